@@ -1,0 +1,76 @@
+/* bitfuse: real-time RGB-D reconstruction with a sign-bit map. */
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "app.h"
+
+typedef struct app_command {
+    const char *name;
+    int (*run)(int argc, char **argv);
+    const char *summary;
+} app_command;
+
+static const app_command commands[] = {
+    {"demo", cmd_demo, "make a short synthetic sequence and evaluate it (built-in data)"},
+    {"synth", cmd_synth, "render a synthetic RGB-D sequence with ground truth (TUM folder)"},
+    {"info", cmd_info, "read a sequence and print what it holds"},
+    {"eval-traj", cmd_eval_traj, "trajectory error: ATE and RPE (TUM benchmark rules)"},
+    {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},
+    {"devices", cmd_devices, "list Vulkan devices and say which one bitfuse uses"},
+};
+#define N_COMMANDS (sizeof commands / sizeof commands[0])
+
+static void usage(FILE *f)
+{
+    fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n\ncommands:\n");
+    for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
+    fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error\n"
+               "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error),\n"
+               "             BITFUSE_THREADS (CPU threads), BITFUSE_VALIDATION=1 (Vulkan validation)\n");
+}
+
+int app_fail(const char *cmd, bf_status s)
+{
+    const char *msg = bf_last_error();
+    fprintf(stderr, "bitfuse %s: error: %s\n", cmd, msg[0] ? msg : bf_status_message(s));
+    switch (s) {
+    case BF_OK: return APP_EXIT_OK;
+    case BF_INVALID_ARG: return APP_EXIT_USAGE;
+    case BF_IO:
+    case BF_FORMAT: return APP_EXIT_INPUT;
+    case BF_VULKAN:
+    case BF_NO_DEVICE: return APP_EXIT_DEVICE;
+    default: return APP_EXIT_FAILURE;
+    }
+}
+
+int app_usage_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(stderr, "bitfuse %s: ", cmd);
+    vfprintf(stderr, fmt, ap);
+    fprintf(stderr, "\n(see bitfuse %s --help)\n", cmd);
+    va_end(ap);
+    return APP_EXIT_USAGE;
+}
+
+bool app_is_help(const char *arg) { return !strcmp(arg, "-h") || !strcmp(arg, "--help"); }
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        usage(stderr);
+        return APP_EXIT_USAGE;
+    }
+    if (app_is_help(argv[1]) || !strcmp(argv[1], "help")) {
+        usage(stdout);
+        return APP_EXIT_OK;
+    }
+    for (size_t i = 0; i < N_COMMANDS; i++)
+        if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+    fprintf(stderr, "bitfuse: unknown command '%s'\n", argv[1]);
+    usage(stderr);
+    return APP_EXIT_USAGE;
+}

@@ -1,0 +1,226 @@
+/* core: errors, logging, math (SE(3) in double), camera intrinsics, frames,
+ * timers and a small thread pool. Depends on libc (and pthreads) only.
+ *
+ * Conventions (see docs/core.md):
+ *  - A function that can fail returns bf_status and writes its outputs only
+ *    on success. bf_fail() records a message naming file, frame and reason.
+ *  - Transforms are named by frames, read right to left: T_wc takes camera
+ *    points to world, p_w = T_wc * p_c.
+ *  - Poses are kept in double on the CPU (DESIGN.md section 10).
+ */
+#ifndef BF_CORE_H
+#define BF_CORE_H
+
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+/* ---------------------------------------------------------------- status */
+
+/* One table expands into the enum, bf_status_name() and the default message
+ * (libuv's UV_ERRNO_MAP). Exit codes of the command-line tool derive from it:
+ * see app/ and docs/cli.md. */
+#define BF_STATUS_MAP(X)                                                  \
+    X(OK, "ok")                                                           \
+    X(INVALID_ARG, "invalid argument")                                    \
+    X(IO, "input/output error")                                           \
+    X(FORMAT, "malformed input")                                          \
+    X(NO_MEMORY, "out of host memory")                                    \
+    X(POOL_FULL, "pool exhausted")                                        \
+    X(VULKAN, "Vulkan error")                                             \
+    X(NO_DEVICE, "no suitable device")                                    \
+    X(UNSUPPORTED, "unsupported")                                         \
+    X(NUMERIC, "numerical failure")                                       \
+    X(END, "end of stream")
+
+typedef enum bf_status {
+#define BF__ENUM(name, msg) BF_##name,
+    BF_STATUS_MAP(BF__ENUM)
+#undef BF__ENUM
+    BF_STATUS_COUNT
+} bf_status;
+
+const char *bf_status_name(bf_status s);   /* "BF_IO" */
+const char *bf_status_message(bf_status s); /* "input/output error" */
+
+/* Records a formatted message for the calling thread and returns s, so that
+ * `return bf_fail(BF_IO, "%s: frame %u: depth PNG is 8-bit", path, i);`
+ * reports and fails in one line. The message is also logged at debug level. */
+bf_status bf_fail(bf_status s, const char *fmt, ...)
+    __attribute__((format(printf, 2, 3)));
+/* The last message recorded by bf_fail() on this thread ("" if none). */
+const char *bf_last_error(void);
+void bf_clear_error(void);
+
+/* ---------------------------------------------------------------- logging */
+
+typedef enum bf_log_level {
+    BF_LOG_DEBUG,
+    BF_LOG_INFO,
+    BF_LOG_WARN,
+    BF_LOG_ERROR,
+    BF_LOG_SILENT
+} bf_log_level;
+
+/* Messages go to stderr with a level prefix. The initial level is INFO, or
+ * the BITFUSE_LOG environment variable (debug|info|warn|error|silent). */
+void bf_log_set_level(bf_log_level level);
+bf_log_level bf_log_get_level(void);
+void bf_log(bf_log_level level, const char *fmt, ...)
+    __attribute__((format(printf, 2, 3)));
+#define bf_debug(...) bf_log(BF_LOG_DEBUG, __VA_ARGS__)
+#define bf_info(...) bf_log(BF_LOG_INFO, __VA_ARGS__)
+#define bf_warn(...) bf_log(BF_LOG_WARN, __VA_ARGS__)
+#define bf_error(...) bf_log(BF_LOG_ERROR, __VA_ARGS__)
+
+/* A broken invariant: on in release builds too, prints the expression,
+ * file and line and aborts (Redis's serverAssert). */
+#define BF_ASSERT(e) \
+    ((e) ? (void)0 : bf__assert_fail(#e, __FILE__, __LINE__))
+_Noreturn void bf__assert_fail(const char *expr, const char *file, int line);
+
+/* ---------------------------------------------------------------- math */
+
+typedef struct bf_vec3 { double x, y, z; } bf_vec3;
+/* Unit quaternion, Hamilton convention, w is the real part. */
+typedef struct bf_quat { double w, x, y, z; } bf_quat;
+/* Rigid transform p' = R p + t, R row-major. */
+typedef struct bf_se3 { double R[3][3]; bf_vec3 t; } bf_se3;
+
+static inline bf_vec3 bf_v3(double x, double y, double z) { bf_vec3 v = {x, y, z}; return v; }
+static inline bf_vec3 bf_v3_add(bf_vec3 a, bf_vec3 b) { return bf_v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+static inline bf_vec3 bf_v3_sub(bf_vec3 a, bf_vec3 b) { return bf_v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+static inline bf_vec3 bf_v3_scale(bf_vec3 a, double s) { return bf_v3(a.x * s, a.y * s, a.z * s); }
+static inline double bf_v3_dot(bf_vec3 a, bf_vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline bf_vec3 bf_v3_cross(bf_vec3 a, bf_vec3 b)
+{
+    return bf_v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+double bf_v3_norm(bf_vec3 a);
+bf_vec3 bf_v3_normalize(bf_vec3 a); /* zero stays zero */
+
+bf_quat bf_quat_identity(void);
+bf_quat bf_quat_mul(bf_quat a, bf_quat b);
+bf_quat bf_quat_conj(bf_quat q);
+bf_quat bf_quat_normalize(bf_quat q);
+bf_vec3 bf_quat_rotate(bf_quat q, bf_vec3 v);
+/* Rotation by angle_rad about a (not necessarily unit) axis. */
+bf_quat bf_quat_from_axis_angle(bf_vec3 axis, double angle_rad);
+/* Shortest-path spherical interpolation, s in [0,1]. */
+bf_quat bf_quat_slerp(bf_quat a, bf_quat b, double s);
+/* Angle of the rotation q, in [0, pi]. */
+double bf_quat_angle(bf_quat q);
+void bf_quat_to_mat(bf_quat q, double R[3][3]);
+/* Robust for every rotation (Shepperd's method); result has w >= 0. */
+bf_quat bf_quat_from_mat(const double R[3][3]);
+
+bf_se3 bf_se3_identity(void);
+bf_se3 bf_se3_from_qt(bf_quat q, bf_vec3 t);
+void bf_se3_to_qt(const bf_se3 *T, bf_quat *q, bf_vec3 *t);
+bf_se3 bf_se3_mul(const bf_se3 *A, const bf_se3 *B); /* A * B */
+bf_se3 bf_se3_inverse(const bf_se3 *T);
+bf_vec3 bf_se3_apply(const bf_se3 *T, bf_vec3 p);
+bf_vec3 bf_se3_rotate(const bf_se3 *T, bf_vec3 v);
+/* Exponential map of a twist xi = (v, w): translation part first, then the
+ * rotation vector (so(3)), as in Barfoot's convention. */
+bf_se3 bf_se3_exp(const double xi[6]);
+void bf_se3_log(const bf_se3 *T, double xi[6]);
+/* Rotation angle of T in radians, in [0, pi]; robust near 0 and pi. */
+double bf_se3_angle(const bf_se3 *T);
+/* Linear translation and slerp rotation between A (s=0) and B (s=1). */
+bf_se3 bf_se3_interpolate(const bf_se3 *A, const bf_se3 *B, double s);
+/* Row-major 4x4 float for the GPU (only for chunk-relative transforms). */
+void bf_se3_to_mat4f(const bf_se3 *T, float out[16]);
+bool bf_se3_is_finite(const bf_se3 *T);
+
+/* Symmetric eigen-decomposition by cyclic Jacobi (n <= 6): A is destroyed,
+ * eigenvalues ascending in w, eigenvectors in the columns of V. */
+void bf_sym_eigen(int n, double *A, double *w, double *V);
+
+/* ---------------------------------------------------------------- camera */
+
+/* Pinhole intrinsics of the depth image (colour is registered to depth).
+ * A negative fy (ICL-NUIM) flips the image y axis. */
+typedef struct bf_intrinsics {
+    uint32_t width, height; /* pixels */
+    double fx_px, fy_px, cx_px, cy_px;
+    double depth_scale; /* raw depth units per metre (TUM: 5000) */
+} bf_intrinsics;
+
+/* Back-projects pixel (u, v) (pixel centres at integers) at depth z metres. */
+bf_vec3 bf_intrinsics_unproject(const bf_intrinsics *K, double u, double v, double z_m);
+/* Projects camera point p; returns false when z <= 0. */
+bool bf_intrinsics_project(const bf_intrinsics *K, bf_vec3 p_c, double *u, double *v);
+
+/* ---------------------------------------------------------------- frames */
+
+/* One RGB-D frame. The pixel buffers are borrowed from whoever produced the
+ * frame (a source's ring, usually) and stay valid until that producer's next
+ * call; copy them to keep them. depth is raw sensor units (0 = no depth),
+ * divide by intrinsics.depth_scale for metres. rgb is 8-bit RGB, may be NULL. */
+typedef struct bf_frame {
+    uint32_t index;       /* 0-based position in the sequence */
+    uint32_t width, height;
+    double t_depth_s;     /* timestamp of the depth image, seconds */
+    double t_rgb_s;       /* timestamp of the colour image (= t_depth_s if none) */
+    const uint16_t *depth;
+    const uint8_t *rgb;   /* width*height*3 or NULL */
+    bool has_pose;        /* ground truth known for this frame */
+    bf_se3 T_wc;          /* ground-truth camera-to-world, if has_pose */
+} bf_frame;
+
+/* ---------------------------------------------------------------- time */
+
+uint64_t bf_time_ns(void);       /* monotonic */
+double bf_time_s(void);          /* monotonic, seconds */
+
+/* Collects durations and reports median and 95th percentile. */
+typedef struct bf_stats {
+    double *v;
+    size_t n, cap;
+} bf_stats;
+bf_status bf_stats_push(bf_stats *s, double x);
+double bf_stats_percentile(const bf_stats *s, double p); /* p in [0,100]; NaN if empty */
+double bf_stats_mean(const bf_stats *s);
+void bf_stats_free(bf_stats *s);
+/* Percentile of an array (sorted in place), linear interpolation. */
+double bf_percentile_inplace(double *v, size_t n, double p);
+
+/* Per-second status line on stderr for long work: "label  i/n  rate  eta". */
+typedef struct bf_progress {
+    const char *label;
+    uint64_t total;
+    double t_start, t_last;
+    bool enabled;         /* off when stderr is not a terminal and BITFUSE_PROGRESS unset */
+} bf_progress;
+void bf_progress_begin(bf_progress *p, const char *label, uint64_t total);
+void bf_progress_update(bf_progress *p, uint64_t done);
+void bf_progress_end(bf_progress *p, uint64_t done);
+
+/* ---------------------------------------------------------------- threads */
+
+/* Number of worker threads for CPU work: BITFUSE_THREADS or the core count. */
+int bf_thread_count(void);
+/* Calls fn(ctx, i) for i in [0, n) on up to bf_thread_count() threads,
+ * handing out indices dynamically; returns when all are done. fn must be
+ * thread-safe. Falls back to the calling thread if threads cannot start. */
+void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx);
+
+/* ---------------------------------------------------------------- files */
+
+/* Reads a whole file; *data is malloc'd and NUL-terminated (size excludes it). */
+bf_status bf_read_file(const char *path, char **data, size_t *size);
+/* Creates a directory and its parents (mkdir -p). */
+bf_status bf_mkdir_p(const char *path);
+/* Writes data to path atomically: temporary file, fsync, rename. */
+bf_status bf_write_file_atomic(const char *path, const void *data, size_t size);
+bool bf_file_exists(const char *path);
+/* Joins dir and name into out (size cap); fails with BF_INVALID_ARG if too long. */
+bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name);
+
+/* Strict number parsing: the whole string must be a finite number. */
+bool bf_parse_double(const char *s, double *out);
+bool bf_parse_u32(const char *s, uint32_t *out);
+
+#endif

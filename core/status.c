@@ -1,0 +1,85 @@
+/* Status table, error messages and logging. */
+#include "core.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const status_names[] = {
+#define BF__NAME(name, msg) "BF_" #name,
+    BF_STATUS_MAP(BF__NAME)
+#undef BF__NAME
+};
+static const char *const status_messages[] = {
+#define BF__MSG(name, msg) msg,
+    BF_STATUS_MAP(BF__MSG)
+#undef BF__MSG
+};
+
+const char *bf_status_name(bf_status s)
+{
+    return (unsigned)s < BF_STATUS_COUNT ? status_names[s] : "BF_UNKNOWN";
+}
+
+const char *bf_status_message(bf_status s)
+{
+    return (unsigned)s < BF_STATUS_COUNT ? status_messages[s] : "unknown status";
+}
+
+static _Thread_local char last_error[1024];
+
+bf_status bf_fail(bf_status s, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(last_error, sizeof last_error, fmt, ap);
+    va_end(ap);
+    bf_debug("%s: %s", bf_status_name(s), last_error);
+    return s;
+}
+
+const char *bf_last_error(void) { return last_error; }
+void bf_clear_error(void) { last_error[0] = '\0'; }
+
+static int log_level = -1;
+
+static bf_log_level log_level_from_env(void)
+{
+    const char *e = getenv("BITFUSE_LOG");
+    if (!e) return BF_LOG_INFO;
+    if (!strcmp(e, "debug")) return BF_LOG_DEBUG;
+    if (!strcmp(e, "warn")) return BF_LOG_WARN;
+    if (!strcmp(e, "error")) return BF_LOG_ERROR;
+    if (!strcmp(e, "silent")) return BF_LOG_SILENT;
+    return BF_LOG_INFO;
+}
+
+void bf_log_set_level(bf_log_level level) { log_level = (int)level; }
+
+bf_log_level bf_log_get_level(void)
+{
+    if (log_level < 0) log_level = (int)log_level_from_env();
+    return (bf_log_level)log_level;
+}
+
+void bf_log(bf_log_level level, const char *fmt, ...)
+{
+    static const char *const prefix[] = {"debug: ", "", "warning: ", "error: "};
+    if (level < bf_log_get_level() || level >= BF_LOG_SILENT) return;
+    char line[2048];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    /* One fputs per message so lines from threads do not interleave. */
+    char out[2100];
+    snprintf(out, sizeof out, "bitfuse: %s%s\n", prefix[level], line);
+    fputs(out, stderr);
+}
+
+void bf__assert_fail(const char *expr, const char *file, int line)
+{
+    fprintf(stderr, "bitfuse: assertion failed: %s (%s:%d)\n", expr, file, line);
+    fflush(stderr);
+    abort();
+}

@@ -1,0 +1,53 @@
+/* A fork-join parallel loop over pthreads: enough for the CPU-side tools
+ * (synthetic rendering, evaluation). The GPU path never uses it. */
+#include "core.h"
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#define BF_MAX_THREADS 64
+
+int bf_thread_count(void)
+{
+    const char *e = getenv("BITFUSE_THREADS");
+    long n = e ? atol(e) : sysconf(_SC_NPROCESSORS_ONLN);
+    if (n < 1) n = 1;
+    if (n > BF_MAX_THREADS) n = BF_MAX_THREADS;
+    return (int)n;
+}
+
+typedef struct pfor_job {
+    void (*fn)(void *ctx, size_t i);
+    void *ctx;
+    size_t n;
+    atomic_size_t next;
+} pfor_job;
+
+static void *pfor_worker(void *arg)
+{
+    pfor_job *job = arg;
+    for (;;) {
+        size_t i = atomic_fetch_add(&job->next, 1);
+        if (i >= job->n) break;
+        job->fn(job->ctx, i);
+    }
+    return NULL;
+}
+
+void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx)
+{
+    pfor_job job = {.fn = fn, .ctx = ctx, .n = n};
+    atomic_init(&job.next, 0);
+    int nt = bf_thread_count();
+    if ((size_t)nt > n) nt = (int)n;
+    pthread_t th[BF_MAX_THREADS];
+    int started = 0;
+    for (int k = 1; k < nt; k++) {
+        if (pthread_create(&th[started], NULL, pfor_worker, &job) != 0) break;
+        started++;
+    }
+    pfor_worker(&job); /* the caller works too */
+    for (int k = 0; k < started; k++) pthread_join(th[k], NULL);
+}

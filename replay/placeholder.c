@@ -1,0 +1,1 @@
+/* placeholder */ typedef int bf_replay_placeholder;

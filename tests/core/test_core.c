@@ -1,0 +1,217 @@
+/* core: SE(3), quaternions, eigen-decomposition, parsing, statistics. */
+#include "core/core.h"
+#include "test.h"
+
+/* A deterministic pseudo-random sweep (xorshift) so failures reproduce. */
+static double rnd(unsigned *s)
+{
+    *s ^= *s << 13;
+    *s ^= *s >> 17;
+    *s ^= *s << 5;
+    return (double)*s / 4294967296.0;
+}
+
+static double max_abs_diff_R(const double A[3][3], const double B[3][3])
+{
+    double m = 0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) m = fmax(m, fabs(A[i][j] - B[i][j]));
+    return m;
+}
+
+BF_TEST(quaternion_matrix_round_trip_over_all_angles)
+{
+    unsigned s = 12345;
+    for (int k = 0; k < 2000; k++) {
+        bf_vec3 axis = bf_v3(rnd(&s) - 0.5, rnd(&s) - 0.5, rnd(&s) - 0.5);
+        /* Include angles right at 0 and pi where naive conversions break. */
+        double ang = k < 10 ? 0 : k < 20 ? M_PI : k < 30 ? M_PI - 1e-9 : rnd(&s) * M_PI;
+        bf_quat q = bf_quat_from_axis_angle(axis, ang);
+        double R[3][3], R2[3][3];
+        bf_quat_to_mat(q, R);
+        bf_quat q2 = bf_quat_from_mat(R);
+        bf_quat_to_mat(q2, R2);
+        CHECK_LE(max_abs_diff_R(R, R2), 1e-12);
+        CHECK_NEAR(bf_quat_angle(q2), ang, 1e-7);
+        /* R is orthonormal with det +1. */
+        double det = R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1]) -
+                     R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0]) +
+                     R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]);
+        CHECK_NEAR(det, 1.0, 1e-12);
+    }
+}
+
+BF_TEST(quaternion_rotation_matches_matrix)
+{
+    bf_quat q = bf_quat_from_axis_angle(bf_v3(0, 0, 1), M_PI / 2);
+    bf_vec3 v = bf_quat_rotate(q, bf_v3(1, 0, 0));
+    CHECK_NEAR(v.x, 0, 1e-15);
+    CHECK_NEAR(v.y, 1, 1e-15);
+    CHECK_NEAR(v.z, 0, 1e-15);
+    bf_quat a = bf_quat_from_axis_angle(bf_v3(1, 2, 3), 0.7);
+    bf_quat b = bf_quat_from_axis_angle(bf_v3(-1, 0, 2), 1.9);
+    bf_vec3 p = bf_v3(0.3, -1.2, 2.5);
+    bf_vec3 r1 = bf_quat_rotate(bf_quat_mul(a, b), p);
+    bf_vec3 r2 = bf_quat_rotate(a, bf_quat_rotate(b, p));
+    CHECK_NEAR(r1.x, r2.x, 1e-14);
+    CHECK_NEAR(r1.y, r2.y, 1e-14);
+    CHECK_NEAR(r1.z, r2.z, 1e-14);
+}
+
+BF_TEST(se3_exp_log_round_trip_including_small_and_near_pi_angles)
+{
+    unsigned s = 777;
+    for (int k = 0; k < 3000; k++) {
+        double xi[6], back[6];
+        double scale = k % 3 == 0 ? 1e-9 : 1.0;
+        for (int i = 0; i < 3; i++) xi[i] = (rnd(&s) - 0.5) * 4;
+        bf_vec3 w = bf_v3_normalize(bf_v3(rnd(&s) - 0.5, rnd(&s) - 0.5, rnd(&s) - 0.5));
+        double th = k % 5 == 0 ? M_PI - 1e-6 : rnd(&s) * 3.0 * scale;
+        xi[3] = w.x * th; xi[4] = w.y * th; xi[5] = w.z * th;
+        bf_se3 T = bf_se3_exp(xi);
+        bf_se3_log(&T, back);
+        bf_se3 T2 = bf_se3_exp(back);
+        CHECK_LE(max_abs_diff_R(T.R, T2.R), 1e-9);
+        CHECK_NEAR(T.t.x, T2.t.x, 1e-8);
+        CHECK_NEAR(T.t.y, T2.t.y, 1e-8);
+        CHECK_NEAR(T.t.z, T2.t.z, 1e-8);
+        if (th < 3.0) /* away from pi the twist itself is unique */
+            for (int i = 0; i < 6; i++) CHECK_NEAR(back[i], xi[i], 1e-8);
+    }
+}
+
+BF_TEST(se3_inverse_and_composition_cancel)
+{
+    double xi[6] = {0.4, -1.0, 2.0, 0.3, -0.2, 1.1};
+    bf_se3 T = bf_se3_exp(xi);
+    bf_se3 Ti = bf_se3_inverse(&T);
+    bf_se3 I = bf_se3_mul(&T, &Ti);
+    bf_se3 Id = bf_se3_identity();
+    CHECK_LE(max_abs_diff_R(I.R, Id.R), 1e-15);
+    CHECK_LE(bf_v3_norm(I.t), 1e-15);
+    bf_vec3 p = bf_v3(1, 2, 3);
+    bf_vec3 q = bf_se3_apply(&Ti, bf_se3_apply(&T, p));
+    CHECK_LE(bf_v3_norm(bf_v3_sub(p, q)), 1e-14);
+    CHECK_NEAR(bf_se3_angle(&T), sqrt(0.09 + 0.04 + 1.21), 1e-12);
+}
+
+BF_TEST(se3_far_from_origin_keeps_submillimetre_precision)
+{
+    /* 10 km from the origin: double keeps ~1e-12 m, float would lose ~1 mm. */
+    bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.3), bf_v3(1e4, -1e4, 5e3));
+    bf_se3 Ti = bf_se3_inverse(&T);
+    bf_vec3 p = bf_v3(1e4 + 0.0001, -1e4, 5e3 + 1.5);
+    bf_vec3 q = bf_se3_apply(&T, bf_se3_apply(&Ti, p));
+    CHECK_LE(bf_v3_norm(bf_v3_sub(p, q)), 1e-9);
+}
+
+BF_TEST(slerp_interpolates_at_constant_angular_speed)
+{
+    bf_quat a = bf_quat_identity();
+    bf_quat b = bf_quat_from_axis_angle(bf_v3(0, 0, 1), 1.2);
+    for (int k = 0; k <= 10; k++) {
+        double s = k / 10.0;
+        bf_quat q = bf_quat_slerp(a, b, s);
+        CHECK_NEAR(bf_quat_angle(q), 1.2 * s, 1e-12);
+    }
+    /* -b is the same rotation: slerp must take the short way. */
+    bf_quat nb = {-b.w, -b.x, -b.y, -b.z};
+    CHECK_NEAR(bf_quat_angle(bf_quat_slerp(a, nb, 0.5)), 0.6, 1e-12);
+    bf_se3 A = bf_se3_identity();
+    bf_se3 B = bf_se3_from_qt(b, bf_v3(2, 0, 0));
+    bf_se3 M = bf_se3_interpolate(&A, &B, 0.25);
+    CHECK_NEAR(M.t.x, 0.5, 1e-15);
+    CHECK_NEAR(bf_se3_angle(&M), 0.3, 1e-12);
+}
+
+BF_TEST(symmetric_eigen_reconstructs_matrix)
+{
+    unsigned s = 99;
+    double A[36], A0[36], w[6], V[36];
+    for (int i = 0; i < 6; i++)
+        for (int j = i; j < 6; j++) A[i * 6 + j] = A[j * 6 + i] = rnd(&s) - 0.5;
+    memcpy(A0, A, sizeof A);
+    bf_sym_eigen(6, A, w, V);
+    for (int i = 1; i < 6; i++) CHECK_LE(w[i - 1], w[i]);
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++) {
+            double r = 0;
+            for (int k = 0; k < 6; k++) r += V[i * 6 + k] * w[k] * V[j * 6 + k];
+            CHECK_NEAR(r, A0[i * 6 + j], 1e-12);
+        }
+}
+
+BF_TEST(intrinsics_project_unproject_round_trip_with_negative_fy)
+{
+    bf_intrinsics K = {640, 480, 481.2, -480.0, 319.5, 239.5, 5000};
+    bf_vec3 p = bf_intrinsics_unproject(&K, 100.25, 400.5, 2.5);
+    double u, v;
+    CHECK(bf_intrinsics_project(&K, p, &u, &v));
+    CHECK_NEAR(u, 100.25, 1e-12);
+    CHECK_NEAR(v, 400.5, 1e-12);
+    CHECK(p.y < 0); /* flipped y: rows below the centre map to -y */
+    CHECK(!bf_intrinsics_project(&K, bf_v3(0, 0, -1), &u, &v));
+}
+
+BF_TEST(strict_number_parsing_rejects_garbage_and_nan)
+{
+    double d;
+    uint32_t u;
+    CHECK(bf_parse_double("1305031102.160407", &d));
+    CHECK_NEAR(d, 1305031102.160407, 1e-6);
+    CHECK(!bf_parse_double("nan", &d));
+    CHECK(!bf_parse_double("1.5x", &d));
+    CHECK(!bf_parse_double("", &d));
+    CHECK(!bf_parse_double("inf", &d));
+    CHECK(bf_parse_u32("4294967295", &u));
+    CHECK(!bf_parse_u32("4294967296", &u));
+    CHECK(!bf_parse_u32("-1", &u));
+}
+
+BF_TEST(percentiles_interpolate_like_numpy)
+{
+    bf_stats s = {0};
+    for (int i = 1; i <= 10; i++) CHECK_OK(bf_stats_push(&s, i));
+    CHECK_NEAR(bf_stats_percentile(&s, 50), 5.5, 1e-12);
+    CHECK_NEAR(bf_stats_percentile(&s, 95), 9.55, 1e-12);
+    CHECK_NEAR(bf_stats_mean(&s), 5.5, 1e-12);
+    bf_stats_free(&s);
+    CHECK(isnan(bf_stats_percentile(&s, 50)));
+}
+
+static void square(void *ctx, size_t i) { ((double *)ctx)[i] = (double)(i * i); }
+
+BF_TEST(parallel_for_visits_every_index_once)
+{
+    double v[1000];
+    memset(v, 0, sizeof v);
+    bf_parallel_for(1000, square, v);
+    for (int i = 0; i < 1000; i++) CHECK_NEAR(v[i], (double)i * i, 0);
+}
+
+BF_TEST(atomic_write_replaces_file_and_reads_back)
+{
+    char path[512];
+    CHECK_OK(bf_path_join(path, sizeof path, bf_test_tmpdir(), "a/b/c"));
+    CHECK_OK(bf_mkdir_p(path));
+    CHECK_OK(bf_path_join(path, sizeof path, bf_test_tmpdir(), "a/b/c/f.txt"));
+    CHECK_OK(bf_write_file_atomic(path, "hello", 5));
+    CHECK_OK(bf_write_file_atomic(path, "world!", 6));
+    char *data;
+    size_t n;
+    CHECK_OK(bf_read_file(path, &data, &n));
+    CHECK_EQ_INT(n, 6);
+    CHECK(!strcmp(data, "world!"));
+    free(data);
+    CHECK_STATUS(bf_read_file("/nonexistent/file", &data, &n), BF_IO);
+    CHECK_ERROR_MENTIONS("/nonexistent/file");
+}
+
+BF_TEST(status_table_names_every_code)
+{
+    CHECK(!strcmp(bf_status_name(BF_IO), "BF_IO"));
+    CHECK(!strcmp(bf_status_name(BF_POOL_FULL), "BF_POOL_FULL"));
+    CHECK(!strcmp(bf_status_message(BF_FORMAT), "malformed input"));
+    CHECK_STATUS(bf_fail(BF_FORMAT, "%s: line %d: bad", "x.txt", 3), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("x.txt: line 3");
+}
