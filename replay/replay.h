@@ -58,6 +58,7 @@ typedef struct replay_traj {
     size_t n;
     double *t_s;   /* strictly increasing */
     bf_se3 *T_wc;
+    size_t cap;    /* entries allocated (managed by push/read; 0 is fine) */
 } replay_traj;
 
 /* Reads a TUM trajectory. Unsorted or duplicate timestamps, NaN or a

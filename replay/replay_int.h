@@ -1,0 +1,117 @@
+/* replay: declarations shared by the module's files (not for other modules).
+ *
+ * The three folder readers (tum.c, icl.c, posefolder.c) only build a list of
+ * frame references (paths, times, poses) at open; source.c owns the decoding
+ * buffers and delivers frames from that list, so every format shares one
+ * next(), one skip rule and one set of size checks. */
+#ifndef BF_REPLAY_INT_H
+#define BF_REPLAY_INT_H
+
+#include "replay/replay.h"
+
+#include <stdio.h>
+
+/* TUM's associate.py default: colour and depth further apart than this are
+ * not a pair; also the reach of a ground-truth pose beyond its range. */
+#define REPLAY_MAX_DT_S 0.02
+
+/* Frame times of the numbered layouts (ICL-NUIM, pose folders): 30 Hz. */
+#define REPLAY_NUMBERED_FPS 30.0
+
+/* ------------------------------------------------------------ text files */
+
+/* A whole text file read into memory and walked line by line. Fields are
+ * split at spaces, tabs and commas (as TUM's associate.py does); empty lines
+ * and lines starting with '#' are skipped. */
+typedef struct replay__text {
+    const char *path; /* borrowed, for messages */
+    char *buf;        /* owned, NUL-terminated */
+    char *p;          /* start of the next line */
+    uint32_t line;    /* 1-based number of the line last returned */
+} replay__text;
+
+/* BF_IO naming the file if it cannot be read. */
+bf_status replay__text_open(replay__text *t, const char *path);
+void replay__text_close(replay__text *t);
+/* Splits the next content line into at most cap fields (modifying the
+ * buffer). Returns the number of fields on the line (which may exceed cap;
+ * only cap are stored), or -1 at the end of the file. */
+int replay__text_next(replay__text *t, char **fields, int cap);
+/* Parses a finite number; BF_FORMAT "path:line: what 'x' is not a finite
+ * number" otherwise. */
+bf_status replay__text_double(const replay__text *t, const char *s, const char *what, double *out);
+
+/* Builds a pose from TUM's order tx ty tz qx qy qz qw; a quaternion whose
+ * norm is off by more than 1e-3 is BF_FORMAT naming file and line. */
+bf_status replay__pose_from_fields(const replay__text *t, char **f, bf_se3 *T_wc);
+
+/* Copies the last error and fails with "<old message> (frame N)". */
+bf_status replay__fail_frame(bf_status s, uint32_t frame);
+
+/* ------------------------------------------------------------ images */
+
+/* Header only: size of a PNG or JPEG (detected by content). */
+bf_status replay__image_size(const char *path, uint32_t *w, uint32_t *h);
+/* Decodes a 16-bit grey PNG into buf, which holds cap_px pixels. When
+ * exp_w/exp_h are non-zero a different size is BF_FORMAT. */
+bf_status replay__png_decode_u16(const char *path, uint16_t *buf, size_t cap_px,
+                                 uint32_t exp_w, uint32_t exp_h, uint32_t *w, uint32_t *h);
+/* Decodes a PNG or JPEG into 8-bit RGB (cap_px pixels of 3 bytes). */
+bf_status replay__image_decode_rgb8(const char *path, uint8_t *buf, size_t cap_px,
+                                    uint32_t exp_w, uint32_t exp_h, uint32_t *w, uint32_t *h);
+
+/* ------------------------------------------------------------ sources */
+
+/* One frame of a file sequence, as listed at open. */
+typedef struct replay__frame_ref {
+    double t_depth_s, t_rgb_s;
+    const char *depth_path; /* in the sequence's string arena */
+    const char *rgb_path;   /* NULL if the sequence has no colour */
+    const char *pose_path;  /* pose-per-frame folders: read at next(), else NULL */
+    bool has_pose;
+    bf_se3 T_wc;
+} replay__frame_ref;
+
+/* A growing list of frame references plus the arena their strings live in.
+ * Grows only while the sequence is opened. */
+typedef struct replay__list {
+    replay__frame_ref *v;
+    uint32_t n, cap;
+    char **strings; /* every string strdup'd for the list */
+    size_t n_strings, strings_cap;
+} replay__list;
+
+bf_status replay__list_push(replay__list *l, const replay__frame_ref *f);
+/* strdup into the list's arena; NULL on out of memory (status recorded). */
+const char *replay__list_str(replay__list *l, const char *s);
+void replay__list_free(replay__list *l);
+
+/* Camera settings a folder reader resolves before the source is built. */
+typedef struct replay__camera {
+    bf_intrinsics K;   /* fx, fy, cx, cy, depth_scale (size filled later) */
+    const char *origin; /* "fr2 preset", "camera.txt", ... for logs */
+} replay__camera;
+
+/* Applies the precedence every format shares: the user's --camera and
+ * --depth-scale, then camera.txt in dir (if present), then the format's
+ * defaults already in cam. */
+bf_status replay__camera_resolve(const char *dir, const replay_options *opt, replay__camera *cam);
+/* Reads "fx fy cx cy depth_scale" (depth_scale optional). */
+bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K);
+
+/* Builds the source from a frame list (taking ownership of it, also on
+ * failure), probing the first readable frame for the image size. */
+bf_status replay__source_create(const char *kind, replay__list *list, const replay__camera *cam,
+                                const replay_options *opt, rgbd_source **out);
+
+/* The format readers: each fills a frame list and a camera. */
+bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__list *list, replay__camera *cam);
+bf_status replay__icl_list(const char *dir, const replay_options *opt, replay__list *list, replay__camera *cam);
+bf_status replay__posefolder_list(const char *dir, const replay_options *opt, replay__list *list,
+                                  replay__camera *cam);
+/* Reads a 4x4 camera-to-world matrix (4 rows of 4 numbers). */
+bf_status replay__pose_matrix_read(const char *path, bf_se3 *T_wc);
+
+bool replay__is_dir(const char *path);
+
+#endif

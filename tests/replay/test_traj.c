@@ -1,0 +1,128 @@
+/* replay: TUM trajectory files (read, write, interpolate) and their errors. */
+#include <stdio.h>
+
+#include "replay/replay.h"
+#include "replay_test.h"
+#include "test.h"
+
+static bf_se3 pose_at(double a)
+{
+    return bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0.3, -1, 0.5), a), bf_v3(a, -2 * a, 0.5 + a * a));
+}
+
+BF_TEST(traj_write_read_round_trip)
+{
+    replay_traj tr = {0};
+    for (int i = 0; i < 200; i++) {
+        bf_se3 T = pose_at(0.03 * i - 2.0); /* includes angles past pi/2, so qw < 0 before flipping */
+        CHECK_OK(replay_traj_push(&tr, 1305031102.175304 + 0.033 * i, &T));
+    }
+    char path[512];
+    snprintf(path, sizeof path, "%s/traj_rt.txt", bf_test_tmpdir());
+    CHECK_OK(replay_traj_write_tum(path, &tr));
+    replay_traj back = {0};
+    CHECK_OK(replay_traj_read_tum(path, &back));
+    CHECK_EQ_INT(back.n, tr.n);
+    for (size_t i = 0; i < tr.n; i++) {
+        /* 9 decimals: times within 1e-9 plus the double spacing at 1.3e9 s
+         * (2.4e-7); position within 5e-10; rotation within a few 1e-9. */
+        CHECK_NEAR(back.t_s[i], tr.t_s[i], 5e-7);
+        CHECK_NEAR(back.T_wc[i].t.x, tr.T_wc[i].t.x, 1e-9);
+        CHECK_NEAR(back.T_wc[i].t.y, tr.T_wc[i].t.y, 1e-9);
+        CHECK_NEAR(back.T_wc[i].t.z, tr.T_wc[i].t.z, 1e-9);
+        bf_se3 inv = bf_se3_inverse(&tr.T_wc[i]);
+        bf_se3 d = bf_se3_mul(&inv, &back.T_wc[i]);
+        CHECK_LE(bf_se3_angle(&d), 1e-8);
+    }
+    /* Every written quaternion has qw >= 0. */
+    char *text;
+    CHECK_OK(bf_read_file(path, &text, NULL));
+    int bad = 0;
+    for (char *line = strtok(text, "\n"); line; line = strtok(NULL, "\n")) {
+        if (line[0] == '#') continue;
+        double v[8];
+        CHECK_EQ_INT(sscanf(line, "%lf %lf %lf %lf %lf %lf %lf %lf", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5],
+                            &v[6], &v[7]), 8);
+        if (v[7] < 0) bad++;
+    }
+    free(text);
+    CHECK_EQ_INT(bad, 0);
+    replay_traj_free(&tr);
+    replay_traj_free(&back);
+}
+
+BF_TEST(traj_interpolates_linear_position_and_slerp)
+{
+    replay_traj tr = {0};
+    bf_se3 A = bf_se3_from_qt(bf_quat_identity(), bf_v3(0, 0, 0));
+    bf_se3 B = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 0, 1), 1.0), bf_v3(2, 4, -6));
+    CHECK_OK(replay_traj_push(&tr, 10.0, &A));
+    CHECK_OK(replay_traj_push(&tr, 11.0, &B));
+    bf_se3 T;
+    CHECK(replay_traj_interpolate(&tr, 10.25, &T));
+    CHECK_NEAR(T.t.x, 0.5, 1e-12);
+    CHECK_NEAR(T.t.y, 1.0, 1e-12);
+    CHECK_NEAR(T.t.z, -1.5, 1e-12);
+    CHECK_NEAR(bf_se3_angle(&T), 0.25, 1e-12);
+    /* Ends are exact; outside the range there is no pose. */
+    CHECK(replay_traj_interpolate(&tr, 11.0, &T));
+    CHECK_NEAR(T.t.x, 2, 0);
+    CHECK(replay_traj_interpolate(&tr, 10.0, &T));
+    CHECK_NEAR(T.t.x, 0, 0);
+    CHECK(!replay_traj_interpolate(&tr, 9.999, &T));
+    CHECK(!replay_traj_interpolate(&tr, 11.001, &T));
+    replay_traj_free(&tr);
+    replay_traj empty = {0};
+    CHECK(!replay_traj_interpolate(&empty, 0, &T));
+}
+
+BF_TEST(traj_reads_real_tum_groundtruth)
+{
+    const char *p = bf_test_data("tum/fr1_xyz/groundtruth.txt");
+    if (!p) BF_SKIP("tum/fr1_xyz absent");
+    replay_traj tr = {0};
+    CHECK_OK(replay_traj_read_tum(p, &tr));
+    CHECK_EQ_INT(tr.n, 3000);
+    for (size_t i = 1; i < tr.n; i++) CHECK(tr.t_s[i] > tr.t_s[i - 1]);
+    replay_traj_free(&tr);
+}
+
+static const char *write_text(const char *name, const char *text)
+{
+    const char *p = rt_tmp(name);
+    return rt_write_text(p, text) ? p : "(write failed)";
+}
+
+BF_TEST(traj_malformed_files_name_file_and_line)
+{
+    replay_traj tr = {0};
+    const char *p = write_text("traj_unsorted.txt", "# c\n1 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n1.5 0 0 0 0 0 0 1\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_unsorted.txt:4");
+    CHECK_ERROR_MENTIONS("before");
+    p = write_text("traj_dup.txt", "1 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_dup.txt:2");
+    CHECK_ERROR_MENTIONS("repeats");
+    p = write_text("traj_nan.txt", "1 0 0 0 0 0 0 1\n\n2 0 nan 0 0 0 0 1\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_nan.txt:3");
+    CHECK_ERROR_MENTIONS("finite");
+    p = write_text("traj_fields.txt", "1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_fields.txt:2");
+    CHECK_ERROR_MENTIONS("found 7");
+    p = write_text("traj_quat.txt", "1 0 0 0 0 0 0 1.1\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_quat.txt:1");
+    p = write_text("traj_word.txt", "1 0 0 x 0 0 0 1\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_word.txt:1");
+    p = write_text("traj_empty.txt", "# nothing\n");
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_empty.txt");
+    CHECK_STATUS(replay_traj_read_tum("/nonexistent/traj.txt", &tr), BF_IO);
+    CHECK_ERROR_MENTIONS("/nonexistent/traj.txt");
+    /* Outputs untouched on failure. */
+    CHECK(tr.n == 0 && tr.t_s == NULL);
+}
