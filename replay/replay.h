@@ -13,7 +13,7 @@
 
 typedef struct replay_options {
     const char *camera;   /* NULL (format default / camera.txt), "fr1", "fr2",
-                             "fr3" or "fx,fy,cx,cy" */
+                             "fr3", "icl" or "fx,fy,cx,cy"; borrowed */
     double depth_scale;   /* raw units per metre; 0 = format default */
     uint32_t max_frames;  /* only the first N frames; 0 = all */
     bool skip_bad_frames; /* skip an unreadable frame with a warning */
@@ -28,6 +28,11 @@ typedef struct replay_options {
  * with rgbd_source_close(). Errors name the file and line. */
 bf_status replay_open(const char *path, const replay_options *opt, rgbd_source **out);
 
+/* Frames a replay source skipped so far under skip_bad_frames (0 for a
+ * source not made by replay_open). Frame indices keep their place in the
+ * sequence, so a skipped frame leaves a gap in bf_frame.index. */
+uint32_t replay_skipped_frames(const rgbd_source *src);
+
 /* Parses one of the shared sequence options at argv[*i] (--camera,
  * --depth-scale, --frames, --skip-bad-frames), advancing *i past its value.
  * Returns 1 if it consumed an option, 0 if argv[*i] is not one of them, and
@@ -37,7 +42,8 @@ int replay_parse_option(int argc, char **argv, int *i, replay_options *opt);
 const char *replay_options_help(void);
 
 /* Fills K (fx, fy, cx, cy) from "fr1" | "fr2" | "fr3" (TUM's published
- * calibration) or "fx,fy,cx,cy"; width/height/depth_scale are left alone. */
+ * calibration), "icl" (ICL-NUIM, fy < 0) or "fx,fy,cx,cy"; width/height/
+ * depth_scale are left alone. BF_INVALID_ARG for anything else. */
 bf_status replay_parse_camera(const char *spec, bf_intrinsics *K);
 
 /* ------------------------------------------------------------ images */

@@ -77,6 +77,8 @@ typedef struct replay__frame_ref {
 typedef struct replay__list {
     replay__frame_ref *v;
     uint32_t n, cap;
+    uint16_t depth_invalid; /* raw value meaning "no depth" besides 0
+                               (7-Scenes: 65535), mapped to 0; 0 = none */
     char **strings; /* every string strdup'd for the list */
     size_t n_strings, strings_cap;
 } replay__list;

@@ -1,0 +1,219 @@
+/* replay: TUM RGB-D benchmark folders (Sturm et al., "A Benchmark for the
+ * Evaluation of RGB-D SLAM Systems", IROS 2012): rgb.txt, depth.txt and
+ * groundtruth.txt, colour and depth paired by timestamp as the benchmark's
+ * associate.py pairs them. */
+#include "replay_int.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* One index file (rgb.txt or depth.txt): times and paths in file order. */
+typedef struct tum_index {
+    uint32_t n;
+    double *t_s;
+    char **path; /* joined with the folder, in the list's arena */
+} tum_index;
+
+static void tum_index_free(tum_index *x)
+{
+    free(x->t_s);
+    free(x->path);
+    memset(x, 0, sizeof *x);
+}
+
+/* Reads "timestamp filename" lines; times must strictly increase. */
+static bf_status tum_index_read(const char *dir, const char *name, replay__list *list, tum_index *out)
+{
+    char file[4096], joined[4096];
+    bf_status s = bf_path_join(file, sizeof file, dir, name);
+    if (s) return s;
+    replay__text t;
+    if ((s = replay__text_open(&t, file))) return s;
+    tum_index x = {0};
+    uint32_t cap = 0;
+    char *f[3];
+    int n;
+    while ((n = replay__text_next(&t, f, 3)) >= 0) {
+        if (n != 2) {
+            s = bf_fail(BF_FORMAT, "%s:%u: expected 2 fields (timestamp filename), found %d", file, t.line, n);
+            goto fail;
+        }
+        double ts;
+        if ((s = replay__text_double(&t, f[0], "timestamp", &ts))) goto fail;
+        if (x.n > 0 && !(ts > x.t_s[x.n - 1])) {
+            s = bf_fail(BF_FORMAT, "%s:%u: timestamp %.6f %s the previous line's (%.6f); times must increase", file,
+                        t.line, ts, ts == x.t_s[x.n - 1] ? "repeats" : "is before", x.t_s[x.n - 1]);
+            goto fail;
+        }
+        if (x.n == cap) {
+            cap = cap ? 2 * cap : 1024;
+            double *nt = realloc(x.t_s, cap * sizeof *nt);
+            if (nt) x.t_s = nt;
+            char **np = nt ? realloc(x.path, cap * sizeof *np) : NULL;
+            if (!np) {
+                s = bf_fail(BF_NO_MEMORY, "%s: %u lines", file, cap);
+                goto fail;
+            }
+            x.path = np;
+        }
+        if ((s = bf_path_join(joined, sizeof joined, dir, f[1]))) goto fail;
+        const char *p = replay__list_str(list, joined);
+        if (!p) {
+            s = BF_NO_MEMORY;
+            goto fail;
+        }
+        x.t_s[x.n] = ts;
+        x.path[x.n] = (char *)p;
+        x.n++;
+    }
+    if (x.n == 0) {
+        s = bf_fail(BF_FORMAT, "%s: no frames listed", file);
+        goto fail;
+    }
+    replay__text_close(&t);
+    *out = x;
+    return BF_OK;
+fail:
+    replay__text_close(&t);
+    tum_index_free(&x);
+    return s;
+}
+
+/* A possible (depth, colour) pair closer than REPLAY_MAX_DT_S. */
+typedef struct tum_candidate {
+    double dt_s;
+    uint32_t depth_idx, rgb_idx;
+} tum_candidate;
+
+static int candidate_cmp(const void *a, const void *b)
+{
+    const tum_candidate *x = a, *y = b;
+    if (x->dt_s != y->dt_s) return x->dt_s < y->dt_s ? -1 : 1;
+    if (x->depth_idx != y->depth_idx) return x->depth_idx < y->depth_idx ? -1 : 1;
+    return (x->rgb_idx > y->rgb_idx) - (x->rgb_idx < y->rgb_idx);
+}
+
+/* TUM's associate.py: every pair with |t_depth - t_rgb| < 0.02 s is a
+ * candidate; candidates sorted by |dt| (ties by depth, then colour time) are
+ * taken greedily when neither image is taken yet. rgb_of[i] is the colour
+ * index of depth frame i or UINT32_MAX when it has none. */
+static bf_status tum_associate(const tum_index *depth, const tum_index *rgb, uint32_t *rgb_of)
+{
+    size_t n = 0, cap = 0;
+    tum_candidate *c = NULL;
+    uint32_t j0 = 0;
+    for (uint32_t i = 0; i < depth->n; i++) {
+        double td = depth->t_s[i];
+        while (j0 < rgb->n && rgb->t_s[j0] <= td - REPLAY_MAX_DT_S) j0++;
+        for (uint32_t j = j0; j < rgb->n && rgb->t_s[j] < td + REPLAY_MAX_DT_S; j++) {
+            double dt = td > rgb->t_s[j] ? td - rgb->t_s[j] : rgb->t_s[j] - td;
+            if (!(dt < REPLAY_MAX_DT_S)) continue;
+            if (n == cap) {
+                cap = cap ? 2 * cap : 1024;
+                tum_candidate *nc = realloc(c, cap * sizeof *nc);
+                if (!nc) {
+                    free(c);
+                    return bf_fail(BF_NO_MEMORY, "associating %u depth images", depth->n);
+                }
+                c = nc;
+            }
+            c[n++] = (tum_candidate){dt, i, j};
+        }
+    }
+    if (n) qsort(c, n, sizeof *c, candidate_cmp);
+    bool *rgb_used = calloc(rgb->n, 1);
+    if (!rgb_used) {
+        free(c);
+        return bf_fail(BF_NO_MEMORY, "associating %u colour images", rgb->n);
+    }
+    for (uint32_t i = 0; i < depth->n; i++) rgb_of[i] = UINT32_MAX;
+    for (size_t k = 0; k < n; k++)
+        if (rgb_of[c[k].depth_idx] == UINT32_MAX && !rgb_used[c[k].rgb_idx]) {
+            rgb_of[c[k].depth_idx] = c[k].rgb_idx;
+            rgb_used[c[k].rgb_idx] = true;
+        }
+    free(rgb_used);
+    free(c);
+    return BF_OK;
+}
+
+/* Ground truth for a frame at t: interpolated inside the trajectory's time
+ * range; just outside it, the end pose if it is within REPLAY_MAX_DT_S (the
+ * benchmark's own association tolerance); else none. */
+static bool tum_gt_pose(const replay_traj *gt, double t_s, bf_se3 *T_wc)
+{
+    if (replay_traj_interpolate(gt, t_s, T_wc)) return true;
+    if (t_s < gt->t_s[0] && gt->t_s[0] - t_s <= REPLAY_MAX_DT_S) {
+        *T_wc = gt->T_wc[0];
+        return true;
+    }
+    if (t_s > gt->t_s[gt->n - 1] && t_s - gt->t_s[gt->n - 1] <= REPLAY_MAX_DT_S) {
+        *T_wc = gt->T_wc[gt->n - 1];
+        return true;
+    }
+    return false;
+}
+
+/* The TUM sensor a folder name mentions ("rgbd_dataset_freiburg2_desk"). */
+static const char *tum_preset_hint(const char *dir)
+{
+    if (strstr(dir, "freiburg1")) return "fr1";
+    if (strstr(dir, "freiburg2")) return "fr2";
+    if (strstr(dir, "freiburg3")) return "fr3";
+    return NULL;
+}
+
+bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__list *list, replay__camera *cam)
+{
+    /* TUM's default when the sensor is unknown ("ROS default"). */
+    cam->K = (bf_intrinsics){.fx_px = 525.0, .fy_px = 525.0, .cx_px = 319.5, .cy_px = 239.5, .depth_scale = 5000};
+    cam->origin = "TUM default camera";
+    bf_status s = replay__camera_resolve(dir, opt, cam);
+    if (s) return s;
+    const char *hint = tum_preset_hint(dir);
+    if (hint && !strcmp(cam->origin, "TUM default camera"))
+        bf_warn("%s: using the default camera 525,525,319.5,239.5; the name suggests --camera %s", dir, hint);
+
+    char file[4096];
+    tum_index depth = {0}, rgb = {0};
+    replay_traj gt = {0};
+    uint32_t *rgb_of = NULL;
+    if ((s = tum_index_read(dir, "depth.txt", list, &depth))) goto done;
+    if ((s = bf_path_join(file, sizeof file, dir, "rgb.txt"))) goto done;
+    bool has_rgb = bf_file_exists(file);
+    if (has_rgb && (s = tum_index_read(dir, "rgb.txt", list, &rgb))) goto done;
+    if ((s = bf_path_join(file, sizeof file, dir, "groundtruth.txt"))) goto done;
+    if (bf_file_exists(file) && (s = replay_traj_read_tum(file, &gt))) goto done;
+    rgb_of = malloc(depth.n * sizeof *rgb_of);
+    if (!rgb_of) {
+        s = bf_fail(BF_NO_MEMORY, "%s: %u frames", dir, depth.n);
+        goto done;
+    }
+    if (has_rgb && (s = tum_associate(&depth, &rgb, rgb_of))) goto done;
+    uint32_t n_unpaired = 0;
+    for (uint32_t i = 0; i < depth.n; i++) {
+        replay__frame_ref f = {.t_depth_s = depth.t_s[i], .t_rgb_s = depth.t_s[i], .depth_path = depth.path[i]};
+        if (has_rgb) {
+            /* associate.py drops a depth image without colour partner. */
+            if (rgb_of[i] == UINT32_MAX) {
+                n_unpaired++;
+                continue;
+            }
+            f.rgb_path = rgb.path[rgb_of[i]];
+            f.t_rgb_s = rgb.t_s[rgb_of[i]];
+        }
+        if (gt.n) f.has_pose = tum_gt_pose(&gt, f.t_depth_s, &f.T_wc);
+        if ((s = replay__list_push(list, &f))) goto done;
+    }
+    if (n_unpaired)
+        bf_info("%s: %u of %u depth images have no colour image within %.2f s and are left out", dir, n_unpaired,
+                depth.n, REPLAY_MAX_DT_S);
+    if (list->n == 0) s = bf_fail(BF_FORMAT, "%s: no depth image has a colour image within %.2f s", dir,
+                                  REPLAY_MAX_DT_S);
+done:
+    free(rgb_of);
+    replay_traj_free(&gt);
+    tum_index_free(&depth);
+    tum_index_free(&rgb);
+    return s;
+}
