@@ -1,0 +1,337 @@
+/* eval: trajectory error (association, Horn alignment, ATE, RPE). */
+#include "eval/eval.h"
+#include "test.h"
+
+static double det3(const double R[3][3])
+{
+    return R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1]) - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0]) +
+           R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]);
+}
+
+static double max_abs_diff_se3(const bf_se3 *A, const bf_se3 *B)
+{
+    double m = 0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) m = fmax(m, fabs(A->R[i][j] - B->R[i][j]));
+    m = fmax(m, fabs(A->t.x - B->t.x));
+    m = fmax(m, fabs(A->t.y - B->t.y));
+    return fmax(m, fabs(A->t.z - B->t.z));
+}
+
+/* A smooth, non-planar camera path with a turning camera: 30 Hz. */
+static bf_se3 path_pose(double t)
+{
+    bf_quat q = bf_quat_from_axis_angle(bf_v3(0.2, 1, 0.1), 0.3 * t);
+    return bf_se3_from_qt(q, bf_v3(cos(t), sin(0.7 * t), 0.2 * t + 0.1 * sin(2 * t)));
+}
+
+/* ------------------------------------------------------------ real data */
+
+/* Expected values from tests/eval/tum_oracle.py, an independent numpy
+ * re-implementation of TUM's associate.py (|dt| < 0.02 s), evaluate_ate.py
+ * (Horn via SVD, U diag(1,1,det) V^T) and evaluate_rpe.py (--fixed_delta,
+ * all pairs), run with Debian's python3-numpy 1.24.2 as
+ *   python3 tests/eval/tum_oracle.py groundtruth.txt rgbdslam_estimate.txt
+ * The oracle uses the SVD, traj.c the quaternion eigenvector: both are
+ * exact up to rounding, so 1e-9 (relative) is far above the double-precision
+ * disagreement (~1e-13) and far below any real change of rule. */
+BF_TEST(ate_and_rpe_of_rgbdslam_on_fr1_xyz_match_the_tum_oracle)
+{
+    const char *dir = bf_test_data("tum/fr1_xyz");
+    if (!dir) BF_SKIP("shared data absent");
+    char p_gt[4200], p_est[4200];
+    snprintf(p_gt, sizeof p_gt, "%s/groundtruth.txt", dir);
+    snprintf(p_est, sizeof p_est, "%s/rgbdslam_estimate.txt", dir);
+    replay_traj gt = {0}, est = {0};
+    CHECK_OK(replay_traj_read_tum(p_gt, &gt));
+    CHECK_OK(replay_traj_read_tum(p_est, &est));
+
+    eval_ate_result ate;
+    eval_rpe_result rs, rf;
+    bf_status s1 = eval_ate(&gt, &est, 0.02, &ate);
+    bf_status s2 = eval_rpe(&gt, &est, 0, false, 1.0, &rs);
+    bf_status s3 = eval_rpe(&gt, &est, 0, true, 0, &rf);
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+    CHECK_OK(s1);
+    CHECK_OK(s2);
+    CHECK_OK(s3);
+#define REL(x) (1e-9 * fabs(x))
+    CHECK_EQ_INT(ate.n_matched, 786);
+    CHECK_NEAR(ate.trans.rmse, 0.0134734677699, REL(0.0134734677699) + 1e-13);
+    CHECK_NEAR(ate.trans.mean, 0.012029476392, REL(0.012029476392) + 1e-13);
+    CHECK_NEAR(ate.trans.median, 0.0111757511333, REL(0.0111757511333) + 1e-13);
+    CHECK_NEAR(ate.trans.std, 0.00606844555718, REL(0.00606844555718) + 1e-13);
+    CHECK_NEAR(ate.trans.min, 0.000938702720662, 1e-12);
+    CHECK_NEAR(ate.trans.max, 0.0347272016811, REL(0.0347272016811) + 1e-13);
+    /* The alignment itself (oracle's rot and trans). */
+    const double R[3][3] = {{0.9995289339037357, -0.025556512467789262, -0.016993379880015647},
+                            {0.025922282215500303, 0.9994291876936816, 0.021664119430254758},
+                            {0.01643002051133091, -0.022094421387130553, 0.9996208736163751}};
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) CHECK_NEAR(ate.T_gt_est.R[i][j], R[i][j], 1e-9);
+    CHECK_NEAR(ate.T_gt_est.t.x, 0.05514887223796139, 1e-9);
+    CHECK_NEAR(ate.T_gt_est.t.y, -0.06462044550667712, 1e-9);
+    CHECK_NEAR(ate.T_gt_est.t.z, -0.0013055199633258407, 1e-9);
+
+    CHECK_EQ_INT(rs.n_pairs, 753);
+    CHECK_NEAR(rs.trans.rmse, 0.0212174440791, REL(0.0212174440791) + 1e-13);
+    CHECK_NEAR(rs.trans.mean, 0.0195236639524, REL(0.0195236639524) + 1e-13);
+    CHECK_NEAR(rs.trans.median, 0.0193085925867, REL(0.0193085925867) + 1e-13);
+    CHECK_NEAR(rs.trans.std, 0.00830701385115, REL(0.00830701385115) + 1e-13);
+    CHECK_NEAR(rs.trans.max, 0.048152004435, REL(0.048152004435) + 1e-13);
+    CHECK_NEAR(rs.rot.rmse, 0.934480459417, REL(0.934480459417) + 1e-11);
+    CHECK_NEAR(rs.rot.mean, 0.84147232844, REL(0.84147232844) + 1e-11);
+    CHECK_NEAR(rs.rot.median, 0.801085322109, REL(0.801085322109) + 1e-11);
+    CHECK_NEAR(rs.rot.max, 2.29598544512, REL(2.29598544512) + 1e-11);
+
+    CHECK_EQ_INT(rf.n_pairs, 783);
+    CHECK_NEAR(rf.trans.rmse, 0.00576344630998, REL(0.00576344630998) + 1e-13);
+    CHECK_NEAR(rf.trans.mean, 0.00481646152778, REL(0.00481646152778) + 1e-13);
+    CHECK_NEAR(rf.trans.median, 0.00412328299051, REL(0.00412328299051) + 1e-13);
+    CHECK_NEAR(rf.rot.rmse, 0.352968960967, REL(0.352968960967) + 1e-11);
+    CHECK_NEAR(rf.rot.mean, 0.300080291019, REL(0.300080291019) + 1e-11);
+    CHECK_NEAR(rf.rot.median, 0.262954972396, REL(0.262954972396) + 1e-11);
+#undef REL
+}
+
+/* ------------------------------------------------------------ ATE */
+
+BF_TEST(ate_of_a_rigidly_moved_copy_is_zero_and_recovers_the_inverse)
+{
+    replay_traj gt = {0}, est = {0};
+    bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(1, -2, 0.5), 2.5), bf_v3(3, -1, 7));
+    for (int i = 0; i < 300; i++) {
+        double t = i / 30.0;
+        bf_se3 P = path_pose(t), Q = bf_se3_mul(&T, &P);
+        CHECK_OK(replay_traj_push(&gt, 1000 + t, &P));
+        /* est stamps 3 ms late: still associated one to one. */
+        CHECK_OK(replay_traj_push(&est, 1000 + t + 0.003, &Q));
+    }
+    eval_ate_result r;
+    CHECK_OK(eval_ate(&gt, &est, 0.02, &r));
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+    CHECK_EQ_INT(r.n_matched, 300);
+    /* Coordinates of size ~10 m: rounding leaves ~1e-15 m per point. */
+    CHECK_LE(r.trans.rmse, 1e-12);
+    bf_se3 Tinv = bf_se3_inverse(&T);
+    CHECK_LE(max_abs_diff_se3(&r.T_gt_est, &Tinv), 1e-12);
+}
+
+/* Points on a circle in z = 0 at angles 2 pi i / N, est displaced along z
+ * by e_i = a_(i mod 4) (-1)^(i div 4) with N / 4 even. Each residue class
+ * r sums (-1)^m e^{2 pi i (4m + r) / N} over m, a full geometric series of
+ * ratio -e^{8 pi i / N} != 1 whose N/4-th power is 1: zero. So the
+ * displacements have zero mean and zero cross-covariance with the circle,
+ * the optimal alignment is the identity (uniquely: the circle fixes the
+ * rotation) and each error is exactly |e_i|. */
+BF_TEST(ate_of_known_noise_gives_its_rmse)
+{
+    replay_traj gt = {0}, est = {0};
+    const int N = 400;
+    double sum2 = 0, sum = 0;
+    for (int i = 0; i < N; i++) {
+        double a = 2 * M_PI * i / N;
+        double sigma = 0.001 * (1 + (i % 4)); /* 1, 2, 3, 4 mm */
+        double e = ((i / 4) % 2 ? -1 : 1) * sigma;
+        sum2 += e * e;
+        sum += sigma;
+        bf_se3 P = bf_se3_from_qt(bf_quat_identity(), bf_v3(2 * cos(a), 2 * sin(a), 0));
+        bf_se3 Q = P;
+        Q.t.z += e;
+        CHECK_OK(replay_traj_push(&gt, i * 0.01, &P));
+        CHECK_OK(replay_traj_push(&est, i * 0.01, &Q));
+    }
+    eval_ate_result r;
+    CHECK_OK(eval_ate(&gt, &est, 0.005, &r));
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+    CHECK_EQ_INT(r.n_matched, N);
+    CHECK_NEAR(r.trans.rmse, sqrt(sum2 / N), 1e-12);
+    CHECK_NEAR(r.trans.mean, sum / N, 1e-12);
+    CHECK_NEAR(r.trans.median, 0.0025, 1e-12); /* 1,2 | 3,4 mm: middle two are 2 and 3 */
+    CHECK_NEAR(r.trans.min, 0.001, 1e-12);
+    CHECK_NEAR(r.trans.max, 0.004, 1e-12);
+    CHECK_NEAR(r.trans.std, sqrt(sum2 / N - (sum / N) * (sum / N)), 1e-12);
+    bf_se3 I = bf_se3_identity();
+    CHECK_LE(max_abs_diff_se3(&r.T_gt_est, &I), 1e-12);
+}
+
+BF_TEST(horn_never_returns_a_reflection)
+{
+    /* A mirrored point set: the best orthogonal map is the mirror (det -1);
+     * an SVD solution without the det correction returns it. */
+    bf_vec3 a[50], b[50];
+    unsigned s = 7;
+    for (int i = 0; i < 50; i++) {
+        s = s * 1103515245u + 12345u;
+        double x = (s >> 8) % 1000 / 1000.0;
+        s = s * 1103515245u + 12345u;
+        double y = (s >> 8) % 1000 / 1000.0;
+        s = s * 1103515245u + 12345u;
+        double z = (s >> 8) % 1000 / 1000.0;
+        a[i] = bf_v3(x, y, z);
+        b[i] = bf_v3(x, y, -z);
+    }
+    bf_se3 T;
+    CHECK_OK(eval_horn_align(a, b, 50, &T));
+    CHECK_NEAR(det3(T.R), 1.0, 1e-12);
+
+    /* Collinear points along a line: the rotation about the line is free,
+     * any choice must still be proper and map the line onto its image. */
+    bf_se3 M = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0.3, 0.2, 1), 1.2), bf_v3(1, 2, 3));
+    for (int i = 0; i < 50; i++) {
+        a[i] = bf_v3(0.1 * i, 0, 0);
+        b[i] = bf_se3_apply(&M, a[i]);
+    }
+    CHECK_OK(eval_horn_align(a, b, 50, &T));
+    CHECK_NEAR(det3(T.R), 1.0, 1e-12);
+    for (int i = 0; i < 50; i++) CHECK_LE(bf_v3_norm(bf_v3_sub(bf_se3_apply(&T, a[i]), b[i])), 1e-12);
+
+    /* A collinear trajectory mirrored through a plane containing the line
+     * is still fitted exactly by a proper rotation. */
+    for (int i = 0; i < 50; i++) b[i] = bf_v3(0.1 * i, 0, 0);
+    CHECK_OK(eval_horn_align(a, b, 50, &T));
+    CHECK_NEAR(det3(T.R), 1.0, 1e-12);
+
+    /* All points at one place: identity rotation, translation between them. */
+    for (int i = 0; i < 5; i++) {
+        a[i] = bf_v3(1, 1, 1);
+        b[i] = bf_v3(2, 1, 1);
+    }
+    CHECK_OK(eval_horn_align(a, b, 5, &T));
+    CHECK_NEAR(T.R[0][0] + T.R[1][1] + T.R[2][2], 3, 1e-15);
+    CHECK_NEAR(T.t.x, 1, 1e-15);
+    CHECK_STATUS(eval_horn_align(a, b, 0, &T), BF_INVALID_ARG);
+}
+
+BF_TEST(ate_on_a_straight_line_trajectory_is_zero_without_reflection)
+{
+    replay_traj gt = {0}, est = {0};
+    bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.5), bf_v3(0, 0, 1));
+    for (int i = 0; i < 100; i++) {
+        bf_se3 P = bf_se3_from_qt(bf_quat_identity(), bf_v3(0.01 * i, 0, 0)), Q = bf_se3_mul(&T, &P);
+        CHECK_OK(replay_traj_push(&gt, i * 0.1, &P));
+        CHECK_OK(replay_traj_push(&est, i * 0.1, &Q));
+    }
+    eval_ate_result r;
+    CHECK_OK(eval_ate(&gt, &est, 0, &r));
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+    CHECK_LE(r.trans.rmse, 1e-13);
+    CHECK_NEAR(det3(r.T_gt_est.R), 1.0, 1e-12);
+}
+
+BF_TEST(association_is_greedy_one_to_one_and_strict)
+{
+    replay_traj gt = {0}, est = {0};
+    bf_se3 I = bf_se3_identity();
+    /* gt 0.00 and 1.00; est 0.005 and 0.008 both nearest to gt 0.00: only
+     * the closer is taken. est 1.02 is exactly 0.02 away: not a candidate
+     * (associate.py uses a strict <). */
+    double tg[] = {0.0, 1.0}, te[] = {0.005, 0.008, 1.02};
+    for (int i = 0; i < 2; i++) CHECK_OK(replay_traj_push(&gt, tg[i], &I));
+    for (int i = 0; i < 3; i++) CHECK_OK(replay_traj_push(&est, te[i], &I));
+    eval_match *m;
+    size_t n;
+    CHECK_OK(eval_associate(&gt, &est, 0.0200001, &m, &n));
+    CHECK_EQ_INT(n, 2);
+    CHECK_EQ_INT(m[0].i_est, 0);
+    CHECK_EQ_INT(m[1].i_est, 2);
+    free(m);
+    CHECK_OK(eval_associate(&gt, &est, 0.02, &m, &n));
+    CHECK_EQ_INT(n, 1);
+    free(m);
+    /* Fewer than two pairs: ATE refuses, naming the reason. */
+    eval_ate_result r;
+    CHECK_STATUS(eval_ate(&gt, &est, 0.02, &r), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("pose pair");
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+}
+
+/* ------------------------------------------------------------ RPE */
+
+BF_TEST(rpe_of_a_constant_drift_is_the_drift_per_delta)
+{
+    /* gt moves along x at 1 m/s, est at 1.02 m/s, neither turns: for poses
+     * dt apart the error is a pure translation of 0.02 dt m. A second pair
+     * checks rotation drift: gt static, est turning 3 deg/s about z in
+     * place, so the error is a pure rotation of 3 dt deg. 10 s at 30 Hz. */
+    replay_traj gt = {0}, est = {0}, spin = {0};
+    for (int i = 0; i <= 300; i++) {
+        double t = i / 30.0;
+        bf_se3 G = bf_se3_from_qt(bf_quat_identity(), bf_v3(t, 0, 0));
+        bf_se3 E = bf_se3_from_qt(bf_quat_identity(), bf_v3(1.02 * t, 0, 0));
+        bf_se3 S = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 0, 1), 3 * M_PI / 180 * t), bf_v3(0, 0, 0));
+        CHECK_OK(replay_traj_push(&gt, 50 + t, &G));
+        CHECK_OK(replay_traj_push(&est, 50 + t, &E));
+        CHECK_OK(replay_traj_push(&spin, 50 + t, &S));
+    }
+    eval_rpe_result r;
+    CHECK_OK(eval_rpe(&gt, &est, 0, false, 1.0, &r));
+    /* TUM's pair rule: j = pose nearest t_i + 1 s, dropped when j is the
+     * last pose, so i = 0..269 (j = i + 30 <= 299): 270 pairs. */
+    CHECK_EQ_INT(r.n_pairs, 270);
+    CHECK_NEAR(r.trans.mean, 0.02, 1e-12);
+    CHECK_NEAR(r.trans.max, 0.02, 1e-12);
+    CHECK_NEAR(r.rot.max, 0, 1e-12);
+    CHECK_OK(eval_rpe(&gt, &est, 0, true, 0, &r));
+    /* Per frame: j = i + 1, and the pair ending at the last pose is dropped:
+     * 299 pairs of 1/30 s, error 0.02/30 m each. */
+    CHECK_EQ_INT(r.n_pairs, 299);
+    CHECK_NEAR(r.trans.median, 0.02 / 30, 1e-12);
+
+    /* Rotation drift over 2 s: 6 deg; pairs i = 0..239 (j = i + 60 < 300). */
+    replay_traj still = {0};
+    for (size_t i = 0; i < spin.n; i++) {
+        bf_se3 I = bf_se3_identity();
+        CHECK_OK(replay_traj_push(&still, spin.t_s[i], &I));
+    }
+    CHECK_OK(eval_rpe(&still, &spin, 0, false, 2.0, &r));
+    CHECK_EQ_INT(r.n_pairs, 240);
+    CHECK_NEAR(r.rot.mean, 6.0, 1e-9);
+    CHECK_NEAR(r.rot.std, 0, 1e-9);
+    CHECK_NEAR(r.trans.max, 0, 1e-12);
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+    replay_traj_free(&spin);
+    replay_traj_free(&still);
+}
+
+BF_TEST(rpe_skips_pairs_without_nearby_ground_truth)
+{
+    /* Ground truth with a 2 s hole: estimated poses inside the hole have no
+     * gt within twice the median interval and their pairs are skipped. */
+    replay_traj gt = {0}, est = {0};
+    bf_se3 I = bf_se3_identity();
+    for (int i = 0; i <= 300; i++) {
+        double t = i / 30.0;
+        if (t < 4 || t > 6) CHECK_OK(replay_traj_push(&gt, t, &I));
+        CHECK_OK(replay_traj_push(&est, t, &I));
+    }
+    eval_rpe_result r;
+    CHECK_OK(eval_rpe(&gt, &est, 0, true, 0, &r));
+    /* 299 pairs without the hole; the pairs touching est poses with t in
+     * (4 + 2/30, 6 - 2/30) exclusive are lost. */
+    CHECK(r.n_pairs < 299 && r.n_pairs > 230);
+    CHECK_NEAR(r.trans.max, 0, 0);
+    CHECK_STATUS(eval_rpe(&gt, &est, 0, false, -1, &r), BF_INVALID_ARG);
+    replay_traj_free(&gt);
+    replay_traj_free(&est);
+}
+
+BF_TEST(error_stats_follow_numpy)
+{
+    const double v[] = {4, 1, 3, 2};
+    eval_err_stats s;
+    CHECK_OK(eval_err_stats_compute(v, 4, &s));
+    CHECK_NEAR(s.mean, 2.5, 0);
+    CHECK_NEAR(s.median, 2.5, 0);
+    CHECK_NEAR(s.rmse, sqrt(30.0 / 4), 1e-15);
+    CHECK_NEAR(s.std, sqrt(1.25), 1e-15);
+    CHECK_NEAR(s.min, 1, 0);
+    CHECK_NEAR(s.max, 4, 0);
+    CHECK_STATUS(eval_err_stats_compute(v, 0, &s), BF_INVALID_ARG);
+}
