@@ -29,4 +29,9 @@ bool rt_png_write_gray8(const char *path, const uint8_t *pix, uint32_t w, uint32
 /* Writes an RGB JPEG at the given quality with libjpeg. */
 bool rt_jpeg_write(const char *path, const uint8_t *rgb, uint32_t w, uint32_t h, int quality);
 
+/* dir/name as a symbolic link to target (real data stays where it is). */
+bool rt_link(const char *target, const char *dir, const char *name);
+/* Path of dir/name in a static slot (as rt_tmp). */
+const char *rt_join(const char *dir, const char *name);
+
 #endif

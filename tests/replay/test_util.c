@@ -2,6 +2,7 @@
 #include <png.h>
 #include <stdio.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <jpeglib.h>
 
@@ -125,4 +126,26 @@ bool rt_jpeg_write(const char *path, const uint8_t *rgb, uint32_t w, uint32_t h,
     jpeg_finish_compress(&c);
     jpeg_destroy_compress(&c);
     return fclose(f) == 0;
+}
+
+const char *rt_join(const char *dir, const char *name)
+{
+    static char slots[8][1024];
+    static int next;
+    char *p = slots[next++ & 7];
+    snprintf(p, 1024, "%s/%s", dir, name);
+    return p;
+}
+
+bool rt_link(const char *target, const char *dir, const char *name)
+{
+    char path[1024];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    char sub[1024];
+    snprintf(sub, sizeof sub, "%s", path);
+    char *slash = strrchr(sub, '/');
+    *slash = '\0';
+    if (bf_mkdir_p(sub)) return false;
+    unlink(path);
+    return symlink(target, path) == 0;
 }

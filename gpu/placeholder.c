@@ -1,1 +1,0 @@
-/* placeholder */ typedef int bf_gpu_placeholder;
