@@ -136,7 +136,8 @@ static bf_status png_decode(FILE *f, const char *path, png_want want, void *buf,
     if (setjmp(png_jmpbuf(png))) {
         png_destroy_read_struct(&png, &info, NULL);
         free(owned);
-        return bf_fail(BF_FORMAT, "%s: corrupt or truncated PNG (%s)", path, err.msg);
+        if (feof(f)) return bf_fail(BF_FORMAT, "%s: truncated PNG (the file ends early)", path);
+        return bf_fail(BF_FORMAT, "%s: corrupt PNG (%s)", path, err.msg);
     }
     png_init_io(png, f);
     uint32_t w = 0, h = 0;
