@@ -1,4 +1,12 @@
 #version 450
-layout(local_size_x = 64) in;
+/* Adds 1 to each of the first n words of data (the gpu round-trip test). */
+#include "gpu_test.glsl.h"
+BF_LOCAL_SIZE_FROM_SPEC
 layout(std430, binding = 0) buffer Data { uint v[]; } data;
-void main() { data.v[gl_GlobalInvocationID.x] += 1u; }
+layout(push_constant) uniform Push { gpu_test_count pc; };
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= pc.n) return;
+    data.v[i] += 1u;
+}

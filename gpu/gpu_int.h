@@ -1,0 +1,213 @@
+/* Declarations shared by gpu/'s files: the Vulkan function table and the
+ * object layouts. Not for other modules. */
+#ifndef BF_GPU_INT_H
+#define BF_GPU_INT_H
+
+#include <stdatomic.h>
+
+#include "gpu/gpu.h"
+
+/* Functions the loader exports before any instance exists. */
+#define GPU__VK_GLOBAL(X)                    \
+    X(EnumerateInstanceVersion)              \
+    X(EnumerateInstanceExtensionProperties)  \
+    X(EnumerateInstanceLayerProperties)      \
+    X(CreateInstance)
+
+/* Instance-level functions (loaded with vkGetInstanceProcAddr). */
+#define GPU__VK_INSTANCE(X)                  \
+    X(DestroyInstance)                       \
+    X(EnumeratePhysicalDevices)              \
+    X(GetPhysicalDeviceProperties)           \
+    X(GetPhysicalDeviceProperties2)          \
+    X(GetPhysicalDeviceQueueFamilyProperties) \
+    X(GetPhysicalDeviceMemoryProperties)     \
+    X(CreateDevice)                          \
+    X(GetDeviceProcAddr)
+
+/* From VK_EXT_debug_utils; NULL when it is not enabled. */
+#define GPU__VK_DEBUG(X)                     \
+    X(CreateDebugUtilsMessengerEXT)          \
+    X(DestroyDebugUtilsMessengerEXT)         \
+    X(SetDebugUtilsObjectNameEXT)            \
+    X(CmdBeginDebugUtilsLabelEXT)            \
+    X(CmdEndDebugUtilsLabelEXT)
+
+/* Device-level functions (loaded with vkGetDeviceProcAddr). */
+#define GPU__VK_DEVICE(X)                    \
+    X(DestroyDevice)                         \
+    X(DeviceWaitIdle)                        \
+    X(GetDeviceQueue)                        \
+    X(QueueSubmit)                           \
+    X(CreateBuffer)                          \
+    X(DestroyBuffer)                         \
+    X(GetBufferMemoryRequirements)           \
+    X(AllocateMemory)                        \
+    X(FreeMemory)                            \
+    X(BindBufferMemory)                      \
+    X(MapMemory)                             \
+    X(UnmapMemory)                           \
+    X(FlushMappedMemoryRanges)               \
+    X(InvalidateMappedMemoryRanges)          \
+    X(CreateShaderModule)                    \
+    X(DestroyShaderModule)                   \
+    X(CreateDescriptorSetLayout)             \
+    X(DestroyDescriptorSetLayout)            \
+    X(CreatePipelineLayout)                  \
+    X(DestroyPipelineLayout)                 \
+    X(CreateComputePipelines)                \
+    X(DestroyPipeline)                       \
+    X(CreatePipelineCache)                   \
+    X(DestroyPipelineCache)                  \
+    X(GetPipelineCacheData)                  \
+    X(CreateDescriptorPool)                  \
+    X(DestroyDescriptorPool)                 \
+    X(AllocateDescriptorSets)                \
+    X(FreeDescriptorSets)                    \
+    X(UpdateDescriptorSets)                  \
+    X(CreateCommandPool)                     \
+    X(DestroyCommandPool)                    \
+    X(AllocateCommandBuffers)                \
+    X(ResetCommandBuffer)                    \
+    X(BeginCommandBuffer)                    \
+    X(EndCommandBuffer)                      \
+    X(CmdBindPipeline)                       \
+    X(CmdBindDescriptorSets)                 \
+    X(CmdPushConstants)                      \
+    X(CmdDispatch)                           \
+    X(CmdDispatchIndirect)                   \
+    X(CmdPipelineBarrier)                    \
+    X(CmdCopyBuffer)                         \
+    X(CmdFillBuffer)                         \
+    X(CmdWriteTimestamp)                     \
+    X(CmdResetQueryPool)                     \
+    X(CreateQueryPool)                       \
+    X(DestroyQueryPool)                      \
+    X(GetQueryPoolResults)                   \
+    X(CreateFence)                           \
+    X(DestroyFence)                          \
+    X(ResetFences)                           \
+    X(WaitForFences)
+
+typedef struct gpu__vk {
+    void *lib; /* dlopen handle of the loader */
+    PFN_vkGetInstanceProcAddr GetInstanceProcAddr;
+#define GPU__VK_MEMBER(name) PFN_vk##name name;
+    GPU__VK_GLOBAL(GPU__VK_MEMBER)
+    GPU__VK_INSTANCE(GPU__VK_MEMBER)
+    GPU__VK_DEBUG(GPU__VK_MEMBER)
+    GPU__VK_DEVICE(GPU__VK_MEMBER)
+#undef GPU__VK_MEMBER
+} gpu__vk;
+
+/* An instance with its loader, shared by gpu_device_list and the context. */
+typedef struct gpu__instance {
+    gpu__vk vk;
+    VkInstance instance;
+    VkDebugUtilsMessengerEXT messenger;
+    bool has_debug_utils;
+    bool has_validation;
+} gpu__instance;
+
+struct gpu_context {
+    gpu__instance inst;
+    _Atomic uint32_t n_messages;     /* validation warnings and errors */
+    VkPhysicalDevice phys;
+    gpu_device_info info;
+    VkPhysicalDeviceMemoryProperties mem_props;
+    VkDevice device;
+    VkQueue queue;
+    bool force_staging;
+
+    VkPipelineCache pipeline_cache;
+    char cache_path[4096];           /* "" when not persisted */
+    size_t cache_loaded_bytes;
+
+    /* One set layout per buffer count, made on first use (at create time of
+     * a pipeline or binding set, never while recording). */
+    VkDescriptorSetLayout set_layouts[GPU_MAX_BINDINGS + 1];
+    VkDescriptorPool descriptor_pool;
+    uint32_t bindings_cap, n_bindings;
+
+    VkCommandPool command_pool;
+    VkCommandBuffer cmd;             /* per-frame work: gpu_begin .. gpu_submit_wait */
+    VkFence fence;
+    bool is_recording;
+    VkCommandBuffer xfer_cmd;        /* synchronous transfers (upload/download/fill) */
+    VkFence xfer_fence;
+    gpu_buffer *staging;             /* NULL when all device memory is mappable */
+
+    VkQueryPool query_pool;          /* 2 * stage_cap timestamps; NULL without timestamps */
+    uint32_t stage_cap, n_stages;
+    bool is_stage_open;
+    bool is_stage_timed;             /* the open stage got a begin timestamp */
+    gpu_stage_time *stages;          /* stage_cap entries */
+    uint32_t label_depth;
+};
+
+struct gpu_buffer {
+    gpu_context *ctx;
+    VkBuffer buffer;
+    VkDeviceMemory memory;
+    uint64_t size;
+    uint32_t usage;                  /* gpu_usage bits */
+    gpu_memory kind;
+    bool is_coherent;
+    void *mapped;                    /* NULL if not (or not to be) mapped */
+    char name[64];
+};
+
+struct gpu_pipeline {
+    gpu_context *ctx;
+    VkPipelineLayout layout;
+    VkPipeline pipeline;
+    uint32_t n_buffers, push_bytes;
+    uint32_t local_size[3];
+    char name[64];
+};
+
+struct gpu_bindings {
+    gpu_context *ctx;
+    VkDescriptorSet set;
+    uint32_t n_buffers;
+    uint32_t set_mask;               /* slots bound so far */
+    char name[64];
+};
+
+extern _Atomic uint32_t gpu__messages_total;
+
+/* Maps a VkResult to a status and records "call: object: VK_ERROR_..." */
+bf_status gpu__vk_fail(VkResult r, const char *call, const char *object);
+const char *gpu__vk_result_name(VkResult r);
+#define GPU__CHECK(call, object)                                        \
+    do {                                                                \
+        VkResult gpu__r = (call);                                       \
+        if (gpu__r != VK_SUCCESS) {                                     \
+            status = gpu__vk_fail(gpu__r, #call, (object));             \
+            goto fail;                                                  \
+        }                                                               \
+    } while (0)
+
+/* Opens the loader and creates an instance, with the validation layer and
+ * debug utils when validation is set. user is handed to the messenger
+ * (a gpu_context or NULL). */
+bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_context *user,
+                               gpu__instance *out);
+void gpu__instance_destroy(gpu__instance *inst);
+bool gpu__validation_wanted(const gpu_config *cfg);
+/* Fills info for one physical device. */
+void gpu__query_device(const gpu__instance *inst, VkPhysicalDevice phys, gpu_device_info *info);
+/* Index of the device to use among n, or UINT32_MAX (with a bf_fail message). */
+uint32_t gpu__choose_device(const gpu_device_info *infos, uint32_t n, const char *want);
+const char *gpu__wanted_device(const gpu_config *cfg);
+
+void gpu__name(gpu_context *ctx, VkObjectType type, uint64_t handle, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+bf_status gpu__set_layout(gpu_context *ctx, uint32_t n_buffers, VkDescriptorSetLayout *out);
+bf_status gpu__pipeline_cache_open(gpu_context *ctx, const gpu_config *cfg);
+void gpu__pipeline_cache_close(gpu_context *ctx);
+/* Runs one recording on the transfer command buffer and waits for it. */
+bf_status gpu__xfer_begin(gpu_context *ctx);
+bf_status gpu__xfer_submit_wait(gpu_context *ctx);
+
+#endif

@@ -1,0 +1,51 @@
+/* Definitions shared by C and GLSL (STYLE.md section 4). glslc compiles
+ * shaders with -DBF_GLSL=1; C never defines BF_GLSL. Shared functions are
+ * pure (values in, value out) and use only the macros below, so one body
+ * serves both sides and a GPU test can compare them bit for bit. */
+#ifndef BF_COMMON_GLSL_H
+#define BF_COMMON_GLSL_H
+
+#ifdef BF_GLSL
+#  define BF_FN
+#  define bf_u32 uint
+#  define bf_i32 int
+#  define bf_f32 float
+#  define bf_popcount(x) uint(bitCount(x))
+#else
+#  include <stdint.h>
+#  define BF_FN static inline
+typedef uint32_t bf_u32;
+typedef int32_t bf_i32;
+typedef float bf_f32;
+#  define bf_popcount(x) ((bf_u32)__builtin_popcount(x))
+#endif
+
+/* Specialization constant ids: 0..2 carry the workgroup size chosen on the
+ * host from the device limits (gpu_pipeline_desc.local_size); a shader's own
+ * constants start at BF_SPEC_USER. */
+#define BF_SPEC_LOCAL_SIZE_X 0
+#define BF_SPEC_LOCAL_SIZE_Y 1
+#define BF_SPEC_LOCAL_SIZE_Z 2
+#define BF_SPEC_USER 3
+#ifdef BF_GLSL
+#  define BF_LOCAL_SIZE_FROM_SPEC \
+    layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z_id = 2) in;
+#endif
+
+/* ------------------------------------------------------------ bricks */
+
+/* A brick is 8x8x8 voxels, one bit per voxel in each bit plane (sign,
+ * confidence): 16 words of 32 bits, each word a 4x4x2 sub-brick
+ * (Reichl 2016, ch. 8; DESIGN.md section 3). */
+#define BRICK_EDGE 8u
+#define BRICK_VOXELS 512u
+#define BRICK_WORDS 16u
+
+/* Word of voxel (x, y, z), each in [0, 8). */
+BF_FN bf_u32 brick_word(bf_u32 x, bf_u32 y, bf_u32 z) { return (z >> 1) * 4u + (y >> 2) * 2u + (x >> 2); }
+/* Bit of voxel (x, y, z) inside its word. */
+BF_FN bf_u32 brick_bit(bf_u32 x, bf_u32 y, bf_u32 z) { return (z & 1u) * 16u + (y & 3u) * 4u + (x & 3u); }
+/* Set bits below bit i (in [0, 32)) of w: the voxel's colour slot. */
+BF_FN bf_u32 brick_rank(bf_u32 w, bf_u32 i) { return bf_popcount(w & ((1u << i) - 1u)); }
+
+#endif
