@@ -169,7 +169,8 @@ typedef struct eval_synth_config {
     double rate_hz;         /* 0 = 30 */
     eval_noise noise;
     uint64_t seed;
-    bf_intrinsics K;        /* 0 fields = 640x480, 525, 525, 319.5, 239.5, 5000 */
+    bf_intrinsics K;        /* size 0 = 640x480; fx 0 = 525, 525, (w-1)/2, (h-1)/2;
+                               depth_scale 0 = 5000 */
     const char *out_dir;
     double seen_cell_m;     /* seen.ply grid; 0 = 0.005 */
 } eval_synth_config;

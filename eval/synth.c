@@ -1,0 +1,306 @@
+/* eval: a whole synthetic sequence: trajectory in, TUM folder out.
+ *
+ * Placement: the trajectory (any TUM file, e.g. a real motion-capture run)
+ * lives in its own world frame. It is moved into the scene by one rigid
+ * transform, T_world_traj = T_view * inv(T_traj(t_0)): the first frame's
+ * camera lands exactly on the scene's chosen view (for the room: 1.75 m from
+ * the table, looking at it) and every later pose is
+ * T_wc(t) = T_world_traj * T_traj(t), so all relative motion is the
+ * trajectory's own, untouched.
+ *
+ * Timing: frames at t_0 + i / rate (30 Hz by default), poses interpolated
+ * between the trajectory's samples (linear position, slerp rotation), as a
+ * sensor following that motion would record them. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "synth_int.h"
+
+/* ------------------------------------------------------------ seen points */
+
+/* The visibility mask: noise-free surface points that got valid depth, one
+ * per cell of a grid, so the density is about uniform by area. */
+typedef struct seen_set {
+    uint64_t *keys;   /* open addressing, 0 = empty */
+    size_t cap, n;
+    float *xyz;
+    size_t xyz_cap;
+    double cell_m;
+} seen_set;
+
+static bool seen_grow(seen_set *s)
+{
+    size_t cap = s->cap ? 2 * s->cap : (size_t)1 << 16;
+    uint64_t *keys = calloc(cap, sizeof *keys);
+    if (!keys) return false;
+    for (size_t i = 0; i < s->cap; i++) {
+        uint64_t k = s->keys[i];
+        if (!k) continue;
+        size_t j = eval__mix64(k) & (cap - 1);
+        while (keys[j]) j = (j + 1) & (cap - 1);
+        keys[j] = k;
+    }
+    free(s->keys);
+    s->keys = keys;
+    s->cap = cap;
+    return true;
+}
+
+static bool seen_add(seen_set *s, bf_vec3 p)
+{
+    int64_t c[3] = {(int64_t)floor(p.x / s->cell_m), (int64_t)floor(p.y / s->cell_m), (int64_t)floor(p.z / s->cell_m)};
+    uint64_t key = 1; /* never 0 */
+    for (int k = 0; k < 3; k++) {
+        int64_t v = c[k] + ((int64_t)1 << 20);
+        if (v < 0 || v >= ((int64_t)1 << 21)) return true; /* beyond +-5 km: ignore */
+        key = (key << 21) | (uint64_t)v;
+    }
+    if (2 * (s->n + 1) > s->cap && !seen_grow(s)) return false;
+    size_t j = eval__mix64(key) & (s->cap - 1);
+    while (s->keys[j]) {
+        if (s->keys[j] == key) return true;
+        j = (j + 1) & (s->cap - 1);
+    }
+    if (3 * (s->n + 1) > s->xyz_cap) {
+        size_t cap = s->xyz_cap ? 2 * s->xyz_cap : 3 * 65536;
+        float *xyz = realloc(s->xyz, cap * sizeof *xyz);
+        if (!xyz) return false;
+        s->xyz = xyz;
+        s->xyz_cap = cap;
+    }
+    s->keys[j] = key;
+    s->xyz[3 * s->n] = (float)p.x;
+    s->xyz[3 * s->n + 1] = (float)p.y;
+    s->xyz[3 * s->n + 2] = (float)p.z;
+    s->n++;
+    return true;
+}
+
+/* Half the pixels per frame, in both directions every other one, the
+ * pattern shifting from frame to frame so four frames cover every pixel. */
+static bool seen_collect(seen_set *s, const eval_renderer *r, uint32_t frame, uint32_t w, uint32_t h)
+{
+    uint32_t ou = frame & 1, ov = (frame >> 1) & 1;
+    for (uint32_t v = ov; v < h; v += 2)
+        for (uint32_t u = ou; u < w; u += 2) {
+            bf_vec3 p;
+            if (eval_render_clean_point(r, u, v, &p) && !seen_add(s, p)) return false;
+        }
+    return true;
+}
+
+static void seen_free(seen_set *s)
+{
+    free(s->keys);
+    free(s->xyz);
+}
+
+/* ------------------------------------------------------------ outputs */
+
+static bf_status write_scene_ply(const char *dir, const eval_scene *sc)
+{
+    char path[4096];
+    bf_status s = bf_path_join(path, sizeof path, dir, "scene.ply");
+    if (s) return s;
+    /* Vertex colours: the albedo where the vertex sits, for viewing. */
+    eval_mesh m = sc->mesh;
+    m.rgb = malloc((size_t)m.n_verts * 3 + 1);
+    uint8_t *done = calloc((size_t)m.n_verts + 1, 1);
+    if (!m.rgb || !done) {
+        free(m.rgb);
+        free(done);
+        return bf_fail(BF_NO_MEMORY, "%s: vertex colours", path);
+    }
+    memset(m.rgb, 255, (size_t)m.n_verts * 3);
+    for (uint32_t t = 0; t < m.n_tris; t++)
+        for (int k = 0; k < 3; k++) {
+            uint32_t vi = m.tri[3 * (size_t)t + k];
+            if (done[vi]) continue;
+            done[vi] = 1;
+            double rgb[3];
+            const float *p = m.xyz + 3 * (size_t)vi;
+            eval__albedo(sc->tri_material[t], sc->tri_variant[t], bf_v3(p[0], p[1], p[2]), rgb);
+            for (int c = 0; c < 3; c++) m.rgb[3 * (size_t)vi + c] = (uint8_t)fmin(255, fmax(0, rgb[c] * 255 + 0.5));
+        }
+    s = eval_mesh_write_ply(path, &m);
+    free(m.rgb);
+    free(done);
+    return s;
+}
+
+static bf_status write_seen_ply(const char *dir, const seen_set *seen)
+{
+    char path[4096];
+    bf_status s = bf_path_join(path, sizeof path, dir, "seen.ply");
+    if (s) return s;
+    eval_mesh m = {.n_verts = (uint32_t)seen->n, .xyz = seen->xyz};
+    return eval_mesh_write_ply(path, &m);
+}
+
+static const char *noise_name(eval_noise n) { return n == EVAL_NOISE_KINECT1 ? "kinect1" : "none"; }
+
+/* JSON string body with quotes and backslashes escaped. */
+static void json_str(char *out, size_t cap, const char *s)
+{
+    size_t j = 0;
+    for (; *s && j + 3 < cap; s++) {
+        if (*s == '"' || *s == '\\') out[j++] = '\\';
+        out[j++] = (unsigned char)*s < 0x20 ? ' ' : *s;
+    }
+    out[j] = 0;
+}
+
+static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *K, const eval_scene *sc,
+                             const eval_synth_result *res, uint32_t n_requested, double t0_s, double p95_s,
+                             double cell_m, double rate_hz)
+{
+    char path[4096], scene[1024], traj[4096];
+    bf_status s = bf_path_join(path, sizeof path, cfg->out_dir, "stats.json");
+    if (s) return s;
+    json_str(scene, sizeof scene, sc->desc);
+    json_str(traj, sizeof traj, cfg->traj_path);
+    bf_quat q;
+    bf_vec3 t;
+    bf_se3_to_qt(&res->T_world_traj, &q, &t);
+    const double(*R)[3] = res->T_world_traj.R;
+    char buf[8192];
+    int n = snprintf(
+        buf, sizeof buf,
+        "{\n  \"command\": \"synth\",\n  \"scene\": \"%s\",\n  \"scene_triangles\": %u,\n"
+        "  \"trajectory\": \"%s\",\n  \"t_first_s\": %.6f,\n  \"rate_hz\": %.9g,\n"
+        "  \"frames\": %u,\n  \"frames_requested\": %u,\n  \"noise\": \"%s\",\n  \"seed\": %llu,\n"
+        "  \"camera\": {\"width\": %u, \"height\": %u, \"fx\": %.9g, \"fy\": %.9g, \"cx\": %.9g, \"cy\": %.9g, "
+        "\"depth_scale\": %.9g},\n"
+        "  \"time_per_frame_s\": {\"mean\": %.4f, \"median\": %.4f, \"p95\": %.4f},\n"
+        "  \"frames_per_s\": %.3f,\n  \"threads\": %d,\n  \"valid_depth_share\": %.4f,\n"
+        "  \"seen_points\": %u,\n  \"seen_cell_m\": %.4g,\n"
+        "  \"placement\": {\n    \"rule\": \"T_world_traj = T_view * inv(T_traj(t_first)); rendered pose = T_world_traj * "
+        "T_traj(t)\",\n"
+        "    \"t\": [%.9f, %.9f, %.9f],\n    \"q_xyzw\": [%.9f, %.9f, %.9f, %.9f],\n"
+        "    \"matrix\": [[%.9f, %.9f, %.9f, %.9f], [%.9f, %.9f, %.9f, %.9f], [%.9f, %.9f, %.9f, %.9f], [0, 0, 0, 1]]\n"
+        "  }\n}\n",
+        scene, sc->mesh.n_tris, traj, t0_s, rate_hz, res->n_frames, n_requested, noise_name(cfg->noise),
+        (unsigned long long)cfg->seed, K->width, K->height, K->fx_px, K->fy_px, K->cx_px, K->cy_px, K->depth_scale,
+        res->mean_frame_s, res->median_frame_s, p95_s, res->mean_frame_s > 0 ? 1.0 / res->mean_frame_s : 0,
+        bf_thread_count(), res->valid_share, res->n_seen, cell_m, t.x, t.y, t.z, q.x, q.y, q.z, q.w, R[0][0], R[0][1],
+        R[0][2], res->T_world_traj.t.x, R[1][0], R[1][1], R[1][2], res->T_world_traj.t.y, R[2][0], R[2][1], R[2][2],
+        res->T_world_traj.t.z);
+    if (n < 0 || (size_t)n >= sizeof buf) return bf_fail(BF_INVALID_ARG, "%s: statistics too long", path);
+    return bf_write_file_atomic(path, buf, (size_t)n);
+}
+
+/* ------------------------------------------------------------ the sequence */
+
+bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
+{
+    if (!cfg || !cfg->scene || !cfg->traj_path || !cfg->out_dir)
+        return bf_fail(BF_INVALID_ARG, "synth: scene, trajectory and output folder are required");
+    if (cfg->n_frames == 0) return bf_fail(BF_INVALID_ARG, "synth: zero frames requested");
+    double rate = cfg->rate_hz > 0 ? cfg->rate_hz : 30.0;
+    if (!isfinite(rate) || rate > 1e5) return bf_fail(BF_INVALID_ARG, "synth: frame rate %g Hz", rate);
+    double cell = cfg->seen_cell_m > 0 ? cfg->seen_cell_m : 0.005;
+    bf_intrinsics K = cfg->K;
+    if (K.width == 0) K.width = 640;
+    if (K.height == 0) K.height = 480;
+    if (K.fx_px == 0) {
+        K.fx_px = K.fy_px = 525.0;
+        K.cx_px = (K.width - 1) / 2.0;
+        K.cy_px = (K.height - 1) / 2.0;
+    }
+    if (K.depth_scale == 0) K.depth_scale = 5000.0;
+
+    replay_traj traj = {0};
+    eval_scene scene = {0};
+    eval_renderer *r = NULL;
+    replay_tum_writer *w = NULL;
+    uint16_t *depth = NULL;
+    uint8_t *rgb = NULL;
+    seen_set seen = {.cell_m = cell};
+    bf_stats times = {0};
+    bf_status s;
+    if ((s = replay_traj_read_tum(cfg->traj_path, &traj))) goto done;
+    double t0 = traj.t_s[0], t_end = traj.t_s[traj.n - 1];
+    /* Frames whose time lies within the trajectory. */
+    uint32_t n_frames = 0;
+    while (n_frames < cfg->n_frames && t0 + n_frames / rate <= t_end) n_frames++;
+    if (n_frames < cfg->n_frames)
+        bf_warn("synth: %s spans %.3f s: only %u of %u frames at %g Hz fit, stopping there", cfg->traj_path,
+                t_end - t0, n_frames, cfg->n_frames, rate);
+
+    if (!strcmp(cfg->scene, "room"))
+        s = eval_scene_room(cfg->data_dir, &scene);
+    else
+        s = eval_scene_from_ply(cfg->scene, cfg->mesh_scale > 0 ? cfg->mesh_scale : 1.0, &scene);
+    if (s) goto done;
+    bf_info("synth: scene: %s", scene.desc);
+
+    bf_se3 T_first_inv = bf_se3_inverse(&traj.T_wc[0]);
+    bf_se3 T_world_traj = bf_se3_mul(&scene.T_wc_view, &T_first_inv);
+
+    eval_render_config rc = {K, cfg->noise, cfg->seed};
+    double t_build = bf_time_s();
+    if ((s = eval_renderer_create(&scene, &rc, &r))) goto done;
+    bf_info("synth: BVH over %u triangles in %.2f s", scene.mesh.n_tris, bf_time_s() - t_build);
+    if ((s = replay_tum_writer_create(cfg->out_dir, &K, &w))) goto done;
+    size_t n_pix = (size_t)K.width * K.height;
+    depth = malloc(n_pix * sizeof *depth);
+    rgb = malloc(n_pix * 3);
+    if (!depth || !rgb) {
+        s = bf_fail(BF_NO_MEMORY, "synth: frame buffers");
+        goto done;
+    }
+
+    bf_progress prog;
+    bf_progress_begin(&prog, "synth", n_frames);
+    uint64_t n_valid = 0;
+    for (uint32_t i = 0; i < n_frames; i++) {
+        double t = t0 + i / rate;
+        bf_se3 T_traj;
+        if (!replay_traj_interpolate(&traj, t, &T_traj)) {
+            s = bf_fail(BF_INVALID_ARG, "synth: frame %u: time %.6f outside %s", i, t, cfg->traj_path);
+            goto done;
+        }
+        bf_se3 T_wc = bf_se3_mul(&T_world_traj, &T_traj);
+        eval_render_stats st;
+        if ((s = eval_render(r, i, &T_wc, depth, rgb, &st))) goto done;
+        if ((s = bf_stats_push(&times, st.seconds))) goto done;
+        n_valid += st.n_valid;
+        bf_frame f = {.index = i, .width = K.width, .height = K.height, .t_depth_s = t, .t_rgb_s = t,
+                      .depth = depth, .rgb = rgb, .has_pose = true, .T_wc = T_wc};
+        if ((s = replay_tum_writer_add(w, &f))) goto done;
+        if (!seen_collect(&seen, r, i, K.width, K.height)) {
+            s = bf_fail(BF_NO_MEMORY, "synth: frame %u: seen points", i);
+            goto done;
+        }
+        bf_progress_update(&prog, i + 1);
+    }
+    bf_progress_end(&prog, n_frames);
+    if ((s = replay_tum_writer_finish(w))) goto done;
+    if ((s = write_scene_ply(cfg->out_dir, &scene))) goto done;
+    if ((s = write_seen_ply(cfg->out_dir, &seen))) goto done;
+
+    eval_synth_result res = {
+        .n_frames = n_frames,
+        .mean_frame_s = bf_stats_mean(&times),
+        .median_frame_s = bf_stats_percentile(&times, 50),
+        .valid_share = (double)n_valid / ((double)n_pix * n_frames),
+        .T_world_traj = T_world_traj,
+        .n_seen = (uint32_t)seen.n,
+        .n_scene_tris = scene.mesh.n_tris,
+    };
+    if ((s = write_stats(cfg, &K, &scene, &res, cfg->n_frames, t0, bf_stats_percentile(&times, 95), cell, rate)))
+        goto done;
+    if (out) *out = res;
+done:
+    replay_tum_writer_destroy(w);
+    eval_renderer_destroy(r);
+    eval_scene_free(&scene);
+    replay_traj_free(&traj);
+    seen_free(&seen);
+    bf_stats_free(&times);
+    free(depth);
+    free(rgb);
+    return s;
+}
