@@ -216,6 +216,9 @@ bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_conte
     VkResult r = inst.vk.CreateInstance(&info, NULL, &inst.instance);
     if (r != VK_SUCCESS) {
         status = gpu__vk_fail(r, "vkCreateInstance", "bitfuse");
+        if (r == VK_ERROR_INCOMPATIBLE_DRIVER)
+            status = bf_fail(BF_NO_DEVICE, "no Vulkan driver found (vkCreateInstance: %s; Debian: "
+                             "apt install mesa-vulkan-drivers)", gpu__vk_result_name(r));
         if (status == BF_VULKAN) status = BF_NO_DEVICE;
         goto fail;
     }
