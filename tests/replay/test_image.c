@@ -176,3 +176,28 @@ BF_TEST(depth_png_with_wrong_bit_depth_or_colour_is_refused)
     CHECK_STATUS(replay_image_read_rgb8(rt_tmp("text.png"), &rgb, &w, &h), BF_FORMAT);
     CHECK_ERROR_MENTIONS("text.png");
 }
+
+BF_TEST(corrupt_png_data_is_format_error_naming_the_file)
+{
+    const char *dir = bf_test_data("tum/frames");
+    if (!dir) BF_SKIP("tum/frames absent");
+    char src[1024];
+    snprintf(src, sizeof src, "%s/fr2_desk_b2_depth.png", dir);
+    char *data;
+    size_t size;
+    CHECK_OK(bf_read_file(src, &data, &size));
+    /* Flip bytes in the middle of the image data: a CRC or zlib error. */
+    for (size_t i = size / 2; i < size / 2 + 16; i++) data[i] ^= 0x5a;
+    const char *p = rt_tmp("corrupt_depth.png");
+    FILE *f = fopen(p, "wb");
+    CHECK(f);
+    CHECK_EQ_INT(fwrite(data, 1, size, f), size);
+    fclose(f);
+    free(data);
+    uint16_t *d = NULL;
+    uint32_t w, h;
+    CHECK_STATUS(replay_png_read_u16(p, &d, &w, &h), BF_FORMAT);
+    CHECK(d == NULL);
+    CHECK_ERROR_MENTIONS("corrupt_depth.png");
+    CHECK_ERROR_MENTIONS("corrupt PNG");
+}
