@@ -43,7 +43,8 @@ struct replay_tum_writer {
     text_buf rgb_txt, depth_txt, gt_txt;
     uint32_t n_frames, n_poses;
     uint32_t width, height; /* of the first frame */
-    double t_last_s;
+    double t_last_s, t_last_rgb_s;
+    uint32_t n_rgb;
     bool is_finished;
 };
 
@@ -100,6 +101,9 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f)
         (w->n_frames > 0 && !(f->t_depth_s >= w->t_last_s + 1e-6)))
         return bf_fail(BF_INVALID_ARG, "%s: frame %u: time %.6f s is not after the previous frame's", w->dir,
                        f->index, f->t_depth_s);
+    if (f->rgb && w->n_rgb > 0 && !(f->t_rgb_s >= w->t_last_rgb_s + 1e-6))
+        return bf_fail(BF_INVALID_ARG, "%s: frame %u: colour time %.6f s is not after the previous colour image's",
+                       w->dir, f->index, f->t_rgb_s);
     if (f->has_pose && !bf_se3_is_finite(&f->T_wc))
         return bf_fail(BF_INVALID_ARG, "%s: frame %u: pose is not finite", w->dir, f->index);
     char name[64], path[4096];
@@ -113,6 +117,8 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f)
         if ((s = bf_path_join(path, sizeof path, w->dir, name))) return s;
         if ((s = replay_png_write_rgb8(path, f->rgb, f->width, f->height))) return s;
         if ((s = text_printf(&w->rgb_txt, "%.6f %s\n", f->t_rgb_s, name))) return s;
+        w->t_last_rgb_s = f->t_rgb_s;
+        w->n_rgb++;
     }
     if (f->has_pose) {
         bf_quat q;

@@ -21,8 +21,11 @@ BF_TEST(writer_writes_index_files_only_at_finish)
     CHECK(!bf_file_exists(p));
     snprintf(p, sizeof p, "%s/depth/1.000000.png", dir);
     CHECK(bf_file_exists(p));
-    /* Time must advance; size must stay. */
+    /* Time must advance (depth and colour); size must stay. */
     CHECK_STATUS(replay_tum_writer_add(w, &f), BF_INVALID_ARG);
+    f.t_depth_s = 2;
+    CHECK_STATUS(replay_tum_writer_add(w, &f), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("colour time");
     f.t_depth_s = 2;
     f.width = 3;
     CHECK_STATUS(replay_tum_writer_add(w, &f), BF_INVALID_ARG);
