@@ -302,9 +302,11 @@ bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_me
 
 /* Area-uniform samples of m's triangles: n = min(max_samples,
  * round(area * samples_per_m2)) (at least 1 for a mesh with area), points
- * drawn with a counter-based generator so the result depends only on seed.
- * *xyz is malloc'd (3 * n floats). A mesh without area gives n = 0. */
+ * drawn with a counter-based generator so the result depends only on seed
+ * (not on the thread count). *xyz is malloc'd (3 * n floats); tri (may be
+ * NULL) receives a malloc'd array of each sample's triangle. A mesh without
+ * area gives n = 0 and NULL arrays. */
 bf_status eval_mesh_sample_area(const eval_mesh *m, double samples_per_m2, uint64_t max_samples,
-                                uint64_t seed, float **xyz, size_t *n);
+                                uint64_t seed, float **xyz, uint32_t **tri, size_t *n);
 
 #endif
