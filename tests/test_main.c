@@ -1,6 +1,7 @@
 /* The harness behind tests/test.h. */
 #include "test.h"
 
+#include <ftw.h>
 #include <stdarg.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -43,18 +44,39 @@ const char *bf_test_data(const char *sub)
     return stat(path, &st) == 0 ? path : NULL;
 }
 
+static char tmpdir[256];
+
 const char *bf_test_tmpdir(void)
 {
-    static char dir[256];
-    if (!dir[0]) {
+    if (!tmpdir[0]) {
         const char *base = getenv("TMPDIR");
-        snprintf(dir, sizeof dir, "%s/bitfuse-test-XXXXXX", base ? base : "/tmp");
-        if (!mkdtemp(dir)) {
+        snprintf(tmpdir, sizeof tmpdir, "%s/bitfuse-test-XXXXXX", base ? base : "/tmp");
+        if (!mkdtemp(tmpdir)) {
             perror("mkdtemp");
             exit(1);
         }
     }
-    return dir;
+    return tmpdir;
+}
+
+static int rm_entry(const char *path, const struct stat *st, int flag, struct FTW *ftw)
+{
+    (void)st;
+    (void)flag;
+    (void)ftw;
+    return remove(path);
+}
+
+/* Removes the temporary directory unless a test failed (then it is kept
+ * for inspection and its path printed). */
+static void cleanup_tmpdir(const char *dir, int failed)
+{
+    if (!dir[0]) return;
+    if (failed || getenv("BITFUSE_KEEP_TMP")) {
+        fprintf(stderr, "test files kept in %s\n", dir);
+        return;
+    }
+    nftw(dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
 }
 
 int main(int argc, char **argv)
@@ -77,6 +99,7 @@ int main(int argc, char **argv)
             fprintf(stderr, "[  OK  ] %s\n", tests[i].name);
         }
     }
+    cleanup_tmpdir(tmpdir, failed);
     printf("%d passed, %d failed, %d skipped\n", passed, failed, skipped);
     if (failed) return 1;
     if (passed == 0 && skipped > 0) return 77;
