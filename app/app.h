@@ -18,6 +18,9 @@ enum {
 int app_fail(const char *cmd, bf_status s);
 /* Prints a usage error and returns APP_EXIT_USAGE. */
 int app_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* The shared real-data folder (meshes/, tum/...): ../shared/data beside the
+ * source tree, else beside the current folder; NULL when neither exists. */
+const char *app_default_data_dir(void);
 /* True if argv[i] is -h or --help. */
 bool app_is_help(const char *arg);
 

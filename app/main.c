@@ -56,6 +56,14 @@ int app_usage_error(const char *cmd, const char *fmt, ...)
     return APP_EXIT_USAGE;
 }
 
+const char *app_default_data_dir(void)
+{
+    static const char *const candidates[] = {BF_SOURCE_DIR "/../shared/data", "../shared/data"};
+    for (size_t i = 0; i < sizeof candidates / sizeof candidates[0]; i++)
+        if (bf_file_exists(candidates[i])) return candidates[i];
+    return NULL;
+}
+
 bool app_is_help(const char *arg) { return !strcmp(arg, "-h") || !strcmp(arg, "--help"); }
 
 int main(int argc, char **argv)
