@@ -24,38 +24,44 @@ struct eval_kdtree {
     kd_node *nodes;
 };
 
+/* The build permutes the tree's own copy of the points (and their original
+ * indices) in place, so every pass over a node reads one contiguous run
+ * instead of chasing an index array through the caller's points. */
 typedef struct kd_build {
-    const float *xyz;
-    uint32_t *perm;
+    float *pts;
+    uint32_t *idx;
     kd_node *nodes;
     size_t n_nodes, cap;
 } kd_build;
 
-static float kd_key(const kd_build *kb, size_t i, int axis) { return kb->xyz[3 * (size_t)kb->perm[i] + axis]; }
-
-static void kd_swap(uint32_t *p, size_t i, size_t j)
+static void kd_swap(kd_build *kb, size_t i, size_t j)
 {
-    uint32_t t = p[i];
-    p[i] = p[j];
-    p[j] = t;
+    float t[3];
+    memcpy(t, &kb->pts[3 * i], sizeof t);
+    memcpy(&kb->pts[3 * i], &kb->pts[3 * j], sizeof t);
+    memcpy(&kb->pts[3 * j], t, sizeof t);
+    uint32_t u = kb->idx[i];
+    kb->idx[i] = kb->idx[j];
+    kb->idx[j] = u;
 }
 
-/* Reorders perm[lo, hi) so that element k has the key it would have if
- * sorted, smaller-or-equal keys before it and greater-or-equal after
- * (quickselect with a three-way partition: runs of equal coordinates, common
- * on planes and grids, cannot make it quadratic). */
+/* Reorders [lo, hi) so that element k has the key it would have if sorted,
+ * smaller-or-equal keys before it and greater-or-equal after (quickselect
+ * with a three-way partition: runs of equal coordinates, common on planes
+ * and grids, cannot make it quadratic). */
 static void kd_select(kd_build *kb, int axis, size_t lo, size_t hi, size_t k)
 {
+    const float *p = kb->pts + axis;
     while (hi - lo > 1) {
-        float a = kd_key(kb, lo, axis), b = kd_key(kb, lo + (hi - lo) / 2, axis), c = kd_key(kb, hi - 1, axis);
+        float a = p[3 * lo], b = p[3 * (lo + (hi - lo) / 2)], c = p[3 * (hi - 1)];
         float pivot = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
         size_t lt = lo, i = lo, gt = hi;
         while (i < gt) {
-            float v = kd_key(kb, i, axis);
+            float v = p[3 * i];
             if (v < pivot)
-                kd_swap(kb->perm, lt++, i++);
+                kd_swap(kb, lt++, i++);
             else if (v > pivot)
-                kd_swap(kb->perm, i, --gt);
+                kd_swap(kb, i, --gt);
             else
                 i++;
         }
@@ -68,7 +74,9 @@ static void kd_select(kd_build *kb, int axis, size_t lo, size_t hi, size_t k)
     }
 }
 
-static uint32_t kd_build_node(kd_build *kb, size_t lo, size_t hi)
+/* box: bounds of the node's points, tight at the root and narrowed by the
+ * split planes below it (a looser box only changes which axis is split). */
+static uint32_t kd_build_node(kd_build *kb, size_t lo, size_t hi, const float box[6])
 {
     BF_ASSERT(kb->n_nodes < kb->cap);
     uint32_t id = (uint32_t)kb->n_nodes++;
@@ -77,21 +85,19 @@ static uint32_t kd_build_node(kd_build *kb, size_t lo, size_t hi)
         *nd = (kd_node){0, KD_LEAF_AXIS, (uint32_t)lo, (uint32_t)hi};
         return id;
     }
-    float mn[3] = {INFINITY, INFINITY, INFINITY}, mx[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (size_t i = lo; i < hi; i++)
-        for (int k = 0; k < 3; k++) {
-            float v = kd_key(kb, i, k);
-            mn[k] = fminf(mn[k], v);
-            mx[k] = fmaxf(mx[k], v);
-        }
     int axis = 0;
     for (int k = 1; k < 3; k++)
-        if (mx[k] - mn[k] > mx[axis] - mn[axis]) axis = k;
+        if (box[3 + k] - box[k] > box[3 + axis] - box[axis]) axis = k;
     size_t mid = lo + (hi - lo) / 2;
     kd_select(kb, axis, lo, hi, mid);
-    float split = kd_key(kb, mid, axis);
-    uint32_t l = kd_build_node(kb, lo, mid);
-    uint32_t r = kd_build_node(kb, mid, hi);
+    float split = kb->pts[3 * mid + axis];
+    float lbox[6], rbox[6];
+    memcpy(lbox, box, sizeof lbox);
+    memcpy(rbox, box, sizeof rbox);
+    lbox[3 + axis] = split;
+    rbox[axis] = split;
+    uint32_t l = kd_build_node(kb, lo, mid, lbox);
+    uint32_t r = kd_build_node(kb, mid, hi, rbox);
     kb->nodes[id] = (kd_node){split, (uint32_t)axis, l, r};
     return id;
 }
@@ -100,7 +106,7 @@ bf_status eval__kdtree_build(const float *xyz, size_t n, eval_kdtree **out)
 {
     if (n >= UINT32_MAX) return bf_fail(BF_INVALID_ARG, "kd-tree: %zu points (at most 2^32-2)", n);
     eval_kdtree *t = calloc(1, sizeof *t);
-    kd_build kb = {.xyz = xyz};
+    kd_build kb = {0};
     if (!t) goto oom;
     t->n = n;
     /* Every leaf holds more than EVAL__KD_LEAF / 2 points (median splits of
@@ -108,21 +114,30 @@ bf_status eval__kdtree_build(const float *xyz, size_t n, eval_kdtree **out)
      * 2n / EVAL__KD_LEAF + 1 leaves and twice that many nodes. */
     kb.cap = 2 * (2 * n / EVAL__KD_LEAF + 1) + 1;
     kb.nodes = malloc(kb.cap * sizeof *kb.nodes);
-    kb.perm = malloc((n ? n : 1) * sizeof *kb.perm);
-    t->pts = malloc((n ? n : 1) * 3 * sizeof *t->pts);
-    if (!kb.nodes || !kb.perm || !t->pts) goto oom;
-    for (size_t i = 0; i < n; i++) kb.perm[i] = (uint32_t)i;
-    if (n > 0) kd_build_node(&kb, 0, n);
-    for (size_t i = 0; i < n; i++) memcpy(&t->pts[3 * i], &xyz[3 * (size_t)kb.perm[i]], 3 * sizeof(float));
-    t->idx = kb.perm;
+    kb.idx = malloc((n ? n : 1) * sizeof *kb.idx);
+    kb.pts = malloc((n ? n : 1) * 3 * sizeof *kb.pts);
+    if (!kb.nodes || !kb.idx || !kb.pts) goto oom;
+    if (n) memcpy(kb.pts, xyz, n * 3 * sizeof *kb.pts);
+    for (size_t i = 0; i < n; i++) kb.idx[i] = (uint32_t)i;
+    if (n > 0) {
+        float box[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+        for (size_t i = 0; i < n; i++)
+            for (int k = 0; k < 3; k++) {
+                box[k] = fminf(box[k], kb.pts[3 * i + k]);
+                box[3 + k] = fmaxf(box[3 + k], kb.pts[3 * i + k]);
+            }
+        kd_build_node(&kb, 0, n, box);
+    }
+    t->pts = kb.pts;
+    t->idx = kb.idx;
     t->nodes = kb.nodes;
     t->n_nodes = kb.n_nodes;
     *out = t;
     return BF_OK;
 oom:
     free(kb.nodes);
-    free(kb.perm);
-    if (t) free(t->pts);
+    free(kb.idx);
+    free(kb.pts);
     free(t);
     return bf_fail(BF_NO_MEMORY, "kd-tree: out of memory for %zu points", n);
 }

@@ -319,11 +319,16 @@ bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_me
         goto done;
     }
 
+    double t1 = bf_time_s();
     bf_progress prog;
     bf_progress_begin(&prog, "eval-surface: points", (uint64_t)(n_acc + n_comp));
     run_distances(rec_pts, n_acc, to_ref, cfg.max_dist_m, acc, &prog, 0);
+    double t2 = bf_time_s();
     run_distances(comp_pts, n_comp, to_rec, cfg.max_dist_m, comp, &prog, n_acc);
+    double t3 = bf_time_s();
     bf_progress_end(&prog, (uint64_t)(n_acc + n_comp));
+    bf_debug("eval-surface: setup (trees, samples) %.2f s, %zu accuracy queries %.2f s, "
+             "%zu completeness queries %.2f s", t1 - t0, n_acc, t2 - t1, n_comp, t3 - t2);
 
     eval_surface_result r = {0};
     if ((s = dist_stats(acc, n_acc, cfg.threshold_m, cfg.max_dist_m, &r.accuracy))) goto done;

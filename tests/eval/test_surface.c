@@ -441,12 +441,14 @@ BF_TEST(surface_result_does_not_depend_on_the_thread_count)
 {
     eval_mesh sph = make_uv_sphere(0.5, 16, 32), box = make_box(0.6, 0.5, 0.4);
     for (uint32_t i = 0; i < box.n_verts * 3; i++) box.xyz[i] -= 0.25f;
+    eval_surface_config cfg = eval_surface_config_default();
+    cfg.samples_per_m2 = 2e4;
     eval_surface_result a, b;
     setenv("BITFUSE_THREADS", "1", 1);
-    bf_status s = eval_surface(&sph, &box, NULL, NULL, &a);
+    bf_status s = eval_surface(&sph, &box, NULL, &cfg, &a);
     unsetenv("BITFUSE_THREADS");
     CHECK_OK(s);
-    CHECK_OK(eval_surface(&sph, &box, NULL, NULL, &b));
+    CHECK_OK(eval_surface(&sph, &box, NULL, &cfg, &b));
     CHECK(a.accuracy.mean == b.accuracy.mean && a.accuracy.p90 == b.accuracy.p90);
     CHECK(a.completeness == b.completeness && a.completeness_dist.median == b.completeness_dist.median);
     eval_mesh_free(&sph);
