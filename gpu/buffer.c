@@ -85,11 +85,11 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
         .allocationSize = req.size,
         .memoryTypeIndex = type,
     };
-    VkResult r = vk->AllocateMemory(ctx->device, &ai, NULL, &buf->memory);
+    VkResult r = GPU__CALL(vk->AllocateMemory(ctx->device, &ai, NULL, &buf->memory));
     if (r != VK_SUCCESS) {
         status = gpu__vk_fail(r, "vkAllocateMemory", buf->name);
         if (status == BF_NO_MEMORY)
-            bf_fail(BF_NO_MEMORY, "gpu buffer %s: cannot allocate %llu bytes of %s memory: %s", buf->name,
+            bf_fail(BF_NO_MEMORY, "gpu buffer %s: vkAllocateMemory of %llu bytes of %s memory: %s", buf->name,
                     (unsigned long long)req.size,
                     flags & VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT ? "device" : "host-visible",
                     gpu__vk_result_name(r));
@@ -199,7 +199,11 @@ bf_status gpu__xfer_submit_wait(gpu_context *ctx)
     GPU__CHECK(vk->QueueSubmit(ctx->queue, 1, &si, ctx->xfer_fence), "gpu.xfer_cmd");
     GPU__CHECK(vk->WaitForFences(ctx->device, 1, &ctx->xfer_fence, VK_TRUE, 600ull * 1000000000ull),
                "gpu.xfer_fence");
+    return BF_OK;
 fail:
+    /* The transfer may still run: settle it so the caller can free the
+     * buffers (on a lost device this returns at once). */
+    vk->DeviceWaitIdle(ctx->device);
     return status;
 }
 

@@ -228,15 +228,18 @@ bf_status gpu_submit_wait(gpu_context *ctx)
     };
     GPU__CHECK(vk->ResetFences(ctx->device, 1, &ctx->fence), "gpu.fence");
     GPU__CHECK(vk->QueueSubmit(ctx->queue, 1, &si, ctx->fence), "gpu.cmd");
-    VkResult r = vk->WaitForFences(ctx->device, 1, &ctx->fence, VK_TRUE, GPU_FENCE_TIMEOUT_NS);
+    VkResult r = GPU__CALL(vk->WaitForFences(ctx->device, 1, &ctx->fence, VK_TRUE, GPU_FENCE_TIMEOUT_NS));
     if (r == VK_TIMEOUT) {
         status = bf_fail(BF_VULKAN, "vkWaitForFences: gpu.fence: the submission did not finish in %llu s on %s",
                          GPU_FENCE_TIMEOUT_NS / 1000000000ull, ctx->info.name);
         goto fail;
     }
-    GPU__CHECK(r, "gpu.fence");
-    status = read_timestamps(ctx);
+    GPU__CHECK_RESULT(r, "vkWaitForFences", "gpu.fence");
+    return read_timestamps(ctx);
 fail:
+    /* The submission may still run: settle it so the caller can free what
+     * it uses (on a lost device this returns at once). */
+    vk->DeviceWaitIdle(ctx->device);
     return status;
 }
 

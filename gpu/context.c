@@ -8,6 +8,17 @@
 #include <string.h>
 
 _Atomic uint32_t gpu__messages_total;
+static _Atomic uint32_t fault_countdown; /* 0: disarmed */
+
+uint32_t gpu_debug_fail_after(uint32_t n_calls) { return atomic_exchange(&fault_countdown, n_calls); }
+
+bool gpu__fault_now(void)
+{
+    uint32_t n = atomic_load(&fault_countdown);
+    while (n > 0 && !atomic_compare_exchange_weak(&fault_countdown, &n, n - 1)) {
+    }
+    return n == 1;
+}
 
 static const char *const validation_layer = "VK_LAYER_KHRONOS_validation";
 
@@ -49,13 +60,19 @@ bf_status gpu__vk_fail(VkResult r, const char *call, const char *object)
     case VK_ERROR_FEATURE_NOT_PRESENT: s = BF_UNSUPPORTED; break;
     default: s = BF_VULKAN; break;
     }
-    /* "vkCreateBuffer(...)" is long: keep the function name only. */
-    char fn[64];
-    size_t k = 0;
-    for (; call[k] && call[k] != '(' && k + 1 < sizeof fn; k++) fn[k] = call[k];
-    fn[k] = '\0';
-    const char *vk = strstr(fn, "vk.");
-    return bf_fail(s, "%s%s: %s: %s", vk ? "vk" : "", vk ? vk + 3 : fn, object ? object : "",
+    /* "GPU__CALL(vk->CreateBuffer(ctx->device, ...))" -> "vkCreateBuffer". */
+    const char *end = strchr(call, '(');
+    const char *start = call;
+    if (!strncmp(call, "GPU__CALL(", 10)) {
+        start = call + 10;
+        end = strchr(start, '(');
+    }
+    if (!end) end = call + strlen(call);
+    for (const char *p = start; p < end; p++)
+        if (*p == '.' || *p == '>') start = p + 1;
+    int len = (int)(end - start);
+    bool has_prefix = len >= 2 && !strncmp(start, "vk", 2);
+    return bf_fail(s, "%s%.*s: %s: %s", has_prefix ? "" : "vk", len, start, object ? object : "",
                    gpu__vk_result_name(r));
 }
 
@@ -213,7 +230,7 @@ bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_conte
         .enabledExtensionCount = n_exts,
         .ppEnabledExtensionNames = exts,
     };
-    VkResult r = inst.vk.CreateInstance(&info, NULL, &inst.instance);
+    VkResult r = GPU__CALL(inst.vk.CreateInstance(&info, NULL, &inst.instance));
     if (r != VK_SUCCESS) {
         status = gpu__vk_fail(r, "vkCreateInstance", "bitfuse");
         if (r == VK_ERROR_INCOMPATIBLE_DRIVER)
@@ -412,7 +429,7 @@ static bf_status enumerate(const gpu__instance *inst, VkPhysicalDevice phys[GPU_
                            gpu_device_info infos[GPU_MAX_DEVICES], uint32_t *n)
 {
     uint32_t count = GPU_MAX_DEVICES;
-    VkResult r = inst->vk.EnumeratePhysicalDevices(inst->instance, &count, phys);
+    VkResult r = GPU__CALL(inst->vk.EnumeratePhysicalDevices(inst->instance, &count, phys));
     if (r != VK_SUCCESS && r != VK_INCOMPLETE) {
         bf_status s = gpu__vk_fail(r, "vkEnumeratePhysicalDevices", "instance");
         return s == BF_VULKAN ? BF_NO_DEVICE : s;

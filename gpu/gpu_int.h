@@ -176,14 +176,27 @@ struct gpu_bindings {
 
 extern _Atomic uint32_t gpu__messages_total;
 
+/* Fault injection (gpu_debug_fail_after): true when the armed countdown
+ * reaches this call, which then is not made and fails instead. */
+bool gpu__fault_now(void);
+#define GPU__CALL(call) (gpu__fault_now() ? VK_ERROR_OUT_OF_DEVICE_MEMORY : (call))
+
 /* Maps a VkResult to a status and records "call: object: VK_ERROR_..." */
 bf_status gpu__vk_fail(VkResult r, const char *call, const char *object);
 const char *gpu__vk_result_name(VkResult r);
 #define GPU__CHECK(call, object)                                        \
     do {                                                                \
-        VkResult gpu__r = (call);                                       \
+        VkResult gpu__r = GPU__CALL(call);                              \
         if (gpu__r != VK_SUCCESS) {                                     \
             status = gpu__vk_fail(gpu__r, #call, (object));             \
+            goto fail;                                                  \
+        }                                                               \
+    } while (0)
+/* The same for a result already in hand (no fault injection point). */
+#define GPU__CHECK_RESULT(r, call_name, object)                         \
+    do {                                                                \
+        if ((r) != VK_SUCCESS) {                                        \
+            status = gpu__vk_fail((r), (call_name), (object));          \
             goto fail;                                                  \
         }                                                               \
     } while (0)

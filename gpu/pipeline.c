@@ -184,13 +184,17 @@ bf_status gpu_bindings_create(gpu_context *ctx, uint32_t n_buffers, const char *
         .descriptorSetCount = 1,
         .pSetLayouts = &layout,
     };
-    GPU__CHECK(ctx->inst.vk.AllocateDescriptorSets(ctx->device, &ai, &b->set), b->name);
+    VkResult r = GPU__CALL(ctx->inst.vk.AllocateDescriptorSets(ctx->device, &ai, &b->set));
+    if (r == VK_ERROR_OUT_OF_POOL_MEMORY || r == VK_ERROR_FRAGMENTED_POOL) {
+        status = bf_fail(BF_POOL_FULL, "gpu bindings %s: descriptor pool exhausted (%s)", name, gpu__vk_result_name(r));
+        goto fail;
+    }
+    GPU__CHECK_RESULT(r, "vkAllocateDescriptorSets", b->name);
     gpu__name(ctx, VK_OBJECT_TYPE_DESCRIPTOR_SET, (uint64_t)b->set, "%s", b->name);
     ctx->n_bindings++;
     *out = b;
     return BF_OK;
 fail:
-    if (status == BF_NO_MEMORY) status = bf_fail(BF_POOL_FULL, "gpu bindings %s: descriptor pool exhausted", name);
     free(b);
     return status;
 }
@@ -310,7 +314,7 @@ bf_status gpu__pipeline_cache_open(gpu_context *ctx, const gpu_config *cfg)
         .initialDataSize = size,
         .pInitialData = data,
     };
-    VkResult r = ctx->inst.vk.CreatePipelineCache(ctx->device, &info, NULL, &ctx->pipeline_cache);
+    VkResult r = GPU__CALL(ctx->inst.vk.CreatePipelineCache(ctx->device, &info, NULL, &ctx->pipeline_cache));
     if (r != VK_SUCCESS && data) {
         bf_warn("gpu: pipeline cache %s rejected by the driver (%s); starting empty", ctx->cache_path,
                 gpu__vk_result_name(r));
@@ -320,7 +324,7 @@ bf_status gpu__pipeline_cache_open(gpu_context *ctx, const gpu_config *cfg)
         r = ctx->inst.vk.CreatePipelineCache(ctx->device, &info, NULL, &ctx->pipeline_cache);
     }
     free(data);
-    GPU__CHECK(r, "gpu.pipeline_cache");
+    GPU__CHECK_RESULT(r, "vkCreatePipelineCache", "gpu.pipeline_cache");
     gpu__name(ctx, VK_OBJECT_TYPE_PIPELINE_CACHE, (uint64_t)ctx->pipeline_cache, "gpu.pipeline_cache");
     ctx->cache_loaded_bytes = size;
     if (size) bf_debug("gpu: pipeline cache %s: %zu bytes loaded", ctx->cache_path, size);
@@ -373,7 +377,7 @@ bf_status gpu_pipeline_warm_up(gpu_context *ctx, gpu_pipeline *const *pipes, uin
     bf_status status = BF_OK;
     gpu_buffer *scratch = NULL;
     gpu_bindings *binds[GPU_MAX_BINDINGS + 1] = {0};
-    uint32_t zeros[64] = {0}; /* push constants; sized past any maxPushConstantsSize in use (128..256) */
+    static const uint32_t zeros[1024]; /* push constants: past any maxPushConstantsSize in use (128..256) */
     if (n == 0) return BF_OK;
     double t0 = bf_time_s();
     gpu_buffer_desc sd = {.name = "gpu.warm_up_scratch", .size_bytes = 64u << 10, .memory = GPU_MEMORY_DEVICE};

@@ -784,3 +784,80 @@ BF_TEST(warm_up_runs_every_pipeline)
     for (int i = N - 1; i >= 0; i--) gpu_pipeline_destroy(p[i]);
     CLOSE_CTX_CLEAN(ctx, v0);
 }
+
+/* ------------------------------------------------------------ failure paths */
+
+/* The life of a small GPU stage: context, pipeline, warm-up, buffer, upload,
+ * bindings, a timed dispatch, download, teardown. Returns the first failure,
+ * having released everything it made. */
+static bf_status small_stage(const gpu_config *cfg)
+{
+    enum { N = 256 };
+    uint32_t data[N], back[N];
+    for (uint32_t i = 0; i < N; i++) data[i] = i;
+    gpu_context *ctx = NULL;
+    gpu_pipeline *p = NULL;
+    gpu_buffer *buf = NULL;
+    gpu_bindings *b = NULL;
+    bf_status s = gpu_context_create(cfg, &ctx);
+    if (s) goto done;
+    gpu_pipeline_desc d = desc_of("fault.selftest", SPV(selftest), 1, sizeof(struct gpu_test_count), 64);
+    if ((s = gpu_pipeline_create(ctx, &d, &p))) goto done;
+    if ((s = gpu_pipeline_warm_up(ctx, &p, 1))) goto done;
+    gpu_buffer_desc bd = {.name = "fault.data", .size_bytes = sizeof data};
+    if ((s = gpu_buffer_create(ctx, &bd, &buf))) goto done;
+    if ((s = gpu_buffer_upload(buf, 0, data, sizeof data))) goto done;
+    if ((s = gpu_bindings_create(ctx, 1, "fault.bindings", &b))) goto done;
+    if ((s = gpu_bindings_set(b, 0, buf, 0, GPU_WHOLE_SIZE))) goto done;
+    if ((s = gpu_begin(ctx))) goto done;
+    gpu_cmd_stage_begin(ctx, "fault.stage");
+    struct gpu_test_count pc = {.n = N};
+    gpu_cmd_dispatch(ctx, p, b, &pc, gpu_groups(N, 64), 1, 1);
+    gpu_cmd_stage_end(ctx);
+    if ((s = gpu_submit_wait(ctx))) goto done;
+    if ((s = gpu_buffer_download(buf, 0, back, sizeof back))) goto done;
+    for (uint32_t i = 0; i < N; i++)
+        if (back[i] != i + 1) {
+            s = bf_fail(BF_NUMERIC, "fault.data[%u] = %u, want %u", i, back[i], i + 1);
+            goto done;
+        }
+done:
+    gpu_bindings_destroy(b);
+    gpu_buffer_destroy(buf);
+    gpu_pipeline_destroy(p);
+    gpu_context_destroy(ctx);
+    return s;
+}
+
+/* Fails each checked Vulkan call in turn (SQLite's tempfault walk): every
+ * failure must come back as BF_NO_MEMORY naming the call, with nothing left
+ * behind (validation reports leaked objects at vkDestroyDevice and
+ * vkDestroyInstance; LeakSanitizer the host side). */
+BF_TEST(every_vulkan_failure_is_a_clean_status)
+{
+    for (int staged = 0; staged < 2; staged++) {
+        gpu_config cfg = test_config();
+        cfg.force_staging = staged;
+        uint32_t v0 = gpu_validation_message_total();
+        bf_status s = small_stage(&cfg);
+        if (s == BF_NO_DEVICE) BF_SKIP(bf_last_error());
+        CHECK_OK(s);
+        uint32_t k = 1;
+        for (; k < 1000; k++) {
+            gpu_debug_fail_after(k);
+            bf_clear_error();
+            s = small_stage(&cfg);
+            bool is_unfired = gpu_debug_fail_after(0) != 0;
+            CHECK_EQ_INT(gpu_validation_message_total(), v0);
+            if (is_unfired) break; /* k is past the last call: every point walked */
+            if (s == BF_OK) continue; /* recovered (a rejected cache, a cache not saved) */
+            if (s != BF_NO_MEMORY) fprintf(stderr, "  call %u: %s\n", k, bf_last_error());
+            CHECK_STATUS(s, BF_NO_MEMORY);
+            CHECK_ERROR_MENTIONS("VK_ERROR_OUT_OF_DEVICE_MEMORY");
+            CHECK(strstr(bf_last_error(), "vk") != NULL); /* names the failed call */
+        }
+        CHECK_OK(s);
+        CHECK(k > 20 && k < 1000);
+        fprintf(stderr, "  %s: %u failure points, each clean\n", staged ? "staged" : "mapped", k - 1);
+    }
+}
