@@ -327,7 +327,6 @@ static bf_status ply_read_vertices(ply_reader *rd, const ply_element *el, eval_m
 
 static bf_status ply_read_faces(ply_reader *rd, const ply_element *el, ply_tris *tris)
 {
-    uint32_t poly[256];
     for (uint64_t i = 0; i < el->count; i++) {
         for (int k = 0; k < el->n_props; k++) {
             const ply_prop *pr = &el->prop[k];
@@ -348,24 +347,27 @@ static bf_status ply_read_faces(ply_reader *rd, const ply_element *el, ply_tris 
                 if (s) return s;
                 continue;
             }
-            if (cnt > (double)(sizeof poly / sizeof poly[0]))
-                return bf_fail(BF_FORMAT, "%s: face %llu: %.0f vertices (at most %zu supported)",
-                               rd->path, (unsigned long long)i, cnt, sizeof poly / sizeof poly[0]);
-            size_t n = (size_t)cnt;
-            for (size_t j = 0; j < n; j++) {
+            /* Fan the polygon around its first vertex as it is read;
+             * faces with fewer than three vertices carry no area and are
+             * dropped. */
+            uint64_t n = (uint64_t)cnt;
+            if (rd->format != PLY_ASCII && n > (uint64_t)(rd->end - rd->p) / ply_type_size(pr->type))
+                return bf_fail(BF_FORMAT, "%s: face %llu: %llu corners, file truncated", rd->path,
+                               (unsigned long long)i, (unsigned long long)n);
+            uint32_t first = 0, prev = 0;
+            for (uint64_t j = 0; j < n; j++) {
                 double v;
                 s = ply_read_value(rd, pr->type, "face", i, &v);
                 if (s) return s;
                 if (v < 0 || v > (double)UINT32_MAX)
                     return bf_fail(BF_FORMAT, "%s: face %llu: vertex index %.0f out of range", rd->path,
                                    (unsigned long long)i, v);
-                poly[j] = (uint32_t)v;
-            }
-            /* Fan the polygon around its first vertex; faces with fewer than
-             * three vertices carry no area and are dropped. */
-            for (size_t j = 2; j < n; j++) {
-                s = ply_tris_push(tris, poly[0], poly[j - 1], poly[j]);
-                if (s) return s;
+                uint32_t cur = (uint32_t)v;
+                if (j == 0)
+                    first = cur;
+                else if (j >= 2 && (s = ply_tris_push(tris, first, prev, cur)))
+                    return s;
+                prev = cur;
             }
         }
     }

@@ -378,3 +378,26 @@ BF_TEST(mesh_append_transforms_vertices_normals_and_offsets_indices)
     eval_mesh_free(&dst);
     eval_mesh_free(NULL);
 }
+
+BF_TEST(ply_large_polygon_fans_into_n_minus_2_triangles)
+{
+    char path[512];
+    tmp_path(path, sizeof path, "polygon.ply");
+    FILE *f = fopen(path, "w");
+    CHECK(f != NULL);
+    const int n = 300;
+    fprintf(f, "ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+               "property float z\nelement face 1\nproperty list ushort uint vertex_indices\nend_header\n", n);
+    for (int i = 0; i < n; i++) fprintf(f, "%.6f %.6f 0\n", cos(2 * M_PI * i / n), sin(2 * M_PI * i / n));
+    fprintf(f, "%d", n);
+    for (int i = 0; i < n; i++) fprintf(f, " %d", i);
+    fprintf(f, "\n");
+    fclose(f);
+    eval_mesh m;
+    CHECK_OK(eval_mesh_read_ply(path, &m));
+    CHECK_EQ_INT(m.n_tris, n - 2);
+    CHECK_EQ_INT(m.tri[3 * (n - 3)], 0);
+    CHECK_EQ_INT(m.tri[3 * (n - 3) + 1], n - 2);
+    CHECK_EQ_INT(m.tri[3 * (n - 3) + 2], n - 1);
+    eval_mesh_free(&m);
+}

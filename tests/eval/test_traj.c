@@ -335,3 +335,64 @@ BF_TEST(error_stats_follow_numpy)
     CHECK_NEAR(s.max, 4, 0);
     CHECK_STATUS(eval_err_stats_compute(v, 0, &s), BF_INVALID_ARG);
 }
+
+/* The sliding-window candidate search of eval_associate against the
+ * literal n x m loop of associate.py, on jittered stamps of two rates. */
+BF_TEST(association_matches_the_brute_force_greedy_rule)
+{
+    unsigned st = 99;
+    for (int round = 0; round < 20; round++) {
+        replay_traj gt = {0}, est = {0};
+        bf_se3 I = bf_se3_identity();
+        double t = 0;
+        for (int i = 0; i < 200; i++) {
+            st = st * 1103515245u + 12345u;
+            t += 0.005 + 0.01 * ((st >> 8) % 1000) / 1000.0;
+            CHECK_OK(replay_traj_push(&gt, t, &I));
+        }
+        t = 0.003 * round;
+        for (int i = 0; i < 120; i++) {
+            st = st * 1103515245u + 12345u;
+            t += 0.01 + 0.03 * ((st >> 8) % 1000) / 1000.0;
+            CHECK_OK(replay_traj_push(&est, t, &I));
+        }
+        double max_dt = 0.004 + 0.002 * round;
+        /* Brute force: repeatedly take the globally closest free pair. */
+        bool *ua = calloc(gt.n, 1), *ub = calloc(est.n, 1);
+        size_t n_bf = 0;
+        size_t *pair_of_gt = malloc(gt.n * sizeof *pair_of_gt);
+        for (size_t a = 0; a < gt.n; a++) pair_of_gt[a] = SIZE_MAX;
+        for (;;) {
+            double best = INFINITY;
+            size_t ba = 0, bb = 0;
+            for (size_t a = 0; a < gt.n; a++)
+                for (size_t b = 0; b < est.n; b++) {
+                    double dt = fabs(gt.t_s[a] - est.t_s[b]);
+                    if (ua[a] || ub[b] || !(dt < max_dt) || !(dt < best)) continue;
+                    best = dt;
+                    ba = a;
+                    bb = b;
+                }
+            if (best == INFINITY) break;
+            ua[ba] = ub[bb] = true;
+            pair_of_gt[ba] = bb;
+            n_bf++;
+        }
+        eval_match *m;
+        size_t n;
+        CHECK_OK(eval_associate(&gt, &est, max_dt, &m, &n));
+        bool same = n == n_bf;
+        for (size_t k = 0; same && k < n; k++) {
+            same = pair_of_gt[m[k].i_gt] == m[k].i_est;
+            if (k > 0) same = same && m[k].i_gt > m[k - 1].i_gt;
+        }
+        free(m);
+        free(ua);
+        free(ub);
+        free(pair_of_gt);
+        replay_traj_free(&gt);
+        replay_traj_free(&est);
+        CHECK(same);
+        CHECK(n_bf > 0);
+    }
+}
