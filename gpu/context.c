@@ -395,11 +395,13 @@ const char *gpu__wanted_device(const gpu_config *cfg)
 
 uint32_t gpu__choose_device(const gpu_device_info *infos, uint32_t n, const char *want)
 {
+    /* A number is an index when it is one ("1"), else part of a name ("1080"). */
     uint32_t index;
-    if (want && bf_parse_u32(want, &index)) {
-        if (index < n && infos[index].is_usable) return index;
-        bf_fail(BF_NO_DEVICE, "device %s: %s (there are %u devices)", want,
-                index < n ? "not usable (needs Vulkan 1.2 and a compute queue)" : "no such index", n);
+    bool is_index = want && bf_parse_u32(want, &index);
+    if (is_index && index < n) {
+        if (infos[index].is_usable) return index;
+        bf_fail(BF_NO_DEVICE, "device %u (%s) is not usable: bitfuse needs Vulkan 1.2 and a compute queue", index,
+                infos[index].name);
         return UINT32_MAX;
     }
     uint32_t best = UINT32_MAX;
@@ -415,8 +417,8 @@ uint32_t gpu__choose_device(const gpu_device_info *infos, uint32_t n, const char
                 size_t len = strlen(names);
                 snprintf(names + len, sizeof names - len, "%s'%s'", i ? ", " : "", infos[i].name);
             }
-            bf_fail(BF_NO_DEVICE, "no usable Vulkan device matches '%s' (BITFUSE_DEVICE or --device); "
-                    "devices: %s", want, n ? names : "none");
+            bf_fail(BF_NO_DEVICE, "no usable Vulkan device matches '%s' (BITFUSE_DEVICE or --device%s); "
+                    "devices: %s", want, is_index ? "; no such index either" : "", n ? names : "none");
         } else {
             bf_fail(BF_NO_DEVICE, "no usable Vulkan device (%u found; bitfuse needs Vulkan 1.2 and "
                     "a compute queue)", n);

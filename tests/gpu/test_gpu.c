@@ -206,6 +206,12 @@ BF_TEST(missing_device_or_loader_gives_no_device)
     cfg.device = "99";
     CHECK_STATUS(gpu_context_create(&cfg, &ctx), BF_NO_DEVICE);
     CHECK_ERROR_MENTIONS("no such index");
+    cfg.device = "0"; /* an index */
+    OPEN_CTX(ctx, &cfg);
+    CHECK(!strcmp(gpu_device_name(ctx), list[0].name));
+    CHECK_EQ_INT(gpu_validation_message_count(ctx), 0);
+    gpu_context_destroy(ctx);
+    ctx = NULL;
 
     gpu_config no_loader = test_config();
     no_loader.loader = "libvulkan-that-is-not-there.so.1";
