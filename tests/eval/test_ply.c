@@ -401,3 +401,12 @@ BF_TEST(ply_large_polygon_fans_into_n_minus_2_triangles)
     CHECK_EQ_INT(m.tri[3 * (n - 3) + 2], n - 1);
     eval_mesh_free(&m);
 }
+
+BF_TEST(ply_write_to_a_missing_directory_is_an_io_error)
+{
+    eval_mesh m = make_quad();
+    bf_status s = eval_mesh_write_ply("/nonexistent-dir/x.ply", &m);
+    eval_mesh_free(&m);
+    CHECK_STATUS(s, BF_IO);
+    CHECK_ERROR_MENTIONS("nonexistent-dir");
+}

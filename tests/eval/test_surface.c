@@ -454,3 +454,27 @@ BF_TEST(surface_result_does_not_depend_on_the_thread_count)
     eval_mesh_free(&sph);
     eval_mesh_free(&box);
 }
+
+/* A point-cloud reference (no triangles) is measured as points: a 50 x 50
+ * grid with 1 cm spacing, the reconstruction the same grid 3 mm above it.
+ * Each nearest distance is exactly 3 mm (the grid's own point beneath;
+ * neighbours are sqrt(0.01^2 + 0.003^2) away), in both directions. */
+BF_TEST(surface_point_cloud_reference_is_measured_point_to_point)
+{
+    eval_mesh ref = mesh_alloc(2500, 0), rec = mesh_alloc(2500, 0);
+    for (uint32_t i = 0; i < 2500; i++) {
+        set_v(&ref, i, 0.01 * (i % 50), 0.01 * (i / 50), 0);
+        set_v(&rec, i, 0.01 * (i % 50), 0.01 * (i / 50), 0.003);
+    }
+    eval_surface_config cfg = eval_surface_config_default();
+    cfg.threshold_m = 0.005;
+    eval_surface_result r;
+    CHECK_OK(eval_surface(&ref, &rec, NULL, &cfg, &r));
+    CHECK_EQ_INT(r.n_ref_points, 2500);
+    CHECK_NEAR(r.accuracy.max, 0.003, 1e-7);
+    CHECK_NEAR(r.accuracy.mean, 0.003, 1e-7);
+    CHECK_NEAR(r.completeness_dist.median, 0.003, 1e-7);
+    CHECK_NEAR(r.completeness, 1.0, 0);
+    eval_mesh_free(&ref);
+    eval_mesh_free(&rec);
+}
