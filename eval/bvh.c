@@ -335,7 +335,12 @@ bool eval_bvh_raycast(const eval_bvh *b, bf_vec3 o, bf_vec3 d, double t_min, dou
     for (int a = 0; a < 3; a++) inv[a] = dir[a] != 0 ? 1.0 / dir[a] : copysign(1e300, dir[a]);
     double best_t = t_max, bu = 0, bv = 0;
     uint32_t best_tri = UINT32_MAX;
-    uint32_t stack[EVAL_BVH_STACK];
+    /* Deferred far children with their entry distance: popped only while
+     * they can still hold a nearer hit. */
+    struct {
+        uint32_t idx;
+        double t_near;
+    } stack[EVAL_BVH_STACK];
     int sp = 0;
     uint32_t idx = 0;
     if (slab(&b->nodes[0], org, inv, t_min, best_t) == INFINITY) return false;
@@ -359,10 +364,12 @@ bool eval_bvh_raycast(const eval_bvh *b, bf_vec3 o, bf_vec3 d, double t_min, dou
                 /* Visit the nearer child first; the other waits on the stack. */
                 if (tr < tl) {
                     idx = r;
-                    stack[sp++] = l;
+                    stack[sp].idx = l;
+                    stack[sp++].t_near = tl;
                 } else {
                     idx = l;
-                    stack[sp++] = r;
+                    stack[sp].idx = r;
+                    stack[sp++].t_near = tr;
                 }
                 continue;
             }
@@ -378,9 +385,10 @@ bool eval_bvh_raycast(const eval_bvh *b, bf_vec3 o, bf_vec3 d, double t_min, dou
         /* Pop the next node that can still hold a nearer hit. */
         for (;;) {
             if (sp == 0) goto done;
-            idx = stack[--sp];
-            if (slab(&b->nodes[idx], org, inv, t_min, best_t) != INFINITY) break;
+            sp--;
+            if (stack[sp].t_near <= best_t) break;
         }
+        idx = stack[sp].idx;
     }
 done:
     if (best_tri == UINT32_MAX) return false;
