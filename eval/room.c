@@ -307,9 +307,9 @@ typedef struct room_object {
 #define TABLE_TOP_Z 0.76
 
 static const room_object room_objects[] = {
-    {"bunny.ply", 1, 0.18, 0.30, -0.12, -60, 7},
-    {"armadillo.ply", 1, 0.25, 0.62, 0.18, -120, 1},
-    {"dragon.ply", 1, 0.16, 0.95, -0.15, -90, 3},
+    {"bunny.ply", 1, 0.18, 0.30, -0.12, -20, 7},
+    {"armadillo.ply", 1, 0.25, 0.62, 0.18, 115, 1},
+    {"dragon.ply", 1, 0.16, 0.95, -0.15, -65, 3},
 };
 
 static bf_status add_object(builder *b, const char *data_dir, const room_object *o, char *desc, size_t desc_cap)
