@@ -48,9 +48,15 @@ static bool seen_grow(seen_set *s)
     return true;
 }
 
-static bool seen_add(seen_set *s, bf_vec3 p)
+static bool seen_add(seen_set *s, bf_vec3 p_in)
 {
-    int64_t c[3] = {(int64_t)floor(p.x / s->cell_m), (int64_t)floor(p.y / s->cell_m), (int64_t)floor(p.z / s->cell_m)};
+    /* Cells from the float coordinates that seen.ply stores, centred on
+     * multiples of the cell size: the room's walls, floor and table top lie
+     * on such multiples, and a boundary cell there would take points from
+     * both sides of the plane (double rounding puts hits on either). */
+    float pf[3] = {(float)p_in.x, (float)p_in.y, (float)p_in.z};
+    int64_t c[3];
+    for (int k = 0; k < 3; k++) c[k] = (int64_t)floor(pf[k] / s->cell_m + 0.5);
     uint64_t key = 1; /* never 0 */
     for (int k = 0; k < 3; k++) {
         int64_t v = c[k] + ((int64_t)1 << 20);
@@ -71,9 +77,7 @@ static bool seen_add(seen_set *s, bf_vec3 p)
         s->xyz_cap = cap;
     }
     s->keys[j] = key;
-    s->xyz[3 * s->n] = (float)p.x;
-    s->xyz[3 * s->n + 1] = (float)p.y;
-    s->xyz[3 * s->n + 2] = (float)p.z;
+    memcpy(s->xyz + 3 * s->n, pf, sizeof pf);
     s->n++;
     return true;
 }

@@ -398,6 +398,36 @@ BF_TEST(trajectory_errors_and_short_trajectory)
     CHECK_STATUS(eval_synth_run(&cfg, NULL), BF_INVALID_ARG);
 }
 
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+BF_TEST(mesh_scene_view_frames_the_mesh)
+{
+    const char *path = bf_test_data("meshes/bunny.ply");
+    if (!path) BF_SKIP("shared data absent: meshes/bunny.ply");
+    eval_scene sc;
+    CHECK_OK(eval_scene_from_ply(path, 0.3, &sc));
+    eval_render_config rc = {{160, 120, 131.25, 131.25, 79.5, 59.5, 5000}, EVAL_NOISE_NONE, 1};
+    eval_renderer *r = NULL;
+    CHECK_OK(eval_renderer_create(&sc, &rc, &r));
+    uint16_t depth[160 * 120];
+    eval_render_stats st;
+    CHECK_OK(eval_render(r, 0, &sc.T_wc_view, depth, NULL, &st));
+    eval_renderer_destroy(r);
+    eval_scene_free(&sc);
+    /* The bunny (inside its bounding sphere, which fills the image height)
+     * covers a good part of the image and none of its border. */
+    fprintf(stderr, "  bunny covers %u of %u pixels\n", st.n_hit, 160 * 120);
+    CHECK(st.n_hit > 160 * 120 / 10 && st.n_hit < 160 * 120 * 3 / 4);
+    int n_border = 0;
+    for (int u = 0; u < 160; u++) n_border += depth[u] != 0 || depth[119 * 160 + u] != 0;
+    CHECK_EQ_INT(n_border, 0);
+    CHECK_STATUS(eval_scene_from_ply(path, -1, &sc), BF_INVALID_ARG);
+}
+
 BF_TEST(room_sequence_along_fr1_xyz_reads_back)
 {
     const char *gt = bf_test_data("tum/fr1_xyz/groundtruth.txt");
@@ -459,6 +489,19 @@ BF_TEST(room_sequence_along_fr1_xyz_reads_back)
     CHECK_OK(eval_mesh_read_ply(path, &seen));
     CHECK_EQ_INT(seen.n_verts, res.n_seen);
     CHECK(seen.n_verts > 10000);
+    /* One point per 5 mm cell. */
+    uint64_t *keys = malloc(sizeof(uint64_t) * seen.n_verts);
+    CHECK(keys != NULL);
+    for (uint32_t i = 0; i < seen.n_verts; i++) {
+        uint64_t k = 0;
+        for (int a = 0; a < 3; a++) k = (k << 21) | (uint64_t)((int64_t)floor(seen.xyz[3 * i + a] / 0.005 + 0.5) + (1 << 20));
+        keys[i] = k;
+    }
+    qsort(keys, seen.n_verts, sizeof *keys, cmp_u64);
+    uint32_t n_dup = 0;
+    for (uint32_t i = 1; i < seen.n_verts; i++) n_dup += keys[i] == keys[i - 1];
+    free(keys);
+    CHECK_EQ_INT(n_dup, 0);
     eval_bvh *b = NULL;
     CHECK_OK(eval_bvh_build(&scene, &b));
     double worst = 0;
