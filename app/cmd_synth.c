@@ -132,6 +132,8 @@ int cmd_synth(int argc, char **argv)
     printf("  scene        %u triangles\n", res.n_scene_tris);
     printf("  render       %.3f s per frame (median %.3f), %.2f frames/s on %d threads\n", res.mean_frame_s,
            res.median_frame_s, res.mean_frame_s > 0 ? 1 / res.mean_frame_s : 0, bf_thread_count());
+    printf("  end to end   %.1f s in all, %.3f s per frame (PNG encoding, scene and BVH included)\n", res.total_s,
+           res.total_s / res.n_frames);
     printf("  valid depth  %.1f %% of pixels (noise %s, seed %llu)\n", 100 * res.valid_share,
            cfg.noise == EVAL_NOISE_KINECT1 ? "kinect1" : "none", (unsigned long long)cfg.seed);
     printf("  seen.ply     %u points\n", res.n_seen);

@@ -178,6 +178,7 @@ typedef struct eval_synth_config {
 typedef struct eval_synth_result {
     uint32_t n_frames;      /* written */
     double mean_frame_s, median_frame_s; /* render time per frame */
+    double total_s;         /* wall time of the whole run (scene, BVH, PNGs, ...) */
     double valid_share;     /* valid depth pixels / all pixels */
     bf_se3 T_world_traj;    /* placement: rendered pose = T_world_traj * trajectory pose */
     uint32_t n_seen;        /* points in seen.ply */

@@ -178,7 +178,7 @@ static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *
         "  \"camera\": {\"width\": %u, \"height\": %u, \"fx\": %.9g, \"fy\": %.9g, \"cx\": %.9g, \"cy\": %.9g, "
         "\"depth_scale\": %.9g},\n"
         "  \"time_per_frame_s\": {\"mean\": %.4f, \"median\": %.4f, \"p95\": %.4f},\n"
-        "  \"frames_per_s\": %.3f,\n  \"threads\": %d,\n  \"valid_depth_share\": %.4f,\n"
+        "  \"frames_per_s\": %.3f,\n  \"total_s\": %.3f,\n  \"threads\": %d,\n  \"valid_depth_share\": %.4f,\n"
         "  \"seen_points\": %u,\n  \"seen_cell_m\": %.4g,\n"
         "  \"placement\": {\n    \"rule\": \"T_world_traj = T_view * inv(T_traj(t_first)); rendered pose = T_world_traj * "
         "T_traj(t)\",\n"
@@ -188,6 +188,7 @@ static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *
         scene, sc->mesh.n_tris, traj, t0_s, rate_hz, res->n_frames, n_requested, noise_name(cfg->noise),
         (unsigned long long)cfg->seed, K->width, K->height, K->fx_px, K->fy_px, K->cx_px, K->cy_px, K->depth_scale,
         res->mean_frame_s, res->median_frame_s, p95_s, res->mean_frame_s > 0 ? 1.0 / res->mean_frame_s : 0,
+        res->total_s,
         bf_thread_count(), res->valid_share, res->n_seen, cell_m, t.x, t.y, t.z, q.x, q.y, q.z, q.w, R[0][0], R[0][1],
         R[0][2], res->T_world_traj.t.x, R[1][0], R[1][1], R[1][2], res->T_world_traj.t.y, R[2][0], R[2][1], R[2][2],
         res->T_world_traj.t.z);
@@ -223,6 +224,7 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
     uint8_t *rgb = NULL;
     seen_set seen = {.cell_m = cell};
     bf_stats times = {0};
+    double t_run = bf_time_s();
     bf_status s;
     if ((s = replay_traj_read_tum(cfg->traj_path, &traj))) goto done;
     double t0 = traj.t_s[0], t_end = traj.t_s[traj.n - 1];
@@ -293,6 +295,7 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
         .T_world_traj = T_world_traj,
         .n_seen = (uint32_t)seen.n,
         .n_scene_tris = scene.mesh.n_tris,
+        .total_s = bf_time_s() - t_run, /* stats.json itself excluded */
     };
     if ((s = write_stats(cfg, &K, &scene, &res, cfg->n_frames, t0, bf_stats_percentile(&times, 95), cell, rate)))
         goto done;
