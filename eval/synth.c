@@ -12,6 +12,7 @@
  * between the trajectory's samples (linear position, slerp rotation), as a
  * sensor following that motion would record them. */
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -99,6 +100,104 @@ static void seen_free(seen_set *s)
 {
     free(s->keys);
     free(s->xyz);
+}
+
+/* ------------------------------------------------------------ image writing
+ * Encoding the two PNGs of a frame takes about a third of the render time,
+ * on one thread. A writer thread encodes frame i while frame i + 1 renders
+ * (two frame buffers in turn), so the cores stay busy. Frames reach the TUM
+ * writer in order, one at a time; its first failure stops the run. */
+
+typedef struct png_stage {
+    replay_tum_writer *w;
+    pthread_t thread;
+    bool is_threaded;
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    bool has_job, is_quitting;
+    bf_frame job;
+    bf_status status;
+    char msg[1024]; /* bf_last_error() of the writer thread */
+} png_stage;
+
+static void *png_stage_main(void *arg)
+{
+    png_stage *st = arg;
+    pthread_mutex_lock(&st->mu);
+    for (;;) {
+        while (!st->has_job && !st->is_quitting) pthread_cond_wait(&st->cv, &st->mu);
+        if (!st->has_job) break;
+        bf_frame f = st->job;
+        pthread_mutex_unlock(&st->mu);
+        bf_status s = st->status ? BF_OK : replay_tum_writer_add(st->w, &f);
+        pthread_mutex_lock(&st->mu);
+        if (s && !st->status) {
+            st->status = s;
+            snprintf(st->msg, sizeof st->msg, "%s", bf_last_error());
+        }
+        st->has_job = false;
+        pthread_cond_broadcast(&st->cv);
+    }
+    pthread_mutex_unlock(&st->mu);
+    return NULL;
+}
+
+static void png_stage_start(png_stage *st, replay_tum_writer *w)
+{
+    memset(st, 0, sizeof *st);
+    st->w = w;
+    if (pthread_mutex_init(&st->mu, NULL)) return;
+    if (pthread_cond_init(&st->cv, NULL)) {
+        pthread_mutex_destroy(&st->mu);
+        return;
+    }
+    st->is_threaded = pthread_create(&st->thread, NULL, png_stage_main, st) == 0;
+    if (!st->is_threaded) {
+        pthread_cond_destroy(&st->cv);
+        pthread_mutex_destroy(&st->mu);
+    }
+}
+
+/* Waits until the previous frame is written; returns its status. */
+static bf_status png_stage_wait(png_stage *st)
+{
+    if (!st->is_threaded) return st->status;
+    pthread_mutex_lock(&st->mu);
+    while (st->has_job) pthread_cond_wait(&st->cv, &st->mu);
+    bf_status s = st->status;
+    pthread_mutex_unlock(&st->mu);
+    return s ? bf_fail(s, "%s", st->msg) : BF_OK;
+}
+
+/* Hands f over (its buffers must stay untouched until the next wait). */
+static bf_status png_stage_post(png_stage *st, const bf_frame *f)
+{
+    bf_status s = png_stage_wait(st);
+    if (s) return s;
+    if (!st->is_threaded) return st->status = replay_tum_writer_add(st->w, f);
+    pthread_mutex_lock(&st->mu);
+    st->job = *f;
+    st->has_job = true;
+    pthread_cond_broadcast(&st->cv);
+    pthread_mutex_unlock(&st->mu);
+    return BF_OK;
+}
+
+/* Waits for the last frame and ends the thread; returns the first failure. */
+static bf_status png_stage_stop(png_stage *st)
+{
+    bf_status s = png_stage_wait(st);
+    if (st->is_threaded) {
+        pthread_mutex_lock(&st->mu);
+        st->is_quitting = true;
+        pthread_cond_broadcast(&st->cv);
+        pthread_mutex_unlock(&st->mu);
+        pthread_join(st->thread, NULL);
+        pthread_cond_destroy(&st->cv);
+        pthread_mutex_destroy(&st->mu);
+        st->is_threaded = false;
+    }
+    return s;
 }
 
 /* ------------------------------------------------------------ outputs */
@@ -220,8 +319,10 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
     eval_scene scene = {0};
     eval_renderer *r = NULL;
     replay_tum_writer *w = NULL;
-    uint16_t *depth = NULL;
-    uint8_t *rgb = NULL;
+    uint16_t *depth[2] = {NULL, NULL};
+    uint8_t *rgb[2] = {NULL, NULL};
+    png_stage stage;
+    bool has_stage = false;
     seen_set seen = {.cell_m = cell};
     bf_stats times = {0};
     double t_run = bf_time_s();
@@ -251,13 +352,17 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
     bf_info("synth: BVH over %u triangles in %.2f s", scene.mesh.n_tris, bf_time_s() - t_build);
     if ((s = replay_tum_writer_create(cfg->out_dir, &K, &w))) goto done;
     size_t n_pix = (size_t)K.width * K.height;
-    depth = malloc(n_pix * sizeof *depth);
-    rgb = malloc(n_pix * 3);
-    if (!depth || !rgb) {
+    for (int k = 0; k < 2; k++) {
+        depth[k] = malloc(n_pix * sizeof *depth[k]);
+        rgb[k] = malloc(n_pix * 3);
+    }
+    if (!depth[0] || !rgb[0] || !depth[1] || !rgb[1]) {
         s = bf_fail(BF_NO_MEMORY, "synth: frame buffers");
         goto done;
     }
 
+    png_stage_start(&stage, w);
+    has_stage = true;
     bf_progress prog;
     bf_progress_begin(&prog, "synth", n_frames);
     uint64_t n_valid = 0;
@@ -270,12 +375,15 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
         }
         bf_se3 T_wc = bf_se3_mul(&T_world_traj, &T_traj);
         eval_render_stats st;
-        if ((s = eval_render(r, i, &T_wc, depth, rgb, &st))) goto done;
+        /* Buffer i % 2 was last handed over for frame i - 2, written by now. */
+        uint16_t *d = depth[i & 1];
+        uint8_t *c = rgb[i & 1];
+        if ((s = eval_render(r, i, &T_wc, d, c, &st))) goto done;
         if ((s = bf_stats_push(&times, st.seconds))) goto done;
         n_valid += st.n_valid;
         bf_frame f = {.index = i, .width = K.width, .height = K.height, .t_depth_s = t, .t_rgb_s = t,
-                      .depth = depth, .rgb = rgb, .has_pose = true, .T_wc = T_wc};
-        if ((s = replay_tum_writer_add(w, &f))) goto done;
+                      .depth = d, .rgb = c, .has_pose = true, .T_wc = T_wc};
+        if ((s = png_stage_post(&stage, &f))) goto done;
         if (!seen_collect(&seen, r, i, K.width, K.height)) {
             s = bf_fail(BF_NO_MEMORY, "synth: frame %u: seen points", i);
             goto done;
@@ -283,6 +391,8 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
         bf_progress_update(&prog, i + 1);
     }
     bf_progress_end(&prog, n_frames);
+    has_stage = false;
+    if ((s = png_stage_stop(&stage))) goto done;
     if ((s = replay_tum_writer_finish(w))) goto done;
     if ((s = write_scene_ply(cfg->out_dir, &scene))) goto done;
     if ((s = write_seen_ply(cfg->out_dir, &seen))) goto done;
@@ -301,13 +411,16 @@ bf_status eval_synth_run(const eval_synth_config *cfg, eval_synth_result *out)
         goto done;
     if (out) *out = res;
 done:
+    if (has_stage) png_stage_stop(&stage); /* the run already failed: keep its status */
     replay_tum_writer_destroy(w);
     eval_renderer_destroy(r);
     eval_scene_free(&scene);
     replay_traj_free(&traj);
     seen_free(&seen);
     bf_stats_free(&times);
-    free(depth);
-    free(rgb);
+    for (int k = 0; k < 2; k++) {
+        free(depth[k]);
+        free(rgb[k]);
+    }
     return s;
 }
