@@ -163,11 +163,17 @@ static void trace_row(void *ctx, size_t row)
         if (job->rgb) {
             uint8_t *o = job->rgb + 3 * i;
             if (is_kinect) {
-                double g[4];
+                /* Per channel the sum of four 16-bit uniforms (Irwin-Hall,
+                 * variance 4/12): close to Gaussian and cheaper than
+                 * Box-Muller, which only the depth noise needs exactly. */
                 uint64_t key = eval__rng_key(r->cfg.seed, job->frame, (uint32_t)i, EVAL_RNG_COLOUR);
-                eval__gauss2(key, &g[0], &g[1]);
-                eval__gauss2(eval__mix64(key), &g[2], &g[3]);
-                for (int k = 0; k < 3; k++) o[k] = to_u8(rgb[k] + g[k] * EVAL_COLOUR_SIGMA / 255.0);
+                for (int k = 0; k < 3; k++) {
+                    uint64_t h = eval__mix64(key + (uint64_t)k);
+                    double sum = 0;
+                    for (int j = 0; j < 4; j++) sum += (double)((h >> (16 * j)) & 0xffff) * (1.0 / 65536.0);
+                    double g = (sum - 2.0) * sqrt(3.0); /* unit variance */
+                    o[k] = to_u8(rgb[k] + g * EVAL_COLOUR_SIGMA / 255.0);
+                }
             } else {
                 for (int k = 0; k < 3; k++) o[k] = to_u8(rgb[k]);
             }
