@@ -32,20 +32,6 @@ static const char synth_help[] =
     "\n"
     "Threads: BITFUSE_THREADS (default: all cores). See docs/synth.md.\n";
 
-#ifndef BF_SOURCE_DIR
-#define BF_SOURCE_DIR "."
-#endif
-
-/* The shared data folder: beside the source tree, else beside the current
- * folder; NULL when neither has one. */
-static const char *default_data_dir(void)
-{
-    static const char *const candidates[] = {BF_SOURCE_DIR "/../shared/data", "../shared/data"};
-    for (size_t i = 0; i < sizeof candidates / sizeof candidates[0]; i++)
-        if (bf_file_exists(candidates[i])) return candidates[i];
-    return NULL;
-}
-
 static bool parse_u64(const char *s, uint64_t *out)
 {
     char *end;
@@ -122,7 +108,7 @@ int cmd_synth(int argc, char **argv)
     if (!strcmp(cfg.scene, "room")) {
         if (data_dir && !bf_file_exists(data_dir))
             return app_usage_error(cmd, "--data: folder '%s' does not exist", data_dir);
-        cfg.data_dir = data_dir ? data_dir : default_data_dir();
+        cfg.data_dir = data_dir ? data_dir : app_default_data_dir();
         if (!cfg.data_dir) bf_info("synth: no shared data folder found: the room has no meshes");
     }
     eval_synth_result res;
