@@ -11,6 +11,9 @@
 #  define bf_i32 int
 #  define bf_f32 float
 #  define bf_popcount(x) uint(bitCount(x))
+/* No fused multiply-add or reassociation: C (ISO mode, -ffp-contract=off)
+ * and GLSL then round every float operation the same way. */
+#  define BF_PRECISE precise
 #else
 #  include <stdint.h>
 #  define BF_FN static inline
@@ -18,6 +21,7 @@ typedef uint32_t bf_u32;
 typedef int32_t bf_i32;
 typedef float bf_f32;
 #  define bf_popcount(x) ((bf_u32)__builtin_popcount(x))
+#  define BF_PRECISE
 #endif
 
 /* Specialization constant ids: 0..2 carry the workgroup size chosen on the

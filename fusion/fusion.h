@@ -1,0 +1,120 @@
+/* fusion: the sign-bit map on the GPU and windowed fusion into it
+ * (DESIGN.md sections 3 and 4; Reichl, Weiss, Westermann 2016).
+ *
+ * A map is a hash of world chunks, each an octree of 8x8x8 bricks at the
+ * level each part of the scene needs, with one sign bit and one confidence
+ * bit per voxel. Frames are added one at a time with their camera pose;
+ * every frame allocates the bricks its depth samples need, integrates new
+ * bricks quickly from the last few frames (sub-cache), and integrates a
+ * slice of the current window's bricks (the window of n frames slides by
+ * n/2; its integration is spread over the next n/2 frames).
+ *
+ * Layout shared with the shaders: shaders/fusion.glsl.h. Host copies of the
+ * map for export and tests: fusion_snapshot. See docs/fusion.md.
+ */
+#ifndef BF_FUSION_H
+#define BF_FUSION_H
+
+#include "core/core.h"
+#include "gpu/gpu.h"
+
+typedef struct fusion_map fusion_map; /* opaque */
+
+typedef struct fusion_config {
+    float chunk_m;          /* edge of a world chunk [m], default 2 */
+    uint32_t max_level;     /* finest octree level, default 8 (~1 mm at 2 m chunks) */
+    float voxel_ratio;      /* voxel-to-pixel ratio of the level rule, default 1 */
+    uint32_t window;        /* n: frames per window, even, default 40 */
+    uint32_t subcache;      /* n^: frames for new bricks' quick integration, default 10 */
+    uint32_t brick_cap;     /* bricks allocated at create, never grown; default 1 << 20 */
+    uint32_t node_cap;      /* octree nodes, default 2 * brick_cap */
+    uint32_t hash_buckets;  /* chunk hash buckets, default 4096 */
+    uint32_t hash_overflow; /* overflow entries, default 4096 */
+    float sigma_a, sigma_b, sigma_c; /* sensor sigma(z) = a + b (z - c)^2, default Kinect v1 */
+    float conf_weight;      /* accumulated weight that makes a voxel confident, default 4 */
+    float band_sigmas;      /* allocation band around a sample: +-k sigma(z), default 3 */
+    float max_depth_m;      /* samples beyond are ignored, default 4.5 */
+} fusion_config;
+
+/* The defaults above. */
+fusion_config fusion_config_default(void);
+
+/* Creates an empty map for frames of camera K. origin_w is the world point
+ * that becomes the GPU's origin (the first camera position, usually): all
+ * GPU coordinates are relative to it, in float. ctx is borrowed and must
+ * outlive the map. BF_INVALID_ARG for a bad config (the message says
+ * which field), BF_NO_MEMORY when the pools do not fit the device. */
+bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_intrinsics *K, bf_vec3 origin_w,
+                        fusion_map **out);
+/* Waits for the map's GPU work and frees it. NULL is a no-op. */
+void fusion_destroy(fusion_map *map);
+
+/* Adds one frame seen from T_wc (camera to world): uploads it to the frame
+ * ring, allocates bricks, integrates (sub-cache and the current window
+ * slice). Depth must have K's size. BF_POOL_FULL when a pool ran out: the
+ * requests that did not fit are dropped and counted, the map stays
+ * consistent (fusion_check passes). */
+bf_status fusion_add_frame(fusion_map *map, const bf_frame *f, const bf_se3 *T_wc);
+/* Integrates whatever the schedule still owes (the last, partial windows),
+ * as at the end of a sequence. */
+bf_status fusion_flush(fusion_map *map);
+
+/* ------------------------------------------------------------ statistics */
+
+typedef struct fusion_stats {
+    uint32_t n_frames;
+    uint32_t n_chunks;
+    uint32_t n_nodes;
+    uint32_t n_bricks;
+    uint32_t bricks_per_level[16];
+    uint64_t n_confident_voxels;
+    uint64_t n_surface_voxels;       /* confident voxels with a confident neighbour of the other sign */
+    uint32_t fail_nodes, fail_bricks, fail_hash; /* requests dropped for a full pool */
+    /* Bytes of map data in use (what the scene needs), by part. */
+    uint64_t bytes_sign, bytes_conf, bytes_info, bytes_nodes, bytes_hash, bytes_total;
+    uint64_t bytes_reserved;         /* allocated at create */
+    /* GPU time of the last frame by stage, ms. */
+    double ms_upload, ms_alloc, ms_subcache, ms_window;
+} fusion_stats;
+
+/* Reads the counters back (a small download) and fills *out. */
+bf_status fusion_get_stats(fusion_map *map, fusion_stats *out);
+
+/* ------------------------------------------------------------ host copies */
+
+/* One brick as the host sees it. Voxel (x, y, z) has its centre at
+ * origin_w + key * chunk_m + ((cell * 8 + (x, y, z)) + 0.5) * voxel_m(level),
+ * its sign bit at sign[brick_word(x,y,z)] >> brick_bit(x,y,z) (1 = in
+ * front of the surface), likewise its confidence bit. */
+typedef struct fusion_brick {
+    int32_t key[3];      /* chunk coordinates */
+    uint32_t level;
+    uint32_t cell[3];    /* cell of the brick at its level inside the chunk, < 2^level */
+    float error;         /* average sigma of the window that last set it [m] */
+    uint32_t sign[16];
+    uint32_t conf[16];
+} fusion_brick;
+
+typedef struct fusion_snapshot {
+    float chunk_m;
+    bf_vec3 origin_w;
+    uint32_t n_bricks;
+    fusion_brick *bricks; /* malloc'd */
+} fusion_snapshot;
+
+/* Downloads every live brick. */
+bf_status fusion_snapshot_take(fusion_map *map, fusion_snapshot *out);
+void fusion_snapshot_free(fusion_snapshot *s);
+/* Voxel edge of a level [m]. */
+double fusion_voxel_m(float chunk_m, uint32_t level);
+/* World position of voxel (x, y, z) of brick b. */
+bf_vec3 fusion_voxel_center_w(const fusion_snapshot *s, const fusion_brick *b, uint32_t x, uint32_t y,
+                              uint32_t z);
+
+/* Integrity check (SQLite's integrity_check): every hash entry, node and
+ * brick is reachable exactly once, brick records agree with the nodes that
+ * own them, counters agree with what is live. BF_NUMERIC with a message on
+ * the first inconsistency. Downloads the whole map: for tests. */
+bf_status fusion_check(fusion_map *map);
+
+#endif

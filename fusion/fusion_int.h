@@ -1,0 +1,77 @@
+/* Declarations shared by fusion/'s files (SQLite's btreeInt.h idea). */
+#ifndef BF_FUSION_INT_H
+#define BF_FUSION_INT_H
+
+#include "fusion.h"
+#include "shaders/fusion.glsl.h"
+
+/* A list of brick slots on the GPU (new bricks of a frame, a window's
+ * bricks): word FUSION_LIST_COUNT holds the count, words
+ * FUSION_LIST_ARGS.. +2 indirect dispatch arguments a prepare pass writes,
+ * entries start at FUSION_LIST_HEADER. */
+#define FUSION_LIST_COUNT 0u
+#define FUSION_LIST_ARGS 1u
+#define FUSION_LIST_HEADER 4u
+
+struct fusion_map {
+    gpu_context *ctx;
+    fusion_config cfg;
+    bf_intrinsics K;
+    bf_vec3 origin_w;
+    uint32_t ring_slots;      /* 2n */
+    uint32_t n_entries;       /* hash entries: buckets * slots + overflow */
+
+    /* The map (shaders/fusion.glsl.h has the layouts). */
+    gpu_buffer *hash, *locks, *nodes, *info, *sign, *conf, *counters;
+    gpu_buffer *free_stack;   /* brick slots not in use, FUSION_CNT_FREE_TOP of them */
+    gpu_buffer *stamp;        /* per brick: index of the last frame that touched it */
+    /* The frame ring. */
+    gpu_buffer *frames;       /* ring_slots fusion_frame records */
+    gpu_buffer *depth_ring;   /* ring_slots depth images, 2 pixels per word */
+    gpu_buffer *upload;       /* host-visible staging of one frame: record + depth */
+    /* Work lists. */
+    gpu_buffer *samples;      /* retry queue of the allocation passes */
+    gpu_buffer *new_list;     /* bricks created by the current frame */
+    gpu_buffer *window_list;  /* bricks of the window being integrated */
+
+    /* Pipelines and binding sets, created by each stage's file. */
+    gpu_pipeline *p_alloc, *p_alloc_retry, *p_alloc_args;
+    gpu_bindings *b_alloc;
+    gpu_pipeline *p_integrate, *p_integrate_args, *p_window_list;
+    gpu_bindings *b_integrate_new, *b_integrate_window, *b_window_list;
+
+    /* Schedule (host side). */
+    uint32_t n_frames;        /* frames added */
+    uint32_t window_end;      /* one past the last frame of the window being integrated */
+    uint32_t window_slices_done;
+    bool window_pending;
+
+    double ms_upload, ms_alloc, ms_subcache, ms_window;
+};
+
+/* map.c: insert one brick from the host, creating its chunk and octree path
+ * (tests build maps with it). Must not run while GPU work is pending.
+ * *slot receives the brick slot. */
+bf_status fusion__debug_insert_brick(fusion_map *map, const int32_t key[3], uint32_t level, const uint32_t cell[3],
+                                     uint32_t *slot);
+/* map.c: host ring slot of sequence frame index i. */
+static inline uint32_t fusion__ring_slot(const fusion_map *map, uint32_t i) { return i % map->ring_slots; }
+
+/* alloc.c */
+bf_status fusion__alloc_create(fusion_map *map);
+void fusion__alloc_destroy(fusion_map *map);
+/* Records the allocation passes for the frame in ring slot `slot`. */
+void fusion__cmd_alloc(fusion_map *map, uint32_t slot, uint32_t frame_index);
+
+/* integrate.c */
+bf_status fusion__integrate_create(fusion_map *map);
+void fusion__integrate_destroy(fusion_map *map);
+/* Records the integration of entries [first, first + max_count) of list
+ * (clamped to the list's count on the GPU) against the frames with sequence
+ * indices [frame_first, frame_first + n_frames) still in the ring. With
+ * set_confidence false only the sign of non-confident voxels is written
+ * (the sub-cache's quick pass); with true the window rule applies. */
+void fusion__cmd_integrate(fusion_map *map, gpu_bindings *b, uint32_t first, uint32_t max_count,
+                           uint32_t frame_first, uint32_t n_frames, bool set_confidence);
+
+#endif
