@@ -157,18 +157,29 @@ double eval__kdtree_nearest(const eval_kdtree *t, bf_vec3 p, double max_dist, si
     const double q[3] = {p.x, p.y, p.z};
     double best2 = max_dist == INFINITY ? INFINITY : max_dist * max_dist;
     size_t best = SIZE_MAX;
-    /* Each entry carries a lower bound of the squared distance to its node. */
+    /* Each entry carries a lower bound of the squared distance to its node,
+     * the sum over the axes of the squared distance from q to the node's
+     * slab on that axis (Arya and Mount's incremental distance, 1993). A
+     * bound from one axis alone lets a query far from the cloud visit
+     * nearly every node. */
     struct {
         uint32_t node;
         double d2;
+        double off[3]; /* distance from q to the node's region along each axis */
     } stack[KD_STACK];
     int sp = 0;
     stack[sp].node = 0;
-    stack[sp++].d2 = 0;
+    stack[sp].d2 = 0;
+    stack[sp].off[0] = stack[sp].off[1] = stack[sp].off[2] = 0;
+    sp++;
     while (sp > 0) {
-        uint32_t ni = stack[--sp].node;
+        sp--;
+        uint32_t ni = stack[sp].node;
         double d2n = stack[sp].d2;
-        if (d2n > best2) continue;
+        double off[3] = {stack[sp].off[0], stack[sp].off[1], stack[sp].off[2]};
+        /* The bound sums three rounded squares: allow for its rounding so a
+         * point exactly on a splitting plane is never pruned. */
+        if (d2n > best2 * (1 + 1e-12)) continue;
         const kd_node *nd = &t->nodes[ni];
         if (nd->axis == KD_LEAF_AXIS) {
             for (uint32_t i = nd->a; i < nd->b; i++) {
@@ -184,16 +195,24 @@ double eval__kdtree_nearest(const eval_kdtree *t, bf_vec3 p, double max_dist, si
         }
         double diff = q[nd->axis] - nd->split;
         uint32_t near = diff < 0 ? nd->a : nd->b, far = diff < 0 ? nd->b : nd->a;
-        /* The far side lies beyond the splitting plane; keep the larger of
-         * the two lower bounds. Push far first so near is searched first. */
-        double far2 = fmax(d2n, diff * diff);
+        /* The far side begins at the splitting plane, which lies at least as
+         * far from q on this axis as the node's own region does: its offset
+         * on the axis becomes |diff|, the others stay. Push far first so
+         * near is searched first. */
+        double far2 = d2n - off[nd->axis] * off[nd->axis] + diff * diff;
+        if (far2 < d2n) far2 = d2n; /* rounding */
         BF_ASSERT(sp + 2 <= KD_STACK);
-        if (far2 <= best2) {
+        if (far2 <= best2 * (1 + 1e-12)) {
             stack[sp].node = far;
-            stack[sp++].d2 = far2;
+            stack[sp].d2 = far2;
+            memcpy(stack[sp].off, off, sizeof off);
+            stack[sp].off[nd->axis] = fabs(diff);
+            sp++;
         }
         stack[sp].node = near;
-        stack[sp++].d2 = d2n;
+        stack[sp].d2 = d2n;
+        memcpy(stack[sp].off, off, sizeof off);
+        sp++;
     }
     if (best == SIZE_MAX) return INFINITY;
     if (idx) *idx = t->idx[best];
