@@ -106,7 +106,7 @@ typedef struct fusion_snapshot {
 bf_status fusion_snapshot_take(fusion_map *map, fusion_snapshot *out);
 void fusion_snapshot_free(fusion_snapshot *s);
 /* Voxel edge of a level [m]. */
-double fusion_voxel_m(float chunk_m, uint32_t level);
+double fusion_level_voxel_m(float chunk_m, uint32_t level);
 /* World position of voxel (x, y, z) of brick b. */
 bf_vec3 fusion_voxel_center_w(const fusion_snapshot *s, const fusion_brick *b, uint32_t x, uint32_t y,
                               uint32_t z);

@@ -36,7 +36,7 @@ struct fusion_map {
 
     /* Pipelines and binding sets, created by each stage's file. */
     gpu_pipeline *p_alloc, *p_alloc_retry, *p_alloc_args;
-    gpu_bindings *b_alloc;
+    gpu_bindings *b_alloc, *b_alloc_args;
     gpu_pipeline *p_integrate, *p_integrate_args, *p_window_list;
     gpu_bindings *b_integrate_new, *b_integrate_window, *b_window_list;
 

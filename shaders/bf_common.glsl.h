@@ -14,6 +14,8 @@
 /* No fused multiply-add or reassociation: C (ISO mode, -ffp-contract=off)
  * and GLSL then round every float operation the same way. */
 #  define BF_PRECISE precise
+#  define BF_U32(x) uint(x)
+#  define BF_F32(x) float(x)
 #else
 #  include <stdint.h>
 #  define BF_FN static inline
@@ -22,6 +24,8 @@ typedef int32_t bf_i32;
 typedef float bf_f32;
 #  define bf_popcount(x) ((bf_u32)__builtin_popcount(x))
 #  define BF_PRECISE
+#  define BF_U32(x) ((bf_u32)(x))
+#  define BF_F32(x) ((bf_f32)(x))
 #endif
 
 /* Specialization constant ids: 0..2 carry the workgroup size chosen on the

@@ -48,7 +48,7 @@
 /* Niessner et al. 2013's spatial hash (Teschner's primes). */
 BF_FN bf_u32 fusion_hash(bf_i32 x, bf_i32 y, bf_i32 z, bf_u32 n_buckets)
 {
-    bf_u32 h = ((bf_u32)x * 73856093u) ^ ((bf_u32)y * 19349669u) ^ ((bf_u32)z * 83492791u);
+    bf_u32 h = (BF_U32(x) * 73856093u) ^ (BF_U32(y) * 19349669u) ^ (BF_U32(z) * 83492791u);
     return h % n_buckets;
 }
 
@@ -81,7 +81,7 @@ BF_FN bf_u32 fusion_pos_level(bf_u32 p) { return p >> 24; }
 /* Voxel edge at a level: chunk_m / 8 / 2^level (exact: powers of two). */
 BF_FN bf_f32 fusion_voxel_m(bf_f32 chunk_m, bf_u32 level)
 {
-    return chunk_m * (0.125f / (bf_f32)(1u << level));
+    return chunk_m * (0.125f / BF_F32(1u << level));
 }
 
 /* The level whose voxel edge is closest (in ratio) to the sample's footprint
@@ -128,6 +128,36 @@ BF_FN bf_f32 fusion_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
     BF_PRECISE bf_f32 s = a + b * d * d;
     return s;
 }
+
+/* ------------------------------------------------------------ allocation */
+/* The retry queues of the allocation passes live in one buffer: two queues,
+ * each a 4-word header {count, groups x, y, z} at word 4 * q, entries from
+ * FUSION_QUEUE_ENTRIES + q * queue_cap. An entry is pixel * 4 + band point. */
+#define FUSION_QUEUE_ENTRIES 8u
+/* Workgroup size of the allocation passes (1-D: pixels or queue entries). */
+#define FUSION_ALLOC_LOCAL 64u
+
+/* Push constants of fusion_alloc.comp and fusion_alloc_args.comp. */
+struct fusion_alloc_push {
+    bf_u32 slot;          /* ring slot of the frame */
+    bf_u32 frame_index;   /* its sequence index (brick stamps) */
+    bf_u32 pass;          /* 0: every pixel; > 0: the retry queue (pass - 1) % 2 */
+    bf_u32 queue_cap;     /* entries per retry queue */
+    bf_u32 max_level;
+    bf_u32 n_buckets;
+    bf_u32 n_overflow;
+    bf_u32 node_cap;
+    bf_f32 chunk_m;
+    bf_f32 voxel_ratio;
+    bf_f32 band_sigmas;
+    bf_f32 max_depth_m;
+    bf_f32 sigma_a, sigma_b, sigma_c;
+    bf_u32 pad;
+};
+#ifndef BF_GLSL
+typedef struct fusion_alloc_push fusion_alloc_push;
+_Static_assert(sizeof(fusion_alloc_push) == 64, "fusion_alloc_push must match std430");
+#endif
 
 /* ------------------------------------------------------------ counters */
 /* Word offsets in the counters buffer. */

@@ -1,0 +1,502 @@
+/* The map's buffers: creation, destruction, host copies (snapshot), the
+ * integrity check and host-side insertion for tests. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fusion_int.h"
+
+fusion_config fusion_config_default(void)
+{
+    fusion_config c = {
+        .chunk_m = 2.0f,
+        .max_level = 8,
+        .voxel_ratio = 1.0f,
+        .window = 40,
+        .subcache = 10,
+        .brick_cap = 1u << 20,
+        .node_cap = 0,
+        .hash_buckets = 4096,
+        .hash_overflow = 4096,
+        .sigma_a = 0.0012f,
+        .sigma_b = 0.0019f,
+        .sigma_c = 0.4f,
+        .conf_weight = 4.0f,
+        .band_sigmas = 3.0f,
+        .max_depth_m = 4.5f,
+    };
+    return c;
+}
+
+static bf_status config_check(const fusion_config *c, const bf_intrinsics *K)
+{
+    if (!(c->chunk_m > 0.01f && c->chunk_m <= 64.0f))
+        return bf_fail(BF_INVALID_ARG, "fusion: chunk_m %g outside (0.01, 64] m", c->chunk_m);
+    if (c->max_level > FUSION_MAX_LEVEL)
+        return bf_fail(BF_INVALID_ARG, "fusion: max_level %u above %u", c->max_level, FUSION_MAX_LEVEL);
+    if (!(c->voxel_ratio > 0.05f && c->voxel_ratio <= 64.0f))
+        return bf_fail(BF_INVALID_ARG, "fusion: voxel_ratio %g outside (0.05, 64]", c->voxel_ratio);
+    if (c->window < 2 || c->window % 2 || c->window > 256)
+        return bf_fail(BF_INVALID_ARG, "fusion: window %u must be even, 2..256", c->window);
+    if (c->subcache < 1 || c->subcache > c->window)
+        return bf_fail(BF_INVALID_ARG, "fusion: subcache %u must be 1..window", c->subcache);
+    if (c->brick_cap < 1 || c->node_cap < 9 || c->hash_buckets < 1)
+        return bf_fail(BF_INVALID_ARG, "fusion: brick_cap, node_cap and hash_buckets must be positive");
+    if (!(c->conf_weight > 0) || !(c->band_sigmas > 0) || !(c->max_depth_m > 0) || !(c->sigma_a > 0) ||
+        !(c->sigma_b >= 0))
+        return bf_fail(BF_INVALID_ARG, "fusion: weights, band, depth range and sigma must be positive");
+    if (K->width < 2 || K->height < 2 || K->width > 8192 || K->height > 8192 || !(K->depth_scale > 0) ||
+        !isfinite(K->fx_px) || !isfinite(K->fy_px) || K->fx_px == 0 || K->fy_px == 0)
+        return bf_fail(BF_INVALID_ARG, "fusion: bad intrinsics (%ux%u, fx %g, fy %g, depth scale %g)", K->width,
+                       K->height, K->fx_px, K->fy_px, K->depth_scale);
+    return BF_OK;
+}
+
+typedef struct buf_plan {
+    gpu_buffer **dst;
+    const char *name;
+    uint64_t bytes;
+    gpu_memory memory;
+    uint32_t usage;
+} buf_plan;
+
+static bf_status create_buffers(fusion_map *m)
+{
+    const fusion_config *c = &m->cfg;
+    uint64_t pixels = (uint64_t)m->K.width * m->K.height;
+    uint64_t depth_words = (pixels + 1) / 2;
+    uint32_t st = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER;
+    buf_plan plan[] = {
+        {&m->hash, "fusion.hash", (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->locks, "fusion.locks", (uint64_t)c->hash_buckets * 4, GPU_MEMORY_DEVICE, st},
+        {&m->nodes, "fusion.nodes", (uint64_t)c->node_cap * FUSION_NODE_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->info, "fusion.brick_info", (uint64_t)c->brick_cap * FUSION_BRICK_INFO_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->sign, "fusion.sign_pool", (uint64_t)c->brick_cap * BRICK_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->conf, "fusion.conf_pool", (uint64_t)c->brick_cap * BRICK_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->free_stack, "fusion.free_stack", (uint64_t)c->brick_cap * 4, GPU_MEMORY_DEVICE, st},
+        {&m->stamp, "fusion.stamp", (uint64_t)c->brick_cap * 4, GPU_MEMORY_DEVICE, st},
+        {&m->counters, "fusion.counters", FUSION_CNT_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
+        {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
+        {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4, GPU_MEMORY_UPLOAD, st},
+        /* Up to 3 band points per pixel wait for a retry pass. */
+        {&m->samples, "fusion.retry", (FUSION_QUEUE_ENTRIES + 2 * 3 * pixels) * 4, GPU_MEMORY_DEVICE,
+         st | GPU_USAGE_INDIRECT},
+        {&m->new_list, "fusion.new_list", ((uint64_t)FUSION_LIST_HEADER + c->brick_cap) * 4, GPU_MEMORY_DEVICE,
+         st | GPU_USAGE_INDIRECT},
+        {&m->window_list, "fusion.window_list", ((uint64_t)FUSION_LIST_HEADER + c->brick_cap) * 4,
+         GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
+    };
+    uint64_t max_binding = gpu_device_limits(m->ctx)->max_storage_buffer_range;
+    for (size_t i = 0; i < sizeof plan / sizeof plan[0]; i++) {
+        if (plan[i].bytes > max_binding)
+            return bf_fail(BF_INVALID_ARG,
+                           "fusion: %s needs %llu bytes, above this device's %llu-byte storage binding "
+                           "(lower brick_cap / node_cap)",
+                           plan[i].name, (unsigned long long)plan[i].bytes, (unsigned long long)max_binding);
+        gpu_buffer_desc d = {.name = plan[i].name, .size_bytes = plan[i].bytes, .memory = plan[i].memory,
+                             .usage = plan[i].usage};
+        bf_status s = gpu_buffer_create(m->ctx, &d, plan[i].dst);
+        if (s != BF_OK) return s;
+    }
+    return BF_OK;
+}
+
+/* Fills the pools with their empty state: no chunk, no node, every brick slot
+ * on the free stack (slot 0 on top), empty frame slots. */
+static bf_status init_buffers(fusion_map *m)
+{
+    const fusion_config *c = &m->cfg;
+    bf_status s;
+    uint32_t *tmp = malloc((size_t)(m->n_entries > c->brick_cap ? m->n_entries : c->brick_cap) *
+                           FUSION_ENTRY_WORDS * 4);
+    if (!tmp) return bf_fail(BF_NO_MEMORY, "fusion: host staging for map init");
+    for (uint32_t e = 0; e < m->n_entries; e++) {
+        uint32_t *w = tmp + (size_t)e * FUSION_ENTRY_WORDS;
+        memset(w, 0, FUSION_ENTRY_WORDS * 4);
+        w[FUSION_ENTRY_ROOT] = FUSION_NONE;
+        w[FUSION_ENTRY_NEXT] = FUSION_NONE;
+        w[FUSION_ENTRY_STATE] = FUSION_ENTRY_FREE;
+    }
+    s = gpu_buffer_upload(m->hash, 0, tmp, (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
+    for (uint32_t i = 0; s == BF_OK && i < c->brick_cap; i++) tmp[i] = c->brick_cap - 1 - i;
+    if (s == BF_OK) s = gpu_buffer_upload(m->free_stack, 0, tmp, (uint64_t)c->brick_cap * 4);
+    free(tmp);
+    if (s == BF_OK) s = gpu_buffer_zero(m->locks);
+    if (s == BF_OK) s = gpu_buffer_fill(m->nodes, 0, gpu_buffer_size(m->nodes), FUSION_NONE);
+    if (s == BF_OK) s = gpu_buffer_fill(m->info, 0, gpu_buffer_size(m->info), FUSION_NONE);
+    if (s == BF_OK) s = gpu_buffer_zero(m->sign);
+    if (s == BF_OK) s = gpu_buffer_zero(m->conf);
+    if (s == BF_OK) s = gpu_buffer_fill(m->stamp, 0, gpu_buffer_size(m->stamp), FUSION_NONE);
+    if (s == BF_OK) s = gpu_buffer_fill(m->frames, 0, gpu_buffer_size(m->frames), FUSION_NONE);
+    if (s == BF_OK) s = gpu_buffer_zero(m->depth_ring);
+    if (s == BF_OK) s = gpu_buffer_zero(m->samples);
+    if (s == BF_OK) s = gpu_buffer_zero(m->new_list);
+    if (s == BF_OK) s = gpu_buffer_zero(m->window_list);
+    uint32_t cnt[FUSION_CNT_WORDS] = {0};
+    cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
+    if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
+    return s;
+}
+
+bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_intrinsics *K, bf_vec3 origin_w,
+                        fusion_map **out)
+{
+    fusion_config c = cfg ? *cfg : fusion_config_default();
+    if (c.node_cap == 0) c.node_cap = 2 * c.brick_cap + 64;
+    bf_status s = config_check(&c, K);
+    if (s != BF_OK) return s;
+    if (!isfinite(origin_w.x) || !isfinite(origin_w.y) || !isfinite(origin_w.z))
+        return bf_fail(BF_INVALID_ARG, "fusion: map origin is not finite");
+    fusion_map *m = calloc(1, sizeof *m);
+    if (!m) return bf_fail(BF_NO_MEMORY, "fusion: map struct");
+    m->ctx = ctx;
+    m->cfg = c;
+    m->K = *K;
+    m->origin_w = origin_w;
+    m->ring_slots = 2 * c.window;
+    m->n_entries = c.hash_buckets * FUSION_BUCKET_SLOTS + c.hash_overflow;
+    if ((s = create_buffers(m)) != BF_OK) goto fail;
+    if ((s = init_buffers(m)) != BF_OK) goto fail;
+    if ((s = fusion__alloc_create(m)) != BF_OK) goto fail;
+    if ((s = fusion__integrate_create(m)) != BF_OK) goto fail;
+    *out = m;
+    return BF_OK;
+fail:
+    fusion_destroy(m);
+    return s;
+}
+
+void fusion_destroy(fusion_map *m)
+{
+    if (!m) return;
+    fusion__integrate_destroy(m);
+    fusion__alloc_destroy(m);
+    gpu_buffer *bufs[] = {m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
+                          m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
+                          m->locks, m->hash};
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
+    free(m);
+}
+
+double fusion_level_voxel_m(float chunk_m, uint32_t level) { return (double)fusion_voxel_m(chunk_m, level); }
+
+bf_vec3 fusion_voxel_center_w(const fusion_snapshot *s, const fusion_brick *b, uint32_t x, uint32_t y, uint32_t z)
+{
+    double v = fusion_level_voxel_m(s->chunk_m, b->level);
+    uint32_t xyz[3] = {x, y, z};
+    double p[3];
+    for (int i = 0; i < 3; i++)
+        p[i] = (double)b->key[i] * s->chunk_m + ((double)(b->cell[i] * 8 + xyz[i]) + 0.5) * v;
+    return bf_v3(s->origin_w.x + p[0], s->origin_w.y + p[1], s->origin_w.z + p[2]);
+}
+
+/* ------------------------------------------------------------ host mirror */
+
+/* A full host copy of the map's index structures (tests and checks only). */
+typedef struct host_map {
+    uint32_t *hash, *nodes, *info, *counters, *free_stack;
+} host_map;
+
+static void host_map_free(host_map *h)
+{
+    free(h->hash);
+    free(h->nodes);
+    free(h->info);
+    free(h->counters);
+    free(h->free_stack);
+    memset(h, 0, sizeof *h);
+}
+
+static bf_status download_whole(gpu_buffer *b, uint32_t **out)
+{
+    uint64_t n = gpu_buffer_size(b);
+    uint32_t *p = malloc(n);
+    if (!p) return bf_fail(BF_NO_MEMORY, "fusion: host copy of %s (%llu bytes)", gpu_buffer_name(b),
+                           (unsigned long long)n);
+    bf_status s = gpu_buffer_download(b, 0, p, n);
+    if (s != BF_OK) {
+        free(p);
+        return s;
+    }
+    *out = p;
+    return BF_OK;
+}
+
+static bf_status host_map_load(fusion_map *m, host_map *h)
+{
+    memset(h, 0, sizeof *h);
+    bf_status s = download_whole(m->hash, &h->hash);
+    if (s == BF_OK) s = download_whole(m->nodes, &h->nodes);
+    if (s == BF_OK) s = download_whole(m->info, &h->info);
+    if (s == BF_OK) s = download_whole(m->counters, &h->counters);
+    if (s == BF_OK) s = download_whole(m->free_stack, &h->free_stack);
+    if (s != BF_OK) host_map_free(h);
+    return s;
+}
+
+/* Hash entry of chunk key, or FUSION_NONE. */
+static uint32_t host_find_chunk(const fusion_map *m, const host_map *h, const int32_t key[3])
+{
+    uint32_t bucket = fusion_hash(key[0], key[1], key[2], m->cfg.hash_buckets);
+    for (uint32_t k = 0; k < FUSION_BUCKET_SLOTS; k++) {
+        const uint32_t *e = h->hash + (size_t)(bucket * FUSION_BUCKET_SLOTS + k) * FUSION_ENTRY_WORDS;
+        if (e[FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID && (int32_t)e[0] == key[0] && (int32_t)e[1] == key[1] &&
+            (int32_t)e[2] == key[2])
+            return bucket * FUSION_BUCKET_SLOTS + k;
+    }
+    uint32_t next = h->hash[(size_t)(bucket * FUSION_BUCKET_SLOTS + FUSION_BUCKET_SLOTS - 1) * FUSION_ENTRY_WORDS +
+                            FUSION_ENTRY_NEXT];
+    for (uint32_t guard = 0; next != FUSION_NONE && guard < m->n_entries; guard++) {
+        const uint32_t *e = h->hash + (size_t)next * FUSION_ENTRY_WORDS;
+        if (e[FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID && (int32_t)e[0] == key[0] && (int32_t)e[1] == key[1] &&
+            (int32_t)e[2] == key[2])
+            return next;
+        next = e[FUSION_ENTRY_NEXT];
+    }
+    return FUSION_NONE;
+}
+
+static bf_status host_alloc_nodes(const fusion_map *m, host_map *h, uint32_t n, uint32_t *first)
+{
+    uint32_t used = h->counters[FUSION_CNT_NODES];
+    if (used + n > m->cfg.node_cap) return bf_fail(BF_POOL_FULL, "fusion: node pool full (%u nodes)", m->cfg.node_cap);
+    h->counters[FUSION_CNT_NODES] = used + n;
+    *first = used;
+    return BF_OK;
+}
+
+static bf_status host_insert_chunk(fusion_map *m, host_map *h, const int32_t key[3], uint32_t *entry)
+{
+    uint32_t bucket = fusion_hash(key[0], key[1], key[2], m->cfg.hash_buckets), e = FUSION_NONE;
+    for (uint32_t k = 0; k < FUSION_BUCKET_SLOTS && e == FUSION_NONE; k++)
+        if (h->hash[(size_t)(bucket * FUSION_BUCKET_SLOTS + k) * FUSION_ENTRY_WORDS + FUSION_ENTRY_STATE] ==
+            FUSION_ENTRY_FREE)
+            e = bucket * FUSION_BUCKET_SLOTS + k;
+    if (e == FUSION_NONE) { /* overflow: link from the bucket's last slot */
+        uint32_t idx = h->counters[FUSION_CNT_OVERFLOW];
+        if (idx >= m->cfg.hash_overflow) return bf_fail(BF_POOL_FULL, "fusion: chunk hash overflow full");
+        h->counters[FUSION_CNT_OVERFLOW] = idx + 1;
+        e = m->cfg.hash_buckets * FUSION_BUCKET_SLOTS + idx;
+        uint32_t *link = h->hash + (size_t)(bucket * FUSION_BUCKET_SLOTS + FUSION_BUCKET_SLOTS - 1) * FUSION_ENTRY_WORDS +
+                         FUSION_ENTRY_NEXT;
+        while (*link != FUSION_NONE) link = h->hash + (size_t)*link * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT;
+        *link = e;
+    }
+    uint32_t root = 0;
+    bf_status s = host_alloc_nodes(m, h, 1, &root);
+    if (s != BF_OK) return s;
+    uint32_t *w = h->hash + (size_t)e * FUSION_ENTRY_WORDS;
+    w[0] = (uint32_t)key[0], w[1] = (uint32_t)key[1], w[2] = (uint32_t)key[2];
+    w[FUSION_ENTRY_ROOT] = root;
+    w[FUSION_ENTRY_STATE] = FUSION_ENTRY_VALID;
+    *entry = e;
+    return BF_OK;
+}
+
+bf_status fusion__debug_insert_brick(fusion_map *m, const int32_t key[3], uint32_t level, const uint32_t cell[3],
+                                     uint32_t *slot)
+{
+    if (level > m->cfg.max_level || cell[0] >> level || cell[1] >> level || cell[2] >> level)
+        return bf_fail(BF_INVALID_ARG, "fusion: cell (%u,%u,%u) outside level %u", cell[0], cell[1], cell[2], level);
+    host_map h;
+    bf_status s = host_map_load(m, &h);
+    if (s != BF_OK) return s;
+    uint32_t entry = host_find_chunk(m, &h, key);
+    if (entry == FUSION_NONE) s = host_insert_chunk(m, &h, key, &entry);
+    uint32_t node = s == BF_OK ? h.hash[(size_t)entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT] : 0;
+    for (uint32_t l = 1; s == BF_OK && l <= level; l++) {
+        uint32_t sh = level - l;
+        uint32_t oct = fusion_octant(cell[0] >> sh, cell[1] >> sh, cell[2] >> sh);
+        uint32_t *child = &h.nodes[(size_t)node * FUSION_NODE_WORDS + FUSION_NODE_CHILD];
+        if (*child == FUSION_NONE) {
+            uint32_t first = 0;
+            if ((s = host_alloc_nodes(m, &h, 8, &first)) != BF_OK) break;
+            *child = first;
+        }
+        node = *child + oct;
+    }
+    uint32_t *brick = s == BF_OK ? &h.nodes[(size_t)node * FUSION_NODE_WORDS + FUSION_NODE_BRICK] : NULL;
+    if (s == BF_OK && *brick == FUSION_NONE) {
+        uint32_t top = h.counters[FUSION_CNT_FREE_TOP];
+        if (top == 0) {
+            s = bf_fail(BF_POOL_FULL, "fusion: brick pool full (%u bricks)", m->cfg.brick_cap);
+        } else {
+            uint32_t b = h.free_stack[top - 1];
+            h.counters[FUSION_CNT_FREE_TOP] = top - 1;
+            h.counters[FUSION_CNT_BRICKS]++;
+            *brick = b;
+            uint32_t *info = h.info + (size_t)b * FUSION_BRICK_INFO_WORDS;
+            info[FUSION_INFO_CHUNK] = entry;
+            info[FUSION_INFO_POS] = fusion_pack_pos(cell[0], cell[1], cell[2], level);
+            info[FUSION_INFO_NODE] = node;
+            float inf = INFINITY;
+            memcpy(&info[FUSION_INFO_ERROR], &inf, 4);
+        }
+    }
+    if (s == BF_OK) s = gpu_buffer_upload(m->hash, 0, h.hash, gpu_buffer_size(m->hash));
+    if (s == BF_OK) s = gpu_buffer_upload(m->nodes, 0, h.nodes, gpu_buffer_size(m->nodes));
+    if (s == BF_OK) s = gpu_buffer_upload(m->info, 0, h.info, gpu_buffer_size(m->info));
+    if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, h.counters, gpu_buffer_size(m->counters));
+    if (s == BF_OK) *slot = *brick;
+    host_map_free(&h);
+    return s;
+}
+
+/* ------------------------------------------------------------ snapshot */
+
+bf_status fusion_snapshot_take(fusion_map *m, fusion_snapshot *out)
+{
+    uint32_t cap = m->cfg.brick_cap;
+    uint32_t *info = malloc((size_t)cap * FUSION_BRICK_INFO_WORDS * 4), *hash = NULL, *sign = NULL, *conf = NULL;
+    fusion_brick *bricks = NULL;
+    bf_status s = info ? gpu_buffer_download(m->info, 0, info, (uint64_t)cap * FUSION_BRICK_INFO_WORDS * 4)
+                       : bf_fail(BF_NO_MEMORY, "fusion: snapshot");
+    /* Live slots are mostly low (the free stack hands out slot 0 first):
+     * download the sign and confidence pools only up to the highest. */
+    uint32_t n_live = 0, high = 0;
+    for (uint32_t b = 0; s == BF_OK && b < cap; b++)
+        if (info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] < m->n_entries) n_live++, high = b + 1;
+    if (s == BF_OK) {
+        hash = malloc((size_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
+        sign = malloc((size_t)high * BRICK_WORDS * 4 + 4);
+        conf = malloc((size_t)high * BRICK_WORDS * 4 + 4);
+        bricks = malloc((size_t)n_live * sizeof *bricks + 1);
+        if (!hash || !sign || !conf || !bricks) s = bf_fail(BF_NO_MEMORY, "fusion: snapshot of %u bricks", n_live);
+    }
+    if (s == BF_OK) s = gpu_buffer_download(m->hash, 0, hash, (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
+    if (s == BF_OK && high) s = gpu_buffer_download(m->sign, 0, sign, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && high) s = gpu_buffer_download(m->conf, 0, conf, (uint64_t)high * BRICK_WORDS * 4);
+    uint32_t k = 0;
+    for (uint32_t b = 0; s == BF_OK && b < high; b++) {
+        const uint32_t *in = info + (size_t)b * FUSION_BRICK_INFO_WORDS;
+        if (in[FUSION_INFO_CHUNK] >= m->n_entries) continue;
+        const uint32_t *e = hash + (size_t)in[FUSION_INFO_CHUNK] * FUSION_ENTRY_WORDS;
+        fusion_brick *o = &bricks[k++];
+        for (int i = 0; i < 3; i++) o->key[i] = (int32_t)e[i];
+        uint32_t p = in[FUSION_INFO_POS];
+        o->level = fusion_pos_level(p);
+        o->cell[0] = fusion_pos_x(p), o->cell[1] = fusion_pos_y(p), o->cell[2] = fusion_pos_z(p);
+        memcpy(&o->error, &in[FUSION_INFO_ERROR], 4);
+        memcpy(o->sign, sign + (size_t)b * BRICK_WORDS, sizeof o->sign);
+        memcpy(o->conf, conf + (size_t)b * BRICK_WORDS, sizeof o->conf);
+    }
+    free(info);
+    free(hash);
+    free(sign);
+    free(conf);
+    if (s != BF_OK) {
+        free(bricks);
+        return s;
+    }
+    out->chunk_m = m->cfg.chunk_m;
+    out->origin_w = m->origin_w;
+    out->n_bricks = n_live;
+    out->bricks = bricks;
+    return BF_OK;
+}
+
+void fusion_snapshot_free(fusion_snapshot *s)
+{
+    if (!s) return;
+    free(s->bricks);
+    s->bricks = NULL;
+    s->n_bricks = 0;
+}
+
+/* ------------------------------------------------------------ integrity */
+
+/* Walks one octree, checking every node and brick it reaches. */
+static bf_status check_tree(const fusion_map *m, const host_map *h, uint32_t entry, uint32_t node, uint32_t level,
+                            const uint32_t cell[3], uint8_t *node_seen, uint8_t *brick_seen, uint32_t *n_bricks)
+{
+    uint32_t n_nodes = h->counters[FUSION_CNT_NODES] < m->cfg.node_cap ? h->counters[FUSION_CNT_NODES] : m->cfg.node_cap;
+    if (node >= n_nodes) return bf_fail(BF_NUMERIC, "fusion check: node %u beyond the %u handed out", node, n_nodes);
+    if (node_seen[node]++) return bf_fail(BF_NUMERIC, "fusion check: node %u reached twice", node);
+    const uint32_t *nd = h->nodes + (size_t)node * FUSION_NODE_WORDS;
+    uint32_t b = nd[FUSION_NODE_BRICK];
+    if (b == FUSION_LOCKED || nd[FUSION_NODE_CHILD] == FUSION_LOCKED)
+        return bf_fail(BF_NUMERIC, "fusion check: node %u still locked", node);
+    if (b != FUSION_NONE) {
+        if (b >= m->cfg.brick_cap) return bf_fail(BF_NUMERIC, "fusion check: node %u owns brick %u beyond the pool", node, b);
+        if (brick_seen[b]++) return bf_fail(BF_NUMERIC, "fusion check: brick %u owned twice", b);
+        const uint32_t *in = h->info + (size_t)b * FUSION_BRICK_INFO_WORDS;
+        if (in[FUSION_INFO_CHUNK] != entry || in[FUSION_INFO_NODE] != node ||
+            in[FUSION_INFO_POS] != fusion_pack_pos(cell[0], cell[1], cell[2], level))
+            return bf_fail(BF_NUMERIC, "fusion check: brick %u record (chunk %u node %u pos %08x) disagrees with its "
+                           "node %u (chunk %u, level %u cell %u,%u,%u)", b, in[FUSION_INFO_CHUNK], in[FUSION_INFO_NODE],
+                           in[FUSION_INFO_POS], node, entry, level, cell[0], cell[1], cell[2]);
+        (*n_bricks)++;
+    }
+    uint32_t child = nd[FUSION_NODE_CHILD];
+    if (child == FUSION_NONE) return BF_OK;
+    if (level >= m->cfg.max_level) return bf_fail(BF_NUMERIC, "fusion check: node %u at level %u has children", node, level);
+    for (uint32_t o = 0; o < 8; o++) {
+        uint32_t c[3] = {2 * cell[0] + (o & 1), 2 * cell[1] + ((o >> 1) & 1), 2 * cell[2] + ((o >> 2) & 1)};
+        bf_status s = check_tree(m, h, entry, child + o, level + 1, c, node_seen, brick_seen, n_bricks);
+        if (s != BF_OK) return s;
+    }
+    return BF_OK;
+}
+
+static bf_status check_map(const fusion_map *m, const host_map *h)
+{
+    uint8_t *node_seen = calloc(m->cfg.node_cap, 1), *brick_seen = calloc(m->cfg.brick_cap, 1);
+    uint8_t *entry_seen = calloc(m->n_entries, 1);
+    bf_status s = node_seen && brick_seen && entry_seen ? BF_OK : bf_fail(BF_NO_MEMORY, "fusion check");
+    uint32_t n_bricks = 0, n_chunks = 0;
+    for (uint32_t bucket = 0; s == BF_OK && bucket < m->cfg.hash_buckets; bucket++) {
+        /* The bucket's slots, then its overflow chain. */
+        uint32_t e = bucket * FUSION_BUCKET_SLOTS, k = 0;
+        while (s == BF_OK && e != FUSION_NONE) {
+            const uint32_t *w = h->hash + (size_t)e * FUSION_ENTRY_WORDS;
+            if (entry_seen[e]++) {
+                s = bf_fail(BF_NUMERIC, "fusion check: hash entry %u reached twice (cycle?)", e);
+                break;
+            }
+            if (w[FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID) {
+                int32_t key[3] = {(int32_t)w[0], (int32_t)w[1], (int32_t)w[2]};
+                if (fusion_hash(key[0], key[1], key[2], m->cfg.hash_buckets) != bucket)
+                    s = bf_fail(BF_NUMERIC, "fusion check: chunk (%d,%d,%d) in bucket %u, hashes elsewhere", key[0],
+                                key[1], key[2], bucket);
+                else if (host_find_chunk(m, h, key) != e)
+                    s = bf_fail(BF_NUMERIC, "fusion check: chunk (%d,%d,%d) stored twice", key[0], key[1], key[2]);
+                uint32_t cell[3] = {0, 0, 0};
+                if (s == BF_OK)
+                    s = check_tree(m, h, e, w[FUSION_ENTRY_ROOT], 0, cell, node_seen, brick_seen, &n_bricks);
+                n_chunks++;
+            } else if (w[FUSION_ENTRY_STATE] != FUSION_ENTRY_FREE) {
+                s = bf_fail(BF_NUMERIC, "fusion check: hash entry %u in state %u", e, w[FUSION_ENTRY_STATE]);
+            }
+            k++;
+            if (k < FUSION_BUCKET_SLOTS) e++;
+            else e = w[FUSION_ENTRY_NEXT];
+        }
+    }
+    uint32_t live = m->cfg.brick_cap - h->counters[FUSION_CNT_FREE_TOP];
+    if (s == BF_OK && (n_bricks != live || n_bricks != h->counters[FUSION_CNT_BRICKS]))
+        s = bf_fail(BF_NUMERIC, "fusion check: %u bricks in the trees, %u off the free stack, counter says %u", n_bricks,
+                    live, h->counters[FUSION_CNT_BRICKS]);
+    /* Every slot on the free stack is free, once. */
+    for (uint32_t i = 0; s == BF_OK && i < h->counters[FUSION_CNT_FREE_TOP]; i++) {
+        uint32_t b = h->free_stack[i];
+        if (b >= m->cfg.brick_cap || brick_seen[b]++)
+            s = bf_fail(BF_NUMERIC, "fusion check: free stack entry %u (brick %u) is live or repeated", i, b);
+        else if (h->info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] != FUSION_NONE)
+            s = bf_fail(BF_NUMERIC, "fusion check: free brick %u still has a record", b);
+    }
+    free(node_seen);
+    free(brick_seen);
+    free(entry_seen);
+    return s;
+}
+
+bf_status fusion_check(fusion_map *m)
+{
+    host_map h;
+    bf_status s = host_map_load(m, &h);
+    if (s != BF_OK) return s;
+    s = check_map(m, &h);
+    host_map_free(&h);
+    return s;
+}

@@ -1,0 +1,223 @@
+#version 450
+/* Brick allocation (DESIGN.md section 3): one invocation per depth sample
+ * (pass 0) or per queued retry (later passes). Each sample inserts three
+ * points along its ray, at -band, 0 and +band sigma(z) around the measured
+ * depth, so the voxels on both sides of the surface get bricks. Per point:
+ * chunk hash lookup / insertion, octree descent to the level matching the
+ * sample's pixel footprint (creating nodes), brick allocation.
+ *
+ * Contention never spins (no forward-progress guarantee; lavapipe runs
+ * subgroups of 8): whoever wins a lock (bucket word, or CAS of a node field
+ * from NONE to LOCKED) does the work; losers queue the point for the next
+ * pass, which sees the finished result. Bucket locks are cleared by the host
+ * before every pass. A point that loses at most once per level finishes
+ * within max_level + 2 passes. */
+#extension GL_GOOGLE_include_directive : require
+#include "fusion.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) coherent buffer Hash { uint w[]; } hash;
+layout(std430, binding = 1) coherent buffer Locks { uint w[]; } locks;
+layout(std430, binding = 2) coherent buffer Nodes { uint w[]; } nodes;
+layout(std430, binding = 3) coherent buffer Info { uint w[]; } info;
+layout(std430, binding = 4) coherent buffer Counters { uint w[]; } cnt;
+layout(std430, binding = 5) coherent buffer FreeStack { uint w[]; } free_stack;
+layout(std430, binding = 6) coherent buffer Stamp { uint w[]; } stamp;
+layout(std430, binding = 7) readonly buffer Frames { fusion_frame f[]; } frames;
+layout(std430, binding = 8) readonly buffer DepthRing { uint w[]; } depth;
+layout(std430, binding = 9) coherent buffer Queue { uint w[]; } queue;
+layout(std430, binding = 10) coherent buffer NewList { uint w[]; } new_list;
+
+layout(push_constant) uniform Push { fusion_alloc_push pc; };
+
+/* Queues the point for the next pass. */
+void retry(uint item)
+{
+    uint q = pc.pass % 2u; /* pass p reads queue (p - 1) % 2 and writes p % 2 */
+    uint i = atomicAdd(queue.w[4u * q], 1u);
+    if (i < pc.queue_cap) queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i] = item;
+}
+
+bool entry_has(uint e, ivec3 key)
+{
+    uint base = e * FUSION_ENTRY_WORDS;
+    return atomicAdd(hash.w[base + FUSION_ENTRY_STATE], 0u) == FUSION_ENTRY_VALID &&
+           int(hash.w[base + FUSION_ENTRY_X]) == key.x && int(hash.w[base + FUSION_ENTRY_Y]) == key.y &&
+           int(hash.w[base + FUSION_ENTRY_Z]) == key.z;
+}
+
+/* Hash entry of the chunk, FUSION_NONE if absent. */
+uint find_chunk(uint bucket, ivec3 key)
+{
+    uint first = bucket * FUSION_BUCKET_SLOTS;
+    for (uint k = 0u; k < FUSION_BUCKET_SLOTS; k++)
+        if (entry_has(first + k, key)) return first + k;
+    uint e = hash.w[(first + FUSION_BUCKET_SLOTS - 1u) * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT];
+    for (uint guard = 0u; e != FUSION_NONE && guard < pc.n_overflow; guard++) {
+        if (entry_has(e, key)) return e;
+        e = hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT];
+    }
+    return FUSION_NONE;
+}
+
+/* Inserts the chunk; the caller holds the bucket's lock for this pass, so
+ * nobody else writes this bucket's slots or chain. FUSION_NONE if a pool
+ * is full (counted). */
+uint insert_chunk(uint bucket, ivec3 key)
+{
+    uint first = bucket * FUSION_BUCKET_SLOTS, e = FUSION_NONE;
+    for (uint k = 0u; k < FUSION_BUCKET_SLOTS && e == FUSION_NONE; k++)
+        if (hash.w[(first + k) * FUSION_ENTRY_WORDS + FUSION_ENTRY_STATE] == FUSION_ENTRY_FREE) e = first + k;
+    uint root = atomicAdd(cnt.w[FUSION_CNT_NODES], 1u);
+    if (root >= pc.node_cap) {
+        atomicAdd(cnt.w[FUSION_CNT_FAIL_NODES], 1u);
+        return FUSION_NONE;
+    }
+    if (e == FUSION_NONE) {
+        uint idx = atomicAdd(cnt.w[FUSION_CNT_OVERFLOW], 1u);
+        if (idx >= pc.n_overflow) {
+            atomicAdd(cnt.w[FUSION_CNT_FAIL_HASH], 1u);
+            return FUSION_NONE; /* the root node stays unused: counted in nodes, harmless */
+        }
+        e = pc.n_buckets * FUSION_BUCKET_SLOTS + idx;
+        hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT] = FUSION_NONE;
+    }
+    uint base = e * FUSION_ENTRY_WORDS;
+    hash.w[base + FUSION_ENTRY_X] = uint(key.x);
+    hash.w[base + FUSION_ENTRY_Y] = uint(key.y);
+    hash.w[base + FUSION_ENTRY_Z] = uint(key.z);
+    hash.w[base + FUSION_ENTRY_ROOT] = root;
+    if (e >= pc.n_buckets * FUSION_BUCKET_SLOTS) { /* link at the end of the bucket's chain */
+        uint link = (first + FUSION_BUCKET_SLOTS - 1u) * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT;
+        while (hash.w[link] != FUSION_NONE) link = hash.w[link] * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT;
+        memoryBarrierBuffer(); /* publish the entry before it becomes reachable */
+        hash.w[link] = e;
+    }
+    memoryBarrierBuffer(); /* key and root before the state that makes them valid */
+    atomicExchange(hash.w[base + FUSION_ENTRY_STATE], FUSION_ENTRY_VALID);
+    return e;
+}
+
+/* Takes a brick slot off the free stack; FUSION_NONE when empty. */
+uint pop_brick()
+{
+    int old = int(atomicAdd(cnt.w[FUSION_CNT_FREE_TOP], 0xFFFFFFFFu));
+    if (old <= 0) {
+        atomicAdd(cnt.w[FUSION_CNT_FREE_TOP], 1u);
+        return FUSION_NONE;
+    }
+    return free_stack.w[old - 1];
+}
+
+/* Creates the brick of node (owner of cell at level) or stamps the existing one. */
+void touch_brick(uint node, uint entry, uvec3 cell, uint level)
+{
+    uint f = node * FUSION_NODE_WORDS + FUSION_NODE_BRICK;
+    uint b = atomicAdd(nodes.w[f], 0u);
+    if (b == FUSION_LOCKED) return; /* being created in this pass: its creator stamps it */
+    if (b != FUSION_NONE) {
+        stamp.w[b] = pc.frame_index;
+        return;
+    }
+    if (atomicCompSwap(nodes.w[f], FUSION_NONE, FUSION_LOCKED) != FUSION_NONE) return;
+    b = pop_brick();
+    if (b == FUSION_NONE) {
+        atomicAdd(cnt.w[FUSION_CNT_FAIL_BRICKS], 1u);
+        atomicExchange(nodes.w[f], FUSION_NONE);
+        return;
+    }
+    uint base = b * FUSION_BRICK_INFO_WORDS;
+    info.w[base + FUSION_INFO_CHUNK] = entry;
+    info.w[base + FUSION_INFO_POS] = fusion_pack_pos(cell.x, cell.y, cell.z, level);
+    info.w[base + FUSION_INFO_NODE] = node;
+    info.w[base + FUSION_INFO_ERROR] = floatBitsToUint(1.0 / 0.0); /* no window has set it yet */
+    stamp.w[b] = pc.frame_index;
+    atomicAdd(cnt.w[FUSION_CNT_BRICKS], 1u);
+    atomicAdd(cnt.w[FUSION_CNT_NEW], 1u);
+    uint i = atomicAdd(new_list.w[0], 1u);
+    new_list.w[4u + i] = b; /* the list holds brick_cap entries: never overflows */
+    memoryBarrierBuffer(); /* the record before the node points at it */
+    atomicExchange(nodes.w[f], b);
+}
+
+/* Inserts point p (map frame) at level; false if it must be retried. */
+bool insert_point(vec3 p, uint level)
+{
+    ivec3 key = ivec3(floor(p / pc.chunk_m));
+    vec3 q = p - vec3(key) * pc.chunk_m; /* chunk-local, in [0, chunk_m) up to rounding */
+    uint bucket = fusion_hash(key.x, key.y, key.z, pc.n_buckets);
+    uint entry = find_chunk(bucket, key);
+    if (entry == FUSION_NONE) {
+        if (atomicCompSwap(locks.w[bucket], 0u, 1u) != 0u) return false;
+        entry = insert_chunk(bucket, key);
+        if (entry == FUSION_NONE) return true; /* pool full: dropped and counted */
+    }
+    float cell_m = pc.chunk_m / float(1u << level); /* edge of a level-`level` cell */
+    uvec3 cell = uvec3(clamp(ivec3(floor(q / cell_m)), ivec3(0), ivec3((1 << level) - 1)));
+    uint node = hash.w[entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
+    for (uint l = 1u; l <= level; l++) {
+        uint f = node * FUSION_NODE_WORDS + FUSION_NODE_CHILD;
+        uint child = atomicAdd(nodes.w[f], 0u);
+        if (child == FUSION_LOCKED) return false;
+        if (child == FUSION_NONE) {
+            if (atomicCompSwap(nodes.w[f], FUSION_NONE, FUSION_LOCKED) != FUSION_NONE) return false;
+            child = atomicAdd(cnt.w[FUSION_CNT_NODES], 8u);
+            if (child + 8u > pc.node_cap) {
+                atomicAdd(cnt.w[FUSION_CNT_FAIL_NODES], 1u);
+                atomicExchange(nodes.w[f], FUSION_NONE);
+                return true;
+            }
+            /* The pool is pre-filled with FUSION_NONE: the 8 children need no
+             * initialisation before they become reachable. */
+            atomicExchange(nodes.w[f], child);
+        }
+        uint sh = level - l;
+        node = child + fusion_octant(cell.x >> sh, cell.y >> sh, cell.z >> sh);
+    }
+    touch_brick(node, entry, cell, level);
+    return true;
+}
+
+uint depth_raw(uint slot, uint pixel, uint n_pixels)
+{
+    uint words = (n_pixels + 1u) / 2u;
+    uint w = depth.w[slot * words + pixel / 2u];
+    return (pixel & 1u) == 0u ? (w & 0xFFFFu) : (w >> 16);
+}
+
+void main()
+{
+    fusion_frame fr = frames.f[pc.slot];
+    uint n_pixels = fr.width * fr.height;
+    uint item;
+    if (pc.pass == 0u) {
+        item = gl_GlobalInvocationID.x * 4u; /* band points 0..2 handled in the loop below */
+    } else {
+        uint q = (pc.pass - 1u) % 2u;
+        uint i = gl_GlobalInvocationID.x;
+        if (i >= min(queue.w[4u * q], pc.queue_cap)) return;
+        item = queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i];
+    }
+    uint pixel = item / 4u;
+    if (pixel >= n_pixels) return;
+    float z = float(depth_raw(pc.slot, pixel, n_pixels)) * fr.depth_unit_m;
+    if (!(z > 0.0) || z > pc.max_depth_m) return;
+    float u = float(pixel % fr.width), v = float(pixel / fr.width);
+    vec3 ray = vec3((u - fr.cx) / fr.fx, (v - fr.cy) / fr.fy, 1.0); /* camera frame, z = 1 */
+    float sigma = fusion_sigma(z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
+    uint level = fusion_level_for_footprint(pc.voxel_ratio * z / abs(fr.fx), pc.chunk_m, pc.max_level);
+    float band = pc.band_sigmas * sigma;
+    /* T_cm maps map points to the camera: p_m = R^T (p_c - t). */
+    mat3 Rt = mat3(fr.R[0], fr.R[1], fr.R[2], fr.R[3], fr.R[4], fr.R[5], fr.R[6], fr.R[7], fr.R[8]);
+    vec3 t = vec3(fr.t[0], fr.t[1], fr.t[2]);
+    uint k_first = pc.pass == 0u ? 0u : item % 4u, k_last = pc.pass == 0u ? 2u : item % 4u;
+    for (uint k = k_first; k <= k_last; k++) {
+        float zk = z + (float(k) - 1.0) * band;
+        if (!(zk > 0.0)) continue;
+        /* GLSL's mat3(...) is column-major: these columns are R's rows, so
+         * Rt * x = R^T x. */
+        vec3 p = Rt * (ray * zk - t);
+        if (!insert_point(p, level)) retry(pixel * 4u + k);
+    }
+}

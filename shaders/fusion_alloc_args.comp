@@ -1,0 +1,26 @@
+#version 450
+/* Between two allocation passes: writes the indirect group counts of the
+ * retry queue the next pass reads, empties the queue it will write, and
+ * clears the bucket locks (each pass has its own inserters). */
+#extension GL_GOOGLE_include_directive : require
+#include "fusion.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) buffer Queue { uint w[]; } queue;
+layout(std430, binding = 1) buffer Locks { uint w[]; } locks;
+
+layout(push_constant) uniform Push { fusion_alloc_push pc; };
+
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (i < pc.n_buckets) locks.w[i] = 0u;
+    if (i != 0u || pc.pass == 0u) return;
+    uint q_in = (pc.pass - 1u) % 2u, q_out = pc.pass % 2u;
+    uint n = min(queue.w[4u * q_in], pc.queue_cap);
+    queue.w[4u * q_in + 1u] = (n + FUSION_ALLOC_LOCAL - 1u) / FUSION_ALLOC_LOCAL;
+    queue.w[4u * q_in + 2u] = 1u;
+    queue.w[4u * q_in + 3u] = 1u;
+    queue.w[4u * q_out] = 0u;
+}
