@@ -22,18 +22,6 @@ static void devices_help(FILE *f)
             "exit codes: 0 ok, 2 usage, 4 no (matching) Vulkan device\n");
 }
 
-static void json_string(const char *s)
-{
-    putchar('"');
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\') printf("\\%c", c);
-        else if (c < 0x20) printf("\\u%04x", c);
-        else putchar(c);
-    }
-    putchar('"');
-}
-
 static void print_uuid(const uint8_t *u)
 {
     for (unsigned i = 0; i < VK_UUID_SIZE; i++) printf("%s%02x", i == 4 || i == 6 || i == 8 || i == 10 ? "-" : "", u[i]);
@@ -48,13 +36,13 @@ static void print_json(const gpu_device_info *d, uint32_t n, uint32_t chosen)
     for (uint32_t i = 0; i < n; i++) {
         const gpu_limits *l = &d[i].limits;
         printf("%s\n  {\"index\": %u, \"name\": ", i ? "," : "", i);
-        json_string(d[i].name);
+        bf_json_string(stdout, d[i].name);
         printf(", \"type\": \"%s\", \"is_chosen\": %s, \"is_usable\": %s, \"api_version\": \"%u.%u.%u\", "
                "\"driver\": ",
                gpu_device_type_name(d[i].type), i == chosen ? "true" : "false", d[i].is_usable ? "true" : "false",
                VK_API_VERSION_MAJOR(d[i].api_version), VK_API_VERSION_MINOR(d[i].api_version),
                VK_API_VERSION_PATCH(d[i].api_version));
-        json_string(d[i].driver_info[0] ? d[i].driver_info : d[i].driver_name);
+        bf_json_string(stdout, d[i].driver_info[0] ? d[i].driver_info : d[i].driver_name);
         printf(", \"device_uuid\": \"");
         print_uuid(d[i].device_uuid);
         printf("\",\n   \"limits\": {\"max_storage_buffer_range\": %llu, \"max_memory_allocation_size\": %llu, "

@@ -25,44 +25,18 @@ static const char *usage_text =
     "  --seed N              sampling seed (1)\n"
     "  --json                machine-readable output on stdout (docs/eval.md)\n";
 
-static void print_num(double v)
-{
-    if (isfinite(v))
-        printf("%.9g", v);
-    else
-        printf("null");
-}
-
-static void print_json_string(const char *s)
-{
-    if (!s) {
-        printf("null");
-        return;
-    }
-    putchar('"');
-    for (; *s; s++) {
-        if (*s == '"' || *s == '\\')
-            printf("\\%c", *s);
-        else if ((unsigned char)*s < 0x20)
-            printf("\\u%04x", *s);
-        else
-            putchar(*s);
-    }
-    putchar('"');
-}
-
 static void print_dist_json(const eval_dist_stats *d)
 {
     printf("\"mean_m\": ");
-    print_num(d->mean);
+    bf_json_number(stdout, d->mean, 9);
     printf(", \"median_m\": ");
-    print_num(d->median);
+    bf_json_number(stdout, d->median, 9);
     printf(", \"p90_m\": ");
-    print_num(d->p90);
+    bf_json_number(stdout, d->p90, 9);
     printf(", \"rmse_m\": ");
-    print_num(d->rmse);
+    bf_json_number(stdout, d->rmse, 9);
     printf(", \"max_m\": ");
-    print_num(d->max);
+    bf_json_number(stdout, d->max, 9);
     printf(", \"beyond_max_dist\": %zu", d->n_beyond);
 }
 
@@ -145,14 +119,14 @@ int cmd_eval_surface(int argc, char **argv)
     const char *source = r.used_visible ? "visible" : ref_t ? "samples" : "vertices";
     if (json) {
         printf("{\n  \"reference\": ");
-        print_json_string(ref_path);
+        bf_json_string(stdout, ref_path);
         printf(",\n  \"reconstruction\": ");
-        print_json_string(rec_path);
+        bf_json_string(stdout, rec_path);
         printf(",\n  \"visible\": ");
-        print_json_string(vis_path);
+        bf_json_string(stdout, vis_path);
         printf(",\n  \"reference_vertices\": %u,\n  \"reference_triangles\": %u,\n", ref_v, ref_t);
         printf("  \"threshold_m\": %.9g,\n  \"max_dist_m\": ", cfg.threshold_m);
-        print_num(cfg.max_dist_m);
+        bf_json_number(stdout, cfg.max_dist_m, 9);
         printf(",\n  \"samples_per_m2\": %.9g,\n  \"max_samples\": %llu,\n  \"seed\": %llu,\n",
                cfg.samples_per_m2, (unsigned long long)cfg.max_samples, (unsigned long long)cfg.seed);
         printf("  \"accuracy\": {\"points\": %zu, \"rec_vertices\": %zu, \"rec_samples\": %zu, ",

@@ -30,20 +30,6 @@ static void print_stats_json(const char *name, const eval_err_stats *s, bool las
            name, s->rmse, s->mean, s->median, s->std, s->min, s->max, last ? "" : ",");
 }
 
-static void print_json_string(const char *s)
-{
-    putchar('"');
-    for (; *s; s++) {
-        if (*s == '"' || *s == '\\')
-            printf("\\%c", *s);
-        else if ((unsigned char)*s < 0x20)
-            printf("\\u%04x", *s);
-        else
-            putchar(*s);
-    }
-    putchar('"');
-}
-
 int cmd_eval_traj(int argc, char **argv)
 {
     const char *cmd = "eval-traj", *paths[2] = {NULL, NULL};
@@ -100,9 +86,9 @@ int cmd_eval_traj(int argc, char **argv)
     bf_se3_to_qt(&ate.T_gt_est, &q, &t);
     if (json) {
         printf("{\n  \"gt\": ");
-        print_json_string(paths[0]);
+        bf_json_string(stdout, paths[0]);
         printf(",\n  \"est\": ");
-        print_json_string(paths[1]);
+        bf_json_string(stdout, paths[1]);
         printf(",\n  \"n_gt\": %zu,\n  \"n_est\": %zu,\n", n_gt, n_est);
         printf("  \"ate\": {\n    \"pairs\": %zu,\n    \"max_dt_s\": %.9g,\n", ate.n_matched,
                max_dt > 0 ? max_dt : 0.02);

@@ -65,29 +65,6 @@ static uint32_t hist_rank(const uint64_t *hist, uint64_t k)
     return 65535;
 }
 
-static void json_string(const char *s)
-{
-    putchar('"');
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\')
-            printf("\\%c", c);
-        else if (c < 0x20)
-            printf("\\u%04x", c);
-        else
-            putchar(c);
-    }
-    putchar('"');
-}
-
-static void json_number(double v)
-{
-    if (isfinite(v))
-        printf("%.10g", v);
-    else
-        printf("null");
-}
-
 int cmd_info(int argc, char **argv)
 {
     replay_options opt = {0};
@@ -140,9 +117,9 @@ int cmd_info(int argc, char **argv)
 
     if (is_json) {
         printf("{\"path\": ");
-        json_string(path);
+        bf_json_string(stdout, path);
         printf(", \"kind\": ");
-        json_string(src->kind);
+        bf_json_string(stdout, src->kind);
         printf(", \"width\": %u, \"height\": %u", K->width, K->height);
         printf(", \"fx\": %.10g, \"fy\": %.10g, \"cx\": %.10g, \"cy\": %.10g, \"depth_scale\": %.10g", K->fx_px,
                K->fy_px, K->cx_px, K->cy_px, K->depth_scale);
@@ -150,19 +127,19 @@ int cmd_info(int argc, char **argv)
                skipped);
         printf(", \"frames_with_colour\": %u", st.n_with_rgb);
         printf(", \"t_first_s\": ");
-        json_number(st.n_frames ? st.t_first_s : NAN);
+        bf_json_number(stdout, st.n_frames ? st.t_first_s : NAN, 10);
         printf(", \"t_last_s\": ");
-        json_number(st.n_frames ? st.t_last_s : NAN);
+        bf_json_number(stdout, st.n_frames ? st.t_last_s : NAN, 10);
         printf(", \"duration_s\": ");
-        json_number(span);
+        bf_json_number(stdout, span, 10);
         printf(", \"valid_depth_share\": ");
-        json_number(valid_share);
+        bf_json_number(stdout, valid_share, 10);
         printf(", \"depth_min_m\": ");
-        json_number(d_min);
+        bf_json_number(stdout, d_min, 10);
         printf(", \"depth_median_m\": ");
-        json_number(d_med);
+        bf_json_number(stdout, d_med, 10);
         printf(", \"depth_max_m\": ");
-        json_number(d_max);
+        bf_json_number(stdout, d_max, 10);
         printf(", \"has_groundtruth\": %s, \"frames_with_pose\": %u}\n", src->has_groundtruth ? "true" : "false",
                st.n_with_pose);
     } else {

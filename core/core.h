@@ -15,6 +15,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 /* ---------------------------------------------------------------- status */
 
@@ -222,5 +223,14 @@ bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name)
 /* Strict number parsing: the whole string must be a finite number. */
 bool bf_parse_double(const char *s, double *out);
 bool bf_parse_u32(const char *s, uint32_t *out);
+
+/* ---------------------------------------------------------------- JSON */
+
+/* Writes s to f as a quoted JSON string, escaping quotes, backslashes and
+ * control characters (RFC 8259, section 7); NULL is written as null. */
+void bf_json_string(FILE *f, const char *s);
+/* Writes v to f with printf's %.<digits>g, or null when v is NaN or
+ * infinite (JSON has no such numbers). */
+void bf_json_number(FILE *f, double v, int digits);
 
 #endif

@@ -215,3 +215,23 @@ BF_TEST(status_table_names_every_code)
     CHECK_STATUS(bf_fail(BF_FORMAT, "%s: line %d: bad", "x.txt", 3), BF_FORMAT);
     CHECK_ERROR_MENTIONS("x.txt: line 3");
 }
+
+BF_TEST(json_writers_escape_strings_and_write_null_for_nan)
+{
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    CHECK(f != NULL);
+    bf_json_string(f, "a\"b\\c\nd\x01/");
+    fputc(' ', f);
+    bf_json_string(f, NULL);
+    fputc(' ', f);
+    bf_json_number(f, NAN, 9);
+    fputc(' ', f);
+    bf_json_number(f, -INFINITY, 9);
+    fputc(' ', f);
+    bf_json_number(f, 0.125, 9);
+    fclose(f);
+    CHECK(!strcmp(buf, "\"a\\\"b\\\\c\\u000ad\\u0001/\" null null null 0.125"));
+    free(buf);
+}
