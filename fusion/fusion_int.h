@@ -42,9 +42,12 @@ struct fusion_map {
 
     /* Schedule (host side). */
     uint32_t n_frames;        /* frames added */
-    uint32_t window_end;      /* one past the last frame of the window being integrated */
+    uint32_t window_first;    /* first frame of the window being integrated */
+    uint32_t window_end;      /* one past its last frame */
+    uint32_t window_count;    /* bricks in its list (read back when it closed) */
     uint32_t window_slices_done;
     bool window_pending;
+    uint32_t fails_seen;      /* pool-full drops already reported */
 
     double ms_upload, ms_alloc, ms_subcache, ms_window;
 };
@@ -56,6 +59,13 @@ bf_status fusion__debug_insert_brick(fusion_map *map, const int32_t key[3], uint
                                      uint32_t *slot);
 /* map.c: host ring slot of sequence frame index i. */
 static inline uint32_t fusion__ring_slot(const fusion_map *map, uint32_t i) { return i % map->ring_slots; }
+
+/* fusion.c: the window-gathering pipeline. */
+bf_status fusion__schedule_create(fusion_map *map);
+void fusion__schedule_destroy(fusion_map *map);
+/* Confident voxels of one brick with a confident 6-neighbour of the other
+ * sign inside the brick (a lower bound of the surface voxels). */
+uint32_t fusion__brick_surface_voxels(const uint32_t sign[16], const uint32_t conf[16]);
 
 /* alloc.c */
 bf_status fusion__alloc_create(fusion_map *map);

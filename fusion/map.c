@@ -160,6 +160,7 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     if ((s = init_buffers(m)) != BF_OK) goto fail;
     if ((s = fusion__alloc_create(m)) != BF_OK) goto fail;
     if ((s = fusion__integrate_create(m)) != BF_OK) goto fail;
+    if ((s = fusion__schedule_create(m)) != BF_OK) goto fail;
     *out = m;
     return BF_OK;
 fail:
@@ -170,6 +171,7 @@ fail:
 void fusion_destroy(fusion_map *m)
 {
     if (!m) return;
+    fusion__schedule_destroy(m);
     fusion__integrate_destroy(m);
     fusion__alloc_destroy(m);
     gpu_buffer *bufs[] = {m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,

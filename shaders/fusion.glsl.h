@@ -159,6 +159,17 @@ typedef struct fusion_alloc_push fusion_alloc_push;
 _Static_assert(sizeof(fusion_alloc_push) == 64, "fusion_alloc_push must match std430");
 #endif
 
+/* Push constants of fusion_window_list.comp. */
+struct fusion_window_list_push {
+    bf_u32 brick_cap;
+    bf_u32 n_entries;  /* hash entries: a brick record's chunk below it is live */
+    bf_u32 first, last; /* frame indices of the window, inclusive */
+};
+#ifndef BF_GLSL
+typedef struct fusion_window_list_push fusion_window_list_push;
+_Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push must match std430");
+#endif
+
 /* ------------------------------------------------------------ counters */
 /* Word offsets in the counters buffer. */
 #define FUSION_CNT_NODES 0u        /* nodes handed out (bump allocator) */

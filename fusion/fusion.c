@@ -1,0 +1,305 @@
+/* Adding frames: upload into the ring, allocation, the sub-cache pass and
+ * the window schedule (DESIGN.md section 4).
+ *
+ * Windows of n frames slide by n/2: when frame e with (e + 1) % (n/2) == 0
+ * arrives, the window [e - n + 1, e] closes, its bricks (those stamped by one
+ * of its frames) are gathered, and their integration is spread over the next
+ * n/2 frames, 2/n of the list per frame, so the frame time stays flat. The
+ * ring holds 2n frames, so the window's frames are still there when its last
+ * slice runs (e + n/2 - 2n < e - n + 1). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bf_shaders_spv.h"
+#include "fusion_int.h"
+
+static uint32_t half_window(const fusion_map *m) { return m->cfg.window / 2; }
+
+static bf_status window_list_create(fusion_map *m)
+{
+    gpu_pipeline_desc d = {
+        .name = "fusion.window_list",
+        .spirv = bf_spv_fusion_window_list,
+        .spirv_bytes = bf_spv_fusion_window_list_size,
+        .n_buffers = 3,
+        .push_bytes = sizeof(fusion_window_list_push),
+        .local_size = {64, 1, 1},
+    };
+    bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_window_list);
+    if (s == BF_OK) s = gpu_bindings_create(m->ctx, 3, "fusion.window_list", &m->b_window_list);
+    if (s == BF_OK) s = gpu_bindings_set(m->b_window_list, 0, m->info, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(m->b_window_list, 1, m->stamp, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(m->b_window_list, 2, m->window_list, 0, GPU_WHOLE_SIZE);
+    return s;
+}
+
+bf_status fusion__schedule_create(fusion_map *m) { return window_list_create(m); }
+
+void fusion__schedule_destroy(fusion_map *m)
+{
+    gpu_bindings_destroy(m->b_window_list);
+    gpu_pipeline_destroy(m->p_window_list);
+    m->b_window_list = NULL;
+    m->p_window_list = NULL;
+}
+
+/* Records the gathering of the bricks stamped by frames [first, last]. */
+static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
+{
+    fusion_window_list_push pc = {m->cfg.brick_cap, m->n_entries, first, last};
+    gpu_cmd_fill(m->ctx, m->window_list, 0, FUSION_LIST_HEADER * 4, 0);
+    /* The cleared count -> the gathering pass. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, gpu_groups(m->cfg.brick_cap, 64), 1, 1);
+}
+
+/* The frame record: T_cm takes map points (world minus the map origin) to
+ * the camera. Computed in double, handed over in float (DESIGN.md 10). */
+static void frame_record(const fusion_map *m, const bf_se3 *T_wc, uint32_t index, fusion_frame *r)
+{
+    bf_se3 T_mc = *T_wc;
+    T_mc.t = bf_v3_sub(T_wc->t, m->origin_w);
+    bf_se3 T_cm = bf_se3_inverse(&T_mc);
+    memset(r, 0, sizeof *r);
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) r->R[i * 3 + j] = (float)T_cm.R[i][j];
+    r->t[0] = (float)T_cm.t.x, r->t[1] = (float)T_cm.t.y, r->t[2] = (float)T_cm.t.z;
+    r->fx = (float)m->K.fx_px, r->fy = (float)m->K.fy_px;
+    r->cx = (float)m->K.cx_px, r->cy = (float)m->K.cy_px;
+    r->depth_unit_m = (float)(1.0 / m->K.depth_scale);
+    r->width = m->K.width, r->height = m->K.height;
+    r->index = index;
+}
+
+/* Writes the record and the depth image into the upload buffer and records
+ * their copies into ring slot `slot`. */
+static bf_status cmd_upload(fusion_map *m, const bf_frame *f, const fusion_frame *rec, uint32_t slot)
+{
+    uint8_t *up = gpu_buffer_map(m->upload);
+    if (!up) return bf_fail(BF_VULKAN, "fusion: upload buffer is not mapped");
+    uint64_t pixels = (uint64_t)m->K.width * m->K.height, depth_bytes = (pixels + 1) / 2 * 4;
+    memcpy(up, rec, sizeof *rec);
+    memcpy(up + sizeof *rec, f->depth, pixels * 2);
+    if (pixels % 2) memset(up + sizeof *rec + pixels * 2, 0, 2);
+    bf_status s = gpu_buffer_flush(m->upload);
+    if (s != BF_OK) return s;
+    gpu_cmd_copy(m->ctx, m->upload, 0, m->frames, (uint64_t)slot * sizeof *rec, sizeof *rec);
+    gpu_cmd_copy(m->ctx, m->upload, sizeof *rec, m->depth_ring, (uint64_t)slot * depth_bytes, depth_bytes);
+    return BF_OK;
+}
+
+/* Records this frame's slice of the window being integrated. */
+static void cmd_window_slice(fusion_map *m)
+{
+    uint32_t half = half_window(m);
+    uint32_t per = (m->window_count + half - 1) / half;
+    uint32_t first = m->window_slices_done * per;
+    uint32_t n_frames = m->window_end - m->window_first;
+    if (per > 0 && first < m->window_count)
+        fusion__cmd_integrate(m, m->b_integrate_window, first, per, m->window_first, n_frames, true);
+    if (++m->window_slices_done >= half) m->window_pending = false;
+}
+
+static void read_stage_times(fusion_map *m)
+{
+    const gpu_stage_time *t;
+    uint32_t n = gpu_stage_times(m->ctx, &t);
+    m->ms_upload = m->ms_alloc = m->ms_subcache = m->ms_window = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        if (!strcmp(t[i].name, "fusion.upload")) m->ms_upload += t[i].ms;
+        else if (!strcmp(t[i].name, "fusion.alloc")) m->ms_alloc += t[i].ms;
+        else if (!strcmp(t[i].name, "fusion.subcache")) m->ms_subcache += t[i].ms;
+        else if (!strncmp(t[i].name, "fusion.window", 13)) m->ms_window += t[i].ms;
+    }
+}
+
+/* Reads the count of the window list gathered in the last submission. */
+static bf_status read_window_count(fusion_map *m)
+{
+    uint32_t n;
+    bf_status s = gpu_buffer_download(m->window_list, 0, &n, 4);
+    if (s == BF_OK) m->window_count = n;
+    return s;
+}
+
+/* Closes the window ending with frame `last` (inclusive): gathers its list
+ * (this submission) and schedules its slices. */
+static void start_window(fusion_map *m, uint32_t last)
+{
+    m->window_end = last + 1;
+    m->window_first = last + 1 >= m->cfg.window ? last + 1 - m->cfg.window : 0;
+    m->window_slices_done = 0;
+    m->window_pending = true;
+    m->window_count = 0;
+    gpu_cmd_stage_begin(m->ctx, "fusion.window_list");
+    cmd_window_list(m, m->window_first, last);
+    gpu_cmd_stage_end(m->ctx);
+}
+
+/* Reports requests dropped for a full pool since the last frame (the map
+ * stays consistent: a dropped request changes nothing). */
+static bf_status check_pools(fusion_map *m, uint32_t index)
+{
+    uint32_t cnt[FUSION_CNT_WORDS];
+    bf_status s = gpu_buffer_download(m->counters, 0, cnt, sizeof cnt);
+    if (s != BF_OK) return s;
+    uint32_t fails = cnt[FUSION_CNT_FAIL_NODES] + cnt[FUSION_CNT_FAIL_BRICKS] + cnt[FUSION_CNT_FAIL_HASH];
+    if (fails == m->fails_seen) return BF_OK;
+    m->fails_seen = fails;
+    return bf_fail(BF_POOL_FULL,
+                   "fusion: frame %u: map pools full, requests dropped so far: %u nodes (cap %u), %u bricks "
+                   "(cap %u), %u chunks (overflow cap %u)",
+                   index, cnt[FUSION_CNT_FAIL_NODES], m->cfg.node_cap, cnt[FUSION_CNT_FAIL_BRICKS], m->cfg.brick_cap,
+                   cnt[FUSION_CNT_FAIL_HASH], m->cfg.hash_overflow);
+}
+
+bf_status fusion_add_frame(fusion_map *m, const bf_frame *f, const bf_se3 *T_wc)
+{
+    if (f->width != m->K.width || f->height != m->K.height || !f->depth)
+        return bf_fail(BF_INVALID_ARG, "fusion: frame %u is %ux%u, the map was made for %ux%u", f->index, f->width,
+                       f->height, m->K.width, m->K.height);
+    if (!bf_se3_is_finite(T_wc))
+        return bf_fail(BF_INVALID_ARG, "fusion: frame %u: camera pose is not finite", f->index);
+    uint32_t index = m->n_frames, slot = fusion__ring_slot(m, index);
+    fusion_frame rec;
+    frame_record(m, T_wc, index, &rec);
+    bf_status s = gpu_begin(m->ctx);
+    if (s != BF_OK) return s;
+    gpu_cmd_stage_begin(m->ctx, "fusion.upload");
+    s = cmd_upload(m, f, &rec, slot);
+    gpu_cmd_stage_end(m->ctx);
+    gpu_cmd_stage_begin(m->ctx, "fusion.alloc");
+    fusion__cmd_alloc(m, slot, index);
+    gpu_cmd_stage_end(m->ctx);
+    /* New bricks and their stamps -> the integration passes. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+    gpu_cmd_stage_begin(m->ctx, "fusion.subcache");
+    uint32_t n_sub = index + 1 < m->cfg.subcache ? index + 1 : m->cfg.subcache;
+    fusion__cmd_integrate(m, m->b_integrate_new, 0, m->cfg.brick_cap, index + 1 - n_sub, n_sub, false);
+    gpu_cmd_stage_end(m->ctx);
+    bool closes = (index + 1) % half_window(m) == 0;
+    if (m->window_pending) {
+        /* Sub-cache writes -> the window slice reading the same bricks. */
+        gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        gpu_cmd_stage_begin(m->ctx, "fusion.window");
+        cmd_window_slice(m);
+        gpu_cmd_stage_end(m->ctx);
+    }
+    if (closes) {
+        /* Stamps of this frame's allocation -> the gathering pass. */
+        gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        if (m->window_pending) { /* a slice left over (n/2 of them per window): finish it now */
+            while (m->window_pending) cmd_window_slice(m);
+            gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        }
+        start_window(m, index);
+    }
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
+    if (s == BF_OK) s = gpu_submit_wait(m->ctx);
+    else (void)gpu_submit_wait(m->ctx);
+    if (s != BF_OK) return s;
+    read_stage_times(m);
+    if (closes && (s = read_window_count(m)) != BF_OK) return s;
+    m->n_frames++;
+    return check_pools(m, index);
+}
+
+bf_status fusion_flush(fusion_map *m)
+{
+    if (m->n_frames == 0) return BF_OK;
+    bf_status s = gpu_begin(m->ctx);
+    if (s != BF_OK) return s;
+    gpu_cmd_stage_begin(m->ctx, "fusion.window");
+    while (m->window_pending) cmd_window_slice(m);
+    gpu_cmd_stage_end(m->ctx);
+    /* The frames after the last closed window have not been in a full
+     * window yet: integrate the last n frames as one more window. */
+    bool tail = m->window_end < m->n_frames;
+    if (tail) {
+        gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        start_window(m, m->n_frames - 1);
+    }
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
+    if ((s = gpu_submit_wait(m->ctx)) != BF_OK) return s;
+    if (!tail) return BF_OK;
+    if ((s = read_window_count(m)) != BF_OK) return s;
+    if ((s = gpu_begin(m->ctx)) != BF_OK) return s;
+    gpu_cmd_stage_begin(m->ctx, "fusion.window");
+    while (m->window_pending) cmd_window_slice(m);
+    gpu_cmd_stage_end(m->ctx);
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
+    return gpu_submit_wait(m->ctx);
+}
+
+/* ------------------------------------------------------------ statistics */
+
+bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
+{
+    uint32_t cnt[FUSION_CNT_WORDS];
+    bf_status s = gpu_buffer_download(m->counters, 0, cnt, sizeof cnt);
+    if (s != BF_OK) return s;
+    fusion_snapshot snap;
+    if ((s = fusion_snapshot_take(m, &snap)) != BF_OK) return s;
+    fusion_stats st;
+    memset(&st, 0, sizeof st);
+    st.n_frames = m->n_frames;
+    st.n_nodes = cnt[FUSION_CNT_NODES] < m->cfg.node_cap ? cnt[FUSION_CNT_NODES] : m->cfg.node_cap;
+    st.n_bricks = snap.n_bricks;
+    st.fail_nodes = cnt[FUSION_CNT_FAIL_NODES];
+    st.fail_bricks = cnt[FUSION_CNT_FAIL_BRICKS];
+    st.fail_hash = cnt[FUSION_CNT_FAIL_HASH];
+    for (uint32_t i = 0; i < snap.n_bricks; i++) {
+        const fusion_brick *b = &snap.bricks[i];
+        st.bricks_per_level[b->level]++;
+        for (uint32_t w = 0; w < BRICK_WORDS; w++) st.n_confident_voxels += (uint64_t)__builtin_popcount(b->conf[w]);
+        st.n_surface_voxels += fusion__brick_surface_voxels(b->sign, b->conf);
+    }
+    fusion_snapshot_free(&snap);
+    /* Chunks: live hash entries. */
+    uint32_t *hash = malloc((size_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
+    if (!hash) return bf_fail(BF_NO_MEMORY, "fusion: stats");
+    s = gpu_buffer_download(m->hash, 0, hash, (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
+    for (uint32_t e = 0; s == BF_OK && e < m->n_entries; e++)
+        st.n_chunks += hash[(size_t)e * FUSION_ENTRY_WORDS + FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID;
+    free(hash);
+    if (s != BF_OK) return s;
+    /* Bytes the scene needs: the live part of each pool (a pool grown to fit
+     * would hold exactly this); reserved: what create allocated. */
+    st.bytes_sign = (uint64_t)st.n_bricks * BRICK_WORDS * 4;
+    st.bytes_conf = st.bytes_sign;
+    st.bytes_info = (uint64_t)st.n_bricks * (FUSION_BRICK_INFO_WORDS + 1) * 4; /* record + stamp */
+    st.bytes_nodes = (uint64_t)st.n_nodes * FUSION_NODE_WORDS * 4;
+    st.bytes_hash = (uint64_t)st.n_chunks * FUSION_ENTRY_WORDS * 4;
+    st.bytes_total = st.bytes_sign + st.bytes_conf + st.bytes_info + st.bytes_nodes + st.bytes_hash;
+    st.bytes_reserved = gpu_buffer_size(m->hash) + gpu_buffer_size(m->nodes) + gpu_buffer_size(m->info) +
+                        gpu_buffer_size(m->sign) + gpu_buffer_size(m->conf) + gpu_buffer_size(m->free_stack) +
+                        gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks);
+    st.ms_upload = m->ms_upload, st.ms_alloc = m->ms_alloc;
+    st.ms_subcache = m->ms_subcache, st.ms_window = m->ms_window;
+    *out = st;
+    return BF_OK;
+}
+
+uint32_t fusion__brick_surface_voxels(const uint32_t sign[16], const uint32_t conf[16])
+{
+    uint32_t n = 0;
+    for (uint32_t z = 0; z < 8; z++)
+        for (uint32_t y = 0; y < 8; y++)
+            for (uint32_t x = 0; x < 8; x++) {
+                uint32_t w = brick_word(x, y, z), bit = brick_bit(x, y, z);
+                if (!((conf[w] >> bit) & 1)) continue;
+                uint32_t sv = (sign[w] >> bit) & 1;
+                int nb[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+                for (int k = 0; k < 6; k++) {
+                    int a = (int)x + nb[k][0], b = (int)y + nb[k][1], c = (int)z + nb[k][2];
+                    if (a < 0 || b < 0 || c < 0 || a > 7 || b > 7 || c > 7) continue;
+                    uint32_t w2 = brick_word(a, b, c), b2 = brick_bit(a, b, c);
+                    if (((conf[w2] >> b2) & 1) && ((sign[w2] >> b2) & 1) != sv) {
+                        n++;
+                        break;
+                    }
+                }
+            }
+    return n;
+}
