@@ -14,33 +14,6 @@
 #include "gpu/gpu.h"
 #include "shaders/gpu_test.glsl.h"
 
-/* ------------------------------------------------------------ sanitizers */
-
-#if defined(__SANITIZE_ADDRESS__)
-#define TEST_GPU_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define TEST_GPU_ASAN 1
-#endif
-#endif
-#ifdef TEST_GPU_ASAN
-#include <dlfcn.h>
-/* The Khronos validation layer (1.3.239 on Debian 12) leaves some 25 KB of
- * C++ allocations behind per context; with validation off these tests leak
- * nothing (checked under ASan). The loader unloads the layer in
- * vkDestroyInstance, after which LeakSanitizer cannot name the module an
- * allocation came from, so a suppression by module cannot match. Pinning the
- * layer (RTLD_NODELETE, RTLD_LOCAL: no symbol interposition) keeps it mapped
- * until exit; the suppression then drops exactly the allocations made inside
- * it. Ours never pass through the layer and stay reported. */
-__attribute__((constructor)) static void pin_validation_layer(void)
-{
-    dlopen("libVkLayer_khronos_validation.so", RTLD_NOW | RTLD_LOCAL | RTLD_NODELETE); /* absent: nothing to pin */
-}
-const char *__lsan_default_suppressions(void);
-const char *__lsan_default_suppressions(void) { return "leak:libVkLayer_khronos_validation.so\n"; }
-#endif
-
 /* ------------------------------------------------------------ helpers */
 
 static gpu_config test_config(void)

@@ -1,0 +1,299 @@
+/* fusion: the map on the GPU, brick allocation, the window schedule, pool
+ * exhaustion. Validation is on; any message fails a test. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fusion/fusion.h"
+#include "gpu_fixture.h"
+#include "shaders/fusion.glsl.h"
+
+static const bf_intrinsics K_TEST = {160, 120, 130.0, 130.0, 79.5, 59.5, 5000};
+
+/* A fronto-parallel plane at depth z_m (camera looking along +z). */
+static uint16_t *plane_depth(const bf_intrinsics *K, double z_m)
+{
+    uint16_t *d = malloc((size_t)K->width * K->height * 2);
+    for (uint32_t i = 0; i < K->width * K->height; i++) d[i] = (uint16_t)lround(z_m * K->depth_scale);
+    return d;
+}
+
+static bf_frame make_frame(const bf_intrinsics *K, const uint16_t *depth, uint32_t index)
+{
+    bf_frame f = {.index = index, .width = K->width, .height = K->height, .depth = depth};
+    return f;
+}
+
+static fusion_config small_config(void)
+{
+    fusion_config c = fusion_config_default();
+    c.brick_cap = 1u << 15;
+    c.hash_buckets = 64;
+    c.hash_overflow = 64;
+    c.window = 4;
+    c.subcache = 2;
+    return c;
+}
+
+BF_TEST(far_sample_lands_on_coarse_level)
+{
+    /* f = 525, 2 m chunks: footprints 1.9, 3.8, 7.6 mm pick voxels of
+     * 1.95 mm (level 7), 3.9 mm (6), 7.8 mm (5): the closest in ratio. */
+    CHECK_EQ_INT(fusion_level_for_footprint(1.0f / 525, 2.0f, 8), 7);
+    CHECK_EQ_INT(fusion_level_for_footprint(2.0f / 525, 2.0f, 8), 6);
+    CHECK_EQ_INT(fusion_level_for_footprint(4.0f / 525, 2.0f, 8), 5);
+    CHECK_EQ_INT(fusion_level_for_footprint(0.1f / 525, 2.0f, 8), 8); /* clamped to the finest */
+    CHECK_EQ_INT(fusion_level_for_footprint(0.5f, 2.0f, 8), 0);       /* and to the coarsest */
+    /* The boundary between two levels is the geometric mean of their voxels. */
+    float v6 = 2.0f / 8 / 64;
+    CHECK_EQ_INT(fusion_level_for_footprint(v6 * 0.7f, 2.0f, 8), 7);
+    CHECK_EQ_INT(fusion_level_for_footprint(v6 * 0.72f, 2.0f, 8), 6);
+    CHECK_NEAR(fusion_voxel_m(2.0f, 6), 2.0 / 512, 0);
+}
+
+BF_TEST(create_rejects_bad_config_with_a_message)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_map *map = NULL;
+    fusion_config c = small_config();
+    c.window = 5;
+    CHECK_STATUS(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("window");
+    CHECK(map == NULL);
+    c = small_config();
+    c.brick_cap = 1u << 24; /* 256 MiB of brick records: above lavapipe's 128 MiB binding */
+    c.node_cap = 1u << 16;
+    CHECK_STATUS(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("brick_info");
+    CHECK_ERROR_MENTIONS("storage binding");
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* The bricks a frame of plane depth must allocate, computed on the CPU in
+ * double: for every pixel the three band points z + k band, k = -1, 0, 1,
+ * at the level of the sample. Cells whose point lies within 1e-4 m of a
+ * cell face are marked ambiguous (float on the GPU may round either way). */
+typedef struct expect_cell {
+    int32_t key[3];
+    uint32_t level, cell[3];
+    bool ambiguous;
+} expect_cell;
+
+static bool same_cell(const expect_cell *a, const fusion_brick *b)
+{
+    return a->key[0] == b->key[0] && a->key[1] == b->key[1] && a->key[2] == b->key[2] && a->level == b->level &&
+           a->cell[0] == b->cell[0] && a->cell[1] == b->cell[1] && a->cell[2] == b->cell[2];
+}
+
+static size_t expected_cells(const bf_intrinsics *K, const fusion_config *c, const bf_se3 *T_mc, double z,
+                             expect_cell *out, size_t cap)
+{
+    size_t n = 0;
+    double sigma = c->sigma_a + c->sigma_b * (z - c->sigma_c) * (z - c->sigma_c);
+    uint32_t level = fusion_level_for_footprint((float)(c->voxel_ratio * z / K->fx_px), c->chunk_m, c->max_level);
+    double cell_m = c->chunk_m / (double)(1u << level);
+    for (uint32_t v = 0; v < K->height; v++)
+        for (uint32_t u = 0; u < K->width; u++)
+            for (int k = -1; k <= 1; k++) {
+                double zk = z + k * c->band_sigmas * sigma;
+                bf_vec3 p = bf_se3_apply(T_mc, bf_intrinsics_unproject(K, u, v, zk));
+                double pc[3] = {p.x, p.y, p.z};
+                expect_cell e = {.level = level};
+                for (int i = 0; i < 3; i++) {
+                    double kf = floor(pc[i] / c->chunk_m);
+                    e.key[i] = (int32_t)kf;
+                    double q = pc[i] - kf * c->chunk_m;
+                    double cf = floor(q / cell_m);
+                    e.cell[i] = (uint32_t)cf;
+                    double r = q - cf * cell_m;
+                    if (r < 1e-4 || cell_m - r < 1e-4) e.ambiguous = true;
+                }
+                size_t j = 0;
+                for (; j < n; j++)
+                    if (!memcmp(out[j].key, e.key, sizeof e.key) && out[j].level == e.level &&
+                        !memcmp(out[j].cell, e.cell, sizeof e.cell))
+                        break;
+                if (j == n && n < cap) out[n++] = e;
+                else if (j < n && !e.ambiguous) out[j].ambiguous = false;
+            }
+    return n;
+}
+
+/* Runs one plane frame through a fresh map and compares the allocated
+ * bricks with the CPU's expectation. */
+static void check_plane_allocation(bf_vec3 origin_w, bf_se3 T_wc, double z)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, origin_w, &map));
+    uint16_t *depth = plane_depth(&K_TEST, z);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    CHECK_OK(fusion_add_frame(map, &f, &T_wc));
+    CHECK_OK(fusion_check(map));
+    fusion_snapshot snap;
+    CHECK_OK(fusion_snapshot_take(map, &snap));
+    bf_se3 T_mc = T_wc;
+    T_mc.t = bf_v3_sub(T_wc.t, origin_w);
+    size_t cap = 4096;
+    expect_cell *exp = malloc(cap * sizeof *exp);
+    size_t n = expected_cells(&K_TEST, &c, &T_mc, z, exp, cap);
+    CHECK(n < cap);
+    size_t n_sure = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (exp[i].ambiguous) continue;
+        n_sure++;
+        bool found = false;
+        for (uint32_t b = 0; b < snap.n_bricks && !found; b++) found = same_cell(&exp[i], &snap.bricks[b]);
+        CHECK(found);
+    }
+    for (uint32_t b = 0; b < snap.n_bricks; b++) {
+        bool found = false;
+        for (size_t i = 0; i < n && !found; i++) found = same_cell(&exp[i], &snap.bricks[b]);
+        CHECK(found);
+    }
+    CHECK(n_sure > 10);
+    CHECK(snap.n_bricks >= n_sure && snap.n_bricks <= n);
+    fusion_stats st;
+    CHECK_OK(fusion_get_stats(map, &st));
+    CHECK_EQ_INT(st.n_bricks, snap.n_bricks);
+    CHECK_EQ_INT(st.fail_bricks + st.fail_nodes + st.fail_hash, 0);
+    free(exp);
+    free(depth);
+    fusion_snapshot_free(&snap);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+BF_TEST(plane_allocates_exactly_the_band_bricks)
+{
+    /* Camera at the origin looking along +z at a plane 1.3 m away: the
+     * plane spans negative and positive x and y, so chunks -1 and 0. */
+    check_plane_allocation(bf_v3(0, 0, 0), bf_se3_identity(), 1.3);
+}
+
+BF_TEST(allocation_10_km_from_the_origin_matches_the_origin)
+{
+    /* The map origin sits at the first camera: GPU coordinates stay small
+     * and the same bricks come out as at the origin (DESIGN.md section 10). */
+    bf_vec3 far = bf_v3(1e4, -1e4, 5e3);
+    bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.2), far);
+    check_plane_allocation(far, T, 1.1);
+}
+
+BF_TEST(full_brick_pool_is_reported_and_map_stays_consistent)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    c.brick_cap = 40;
+    c.node_cap = 1u << 14; /* only the brick pool runs out */
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
+    uint16_t *depth = plane_depth(&K_TEST, 0.9);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    bf_se3 T = bf_se3_identity();
+    CHECK_STATUS(fusion_add_frame(map, &f, &T), BF_POOL_FULL);
+    CHECK_ERROR_MENTIONS("bricks");
+    CHECK_OK(fusion_check(map));
+    fusion_stats st;
+    CHECK_OK(fusion_get_stats(map, &st));
+    CHECK_EQ_INT(st.n_bricks, 40);
+    CHECK(st.fail_bricks > 0);
+    CHECK_EQ_INT(st.fail_nodes, 0);
+    /* The same frame again drops again but corrupts nothing. */
+    f.index = 1;
+    CHECK_STATUS(fusion_add_frame(map, &f, &T), BF_POOL_FULL);
+    CHECK_OK(fusion_check(map));
+    free(depth);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+BF_TEST(chunk_hash_overflow_chains_and_full_overflow_is_counted)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    c.hash_buckets = 1; /* every chunk in one bucket: 4 slots, then the chain */
+    c.hash_overflow = 3;
+    c.chunk_m = 0.25f;  /* small chunks: the plane spans many */
+    c.max_level = 5;
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
+    uint16_t *depth = plane_depth(&K_TEST, 1.0);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    bf_se3 T = bf_se3_identity();
+    CHECK_STATUS(fusion_add_frame(map, &f, &T), BF_POOL_FULL);
+    CHECK_ERROR_MENTIONS("chunks");
+    CHECK_OK(fusion_check(map));
+    fusion_stats st;
+    CHECK_OK(fusion_get_stats(map, &st));
+    CHECK_EQ_INT(st.n_chunks, 7); /* 4 bucket slots + 3 overflow entries */
+    CHECK(st.fail_hash > 0);
+    free(depth);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+BF_TEST(empty_frame_and_bad_pose_change_nothing)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
+    uint16_t *depth = calloc((size_t)K_TEST.width * K_TEST.height, 2);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    bf_se3 T = bf_se3_identity();
+    for (uint32_t i = 0; i < 6; i++) CHECK_OK(fusion_add_frame(map, &f, &T));
+    CHECK_OK(fusion_flush(map));
+    fusion_stats st;
+    CHECK_OK(fusion_get_stats(map, &st));
+    CHECK_EQ_INT(st.n_bricks, 0);
+    CHECK_EQ_INT(st.n_chunks, 0);
+    bf_se3 bad = T;
+    bad.t.x = NAN;
+    CHECK_STATUS(fusion_add_frame(map, &f, &bad), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("not finite");
+    bf_frame small = f;
+    small.width = 80;
+    CHECK_STATUS(fusion_add_frame(map, &small, &T), BF_INVALID_ARG);
+    CHECK_OK(fusion_check(map));
+    free(depth);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+BF_TEST(repeated_frames_allocate_nothing_new_and_stay_consistent)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
+    uint16_t *depth = plane_depth(&K_TEST, 1.2);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    bf_se3 T = bf_se3_identity();
+    CHECK_OK(fusion_add_frame(map, &f, &T));
+    fusion_stats st1, st2;
+    CHECK_OK(fusion_get_stats(map, &st1));
+    for (uint32_t i = 1; i < 9; i++) CHECK_OK(fusion_add_frame(map, &f, &T));
+    CHECK_OK(fusion_flush(map));
+    CHECK_OK(fusion_get_stats(map, &st2));
+    CHECK_OK(fusion_check(map));
+    CHECK(st2.n_bricks <= st1.n_bricks); /* removal may only shrink it */
+    CHECK_EQ_INT(st2.n_nodes, st1.n_nodes);
+    CHECK_EQ_INT(st2.n_frames, 9);
+    free(depth);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
