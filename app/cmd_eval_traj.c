@@ -15,7 +15,8 @@ static const char *usage_text =
     "aligned by Horn's method (rotation + translation), then rmse/mean/median/\n"
     "std/min/max of the distances (TUM evaluate_ate.py).\n"
     "RPE: relative motion error over pose pairs delta apart (TUM evaluate_rpe.py\n"
-    "--fixed_delta, all pairs); by default both per second and per frame.\n"
+    "--fixed_delta, all pairs); by default both per second and per frame, each\n"
+    "left out with a warning when the trajectories are too short for it.\n"
     "\n"
     "  --json        machine-readable output on stdout (fields in docs/eval.md)\n"
     "  --max-dt S    association tolerance in seconds (default: ATE 0.02, RPE\n"
@@ -74,8 +75,26 @@ int cmd_eval_traj(int argc, char **argv)
     bf_status s = replay_traj_read_tum(paths[0], &gt);
     if (!s) s = replay_traj_read_tum(paths[1], &est);
     if (!s) s = eval_ate(&gt, &est, max_dt, &ate);
-    if (!s && do_s) s = eval_rpe(&gt, &est, max_dt, false, delta_s, &rpe_s);
-    if (!s && do_f) s = eval_rpe(&gt, &est, max_dt, true, 0, &rpe_f);
+    /* Without --delta or --per-frame both RPEs are extras next to the ATE: a
+     * sequence too short for one of them (under a second, say) leaves that
+     * one out with a warning instead of failing the whole evaluation. */
+    bool rpe_optional = !delta_given && !per_frame_only;
+    if (!s && do_s) {
+        s = eval_rpe(&gt, &est, max_dt, false, delta_s, &rpe_s);
+        if (s == BF_FORMAT && rpe_optional) {
+            bf_warn("RPE per %g s left out: %s", delta_s, bf_last_error());
+            do_s = false;
+            s = BF_OK;
+        }
+    }
+    if (!s && do_f) {
+        s = eval_rpe(&gt, &est, max_dt, true, 0, &rpe_f);
+        if (s == BF_FORMAT && rpe_optional) {
+            bf_warn("RPE per frame left out: %s", bf_last_error());
+            do_f = false;
+            s = BF_OK;
+        }
+    }
     size_t n_gt = gt.n, n_est = est.n;
     replay_traj_free(&gt);
     replay_traj_free(&est);
