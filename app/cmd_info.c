@@ -126,10 +126,12 @@ int cmd_info(int argc, char **argv)
         printf(", \"frames\": %u, \"frames_listed\": %u, \"skipped_frames\": %u", st.n_frames, src->n_frames,
                skipped);
         printf(", \"frames_with_colour\": %u", st.n_with_rgb);
+        /* Timestamps are ~1e9 s with microseconds: 17 digits round-trip a
+         * double, 10 would round them to whole seconds. */
         printf(", \"t_first_s\": ");
-        bf_json_number(stdout, st.n_frames ? st.t_first_s : NAN, 10);
+        bf_json_number(stdout, st.n_frames ? st.t_first_s : NAN, 17);
         printf(", \"t_last_s\": ");
-        bf_json_number(stdout, st.n_frames ? st.t_last_s : NAN, 10);
+        bf_json_number(stdout, st.n_frames ? st.t_last_s : NAN, 17);
         printf(", \"duration_s\": ");
         bf_json_number(stdout, span, 10);
         printf(", \"valid_depth_share\": ");
