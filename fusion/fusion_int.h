@@ -84,4 +84,46 @@ void fusion__integrate_destroy(fusion_map *map);
 void fusion__cmd_integrate(fusion_map *map, gpu_bindings *b, uint32_t first, uint32_t max_count,
                            uint32_t frame_first, uint32_t n_frames, bool set_confidence);
 
+/* ------------------------------------------------------------ integration
+ * (integrate.c, integrate_ref.c; the rule is in shaders/fusion.glsl.h and
+ * docs/fusion_integrate.md.) */
+
+/* The push constants fusion__cmd_integrate records for a pass (the
+ * reference takes the same block). */
+fusion_integrate_push fusion__integrate_params(const fusion_map *map, uint32_t first, uint32_t max_count,
+                                               uint32_t frame_first, uint32_t n_frames, bool set_confidence);
+
+/* One brick as the integration sees it: its chunk key, packed position,
+ * stored error (float bits of FUSION_INFO_ERROR) and bit planes. */
+typedef struct fusion_ref_brick {
+    int32_t key[3];
+    uint32_t pos;                 /* fusion_pack_pos(cell, level) */
+    float error;
+    uint32_t sign[BRICK_WORDS], conf[BRICK_WORDS];
+} fusion_ref_brick;
+
+/* What the oracle saw, for tests: how far the inputs kept from the
+ * boundaries where a last-bit difference in a GPU division (2.5 ulp allowed
+ * by Vulkan) could flip a bit. Only divisions can differ: adds, multiplies
+ * and conversions are correctly rounded on both sides. */
+typedef struct fusion_ref_margins {
+    double pixel;        /* smallest distance of u + 1/2 or v + 1/2 to an integer (pixel edge, image border), px */
+    double sign;         /* smallest |numerator| / (|psi phi| + sum |W_i D_i|) of a voxel with a divided term */
+    double conf;         /* smallest |denominator - conf_weight| / conf_weight of such a voxel */
+    uint32_t n_pairs;    /* (voxel, frame) pairs with W > 0 */
+    uint32_t n_divided;  /* voxels whose sums hold a ramp weight or a scaled psi */
+    float window_err;    /* fusion_window_error of the brick */
+    bool error_written;  /* the pass stored window_err as the brick's error */
+} fusion_ref_margins;
+
+/* integrate_ref.c: the CPU oracle of one brick's integration (a test
+ * oracle, not a product path). Runs the shared functions of
+ * shaders/fusion.glsl.h in the kernel's order on brick b in place, against
+ * the frame ring as the GPU holds it: frames[pc->ring_slots] records and
+ * depth_ring (pc->ring_slots images of pc->depth_words words). No culling:
+ * the kernel's culling must not change a bit, and the comparison checks it.
+ * margins may be NULL. */
+void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *frames, const uint32_t *depth_ring,
+                           fusion_ref_brick *b, fusion_ref_margins *margins);
+
 #endif

@@ -185,4 +185,315 @@ _Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push m
 #define FUSION_CNT_DISPATCH 12u    /* 3 words: indirect group counts */
 #define FUSION_CNT_WORDS 16u
 
+/* ============================================================ integration
+ * Windowed integration of one brick (DESIGN.md section 4; Reichl, Weiss,
+ * Westermann 2016, section 4; the host side is fusion/integrate.c, the
+ * kernel shaders/fusion_integrate.comp, the CPU oracle
+ * fusion/integrate_ref.c). The per-voxel math lives here once, so GPU and
+ * CPU round every float operation the same way (BF_PRECISE: no contraction
+ * or reassociation in GLSL; C builds with -ffp-contract=off by -std=c17).
+ *
+ * For voxel centre p (relative to the map origin) and each frame i of the
+ * window still in the ring: p_c = R p + t, nearest pixel of (fx x/z + cx,
+ * fy y/z + cy), d_i = raw depth * depth_unit_m (0: no sample),
+ * D_i = d_i - p_c.z (positive in front of the surface), sigma_i =
+ * fusion_sigma(d_i), and
+ *   W_i = 1,                       D_i >= 0 (D_i clamped to +sigma_i:
+ *                                  free space counts as +sigma and carves),
+ *   W_i = (sigma_i + D_i)/sigma_i, -sigma_i < D_i < 0 (a ramp to 0 at -sigma),
+ *   W_i = 0,                       D_i <= -sigma_i (occluded).
+ * DESIGN.md writes the ramp as 1 - (sigma + D_i)/sigma, which is 0 at the
+ * surface and 1 at -sigma: the inverse of a ramp that fades the occluded
+ * side out. We read it as a typo and use (sigma + D_i)/sigma (continuous at
+ * D_i = 0 and at -sigma, so the only decisions are the ones listed in
+ * docs/fusion_integrate.md).
+ * D = (Psi Phi + sum W_i D_i) / (Psi + sum W_i); sign bit = D > 0, decided
+ * on the numerator (the denominator is positive) without dividing. */
+
+/* The work-list layout of fusion/fusion_int.h, for the shaders (C takes it
+ * them from there; keep the two equal). */
+#ifdef BF_GLSL
+#  define FUSION_LIST_COUNT 0u
+#  define FUSION_LIST_ARGS 1u
+#  define FUSION_LIST_HEADER 4u
+#endif
+
+/* Frames one pass may look at (fusion_config.window <= 256): a workgroup
+ * keeps one visibility bit per frame, and the window error's fixed-point
+ * sum of 512 voxels x 256 frames x FUSION_SIGMA_UM_MAX stays below 2^32. */
+#define FUSION_INTEGRATE_MAX_FRAMES 256u
+#define FUSION_SIGMA_UM_MAX 32767u
+/* Default prior weight Psi of a confident voxel at equal errors. */
+#define FUSION_PRIOR_WEIGHT 2.0f
+/* Prior distance when the sweep finds no confident voxel of the other sign
+ * within FUSION_PRIOR_STEPS voxels: the bound, (steps + 1) - 1/2 voxels. */
+#define FUSION_PRIOR_STEPS 3u
+
+/* Push constants of fusion_integrate.comp and fusion_integrate_args.comp. */
+struct fusion_integrate_push {
+    bf_u32 first;          /* first list entry of this pass */
+    bf_u32 max_count;      /* entries at most, clamped to the list's count on the GPU */
+    bf_u32 frame_first;    /* sequence index of the window's first frame */
+    bf_u32 n_frames;       /* frames of the window, <= FUSION_INTEGRATE_MAX_FRAMES */
+    bf_u32 ring_slots;     /* frame ring slots (2n) */
+    bf_u32 depth_words;    /* words per depth image in the ring: (width * height + 1) / 2 */
+    bf_u32 set_confidence; /* 1: window rule; 0: sub-cache (signs of non-confident voxels only) */
+    bf_u32 max_groups_x;   /* args pass: workgroups per row of the indirect grid */
+    bf_f32 chunk_m;
+    bf_f32 conf_weight;    /* Psi + sum W_i that makes a voxel confident */
+    bf_f32 sigma_a, sigma_b, sigma_c;
+    bf_f32 prior_weight;   /* Psi of a confident voxel when window and brick errors agree */
+};
+#ifndef BF_GLSL
+typedef struct fusion_integrate_push fusion_integrate_push;
+_Static_assert(sizeof(fusion_integrate_push) == 56, "fusion_integrate_push must match std430");
+#endif
+
+/* One axis of a voxel centre relative to the map origin: chunk corner
+ * key * chunk_m plus (cell * 8 + xyz + 1/2) voxels (fusion.h's
+ * fusion_voxel_center_w in float). */
+BF_FN bf_f32 fusion_voxel_centre(bf_i32 key, bf_u32 cell, bf_u32 xyz, bf_f32 chunk_m, bf_f32 voxel_m)
+{
+    BF_PRECISE bf_f32 corner = BF_F32(key) * chunk_m;
+    BF_PRECISE bf_f32 offset = (BF_F32(cell * 8u + xyz) + 0.5f) * voxel_m;
+    BF_PRECISE bf_f32 p = corner + offset;
+    return p;
+}
+
+/* A point in camera coordinates. */
+struct fusion_point {
+    bf_f32 x, y, z;
+};
+#ifndef BF_GLSL
+typedef struct fusion_point fusion_point;
+#endif
+
+/* p_c = R p + t of the frame record (map to camera), summed left to right. */
+BF_FN fusion_point fusion_to_camera(fusion_frame f, bf_f32 px, bf_f32 py, bf_f32 pz)
+{
+    BF_PRECISE bf_f32 x = f.R[0] * px + f.R[1] * py + f.R[2] * pz + f.t[0];
+    BF_PRECISE bf_f32 y = f.R[3] * px + f.R[4] * py + f.R[5] * pz + f.t[1];
+    BF_PRECISE bf_f32 z = f.R[6] * px + f.R[7] * py + f.R[8] * pz + f.t[2];
+    fusion_point c;
+    c.x = x;
+    c.y = y;
+    c.z = z;
+    return c;
+}
+
+/* Row-major index of the pixel nearest to the projection of camera point c
+ * (pixel centres at integers: floor(u + 1/2)), or FUSION_NONE when c is not
+ * in front of the camera (z <= 0) or falls outside the image. NaN
+ * coordinates fail every comparison and give FUSION_NONE. */
+BF_FN bf_u32 fusion_project_pixel(fusion_frame f, fusion_point c)
+{
+    if (!(c.z > 0.0f)) return FUSION_NONE;
+    BF_PRECISE bf_f32 u = f.fx * c.x / c.z + f.cx + 0.5f;
+    BF_PRECISE bf_f32 v = f.fy * c.y / c.z + f.cy + 0.5f;
+    if (!(u >= 0.0f && v >= 0.0f && u < BF_F32(f.width) && v < BF_F32(f.height))) return FUSION_NONE;
+    return BF_U32(v) * f.width + BF_U32(u); /* truncation is floor for u, v >= 0 */
+}
+
+/* Raw 16-bit depth of pixel i of a ring image, from its word (two pixels
+ * per word, low half first). */
+BF_FN bf_u32 fusion_depth_raw(bf_u32 word, bf_u32 pixel) { return (pixel & 1u) != 0u ? word >> 16 : word & 0xFFFFu; }
+
+/* One frame's observation of one voxel: weight W_i, W_i * D_i (D_i clamped
+ * to +sigma in front) and sigma_i; all 0 when the sample is invalid or the
+ * voxel is occluded (W_i = 0). */
+struct fusion_obs {
+    bf_f32 w, wd, sigma;
+};
+#ifndef BF_GLSL
+typedef struct fusion_obs fusion_obs;
+#endif
+
+BF_FN fusion_obs fusion_observe(bf_u32 raw, bf_f32 depth_unit_m, bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
+{
+    fusion_obs o;
+    o.w = 0.0f;
+    o.wd = 0.0f;
+    o.sigma = 0.0f;
+    if (raw == 0u) return o;
+    BF_PRECISE bf_f32 d = BF_F32(raw) * depth_unit_m;
+    BF_PRECISE bf_f32 sigma = fusion_sigma(d, a, b, c);
+    BF_PRECISE bf_f32 dist = d - z;
+    if (!(sigma > 0.0f) || !(dist > -sigma)) return o; /* occluded (or NaN) */
+    if (dist >= 0.0f) {
+        o.w = 1.0f;
+        o.wd = dist < sigma ? dist : sigma;
+    } else {
+        /* The ramp (sigma + D)/sigma: 1 at the surface, 0 at -sigma (DESIGN.md's
+         * 1 - (sigma + D)/sigma inverts it; see the section comment). */
+        BF_PRECISE bf_f32 w = (sigma + dist) / sigma;
+        BF_PRECISE bf_f32 wd = w * dist;
+        o.w = w;
+        o.wd = wd;
+    }
+    o.sigma = sigma;
+    return o;
+}
+
+/* A voxel's sums over the window, in frame order: sum W_i, sum W_i D_i,
+ * the number of frames with W_i > 0 and their sigma_i in micrometres (an
+ * integer, so the per-brick error sums the same in any order). */
+struct fusion_acc {
+    bf_f32 sum_w, sum_wd;
+    bf_u32 n, sigma_um;
+};
+#ifndef BF_GLSL
+typedef struct fusion_acc fusion_acc;
+#endif
+
+BF_FN fusion_acc fusion_acc_zero(void)
+{
+    fusion_acc a;
+    a.sum_w = 0.0f;
+    a.sum_wd = 0.0f;
+    a.n = 0u;
+    a.sigma_um = 0u;
+    return a;
+}
+
+/* sigma in whole micrometres, capped at FUSION_SIGMA_UM_MAX (33 mm: the
+ * Kinect v1 sigma at 4.4 m). */
+BF_FN bf_u32 fusion_sigma_um(bf_f32 sigma)
+{
+    BF_PRECISE bf_f32 um = sigma * 1.0e6f + 0.5f;
+    return um < BF_F32(FUSION_SIGMA_UM_MAX) ? BF_U32(um) : FUSION_SIGMA_UM_MAX;
+}
+
+BF_FN fusion_acc fusion_acc_add(fusion_acc a, fusion_obs o)
+{
+    if (!(o.w > 0.0f)) return a;
+    BF_PRECISE bf_f32 sw = a.sum_w + o.w;
+    BF_PRECISE bf_f32 swd = a.sum_wd + o.wd;
+    a.sum_w = sw;
+    a.sum_wd = swd;
+    a.n += 1u;
+    a.sigma_um += fusion_sigma_um(o.sigma);
+    return a;
+}
+
+/* The window's error for a brick: mean sigma over its (voxel, frame) pairs
+ * with W > 0 [m], by integer division of the fixed-point sum (exact on both
+ * sides); 0 when there is none. */
+BF_FN bf_f32 fusion_window_error(bf_u32 n_pairs, bf_u32 sigma_um_sum)
+{
+    if (n_pairs == 0u) return 0.0f;
+    BF_PRECISE bf_f32 e = BF_F32(sigma_um_sum / n_pairs) * 1.0e-6f;
+    return e;
+}
+
+/* The prior's sweep. row_x holds the bits of voxels (0..7, y, z) that are
+ * confident and of the other sign than voxel (x, y, z), row_y those of
+ * (x, 0..7, z), row_z those of (x, y, 0..7). Returns the fewest steps
+ * (1..FUSION_PRIOR_STEPS) along +-x, +-y, +-z to such a voxel, or
+ * FUSION_PRIOR_STEPS + 1 when there is none within the brick. */
+BF_FN bf_u32 fusion_prior_steps(bf_u32 row_x, bf_u32 row_y, bf_u32 row_z, bf_u32 x, bf_u32 y, bf_u32 z)
+{
+    for (bf_u32 k = 1u; k <= FUSION_PRIOR_STEPS; k++) {
+        bf_u32 hit = 0u;
+        if (x + k < 8u) hit |= (row_x >> (x + k)) & 1u;
+        if (x >= k) hit |= (row_x >> (x - k)) & 1u;
+        if (y + k < 8u) hit |= (row_y >> (y + k)) & 1u;
+        if (y >= k) hit |= (row_y >> (y - k)) & 1u;
+        if (z + k < 8u) hit |= (row_z >> (z + k)) & 1u;
+        if (z >= k) hit |= (row_z >> (z - k)) & 1u;
+        if (hit != 0u) return k;
+    }
+    return FUSION_PRIOR_STEPS + 1u;
+}
+
+/* Prior distance Phi of a confident voxel: its sign (front +, behind -)
+ * times the distance to the sign change, which lies halfway between its
+ * centre and the nearest confident voxel of the other sign: (steps - 1/2)
+ * voxels; with none in reach, the bound (FUSION_PRIOR_STEPS + 1/2). */
+BF_FN bf_f32 fusion_prior_phi(bf_u32 is_front, bf_u32 steps, bf_f32 voxel_m)
+{
+    BF_PRECISE bf_f32 dist = (BF_F32(steps) - 0.5f) * voxel_m;
+    return is_front != 0u ? dist : -dist;
+}
+
+/* Prior weight Psi of a confident voxel: prior_weight scaled by how much
+ * better the brick's stored error is than this window's,
+ * clamp(window_err / brick_err, 1/4, 4); unscaled when either error is
+ * unknown (0, infinite or NaN on the brick's side). */
+BF_FN bf_f32 fusion_prior_psi(bf_f32 prior_weight, bf_f32 window_err, bf_f32 brick_err)
+{
+    BF_PRECISE bf_f32 ratio = 1.0f;
+    if (window_err > 0.0f && brick_err > 0.0f && brick_err < 3.0e38f) {
+        BF_PRECISE bf_f32 r = window_err / brick_err;
+        ratio = r < 0.25f ? 0.25f : (r > 4.0f ? 4.0f : r);
+    }
+    BF_PRECISE bf_f32 psi = prior_weight * ratio;
+    return psi;
+}
+
+/* May this window overwrite the brick's confident voxels? Only when it is
+ * the window rule (set_confidence), and the brick has no confident voxel or
+ * the window's error is not above the brick's stored one (Reichl 2016: a
+ * confident voxel is replaced only by a confident one from a window with a
+ * lower average error). */
+BF_FN bf_u32 fusion_may_replace(bf_u32 set_confidence, bf_u32 has_confident, bf_f32 window_err, bf_f32 brick_err)
+{
+    if (set_confidence == 0u) return 0u;
+    return (has_confident == 0u || !(window_err > brick_err)) ? 1u : 0u;
+}
+
+/* Bits of fusion_decide's result. */
+#define FUSION_DECIDE_SIGN 1u     /* the voxel's sign bit */
+#define FUSION_DECIDE_CONF 2u     /* its confidence bit */
+#define FUSION_DECIDE_SET 4u      /* this window set the confidence (the brick's error follows it) */
+
+/* The voxel's new bits from its old ones and its window sums.
+ * - Confident voxel: replaced (sign, stays confident) only when may_replace
+ *   and the result is itself confident, psi + sum W >= conf_weight; kept
+ *   otherwise, and always in the sub-cache pass.
+ * - Other voxels: unchanged without an observation (sum W = 0); else the
+ *   sign of the numerator, confident when set_confidence and
+ *   psi + sum W >= conf_weight.
+ * psi and phi are 0 for a voxel that is not confident. */
+BF_FN bf_u32 fusion_decide(bf_u32 old_sign, bf_u32 old_conf, fusion_acc a, bf_f32 psi, bf_f32 phi,
+                           bf_f32 conf_weight, bf_u32 set_confidence, bf_u32 may_replace)
+{
+    BF_PRECISE bf_f32 num = psi * phi + a.sum_wd;
+    BF_PRECISE bf_f32 den = psi + a.sum_w;
+    bf_u32 sign = num > 0.0f ? FUSION_DECIDE_SIGN : 0u;
+    bf_u32 confident = (set_confidence != 0u && a.n > 0u && den >= conf_weight) ? 1u : 0u;
+    if (old_conf != 0u) {
+        if (may_replace != 0u && confident != 0u) return sign | FUSION_DECIDE_CONF | FUSION_DECIDE_SET;
+        return (old_sign != 0u ? FUSION_DECIDE_SIGN : 0u) | FUSION_DECIDE_CONF;
+    }
+    if (a.n == 0u) return old_sign != 0u ? FUSION_DECIDE_SIGN : 0u;
+    return confident != 0u ? sign | FUSION_DECIDE_CONF | FUSION_DECIDE_SET : sign;
+}
+
+/* Culling of a (brick, frame) pair (DESIGN.md section 11), before the
+ * per-voxel loop: 1 when no voxel centre of the box [lo, hi] (the centres of
+ * the brick's first and last voxels) can land on a pixel: all 8 corners
+ * behind the camera plane, or all beyond one image edge by more than a
+ * pixel. The tests are half-spaces in camera coordinates (u < -1.5 is
+ * fx x + (cx + 1.5) z < 0 for z > 0), so every centre, a convex combination
+ * of the corners, is on the same side: a culled frame would have given each
+ * voxel W = 0, and culling changes no bit. The pixel of margin covers the
+ * rounding of corners against centres. */
+BF_FN bf_u32 fusion_box_culled(fusion_frame f, bf_f32 lo_x, bf_f32 lo_y, bf_f32 lo_z, bf_f32 hi_x, bf_f32 hi_y,
+                               bf_f32 hi_z)
+{
+    bf_u32 outside = 31u; /* bit per half-space: behind, left, right, top, bottom */
+    for (bf_u32 k = 0u; k < 8u; k++) {
+        fusion_point c = fusion_to_camera(f, (k & 1u) != 0u ? hi_x : lo_x, (k & 2u) != 0u ? hi_y : lo_y,
+                                          (k & 4u) != 0u ? hi_z : lo_z);
+        BF_PRECISE bf_f32 left = f.fx * c.x + (f.cx + 1.5f) * c.z;
+        BF_PRECISE bf_f32 right = f.fx * c.x + (f.cx - BF_F32(f.width) - 0.5f) * c.z;
+        BF_PRECISE bf_f32 top = f.fy * c.y + (f.cy + 1.5f) * c.z;
+        BF_PRECISE bf_f32 bottom = f.fy * c.y + (f.cy - BF_F32(f.height) - 0.5f) * c.z;
+        bf_u32 o = (c.z <= 0.0f ? 1u : 0u) | (left < 0.0f ? 2u : 0u) | (right > 0.0f ? 4u : 0u) |
+                   (top < 0.0f ? 8u : 0u) | (bottom > 0.0f ? 16u : 0u);
+        outside &= o;
+    }
+    return outside != 0u ? 1u : 0u;
+}
+
 #endif

@@ -1,0 +1,172 @@
+#version 450
+/* Windowed integration of a list of bricks (DESIGN.md section 4): one
+ * workgroup per brick of the list, each invocation FUSION_VOXELS_PER_THREAD
+ * voxels (a specialization constant; 512 / it invocations). The per-voxel
+ * math is the shared code of shaders/fusion.glsl.h; fusion/integrate_ref.c
+ * runs the same functions on the CPU as the test oracle.
+ *
+ * Phases, separated by workgroup barriers:
+ *  1. load the brick's record, chunk key and old sign / confidence words;
+ *  2. cull (brick, frame) pairs: one bit per frame of the window that is in
+ *     its ring slot and whose image the brick's box may reach;
+ *  3. accumulate every voxel over the visible frames, in frame order; sum
+ *     the window's (voxel, frame) pairs and their sigma (integers) into
+ *     shared memory;
+ *  4. decide each voxel (prior, confidence, replacement rule), OR its bits
+ *     into the new words;
+ *  5. 16 invocations write the sign and confidence words, one the error. */
+#extension GL_GOOGLE_include_directive : require
+#include "fusion.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+layout(constant_id = BF_SPEC_USER) const uint VOXELS_PER_THREAD = 8u;
+
+layout(std430, binding = 0) readonly buffer Hash { uint w[]; } hash;
+layout(std430, binding = 1) buffer Info { uint w[]; } info;
+layout(std430, binding = 2) buffer Sign { uint w[]; } sign_pool;
+layout(std430, binding = 3) buffer Conf { uint w[]; } conf_pool;
+layout(std430, binding = 4) readonly buffer Frames { fusion_frame f[]; } frames;
+layout(std430, binding = 5) readonly buffer Depth { uint w[]; } depth;
+layout(std430, binding = 6) readonly buffer List { uint w[]; } list;
+
+layout(push_constant) uniform Push { fusion_integrate_push pc; };
+
+shared uint s_old_sign[BRICK_WORDS], s_old_conf[BRICK_WORDS];
+shared uint s_new_sign[BRICK_WORDS], s_new_conf[BRICK_WORDS];
+shared uint s_visible[FUSION_INTEGRATE_MAX_FRAMES / 32u];
+shared uint s_pairs, s_sigma_um, s_set;
+
+/* Bit of voxel (x, y, z) in a brick's 16 words held in shared memory. */
+uint old_bit(bool conf, uint x, uint y, uint z)
+{
+    uint w = conf ? s_old_conf[brick_word(x, y, z)] : s_old_sign[brick_word(x, y, z)];
+    return (w >> brick_bit(x, y, z)) & 1u;
+}
+
+/* Confident voxel of the other sign than `front`, at (x, y, z). */
+uint other_bit(uint front, uint x, uint y, uint z)
+{
+    return old_bit(true, x, y, z) & (old_bit(false, x, y, z) ^ front);
+}
+
+void main()
+{
+    uint n_list = list.w[FUSION_LIST_COUNT];
+    uint count = n_list > pc.first ? min(n_list - pc.first, pc.max_count) : 0u;
+    uint idx = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    if (idx >= count) return; /* uniform over the workgroup: before any barrier */
+    uint slot = list.w[FUSION_LIST_HEADER + pc.first + idx];
+    uint tid = gl_LocalInvocationID.x, n_threads = gl_WorkGroupSize.x;
+
+    /* 1. The brick. */
+    uint chunk = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
+    uint pos = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS];
+    float brick_err = uintBitsToFloat(info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR]);
+    int key_x = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_X]);
+    int key_y = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Y]);
+    int key_z = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Z]);
+    uint cell_x = fusion_pos_x(pos), cell_y = fusion_pos_y(pos), cell_z = fusion_pos_z(pos);
+    float voxel_m = fusion_voxel_m(pc.chunk_m, fusion_pos_level(pos));
+    if (tid < BRICK_WORDS) {
+        s_old_sign[tid] = sign_pool.w[slot * BRICK_WORDS + tid];
+        s_old_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
+        s_new_sign[tid] = 0u;
+        s_new_conf[tid] = 0u;
+    }
+    if (tid < FUSION_INTEGRATE_MAX_FRAMES / 32u) s_visible[tid] = 0u;
+    if (tid == 0u) {
+        s_pairs = 0u;
+        s_sigma_um = 0u;
+        s_set = 0u;
+    }
+    barrier(); /* the zeroed shared words -> phase 2's atomics */
+
+    /* 2. Cull (brick, frame) pairs on the box of the voxel centres. */
+    float lo_x = fusion_voxel_centre(key_x, cell_x, 0u, pc.chunk_m, voxel_m);
+    float lo_y = fusion_voxel_centre(key_y, cell_y, 0u, pc.chunk_m, voxel_m);
+    float lo_z = fusion_voxel_centre(key_z, cell_z, 0u, pc.chunk_m, voxel_m);
+    float hi_x = fusion_voxel_centre(key_x, cell_x, 7u, pc.chunk_m, voxel_m);
+    float hi_y = fusion_voxel_centre(key_y, cell_y, 7u, pc.chunk_m, voxel_m);
+    float hi_z = fusion_voxel_centre(key_z, cell_z, 7u, pc.chunk_m, voxel_m);
+    uint n_frames = min(pc.n_frames, FUSION_INTEGRATE_MAX_FRAMES);
+    for (uint i = tid; i < n_frames; i += n_threads) {
+        uint index = pc.frame_first + i;
+        fusion_frame f = frames.f[index % pc.ring_slots];
+        if (f.index == index && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u)
+            atomicOr(s_visible[i >> 5], 1u << (i & 31u));
+    }
+    barrier(); /* s_visible -> phase 3 */
+
+    /* 3. Accumulate. Invocation tid owns voxels tid + k * n_threads: the
+     * lanes of a subgroup take neighbouring x, so they read neighbouring
+     * pixels. */
+    float px[VOXELS_PER_THREAD], py[VOXELS_PER_THREAD], pz[VOXELS_PER_THREAD];
+    fusion_acc acc[VOXELS_PER_THREAD];
+    for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+        uint v = tid + k * n_threads;
+        px[k] = fusion_voxel_centre(key_x, cell_x, v & 7u, pc.chunk_m, voxel_m);
+        py[k] = fusion_voxel_centre(key_y, cell_y, (v >> 3) & 7u, pc.chunk_m, voxel_m);
+        pz[k] = fusion_voxel_centre(key_z, cell_z, v >> 6, pc.chunk_m, voxel_m);
+        acc[k] = fusion_acc_zero();
+    }
+    for (uint i = 0u; i < n_frames; i++) {
+        if ((s_visible[i >> 5] & (1u << (i & 31u))) == 0u) continue;
+        uint ring = (pc.frame_first + i) % pc.ring_slots;
+        fusion_frame f = frames.f[ring];
+        uint base = ring * pc.depth_words;
+        for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+            fusion_point c = fusion_to_camera(f, px[k], py[k], pz[k]);
+            uint pixel = fusion_project_pixel(f, c);
+            if (pixel == FUSION_NONE) continue;
+            uint raw = fusion_depth_raw(depth.w[base + (pixel >> 1)], pixel);
+            acc[k] = fusion_acc_add(acc[k], fusion_observe(raw, f.depth_unit_m, c.z, pc.sigma_a, pc.sigma_b, pc.sigma_c));
+        }
+    }
+    uint pairs = 0u, sigma_um = 0u;
+    for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+        pairs += acc[k].n;
+        sigma_um += acc[k].sigma_um;
+    }
+    if (pairs != 0u) {
+        atomicAdd(s_pairs, pairs);
+        atomicAdd(s_sigma_um, sigma_um);
+    }
+    barrier(); /* the window's pair count and sigma sum -> phase 4 */
+
+    /* 4. Decide. */
+    float window_err = fusion_window_error(s_pairs, s_sigma_um);
+    uint has_conf = 0u;
+    for (uint w = 0u; w < BRICK_WORDS; w++) has_conf |= s_old_conf[w];
+    uint may_replace = fusion_may_replace(pc.set_confidence, has_conf != 0u ? 1u : 0u, window_err, brick_err);
+    float psi_conf = fusion_prior_psi(pc.prior_weight, window_err, brick_err);
+    for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+        uint v = tid + k * n_threads;
+        uint x = v & 7u, y = (v >> 3) & 7u, z = v >> 6;
+        uint word = brick_word(x, y, z), bit = brick_bit(x, y, z);
+        uint old_sign = (s_old_sign[word] >> bit) & 1u, old_conf = (s_old_conf[word] >> bit) & 1u;
+        float psi = 0.0f, phi = 0.0f;
+        if (old_conf != 0u && pc.set_confidence != 0u) {
+            uint row_x = 0u, row_y = 0u, row_z = 0u;
+            for (uint j = 0u; j < 8u; j++) {
+                row_x |= other_bit(old_sign, j, y, z) << j;
+                row_y |= other_bit(old_sign, x, j, z) << j;
+                row_z |= other_bit(old_sign, x, y, j) << j;
+            }
+            psi = psi_conf;
+            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x, row_y, row_z, x, y, z), voxel_m);
+        }
+        uint r = fusion_decide(old_sign, old_conf, acc[k], psi, phi, pc.conf_weight, pc.set_confidence, may_replace);
+        if ((r & FUSION_DECIDE_SIGN) != 0u) atomicOr(s_new_sign[word], 1u << bit);
+        if ((r & FUSION_DECIDE_CONF) != 0u) atomicOr(s_new_conf[word], 1u << bit);
+        if ((r & FUSION_DECIDE_SET) != 0u) s_set = 1u; /* every writer stores 1: no race on the value */
+    }
+    barrier(); /* the new words and s_set -> phase 5 */
+
+    /* 5. Write back. The brick belongs to this workgroup alone. */
+    if (tid < BRICK_WORDS) {
+        sign_pool.w[slot * BRICK_WORDS + tid] = s_new_sign[tid];
+        conf_pool.w[slot * BRICK_WORDS + tid] = s_new_conf[tid];
+    }
+    if (tid == 0u && s_set != 0u && may_replace != 0u)
+        info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR] = floatBitsToUint(window_err);
+}
