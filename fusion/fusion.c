@@ -48,6 +48,8 @@ void fusion__schedule_destroy(fusion_map *m)
 static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
 {
     fusion_window_list_push pc = {m->cfg.brick_cap, m->n_entries, first, last};
+    /* The previous window's slices read the list -> the fill that resets it. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_fill(m->ctx, m->window_list, 0, FUSION_LIST_HEADER * 4, 0);
     /* The cleared count -> the gathering pass. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
@@ -233,6 +235,12 @@ bf_status fusion_flush(fusion_map *m)
 }
 
 /* ------------------------------------------------------------ statistics */
+
+fusion_stage_ms fusion_last_stage_ms(const fusion_map *m)
+{
+    fusion_stage_ms t = {m->ms_upload, m->ms_alloc, m->ms_subcache, m->ms_window};
+    return t;
+}
 
 bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
 {

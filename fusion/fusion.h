@@ -77,7 +77,14 @@ typedef struct fusion_stats {
     double ms_upload, ms_alloc, ms_subcache, ms_window;
 } fusion_stats;
 
-/* Reads the counters back (a small download) and fills *out. */
+/* GPU time of the last added frame by stage [ms], from Vulkan timestamps. */
+typedef struct fusion_stage_ms {
+    double upload, alloc, subcache, window;
+} fusion_stage_ms;
+fusion_stage_ms fusion_last_stage_ms(const fusion_map *map);
+
+/* Downloads the map (counters, records, bit planes) and fills *out: for
+ * reports at the end of a run, not per frame. */
 bf_status fusion_get_stats(fusion_map *map, fusion_stats *out);
 
 /* ------------------------------------------------------------ host copies */
