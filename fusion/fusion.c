@@ -34,14 +34,39 @@ static bf_status window_list_create(fusion_map *m)
     return s;
 }
 
-bf_status fusion__schedule_create(fusion_map *m) { return window_list_create(m); }
+static bf_status remove_create(fusion_map *m)
+{
+    gpu_pipeline_desc d = {
+        .name = "fusion.remove",
+        .spirv = bf_spv_fusion_remove,
+        .spirv_bytes = bf_spv_fusion_remove_size,
+        .n_buffers = 8,
+        .push_bytes = sizeof(fusion_remove_push),
+        .local_size = {64, 1, 1},
+    };
+    bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_remove);
+    if (s == BF_OK) s = gpu_bindings_create(m->ctx, 8, "fusion.remove", &m->b_remove);
+    gpu_buffer *bufs[8] = {m->window_list, m->info, m->nodes, m->sign, m->conf, m->stamp, m->counters, m->free_stack};
+    for (uint32_t i = 0; i < 8 && s == BF_OK; i++) s = gpu_bindings_set(m->b_remove, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    return s;
+}
+
+bf_status fusion__schedule_create(fusion_map *m)
+{
+    bf_status s = window_list_create(m);
+    if (s == BF_OK) s = remove_create(m);
+    if (s == BF_OK) s = gpu_pipeline_warm_up(m->ctx, (gpu_pipeline *[]){m->p_window_list, m->p_remove}, 2);
+    return s;
+}
 
 void fusion__schedule_destroy(fusion_map *m)
 {
+    gpu_bindings_destroy(m->b_remove);
+    gpu_pipeline_destroy(m->p_remove);
     gpu_bindings_destroy(m->b_window_list);
     gpu_pipeline_destroy(m->p_window_list);
-    m->b_window_list = NULL;
-    m->p_window_list = NULL;
+    m->b_remove = m->b_window_list = NULL;
+    m->p_remove = m->p_window_list = NULL;
 }
 
 /* Records the gathering of the bricks stamped by frames [first, last]. */
@@ -98,8 +123,16 @@ static void cmd_window_slice(fusion_map *m)
     uint32_t per = (m->window_count + half - 1) / half;
     uint32_t first = m->window_slices_done * per;
     uint32_t n_frames = m->window_end - m->window_first;
-    if (per > 0 && first < m->window_count)
+    if (per > 0 && first < m->window_count) {
         fusion__cmd_integrate(m, m->b_integrate_window, first, per, m->window_first, n_frames, true);
+        /* The slice's new bit planes -> the removal pass reading them. */
+        gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        fusion_remove_push pc = {first, per, m->window_end - 1, 0};
+        gpu_cmd_dispatch(m->ctx, m->p_remove, m->b_remove, &pc, gpu_groups(per, 64), 1, 1);
+        /* Removal's reads of the list and the pools -> the next slice's args
+         * pass writing the list header and its integration. */
+        gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+    }
     if (++m->window_slices_done >= half) m->window_pending = false;
 }
 

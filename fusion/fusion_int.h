@@ -39,6 +39,8 @@ struct fusion_map {
     gpu_bindings *b_alloc, *b_alloc_args;
     gpu_pipeline *p_integrate, *p_integrate_args, *p_window_list;
     gpu_bindings *b_integrate_new, *b_integrate_window, *b_window_list;
+    gpu_pipeline *p_remove;
+    gpu_bindings *b_remove;
 
     /* Schedule (host side). */
     uint32_t n_frames;        /* frames added */
@@ -105,14 +107,24 @@ typedef struct fusion_ref_brick {
 /* What the oracle saw, for tests: how far the inputs kept from the
  * boundaries where a last-bit difference in a GPU division (2.5 ulp allowed
  * by Vulkan) could flip a bit. Only divisions can differ: adds, multiplies
- * and conversions are correctly rounded on both sides. */
+ * and conversions are correctly rounded on both sides, and BF_PRECISE
+ * forbids contraction. A voxel is fragile when one of its projections lies
+ * within FUSION_REF_TOL px of a pixel edge whose other side holds another
+ * depth (or the image border), or when its decision sums hold a divided
+ * term and its numerator or its confidence test is within a relative
+ * FUSION_REF_TOL of the boundary. Elsewhere GPU == CPU bit for bit is a
+ * fair requirement. */
+#define FUSION_REF_TOL 1e-4
 typedef struct fusion_ref_margins {
     double pixel;        /* smallest distance of u + 1/2 or v + 1/2 to an integer (pixel edge, image border), px */
     double sign;         /* smallest |numerator| / (|psi phi| + sum |W_i D_i|) of a voxel with a divided term */
     double conf;         /* smallest |denominator - conf_weight| / conf_weight of such a voxel */
     uint32_t n_pairs;    /* (voxel, frame) pairs with W > 0 */
     uint32_t n_divided;  /* voxels whose sums hold a ramp weight or a scaled psi */
+    uint32_t n_fragile;  /* voxels set in fragile */
+    uint32_t fragile[BRICK_WORDS]; /* bit planes' layout */
     float window_err;    /* fusion_window_error of the brick */
+    double error_gap;    /* |window_err - brick error| / brick error when the rule compares them, else inf */
     bool error_written;  /* the pass stored window_err as the brick's error */
 } fusion_ref_margins;
 

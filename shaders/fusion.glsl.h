@@ -170,6 +170,17 @@ typedef struct fusion_window_list_push fusion_window_list_push;
 _Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push must match std430");
 #endif
 
+/* Push constants of fusion_remove.comp. */
+struct fusion_remove_push {
+    bf_u32 first, max_count; /* the window slice just integrated */
+    bf_u32 last_frame;       /* last frame of its window */
+    bf_u32 pad;
+};
+#ifndef BF_GLSL
+typedef struct fusion_remove_push fusion_remove_push;
+_Static_assert(sizeof(fusion_remove_push) == 16, "fusion_remove_push must match std430");
+#endif
+
 /* ------------------------------------------------------------ counters */
 /* Word offsets in the counters buffer. */
 #define FUSION_CNT_NODES 0u        /* nodes handed out (bump allocator) */
@@ -182,6 +193,7 @@ _Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push m
 #define FUSION_CNT_FAIL_BRICKS 7u  /* requests refused: brick pool full */
 #define FUSION_CNT_FAIL_HASH 8u    /* requests refused: hash overflow full */
 #define FUSION_CNT_LIST 9u         /* entries in the work list being built */
+#define FUSION_CNT_REMOVED 10u     /* bricks removed as empty, in all */
 #define FUSION_CNT_DISPATCH 12u    /* 3 words: indirect group counts */
 #define FUSION_CNT_WORDS 16u
 
