@@ -122,28 +122,45 @@ typedef struct demo_report {
 
 static bf_status demo_write_json(const char *path, const demo_report *r)
 {
-    char buf[4096];
-    int n = snprintf(
-        buf, sizeof buf,
-        "{\n"
-        "  \"command\": \"demo\",\n"
-        "  \"device\": \"%s\",\n"
-        "  \"frames\": %u,\n"
-        "  \"render_ms_per_frame_median\": %.3f,\n"
-        "  \"valid_depth_share\": %.4f,\n"
-        "  \"frames_replayed\": %u,\n"
-        "  \"raw_points\": %u,\n"
-        "  \"raw_accuracy_m\": {\"mean\": %.6f, \"median\": %.6f, \"p90\": %.6f, \"rmse\": %.6f},\n"
-        "  \"seen_completeness\": {\"threshold_m\": 0.01, \"share\": %.4f, \"median_m\": %.6f},\n"
-        "  \"trajectory_check\": {\"pairs\": %zu, \"ate_rmse_m\": %.9f},\n"
-        "  \"seconds\": %.3f\n"
-        "}\n",
-        r->device, r->synth.n_frames, 1e3 * r->synth.median_frame_s, r->synth.valid_share, r->n_replayed,
-        r->n_points, r->surf.accuracy.mean, r->surf.accuracy.median, r->surf.accuracy.p90,
-        r->surf.accuracy.rmse, r->surf.completeness, r->surf.completeness_dist.median, r->ate.n_matched,
-        r->ate.trans.rmse, r->seconds);
-    if (n < 0 || (size_t)n >= sizeof buf) return bf_fail(BF_INVALID_ARG, "%s: report too long", path);
-    return bf_write_file_atomic(path, buf, (size_t)n);
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    if (!f) return bf_fail(BF_NO_MEMORY, "%s: report", path);
+    fputs("{\n  \"command\": \"demo\",\n  \"device\": ", f);
+    bf_json_string(f, r->device);
+    fprintf(f,
+            ",\n"
+            "  \"frames\": %u,\n"
+            "  \"render_ms_per_frame_median\": %.3f,\n"
+            "  \"valid_depth_share\": %.4f,\n"
+            "  \"frames_replayed\": %u,\n"
+            "  \"raw_points\": %u,\n"
+            "  \"raw_accuracy_m\": {\"mean\": ",
+            r->synth.n_frames, 1e3 * r->synth.median_frame_s, r->synth.valid_share, r->n_replayed, r->n_points);
+    /* Distances are null when nothing was measured (JSON has no NaN). */
+    bf_json_number(f, r->surf.accuracy.mean, 6);
+    fputs(", \"median\": ", f);
+    bf_json_number(f, r->surf.accuracy.median, 6);
+    fputs(", \"p90\": ", f);
+    bf_json_number(f, r->surf.accuracy.p90, 6);
+    fputs(", \"rmse\": ", f);
+    bf_json_number(f, r->surf.accuracy.rmse, 6);
+    fprintf(f, "},\n  \"seen_completeness\": {\"threshold_m\": 0.01, \"share\": %.4f, \"median_m\": ",
+            r->surf.completeness);
+    bf_json_number(f, r->surf.completeness_dist.median, 6);
+    fprintf(f,
+            "},\n"
+            "  \"trajectory_check\": {\"pairs\": %zu, \"ate_rmse_m\": %.9f},\n"
+            "  \"seconds\": %.3f\n"
+            "}\n",
+            r->ate.n_matched, r->ate.trans.rmse, r->seconds);
+    if (fclose(f) != 0) {
+        free(buf);
+        return bf_fail(BF_NO_MEMORY, "%s: report", path);
+    }
+    bf_status s = bf_write_file_atomic(path, buf, len);
+    free(buf);
+    return s;
 }
 
 /* The device that the reconstruction will use; a missing one is reported,

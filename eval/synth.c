@@ -244,35 +244,28 @@ static bf_status write_seen_ply(const char *dir, const seen_set *seen)
 
 static const char *noise_name(eval_noise n) { return n == EVAL_NOISE_KINECT1 ? "kinect1" : "none"; }
 
-/* JSON string body with quotes and backslashes escaped. */
-static void json_str(char *out, size_t cap, const char *s)
-{
-    size_t j = 0;
-    for (; *s && j + 3 < cap; s++) {
-        if (*s == '"' || *s == '\\') out[j++] = '\\';
-        out[j++] = (unsigned char)*s < 0x20 ? ' ' : *s;
-    }
-    out[j] = 0;
-}
-
 static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *K, const eval_scene *sc,
                              const eval_synth_result *res, uint32_t n_requested, double t0_s, double p95_s,
                              double cell_m, double rate_hz)
 {
-    char path[4096], scene[1024], traj[4096];
+    char path[4096];
     bf_status s = bf_path_join(path, sizeof path, cfg->out_dir, "stats.json");
     if (s) return s;
-    json_str(scene, sizeof scene, sc->desc);
-    json_str(traj, sizeof traj, cfg->traj_path);
     bf_quat q;
     bf_vec3 t;
     bf_se3_to_qt(&res->T_world_traj, &q, &t);
     const double(*R)[3] = res->T_world_traj.R;
-    char buf[8192];
-    int n = snprintf(
-        buf, sizeof buf,
-        "{\n  \"command\": \"synth\",\n  \"scene\": \"%s\",\n  \"scene_triangles\": %u,\n"
-        "  \"trajectory\": \"%s\",\n  \"t_first_s\": %.6f,\n  \"rate_hz\": %.9g,\n"
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    if (!f) return bf_fail(BF_NO_MEMORY, "%s: statistics", path);
+    fputs("{\n  \"command\": \"synth\",\n  \"scene\": ", f);
+    bf_json_string(f, sc->desc);
+    fprintf(f, ",\n  \"scene_triangles\": %u,\n  \"trajectory\": ", sc->mesh.n_tris);
+    bf_json_string(f, cfg->traj_path);
+    fprintf(
+        f,
+        ",\n  \"t_first_s\": %.6f,\n  \"rate_hz\": %.9g,\n"
         "  \"frames\": %u,\n  \"frames_requested\": %u,\n  \"noise\": \"%s\",\n  \"seed\": %llu,\n"
         "  \"camera\": {\"width\": %u, \"height\": %u, \"fx\": %.9g, \"fy\": %.9g, \"cx\": %.9g, \"cy\": %.9g, "
         "\"depth_scale\": %.9g},\n"
@@ -284,15 +277,19 @@ static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *
         "    \"t\": [%.9f, %.9f, %.9f],\n    \"q_xyzw\": [%.9f, %.9f, %.9f, %.9f],\n"
         "    \"matrix\": [[%.9f, %.9f, %.9f, %.9f], [%.9f, %.9f, %.9f, %.9f], [%.9f, %.9f, %.9f, %.9f], [0, 0, 0, 1]]\n"
         "  }\n}\n",
-        scene, sc->mesh.n_tris, traj, t0_s, rate_hz, res->n_frames, n_requested, noise_name(cfg->noise),
-        (unsigned long long)cfg->seed, K->width, K->height, K->fx_px, K->fy_px, K->cx_px, K->cy_px, K->depth_scale,
-        res->mean_frame_s, res->median_frame_s, p95_s, res->mean_frame_s > 0 ? 1.0 / res->mean_frame_s : 0,
-        res->total_s,
-        bf_thread_count(), res->valid_share, res->n_seen, cell_m, t.x, t.y, t.z, q.x, q.y, q.z, q.w, R[0][0], R[0][1],
-        R[0][2], res->T_world_traj.t.x, R[1][0], R[1][1], R[1][2], res->T_world_traj.t.y, R[2][0], R[2][1], R[2][2],
+        t0_s, rate_hz, res->n_frames, n_requested, noise_name(cfg->noise), (unsigned long long)cfg->seed, K->width,
+        K->height, K->fx_px, K->fy_px, K->cx_px, K->cy_px, K->depth_scale, res->mean_frame_s, res->median_frame_s,
+        p95_s, res->mean_frame_s > 0 ? 1.0 / res->mean_frame_s : 0, res->total_s, bf_thread_count(),
+        res->valid_share, res->n_seen, cell_m, t.x, t.y, t.z, q.x, q.y, q.z, q.w, R[0][0], R[0][1], R[0][2],
+        res->T_world_traj.t.x, R[1][0], R[1][1], R[1][2], res->T_world_traj.t.y, R[2][0], R[2][1], R[2][2],
         res->T_world_traj.t.z);
-    if (n < 0 || (size_t)n >= sizeof buf) return bf_fail(BF_INVALID_ARG, "%s: statistics too long", path);
-    return bf_write_file_atomic(path, buf, (size_t)n);
+    if (fclose(f) != 0) {
+        free(buf);
+        return bf_fail(BF_NO_MEMORY, "%s: statistics", path);
+    }
+    s = bf_write_file_atomic(path, buf, len);
+    free(buf);
+    return s;
 }
 
 /* ------------------------------------------------------------ the sequence */

@@ -20,19 +20,24 @@ mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(
 is_json() { python3 -m json.tool "$1" >/dev/null 2>&1 || fail "$1 is not valid JSON: $(head -c 300 "$1")"; }
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
 
-# A trajectory of 1.5 s at 30 Hz: a slow sideways move.
+# A trajectory of 1.5 s at 30 Hz: a slow sideways move. A copy sits in a
+# folder whose name needs escaping in JSON (stats.json names the file).
 python3 - "$T/traj.txt" <<'PY'
 import sys
 with open(sys.argv[1], "w") as f:
     for i in range(46):
         f.write("%.6f %.6f 0 0 0 0 0 1\n" % (1305031098.6659 + i / 30.0, 0.002 * i))
 PY
+Q="$T/a \"quoted\" \\ dir"
+mkdir "$Q" && cp "$T/traj.txt" "$Q/traj.txt"
 
 # synth: a small sequence (the room without the shared meshes, small images).
 mkdir "$T/nodata"
-expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 3 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+expect 0 "$B" synth --trajectory "$Q/traj.txt" --frames 3 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
     --data "$T/nodata" --out "$T/seq"
 is_json "$T/seq/stats.json"
+python3 -c "import json,sys; assert json.load(open(sys.argv[1]))['trajectory'] == sys.argv[2]" \
+    "$T/seq/stats.json" "$Q/traj.txt" || fail "stats.json does not name the trajectory $Q/traj.txt"
 
 # info: JSON parses and keeps the timestamps' microseconds.
 expect 0 "$B" info "$T/seq" --json
