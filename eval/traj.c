@@ -106,21 +106,6 @@ bf_status eval_horn_align(const bf_vec3 *model, const bf_vec3 *data, size_t n, b
 
 /* ------------------------------------------------------------ association */
 
-typedef struct eval__cand {
-    double dt;
-    size_t a, b;
-} eval__cand;
-
-static int cand_cmp(const void *pa, const void *pb)
-{
-    const eval__cand *x = pa, *y = pb;
-    /* TUM: Python sorts the tuples (|dt|, stamp_a, stamp_b); stamps are
-     * increasing, so comparing indices orders the ties the same way. */
-    if (x->dt != y->dt) return x->dt < y->dt ? -1 : 1;
-    if (x->a != y->a) return x->a < y->a ? -1 : 1;
-    return (x->b > y->b) - (x->b < y->b);
-}
-
 static bf_status check_traj(const replay_traj *t, const char *what)
 {
     if (!t || t->n == 0) return bf_fail(BF_INVALID_ARG, "%s trajectory is empty", what);
@@ -136,72 +121,25 @@ bf_status eval_associate(const replay_traj *gt, const replay_traj *est, double m
     bf_status s;
     if ((s = check_traj(gt, "ground-truth")) || (s = check_traj(est, "estimated"))) return s;
     if (max_dt_s <= 0) max_dt_s = EVAL_TUM_MAX_DT_S;
-    /* TUM associate.py: every pair with |t_a - t_b| < max_difference (strict)
-     * is a candidate; candidates in order of |dt| are accepted greedily when
-     * neither stamp is taken yet. A sliding window over the sorted stamps
-     * finds the same candidates without the n*m loop. */
-    size_t n_cand = 0, cap = 0, lo = 0;
-    eval__cand *cand = NULL;
-    for (size_t a = 0; a < gt->n; a++) {
-        double ta = gt->t_s[a];
-        while (lo < est->n && !(fabs(ta - est->t_s[lo]) < max_dt_s) && est->t_s[lo] < ta) lo++;
-        for (size_t b = lo; b < est->n; b++) {
-            double dt = fabs(ta - est->t_s[b]);
-            if (!(dt < max_dt_s)) {
-                if (est->t_s[b] > ta) break;
-                continue;
-            }
-            if (n_cand == cap) {
-                size_t nc = cap ? 2 * cap : 1024;
-                eval__cand *nb = realloc(cand, nc * sizeof *nb);
-                if (!nb) {
-                    free(cand);
-                    return bf_fail(BF_NO_MEMORY, "out of memory associating trajectories");
-                }
-                cand = nb;
-                cap = nc;
-            }
-            cand[n_cand++] = (eval__cand){dt, a, b};
-        }
-    }
-    if (n_cand) qsort(cand, n_cand, sizeof *cand, cand_cmp);
-    bool *used_a = calloc(gt->n, 1), *used_b = calloc(est->n, 1);
-    size_t n_match_cap = gt->n < est->n ? gt->n : est->n;
-    eval_match *m = malloc((n_match_cap ? n_match_cap : 1) * sizeof *m);
-    if (!used_a || !used_b || !m) {
-        free(cand);
-        free(used_a);
-        free(used_b);
+    /* TUM associate.py (replay_associate_stamps); matches are returned in
+     * the order of the first stamp, as the script returns them. */
+    size_t *est_of = malloc(gt->n * sizeof *est_of);
+    eval_match *m = malloc(gt->n * sizeof *m);
+    if (!est_of || !m) {
+        free(est_of);
         free(m);
         return bf_fail(BF_NO_MEMORY, "out of memory associating trajectories");
+    }
+    if ((s = replay_associate_stamps(gt->t_s, gt->n, est->t_s, est->n, max_dt_s, est_of))) {
+        free(est_of);
+        free(m);
+        return s;
     }
     size_t n = 0;
-    for (size_t k = 0; k < n_cand; k++) {
-        if (used_a[cand[k].a] || used_b[cand[k].b]) continue;
-        used_a[cand[k].a] = used_b[cand[k].b] = true;
-        m[n++] = (eval_match){cand[k].a, cand[k].b};
-    }
-    free(cand);
-    free(used_a);
-    free(used_b);
-    /* TUM: matches are returned sorted by the first stamp. Each gt index
-     * appears once, so a counting pass orders them. */
-    eval_match *sorted = malloc((n ? n : 1) * sizeof *sorted);
-    size_t *slot = malloc(gt->n * sizeof *slot);
-    if (!sorted || !slot) {
-        free(m);
-        free(sorted);
-        free(slot);
-        return bf_fail(BF_NO_MEMORY, "out of memory associating trajectories");
-    }
-    for (size_t i = 0; i < gt->n; i++) slot[i] = SIZE_MAX;
-    for (size_t k = 0; k < n; k++) slot[m[k].i_gt] = k;
-    size_t j = 0;
     for (size_t i = 0; i < gt->n; i++)
-        if (slot[i] != SIZE_MAX) sorted[j++] = m[slot[i]];
-    free(slot);
-    free(m);
-    *out = sorted;
+        if (est_of[i] != SIZE_MAX) m[n++] = (eval_match){i, est_of[i]};
+    free(est_of);
+    *out = m;
     *n_out = n;
     return BF_OK;
 }

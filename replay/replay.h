@@ -79,6 +79,13 @@ void replay_traj_free(replay_traj *traj);
 /* Pose at time t by linear position / slerp rotation between the two
  * neighbouring samples; false if t is outside [t_0, t_n-1]. */
 bool replay_traj_interpolate(const replay_traj *traj, double t_s, bf_se3 *T_wc);
+/* TUM associate.py's rule for two strictly increasing stamp lists: every
+ * pair with |t_a - t_b| < max_dt_s is a candidate; candidates in order of
+ * |dt| (ties by a, then b) are taken greedily while neither stamp is taken.
+ * On success b_of_a[i] (n_a entries, caller's) is the index in t_b matched
+ * to t_a[i], or SIZE_MAX; on failure (out of memory) it is untouched. */
+bf_status replay_associate_stamps(const double *t_a, size_t n_a, const double *t_b, size_t n_b, double max_dt_s,
+                                  size_t *b_of_a);
 
 /* ------------------------------------------------------------ writing */
 

@@ -79,64 +79,6 @@ fail:
     return s;
 }
 
-/* A possible (depth, colour) pair closer than REPLAY_MAX_DT_S. */
-typedef struct tum_candidate {
-    double dt_s;
-    uint32_t depth_idx, rgb_idx;
-} tum_candidate;
-
-static int candidate_cmp(const void *a, const void *b)
-{
-    const tum_candidate *x = a, *y = b;
-    if (x->dt_s != y->dt_s) return x->dt_s < y->dt_s ? -1 : 1;
-    if (x->depth_idx != y->depth_idx) return x->depth_idx < y->depth_idx ? -1 : 1;
-    return (x->rgb_idx > y->rgb_idx) - (x->rgb_idx < y->rgb_idx);
-}
-
-/* TUM's associate.py: every pair with |t_depth - t_rgb| < 0.02 s is a
- * candidate; candidates sorted by |dt| (ties by depth, then colour time) are
- * taken greedily when neither image is taken yet. rgb_of[i] is the colour
- * index of depth frame i or UINT32_MAX when it has none. */
-static bf_status tum_associate(const tum_index *depth, const tum_index *rgb, uint32_t *rgb_of)
-{
-    size_t n = 0, cap = 0;
-    tum_candidate *c = NULL;
-    uint32_t j0 = 0;
-    for (uint32_t i = 0; i < depth->n; i++) {
-        double td = depth->t_s[i];
-        while (j0 < rgb->n && rgb->t_s[j0] <= td - REPLAY_MAX_DT_S) j0++;
-        for (uint32_t j = j0; j < rgb->n && rgb->t_s[j] < td + REPLAY_MAX_DT_S; j++) {
-            double dt = td > rgb->t_s[j] ? td - rgb->t_s[j] : rgb->t_s[j] - td;
-            if (!(dt < REPLAY_MAX_DT_S)) continue;
-            if (n == cap) {
-                cap = cap ? 2 * cap : 1024;
-                tum_candidate *nc = realloc(c, cap * sizeof *nc);
-                if (!nc) {
-                    free(c);
-                    return bf_fail(BF_NO_MEMORY, "associating %u depth images", depth->n);
-                }
-                c = nc;
-            }
-            c[n++] = (tum_candidate){dt, i, j};
-        }
-    }
-    if (n) qsort(c, n, sizeof *c, candidate_cmp);
-    bool *rgb_used = calloc(rgb->n, 1);
-    if (!rgb_used) {
-        free(c);
-        return bf_fail(BF_NO_MEMORY, "associating %u colour images", rgb->n);
-    }
-    for (uint32_t i = 0; i < depth->n; i++) rgb_of[i] = UINT32_MAX;
-    for (size_t k = 0; k < n; k++)
-        if (rgb_of[c[k].depth_idx] == UINT32_MAX && !rgb_used[c[k].rgb_idx]) {
-            rgb_of[c[k].depth_idx] = c[k].rgb_idx;
-            rgb_used[c[k].rgb_idx] = true;
-        }
-    free(rgb_used);
-    free(c);
-    return BF_OK;
-}
-
 /* Ground truth for a frame at t: interpolated inside the trajectory's time
  * range; just outside it, the end pose if it is within REPLAY_MAX_DT_S (the
  * benchmark's own association tolerance); else none. */
@@ -177,7 +119,7 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
     char file[4096];
     tum_index depth = {0}, rgb = {0};
     replay_traj gt = {0};
-    uint32_t *rgb_of = NULL;
+    size_t *rgb_of = NULL; /* colour index of each depth image, or SIZE_MAX */
     if ((s = tum_index_read(dir, "depth.txt", list, &depth))) goto done;
     if ((s = bf_path_join(file, sizeof file, dir, "rgb.txt"))) goto done;
     bool has_rgb = bf_file_exists(file);
@@ -189,13 +131,15 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
         s = bf_fail(BF_NO_MEMORY, "%s: %u frames", dir, depth.n);
         goto done;
     }
-    if (has_rgb && (s = tum_associate(&depth, &rgb, rgb_of))) goto done;
+    /* associate.py's rule, depth as the first list. */
+    if (has_rgb && (s = replay_associate_stamps(depth.t_s, depth.n, rgb.t_s, rgb.n, REPLAY_MAX_DT_S, rgb_of)))
+        goto done;
     uint32_t n_unpaired = 0;
     for (uint32_t i = 0; i < depth.n; i++) {
         replay__frame_ref f = {.t_depth_s = depth.t_s[i], .t_rgb_s = depth.t_s[i], .depth_path = depth.path[i]};
         if (has_rgb) {
             /* associate.py drops a depth image without colour partner. */
-            if (rgb_of[i] == UINT32_MAX) {
+            if (rgb_of[i] == SIZE_MAX) {
                 n_unpaired++;
                 continue;
             }
