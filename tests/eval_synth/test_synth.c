@@ -154,7 +154,11 @@ BF_TEST(kinect1_noise_sigma_matches_model_at_1_2_3_m)
     for (int k = 0; k < 3; k++) {
         double sigma, mean, valid;
         CHECK_OK(plane_sigma(zs[k], 8, &sigma, &mean, &valid));
-        double model = eval_kinect1_axial_sigma(zs[k], 0);
+        /* Nguyen, Izadi and Lovell 2012 (the issue's formula), written out
+         * here so a wrong constant in noise.c cannot pass by agreeing with
+         * itself; the plane faces the camera (theta < 15 deg, no angle term). */
+        double model = 0.0012 + 0.0019 * (zs[k] - 0.4) * (zs[k] - 0.4);
+        CHECK_NEAR(eval_kinect1_axial_sigma(zs[k], 0), model, 1e-15);
         fprintf(stderr, "  z %.1f m: measured sigma %.5f m, model %.5f m (ratio %.3f), mean %+.5f m, valid %.3f\n",
                 zs[k], sigma, model, sigma / model, mean - zs[k], valid);
         CHECK_LE(fabs(sigma / model - 1), 0.10);
