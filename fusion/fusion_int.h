@@ -120,6 +120,7 @@ typedef struct fusion_ref_margins {
     double sign;         /* smallest |numerator| / (|psi phi| + sum |W_i D_i|) of a voxel with a divided term */
     double conf;         /* smallest |denominator - conf_weight| / conf_weight of such a voxel */
     uint32_t n_pairs;    /* (voxel, frame) pairs with W > 0 */
+    uint32_t n_observed; /* voxels with at least one such pair */
     uint32_t n_divided;  /* voxels whose sums hold a ramp weight or a scaled psi */
     uint32_t n_fragile;  /* voxels set in fragile */
     uint32_t fragile[BRICK_WORDS]; /* bit planes' layout */

@@ -22,10 +22,33 @@ static uint32_t other_bit(const fusion_ref_brick *b, uint32_t front, uint32_t x,
 /* Distance of a float to the nearest integer. */
 static double edge_distance(float u) { return fabs((double)u - floor((double)u + 0.5)); }
 
+/* Raw depth of pixel (i, j) of a ring image, or UINT32_MAX outside. */
+static uint32_t raw_at(const fusion_frame *f, const uint32_t *image, int64_t i, int64_t j)
+{
+    if (i < 0 || j < 0 || i >= f->width || j >= f->height) return UINT32_MAX;
+    uint32_t p = (uint32_t)j * f->width + (uint32_t)i;
+    return fusion_depth_raw(image[p >> 1], p);
+}
+
+/* Could a GPU division moving (u, v) (pixel coordinates + 1/2) by up to
+ * FUSION_REF_TOL px pick another depth? */
+static bool pixel_fragile(const fusion_frame *f, const uint32_t *image, float u, float v)
+{
+    double du = edge_distance(u), dv = edge_distance(v);
+    if (du >= FUSION_REF_TOL && dv >= FUSION_REF_TOL) return false;
+    int64_t i = (int64_t)floor((double)u), j = (int64_t)floor((double)v);
+    /* The other side of the nearest edge in each near direction. */
+    int64_t i2 = du < FUSION_REF_TOL ? ((double)u - floor((double)u) < 0.5 ? i - 1 : i + 1) : i;
+    int64_t j2 = dv < FUSION_REF_TOL ? ((double)v - floor((double)v) < 0.5 ? j - 1 : j + 1) : j;
+    uint32_t r = raw_at(f, image, i, j);
+    return raw_at(f, image, i2, j) != r || raw_at(f, image, i, j2) != r || raw_at(f, image, i2, j2) != r;
+}
+
 void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *frames, const uint32_t *depth_ring,
                            fusion_ref_brick *b, fusion_ref_margins *margins)
 {
-    fusion_ref_margins mg = {.pixel = INFINITY, .sign = INFINITY, .conf = INFINITY};
+    fusion_ref_margins mg = {.pixel = INFINITY, .sign = INFINITY, .conf = INFINITY, .error_gap = INFINITY};
+    bool fragile[BRICK_VOXELS];
     uint32_t level = fusion_pos_level(b->pos);
     uint32_t cell[3] = {fusion_pos_x(b->pos), fusion_pos_y(b->pos), fusion_pos_z(b->pos)};
     float voxel_m = fusion_voxel_m(pc->chunk_m, level);
@@ -42,6 +65,7 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
         acc[v] = fusion_acc_zero();
         abs_wd[v] = 0;
         has_ramp[v] = false;
+        fragile[v] = false;
         for (uint32_t i = 0; i < n_frames; i++) {
             uint32_t index = pc->frame_first + i, ring = index % pc->ring_slots;
             fusion_frame f = frames[ring];
@@ -51,6 +75,7 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
                 float u = f.fx * c.x / c.z + f.cx + 0.5f, w = f.fy * c.y / c.z + f.cy + 0.5f;
                 double e = fmin(edge_distance(u), edge_distance(w));
                 if (e < mg.pixel) mg.pixel = e;
+                if (pixel_fragile(&f, depth_ring + (size_t)ring * pc->depth_words, u, w)) fragile[v] = true;
             }
             uint32_t pixel = fusion_project_pixel(f, c);
             if (pixel == FUSION_NONE) continue;
@@ -64,12 +89,15 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
         }
         pairs += acc[v].n;
         sigma_um += acc[v].sigma_um;
+        mg.n_observed += acc[v].n > 0;
     }
 
     float window_err = fusion_window_error(pairs, sigma_um);
     uint32_t has_conf = 0;
     for (uint32_t w = 0; w < BRICK_WORDS; w++) has_conf |= b->conf[w];
     uint32_t may_replace = fusion_may_replace(pc->set_confidence, has_conf != 0, window_err, b->error);
+    if (pc->set_confidence && has_conf && pairs > 0 && isfinite(b->error) && b->error > 0)
+        mg.error_gap = fabs((double)window_err - b->error) / b->error;
     float psi_conf = fusion_prior_psi(pc->prior_weight, window_err, b->error);
     /* psi_conf came from a division unless the ratio was clamped or unscaled. */
     bool psi_divided = psi_conf != pc->prior_weight * 0.25f && psi_conf != pc->prior_weight * 4.0f &&
@@ -88,7 +116,7 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
                 row_z |= other_bit(b, old_sign, x, y, j) << j;
             }
             psi = psi_conf;
-            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x, row_y, row_z, x, y, z), voxel_m);
+            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x, row_y, row_z, x, y, z), voxel_m, window_err);
         }
         uint32_t r = fusion_decide(old_sign, old_conf, acc[v], psi, phi, pc->conf_weight, pc->set_confidence,
                                    may_replace);
@@ -104,10 +132,16 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
             double den = (double)psi + (double)acc[v].sum_w;
             double scale = fabs((double)psi * phi) + abs_wd[v];
             if (scale > 0 && fabs(num) / scale < mg.sign) mg.sign = fabs(num) / scale;
+            if (scale > 0 && fabs(num) / scale < FUSION_REF_TOL) fragile[v] = true;
             if (pc->set_confidence) {
                 double c = fabs(den - pc->conf_weight) / pc->conf_weight;
                 if (c < mg.conf) mg.conf = c;
+                if (c < FUSION_REF_TOL) fragile[v] = true;
             }
+        }
+        if (fragile[v]) {
+            mg.fragile[brick_word(x, y, z)] |= 1u << brick_bit(x, y, z);
+            mg.n_fragile++;
         }
     }
     memcpy(b->sign, new_sign, sizeof new_sign);

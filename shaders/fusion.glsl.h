@@ -420,10 +420,14 @@ BF_FN bf_u32 fusion_prior_steps(bf_u32 row_x, bf_u32 row_y, bf_u32 row_z, bf_u32
 /* Prior distance Phi of a confident voxel: its sign (front +, behind -)
  * times the distance to the sign change, which lies halfway between its
  * centre and the nearest confident voxel of the other sign: (steps - 1/2)
- * voxels; with none in reach, the bound (FUSION_PRIOR_STEPS + 1/2). */
-BF_FN bf_f32 fusion_prior_phi(bf_u32 is_front, bf_u32 steps, bf_f32 voxel_m)
+ * voxels; with none in reach, the bound (FUSION_PRIOR_STEPS + 1/2).
+ * Truncated at band_m (the window's error, when known): observations count
+ * at most +sigma in front, so an untruncated prior of 3.5 voxels, many
+ * sigmas at fine levels, would outvote any window. */
+BF_FN bf_f32 fusion_prior_phi(bf_u32 is_front, bf_u32 steps, bf_f32 voxel_m, bf_f32 band_m)
 {
     BF_PRECISE bf_f32 dist = (BF_F32(steps) - 0.5f) * voxel_m;
+    if (band_m > 0.0f && dist > band_m) dist = band_m;
     return is_front != 0u ? dist : -dist;
 }
 

@@ -153,7 +153,7 @@ void main()
                 row_z |= other_bit(old_sign, x, y, j) << j;
             }
             psi = psi_conf;
-            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x, row_y, row_z, x, y, z), voxel_m);
+            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x, row_y, row_z, x, y, z), voxel_m, window_err);
         }
         uint r = fusion_decide(old_sign, old_conf, acc[k], psi, phi, pc.conf_weight, pc.set_confidence, may_replace);
         if ((r & FUSION_DECIDE_SIGN) != 0u) atomicOr(s_new_sign[word], 1u << bit);
