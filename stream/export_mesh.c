@@ -252,6 +252,46 @@ static void mesh_native(const mesh_job *j, uint32_t i, brick_out *o)
             }
 }
 
+/* Whether every point of level-L voxel v has a finer confident voxel (then
+ * it owns no lattice point). Checks the levels up to 3 finer, whose voxels
+ * under v lie in one brick; "no" is always safe. */
+static bool covered_by_finer(const stream__grid *g, uint32_t L, const int64_t v[3])
+{
+    for (uint32_t k = 0; k < g->n_levels; k++) {
+        uint32_t Lf = g->levels_desc[k];
+        if (Lf <= L || Lf - L > 3) continue;
+        uint32_t d = Lf - L, n = 1u << d;
+        int64_t c0[3] = {v[0] << d, v[1] << d, v[2] << d};
+        int64_t b[3] = {stream__shr(c0[0], 3), stream__shr(c0[1], 3), stream__shr(c0[2], 3)};
+        uint32_t j = stream__grid_find(g, Lf, b);
+        if (j == STREAM__NONE) continue;
+        const fusion_brick *fb = &g->s->bricks[j];
+        bool all = true;
+        for (uint32_t z = 0; z < n && all; z++)
+            for (uint32_t y = 0; y < n && all; y++)
+                for (uint32_t x = 0; x < n && all; x++)
+                    all = stream__bit(fb->conf, (uint32_t)(c0[0] & 7) + x, (uint32_t)(c0[1] & 7) + y,
+                                      (uint32_t)(c0[2] & 7) + z);
+        if (all) return true;
+    }
+    return false;
+}
+
+/* Whether any brick of a finer level overlaps level-L voxel v (levels more
+ * than 3 finer are assumed to: "yes" is always safe). */
+static bool overlapped_by_finer(const stream__grid *g, uint32_t L, const int64_t v[3])
+{
+    for (uint32_t k = 0; k < g->n_levels; k++) {
+        uint32_t Lf = g->levels_desc[k];
+        if (Lf <= L) continue;
+        if (Lf - L > 3) return true;
+        uint32_t d = Lf - L;
+        int64_t b[3] = {stream__shr(v[0] << d, 3), stream__shr(v[1] << d, 3), stream__shr(v[2] << d, 3)};
+        if (stream__grid_find(g, Lf, b) != STREAM__NONE) return true;
+    }
+    return false;
+}
+
 /* A brick coarser than the lattice: each of its voxels holds k^3 lattice
  * points. Voxels whose 3x3x3 neighbourhood is confident, not overlapped by
  * finer bricks and of one field sign cannot produce triangles (every corner
@@ -271,7 +311,7 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
                 int64_t nb[3] = {b[0] + dx, b[1] + dy, b[2] + dz};
                 uint32_t n = stream__grid_find(g, L, nb);
                 const int8_t *sf = n == STREAM__NONE ? NULL : g->sfield + (size_t)n * BRICK_VOXELS;
-                bool usable = sf && !g->has_finer[n];
+                bool check_each = sf && g->has_finer[n];
                 for (int z = 0; z < 8; z++) {
                     int pz = z + 1 + 8 * dz;
                     if (pz < 0 || pz > 9) continue;
@@ -281,7 +321,11 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
                         for (int x = 0; x < 8; x++) {
                             int px = x + 1 + 8 * dx;
                             if (px < 0 || px > 9) continue;
-                            int8_t s = usable ? sf[z * 64 + y * 8 + x] : STREAM__NO_FIELD;
+                            int8_t s = sf ? sf[z * 64 + y * 8 + x] : STREAM__NO_FIELD;
+                            if (check_each && s != STREAM__NO_FIELD) {
+                                int64_t v[3] = {nb[0] * 8 + x, nb[1] * 8 + y, nb[2] * 8 + z};
+                                if (overlapped_by_finer(g, L, v)) s = STREAM__NO_FIELD;
+                            }
                             sg[pz][py][px] = (s == STREAM__NO_FIELD || s == 0) ? 0 : s > 0 ? 1 : -1;
                         }
                     }
@@ -297,6 +341,8 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
         for (int y = 0; y < 8; y++)
             for (int x = 0; x < 8; x++) {
                 if (!stream__bit(br->conf, (uint32_t)x, (uint32_t)y, (uint32_t)z)) continue;
+                int64_t v[3] = {b[0] * 8 + x, b[1] * 8 + y, b[2] * 8 + z};
+                if (g->has_finer[i] && covered_by_finer(g, L, v)) continue;
                 int8_t s0 = sg[z + 1][y + 1][x + 1];
                 bool uniform = s0 != 0;
                 for (int n = 0; n < 27 && uniform; n++)

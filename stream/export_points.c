@@ -20,12 +20,13 @@ typedef struct point_job {
     point_out *out;
 } point_job;
 
-/* Field of the level-L voxel next to v along axis a (dir +-1), NAN if none. */
-static double neighbour_field(const stream__grid *g, uint32_t i, uint32_t L, const int64_t v[3], int a, int dir)
+/* Field of the level-L voxel at v + (dx, dy, dz), NAN if it has none. */
+static double neighbour_field(const stream__grid *g, uint32_t i, uint32_t L, const int64_t v[3], int dx, int dy,
+                              int dz)
 {
-    int64_t n[3] = {v[0], v[1], v[2]};
-    n[a] += dir;
-    if (stream__shr(n[a], 3) == g->bc[i][a]) {
+    int64_t n[3] = {v[0] + dx, v[1] + dy, v[2] + dz};
+    if (stream__shr(n[0], 3) == g->bc[i][0] && stream__shr(n[1], 3) == g->bc[i][1] &&
+        stream__shr(n[2], 3) == g->bc[i][2]) {
         int8_t f = g->sfield[(size_t)i * BRICK_VOXELS + (size_t)((n[2] & 7) * 64 + (n[1] & 7) * 8 + (n[0] & 7))];
         return f == STREAM__NO_FIELD ? NAN : f / 127.0;
     }
@@ -79,16 +80,27 @@ static void points_brick(void *ctx, size_t k)
                         if (a == 2) toward_free.z += d;
                     }
                 if (!is_surface) continue;
-                /* The field grows toward free space: its gradient (central
-                 * differences, one-sided where a neighbour has no field)
-                 * points out of the surface. */
+                /* The field grows toward free space: its gradient points
+                 * out of the surface. Least-squares gradient over the 3x3x3
+                 * box (the sum of offset * field, Sobel-like): with the box
+                 * mean inside the field that is a 5-voxel-wide estimate,
+                 * which follows a curved surface far better than central
+                 * differences across the staircase. */
                 bf_vec3 grad;
-                double gc[3];
+                double gc[3] = {0, 0, 0};
                 double f0 = g->sfield[(size_t)i * BRICK_VOXELS + z * 64 + y * 8 + x] / 127.0;
-                for (int a = 0; a < 3; a++) {
-                    double fp = neighbour_field(g, i, L, v, a, +1), fm = neighbour_field(g, i, L, v, a, -1);
-                    gc[a] = !isnan(fp) && !isnan(fm) ? (fp - fm) / 2 : !isnan(fp) ? fp - f0 : !isnan(fm) ? f0 - fm : 0;
-                }
+                for (int dz = -1; dz <= 1; dz++)
+                    for (int dy = -1; dy <= 1; dy++)
+                        for (int dx = -1; dx <= 1; dx++) {
+                            if (!dx && !dy && !dz) continue;
+                            double f = neighbour_field(g, i, L, v, dx, dy, dz);
+                            if (isnan(f)) continue;
+                            /* Differences to the centre, so a missing
+                             * neighbour (the brick or level ends) does not
+                             * bias the sum. */
+                            f -= f0;
+                            gc[0] += dx * f, gc[1] += dy * f, gc[2] += dz * f;
+                        }
                 grad = bf_v3_normalize(bf_v3(gc[0], gc[1], gc[2]));
                 if (bf_v3_norm(grad) == 0) grad = bf_v3_normalize(toward_free);
                 for (int a = 0; a < 3; a++)
