@@ -164,6 +164,9 @@ BF_TEST(kdtree_nearest_matches_brute_force)
     CHECK_OK(eval__kdtree_build(xyz, n, &kd));
     for (int q = 0; q < 2000; q++) {
         bf_vec3 p = bf_v3(rnd() * 3 - 1.5, rnd() * 3 - 1.5, rnd() * 3 - 1.5);
+        /* Every fourth query far outside the cloud, where the pruning bound
+         * sums the distances over several axes (corners of the cloud's box). */
+        if (q % 4 == 0) p = bf_v3_scale(p, 4);
         double best = INFINITY;
         for (size_t i = 0; i < n; i++) {
             double dx = xyz[3 * i] - p.x, dy = xyz[3 * i + 1] - p.y, dz = xyz[3 * i + 2] - p.z;
