@@ -63,6 +63,11 @@ int cmd_eval_surface(int argc, char **argv)
             json = true;
             continue;
         }
+        static const char *const with_value[] = {"--reference", "--reconstruction", "--visible", "--threshold",
+                                                 "--max-dist", "--samples-per-m2", "--max-samples", "--seed"};
+        bool is_known = false;
+        for (size_t k = 0; k < sizeof with_value / sizeof with_value[0]; k++) is_known |= !strcmp(a, with_value[k]);
+        if (!is_known) return app_usage_error(cmd, "unknown argument '%s'", a);
         if (!val) return app_usage_error(cmd, "%s needs a value", a);
         double v;
         uint32_t u;

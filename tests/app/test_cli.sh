@@ -56,8 +56,12 @@ is_json "$T/out"
 expect 0 "$B" eval-surface --reference "$T/seq/scene.ply" --reconstruction "$T/seq/seen.ply" --max-samples 2000 --json
 is_json "$T/out"
 
-# Bad input: exit 3 and the message names the file (and line or frame).
+# Bad command lines: exit 2, naming the culprit.
 expect 2 "$B" info
+expect 2 "$B" eval-surface rec.ply
+mentions "unknown argument 'rec.ply'"
+
+# Bad input: exit 3 and the message names the file (and line or frame).
 expect 3 "$B" info "$T/missing"
 mentions "$T/missing"
 mkdir "$T/empty"
