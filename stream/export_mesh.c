@@ -261,7 +261,7 @@ static bool covered_by_finer(const stream__grid *g, uint32_t L, const int64_t v[
         uint32_t Lf = g->levels_desc[k];
         if (Lf <= L || Lf - L > 3) continue;
         uint32_t d = Lf - L, n = 1u << d;
-        int64_t c0[3] = {v[0] << d, v[1] << d, v[2] << d};
+        int64_t c0[3] = {v[0] * ((int64_t)1 << d), v[1] * ((int64_t)1 << d), v[2] * ((int64_t)1 << d)};
         int64_t b[3] = {stream__shr(c0[0], 3), stream__shr(c0[1], 3), stream__shr(c0[2], 3)};
         uint32_t j = stream__grid_find(g, Lf, b);
         if (j == STREAM__NONE) continue;
@@ -286,7 +286,7 @@ static bool overlapped_by_finer(const stream__grid *g, uint32_t L, const int64_t
         if (Lf <= L) continue;
         if (Lf - L > 3) return true;
         uint32_t d = Lf - L;
-        int64_t b[3] = {stream__shr(v[0] << d, 3), stream__shr(v[1] << d, 3), stream__shr(v[2] << d, 3)};
+        int64_t b[3] = {stream__shr(v[0] * ((int64_t)1 << d), 3), stream__shr(v[1] * ((int64_t)1 << d), 3), stream__shr(v[2] * ((int64_t)1 << d), 3)};
         if (stream__grid_find(g, Lf, b) != STREAM__NONE) return true;
     }
     return false;

@@ -157,6 +157,7 @@ bf_status stream_export_points(const fusion_snapshot *s, eval_mesh *out, stream_
             m.normal = malloc(n * 3 * sizeof *m.normal);
             if (!m.xyz || !m.normal) goto fail_mem;
             for (uint32_t k = 0; k < g.n; k++) {
+                if (po[k].n == 0) continue;
                 memcpy(m.xyz + 3 * (size_t)m.n_verts, po[k].xyz, po[k].n * 3 * sizeof *m.xyz);
                 memcpy(m.normal + 3 * (size_t)m.n_verts, po[k].normal, po[k].n * 3 * sizeof *m.normal);
                 m.n_verts += (uint32_t)po[k].n;

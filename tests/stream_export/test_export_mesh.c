@@ -37,9 +37,9 @@ static bool pick_x_above(const void *ctx, bf_vec3 c) { return c.x >= *(const dou
 static void print_acc(const char *what, const fx_accuracy *a, double v, const stream_export_stats *st)
 {
     printf("  %s: voxel %.2f mm, vertices median %.3f max %.3f vox, area median %.3f p99 %.3f max %.3f vox, "
-           "%llu tris %llu verts, %.3f s\n",
+           "%u bricks, %llu tris %llu verts, %.3f s\n",
            what, v * 1e3, a->vert_median / v, a->vert_max / v, a->area_median / v, a->area_p99 / v, a->area_max / v,
-           (unsigned long long)st->n_triangles, (unsigned long long)st->n_vertices, st->seconds);
+           st->n_bricks, (unsigned long long)st->n_triangles, (unsigned long long)st->n_vertices, st->seconds);
 }
 
 /* Tolerances of a sphere voxelized at one level. The binary grid pins the
