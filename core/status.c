@@ -1,6 +1,7 @@
 /* Status table, error messages and logging. */
 #include "core.h"
 
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,7 +42,10 @@ bf_status bf_fail(bf_status s, const char *fmt, ...)
 const char *bf_last_error(void) { return last_error; }
 void bf_clear_error(void) { last_error[0] = '\0'; }
 
-static int log_level = -1;
+/* Read by every thread that logs (bf_parallel_for workers, synth's PNG
+ * writer), set lazily from BITFUSE_LOG: atomic, so the first reads may race
+ * to compute the same value but never tear. */
+static atomic_int log_level = -1;
 
 static bf_log_level log_level_from_env(void)
 {
@@ -54,12 +58,18 @@ static bf_log_level log_level_from_env(void)
     return BF_LOG_INFO;
 }
 
-void bf_log_set_level(bf_log_level level) { log_level = (int)level; }
+void bf_log_set_level(bf_log_level level) { atomic_store(&log_level, (int)level); }
 
 bf_log_level bf_log_get_level(void)
 {
-    if (log_level < 0) log_level = (int)log_level_from_env();
-    return (bf_log_level)log_level;
+    int level = atomic_load(&log_level);
+    if (level < 0) {
+        /* Only replaces "unset": a concurrent bf_log_set_level wins. */
+        int unset = -1;
+        level = (int)log_level_from_env();
+        if (!atomic_compare_exchange_strong(&log_level, &unset, level)) level = unset;
+    }
+    return (bf_log_level)level;
 }
 
 void bf_log(bf_log_level level, const char *fmt, ...)
