@@ -106,19 +106,21 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f)
                        w->dir, f->index, f->t_rgb_s);
     if (f->has_pose && !bf_se3_is_finite(&f->T_wc))
         return bf_fail(BF_INVALID_ARG, "%s: frame %u: pose is not finite", w->dir, f->index);
+    /* A failure part-way leaves the index lines as they were (the contract:
+     * outputs untouched), so the caller may retry or finish without the frame;
+     * only an image file of the failed frame may remain. */
+    size_t len_depth = w->depth_txt.len, len_rgb = w->rgb_txt.len, len_gt = w->gt_txt.len;
     char name[64], path[4096];
     bf_status s;
     snprintf(name, sizeof name, "depth/%.6f.png", f->t_depth_s);
-    if ((s = bf_path_join(path, sizeof path, w->dir, name))) return s;
-    if ((s = replay_png_write_u16(path, f->depth, f->width, f->height))) return s;
-    if ((s = text_printf(&w->depth_txt, "%.6f %s\n", f->t_depth_s, name))) return s;
+    if ((s = bf_path_join(path, sizeof path, w->dir, name))) goto fail;
+    if ((s = replay_png_write_u16(path, f->depth, f->width, f->height))) goto fail;
+    if ((s = text_printf(&w->depth_txt, "%.6f %s\n", f->t_depth_s, name))) goto fail;
     if (f->rgb) {
         snprintf(name, sizeof name, "rgb/%.6f.png", f->t_rgb_s);
-        if ((s = bf_path_join(path, sizeof path, w->dir, name))) return s;
-        if ((s = replay_png_write_rgb8(path, f->rgb, f->width, f->height))) return s;
-        if ((s = text_printf(&w->rgb_txt, "%.6f %s\n", f->t_rgb_s, name))) return s;
-        w->t_last_rgb_s = f->t_rgb_s;
-        w->n_rgb++;
+        if ((s = bf_path_join(path, sizeof path, w->dir, name))) goto fail;
+        if ((s = replay_png_write_rgb8(path, f->rgb, f->width, f->height))) goto fail;
+        if ((s = text_printf(&w->rgb_txt, "%.6f %s\n", f->t_rgb_s, name))) goto fail;
     }
     if (f->has_pose) {
         bf_quat q;
@@ -127,12 +129,21 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f)
         if (q.w < 0) q = (bf_quat){-q.w, -q.x, -q.y, -q.z};
         if ((s = text_printf(&w->gt_txt, "%.6f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", f->t_depth_s, t.x, t.y, t.z,
                              q.x, q.y, q.z, q.w)))
-            return s;
+            goto fail;
         w->n_poses++;
+    }
+    if (f->rgb) {
+        w->t_last_rgb_s = f->t_rgb_s;
+        w->n_rgb++;
     }
     w->t_last_s = f->t_depth_s;
     w->n_frames++;
     return BF_OK;
+fail:
+    w->depth_txt.len = len_depth;
+    w->rgb_txt.len = len_rgb;
+    w->gt_txt.len = len_gt;
+    return s;
 }
 
 static bf_status write_index(const replay_tum_writer *w, const char *name, const text_buf *b)

@@ -105,3 +105,38 @@ BF_TEST(writer_then_reader_round_trip_is_bit_exact)
     }
     rgbd_source_close(src);
 }
+
+BF_TEST(writer_failed_add_leaves_the_index_files_as_they_were)
+{
+    const char *dir = rt_fresh_dir("writer_failed_add");
+    CHECK(dir);
+    bf_intrinsics K = {0, 0, 500, 500, 3.5, 2.5, 5000};
+    replay_tum_writer *w;
+    CHECK_OK(replay_tum_writer_create(dir, &K, &w));
+    uint16_t d[4 * 3] = {1, 2, 3};
+    uint8_t c[4 * 3 * 3] = {9};
+    bf_frame f = {.index = 0, .width = 4, .height = 3, .t_depth_s = 1.0, .t_rgb_s = 1.0, .depth = d, .rgb = c,
+                  .has_pose = true, .T_wc = bf_se3_identity()};
+    /* A folder where frame 0's colour PNG should go: the depth PNG is
+     * written, the colour PNG fails. */
+    char p[1024];
+    snprintf(p, sizeof p, "%s/rgb/1.000000.png", dir);
+    CHECK_OK(bf_mkdir_p(p));
+    CHECK(replay_tum_writer_add(w, &f) != BF_OK);
+    CHECK_ERROR_MENTIONS("1.000000.png");
+    /* The frame is retried later and the folder finished: one line each. */
+    f.t_depth_s = f.t_rgb_s = 2.0;
+    CHECK_OK(replay_tum_writer_add(w, &f));
+    CHECK_OK(replay_tum_writer_finish(w));
+    replay_tum_writer_destroy(w);
+    static const char *const index[3] = {"depth.txt", "rgb.txt", "groundtruth.txt"};
+    for (int k = 0; k < 3; k++) {
+        snprintf(p, sizeof p, "%s/%s", dir, index[k]);
+        char *txt;
+        CHECK_OK(bf_read_file(p, &txt, NULL));
+        bool has_failed = strstr(txt, "1.000000 ") != NULL, has_retry = strstr(txt, "2.000000 ") != NULL;
+        free(txt);
+        CHECK(!has_failed);
+        CHECK(has_retry);
+    }
+}
