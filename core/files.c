@@ -28,15 +28,16 @@ bf_status bf_read_file(const char *path, char **data, size_t *size)
             buf = nb;
             cap = nc;
         }
+        errno = 0;
         size_t r = fread(buf + n, 1, cap - n, f);
         n += r;
         if (r == 0) break;
     }
-    int err = ferror(f);
+    int err = ferror(f) ? (errno ? errno : EIO) : 0; /* a folder opens but reads EISDIR */
     fclose(f);
     if (err) {
         free(buf);
-        return bf_fail(BF_IO, "%s: read error", path);
+        return bf_fail(BF_IO, "%s: cannot read: %s", path, strerror(err));
     }
     buf[n] = '\0';
     *data = buf;

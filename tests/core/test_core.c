@@ -205,6 +205,9 @@ BF_TEST(atomic_write_replaces_file_and_reads_back)
     free(data);
     CHECK_STATUS(bf_read_file("/nonexistent/file", &data, &n), BF_IO);
     CHECK_ERROR_MENTIONS("/nonexistent/file");
+    /* A folder opens for reading on Linux; the read then says why it failed. */
+    CHECK_STATUS(bf_read_file(bf_test_tmpdir(), &data, &n), BF_IO);
+    CHECK_ERROR_MENTIONS("directory");
 }
 
 BF_TEST(status_table_names_every_code)
