@@ -174,7 +174,7 @@ static bool out_reserve(brick_out *o, size_t more)
     if (o->n + more <= o->cap) return true;
     size_t cap = o->cap ? o->cap * 2 : 192;
     while (cap < o->n + more) cap *= 2;
-    tri_vert *v = realloc(o->v, cap * sizeof *v);
+    tri_vert *v = stream__realloc(o->v, cap * sizeof *v);
     if (!v) return false;
     o->v = v;
     o->cap = cap;
@@ -332,7 +332,7 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
                 }
             }
     size_t nk = (size_t)(k + 1);
-    corner *cr = malloc(nk * nk * nk * sizeof *cr);
+    corner *cr = stream__malloc(nk * nk * nk * sizeof *cr);
     if (!cr) {
         o->failed = true;
         return;
@@ -464,10 +464,10 @@ static bf_status taubin(double *pos, uint32_t n_verts, const uint32_t *tri, uint
                         uint32_t iterations)
 {
     if (iterations == 0 || n_verts == 0) return BF_OK;
-    uint32_t *start = calloc((size_t)n_verts + 1, sizeof *start);
-    uint32_t *nb = malloc((size_t)n_tris * 6 * sizeof *nb);
-    uint32_t *fill = malloc((size_t)n_verts * sizeof *fill);
-    double *tmp = malloc((size_t)n_verts * 3 * sizeof *tmp);
+    uint32_t *start = stream__calloc((size_t)n_verts + 1, sizeof *start);
+    uint32_t *nb = stream__malloc((size_t)n_tris * 6 * sizeof *nb);
+    uint32_t *fill = stream__malloc((size_t)n_verts * sizeof *fill);
+    double *tmp = stream__malloc((size_t)n_verts * 3 * sizeof *tmp);
     if (!start || !nb || !fill || !tmp) {
         free(start), free(nb), free(fill), free(tmp);
         return bf_fail(BF_NO_MEMORY, "export: no memory to smooth %u vertices", n_verts);
@@ -541,7 +541,7 @@ bf_status stream_export_mesh(const fusion_snapshot *s, const stream_mesh_config 
     for (uint32_t k = 0; k < g.n; k++) sx.bricks_per_level[stream__level_slot(s->bricks[g.order[k]].level)]++;
     if (g.n == 0) goto done;
 
-    bo = calloc(g.n, sizeof *bo);
+    bo = stream__calloc(g.n, sizeof *bo);
     if (!bo) goto fail_mem;
     mesh_job job = {&g, lo, bo};
     bf_parallel_for(g.n, mesh_brick, &job);
@@ -562,9 +562,9 @@ bf_status stream_export_mesh(const fusion_snapshot *s, const stream_mesh_config 
     /* Weld: one vertex per lattice edge, numbered in order of first use. */
     uint64_t cap = 16;
     while (cap < n_tv) cap <<= 1;
-    ws = malloc(cap * sizeof *ws);
-    m.tri = malloc(n_tv * sizeof *m.tri);
-    pos = malloc(n_tv * 3 * sizeof *pos); /* at most one vertex per triangle corner */
+    ws = stream__malloc(cap * sizeof *ws);
+    m.tri = stream__malloc(n_tv * sizeof *m.tri);
+    pos = stream__malloc(n_tv * 3 * sizeof *pos); /* at most one vertex per triangle corner */
     if (!ws || !m.tri || !pos) goto fail_mem;
     for (uint64_t k = 0; k < cap; k++) ws[k].idx = UINT32_MAX;
     size_t t_i = 0;
@@ -598,9 +598,9 @@ bf_status stream_export_mesh(const fusion_snapshot *s, const stream_mesh_config 
     /* Positions stay relative to origin_w while smoothing (small numbers). */
     rc = taubin(pos, m.n_verts, m.tri, m.n_tris, c.taubin_lambda, c.taubin_mu, c.taubin_iterations);
     if (rc != BF_OK) goto fail;
-    m.xyz = malloc((size_t)m.n_verts * 3 * sizeof *m.xyz);
-    m.normal = calloc((size_t)m.n_verts * 3, sizeof *m.normal);
-    double *acc = calloc((size_t)m.n_verts * 3, sizeof *acc);
+    m.xyz = stream__malloc((size_t)m.n_verts * 3 * sizeof *m.xyz);
+    m.normal = stream__calloc((size_t)m.n_verts * 3, sizeof *m.normal);
+    double *acc = stream__calloc((size_t)m.n_verts * 3, sizeof *acc);
     if (!m.xyz || !m.normal || !acc) {
         free(acc);
         goto fail_mem;

@@ -111,8 +111,8 @@ static void points_brick(void *ctx, size_t k)
                 n++;
             }
     if (n == 0) return;
-    o->xyz = malloc(n * 3 * sizeof *o->xyz);
-    o->normal = malloc(n * 3 * sizeof *o->normal);
+    o->xyz = stream__malloc(n * 3 * sizeof *o->xyz);
+    o->normal = stream__malloc(n * 3 * sizeof *o->normal);
     if (!o->xyz || !o->normal) {
         o->failed = true;
         return;
@@ -138,7 +138,7 @@ bf_status stream_export_points(const fusion_snapshot *s, eval_mesh *out, stream_
     point_out *po = NULL;
     for (uint32_t k = 0; k < g.n; k++) sx.bricks_per_level[stream__level_slot(s->bricks[g.order[k]].level)]++;
     if (g.n) {
-        po = calloc(g.n, sizeof *po);
+        po = stream__calloc(g.n, sizeof *po);
         if (!po) goto fail_mem;
         point_job job = {&g, po};
         bf_parallel_for(g.n, points_brick, &job);
@@ -153,8 +153,8 @@ bf_status stream_export_points(const fusion_snapshot *s, eval_mesh *out, stream_
             goto fail;
         }
         if (n) {
-            m.xyz = malloc(n * 3 * sizeof *m.xyz);
-            m.normal = malloc(n * 3 * sizeof *m.normal);
+            m.xyz = stream__malloc(n * 3 * sizeof *m.xyz);
+            m.normal = stream__malloc(n * 3 * sizeof *m.normal);
             if (!m.xyz || !m.normal) goto fail_mem;
             for (uint32_t k = 0; k < g.n; k++) {
                 if (po[k].n == 0) continue;

@@ -2,10 +2,25 @@
  * global brick coordinates) to the snapshot's bricks, the finest-confident-
  * voxel lookup and the smoothed sign field. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "stream_int.h"
+
+_Atomic long stream__fail_countdown = 0;
+
+static bool fault(void)
+{
+    long n = stream__fail_countdown;
+    while (n > 0)
+        if (atomic_compare_exchange_weak(&stream__fail_countdown, &n, n - 1)) return n == 1;
+    return false;
+}
+
+void *stream__malloc(size_t size) { return fault() ? NULL : malloc(size); }
+void *stream__calloc(size_t n, size_t size) { return fault() ? NULL : calloc(n, size); }
+void *stream__realloc(void *p, size_t size) { return fault() ? NULL : realloc(p, size); }
 
 static uint64_t hash_key(uint32_t level, const int64_t b[3])
 {
@@ -225,11 +240,11 @@ bf_status stream__grid_build(const fusion_snapshot *s, bool with_field, stream__
     uint64_t cap = 16;
     while (cap < 2ull * s->n_bricks) cap <<= 1;
     g->mask = cap - 1;
-    g->slots = malloc(cap * sizeof *g->slots);
-    g->bc = malloc((size_t)s->n_bricks * sizeof *g->bc);
-    g->has_finer = calloc(s->n_bricks, 1);
-    g->order = malloc((size_t)s->n_bricks * sizeof *g->order);
-    if (with_field) g->sfield = malloc((size_t)s->n_bricks * BRICK_VOXELS);
+    g->slots = stream__malloc(cap * sizeof *g->slots);
+    g->bc = stream__malloc((size_t)s->n_bricks * sizeof *g->bc);
+    g->has_finer = stream__calloc(s->n_bricks, 1);
+    g->order = stream__malloc((size_t)s->n_bricks * sizeof *g->order);
+    if (with_field) g->sfield = stream__malloc((size_t)s->n_bricks * BRICK_VOXELS);
     if (!g->slots || !g->bc || !g->has_finer || !g->order || (with_field && !g->sfield)) goto fail_mem;
     for (uint64_t k = 0; k < cap; k++) g->slots[k].idx = STREAM__NONE;
     for (uint32_t i = 0; i < s->n_bricks; i++) {

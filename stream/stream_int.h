@@ -70,6 +70,15 @@ double stream__grid_field(const stream__grid *g, uint32_t level, const int64_t q
 /* Field of one voxel (level-L global coordinates), NAN when it has none. */
 double stream__grid_voxel_field(const stream__grid *g, uint32_t level, const int64_t v[3]);
 
+/* Allocation with fault injection for the tests (SQLite's FAULT_INSTALL
+ * idea): when stream__fail_countdown is set to n > 0, the n-th allocation
+ * from then on returns NULL (and the countdown stops at 0). Every
+ * allocation in stream/ goes through these. */
+extern _Atomic long stream__fail_countdown;
+void *stream__malloc(size_t size);
+void *stream__calloc(size_t n, size_t size);
+void *stream__realloc(void *p, size_t size);
+
 static inline bool stream__bit(const uint32_t *words, uint32_t x, uint32_t y, uint32_t z)
 {
     return (words[brick_word(x, y, z)] >> brick_bit(x, y, z)) & 1u;

@@ -209,6 +209,12 @@ static void check_box(bool rotated)
 BF_TEST(rotated_box_is_closed_and_within_a_quarter_voxel_on_faces) { check_box(true); }
 BF_TEST(axis_aligned_box_is_closed_and_within_half_a_voxel_on_faces) { check_box(false); }
 
+static int cmp_u64(const void *x, const void *y)
+{
+    uint64_t a = *(const uint64_t *)x, b = *(const uint64_t *)y;
+    return a < b ? -1 : a > b;
+}
+
 /* A tilted plane through a corner shared by eight chunks (keys -1 and 0 on
  * every axis), meshed inside a box: the only open edges are at the box's
  * faces, none at brick or chunk borders inside. */
@@ -257,8 +263,7 @@ BF_TEST(plane_across_chunk_borders_with_negative_keys_has_no_cracks)
                 uint64_t a = m.tri[3 * t + k], b = m.tri[3 * t + (k + 1) % 3];
                 key[3 * t + k] = a < b ? a << 32 | b : b << 32 | a;
             }
-        int cmp(const void *x, const void *y);
-        qsort(key, n, sizeof *key, (int (*)(const void *, const void *))cmp);
+        qsort(key, n, sizeof *key, cmp_u64);
         for (size_t i = 0; i < n;) {
             size_t j = i + 1;
             while (j < n && key[j] == key[i]) j++;
@@ -290,12 +295,6 @@ BF_TEST(plane_across_chunk_borders_with_negative_keys_has_no_cracks)
         CHECK(bf_v3_dot(pl.n, bf_v3(m.normal[3 * i], m.normal[3 * i + 1], m.normal[3 * i + 2])) > 0.5);
     eval_mesh_free(&m);
     fx_free(&s);
-}
-
-int cmp(const void *x, const void *y)
-{
-    uint64_t a = *(const uint64_t *)x, b = *(const uint64_t *)y;
-    return a < b ? -1 : a > b;
 }
 
 BF_TEST(non_confident_voxels_never_produce_geometry)
