@@ -97,6 +97,10 @@ int cmd_info(int argc, char **argv)
     if (!st.hist) return app_fail("info", bf_fail(BF_NO_MEMORY, "depth histogram"));
     bf_status s = replay_open(path, &opt, &src);
     if (s == BF_OK) s = info_gather(src, &st);
+    /* Every frame skipped (--skip-bad-frames) leaves nothing to describe: a
+     * script must not take that sequence for a good one. */
+    if (s == BF_OK && st.n_frames == 0)
+        s = bf_fail(BF_FORMAT, "%s: no frame could be read (%u skipped)", path, replay_skipped_frames(src));
     if (s) {
         free(st.hist);
         rgbd_source_close(src);
