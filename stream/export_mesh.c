@@ -560,11 +560,14 @@ bf_status stream_export_mesh(const fusion_snapshot *s, const stream_mesh_config 
     if (m.n_tris == 0) goto done;
 
     /* Weld: one vertex per lattice edge, numbered in order of first use. */
+    /* More slots than triangle corners, so an empty slot always exists; a
+     * closed mesh has about one vertex per 6 corners, so the load is low. */
     uint64_t cap = 16;
-    while (cap < n_tv) cap <<= 1;
+    while (cap <= n_tv) cap <<= 1;
+    size_t pos_cap = n_tv / 4 + 16; /* grown below if the mesh has many rim vertices */
     ws = stream__malloc(cap * sizeof *ws);
     m.tri = stream__malloc(n_tv * sizeof *m.tri);
-    pos = stream__malloc(n_tv * 3 * sizeof *pos); /* at most one vertex per triangle corner */
+    pos = stream__malloc(pos_cap * 3 * sizeof *pos);
     if (!ws || !m.tri || !pos) goto fail_mem;
     for (uint64_t k = 0; k < cap; k++) ws[k].idx = UINT32_MAX;
     size_t t_i = 0;
@@ -577,6 +580,12 @@ bf_status stream_export_mesh(const fusion_snapshot *s, const stream_mesh_config 
             uint64_t sl = h & (cap - 1);
             while (ws[sl].idx != UINT32_MAX && (ws[sl].k0 != tv->k0 || ws[sl].k1 != tv->k1)) sl = (sl + 1) & (cap - 1);
             if (ws[sl].idx == UINT32_MAX) {
+                if (m.n_verts == pos_cap) {
+                    double *p = stream__realloc(pos, pos_cap * 2 * 3 * sizeof *pos);
+                    if (!p) goto fail_mem;
+                    pos = p;
+                    pos_cap *= 2;
+                }
                 ws[sl].k0 = tv->k0, ws[sl].k1 = tv->k1, ws[sl].idx = m.n_verts;
                 int64_t cc[3];
                 int ax;
