@@ -87,9 +87,12 @@ bf_status bf_write_file_atomic(const char *path, const void *data, size_t size)
         p += w;
         left -= (size_t)w;
     }
-    if (fsync(fd) != 0 || close(fd) != 0) {
+    /* Close even when fsync fails, or the descriptor leaks. */
+    int e = fsync(fd) != 0 ? errno : 0;
+    if (close(fd) != 0 && !e) e = errno;
+    if (e) {
         unlink(tmp);
-        return bf_fail(BF_IO, "%s: cannot flush: %s", tmp, strerror(errno));
+        return bf_fail(BF_IO, "%s: cannot flush: %s", tmp, strerror(e));
     }
     if (rename(tmp, path) != 0) {
         int e = errno;
