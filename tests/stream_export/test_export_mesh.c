@@ -393,7 +393,7 @@ static bool meshes_equal(const eval_mesh *a, const eval_mesh *b)
            !memcmp(a->tri, b->tri, (size_t)a->n_tris * 3 * sizeof(uint32_t));
 }
 
-BF_TEST(result_does_not_depend_on_brick_order_and_duplicates_are_dropped)
+BF_TEST(result_does_not_depend_on_brick_order_or_threads_and_duplicates_are_dropped)
 {
     fusion_snapshot s;
     snap_init(&s);
@@ -426,6 +426,21 @@ BF_TEST(result_does_not_depend_on_brick_order_and_duplicates_are_dropped)
     CHECK_EQ_INT(sb.n_duplicates, 10);
     CHECK_EQ_INT(sb.n_bricks, sa.n_bricks);
     CHECK(meshes_equal(&a, &b));
+    /* One thread and three threads: the same bytes. */
+    eval_mesh c1, c3;
+    const char *env = getenv("BITFUSE_THREADS");
+    char *saved = env ? strdup(env) : NULL;
+    setenv("BITFUSE_THREADS", "1", 1);
+    CHECK_OK(stream_export_mesh(&t, NULL, &c1, NULL));
+    setenv("BITFUSE_THREADS", "3", 1);
+    CHECK_OK(stream_export_mesh(&t, NULL, &c3, NULL));
+    if (saved)
+        setenv("BITFUSE_THREADS", saved, 1);
+    else
+        unsetenv("BITFUSE_THREADS");
+    free(saved);
+    CHECK(meshes_equal(&a, &c1) && meshes_equal(&a, &c3));
+    eval_mesh_free(&c1), eval_mesh_free(&c3);
     CHECK(pa.n_verts == pb.n_verts && !memcmp(pa.xyz, pb.xyz, (size_t)pa.n_verts * 12) &&
           !memcmp(pa.normal, pb.normal, (size_t)pa.n_verts * 12));
     eval_mesh_free(&a), eval_mesh_free(&b), eval_mesh_free(&pa), eval_mesh_free(&pb);
