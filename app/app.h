@@ -26,6 +26,7 @@ bool app_is_help(const char *arg);
 
 int cmd_demo(int argc, char **argv);
 int cmd_synth(int argc, char **argv);
+int cmd_fuse(int argc, char **argv);
 int cmd_eval_traj(int argc, char **argv);
 int cmd_eval_surface(int argc, char **argv);
 int cmd_devices(int argc, char **argv);

@@ -14,6 +14,7 @@ typedef struct app_command {
 static const app_command commands[] = {
     {"demo", cmd_demo, "make a short synthetic sequence and evaluate it (built-in data)"},
     {"synth", cmd_synth, "render a synthetic RGB-D sequence with ground truth (TUM folder)"},
+    {"fuse", cmd_fuse, "fuse a sequence with known poses into the map; export mesh and points"},
     {"info", cmd_info, "read a sequence and print what it holds"},
     {"eval-traj", cmd_eval_traj, "trajectory error: ATE and RPE (TUM benchmark rules)"},
     {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},

@@ -77,7 +77,8 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
     gpu_cmd_fill(m->ctx, m->locks, 0, GPU_WHOLE_SIZE, 0);
     /* Publishes the fills (and the frame's upload) to the first pass. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    gpu_cmd_dispatch(m->ctx, m->p_alloc, m->b_alloc, &pc, gpu_groups(n_pixels, FUSION_ALLOC_LOCAL), 1, 1);
+    uint32_t tiles = gpu_groups(m->K.width, FUSION_ALLOC_TILE) * gpu_groups(m->K.height, FUSION_ALLOC_TILE);
+    gpu_cmd_dispatch(m->ctx, m->p_alloc, m->b_alloc, &pc, gpu_groups(tiles, FUSION_ALLOC_LOCAL), 1, 1);
     for (uint32_t p = 1; p <= alloc_retry_passes(m); p++) {
         pc.pass = p;
         /* The previous pass's queue writes -> the args pass reading the count. */

@@ -141,11 +141,19 @@ void touch_brick(uint node, uint entry, uvec3 cell, uint level)
     atomicExchange(nodes.w[f], b);
 }
 
-/* Inserts point p (map frame) at level; false if it must be retried. */
-bool insert_point(vec3 p, uint level)
+/* The chunk of map point p and its cell at level inside the chunk. */
+void locate(vec3 p, uint level, out ivec3 key, out uvec3 cell)
 {
-    ivec3 key = ivec3(floor(p / pc.chunk_m));
+    key = ivec3(floor(p / pc.chunk_m));
     vec3 q = p - vec3(key) * pc.chunk_m; /* chunk-local, in [0, chunk_m) up to rounding */
+    float cell_m = pc.chunk_m / float(1u << level); /* edge of a level-`level` cell */
+    cell = uvec3(clamp(ivec3(floor(q / cell_m)), ivec3(0), ivec3((1 << level) - 1)));
+}
+
+/* Inserts the brick of cell at level in chunk key; false if it must be
+ * retried. */
+bool insert_cell(ivec3 key, uvec3 cell, uint level)
+{
     uint bucket = fusion_hash(key.x, key.y, key.z, pc.n_buckets);
     uint entry = find_chunk(bucket, key);
     if (entry == FUSION_NONE) {
@@ -153,8 +161,6 @@ bool insert_point(vec3 p, uint level)
         entry = insert_chunk(bucket, key);
         if (entry == FUSION_NONE) return true; /* pool full: dropped and counted */
     }
-    float cell_m = pc.chunk_m / float(1u << level); /* edge of a level-`level` cell */
-    uvec3 cell = uvec3(clamp(ivec3(floor(q / cell_m)), ivec3(0), ivec3((1 << level) - 1)));
     uint node = hash.w[entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
     for (uint l = 1u; l <= level; l++) {
         uint f = node * FUSION_NODE_WORDS + FUSION_NODE_CHILD;
@@ -186,38 +192,78 @@ uint depth_raw(uint slot, uint pixel, uint n_pixels)
     return (pixel & 1u) == 0u ? (w & 0xFFFFu) : (w >> 16);
 }
 
+/* The map point of band point k of a pixel, and its level; false when the
+ * pixel has no usable depth. */
+bool band_point(fusion_frame fr, uint pixel, uint k, out vec3 p, out uint level)
+{
+    uint n_pixels = fr.width * fr.height;
+    float z = float(depth_raw(pc.slot, pixel, n_pixels)) * fr.depth_unit_m;
+    p = vec3(0.0);
+    level = 0u;
+    if (!(z > 0.0) || z > pc.max_depth_m) return false;
+    float sigma = fusion_sigma(z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
+    level = fusion_level_for_footprint(pc.voxel_ratio * z / abs(fr.fx), pc.chunk_m, pc.max_level);
+    float zk = z + (float(k) - 1.0) * pc.band_sigmas * sigma;
+    if (!(zk > 0.0)) return false;
+    float u = float(pixel % fr.width), v = float(pixel / fr.width);
+    vec3 ray = vec3((u - fr.cx) / fr.fx, (v - fr.cy) / fr.fy, 1.0); /* camera frame, z = 1 */
+    /* T_cm maps map points to the camera: p_m = R^T (p_c - t). GLSL's
+     * mat3(...) is column-major, so these columns are R's rows: Rt = R^T. */
+    mat3 Rt = mat3(fr.R[0], fr.R[1], fr.R[2], fr.R[3], fr.R[4], fr.R[5], fr.R[6], fr.R[7], fr.R[8]);
+    p = Rt * (ray * zk - vec3(fr.t[0], fr.t[1], fr.t[2]));
+    return true;
+}
+
 void main()
 {
     fusion_frame fr = frames.f[pc.slot];
     uint n_pixels = fr.width * fr.height;
-    uint item;
-    if (pc.pass == 0u) {
-        item = gl_GlobalInvocationID.x * 4u; /* band points 0..2 handled in the loop below */
-    } else {
+    if (pc.pass > 0u) {
         uint q = (pc.pass - 1u) % 2u;
         uint i = gl_GlobalInvocationID.x;
         if (i >= min(queue.w[4u * q], pc.queue_cap)) return;
-        item = queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i];
+        uint item = queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i];
+        uint pixel = item / 4u, k = item % 4u;
+        vec3 p;
+        uint level;
+        if (pixel >= n_pixels || !band_point(fr, pixel, k, p, level)) return;
+        ivec3 key;
+        uvec3 cell;
+        locate(p, level, key, cell);
+        if (!insert_cell(key, cell, level)) retry(item);
+        return;
     }
-    uint pixel = item / 4u;
-    if (pixel >= n_pixels) return;
-    float z = float(depth_raw(pc.slot, pixel, n_pixels)) * fr.depth_unit_m;
-    if (!(z > 0.0) || z > pc.max_depth_m) return;
-    float u = float(pixel % fr.width), v = float(pixel / fr.width);
-    vec3 ray = vec3((u - fr.cx) / fr.fx, (v - fr.cy) / fr.fy, 1.0); /* camera frame, z = 1 */
-    float sigma = fusion_sigma(z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
-    uint level = fusion_level_for_footprint(pc.voxel_ratio * z / abs(fr.fx), pc.chunk_m, pc.max_level);
-    float band = pc.band_sigmas * sigma;
-    /* T_cm maps map points to the camera: p_m = R^T (p_c - t). */
-    mat3 Rt = mat3(fr.R[0], fr.R[1], fr.R[2], fr.R[3], fr.R[4], fr.R[5], fr.R[6], fr.R[7], fr.R[8]);
-    vec3 t = vec3(fr.t[0], fr.t[1], fr.t[2]);
-    uint k_first = pc.pass == 0u ? 0u : item % 4u, k_last = pc.pass == 0u ? 2u : item % 4u;
-    for (uint k = k_first; k <= k_last; k++) {
-        float zk = z + (float(k) - 1.0) * band;
-        if (!(zk > 0.0)) continue;
-        /* GLSL's mat3(...) is column-major: these columns are R's rows, so
-         * Rt * x = R^T x. */
-        vec3 p = Rt * (ray * zk - t);
-        if (!insert_point(p, level)) retry(pixel * 4u + k);
-    }
+    /* Pass 0: one invocation per tile of FUSION_ALLOC_TILE^2 pixels. Every
+     * sample is inserted, but a point in the same level cell as the last one
+     * of its band index would only repeat the same descent: skip it (a
+     * brick spans about 8 pixels at voxel-to-pixel ratio 1). */
+    uint tiles_x = (fr.width + FUSION_ALLOC_TILE - 1u) / FUSION_ALLOC_TILE;
+    uint tile = gl_GlobalInvocationID.x;
+    uint tx = tile % tiles_x, ty = tile / tiles_x;
+    uint rows = ty * FUSION_ALLOC_TILE < fr.height ? FUSION_ALLOC_TILE : 0u;
+    /* Per band index: the last cell inserted (key, then cell and level). */
+    ivec3 last_key[3] = ivec3[3](ivec3(0), ivec3(0), ivec3(0));
+    uvec4 last_cell[3] = uvec4[3](uvec4(0xFFFFFFFFu), uvec4(0xFFFFFFFFu), uvec4(0xFFFFFFFFu));
+    for (uint dy = 0u; dy < rows; dy++)
+        for (uint dx = 0u; dx < FUSION_ALLOC_TILE; dx++) {
+            uint x = tx * FUSION_ALLOC_TILE + dx, y = ty * FUSION_ALLOC_TILE + dy;
+            if (x >= fr.width || y >= fr.height) continue;
+            uint pixel = y * fr.width + x;
+            for (uint k = 0u; k < 3u; k++) {
+                vec3 p;
+                uint level;
+                if (!band_point(fr, pixel, k, p, level)) break;
+                ivec3 key;
+                uvec3 cell;
+                locate(p, level, key, cell);
+                uvec4 id = uvec4(cell, level);
+                if (all(equal(id, last_cell[k])) && all(equal(key, last_key[k]))) continue;
+                if (insert_cell(key, cell, level)) {
+                    last_key[k] = key;
+                    last_cell[k] = id;
+                } else {
+                    retry(pixel * 4u + k);
+                }
+            }
+        }
 }

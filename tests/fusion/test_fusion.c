@@ -123,15 +123,15 @@ static size_t expected_cells(const bf_intrinsics *K, const fusion_config *c, con
 
 /* Runs one plane frame through a fresh map and compares the allocated
  * bricks with the CPU's expectation. */
-static void check_plane_allocation(bf_vec3 origin_w, bf_se3 T_wc, double z)
+static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_se3 T_wc, double z)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     fusion_config c = small_config();
     fusion_map *map;
-    CHECK_OK(fusion_create(ctx, &c, &K_TEST, origin_w, &map));
-    uint16_t *depth = plane_depth(&K_TEST, z);
-    bf_frame f = make_frame(&K_TEST, depth, 0);
+    CHECK_OK(fusion_create(ctx, &c, K, origin_w, &map));
+    uint16_t *depth = plane_depth(K, z);
+    bf_frame f = make_frame(K, depth, 0);
     CHECK_OK(fusion_add_frame(map, &f, &T_wc));
     CHECK_OK(fusion_check(map));
     fusion_snapshot snap;
@@ -140,7 +140,7 @@ static void check_plane_allocation(bf_vec3 origin_w, bf_se3 T_wc, double z)
     T_mc.t = bf_v3_sub(T_wc.t, origin_w);
     size_t cap = 4096;
     expect_cell *exp = malloc(cap * sizeof *exp);
-    size_t n = expected_cells(&K_TEST, &c, &T_mc, z, exp, cap);
+    size_t n = expected_cells(K, &c, &T_mc, z, exp, cap);
     CHECK(n < cap);
     size_t n_sure = 0;
     for (size_t i = 0; i < n; i++) {
@@ -148,6 +148,9 @@ static void check_plane_allocation(bf_vec3 origin_w, bf_se3 T_wc, double z)
         n_sure++;
         bool found = false;
         for (uint32_t b = 0; b < snap.n_bricks && !found; b++) found = same_cell(&exp[i], &snap.bricks[b]);
+        if (!found)
+            fprintf(stderr, "  missing brick: chunk (%d,%d,%d) level %u cell (%u,%u,%u)\n", exp[i].key[0], exp[i].key[1],
+                    exp[i].key[2], exp[i].level, exp[i].cell[0], exp[i].cell[1], exp[i].cell[2]);
         CHECK(found);
     }
     for (uint32_t b = 0; b < snap.n_bricks; b++) {
@@ -173,7 +176,10 @@ BF_TEST(plane_allocates_exactly_the_band_bricks)
 {
     /* Camera at the origin looking along +z at a plane 1.3 m away: the
      * plane spans negative and positive x and y, so chunks -1 and 0. */
-    check_plane_allocation(bf_v3(0, 0, 0), bf_se3_identity(), 1.3);
+    check_plane_allocation(&K_TEST, bf_v3(0, 0, 0), bf_se3_identity(), 1.3);
+    /* A width whose tiles do not fill the last workgroup. */
+    bf_intrinsics K = {164, 118, 130.0, 130.0, 81.5, 58.5, 5000};
+    check_plane_allocation(&K, bf_v3(0, 0, 0), bf_se3_identity(), 0.8);
 }
 
 BF_TEST(allocation_10_km_from_the_origin_matches_the_origin)
@@ -182,7 +188,7 @@ BF_TEST(allocation_10_km_from_the_origin_matches_the_origin)
      * and the same bricks come out as at the origin (DESIGN.md section 10). */
     bf_vec3 far = bf_v3(1e4, -1e4, 5e3);
     bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.2), far);
-    check_plane_allocation(far, T, 1.1);
+    check_plane_allocation(&K_TEST, far, T, 1.1);
 }
 
 BF_TEST(full_brick_pool_is_reported_and_map_stays_consistent)

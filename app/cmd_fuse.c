@@ -1,0 +1,306 @@
+/* bitfuse fuse: fuse a sequence into the sign-bit map with known camera
+ * poses, export a mesh and a point cloud, report time and memory. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "app.h"
+#include "eval/eval.h"
+#include "fusion/fusion.h"
+#include "gpu/gpu.h"
+#include "replay/replay.h"
+#include "stream/stream.h"
+
+static const char fuse_help[] =
+    "usage: bitfuse fuse SEQUENCE --poses FILE|groundtruth --out DIR [options]\n"
+    "\n"
+    "Fuses every frame of SEQUENCE into the sign-bit map (DESIGN.md sections 3-4) with the\n"
+    "given camera poses, then writes into DIR:\n"
+    "  mesh.ply     triangle mesh of the confident surface (binary PLY, normals)\n"
+    "  points.ply   surface voxel centres with normals (binary PLY)\n"
+    "  stats.json   frames, time per frame (median, p95), GPU time per stage, map bytes\n"
+    "               by part, bricks per level, surface voxels, bits per voxel\n"
+    "\n"
+    "options:\n"
+    "  --poses P          'groundtruth' (the sequence's own) or a TUM trajectory file\n"
+    "                     (camera-to-world; poses interpolated at the depth timestamps)\n"
+    "  --out DIR          output folder (created)\n"
+    "  --ratio R          voxel-to-pixel ratio of the level rule, default 1\n"
+    "  --window N         frames per window (even), default 40\n"
+    "  --subcache N       frames of the new-brick pass, default 10\n"
+    "  --bricks N         brick pool size, default 1048576\n"
+    "  --chunk M          chunk edge in metres, default 2\n"
+    "  --max-level L      finest octree level, default 8\n"
+    "  --no-mesh          skip the mesh (points and stats only)\n"
+    "%s"
+    "\n"
+    "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input, 4 no Vulkan device\n";
+
+typedef struct fuse_args {
+    const char *seq, *poses, *out;
+    replay_options ropt;
+    fusion_config fcfg;
+    bool no_mesh;
+} fuse_args;
+
+static int parse_args(int argc, char **argv, fuse_args *a)
+{
+    const char *cmd = "fuse";
+    memset(a, 0, sizeof *a);
+    a->fcfg = fusion_config_default();
+    for (int i = 1; i < argc; i++) {
+        int r = replay_parse_option(argc, argv, &i, &a->ropt);
+        if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
+        if (r > 0) continue;
+        const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        double d;
+        uint32_t u;
+        if (app_is_help(o)) {
+            printf(fuse_help, replay_options_help());
+            return -1;
+        } else if (!strcmp(o, "--no-mesh")) {
+            a->no_mesh = true;
+        } else if (o[0] != '-') {
+            if (a->seq) return app_usage_error(cmd, "more than one sequence: %s", o);
+            a->seq = o;
+        } else if (!v) {
+            return app_usage_error(cmd, "%s needs a value", o);
+        } else if (!strcmp(o, "--poses")) {
+            a->poses = v, i++;
+        } else if (!strcmp(o, "--out")) {
+            a->out = v, i++;
+        } else if (!strcmp(o, "--ratio") && bf_parse_double(v, &d)) {
+            a->fcfg.voxel_ratio = (float)d, i++;
+        } else if (!strcmp(o, "--chunk") && bf_parse_double(v, &d)) {
+            a->fcfg.chunk_m = (float)d, i++;
+        } else if (!strcmp(o, "--window") && bf_parse_u32(v, &u)) {
+            a->fcfg.window = u, i++;
+        } else if (!strcmp(o, "--subcache") && bf_parse_u32(v, &u)) {
+            a->fcfg.subcache = u, i++;
+        } else if (!strcmp(o, "--bricks") && bf_parse_u32(v, &u)) {
+            a->fcfg.brick_cap = u, i++;
+        } else if (!strcmp(o, "--max-level") && bf_parse_u32(v, &u)) {
+            a->fcfg.max_level = u, i++;
+        } else {
+            return app_usage_error(cmd, "unknown option or bad value: %s %s", o, v);
+        }
+    }
+    if (!a->seq) return app_usage_error(cmd, "no sequence given");
+    if (!a->poses) return app_usage_error(cmd, "--poses is required (groundtruth or a TUM file)");
+    if (!a->out) return app_usage_error(cmd, "--out is required");
+    return 0;
+}
+
+/* Per-frame measurements. */
+typedef struct fuse_timing {
+    bf_stats frame_ms, upload_ms, alloc_ms, subcache_ms, window_ms;
+} fuse_timing;
+
+static void timing_free(fuse_timing *t)
+{
+    bf_stats_free(&t->frame_ms);
+    bf_stats_free(&t->upload_ms);
+    bf_stats_free(&t->alloc_ms);
+    bf_stats_free(&t->subcache_ms);
+    bf_stats_free(&t->window_ms);
+}
+
+/* The pose of frame f: its ground truth, or the trajectory at its depth
+ * timestamp. False when there is none (the frame is skipped). */
+static bool frame_pose(const bf_frame *f, const replay_traj *traj, bf_se3 *T_wc)
+{
+    if (!traj) {
+        if (!f->has_pose) return false;
+        *T_wc = f->T_wc;
+        return true;
+    }
+    return replay_traj_interpolate(traj, f->t_depth_s, T_wc);
+}
+
+typedef struct fuse_result {
+    uint32_t n_fused, n_skipped;
+    fusion_stats map;
+    stream_export_stats mesh_st, points_st;
+    double seconds;
+    char device[256];
+} fuse_result;
+
+static void write_stats_json(FILE *f, const fuse_args *a, const fuse_result *r, const fuse_timing *t)
+{
+    const fusion_stats *m = &r->map;
+    uint64_t voxels = (uint64_t)m->n_bricks * 512;
+    fprintf(f, "{\n  \"command\": \"fuse\",\n  \"sequence\": ");
+    bf_json_string(f, a->seq);
+    fprintf(f, ",\n  \"device\": ");
+    bf_json_string(f, r->device);
+    fprintf(f, ",\n  \"config\": {\"voxel_ratio\": %g, \"window\": %u, \"subcache\": %u, \"chunk_m\": %g, "
+               "\"max_level\": %u, \"brick_cap\": %u},\n",
+            a->fcfg.voxel_ratio, a->fcfg.window, a->fcfg.subcache, a->fcfg.chunk_m, a->fcfg.max_level,
+            a->fcfg.brick_cap);
+    fprintf(f, "  \"frames\": %u,\n  \"frames_skipped\": %u,\n", r->n_fused, r->n_skipped);
+    fprintf(f, "  \"frame_ms\": {\"median\": ");
+    bf_json_number(f, bf_stats_percentile(&t->frame_ms, 50), 5);
+    fprintf(f, ", \"p95\": ");
+    bf_json_number(f, bf_stats_percentile(&t->frame_ms, 95), 5);
+    fprintf(f, ", \"mean\": ");
+    bf_json_number(f, bf_stats_mean(&t->frame_ms), 5);
+    fprintf(f, "},\n  \"gpu_stage_ms_median\": {\"upload\": ");
+    bf_json_number(f, bf_stats_percentile(&t->upload_ms, 50), 4);
+    fprintf(f, ", \"alloc\": ");
+    bf_json_number(f, bf_stats_percentile(&t->alloc_ms, 50), 4);
+    fprintf(f, ", \"subcache\": ");
+    bf_json_number(f, bf_stats_percentile(&t->subcache_ms, 50), 4);
+    fprintf(f, ", \"window\": ");
+    bf_json_number(f, bf_stats_percentile(&t->window_ms, 50), 4);
+    fprintf(f, "},\n  \"map_bytes\": {\"sign\": %llu, \"confidence\": %llu, \"brick_records\": %llu, "
+               "\"nodes\": %llu, \"hash\": %llu, \"total\": %llu, \"reserved\": %llu},\n",
+            (unsigned long long)m->bytes_sign, (unsigned long long)m->bytes_conf, (unsigned long long)m->bytes_info,
+            (unsigned long long)m->bytes_nodes, (unsigned long long)m->bytes_hash, (unsigned long long)m->bytes_total,
+            (unsigned long long)m->bytes_reserved);
+    fprintf(f, "  \"chunks\": %u,\n  \"nodes\": %u,\n  \"bricks\": %u,\n  \"bricks_per_level\": [", m->n_chunks,
+            m->n_nodes, m->n_bricks);
+    for (int l = 0; l <= (int)a->fcfg.max_level; l++) fprintf(f, "%s%u", l ? ", " : "", m->bricks_per_level[l]);
+    fprintf(f, "],\n  \"allocated_voxels\": %llu,\n  \"confident_voxels\": %llu,\n  \"surface_voxels\": %llu,\n",
+            (unsigned long long)voxels, (unsigned long long)m->n_confident_voxels,
+            (unsigned long long)r->points_st.n_points);
+    fprintf(f, "  \"bits_per_allocated_voxel\": ");
+    bf_json_number(f, voxels ? 8.0 * (double)m->bytes_total / (double)voxels : NAN, 4);
+    fprintf(f, ",\n  \"bits_per_surface_voxel\": ");
+    bf_json_number(f, r->points_st.n_points ? 8.0 * (double)m->bytes_total / (double)r->points_st.n_points : NAN, 4);
+    fprintf(f, ",\n  \"tsdf_4byte_bytes_same_voxels\": %llu,\n", (unsigned long long)(voxels * 4));
+    fprintf(f, "  \"pool_full_drops\": {\"nodes\": %u, \"bricks\": %u, \"chunks\": %u},\n", m->fail_nodes,
+            m->fail_bricks, m->fail_hash);
+    fprintf(f, "  \"mesh\": {\"vertices\": %llu, \"triangles\": %llu, \"seconds\": %.3f},\n",
+            (unsigned long long)r->mesh_st.n_vertices, (unsigned long long)r->mesh_st.n_triangles,
+            r->mesh_st.seconds);
+    fprintf(f, "  \"seconds\": %.3f\n}\n", r->seconds);
+}
+
+static bf_status push_stage_times(fuse_timing *t, fusion_stage_ms ms)
+{
+    bf_status s = bf_stats_push(&t->upload_ms, ms.upload);
+    if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, ms.alloc);
+    if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, ms.subcache);
+    if (s == BF_OK) s = bf_stats_push(&t->window_ms, ms.window);
+    return s;
+}
+
+/* Fuses every frame of src; the map is created at the first posed frame. */
+static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const replay_traj *traj, const fuse_args *a,
+                             fusion_map **map_out, fuse_result *r, fuse_timing *t)
+{
+    fusion_map *map = NULL;
+    bf_frame f;
+    bf_status s;
+    bf_progress prog;
+    bf_progress_begin(&prog, "fuse", src->n_frames);
+    uint32_t seen = 0;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+        seen++;
+        bf_se3 T_wc;
+        if (!frame_pose(&f, traj, &T_wc)) {
+            r->n_skipped++;
+            bf_warn("fuse: frame %u (t = %.6f): no pose, skipped", f.index, f.t_depth_s);
+            continue;
+        }
+        if (!map && (s = fusion_create(ctx, &a->fcfg, rgbd_source_intrinsics(src), T_wc.t, &map)) != BF_OK) break;
+        double t0 = bf_time_s();
+        s = fusion_add_frame(map, &f, &T_wc);
+        if (s != BF_OK) break;
+        double ms = 1e3 * (bf_time_s() - t0);
+        if ((s = bf_stats_push(&t->frame_ms, ms)) != BF_OK) break;
+        if ((s = push_stage_times(t, fusion_last_stage_ms(map))) != BF_OK) break;
+        r->n_fused++;
+        bf_progress_update(&prog, seen);
+    }
+    bf_progress_end(&prog, seen);
+    if (s == BF_END) s = map ? fusion_flush(map) : bf_fail(BF_FORMAT, "%s: no frame with a pose", a->seq);
+    *map_out = map;
+    return s;
+}
+
+static bf_status export_outputs(fusion_map *map, const fuse_args *a, fuse_result *r)
+{
+    char path[4096];
+    fusion_snapshot snap;
+    bf_status s = fusion_snapshot_take(map, &snap);
+    if (s != BF_OK) return s;
+    eval_mesh mesh = {0}, pts = {0};
+    if (!a->no_mesh) {
+        s = stream_export_mesh(&snap, NULL, &mesh, &r->mesh_st);
+        if (s == BF_OK && (s = bf_path_join(path, sizeof path, a->out, "mesh.ply")) == BF_OK)
+            s = eval_mesh_write_ply(path, &mesh);
+    }
+    if (s == BF_OK) s = stream_export_points(&snap, &pts, &r->points_st);
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a->out, "points.ply")) == BF_OK)
+        s = eval_mesh_write_ply(path, &pts);
+    eval_mesh_free(&mesh);
+    eval_mesh_free(&pts);
+    fusion_snapshot_free(&snap);
+    return s;
+}
+
+int cmd_fuse(int argc, char **argv)
+{
+    const char *cmd = "fuse";
+    fuse_args a;
+    int rc = parse_args(argc, argv, &a);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    double t_start = bf_time_s();
+    fuse_result r;
+    memset(&r, 0, sizeof r);
+    fuse_timing t;
+    memset(&t, 0, sizeof t);
+    replay_traj traj = {0};
+    bool use_traj = strcmp(a.poses, "groundtruth") != 0;
+    rgbd_source *src = NULL;
+    gpu_context *ctx = NULL;
+    fusion_map *map = NULL;
+    bf_status s = bf_mkdir_p(a.out);
+    if (s == BF_OK && use_traj) s = replay_traj_read_tum(a.poses, &traj);
+    if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
+    if (s == BF_OK && !use_traj && !src->has_groundtruth)
+        s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
+    gpu_config gcfg = {0};
+    if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
+    if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+    if (s == BF_OK) s = fuse_frames(ctx, src, use_traj ? &traj : NULL, &a, &map, &r, &t);
+    if (s == BF_OK) s = fusion_get_stats(map, &r.map);
+    if (s == BF_OK) s = export_outputs(map, &a, &r);
+    r.seconds = bf_time_s() - t_start;
+    char path[4096];
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "stats.json")) == BF_OK) {
+        char *buf = NULL;
+        size_t len = 0;
+        FILE *mf = open_memstream(&buf, &len);
+        if (!mf) s = bf_fail(BF_NO_MEMORY, "fuse: stats buffer");
+        else {
+            write_stats_json(mf, &a, &r, &t);
+            fclose(mf);
+            s = bf_write_file_atomic(path, buf, len);
+            free(buf);
+        }
+    }
+    if (s == BF_OK) {
+        const fusion_stats *m = &r.map;
+        printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.n_fused, r.n_skipped, r.device);
+        printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&t.frame_ms, 50),
+               bf_stats_percentile(&t.frame_ms, 95));
+        printf("  map              %u chunks, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
+               m->n_chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
+               m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0);
+        printf("  bricks per level");
+        for (uint32_t l = 0; l <= a.fcfg.max_level; l++)
+            if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);
+        printf("\n  surface          %llu voxels, mesh %llu triangles\n", (unsigned long long)r.points_st.n_points,
+               (unsigned long long)r.mesh_st.n_triangles);
+        printf("  wrote            %s/{mesh.ply,points.ply,stats.json} in %.1f s\n", a.out, r.seconds);
+    }
+    fusion_destroy(map);
+    gpu_context_destroy(ctx);
+    rgbd_source_close(src);
+    replay_traj_free(&traj);
+    timing_free(&t);
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
+}
