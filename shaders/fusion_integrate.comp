@@ -36,17 +36,36 @@ shared uint s_new_sign[BRICK_WORDS], s_new_conf[BRICK_WORDS];
 shared uint s_visible[FUSION_INTEGRATE_MAX_FRAMES / 32u];
 shared uint s_pairs, s_sigma_um, s_set;
 
-/* Bit of voxel (x, y, z) in a brick's 16 words held in shared memory. */
-uint old_bit(bool conf, uint x, uint y, uint z)
-{
-    uint w = conf ? s_old_conf[brick_word(x, y, z)] : s_old_sign[brick_word(x, y, z)];
-    return (w >> brick_bit(x, y, z)) & 1u;
-}
+/* Confident voxels of each sign: s_target[0] holds those of sign 0 (the
+ * targets of the prior's sweep from a front voxel), s_target[1] those of
+ * sign 1. */
+shared uint s_target[2][BRICK_WORDS];
 
-/* Confident voxel of the other sign than `front`, at (x, y, z). */
-uint other_bit(uint front, uint x, uint y, uint z)
+/* The sweep's rows through voxel (x, y, z) (fusion_prior_steps): bits of
+ * t's voxels (0..7, y, z), (x, 0..7, z) and (x, y, 0..7), gathered from 2,
+ * 2 and 4 words instead of 24 bit reads. */
+uint row_x(uint t, uint y, uint z)
 {
-    return old_bit(true, x, y, z) & (old_bit(false, x, y, z) ^ front);
+    uint w = brick_word(0u, y, z), sh = brick_bit(0u, y, z);
+    return ((s_target[t][w] >> sh) & 15u) | (((s_target[t][w + 1u] >> sh) & 15u) << 4);
+}
+uint row_y(uint t, uint x, uint z)
+{
+    uint r = 0u;
+    for (uint h = 0u; h < 2u; h++) {
+        uint w = s_target[t][brick_word(x, 4u * h, z)] >> brick_bit(x, 0u, z);
+        r |= ((w & 1u) | ((w >> 3) & 2u) | ((w >> 6) & 4u) | ((w >> 9) & 8u)) << (4u * h);
+    }
+    return r;
+}
+uint row_z(uint t, uint x, uint y)
+{
+    uint r = 0u;
+    for (uint pair = 0u; pair < 4u; pair++) {
+        uint w = s_target[t][brick_word(x, y, 2u * pair)] >> brick_bit(x, y, 0u);
+        r |= ((w & 1u) | ((w >> 15) & 2u)) << (2u * pair);
+    }
+    return r;
 }
 
 void main()
@@ -72,6 +91,8 @@ void main()
         s_old_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
         s_new_sign[tid] = 0u;
         s_new_conf[tid] = 0u;
+        s_target[0][tid] = s_old_conf[tid] & ~s_old_sign[tid];
+        s_target[1][tid] = s_old_conf[tid] & s_old_sign[tid];
     }
     if (tid < FUSION_INTEGRATE_MAX_FRAMES / 32u) s_visible[tid] = 0u;
     if (tid == 0u) {
@@ -139,6 +160,9 @@ void main()
     for (uint w = 0u; w < BRICK_WORDS; w++) has_conf |= s_old_conf[w];
     uint may_replace = fusion_may_replace(pc.set_confidence, has_conf != 0u ? 1u : 0u, window_err, brick_err);
     float psi_conf = fusion_prior_psi(pc.prior_weight, window_err, brick_err);
+    /* A thread's voxels that share a word (z and z + 1 when there are 64
+     * threads) are ORed locally first: one shared atomic per word. */
+    uint acc_word = FUSION_NONE, acc_sign = 0u, acc_conf = 0u, set = 0u;
     for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
         uint v = tid + k * n_threads;
         uint x = v & 7u, y = (v >> 3) & 7u, z = v >> 6;
@@ -146,20 +170,28 @@ void main()
         uint old_sign = (s_old_sign[word] >> bit) & 1u, old_conf = (s_old_conf[word] >> bit) & 1u;
         float psi = 0.0f, phi = 0.0f;
         if (old_conf != 0u && pc.set_confidence != 0u) {
-            uint row_x = 0u, row_y = 0u, row_z = 0u;
-            for (uint j = 0u; j < 8u; j++) {
-                row_x |= other_bit(old_sign, j, y, z) << j;
-                row_y |= other_bit(old_sign, x, j, z) << j;
-                row_z |= other_bit(old_sign, x, y, j) << j;
-            }
+            uint t = old_sign ^ 1u; /* confident voxels of the other sign */
             psi = psi_conf;
-            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x, row_y, row_z, x, y, z), voxel_m, window_err);
+            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x(t, y, z), row_y(t, x, z), row_z(t, x, y), x, y, z),
+                                   voxel_m, window_err);
         }
         uint r = fusion_decide(old_sign, old_conf, acc[k], psi, phi, pc.conf_weight, pc.set_confidence, may_replace);
-        if ((r & FUSION_DECIDE_SIGN) != 0u) atomicOr(s_new_sign[word], 1u << bit);
-        if ((r & FUSION_DECIDE_CONF) != 0u) atomicOr(s_new_conf[word], 1u << bit);
-        if ((r & FUSION_DECIDE_SET) != 0u) s_set = 1u; /* every writer stores 1: no race on the value */
+        if (word != acc_word) {
+            if (acc_word != FUSION_NONE) {
+                if (acc_sign != 0u) atomicOr(s_new_sign[acc_word], acc_sign);
+                if (acc_conf != 0u) atomicOr(s_new_conf[acc_word], acc_conf);
+            }
+            acc_word = word;
+            acc_sign = 0u;
+            acc_conf = 0u;
+        }
+        if ((r & FUSION_DECIDE_SIGN) != 0u) acc_sign |= 1u << bit;
+        if ((r & FUSION_DECIDE_CONF) != 0u) acc_conf |= 1u << bit;
+        set |= r & FUSION_DECIDE_SET;
     }
+    if (acc_sign != 0u) atomicOr(s_new_sign[acc_word], acc_sign);
+    if (acc_conf != 0u) atomicOr(s_new_conf[acc_word], acc_conf);
+    if (set != 0u) s_set = 1u; /* every writer stores 1: no race on the value */
     barrier(); /* the new words and s_set -> phase 5 */
 
     /* 5. Write back. The brick belongs to this workgroup alone. */

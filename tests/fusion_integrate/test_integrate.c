@@ -647,6 +647,39 @@ BF_TEST(gpu_equals_cpu_subcache_mode)
     CLOSE_SCENE(&s);
 }
 
+/* Confident voxels of both signs all over the bricks (random planes), so
+ * the prior's sweep finds neighbours 1, 2, 3 steps away and none: the
+ * kernel's word-wise row gathers against the oracle's bit-by-bit ones, and
+ * the error rule against a stored error between the two windows'. */
+BF_TEST(gpu_equals_cpu_random_confident_state)
+{
+    scene s;
+    OPEN_SCENE(&s);
+    g_plane_z = 1.0;
+    s.level = 7; /* 2 mm voxels: 1, 2, 3 and 4 steps give distinct Phi within the ~9 mm band */
+    CHECK_OK(add_box(&s, -0.02, -0.02, 0.98, 0.02, 0.02, 1.02));
+    uint32_t seed = 777;
+    for (uint32_t i = 0; i < s.n; i++) {
+        for (uint32_t w = 0; w < BRICK_WORDS; w++) {
+            uint32_t r[3];
+            for (int k = 0; k < 3; k++) {
+                seed ^= seed << 13, seed ^= seed >> 17, seed ^= seed << 5;
+                r[k] = seed;
+            }
+            s.b[i].sign[w] = r[0];
+            s.b[i].conf[w] = i % 3 == 0 ? r[1] & r[2] : r[1] | r[2]; /* sparse or dense confidence */
+        }
+        /* Above this window's error (~8.7 mm: replaced, Psi ~1.8, so Phi
+         * decides near the surface) and below it (kept). */
+        s.b[i].error = i % 2 ? 0.0095f : 0.006f;
+    }
+    for (uint32_t i = 0; i < 6; i++) put_frame(&s, i, cam_jitter(0, 0, 0, 0, 0, 1, (int)i), surf_plane_z);
+    pass_result r;
+    PASS(&s, 0, s.n, 0, 6, true, true, &r, 0.05);
+    CHECK(r.n_changed > 0);
+    CLOSE_SCENE(&s);
+}
+
 /* A slice of the list: only entries [first, first + count) change. */
 BF_TEST(list_slice_touches_only_its_bricks)
 {
