@@ -55,6 +55,12 @@ int cmd_synth(int argc, char **argv)
             return APP_EXIT_OK;
         }
         if (strncmp(a, "--", 2)) return app_usage_error(cmd, "unexpected argument '%s'", a);
+        static const char *const known[] = {"--scene", "--trajectory", "--out",   "--data",  "--frames",
+                                            "--rate",  "--noise",      "--seed",  "--camera", "--size",
+                                            "--scale", "--seen-cell"};
+        bool is_known = false;
+        for (size_t k = 0; k < sizeof known / sizeof known[0]; k++) is_known |= !strcmp(a, known[k]);
+        if (!is_known) return app_usage_error(cmd, "unknown option '%s'", a);
         if (i + 1 >= argc) return app_usage_error(cmd, "%s needs a value", a);
         const char *v = argv[++i];
         if (!strcmp(a, "--scene")) {

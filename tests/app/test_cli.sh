@@ -60,6 +60,8 @@ is_json "$T/out"
 expect 2 "$B" info
 expect 2 "$B" eval-surface rec.ply
 mentions "unknown argument 'rec.ply'"
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 1 --out "$T/x" --verbose
+mentions "unknown option '--verbose'"
 
 # Bad input: exit 3 and the message names the file (and line or frame).
 expect 3 "$B" info "$T/missing"
