@@ -107,30 +107,32 @@ BF_TEST(sphere_level7_is_closed_outward_and_within_a_voxel) { check_sphere_level
  * border. With overlap, level 6 covers the whole sphere and level 7 only
  * half: the finer data wins there. Tolerances as for one level, in the
  * coarser level's voxels (the worse half bounds both). */
-static void check_transition(bool overlap)
+static void check_transition(bool overlap, uint32_t coarse)
 {
     fusion_snapshot s;
     snap_init(&s);
     fx_sphere sp = test_sphere();
+    if (coarse < 6) sp.r = 0.2;
     bf_vec3 lo, hi;
     sphere_bounds(&sp, &lo, &hi);
     double split = ORIGIN.x; /* a chunk border, so brick borders of both levels */
-    fx_voxelize(&s, fx_sphere_sdf, &sp, 6, lo, hi, 2, overlap ? NULL : pick_x_below, &split, true);
+    fx_voxelize(&s, fx_sphere_sdf, &sp, coarse, lo, hi, 2, overlap ? NULL : pick_x_below, &split, true);
     fx_voxelize(&s, fx_sphere_sdf, &sp, 7, lo, hi, 2, pick_x_above, &split, true);
     eval_mesh m;
     stream_export_stats st;
     CHECK_OK(stream_export_mesh(&s, NULL, &m, &st));
     CHECK_EQ_INT(st.level_out, 7);
-    CHECK(st.cells_per_level[6] > 0 && st.cells_per_level[7] > 0);
+    CHECK(st.cells_per_level[coarse] > 0 && st.cells_per_level[7] > 0);
     fx_topology topo;
     fx_mesh_topology(&m, &topo);
     CHECK_EQ_INT(topo.n_boundary, 0);
     CHECK_EQ_INT(topo.n_nonmanifold, 0);
     CHECK_EQ_INT(topo.n_flipped, 0);
-    double v6 = fx_voxel_m(&s, 6), v7 = fx_voxel_m(&s, 7);
+    double v6 = fx_voxel_m(&s, coarse), v7 = fx_voxel_m(&s, 7);
     fx_accuracy acc;
     fx_mesh_accuracy(&m, fx_sphere_sdf, &sp, v7, &acc);
-    print_acc(overlap ? "sphere level 6 + half 7 (overlap)" : "sphere half 6 | half 7", &acc, v6, &st);
+    print_acc(overlap ? "sphere level 6 + half 7 (overlap)" : coarse == 6 ? "sphere half 6 | half 7" : "sphere half 5 | half 7",
+              &acc, v6, &st);
     CHECK_LE(acc.vert_median, 0.25 * v6);
     CHECK_LE(acc.area_median, 0.25 * v6);
     CHECK_LE(acc.vert_max, 1.0 * v6);
@@ -151,8 +153,9 @@ static void check_transition(bool overlap)
     fx_free(&s);
 }
 
-BF_TEST(sphere_half_level6_half_level7_has_no_holes) { check_transition(false); }
-BF_TEST(finer_overlapping_bricks_win_and_the_mesh_stays_closed) { check_transition(true); }
+BF_TEST(sphere_half_level6_half_level7_has_no_holes) { check_transition(false, 6); }
+BF_TEST(finer_overlapping_bricks_win_and_the_mesh_stays_closed) { check_transition(true, 6); }
+BF_TEST(two_levels_apart_half_level5_half_level7_has_no_holes) { check_transition(false, 5); }
 
 /* A box rotated against the lattice (its faces tilted, so neighbouring
  * signs do locate them), and the same box axis-aligned. */

@@ -42,9 +42,15 @@ static void check_points(fusion_snapshot *s, const fx_sphere *sp, double v_worst
         n_over_20 += ang > 20;
     }
     double dmax = 0, dsum = 0;
-    for (uint32_t i = 0; i < p.n_verts; i++) dmax = fmax(dmax, d[i]), dsum += d[i];
-    printf("  %s: %u points, mean distance %.3f max %.3f voxels, normals max %.1f deg, %.3f s\n", what, p.n_verts,
-           dsum / p.n_verts / v_worst, dmax / v_worst, max_angle, st.seconds);
+    uint32_t n_beyond_half_diag = 0;
+    for (uint32_t i = 0; i < p.n_verts; i++) {
+        dmax = fmax(dmax, d[i]), dsum += d[i];
+        n_beyond_half_diag += d[i] > 0.5 * sqrt(3) * v_worst;
+    }
+    printf("  %s: %u points, mean distance %.3f max %.3f voxels (%.2f %% beyond 0.5 sqrt(3)), normals max %.1f deg, "
+           "%.3f s\n",
+           what, p.n_verts, dsum / p.n_verts / v_worst, dmax / v_worst, 100.0 * n_beyond_half_diag / p.n_verts,
+           max_angle, st.seconds);
     CHECK_LE(dmax, v_worst * (1 + 1e-6));
     CHECK_LE(dsum / p.n_verts, 0.5 * v_worst);
     CHECK_EQ_INT(n_over_20, 0);
