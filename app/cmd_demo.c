@@ -122,10 +122,9 @@ typedef struct demo_report {
 
 static bf_status demo_write_json(const char *path, const demo_report *r)
 {
-    char *buf = NULL;
-    size_t len = 0;
-    FILE *f = open_memstream(&buf, &len);
-    if (!f) return bf_fail(BF_NO_MEMORY, "%s: report", path);
+    bf_membuf mb;
+    FILE *f = bf_membuf_open(&mb);
+    if (!f) return BF_NO_MEMORY;
     fputs("{\n  \"command\": \"demo\",\n  \"device\": ", f);
     bf_json_string(f, r->device);
     fprintf(f,
@@ -154,13 +153,7 @@ static bf_status demo_write_json(const char *path, const demo_report *r)
             "  \"seconds\": %.3f\n"
             "}\n",
             r->ate.n_matched, r->ate.trans.rmse, r->seconds);
-    if (fclose(f) != 0) {
-        free(buf);
-        return bf_fail(BF_NO_MEMORY, "%s: report", path);
-    }
-    bf_status s = bf_write_file_atomic(path, buf, len);
-    free(buf);
-    return s;
+    return bf_membuf_write_atomic(&mb, path);
 }
 
 /* The device that the reconstruction will use; a missing one is reported,

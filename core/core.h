@@ -217,6 +217,17 @@ bf_status bf_mkdir_p(const char *path);
 /* Writes data to path atomically: temporary file, fsync, rename. */
 bf_status bf_write_file_atomic(const char *path, const void *data, size_t size);
 bool bf_file_exists(const char *path);
+/* A file built in memory and then written atomically: bf_membuf_open
+ * returns a stream to print into (NULL, with a message, when out of
+ * memory); bf_membuf_write_atomic closes it and writes what was printed to
+ * path with bf_write_file_atomic. The buffer is freed either way. */
+typedef struct bf_membuf {
+    FILE *f;
+    char *buf;
+    size_t len;
+} bf_membuf;
+FILE *bf_membuf_open(bf_membuf *m);
+bf_status bf_membuf_write_atomic(bf_membuf *m, const char *path);
 /* Joins dir and name into out (size cap); fails with BF_INVALID_ARG if too long. */
 bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name);
 

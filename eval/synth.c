@@ -255,10 +255,9 @@ static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *
     bf_vec3 t;
     bf_se3_to_qt(&res->T_world_traj, &q, &t);
     const double(*R)[3] = res->T_world_traj.R;
-    char *buf = NULL;
-    size_t len = 0;
-    FILE *f = open_memstream(&buf, &len);
-    if (!f) return bf_fail(BF_NO_MEMORY, "%s: statistics", path);
+    bf_membuf mb;
+    FILE *f = bf_membuf_open(&mb);
+    if (!f) return BF_NO_MEMORY;
     fputs("{\n  \"command\": \"synth\",\n  \"scene\": ", f);
     bf_json_string(f, sc->desc);
     fprintf(f, ",\n  \"scene_triangles\": %u,\n  \"trajectory\": ", sc->mesh.n_tris);
@@ -283,13 +282,7 @@ static bf_status write_stats(const eval_synth_config *cfg, const bf_intrinsics *
         res->valid_share, res->n_seen, cell_m, t.x, t.y, t.z, q.x, q.y, q.z, q.w, R[0][0], R[0][1], R[0][2],
         res->T_world_traj.t.x, R[1][0], R[1][1], R[1][2], res->T_world_traj.t.y, R[2][0], R[2][1], R[2][2],
         res->T_world_traj.t.z);
-    if (fclose(f) != 0) {
-        free(buf);
-        return bf_fail(BF_NO_MEMORY, "%s: statistics", path);
-    }
-    s = bf_write_file_atomic(path, buf, len);
-    free(buf);
-    return s;
+    return bf_membuf_write_atomic(&mb, path);
 }
 
 /* ------------------------------------------------------------ the sequence */

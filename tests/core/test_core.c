@@ -238,3 +238,27 @@ BF_TEST(json_writers_escape_strings_and_write_null_for_nan)
     CHECK(!strcmp(buf, "\"a\\\"b\\\\c\\u000ad\\u0001/\" null null null 0.125"));
     free(buf);
 }
+
+BF_TEST(membuf_writes_what_was_printed_atomically)
+{
+    char path[512];
+    CHECK_OK(bf_path_join(path, sizeof path, bf_test_tmpdir(), "membuf.json"));
+    bf_membuf mb;
+    FILE *f = bf_membuf_open(&mb);
+    CHECK(f != NULL);
+    fputs("{\"name\": ", f);
+    bf_json_string(f, "x\"y");
+    fputs("}\n", f);
+    CHECK_OK(bf_membuf_write_atomic(&mb, path));
+    CHECK(mb.buf == NULL && mb.f == NULL);
+    char *data;
+    CHECK_OK(bf_read_file(path, &data, NULL));
+    bool same = !strcmp(data, "{\"name\": \"x\\\"y\"}\n");
+    free(data);
+    CHECK(same);
+    /* A path that cannot be written: the status says so, the buffer is freed. */
+    f = bf_membuf_open(&mb);
+    CHECK(f != NULL);
+    fputs("x", f);
+    CHECK_STATUS(bf_membuf_write_atomic(&mb, "/nonexistent/dir/file"), BF_IO);
+}
