@@ -253,52 +253,42 @@ static bf_status jpeg_decode(FILE *f, const char *path, bool header_only, uint8_
 
 /* ------------------------------------------------------------ entry points */
 
-bf_status replay__image_size(const char *path, uint32_t *w, uint32_t *h)
+/* Opens path, decodes it by its content and closes it. PNG_WANT_U16 takes
+ * PNG only (depth); RGB8 and the header also take JPEG. */
+static bf_status image_read(const char *path, png_want want, void *buf, size_t cap_px, void **alloc,
+                            uint32_t exp_w, uint32_t exp_h, uint32_t *w, uint32_t *h)
 {
-    FILE *f;
-    image_kind kind;
+    FILE *f = NULL;
+    image_kind kind = IMAGE_OTHER;
     bf_status s = image_open(path, &f, &kind);
     if (s) return s;
     if (kind == IMAGE_PNG)
-        s = png_decode(f, path, PNG_WANT_HEADER, NULL, 0, NULL, 0, 0, w, h);
-    else if (kind == IMAGE_JPEG)
-        s = jpeg_decode(f, path, true, NULL, 0, NULL, 0, 0, w, h);
+        s = png_decode(f, path, want, buf, cap_px, alloc, exp_w, exp_h, w, h);
+    else if (kind == IMAGE_JPEG && want != PNG_WANT_U16)
+        s = jpeg_decode(f, path, want == PNG_WANT_HEADER, buf, cap_px, alloc, exp_w, exp_h, w, h);
+    else if (want == PNG_WANT_U16)
+        s = bf_fail(BF_FORMAT, "%s: depth image is not a PNG", path);
     else
         s = bf_fail(BF_FORMAT, "%s: not a PNG or JPEG file", path);
     fclose(f);
     return s;
+}
+
+bf_status replay__image_size(const char *path, uint32_t *w, uint32_t *h)
+{
+    return image_read(path, PNG_WANT_HEADER, NULL, 0, NULL, 0, 0, w, h);
 }
 
 static bf_status read_u16(const char *path, uint16_t *buf, size_t cap_px, void **alloc, uint32_t exp_w,
                           uint32_t exp_h, uint32_t *w, uint32_t *h)
 {
-    FILE *f;
-    image_kind kind;
-    bf_status s = image_open(path, &f, &kind);
-    if (s) return s;
-    if (kind == IMAGE_PNG)
-        s = png_decode(f, path, PNG_WANT_U16, buf, cap_px, alloc, exp_w, exp_h, w, h);
-    else
-        s = bf_fail(BF_FORMAT, "%s: depth image is not a PNG", path);
-    fclose(f);
-    return s;
+    return image_read(path, PNG_WANT_U16, buf, cap_px, alloc, exp_w, exp_h, w, h);
 }
 
 static bf_status read_rgb8(const char *path, uint8_t *buf, size_t cap_px, void **alloc, uint32_t exp_w,
                            uint32_t exp_h, uint32_t *w, uint32_t *h)
 {
-    FILE *f;
-    image_kind kind;
-    bf_status s = image_open(path, &f, &kind);
-    if (s) return s;
-    if (kind == IMAGE_PNG)
-        s = png_decode(f, path, PNG_WANT_RGB8, buf, cap_px, alloc, exp_w, exp_h, w, h);
-    else if (kind == IMAGE_JPEG)
-        s = jpeg_decode(f, path, false, buf, cap_px, alloc, exp_w, exp_h, w, h);
-    else
-        s = bf_fail(BF_FORMAT, "%s: not a PNG or JPEG file", path);
-    fclose(f);
-    return s;
+    return image_read(path, PNG_WANT_RGB8, buf, cap_px, alloc, exp_w, exp_h, w, h);
 }
 
 bf_status replay__png_decode_u16(const char *path, uint16_t *buf, size_t cap_px, uint32_t exp_w, uint32_t exp_h,

@@ -201,3 +201,20 @@ BF_TEST(corrupt_png_data_is_format_error_naming_the_file)
     CHECK_ERROR_MENTIONS("corrupt_depth.png");
     CHECK_ERROR_MENTIONS("corrupt PNG");
 }
+
+BF_TEST(depth_must_be_png_and_colour_png_or_jpeg_by_content)
+{
+    static uint8_t c[8 * 6 * 3];
+    const char *pj = rt_tmp("depth_as.jpg");
+    CHECK(rt_jpeg_write(pj, c, 8, 6, 90));
+    uint16_t *d;
+    uint8_t *rgb;
+    uint32_t w, h;
+    /* A JPEG is colour, never depth. */
+    CHECK_STATUS(replay_png_read_u16(pj, &d, &w, &h), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("depth image is not a PNG");
+    const char *pt = rt_tmp("colour_as.txt");
+    CHECK(rt_write_text(pt, "not an image\n"));
+    CHECK_STATUS(replay_image_read_rgb8(pt, &rgb, &w, &h), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("not a PNG or JPEG file");
+}
