@@ -220,6 +220,22 @@ static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const replay_tr
     return s;
 }
 
+/* The mesh lattice level: the finest level that holds at least a tenth of
+ * the bricks. A handful of bricks at a finer level (a sample that came very
+ * close) must not put the whole room on their lattice, which would multiply
+ * the triangles by 4 per level; their detail is averaged onto this one. */
+static uint32_t mesh_level(const fusion_snapshot *snap)
+{
+    uint32_t per_level[32] = {0};
+    for (uint32_t i = 0; i < snap->n_bricks; i++) per_level[snap->bricks[i].level & 31]++;
+    uint64_t at_or_above = 0;
+    for (int l = 31; l >= 0; l--) {
+        at_or_above += per_level[l];
+        if (10 * at_or_above >= snap->n_bricks) return (uint32_t)l;
+    }
+    return 0;
+}
+
 static bf_status export_outputs(fusion_map *map, const fuse_args *a, fuse_result *r)
 {
     char path[4096];
@@ -228,7 +244,9 @@ static bf_status export_outputs(fusion_map *map, const fuse_args *a, fuse_result
     if (s != BF_OK) return s;
     eval_mesh mesh = {0}, pts = {0};
     if (!a->no_mesh) {
-        s = stream_export_mesh(&snap, NULL, &mesh, &r->mesh_st);
+        stream_mesh_config mcfg = stream_mesh_config_default();
+        mcfg.max_level = mesh_level(&snap);
+        s = stream_export_mesh(&snap, &mcfg, &mesh, &r->mesh_st);
         if (s == BF_OK && (s = bf_path_join(path, sizeof path, a->out, "mesh.ply")) == BF_OK)
             s = eval_mesh_write_ply(path, &mesh);
     }

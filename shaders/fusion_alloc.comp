@@ -42,7 +42,7 @@ void retry(uint item)
 bool entry_has(uint e, ivec3 key)
 {
     uint base = e * FUSION_ENTRY_WORDS;
-    return atomicAdd(hash.w[base + FUSION_ENTRY_STATE], 0u) == FUSION_ENTRY_VALID &&
+    return hash.w[base + FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID &&
            int(hash.w[base + FUSION_ENTRY_X]) == key.x && int(hash.w[base + FUSION_ENTRY_Y]) == key.y &&
            int(hash.w[base + FUSION_ENTRY_Z]) == key.z;
 }
@@ -114,7 +114,7 @@ uint pop_brick()
 void touch_brick(uint node, uint entry, uvec3 cell, uint level)
 {
     uint f = node * FUSION_NODE_WORDS + FUSION_NODE_BRICK;
-    uint b = atomicAdd(nodes.w[f], 0u);
+    uint b = nodes.w[f];
     if (b == FUSION_LOCKED) return; /* being created in this pass: its creator stamps it */
     if (b != FUSION_NONE) {
         stamp.w[b] = pc.frame_index;
@@ -164,7 +164,7 @@ bool insert_cell(ivec3 key, uvec3 cell, uint level)
     uint node = hash.w[entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
     for (uint l = 1u; l <= level; l++) {
         uint f = node * FUSION_NODE_WORDS + FUSION_NODE_CHILD;
-        uint child = atomicAdd(nodes.w[f], 0u);
+        uint child = nodes.w[f];
         if (child == FUSION_LOCKED) return false;
         if (child == FUSION_NONE) {
             if (atomicCompSwap(nodes.w[f], FUSION_NONE, FUSION_LOCKED) != FUSION_NONE) return false;
