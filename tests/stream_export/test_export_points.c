@@ -18,7 +18,7 @@ static bool pick_x_above(const void *ctx, bf_vec3 c) { return c.x >= *(const dou
  * inside ones surface voxels at 0.9 v). On average the surface sits halfway:
  * median <= 0.5 voxel (about 0.3 for a smooth shape).
  * Normal bound: the gradient of a 3x3x3 box mean by central differences is
- * a 5-voxel-wide derivative filter; on a sphere of 77+ voxels radius its
+ * a 5-voxel-wide derivative filter; on a sphere of 51+ voxels radius its
  * direction follows the normal to within a few degrees plus the lattice's
  * anisotropy; 20 degrees leaves room for the staircase. */
 static void check_points(fusion_snapshot *s, const fx_sphere *sp, double v_worst, const char *what)
@@ -64,8 +64,8 @@ BF_TEST(sphere_surface_points_lie_within_a_voxel_with_normals_within_20_degrees)
     memset(&s, 0, sizeof s);
     s.chunk_m = 2;
     s.origin_w = ORIGIN;
-    fx_sphere sp = {bf_v3(ORIGIN.x - 0.0123, ORIGIN.y + 0.0171, ORIGIN.z + 0.0029), 0.3};
-    bf_vec3 lo = bf_v3(sp.c.x - 0.35, sp.c.y - 0.35, sp.c.z - 0.35), hi = bf_v3(sp.c.x + 0.35, sp.c.y + 0.35, sp.c.z + 0.35);
+    fx_sphere sp = {bf_v3(ORIGIN.x - 0.0123, ORIGIN.y + 0.0171, ORIGIN.z + 0.0029), 0.2};
+    bf_vec3 lo = bf_v3(sp.c.x - 0.25, sp.c.y - 0.25, sp.c.z - 0.25), hi = bf_v3(sp.c.x + 0.25, sp.c.y + 0.25, sp.c.z + 0.25);
     fx_voxelize(&s, fx_sphere_sdf, &sp, 7, lo, hi, 2, NULL, NULL, true);
     check_points(&s, &sp, fx_voxel_m(&s, 7), "sphere level 7");
     fx_free(&s);
@@ -77,8 +77,8 @@ BF_TEST(surface_points_across_a_level_transition)
     memset(&s, 0, sizeof s);
     s.chunk_m = 2;
     s.origin_w = ORIGIN;
-    fx_sphere sp = {bf_v3(ORIGIN.x - 0.0123, ORIGIN.y + 0.0171, ORIGIN.z + 0.0029), 0.3};
-    bf_vec3 lo = bf_v3(sp.c.x - 0.35, sp.c.y - 0.35, sp.c.z - 0.35), hi = bf_v3(sp.c.x + 0.35, sp.c.y + 0.35, sp.c.z + 0.35);
+    fx_sphere sp = {bf_v3(ORIGIN.x - 0.0123, ORIGIN.y + 0.0171, ORIGIN.z + 0.0029), 0.2};
+    bf_vec3 lo = bf_v3(sp.c.x - 0.25, sp.c.y - 0.25, sp.c.z - 0.25), hi = bf_v3(sp.c.x + 0.25, sp.c.y + 0.25, sp.c.z + 0.25);
     double split = ORIGIN.x;
     /* Level 6 everywhere, level 7 over half: level-6 voxels under the
      * confident level-7 half are overridden and give no points. */
