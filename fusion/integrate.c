@@ -20,7 +20,7 @@ static uint32_t voxels_per_thread(const gpu_context *ctx)
     const char *env = getenv("BITFUSE_INTEGRATE_VPT");
     if (env) {
         uint32_t v = (uint32_t)strtoul(env, NULL, 10);
-        if (v == 1 || v == 2 || v == 4 || v == 8 || v == 16) vpt = v;
+        if (v && v <= 64 && !(v & (v - 1))) vpt = v;
     }
     const gpu_limits *l = gpu_device_limits(ctx);
     while (BRICK_VOXELS / vpt > l->max_compute_workgroup_invocations ||

@@ -86,15 +86,16 @@ void main()
     int key_z = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Z]);
     uint cell_x = fusion_pos_x(pos), cell_y = fusion_pos_y(pos), cell_z = fusion_pos_z(pos);
     float voxel_m = fusion_voxel_m(pc.chunk_m, fusion_pos_level(pos));
-    if (tid < BRICK_WORDS) {
-        s_old_sign[tid] = sign_pool.w[slot * BRICK_WORDS + tid];
-        s_old_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
-        s_new_sign[tid] = 0u;
-        s_new_conf[tid] = 0u;
-        s_target[0][tid] = s_old_conf[tid] & ~s_old_sign[tid];
-        s_target[1][tid] = s_old_conf[tid] & s_old_sign[tid];
+    for (uint w = tid; w < BRICK_WORDS; w += n_threads) { /* loops: any workgroup size works */
+        uint sign = sign_pool.w[slot * BRICK_WORDS + w], conf = conf_pool.w[slot * BRICK_WORDS + w];
+        s_old_sign[w] = sign;
+        s_old_conf[w] = conf;
+        s_new_sign[w] = 0u;
+        s_new_conf[w] = 0u;
+        s_target[0][w] = conf & ~sign;
+        s_target[1][w] = conf & sign;
     }
-    if (tid < FUSION_INTEGRATE_MAX_FRAMES / 32u) s_visible[tid] = 0u;
+    for (uint w = tid; w < FUSION_INTEGRATE_MAX_FRAMES / 32u; w += n_threads) s_visible[w] = 0u;
     if (tid == 0u) {
         s_pairs = 0u;
         s_sigma_um = 0u;
@@ -169,7 +170,7 @@ void main()
         uint word = brick_word(x, y, z), bit = brick_bit(x, y, z);
         uint old_sign = (s_old_sign[word] >> bit) & 1u, old_conf = (s_old_conf[word] >> bit) & 1u;
         float psi = 0.0f, phi = 0.0f;
-        if (old_conf != 0u && pc.set_confidence != 0u) {
+        if (old_conf != 0u && pc.set_confidence != 0u && acc[k].n > 0u) { /* unobserved: kept, no prior needed */
             uint t = old_sign ^ 1u; /* confident voxels of the other sign */
             psi = psi_conf;
             phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x(t, y, z), row_y(t, x, z), row_z(t, x, y), x, y, z),
@@ -195,9 +196,9 @@ void main()
     barrier(); /* the new words and s_set -> phase 5 */
 
     /* 5. Write back. The brick belongs to this workgroup alone. */
-    if (tid < BRICK_WORDS) {
-        sign_pool.w[slot * BRICK_WORDS + tid] = s_new_sign[tid];
-        conf_pool.w[slot * BRICK_WORDS + tid] = s_new_conf[tid];
+    for (uint w = tid; w < BRICK_WORDS; w += n_threads) {
+        sign_pool.w[slot * BRICK_WORDS + w] = s_new_sign[w];
+        conf_pool.w[slot * BRICK_WORDS + w] = s_new_conf[w];
     }
     if (tid == 0u && s_set != 0u && may_replace != 0u)
         info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR] = floatBitsToUint(window_err);

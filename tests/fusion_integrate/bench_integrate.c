@@ -156,7 +156,7 @@ int main(int argc, char **argv)
            n_frames, ms[RUNS / 2], ms[0], ms[RUNS - 1], 1000.0 * ms[RUNS / 2] / n,
            1000.0 * ms[RUNS / 2] / n / n_frames);
     /* Fewer frames: the per-brick part of the cost against the per-frame part. */
-    for (uint32_t nf = 1; nf < n_frames; nf *= 4) {
+    for (uint32_t nf = 0; nf < n_frames; nf = nf ? nf * 4 : 1) {
         for (int r = 0; r < 3; r++) {
             TRY(gpu_begin(ctx));
             gpu_cmd_stage_begin(ctx, "integrate");
