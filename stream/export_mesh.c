@@ -123,6 +123,7 @@ typedef struct mesh_job {
     const stream__grid *g;
     uint32_t lo;            /* lattice level */
     brick_out *out;         /* per entry of g->order */
+    size_t first;           /* entry of g->order of the current batch's index 0 */
 } mesh_job;
 
 #define COORD_BIAS ((int64_t)1 << 41)
@@ -404,6 +405,7 @@ static void mesh_fine(const mesh_job *j, uint32_t i, brick_out *o)
 static void mesh_brick(void *ctx, size_t k)
 {
     const mesh_job *j = ctx;
+    k += j->first;
     uint32_t i = j->g->order[k];
     uint32_t L = j->g->s->bricks[i].level;
     if (L == j->lo)
@@ -506,6 +508,8 @@ static bf_status taubin(double *pos, uint32_t n_verts, const uint32_t *tri, uint
 
 /* ------------------------------------------------------------ public */
 
+#define MESH_BATCH ((size_t)4096)
+
 stream_mesh_config stream_mesh_config_default(void)
 {
     stream_mesh_config c = {
@@ -543,8 +547,16 @@ bf_status stream_export_mesh(const fusion_snapshot *s, const stream_mesh_config 
 
     bo = stream__calloc(g.n, sizeof *bo);
     if (!bo) goto fail_mem;
-    mesh_job job = {&g, lo, bo};
-    bf_parallel_for(g.n, mesh_brick, &job);
+    /* Batches only so that a progress line can follow long exports. */
+    mesh_job job = {&g, lo, bo, 0};
+    bf_progress prog;
+    bf_progress_begin(&prog, "export: mesh bricks", g.n);
+    for (size_t b0 = 0; b0 < g.n; b0 += MESH_BATCH) {
+        job.first = b0;
+        bf_parallel_for(g.n - b0 < MESH_BATCH ? g.n - b0 : MESH_BATCH, mesh_brick, &job);
+        bf_progress_update(&prog, b0);
+    }
+    bf_progress_end(&prog, g.n);
     size_t n_tv = 0;
     for (uint32_t k = 0; k < g.n; k++) {
         if (bo[k].failed) goto fail_mem;
