@@ -531,6 +531,20 @@ BF_TEST(gpu_equals_cpu_sphere) { run_surface_case(surf_sphere, 6, 0.05); }
 BF_TEST(gpu_equals_cpu_step_edge) { run_surface_case(surf_step, 4, 0.05); }
 BF_TEST(gpu_equals_cpu_invalid_pixels) { run_surface_case(surf_holes, 4, 0.05); }
 
+/* The kernel's workgroup size (voxels per invocation, 512 / it threads) is
+ * a tuning choice: every size gives the same bits. */
+BF_TEST(gpu_equals_cpu_at_every_workgroup_size)
+{
+    static const char *vpt[] = {"1", "4", "16", "64"};
+    for (size_t k = 0; k < sizeof vpt / sizeof vpt[0]; k++) {
+        setenv("BITFUSE_INTEGRATE_VPT", vpt[k], 1);
+        fprintf(stderr, "  %s voxels per invocation\n", vpt[k]);
+        run_surface_case(surf_sphere, 4, 0.05);
+        unsetenv("BITFUSE_INTEGRATE_VPT");
+        if (bf__test_failed_now) return;
+    }
+}
+
 /* Frames that see the bricks partly, from behind, or not at all, and a
  * stale ring slot (a record with another index): culling and skipping must
  * change no bit. */
