@@ -232,7 +232,7 @@ static void mesh_native(const mesh_job *j, uint32_t i, brick_out *o)
                     own[(z * 8 + y) * 8 + x] = conf;
                     if (conf) {
                         r->cls = stream__bit(br->sign, (uint32_t)x, (uint32_t)y, (uint32_t)z) ? 1 : 0;
-                        r->f = sf[z * 64 + y * 8 + x] / 127.0f;
+                        r->f = (float)(sf[z * 64 + y * 8 + x] / 127.0); /* bit-equal to corner_eval at a centre */
                         continue;
                     }
                 }
