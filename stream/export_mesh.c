@@ -293,6 +293,38 @@ static bool overlapped_by_finer(const stream__grid *g, uint32_t L, const int64_t
     return false;
 }
 
+/* corner_eval for a corner of a coarse brick's cell, without the hash when
+ * the corner's voxel is a confident level-L voxel in one of the 27 bricks
+ * around, none of them overlapped by finer bricks: then that voxel is the
+ * finest confident one there, as corner_eval would find, and the field is
+ * computed by the same function on the same bytes. False: use corner_eval. */
+static bool coarse_corner(const mesh_job *j, uint32_t L, const stream__nbhood *nbh, const int64_t c[3], corner *out)
+{
+    const stream__grid *g = j->g;
+    uint32_t sh = g->level_max - L + 1;
+    int64_t q[3], u[3];
+    int k = 0, mul = 1;
+    for (int a = 0; a < 3; a++) {
+        q[a] = stream__centre_q(g, j->lo, c[a]);
+        u[a] = stream__shr(q[a], sh);
+        int64_t d = stream__shr(u[a], 3) - nbh->b[a];
+        if (d < -1 || d > 1) return false;
+        k += (int)(d + 1) * mul;
+        mul *= 3;
+    }
+    uint32_t n = nbh->idx[k];
+    if (n == STREAM__NONE || g->has_finer[n]) return false;
+    const fusion_brick *br = &g->s->bricks[n];
+    uint32_t x = (uint32_t)(u[0] & 7), y = (uint32_t)(u[1] & 7), z = (uint32_t)(u[2] & 7);
+    if (!stream__bit(br->conf, x, y, z)) return false;
+    bool is_free = stream__bit(br->sign, x, y, z);
+    double f = stream__grid_field_nb(g, L, q, nbh);
+    if (isnan(f)) f = is_free ? 1 : -1;
+    out->f = (float)f;
+    out->cls = f == 0 ? (is_free ? 1 : 0) : f > 0 ? 1 : 0; /* L is coarser than the lattice */
+    return true;
+}
+
 /* A brick coarser than the lattice: each of its voxels holds k^3 lattice
  * points. Voxels whose 3x3x3 neighbourhood is confident, not overlapped by
  * finer bricks and of one field sign cannot produce triangles (every corner
@@ -306,6 +338,8 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
     int64_t k = (int64_t)1 << d;
     const int64_t *b = g->bc[i];
     int8_t sg[10][10][10];
+    stream__nbhood nbh;
+    stream__grid_nbhood(g, L, b, &nbh);
     for (int dz = -1; dz <= 1; dz++)
         for (int dy = -1; dy <= 1; dy++)
             for (int dx = -1; dx <= 1; dx++) {
@@ -353,7 +387,7 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
                 for (size_t n = 0; n < nk * nk * nk; n++) {
                     int64_t c[3] = {c0[0] + (int64_t)(n % nk), c0[1] + (int64_t)(n / nk % nk),
                                     c0[2] + (int64_t)(n / (nk * nk))};
-                    cr[n] = corner_eval(j, c, NULL);
+                    if (!coarse_corner(j, L, &nbh, c, &cr[n])) cr[n] = corner_eval(j, c, NULL);
                 }
                 for (int64_t cz = 0; cz < k; cz++)
                     for (int64_t cy = 0; cy < k; cy++)

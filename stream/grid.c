@@ -114,7 +114,30 @@ double stream__grid_voxel_field(const stream__grid *g, uint32_t level, const int
     return f == STREAM__NO_FIELD ? NAN : f / 127.0;
 }
 
-double stream__grid_field(const stream__grid *g, uint32_t level, const int64_t q[3])
+/* Field of level-L voxel v, read through nbh when v lies in its 27 bricks
+ * (the same bytes the hash would find), else through the hash. */
+static double voxel_field_nb(const stream__grid *g, uint32_t level, const int64_t v[3], const stream__nbhood *nbh)
+{
+    if (nbh) {
+        int k = 0, mul = 1;
+        bool near = true;
+        for (int a = 0; a < 3 && near; a++) {
+            int64_t d = stream__shr(v[a], 3) - nbh->b[a];
+            near = d >= -1 && d <= 1;
+            k += (int)(d + 1) * mul;
+            mul *= 3;
+        }
+        if (near) {
+            uint32_t i = nbh->idx[k];
+            if (i == STREAM__NONE) return NAN;
+            int8_t f = g->sfield[(size_t)i * BRICK_VOXELS + (size_t)((v[2] & 7) * 64 + (v[1] & 7) * 8 + (v[0] & 7))];
+            return f == STREAM__NO_FIELD ? NAN : f / 127.0;
+        }
+    }
+    return stream__grid_voxel_field(g, level, v);
+}
+
+double stream__grid_field_nb(const stream__grid *g, uint32_t level, const int64_t q[3], const stream__nbhood *nbh)
 {
     uint32_t sh = g->level_max - level + 1;
     int64_t v0[3];
@@ -134,12 +157,26 @@ double stream__grid_field(const stream__grid *g, uint32_t level, const int64_t q
             w *= bit ? f[a] : 1 - f[a];
         }
         if (w <= 0) continue;
-        double s = stream__grid_voxel_field(g, level, v);
+        double s = voxel_field_nb(g, level, v, nbh);
         if (isnan(s)) continue;
         sum += w * s;
         wsum += w;
     }
     return wsum > 0 ? sum / wsum : NAN;
+}
+
+double stream__grid_field(const stream__grid *g, uint32_t level, const int64_t q[3])
+{
+    return stream__grid_field_nb(g, level, q, NULL);
+}
+
+void stream__grid_nbhood(const stream__grid *g, uint32_t level, const int64_t b[3], stream__nbhood *out)
+{
+    memcpy(out->b, b, sizeof out->b);
+    for (int k = 0; k < 27; k++) {
+        int64_t nb[3] = {b[0] + k % 3 - 1, b[1] + k / 3 % 3 - 1, b[2] + k / 9 - 1};
+        out->idx[k] = stream__grid_find(g, level, nb);
+    }
 }
 
 /* Field of one brick: each confident voxel's mean of +-1 over the confident

@@ -67,6 +67,18 @@ bool stream__grid_sample(const stream__grid *g, const int64_t q[3], stream__voxe
  * (weights renormalised). NAN when none has. */
 double stream__grid_field(const stream__grid *g, uint32_t level, const int64_t q[3]);
 
+/* The 27 bricks of one level around brick b (index k = (dx+1) + 3 (dy+1)
+ * + 9 (dz+1)), to read fields without the hash. */
+typedef struct stream__nbhood {
+    int64_t b[3];
+    uint32_t idx[27]; /* snapshot index or STREAM__NONE */
+} stream__nbhood;
+void stream__grid_nbhood(const stream__grid *g, uint32_t level, const int64_t b[3], stream__nbhood *out);
+/* stream__grid_field reading voxels in nbh's bricks through nbh: the same
+ * arithmetic on the same bytes, so bit-equal to stream__grid_field (corner
+ * classes decided from it must agree between the cells sharing a corner). */
+double stream__grid_field_nb(const stream__grid *g, uint32_t level, const int64_t q[3], const stream__nbhood *nbh);
+
 /* Field of one voxel (level-L global coordinates), NAN when it has none. */
 double stream__grid_voxel_field(const stream__grid *g, uint32_t level, const int64_t v[3]);
 
