@@ -19,15 +19,15 @@ BF_LOCAL_SIZE_FROM_SPEC
 
 layout(std430, binding = 0) coherent buffer Hash { uint w[]; } hash;
 layout(std430, binding = 1) coherent buffer Locks { uint w[]; } locks;
-layout(std430, binding = 2) coherent buffer Nodes { uint w[]; } nodes;
-layout(std430, binding = 3) coherent buffer Info { uint w[]; } info;
+layout(std430, binding = 2) buffer Nodes { uint w[]; } nodes;
+layout(std430, binding = 3) buffer Info { uint w[]; } info;
 layout(std430, binding = 4) coherent buffer Counters { uint w[]; } cnt;
-layout(std430, binding = 5) coherent buffer FreeStack { uint w[]; } free_stack;
-layout(std430, binding = 6) coherent buffer Stamp { uint w[]; } stamp;
+layout(std430, binding = 5) buffer FreeStack { uint w[]; } free_stack;
+layout(std430, binding = 6) buffer Stamp { uint w[]; } stamp;
 layout(std430, binding = 7) readonly buffer Frames { fusion_frame f[]; } frames;
 layout(std430, binding = 8) readonly buffer DepthRing { uint w[]; } depth;
-layout(std430, binding = 9) coherent buffer Queue { uint w[]; } queue;
-layout(std430, binding = 10) coherent buffer NewList { uint w[]; } new_list;
+layout(std430, binding = 9) buffer Queue { uint w[]; } queue;
+layout(std430, binding = 10) buffer NewList { uint w[]; } new_list;
 
 layout(push_constant) uniform Push { fusion_alloc_push pc; };
 
@@ -144,10 +144,10 @@ void touch_brick(uint node, uint entry, uvec3 cell, uint level)
 /* The chunk of map point p and its cell at level inside the chunk. */
 void locate(vec3 p, uint level, out ivec3 key, out uvec3 cell)
 {
-    key = ivec3(floor(p / pc.chunk_m));
+    key = ivec3(floor(p * (1.0 / pc.chunk_m)));
     vec3 q = p - vec3(key) * pc.chunk_m; /* chunk-local, in [0, chunk_m) up to rounding */
-    float cell_m = pc.chunk_m / float(1u << level); /* edge of a level-`level` cell */
-    cell = uvec3(clamp(ivec3(floor(q / cell_m)), ivec3(0), ivec3((1 << level) - 1)));
+    float cells_per_m = float(1u << level) / pc.chunk_m; /* level-`level` cells per metre */
+    cell = uvec3(clamp(ivec3(floor(q * cells_per_m)), ivec3(0), ivec3((1 << level) - 1)));
 }
 
 /* Inserts the brick of cell at level in chunk key; false if it must be
@@ -192,45 +192,76 @@ uint depth_raw(uint slot, uint pixel, uint n_pixels)
     return (pixel & 1u) == 0u ? (w & 0xFFFFu) : (w >> 16);
 }
 
-/* The map point of band point k of a pixel, and its level; false when the
- * pixel has no usable depth. */
-bool band_point(fusion_frame fr, uint pixel, uint k, out vec3 p, out uint level)
+/* The frame's camera, read once per invocation. */
+uint g_width, g_n_pixels;
+float g_unit, g_cx, g_cy, g_inv_fx, g_inv_fy, g_inv_abs_fx;
+
+void load_camera(fusion_frame fr)
 {
-    uint n_pixels = fr.width * fr.height;
-    float z = float(depth_raw(pc.slot, pixel, n_pixels)) * fr.depth_unit_m;
-    p = vec3(0.0);
-    level = 0u;
-    if (!(z > 0.0) || z > pc.max_depth_m) return false;
-    float sigma = fusion_sigma(z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
-    level = fusion_level_for_footprint(pc.voxel_ratio * z / abs(fr.fx), pc.chunk_m, pc.max_level);
-    float zk = z + (float(k) - 1.0) * pc.band_sigmas * sigma;
-    if (!(zk > 0.0)) return false;
-    float u = float(pixel % fr.width), v = float(pixel / fr.width);
-    vec3 ray = vec3((u - fr.cx) / fr.fx, (v - fr.cy) / fr.fy, 1.0); /* camera frame, z = 1 */
-    /* T_cm maps map points to the camera: p_m = R^T (p_c - t). GLSL's
-     * mat3(...) is column-major, so these columns are R's rows: Rt = R^T. */
-    mat3 Rt = mat3(fr.R[0], fr.R[1], fr.R[2], fr.R[3], fr.R[4], fr.R[5], fr.R[6], fr.R[7], fr.R[8]);
-    p = Rt * (ray * zk - vec3(fr.t[0], fr.t[1], fr.t[2]));
+    g_width = fr.width;
+    g_n_pixels = fr.width * fr.height;
+    g_unit = fr.depth_unit_m;
+    g_cx = fr.cx;
+    g_cy = fr.cy;
+    g_inv_fx = 1.0 / fr.fx;
+    g_inv_fy = 1.0 / fr.fy;
+    g_inv_abs_fx = 1.0 / abs(fr.fx);
+}
+
+/* A depth sample as the allocation sees it: the map point at depth 1 along
+ * its ray is o + d, band point k sits at o + z_k d. */
+struct sample_ray {
+    vec3 d;       /* ray direction in the map frame, scaled to unit camera z */
+    float z;      /* measured depth [m] */
+    float band;   /* band_sigmas * sigma(z) */
+    uint level;   /* octree level of the sample */
+};
+
+/* The sample of a pixel; false when the pixel has no usable depth. Rt is
+ * R^T of the frame's map-to-camera transform. */
+bool sample_of(mat3 Rt, uint pixel, out sample_ray s)
+{
+    s.z = float(depth_raw(pc.slot, pixel, g_n_pixels)) * g_unit;
+    s.d = vec3(0.0);
+    s.band = 0.0;
+    s.level = 0u;
+    if (!(s.z > 0.0) || s.z > pc.max_depth_m) return false;
+    s.band = pc.band_sigmas * fusion_sigma(s.z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
+    s.level = fusion_level_for_footprint(pc.voxel_ratio * s.z * g_inv_abs_fx, pc.chunk_m, pc.max_level);
+    float u = float(pixel % g_width), v = float(pixel / g_width);
+    s.d = Rt * vec3((u - g_cx) * g_inv_fx, (v - g_cy) * g_inv_fy, 1.0);
     return true;
+}
+
+/* T_cm maps map points to the camera, so p_m = R^T (p_c - t): the origin of
+ * the rays is -R^T t. GLSL's mat3(...) is column-major, so these columns
+ * are R's rows: the matrix is R^T. */
+mat3 frame_Rt(fusion_frame fr)
+{
+    return mat3(fr.R[0], fr.R[1], fr.R[2], fr.R[3], fr.R[4], fr.R[5], fr.R[6], fr.R[7], fr.R[8]);
 }
 
 void main()
 {
     fusion_frame fr = frames.f[pc.slot];
     uint n_pixels = fr.width * fr.height;
+    load_camera(fr);
     if (pc.pass > 0u) {
         uint q = (pc.pass - 1u) % 2u;
         uint i = gl_GlobalInvocationID.x;
         if (i >= min(queue.w[4u * q], pc.queue_cap)) return;
         uint item = queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i];
         uint pixel = item / 4u, k = item % 4u;
-        vec3 p;
-        uint level;
-        if (pixel >= n_pixels || !band_point(fr, pixel, k, p, level)) return;
+        mat3 Rt = frame_Rt(fr);
+        vec3 o = -(Rt * vec3(fr.t[0], fr.t[1], fr.t[2]));
+        sample_ray sr;
+        if (pixel >= n_pixels || !sample_of(Rt, pixel, sr)) return;
+        float zk = sr.z + (float(k) - 1.0) * sr.band;
+        if (!(zk > 0.0)) return;
         ivec3 key;
         uvec3 cell;
-        locate(p, level, key, cell);
-        if (!insert_cell(key, cell, level)) retry(item);
+        locate(o + zk * sr.d, sr.level, key, cell);
+        if (!insert_cell(key, cell, sr.level)) retry(item);
         return;
     }
     /* Pass 0: one invocation per tile of FUSION_ALLOC_TILE^2 pixels. Every
@@ -241,26 +272,32 @@ void main()
     uint tile = gl_GlobalInvocationID.x;
     uint tx = tile % tiles_x, ty = tile / tiles_x;
     uint rows = ty * FUSION_ALLOC_TILE < fr.height ? FUSION_ALLOC_TILE : 0u;
+    mat3 Rt = frame_Rt(fr);
+    vec3 o = -(Rt * vec3(fr.t[0], fr.t[1], fr.t[2]));
     /* Per band index: the last cell inserted (key, then cell and level). */
-    ivec3 last_key[3] = ivec3[3](ivec3(0), ivec3(0), ivec3(0));
-    uvec4 last_cell[3] = uvec4[3](uvec4(0xFFFFFFFFu), uvec4(0xFFFFFFFFu), uvec4(0xFFFFFFFFu));
+    ivec3 last_key0 = ivec3(0), last_key1 = ivec3(0), last_key2 = ivec3(0);
+    uvec4 last_cell0 = uvec4(0xFFFFFFFFu), last_cell1 = uvec4(0xFFFFFFFFu), last_cell2 = uvec4(0xFFFFFFFFu);
     for (uint dy = 0u; dy < rows; dy++)
         for (uint dx = 0u; dx < FUSION_ALLOC_TILE; dx++) {
             uint x = tx * FUSION_ALLOC_TILE + dx, y = ty * FUSION_ALLOC_TILE + dy;
             if (x >= fr.width || y >= fr.height) continue;
             uint pixel = y * fr.width + x;
+            sample_ray sr;
+            if (!sample_of(Rt, pixel, sr)) continue;
             for (uint k = 0u; k < 3u; k++) {
-                vec3 p;
-                uint level;
-                if (!band_point(fr, pixel, k, p, level)) break;
+                float zk = sr.z + (float(k) - 1.0) * sr.band;
+                if (!(zk > 0.0)) continue;
                 ivec3 key;
                 uvec3 cell;
-                locate(p, level, key, cell);
-                uvec4 id = uvec4(cell, level);
-                if (all(equal(id, last_cell[k])) && all(equal(key, last_key[k]))) continue;
-                if (insert_cell(key, cell, level)) {
-                    last_key[k] = key;
-                    last_cell[k] = id;
+                locate(o + zk * sr.d, sr.level, key, cell);
+                uvec4 id = uvec4(cell, sr.level);
+                ivec3 lk = k == 0u ? last_key0 : (k == 1u ? last_key1 : last_key2);
+                uvec4 lc = k == 0u ? last_cell0 : (k == 1u ? last_cell1 : last_cell2);
+                if (all(equal(id, lc)) && all(equal(key, lk))) continue;
+                if (insert_cell(key, cell, sr.level)) {
+                    if (k == 0u) { last_key0 = key; last_cell0 = id; }
+                    else if (k == 1u) { last_key1 = key; last_cell1 = id; }
+                    else { last_key2 = key; last_cell2 = id; }
                 } else {
                     retry(pixel * 4u + k);
                 }
