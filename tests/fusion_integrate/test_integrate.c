@@ -25,23 +25,7 @@
 #include "fusion/fusion_int.h"
 #include "gpu/gpu.h"
 
-#if defined(__SANITIZE_ADDRESS__)
-#define TEST_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define TEST_ASAN 1
-#endif
-#endif
-#ifdef TEST_ASAN
-#include <dlfcn.h>
-/* See tests/gpu/test_gpu.c: the validation layer's own allocations. */
-__attribute__((constructor)) static void pin_validation_layer(void)
-{
-    dlopen("libVkLayer_khronos_validation.so", RTLD_NOW | RTLD_LOCAL | RTLD_NODELETE);
-}
-const char *__lsan_default_suppressions(void);
-const char *__lsan_default_suppressions(void) { return "leak:libVkLayer_khronos_validation.so\n"; }
-#endif
+/* Under ASan, tests/test_main.c pins the validation layer and suppresses its leaks. */
 
 /* ------------------------------------------------------------ shared functions */
 
