@@ -43,7 +43,7 @@ acc = e["accuracy"]
 print("\t".join(str(x) for x in [ratio, window, round(s["frame_ms"]["median"], 1), round(s["frame_ms"]["p95"], 1),
       round(g["alloc"], 1), round(g["subcache"], 1), round(g["window"], 1),
       round(s["map_bytes"]["total"] / 2**20, 2), round(s["bits_per_allocated_voxel"], 3), s["bricks"],
-      round(1e3 * acc["median"], 2), round(1e3 * acc["p90"], 2), round(e["completeness"], 4)]))
+      round(1e3 * acc["median_m"], 2), round(1e3 * acc["p90_m"], 2), round(e["completeness"]["ratio"], 4)]))
 EOF
 done
 
