@@ -48,6 +48,7 @@ int main(int argc, char **argv)
     TRY(gpu_context_create(&gc, &ctx));
     fusion_config cfg = fusion_config_default();
     cfg.window = n_frames + (n_frames & 1);
+    if (cfg.subcache > cfg.window) cfg.subcache = cfg.window;
     cfg.brick_cap = 1u << 18;
     cfg.voxel_ratio = ratio;
     fusion_map *map;

@@ -519,7 +519,7 @@ BF_TEST(gpu_equals_cpu_invalid_pixels) { run_surface_case(surf_holes, 4, 0.05); 
  * a tuning choice: every size gives the same bits. */
 BF_TEST(gpu_equals_cpu_at_every_workgroup_size)
 {
-    static const char *vpt[] = {"1", "4", "16", "64"};
+    static const char *vpt[] = {"1", "8", "16", "32"};
     for (size_t k = 0; k < sizeof vpt / sizeof vpt[0]; k++) {
         setenv("BITFUSE_INTEGRATE_VPT", vpt[k], 1);
         fprintf(stderr, "  %s voxels per invocation\n", vpt[k]);
