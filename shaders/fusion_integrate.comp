@@ -77,8 +77,10 @@ void main()
     uint slot = list.w[FUSION_LIST_HEADER + pc.first + idx];
     uint tid = gl_LocalInvocationID.x, n_threads = gl_WorkGroupSize.x;
 
-    /* 1. The brick. */
+    /* 1. The brick. A slot freed since the list was gathered (empty-brick
+     * removal) has no chunk: nothing to do. */
     uint chunk = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
+    if (chunk == FUSION_NONE) return; /* uniform: before any barrier */
     uint pos = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS];
     float brick_err = uintBitsToFloat(info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR]);
     int key_x = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_X]);

@@ -703,6 +703,40 @@ BF_TEST(list_slice_touches_only_its_bricks)
     CLOSE_SCENE(&s);
 }
 
+/* A list entry whose slot was freed after the list was gathered (its record
+ * says no chunk) is skipped: nothing is read through it or written. */
+BF_TEST(freed_slot_in_the_list_is_skipped)
+{
+    scene s;
+    OPEN_SCENE(&s);
+    g_plane_z = 1.0;
+    CHECK_OK(add_box(&s, -0.12, -0.1, 0.9, 0.12, 0.1, 1.1));
+    for (uint32_t i = 0; i < 3; i++) put_frame(&s, i, cam_jitter(0, 0, 0, 0, 0, 1, (int)i), surf_plane_z);
+    fusion_map *m = s.map;
+    uint32_t freed = m->cfg.brick_cap - 1; /* never handed out: its record is all FUSION_NONE */
+    uint32_t marker[BRICK_WORDS];
+    for (uint32_t w = 0; w < BRICK_WORDS; w++) marker[w] = 0x5a5a0000u + w;
+    CHECK_OK(gpu_buffer_upload(m->sign, (uint64_t)freed * 64, marker, 64));
+    CHECK_OK(gpu_buffer_upload(m->frames, 0, s.frames, sizeof s.frames));
+    CHECK_OK(gpu_buffer_upload(m->depth_ring, 0, s.depth, sizeof s.depth));
+    uint32_t list[FUSION_LIST_HEADER + 2] = {2, 0, 0, 0, freed, s.slot[0]};
+    CHECK_OK(gpu_buffer_upload(m->new_list, 0, list, sizeof list));
+    CHECK_OK(gpu_begin(m->ctx));
+    fusion__cmd_integrate(m, m->b_integrate_new, 0, 2, 0, 3, false);
+    CHECK_OK(gpu_submit_wait(m->ctx));
+    uint32_t got[BRICK_WORDS], info[FUSION_BRICK_INFO_WORDS], sign0[BRICK_WORDS];
+    CHECK_OK(gpu_buffer_download(m->sign, (uint64_t)freed * 64, got, 64));
+    CHECK_OK(gpu_buffer_download(m->info, (uint64_t)freed * sizeof info, info, sizeof info));
+    CHECK(!memcmp(got, marker, sizeof got));
+    for (uint32_t k = 0; k < FUSION_BRICK_INFO_WORDS; k++) CHECK_EQ_INT(info[k], FUSION_NONE);
+    CHECK_OK(gpu_buffer_download(m->sign, (uint64_t)s.slot[0] * 64, sign0, 64));
+    uint32_t any = 0;
+    for (uint32_t w = 0; w < BRICK_WORDS; w++) any |= sign0[w];
+    CHECK(any != 0); /* the live brick next to it was integrated */
+    CHECK_OK(fusion_check(m));
+    CLOSE_SCENE(&s);
+}
+
 /* ------------------------------------------------------------ physics */
 
 /* A fronto-parallel plane at depth d seen by 5 frames from near the origin:
