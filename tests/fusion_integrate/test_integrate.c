@@ -48,18 +48,28 @@ BF_TEST(observe_weights_follow_the_rule)
     o = fusion_observe(1000, 0.001f, 0.998f, a, b, c);
     CHECK(o.w == 1.0f);
     CHECK_NEAR(o.wd, 0.002, 1e-6);
-    /* Behind by half a sigma: the ramp gives 1/2 (not DESIGN.md's inverted 1/2 either way: check a quarter). */
+    /* Behind by a quarter sigma: W = 1, D itself (the clamp is symmetric). */
     o = fusion_observe(1000, 0.001f, 1.0f + 0.25f * sigma, a, b, c);
-    CHECK_NEAR(o.w, 0.75, 1e-5);
-    CHECK_NEAR(o.wd, -0.75 * 0.25 * sigma, 1e-7);
+    CHECK(o.w == 1.0f);
+    CHECK_NEAR(o.wd, -0.25 * sigma, 1e-7);
+    /* Behind by 1.5 sigma: W = 1, D clamped to -sigma. */
+    o = fusion_observe(1000, 0.001f, 1.0f + 1.5f * sigma, a, b, c);
+    CHECK(o.w == 1.0f);
+    CHECK_NEAR(o.wd, -sigma, 1e-7);
+    /* Behind by 2.25 sigma: the fade-out (3 sigma + D)/sigma = 0.75, D clamped. */
+    o = fusion_observe(1000, 0.001f, 1.0f + 2.25f * sigma, a, b, c);
+    CHECK_NEAR(o.w, 0.75, 1e-4);
+    CHECK_NEAR(o.wd, -0.75 * sigma, 1e-6);
     /* Occluded and invalid. */
-    o = fusion_observe(1000, 0.001f, 1.0f + 1.01f * sigma, a, b, c);
+    o = fusion_observe(1000, 0.001f, 1.0f + 3.01f * sigma, a, b, c);
     CHECK(o.w == 0.0f && o.wd == 0.0f);
     o = fusion_observe(0, 0.001f, 0.5f, a, b, c);
     CHECK(o.w == 0.0f && o.wd == 0.0f);
-    /* Continuity at the surface: both sides give W -> 1. */
-    o = fusion_observe(1000, 0.001f, 1.0f + 1e-6f, a, b, c);
-    CHECK_NEAR(o.w, 1.0, 1e-3);
+    /* Symmetry: D and -D within sigma give opposite sums of equal weight. */
+    fusion_obs f1 = fusion_observe(1000, 0.001f, 1.0f - 0.5f * sigma, a, b, c);
+    fusion_obs f2 = fusion_observe(1000, 0.001f, 1.0f + 0.5f * sigma, a, b, c);
+    CHECK(f1.w == f2.w);
+    CHECK_NEAR(f1.wd, -f2.wd, 1e-7);
 }
 
 BF_TEST(project_pixel_nearest_and_outside)
@@ -741,8 +751,9 @@ BF_TEST(freed_slot_in_the_list_is_skipped)
 
 /* A fronto-parallel plane at depth d seen by 5 frames from near the origin:
  * voxels in front of it get sign 1 and, seen in every frame with weight 1,
- * confidence; voxels behind it get sign 0; those beyond the band are not
- * observed (W = 0) and stay as they were (0, not confident). */
+ * confidence; voxels behind it within 3 sigma get sign 0 (confident down to
+ * about 2.2 sigma); those beyond are not observed (W = 0) and stay as they
+ * were (0, not confident). */
 BF_TEST(plane_gives_front_sign_and_confidence_where_weight_suffices)
 {
     scene s;
@@ -767,13 +778,15 @@ BF_TEST(plane_gives_front_sign_and_confidence_where_weight_suffices)
                 CHECK_EQ_INT(sg, 1);
                 CHECK_EQ_INT(cf, 1);
                 n_front++;
-            } else if (cz > d + 1e-4 && cz < d + sigma) { /* behind, in the band: a ramp, sum W < 5 */
+            } else if (cz > d + 1e-4 && cz < d + 3 * sigma) { /* behind, in the band */
                 CHECK_EQ_INT(sg, 0);
                 n_behind++;
-                /* Confident only if the 5 ramp weights reach 4: (sigma - D)/sigma >= 0.8. */
-                double w = 5 * (sigma - (cz - d)) / sigma;
+                /* W = 1 down to -2 sigma, then the fade (3 sigma - D)/sigma: confident
+                 * when the 5 frames' weights reach 4, i.e. D <= 2.2 sigma. */
+                double D = cz - d;
+                double w = D <= 2 * sigma ? 5.0 : 5 * (3 * sigma - D) / sigma;
                 if (fabs(w - 4.0) > 0.05) CHECK_EQ_INT(cf, w >= 4.0 ? 1 : 0);
-            } else if (cz > d + sigma + 1e-4) {
+            } else if (cz > d + 3 * sigma + 1e-4) {
                 CHECK_EQ_INT(sg, 0);
                 CHECK_EQ_INT(cf, 0);
                 n_far++;
