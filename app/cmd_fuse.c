@@ -52,7 +52,10 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     for (int i = 1; i < argc; i++) {
         int r = replay_parse_option(argc, argv, &i, &a->ropt);
         if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
-        if (r > 0) continue;
+        if (r > 0) { /* it moved i past the option: the loop's i++ must not skip one more */
+            i--;
+            continue;
+        }
         const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         double d;
         uint32_t u;
@@ -313,7 +316,8 @@ int cmd_fuse(int argc, char **argv)
             if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);
         printf("\n  surface          %llu voxels, mesh %llu triangles\n", (unsigned long long)r.points_st.n_points,
                (unsigned long long)r.mesh_st.n_triangles);
-        printf("  wrote            %s/{mesh.ply,points.ply,stats.json} in %.1f s\n", a.out, r.seconds);
+        printf("  wrote            %s/{%spoints.ply,stats.json} in %.1f s\n", a.out, a.no_mesh ? "" : "mesh.ply,",
+               r.seconds);
     }
     fusion_destroy(map);
     gpu_context_destroy(ctx);

@@ -106,7 +106,9 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         .set_confidence = set_confidence ? 1u : 0u,
         .max_groups_x = max_x < 65535u ? max_x : 65535u,
         .chunk_m = m->cfg.chunk_m,
-        .conf_weight = m->cfg.conf_weight,
+        /* A window shorter than the threshold (a sequence of fewer frames)
+         * can still make a voxel confident: seen in every one of its frames. */
+        .conf_weight = m->cfg.conf_weight < (float)n_frames ? m->cfg.conf_weight : (float)n_frames,
         .sigma_a = m->cfg.sigma_a,
         .sigma_b = m->cfg.sigma_b,
         .sigma_c = m->cfg.sigma_c,
