@@ -1,0 +1,105 @@
+/* fusion end to end: a short synthetic room sequence with Kinect v1 noise,
+ * fused with its true poses, exported as surface voxels and measured
+ * against the reference mesh (issue 3's check, at test size: 36 frames of
+ * 320x240 instead of 300 of 640x480; bench/fusion_sweep.sh runs the full
+ * size). Validation is on. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "eval/eval.h"
+#include "fusion/fusion.h"
+#include "gpu_fixture.h"
+#include "replay/replay.h"
+#include "stream/stream.h"
+
+/* A hand-held sideways sweep with a little yaw, 100 Hz, first pose the
+ * identity (synth places it at the room's viewpoint). */
+static void write_sweep(const char *path)
+{
+    replay_traj t = {0};
+    for (int k = 0; k <= 250; k++) {
+        double s = k / 100.0;
+        bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), -0.15 * sin(s)),
+                                  bf_v3(0.25 * sin(s), 0.02 * sin(3 * s), 0.05 * (1 - cos(s))));
+        replay_traj_push(&t, 100.0 + s, &T);
+    }
+    replay_traj_write_tum(path, &t);
+    replay_traj_free(&t);
+}
+
+BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    char traj[512], seq[512], path[600];
+    snprintf(traj, sizeof traj, "%s/sweep.txt", bf_test_tmpdir());
+    snprintf(seq, sizeof seq, "%s/room", bf_test_tmpdir());
+    write_sweep(traj);
+    /* Without the shared meshes the room is walls, table and boxes: the
+     * test does not depend on ../shared/data. */
+    eval_synth_config sc = {.scene = "room", .traj_path = traj, .n_frames = 36, .noise = EVAL_NOISE_KINECT1,
+                            .seed = 3, .K = {320, 240, 262.5, 262.5, 159.5, 119.5, 5000}, .out_dir = seq};
+    CHECK_OK(eval_synth_run(&sc, NULL));
+
+    rgbd_source *src;
+    CHECK_OK(replay_open(seq, NULL, &src));
+    fusion_config fc = fusion_config_default();
+    fc.brick_cap = 1u << 17;
+    fusion_map *map = NULL;
+    bf_frame f;
+    bf_status s;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+        CHECK(f.has_pose);
+        if (!map) CHECK_OK(fusion_create(ctx, &fc, rgbd_source_intrinsics(src), f.T_wc.t, &map));
+        CHECK_OK(fusion_add_frame(map, &f, &f.T_wc));
+    }
+    CHECK_STATUS(s, BF_END);
+    CHECK_OK(fusion_flush(map));
+    CHECK_OK(fusion_check(map));
+    fusion_stats st;
+    CHECK_OK(fusion_get_stats(map, &st));
+    /* Memory: 2 bits of sign and confidence per voxel plus records, nodes
+     * and hash must stay under 3 bits per allocated voxel, a tenth of a
+     * 4-byte TSDF. */
+    CHECK(st.n_bricks > 1000);
+    CHECK_LE(8.0 * (double)st.bytes_total / (512.0 * st.n_bricks), 3.0);
+    /* The level most of the surface sits on (half-resolution frames put it
+     * one level coarser than 640x480 would). */
+    uint32_t typical = 0;
+    for (uint32_t l = 0; l < 16; l++)
+        if (st.bricks_per_level[l] > st.bricks_per_level[typical]) typical = l;
+
+    fusion_snapshot snap;
+    CHECK_OK(fusion_snapshot_take(map, &snap));
+    eval_mesh pts = {0}, ref = {0}, seen = {0};
+    CHECK_OK(stream_export_points(&snap, &pts, NULL));
+    snprintf(path, sizeof path, "%s/scene.ply", seq);
+    CHECK_OK(eval_mesh_read_ply(path, &ref));
+    snprintf(path, sizeof path, "%s/seen.ply", seq);
+    CHECK_OK(eval_mesh_read_ply(path, &seen));
+    eval_surface_config ec = eval_surface_config_default();
+    eval_surface_result er;
+    CHECK_OK(eval_surface(&ref, &pts, &seen, &ec, &er));
+    double voxel = fusion_level_voxel_m(fc.chunk_m, typical);
+    fprintf(stderr, "  %u bricks (most at level %u, %.1f mm), %u surface points: median %.2f mm, p90 %.2f mm, "
+                    "completeness %.1f%%\n",
+            st.n_bricks, typical, 1e3 * voxel, pts.n_verts, 1e3 * er.accuracy.median, 1e3 * er.accuracy.p90,
+            100 * er.completeness);
+    /* Issue 3's bounds at test size: surface voxel centres lie within one
+     * voxel of the surface's level (median; a centre next to a sign change is
+     * at most one voxel away from it, half a voxel on average), and 90% of the
+     * seen surface has a surface voxel within 1 cm. The 5 mm bound of the
+     * issue holds for 640x480 frames (finer levels): bench/fusion_sweep.sh. */
+    CHECK_LE(er.accuracy.median, voxel);
+    CHECK(er.completeness >= 0.90);
+    eval_mesh_free(&pts);
+    eval_mesh_free(&ref);
+    eval_mesh_free(&seen);
+    fusion_snapshot_free(&snap);
+    fusion_destroy(map);
+    rgbd_source_close(src);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
