@@ -12,7 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 FRAMES=${1:-300}
 OUT=${2:-/tmp/bitfuse-sweep}
-BIN=build/app/bitfuse
+BIN=${BITFUSE_BIN:-build/app/bitfuse}
 TRAJ=../shared/data/tum/fr1_xyz/groundtruth.txt
 [ -x "$BIN" ] || bash scripts/build.sh
 mkdir -p "$OUT"
