@@ -5,13 +5,7 @@
 #include "fusion.h"
 #include "shaders/fusion.glsl.h"
 
-/* A list of brick slots on the GPU (new bricks of a frame, a window's
- * bricks): word FUSION_LIST_COUNT holds the count, words
- * FUSION_LIST_ARGS.. +2 indirect dispatch arguments a prepare pass writes,
- * entries start at FUSION_LIST_HEADER. */
-#define FUSION_LIST_COUNT 0u
-#define FUSION_LIST_ARGS 1u
-#define FUSION_LIST_HEADER 4u
+/* Work lists of brick slots: FUSION_LIST_* in shaders/fusion.glsl.h. */
 
 struct fusion_map {
     gpu_context *ctx;

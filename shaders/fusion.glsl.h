@@ -129,6 +129,15 @@ BF_FN bf_f32 fusion_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
     return s;
 }
 
+/* ------------------------------------------------------------ work lists */
+/* A list of brick slots (new bricks of a frame, a window's bricks): word
+ * FUSION_LIST_COUNT holds the count, words FUSION_LIST_ARGS .. + 2 the
+ * indirect dispatch arguments a prepare pass writes, entries start at
+ * FUSION_LIST_HEADER. */
+#define FUSION_LIST_COUNT 0u
+#define FUSION_LIST_ARGS 1u
+#define FUSION_LIST_HEADER 4u
+
 /* ------------------------------------------------------------ allocation */
 /* The retry queues of the allocation passes live in one buffer: two queues,
  * each a 4-word header {count, groups x, y, z} at word 4 * q, entries from
@@ -232,13 +241,6 @@ _Static_assert(sizeof(fusion_remove_push) == 16, "fusion_remove_push must match 
  * D = (Psi Phi + sum W_i D_i) / (Psi + sum W_i); sign bit = D > 0, decided
  * on the numerator (the denominator is positive) without dividing. */
 
-/* The work-list layout of fusion/fusion_int.h, for the shaders (C takes it
- * them from there; keep the two equal). */
-#ifdef BF_GLSL
-#  define FUSION_LIST_COUNT 0u
-#  define FUSION_LIST_ARGS 1u
-#  define FUSION_LIST_HEADER 4u
-#endif
 
 /* Frames one pass may look at (fusion_config.window <= 256): a workgroup
  * keeps one visibility bit per frame, and the window error's fixed-point

@@ -20,6 +20,6 @@ void main()
     if (info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] >= pc.n_entries) return; /* free slot */
     uint s = stamp.w[b];
     if (s == FUSION_NONE || s < pc.first || s > pc.last) return;
-    uint i = atomicAdd(list.w[0], 1u);
-    list.w[4u + i] = b;
+    uint i = atomicAdd(list.w[FUSION_LIST_COUNT], 1u);
+    list.w[FUSION_LIST_HEADER + i] = b;
 }
