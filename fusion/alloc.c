@@ -4,9 +4,11 @@
 #include "bf_shaders_spv.h"
 #include "fusion_int.h"
 
-/* Passes after the first: a point loses at most once per level it creates
- * (chunk, max_level nodes, brick), so max_level + 2 retries drain the queue. */
-static uint32_t alloc_retry_passes(const fusion_map *m) { return m->cfg.max_level + 2; }
+/* Passes after the first (which only queues the points): a point loses at
+ * most once per level it creates (chunk, max_level nodes; a brick never
+ * loses), so max_level + 2 insertion passes drain the queue; one more as
+ * margin, as before pass 0 stopped inserting. */
+static uint32_t alloc_retry_passes(const fusion_map *m) { return m->cfg.max_level + 3; }
 
 bf_status fusion__alloc_create(fusion_map *m)
 {
@@ -77,8 +79,8 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
     gpu_cmd_fill(m->ctx, m->locks, 0, GPU_WHOLE_SIZE, 0);
     /* Publishes the fills (and the frame's upload) to the first pass. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    uint32_t tiles = gpu_groups(m->K.width, FUSION_ALLOC_TILE) * gpu_groups(m->K.height, FUSION_ALLOC_TILE);
-    gpu_cmd_dispatch(m->ctx, m->p_alloc, m->b_alloc, &pc, gpu_groups(tiles, FUSION_ALLOC_LOCAL), 1, 1);
+    gpu_cmd_dispatch(m->ctx, m->p_alloc, m->b_alloc, &pc, gpu_groups(m->K.width, FUSION_ALLOC_LOCAL),
+                     gpu_groups(m->K.height, FUSION_ALLOC_ROWS), 1);
     for (uint32_t p = 1; p <= alloc_retry_passes(m); p++) {
         pc.pass = p;
         /* The previous pass's queue writes -> the args pass reading the count. */

@@ -143,13 +143,11 @@ BF_FN bf_f32 fusion_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
  * each a 4-word header {count, groups x, y, z} at word 4 * q, entries from
  * FUSION_QUEUE_ENTRIES + q * queue_cap. An entry is pixel * 4 + band point. */
 #define FUSION_QUEUE_ENTRIES 8u
-/* Workgroup size of the allocation passes (1-D: tiles or queue entries).
- * 16, not 64: with 64 and 4x4 tiles a 160x120 frame lost the bricks of its
- * last tile row on lavapipe (test plane_allocates_exactly_the_band_bricks),
- * a failure not understood yet; 16 passes at every size tried. */
+/* Workgroup size of the allocation passes (1-D: pixel columns in pass 0,
+ * queue entries after it). */
 #define FUSION_ALLOC_LOCAL 16u
-/* Pass 0 gives each invocation a square tile of pixels of this edge. */
-#define FUSION_ALLOC_TILE 4u
+/* Pass 0 gives each invocation a column segment of this many rows. */
+#define FUSION_ALLOC_ROWS 16u
 
 /* Push constants of fusion_alloc.comp and fusion_alloc_args.comp. */
 struct fusion_alloc_push {

@@ -1,17 +1,22 @@
 #version 450
-/* Brick allocation (DESIGN.md section 3): one invocation per depth sample
- * (pass 0) or per queued retry (later passes). Each sample inserts three
- * points along its ray, at -band, 0 and +band sigma(z) around the measured
- * depth, so the voxels on both sides of the surface get bricks. Per point:
- * chunk hash lookup / insertion, octree descent to the level matching the
- * sample's pixel footprint (creating nodes), brick allocation.
+/* Brick allocation (DESIGN.md section 3). Each depth sample has three points
+ * along its ray, at -band, 0 and +band sigma(z) around the measured depth,
+ * so the voxels on both sides of the surface get bricks. Pass 0 computes
+ * every point's cell (chunk, cell at the level matching the sample's pixel
+ * footprint) and queues only the points whose cell differs from those of
+ * the neighbours before it; the later passes, one invocation per queued
+ * point, do the chunk hash lookup / insertion, the octree descent (creating
+ * nodes) and the brick allocation. Split so, every lane of a SIMD group does
+ * the same work (llvmpipe runs 8 lanes in lockstep; a descent done for any
+ * lane costs all of them), and a brick is descended to about twice per
+ * column group instead of three times per pixel.
  *
  * Contention never spins (no forward-progress guarantee; lavapipe runs
  * subgroups of 8): whoever wins a lock (bucket word, or CAS of a node field
  * from NONE to LOCKED) does the work; losers queue the point for the next
  * pass, which sees the finished result. Bucket locks are cleared by the host
  * before every pass. A point that loses at most once per level finishes
- * within max_level + 2 passes. */
+ * within max_level + 2 insertion passes. */
 #extension GL_GOOGLE_include_directive : require
 #include "fusion.glsl.h"
 
@@ -217,20 +222,75 @@ struct sample_ray {
     uint level;   /* octree level of the sample */
 };
 
-/* The sample of a pixel; false when the pixel has no usable depth. Rt is
- * R^T of the frame's map-to-camera transform. */
-bool sample_of(mat3 Rt, uint pixel, out sample_ray s)
+/* The sample of pixel (x, y); false when the pixel has no usable depth. Rt
+ * is R^T of the frame's map-to-camera transform. */
+bool sample_at(mat3 Rt, uint x, uint y, out sample_ray s)
 {
-    s.z = float(depth_raw(pc.slot, pixel, g_n_pixels)) * g_unit;
+    s.z = float(depth_raw(pc.slot, y * g_width + x, g_n_pixels)) * g_unit;
     s.d = vec3(0.0);
     s.band = 0.0;
     s.level = 0u;
     if (!(s.z > 0.0) || s.z > pc.max_depth_m) return false;
     s.band = pc.band_sigmas * fusion_sigma(s.z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
     s.level = fusion_level_for_footprint(pc.voxel_ratio * s.z * g_inv_abs_fx, pc.chunk_m, pc.max_level);
-    float u = float(pixel % g_width), v = float(pixel / g_width);
-    s.d = Rt * vec3((u - g_cx) * g_inv_fx, (v - g_cy) * g_inv_fy, 1.0);
+    s.d = Rt * vec3((float(x) - g_cx) * g_inv_fx, (float(y) - g_cy) * g_inv_fy, 1.0);
     return true;
+}
+
+/* Band point k (0, 1, 2: -band, 0, +band) of a sample; false when it lies
+ * behind the camera. */
+bool band_point(sample_ray sr, uint k, out float zk)
+{
+    zk = sr.z + (float(k) - 1.0) * sr.band;
+    return zk > 0.0;
+}
+
+/* A band point's brick: its chunk key and fusion_pack_pos(cell, level);
+ * pos = FUSION_NONE when there is no point (no depth, or behind the
+ * camera). No real pos equals FUSION_NONE (level <= 8). */
+struct cell_id {
+    ivec3 key;
+    uint pos;
+};
+
+cell_id point_cell(vec3 o, sample_ray sr, bool ok, uint k)
+{
+    cell_id c;
+    c.key = ivec3(0);
+    c.pos = FUSION_NONE;
+    float zk;
+    if (!ok || !band_point(sr, k, zk)) return c;
+    uvec3 cell;
+    locate(o + zk * sr.d, sr.level, c.key, cell);
+    c.pos = fusion_pack_pos(cell.x, cell.y, cell.z, sr.level);
+    return c;
+}
+
+bool same_cell(cell_id a, cell_id b) { return a.pos == b.pos && all(equal(a.key, b.key)); }
+
+/* The three band cells of pixel (x, y). */
+void pixel_cells(mat3 Rt, vec3 o, uint x, uint y, out cell_id c0, out cell_id c1, out cell_id c2)
+{
+    sample_ray sr;
+    bool ok = sample_at(Rt, x, y, sr);
+    c0 = point_cell(o, sr, ok, 0u);
+    c1 = point_cell(o, sr, ok, 1u);
+    c2 = point_cell(o, sr, ok, 2u);
+}
+
+/* Is the point c a repeat of one of the three cells a0..a2 (a neighbour's)? */
+bool in3(cell_id c, cell_id a0, cell_id a1, cell_id a2)
+{
+    return same_cell(c, a0) || same_cell(c, a1) || same_cell(c, a2);
+}
+
+/* Pass 0 queues band point k of pixel unless it repeats an earlier point:
+ * one of the same pixel (smaller k), of the left or of the upper pixel. */
+void queue_new(cell_id c, bool repeat, uint pixel, uint k, cell_id l0, cell_id l1, cell_id l2, cell_id u0, cell_id u1,
+               cell_id u2)
+{
+    if (c.pos == FUSION_NONE || repeat || in3(c, l0, l1, l2) || in3(c, u0, u1, u2)) return;
+    retry(pixel * 4u + k);
 }
 
 /* T_cm maps map points to the camera, so p_m = R^T (p_c - t): the origin of
@@ -255,52 +315,45 @@ void main()
         mat3 Rt = frame_Rt(fr);
         vec3 o = -(Rt * vec3(fr.t[0], fr.t[1], fr.t[2]));
         sample_ray sr;
-        if (pixel >= n_pixels || !sample_of(Rt, pixel, sr)) return;
-        float zk = sr.z + (float(k) - 1.0) * sr.band;
-        if (!(zk > 0.0)) return;
+        if (pixel >= n_pixels || k > 2u || !sample_at(Rt, pixel % g_width, pixel / g_width, sr)) return;
+        float zk;
+        if (!band_point(sr, k, zk)) return;
         ivec3 key;
         uvec3 cell;
         locate(o + zk * sr.d, sr.level, key, cell);
         if (!insert_cell(key, cell, sr.level)) retry(item);
         return;
     }
-    /* Pass 0: one invocation per tile of FUSION_ALLOC_TILE^2 pixels. Every
-     * sample is inserted, but a point in the same level cell as the last one
-     * of its band index would only repeat the same descent: skip it (a
-     * brick spans about 8 pixels at voxel-to-pixel ratio 1). */
-    uint tiles_x = (fr.width + FUSION_ALLOC_TILE - 1u) / FUSION_ALLOC_TILE;
-    uint tile = gl_GlobalInvocationID.x;
-    uint tx = tile % tiles_x, ty = tile / tiles_x;
-    uint rows = ty * FUSION_ALLOC_TILE < fr.height ? FUSION_ALLOC_TILE : 0u;
+    /* Pass 0 inserts nothing: it queues, for the insertion passes, every
+     * band point whose cell differs from the band cells of the pixel to its
+     * left, of the pixel above and of the same pixel's earlier points.
+     * Every cell a frame touches is queued at least once (a point left out
+     * repeats an earlier one in (row, column, k) order, which by induction
+     * leads to a queued one), about twice per brick and column group instead
+     * of once per pixel. One invocation per column segment of
+     * FUSION_ALLOC_ROWS rows: every lane does the same work, the cells of
+     * the pixel above are carried from the previous row, those of the left
+     * column recomputed. */
+    uint x = gl_GlobalInvocationID.x, y0 = gl_WorkGroupID.y * FUSION_ALLOC_ROWS;
+    if (x >= fr.width || y0 >= fr.height) return;
+    uint y1 = min(y0 + FUSION_ALLOC_ROWS, fr.height);
     mat3 Rt = frame_Rt(fr);
     vec3 o = -(Rt * vec3(fr.t[0], fr.t[1], fr.t[2]));
-    /* Per band index: the last cell inserted (key, then cell and level). */
-    ivec3 last_key0 = ivec3(0), last_key1 = ivec3(0), last_key2 = ivec3(0);
-    uvec4 last_cell0 = uvec4(0xFFFFFFFFu), last_cell1 = uvec4(0xFFFFFFFFu), last_cell2 = uvec4(0xFFFFFFFFu);
-    for (uint dy = 0u; dy < rows; dy++)
-        for (uint dx = 0u; dx < FUSION_ALLOC_TILE; dx++) {
-            uint x = tx * FUSION_ALLOC_TILE + dx, y = ty * FUSION_ALLOC_TILE + dy;
-            if (x >= fr.width || y >= fr.height) continue;
-            uint pixel = y * fr.width + x;
-            sample_ray sr;
-            if (!sample_of(Rt, pixel, sr)) continue;
-            for (uint k = 0u; k < 3u; k++) {
-                float zk = sr.z + (float(k) - 1.0) * sr.band;
-                if (!(zk > 0.0)) continue;
-                ivec3 key;
-                uvec3 cell;
-                locate(o + zk * sr.d, sr.level, key, cell);
-                uvec4 id = uvec4(cell, sr.level);
-                ivec3 lk = k == 0u ? last_key0 : (k == 1u ? last_key1 : last_key2);
-                uvec4 lc = k == 0u ? last_cell0 : (k == 1u ? last_cell1 : last_cell2);
-                if (all(equal(id, lc)) && all(equal(key, lk))) continue;
-                if (insert_cell(key, cell, sr.level)) {
-                    if (k == 0u) { last_key0 = key; last_cell0 = id; }
-                    else if (k == 1u) { last_key1 = key; last_cell1 = id; }
-                    else { last_key2 = key; last_cell2 = id; }
-                } else {
-                    retry(pixel * 4u + k);
-                }
-            }
-        }
+    cell_id none;
+    none.key = ivec3(0);
+    none.pos = FUSION_NONE;
+    cell_id u0 = none, u1 = none, u2 = none;
+    if (y0 > 0u) pixel_cells(Rt, o, x, y0 - 1u, u0, u1, u2);
+    for (uint y = y0; y < y1; y++) {
+        cell_id c0, c1, c2, l0 = none, l1 = none, l2 = none;
+        pixel_cells(Rt, o, x, y, c0, c1, c2);
+        if (x > 0u) pixel_cells(Rt, o, x - 1u, y, l0, l1, l2);
+        uint pixel = y * fr.width + x;
+        queue_new(c0, false, pixel, 0u, l0, l1, l2, u0, u1, u2);
+        queue_new(c1, same_cell(c1, c0), pixel, 1u, l0, l1, l2, u0, u1, u2);
+        queue_new(c2, same_cell(c2, c0) || same_cell(c2, c1), pixel, 2u, l0, l1, l2, u0, u1, u2);
+        u0 = c0;
+        u1 = c1;
+        u2 = c2;
+    }
 }
