@@ -287,9 +287,9 @@ bool in3(cell_id c, cell_id a0, cell_id a1, cell_id a2)
 /* Pass 0 queues band point k of pixel unless it repeats an earlier point:
  * one of the same pixel (smaller k), of the left or of the upper pixel. */
 void queue_new(cell_id c, bool repeat, uint pixel, uint k, cell_id l0, cell_id l1, cell_id l2, cell_id u0, cell_id u1,
-               cell_id u2)
+               cell_id u2, cell_id ul0, cell_id ul1, cell_id ul2)
 {
-    if (c.pos == FUSION_NONE || repeat || in3(c, l0, l1, l2) || in3(c, u0, u1, u2)) return;
+    if (c.pos == FUSION_NONE || repeat || in3(c, l0, l1, l2) || in3(c, u0, u1, u2) || in3(c, ul0, ul1, ul2)) return;
     retry(pixel * 4u + k);
 }
 
@@ -342,18 +342,24 @@ void main()
     cell_id none;
     none.key = ivec3(0);
     none.pos = FUSION_NONE;
-    cell_id u0 = none, u1 = none, u2 = none;
-    if (y0 > 0u) pixel_cells(Rt, o, x, y0 - 1u, u0, u1, u2);
+    cell_id u0 = none, u1 = none, u2 = none, ul0 = none, ul1 = none, ul2 = none;
+    if (y0 > 0u) {
+        pixel_cells(Rt, o, x, y0 - 1u, u0, u1, u2);
+        if (x > 0u) pixel_cells(Rt, o, x - 1u, y0 - 1u, ul0, ul1, ul2);
+    }
     for (uint y = y0; y < y1; y++) {
         cell_id c0, c1, c2, l0 = none, l1 = none, l2 = none;
         pixel_cells(Rt, o, x, y, c0, c1, c2);
         if (x > 0u) pixel_cells(Rt, o, x - 1u, y, l0, l1, l2);
         uint pixel = y * fr.width + x;
-        queue_new(c0, false, pixel, 0u, l0, l1, l2, u0, u1, u2);
-        queue_new(c1, same_cell(c1, c0), pixel, 1u, l0, l1, l2, u0, u1, u2);
-        queue_new(c2, same_cell(c2, c0) || same_cell(c2, c1), pixel, 2u, l0, l1, l2, u0, u1, u2);
+        queue_new(c0, false, pixel, 0u, l0, l1, l2, u0, u1, u2, ul0, ul1, ul2);
+        queue_new(c1, same_cell(c1, c0), pixel, 1u, l0, l1, l2, u0, u1, u2, ul0, ul1, ul2);
+        queue_new(c2, same_cell(c2, c0) || same_cell(c2, c1), pixel, 2u, l0, l1, l2, u0, u1, u2, ul0, ul1, ul2);
         u0 = c0;
         u1 = c1;
         u2 = c2;
+        ul0 = l0;
+        ul1 = l1;
+        ul2 = l2;
     }
 }
