@@ -27,10 +27,8 @@ static bf_status window_list_create(fusion_map *m)
         .local_size = {64, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_window_list);
-    if (s == BF_OK) s = gpu_bindings_create(m->ctx, 3, "fusion.window_list", &m->b_window_list);
-    if (s == BF_OK) s = gpu_bindings_set(m->b_window_list, 0, m->info, 0, GPU_WHOLE_SIZE);
-    if (s == BF_OK) s = gpu_bindings_set(m->b_window_list, 1, m->stamp, 0, GPU_WHOLE_SIZE);
-    if (s == BF_OK) s = gpu_bindings_set(m->b_window_list, 2, m->window_list, 0, GPU_WHOLE_SIZE);
+    gpu_buffer *bufs[3] = {m->info, m->stamp, m->window_list};
+    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.window_list", bufs, 3, &m->b_window_list);
     return s;
 }
 
@@ -45,9 +43,8 @@ static bf_status remove_create(fusion_map *m)
         .local_size = {64, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_remove);
-    if (s == BF_OK) s = gpu_bindings_create(m->ctx, 8, "fusion.remove", &m->b_remove);
     gpu_buffer *bufs[8] = {m->window_list, m->info, m->nodes, m->sign, m->conf, m->stamp, m->counters, m->free_stack};
-    for (uint32_t i = 0; i < 8 && s == BF_OK; i++) s = gpu_bindings_set(m->b_remove, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.remove", bufs, 8, &m->b_remove);
     return s;
 }
 

@@ -53,6 +53,9 @@ struct fusion_map {
  * *slot receives the brick slot. */
 bf_status fusion__debug_insert_brick(fusion_map *map, const int32_t key[3], uint32_t level, const uint32_t cell[3],
                                      uint32_t *slot);
+/* map.c: a binding set named name with bufs[i], whole, at binding i. */
+bf_status fusion__bindings_create(fusion_map *map, const char *name, gpu_buffer *const *bufs, uint32_t n,
+                                  gpu_bindings **out);
 /* map.c: host ring slot of sequence frame index i. */
 static inline uint32_t fusion__ring_slot(const fusion_map *map, uint32_t i) { return i % map->ring_slots; }
 

@@ -181,6 +181,20 @@ void fusion_destroy(fusion_map *m)
     free(m);
 }
 
+bf_status fusion__bindings_create(fusion_map *m, const char *name, gpu_buffer *const *bufs, uint32_t n,
+                                  gpu_bindings **out)
+{
+    gpu_bindings *b = NULL;
+    bf_status s = gpu_bindings_create(m->ctx, n, name, &b);
+    for (uint32_t i = 0; i < n && s == BF_OK; i++) s = gpu_bindings_set(b, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    if (s != BF_OK) {
+        gpu_bindings_destroy(b);
+        return s;
+    }
+    *out = b;
+    return BF_OK;
+}
+
 double fusion_level_voxel_m(float chunk_m, uint32_t level) { return (double)fusion_voxel_m(chunk_m, level); }
 
 bf_vec3 fusion_voxel_center_w(const fusion_snapshot *s, const fusion_brick *b, uint32_t x, uint32_t y, uint32_t z)
