@@ -146,9 +146,9 @@ BF_FN bf_f32 fusion_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
 /* Workgroup size of the allocation passes (1-D: pixel columns in pass 0,
  * queue entries after it). llvmpipe pays about a microsecond per workgroup:
  * 64 rather than 16 saves several ms on the ~100k queued points of a
- * 640x480 frame. (With 16 and pass 0's former 4x4 pixel tiles per
- * invocation, 64 once lost a 160x120 frame's last tile row; not seen with
- * the column segments.) */
+ * 640x480 frame. (The former pass 0, 4x4 pixel tiles per invocation, lost
+ * a 160x120 frame's last tile row with 64; the column segments pass the
+ * same test with 64.) */
 #define FUSION_ALLOC_LOCAL 64u
 /* Pass 0 gives each invocation a column segment of this many rows. */
 #define FUSION_ALLOC_ROWS 16u
