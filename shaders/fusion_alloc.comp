@@ -18,6 +18,8 @@
  * before every pass. A point that loses at most once per level finishes
  * within max_level + 2 insertion passes. */
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_shuffle_relative : require
 #include "fusion.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
@@ -286,6 +288,15 @@ bool in3(cell_id c, cell_id a0, cell_id a1, cell_id a2)
 
 /* Pass 0 queues band point k of pixel unless it repeats an earlier point:
  * one of the same pixel (smaller k), of the left or of the upper pixel. */
+/* The cell of the lane to the left in the subgroup (undefined in lane 0). */
+cell_id from_left(cell_id c)
+{
+    cell_id l;
+    l.key = subgroupShuffleUp(c.key, 1u);
+    l.pos = subgroupShuffleUp(c.pos, 1u);
+    return l;
+}
+
 void queue_new(cell_id c, bool repeat, uint pixel, uint k, cell_id l0, cell_id l1, cell_id l2, cell_id u0, cell_id u1,
                cell_id u2, cell_id ul0, cell_id ul1, cell_id ul2)
 {
@@ -325,32 +336,44 @@ void main()
         return;
     }
     /* Pass 0 inserts nothing: it queues, for the insertion passes, every
-     * band point whose cell differs from the band cells of the pixel to its
-     * left, of the pixel above and of the same pixel's earlier points.
+     * band point whose cell differs from the band cells of the pixels to its
+     * left, above and above left, and from the same pixel's earlier points.
      * Every cell a frame touches is queued at least once (a point left out
-     * repeats an earlier one in (row, column, k) order, which by induction
-     * leads to a queued one), about twice per brick and column group instead
-     * of once per pixel. One invocation per column segment of
-     * FUSION_ALLOC_ROWS rows: every lane does the same work, the cells of
-     * the pixel above are carried from the previous row, those of the left
-     * column recomputed. */
+     * repeats one earlier in (row, column, k) order, which by induction
+     * leads to a queued one), a few times per brick instead of three times
+     * per pixel. One invocation per column segment of FUSION_ALLOC_ROWS
+     * rows: every lane does the same work, the cells of the pixel above are
+     * carried from the previous row, those of the left column come from the
+     * lane to the left when it holds column x - 1 (checked, so any lane
+     * order is exact); the first lane of a subgroup compares with the pixel
+     * above only (more points queued, no column computed twice). */
     uint x = gl_GlobalInvocationID.x, y0 = gl_WorkGroupID.y * FUSION_ALLOC_ROWS;
-    if (x >= fr.width || y0 >= fr.height) return;
+    if (y0 >= fr.height) return; /* uniform in the workgroup */
+    bool inside = x < fr.width;
+    bool has_left = gl_SubgroupInvocationID > 0u && subgroupShuffleUp(x, 1u) + 1u == x && inside;
     uint y1 = min(y0 + FUSION_ALLOC_ROWS, fr.height);
     mat3 Rt = frame_Rt(fr);
     vec3 o = -(Rt * vec3(fr.t[0], fr.t[1], fr.t[2]));
     cell_id none;
     none.key = ivec3(0);
     none.pos = FUSION_NONE;
-    cell_id u0 = none, u1 = none, u2 = none, ul0 = none, ul1 = none, ul2 = none;
-    if (y0 > 0u) {
-        pixel_cells(Rt, o, x, y0 - 1u, u0, u1, u2);
-        if (x > 0u) pixel_cells(Rt, o, x - 1u, y0 - 1u, ul0, ul1, ul2);
+    cell_id u0 = none, u1 = none, u2 = none;
+    if (y0 > 0u && inside) pixel_cells(Rt, o, x, y0 - 1u, u0, u1, u2);
+    cell_id ul0 = from_left(u0), ul1 = from_left(u1), ul2 = from_left(u2);
+    if (!has_left) {
+        ul0 = none;
+        ul1 = none;
+        ul2 = none;
     }
     for (uint y = y0; y < y1; y++) {
-        cell_id c0, c1, c2, l0 = none, l1 = none, l2 = none;
-        pixel_cells(Rt, o, x, y, c0, c1, c2);
-        if (x > 0u) pixel_cells(Rt, o, x - 1u, y, l0, l1, l2);
+        cell_id c0 = none, c1 = none, c2 = none;
+        if (inside) pixel_cells(Rt, o, x, y, c0, c1, c2);
+        cell_id l0 = from_left(c0), l1 = from_left(c1), l2 = from_left(c2);
+        if (!has_left) {
+            l0 = none;
+            l1 = none;
+            l2 = none;
+        }
         uint pixel = y * fr.width + x;
         queue_new(c0, false, pixel, 0u, l0, l1, l2, u0, u1, u2, ul0, ul1, ul2);
         queue_new(c1, same_cell(c1, c0), pixel, 1u, l0, l1, l2, u0, u1, u2, ul0, ul1, ul2);
