@@ -8,8 +8,9 @@
  * point, do the chunk hash lookup / insertion, the octree descent (creating
  * nodes) and the brick allocation. Split so, every lane of a SIMD group does
  * the same work (llvmpipe runs 8 lanes in lockstep; a descent done for any
- * lane costs all of them), and a brick is descended to about twice per
- * column group instead of three times per pixel.
+ * lane costs all of them), and there are about four descents per brick
+ * instead of three per pixel (about 120k points instead of 920k for a
+ * 640x480 frame of 28k bricks).
  *
  * Contention never spins (no forward-progress guarantee; lavapipe runs
  * subgroups of 8): whoever wins a lock (bucket word, or CAS of a node field
@@ -286,8 +287,6 @@ bool in3(cell_id c, cell_id a0, cell_id a1, cell_id a2)
     return same_cell(c, a0) || same_cell(c, a1) || same_cell(c, a2);
 }
 
-/* Pass 0 queues band point k of pixel unless it repeats an earlier point:
- * one of the same pixel (smaller k), of the left or of the upper pixel. */
 /* The cell of the lane to the left in the subgroup (undefined in lane 0). */
 cell_id from_left(cell_id c)
 {
@@ -297,6 +296,9 @@ cell_id from_left(cell_id c)
     return l;
 }
 
+/* Pass 0 queues band point k of pixel unless it repeats an earlier point:
+ * one of the same pixel (repeat: a smaller k), of the left, upper or upper
+ * left pixel. */
 void queue_new(cell_id c, bool repeat, uint pixel, uint k, cell_id l0, cell_id l1, cell_id l2, cell_id u0, cell_id u1,
                cell_id u2, cell_id ul0, cell_id ul1, cell_id ul2)
 {
