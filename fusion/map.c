@@ -148,6 +148,11 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     if (s != BF_OK) return s;
     if (!isfinite(origin_w.x) || !isfinite(origin_w.y) || !isfinite(origin_w.z))
         return bf_fail(BF_INVALID_ARG, "fusion: map origin is not finite");
+    /* The allocation pass shares pixel cells between neighbouring lanes. */
+    uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_RELATIVE_BIT;
+    if ((gpu_device_limits(ctx)->subgroup_ops & need) != need)
+        return bf_fail(BF_UNSUPPORTED, "fusion: device %s lacks subgroup shuffles in compute shaders",
+                       gpu_device_name(ctx));
     fusion_map *m = calloc(1, sizeof *m);
     if (!m) return bf_fail(BF_NO_MEMORY, "fusion: map struct");
     m->ctx = ctx;

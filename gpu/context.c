@@ -338,6 +338,7 @@ void gpu__query_device(const gpu__instance *inst, VkPhysicalDevice phys, gpu_dev
     lim->min_storage_buffer_offset_alignment = l->minStorageBufferOffsetAlignment;
     lim->non_coherent_atom_size = l->nonCoherentAtomSize;
     lim->subgroup_size = subgroup.subgroupSize;
+    lim->subgroup_ops = (subgroup.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) ? subgroup.supportedOperations : 0;
     lim->max_compute_workgroup_invocations = l->maxComputeWorkGroupInvocations;
     for (int i = 0; i < 3; i++) {
         lim->max_compute_workgroup_size[i] = l->maxComputeWorkGroupSize[i];

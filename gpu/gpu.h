@@ -90,6 +90,7 @@ typedef struct gpu_limits {
     uint64_t min_storage_buffer_offset_alignment;
     uint64_t non_coherent_atom_size;
     uint32_t subgroup_size;
+    uint32_t subgroup_ops;                  /* VkSubgroupFeatureFlags usable in compute shaders, 0 if none */
     uint32_t max_compute_workgroup_invocations;
     uint32_t max_compute_workgroup_size[3];
     uint32_t max_compute_workgroup_count[3];
