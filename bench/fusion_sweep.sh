@@ -13,6 +13,10 @@ cd "$(dirname "$0")/.."
 FRAMES=${1:-300}
 OUT=${2:-/tmp/bitfuse-sweep}
 BIN=${BITFUSE_BIN:-build/app/bitfuse}
+# Debian's python3 has numpy and matplotlib (scripts/install-deps.sh); a
+# python3 earlier on PATH may not.
+PY=python3
+[ -x /usr/bin/python3 ] && PY=/usr/bin/python3
 TRAJ=../shared/data/tum/fr1_xyz/groundtruth.txt
 [ -x "$BIN" ] || bash scripts/build.sh
 mkdir -p "$OUT"
@@ -33,7 +37,7 @@ for cfg in "1 40" "2 40" "1 20" "2 20"; do
   $BIN fuse "$SEQ" --poses groundtruth --out "$RUN" --ratio "$1" --window "$2" > "$RUN.log" 2>&1
   $BIN eval-surface --reference "$SEQ/scene.ply" --reconstruction "$RUN/mesh.ply" --visible "$SEQ/seen.ply" \
        --json > "$RUN/surface.json"
-  python3 - "$RUN" "$1" "$2" >> "$RESULTS" <<'EOF'
+  $PY - "$RUN" "$1" "$2" >> "$RESULTS" <<'EOF'
 import json, sys
 run, ratio, window = sys.argv[1:4]
 s = json.load(open(run + "/stats.json"))
@@ -47,7 +51,7 @@ print("\t".join(str(x) for x in [ratio, window, round(s["frame_ms"]["median"], 1
 EOF
 done
 
-python3 - "$RESULTS" "$(git rev-parse --short HEAD)" "$FRAMES" <<'EOF'
+$PY - "$RESULTS" "${SWEEP_COMMIT:-$(git rev-parse --short HEAD)}" "$FRAMES" <<'EOF'
 import csv, sys
 path, commit, frames = sys.argv[1:4]
 rows = list(csv.DictReader(open(path), delimiter="\t"))
