@@ -27,7 +27,7 @@ static void usage(FILE *f)
     fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n\ncommands:\n");
     for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
     fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error\n"
-               "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error),\n"
+               "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"
                "             BITFUSE_THREADS (CPU threads), BITFUSE_VALIDATION=1 (Vulkan validation)\n");
 }
 
