@@ -87,6 +87,30 @@ fusion_stage_ms fusion_last_stage_ms(const fusion_map *map);
  * reports at the end of a run, not per frame. */
 bf_status fusion_get_stats(fusion_map *map, fusion_stats *out);
 
+/* ------------------------------------------------------------ GPU view */
+
+/* The map's buffers as readers on the GPU see them (render/'s ray-caster):
+ * layouts in shaders/fusion.glsl.h. Readers must not write them, and must
+ * record their work after fusion_add_frame / fusion_flush returned (those
+ * wait for their own submissions). Valid until fusion_destroy. */
+typedef struct fusion_gpu_view {
+    gpu_buffer *hash;       /* n_entries entries of FUSION_ENTRY_WORDS */
+    gpu_buffer *nodes;      /* FUSION_NODE_WORDS per node */
+    gpu_buffer *info;       /* FUSION_BRICK_INFO_WORDS per brick slot */
+    gpu_buffer *sign, *conf; /* BRICK_WORDS per brick slot */
+    uint32_t n_buckets;     /* hash buckets (fusion_hash's modulus) */
+    uint32_t n_entries;     /* buckets * FUSION_BUCKET_SLOTS + overflow */
+    uint32_t max_level;
+    float chunk_m;
+    bf_vec3 origin_w;       /* world point of the GPU's origin (double) */
+} fusion_gpu_view;
+
+fusion_gpu_view fusion_gpu_view_get(const fusion_map *map);
+/* The config the map was created with (defaults filled in). */
+const fusion_config *fusion_get_config(const fusion_map *map);
+/* Frames added so far. */
+uint32_t fusion_frame_count(const fusion_map *map);
+
 /* ------------------------------------------------------------ host copies */
 
 /* One brick as the host sees it. Voxel (x, y, z) has its centre at

@@ -521,3 +521,24 @@ bf_status fusion_check(fusion_map *m)
     host_map_free(&h);
     return s;
 }
+
+fusion_gpu_view fusion_gpu_view_get(const fusion_map *m)
+{
+    fusion_gpu_view v = {
+        .hash = m->hash,
+        .nodes = m->nodes,
+        .info = m->info,
+        .sign = m->sign,
+        .conf = m->conf,
+        .n_buckets = m->cfg.hash_buckets,
+        .n_entries = m->n_entries,
+        .max_level = m->cfg.max_level,
+        .chunk_m = m->cfg.chunk_m,
+        .origin_w = m->origin_w,
+    };
+    return v;
+}
+
+const fusion_config *fusion_get_config(const fusion_map *m) { return &m->cfg; }
+
+uint32_t fusion_frame_count(const fusion_map *m) { return m->n_frames; }

@@ -1,0 +1,70 @@
+/* render: the shared ray-casting backend (DESIGN.md section 5; Reichl,
+ * Weiss, Westermann 2016, section 5).
+ *
+ * One ray per pixel: a DDA over the world chunks the ray crosses, in each
+ * chunk that exists an octree DDA with a short stack (restart from the root
+ * on underflow) down to the finest existing brick, and in the brick a
+ * brick traverser. The `surface` traverser steps voxel by voxel until the
+ * sign bit changes from front (1) to behind (0); for tracking the hit is
+ * refined between the two voxel centres, for display only confident voxels
+ * count. The traverser is one GLSL function behind one seam
+ * (shaders/render_traverse.glsl.h) so the particle and mesh renderers can
+ * reuse the chunk and octree walk with their own.
+ *
+ * Images stay on the GPU (tracking reads them there); render_download
+ * copies them to the host for PNGs and tests.
+ */
+#ifndef BF_RENDER_H
+#define BF_RENDER_H
+
+#include "core/core.h"
+#include "fusion/fusion.h"
+#include "gpu/gpu.h"
+
+typedef struct render_caster render_caster; /* opaque */
+
+typedef struct render_options {
+    bool confident_only; /* display: only confident voxels are surface; tracking: every sign bit */
+    bool refine;         /* hit between the two voxel centres where the sign changes (tracking) */
+    float near_m, far_m; /* ray range along the optical axis, default 0.2 / 6 */
+} render_options;
+
+render_options render_options_tracking(void); /* every sign bit, refined */
+render_options render_options_display(void);  /* confident voxels only, refined */
+
+/* The images of the last ray-cast, row-major width x height, on the GPU. */
+typedef struct render_targets {
+    uint32_t width, height;
+    gpu_buffer *depth;  /* float per pixel: camera z of the hit [m]; 0 = no hit */
+    gpu_buffer *normal; /* 4 floats per pixel: unit normal in camera coordinates, w = 0; all 0 = no hit */
+    gpu_buffer *level;  /* uint per pixel: octree level of the brick hit; FUSION_NONE = no hit */
+    gpu_buffer *colour; /* uint per pixel: shaded RGBA8 (R in the low byte); 0 = no hit */
+} render_targets;
+
+/* Creates a caster for images of width x height. ctx is borrowed. */
+bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, render_caster **out);
+/* NULL is a no-op. */
+void render_destroy(render_caster *rc);
+
+/* Ray-casts map from camera pose T_wc (camera to world, double; the caster
+ * hands the GPU a transform relative to the map's origin) with intrinsics
+ * K (K's size must be the caster's). Waits for the GPU. */
+bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
+                         const render_options *opt);
+const render_targets *render_get_targets(const render_caster *rc);
+/* GPU time of the last render_raycast [ms] (Vulkan timestamps). */
+double render_last_ms(const render_caster *rc);
+
+/* Host copies of the images (malloc'd arrays, freed by render_images_free). */
+typedef struct render_images {
+    uint32_t width, height;
+    float *depth;   /* width * height */
+    float *normal;  /* 4 * width * height */
+    uint32_t *level;
+    uint8_t *rgb;   /* 3 * width * height, the shaded view (no hit: black) */
+} render_images;
+
+bf_status render_download(render_caster *rc, render_images *out);
+void render_images_free(render_images *im);
+
+#endif

@@ -1,0 +1,95 @@
+/* tracking: camera tracking against the map (DESIGN.md section 6;
+ * Newcombe et al. 2011 KinectFusion for projective point-to-plane ICP,
+ * Reichl's dissertation ch. 8 for the perspective-adapted ROF filter).
+ *
+ * The reference is a depth image seen from a known pose: the ray-cast of
+ * the map at the last pose (render/), or a raw frame. It is smoothed with
+ * the ROF filter on its foreground (Chambolle's dual iteration, lambda
+ * adapted to depth so near surfaces are smoothed more than far ones), and
+ * turned into vertex and normal pyramids (3 levels). A new frame is tracked
+ * by projective data association and point-to-plane ICP, coarse to fine;
+ * each iteration reduces the 6x6 system on the GPU in partial sums and
+ * solves it on the CPU in double.
+ *
+ * Poses are camera to world in double. The GPU only ever sees the pose of
+ * the new frame relative to the reference camera, so tracking 10 km from
+ * the world origin is as accurate as at the origin.
+ */
+#ifndef BF_TRACKING_H
+#define BF_TRACKING_H
+
+#include "core/core.h"
+#include "gpu/gpu.h"
+
+typedef struct track_tracker track_tracker; /* opaque */
+
+#define TRACK_MAX_LEVELS 3u
+
+typedef struct track_config {
+    uint32_t levels;                       /* pyramid levels, 1..3, default 3 */
+    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 10, 5, 4 */
+    float dist_m;                          /* association distance gate, default 0.1 */
+    float angle_deg;                       /* normal angle gate, default 20 */
+    float max_depth_m;                     /* samples beyond are ignored, default 4.5 */
+    /* Failure and degeneracy (checked at the end of the finest level). */
+    float min_inlier_frac;   /* inliers / valid samples of the frame below this: failure */
+    float max_residual_m;    /* RMS point-to-plane residual of the inliers above this: failure */
+    float max_motion_m;      /* estimated motion from the guess beyond these: failure */
+    float max_motion_deg;
+    double degenerate_ratio; /* smallest / largest eigenvalue of the scaled system below this: degenerate */
+    /* ROF smoothing of the reference (0 iterations: off). */
+    uint32_t rof_iterations;
+    float rof_lambda0;       /* data weight at 1 m; lambda(z) per the dissertation */
+} track_config;
+
+track_config track_config_default(void);
+
+typedef enum track_outcome {
+    TRACK_OK = 0,
+    TRACK_NO_DEPTH,      /* the frame has too few valid depth samples (empty, NaN, all zero) */
+    TRACK_NO_REFERENCE,  /* no reference set, or it has too few valid pixels */
+    TRACK_FEW_INLIERS,   /* too few associations passed the gates */
+    TRACK_HIGH_RESIDUAL, /* the inliers do not fit */
+    TRACK_LARGE_MOTION,  /* the estimate jumped beyond max_motion from the guess */
+    TRACK_NUMERIC,       /* the system was singular or not finite */
+} track_outcome;
+
+const char *track_outcome_name(track_outcome o); /* "ok", "few-inliers", ... */
+
+typedef struct track_result {
+    track_outcome outcome;
+    bool degenerate;     /* ill-conditioned (a single plane in view): weak directions kept from the guess */
+    bf_se3 T_wc;         /* the estimate when outcome is TRACK_OK, else the guess */
+    uint32_t n_valid;    /* valid samples of the frame at the finest level */
+    uint32_t n_inliers;  /* associations that passed the gates, last iteration of the finest level */
+    double inlier_frac;  /* n_inliers / n_valid */
+    double residual_m;   /* RMS point-to-plane residual of the inliers */
+    double eig_min, eig_max; /* of the last system (rotation columns scaled by the scene depth) */
+    uint32_t iterations; /* run in all levels */
+    double ms_gpu;       /* GPU time of the tracking (pyramids + ICP), ms */
+    double ms_rof;       /* GPU time of the last reference smoothing, ms */
+} track_result;
+
+/* ctx is borrowed. Frames and references have K's size. */
+bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out);
+void track_destroy(track_tracker *t); /* NULL is a no-op */
+
+/* Sets the reference from a depth image on the GPU (float camera z in
+ * metres per pixel, 0 = none; render_targets.depth) seen from T_wc: ROF
+ * smoothing on its foreground, then the vertex and normal pyramids. The
+ * buffer is read now and may change afterwards. */
+bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc);
+/* Sets the reference from a raw frame (frame-to-frame tracking, tests):
+ * the same path after converting its depth to metres. */
+bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const bf_se3 *T_wc);
+
+/* Tracks frame f against the reference, starting from guess_wc. Returns
+ * BF_OK whenever tracking ran (out->outcome says how it went) and an error
+ * only for bad arguments or a device failure. */
+bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out);
+
+/* The smoothed reference depth (finest level), width * height floats, for
+ * tests and snapshots. */
+bf_status track_download_reference(track_tracker *t, float *depth);
+
+#endif
