@@ -1,0 +1,161 @@
+/* The reconstruction loop: track, fuse, ray-cast, smooth (recon.h). */
+#include "recon.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct recon {
+    gpu_context *ctx;
+    recon_config cfg;
+    bf_intrinsics K;
+    bf_se3 T_first;      /* pose of the first frame with depth */
+    bf_se3 T_last;       /* last good pose */
+    fusion_map *map;     /* created at the first frame with depth */
+    render_caster *caster;
+    track_tracker *tracker;
+    recon_counts counts;
+};
+
+recon_config recon_config_default(void)
+{
+    recon_config c = {
+        .fusion = fusion_config_default(),
+        .track = track_config_default(),
+        .raycast = render_options_tracking(),
+        .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
+        .fuse_degenerate = true,
+    };
+    return c;
+}
+
+const char *recon_state_name(recon_frame_state s)
+{
+    switch (s) {
+    case RECON_FIRST: return "first";
+    case RECON_TRACKED: return "tracked";
+    case RECON_NO_DEPTH: return "no-depth";
+    case RECON_LOST: return "lost";
+    }
+    return "?";
+}
+
+bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intrinsics *K, const bf_se3 *T_wc0,
+                       recon **out)
+{
+    if (!ctx || !cfg || !K || !T_wc0 || !out) return bf_fail(BF_INVALID_ARG, "recon_create: NULL argument");
+    recon *r = calloc(1, sizeof *r);
+    if (!r) return bf_fail(BF_NO_MEMORY, "recon_create");
+    r->ctx = ctx;
+    r->cfg = *cfg;
+    r->K = *K;
+    r->T_first = *T_wc0;
+    r->T_last = *T_wc0;
+    if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
+    bf_status s = render_create(ctx, K->width, K->height, &r->caster);
+    if (s == BF_OK) s = track_create(ctx, &r->cfg.track, K, &r->tracker);
+    if (s != BF_OK) {
+        recon_destroy(r);
+        return s;
+    }
+    *out = r;
+    return BF_OK;
+}
+
+void recon_destroy(recon *r)
+{
+    if (!r) return;
+    track_destroy(r->tracker);
+    render_destroy(r->caster);
+    fusion_destroy(r->map);
+    free(r);
+}
+
+fusion_map *recon_map(recon *r) { return r->map; }
+render_caster *recon_caster(recon *r) { return r->caster; }
+recon_counts recon_get_counts(const recon *r) { return r->counts; }
+
+static uint32_t count_valid(const bf_frame *f)
+{
+    uint32_t n = 0;
+    size_t np = (size_t)f->width * f->height;
+    for (size_t i = 0; i < np; i++) n += f->depth[i] != 0;
+    return n;
+}
+
+/* Fuses f at T and makes the ray-cast of the map at T the next reference. */
+static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, recon_frame_result *out)
+{
+    bf_status s = fusion_add_frame(r->map, f, T);
+    out->fuse = fusion_last_stage_ms(r->map);
+    out->fuse_status = s;
+    if (s == BF_POOL_FULL) {
+        /* The map stays consistent; what did not fit is dropped and counted. */
+        r->counts.pool_full++;
+        bf_warn("recon: frame %u: %s", f->index, bf_last_error());
+        s = BF_OK;
+    }
+    if (s != BF_OK) return s;
+    out->fused = true;
+    if ((s = render_raycast(r->caster, r->map, &r->K, T, &r->cfg.raycast)) != BF_OK) return s;
+    out->ms_raycast = render_last_ms(r->caster);
+    if ((s = track_set_reference_gpu(r->tracker, render_get_targets(r->caster)->depth, T)) != BF_OK) return s;
+    return BF_OK;
+}
+
+bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
+{
+    if (!r || !f || !out) return bf_fail(BF_INVALID_ARG, "recon_add_frame: NULL argument");
+    if (f->width != r->K.width || f->height != r->K.height || !f->depth)
+        return bf_fail(BF_INVALID_ARG, "recon: frame %u is %ux%u, the camera %ux%u", f->index, f->width, f->height,
+                       r->K.width, r->K.height);
+    double t0 = bf_time_s();
+    memset(out, 0, sizeof *out);
+    out->index = f->index;
+    out->T_wc = r->T_last;
+    out->n_valid = count_valid(f);
+    r->counts.frames++;
+    bf_status s = BF_OK;
+    if (out->n_valid < r->cfg.min_valid_pixels) {
+        out->state = RECON_NO_DEPTH;
+        r->counts.no_depth++;
+    } else if (!r->map) {
+        out->state = RECON_FIRST;
+        s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
+        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, out);
+        if (s == BF_OK) r->counts.tracked++;
+    } else {
+        s = track_frame(r->tracker, f, &r->T_last, &out->track);
+        if (s == BF_OK) {
+            out->ms_track = out->track.ms_gpu;
+            bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
+            if (out->track.degenerate) r->counts.degenerate++;
+            if (good) {
+                out->state = RECON_TRACKED;
+                out->T_wc = out->track.T_wc;
+                r->T_last = out->track.T_wc;
+                r->counts.tracked++;
+                s = fuse_and_reference(r, f, &out->T_wc, out);
+            } else {
+                out->state = RECON_LOST;
+                r->counts.lost++;
+            }
+        }
+    }
+    out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
+    out->ms_frame = 1e3 * (bf_time_s() - t0);
+    return s;
+}
+
+bf_status recon_flush(recon *r)
+{
+    if (!r->map) return BF_OK;
+    return fusion_flush(r->map);
+}
+
+bf_status recon_render_view(recon *r, const bf_se3 *T_wc)
+{
+    if (!r->map) return bf_fail(BF_INVALID_ARG, "recon: no map yet (no frame with depth)");
+    render_options opt = render_options_display();
+    return render_raycast(r->caster, r->map, &r->K, T_wc, &opt);
+}

@@ -1,0 +1,82 @@
+/* recon: the full reconstruction loop of one sequence (DESIGN.md section 1):
+ * track the frame against the smoothed ray-cast of the map, fuse it at the
+ * pose found, ray-cast the map at that pose, smooth it as the next frame's
+ * reference. The loop is what `bitfuse replay`, `bitfuse demo` and
+ * `bitfuse live` run; the tests drive it directly.
+ *
+ * Frames tracked badly are not fused (the map stays as it was) and the
+ * camera keeps its last good pose; frames without depth are skipped. Both
+ * are reported per frame and counted.
+ */
+#ifndef BF_RECON_H
+#define BF_RECON_H
+
+#include "core/core.h"
+#include "fusion/fusion.h"
+#include "gpu/gpu.h"
+#include "render/render.h"
+#include "tracking/tracking.h"
+
+typedef struct recon recon; /* opaque */
+
+typedef struct recon_config {
+    fusion_config fusion;
+    track_config track;
+    render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */
+    uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
+    bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
+} recon_config;
+
+recon_config recon_config_default(void);
+
+/* What happened to one frame. */
+typedef enum recon_frame_state {
+    RECON_FIRST = 0,  /* the first frame: fused at the initial pose */
+    RECON_TRACKED,    /* tracked and fused */
+    RECON_NO_DEPTH,   /* too few valid depth samples: skipped */
+    RECON_LOST,       /* tracking failed (result.track.outcome says why): not fused */
+} recon_frame_state;
+
+const char *recon_state_name(recon_frame_state s);
+
+typedef struct recon_frame_result {
+    uint32_t index;          /* the frame's index */
+    recon_frame_state state;
+    bf_se3 T_wc;             /* the frame's pose: tracked, or the last good one */
+    track_result track;      /* valid for RECON_TRACKED and RECON_LOST */
+    bool fused;
+    bf_status fuse_status;   /* BF_POOL_FULL is reported here and the loop goes on */
+    uint32_t n_valid;        /* valid depth samples */
+    /* Times [ms]: wall clock of the whole frame and GPU time per stage. */
+    double ms_frame;
+    double ms_track, ms_rof, ms_raycast;
+    fusion_stage_ms fuse;
+} recon_frame_result;
+
+/* T_wc0 is the first frame's pose (the map's origin goes there). ctx is
+ * borrowed and must outlive the loop. */
+bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intrinsics *K, const bf_se3 *T_wc0,
+                       recon **out);
+void recon_destroy(recon *r); /* NULL is a no-op */
+
+/* Runs the loop on one frame. Errors are device failures and bad
+ * arguments only; tracking failures and pool exhaustion are in *out. */
+bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out);
+/* Integrates what the fusion schedule still owes (end of sequence). */
+bf_status recon_flush(recon *r);
+
+/* The map (NULL before the first frame with depth) and the caster, for
+ * export, statistics and views. */
+fusion_map *recon_map(recon *r);
+render_caster *recon_caster(recon *r);
+/* Ray-casts the map for display (confident voxels) at T_wc into the
+ * caster's images; render_download gets them. */
+bf_status recon_render_view(recon *r, const bf_se3 *T_wc);
+
+/* Running counts. */
+typedef struct recon_counts {
+    uint32_t frames, tracked, lost, no_depth, degenerate, pool_full;
+} recon_counts;
+recon_counts recon_get_counts(const recon *r);
+
+#endif
