@@ -3,7 +3,11 @@
 #ifndef BF_APP_H
 #define BF_APP_H
 
+#include <stdio.h>
+
 #include "core/core.h"
+#include "fusion/fusion.h"
+#include "stream/stream.h"
 
 /* Exit codes scripts can rely on (docs/cli.md). */
 enum {
@@ -23,6 +27,20 @@ int app_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format
 const char *app_default_data_dir(void);
 /* True if argv[i] is -h or --help. */
 bool app_is_help(const char *arg);
+
+/* output.c: what the commands that build a map report about it. */
+typedef struct app_map_report {
+    fusion_stats map;
+    stream_export_stats mesh, points;
+} app_map_report;
+/* Fills r->map, writes out_dir/points.ply and, with_mesh, out_dir/mesh.ply. */
+bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r);
+/* The map's lines of stats.json ("map_bytes" .. "mesh", each ending ",\n"). */
+void app_json_map(FILE *f, const app_map_report *r, uint32_t max_level);
+/* The map's lines of the printed summary. */
+void app_print_map(const app_map_report *r, uint32_t max_level);
+/* Writes dir/name atomically from what write() prints. */
+bf_status app_write_json(const char *dir, const char *name, void (*write)(FILE *f, const void *arg), const void *arg);
 
 int cmd_demo(int argc, char **argv);
 int cmd_synth(int argc, char **argv);

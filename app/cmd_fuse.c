@@ -123,16 +123,23 @@ static bool frame_pose(const bf_frame *f, const replay_traj *traj, bf_se3 *T_wc)
 
 typedef struct fuse_result {
     uint32_t n_fused, n_skipped;
-    fusion_stats map;
-    stream_export_stats mesh_st, points_st;
+    app_map_report out;
     double seconds;
     char device[256];
 } fuse_result;
 
-static void write_stats_json(FILE *f, const fuse_args *a, const fuse_result *r, const fuse_timing *t)
+typedef struct fuse_report {
+    const fuse_args *a;
+    const fuse_result *r;
+    const fuse_timing *t;
+} fuse_report;
+
+static void write_stats_json(FILE *f, const void *arg)
 {
-    const fusion_stats *m = &r->map;
-    uint64_t voxels = (uint64_t)m->n_bricks * 512;
+    const fuse_report *rep = arg;
+    const fuse_args *a = rep->a;
+    const fuse_result *r = rep->r;
+    const fuse_timing *t = rep->t;
     fprintf(f, "{\n  \"command\": \"fuse\",\n  \"sequence\": ");
     bf_json_string(f, a->seq);
     fprintf(f, ",\n  \"device\": ");
@@ -156,27 +163,8 @@ static void write_stats_json(FILE *f, const fuse_args *a, const fuse_result *r, 
     bf_json_number(f, bf_stats_percentile(&t->subcache_ms, 50), 4);
     fprintf(f, ", \"window\": ");
     bf_json_number(f, bf_stats_percentile(&t->window_ms, 50), 4);
-    fprintf(f, "},\n  \"map_bytes\": {\"sign\": %llu, \"confidence\": %llu, \"brick_records\": %llu, "
-               "\"nodes\": %llu, \"hash\": %llu, \"total\": %llu, \"reserved\": %llu},\n",
-            (unsigned long long)m->bytes_sign, (unsigned long long)m->bytes_conf, (unsigned long long)m->bytes_info,
-            (unsigned long long)m->bytes_nodes, (unsigned long long)m->bytes_hash, (unsigned long long)m->bytes_total,
-            (unsigned long long)m->bytes_reserved);
-    fprintf(f, "  \"chunks\": %u,\n  \"nodes\": %u,\n  \"bricks\": %u,\n  \"bricks_per_level\": [", m->n_chunks,
-            m->n_nodes, m->n_bricks);
-    for (int l = 0; l <= (int)a->fcfg.max_level; l++) fprintf(f, "%s%u", l ? ", " : "", m->bricks_per_level[l]);
-    fprintf(f, "],\n  \"allocated_voxels\": %llu,\n  \"confident_voxels\": %llu,\n  \"surface_voxels\": %llu,\n",
-            (unsigned long long)voxels, (unsigned long long)m->n_confident_voxels,
-            (unsigned long long)r->points_st.n_points);
-    fprintf(f, "  \"bits_per_allocated_voxel\": ");
-    bf_json_number(f, voxels ? 8.0 * (double)m->bytes_total / (double)voxels : NAN, 4);
-    fprintf(f, ",\n  \"bits_per_surface_voxel\": ");
-    bf_json_number(f, r->points_st.n_points ? 8.0 * (double)m->bytes_total / (double)r->points_st.n_points : NAN, 4);
-    fprintf(f, ",\n  \"tsdf_4byte_bytes_same_voxels\": %llu,\n", (unsigned long long)(voxels * 4));
-    fprintf(f, "  \"pool_full_drops\": {\"nodes\": %u, \"bricks\": %u, \"chunks\": %u},\n", m->fail_nodes,
-            m->fail_bricks, m->fail_hash);
-    fprintf(f, "  \"mesh\": {\"vertices\": %llu, \"triangles\": %llu, \"seconds\": %.3f},\n",
-            (unsigned long long)r->mesh_st.n_vertices, (unsigned long long)r->mesh_st.n_triangles,
-            r->mesh_st.seconds);
+    fprintf(f, "},\n");
+    app_json_map(f, &r->out, a->fcfg.max_level);
     fprintf(f, "  \"seconds\": %.3f\n}\n", r->seconds);
 }
 
@@ -223,45 +211,6 @@ static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const replay_tr
     return s;
 }
 
-/* The mesh lattice level: the finest level that holds at least a tenth of
- * the bricks. A handful of bricks at a finer level (a sample that came very
- * close) must not put the whole room on their lattice, which would multiply
- * the triangles by 4 per level; their detail is averaged onto this one. */
-static uint32_t mesh_level(const fusion_snapshot *snap)
-{
-    uint32_t per_level[32] = {0};
-    for (uint32_t i = 0; i < snap->n_bricks; i++) per_level[snap->bricks[i].level & 31]++;
-    uint64_t at_or_above = 0;
-    for (int l = 31; l >= 0; l--) {
-        at_or_above += per_level[l];
-        if (10 * at_or_above >= snap->n_bricks) return (uint32_t)l;
-    }
-    return 0;
-}
-
-static bf_status export_outputs(fusion_map *map, const fuse_args *a, fuse_result *r)
-{
-    char path[4096];
-    fusion_snapshot snap;
-    bf_status s = fusion_snapshot_take(map, &snap);
-    if (s != BF_OK) return s;
-    eval_mesh mesh = {0}, pts = {0};
-    if (!a->no_mesh) {
-        stream_mesh_config mcfg = stream_mesh_config_default();
-        mcfg.max_level = mesh_level(&snap);
-        s = stream_export_mesh(&snap, &mcfg, &mesh, &r->mesh_st);
-        if (s == BF_OK && (s = bf_path_join(path, sizeof path, a->out, "mesh.ply")) == BF_OK)
-            s = eval_mesh_write_ply(path, &mesh);
-    }
-    if (s == BF_OK) s = stream_export_points(&snap, &pts, &r->points_st);
-    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a->out, "points.ply")) == BF_OK)
-        s = eval_mesh_write_ply(path, &pts);
-    eval_mesh_free(&mesh);
-    eval_mesh_free(&pts);
-    fusion_snapshot_free(&snap);
-    return s;
-}
-
 int cmd_fuse(int argc, char **argv)
 {
     const char *cmd = "fuse";
@@ -287,35 +236,15 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
     if (s == BF_OK) s = fuse_frames(ctx, src, use_traj ? &traj : NULL, &a, &map, &r, &t);
-    if (s == BF_OK) s = fusion_get_stats(map, &r.map);
-    if (s == BF_OK) s = export_outputs(map, &a, &r);
+    if (s == BF_OK) s = app_export_map(map, a.out, !a.no_mesh, &r.out);
     r.seconds = bf_time_s() - t_start;
-    char path[4096];
-    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "stats.json")) == BF_OK) {
-        char *buf = NULL;
-        size_t len = 0;
-        FILE *mf = open_memstream(&buf, &len);
-        if (!mf) s = bf_fail(BF_NO_MEMORY, "fuse: stats buffer");
-        else {
-            write_stats_json(mf, &a, &r, &t);
-            fclose(mf);
-            s = bf_write_file_atomic(path, buf, len);
-            free(buf);
-        }
-    }
+    fuse_report rep = {&a, &r, &t};
+    if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
     if (s == BF_OK) {
-        const fusion_stats *m = &r.map;
         printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.n_fused, r.n_skipped, r.device);
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&t.frame_ms, 50),
                bf_stats_percentile(&t.frame_ms, 95));
-        printf("  map              %u chunks, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
-               m->n_chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
-               m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0);
-        printf("  bricks per level");
-        for (uint32_t l = 0; l <= a.fcfg.max_level; l++)
-            if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);
-        printf("\n  surface          %llu voxels, mesh %llu triangles\n", (unsigned long long)r.points_st.n_points,
-               (unsigned long long)r.mesh_st.n_triangles);
+        app_print_map(&r.out, a.fcfg.max_level);
         printf("  wrote            %s/{%spoints.ply,stats.json} in %.1f s\n", a.out, a.no_mesh ? "" : "mesh.ply,",
                r.seconds);
     }
