@@ -41,4 +41,79 @@ static inline const bf_intrinsics *rgbd_source_intrinsics(const rgbd_source *src
     return &src->intrinsics;
 }
 
+/* ------------------------------------------------------------ capture thread
+ * capture_threaded() runs any source on its own thread, feeding a bounded
+ * queue of deep-copied frames (DESIGN.md section 1: capture thread -> bounded
+ * queue -> main loop). The ring of capacity + 2 frame buffers (queued frames,
+ * the one the consumer holds, the one the thread fills) is allocated at
+ * create, sized from the source's intrinsics: nothing is allocated per frame.
+ * When the consumer falls behind, the oldest queued frame is dropped and
+ * counted: the device is never blocked and the queue never grows. */
+
+typedef struct capture_thread_stats {
+    uint64_t captured;  /* frames the thread took from the source */
+    uint64_t delivered; /* frames handed to the consumer by next() */
+    uint64_t dropped;   /* oldest queued frames overwritten by newer ones */
+    uint32_t queued;    /* frames waiting in the queue now */
+    bool is_ended;      /* the thread stopped taking frames (end, error or stop) */
+} capture_thread_stats;
+
+/* Wraps src in a capture thread with a queue of capacity frames (>= 1),
+ * dropping the oldest queued frame when full. The returned source delivers
+ * the frames with their own index (a dropped frame leaves a gap); its next()
+ * blocks until a frame is queued or the thread ended (BF_END, or the
+ * source's error with its message). On success *out owns src: closing *out
+ * stops the thread and closes src. On failure src is untouched and still the
+ * caller's. src must report its frame size in intrinsics.width/height; a
+ * frame of another size ends the stream with BF_FORMAT. */
+bf_status capture_threaded(rgbd_source *src, uint32_t capacity, rgbd_source **out);
+/* The same, but a full queue makes the thread wait for the consumer instead
+ * of dropping: for file sources, where waiting costs nothing and a dropped
+ * frame would be lost for good. */
+bf_status capture_threaded_lossless(rgbd_source *src, uint32_t capacity, rgbd_source **out);
+/* Counters so far (zeros for a source not made by capture_threaded*). Safe
+ * from any thread. */
+capture_thread_stats capture_threaded_stats(const rgbd_source *src);
+/* Asks the thread to stop taking frames: already queued frames are still
+ * delivered, then next() returns BF_END. Only sets an atomic flag, so it is
+ * async-signal-safe (call it from a SIGINT handler); no-op for other sources
+ * and NULL. */
+void capture_threaded_stop(rgbd_source *src);
+
+/* ------------------------------------------------------------ live capture
+ * (capture/open.c; backends capture/freenect.c, openni2.c, v4l2.c) */
+
+/* Opens a live source by URI (docs/devices.md):
+ *   freenect:INDEX[?depth=registered|disparity]   Kinect v1, libfreenect
+ *   openni2:  openni2:URI  openni2:FILE.oni       OpenNI2 (PrimeSense, Orbbec,
+ *                                                 Xtion; .oni recordings)
+ *   v4l2:/dev/videoN[,/dev/videoM]                UVC depth node (Z16) and an
+ *                                                 optional colour node
+ * Any URI may end in "?camera=fx,fy,cx,cy" (pixels) and "&depth_scale=S"
+ * to override what the backend reports. Frames carry the device's
+ * timestamps in seconds where it has them (see each backend), else the
+ * monotonic clock. On success *out owns the source (rgbd_source_close());
+ * n_frames is 0 for live devices. Failures: an unknown scheme is
+ * BF_INVALID_ARG; a backend left out of this build is BF_UNSUPPORTED naming
+ * the Debian package to install; an absent or unreachable device is
+ * BF_NO_DEVICE with the URI in the message. Never crashes on a missing
+ * device. */
+bf_status capture_open(const char *uri, rgbd_source **out);
+
+/* NULL-terminated names of the backends compiled into this build, in the
+ * order capture_open tries them ("freenect", "openni2", "v4l2"). */
+const char *const *capture_backend_names(void);
+
+/* One device a backend can see now. */
+typedef struct capture_device_info {
+    char uri[256];  /* what capture_open takes, "freenect:0" */
+    char name[256]; /* human-readable, "Kinect v1 (serial A00366...)" */
+} capture_device_info;
+
+/* Fills up to cap entries with the devices the compiled backends find and
+ * returns how many were found (may exceed cap). Never fails: a backend that
+ * cannot look (no USB access) contributes nothing and logs why at debug
+ * level. Files (.oni) are not listed. */
+uint32_t capture_list_devices(capture_device_info *out, uint32_t cap);
+
 #endif

@@ -99,4 +99,65 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f);
 bf_status replay_tum_writer_finish(replay_tum_writer *w);
 void replay_tum_writer_destroy(replay_tum_writer *w); /* NULL is a no-op */
 
+/* ------------------------------------------------------------ the bitfuse log
+ * One file per recording (docs/formats.md, "The bitfuse log"): a header
+ * (intrinsics, depth scale, size, device, colour codec), per frame a
+ * self-checking record (timestamps, pose, depth compressed losslessly with
+ * zstd, colour as zstd or JPEG), and an index + footer at the end for
+ * seeking. A log cut off anywhere (a crash) still replays every whole frame.
+ * replay_open() opens a path ending in .bflog (or any file starting with the
+ * log's magic) as a source. */
+
+typedef enum replay_log_colour {
+    REPLAY_LOG_COLOUR_NONE = 0, /* depth only; colour is dropped */
+    REPLAY_LOG_COLOUR_ZSTD = 1, /* lossless: zstd of the RGB bytes */
+    REPLAY_LOG_COLOUR_JPEG = 2, /* lossy, about 15x smaller than zstd */
+} replay_log_colour;
+
+typedef struct replay_log_config {
+    replay_log_colour colour; /* default (0 in a zeroed config) NONE: set it */
+    int jpeg_quality;         /* 1..100, 0 = 90 */
+    int zstd_level;           /* 1..19, 0 = 1 (fast enough for 30 Hz on one core) */
+    const char *device;       /* recorded in the header ("freenect:0", a path), borrowed; may be NULL */
+    bool has_groundtruth;     /* recorded in the header: frames carry poses */
+} replay_log_config;
+
+/* Byte counts so far (the raw sizes are what the frames would take
+ * uncompressed: 2 bytes per depth pixel, 3 per colour pixel). */
+typedef struct replay_log_stats {
+    uint32_t n_frames;
+    uint64_t depth_raw_bytes, depth_bytes;
+    uint64_t rgb_raw_bytes, rgb_bytes;
+    uint64_t file_bytes; /* everything written, headers included */
+} replay_log_stats;
+
+typedef struct replay_log_writer replay_log_writer;
+
+/* Creates (or truncates) the log at path and writes its header. K gives the
+ * frame size (width/height must be set) and the camera. The file is written
+ * in place, not through a temporary name: a recording cut off by a crash
+ * must stay on disk, and it replays up to its last whole frame. */
+bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, const replay_log_config *cfg,
+                                   replay_log_writer **out);
+/* Appends one frame (compressed, checksummed, flushed to the OS). A frame of
+ * another size or with non-finite times is BF_INVALID_ARG and writes
+ * nothing; BF_IO (disk full) leaves the file replayable up to the frame
+ * before. The frame's pixels are only read during the call. */
+bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f);
+/* Writes the index and footer, fsyncs and closes the file. After a failed
+ * finish the log still replays (the reader scans it without the index). */
+bf_status replay_log_writer_finish(replay_log_writer *w);
+replay_log_stats replay_log_writer_stats(const replay_log_writer *w);
+/* Frees w; a log not finished is left as a crash would leave it (readable,
+ * without index). NULL is a no-op. */
+void replay_log_writer_destroy(replay_log_writer *w);
+
+/* Seeking in a log source: the next frame delivered is the one at position
+ * pos (0-based order in the file, not bf_frame.index, which keeps the index
+ * the frame had when it was recorded). BF_INVALID_ARG past the end or for a
+ * source that is not a log. */
+bf_status replay_log_seek(rgbd_source *src, uint32_t pos);
+/* True if path names a log by its extension (".bflog"). */
+bool replay_is_log_path(const char *path);
+
 #endif

@@ -4,6 +4,7 @@
  * list. Nothing is allocated per frame here (libpng and libjpeg allocate
  * their decoder state per image internally). */
 #include "replay_int.h"
+#include "log_int.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -191,7 +192,8 @@ fail:
 
 uint32_t replay_skipped_frames(const rgbd_source *src)
 {
-    if (!src || src->ops != &replay__ops) return 0;
+    if (src && src->ops != &replay__ops) return replay__log_skipped(src);
+    if (!src) return 0;
     return ((const replay__source *)src)->n_skipped;
 }
 
@@ -209,8 +211,10 @@ bf_status replay_open(const char *path, const replay_options *opt, rgbd_source *
     if (!opt) opt = &defaults;
     if (!path || !path[0]) return bf_fail(BF_INVALID_ARG, "no sequence path given");
     if (!bf_file_exists(path)) return bf_fail(BF_IO, "%s: no such file or folder", path);
+    if (replay_is_log_path(path) || replay__log_sniff(path)) return replay__log_open(path, opt, out);
     if (!replay__is_dir(path))
-        return bf_fail(BF_FORMAT, "%s: not a folder (expected a TUM, ICL-NUIM or pose-per-frame folder)", path);
+        return bf_fail(BF_FORMAT, "%s: not a folder or a bitfuse log (expected a TUM, ICL-NUIM or pose-per-frame "
+                       "folder, or a .bflog file)", path);
     replay__list list = {0};
     replay__camera cam = {0};
     bf_status s;

@@ -1,0 +1,251 @@
+/* replay: the bitfuse log writer. Frames are compressed into buffers sized
+ * at create (zstd's bound for the frame size), written with buffered stdio
+ * and flushed to the OS after every frame, so a process that dies loses at
+ * most the frame being written. The index of frame offsets grows in memory
+ * (16 bytes a frame; the only growth while recording) and goes to the file
+ * in finish(), followed by the footer that points at it. */
+#include "log_int.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include <zstd.h>
+
+struct replay_log_writer {
+    char *path;
+    FILE *f;
+    bf_intrinsics K;
+    replay_log_config cfg;
+    size_t n_px;
+    ZSTD_CCtx *zc;
+    uint8_t *filtered;     /* 2 * n_px: the depth filter's output */
+    uint8_t *depth_buf;    /* log__depth_bound(n_px) */
+    uint8_t *rgb_buf;      /* log__rgb_bound(n_px) */
+    uint8_t *index;        /* LOG_INDEX_ENTRY per frame */
+    size_t index_cap;      /* frames */
+    uint64_t offset;       /* bytes written so far = next record's offset */
+    replay_log_stats st;
+    bool is_finished, is_broken;
+};
+
+static bf_status write_bytes(replay_log_writer *w, const void *p, size_t n)
+{
+    if (n && fwrite(p, 1, n, w->f) != n) {
+        w->is_broken = true;
+        return bf_fail(BF_IO, "%s: write failed at byte %llu: %s", w->path, (unsigned long long)w->offset,
+                       strerror(errno));
+    }
+    w->offset += n;
+    return BF_OK;
+}
+
+bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, const replay_log_config *cfg,
+                                   replay_log_writer **out)
+{
+    if (!path || !path[0] || !K || !cfg) return bf_fail(BF_INVALID_ARG, "log writer needs a path, intrinsics and a config");
+    if (K->width == 0 || K->height == 0 || K->width > 16384 || K->height > 16384)
+        return bf_fail(BF_INVALID_ARG, "%s: frame size %ux%u is outside 1..16384", path, K->width, K->height);
+    if (!(isfinite(K->fx_px) && isfinite(K->fy_px) && isfinite(K->cx_px) && isfinite(K->cy_px) &&
+          K->depth_scale > 0 && isfinite(K->depth_scale)))
+        return bf_fail(BF_INVALID_ARG, "%s: invalid intrinsics for the log", path);
+    if (cfg->colour != REPLAY_LOG_COLOUR_NONE && cfg->colour != REPLAY_LOG_COLOUR_ZSTD &&
+        cfg->colour != REPLAY_LOG_COLOUR_JPEG)
+        return bf_fail(BF_INVALID_ARG, "%s: unknown colour codec %d", path, (int)cfg->colour);
+    if (cfg->jpeg_quality < 0 || cfg->jpeg_quality > 100)
+        return bf_fail(BF_INVALID_ARG, "%s: JPEG quality %d is outside 1..100", path, cfg->jpeg_quality);
+    if (cfg->zstd_level < 0 || cfg->zstd_level > ZSTD_maxCLevel())
+        return bf_fail(BF_INVALID_ARG, "%s: zstd level %d is outside 1..%d", path, cfg->zstd_level,
+                       ZSTD_maxCLevel());
+    size_t dev_len = cfg->device ? strlen(cfg->device) : 0;
+    if (dev_len > LOG_DEVICE_MAX) dev_len = LOG_DEVICE_MAX; /* a label: cut, not refused */
+
+    replay_log_writer *w = calloc(1, sizeof *w);
+    if (!w) return bf_fail(BF_NO_MEMORY, "%s: log writer", path);
+    bf_status s = BF_OK;
+    w->K = *K;
+    w->cfg = *cfg;
+    w->cfg.device = NULL;
+    if (!w->cfg.jpeg_quality) w->cfg.jpeg_quality = 90;
+    if (!w->cfg.zstd_level) w->cfg.zstd_level = 1;
+    w->n_px = (size_t)K->width * K->height;
+    w->path = strdup(path);
+    w->zc = ZSTD_createCCtx();
+    w->filtered = malloc(2 * w->n_px);
+    w->depth_buf = malloc(log__depth_bound(w->n_px));
+    w->rgb_buf = cfg->colour ? malloc(log__rgb_bound(w->n_px)) : NULL;
+    if (!w->path || !w->zc || !w->filtered || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
+        s = bf_fail(BF_NO_MEMORY, "%s: log writer buffers for %ux%u frames", path, K->width, K->height);
+        goto fail;
+    }
+    if (ZSTD_isError(ZSTD_CCtx_setParameter(w->zc, ZSTD_c_compressionLevel, w->cfg.zstd_level))) {
+        s = bf_fail(BF_INVALID_ARG, "%s: zstd refuses level %d", path, w->cfg.zstd_level);
+        goto fail;
+    }
+    w->f = fopen(path, "wb");
+    if (!w->f) {
+        s = bf_fail(BF_IO, "%s: cannot create: %s", path, strerror(errno));
+        goto fail;
+    }
+    uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
+    memset(hdr, 0, sizeof hdr);
+    memcpy(hdr, LOG_MAGIC, LOG_MAGIC_LEN);
+    uint32_t hdr_size = LOG_HEADER_FIXED + (uint32_t)dev_len + 4;
+    log__put_u32(hdr + 8, LOG_VERSION);
+    log__put_u32(hdr + 12, hdr_size);
+    log__put_u32(hdr + 16, K->width);
+    log__put_u32(hdr + 20, K->height);
+    log__put_f64(hdr + 24, K->fx_px);
+    log__put_f64(hdr + 32, K->fy_px);
+    log__put_f64(hdr + 40, K->cx_px);
+    log__put_f64(hdr + 48, K->cy_px);
+    log__put_f64(hdr + 56, K->depth_scale);
+    log__put_u32(hdr + 64, (uint32_t)cfg->colour);
+    log__put_u32(hdr + 68, LOG_DEPTH_ZSTD_DELTA);
+    log__put_u32(hdr + 72, cfg->has_groundtruth ? LOG_HEADER_HAS_GROUNDTRUTH : 0);
+    log__put_u32(hdr + 76, (uint32_t)dev_len);
+    if (dev_len) memcpy(hdr + LOG_HEADER_FIXED, cfg->device, dev_len);
+    log__put_u32(hdr + LOG_HEADER_FIXED + dev_len, log__crc32(0, hdr, LOG_HEADER_FIXED + dev_len));
+    if ((s = write_bytes(w, hdr, hdr_size))) goto fail;
+    if (fflush(w->f) != 0) {
+        s = bf_fail(BF_IO, "%s: write failed: %s", path, strerror(errno));
+        goto fail;
+    }
+    w->st.file_bytes = w->offset;
+    *out = w;
+    return BF_OK;
+fail:
+    if (w->f) {
+        fclose(w->f);
+        w->f = NULL;
+        remove(path); /* a header that never made it is no log */
+    }
+    replay_log_writer_destroy(w);
+    return s;
+}
+
+bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
+{
+    if (w->is_finished) return bf_fail(BF_INVALID_ARG, "%s: log already finished", w->path);
+    if (w->is_broken) return bf_fail(BF_IO, "%s: an earlier write failed; the log ends before frame %u", w->path, f->index);
+    if (!f->depth || f->width != w->K.width || f->height != w->K.height)
+        return bf_fail(BF_INVALID_ARG, "%s: frame %u is %ux%u%s, the log's frames are %ux%u", w->path, f->index,
+                       f->width, f->height, f->depth ? "" : " without depth", w->K.width, w->K.height);
+    if (!isfinite(f->t_depth_s) || !isfinite(f->t_rgb_s))
+        return bf_fail(BF_INVALID_ARG, "%s: frame %u: timestamps are not finite", w->path, f->index);
+    if (f->has_pose && !bf_se3_is_finite(&f->T_wc))
+        return bf_fail(BF_INVALID_ARG, "%s: frame %u: pose is not finite", w->path, f->index);
+    if (w->st.n_frames == UINT32_MAX) return bf_fail(BF_INVALID_ARG, "%s: too many frames", w->path);
+    if (w->st.n_frames == w->index_cap) {
+        size_t cap = w->index_cap ? 2 * w->index_cap : 1024;
+        uint8_t *p = realloc(w->index, cap * LOG_INDEX_ENTRY);
+        if (!p) return bf_fail(BF_NO_MEMORY, "%s: frame index of %zu entries", w->path, cap);
+        w->index = p;
+        w->index_cap = cap;
+    }
+
+    log__frame_header h = {
+        .index = f->index,
+        .flags = (f->has_pose ? LOG_FRAME_HAS_POSE : 0u),
+        .depth_codec = LOG_DEPTH_ZSTD_DELTA,
+        .t_depth_s = f->t_depth_s,
+        .t_rgb_s = f->t_rgb_s,
+        .T_wc = f->has_pose ? f->T_wc : bf_se3_identity(),
+    };
+    log__depth_filter(f->depth, f->width, f->height, w->filtered);
+    size_t dz = ZSTD_compress2(w->zc, w->depth_buf, log__depth_bound(w->n_px), w->filtered, 2 * w->n_px);
+    if (ZSTD_isError(dz))
+        return bf_fail(BF_NO_MEMORY, "%s: frame %u: zstd: %s", w->path, f->index, ZSTD_getErrorName(dz));
+    h.depth_size = (uint32_t)dz;
+    size_t rz = 0;
+    if (f->rgb && w->cfg.colour != REPLAY_LOG_COLOUR_NONE) {
+        h.flags |= LOG_FRAME_HAS_RGB;
+        h.colour_codec = (uint32_t)w->cfg.colour;
+        if (w->cfg.colour == REPLAY_LOG_COLOUR_ZSTD) {
+            rz = ZSTD_compress2(w->zc, w->rgb_buf, log__rgb_bound(w->n_px), f->rgb, 3 * w->n_px);
+            if (ZSTD_isError(rz))
+                return bf_fail(BF_NO_MEMORY, "%s: frame %u: zstd: %s", w->path, f->index, ZSTD_getErrorName(rz));
+        } else {
+            char what[600];
+            snprintf(what, sizeof what, "%s: frame %u", w->path, f->index);
+            bf_status s = log__jpeg_encode(f->rgb, f->width, f->height, w->cfg.jpeg_quality, w->rgb_buf,
+                                           log__rgb_bound(w->n_px), &rz, what);
+            if (s) return s;
+        }
+        h.rgb_size = (uint32_t)rz;
+    }
+    h.payload_crc = log__crc32(log__crc32(0, w->depth_buf, dz), w->rgb_buf, rz);
+    uint8_t hb[LOG_FRAME_HEADER];
+    log__frame_header_pack(&h, hb);
+
+    uint64_t at = w->offset;
+    bf_status s;
+    if ((s = write_bytes(w, hb, sizeof hb)) || (s = write_bytes(w, w->depth_buf, dz)) ||
+        (s = write_bytes(w, w->rgb_buf, rz)))
+        return s;
+    if (fflush(w->f) != 0) {
+        w->is_broken = true;
+        return bf_fail(BF_IO, "%s: frame %u: write failed: %s", w->path, f->index, strerror(errno));
+    }
+    uint8_t *e = w->index + (size_t)w->st.n_frames * LOG_INDEX_ENTRY;
+    log__put_u64(e, at);
+    log__put_f64(e + 8, f->t_depth_s);
+    w->st.n_frames++;
+    w->st.depth_raw_bytes += 2 * w->n_px;
+    w->st.depth_bytes += dz;
+    if (h.flags & LOG_FRAME_HAS_RGB) {
+        w->st.rgb_raw_bytes += 3 * w->n_px;
+        w->st.rgb_bytes += rz;
+    }
+    w->st.file_bytes = w->offset;
+    return BF_OK;
+}
+
+bf_status replay_log_writer_finish(replay_log_writer *w)
+{
+    if (w->is_finished) return BF_OK;
+    if (w->is_broken) return bf_fail(BF_IO, "%s: an earlier write failed; the log has no index", w->path);
+    uint64_t index_at = w->offset;
+    uint8_t head[8], tail[4], foot[LOG_FOOTER];
+    log__put_u32(head, LOG_INDEX_MAGIC);
+    log__put_u32(head + 4, w->st.n_frames);
+    size_t n_bytes = (size_t)w->st.n_frames * LOG_INDEX_ENTRY;
+    log__put_u32(tail, log__crc32(log__crc32(0, head, sizeof head), w->index, n_bytes));
+    log__put_u64(foot, index_at);
+    log__put_u32(foot + 8, w->st.n_frames);
+    log__put_u32(foot + 12, log__crc32(0, foot, 12));
+    memcpy(foot + 16, LOG_FOOTER_MAGIC, 8);
+    bf_status s;
+    if ((s = write_bytes(w, head, sizeof head)) || (s = write_bytes(w, w->index, n_bytes)) ||
+        (s = write_bytes(w, tail, sizeof tail)) || (s = write_bytes(w, foot, sizeof foot)))
+        return s;
+    /* fsync: the footer claims the whole file is there; make it so before
+     * anyone relies on it. */
+    bool bad = fflush(w->f) != 0 || fsync(fileno(w->f)) != 0;
+    int err = errno;
+    bad |= fclose(w->f) != 0;
+    w->f = NULL;
+    if (bad) {
+        w->is_broken = true;
+        return bf_fail(BF_IO, "%s: cannot finish the log: %s", w->path, strerror(err));
+    }
+    w->st.file_bytes = w->offset;
+    w->is_finished = true;
+    return BF_OK;
+}
+
+replay_log_stats replay_log_writer_stats(const replay_log_writer *w) { return w->st; }
+
+void replay_log_writer_destroy(replay_log_writer *w)
+{
+    if (!w) return;
+    if (w->f) fclose(w->f);
+    ZSTD_freeCCtx(w->zc);
+    free(w->filtered);
+    free(w->depth_buf);
+    free(w->rgb_buf);
+    free(w->index);
+    free(w->path);
+    free(w);
+}
