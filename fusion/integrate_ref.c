@@ -58,10 +58,14 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
     double abs_wd[BRICK_VOXELS];
     bool has_ramp[BRICK_VOXELS];
     uint32_t pairs = 0, sigma_um = 0;
+    /* The stepping of every frame in the ring, from the first voxel centre. */
+    float p0[3];
+    for (int a = 0; a < 3; a++) p0[a] = fusion_voxel_centre(b->key[a], cell[a], 0, pc->chunk_m, voxel_m);
+    fusion_step step[FUSION_INTEGRATE_MAX_FRAMES];
+    for (uint32_t i = 0; i < n_frames; i++)
+        step[i] = fusion_step_make(frames[(pc->frame_first + i) % pc->ring_slots], p0[0], p0[1], p0[2], voxel_m);
     for (uint32_t v = 0; v < BRICK_VOXELS; v++) {
         uint32_t xyz[3] = {v & 7u, (v >> 3) & 7u, v >> 6};
-        float p[3];
-        for (int a = 0; a < 3; a++) p[a] = fusion_voxel_centre(b->key[a], cell[a], xyz[a], pc->chunk_m, voxel_m);
         acc[v] = fusion_acc_zero();
         abs_wd[v] = 0;
         has_ramp[v] = false;
@@ -70,14 +74,14 @@ void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *
             uint32_t index = pc->frame_first + i, ring = index % pc->ring_slots;
             fusion_frame f = frames[ring];
             if (f.index != index) continue;
-            fusion_point c = fusion_to_camera(f, p[0], p[1], p[2]);
-            if (c.z > 0.0f) { /* the same float expressions as fusion_project_pixel */
-                float u = f.fx * c.x / c.z + f.cx + 0.5f, w = f.fy * c.y / c.z + f.cy + 0.5f;
+            fusion_point c = fusion_step_point(step[i], xyz[0], xyz[1], xyz[2]);
+            if (c.z > 0.0f) { /* the same float expressions as fusion_project_step */
+                float u = c.x / c.z, w = c.y / c.z;
                 double e = fmin(edge_distance(u), edge_distance(w));
                 if (e < mg.pixel) mg.pixel = e;
                 if (pixel_fragile(&f, depth_ring + (size_t)ring * pc->depth_words, u, w)) fragile[v] = true;
             }
-            uint32_t pixel = fusion_project_pixel(f, c);
+            uint32_t pixel = fusion_project_step(c, f.width, f.height);
             if (pixel == FUSION_NONE) continue;
             uint32_t raw = fusion_depth_raw(depth_ring[(size_t)ring * pc->depth_words + (pixel >> 1)], pixel);
             fusion_obs o = fusion_observe(raw, f.depth_unit_m, c.z, pc->sigma_a, pc->sigma_b, pc->sigma_c);

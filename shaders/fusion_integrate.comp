@@ -7,15 +7,19 @@
  *
  * Phases, separated by workgroup barriers:
  *  1. load the brick's record, chunk key and old sign / confidence words;
- *  2. cull (brick, frame) pairs: one bit per frame of the window that is in
- *     its ring slot and whose image the brick's box may reach;
- *  3. accumulate every voxel over the visible frames, in frame order; sum
- *     the window's (voxel, frame) pairs and their sigma (integers) into
- *     shared memory;
+ *  2. for each chunk of FUSION_INTEGRATE_CHUNK frames: cull (brick, frame)
+ *     pairs (a frame of the window that is in its ring slot and whose
+ *     image the brick's box may reach) and keep the visible frames'
+ *     stepping (fusion_step) in shared memory; then
+ *  3. accumulate every voxel over the chunk's visible frames, in frame
+ *     order, in registers (the voxel loop is unrolled); after the last
+ *     chunk, a brick no frame sees is left as it is; sum the window's
+ *     (voxel, frame) pairs and their sigma (integers) into shared memory;
  *  4. decide each voxel (prior, confidence, replacement rule), OR its bits
  *     into the new words;
  *  5. 16 invocations write the sign and confidence words, one the error. */
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "fusion.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
@@ -33,8 +37,14 @@ layout(push_constant) uniform Push { fusion_integrate_push pc; };
 
 shared uint s_old_sign[BRICK_WORDS], s_old_conf[BRICK_WORDS];
 shared uint s_new_sign[BRICK_WORDS], s_new_conf[BRICK_WORDS];
-shared uint s_visible[FUSION_INTEGRATE_MAX_FRAMES / 32u];
-shared uint s_pairs, s_sigma_um, s_set;
+/* Frames of the window are handled in chunks: per frame of the chunk,
+ * whether the brick may be seen in it, and its stepping: h0 and the depth
+ * unit, sx and the depth image's first word, sy and the width, sz and the
+ * height. */
+#define FUSION_INTEGRATE_CHUNK 64u
+shared uint s_visible[FUSION_INTEGRATE_CHUNK];
+shared vec4 s_step[FUSION_INTEGRATE_CHUNK * 4u];
+shared uint s_pairs, s_sigma_um, s_set, s_seen;
 
 /* Confident voxels of each sign: s_target[0] holds those of sign 0 (the
  * targets of the prior's sweep from a front voxel), s_target[1] those of
@@ -97,15 +107,14 @@ void main()
         s_target[0][w] = conf & ~sign;
         s_target[1][w] = conf & sign;
     }
-    for (uint w = tid; w < FUSION_INTEGRATE_MAX_FRAMES / 32u; w += n_threads) s_visible[w] = 0u;
     if (tid == 0u) {
         s_pairs = 0u;
         s_sigma_um = 0u;
         s_set = 0u;
+        s_seen = 0u;
     }
-    barrier(); /* the zeroed shared words -> phase 2's atomics */
+    barrier(); /* the zeroed shared words -> phases 2 and 3 */
 
-    /* 2. Cull (brick, frame) pairs on the box of the voxel centres. */
     float lo_x = fusion_voxel_centre(key_x, cell_x, 0u, pc.chunk_m, voxel_m);
     float lo_y = fusion_voxel_centre(key_y, cell_y, 0u, pc.chunk_m, voxel_m);
     float lo_z = fusion_voxel_centre(key_z, cell_z, 0u, pc.chunk_m, voxel_m);
@@ -113,41 +122,58 @@ void main()
     float hi_y = fusion_voxel_centre(key_y, cell_y, 7u, pc.chunk_m, voxel_m);
     float hi_z = fusion_voxel_centre(key_z, cell_z, 7u, pc.chunk_m, voxel_m);
     uint n_frames = min(pc.n_frames, FUSION_INTEGRATE_MAX_FRAMES);
-    for (uint i = tid; i < n_frames; i += n_threads) {
-        uint index = pc.frame_first + i;
-        fusion_frame f = frames.f[index % pc.ring_slots];
-        if (f.index == index && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u)
-            atomicOr(s_visible[i >> 5], 1u << (i & 31u));
-    }
-    barrier(); /* s_visible -> phase 3 */
-
-    /* 3. Accumulate. Invocation tid owns voxels tid + k * n_threads: the
-     * lanes of a subgroup take neighbouring x, so they read neighbouring
-     * pixels. */
-    float px[VOXELS_PER_THREAD], py[VOXELS_PER_THREAD], pz[VOXELS_PER_THREAD];
+    /* Invocation tid owns voxels tid + k * n_threads: the lanes of a
+     * subgroup take neighbouring x, so they read neighbouring pixels. The
+     * k loops are unrolled, so acc[] lives in registers. */
     fusion_acc acc[VOXELS_PER_THREAD];
-    for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
-        uint v = tid + k * n_threads;
-        px[k] = fusion_voxel_centre(key_x, cell_x, v & 7u, pc.chunk_m, voxel_m);
-        py[k] = fusion_voxel_centre(key_y, cell_y, (v >> 3) & 7u, pc.chunk_m, voxel_m);
-        pz[k] = fusion_voxel_centre(key_z, cell_z, v >> 6, pc.chunk_m, voxel_m);
-        acc[k] = fusion_acc_zero();
-    }
-    for (uint i = 0u; i < n_frames; i++) {
-        if ((s_visible[i >> 5] & (1u << (i & 31u))) == 0u) continue;
-        uint ring = (pc.frame_first + i) % pc.ring_slots;
-        fusion_frame f = frames.f[ring];
-        uint base = ring * pc.depth_words;
-        for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
-            fusion_point c = fusion_to_camera(f, px[k], py[k], pz[k]);
-            uint pixel = fusion_project_pixel(f, c);
-            if (pixel == FUSION_NONE) continue;
-            uint raw = fusion_depth_raw(depth.w[base + (pixel >> 1)], pixel);
-            acc[k] = fusion_acc_add(acc[k], fusion_observe(raw, f.depth_unit_m, c.z, pc.sigma_a, pc.sigma_b, pc.sigma_c));
+    [[unroll]] for (uint k = 0u; k < VOXELS_PER_THREAD; k++) acc[k] = fusion_acc_zero();
+    for (uint c0 = 0u; c0 < n_frames; c0 += FUSION_INTEGRATE_CHUNK) {
+        uint n_chunk = min(n_frames - c0, FUSION_INTEGRATE_CHUNK);
+        /* 2. Cull (brick, frame) pairs on the box of the voxel centres; keep
+         * the visible frames' stepping. */
+        for (uint j = tid; j < n_chunk; j += n_threads) {
+            uint index = pc.frame_first + c0 + j, ring = index % pc.ring_slots;
+            fusion_frame f = frames.f[ring];
+            uint visible = f.index == index && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u ? 1u : 0u;
+            s_visible[j] = visible;
+            if (visible != 0u) {
+                fusion_step st = fusion_step_make(f, lo_x, lo_y, lo_z, voxel_m);
+                s_step[4u * j + 0u] = vec4(st.h0.x, st.h0.y, st.h0.z, f.depth_unit_m);
+                s_step[4u * j + 1u] = vec4(st.sx.x, st.sx.y, st.sx.z, uintBitsToFloat(ring * pc.depth_words));
+                s_step[4u * j + 2u] = vec4(st.sy.x, st.sy.y, st.sy.z, uintBitsToFloat(f.width));
+                s_step[4u * j + 3u] = vec4(st.sz.x, st.sz.y, st.sz.z, uintBitsToFloat(f.height));
+                s_seen = 1u; /* every writer stores 1 */
+            }
         }
+        barrier(); /* s_visible, s_step -> the accumulation */
+
+        /* 3. Accumulate, in frame order. */
+        for (uint j = 0u; j < n_chunk; j++) {
+            if (s_visible[j] == 0u) continue;
+            vec4 a = s_step[4u * j + 0u], b = s_step[4u * j + 1u], c = s_step[4u * j + 2u], d = s_step[4u * j + 3u];
+            fusion_step st;
+            st.h0.x = a.x, st.h0.y = a.y, st.h0.z = a.z;
+            st.sx.x = b.x, st.sx.y = b.y, st.sx.z = b.z;
+            st.sy.x = c.x, st.sy.y = c.y, st.sy.z = c.z;
+            st.sz.x = d.x, st.sz.y = d.y, st.sz.z = d.z;
+            uint base = floatBitsToUint(b.w), width = floatBitsToUint(c.w), height = floatBitsToUint(d.w);
+            [[unroll]] for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+                uint v = tid + k * n_threads;
+                fusion_point h = fusion_step_point(st, v & 7u, (v >> 3) & 7u, v >> 6);
+                uint pixel = fusion_project_step(h, width, height);
+                /* Fetched by every lane (pixel 0 when there is none): no
+                 * divergent load. Raw 0 observes nothing. */
+                uint word = depth.w[base + (pixel != FUSION_NONE ? pixel >> 1 : 0u)];
+                uint raw = pixel != FUSION_NONE ? fusion_depth_raw(word, pixel) : 0u;
+                acc[k] = fusion_acc_add(acc[k], fusion_observe(raw, a.w, h.z, pc.sigma_a, pc.sigma_b, pc.sigma_c));
+            }
+        }
+        barrier(); /* the chunk's reads of s_visible and s_step -> the next chunk's writes; s_seen -> below */
     }
+    /* No frame sees the brick: every voxel keeps its bits, no error is set. */
+    if (s_seen == 0u) return; /* uniform: s_seen is not written after the last barrier */
     uint pairs = 0u, sigma_um = 0u;
-    for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+    [[unroll]] for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
         pairs += acc[k].n;
         sigma_um += acc[k].sigma_um;
     }
@@ -166,7 +192,7 @@ void main()
     /* A thread's voxels that share a word (z and z + 1 when there are 64
      * threads) are ORed locally first: one shared atomic per word. */
     uint acc_word = FUSION_NONE, acc_sign = 0u, acc_conf = 0u, set = 0u;
-    for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
+    [[unroll]] for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
         uint v = tid + k * n_threads;
         uint x = v & 7u, y = (v >> 3) & 7u, z = v >> 6;
         uint word = brick_word(x, y, z), bit = brick_bit(x, y, z);
