@@ -1,0 +1,222 @@
+/* The ray-caster's host side: targets, pipelines, the map-relative camera
+ * transform and the two passes (shaders/render_raycast.comp,
+ * shaders/render_shade.comp; parameters in shaders/render.glsl.h). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bf_shaders_spv.h"
+#include "render.h"
+#include "shaders/fusion.glsl.h"
+#include "shaders/render.glsl.h"
+
+struct render_caster {
+    gpu_context *ctx;
+    render_targets targets;
+    gpu_pipeline *p_raycast, *p_shade;
+    gpu_bindings *b_raycast, *b_shade;
+    /* The map buffers bound to b_raycast (rebound when another map comes). */
+    gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf;
+    double last_ms;
+};
+
+render_options render_options_tracking(void)
+{
+    return (render_options){.confident_only = false, .refine = true, .near_m = 0.2f, .far_m = 6.0f};
+}
+
+render_options render_options_display(void)
+{
+    return (render_options){.confident_only = true, .refine = true, .near_m = 0.2f, .far_m = 6.0f};
+}
+
+static bf_status target_create(gpu_context *ctx, const char *name, uint64_t bytes, gpu_buffer **out)
+{
+    gpu_buffer_desc d = {.name = name, .size_bytes = bytes, .memory = GPU_MEMORY_DEVICE,
+                         .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
+    return gpu_buffer_create(ctx, &d, out);
+}
+
+bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, render_caster **out)
+{
+    if (!ctx || !out || width == 0 || height == 0 || width > 16384 || height > 16384)
+        return bf_fail(BF_INVALID_ARG, "render: image size %ux%u (1..16384 each)", width, height);
+    render_caster *rc = calloc(1, sizeof *rc);
+    if (!rc) return bf_fail(BF_NO_MEMORY, "render: caster");
+    rc->ctx = ctx;
+    rc->targets.width = width;
+    rc->targets.height = height;
+    uint64_t n = (uint64_t)width * height;
+    bf_status s = target_create(ctx, "render.depth", 4 * n, &rc->targets.depth);
+    if (s == BF_OK) s = target_create(ctx, "render.normal", 16 * n, &rc->targets.normal);
+    if (s == BF_OK) s = target_create(ctx, "render.level", 4 * n, &rc->targets.level);
+    if (s == BF_OK) s = target_create(ctx, "render.colour", 4 * n, &rc->targets.colour);
+    gpu_pipeline_desc pr = {
+        .name = "render.raycast",
+        .spirv = bf_spv_render_raycast,
+        .spirv_bytes = bf_spv_render_raycast_size,
+        .n_buffers = 6,
+        .push_bytes = sizeof(render_push),
+        .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
+    };
+    gpu_pipeline_desc ps = {
+        .name = "render.shade",
+        .spirv = bf_spv_render_shade,
+        .spirv_bytes = bf_spv_render_shade_size,
+        .n_buffers = 4,
+        .push_bytes = sizeof(render_push),
+        .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
+    };
+    if (s == BF_OK) s = gpu_pipeline_create(ctx, &pr, &rc->p_raycast);
+    if (s == BF_OK) s = gpu_pipeline_create(ctx, &ps, &rc->p_shade);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 6, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 4, "render.shade", &rc->b_shade);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 4, rc->targets.depth, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 5, rc->targets.level, 0, GPU_WHOLE_SIZE);
+    gpu_buffer *shade[4] = {rc->targets.depth, rc->targets.level, rc->targets.normal, rc->targets.colour};
+    for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_shade, i, shade[i], 0, GPU_WHOLE_SIZE);
+    /* Compile now (llvmpipe compiles on first use), not in the first frame. */
+    if (s == BF_OK) s = gpu_pipeline_warm_up(ctx, (gpu_pipeline *[]){rc->p_raycast, rc->p_shade}, 2);
+    if (s != BF_OK) {
+        render_destroy(rc);
+        return s;
+    }
+    *out = rc;
+    return BF_OK;
+}
+
+void render_destroy(render_caster *rc)
+{
+    if (!rc) return;
+    gpu_bindings_destroy(rc->b_shade);
+    gpu_bindings_destroy(rc->b_raycast);
+    gpu_pipeline_destroy(rc->p_shade);
+    gpu_pipeline_destroy(rc->p_raycast);
+    gpu_buffer_destroy(rc->targets.colour);
+    gpu_buffer_destroy(rc->targets.level);
+    gpu_buffer_destroy(rc->targets.normal);
+    gpu_buffer_destroy(rc->targets.depth);
+    memset(rc, 0xff, sizeof *rc); /* poison: a use after destroy fails loudly */
+    free(rc);
+}
+
+/* Binds the map's buffers when they are not those bound already. */
+static bf_status bind_map(render_caster *rc, const fusion_gpu_view *v)
+{
+    if (rc->bound_hash == v->hash && rc->bound_nodes == v->nodes && rc->bound_sign == v->sign &&
+        rc->bound_conf == v->conf)
+        return BF_OK;
+    gpu_buffer *bufs[4] = {v->hash, v->nodes, v->sign, v->conf};
+    rc->bound_hash = rc->bound_nodes = rc->bound_sign = rc->bound_conf = NULL;
+    bf_status s = BF_OK;
+    for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    if (s != BF_OK) return s;
+    rc->bound_hash = v->hash, rc->bound_nodes = v->nodes, rc->bound_sign = v->sign, rc->bound_conf = v->conf;
+    return BF_OK;
+}
+
+bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
+                         const render_options *opt)
+{
+    if (!rc || !map || !K || !T_wc || !opt) return bf_fail(BF_INVALID_ARG, "render: NULL argument");
+    if (K->width != rc->targets.width || K->height != rc->targets.height)
+        return bf_fail(BF_INVALID_ARG, "render: intrinsics are %ux%u, the caster's images %ux%u", K->width,
+                       K->height, rc->targets.width, rc->targets.height);
+    if (!(K->fx_px > 0) || !(K->fy_px > 0) || !isfinite(K->cx_px) || !isfinite(K->cy_px))
+        return bf_fail(BF_INVALID_ARG, "render: intrinsics fx %g fy %g cx %g cy %g", K->fx_px, K->fy_px, K->cx_px,
+                       K->cy_px);
+    if (!bf_se3_is_finite(T_wc)) return bf_fail(BF_INVALID_ARG, "render: camera pose is not finite");
+    if (!(opt->near_m > 0) || !(opt->far_m > opt->near_m) || !isfinite(opt->far_m))
+        return bf_fail(BF_INVALID_ARG, "render: depth range [%g, %g] m", opt->near_m, opt->far_m);
+    fusion_gpu_view v = fusion_gpu_view_get(map);
+    bf_status s = bind_map(rc, &v);
+    if (s != BF_OK) return s;
+
+    /* T_mc = T_wc with its translation made relative to the map origin in
+     * double: the GPU's floats stay small however far the map is from the
+     * world origin (DESIGN.md section 10). */
+    render_push pc = {
+        .fx = (float)K->fx_px,
+        .fy = (float)K->fy_px,
+        .cx = (float)K->cx_px,
+        .cy = (float)K->cy_px,
+        .width = K->width,
+        .height = K->height,
+        .near_m = opt->near_m,
+        .far_m = opt->far_m,
+        .chunk_m = v.chunk_m,
+        .n_buckets = v.n_buckets,
+        .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
+        .max_level = v.max_level,
+        .flags = (opt->confident_only ? RENDER_FLAG_CONFIDENT_ONLY : 0u) | (opt->refine ? RENDER_FLAG_REFINE : 0u),
+    };
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_wc->R[r][c];
+    pc.t[0] = (float)(T_wc->t.x - v.origin_w.x);
+    pc.t[1] = (float)(T_wc->t.y - v.origin_w.y);
+    pc.t[2] = (float)(T_wc->t.z - v.origin_w.z);
+
+    uint32_t gx = gpu_groups(K->width, RENDER_LOCAL_X), gy = gpu_groups(K->height, RENDER_LOCAL_Y);
+    if ((s = gpu_begin(rc->ctx)) != BF_OK) return s;
+    bf_status ts = gpu_cmd_stage_begin(rc->ctx, "render.raycast");
+    gpu_cmd_dispatch(rc->ctx, rc->p_raycast, rc->b_raycast, &pc, gx, gy, 1);
+    /* The depth and level writes of the ray-cast -> the shading pass's reads. */
+    gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
+    gpu_cmd_dispatch(rc->ctx, rc->p_shade, rc->b_shade, &pc, gx, gy, 1);
+    /* All four images -> host downloads (render_download) and later readers. */
+    gpu_cmd_barrier(rc->ctx, GPU_BARRIER_HOST);
+    gpu_cmd_stage_end(rc->ctx);
+    if ((s = gpu_submit_wait(rc->ctx)) != BF_OK) return s;
+    rc->last_ms = 0;
+    if (ts == BF_OK) {
+        const gpu_stage_time *t;
+        uint32_t n = gpu_stage_times(rc->ctx, &t);
+        for (uint32_t i = 0; i < n; i++)
+            if (!strcmp(t[i].name, "render.raycast")) rc->last_ms += t[i].ms;
+    }
+    return BF_OK;
+}
+
+const render_targets *render_get_targets(const render_caster *rc) { return &rc->targets; }
+
+double render_last_ms(const render_caster *rc) { return rc->last_ms; }
+
+bf_status render_download(render_caster *rc, render_images *out)
+{
+    uint64_t n = (uint64_t)rc->targets.width * rc->targets.height;
+    render_images im = {.width = rc->targets.width, .height = rc->targets.height};
+    im.depth = malloc(4 * n);
+    im.normal = malloc(16 * n);
+    im.level = malloc(4 * n);
+    im.rgb = malloc(3 * n);
+    uint32_t *colour = malloc(4 * n);
+    bf_status s = (im.depth && im.normal && im.level && im.rgb && colour)
+                      ? BF_OK
+                      : bf_fail(BF_NO_MEMORY, "render: host images of %ux%u", im.width, im.height);
+    if (s == BF_OK) s = gpu_buffer_download(rc->targets.depth, 0, im.depth, 4 * n);
+    if (s == BF_OK) s = gpu_buffer_download(rc->targets.normal, 0, im.normal, 16 * n);
+    if (s == BF_OK) s = gpu_buffer_download(rc->targets.level, 0, im.level, 4 * n);
+    if (s == BF_OK) s = gpu_buffer_download(rc->targets.colour, 0, colour, 4 * n);
+    for (uint64_t i = 0; s == BF_OK && i < n; i++) {
+        im.rgb[3 * i + 0] = (uint8_t)(colour[i] & 255u);
+        im.rgb[3 * i + 1] = (uint8_t)((colour[i] >> 8) & 255u);
+        im.rgb[3 * i + 2] = (uint8_t)((colour[i] >> 16) & 255u);
+    }
+    free(colour);
+    if (s != BF_OK) {
+        render_images_free(&im);
+        return s;
+    }
+    *out = im;
+    return BF_OK;
+}
+
+void render_images_free(render_images *im)
+{
+    if (!im) return;
+    free(im->depth);
+    free(im->normal);
+    free(im->level);
+    free(im->rgb);
+    memset(im, 0, sizeof *im);
+}

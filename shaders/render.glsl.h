@@ -1,0 +1,96 @@
+/* The ray-caster's parameters and pure helpers, as C and GLSL both see them
+ * (render/render.h, shaders/render_raycast.comp, shaders/render_shade.comp;
+ * DESIGN.md section 5). The map layout it reads is shaders/fusion.glsl.h.
+ *
+ * Rays live in the map frame (relative to the map origin, in float): the
+ * host turns the double T_wc into T_mc = (R, t) with t = T_wc.t - origin_w
+ * computed in double, so a map 10 km from the world origin ray-casts exactly
+ * as one at the origin (DESIGN.md section 10). The ray of pixel (u, v) is
+ * o + s dir with o = t and dir = R ((u - cx)/fx, (v - cy)/fy, 1): dir has
+ * camera z 1, so the ray parameter s is the camera depth of the point, and
+ * near/far are depths along the optical axis, as render_options says.
+ */
+#ifndef BF_RENDER_GLSL_H
+#define BF_RENDER_GLSL_H
+
+#include "bf_common.glsl.h"
+
+/* Workgroup of both passes: 8x8 pixels, so the 8 lanes of a lavapipe
+ * subgroup are 8 neighbouring pixels of one row (coherent rays). */
+#define RENDER_LOCAL_X 8u
+#define RENDER_LOCAL_Y 8u
+
+/* render_push.flags */
+#define RENDER_FLAG_CONFIDENT_ONLY 1u /* non-confident voxels are unknown */
+#define RENDER_FLAG_REFINE 2u         /* hit between the two voxel centres */
+
+/* Octree cells are addressed by integer coordinates on the finest grid
+ * (2^FUSION_MAX_LEVEL = 256 cells per chunk edge); a cell at level L is
+ * q >> (8 - L). */
+#define RENDER_GRID_BITS 8u
+#define RENDER_GRID 256u
+
+/* Entries of the octree walk's short stack (Laine & Karras 2010 keep a
+ * full stack; a short one with a restart from the root on underflow is
+ * what DESIGN.md section 5 and Reichl 2016 use). */
+#define RENDER_STACK 4u
+
+/* Bound on the cells a ray may visit: a guard against a corrupt map, far
+ * above what a 6 m ray through a room visits (a few hundred). */
+#define RENDER_MAX_CELLS 4096u
+
+/* Push constants of render_raycast.comp and render_shade.comp. */
+struct render_push {
+    bf_f32 R[9];             /* camera to map rotation, row-major */
+    bf_f32 t[3];             /* camera centre in the map frame [m] */
+    bf_f32 fx, fy, cx, cy;   /* pixels */
+    bf_u32 width, height;
+    bf_f32 near_m, far_m;    /* camera depth range of the ray */
+    bf_f32 chunk_m;
+    bf_u32 n_buckets;        /* fusion_hash's modulus */
+    bf_u32 n_overflow;       /* overflow entries after the buckets' slots */
+    bf_u32 max_level;
+    bf_u32 flags;            /* RENDER_FLAG_* */
+    bf_u32 pad[3];
+};
+#define RENDER_PUSH_WORDS 28u
+#ifndef BF_GLSL
+typedef struct render_push render_push;
+_Static_assert(sizeof(render_push) == RENDER_PUSH_WORDS * 4, "render_push must match std430");
+_Static_assert(__builtin_offsetof(render_push, fx) == 48, "render_push.fx");
+_Static_assert(__builtin_offsetof(render_push, width) == 64, "render_push.width");
+_Static_assert(__builtin_offsetof(render_push, chunk_m) == 80, "render_push.chunk_m");
+_Static_assert(__builtin_offsetof(render_push, flags) == 96, "render_push.flags");
+#endif
+
+/* The refined hit depth: halfway, in camera depth, between the centre of
+ * the last front voxel and that of the first voxel behind (render.md says
+ * why camera depth rather than the projection onto the ray). */
+BF_FN bf_f32 render_refine_depth(bf_f32 front_depth, bf_f32 behind_depth)
+{
+    BF_PRECISE bf_f32 d = 0.5f * (front_depth + behind_depth);
+    return d;
+}
+
+/* Shaded colour of a hit: Lambert with a headlight (the light sits at the
+ * camera, so the cosine is that of the normal with the reversed ray), a
+ * little ambient, tinted by the octree level so the level rule shows.
+ * cos_theta in [0, 1]. RGBA8, R in the low byte, alpha 255. */
+BF_FN bf_u32 render_shade(bf_f32 cos_theta, bf_u32 level)
+{
+    /* One tint per level, cycling every 4: warm for coarse, cool for fine. */
+    bf_f32 tr = 1.0f, tg = 1.0f, tb = 1.0f;
+    bf_u32 k = level % 4u;
+    if (k == 0u) { tr = 1.0f; tg = 0.80f; tb = 0.70f; }
+    if (k == 1u) { tr = 0.85f; tg = 1.0f; tb = 0.75f; }
+    if (k == 2u) { tr = 0.75f; tg = 0.90f; tb = 1.0f; }
+    if (k == 3u) { tr = 1.0f; tg = 0.85f; tb = 1.0f; }
+    bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
+    bf_f32 i = 0.12f + 0.88f * c;
+    bf_u32 r = BF_U32(255.0f * i * tr + 0.5f);
+    bf_u32 g = BF_U32(255.0f * i * tg + 0.5f);
+    bf_u32 b = BF_U32(255.0f * i * tb + 0.5f);
+    return r | (g << 8) | (b << 16) | (255u << 24);
+}
+
+#endif

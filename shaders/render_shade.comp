@@ -1,0 +1,83 @@
+#version 450
+/* Second pass of the ray-cast: normals from the depth image by central
+ * differences, and the shaded colour (DESIGN.md section 5: deferred
+ * shading, normals from depth). Why from depth and not from the sign
+ * field's gradient: the gradient of one bit per voxel over a 3x3x3
+ * neighbourhood takes 27 lookups (across brick and level borders) per
+ * pixel and still only knows a few dozen directions; the refined depth is
+ * continuous across a flat surface, costs four reads per pixel, and is the
+ * quantity ICP works with, so its normals agree with what tracking sees.
+ *
+ * A neighbour counts when it was hit and its depth is within
+ * RENDER_EDGE_VOXELS voxels of the pixel's level plus RENDER_EDGE_REL of
+ * the depth (else it is across a depth edge); with both neighbours of an
+ * axis the difference is central, with one it is one-sided. A pixel with
+ * no usable neighbour on an axis gets the normal facing the camera. */
+#extension GL_GOOGLE_include_directive : require
+#include "fusion.glsl.h"
+#include "render.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) readonly buffer Depth { float v[]; } depth_in;
+layout(std430, binding = 1) readonly buffer Level { uint v[]; } level_in;
+layout(std430, binding = 2) writeonly buffer Normal { vec4 v[]; } normal_out;
+layout(std430, binding = 3) writeonly buffer Colour { uint v[]; } colour_out;
+
+layout(push_constant) uniform Push { render_push pc; };
+
+#define RENDER_EDGE_VOXELS 4.0
+#define RENDER_EDGE_REL 0.02
+
+vec3 back_project(int u, int v, float z) { return z * vec3((float(u) - pc.cx) / pc.fx, (float(v) - pc.cy) / pc.fy, 1.0); }
+
+/* Depth of pixel (u, v) if it is usable as a neighbour of a pixel at depth
+ * z with edge threshold thr, else 0. */
+float neighbour(int u, int v, float z, float thr)
+{
+    if (u < 0 || v < 0 || u >= int(pc.width) || v >= int(pc.height)) return 0.0;
+    float d = depth_in.v[uint(v) * pc.width + uint(u)];
+    return (d > 0.0 && abs(d - z) <= thr) ? d : 0.0;
+}
+
+/* Tangent along one image axis (du, dv) = (1, 0) or (0, 1); false if
+ * neither neighbour is usable. */
+bool tangent(int u, int v, int du, int dv, float z, float thr, out vec3 t)
+{
+    float dp = neighbour(u + du, v + dv, z, thr), dm = neighbour(u - du, v - dv, z, thr);
+    vec3 c = back_project(u, v, z);
+    if (dp > 0.0 && dm > 0.0) t = back_project(u + du, v + dv, dp) - back_project(u - du, v - dv, dm);
+    else if (dp > 0.0) t = back_project(u + du, v + dv, dp) - c;
+    else if (dm > 0.0) t = c - back_project(u - du, v - dv, dm);
+    else return false;
+    return true;
+}
+
+void main()
+{
+    uvec2 px = gl_GlobalInvocationID.xy;
+    if (px.x >= pc.width || px.y >= pc.height) return;
+    uint pixel = px.y * pc.width + px.x;
+    float z = depth_in.v[pixel];
+    if (!(z > 0.0)) {
+        normal_out.v[pixel] = vec4(0.0);
+        colour_out.v[pixel] = 0u;
+        return;
+    }
+    uint level = level_in.v[pixel];
+    float thr = RENDER_EDGE_VOXELS * fusion_voxel_m(pc.chunk_m, min(level, FUSION_MAX_LEVEL)) + RENDER_EDGE_REL * z;
+    int u = int(px.x), v = int(px.y);
+    vec3 p = back_project(u, v, z);
+    vec3 view = normalize(p);
+    vec3 tx, ty, n;
+    if (tangent(u, v, 1, 0, z, thr, tx) && tangent(u, v, 0, 1, z, thr, ty)) {
+        n = cross(ty, tx); /* x right, y down: cross(y, x) faces the camera */
+        float len = length(n);
+        n = len > 0.0 ? n / len : -view;
+        if (dot(n, view) > 0.0) n = -n;
+    } else {
+        n = -view;
+    }
+    normal_out.v[pixel] = vec4(n, 0.0);
+    colour_out.v[pixel] = render_shade(-dot(n, view), level);
+}

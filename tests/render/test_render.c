@@ -1,0 +1,577 @@
+/* render: the ray-caster against maps of known geometry (bricks written by
+ * hand), against its CPU oracle (tests/render/raycast_ref.c) on a fused
+ * noisy room, against the frames that were fused, and 10 km from the
+ * origin. Validation is on; any message fails a test. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "eval/eval.h"
+#include "fusion/fusion_int.h"
+#include "gpu_fixture.h"
+#include "raycast_ref.h"
+#include "render/render.h"
+
+static const bf_intrinsics K_SMALL = {160, 120, 130.0, 130.0, 79.5, 59.5, 5000};
+
+static fusion_config small_config(void)
+{
+    fusion_config c = fusion_config_default();
+    c.brick_cap = 1u << 13;
+    c.hash_buckets = 64;
+    c.hash_overflow = 64;
+    c.window = 4;
+    c.subcache = 2;
+    return c;
+}
+
+/* ------------------------------------------------------------ maps by hand */
+
+/* A plane: voxel centre c is in front when dot(c - p0, n) > 0 (n points
+ * towards the camera), map coordinates. */
+typedef struct plane {
+    double p0[3], n[3];
+} plane;
+
+static double plane_dist(const plane *pl, const double c[3])
+{
+    return (c[0] - pl->p0[0]) * pl->n[0] + (c[1] - pl->p0[1]) * pl->n[1] + (c[2] - pl->p0[2]) * pl->n[2];
+}
+
+/* Whole-brick confidence: 1 for every brick, or by the parity of the brick's
+ * global x cell (test of confident_only). */
+typedef enum conf_rule { CONF_ALL, CONF_EVEN_X } conf_rule;
+
+/* Inserts every brick at level whose cell lies in the box [lo, hi] (map
+ * coordinates) and within 1.5 voxels (plus the cell's half diagonal) of the
+ * plane, and writes its bits from the plane. Returns the bricks inserted. */
+static uint32_t insert_plane(fusion_map *map, const plane *pl, uint32_t level, const double lo[3], const double hi[3],
+                             conf_rule rule)
+{
+    const fusion_config *c = fusion_get_config(map);
+    fusion_gpu_view v = fusion_gpu_view_get(map);
+    double cell_m = c->chunk_m / (double)(1u << level), voxel = cell_m / 8;
+    int64_t g0[3], g1[3];
+    for (int a = 0; a < 3; a++) g0[a] = (int64_t)floor(lo[a] / cell_m), g1[a] = (int64_t)floor(hi[a] / cell_m);
+    uint32_t n = 0;
+    for (int64_t gz = g0[2]; gz <= g1[2]; gz++)
+        for (int64_t gy = g0[1]; gy <= g1[1]; gy++)
+            for (int64_t gx = g0[0]; gx <= g1[0]; gx++) {
+                int64_t g[3] = {gx, gy, gz};
+                double mid[3];
+                for (int a = 0; a < 3; a++) mid[a] = (g[a] + 0.5) * cell_m;
+                if (fabs(plane_dist(pl, mid)) > cell_m * 0.8661 + 1.5 * voxel) continue;
+                int32_t key[3];
+                uint32_t cell[3];
+                int64_t per = 1ll << level;
+                for (int a = 0; a < 3; a++) {
+                    int64_t k = g[a] >= 0 ? g[a] / per : -((-g[a] + per - 1) / per);
+                    key[a] = (int32_t)k;
+                    cell[a] = (uint32_t)(g[a] - k * per);
+                }
+                uint32_t slot;
+                if (fusion__debug_insert_brick(map, key, level, cell, &slot) != BF_OK) return 0;
+                uint32_t sign[16] = {0}, conf[16] = {0};
+                bool confident = rule == CONF_ALL || (gx % 2 == 0);
+                for (uint32_t z = 0; z < 8; z++)
+                    for (uint32_t y = 0; y < 8; y++)
+                        for (uint32_t x = 0; x < 8; x++) {
+                            double ctr[3] = {(g[0] * 8 + x + 0.5) * voxel, (g[1] * 8 + y + 0.5) * voxel,
+                                             (g[2] * 8 + z + 0.5) * voxel};
+                            uint32_t w = brick_word(x, y, z), b = brick_bit(x, y, z);
+                            if (plane_dist(pl, ctr) > 0) sign[w] |= 1u << b;
+                            if (confident) conf[w] |= 1u << b;
+                        }
+                if (gpu_buffer_upload(v.sign, (uint64_t)slot * 64, sign, 64) != BF_OK) return 0;
+                if (gpu_buffer_upload(v.conf, (uint64_t)slot * 64, conf, 64) != BF_OK) return 0;
+                n++;
+            }
+    return n;
+}
+
+/* Depth of the ray of pixel (u, v) from the identity pose at the map origin
+ * where it meets the plane. */
+static double plane_depth_at(const plane *pl, double u, double v, const bf_intrinsics *K)
+{
+    double d[3] = {(u - K->cx_px) / K->fx_px, (v - K->cy_px) / K->fy_px, 1};
+    double num = pl->p0[0] * pl->n[0] + pl->p0[1] * pl->n[1] + pl->p0[2] * pl->n[2];
+    return num / (d[0] * pl->n[0] + d[1] * pl->n[1] + d[2] * pl->n[2]);
+}
+
+static double angle_deg(const float *n, const double *m)
+{
+    double dot = n[0] * m[0] + n[1] * m[1] + n[2] * m[2];
+    double ln = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]), lm = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+    double c = dot / (ln * lm);
+    return acos(c > 1 ? 1 : (c < -1 ? -1 : c)) * 180 / M_PI;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double median(double *v, size_t n)
+{
+    if (n == 0) return NAN;
+    qsort(v, n, sizeof *v, cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+BF_TEST(fronto_parallel_plane_depth_normal_and_level_are_exact)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_SMALL, bf_v3(0, 0, 0), &map));
+    /* A plane at 1.2913 m, across the chunk border x = 0 (keys -1 and 0):
+     * level 5 (7.8 mm voxels) left of x = 0.25 m, level 6 (3.9 mm) right of
+     * it, so two levels meet on one surface. The image sees x in +-0.8 m. */
+    const double z0 = 1.2913;
+    plane pl = {{0, 0, z0}, {0, 0, -1}};
+    uint32_t n5 = insert_plane(map, &pl, 5, (double[]){-0.9, -0.7, 1.2}, (double[]){0.2499, 0.7, 1.4}, CONF_ALL);
+    uint32_t n6 = insert_plane(map, &pl, 6, (double[]){0.25, -0.7, 1.2}, (double[]){0.9, 0.7, 1.4}, CONF_ALL);
+    CHECK(n5 > 100 && n6 > 100);
+    CHECK_OK(fusion_check(map));
+
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    bf_se3 T = bf_se3_identity();
+    for (int mode = 0; mode < 3; mode++) {
+        render_options opt = mode == 0 ? render_options_tracking() : render_options_display();
+        if (mode == 2) opt.refine = false;
+        CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+        render_images im;
+        CHECK_OK(render_download(rc, &im));
+        uint32_t n_hit = 0;
+        double worst = 0;
+        for (uint32_t v = 0; v < im.height; v++)
+            for (uint32_t u = 0; u < im.width; u++) {
+                size_t i = (size_t)v * im.width + u;
+                if (!(im.depth[i] > 0)) continue;
+                n_hit++;
+                double x = (u - K_SMALL.cx_px) / K_SMALL.fx_px * z0;
+                uint32_t level = x < 0.25 ? 5 : 6;
+                CHECK(im.level[i] == 5 || im.level[i] == 6);
+                double voxel = fusion_level_voxel_m(c.chunk_m, im.level[i]);
+                /* The sign bits put the surface between the centres on both
+                 * sides of z0: the refined hit is the face between them,
+                 * voxel * round(z0 / voxel), at most half a voxel from z0;
+                 * the unrefined hit (entry face of the first voxel behind) is
+                 * the same face on a fronto-parallel plane. */
+                double face = voxel * floor(z0 / voxel + 0.5);
+                CHECK_NEAR(im.depth[i], face, 2e-5);
+                CHECK_LE(fabs(im.depth[i] - z0), 0.5 * voxel);
+                if (fabs(x - 0.25) > 2 * voxel) CHECK_EQ_INT(im.level[i], level);
+                if (fabs(im.depth[i] - z0) > worst) worst = fabs(im.depth[i] - z0);
+                /* A flat depth image has the exact normal (away from the
+                 * step of half a voxel where the two levels meet). */
+                if (fabs(x - 0.25) > 3 * z0 / K_SMALL.fx_px)
+                    CHECK_LE(angle_deg(&im.normal[4 * i], (double[]){0, 0, -1}), 0.5);
+                CHECK(im.rgb[3 * i] > 0);
+            }
+        /* The bricks cover the whole view. */
+        CHECK_EQ_INT(n_hit, im.width * im.height);
+        if (mode == 0) fprintf(stderr, "  plane: %u bricks, worst |depth - z0| %.2f mm\n", n5 + n6, 1e3 * worst);
+        render_images_free(&im);
+    }
+    CHECK(render_last_ms(rc) > 0);
+    render_destroy(rc);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+BF_TEST(tilted_plane_depth_within_a_voxel_and_normals_within_degrees)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_SMALL, bf_v3(0, 0, 0), &map));
+    /* A plane through (0, 0, 1.3) turned 35 degrees about y and 10 about x,
+     * level 5 everywhere. */
+    double a = 35 * M_PI / 180, b = 10 * M_PI / 180;
+    plane pl = {{0, 0, 1.3}, {sin(a) * cos(b), sin(b), -cos(a) * cos(b)}};
+    uint32_t n = insert_plane(map, &pl, 5, (double[]){-1.0, -0.8, 0.6}, (double[]){1.0, 0.8, 2.4}, CONF_ALL);
+    CHECK(n > 100);
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    bf_se3 T = bf_se3_identity();
+    render_options opt = render_options_tracking();
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    render_images im;
+    CHECK_OK(render_download(rc, &im));
+    double voxel = fusion_level_voxel_m(c.chunk_m, 5);
+    size_t np = (size_t)im.width * im.height, n_hit = 0, n_ang = 0, n_inside = 0, n_inside_hit = 0;
+    double *err = malloc(np * sizeof *err), *ang = malloc(np * sizeof *ang), worst = 0;
+    double nrm[3] = {pl.n[0], pl.n[1], pl.n[2]};
+    for (uint32_t v = 0; v < im.height; v++)
+        for (uint32_t u = 0; u < im.width; u++) {
+            size_t i = (size_t)v * im.width + u;
+            double truth = plane_depth_at(&pl, u, v, &K_SMALL);
+            double tx = (u - K_SMALL.cx_px) / K_SMALL.fx_px * truth, ty = (v - K_SMALL.cy_px) / K_SMALL.fy_px * truth;
+            bool inside = fabs(tx) < 0.9 && fabs(ty) < 0.7 && truth > 0.7 && truth < 2.3; /* a cell in from the box */
+            n_inside += inside;
+            if (!(im.depth[i] > 0)) continue;
+            n_inside_hit += inside;
+            double e = fabs(im.depth[i] - truth);
+            err[n_hit++] = e;
+            if (e > worst) worst = e;
+            /* The midpoint of the two centres is within half a voxel of the
+             * plane along the step between them; carried to the ray along the
+             * optical axis it moves by at most the centres' lateral distance
+             * from the ray (< a voxel) times tan 36 degrees (the plane's tilt
+             * from the image plane): 0.5 / cos(36) + 0.75 voxel bounds it. */
+            CHECK_LE(e, 3 * voxel);
+            if (u > 0 && v > 0 && u + 1 < im.width && v + 1 < im.height) ang[n_ang++] = angle_deg(&im.normal[4 * i], nrm);
+        }
+    CHECK(n_inside > np / 2);
+    CHECK_EQ_INT(n_inside_hit, n_inside);
+    double med_err = median(err, n_hit), med_ang = median(ang, n_ang);
+    size_t n_err = n_hit;
+    double *e2 = malloc(n_err * sizeof *e2);
+    memcpy(e2, err, n_err * sizeof *e2);
+    qsort(e2, n_err, sizeof *e2, cmp_double);
+    fprintf(stderr, "  p90 %.2f mm p99 %.2f\n", 1e3 * e2[n_err * 9 / 10], 1e3 * e2[n_err * 99 / 100]);
+    free(e2);
+    fprintf(stderr, "  tilted plane: median |depth error| %.2f mm (voxel %.2f mm), worst %.2f mm, median normal error %.2f deg\n",
+            1e3 * med_err, 1e3 * voxel, 1e3 * worst, med_ang);
+    CHECK_LE(med_err, 0.5 * voxel);
+    CHECK_LE(med_ang, 8.0);
+    free(err);
+    free(ang);
+    render_images_free(&im);
+    render_destroy(rc);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+BF_TEST(display_mode_hides_bricks_without_confident_voxels)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_SMALL, bf_v3(0, 0, 0), &map));
+    const double z0 = 1.1;
+    plane pl = {{0, 0, z0}, {0, 0, -1}};
+    CHECK(insert_plane(map, &pl, 5, (double[]){-0.9, -0.7, 1.0}, (double[]){0.9, 0.7, 1.2}, CONF_EVEN_X) > 100);
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    bf_se3 T = bf_se3_identity();
+    render_options track = render_options_tracking(), show = render_options_display();
+    render_images a, b;
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &track));
+    CHECK_OK(render_download(rc, &a));
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &show));
+    CHECK_OK(render_download(rc, &b));
+    double cell = c.chunk_m / 32;
+    uint32_t n_hidden = 0, n_shown = 0;
+    for (uint32_t v = 0; v < a.height; v++)
+        for (uint32_t u = 0; u < a.width; u++) {
+            size_t i = (size_t)v * a.width + u;
+            CHECK(a.depth[i] > 0); /* tracking sees every sign bit */
+            /* Keep pixels whose ray stays in one brick column over all the
+             * bricks (z in [1, 1.2]): a front voxel of a confident column, the
+             * unknown voxels of a non-confident one and a behind voxel of the
+             * next confident column make a hit (unknown is skipped). */
+            double x0 = (u - K_SMALL.cx_px) / K_SMALL.fx_px * 1.0;
+            double x1 = (u - K_SMALL.cx_px) / K_SMALL.fx_px * 1.2;
+            double g0 = floor(x0 / cell), g1 = floor(x1 / cell);
+            if (g0 != g1) continue;
+            bool confident = fmod(fabs(g0), 2.0) == 0;
+            if (confident) {
+                CHECK_NEAR(b.depth[i], a.depth[i], 1e-6);
+                CHECK_EQ_INT(b.level[i], 5);
+                n_shown++;
+            } else {
+                CHECK_EQ_INT(b.depth[i], 0);
+                CHECK_EQ_INT(b.level[i], FUSION_NONE);
+                CHECK(b.normal[4 * i] == 0 && b.normal[4 * i + 2] == 0);
+                CHECK(b.rgb[3 * i] == 0 && b.rgb[3 * i + 1] == 0);
+                n_hidden++;
+            }
+        }
+    CHECK(n_hidden > 1000 && n_shown > 1000);
+    render_images_free(&a);
+    render_images_free(&b);
+    render_destroy(rc);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+static uint32_t count_hits(const render_images *im)
+{
+    uint32_t n = 0;
+    for (size_t i = 0; i < (size_t)im->width * im->height; i++) n += im->depth[i] > 0;
+    return n;
+}
+
+BF_TEST(empty_map_and_pose_looking_away_give_no_hits_and_bad_sizes_are_refused)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_SMALL, bf_v3(3, -2, 1), &map));
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    bf_se3 T = bf_se3_identity();
+    T.t = bf_v3(3, -2, 1);
+    render_options opt = render_options_tracking();
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    render_images im;
+    CHECK_OK(render_download(rc, &im));
+    CHECK_EQ_INT(count_hits(&im), 0);
+    for (size_t i = 0; i < (size_t)im.width * im.height; i++) {
+        CHECK_EQ_INT(im.level[i], FUSION_NONE);
+        CHECK(im.normal[4 * i] == 0 && im.normal[4 * i + 1] == 0 && im.normal[4 * i + 2] == 0);
+    }
+    render_images_free(&im);
+
+    /* A plane 1 m in front of the map origin: seen from the origin, not from
+     * the same place turned around. */
+    plane pl = {{0, 0, 1.0}, {0, 0, -1}};
+    CHECK(insert_plane(map, &pl, 4, (double[]){-1, -1, 0.9}, (double[]){1, 1, 1.1}, CONF_ALL) > 10);
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    CHECK_OK(render_download(rc, &im));
+    CHECK(count_hits(&im) > im.width * im.height / 2);
+    render_images_free(&im);
+    bf_se3 away = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), M_PI), T.t);
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &away, &opt));
+    CHECK_OK(render_download(rc, &im));
+    CHECK_EQ_INT(count_hits(&im), 0);
+    render_images_free(&im);
+    /* Looking at it from behind: the ray meets behind voxels first and
+     * front ones after, which is no surface. */
+    bf_se3 behind = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), M_PI), bf_v3(3, -2, 3));
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &behind, &opt));
+    CHECK_OK(render_download(rc, &im));
+    CHECK_EQ_INT(count_hits(&im), 0);
+    render_images_free(&im);
+
+    bf_intrinsics K = K_SMALL;
+    K.width = 80;
+    CHECK_STATUS(render_raycast(rc, map, &K, &T, &opt), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("80x120");
+    bf_se3 bad = T;
+    bad.t.y = NAN;
+    CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &bad, &opt), BF_INVALID_ARG);
+    render_options r = opt;
+    r.far_m = r.near_m;
+    CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &r), BF_INVALID_ARG);
+    render_caster *none = NULL;
+    CHECK_STATUS(render_create(ctx, 0, 10, &none), BF_INVALID_ARG);
+    CHECK(none == NULL);
+    render_destroy(NULL);
+    render_destroy(rc);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* ------------------------------------------------------------ fused room */
+
+/* Frames of the synthetic room (Kinect v1 noise), rendered once for all
+ * tests of this binary. */
+#define ROOM_FRAMES 8
+static const bf_intrinsics K_ROOM = {320, 240, 262.5, 262.5, 159.5, 119.5, 5000};
+static struct {
+    bool ready;
+    bf_se3 T_wc[ROOM_FRAMES];
+    uint16_t *depth[ROOM_FRAMES];
+} room;
+
+static bf_status room_frames(void)
+{
+    if (room.ready) return BF_OK;
+    eval_scene scene;
+    bf_status s = eval_scene_room(NULL, &scene);
+    if (s != BF_OK) return s;
+    eval_render_config rcfg = {.K = K_ROOM, .noise = EVAL_NOISE_KINECT1, .seed = 7};
+    eval_renderer *ren;
+    if ((s = eval_renderer_create(&scene, &rcfg, &ren)) != BF_OK) {
+        eval_scene_free(&scene);
+        return s;
+    }
+    for (uint32_t k = 0; k < ROOM_FRAMES && s == BF_OK; k++) {
+        /* A slow sideways sway with a little yaw around the room's view. */
+        bf_se3 step = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.03 * sin(0.5 * k)),
+                                     bf_v3(0.04 * k, 0.01 * sin(k), 0));
+        room.T_wc[k] = bf_se3_mul(&scene.T_wc_view, &step);
+        room.depth[k] = malloc((size_t)K_ROOM.width * K_ROOM.height * 2);
+        s = eval_render(ren, k, &room.T_wc[k], room.depth[k], NULL, NULL);
+    }
+    eval_renderer_destroy(ren);
+    eval_scene_free(&scene);
+    room.ready = s == BF_OK;
+    return s;
+}
+
+__attribute__((destructor)) static void room_free(void)
+{
+    for (uint32_t k = 0; k < ROOM_FRAMES; k++) free(room.depth[k]);
+}
+
+/* Fuses the room's frames with poses T_shift * T_wc into a new map whose
+ * origin is the first such camera position. */
+static bf_status room_fuse(gpu_context *ctx, const bf_se3 *T_shift, fusion_map **out)
+{
+    fusion_config fc = fusion_config_default();
+    fc.brick_cap = 1u << 16;
+    fc.window = 8;
+    fc.subcache = 4;
+    bf_se3 T0 = bf_se3_mul(T_shift, &room.T_wc[0]);
+    fusion_map *map;
+    bf_status s = fusion_create(ctx, &fc, &K_ROOM, T0.t, &map);
+    for (uint32_t k = 0; k < ROOM_FRAMES && s == BF_OK; k++) {
+        bf_frame f = {.index = k, .width = K_ROOM.width, .height = K_ROOM.height, .depth = room.depth[k]};
+        bf_se3 T = bf_se3_mul(T_shift, &room.T_wc[k]);
+        s = fusion_add_frame(map, &f, &T);
+    }
+    if (s == BF_OK) s = fusion_flush(map);
+    if (s != BF_OK) {
+        fusion_destroy(map);
+        return s;
+    }
+    *out = map;
+    return BF_OK;
+}
+
+BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    CHECK_OK(room_frames());
+    bf_se3 id = bf_se3_identity();
+    fusion_map *map;
+    CHECK_OK(room_fuse(ctx, &id, &map));
+    fusion_snapshot snap;
+    CHECK_OK(fusion_snapshot_take(map, &snap));
+    raycast_ref *ref;
+    CHECK_OK(raycast_ref_create(&snap, fusion_get_config(map)->max_level, &ref));
+    /* Half resolution of the fused frames keeps the oracle fast; a pose
+     * between two fused ones. */
+    const bf_intrinsics K = {160, 120, 131.25, 131.25, 79.5, 59.5, 5000};
+    bf_se3 T = bf_se3_interpolate(&room.T_wc[2], &room.T_wc[3], 0.5);
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, K.width, K.height, &rc));
+    size_t np = (size_t)K.width * K.height;
+    float *ref_depth = malloc(np * sizeof *ref_depth);
+    uint32_t *ref_level = malloc(np * sizeof *ref_level);
+    for (int mode = 0; mode < 3; mode++) {
+        render_options opt = mode == 0 ? render_options_tracking() : render_options_display();
+        if (mode == 2) opt.refine = false;
+        CHECK_OK(render_raycast(rc, map, &K, &T, &opt));
+        render_images im;
+        CHECK_OK(render_download(rc, &im));
+        raycast_ref_run(ref, &K, &T, &opt, ref_depth, ref_level);
+        size_t agree = 0, both = 0, within = 0, same_level = 0;
+        for (size_t i = 0; i < np; i++) {
+            bool g = im.depth[i] > 0, r = ref_depth[i] > 0;
+            agree += g == r;
+            if (!(g && r)) continue;
+            both++;
+            /* Within one voxel of the coarser of the two hits' levels: GPU
+             * (float, nudged 10 um into each octree cell) and oracle (double)
+             * may see a different voxel where the ray grazes a voxel edge. */
+            uint32_t l = im.level[i] < ref_level[i] ? im.level[i] : ref_level[i];
+            within += fabs(im.depth[i] - ref_depth[i]) <= fusion_level_voxel_m(snap.chunk_m, l) + 1e-5;
+            if (getenv("RENDER_DEBUG") && fabs(im.depth[i] - ref_depth[i]) > fusion_level_voxel_m(snap.chunk_m, l) + 1e-5)
+                fprintf(stderr, "px %zu,%zu gpu %.4f L%u ref %.4f L%u\n", i % K.width, i / K.width, im.depth[i], im.level[i], ref_depth[i], ref_level[i]);
+            same_level += im.level[i] == ref_level[i];
+        }
+        fprintf(stderr,
+                "  oracle (%s%s): %zu hits, mask agreement %.3f%%, depth within a voxel %.3f%%, same level %.3f%%, "
+                "%.2f ms\n",
+                opt.confident_only ? "display" : "tracking", opt.refine ? "" : ", unrefined", both,
+                100.0 * agree / np, 100.0 * within / both, 100.0 * same_level / both, render_last_ms(rc));
+        CHECK(both > np / 2);
+        CHECK(agree >= np * 99 / 100);
+        CHECK(within >= both * 99 / 100);
+        render_images_free(&im);
+    }
+    free(ref_depth);
+    free(ref_level);
+    render_destroy(rc);
+    raycast_ref_destroy(ref);
+    fusion_snapshot_free(&snap);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* Ray-casts map at every third fused frame's pose (times T_shift) into
+ * depth[k] (malloc'd). */
+static bf_status room_cast(gpu_context *ctx, fusion_map *map, const bf_se3 *T_shift, float *depth[ROOM_FRAMES])
+{
+    render_caster *rc = NULL;
+    bf_status s = render_create(ctx, K_ROOM.width, K_ROOM.height, &rc);
+    render_options opt = render_options_tracking();
+    for (uint32_t k = 0; k < ROOM_FRAMES && s == BF_OK; k += 3) {
+        bf_se3 T = bf_se3_mul(T_shift, &room.T_wc[k]);
+        render_images im;
+        if ((s = render_raycast(rc, map, &K_ROOM, &T, &opt)) != BF_OK) break;
+        if ((s = render_download(rc, &im)) != BF_OK) break;
+        depth[k] = im.depth;
+        im.depth = NULL;
+        render_images_free(&im);
+    }
+    render_destroy(rc);
+    return s;
+}
+
+BF_TEST(raycast_at_a_fused_pose_reproduces_its_depth_also_10_km_away)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    CHECK_OK(room_frames());
+    bf_se3 id = bf_se3_identity();
+    bf_se3 far = bf_se3_from_qt(bf_quat_identity(), bf_v3(1e4, -7.5e3, 2e3));
+    fusion_map *near_map, *far_map;
+    CHECK_OK(room_fuse(ctx, &id, &near_map));
+    CHECK_OK(room_fuse(ctx, &far, &far_map));
+    float *dn[ROOM_FRAMES] = {0}, *df[ROOM_FRAMES] = {0};
+    CHECK_OK(room_cast(ctx, near_map, &id, dn));
+    CHECK_OK(room_cast(ctx, far_map, &far, df));
+    size_t np = (size_t)K_ROOM.width * K_ROOM.height;
+    double *ratio = malloc(np * sizeof *ratio);
+    const fusion_config *fc = fusion_get_config(near_map);
+    for (uint32_t k = 0; k < ROOM_FRAMES; k += 3) {
+        size_t n = 0, n_hit = 0, n_valid = 0;
+        double worst_far = 0;
+        for (size_t i = 0; i < np; i++) {
+            /* Same map, same rays: the 10 km offset is removed in double
+             * before anything reaches the GPU. */
+            CHECK_EQ_INT(dn[k][i] > 0, df[k][i] > 0);
+            double dfar = fabs(dn[k][i] - df[k][i]);
+            if (dfar > worst_far) worst_far = dfar;
+            CHECK_LE(dfar, 1e-4);
+            double z = room.depth[k][i] / K_ROOM.depth_scale;
+            n_valid += z > 0;
+            if (!(dn[k][i] > 0)) continue;
+            n_hit++;
+            if (!(z > 0)) continue;
+            double sigma = fc->sigma_a + fc->sigma_b * (z - fc->sigma_c) * (z - fc->sigma_c);
+            ratio[n++] = fabs(dn[k][i] - z) / sigma;
+        }
+        double med = median(ratio, n);
+        fprintf(stderr, "  frame %u: %zu hits of %zu valid pixels, median |ray-cast - frame| = %.2f sigma(z); 10 km: "
+                        "max diff %.2g m\n", k, n_hit, n_valid, med, worst_far);
+        /* The frame's own noise alone gives a median of 0.67 sigma; the map
+         * adds its quantisation (a quarter voxel on average). */
+        CHECK_LE(med, 1.5);
+        CHECK(n_hit >= n_valid * 95 / 100);
+    }
+    for (uint32_t k = 0; k < ROOM_FRAMES; k++) free(dn[k]), free(df[k]);
+    free(ratio);
+    fusion_destroy(far_map);
+    fusion_destroy(near_map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
