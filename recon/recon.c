@@ -129,8 +129,12 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
         if (s == BF_OK) {
             out->ms_track = out->track.ms_gpu;
             bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
-            if (out->track.degenerate) r->counts.degenerate++;
-            if (good) {
+            if (out->track.outcome == TRACK_OK && out->track.degenerate) r->counts.degenerate++;
+            if (out->track.outcome == TRACK_NO_DEPTH) {
+                /* Valid raw samples, but none the tracker can use (all beyond range). */
+                out->state = RECON_NO_DEPTH;
+                r->counts.no_depth++;
+            } else if (good) {
                 out->state = RECON_TRACKED;
                 out->T_wc = out->track.T_wc;
                 r->T_last = out->track.T_wc;
