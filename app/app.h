@@ -49,5 +49,10 @@ int cmd_eval_traj(int argc, char **argv);
 int cmd_eval_surface(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
 int cmd_info(int argc, char **argv);
+int cmd_record(int argc, char **argv);
+int cmd_convert(int argc, char **argv);
+int cmd_live(int argc, char **argv);
+/* The body of record and live (cmd_record.c): live writes DIR/capture.bflog. */
+int app_record(const char *cmd, int argc, char **argv, bool is_live_cmd);
 
 #endif

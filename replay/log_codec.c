@@ -1,6 +1,6 @@
 /* replay: the pieces of the bitfuse log both its writer and reader use:
- * CRC-32, little-endian fields, the frame record header, the depth filter
- * and JPEG in memory. */
+ * CRC-32, little-endian fields, the frame record header and JPEG in
+ * memory. */
 #include "log_int.h"
 
 #include <pthread.h>
@@ -155,42 +155,6 @@ size_t log__depth_bound(size_t n_px) { return ZSTD_compressBound(2 * n_px); }
  * Huffman tables, worst-case code lengths); 64 KiB more than zstd's bound
  * covers it for any image that zstd's bound covers. */
 size_t log__rgb_bound(size_t n_px) { return ZSTD_compressBound(3 * n_px) + 65536; }
-
-/* ------------------------------------------------------------ depth filter */
-
-/* Kinect depth is smooth along a row: neighbouring differences are small
- * numbers whose high bytes are almost all 0x00 or 0xff, which zstd's
- * entropy stage codes in a fraction of a bit once they sit together. */
-void log__depth_filter(const uint16_t *depth, uint32_t w, uint32_t h, uint8_t *out)
-{
-    size_t n = (size_t)w * h;
-    uint8_t *lo = out, *hi = out + n;
-    for (uint32_t y = 0; y < h; y++) {
-        const uint16_t *row = depth + (size_t)y * w;
-        uint16_t prev = 0;
-        for (uint32_t x = 0; x < w; x++) {
-            uint16_t d = (uint16_t)(row[x] - prev);
-            prev = row[x];
-            lo[(size_t)y * w + x] = (uint8_t)d;
-            hi[(size_t)y * w + x] = (uint8_t)(d >> 8);
-        }
-    }
-}
-
-void log__depth_unfilter(const uint8_t *in, uint32_t w, uint32_t h, uint16_t *depth)
-{
-    size_t n = (size_t)w * h;
-    const uint8_t *lo = in, *hi = in + n;
-    for (uint32_t y = 0; y < h; y++) {
-        uint16_t *row = depth + (size_t)y * w;
-        uint16_t prev = 0;
-        for (uint32_t x = 0; x < w; x++) {
-            size_t i = (size_t)y * w + x;
-            prev = (uint16_t)(prev + (uint16_t)(lo[i] | hi[i] << 8));
-            row[x] = prev;
-        }
-    }
-}
 
 /* ------------------------------------------------------------ JPEG */
 

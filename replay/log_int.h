@@ -32,9 +32,12 @@
  * magic. */
 #define LOG_FOOTER 24u
 
-/* Depth codecs. */
-#define LOG_DEPTH_ZSTD 1u      /* zstd of the raw u16 LE image */
-#define LOG_DEPTH_ZSTD_DELTA 2u /* zstd of per-row deltas, split in byte planes */
+/* Depth codec: zstd of the raw u16 little-endian image. Real Kinect depth
+ * holds few distinct values (175 in a TUM fr2 frame: depth comes from
+ * quantised disparity), which zstd's matches and literal coding exploit
+ * directly; row deltas, byte planes and both together all came out worse
+ * (docs/formats.md has the numbers). */
+#define LOG_DEPTH_ZSTD 1u
 
 /* Frame flags. */
 #define LOG_FRAME_HAS_RGB 1u
@@ -86,12 +89,6 @@ bool log__frame_header_unpack(const uint8_t *buf, log__frame_header *h);
  * bigger sizes before it allocates or reads anything. */
 size_t log__depth_bound(size_t n_px);
 size_t log__rgb_bound(size_t n_px);
-
-/* The depth filter of LOG_DEPTH_ZSTD_DELTA: each pixel minus its left
- * neighbour (mod 2^16, the first of a row minus 0), then all low bytes
- * followed by all high bytes. Exactly invertible. out holds 2 * w * h. */
-void log__depth_filter(const uint16_t *depth, uint32_t w, uint32_t h, uint8_t *out);
-void log__depth_unfilter(const uint8_t *in, uint32_t w, uint32_t h, uint16_t *depth);
 
 /* JPEG into / out of memory with libjpeg. encode writes at most cap bytes
  * into out (BF_NO_MEMORY if the image needs more); decode reads exactly a

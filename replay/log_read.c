@@ -39,7 +39,6 @@ typedef struct log__source {
     uint32_t n_skipped;
     size_t n_px;
     ZSTD_DCtx *zd;
-    uint8_t *filtered;    /* 2 * n_px */
     uint8_t *depth_payload, *rgb_payload;
     uint16_t *depth;
     uint8_t *rgb;
@@ -109,7 +108,7 @@ static bf_status header_read(log__source *ls)
         return bf_fail(BF_FORMAT, "%s: log header has invalid intrinsics", ls->path);
     if (h->colour > REPLAY_LOG_COLOUR_JPEG)
         return bf_fail(BF_FORMAT, "%s: unknown colour codec %u in the log header", ls->path, h->colour);
-    if (h->depth_codec != LOG_DEPTH_ZSTD && h->depth_codec != LOG_DEPTH_ZSTD_DELTA)
+    if (h->depth_codec != LOG_DEPTH_ZSTD)
         return bf_fail(BF_FORMAT, "%s: unknown depth codec %u in the log header", ls->path, h->depth_codec);
     return BF_OK;
 }
@@ -245,7 +244,7 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
                  h.rgb_size, W, H);
         return frame_fail(ls, k, at, why);
     }
-    if (h.depth_codec != LOG_DEPTH_ZSTD && h.depth_codec != LOG_DEPTH_ZSTD_DELTA) {
+    if (h.depth_codec != LOG_DEPTH_ZSTD) {
         snprintf(why, sizeof why, "unknown depth codec %u", h.depth_codec);
         return frame_fail(ls, k, at, why);
     }
@@ -272,20 +271,15 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
     }
     /* The checksum matched: a failure below means a writer bug or a forged
      * file, still reported, never trusted. */
-    uint8_t *dst = h.depth_codec == LOG_DEPTH_ZSTD ? (uint8_t *)ls->depth : ls->filtered;
-    size_t dn = ZSTD_decompressDCtx(ls->zd, dst, 2 * ls->n_px, ls->depth_payload, h.depth_size);
+    size_t dn = ZSTD_decompressDCtx(ls->zd, ls->depth, 2 * ls->n_px, ls->depth_payload, h.depth_size);
     if (ZSTD_isError(dn) || dn != 2 * ls->n_px) {
         snprintf(why, sizeof why, "depth does not decompress to %ux%u (%s)", W, H,
                  ZSTD_isError(dn) ? ZSTD_getErrorName(dn) : "wrong size");
         return frame_fail(ls, k, at, why);
     }
-    if (h.depth_codec == LOG_DEPTH_ZSTD_DELTA) {
-        log__depth_unfilter(ls->filtered, W, H, ls->depth);
-    } else {
-        uint16_t probe = 1;
-        if (*(uint8_t *)&probe != 1) /* the file is little-endian */
-            for (size_t i = 0; i < ls->n_px; i++) ls->depth[i] = (uint16_t)(ls->depth[i] << 8 | ls->depth[i] >> 8);
-    }
+    uint16_t probe = 1;
+    if (*(uint8_t *)&probe != 1) /* the file is little-endian */
+        for (size_t i = 0; i < ls->n_px; i++) ls->depth[i] = (uint16_t)(ls->depth[i] << 8 | ls->depth[i] >> 8);
     if (has_rgb) {
         if (h.colour_codec == REPLAY_LOG_COLOUR_ZSTD) {
             size_t cn = ZSTD_decompressDCtx(ls->zd, ls->rgb, 3 * ls->n_px, ls->rgb_payload, h.rgb_size);
@@ -341,7 +335,6 @@ static void log_close(rgbd_source *base)
     if (ls->f) fclose(ls->f);
     ZSTD_freeDCtx(ls->zd);
     free(ls->offsets);
-    free(ls->filtered);
     free(ls->depth_payload);
     free(ls->rgb_payload);
     free(ls->depth);
@@ -378,12 +371,11 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
     if ((s = header_read(ls))) goto fail;
     ls->n_px = (size_t)ls->hdr.K.width * ls->hdr.K.height;
     ls->zd = ZSTD_createDCtx();
-    ls->filtered = malloc(2 * ls->n_px);
     ls->depth_payload = malloc(log__depth_bound(ls->n_px));
     ls->rgb_payload = malloc(log__rgb_bound(ls->n_px));
     ls->depth = malloc(ls->n_px * sizeof *ls->depth);
     ls->rgb = malloc(ls->n_px * 3);
-    if (!ls->zd || !ls->filtered || !ls->depth_payload || !ls->rgb_payload || !ls->depth || !ls->rgb) {
+    if (!ls->zd || !ls->depth_payload || !ls->rgb_payload || !ls->depth || !ls->rgb) {
         s = bf_fail(BF_NO_MEMORY, "%s: buffers for %ux%u frames", path, ls->hdr.K.width, ls->hdr.K.height);
         goto fail;
     }

@@ -20,7 +20,7 @@ struct replay_log_writer {
     replay_log_config cfg;
     size_t n_px;
     ZSTD_CCtx *zc;
-    uint8_t *filtered;     /* 2 * n_px: the depth filter's output */
+    uint16_t *swapped;     /* n_px, big-endian hosts only: depth in file order */
     uint8_t *depth_buf;    /* log__depth_bound(n_px) */
     uint8_t *rgb_buf;      /* log__rgb_bound(n_px) */
     uint8_t *index;        /* LOG_INDEX_ENTRY per frame */
@@ -72,10 +72,12 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     w->n_px = (size_t)K->width * K->height;
     w->path = strdup(path);
     w->zc = ZSTD_createCCtx();
-    w->filtered = malloc(2 * w->n_px);
+    uint16_t probe = 1;
+    bool is_le = *(uint8_t *)&probe == 1;
+    w->swapped = is_le ? NULL : malloc(2 * w->n_px);
     w->depth_buf = malloc(log__depth_bound(w->n_px));
     w->rgb_buf = cfg->colour ? malloc(log__rgb_bound(w->n_px)) : NULL;
-    if (!w->path || !w->zc || !w->filtered || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
+    if (!w->path || !w->zc || (!is_le && !w->swapped) || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
         s = bf_fail(BF_NO_MEMORY, "%s: log writer buffers for %ux%u frames", path, K->width, K->height);
         goto fail;
     }
@@ -102,7 +104,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     log__put_f64(hdr + 48, K->cy_px);
     log__put_f64(hdr + 56, K->depth_scale);
     log__put_u32(hdr + 64, (uint32_t)cfg->colour);
-    log__put_u32(hdr + 68, LOG_DEPTH_ZSTD_DELTA);
+    log__put_u32(hdr + 68, LOG_DEPTH_ZSTD);
     log__put_u32(hdr + 72, cfg->has_groundtruth ? LOG_HEADER_HAS_GROUNDTRUTH : 0);
     log__put_u32(hdr + 76, (uint32_t)dev_len);
     if (dev_len) memcpy(hdr + LOG_HEADER_FIXED, cfg->device, dev_len);
@@ -148,13 +150,17 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
     log__frame_header h = {
         .index = f->index,
         .flags = (f->has_pose ? LOG_FRAME_HAS_POSE : 0u),
-        .depth_codec = LOG_DEPTH_ZSTD_DELTA,
+        .depth_codec = LOG_DEPTH_ZSTD,
         .t_depth_s = f->t_depth_s,
         .t_rgb_s = f->t_rgb_s,
         .T_wc = f->has_pose ? f->T_wc : bf_se3_identity(),
     };
-    log__depth_filter(f->depth, f->width, f->height, w->filtered);
-    size_t dz = ZSTD_compress2(w->zc, w->depth_buf, log__depth_bound(w->n_px), w->filtered, 2 * w->n_px);
+    const uint16_t *depth = f->depth;
+    if (w->swapped) { /* the file is little-endian */
+        for (size_t i = 0; i < w->n_px; i++) w->swapped[i] = (uint16_t)(f->depth[i] << 8 | f->depth[i] >> 8);
+        depth = w->swapped;
+    }
+    size_t dz = ZSTD_compress2(w->zc, w->depth_buf, log__depth_bound(w->n_px), depth, 2 * w->n_px);
     if (ZSTD_isError(dz))
         return bf_fail(BF_NO_MEMORY, "%s: frame %u: zstd: %s", w->path, f->index, ZSTD_getErrorName(dz));
     h.depth_size = (uint32_t)dz;
@@ -242,7 +248,7 @@ void replay_log_writer_destroy(replay_log_writer *w)
     if (!w) return;
     if (w->f) fclose(w->f);
     ZSTD_freeCCtx(w->zc);
-    free(w->filtered);
+    free(w->swapped);
     free(w->depth_buf);
     free(w->rgb_buf);
     free(w->index);
