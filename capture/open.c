@@ -1,0 +1,285 @@
+/* capture: opening a live source by URI. The scheme picks a backend from
+ * one table (Redis's aeApi* idea); each backend is compiled only when its
+ * library was found at configure time (BF_HAVE_FREENECT, BF_HAVE_OPENNI2,
+ * BF_HAVE_V4L2), and a URI for a missing one says which Debian package
+ * would bring it. Also the pure helpers the backends share: URI options,
+ * the Kinect v1 disparity model and pixel-format conversions. */
+#include "live_int.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct capture_backend {
+    const char *scheme;
+    const char *package; /* Debian 12 package with the library's headers */
+    bf_status (*open)(const char *uri, const char *target, const capture__uri_options *opt, rgbd_source **out);
+    uint32_t (*list)(capture_device_info *out, uint32_t cap);
+} capture_backend;
+
+/* open == NULL: known scheme, backend not compiled in. */
+static const capture_backend capture_backends[] = {
+#ifdef BF_HAVE_FREENECT
+    {"freenect", "libfreenect-dev", capture__freenect_open, capture__freenect_list},
+#else
+    {"freenect", "libfreenect-dev", NULL, NULL},
+#endif
+#ifdef BF_HAVE_OPENNI2
+    {"openni2", "libopenni2-dev", capture__openni2_open, capture__openni2_list},
+#else
+    {"openni2", "libopenni2-dev", NULL, NULL},
+#endif
+#ifdef BF_HAVE_V4L2
+    {"v4l2", "linux-libc-dev", capture__v4l2_open, capture__v4l2_list},
+#else
+    {"v4l2", "linux-libc-dev (V4L2 exists on Linux only)", NULL, NULL},
+#endif
+};
+#define CAPTURE_N_BACKENDS (sizeof capture_backends / sizeof capture_backends[0])
+
+const char *const *capture_backend_names(void)
+{
+    static const char *names[CAPTURE_N_BACKENDS + 1];
+    size_t n = 0;
+    for (size_t i = 0; i < CAPTURE_N_BACKENDS; i++)
+        if (capture_backends[i].open) names[n++] = capture_backends[i].scheme;
+    names[n] = NULL;
+    return names;
+}
+
+bf_status capture_open(const char *uri, rgbd_source **out)
+{
+    if (!uri || !out) return bf_fail(BF_INVALID_ARG, "capture_open: NULL argument");
+    const char *colon = strchr(uri, ':');
+    if (!colon || colon == uri)
+        return bf_fail(BF_INVALID_ARG, "%s: not a device URI (expected freenect:N, openni2:[URI|FILE.oni] or "
+                                       "v4l2:/dev/videoN)",
+                       uri);
+    size_t scheme_len = (size_t)(colon - uri);
+    for (size_t i = 0; i < CAPTURE_N_BACKENDS; i++) {
+        const capture_backend *b = &capture_backends[i];
+        if (strlen(b->scheme) != scheme_len || strncmp(uri, b->scheme, scheme_len)) continue;
+        if (!b->open)
+            return bf_fail(BF_UNSUPPORTED, "%s: this bitfuse was built without the %s backend; install %s and "
+                                           "rebuild (scripts/install-deps.sh)",
+                           uri, b->scheme, b->package);
+        char target[1024];
+        capture__uri_options opt;
+        bf_status s = capture__uri_split(uri, colon + 1, target, sizeof target, &opt);
+        if (s) return s;
+        rgbd_source *src = NULL;
+        if ((s = b->open(uri, target, &opt, &src))) return s;
+        capture__apply_options(&opt, &src->intrinsics);
+        *out = src;
+        return BF_OK;
+    }
+    return bf_fail(BF_INVALID_ARG, "%s: unknown capture scheme '%.*s' (known: freenect, openni2, v4l2)", uri,
+                   (int)scheme_len, uri);
+}
+
+uint32_t capture_list_devices(capture_device_info *out, uint32_t cap)
+{
+    uint32_t n = 0;
+    for (size_t i = 0; i < CAPTURE_N_BACKENDS; i++) {
+        if (!capture_backends[i].list) continue;
+        n += capture_backends[i].list(n < cap ? out + n : NULL, n < cap ? cap - n : 0);
+    }
+    return n;
+}
+
+/* ------------------------------------------------------------ URI options */
+
+static bf_status uri_option(const char *uri, const char *key, size_t key_len, const char *val, size_t val_len,
+                            capture__uri_options *opt)
+{
+    char v[128];
+    if (val_len >= sizeof v) return bf_fail(BF_INVALID_ARG, "%s: option value too long", uri);
+    memcpy(v, val, val_len);
+    v[val_len] = 0;
+    if (key_len == 6 && !strncmp(key, "camera", 6)) {
+        double k[4];
+        char *p = v;
+        for (int i = 0; i < 4; i++) {
+            char *end = NULL;
+            k[i] = strtod(p, &end);
+            if (end == p || !isfinite(k[i]) || (i < 3 ? *end != ',' : *end != 0))
+                return bf_fail(BF_INVALID_ARG, "%s: camera=%s: expected fx,fy,cx,cy in pixels", uri, v);
+            p = end + 1;
+        }
+        if (k[0] <= 0 || k[1] == 0)
+            return bf_fail(BF_INVALID_ARG, "%s: camera=%s: focal lengths must be non-zero (fx > 0)", uri, v);
+        opt->has_camera = true;
+        opt->fx_px = k[0], opt->fy_px = k[1], opt->cx_px = k[2], opt->cy_px = k[3];
+        return BF_OK;
+    }
+    if (key_len == 11 && !strncmp(key, "depth_scale", 11)) {
+        if (!bf_parse_double(v, &opt->depth_scale) || !(opt->depth_scale > 0))
+            return bf_fail(BF_INVALID_ARG, "%s: depth_scale=%s: expected raw units per metre > 0", uri, v);
+        opt->has_depth_scale = true;
+        return BF_OK;
+    }
+    if (key_len == 5 && !strncmp(key, "depth", 5)) {
+        if (strcmp(v, "registered") && strcmp(v, "disparity"))
+            return bf_fail(BF_INVALID_ARG, "%s: depth=%s: expected registered or disparity", uri, v);
+        strcpy(opt->depth_mode, v); /* one of the two names above */
+        return BF_OK;
+    }
+    return bf_fail(BF_INVALID_ARG, "%s: unknown option '%.*s' (known: camera, depth_scale, depth)", uri,
+                   (int)key_len, key);
+}
+
+bf_status capture__uri_split(const char *uri, const char *after_scheme, char *target, size_t cap,
+                             capture__uri_options *opt)
+{
+    memset(opt, 0, sizeof *opt);
+    const char *q = strchr(after_scheme, '?');
+    size_t len = q ? (size_t)(q - after_scheme) : strlen(after_scheme);
+    if (len >= cap) return bf_fail(BF_INVALID_ARG, "%s: device part too long", uri);
+    if (!q) {
+        memcpy(target, after_scheme, len);
+        target[len] = 0;
+        return BF_OK;
+    }
+    capture__uri_options o = {0};
+    for (const char *p = q + 1; *p;) {
+        const char *amp = strchr(p, '&');
+        size_t n = amp ? (size_t)(amp - p) : strlen(p);
+        const char *eq = memchr(p, '=', n);
+        if (!eq) return bf_fail(BF_INVALID_ARG, "%s: option '%.*s' has no '=value'", uri, (int)n, p);
+        bf_status s = uri_option(uri, p, (size_t)(eq - p), eq + 1, n - (size_t)(eq - p) - 1, &o);
+        if (s) return s;
+        p += n + (amp ? 1 : 0);
+    }
+    memcpy(target, after_scheme, len);
+    target[len] = 0;
+    *opt = o;
+    return BF_OK;
+}
+
+void capture__apply_options(const capture__uri_options *opt, bf_intrinsics *K)
+{
+    if (opt->has_camera) {
+        K->fx_px = opt->fx_px, K->fy_px = opt->fy_px;
+        K->cx_px = opt->cx_px, K->cy_px = opt->cy_px;
+    }
+    if (opt->has_depth_scale) K->depth_scale = opt->depth_scale;
+}
+
+/* ------------------------------------------------------------ Kinect v1 model */
+
+capture__kinect_params capture__kinect_default_params(void)
+{
+    return (capture__kinect_params){.dcmos_emitter_dist_cm = 7.5,
+                                    .reference_distance_mm = 120.0,
+                                    .reference_pixel_size_mm = 0.1042,
+                                    .const_shift = 200.0};
+}
+
+double capture__kinect_raw_to_mm(uint16_t raw, const capture__kinect_params *p)
+{
+    if (raw >= 2047) return NAN;
+    /* libfreenect registration.c: parameter_coefficient 4, shift_scale 10,
+     * S2D_CONST_OFFSET 0.375 (from the PrimeSense reference driver). The
+     * model mixes cm and mm; shift_scale 10 makes the result millimetres. */
+    double fixed_ref_x = (raw - 4.0 * p->const_shift) / 4.0 - 0.375;
+    double metric = fixed_ref_x * p->reference_pixel_size_mm;
+    double mm = 10.0 * (metric * p->reference_distance_mm / (p->dcmos_emitter_dist_cm - metric) +
+                        p->reference_distance_mm);
+    if (!(mm > 0.0 && mm <= 10000.0)) return NAN;
+    return mm;
+}
+
+double capture__kinect_ir_focal_px(const capture__kinect_params *p)
+{
+    /* The reference pixel size is for the 1280x1024 sensor; at 640x480 a
+     * pixel is twice as large. */
+    return p->reference_distance_mm / (2.0 * p->reference_pixel_size_mm);
+}
+
+double capture__focal_from_fov(uint32_t size_px, double fov_rad)
+{
+    if (!(fov_rad > 0.0 && fov_rad < M_PI)) return NAN;
+    return 0.5 * size_px / tan(0.5 * fov_rad);
+}
+
+/* ------------------------------------------------------------ pixel formats */
+
+static inline uint8_t clamp_u8(int v) { return (uint8_t)(v < 0 ? 0 : v > 255 ? 255 : v); }
+
+/* BT.601 limited range in 8.8 fixed point (coefficients 1.164, 1.596,
+ * 0.392, 0.813, 2.017 as in the V4L2 colour-space documentation). */
+static inline void yuv_to_rgb(int y, int u, int v, uint8_t *rgb)
+{
+    int c = 298 * (y - 16), d = u - 128, e = v - 128;
+    rgb[0] = clamp_u8((c + 409 * e + 128) >> 8);
+    rgb[1] = clamp_u8((c - 100 * d - 208 * e + 128) >> 8);
+    rgb[2] = clamp_u8((c + 516 * d + 128) >> 8);
+}
+
+void capture__yuyv_to_rgb(const uint8_t *src, size_t src_stride, uint32_t w, uint32_t h, uint8_t *rgb)
+{
+    for (uint32_t y = 0; y < h; y++) {
+        const uint8_t *s = src + y * src_stride;
+        uint8_t *d = rgb + (size_t)y * w * 3;
+        for (uint32_t x = 0; x + 1 < w; x += 2, s += 4, d += 6) {
+            yuv_to_rgb(s[0], s[1], s[3], d);
+            yuv_to_rgb(s[2], s[1], s[3], d + 3);
+        }
+    }
+}
+
+void capture__uyvy_to_rgb(const uint8_t *src, size_t src_stride, uint32_t w, uint32_t h, uint8_t *rgb)
+{
+    for (uint32_t y = 0; y < h; y++) {
+        const uint8_t *s = src + y * src_stride;
+        uint8_t *d = rgb + (size_t)y * w * 3;
+        for (uint32_t x = 0; x + 1 < w; x += 2, s += 4, d += 6) {
+            yuv_to_rgb(s[1], s[0], s[2], d);
+            yuv_to_rgb(s[3], s[0], s[2], d + 3);
+        }
+    }
+}
+
+void capture__bgr_to_rgb(const uint8_t *src, size_t src_stride, uint32_t w, uint32_t h, uint8_t *rgb)
+{
+    for (uint32_t y = 0; y < h; y++) {
+        const uint8_t *s = src + y * src_stride;
+        uint8_t *d = rgb + (size_t)y * w * 3;
+        for (uint32_t x = 0; x < w; x++, s += 3, d += 3) {
+            d[0] = s[2];
+            d[1] = s[1];
+            d[2] = s[0];
+        }
+    }
+}
+
+void capture__copy_rows(const uint8_t *src, size_t src_stride, size_t row_bytes, uint32_t h, uint8_t *dst)
+{
+    if (src_stride == row_bytes) {
+        memcpy(dst, src, row_bytes * h);
+        return;
+    }
+    for (uint32_t y = 0; y < h; y++) memcpy(dst + y * row_bytes, src + y * src_stride, row_bytes);
+}
+
+void capture__resize_rgb_nearest(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw,
+                                 uint32_t dh)
+{
+    for (uint32_t y = 0; y < dh; y++) {
+        uint32_t sy = (uint32_t)(((uint64_t)y * sh + sh / 2) / dh);
+        if (sy >= sh) sy = sh - 1;
+        for (uint32_t x = 0; x < dw; x++) {
+            uint32_t sx = (uint32_t)(((uint64_t)x * sw + sw / 2) / dw);
+            if (sx >= sw) sx = sw - 1;
+            memcpy(dst + ((size_t)y * dw + x) * 3, src + ((size_t)sy * sw + sx) * 3, 3);
+        }
+    }
+}
+
+uint64_t capture__unwrap32_push(capture__unwrap32 *u, uint32_t raw)
+{
+    if (u->has_last && raw < u->last && u->last - raw > 0x80000000u) u->high += 1ull << 32;
+    u->has_last = true;
+    u->last = raw;
+    return u->high + raw;
+}
