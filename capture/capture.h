@@ -116,40 +116,4 @@ typedef struct capture_device_info {
  * level. Files (.oni) are not listed. */
 uint32_t capture_list_devices(capture_device_info *out, uint32_t cap);
 
-/* ------------------------------------------------------------ live capture
- * (capture/open.c; backends capture/freenect.c, openni2.c, v4l2.c) */
-
-/* Opens a live source by URI (docs/devices.md):
- *   freenect:INDEX[?depth=registered|disparity]   Kinect v1, libfreenect
- *   openni2:  openni2:URI  openni2:FILE.oni       OpenNI2 (PrimeSense, Orbbec,
- *                                                 Xtion; .oni recordings)
- *   v4l2:/dev/videoN[,/dev/videoM]                UVC depth node (Z16) and an
- *                                                 optional colour node
- * Any URI may end in "?camera=fx,fy,cx,cy" (pixels) and "&depth_scale=S"
- * to override what the backend reports. Frames carry the device's
- * timestamps in seconds where it has them (see each backend), else the
- * monotonic clock. On success *out owns the source (rgbd_source_close());
- * n_frames is 0 for live devices. Failures: an unknown scheme is
- * BF_INVALID_ARG; a backend left out of this build is BF_UNSUPPORTED naming
- * the Debian package to install; an absent or unreachable device is
- * BF_NO_DEVICE with the URI in the message. Never crashes on a missing
- * device. */
-bf_status capture_open(const char *uri, rgbd_source **out);
-
-/* NULL-terminated names of the backends compiled into this build, in the
- * order capture_open tries them ("freenect", "openni2", "v4l2"). */
-const char *const *capture_backend_names(void);
-
-/* One device a backend can see now. */
-typedef struct capture_device_info {
-    char uri[256];  /* what capture_open takes, "freenect:0" */
-    char name[256]; /* human-readable, "Kinect v1 (serial A00366...)" */
-} capture_device_info;
-
-/* Fills up to cap entries with the devices the compiled backends find and
- * returns how many were found (may exceed cap). Never fails: a backend that
- * cannot look (no USB access) contributes nothing and logs why at debug
- * level. Files (.oni) are not listed. */
-uint32_t capture_list_devices(capture_device_info *out, uint32_t cap);
-
 #endif
