@@ -28,7 +28,7 @@ typedef struct track_tracker track_tracker; /* opaque */
 typedef struct track_config {
     uint32_t levels;                       /* pyramid levels, 1..3, default 3 */
     uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 10, 5, 4 */
-    float dist_m;                          /* association distance gate, default 0.1 */
+    float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 20 */
     float max_depth_m;                     /* samples beyond are ignored, default 4.5 */
     /* Failure and degeneracy (checked at the end of the finest level). */
@@ -40,6 +40,11 @@ typedef struct track_config {
     /* ROF smoothing of the reference (0 iterations: off). */
     uint32_t rof_iterations;
     float rof_lambda0;       /* data weight at 1 m; lambda(z) per the dissertation */
+    /* Added with the implementation (docs/tracking.md has the reasons). */
+    float min_valid_frac;    /* valid depth pixels / all below this: TRACK_NO_DEPTH (frame) or
+                                TRACK_NO_REFERENCE (reference); default 0.01 */
+    float converged_m;       /* a level stops iterating when the update moves less than this */
+    float converged_deg;     /* and turns less than this; 0 and 0: always run all iterations */
 } track_config;
 
 track_config track_config_default(void);

@@ -1,0 +1,159 @@
+/* Camera tracking, as both C and GLSL see it (DESIGN.md section 6;
+ * Newcombe et al. 2011 KinectFusion for the pyramids and projective
+ * point-to-plane ICP, Low 2004 for the linearisation, Chambolle 2004 and
+ * Reichl's dissertation ch. 8 for the depth-adapted ROF filter).
+ *
+ * Images are row-major float depth in metres (0 = none). A pyramid buffer
+ * holds its TRACK_MAX_LEVELS levels one after the other; level l is
+ * (width >> l) x (height >> l) pixels and starts at the pixel offset given
+ * in the push constants. Vertex and normal maps are vec4 per pixel (16
+ * bytes, std430 arrays of vec4 match float[4] in C): vertex (x, y, z, 1)
+ * in the camera frame or all zero, normal (x, y, z, 0) facing the camera or
+ * all zero. The ROF dual field is vec2 per pixel.
+ *
+ * Buffers of the image kernels (track_depth, track_pyrdown, track_smooth,
+ * track_vn, track_rof, track_rof_primal), one binding layout for all:
+ *   0 raw      input: u16 depth two per word (low half first), or float bits
+ *   1 depth    depth pyramid (float)
+ *   2 vertex   vertex pyramid (vec4)
+ *   3 normal   normal pyramid (vec4)
+ *   4 counters TRACK_CNT_* (uint)
+ *   5 p_in     ROF dual field read (vec2); after the ROF: smoothing scratch (float)
+ *   6 p_out    ROF dual field written (vec2); after the ROF: the depth pyramid
+ *              that normals are computed from (float, track_smooth.comp)
+ * The ICP kernel: 0 frame vertex, 1 frame normal, 2 reference vertex,
+ * 3 reference normal (pyramids), 4 partial sums (TRACK_PARTIAL_WORDS floats
+ * per workgroup).
+ */
+#ifndef BF_TRACK_GLSL_H
+#define BF_TRACK_GLSL_H
+
+#include "bf_common.glsl.h"
+
+#define TRACK_LEVELS 3u
+#define TRACK_IMAGE_BUFFERS 7u
+#define TRACK_ICP_BUFFERS 5u
+
+/* Counters (uint words of the counters buffer). */
+#define TRACK_CNT_FRAME_VALID 0u /* valid depth pixels of the frame, finest level */
+#define TRACK_CNT_REF_VALID 1u   /* valid depth pixels of the reference, finest level */
+#define TRACK_CNT_WORDS 4u
+
+/* Raw input modes of track_depth. */
+#define TRACK_RAW_U16 0u
+#define TRACK_RAW_F32 1u
+
+/* ------------------------------------------------------------ ICP sums
+ * One workgroup's partial sums of the point-to-plane system (Low 2004):
+ * per inlier the row a = (n, p x n) and residual r = n . (p - q), with p
+ * the frame's point moved into the reference camera, q, n the reference's
+ * vertex and normal. The CPU adds the partials in double. */
+#define TRACK_SUM_ATA 0u       /* 21 words: upper triangle of sum a a^T, row by row */
+#define TRACK_SUM_ATR 21u      /* 6 words: sum a r */
+#define TRACK_SUM_RR 27u       /* sum r^2 */
+#define TRACK_SUM_INLIERS 28u  /* inliers (a count, exact in float below 2^24 per group) */
+#define TRACK_SUM_VALID 29u    /* frame samples with vertex and normal */
+#define TRACK_SUM_Z 30u        /* sum of the inliers' depth in the reference camera */
+#define TRACK_SUMS 31u         /* words summed */
+#define TRACK_PARTIAL_WORDS 32u
+#define TRACK_ICP_LOCAL_MAX 64u /* invocations per workgroup at most (shared arrays) */
+
+/* Push constants of the image kernels. */
+struct track_image_push {
+    bf_u32 width, height;   /* of the level written */
+    bf_u32 src_off;         /* pixel offset of the level read (pyrdown) */
+    bf_u32 dst_off;         /* pixel offset of the level written / read (vn, rof) */
+    bf_u32 mode;            /* TRACK_RAW_* (depth) */
+    bf_u32 counter;         /* TRACK_CNT_* (depth) */
+    bf_f32 unit_m;          /* metres per raw unit (depth, u16 mode) */
+    bf_f32 max_depth_m;     /* beyond: invalid (depth) */
+    bf_f32 fx, fy, cx, cy;  /* of the level (vn) */
+    bf_f32 lambda0;         /* ROF data weight at 1 m */
+    bf_f32 tau;             /* ROF step (Chambolle 2004: 1/4) */
+    bf_u32 src_width;       /* of the level read (pyrdown) */
+    bf_u32 pad;
+};
+#ifndef BF_GLSL
+typedef struct track_image_push track_image_push;
+_Static_assert(sizeof(track_image_push) == 64, "track_image_push must match std430");
+#endif
+
+/* Push constants of the ICP kernel: the frame's pose relative to the
+ * reference camera, T_rc (the CPU composes world poses in double and hands
+ * over only this, so tracking far from the world origin loses nothing). */
+struct track_icp_push {
+    bf_f32 R[9];            /* row-major, frame camera -> reference camera */
+    bf_f32 t[3];
+    bf_f32 fx, fy, cx, cy;  /* of the level */
+    bf_u32 width, height;   /* of the level */
+    bf_u32 off;             /* pixel offset of the level in the pyramids */
+    bf_u32 n_threads;       /* workgroups * local size: the pixel loop's stride */
+    bf_f32 dist_m;          /* association gates */
+    bf_f32 cos_angle;
+    bf_u32 pad[2];
+};
+#ifndef BF_GLSL
+typedef struct track_icp_push track_icp_push;
+_Static_assert(sizeof(track_icp_push) == 96, "track_icp_push must match std430");
+#endif
+
+/* ------------------------------------------------------------ shared math */
+
+/* Kinect v1 axial noise (Nguyen, Izadi, Lovell 2012), metres. */
+BF_FN bf_f32 track_sigma_z(bf_f32 z)
+{
+    BF_PRECISE bf_f32 d = z - 0.4f;
+    BF_PRECISE bf_f32 s = 0.0012f + 0.0019f * d * d;
+    return s;
+}
+
+/* Pyramid: depths of a 2x2 block within this of the block's nearest depth
+ * are averaged (KinectFusion averages within 3 sigma of the centre; a 2x2
+ * block has no centre, the nearest sample stands in so that a background
+ * sample never drags a foreground edge back). */
+BF_FN bf_f32 track_block_thresh(bf_f32 z) { return 3.0f * track_sigma_z(z); }
+
+/* Bilateral smoothing of the depth that normals are computed from
+ * (track_smooth.comp): radius in pixels, spatial weight exp(-k^2 W) with
+ * W = 1 / (2 sigma_s^2), sigma_s = 2 px, and the range sigma 4 sigma_z(z):
+ * wide enough to pass a disparity quantisation step (Kinect v1 at 640x480:
+ * 0.0032 z^2, e.g. 2.9 cm at 3 m against 5.6 cm), narrow enough to stop at
+ * a real edge of 10 cm or more up to 3 m. */
+#define TRACK_SMOOTH_RADIUS 3u
+#define TRACK_SMOOTH_SPACE_W 0.125f
+BF_FN bf_f32 track_smooth_range(bf_f32 z) { return 4.0f * track_sigma_z(z); }
+
+/* Normals: a neighbour farther than this in depth (per pixel of distance)
+ * is across a discontinuity and the normal is invalid: 5% of z allows
+ * surfaces up to about 87 degrees from the view direction at 525 px focal
+ * length (slope z / f per pixel times tan(theta)) while cutting silhouettes. */
+#define TRACK_NORMAL_JUMP_REL 0.05f
+/* Half the baseline of the normals' central differences, pixels. */
+#define TRACK_NORMAL_STEP 1u
+
+/* ROF data weight lambda(z) = lambda0 z^2 (z in metres, lambda0 at 1 m;
+ * docs/tracking.md derives it). The ROF energy is
+ *   E(u) = sum |grad u| + sum lambda(f)/2 (u - f)^2
+ * on the mask f > 0. A structure of r pixels and depth contrast h is
+ * flattened when h < 2 / (lambda r); a surface detail of metric size rho at
+ * depth z spans r = rho f / z pixels, so it is flattened below
+ * h* = 2 z / (lambda rho f) = 2 / (lambda0 rho f z) with this lambda: near
+ * surfaces (many pixels, where the map's ray-cast shows voxel staircases)
+ * are smoothed more, far ones (few pixels per structure) keep their shape,
+ * as Reichl asks. The weight grows with z^2 like the sensor's noise. */
+BF_FN bf_f32 track_rof_lambda(bf_f32 z, bf_f32 lambda0)
+{
+    BF_PRECISE bf_f32 l = lambda0 * z * z;
+    return l;
+}
+
+/* Chambolle's semi-implicit dual step (2004, eq. 9) on one pixel:
+ * p <- (p + s g) / (1 + s |g|), for one component c of p. */
+BF_FN bf_f32 track_rof_step(bf_f32 p, bf_f32 g, bf_f32 s, bf_f32 gnorm)
+{
+    BF_PRECISE bf_f32 num = p + s * g;
+    BF_PRECISE bf_f32 den = 1.0f + s * gnorm;
+    return num / den;
+}
+
+#endif

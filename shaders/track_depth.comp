@@ -1,0 +1,41 @@
+#version 450
+/* Raw depth -> metres, finest level of a depth pyramid (DESIGN.md section
+ * 1, preprocess): u16 sensor units times unit_m, or float metres (a
+ * ray-cast reference). 0, NaN, infinite, negative or beyond max_depth_m
+ * become 0 (no depth). Counts the valid pixels into counters[pc.counter]:
+ * one atomic per workgroup. */
+#extension GL_GOOGLE_include_directive : require
+#include "track.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) readonly buffer Raw { uint w[]; } raw;
+layout(std430, binding = 1) buffer Depth { float d[]; } depth;
+layout(std430, binding = 4) buffer Counters { uint c[]; } counters;
+
+layout(push_constant) uniform Push { track_image_push pc; };
+
+shared uint s_valid;
+
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (gl_LocalInvocationIndex == 0u) s_valid = 0u;
+    barrier();
+    if (i < pc.width * pc.height) {
+        float z;
+        if (pc.mode == TRACK_RAW_U16) {
+            uint v = (raw.w[i >> 1] >> ((i & 1u) * 16u)) & 0xFFFFu;
+            z = float(v) * pc.unit_m;
+        } else {
+            z = uintBitsToFloat(raw.w[i]);
+        }
+        /* The comparison is false for NaN; isinf / isnan guard drivers that
+         * assume finite math. */
+        bool ok = z > 0.0 && z <= pc.max_depth_m && !isnan(z) && !isinf(z);
+        depth.d[pc.dst_off + i] = ok ? z : 0.0;
+        if (ok) atomicAdd(s_valid, 1u);
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && s_valid != 0u) atomicAdd(counters.c[pc.counter], s_valid);
+}

@@ -1,0 +1,243 @@
+/* Point-to-plane ICP, coarse to fine (KinectFusion, Newcombe et al. 2011,
+ * sec. 3.5; linearisation of Low 2004): host side of shaders/track_icp.comp
+ * and track_icp_sg.comp. Each iteration is one dispatch (association,
+ * residuals and workgroup sums fused) and one submission; the CPU adds the
+ * partial sums in double, solves the 6x6 system in double and composes the
+ * relative pose in double. Failure and degeneracy checks are at the end. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bf_shaders_spv.h"
+#include "tracking_int.h"
+
+static uint32_t env_u32(const char *name, uint32_t def)
+{
+    const char *s = getenv(name);
+    uint32_t v;
+    return s && bf_parse_u32(s, &v) && v > 0 ? v : def;
+}
+
+bf_status track__icp_create(track_tracker *t)
+{
+    const gpu_limits *lim = gpu_device_limits(t->ctx);
+    /* 64 invocations, each walking 16 pixels of the finest level
+     * (bench/bench_tracking.c measured the choices on lavapipe:
+     * docs/tracking.md). BITFUSE_TRACK_ICP_LOCAL (a power of two up to 64)
+     * and BITFUSE_TRACK_ICP_PPT override them for benchmarks. */
+    uint32_t local = env_u32("BITFUSE_TRACK_ICP_LOCAL", 64);
+    if (local > TRACK_ICP_LOCAL_MAX || (local & (local - 1))) local = 64;
+    while (local > lim->max_compute_workgroup_invocations || local > lim->max_compute_workgroup_size[0]) local /= 2;
+    t->icp_local = local;
+    t->icp_px_per_thread = env_u32("BITFUSE_TRACK_ICP_PPT", 16);
+    uint64_t n0 = (uint64_t)t->geom.w[0] * t->geom.h[0];
+    t->icp_groups_max = (uint32_t)((n0 + (uint64_t)local * t->icp_px_per_thread - 1) / ((uint64_t)local * t->icp_px_per_thread));
+    if (t->icp_groups_max > lim->max_compute_workgroup_count[0]) {
+        t->icp_groups_max = lim->max_compute_workgroup_count[0];
+    }
+    /* Subgroup additions where the device has them; the shared-memory
+     * kernel otherwise (and with BITFUSE_TRACK_ICP_SUBGROUP=0, so tests
+     * exercise both). */
+    uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
+    const char *env = getenv("BITFUSE_TRACK_ICP_SUBGROUP");
+    t->icp_subgroup = (lim->subgroup_ops & need) == need && !(env && !strcmp(env, "0"));
+    gpu_pipeline_desc d = {
+        .name = t->icp_subgroup ? "track.icp_sg" : "track.icp",
+        .spirv = t->icp_subgroup ? bf_spv_track_icp_sg : bf_spv_track_icp,
+        .spirv_bytes = t->icp_subgroup ? bf_spv_track_icp_sg_size : bf_spv_track_icp_size,
+        .n_buffers = TRACK_ICP_BUFFERS,
+        .push_bytes = sizeof(track_icp_push),
+        .local_size = {local, 1, 1},
+    };
+    bf_status s = gpu_pipeline_create(t->ctx, &d, &t->p_icp);
+    if (s != BF_OK) return s;
+    uint64_t bytes = (uint64_t)t->icp_groups_max * TRACK_PARTIAL_WORDS * 4;
+    gpu_buffer_desc bd = {.name = "track.partials", .size_bytes = bytes, .memory = GPU_MEMORY_READBACK};
+    if ((s = gpu_buffer_create(t->ctx, &bd, &t->partials)) != BF_OK) return s;
+    if ((s = gpu_buffer_zero(t->partials)) != BF_OK) return s;
+    t->partial_host = malloc(bytes);
+    if (!t->partial_host) return bf_fail(BF_NO_MEMORY, "tracking: partial sums");
+    if ((s = gpu_bindings_create(t->ctx, TRACK_ICP_BUFFERS, "track.icp", &t->b_icp)) != BF_OK) return s;
+    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->frame_vertex, t->frame_normal, t->ref_vertex, t->ref_normal, t->partials};
+    for (uint32_t i = 0; i < TRACK_ICP_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(t->b_icp, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    if (s != BF_OK) return s;
+    /* Zero push constants: an empty level, the workgroup writes zeros. */
+    return gpu_pipeline_warm_up(t->ctx, &t->p_icp, 1);
+}
+
+void track__icp_destroy(track_tracker *t)
+{
+    gpu_bindings_destroy(t->b_icp);
+    gpu_buffer_destroy(t->partials);
+    gpu_pipeline_destroy(t->p_icp);
+    free(t->partial_host);
+    t->b_icp = NULL;
+    t->partials = NULL;
+    t->p_icp = NULL;
+    t->partial_host = NULL;
+}
+
+/* One iteration's system, summed in double. */
+typedef struct icp_sums {
+    double s[TRACK_SUMS];
+} icp_sums;
+
+static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, icp_sums *out, double *ms)
+{
+    uint32_t n = t->geom.w[l] * t->geom.h[l];
+    uint32_t per_group = t->icp_local * t->icp_px_per_thread;
+    uint32_t g = (n + per_group - 1) / per_group;
+    if (g > t->icp_groups_max) g = t->icp_groups_max;
+    if (g < 1) g = 1;
+    track_icp_push pc = {
+        .width = t->geom.w[l],
+        .height = t->geom.h[l],
+        .off = t->geom.off[l],
+        .n_threads = g * t->icp_local,
+        /* The distance gate widens with the level (dist_m at the finest,
+         * 4 dist_m at level 2): coarse levels are there to catch the larger
+         * part of the motion, and their pixels are 2^l times wider. Whatever
+         * ICP then finds beyond max_motion is reported as a failure. */
+        .dist_m = t->cfg.dist_m * (float)(1u << l),
+        .cos_angle = (float)cos(t->cfg.angle_deg * M_PI / 180.0),
+    };
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) pc.R[3 * i + j] = (float)T_rc->R[i][j];
+    }
+    pc.t[0] = (float)T_rc->t.x, pc.t[1] = (float)T_rc->t.y, pc.t[2] = (float)T_rc->t.z;
+    track__level_intrinsics(&t->K, l, &pc.fx, &pc.fy, &pc.cx, &pc.cy);
+    bf_status s = gpu_begin(t->ctx);
+    if (s != BF_OK) return s;
+    gpu_cmd_stage_begin(t->ctx, "track.icp");
+    gpu_cmd_dispatch(t->ctx, t->p_icp, t->b_icp, &pc, g, 1, 1);
+    /* The partial sums -> the host's read after the fence. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_HOST);
+    gpu_cmd_stage_end(t->ctx);
+    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    const gpu_stage_time *st;
+    uint32_t n_st = gpu_stage_times(t->ctx, &st);
+    for (uint32_t i = 0; i < n_st; i++) *ms += st[i].ms;
+    if ((s = gpu_buffer_download(t->partials, 0, t->partial_host, (uint64_t)g * TRACK_PARTIAL_WORDS * 4)) != BF_OK)
+        return s;
+    memset(out, 0, sizeof *out);
+    for (uint32_t k = 0; k < g; k++) {
+        const float *p = t->partial_host + (size_t)k * TRACK_PARTIAL_WORDS;
+        for (uint32_t i = 0; i < TRACK_SUMS; i++) out->s[i] += p[i];
+    }
+    return BF_OK;
+}
+
+/* The solve of one system: the update and the spectrum. */
+typedef struct icp_step {
+    double xi[6];        /* translation, then rotation vector (reference camera) */
+    double eig_min, eig_max;
+    bool degenerate;
+    bool ok;             /* finite and solvable */
+} icp_step;
+
+/* Solves H xi = -g in double. Rotation columns are scaled by the mean
+ * depth of the inliers (a rotation of w radians moves a point at depth z by
+ * about w z metres), so the eigenvalues compare metres with metres. The
+ * update keeps only the eigen-directions with eigenvalue >= ratio times the
+ * largest: a single plane constrains 3 of 6, and the other 3 keep the guess
+ * instead of following noise. */
+static icp_step solve(const icp_sums *s, double ratio)
+{
+    icp_step st = {.ok = false};
+    double n_in = s->s[TRACK_SUM_INLIERS];
+    for (uint32_t i = 0; i < TRACK_SUMS; i++)
+        if (!isfinite(s->s[i])) return st;
+    if (n_in < 6) return st;
+    double zbar = s->s[TRACK_SUM_Z] / n_in;
+    if (!(zbar > 0)) return st;
+    double scale[6] = {1, 1, 1, zbar, zbar, zbar};
+    /* With x = (t, w zbar) the system's columns for w are divided by zbar:
+     * H'_ij = H_ij / (scale_i scale_j), g'_i = g_i / scale_i. */
+    double H[36], g[6];
+    uint32_t e = TRACK_SUM_ATA;
+    for (int i = 0; i < 6; i++)
+        for (int j = i; j < 6; j++) {
+            double v = s->s[e++] / (scale[i] * scale[j]);
+            H[6 * i + j] = H[6 * j + i] = v;
+        }
+    for (int i = 0; i < 6; i++) g[i] = s->s[TRACK_SUM_ATR + i] / scale[i];
+    double w[6], V[36];
+    bf_sym_eigen(6, H, w, V);
+    st.eig_min = w[0];
+    st.eig_max = w[5];
+    if (!(w[5] > 0) || !isfinite(w[0])) return st;
+    st.degenerate = w[0] < ratio * w[5];
+    double x[6] = {0};
+    for (int k = 0; k < 6; k++) {
+        if (w[k] < ratio * w[5] || !(w[k] > 0)) continue;
+        double c = 0;
+        for (int i = 0; i < 6; i++) c += V[6 * i + k] * g[i];
+        c /= w[k];
+        for (int i = 0; i < 6; i++) x[i] -= c * V[6 * i + k];
+    }
+    for (int i = 0; i < 6; i++) {
+        st.xi[i] = x[i] / scale[i];
+        if (!isfinite(st.xi[i])) return st;
+    }
+    st.ok = true;
+    return st;
+}
+
+/* T_rc <- (R(w), t) T_rc: the linearised motion p + w x p + t of Low 2004
+ * applied as a rotation about the reference camera's origin plus a shift,
+ * so a step in the translation alone never turns the camera. */
+static void apply(bf_se3 *T_rc, const double xi[6])
+{
+    double rot[6] = {0, 0, 0, xi[3], xi[4], xi[5]};
+    bf_se3 inc = bf_se3_exp(rot);
+    inc.t = bf_v3(xi[0], xi[1], xi[2]);
+    *T_rc = bf_se3_mul(&inc, T_rc);
+}
+
+bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, track_result *res)
+{
+    const track_config *c = &t->cfg;
+    bf_se3 guess_rc = *T_rc;
+    icp_sums sums = {0};
+    icp_step step = {.ok = false};
+    bool have_finest = false;
+    for (int l = (int)c->levels - 1; l >= 0; l--) {
+        for (uint32_t it = 0; it < c->iterations[l]; it++) {
+            bf_status s = run_iteration(t, (uint32_t)l, T_rc, &sums, &res->ms_gpu);
+            if (s != BF_OK) return s;
+            res->iterations++;
+            step = solve(&sums, c->degenerate_ratio);
+            if (l == 0) have_finest = true;
+            bf_debug("tracking: level %d iteration %u: %.0f/%.0f inliers, rms %.2f mm, eig %.3g/%.3g%s", l, it,
+                     sums.s[TRACK_SUM_INLIERS], sums.s[TRACK_SUM_VALID],
+                     1e3 * sqrt(sums.s[TRACK_SUM_RR] / fmax(sums.s[TRACK_SUM_INLIERS], 1)), step.eig_min, step.eig_max,
+                     step.degenerate ? " degenerate" : "");
+            if (!step.ok) break; /* nothing to solve at this level: go finer */
+            apply(T_rc, step.xi);
+            double dt = sqrt(step.xi[0] * step.xi[0] + step.xi[1] * step.xi[1] + step.xi[2] * step.xi[2]);
+            double dw = sqrt(step.xi[3] * step.xi[3] + step.xi[4] * step.xi[4] + step.xi[5] * step.xi[5]);
+            if (dt < c->converged_m && dw * 180.0 / M_PI < c->converged_deg) break;
+        }
+    }
+    /* The checks use the last system of the finest level (DESIGN.md
+     * section 6): the pose before its (tiny, once converged) update. */
+    double n_valid = sums.s[TRACK_SUM_VALID], n_in = sums.s[TRACK_SUM_INLIERS];
+    res->n_valid = (uint32_t)n_valid;
+    res->n_inliers = (uint32_t)n_in;
+    res->inlier_frac = n_valid > 0 ? n_in / n_valid : 0;
+    res->residual_m = n_in > 0 ? sqrt(sums.s[TRACK_SUM_RR] / n_in) : 0;
+    res->eig_min = step.eig_min;
+    res->eig_max = step.eig_max;
+    res->degenerate = step.ok && step.degenerate;
+    bf_se3 motion_inv = bf_se3_inverse(&guess_rc);
+    bf_se3 motion = bf_se3_mul(&motion_inv, T_rc);
+    if (!have_finest || n_valid < 1) res->outcome = TRACK_NO_DEPTH;
+    else if (!bf_se3_is_finite(T_rc)) res->outcome = TRACK_NUMERIC;
+    else if (res->inlier_frac < c->min_inlier_frac) res->outcome = TRACK_FEW_INLIERS;
+    else if (!step.ok) res->outcome = TRACK_NUMERIC;
+    else if (res->residual_m > c->max_residual_m) res->outcome = TRACK_HIGH_RESIDUAL;
+    else if (bf_v3_norm(motion.t) > c->max_motion_m || bf_se3_angle(&motion) * 180.0 / M_PI > c->max_motion_deg)
+        res->outcome = TRACK_LARGE_MOTION;
+    else res->outcome = TRACK_OK;
+    return BF_OK;
+}

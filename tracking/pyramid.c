@@ -1,0 +1,193 @@
+/* Depth conversion, pyramids, vertex and normal maps, and the ROF
+ * smoothing of the reference: host side of shaders/track_depth.comp,
+ * track_pyrdown.comp, track_vn.comp, track_rof.comp and
+ * track_rof_primal.comp (one binding layout, shaders/track.glsl.h). */
+#include <math.h>
+#include <string.h>
+
+#include "bf_shaders_spv.h"
+#include "tracking_int.h"
+
+static bf_status image_pipeline(track_tracker *t, const char *name, const uint32_t *spirv, size_t bytes,
+                                gpu_pipeline **out)
+{
+    gpu_pipeline_desc d = {
+        .name = name,
+        .spirv = spirv,
+        .spirv_bytes = bytes,
+        .n_buffers = TRACK_IMAGE_BUFFERS,
+        .push_bytes = sizeof(track_image_push),
+        .local_size = {TRACK_IMAGE_LOCAL, 1, 1},
+    };
+    return gpu_pipeline_create(t->ctx, &d, out);
+}
+
+static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *raw, bool is_ref, uint32_t p_in,
+                                gpu_bindings **out)
+{
+    bf_status s = gpu_bindings_create(t->ctx, TRACK_IMAGE_BUFFERS, name, out);
+    gpu_buffer *bufs[TRACK_IMAGE_BUFFERS] = {
+        raw,
+        is_ref ? t->ref_depth : t->frame_depth,
+        is_ref ? t->ref_vertex : t->frame_vertex,
+        is_ref ? t->ref_normal : t->frame_normal,
+        t->counters,
+        t->rof_p[p_in],
+        t->rof_p[1 - p_in],
+    };
+    for (uint32_t i = 0; i < TRACK_IMAGE_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(*out, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    return s;
+}
+
+bf_status track__pyramid_create(track_tracker *t)
+{
+    bf_status s;
+    if ((s = image_pipeline(t, "track.depth", bf_spv_track_depth, bf_spv_track_depth_size, &t->p_depth)) != BF_OK)
+        return s;
+    if ((s = image_pipeline(t, "track.pyrdown", bf_spv_track_pyrdown, bf_spv_track_pyrdown_size, &t->p_pyrdown)) !=
+        BF_OK)
+        return s;
+    if ((s = image_pipeline(t, "track.smooth", bf_spv_track_smooth, bf_spv_track_smooth_size, &t->p_smooth)) != BF_OK)
+        return s;
+    if ((s = image_pipeline(t, "track.vn", bf_spv_track_vn, bf_spv_track_vn_size, &t->p_vn)) != BF_OK) return s;
+    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof, bf_spv_track_rof_size, &t->p_rof)) != BF_OK) return s;
+    if ((s = image_pipeline(t, "track.rof_primal", bf_spv_track_rof_primal, bf_spv_track_rof_primal_size,
+                            &t->p_primal)) != BF_OK)
+        return s;
+    if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
+    for (uint32_t k = 0; k < 2; k++) {
+        if ((s = image_bindings(t, k ? "track.ref_up[1]" : "track.ref_up[0]", t->upload, true, k, &t->b_ref_up[k])) !=
+            BF_OK)
+            return s;
+        if ((s = image_bindings(t, k ? "track.ref_gpu[1]" : "track.ref_gpu[0]", t->ref_in, true, k,
+                                &t->b_ref_gpu[k])) != BF_OK)
+            return s;
+    }
+    /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
+    return gpu_pipeline_warm_up(t->ctx, (gpu_pipeline *[]){t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal},
+                                6);
+}
+
+void track__pyramid_destroy(track_tracker *t)
+{
+    for (int k = 1; k >= 0; k--) {
+        gpu_bindings_destroy(t->b_ref_gpu[k]);
+        gpu_bindings_destroy(t->b_ref_up[k]);
+        t->b_ref_gpu[k] = t->b_ref_up[k] = NULL;
+    }
+    gpu_bindings_destroy(t->b_frame);
+    gpu_pipeline_destroy(t->p_primal);
+    gpu_pipeline_destroy(t->p_rof);
+    gpu_pipeline_destroy(t->p_vn);
+    gpu_pipeline_destroy(t->p_smooth);
+    gpu_pipeline_destroy(t->p_pyrdown);
+    gpu_pipeline_destroy(t->p_depth);
+    t->b_frame = NULL;
+    t->p_primal = t->p_rof = t->p_vn = t->p_smooth = t->p_pyrdown = t->p_depth = NULL;
+}
+
+bf_status track__upload_depth(track_tracker *t, const uint16_t *depth)
+{
+    uint8_t *up = gpu_buffer_map(t->upload);
+    if (!up) return bf_fail(BF_VULKAN, "tracking: upload buffer is not mapped");
+    size_t n = (size_t)t->K.width * t->K.height;
+    memcpy(up, depth, n * 2);
+    return gpu_buffer_flush(t->upload);
+}
+
+static track_image_push base_push(const track_tracker *t, uint32_t l)
+{
+    track_image_push pc = {
+        .width = t->geom.w[l],
+        .height = t->geom.h[l],
+        .dst_off = t->geom.off[l],
+        .unit_m = (float)(1.0 / t->K.depth_scale),
+        .max_depth_m = t->cfg.max_depth_m,
+        .lambda0 = t->cfg.rof_lambda0,
+        .tau = 0.25f, /* Chambolle 2004: converges in practice up to 1/4 */
+    };
+    track__level_intrinsics(&t->K, l, &pc.fx, &pc.fy, &pc.cx, &pc.cy);
+    return pc;
+}
+
+static uint32_t groups(const track_image_push *pc) { return gpu_groups(pc->width * pc->height, TRACK_IMAGE_LOCAL); }
+
+/* Depth of level 0 from the raw input, levels above, then vertex and
+ * normal maps of every level, through binding set b. */
+static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t mode, uint32_t counter)
+{
+    track_image_push pc = base_push(t, 0);
+    pc.mode = mode;
+    pc.counter = counter;
+    gpu_cmd_dispatch(t->ctx, t->p_depth, b, &pc, groups(&pc), 1, 1);
+}
+
+static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
+{
+    for (uint32_t l = 1; l < TRACK_LEVELS; l++) {
+        /* Level l - 1's depth writes -> level l's block reads. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        track_image_push pc = base_push(t, l);
+        pc.src_off = t->geom.off[l - 1];
+        pc.src_width = t->geom.w[l - 1];
+        gpu_cmd_dispatch(t->ctx, t->p_pyrdown, b, &pc, groups(&pc), 1, 1);
+    }
+    for (uint32_t pass = 0; pass < 2; pass++) {
+        /* The depth pyramid's (pass 0) or the horizontal pass's (pass 1)
+         * writes -> this pass's reads. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
+            track_image_push pc = base_push(t, l);
+            pc.mode = pass;
+            gpu_cmd_dispatch(t->ctx, t->p_smooth, b, &pc, groups(&pc), 1, 1);
+        }
+    }
+    /* The smoothed depth's writes -> the vertex and normal maps' reads. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+    for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
+        track_image_push pc = base_push(t, l);
+        gpu_cmd_dispatch(t->ctx, t->p_vn, b, &pc, groups(&pc), 1, 1);
+    }
+    /* Vertex and normal writes -> ICP's reads (and the host's downloads). */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+}
+
+void track__cmd_frame_pyramid(track_tracker *t)
+{
+    gpu_cmd_stage_begin(t->ctx, "track.frame");
+    cmd_depth(t, t->b_frame, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID);
+    cmd_pyramid(t, t->b_frame);
+    gpu_cmd_stage_end(t->ctx);
+}
+
+void track__cmd_reference(track_tracker *t, bool from_gpu)
+{
+    gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
+    uint32_t n_it = t->cfg.rof_iterations;
+    gpu_cmd_stage_begin(t->ctx, "track.ref");
+    gpu_cmd_fill(t->ctx, t->rof_p[0], 0, GPU_WHOLE_SIZE, 0);
+    /* The zero dual field -> the first ROF iteration's reads. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    cmd_depth(t, b[0], from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
+    gpu_cmd_stage_end(t->ctx);
+
+    gpu_cmd_stage_begin(t->ctx, "track.rof");
+    track_image_push pc = base_push(t, 0);
+    uint32_t g = groups(&pc);
+    for (uint32_t it = 0; it < n_it; it++) {
+        /* The depth (first) or the previous iteration's dual writes -> this
+         * iteration's reads. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        gpu_cmd_dispatch(t->ctx, t->p_rof, b[it & 1u], &pc, g, 1, 1);
+    }
+    if (n_it > 0) {
+        /* The last dual field -> the primal solution reading it. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        gpu_cmd_dispatch(t->ctx, t->p_primal, b[n_it & 1u], &pc, g, 1, 1);
+    }
+    gpu_cmd_stage_end(t->ctx);
+
+    gpu_cmd_stage_begin(t->ctx, "track.ref");
+    cmd_pyramid(t, b[0]);
+    gpu_cmd_stage_end(t->ctx);
+}

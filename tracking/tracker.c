@@ -1,0 +1,280 @@
+/* The tracker: configuration, buffers, references and the per-frame entry
+ * point (DESIGN.md section 6). The stages live in pyramid.c (depth,
+ * pyramids, ROF) and icp.c (ICP and its checks); docs/tracking.md explains
+ * the defaults. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "tracking_int.h"
+
+track_config track_config_default(void)
+{
+    track_config c = {
+        .levels = 3,
+        /* KinectFusion's counts (Newcombe et al. 2011, sec. 3.5): 10 at the
+         * finest level, 5 and 4 above. With the convergence test below a
+         * level usually stops early. */
+        .iterations = {10, 5, 4},
+        .dist_m = 0.1f,
+        .angle_deg = 20.0f,
+        .max_depth_m = 4.5f, /* Kinect v1's range (EVAL_KINECT1_Z_MAX_M) */
+        /* A quarter of the frame's samples must find a partner: frame to
+         * frame at 30 Hz over 90% do; a lost or jumped camera leaves a few
+         * percent (tests: 0.3 m / 20 degrees gives < 10%). */
+        .min_inlier_frac = 0.25f,
+        /* RMS point-to-plane residual of the inliers: the Kinect v1 noise
+         * (Nguyen et al. 2012) is 2-6 mm at 1-2 m, 14 mm at 3 m for one
+         * image; against a smoothed reference the residual is about that
+         * of the frame. A wrong pose spreads inliers over the whole 0.1 m
+         * gate (RMS ~ 3-5 cm). 2 cm separates the two for desk-sized
+         * scenes; a scene mostly beyond 3.5 m needs more. */
+        .max_residual_m = 0.02f,
+        /* Per frame at 30 Hz: 0.15 m is 4.5 m/s and 15 degrees 450 deg/s,
+         * about twice the fastest hand-held motion, so one dropped frame
+         * still passes; anything beyond is a jump (a 0.3 m / 20 degree jump
+         * fails here if ICP follows it at all). */
+        .max_motion_m = 0.15f,
+        .max_motion_deg = 15.0f,
+        /* Eigenvalues of the system with rotation columns scaled by the
+         * mean depth, smallest over largest, measured at the finest level:
+         * the noisy room 2e-2, the TUM fr2_desk pair 7e-3, and a single
+         * noisy plane (320x240 Kinect v1 model) 3.5e-4, 2.8e-3 and 4.1e-3
+         * for its three weak directions against 5.6e-2 and more for the
+         * constrained ones. 5e-3 drops all three weak ones; the margin to
+         * the desk is thin (docs/tracking.md). */
+        .degenerate_ratio = 5e-3,
+        .rof_iterations = 10,
+        .rof_lambda0 = 100.0f,
+        .min_valid_frac = 0.01f,
+        .converged_m = 1e-5f,
+        .converged_deg = 1e-3f,
+    };
+    return c;
+}
+
+const char *track_outcome_name(track_outcome o)
+{
+    switch (o) {
+    case TRACK_OK: return "ok";
+    case TRACK_NO_DEPTH: return "no-depth";
+    case TRACK_NO_REFERENCE: return "no-reference";
+    case TRACK_FEW_INLIERS: return "few-inliers";
+    case TRACK_HIGH_RESIDUAL: return "high-residual";
+    case TRACK_LARGE_MOTION: return "large-motion";
+    case TRACK_NUMERIC: return "numeric";
+    }
+    return "unknown";
+}
+
+void track__level_intrinsics(const bf_intrinsics *K, uint32_t l, float *fx, float *fy, float *cx, float *cy)
+{
+    /* Pixel centres at integers: level l's pixel i covers [2^l i - 1/2,
+     * 2^l (i + 1) - 1/2) of the finest level, so its centre is at
+     * 2^l i + (2^l - 1) / 2. */
+    double s = 1.0 / (double)(1u << l);
+    *fx = (float)(K->fx_px * s);
+    *fy = (float)(K->fy_px * s);
+    *cx = (float)((K->cx_px + 0.5) * s - 0.5);
+    *cy = (float)((K->cy_px + 0.5) * s - 0.5);
+}
+
+static bf_status check_config(const track_config *c, const bf_intrinsics *K)
+{
+    if (c->levels < 1 || c->levels > TRACK_MAX_LEVELS)
+        return bf_fail(BF_INVALID_ARG, "tracking: %u levels (1..%u)", c->levels, TRACK_MAX_LEVELS);
+    if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->max_depth_m > 0))
+        return bf_fail(BF_INVALID_ARG, "tracking: gates must be positive (dist %g m, angle %g deg, depth %g m)",
+                       c->dist_m, c->angle_deg, c->max_depth_m);
+    if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
+    if (!(c->rof_lambda0 > 0)) return bf_fail(BF_INVALID_ARG, "tracking: rof_lambda0 %g must be positive", c->rof_lambda0);
+    if (!(c->degenerate_ratio >= 0 && c->degenerate_ratio < 1))
+        return bf_fail(BF_INVALID_ARG, "tracking: degenerate_ratio %g not in [0, 1)", c->degenerate_ratio);
+    if (K->width < (1u << (c->levels + 1)) || K->height < (1u << (c->levels + 1)))
+        return bf_fail(BF_INVALID_ARG, "tracking: %ux%u is too small for %u levels", K->width, K->height, c->levels);
+    if (!(K->fx_px > 0) || !(K->fy_px > 0) || !(K->depth_scale > 0) || !isfinite(K->depth_scale))
+        return bf_fail(BF_INVALID_ARG, "tracking: intrinsics need positive fx, fy and depth_scale (%g, %g, %g)",
+                       K->fx_px, K->fy_px, K->depth_scale);
+    return BF_OK;
+}
+
+static bf_status buffer(track_tracker *t, const char *name, uint64_t bytes, gpu_memory mem, gpu_buffer **out)
+{
+    gpu_buffer_desc d = {.name = name, .size_bytes = bytes, .memory = mem};
+    return gpu_buffer_create(t->ctx, &d, out);
+}
+
+bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out)
+{
+    if (!ctx || !cfg || !K || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_config(cfg, K);
+    if (s != BF_OK) return s;
+    track_tracker *t = calloc(1, sizeof *t);
+    if (!t) return bf_fail(BF_NO_MEMORY, "tracking: tracker");
+    t->ctx = ctx;
+    t->cfg = *cfg;
+    t->K = *K;
+    /* Every pyramid has all TRACK_LEVELS levels, whatever cfg.levels uses. */
+    uint32_t off = 0;
+    for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
+        t->geom.w[l] = K->width >> l;
+        t->geom.h[l] = K->height >> l;
+        t->geom.off[l] = off;
+        off += t->geom.w[l] * t->geom.h[l];
+    }
+    t->geom.n_pix = off;
+    uint64_t n0 = (uint64_t)K->width * K->height, np = t->geom.n_pix;
+    if ((s = buffer(t, "track.upload", (n0 + 1) / 2 * 4, GPU_MEMORY_UPLOAD, &t->upload)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.ref_in", n0 * 4, GPU_MEMORY_DEVICE, &t->ref_in)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.frame_depth", np * 4, GPU_MEMORY_DEVICE, &t->frame_depth)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.frame_vertex", np * 16, GPU_MEMORY_DEVICE, &t->frame_vertex)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.frame_normal", np * 16, GPU_MEMORY_DEVICE, &t->frame_normal)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.ref_depth", np * 4, GPU_MEMORY_DEVICE, &t->ref_depth)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.ref_vertex", np * 16, GPU_MEMORY_DEVICE, &t->ref_vertex)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.ref_normal", np * 16, GPU_MEMORY_DEVICE, &t->ref_normal)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.rof_p[0]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[0])) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.rof_p[1]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[1])) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
+    /* Defined contents before any kernel reads them (validation, and a
+     * reference pyramid level a smaller config never writes). */
+    gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_vertex, t->frame_normal, t->ref_depth,
+                          t->ref_vertex, t->ref_normal, t->rof_p[0], t->rof_p[1], t->counters};
+    for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
+    if (s != BF_OK) goto fail;
+    if ((s = track__pyramid_create(t)) != BF_OK) goto fail;
+    if ((s = track__icp_create(t)) != BF_OK) goto fail;
+    *out = t;
+    return BF_OK;
+fail:
+    track_destroy(t);
+    return s;
+}
+
+void track_destroy(track_tracker *t)
+{
+    if (!t) return;
+    track__icp_destroy(t);
+    track__pyramid_destroy(t);
+    gpu_buffer *bufs[] = {t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_vertex, t->ref_depth,
+                          t->frame_normal, t->frame_vertex, t->frame_depth, t->ref_in, t->upload};
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
+    memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
+    free(t);
+}
+
+void track__set_rof_iterations(track_tracker *t, uint32_t n) { t->cfg.rof_iterations = n; }
+
+static uint32_t min_valid(const track_tracker *t)
+{
+    double n = ceil((double)t->cfg.min_valid_frac * t->K.width * t->K.height);
+    return n < 1 ? 1u : (uint32_t)n;
+}
+
+static bf_status read_counter(track_tracker *t, uint32_t idx, uint32_t *v)
+{
+    return gpu_buffer_download(t->counters, idx * 4u, v, 4);
+}
+
+static double stage_ms(const gpu_context *ctx, const char *name)
+{
+    const gpu_stage_time *st;
+    uint32_t n = gpu_stage_times(ctx, &st);
+    double ms = 0;
+    for (uint32_t i = 0; i < n; i++)
+        if (!strcmp(st[i].name, name)) ms += st[i].ms;
+    return ms;
+}
+
+static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16_t *raw, const bf_se3 *T_wc)
+{
+    bf_status s = gpu_buffer_fill(t->counters, TRACK_CNT_REF_VALID * 4u, 4, 0);
+    if (s == BF_OK && raw) s = track__upload_depth(t, raw);
+    if (s == BF_OK) s = gpu_begin(t->ctx);
+    if (s != BF_OK) return s;
+    if (depth) {
+        gpu_cmd_copy(t->ctx, depth, 0, t->ref_in, 0, (uint64_t)t->K.width * t->K.height * 4);
+        /* The copy into ref_in -> the depth conversion reading it. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    }
+    track__cmd_reference(t, depth != NULL);
+    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    t->ms_rof = stage_ms(t->ctx, "track.rof");
+    uint32_t n = 0;
+    if ((s = read_counter(t, TRACK_CNT_REF_VALID, &n)) != BF_OK) return s;
+    t->ref_valid = n;
+    t->has_ref = n >= min_valid(t);
+    t->T_wr = *T_wc;
+    return BF_OK;
+}
+
+bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc)
+{
+    if (!t || !depth || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    uint64_t need = (uint64_t)t->K.width * t->K.height * 4;
+    if (gpu_buffer_size(depth) < need)
+        return bf_fail(BF_INVALID_ARG, "tracking: reference %s holds %llu bytes, %ux%u floats need %llu",
+                       gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth), t->K.width, t->K.height,
+                       (unsigned long long)need);
+    if (!bf_se3_is_finite(T_wc)) return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite");
+    return set_reference(t, depth, NULL, T_wc);
+}
+
+static bf_status check_frame(const track_tracker *t, const bf_frame *f)
+{
+    if (f->width != t->K.width || f->height != t->K.height)
+        return bf_fail(BF_INVALID_ARG, "tracking: frame %u is %ux%u, the tracker %ux%u", f->index, f->width,
+                       f->height, t->K.width, t->K.height);
+    if (!f->depth) return bf_fail(BF_INVALID_ARG, "tracking: frame %u has no depth image", f->index);
+    return BF_OK;
+}
+
+bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const bf_se3 *T_wc)
+{
+    if (!t || !f || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_frame(t, f);
+    if (s != BF_OK) return s;
+    if (!bf_se3_is_finite(T_wc)) return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite");
+    return set_reference(t, NULL, f->depth, T_wc);
+}
+
+bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out)
+{
+    if (!t || !f || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_frame(t, f);
+    if (s != BF_OK) return s;
+    if (!bf_se3_is_finite(guess_wc)) return bf_fail(BF_INVALID_ARG, "tracking: frame %u: guess is not finite", f->index);
+    track_result r = {.outcome = TRACK_OK, .T_wc = *guess_wc, .ms_rof = t->ms_rof};
+    if (!t->has_ref) {
+        r.outcome = TRACK_NO_REFERENCE;
+        *out = r;
+        return BF_OK;
+    }
+    if ((s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0)) != BF_OK) return s;
+    if ((s = track__upload_depth(t, f->depth)) != BF_OK) return s;
+    if ((s = gpu_begin(t->ctx)) != BF_OK) return s;
+    track__cmd_frame_pyramid(t);
+    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    r.ms_gpu = stage_ms(t->ctx, "track.frame");
+    uint32_t n_depth = 0;
+    if ((s = read_counter(t, TRACK_CNT_FRAME_VALID, &n_depth)) != BF_OK) return s;
+    r.n_valid = n_depth;
+    if (n_depth < min_valid(t)) {
+        r.outcome = TRACK_NO_DEPTH;
+        *out = r;
+        return BF_OK;
+    }
+    /* Everything the GPU sees is relative to the reference camera. */
+    bf_se3 T_rw = bf_se3_inverse(&t->T_wr);
+    bf_se3 T_rc = bf_se3_mul(&T_rw, guess_wc);
+    if ((s = track__icp_run(t, &T_rc, &r)) != BF_OK) return s;
+    if (r.outcome == TRACK_OK) r.T_wc = bf_se3_mul(&t->T_wr, &T_rc);
+    else r.T_wc = *guess_wc;
+    *out = r;
+    return BF_OK;
+}
+
+bf_status track_download_reference(track_tracker *t, float *depth)
+{
+    if (!t || !depth) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    return gpu_buffer_download(t->ref_depth, 0, depth, (uint64_t)t->K.width * t->K.height * 4);
+}

@@ -1,0 +1,83 @@
+/* Declarations shared by tracking/'s files (SQLite's btreeInt.h idea). */
+#ifndef BF_TRACKING_INT_H
+#define BF_TRACKING_INT_H
+
+#include "shaders/track.glsl.h"
+#include "tracking.h"
+
+/* Local sizes: 64 invocations for the per-pixel image kernels; the ICP
+ * kernel's workgroup and the pixels each invocation walks are chosen at
+ * create (icp.c). */
+#define TRACK_IMAGE_LOCAL 64u
+
+/* A pyramid's geometry: level l is w[l] x h[l] pixels at pixel offset
+ * off[l]; n_pix pixels in all. */
+typedef struct track_pyramid_geom {
+    uint32_t w[TRACK_LEVELS], h[TRACK_LEVELS], off[TRACK_LEVELS];
+    uint32_t n_pix;
+} track_pyramid_geom;
+
+struct track_tracker {
+    gpu_context *ctx;
+    track_config cfg;
+    bf_intrinsics K;
+    track_pyramid_geom geom;
+
+    /* Frame: raw upload (u16, two per word), pyramids of depth, vertex and
+     * normal. Reference: float input, the same pyramids (level 0 of
+     * ref_depth is the ROF-smoothed depth), the ROF dual fields (ping-pong). */
+    gpu_buffer *upload;        /* UPLOAD: u16 depth of a frame */
+    gpu_buffer *ref_in;        /* float depth of a reference given on the GPU */
+    gpu_buffer *frame_depth, *frame_vertex, *frame_normal;
+    gpu_buffer *ref_depth, *ref_vertex, *ref_normal;
+    gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
+    gpu_buffer *counters;      /* TRACK_CNT_* */
+    gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
+
+    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp;
+    /* Image binding sets: frame from the upload, reference from the upload
+     * (raw frame) or ref_in (GPU depth) with the dual fields 0 -> 1 and
+     * 1 -> 0. */
+    gpu_bindings *b_frame, *b_ref_up[2], *b_ref_gpu[2], *b_icp;
+
+    uint32_t icp_local;        /* ICP invocations per workgroup */
+    uint32_t icp_px_per_thread;
+    uint32_t icp_groups_max;
+    bool icp_subgroup;         /* the subgroup-arithmetic kernel is used */
+    float *partial_host;       /* icp_groups_max * TRACK_PARTIAL_WORDS, allocated at create */
+
+    /* The reference. */
+    bool has_ref;
+    bf_se3 T_wr;               /* camera to world of the reference */
+    uint32_t ref_valid;        /* valid depth pixels at the finest level */
+    double ms_rof;             /* GPU time of the last smoothing */
+};
+
+/* tracker.c: the geometry of level l from K. */
+void track__level_intrinsics(const bf_intrinsics *K, uint32_t l, float *fx, float *fy, float *cx, float *cy);
+
+/* pyramid.c: pipelines and binding sets of the image kernels. */
+bf_status track__pyramid_create(track_tracker *t);
+void track__pyramid_destroy(track_tracker *t);
+/* Records upload -> frame pyramids (depth, vertex, normal; counts the
+ * valid pixels into TRACK_CNT_FRAME_VALID). The frame's depth must already
+ * be in t->upload. */
+void track__cmd_frame_pyramid(track_tracker *t);
+/* Records the reference: depth conversion from the upload (from_gpu false)
+ * or ref_in, ROF smoothing (its own timed stage "track.rof"), pyramids. */
+void track__cmd_reference(track_tracker *t, bool from_gpu);
+/* Writes a frame's depth into the upload buffer. */
+bf_status track__upload_depth(track_tracker *t, const uint16_t *depth);
+
+/* icp.c */
+bf_status track__icp_create(track_tracker *t);
+void track__icp_destroy(track_tracker *t);
+/* Runs ICP (frame pyramids against the reference pyramids) from the
+ * relative pose *T_rc (in/out) and fills the result's statistics and
+ * outcome (except NO_DEPTH / NO_REFERENCE, checked by the caller). */
+bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, track_result *res);
+
+/* For tests: the ROF iteration count used by the next reference. */
+void track__set_rof_iterations(track_tracker *t, uint32_t n);
+
+#endif
