@@ -1,10 +1,14 @@
 /* bitfuse devices: lists the Vulkan devices, marks the one bitfuse would
- * use and prints the limits it sizes its work by. */
+ * use and prints the limits it sizes its work by; then the capture
+ * backends compiled in and the depth cameras they find. */
 #include <stdio.h>
 #include <string.h>
 
 #include "app.h"
+#include "capture/capture.h"
 #include "gpu/gpu.h"
+
+#define DEVICES_MAX_CAMERAS 16
 
 static void devices_help(FILE *f)
 {
@@ -14,7 +18,9 @@ static void devices_help(FILE *f)
             "discrete GPU first, then integrated, virtual, CPU (lavapipe). A device is\n"
             "picked by a case-insensitive part of its name or by its index, from\n"
             "--device or the BITFUSE_DEVICE environment variable. Prints the limits\n"
-            "bitfuse sizes its work by.\n\n"
+            "bitfuse sizes its work by. Then lists the capture backends built in\n"
+            "(freenect, openni2, v4l2) and the cameras they find, with the URI to\n"
+            "pass to bitfuse (docs/devices.md).\n\n"
             "options:\n"
             "  --device NAME     the device to mark (as BITFUSE_DEVICE)\n"
             "  --json            print one JSON object on stdout\n"
@@ -64,7 +70,38 @@ static void print_json(const gpu_device_info *d, uint32_t n, uint32_t chosen)
                    (unsigned long long)l->heaps[h].size_bytes, l->heaps[h].is_device_local ? "true" : "false");
         printf("]}}");
     }
-    printf("\n]}\n");
+    printf("\n]");
+}
+
+/* Appends the capture part to the JSON object print_json left open. */
+static void print_json_capture(const capture_device_info *cams, uint32_t n_cams)
+{
+    printf(", \"capture_backends\": [");
+    const char *const *b = capture_backend_names();
+    for (int i = 0; b[i]; i++) {
+        printf("%s", i ? ", " : "");
+        bf_json_string(stdout, b[i]);
+    }
+    printf("], \"capture_devices\": [");
+    for (uint32_t i = 0; i < n_cams && i < DEVICES_MAX_CAMERAS; i++) {
+        printf("%s{\"uri\": ", i ? ", " : "");
+        bf_json_string(stdout, cams[i].uri);
+        printf(", \"name\": ");
+        bf_json_string(stdout, cams[i].name);
+        printf("}");
+    }
+    printf("]}\n");
+}
+
+static void print_text_capture(const capture_device_info *cams, uint32_t n_cams)
+{
+    printf("\nCapture backends:");
+    const char *const *b = capture_backend_names();
+    for (int i = 0; b[i]; i++) printf("%s%s", i ? ", " : " ", b[i]);
+    if (!b[0]) printf(" none (install libfreenect-dev / libopenni2-dev and rebuild)");
+    printf("\nCameras found:%s\n", n_cams ? "" : " none (files work too: openni2:FILE.oni, or fakenect dumps)");
+    for (uint32_t i = 0; i < n_cams && i < DEVICES_MAX_CAMERAS; i++)
+        printf("  %-28s %s\n", cams[i].uri, cams[i].name);
 }
 
 static void print_text(const gpu_device_info *d, uint32_t n, uint32_t chosen)
@@ -118,19 +155,29 @@ int cmd_devices(int argc, char **argv)
     static gpu_device_info devs[GPU_MAX_DEVICES];
     uint32_t n = 0, chosen = UINT32_MAX;
     bf_status s = gpu_device_list(&cfg, devs, &n, &chosen);
+    /* Keep the GPU's message (gpu__choose_device's names what did not
+     * match) across the camera search. */
+    char why[1024] = "";
+    if (s || chosen == UINT32_MAX) snprintf(why, sizeof why, "%s", bf_last_error());
+    /* Cameras are looked for after the GPU so its messages stay first. */
+    static capture_device_info cams[DEVICES_MAX_CAMERAS];
+    uint32_t n_cams = capture_list_devices(cams, DEVICES_MAX_CAMERAS);
     if (s) {
-        if (is_json) printf("{\"chosen\": null, \"devices\": []}\n");
-        return app_fail("devices", s);
+        if (is_json) {
+            printf("{\"chosen\": null, \"devices\": []");
+            print_json_capture(cams, n_cams);
+        } else {
+            print_text_capture(cams, n_cams);
+        }
+        return app_fail("devices", bf_fail(s, "%s", why));
     }
-    if (chosen == UINT32_MAX) {
-        /* Keep gpu__choose_device's message: it names what did not match. */
-        char why[1024];
-        snprintf(why, sizeof why, "%s", bf_last_error());
-        if (is_json) print_json(devs, n, chosen);
-        else print_text(devs, n, chosen);
-        return app_fail("devices", bf_fail(BF_NO_DEVICE, "%s", why));
+    if (is_json) {
+        print_json(devs, n, chosen);
+        print_json_capture(cams, n_cams);
+    } else {
+        print_text(devs, n, chosen);
+        print_text_capture(cams, n_cams);
     }
-    if (is_json) print_json(devs, n, chosen);
-    else print_text(devs, n, chosen);
+    if (chosen == UINT32_MAX) return app_fail("devices", bf_fail(BF_NO_DEVICE, "%s", why));
     return APP_EXIT_OK;
 }

@@ -63,12 +63,12 @@ typedef struct fn_source {
 static void fn_depth_cb(freenect_device *dev, void *depth, uint32_t timestamp)
 {
     fn_source *s = freenect_get_user(dev);
-    const uint16_t *in = depth;
-    if (s->is_disparity) {
-        for (size_t i = 0; i < (size_t)FN_W * FN_H; i++) s->depth_px[i] = s->raw_to_units[in[i] & 2047u];
-    } else {
-        memcpy(s->depth_px, in, (size_t)FN_W * FN_H * sizeof *s->depth_px);
-    }
+    /* fakenect hands out its file buffer just past the PGM header, at an
+     * odd address: read the samples bytewise. */
+    const uint8_t *in = depth;
+    memcpy(s->depth_px, in, (size_t)FN_W * FN_H * sizeof *s->depth_px);
+    if (s->is_disparity)
+        for (size_t i = 0; i < (size_t)FN_W * FN_H; i++) s->depth_px[i] = s->raw_to_units[s->depth_px[i] & 2047u];
     s->ts_depth = timestamp;
     s->has_new_depth = true;
 }

@@ -17,6 +17,7 @@
 #include "live_int.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
@@ -83,7 +84,7 @@ static bool oni_colour_is_supported(int f)
 typedef struct oni_source {
     rgbd_source base;
     char uri[512];
-    bool is_initialized, is_file, has_colour;
+    bool is_file, has_colour;
     OniDeviceHandle dev;
     OniStreamHandle depth, colour;
     bool is_depth_started, is_colour_started;
@@ -95,6 +96,19 @@ typedef struct oni_source {
     double t_rgb_s;
     uint32_t index;
 } oni_source;
+
+/* OpenNI2 is initialised once per process and never shut down: each
+ * oniShutdown() unloads the drivers and leaves their allocations behind
+ * (LeakSanitizer counts about 10 KiB per cycle), and loading the drivers
+ * again costs a USB scan. */
+static pthread_once_t oni_once = PTHREAD_ONCE_INIT;
+static OniStatus oni_init_status = ONI_STATUS_ERROR;
+static void oni_init_once(void) { oni_init_status = oniInitialize(ONI_API_VERSION); }
+static bool oni_init(void)
+{
+    pthread_once(&oni_once, oni_init_once);
+    return oni_init_status == ONI_STATUS_OK;
+}
 
 static const char *oni_error(void)
 {
@@ -111,7 +125,6 @@ static void oni_close(rgbd_source *base)
     if (s->colour) oniStreamDestroy(s->colour);
     if (s->depth) oniStreamDestroy(s->depth);
     if (s->dev) oniDeviceClose(s->dev);
-    if (s->is_initialized) oniShutdown();
     free(s->depth_px);
     free(s->rgb_px);
     free(s->rgb_native);
@@ -241,11 +254,10 @@ bf_status capture__openni2_open(const char *uri, const char *target, const captu
     snprintf(s->uri, sizeof s->uri, "%s", uri);
     s->is_file = is_file;
     bf_status st;
-    if (oniInitialize(ONI_API_VERSION) != ONI_STATUS_OK) {
+    if (!oni_init()) {
         st = bf_fail(BF_NO_DEVICE, "%s: OpenNI2 did not start: %s", uri, oni_error());
         goto fail;
     }
-    s->is_initialized = true;
     if (oniDeviceOpen(*target ? target : NULL, &s->dev) != ONI_STATUS_OK) {
         s->dev = NULL;
         st = bf_fail(BF_NO_DEVICE, "%s: no OpenNI2 device%s%s: %s", uri, *target ? " at " : "", target, oni_error());
@@ -375,7 +387,7 @@ fail:
 
 uint32_t capture__openni2_list(capture_device_info *out, uint32_t cap)
 {
-    if (oniInitialize(ONI_API_VERSION) != ONI_STATUS_OK) {
+    if (!oni_init()) {
         bf_debug("openni2: OpenNI2 did not start: %s", oni_error());
         return 0;
     }
@@ -388,6 +400,5 @@ uint32_t capture__openni2_list(capture_device_info *out, uint32_t cap)
                  list[i].usbVendorId, list[i].usbProductId);
     }
     if (list) oniReleaseDeviceList(list);
-    oniShutdown();
     return n > 0 ? (uint32_t)n : 0;
 }

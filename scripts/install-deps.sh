@@ -8,6 +8,9 @@ PACKAGES=(
   build-essential cmake pkg-config
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers vulkan-tools glslc
   libpng-dev libjpeg-dev libzstd-dev
+  # Live capture backends (docs/devices.md); libfreenect-bin brings fakenect,
+  # which the capture tests replay Kinect dumps through.
+  libfreenect-dev libfreenect-bin libopenni2-dev
   python3 python3-numpy python3-matplotlib
 )
 
