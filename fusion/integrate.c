@@ -38,6 +38,23 @@ static uint32_t voxels_per_thread(const gpu_context *ctx)
     return vpt;
 }
 
+/* List entries per workgroup. llvmpipe spends about 10 us starting a
+ * workgroup of the integration kernel (whatever the workgroup then does:
+ * measured with an immediate return), about as much as a (brick, frame)
+ * pair costs: on a CPU device a workgroup takes 16 consecutive bricks. A
+ * GPU wants one brick per workgroup. BITFUSE_INTEGRATE_BPG overrides it
+ * (1..1024; benchmarks, tests). Every choice gives the same bits. */
+static uint32_t bricks_per_group(const gpu_context *ctx)
+{
+    uint32_t bpg = gpu_device(ctx)->type == VK_PHYSICAL_DEVICE_TYPE_CPU ? 16 : 1;
+    const char *env = getenv("BITFUSE_INTEGRATE_BPG");
+    if (env) {
+        uint32_t v = (uint32_t)strtoul(env, NULL, 10);
+        if (v >= 1 && v <= 1024) bpg = v;
+    }
+    return bpg;
+}
+
 static bf_status bind_all(fusion_map *m, gpu_bindings *b, gpu_buffer *list)
 {
     gpu_buffer *bufs[INTEGRATE_BUFFERS] = {m->hash, m->info, m->sign, m->conf, m->frames, m->depth_ring, list};
@@ -50,6 +67,7 @@ static bf_status bind_all(fusion_map *m, gpu_bindings *b, gpu_buffer *list)
 bf_status fusion__integrate_create(fusion_map *m)
 {
     uint32_t vpt = voxels_per_thread(m->ctx);
+    m->integrate_bpg = bricks_per_group(m->ctx);
     gpu_pipeline_desc d = {
         .name = "fusion.integrate",
         .spirv = bf_spv_fusion_integrate,
@@ -113,6 +131,7 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         .sigma_b = m->cfg.sigma_b,
         .sigma_c = m->cfg.sigma_c,
         .prior_weight = FUSION_PRIOR_WEIGHT,
+        .bricks_per_group = m->integrate_bpg ? m->integrate_bpg : 1,
     };
     return pc;
 }

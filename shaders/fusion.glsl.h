@@ -269,10 +269,12 @@ struct fusion_integrate_push {
     bf_f32 conf_weight;    /* Psi + sum W_i that makes a voxel confident */
     bf_f32 sigma_a, sigma_b, sigma_c;
     bf_f32 prior_weight;   /* Psi of a confident voxel when window and brick errors agree */
+    bf_u32 bricks_per_group; /* consecutive list entries one workgroup integrates */
+    bf_u32 pad;
 };
 #ifndef BF_GLSL
 typedef struct fusion_integrate_push fusion_integrate_push;
-_Static_assert(sizeof(fusion_integrate_push) == 56, "fusion_integrate_push must match std430");
+_Static_assert(sizeof(fusion_integrate_push) == 64, "fusion_integrate_push must match std430");
 #endif
 
 /* One axis of a voxel centre relative to the map origin: chunk corner

@@ -15,8 +15,8 @@
  *     order, in registers (the voxel loop is unrolled); after the last
  *     chunk, a brick no frame sees is left as it is; sum the window's
  *     (voxel, frame) pairs and their sigma (integers) into shared memory;
- *  4. decide each voxel (prior, confidence, replacement rule), OR its bits
- *     into the new words;
+ *  4. decide each voxel (prior, confidence, replacement rule) from the old
+ *     words held in registers, OR its bits into the new words;
  *  5. 16 invocations write the sign and confidence words, one the error. */
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
@@ -42,51 +42,14 @@ shared uint s_new_sign[BRICK_WORDS], s_new_conf[BRICK_WORDS];
  * unit, sx and the depth image's first word, sy and the width, sz and the
  * height. */
 #define FUSION_INTEGRATE_CHUNK 64u
-shared uint s_visible[FUSION_INTEGRATE_CHUNK];
+shared uint s_visible[FUSION_INTEGRATE_CHUNK / 32u]; /* bit per frame of the chunk */
+shared uint s_order[FUSION_INTEGRATE_CHUNK];         /* the visible frames, in frame order */
 shared vec4 s_step[FUSION_INTEGRATE_CHUNK * 4u];
 shared uint s_pairs, s_sigma_um, s_set, s_seen;
 
-/* Confident voxels of each sign: s_target[0] holds those of sign 0 (the
- * targets of the prior's sweep from a front voxel), s_target[1] those of
- * sign 1. */
-shared uint s_target[2][BRICK_WORDS];
-
-/* The sweep's rows through voxel (x, y, z) (fusion_prior_steps): bits of
- * t's voxels (0..7, y, z), (x, 0..7, z) and (x, y, 0..7), gathered from 2,
- * 2 and 4 words instead of 24 bit reads. */
-uint row_x(uint t, uint y, uint z)
+/* One brick of the list; every return is uniform over the workgroup. */
+void integrate_brick(uint slot, uint tid, uint n_threads)
 {
-    uint w = brick_word(0u, y, z), sh = brick_bit(0u, y, z);
-    return ((s_target[t][w] >> sh) & 15u) | (((s_target[t][w + 1u] >> sh) & 15u) << 4);
-}
-uint row_y(uint t, uint x, uint z)
-{
-    uint r = 0u;
-    for (uint h = 0u; h < 2u; h++) {
-        uint w = s_target[t][brick_word(x, 4u * h, z)] >> brick_bit(x, 0u, z);
-        r |= ((w & 1u) | ((w >> 3) & 2u) | ((w >> 6) & 4u) | ((w >> 9) & 8u)) << (4u * h);
-    }
-    return r;
-}
-uint row_z(uint t, uint x, uint y)
-{
-    uint r = 0u;
-    for (uint pair = 0u; pair < 4u; pair++) {
-        uint w = s_target[t][brick_word(x, y, 2u * pair)] >> brick_bit(x, y, 0u);
-        r |= ((w & 1u) | ((w >> 15) & 2u)) << (2u * pair);
-    }
-    return r;
-}
-
-void main()
-{
-    uint n_list = list.w[FUSION_LIST_COUNT];
-    uint count = n_list > pc.first ? min(n_list - pc.first, pc.max_count) : 0u;
-    uint idx = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
-    if (idx >= count) return; /* uniform over the workgroup: before any barrier */
-    uint slot = list.w[FUSION_LIST_HEADER + pc.first + idx];
-    uint tid = gl_LocalInvocationID.x, n_threads = gl_WorkGroupSize.x;
-
     /* 1. The brick. A slot freed since the list was gathered (empty-brick
      * removal) has no chunk: nothing to do. */
     uint chunk = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
@@ -104,9 +67,8 @@ void main()
         s_old_conf[w] = conf;
         s_new_sign[w] = 0u;
         s_new_conf[w] = 0u;
-        s_target[0][w] = conf & ~sign;
-        s_target[1][w] = conf & sign;
     }
+    for (uint w = tid; w < FUSION_INTEGRATE_CHUNK / 32u; w += n_threads) s_visible[w] = 0u;
     if (tid == 0u) {
         s_pairs = 0u;
         s_sigma_um = 0u;
@@ -134,22 +96,35 @@ void main()
         for (uint j = tid; j < n_chunk; j += n_threads) {
             uint index = pc.frame_first + c0 + j, ring = index % pc.ring_slots;
             fusion_frame f = frames.f[ring];
-            uint visible = f.index == index && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u ? 1u : 0u;
-            s_visible[j] = visible;
-            if (visible != 0u) {
+            if (f.index == index && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u) {
+                atomicOr(s_visible[j >> 5], 1u << (j & 31u));
                 fusion_step st = fusion_step_make(f, lo_x, lo_y, lo_z, voxel_m);
                 s_step[4u * j + 0u] = vec4(st.h0.x, st.h0.y, st.h0.z, f.depth_unit_m);
                 s_step[4u * j + 1u] = vec4(st.sx.x, st.sx.y, st.sx.z, uintBitsToFloat(ring * pc.depth_words));
                 s_step[4u * j + 2u] = vec4(st.sy.x, st.sy.y, st.sy.z, uintBitsToFloat(f.width));
                 s_step[4u * j + 3u] = vec4(st.sz.x, st.sz.y, st.sz.z, uintBitsToFloat(f.height));
-                s_seen = 1u; /* every writer stores 1 */
             }
         }
-        barrier(); /* s_visible, s_step -> the accumulation */
+        barrier(); /* s_visible -> the ranks */
+        /* The visible frames in frame order. llvmpipe runs every statement
+         * of a kernel, masked, whether or not a lane needs it: a loop over
+         * the visible frames alone is what saves the culled pairs' work. */
+        uint vis0 = s_visible[0], vis1 = s_visible[1];
+        uint n_visible = uint(bitCount(vis0) + bitCount(vis1));
+        for (uint j = tid; j < n_chunk; j += n_threads) {
+            uint below = j < 32u ? uint(bitCount(vis0 & ((1u << j) - 1u)))
+                                 : uint(bitCount(vis0) + bitCount(vis1 & ((1u << (j - 32u)) - 1u)));
+            uint bit = j < 32u ? (vis0 >> j) & 1u : (vis1 >> (j - 32u)) & 1u;
+            if (bit != 0u) s_order[below] = j;
+        }
+        if (n_visible != 0u && tid == 0u) s_seen = 1u;
+        barrier(); /* s_order, s_step -> the accumulation */
 
-        /* 3. Accumulate, in frame order. */
-        for (uint j = 0u; j < n_chunk; j++) {
-            if (s_visible[j] == 0u) continue;
+        /* 3. Accumulate, in frame order (a do-while: llvmpipe runs a for
+         * loop's body once more, masked, when it ends). */
+        uint r = 0u;
+        if (n_visible != 0u) do {
+            uint j = s_order[r];
             vec4 a = s_step[4u * j + 0u], b = s_step[4u * j + 1u], c = s_step[4u * j + 2u], d = s_step[4u * j + 3u];
             fusion_step st;
             st.h0.x = a.x, st.h0.y = a.y, st.h0.z = a.z;
@@ -167,8 +142,10 @@ void main()
                 uint raw = pixel != FUSION_NONE ? fusion_depth_raw(word, pixel) : 0u;
                 acc[k] = fusion_acc_add(acc[k], fusion_observe(raw, a.w, h.z, pc.sigma_a, pc.sigma_b, pc.sigma_c));
             }
-        }
-        barrier(); /* the chunk's reads of s_visible and s_step -> the next chunk's writes; s_seen -> below */
+        } while (++r < n_visible);
+        barrier(); /* the chunk's reads of s_visible, s_order and s_step -> the next chunk's writes; s_seen -> below */
+        for (uint w = tid; w < FUSION_INTEGRATE_CHUNK / 32u; w += n_threads) s_visible[w] = 0u;
+        barrier(); /* the cleared bits -> the next chunk's atomics */
     }
     /* No frame sees the brick: every voxel keeps its bits, no error is set. */
     if (s_seen == 0u) return; /* uniform: s_seen is not written after the last barrier */
@@ -185,41 +162,63 @@ void main()
 
     /* 4. Decide. */
     float window_err = fusion_window_error(s_pairs, s_sigma_um);
+    /* Every invocation keeps the old words in registers: the prior's rows
+     * and the old bits are then picked with selects (word indices are
+     * constants on a subgroup-sized workgroup, where x = tid), not with
+     * shared loads, which llvmpipe runs lane by lane. */
+    uint old_s[BRICK_WORDS], old_c[BRICK_WORDS], new_s[BRICK_WORDS], new_c[BRICK_WORDS];
     uint has_conf = 0u;
-    for (uint w = 0u; w < BRICK_WORDS; w++) has_conf |= s_old_conf[w];
+    [[unroll]] for (uint w = 0u; w < BRICK_WORDS; w++) {
+        old_s[w] = s_old_sign[w];
+        old_c[w] = s_old_conf[w];
+        new_s[w] = 0u;
+        new_c[w] = 0u;
+        has_conf |= old_c[w];
+    }
     uint may_replace = fusion_may_replace(pc.set_confidence, has_conf != 0u ? 1u : 0u, window_err, brick_err);
     float psi_conf = fusion_prior_psi(pc.prior_weight, window_err, brick_err);
-    /* A thread's voxels that share a word (z and z + 1 when there are 64
-     * threads) are ORed locally first: one shared atomic per word. */
-    uint acc_word = FUSION_NONE, acc_sign = 0u, acc_conf = 0u, set = 0u;
+    uint set = 0u;
     [[unroll]] for (uint k = 0u; k < VOXELS_PER_THREAD; k++) {
         uint v = tid + k * n_threads;
         uint x = v & 7u, y = (v >> 3) & 7u, z = v >> 6;
-        uint word = brick_word(x, y, z), bit = brick_bit(x, y, z);
-        uint old_sign = (s_old_sign[word] >> bit) & 1u, old_conf = (s_old_conf[word] >> bit) & 1u;
+        uint wb = brick_word(0u, y, z), bit = brick_bit(x, y, z), hx = x >> 2;
+        uint ws = hx != 0u ? old_s[wb + 1u] : old_s[wb], wc = hx != 0u ? old_c[wb + 1u] : old_c[wb];
+        uint old_sign = (ws >> bit) & 1u, old_conf = (wc >> bit) & 1u;
         float psi = 0.0f, phi = 0.0f;
         if (old_conf != 0u && pc.set_confidence != 0u && acc[k].n > 0u) { /* unobserved: kept, no prior needed */
-            uint t = old_sign ^ 1u; /* confident voxels of the other sign */
+            /* Confident voxels of the other sign (fusion_prior_steps's rows). */
+            uint m = old_sign != 0u ? 0xFFFFFFFFu : 0u; /* targets: conf & (sign ^ m) */
+            uint rx = 0u, ry = 0u, rz = 0u;
+            uint sh = brick_bit(0u, y, z);
+            rx = (((old_c[wb] & (old_s[wb] ^ m)) >> sh) & 15u) | ((((old_c[wb + 1u] & (old_s[wb + 1u] ^ m)) >> sh) & 15u) << 4);
+            [[unroll]] for (uint h = 0u; h < 2u; h++) {
+                uint w0 = brick_word(0u, 4u * h, z);
+                uint t = hx != 0u ? old_c[w0 + 1u] & (old_s[w0 + 1u] ^ m) : old_c[w0] & (old_s[w0] ^ m);
+                t >>= brick_bit(x, 0u, z);
+                ry |= ((t & 1u) | ((t >> 3) & 2u) | ((t >> 6) & 4u) | ((t >> 9) & 8u)) << (4u * h);
+            }
+            [[unroll]] for (uint pair = 0u; pair < 4u; pair++) {
+                uint w0 = brick_word(0u, y, 2u * pair);
+                uint t = hx != 0u ? old_c[w0 + 1u] & (old_s[w0 + 1u] ^ m) : old_c[w0] & (old_s[w0] ^ m);
+                t >>= brick_bit(x, y, 0u);
+                rz |= ((t & 1u) | ((t >> 15) & 2u)) << (2u * pair);
+            }
             psi = psi_conf;
-            phi = fusion_prior_phi(old_sign, fusion_prior_steps(row_x(t, y, z), row_y(t, x, z), row_z(t, x, y), x, y, z),
-                                   voxel_m, window_err);
+            phi = fusion_prior_phi(old_sign, fusion_prior_steps(rx, ry, rz, x, y, z), voxel_m, window_err);
         }
         uint r = fusion_decide(old_sign, old_conf, acc[k], psi, phi, pc.conf_weight, pc.set_confidence, may_replace);
-        if (word != acc_word) {
-            if (acc_word != FUSION_NONE) {
-                if (acc_sign != 0u) atomicOr(s_new_sign[acc_word], acc_sign);
-                if (acc_conf != 0u) atomicOr(s_new_conf[acc_word], acc_conf);
-            }
-            acc_word = word;
-            acc_sign = 0u;
-            acc_conf = 0u;
-        }
-        if ((r & FUSION_DECIDE_SIGN) != 0u) acc_sign |= 1u << bit;
-        if ((r & FUSION_DECIDE_CONF) != 0u) acc_conf |= 1u << bit;
+        uint bs = (r & FUSION_DECIDE_SIGN) != 0u ? 1u << bit : 0u, bc = (r & FUSION_DECIDE_CONF) != 0u ? 1u << bit : 0u;
+        new_s[wb] |= hx != 0u ? 0u : bs;
+        new_s[wb + 1u] |= hx != 0u ? bs : 0u;
+        new_c[wb] |= hx != 0u ? 0u : bc;
+        new_c[wb + 1u] |= hx != 0u ? bc : 0u;
         set |= r & FUSION_DECIDE_SET;
     }
-    if (acc_sign != 0u) atomicOr(s_new_sign[acc_word], acc_sign);
-    if (acc_conf != 0u) atomicOr(s_new_conf[acc_word], acc_conf);
+    /* One shared atomic per word and plane. */
+    [[unroll]] for (uint w = 0u; w < BRICK_WORDS; w++) {
+        if (new_s[w] != 0u) atomicOr(s_new_sign[w], new_s[w]);
+        if (new_c[w] != 0u) atomicOr(s_new_conf[w], new_c[w]);
+    }
     if (set != 0u) s_set = 1u; /* every writer stores 1: no race on the value */
     barrier(); /* the new words and s_set -> phase 5 */
 
@@ -230,4 +229,20 @@ void main()
     }
     if (tid == 0u && s_set != 0u && may_replace != 0u)
         info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR] = floatBitsToUint(window_err);
+}
+
+void main()
+{
+    uint n_list = list.w[FUSION_LIST_COUNT];
+    uint count = n_list > pc.first ? min(n_list - pc.first, pc.max_count) : 0u;
+    uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    uint tid = gl_LocalInvocationID.x, n_threads = gl_WorkGroupSize.x;
+    /* bricks_per_group consecutive entries: llvmpipe pays about 10 us to
+     * start a workgroup of this kernel, whatever it does. */
+    for (uint b = 0u; b < pc.bricks_per_group; b++) {
+        uint idx = group * pc.bricks_per_group + b;
+        if (idx >= count) return; /* uniform over the workgroup */
+        barrier(); /* the previous brick's reads of shared memory -> this brick's writes */
+        integrate_brick(list.w[FUSION_LIST_HEADER + pc.first + idx], tid, n_threads);
+    }
 }

@@ -6,15 +6,28 @@
  * sample of bricks against the CPU oracle on this noisy, real-sized input.
  *
  *   bench_fusion_integrate [n_frames [ratio]]     (defaults 20, 1)
- *   BITFUSE_INTEGRATE_VPT=1|2|4|8|16 picks voxels per invocation. */
+ *   BITFUSE_INTEGRATE_VPT=1|2|4|8|16 picks voxels per invocation.
+ *   BENCH_BPG=16,1,... compares bricks per workgroup, interleaved.
+ * Every timed pass reports the GPU timestamps (wall) and the CPU time the
+ * process spent (lavapipe's worker threads): on a shared machine the CPU
+ * time is the steadier of the two. */
 #include <math.h>
 #include <stdio.h>
+#include <sys/resource.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "eval/eval.h"
 #include "fusion/fusion_int.h"
 #include "gpu/gpu.h"
+
+static double cpu_seconds(void)
+{
+    struct rusage u;
+    getrusage(RUSAGE_SELF, &u);
+    return (double)u.ru_utime.tv_sec + 1e-6 * (double)u.ru_utime.tv_usec + (double)u.ru_stime.tv_sec +
+           1e-6 * (double)u.ru_stime.tv_usec;
+}
 
 static int cmp_double(const void *a, const void *b)
 {
@@ -122,54 +135,80 @@ int main(int argc, char **argv)
         TRY(gpu_buffer_download(map->conf, (uint64_t)b * 64, ref[k].conf, 64));
     }
 
-    enum { RUNS = 5 };
-    double ms[RUNS];
-    for (int r = 0; r < RUNS; r++) {
-        TRY(gpu_begin(ctx));
-        gpu_cmd_stage_begin(ctx, "integrate");
-        fusion__cmd_integrate(map, map->b_integrate_window, 0, n, 0, n_frames, true);
-        gpu_cmd_stage_end(ctx);
-        TRY(gpu_submit_wait(ctx));
-        const gpu_stage_time *t;
-        ms[r] = gpu_stage_times(ctx, &t) ? t[0].ms : NAN;
-        if (r == 0) { /* the oracle on the sample, against the first pass */
-            fusion_integrate_push pc = fusion__integrate_params(map, 0, n, 0, n_frames, true);
-            uint32_t bad = 0, fragile = 0, bad_fragile = 0;
-            for (uint32_t k = 0; k < n_sample; k++) {
-                uint32_t b = list[FUSION_LIST_HEADER + (uint32_t)((uint64_t)k * n / n_sample)];
-                uint32_t sign[16], conf[16];
-                TRY(gpu_buffer_download(map->sign, (uint64_t)b * 64, sign, 64));
-                TRY(gpu_buffer_download(map->conf, (uint64_t)b * 64, conf, 64));
-                fusion_ref_margins mg;
-                fusion__integrate_ref(&pc, frames, depth_ring, &ref[k], &mg);
-                fragile += mg.n_fragile;
-                for (int w = 0; w < 16; w++) {
-                    uint32_t d = (sign[w] ^ ref[k].sign[w]) | (conf[w] ^ ref[k].conf[w]);
-                    bad += (uint32_t)__builtin_popcount(d & ~mg.fragile[w]);
-                    bad_fragile += (uint32_t)__builtin_popcount(d & mg.fragile[w]);
-                }
-            }
-            printf("oracle on %u bricks: %u voxels differ (+%u of %u fragile)\n", n_sample, bad, bad_fragile, fragile);
-        }
+    /* Variants (bricks per workgroup), interleaved run by run. */
+    uint32_t bpg[8], n_var = 0;
+    const char *env = getenv("BENCH_BPG");
+#ifdef FUSION_INTEGRATE_HAS_BPG
+    for (const char *c = env; c && *c && n_var < 8;) {
+        bpg[n_var++] = (uint32_t)strtoul(c, (char **)&c, 10);
+        if (*c == ',') c++;
     }
-    qsort(ms, RUNS, sizeof ms[0], cmp_double);
-    printf("window pass, %u frames: median %.1f ms (min %.1f, max %.1f) = %.2f us per brick, %.3f us per (brick, frame)\n",
-           n_frames, ms[RUNS / 2], ms[0], ms[RUNS - 1], 1000.0 * ms[RUNS / 2] / n,
-           1000.0 * ms[RUNS / 2] / n / n_frames);
+#endif
+    (void)env;
+    if (n_var == 0) n_var = 1, bpg[0] = 0;
+    enum { RUNS = 7 };
+    double ms[8][RUNS], cpu[8][RUNS];
+    for (int r = 0; r < RUNS; r++)
+        for (uint32_t k = 0; k < n_var; k++) {
+#ifdef FUSION_INTEGRATE_HAS_BPG
+            if (bpg[k]) map->integrate_bpg = bpg[k];
+#endif
+            double c0 = cpu_seconds();
+            TRY(gpu_begin(ctx));
+            gpu_cmd_stage_begin(ctx, "integrate");
+            fusion__cmd_integrate(map, map->b_integrate_window, 0, n, 0, n_frames, true);
+            gpu_cmd_stage_end(ctx);
+            TRY(gpu_submit_wait(ctx));
+            cpu[k][r] = 1e3 * (cpu_seconds() - c0);
+            const gpu_stage_time *t;
+            ms[k][r] = gpu_stage_times(ctx, &t) ? t[0].ms : NAN;
+            if (r == 0 && k == 0) { /* the oracle on the sample, against the first pass */
+                fusion_integrate_push pc = fusion__integrate_params(map, 0, n, 0, n_frames, true);
+                uint32_t bad = 0, fragile = 0, bad_fragile = 0;
+                for (uint32_t j = 0; j < n_sample; j++) {
+                    uint32_t b = list[FUSION_LIST_HEADER + (uint32_t)((uint64_t)j * n / n_sample)];
+                    uint32_t sign[16], conf[16];
+                    TRY(gpu_buffer_download(map->sign, (uint64_t)b * 64, sign, 64));
+                    TRY(gpu_buffer_download(map->conf, (uint64_t)b * 64, conf, 64));
+                    fusion_ref_margins mg;
+                    fusion__integrate_ref(&pc, frames, depth_ring, &ref[j], &mg);
+                    fragile += mg.n_fragile;
+                    for (int w = 0; w < 16; w++) {
+                        uint32_t d = (sign[w] ^ ref[j].sign[w]) | (conf[w] ^ ref[j].conf[w]);
+                        bad += (uint32_t)__builtin_popcount(d & ~mg.fragile[w]);
+                        bad_fragile += (uint32_t)__builtin_popcount(d & mg.fragile[w]);
+                    }
+                }
+                printf("oracle on %u bricks: %u voxels differ (+%u of %u fragile)\n", n_sample, bad, bad_fragile,
+                       fragile);
+            }
+        }
+    for (uint32_t k = 0; k < n_var; k++) {
+        qsort(ms[k], RUNS, sizeof ms[k][0], cmp_double);
+        qsort(cpu[k], RUNS, sizeof cpu[k][0], cmp_double);
+        printf("window pass, %u frames, bpg %u: wall median %.1f ms (min %.1f, max %.1f) = %.3f us per (brick, frame); "
+               "cpu median %.1f ms (min %.1f) = %.3f us per (brick, frame)\n",
+               n_frames, bpg[k], ms[k][RUNS / 2], ms[k][0], ms[k][RUNS - 1], 1000.0 * ms[k][RUNS / 2] / n / n_frames,
+               cpu[k][RUNS / 2], cpu[k][0], 1000.0 * cpu[k][RUNS / 2] / n / n_frames);
+    }
     /* Fewer frames: the per-brick part of the cost against the per-frame part. */
     for (uint32_t nf = 0; nf < n_frames; nf = nf ? nf * 4 : 1) {
+        double c3[3];
         for (int r = 0; r < 3; r++) {
+            double c0 = cpu_seconds();
             TRY(gpu_begin(ctx));
             gpu_cmd_stage_begin(ctx, "integrate");
             fusion__cmd_integrate(map, map->b_integrate_window, 0, n, 0, nf, true);
             gpu_cmd_stage_end(ctx);
             TRY(gpu_submit_wait(ctx));
+            c3[r] = 1e3 * (cpu_seconds() - c0);
             const gpu_stage_time *t;
-            ms[r] = gpu_stage_times(ctx, &t) ? t[0].ms : NAN;
+            ms[0][r] = gpu_stage_times(ctx, &t) ? t[0].ms : NAN;
         }
-        qsort(ms, 3, sizeof ms[0], cmp_double);
-        printf("window pass, %u frames: median %.1f ms (min %.1f) = %.2f us per brick\n", nf, ms[1], ms[0],
-               1000.0 * ms[1] / n);
+        qsort(ms[0], 3, sizeof ms[0][0], cmp_double);
+        qsort(c3, 3, sizeof c3[0], cmp_double);
+        printf("window pass, %u frames: wall median %.1f ms = %.2f us per brick; cpu median %.1f ms = %.2f us per brick\n",
+               nf, ms[0][1], 1000.0 * ms[0][1] / n, c3[1], 1000.0 * c3[1] / n);
     }
 
     free(depth_ring);
