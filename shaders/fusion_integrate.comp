@@ -89,11 +89,17 @@ void integrate_brick(uint slot, uint tid, uint n_threads)
      * k loops are unrolled, so acc[] lives in registers. */
     fusion_acc acc[VOXELS_PER_THREAD];
     [[unroll]] for (uint k = 0u; k < VOXELS_PER_THREAD; k++) acc[k] = fusion_acc_zero();
-    for (uint c0 = 0u; c0 < n_frames; c0 += FUSION_INTEGRATE_CHUNK) {
+    /* Loops are do-whiles: llvmpipe runs a for loop's body once more,
+     * masked, when it ends. */
+    uint c0 = 0u;
+    if (n_frames != 0u) do {
         uint n_chunk = min(n_frames - c0, FUSION_INTEGRATE_CHUNK);
         /* 2. Cull (brick, frame) pairs on the box of the voxel centres; keep
          * the visible frames' stepping. */
-        for (uint j = tid; j < n_chunk; j += n_threads) {
+        uint it = 0u, n_it = (n_chunk + n_threads - 1u) / n_threads;
+        do {
+            uint j = tid + it * n_threads;
+            if (j >= n_chunk) continue;
             uint index = pc.frame_first + c0 + j, ring = index % pc.ring_slots;
             fusion_frame f = frames.f[ring];
             if (f.index == index && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u) {
@@ -104,7 +110,7 @@ void integrate_brick(uint slot, uint tid, uint n_threads)
                 s_step[4u * j + 2u] = vec4(st.sy.x, st.sy.y, st.sy.z, uintBitsToFloat(f.width));
                 s_step[4u * j + 3u] = vec4(st.sz.x, st.sz.y, st.sz.z, uintBitsToFloat(f.height));
             }
-        }
+        } while (++it < n_it);
         barrier(); /* s_visible -> the ranks */
         /* The visible frames in frame order. llvmpipe runs every statement
          * of a kernel, masked, whether or not a lane needs it: a loop over
@@ -120,8 +126,7 @@ void integrate_brick(uint slot, uint tid, uint n_threads)
         if (n_visible != 0u && tid == 0u) s_seen = 1u;
         barrier(); /* s_order, s_step -> the accumulation */
 
-        /* 3. Accumulate, in frame order (a do-while: llvmpipe runs a for
-         * loop's body once more, masked, when it ends). */
+        /* 3. Accumulate, in frame order. */
         uint r = 0u;
         if (n_visible != 0u) do {
             uint j = s_order[r];
@@ -146,7 +151,8 @@ void integrate_brick(uint slot, uint tid, uint n_threads)
         barrier(); /* the chunk's reads of s_visible, s_order and s_step -> the next chunk's writes; s_seen -> below */
         for (uint w = tid; w < FUSION_INTEGRATE_CHUNK / 32u; w += n_threads) s_visible[w] = 0u;
         barrier(); /* the cleared bits -> the next chunk's atomics */
-    }
+        c0 += FUSION_INTEGRATE_CHUNK;
+    } while (c0 < n_frames);
     /* No frame sees the brick: every voxel keeps its bits, no error is set. */
     if (s_seen == 0u) return; /* uniform: s_seen is not written after the last barrier */
     uint pairs = 0u, sigma_um = 0u;
