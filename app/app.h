@@ -45,6 +45,7 @@ bf_status app_write_json(const char *dir, const char *name, void (*write)(FILE *
 int cmd_demo(int argc, char **argv);
 int cmd_synth(int argc, char **argv);
 int cmd_fuse(int argc, char **argv);
+int cmd_replay(int argc, char **argv);
 int cmd_eval_traj(int argc, char **argv);
 int cmd_eval_surface(int argc, char **argv);
 int cmd_devices(int argc, char **argv);

@@ -1,10 +1,10 @@
-/* bitfuse demo: the main job on built-in data. For now it renders a short
- * synthetic room sequence along a built-in hand-held trajectory, reads it
- * back through the replay path, and evaluates it: the raw sensor points
- * (ground-truth poses) against the reference surface, the rendered
- * trajectory against the one it followed, and the sequence fused into the
- * sign-bit map on the GPU with the true poses. The tracking issue turns it
- * into a full track-and-fuse run. */
+/* bitfuse demo: the main job on built-in data. It renders a short synthetic
+ * room sequence along a built-in hand-held trajectory, reads it back through
+ * the replay path, and evaluates it: the raw sensor points (ground-truth
+ * poses) against the reference surface, then the full loop (ICP tracking
+ * against the ray-cast map, fusion, ray-cast, ROF smoothing) started at the
+ * first true pose: its trajectory against the truth (ATE), its surface
+ * against the reference, time per frame and map memory. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -13,6 +13,7 @@
 #include "app.h"
 #include "eval/eval.h"
 #include "fusion/fusion.h"
+#include "recon/recon.h"
 #include "gpu/gpu.h"
 #include "replay/replay.h"
 #include "stream/stream.h"
@@ -22,12 +23,15 @@ static const char demo_help[] =
     "\n"
     "Renders a synthetic room (Kinect v1 noise) along a built-in hand-held trajectory,\n"
     "replays it, and reports how far the raw depth lies from the true surface and how\n"
-    "much of the seen surface it covers; then fuses it into the sign-bit map on the GPU\n"
-    "with the true poses and measures the fused surface the same way, with the time per\n"
-    "frame and the map's memory. Writes into DIR (default out/demo):\n"
+    "much of the seen surface it covers; then runs the full loop on the GPU (tracks the\n"
+    "camera by ICP against the map and fuses the frames into the sign-bit map) and reports\n"
+    "the trajectory error (ATE), the fused surface's error, the time per frame and the\n"
+    "map's memory. Writes into DIR (default out/demo):\n"
     "  seq/            the TUM-format sequence (bitfuse synth output)\n"
     "  trajectory_input.txt  the built-in trajectory\n"
     "  raw_points.ply  back-projected depth with ground-truth poses\n"
+    "  trajectory.txt  the tracked trajectory (TUM format)\n"
+    "  points.ply      surface voxels of the map\n"
     "  stats.json      everything printed, machine-readable\n"
     "\n"
     "options:\n"
@@ -35,7 +39,7 @@ static const char demo_help[] =
     "  --frames N      frames to render, default 60 (2 s at 30 Hz)\n"
     "  --seed S        noise seed, default 1\n"
     "  --data DIR      shared data (meshes for the room); default ../shared/data\n"
-    "  --no-gpu        skip the GPU fusion step\n";
+    "  --no-gpu        skip the GPU reconstruction\n";
 
 /* A hand-held sweep in the first camera's frame (x right, y down, z forward),
  * sampled at 100 Hz like a motion-capture log: sideways sway of +-0.3 m, a
@@ -122,8 +126,10 @@ typedef struct demo_report {
     uint32_t n_points;
     eval_surface_result surf;
     eval_ate_result ate;
-    /* Fusion with the true poses (when a Vulkan device is there). */
+    /* The full loop (when a Vulkan device is there). */
     bool fused;
+    recon_counts counts;
+    eval_ate_result track_ate;
     double fuse_ms_median, fuse_ms_p95;
     fusion_stats map;
     uint64_t n_surface_points;
@@ -163,7 +169,10 @@ static bf_status demo_write_json(const char *path, const demo_report *r)
             "  \"trajectory_check\": {\"pairs\": %zu, \"ate_rmse_m\": %.9f},\n",
             r->ate.n_matched, r->ate.trans.rmse);
     if (r->fused) {
-        fprintf(f, "  \"fusion\": {\"frame_ms_median\": %.2f, \"frame_ms_p95\": %.2f, \"map_bytes\": %llu, "
+        fprintf(f, "  \"reconstruction\": {\"tracked\": %u, \"lost\": %u, \"ate_rmse_m\": ", r->counts.tracked,
+                r->counts.lost);
+        bf_json_number(f, r->track_ate.trans.rmse, 6);
+        fprintf(f, ", \"frame_ms_median\": %.2f, \"frame_ms_p95\": %.2f, \"map_bytes\": %llu, "
                    "\"bricks\": %u, \"surface_points\": %llu, \"accuracy_median_m\": ",
                 r->fuse_ms_median, r->fuse_ms_p95, (unsigned long long)r->map.bytes_total, r->map.n_bricks,
                 (unsigned long long)r->n_surface_points);
@@ -192,32 +201,46 @@ static gpu_context *demo_device(bool use_gpu, demo_report *r)
     return ctx;
 }
 
-/* Fuses the sequence with its ground-truth poses on the GPU and measures the
- * surface voxels against the reference, as the raw depth was. */
-static bf_status demo_fuse(gpu_context *ctx, const char *seq, const eval_mesh *ref, const eval_mesh *seen,
-                           demo_report *r)
+/* The full loop on the sequence (track, fuse, ray-cast, smooth), started at
+ * the first true pose: the estimated trajectory against the truth (ATE) and
+ * the surface voxels against the reference, as the raw depth was. */
+static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char *out_dir, const eval_mesh *ref,
+                                  const eval_mesh *seen, demo_report *r)
 {
     rgbd_source *src;
     bf_status s = replay_open(seq, NULL, &src);
     if (s != BF_OK) return s;
-    fusion_map *map = NULL;
+    recon *rc = NULL;
+    recon_config cfg = recon_config_default();
     bf_stats ms = {0};
+    replay_traj est = {0}, gt = {0};
     bf_frame f;
-    bf_info("fusing %u frames into the sign-bit map", src->n_frames);
+    bf_progress prog;
+    bf_progress_begin(&prog, "track+fuse", src->n_frames);
     while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        if (!f.has_pose) continue;
-        if (!map && (s = fusion_create(ctx, NULL, rgbd_source_intrinsics(src), f.T_wc.t, &map)) != BF_OK) break;
-        double t0 = bf_time_s();
-        if ((s = fusion_add_frame(map, &f, &f.T_wc)) != BF_OK) break;
-        if ((s = bf_stats_push(&ms, 1e3 * (bf_time_s() - t0))) != BF_OK) break;
+        if (!rc && (s = recon_create(ctx, &cfg, rgbd_source_intrinsics(src), &f.T_wc, &rc)) != BF_OK) break;
+        recon_frame_result fr;
+        if ((s = recon_add_frame(rc, &f, &fr)) != BF_OK) break;
+        if ((s = bf_stats_push(&ms, fr.ms_frame)) != BF_OK) break;
+        if ((s = replay_traj_push(&est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
+        if (f.has_pose && (s = replay_traj_push(&gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
+        bf_progress_update(&prog, f.index + 1);
     }
-    if (s == BF_END) s = map ? fusion_flush(map) : bf_fail(BF_FORMAT, "%s: no frame with a pose", seq);
+    bf_progress_end(&prog, est.n);
+    if (s == BF_END) s = rc ? recon_flush(rc) : bf_fail(BF_FORMAT, "%s: no frame", seq);
+    char path[4096];
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "trajectory.txt")) == BF_OK)
+        s = replay_traj_write_tum(path, &est);
+    if (s == BF_OK) s = eval_ate(&gt, &est, 0, &r->track_ate);
+    if (s == BF_OK) r->counts = recon_get_counts(rc);
     fusion_snapshot snap = {0};
     eval_mesh pts = {0};
     stream_export_stats st;
-    if (s == BF_OK) s = fusion_get_stats(map, &r->map);
-    if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
+    if (s == BF_OK) s = fusion_get_stats(recon_map(rc), &r->map);
+    if (s == BF_OK) s = fusion_snapshot_take(recon_map(rc), &snap);
     if (s == BF_OK) s = stream_export_points(&snap, &pts, &st);
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
+        s = eval_mesh_write_ply(path, &pts);
     if (s == BF_OK) {
         eval_surface_config scfg = eval_surface_config_default();
         scfg.max_dist_m = 0.5;
@@ -232,7 +255,9 @@ static bf_status demo_fuse(gpu_context *ctx, const char *seq, const eval_mesh *r
     eval_mesh_free(&pts);
     fusion_snapshot_free(&snap);
     bf_stats_free(&ms);
-    fusion_destroy(map);
+    replay_traj_free(&est);
+    replay_traj_free(&gt);
+    recon_destroy(rc);
     rgbd_source_close(src);
     return s;
 }
@@ -278,8 +303,8 @@ static bf_status demo_run(gpu_context *ctx, const char *out_dir, uint32_t n_fram
         scfg.max_dist_m = 0.5;
         s = eval_surface(&ref, &raw, &seen, &scfg, &r->surf);
     }
-    /* 6. Fusion with the true poses: the fused surface against the same reference. */
-    if (s == BF_OK && ctx) s = demo_fuse(ctx, seq, &ref, &seen, r);
+    /* 6. The full loop: tracked trajectory and fused surface against the truth. */
+    if (s == BF_OK && ctx) s = demo_reconstruct(ctx, seq, out_dir, &ref, &seen, r);
     eval_mesh_free(&raw);
     eval_mesh_free(&ref);
     eval_mesh_free(&seen);
@@ -361,11 +386,15 @@ int cmd_demo(int argc, char **argv)
     printf("  trajectory check       ATE %.3f mm over %zu poses (placement self-check)\n", 1e3 * r.ate.trans.rmse,
            r.ate.n_matched);
     if (r.fused) {
-        printf("  fused (true poses)     %.0f ms/frame median, %.0f p95; map %.2f MiB, %u bricks\n", r.fuse_ms_median,
-               r.fuse_ms_p95, r.map.bytes_total / 1048576.0, r.map.n_bricks);
+        printf("  tracked                %u of %u frames (%u lost); ATE RMSE %.1f mm against the truth\n",
+               r.counts.tracked, r.counts.frames, r.counts.lost, 1e3 * r.track_ate.trans.rmse);
+        printf("  time per frame         %.0f ms median, %.0f p95 (track + fuse + ray-cast + smooth)\n",
+               r.fuse_ms_median, r.fuse_ms_p95);
+        printf("  map                    %.2f MiB, %u bricks\n", r.map.bytes_total / 1048576.0, r.map.n_bricks);
         printf("  fused surface voxels   median %.1f mm, p90 %.1f mm from the surface; %.1f%% of it within 1 cm\n",
                1e3 * r.fused_surf.accuracy.median, 1e3 * r.fused_surf.accuracy.p90, 100 * r.fused_surf.completeness);
     }
-    printf("  wrote                  %s/{seq/,raw_points.ply,stats.json} in %.1f s\n", out_dir, r.seconds);
+    printf("  wrote                  %s/{seq/,raw_points.ply,%sstats.json} in %.1f s\n", out_dir,
+           r.fused ? "trajectory.txt,points.ply," : "", r.seconds);
     return APP_EXIT_OK;
 }

@@ -14,6 +14,7 @@ typedef struct app_command {
 static const app_command commands[] = {
     {"demo", cmd_demo, "make a short synthetic sequence and evaluate it (built-in data)"},
     {"synth", cmd_synth, "render a synthetic RGB-D sequence with ground truth (TUM folder)"},
+    {"replay", cmd_replay, "track and fuse a recorded sequence (the full loop): trajectory, mesh, stats"},
     {"fuse", cmd_fuse, "fuse a sequence with known poses into the map; export mesh and points"},
     {"info", cmd_info, "read a sequence and print what it holds"},
     {"record", cmd_record, "record a camera (or a sequence) into a bitfuse log (.bflog)"},

@@ -1,0 +1,389 @@
+/* bitfuse replay: the full reconstruction loop (track, fuse, ray-cast,
+ * smooth) on a recorded sequence; writes the estimated trajectory, the map's
+ * mesh and points, per-frame tracking records and stats.json. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "app.h"
+#include "eval/eval.h"
+#include "recon/recon.h"
+#include "replay/replay.h"
+
+static const char replay_help[] =
+    "usage: bitfuse replay SEQUENCE --out DIR [options]\n"
+    "\n"
+    "Runs the full loop on every frame of SEQUENCE (DESIGN.md section 1): ICP against the\n"
+    "ROF-smoothed ray-cast of the map, fusion at the pose found, ray-cast at that pose.\n"
+    "Frames without depth are skipped; frames tracked badly are not fused and keep the\n"
+    "last good pose. Writes into DIR:\n"
+    "  trajectory.txt  TUM format, one line per input frame at its depth timestamp\n"
+    "                  (camera to world, like groundtruth.txt)\n"
+    "  frames.csv      per frame: state, ICP outcome, inliers, residual, times\n"
+    "  mesh.ply        triangle mesh of the confident surface (binary PLY)\n"
+    "  points.ply      surface voxel centres with normals\n"
+    "  stats.json      time per frame and per stage, tracking counts, ATE when the\n"
+    "                  sequence has ground truth, map memory\n"
+    "  views/N.png     shaded ray-cast views, with --view-every\n"
+    "\n"
+    "options:\n"
+    "  --out DIR          output folder (created)\n"
+    "  --init P           first pose: 'groundtruth' (the first frame's, when it has one;\n"
+    "                     the default) or 'identity'\n"
+    "  --ratio R          voxel-to-pixel ratio of the level rule, default 1\n"
+    "  --window N         frames per fusion window (even), default 40\n"
+    "  --subcache N       frames of the new-brick pass, default 10\n"
+    "  --bricks N         brick pool size, default 1048576\n"
+    "  --chunk M          chunk edge in metres, default 2\n"
+    "  --max-level L      finest octree level, default 8\n"
+    "  --icp-iters A,B,C  ICP iterations per pyramid level, finest first, default 10,5,4\n"
+    "  --rof-iters N      ROF iterations on the reference, default from tracking (0: off)\n"
+    "  --rof-lambda L     ROF data weight at 1 m\n"
+    "  --view-every K     write a shaded view every K frames\n"
+    "  --no-mesh          skip the mesh (points and stats only)\n"
+    "%s"
+    "\n"
+    "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
+    "3 bad input, 4 no Vulkan device\n";
+
+typedef struct replay_args {
+    const char *seq, *out;
+    bool init_identity;
+    replay_options ropt;
+    recon_config rcfg;
+    uint32_t view_every;
+    bool no_mesh;
+} replay_args;
+
+static bool parse_iters(const char *v, uint32_t it[TRACK_MAX_LEVELS], uint32_t *levels)
+{
+    uint32_t n = 0;
+    const char *p = v;
+    while (*p && n < TRACK_MAX_LEVELS) {
+        char *end;
+        unsigned long x = strtoul(p, &end, 10);
+        if (end == p || x > 1000) return false;
+        it[n++] = (uint32_t)x;
+        if (*end == ',') end++;
+        else if (*end) return false;
+        p = end;
+    }
+    if (*p || n == 0) return false;
+    *levels = n;
+    return true;
+}
+
+static int parse_args(int argc, char **argv, replay_args *a)
+{
+    const char *cmd = "replay";
+    memset(a, 0, sizeof *a);
+    a->rcfg = recon_config_default();
+    for (int i = 1; i < argc; i++) {
+        int r = replay_parse_option(argc, argv, &i, &a->ropt);
+        if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
+        if (r > 0) { /* it moved i past the option: the loop's i++ must not skip one more */
+            i--;
+            continue;
+        }
+        const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        double d;
+        uint32_t u;
+        fusion_config *fc = &a->rcfg.fusion;
+        track_config *tc = &a->rcfg.track;
+        if (app_is_help(o)) {
+            printf(replay_help, replay_options_help());
+            return -1;
+        } else if (!strcmp(o, "--no-mesh")) {
+            a->no_mesh = true;
+        } else if (o[0] != '-') {
+            if (a->seq) return app_usage_error(cmd, "more than one sequence: %s", o);
+            a->seq = o;
+        } else if (!v) {
+            return app_usage_error(cmd, "%s needs a value", o);
+        } else if (!strcmp(o, "--out")) {
+            a->out = v, i++;
+        } else if (!strcmp(o, "--init") && (!strcmp(v, "groundtruth") || !strcmp(v, "identity"))) {
+            a->init_identity = !strcmp(v, "identity"), i++;
+        } else if (!strcmp(o, "--ratio") && bf_parse_double(v, &d)) {
+            fc->voxel_ratio = (float)d, i++;
+        } else if (!strcmp(o, "--chunk") && bf_parse_double(v, &d)) {
+            fc->chunk_m = (float)d, i++;
+        } else if (!strcmp(o, "--window") && bf_parse_u32(v, &u)) {
+            fc->window = u, i++;
+        } else if (!strcmp(o, "--subcache") && bf_parse_u32(v, &u)) {
+            fc->subcache = u, i++;
+        } else if (!strcmp(o, "--bricks") && bf_parse_u32(v, &u)) {
+            fc->brick_cap = u, i++;
+        } else if (!strcmp(o, "--max-level") && bf_parse_u32(v, &u)) {
+            fc->max_level = u, i++;
+        } else if (!strcmp(o, "--icp-iters") && parse_iters(v, tc->iterations, &tc->levels)) {
+            i++;
+        } else if (!strcmp(o, "--rof-iters") && bf_parse_u32(v, &u)) {
+            tc->rof_iterations = u, i++;
+        } else if (!strcmp(o, "--rof-lambda") && bf_parse_double(v, &d) && d > 0) {
+            tc->rof_lambda0 = (float)d, i++;
+        } else if (!strcmp(o, "--view-every") && bf_parse_u32(v, &u) && u > 0) {
+            a->view_every = u, i++;
+        } else {
+            return app_usage_error(cmd, "unknown option or bad value: %s %s", o, v);
+        }
+    }
+    if (!a->seq) return app_usage_error(cmd, "no sequence given");
+    if (!a->out) return app_usage_error(cmd, "--out is required");
+    return 0;
+}
+
+/* Per-frame measurements over the run. */
+typedef struct replay_timing {
+    bf_stats frame_ms, track_ms, rof_ms, raycast_ms, upload_ms, alloc_ms, subcache_ms, window_ms;
+    bf_stats inlier_frac, residual_mm;
+} replay_timing;
+
+static bf_stats *timing_series(replay_timing *t, int i)
+{
+    bf_stats *all[] = {&t->frame_ms,  &t->track_ms,    &t->rof_ms,    &t->raycast_ms, &t->upload_ms,
+                       &t->alloc_ms,  &t->subcache_ms, &t->window_ms, &t->inlier_frac, &t->residual_mm};
+    return i < (int)(sizeof all / sizeof all[0]) ? all[i] : NULL;
+}
+
+static void timing_free(replay_timing *t)
+{
+    bf_stats *s;
+    for (int i = 0; (s = timing_series(t, i)); i++) bf_stats_free(s);
+}
+
+static bf_status timing_push(replay_timing *t, const recon_frame_result *fr)
+{
+    bf_status s = bf_stats_push(&t->frame_ms, fr->ms_frame);
+    if (fr->state == RECON_TRACKED || fr->state == RECON_LOST) {
+        if (s == BF_OK) s = bf_stats_push(&t->track_ms, fr->ms_track);
+        if (s == BF_OK) s = bf_stats_push(&t->inlier_frac, fr->track.inlier_frac);
+        if (s == BF_OK && fr->track.outcome == TRACK_OK) s = bf_stats_push(&t->residual_mm, 1e3 * fr->track.residual_m);
+    }
+    if (fr->fused) {
+        if (s == BF_OK) s = bf_stats_push(&t->rof_ms, fr->ms_rof);
+        if (s == BF_OK) s = bf_stats_push(&t->raycast_ms, fr->ms_raycast);
+        if (s == BF_OK) s = bf_stats_push(&t->upload_ms, fr->fuse.upload);
+        if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, fr->fuse.alloc);
+        if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, fr->fuse.subcache);
+        if (s == BF_OK) s = bf_stats_push(&t->window_ms, fr->fuse.window);
+    }
+    return s;
+}
+
+typedef struct replay_result {
+    recon_counts counts;
+    app_map_report out;
+    replay_traj est, gt;   /* gt: the frames' own poses, when they have them */
+    bool has_ate;
+    eval_ate_result ate;
+    uint32_t n_views;
+    double seconds;
+    char device[256];
+} replay_result;
+
+typedef struct replay_report {
+    const replay_args *a;
+    const replay_result *r;
+    const replay_timing *t;
+} replay_report;
+
+static void json_series(FILE *f, const char *name, const bf_stats *s, const char *tail)
+{
+    fprintf(f, "\"%s\": {\"median\": ", name);
+    bf_json_number(f, bf_stats_percentile(s, 50), 5);
+    fprintf(f, ", \"p95\": ");
+    bf_json_number(f, bf_stats_percentile(s, 95), 5);
+    fprintf(f, ", \"mean\": ");
+    bf_json_number(f, bf_stats_mean(s), 5);
+    fprintf(f, "}%s", tail);
+}
+
+static void write_stats_json(FILE *f, const void *arg)
+{
+    const replay_report *rep = arg;
+    const replay_args *a = rep->a;
+    const replay_result *r = rep->r;
+    const replay_timing *t = rep->t;
+    const fusion_config *fc = &a->rcfg.fusion;
+    const track_config *tc = &a->rcfg.track;
+    fprintf(f, "{\n  \"command\": \"replay\",\n  \"sequence\": ");
+    bf_json_string(f, a->seq);
+    fprintf(f, ",\n  \"device\": ");
+    bf_json_string(f, r->device);
+    fprintf(f, ",\n  \"config\": {\"voxel_ratio\": %g, \"window\": %u, \"subcache\": %u, \"chunk_m\": %g, "
+               "\"max_level\": %u, \"brick_cap\": %u, \"icp_iterations\": [",
+            fc->voxel_ratio, fc->window, fc->subcache, fc->chunk_m, fc->max_level, fc->brick_cap);
+    for (uint32_t l = 0; l < tc->levels; l++) fprintf(f, "%s%u", l ? ", " : "", tc->iterations[l]);
+    fprintf(f, "], \"rof_iterations\": %u, \"rof_lambda0\": %g},\n", tc->rof_iterations, tc->rof_lambda0);
+    const recon_counts *c = &r->counts;
+    fprintf(f, "  \"frames\": %u,\n  \"tracking\": {\"tracked\": %u, \"lost\": %u, \"no_depth\": %u, "
+               "\"degenerate\": %u, \"pool_full\": %u, ",
+            c->frames, c->tracked, c->lost, c->no_depth, c->degenerate, c->pool_full);
+    json_series(f, "inlier_fraction", &t->inlier_frac, ", ");
+    json_series(f, "residual_mm", &t->residual_mm, "},\n");
+    fprintf(f, "  \"ate_m\": ");
+    if (r->has_ate) {
+        fprintf(f, "{\"rmse\": ");
+        bf_json_number(f, r->ate.trans.rmse, 6);
+        fprintf(f, ", \"mean\": ");
+        bf_json_number(f, r->ate.trans.mean, 6);
+        fprintf(f, ", \"median\": ");
+        bf_json_number(f, r->ate.trans.median, 6);
+        fprintf(f, ", \"max\": ");
+        bf_json_number(f, r->ate.trans.max, 6);
+        fprintf(f, ", \"pairs\": %zu},\n", r->ate.n_matched);
+    } else {
+        fprintf(f, "null,\n");
+    }
+    fprintf(f, "  ");
+    json_series(f, "frame_ms", &t->frame_ms, ",\n");
+    fprintf(f, "  \"gpu_stage_ms\": {");
+    json_series(f, "track", &t->track_ms, ", ");
+    json_series(f, "rof", &t->rof_ms, ", ");
+    json_series(f, "raycast", &t->raycast_ms, ", ");
+    json_series(f, "upload", &t->upload_ms, ", ");
+    json_series(f, "alloc", &t->alloc_ms, ", ");
+    json_series(f, "subcache", &t->subcache_ms, ", ");
+    json_series(f, "window", &t->window_ms, "},\n");
+    app_json_map(f, &r->out, fc->max_level);
+    fprintf(f, "  \"views\": %u,\n  \"seconds\": %.3f\n}\n", r->n_views, r->seconds);
+}
+
+static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, const bf_se3 *T_wc)
+{
+    char dir[4096], name[64], path[4096];
+    render_images im = {0};
+    bf_status s = bf_path_join(dir, sizeof dir, out_dir, "views");
+    if (s == BF_OK) s = bf_mkdir_p(dir);
+    if (s == BF_OK) s = recon_render_view(rc, T_wc);
+    if (s == BF_OK) s = render_download(recon_caster(rc), &im);
+    snprintf(name, sizeof name, "%06u.png", index);
+    if (s == BF_OK) s = bf_path_join(path, sizeof path, dir, name);
+    if (s == BF_OK) s = replay_png_write_rgb8(path, im.rgb, im.width, im.height);
+    render_images_free(&im);
+    return s;
+}
+
+static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr)
+{
+    bool ran = fr->state == RECON_TRACKED || fr->state == RECON_LOST;
+    fprintf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f\n", f->index, f->t_depth_s,
+            recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
+            ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
+            ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
+            ran ? fr->track.eig_min / (fr->track.eig_max > 0 ? fr->track.eig_max : 1) : 0.0, fr->ms_frame,
+            fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window);
+}
+
+/* Runs the loop over every frame of src. The loop is created at the first
+ * frame (its pose is the first ground-truth pose, or the identity). */
+static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_args *a, FILE *csv, recon **rc_out,
+                            replay_result *r, replay_timing *t)
+{
+    recon *rc = NULL;
+    bf_frame f;
+    bf_status s;
+    bf_progress prog;
+    bf_progress_begin(&prog, "replay", src->n_frames);
+    uint32_t seen = 0;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+        seen++;
+        if (!rc) {
+            bf_se3 T0 = (!a->init_identity && f.has_pose) ? f.T_wc : bf_se3_identity();
+            if ((s = recon_create(ctx, &a->rcfg, rgbd_source_intrinsics(src), &T0, &rc)) != BF_OK) break;
+        }
+        recon_frame_result fr;
+        if ((s = recon_add_frame(rc, &f, &fr)) != BF_OK) break;
+        if (fr.state == RECON_LOST)
+            bf_warn("replay: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm): not fused",
+                    f.index, f.t_depth_s, track_outcome_name(fr.track.outcome), 100 * fr.track.inlier_frac,
+                    1e3 * fr.track.residual_m);
+        else if (fr.state == RECON_NO_DEPTH)
+            bf_warn("replay: frame %u (t = %.6f): %u valid depth samples: skipped", f.index, f.t_depth_s, fr.n_valid);
+        csv_frame(csv, &f, &fr);
+        if ((s = timing_push(t, &fr)) != BF_OK) break;
+        if ((s = replay_traj_push(&r->est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
+        if (f.has_pose && (s = replay_traj_push(&r->gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
+        if (a->view_every && recon_map(rc) && f.index % a->view_every == 0) {
+            if ((s = write_view(rc, a->out, f.index, &fr.T_wc)) != BF_OK) break;
+            r->n_views++;
+        }
+        bf_progress_update(&prog, seen);
+    }
+    bf_progress_end(&prog, seen);
+    if (s == BF_END) {
+        s = rc && recon_map(rc) ? recon_flush(rc) : bf_fail(BF_FORMAT, "%s: no frame with depth", a->seq);
+    }
+    if (rc) r->counts = recon_get_counts(rc);
+    *rc_out = rc;
+    return s;
+}
+
+static void print_summary(const replay_args *a, const replay_result *r, const replay_timing *t)
+{
+    const recon_counts *c = &r->counts;
+    printf("bitfuse replay: %u frames on %s: %u tracked, %u lost, %u without depth (%u degenerate)\n", c->frames,
+           r->device, c->tracked, c->lost, c->no_depth, c->degenerate);
+    printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
+           "                   alloc %.1f, sub-cache %.1f, window %.1f ms)\n",
+           bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
+           bf_stats_percentile(&t->track_ms, 50), bf_stats_percentile(&t->rof_ms, 50),
+           bf_stats_percentile(&t->raycast_ms, 50), bf_stats_percentile(&t->alloc_ms, 50),
+           bf_stats_percentile(&t->subcache_ms, 50), bf_stats_percentile(&t->window_ms, 50));
+    if (r->has_ate)
+        printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu poses\n", r->ate.trans.rmse,
+               r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
+    else
+        printf("  trajectory       no ground truth: ATE not computed\n");
+    app_print_map(&r->out, a->rcfg.fusion.max_level);
+    printf("  wrote            %s/{trajectory.txt,frames.csv,%spoints.ply,stats.json} in %.1f s\n", a->out,
+           a->no_mesh ? "" : "mesh.ply,", r->seconds);
+}
+
+int cmd_replay(int argc, char **argv)
+{
+    const char *cmd = "replay";
+    replay_args a;
+    int rc_args = parse_args(argc, argv, &a);
+    if (rc_args) return rc_args < 0 ? APP_EXIT_OK : rc_args;
+    double t_start = bf_time_s();
+    replay_result r;
+    memset(&r, 0, sizeof r);
+    replay_timing t;
+    memset(&t, 0, sizeof t);
+    rgbd_source *src = NULL;
+    gpu_context *ctx = NULL;
+    recon *rc = NULL;
+    FILE *csv = NULL;
+    char path[4096];
+    bf_status s = bf_mkdir_p(a.out);
+    if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "frames.csv")) == BF_OK && !(csv = fopen(path, "w")))
+        s = bf_fail(BF_IO, "%s: cannot create", path);
+    if (csv)
+        fprintf(csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
+                     "frame_ms,track_ms,raycast_ms,fuse_ms\n");
+    gpu_config gcfg = {0};
+    if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
+    if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+    if (s == BF_OK) s = run_frames(ctx, src, &a, csv, &rc, &r, &t);
+    /* The trajectory first: it is what a crashed export must not lose. */
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
+        s = replay_traj_write_tum(path, &r.est);
+    if (s == BF_OK && r.gt.n >= 2 && eval_ate(&r.gt, &r.est, 0, &r.ate) == BF_OK) r.has_ate = true;
+    if (s == BF_OK) s = app_export_map(recon_map(rc), a.out, !a.no_mesh, &r.out);
+    r.seconds = bf_time_s() - t_start;
+    replay_report rep = {&a, &r, &t};
+    if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
+    if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
+    if (s == BF_OK) print_summary(&a, &r, &t);
+    recon_destroy(rc);
+    gpu_context_destroy(ctx);
+    rgbd_source_close(src);
+    replay_traj_free(&r.est);
+    replay_traj_free(&r.gt);
+    timing_free(&t);
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
+}
