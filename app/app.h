@@ -5,6 +5,7 @@
 
 #include <stdio.h>
 
+#include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
 #include "stream/stream.h"
@@ -55,5 +56,15 @@ int cmd_convert(int argc, char **argv);
 int cmd_live(int argc, char **argv);
 /* The body of record and live (cmd_record.c): live writes DIR/capture.bflog. */
 int app_record(const char *cmd, int argc, char **argv, bool is_live_cmd);
+/* cmd_record.c: opens uri (a live URI for capture_open, or a recorded
+ * sequence standing in for a camera, paced at its own frame rate with
+ * realtime) behind the capture thread with a queue of `queue` frames: a live
+ * or paced source drops the oldest frame when the consumer falls behind, a
+ * file read as fast as it decodes loses nothing. *is_live says which. */
+struct replay_options;
+bf_status app_open_device(const char *uri, const struct replay_options *ropt, bool realtime, uint32_t queue,
+                          bool *is_live, rgbd_source **out);
+/* cmd_replay.c: the full loop on a sequence (replay) or a device (live). */
+int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd);
 
 #endif

@@ -1,6 +1,5 @@
-/* bitfuse live: the reconstruction pipeline on a live source. Until the
- * tracking pipeline takes live input it records the source to
- * DIR/capture.bflog (saying so), exactly as `bitfuse record` does. */
+/* bitfuse live: the reconstruction loop on a live source (cmd_replay.c
+ * holds the loop; the device comes through the capture thread). */
 #include "app.h"
 
-int cmd_live(int argc, char **argv) { return app_record("live", argc, argv, true); }
+int cmd_live(int argc, char **argv) { return app_reconstruct("live", argc, argv, true); }

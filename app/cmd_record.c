@@ -244,14 +244,14 @@ static bf_status stats_path(const char *log_path, const char *live_dir, char *ou
     return BF_OK;
 }
 
-/* Opens the device and wraps it in the capture thread. */
-static bf_status open_device(const record_args *a, bool *is_live, rgbd_source **out)
+bf_status app_open_device(const char *uri, const replay_options *ropt, bool realtime, uint32_t queue, bool *is_live,
+                          rgbd_source **out)
 {
     rgbd_source *dev = NULL, *paced = NULL;
-    *is_live = is_live_uri(a->device);
-    bf_status s = *is_live ? capture_open(a->device, &dev) : replay_open(a->device, &a->ropt, &dev);
+    *is_live = is_live_uri(uri);
+    bf_status s = *is_live ? capture_open(uri, &dev) : replay_open(uri, ropt, &dev);
     if (s) return s;
-    if (!*is_live && a->realtime) {
+    if (!*is_live && realtime) {
         if ((s = paced_wrap(dev, &paced))) {
             rgbd_source_close(dev);
             return s;
@@ -260,9 +260,15 @@ static bf_status open_device(const record_args *a, bool *is_live, rgbd_source **
     }
     /* A camera (or a file played as one) must never wait for us; a file
      * read as fast as it decodes must not lose frames. */
-    s = *is_live || a->realtime ? capture_threaded(dev, a->queue, out) : capture_threaded_lossless(dev, a->queue, out);
+    s = *is_live || realtime ? capture_threaded(dev, queue, out) : capture_threaded_lossless(dev, queue, out);
     if (s) rgbd_source_close(dev);
     return s;
+}
+
+/* Opens the device and wraps it in the capture thread. */
+static bf_status open_device(const record_args *a, bool *is_live, rgbd_source **out)
+{
+    return app_open_device(a->device, &a->ropt, a->realtime, a->queue, is_live, out);
 }
 
 /* Records until the device ends, --frames is reached, or Ctrl-C. A device

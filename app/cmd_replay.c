@@ -1,7 +1,9 @@
-/* bitfuse replay: the full reconstruction loop (track, fuse, ray-cast,
- * smooth) on a recorded sequence; writes the estimated trajectory, the map's
- * mesh and points, per-frame tracking records and stats.json. */
+/* bitfuse replay and bitfuse live: the full reconstruction loop (track,
+ * fuse, ray-cast, smooth) on a recorded sequence or a live device; writes
+ * the estimated trajectory, the map's mesh and points, per-frame tracking
+ * records and stats.json. */
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -47,8 +49,30 @@ static const char replay_help[] =
     "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
     "3 bad input, 4 no Vulkan device\n";
 
+static const char live_help[] =
+    "usage: bitfuse live --device URI --out DIR [options]\n"
+    "\n"
+    "Runs the full loop (as bitfuse replay) on a live camera: a capture thread reads the\n"
+    "device into a bounded queue and drops the oldest frame when the loop falls behind\n"
+    "(counted in stats.json). Ctrl-C ends the scan: the map is flushed and everything is\n"
+    "written as after a replay. Writes the files of bitfuse replay into DIR.\n"
+    "\n"
+    "options:\n"
+    "  --device URI       freenect:N, openni2:[URI|FILE.oni], v4l2:/dev/videoN (docs/devices.md),\n"
+    "                     or a recorded sequence standing in for a camera\n"
+    "  --realtime         play a recorded sequence at its own frame rate, as a camera would\n"
+    "  --queue N          capture queue length in frames, default 8\n"
+    "  --record FILE      also record the frames the loop consumed into a bitfuse log\n"
+    "  and every option of bitfuse replay (--ratio, --window, --icp-iters, --view-every, ...)\n"
+    "\n"
+    "exit codes: 0 ok (also when stopped by Ctrl-C), 1 failure, 2 usage, 3 bad input or a\n"
+    "device error mid-scan (what was reconstructed is still written), 4 no device\n";
+
 typedef struct replay_args {
-    const char *seq, *out;
+    const char *seq, *out;   /* seq: the sequence, or the device URI (live) */
+    bool is_live_cmd, realtime;
+    uint32_t queue;
+    const char *record_path; /* live: also record into this log */
     bool init_identity;
     replay_options ropt;
     recon_config rcfg;
@@ -74,10 +98,11 @@ static bool parse_iters(const char *v, uint32_t it[TRACK_MAX_LEVELS], uint32_t *
     return true;
 }
 
-static int parse_args(int argc, char **argv, replay_args *a)
+static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, replay_args *a)
 {
-    const char *cmd = "replay";
     memset(a, 0, sizeof *a);
+    a->is_live_cmd = is_live_cmd;
+    a->queue = 8;
     a->rcfg = recon_config_default();
     for (int i = 1; i < argc; i++) {
         int r = replay_parse_option(argc, argv, &i, &a->ropt);
@@ -92,11 +117,21 @@ static int parse_args(int argc, char **argv, replay_args *a)
         fusion_config *fc = &a->rcfg.fusion;
         track_config *tc = &a->rcfg.track;
         if (app_is_help(o)) {
-            printf(replay_help, replay_options_help());
+            if (is_live_cmd) fputs(live_help, stdout);
+            else printf(replay_help, replay_options_help());
             return -1;
         } else if (!strcmp(o, "--no-mesh")) {
             a->no_mesh = true;
-        } else if (o[0] != '-') {
+        } else if (is_live_cmd && !strcmp(o, "--realtime")) {
+            a->realtime = true;
+        } else if (is_live_cmd && !strcmp(o, "--device") && v) {
+            a->seq = v, i++;
+        } else if (is_live_cmd && !strcmp(o, "--queue") && v && bf_parse_u32(v, &u) && u > 0) {
+            a->queue = u, i++;
+        } else if (is_live_cmd && !strcmp(o, "--record") && v) {
+            if (!replay_is_log_path(v)) return app_usage_error(cmd, "--record must name a .bflog file, not '%s'", v);
+            a->record_path = v, i++;
+        } else if (!is_live_cmd && o[0] != '-') {
             if (a->seq) return app_usage_error(cmd, "more than one sequence: %s", o);
             a->seq = o;
         } else if (!v) {
@@ -129,9 +164,21 @@ static int parse_args(int argc, char **argv, replay_args *a)
             return app_usage_error(cmd, "unknown option or bad value: %s %s", o, v);
         }
     }
-    if (!a->seq) return app_usage_error(cmd, "no sequence given");
+    if (!a->seq) return app_usage_error(cmd, is_live_cmd ? "--device is required" : "no sequence given");
     if (!a->out) return app_usage_error(cmd, "--out is required");
     return 0;
+}
+
+/* ------------------------------------------------------------ Ctrl-C (live) */
+
+static rgbd_source *volatile g_live_src;
+static volatile sig_atomic_t g_stopped;
+
+static void on_stop_signal(int sig)
+{
+    (void)sig;
+    g_stopped = 1;
+    capture_threaded_stop(g_live_src); /* an atomic flag: async-signal-safe */
 }
 
 /* Per-frame measurements over the run. */
@@ -181,6 +228,10 @@ typedef struct replay_result {
     uint32_t n_views;
     double seconds;
     char device[256];
+    bool has_capture;          /* live: the capture thread's counts */
+    capture_thread_stats cap;
+    bool interrupted;
+    uint32_t n_recorded;
 } replay_result;
 
 typedef struct replay_report {
@@ -208,7 +259,8 @@ static void write_stats_json(FILE *f, const void *arg)
     const replay_timing *t = rep->t;
     const fusion_config *fc = &a->rcfg.fusion;
     const track_config *tc = &a->rcfg.track;
-    fprintf(f, "{\n  \"command\": \"replay\",\n  \"sequence\": ");
+    fprintf(f, "{\n  \"command\": \"%s\",\n  \"%s\": ", a->is_live_cmd ? "live" : "replay",
+            a->is_live_cmd ? "source" : "sequence");
     bf_json_string(f, a->seq);
     fprintf(f, ",\n  \"device\": ");
     bf_json_string(f, r->device);
@@ -247,6 +299,11 @@ static void write_stats_json(FILE *f, const void *arg)
     json_series(f, "alloc", &t->alloc_ms, ", ");
     json_series(f, "subcache", &t->subcache_ms, ", ");
     json_series(f, "window", &t->window_ms, "},\n");
+    if (r->has_capture)
+        fprintf(f, "  \"capture\": {\"captured\": %llu, \"delivered\": %llu, \"dropped\": %llu, "
+                   "\"interrupted\": %s, \"recorded\": %u},\n",
+                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.delivered,
+                (unsigned long long)r->cap.dropped, r->interrupted ? "true" : "false", r->n_recorded);
     app_json_map(f, &r->out, fc->max_level);
     fprintf(f, "  \"views\": %u,\n  \"seconds\": %.3f\n}\n", r->n_views, r->seconds);
 }
@@ -279,8 +336,8 @@ static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr
 
 /* Runs the loop over every frame of src. The loop is created at the first
  * frame (its pose is the first ground-truth pose, or the identity). */
-static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_args *a, FILE *csv, recon **rc_out,
-                            replay_result *r, replay_timing *t)
+static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_args *a, FILE *csv,
+                            replay_log_writer *log, recon **rc_out, replay_result *r, replay_timing *t)
 {
     recon *rc = NULL;
     bf_frame f;
@@ -303,6 +360,10 @@ static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_arg
         else if (fr.state == RECON_NO_DEPTH)
             bf_warn("replay: frame %u (t = %.6f): %u valid depth samples: skipped", f.index, f.t_depth_s, fr.n_valid);
         csv_frame(csv, &f, &fr);
+        if (log) {
+            if ((s = replay_log_writer_add(log, &f)) != BF_OK) break;
+            r->n_recorded++;
+        }
         if ((s = timing_push(t, &fr)) != BF_OK) break;
         if ((s = replay_traj_push(&r->est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
         if (f.has_pose && (s = replay_traj_push(&r->gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
@@ -324,8 +385,12 @@ static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_arg
 static void print_summary(const replay_args *a, const replay_result *r, const replay_timing *t)
 {
     const recon_counts *c = &r->counts;
-    printf("bitfuse replay: %u frames on %s: %u tracked, %u lost, %u without depth (%u degenerate)\n", c->frames,
-           r->device, c->tracked, c->lost, c->no_depth, c->degenerate);
+    printf("bitfuse %s: %u frames on %s: %u tracked, %u lost, %u without depth (%u degenerate)\n",
+           a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->lost, c->no_depth, c->degenerate);
+    if (r->has_capture)
+        printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
+               (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
+               r->interrupted ? " (stopped by a signal)" : "");
     printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
            "                   alloc %.1f, sub-cache %.1f, window %.1f ms)\n",
            bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
@@ -342,11 +407,10 @@ static void print_summary(const replay_args *a, const replay_result *r, const re
            a->no_mesh ? "" : "mesh.ply,", r->seconds);
 }
 
-int cmd_replay(int argc, char **argv)
+int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
 {
-    const char *cmd = "replay";
     replay_args a;
-    int rc_args = parse_args(argc, argv, &a);
+    int rc_args = parse_args(cmd, is_live_cmd, argc, argv, &a);
     if (rc_args) return rc_args < 0 ? APP_EXIT_OK : rc_args;
     double t_start = bf_time_s();
     replay_result r;
@@ -356,10 +420,31 @@ int cmd_replay(int argc, char **argv)
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
     recon *rc = NULL;
+    replay_log_writer *log = NULL;
     FILE *csv = NULL;
     char path[4096];
+    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND}, old_int, old_term;
     bf_status s = bf_mkdir_p(a.out);
-    if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
+    if (s == BF_OK && is_live_cmd) {
+        bool is_live;
+        s = app_open_device(a.seq, &a.ropt, a.realtime, a.queue, &is_live, &src);
+        r.has_capture = s == BF_OK;
+        if (s == BF_OK) {
+            /* Ctrl-C ends the scan, not the program: what was seen is kept. */
+            g_live_src = src;
+            g_stopped = 0;
+            sigemptyset(&sa.sa_mask);
+            sigaction(SIGINT, &sa, &old_int);
+            sigaction(SIGTERM, &sa, &old_term);
+        }
+    } else if (s == BF_OK) {
+        s = replay_open(a.seq, &a.ropt, &src);
+    }
+    if (s == BF_OK && a.record_path) {
+        replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
+                                .has_groundtruth = src->has_groundtruth};
+        s = replay_log_writer_create(a.record_path, rgbd_source_intrinsics(src), &lc, &log);
+    }
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "frames.csv")) == BF_OK && !(csv = fopen(path, "w")))
         s = bf_fail(BF_IO, "%s: cannot create", path);
     if (csv)
@@ -368,7 +453,27 @@ int cmd_replay(int argc, char **argv)
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
-    if (s == BF_OK) s = run_frames(ctx, src, &a, csv, &rc, &r, &t);
+    bf_status s_dev = BF_OK;
+    if (s == BF_OK) {
+        s = run_frames(ctx, src, &a, csv, log, &rc, &r, &t);
+        /* A device that failed mid-scan keeps what was reconstructed so far. */
+        if (s != BF_OK && is_live_cmd && rc && recon_map(rc) && s != BF_VULKAN && s != BF_NO_MEMORY) {
+            s_dev = s;
+            bf_warn("%s: %s: device failed (%s); writing what was reconstructed", cmd, a.seq, bf_last_error());
+            s = recon_flush(rc);
+        }
+    }
+    if (is_live_cmd && r.has_capture) {
+        r.cap = capture_threaded_stats(src);
+        r.interrupted = g_stopped;
+        sigaction(SIGINT, &old_int, NULL);
+        sigaction(SIGTERM, &old_term, NULL);
+        g_live_src = NULL;
+    }
+    if (log) {
+        bf_status s_log = replay_log_writer_finish(log);
+        if (s == BF_OK) s = s_log;
+    }
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
         s = replay_traj_write_tum(path, &r.est);
@@ -379,11 +484,15 @@ int cmd_replay(int argc, char **argv)
     if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
     if (s == BF_OK) print_summary(&a, &r, &t);
+    replay_log_writer_destroy(log);
     recon_destroy(rc);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
     replay_traj_free(&r.est);
     replay_traj_free(&r.gt);
     timing_free(&t);
+    if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
+
+int cmd_replay(int argc, char **argv) { return app_reconstruct("replay", argc, argv, false); }

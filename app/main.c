@@ -19,7 +19,7 @@ static const app_command commands[] = {
     {"info", cmd_info, "read a sequence and print what it holds"},
     {"record", cmd_record, "record a camera (or a sequence) into a bitfuse log (.bflog)"},
     {"convert", cmd_convert, "convert a sequence or log into a TUM folder or a bitfuse log"},
-    {"live", cmd_live, "reconstruct from a live camera (for now: records it to DIR/capture.bflog)"},
+    {"live", cmd_live, "track and fuse a live camera (the full loop); Ctrl-C ends the scan"},
     {"eval-traj", cmd_eval_traj, "trajectory error: ATE and RPE (TUM benchmark rules)"},
     {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},
     {"devices", cmd_devices, "list Vulkan devices and say which one bitfuse uses"},

@@ -197,11 +197,33 @@ python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['interrupt
     "$T/int.stats.json" || fail "interrupted record: stats.json"
 expect 0 "$B" info "$T/int.bflog"
 
-# live records until the pipeline takes live input, and says so.
-expect 0 "$B" live --device "$T/seq" --out "$T/live"
-mentions "recording to $T/live/capture.bflog"
+# replay: the full loop; one trajectory line per input frame, stats.json
+# with tracking counts and the ATE against the sequence's ground truth.
+expect 0 "$B" replay "$T/seq" --out "$T/rp" --view-every 2
+is_json "$T/rp/stats.json"
+[ "$(grep -vc '^#' "$T/rp/trajectory.txt")" = 3 ] || fail "replay: trajectory.txt has not 3 poses"
+[ -s "$T/rp/views/000000.png" ] || fail "replay --view-every 2: no view of frame 0"
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); t=d['tracking']; assert d['frames'] == 3 and t['tracked'] + t['lost'] + t['no_depth'] == 3 and d['ate_m'] is not None, d" \
+    "$T/rp/stats.json" || fail "replay stats.json: frames/tracking/ate"
+expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/rp/trajectory.txt" --json
+expect 2 "$B" replay "$T/seq"
+mentions "--out is required"
+expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
+expect 3 "$B" replay "$T/missing" --out "$T/rp3"
+mentions "$T/missing"
+
+# live: the same loop on a device (here a recording standing in for one),
+# recording what it consumed on the side.
+expect 0 "$B" live --device "$T/seq" --out "$T/live" --record "$T/live.bflog"
 is_json "$T/live/stats.json"
-expect 0 "$B" info "$T/live/capture.bflog"
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['command'] == 'live' and d['capture']['captured'] == 3 and d['capture']['recorded'] == 3, d" \
+    "$T/live/stats.json" || fail "live stats.json: capture counts"
+[ "$(grep -vc '^#' "$T/live/trajectory.txt")" = 3 ] || fail "live: trajectory.txt has not 3 poses"
+expect 0 "$B" info "$T/live.bflog"
+expect 2 "$B" live --out "$T/live2"
+mentions "--device is required"
+expect 4 "$B" live --device "v4l2:$T/no-such-video" --out "$T/live3"
+mentions "$T/no-such-video"
 # Bad command lines and devices.
 expect 2 "$B" record --device "$T/seq" --out "$T/x.ply"
 mentions "--out must name a .bflog file"
@@ -213,7 +235,7 @@ expect 3 "$B" record --device "$T/missing" --out "$T/x.bflog"
 mentions "$T/missing"
 expect 4 "$B" record --device "v4l2:$T/no-such-video" --out "$T/x.bflog"
 mentions "$T/no-such-video"
-for c in record convert live; do expect 0 "$B" $c --help; done
+for c in record convert live replay; do expect 0 "$B" $c --help; done
 
 [ $fails = 0 ] && echo "all CLI checks passed"
 [ $fails = 0 ]
