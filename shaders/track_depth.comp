@@ -3,7 +3,8 @@
  * 1, preprocess): u16 sensor units times unit_m, or float metres (a
  * ray-cast reference). 0, NaN, infinite, negative or beyond max_depth_m
  * become 0 (no depth). Counts the valid pixels into counters[pc.counter]:
- * one atomic per workgroup. */
+ * one atomic per workgroup. With TRACK_FLAG_ROF_F the depth also goes to
+ * rof_f, the ROF's input. */
 #extension GL_GOOGLE_include_directive : require
 #include "track.glsl.h"
 
@@ -12,6 +13,7 @@ BF_LOCAL_SIZE_FROM_SPEC
 layout(std430, binding = 0) readonly buffer Raw { uint w[]; } raw;
 layout(std430, binding = 1) buffer Depth { float d[]; } depth;
 layout(std430, binding = 4) buffer Counters { uint c[]; } counters;
+layout(std430, binding = 7) writeonly buffer RofF { float d[]; } rof_f;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 
@@ -19,10 +21,13 @@ shared uint s_valid;
 
 void main()
 {
-    uint i = gl_GlobalInvocationID.x;
+    /* 2D dispatch: x and y without an integer division (lavapipe runs
+     * vector integer divisions lane by lane). */
+    uvec2 xy = gl_GlobalInvocationID.xy;
+    uint i = xy.y * pc.width + xy.x;
     if (gl_LocalInvocationIndex == 0u) s_valid = 0u;
     barrier();
-    if (i < pc.width * pc.height) {
+    if (xy.x < pc.width && xy.y < pc.height) {
         float z;
         if (pc.mode == TRACK_RAW_U16) {
             uint v = (raw.w[i >> 1] >> ((i & 1u) * 16u)) & 0xFFFFu;
@@ -34,6 +39,8 @@ void main()
          * assume finite math. */
         bool ok = z > 0.0 && z <= pc.max_depth_m && !isnan(z) && !isinf(z);
         depth.d[pc.dst_off + i] = ok ? z : 0.0;
+        /* The ROF's data term: its output overwrites the depth. */
+        if ((pc.flags & TRACK_FLAG_ROF_F) != 0u) rof_f.d[i] = ok ? z : 0.0;
         if (ok) atomicAdd(s_valid, 1u);
     }
     barrier();

@@ -14,9 +14,9 @@ layout(push_constant) uniform Push { track_image_push pc; };
 
 void main()
 {
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= pc.width * pc.height) return;
-    uint x = i % pc.width, y = i / pc.width;
+    uint x = gl_GlobalInvocationID.x, y = gl_GlobalInvocationID.y;
+    if (x >= pc.width || y >= pc.height) return;
+    uint i = y * pc.width + x;
     float z[4];
     float zmin = 1e30;
     for (uint k = 0u; k < 4u; k++) {

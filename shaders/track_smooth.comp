@@ -26,9 +26,9 @@ float src(uint i) { return pc.mode == 0u ? depth.d[i] : scratch.d[i]; }
 
 void main()
 {
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= pc.width * pc.height) return;
-    int x = int(i % pc.width), y = int(i / pc.width);
+    if (gl_GlobalInvocationID.x >= pc.width || gl_GlobalInvocationID.y >= pc.height) return;
+    int x = int(gl_GlobalInvocationID.x), y = int(gl_GlobalInvocationID.y);
+    uint i = uint(y) * pc.width + uint(x);
     uint o = pc.dst_off;
     float z = src(o + i);
     float out_z = 0.0;

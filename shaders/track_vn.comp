@@ -25,9 +25,9 @@ vec3 unproject(uint x, uint y, float z)
 
 void main()
 {
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= pc.width * pc.height) return;
-    uint x = i % pc.width, y = i / pc.width;
+    uint x = gl_GlobalInvocationID.x, y = gl_GlobalInvocationID.y;
+    if (x >= pc.width || y >= pc.height) return;
+    uint i = y * pc.width + x;
     uint o = pc.dst_off;
     float z = depth.d[o + i];
     vec4 v = vec4(0.0), n = vec4(0.0);

@@ -1,7 +1,7 @@
 /* Depth conversion, pyramids, vertex and normal maps, and the ROF
  * smoothing of the reference: host side of shaders/track_depth.comp,
  * track_pyrdown.comp, track_vn.comp, track_rof.comp and
- * track_rof_primal.comp (one binding layout, shaders/track.glsl.h). */
+ * track_rof_tile.comp (one binding layout, shaders/track.glsl.h). */
 #include <math.h>
 #include <string.h>
 
@@ -9,7 +9,7 @@
 #include "tracking_int.h"
 
 static bf_status image_pipeline(track_tracker *t, const char *name, const uint32_t *spirv, size_t bytes,
-                                gpu_pipeline **out)
+                                uint32_t tile, gpu_pipeline **out)
 {
     gpu_pipeline_desc d = {
         .name = name,
@@ -17,7 +17,7 @@ static bf_status image_pipeline(track_tracker *t, const char *name, const uint32
         .spirv_bytes = bytes,
         .n_buffers = TRACK_IMAGE_BUFFERS,
         .push_bytes = sizeof(track_image_push),
-        .local_size = {TRACK_IMAGE_LOCAL, 1, 1},
+        .local_size = {tile, tile, 1},
     };
     return gpu_pipeline_create(t->ctx, &d, out);
 }
@@ -34,6 +34,7 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
         t->counters,
         t->rof_p[p_in],
         t->rof_p[1 - p_in],
+        t->rof_f,
     };
     for (uint32_t i = 0; i < TRACK_IMAGE_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(*out, i, bufs[i], 0, GPU_WHOLE_SIZE);
     return s;
@@ -42,17 +43,16 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
 bf_status track__pyramid_create(track_tracker *t)
 {
     bf_status s;
-    if ((s = image_pipeline(t, "track.depth", bf_spv_track_depth, bf_spv_track_depth_size, &t->p_depth)) != BF_OK)
+    if ((s = image_pipeline(t, "track.depth", bf_spv_track_depth, bf_spv_track_depth_size, TRACK_IMAGE_TILE, &t->p_depth)) != BF_OK)
         return s;
-    if ((s = image_pipeline(t, "track.pyrdown", bf_spv_track_pyrdown, bf_spv_track_pyrdown_size, &t->p_pyrdown)) !=
+    if ((s = image_pipeline(t, "track.pyrdown", bf_spv_track_pyrdown, bf_spv_track_pyrdown_size, TRACK_IMAGE_TILE, &t->p_pyrdown)) !=
         BF_OK)
         return s;
-    if ((s = image_pipeline(t, "track.smooth", bf_spv_track_smooth, bf_spv_track_smooth_size, &t->p_smooth)) != BF_OK)
+    if ((s = image_pipeline(t, "track.smooth", bf_spv_track_smooth, bf_spv_track_smooth_size, TRACK_IMAGE_TILE, &t->p_smooth)) != BF_OK)
         return s;
-    if ((s = image_pipeline(t, "track.vn", bf_spv_track_vn, bf_spv_track_vn_size, &t->p_vn)) != BF_OK) return s;
-    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof, bf_spv_track_rof_size, &t->p_rof)) != BF_OK) return s;
-    if ((s = image_pipeline(t, "track.rof_primal", bf_spv_track_rof_primal, bf_spv_track_rof_primal_size,
-                            &t->p_primal)) != BF_OK)
+    if ((s = image_pipeline(t, "track.vn", bf_spv_track_vn, bf_spv_track_vn_size, TRACK_IMAGE_TILE, &t->p_vn)) != BF_OK) return s;
+    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof_tile, bf_spv_track_rof_tile_size, TRACK_ROF_LOCAL_XY,
+                            &t->p_rof)) != BF_OK)
         return s;
     if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
     for (uint32_t k = 0; k < 2; k++) {
@@ -64,8 +64,7 @@ bf_status track__pyramid_create(track_tracker *t)
             return s;
     }
     /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
-    return gpu_pipeline_warm_up(t->ctx, (gpu_pipeline *[]){t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal},
-                                6);
+    return gpu_pipeline_warm_up(t->ctx, (gpu_pipeline *[]){t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof}, 5);
 }
 
 void track__pyramid_destroy(track_tracker *t)
@@ -76,14 +75,13 @@ void track__pyramid_destroy(track_tracker *t)
         t->b_ref_gpu[k] = t->b_ref_up[k] = NULL;
     }
     gpu_bindings_destroy(t->b_frame);
-    gpu_pipeline_destroy(t->p_primal);
     gpu_pipeline_destroy(t->p_rof);
     gpu_pipeline_destroy(t->p_vn);
     gpu_pipeline_destroy(t->p_smooth);
     gpu_pipeline_destroy(t->p_pyrdown);
     gpu_pipeline_destroy(t->p_depth);
     t->b_frame = NULL;
-    t->p_primal = t->p_rof = t->p_vn = t->p_smooth = t->p_pyrdown = t->p_depth = NULL;
+    t->p_rof = t->p_vn = t->p_smooth = t->p_pyrdown = t->p_depth = NULL;
 }
 
 bf_status track__upload_depth(track_tracker *t, const uint16_t *depth)
@@ -110,7 +108,11 @@ static track_image_push base_push(const track_tracker *t, uint32_t l)
     return pc;
 }
 
-static uint32_t groups(const track_image_push *pc) { return gpu_groups(pc->width * pc->height, TRACK_IMAGE_LOCAL); }
+/* The image kernels run on 2D tiles (no integer division for x, y). */
+static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const track_image_push *pc)
+{
+    gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE), gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
+}
 
 /* Depth of level 0 from the raw input, levels above, then vertex and
  * normal maps of every level, through binding set b. */
@@ -119,7 +121,7 @@ static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t mode, uint32_t
     track_image_push pc = base_push(t, 0);
     pc.mode = mode;
     pc.counter = counter;
-    gpu_cmd_dispatch(t->ctx, t->p_depth, b, &pc, groups(&pc), 1, 1);
+    dispatch(t, t->p_depth, b, &pc);
 }
 
 static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
@@ -130,7 +132,7 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
         track_image_push pc = base_push(t, l);
         pc.src_off = t->geom.off[l - 1];
         pc.src_width = t->geom.w[l - 1];
-        gpu_cmd_dispatch(t->ctx, t->p_pyrdown, b, &pc, groups(&pc), 1, 1);
+        dispatch(t, t->p_pyrdown, b, &pc);
     }
     for (uint32_t pass = 0; pass < 2; pass++) {
         /* The depth pyramid's (pass 0) or the horizontal pass's (pass 1)
@@ -139,14 +141,14 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
         for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
             track_image_push pc = base_push(t, l);
             pc.mode = pass;
-            gpu_cmd_dispatch(t->ctx, t->p_smooth, b, &pc, groups(&pc), 1, 1);
+            dispatch(t, t->p_smooth, b, &pc);
         }
     }
     /* The smoothed depth's writes -> the vertex and normal maps' reads. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
     for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
         track_image_push pc = base_push(t, l);
-        gpu_cmd_dispatch(t->ctx, t->p_vn, b, &pc, groups(&pc), 1, 1);
+        dispatch(t, t->p_vn, b, &pc);
     }
     /* Vertex and normal writes -> ICP's reads (and the host's downloads). */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
@@ -165,25 +167,28 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
     gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
     uint32_t n_it = t->cfg.rof_iterations;
     gpu_cmd_stage_begin(t->ctx, "track.ref");
-    gpu_cmd_fill(t->ctx, t->rof_p[0], 0, GPU_WHOLE_SIZE, 0);
-    /* The zero dual field -> the first ROF iteration's reads. */
-    gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    cmd_depth(t, b[0], from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
+    track_image_push pc = base_push(t, 0);
+    pc.mode = from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16;
+    pc.counter = TRACK_CNT_REF_VALID;
+    pc.flags = n_it > 0 ? TRACK_FLAG_ROF_F : 0;
+    dispatch(t, t->p_depth, b[0], &pc);
     gpu_cmd_stage_end(t->ctx);
 
+    /* TRACK_ROF_K iterations per dispatch on shared-memory tiles with a
+     * halo (track_rof_tile.comp), the primal folded into the last: 10
+     * iterations are 2 dispatches instead of 11 full-image passes. */
     gpu_cmd_stage_begin(t->ctx, "track.rof");
-    track_image_push pc = base_push(t, 0);
-    uint32_t g = groups(&pc);
-    for (uint32_t it = 0; it < n_it; it++) {
-        /* The depth (first) or the previous iteration's dual writes -> this
-         * iteration's reads. */
+    pc = base_push(t, 0);
+    uint32_t gx = (pc.width + TRACK_ROF_TILE - 1) / TRACK_ROF_TILE, gy = (pc.height + TRACK_ROF_TILE - 1) / TRACK_ROF_TILE;
+    for (uint32_t done = 0, j = 0; done < n_it; j++) {
+        uint32_t k = n_it - done < TRACK_ROF_K ? n_it - done : TRACK_ROF_K;
+        pc.mode = k;
+        pc.flags = (done > 0 ? TRACK_FLAG_ROF_LOAD : 0) | (done + k == n_it ? TRACK_FLAG_ROF_FINAL : 0);
+        /* f (first) or the previous dispatch's dual field -> this one's
+         * reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        gpu_cmd_dispatch(t->ctx, t->p_rof, b[it & 1u], &pc, g, 1, 1);
-    }
-    if (n_it > 0) {
-        /* The last dual field -> the primal solution reading it. */
-        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        gpu_cmd_dispatch(t->ctx, t->p_primal, b[n_it & 1u], &pc, g, 1, 1);
+        gpu_cmd_dispatch(t->ctx, t->p_rof, b[j & 1u], &pc, gx, gy, 1);
+        done += k;
     }
     gpu_cmd_stage_end(t->ctx);
 

@@ -134,11 +134,12 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     if ((s = buffer(t, "track.ref_normal", np * 16, GPU_MEMORY_DEVICE, &t->ref_normal)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[0]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[0])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[1]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[1])) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.rof_f", n0 * 4, GPU_MEMORY_DEVICE, &t->rof_f)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
     gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_vertex, t->frame_normal, t->ref_depth,
-                          t->ref_vertex, t->ref_normal, t->rof_p[0], t->rof_p[1], t->counters};
+                          t->ref_vertex, t->ref_normal, t->rof_p[0], t->rof_p[1], t->rof_f, t->counters};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
     if (s != BF_OK) goto fail;
     if ((s = track__pyramid_create(t)) != BF_OK) goto fail;
@@ -155,7 +156,7 @@ void track_destroy(track_tracker *t)
     if (!t) return;
     track__icp_destroy(t);
     track__pyramid_destroy(t);
-    gpu_buffer *bufs[] = {t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_vertex, t->ref_depth,
+    gpu_buffer *bufs[] = {t->counters, t->rof_f, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_vertex, t->ref_depth,
                           t->frame_normal, t->frame_vertex, t->frame_depth, t->ref_in, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
@@ -199,6 +200,7 @@ static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16
     track__cmd_reference(t, depth != NULL);
     if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
     t->ms_rof = stage_ms(t->ctx, "track.rof");
+    t->ms_ref = t->ms_rof + stage_ms(t->ctx, "track.ref");
     uint32_t n = 0;
     if ((s = read_counter(t, TRACK_CNT_REF_VALID, &n)) != BF_OK) return s;
     t->ref_valid = n;
@@ -243,7 +245,7 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     bf_status s = check_frame(t, f);
     if (s != BF_OK) return s;
     if (!bf_se3_is_finite(guess_wc)) return bf_fail(BF_INVALID_ARG, "tracking: frame %u: guess is not finite", f->index);
-    track_result r = {.outcome = TRACK_OK, .T_wc = *guess_wc, .ms_rof = t->ms_rof};
+    track_result r = {.outcome = TRACK_OK, .T_wc = *guess_wc, .ms_rof = t->ms_rof, .ms_ref = t->ms_ref};
     if (!t->has_ref) {
         r.outcome = TRACK_NO_REFERENCE;
         *out = r;
@@ -254,7 +256,7 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     if ((s = gpu_begin(t->ctx)) != BF_OK) return s;
     track__cmd_frame_pyramid(t);
     if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
-    r.ms_gpu = stage_ms(t->ctx, "track.frame");
+    r.ms_gpu = r.ms_frame = stage_ms(t->ctx, "track.frame");
     uint32_t n_depth = 0;
     if ((s = read_counter(t, TRACK_CNT_FRAME_VALID, &n_depth)) != BF_OK) return s;
     r.n_valid = n_depth;

@@ -73,6 +73,8 @@ typedef struct track_result {
     uint32_t iterations; /* run in all levels */
     double ms_gpu;       /* GPU time of the tracking (pyramids + ICP), ms */
     double ms_rof;       /* GPU time of the last reference smoothing, ms */
+    double ms_frame;     /* GPU time of the frame's preprocessing (depth, pyramids, normals), ms; in ms_gpu */
+    double ms_ref;       /* GPU time of the last reference preparation (ROF, pyramids, normals), ms */
 } track_result;
 
 /* ctx is borrowed. Frames and references have K's size. */

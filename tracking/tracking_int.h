@@ -5,10 +5,10 @@
 #include "shaders/track.glsl.h"
 #include "tracking.h"
 
-/* Local sizes: 64 invocations for the per-pixel image kernels; the ICP
+/* Local sizes: 8x8 tiles for the per-pixel image kernels; the ICP
  * kernel's workgroup and the pixels each invocation walks are chosen at
  * create (icp.c). */
-#define TRACK_IMAGE_LOCAL 64u
+#define TRACK_IMAGE_TILE 8u
 
 /* A pyramid's geometry: level l is w[l] x h[l] pixels at pixel offset
  * off[l]; n_pix pixels in all. */
@@ -31,10 +31,11 @@ struct track_tracker {
     gpu_buffer *frame_depth, *frame_vertex, *frame_normal;
     gpu_buffer *ref_depth, *ref_vertex, *ref_normal;
     gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
+    gpu_buffer *rof_f;         /* the reference's unsmoothed finest depth, the ROF's input */
     gpu_buffer *counters;      /* TRACK_CNT_* */
     gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
 
-    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp;
+    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_icp;
     /* Image binding sets: frame from the upload, reference from the upload
      * (raw frame) or ref_in (GPU depth) with the dual fields 0 -> 1 and
      * 1 -> 0. */
@@ -51,6 +52,7 @@ struct track_tracker {
     bf_se3 T_wr;               /* camera to world of the reference */
     uint32_t ref_valid;        /* valid depth pixels at the finest level */
     double ms_rof;             /* GPU time of the last smoothing */
+    double ms_ref;             /* GPU time of the last reference preparation (smoothing included) */
 };
 
 /* tracker.c: the geometry of level l from K. */
