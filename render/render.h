@@ -5,9 +5,9 @@
  * chunk that exists an octree DDA with a short stack (restart from the root
  * on underflow) down to the finest existing brick, and in the brick a
  * brick traverser. The `surface` traverser steps voxel by voxel until the
- * sign bit changes from front (1) to behind (0); for tracking the hit is
- * refined between the two voxel centres, for display only confident voxels
- * count. The traverser is one GLSL function behind one seam
+ * sign bit changes from front (1) to behind (0); the hit is refined to the
+ * zero of a smoothed sign field on the ray (sub-voxel: ICP needs it), for
+ * display only confident voxels count. The traverser is one GLSL function behind one seam
  * (shaders/render_traverse.glsl.h) so the particle and mesh renderers can
  * reuse the chunk and octree walk with their own.
  *
@@ -25,7 +25,7 @@ typedef struct render_caster render_caster; /* opaque */
 
 typedef struct render_options {
     bool confident_only; /* display: only confident voxels are surface; tracking: every sign bit */
-    bool refine;         /* hit between the two voxel centres where the sign changes (tracking) */
+    bool refine;         /* sub-voxel hit: zero of the smoothed sign field on the ray (docs/render.md) */
     float near_m, far_m; /* ray range along the optical axis, default 0.2 / 6 */
 } render_options;
 

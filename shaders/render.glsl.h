@@ -39,6 +39,16 @@
  * above what a 6 m ray through a room visits (a few hundred). */
 #define RENDER_MAX_CELLS 4096u
 
+/* Sub-voxel refinement of a tracking hit (render_raycast.comp's
+ * subvoxel_depth, tests/render/raycast_ref.c in double): Newton steps on the
+ * smoothed sign field along the ray, each step at most
+ * RENDER_SUBVOXEL_MAX_STEP voxels along the ray, the result at most
+ * RENDER_SUBVOXEL_MAX_MOVE steps from the midpoint start (render.md: two
+ * steps within a voxel left a noisy map's bias, 4 within 3 remove it). */
+#define RENDER_SUBVOXEL_ITERS 4u
+#define RENDER_SUBVOXEL_MAX_STEP 1.0f
+#define RENDER_SUBVOXEL_MAX_MOVE 3.0f
+
 /* Push constants of render_raycast.comp and render_shade.comp. */
 struct render_push {
     bf_f32 R[9];             /* camera to map rotation, row-major */
@@ -63,9 +73,10 @@ _Static_assert(__builtin_offsetof(render_push, chunk_m) == 80, "render_push.chun
 _Static_assert(__builtin_offsetof(render_push, flags) == 96, "render_push.flags");
 #endif
 
-/* The refined hit depth: halfway, in camera depth, between the centre of
- * the last front voxel and that of the first voxel behind (render.md says
- * why camera depth rather than the projection onto the ray). */
+/* The start of the sub-voxel refinement: halfway, in camera depth, between
+ * the centre of the last front voxel and that of the first voxel behind
+ * (render.md says why camera depth rather than the projection onto the
+ * ray). */
 BF_FN bf_f32 render_refine_depth(bf_f32 front_depth, bf_f32 behind_depth)
 {
     BF_PRECISE bf_f32 d = 0.5f * (front_depth + behind_depth);

@@ -72,6 +72,136 @@ float cell_exit(render_ray ray, vec3 lo, float size)
     return min(s.x, min(s.y, s.z));
 }
 
+/* ---------------------------------------------------- sub-voxel refinement
+ *
+ * The sign bits put a surface somewhere between two voxel centres, so the
+ * midpoint hit is a staircase of voxel-sized plateaus on any slanted surface,
+ * which point-to-plane ICP cannot tell from a tilted or shifted plane (it
+ * pulled a static camera ~1 voxel off). Averaging the bits over a
+ * neighbourhood recovers the sub-voxel position: the 3x3x3 mean of the signs
+ * (+1 front, -1 behind, over the known voxels only) at the voxel centres,
+ * interpolated trilinearly between the centres, is a smooth field F whose
+ * zero set follows a plane to a fraction of a voxel (the kernel, a box of 3
+ * convolved with the trilinear tent, is flat over +-1 voxel along an axis,
+ * so the filtered step is linear there; stream/export_mesh.c places mesh
+ * vertices on the same field). The refined depth is that of F's zero on the
+ * ray, found by Newton steps from the midpoint. On a plane parallel to the
+ * image the field is symmetric about the face between the voxel layers, so
+ * such a plane stays exactly flat at that face. */
+
+/* Slot of the brick at `level` with brick coordinate b (brick units from the
+ * map origin on that level's grid), FUSION_NONE when the node or its brick
+ * does not exist. Only this level counts: another level's voxels have
+ * another size, and leaving them unknown costs only a few samples where
+ * levels meet. */
+uint brick_at(ivec3 b, uint level)
+{
+    ivec3 key = b >> int(level);
+    uint e = find_chunk(key);
+    if (e == FUSION_NONE) return FUSION_NONE;
+    uvec3 cell = uvec3(b - (key << int(level)));
+    uint node = hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
+    for (uint l = 1u; l <= level; l++) {
+        uint child = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_CHILD];
+        if (child >= FUSION_LOCKED) return FUSION_NONE;
+        uvec3 c = cell >> (level - l);
+        node = child + fusion_octant(c.x, c.y, c.z);
+    }
+    uint slot = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_BRICK];
+    return slot < FUSION_LOCKED ? slot : FUSION_NONE;
+}
+
+/* Sign and known bits of the 4x4x4 voxels [B, B + 3] of `level` (voxel
+ * coordinates from the map origin), bit x + 4y + 16z of a 64-bit word kept
+ * as two uints. A voxel is known when its brick exists (and, confident_only,
+ * it is confident). Rows along x are read a nibble (4 voxels, one sub-brick
+ * row) at a time: 32 word reads for 64 voxels. */
+void gather_block(ivec3 B, uint level, uint hit_slot, ivec3 hit_brick, bool confident_only, out uvec2 sgn,
+                  out uvec2 known)
+{
+    ivec3 b0 = B >> 3, b1 = (B + 3) >> 3;
+    uint slots[8];
+    for (uint i = 0u; i < 8u; i++) {
+        ivec3 b = b0 + ivec3(int(i & 1u), int((i >> 1) & 1u), int(i >> 2));
+        slots[i] = FUSION_NONE;
+        if (all(lessThanEqual(b, b1))) slots[i] = b == hit_brick ? hit_slot : brick_at(b, level);
+    }
+    sgn = uvec2(0u);
+    known = uvec2(0u);
+    int x0 = B.x & ~3;
+    uint xs = uint(B.x - x0);
+    for (uint r = 0u; r < 16u; r++) {
+        int Y = B.y + int(r & 3u), Z = B.z + int(r >> 2);
+        uint row_s = 0u, row_k = 0u;
+        for (uint h = 0u; h < 2u; h++) {
+            ivec3 X = ivec3(x0 + 4 * int(h), Y, Z);
+            ivec3 bb = (X >> 3) - b0;
+            uint slot = slots[bb.x + 2 * bb.y + 4 * bb.z];
+            if (slot != FUSION_NONE) {
+                uvec3 l = uvec3(X & 7);
+                uint w = brick_word(l.x, l.y, l.z), sh = brick_bit(l.x, l.y, l.z);
+                uint k = confident_only ? (render_conf_word(slot, w) >> sh) & 15u : 15u;
+                row_s |= ((render_sign_word(slot, w) >> sh) & k) << (4u * h);
+                row_k |= k << (4u * h);
+            }
+        }
+        uint sh = 4u * (r & 3u) + 16u * ((r >> 2) & 1u);
+        if ((r >> 3) == 0u) {
+            sgn.x |= ((row_s >> xs) & 15u) << sh;
+            known.x |= ((row_k >> xs) & 15u) << sh;
+        } else {
+            sgn.y |= ((row_s >> xs) & 15u) << sh;
+            known.y |= ((row_k >> xs) & 15u) << sh;
+        }
+    }
+}
+
+/* Depth of the zero of the smoothed sign field on the ray, from the
+ * midpoint depth s0 of the two voxel centres of a hit in brick (slot,
+ * brick) at level. */
+float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s0, bool confident_only)
+{
+    float v = fusion_voxel_m(pc.chunk_m, level), inv_v = 1.0 / v;
+    float step_max = RENDER_SUBVOXEL_MAX_STEP * v / length(ray.dir);
+    float lo = s0 - RENDER_SUBVOXEL_MAX_MOVE * step_max, hi = s0 + RENDER_SUBVOXEL_MAX_MOVE * step_max;
+    float s = s0;
+    ivec3 G = ivec3(0x7FFFFFFF);
+    float S[8];
+    for (uint it = 0u; it < RENDER_SUBVOXEL_ITERS; it++) {
+        /* Voxel-centre coordinates: centre of voxel i at q = i. */
+        vec3 q = (ray.o + s * ray.dir) * inv_v - 0.5;
+        ivec3 Gn = ivec3(floor(q));
+        if (Gn != G) {
+            /* The 3x3x3 means at the 8 centres around the point: boxes of
+             * the 4x4x4 block around them. */
+            G = Gn;
+            uvec2 sgn, known;
+            gather_block(G - 1, level, slot, brick, confident_only, sgn, known);
+            for (uint c = 0u; c < 8u; c++) {
+                uint i = c & 1u, j = (c >> 1) & 1u, k = c >> 2;
+                uint pm = 0x777u << (i + 4u * j);
+                uvec2 m = k == 0u ? uvec2(pm | (pm << 16), pm) : uvec2(pm << 16, pm | (pm << 16));
+                int nf = bitCount(sgn.x & m.x) + bitCount(sgn.y & m.y);
+                int nk = bitCount(known.x & m.x) + bitCount(known.y & m.y);
+                S[c] = nk > 0 ? float(2 * nf - nk) / float(nk) : 0.0;
+            }
+        }
+        vec3 f = q - vec3(G);
+        float F = 0.0;
+        vec3 g = vec3(0.0);
+        for (uint c = 0u; c < 8u; c++) {
+            vec3 e = vec3(float(c & 1u), float((c >> 1) & 1u), float(c >> 2));
+            vec3 w = mix(1.0 - f, f, e), sgnd = 2.0 * e - 1.0;
+            F += w.x * w.y * w.z * S[c];
+            g += sgnd * vec3(w.y * w.z, w.x * w.z, w.x * w.y) * S[c];
+        }
+        float dFds = dot(g, ray.dir) * inv_v;
+        if (!(dFds < 0.0)) break; /* the field must fall into the surface */
+        s = clamp(s - clamp(F / dFds, -step_max, step_max), lo, hi);
+    }
+    return s;
+}
+
 void main()
 {
     uvec2 px = gl_GlobalInvocationID.xy;
@@ -176,6 +306,9 @@ void main()
         }
         s = max(s_exit, sp);
     }
+    if (hit && (pc.flags & RENDER_FLAG_REFINE) != 0u)
+        tr.hit_depth = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
+                                      (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u);
     depth_out.v[pixel] = hit ? tr.hit_depth : 0.0;
     level_out.v[pixel] = hit ? tr.hit_level : FUSION_NONE;
 }

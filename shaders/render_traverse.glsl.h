@@ -43,6 +43,8 @@ struct render_trace {
     float front_depth; /* camera depth of its centre */
     float hit_depth;
     uint hit_level;
+    uint hit_slot;     /* brick of the first behind voxel (the sub-voxel refinement starts there) */
+    ivec3 hit_brick;   /* its brick coordinate on its level's grid (brick units from the map origin) */
 };
 
 /* Nudge into a cell past its entry face before locating the voxel there
@@ -87,6 +89,8 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                 tr.hit_depth = (flags & RENDER_FLAG_REFINE) != 0u ? render_refine_depth(tr.front_depth, c_depth)
                                                                  : s_enter;
                 tr.hit_level = level;
+                tr.hit_slot = slot;
+                tr.hit_brick = ivec3(floor(brick_lo * (0.125 / voxel_m) + 0.5));
                 return true;
             }
         }

@@ -103,6 +103,76 @@ static double box_exit(const double o[3], const double d[3], const double lo[3],
     return s;
 }
 
+/* Voxel (global voxel coordinates of level `level` from the map origin) as
+ * the sub-voxel field sees it: +1 front, -1 behind, 0 unknown (no brick of
+ * exactly that level there, or not confident when confident_only). */
+static int voxel_value(const raycast_ref *r, const int64_t g[3], uint32_t level, bool confident_only)
+{
+    int64_t per = (int64_t)8 << level;
+    int32_t key[3];
+    uint32_t cell[3], x[3];
+    for (int a = 0; a < 3; a++) {
+        int64_t k = g[a] >= 0 ? g[a] / per : -((-g[a] + per - 1) / per);
+        key[a] = (int32_t)k;
+        int64_t in = g[a] - k * per;
+        cell[a] = (uint32_t)(in / 8);
+        x[a] = (uint32_t)(in % 8);
+    }
+    const ref_cell *c = cell_slot(r, key, fusion_pack_pos(cell[0], cell[1], cell[2], level));
+    if (!c->used || c->brick < 0) return 0;
+    const fusion_brick *b = &r->snap->bricks[c->brick];
+    uint32_t w = brick_word(x[0], x[1], x[2]), bit = brick_bit(x[0], x[1], x[2]);
+    if (confident_only && !((b->conf[w] >> bit) & 1u)) return 0;
+    return ((b->sign[w] >> bit) & 1u) ? 1 : -1;
+}
+
+/* The sub-voxel refinement of render.md, written out plainly: Newton steps
+ * along the ray on the trilinear interpolation of the 3x3x3 means of the
+ * known voxels' signs, from the midpoint depth s0. */
+static double subvoxel(const raycast_ref *r, const double o[3], const double d[3], uint32_t level, double s0,
+                       bool confident_only)
+{
+    double v = fusion_level_voxel_m(r->snap->chunk_m, level);
+    double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    double step_max = RENDER_SUBVOXEL_MAX_STEP * v / len;
+    double lo = s0 - RENDER_SUBVOXEL_MAX_MOVE * step_max, hi = s0 + RENDER_SUBVOXEL_MAX_MOVE * step_max, s = s0;
+    for (uint32_t it = 0; it < RENDER_SUBVOXEL_ITERS; it++) {
+        double q[3], f[3];
+        int64_t G[3];
+        for (int a = 0; a < 3; a++) {
+            q[a] = (o[a] + s * d[a]) / v - 0.5;
+            G[a] = (int64_t)floor(q[a]);
+            f[a] = q[a] - (double)G[a];
+        }
+        double F = 0, grad[3] = {0, 0, 0};
+        for (int c = 0; c < 8; c++) {
+            int e[3] = {c & 1, (c >> 1) & 1, c >> 2};
+            int sum = 0, known = 0;
+            for (int dz = -1; dz <= 1; dz++)
+                for (int dy = -1; dy <= 1; dy++)
+                    for (int dx = -1; dx <= 1; dx++) {
+                        int64_t g[3] = {G[0] + e[0] + dx, G[1] + e[1] + dy, G[2] + e[2] + dz};
+                        int val = voxel_value(r, g, level, confident_only);
+                        sum += val;
+                        known += val != 0;
+                    }
+            double S = known ? (double)sum / known : 0.0, w[3];
+            for (int a = 0; a < 3; a++) w[a] = e[a] ? f[a] : 1 - f[a];
+            F += w[0] * w[1] * w[2] * S;
+            grad[0] += (e[0] ? 1 : -1) * w[1] * w[2] * S;
+            grad[1] += (e[1] ? 1 : -1) * w[0] * w[2] * S;
+            grad[2] += (e[2] ? 1 : -1) * w[0] * w[1] * S;
+        }
+        double dFds = (grad[0] * d[0] + grad[1] * d[1] + grad[2] * d[2]) / v;
+        if (!(dFds < 0)) break;
+        double st = F / dFds;
+        st = st < -step_max ? -step_max : (st > step_max ? step_max : st);
+        s -= st;
+        s = s < lo ? lo : (s > hi ? hi : s);
+    }
+    return s;
+}
+
 static void cast_one(const raycast_ref *r, const double o[3], const double d[3], const double zc[3],
                      const render_options *opt, float *depth_out, uint32_t *level_out)
 {
@@ -169,7 +239,8 @@ static void cast_one(const raycast_ref *r, const double o[3], const double d[3],
                     has_front = true;
                     front_depth = c_depth;
                 } else if (has_front) {
-                    *depth_out = (float)(opt->refine ? 0.5 * (front_depth + c_depth) : s);
+                    double mid = 0.5 * (front_depth + c_depth);
+                    *depth_out = (float)(opt->refine ? subvoxel(r, o, d, best_level, mid, opt->confident_only) : s);
                     *level_out = best_level;
                     return;
                 }
