@@ -41,8 +41,11 @@ static double median(double *v, uint32_t n) { return bf_percentile_inplace(v, n,
 int main(int argc, char **argv)
 {
     uint32_t n_frames = 16;
-    for (int i = 1; i < argc; i++)
+    bool quick = false;
+    for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--frames") && i + 1 < argc) n_frames = (uint32_t)atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--quick")) quick = true; /* the default variant only */
+    }
     bf_intrinsics K = {640, 480, 525, 525, 319.5, 239.5, 5000};
     uint32_t n = K.width * K.height;
     eval_scene scene;
@@ -85,7 +88,37 @@ int main(int argc, char **argv)
            "error mm (median / max) | error deg (median / max) | failures |\n|---|---|---|---|---|---|---|---|\n");
     double *a = malloc(n_frames * sizeof *a), *b = malloc(n_frames * sizeof *b), *c = malloc(n_frames * sizeof *c),
            *e = malloc(n_frames * sizeof *e), *g = malloc(n_frames * sizeof *g), *h = malloc(n_frames * sizeof *h);
-    for (size_t v = 0; v < sizeof vars / sizeof vars[0]; v++) {
+    if (quick) {
+        /* Reference preparation alone, ROF counts interleaved (the machine
+         * is shared: compare within one run). */
+        const uint32_t rofs[] = {0, 1, 5, 10, 20};
+        enum { NR = sizeof rofs / sizeof rofs[0], REPS = 7 };
+        track_tracker *tr[NR];
+        double ms[NR][REPS], ms_ref[NR][REPS];
+        for (uint32_t i = 0; i < NR; i++) {
+            track_config cfg = track_config_default();
+            cfg.rof_iterations = rofs[i];
+            if (track_create(ctx, &cfg, &K, &tr[i]) != BF_OK) return 1;
+        }
+        for (uint32_t i = 0; i < n; i++) fdepth[i] = (float)(depth[0][i] / K.depth_scale);
+        gpu_buffer_upload(ref, 0, fdepth, (uint64_t)n * 4);
+        bf_frame f = {.index = 1, .width = K.width, .height = K.height, .depth = depth[1]};
+        for (uint32_t rep = 0; rep < REPS; rep++)
+            for (uint32_t i = 0; i < NR; i++) {
+                track_set_reference_gpu(tr[i], ref, &T[0]);
+                track_result r;
+                track_frame(tr[i], &f, &T[0], &r);
+                ms[i][rep] = r.ms_rof;
+                ms_ref[i][rep] = r.ms_ref;
+            }
+        for (uint32_t i = 0; i < NR; i++) {
+            printf("ROF %2u: ROF %.2f ms, reference total %.2f ms (GPU, median of %d)\n", rofs[i], median(ms[i], REPS),
+                   median(ms_ref[i], REPS), REPS);
+            track_destroy(tr[i]);
+        }
+    }
+    size_t n_vars = quick ? 1 : sizeof vars / sizeof vars[0];
+    for (size_t v = 0; v < n_vars; v++) {
         track_config cfg = track_config_default();
         memcpy(cfg.iterations, vars[v].it, sizeof cfg.iterations);
         cfg.rof_iterations = vars[v].rof;

@@ -6,24 +6,26 @@
  * Images are row-major float depth in metres (0 = none). A pyramid buffer
  * holds its TRACK_MAX_LEVELS levels one after the other; level l is
  * (width >> l) x (height >> l) pixels and starts at the pixel offset given
- * in the push constants. Vertex and normal maps are vec4 per pixel (16
- * bytes, std430 arrays of vec4 match float[4] in C): vertex (x, y, z, 1)
- * in the camera frame or all zero, normal (x, y, z, 0) facing the camera or
- * all zero. The ROF dual field is vec2 per pixel.
+ * in the push constants. Normal maps are one uint per pixel, the unit
+ * normal facing the camera in octahedral coordinates as two snorm16
+ * (track_oct_encode), 0 where there is none (0 decodes to +z, which never
+ * faces the camera). There are no vertex maps: a vertex is the pixel's
+ * depth back-projected, and on lavapipe every loaded component costs a
+ * bounds-checked load per lane, so ICP reads 4 words per pixel instead of
+ * 16. The ROF dual field is vec2 per pixel.
  *
  * Buffers of the image kernels (track_depth, track_pyrdown, track_smooth,
  * track_vn, track_rof, track_rof_primal), one binding layout for all:
  *   0 raw      input: u16 depth two per word (low half first), or float bits
  *   1 depth    depth pyramid (float)
- *   2 vertex   vertex pyramid (vec4)
- *   3 normal   normal pyramid (vec4)
- *   4 counters TRACK_CNT_* (uint)
- *   5 p_in     ROF dual field read (vec2); after the ROF: smoothing scratch (float)
- *   6 p_out    ROF dual field written (vec2); after the ROF: the depth pyramid
+ *   2 normal   normal pyramid (uint, octahedral)
+ *   3 counters TRACK_CNT_* (uint)
+ *   4 p_in     ROF dual field read (vec2); after the ROF: smoothing scratch (float)
+ *   5 p_out    ROF dual field written (vec2); after the ROF: the depth pyramid
  *              that normals are computed from (float, track_smooth.comp)
- *   7 rof_f    the reference's unsmoothed finest depth, the ROF's data term f
+ *   6 rof_f    the reference's unsmoothed finest depth, the ROF's data term f
  *              (float; written by track_depth with TRACK_FLAG_ROF_F)
- * The ICP kernel: 0 frame vertex, 1 frame normal, 2 reference vertex,
+ * The ICP kernel: 0 frame depth, 1 frame normal, 2 reference depth,
  * 3 reference normal (pyramids), 4 partial sums (TRACK_PARTIAL_WORDS floats
  * per workgroup).
  */
@@ -33,7 +35,7 @@
 #include "bf_common.glsl.h"
 
 #define TRACK_LEVELS 3u
-#define TRACK_IMAGE_BUFFERS 8u
+#define TRACK_IMAGE_BUFFERS 7u
 #define TRACK_ICP_BUFFERS 5u
 
 /* Counters (uint words of the counters buffer). */
@@ -114,7 +116,8 @@ struct track_icp_push {
     bf_u32 n_threads;       /* workgroups * local size: the pixel loop's stride */
     bf_f32 dist_m;          /* association gates */
     bf_f32 cos_angle;
-    bf_u32 pad[2];
+    bf_u32 sub;             /* 1: every pixel; 2: every second (a checkerboard) */
+    bf_u32 pad;
 };
 #ifndef BF_GLSL
 typedef struct track_icp_push track_icp_push;
@@ -122,6 +125,26 @@ _Static_assert(sizeof(track_icp_push) == 96, "track_icp_push must match std430")
 #endif
 
 /* ------------------------------------------------------------ shared math */
+
+#ifdef BF_GLSL
+/* Unit vectors in octahedral coordinates, two snorm16 in a uint (Cigolle
+ * et al. 2014, "A survey of efficient representations for independent unit
+ * vectors", JCGT 3(2)): about 0.003 degrees of error. */
+vec2 track_oct_sign(vec2 v) { return vec2(v.x >= 0.0 ? 1.0 : -1.0, v.y >= 0.0 ? 1.0 : -1.0); }
+uint track_oct_encode(vec3 n)
+{
+    vec2 p = n.xy / (abs(n.x) + abs(n.y) + abs(n.z));
+    if (n.z < 0.0) p = (1.0 - abs(p.yx)) * track_oct_sign(p);
+    return packSnorm2x16(p);
+}
+vec3 track_oct_decode(uint w)
+{
+    vec2 p = unpackSnorm2x16(w);
+    vec3 n = vec3(p, 1.0 - abs(p.x) - abs(p.y));
+    if (n.z < 0.0) n.xy = (1.0 - abs(n.yx)) * track_oct_sign(n.xy);
+    return normalize(n);
+}
+#endif
 
 /* Kinect v1 axial noise (Nguyen, Izadi, Lovell 2012), metres. */
 BF_FN bf_f32 track_sigma_z(bf_f32 z)

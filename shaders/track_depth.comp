@@ -3,21 +3,23 @@
  * 1, preprocess): u16 sensor units times unit_m, or float metres (a
  * ray-cast reference). 0, NaN, infinite, negative or beyond max_depth_m
  * become 0 (no depth). Counts the valid pixels into counters[pc.counter]:
- * one atomic per workgroup. With TRACK_FLAG_ROF_F the depth also goes to
+ * one atomic per subgroup
+ * (subgroup arithmetic is required: lavapipe has it, and a shared counter
+ * costs a barrier and an atomic per lane there). With TRACK_FLAG_ROF_F the depth also goes to
  * rof_f, the ROF's input. */
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
 #include "track.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
 
 layout(std430, binding = 0) readonly buffer Raw { uint w[]; } raw;
 layout(std430, binding = 1) buffer Depth { float d[]; } depth;
-layout(std430, binding = 4) buffer Counters { uint c[]; } counters;
-layout(std430, binding = 7) writeonly buffer RofF { float d[]; } rof_f;
+layout(std430, binding = 3) buffer Counters { uint c[]; } counters;
+layout(std430, binding = 6) writeonly buffer RofF { float d[]; } rof_f;
 
 layout(push_constant) uniform Push { track_image_push pc; };
-
-shared uint s_valid;
 
 void main()
 {
@@ -25,8 +27,7 @@ void main()
      * vector integer divisions lane by lane). */
     uvec2 xy = gl_GlobalInvocationID.xy;
     uint i = xy.y * pc.width + xy.x;
-    if (gl_LocalInvocationIndex == 0u) s_valid = 0u;
-    barrier();
+    bool ok = false;
     if (xy.x < pc.width && xy.y < pc.height) {
         float z;
         if (pc.mode == TRACK_RAW_U16) {
@@ -37,12 +38,11 @@ void main()
         }
         /* The comparison is false for NaN; isinf / isnan guard drivers that
          * assume finite math. */
-        bool ok = z > 0.0 && z <= pc.max_depth_m && !isnan(z) && !isinf(z);
+        ok = z > 0.0 && z <= pc.max_depth_m && !isnan(z) && !isinf(z);
         depth.d[pc.dst_off + i] = ok ? z : 0.0;
         /* The ROF's data term: its output overwrites the depth. */
         if ((pc.flags & TRACK_FLAG_ROF_F) != 0u) rof_f.d[i] = ok ? z : 0.0;
-        if (ok) atomicAdd(s_valid, 1u);
     }
-    barrier();
-    if (gl_LocalInvocationIndex == 0u && s_valid != 0u) atomicAdd(counters.c[pc.counter], s_valid);
+    uint n = subgroupAdd(ok ? 1u : 0u);
+    if (subgroupElect() && n != 0u) atomicAdd(counters.c[pc.counter], n);
 }

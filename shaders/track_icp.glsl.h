@@ -9,75 +9,110 @@
  * keeps its sums in registers; the workgroup then adds its invocations'
  * sums and writes TRACK_PARTIAL_WORDS floats, which the CPU adds in double.
  *
- * For a frame pixel with vertex v and normal m (frame camera), p = T_rc v
- * and m' = R_rc m live in the reference camera; p projects to the nearest
- * reference pixel with vertex q and normal n. An inlier has |p - q| <=
+ * For a frame pixel with depth z (vertex v, back-projected) and normal m
+ * (frame camera; octahedral, track.glsl.h), p = T_rc v and m' = R_rc m live
+ * in the reference camera; p projects to the nearest reference pixel with
+ * vertex q (its depth back-projected) and normal n. An inlier has |p - q| <=
  * dist_m and m' . n >= cos(angle). Its residual is r = n . (p - q) and its
  * row a = (n, p x n): moving p by a small twist (t, w) in the reference
  * camera, p + w x p + t, changes r by a . (t, w). */
 #ifndef BF_GLSL
 #error "track_icp.glsl.h is GLSL only"
 #endif
+#extension GL_EXT_control_flow_attributes : require
 #include "track.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 0) readonly buffer FrameV { vec4 v[]; } frame_v;
-layout(std430, binding = 1) readonly buffer FrameN { vec4 v[]; } frame_n;
-layout(std430, binding = 2) readonly buffer RefV { vec4 v[]; } ref_v;
-layout(std430, binding = 3) readonly buffer RefN { vec4 v[]; } ref_n;
+layout(std430, binding = 0) readonly buffer FrameD { float d[]; } frame_d;
+layout(std430, binding = 1) readonly buffer FrameN { uint n[]; } frame_n;
+layout(std430, binding = 2) readonly buffer RefD { float d[]; } ref_d;
+layout(std430, binding = 3) readonly buffer RefN { uint n[]; } ref_n;
 layout(std430, binding = 4) writeonly buffer Partial { float w[]; } partial;
 
 layout(push_constant) uniform Push { track_icp_push pc; };
 
 shared float s_sum[TRACK_SUMS * TRACK_ICP_LOCAL_MAX];
 
-void main()
+/* Pixel (x, y) of the level back-projected at depth z (as track_vn.comp). */
+vec3 unproject(uint x, uint y, float z)
 {
-    float acc[TRACK_SUMS];
-    for (uint k = 0u; k < TRACK_SUMS; k++) acc[k] = 0.0;
+    return vec3((float(x) - pc.cx) * z / pc.fx, (float(y) - pc.cy) * z / pc.fy, z);
+}
+
+/* One frame pixel's association, gates and contribution. */
+void add_pixel(uint x, uint y, inout float acc[TRACK_SUMS])
+{
+    uint i = pc.off + y * pc.width + x;
+    float z = frame_d.d[i];
+    uint mw = frame_n.n[i];
+    if (!(z > 0.0) || mw == 0u) return;
+    acc[TRACK_SUM_VALID] += 1.0;
     vec3 r0 = vec3(pc.R[0], pc.R[1], pc.R[2]);
     vec3 r1 = vec3(pc.R[3], pc.R[4], pc.R[5]);
     vec3 r2 = vec3(pc.R[6], pc.R[7], pc.R[8]);
-    vec3 t = vec3(pc.t[0], pc.t[1], pc.t[2]);
-    uint n_pix = pc.width * pc.height;
-    float dist2 = pc.dist_m * pc.dist_m;
-    for (uint k = gl_GlobalInvocationID.x; k < n_pix; k += pc.n_threads) {
-        vec4 v = frame_v.v[pc.off + k];
-        vec4 m = frame_n.v[pc.off + k];
-        if (v.w == 0.0 || m == vec4(0.0)) continue;
-        acc[TRACK_SUM_VALID] += 1.0;
-        vec3 p = vec3(dot(r0, v.xyz), dot(r1, v.xyz), dot(r2, v.xyz)) + t;
-        if (!(p.z > 0.0)) continue;
-        vec3 mr = vec3(dot(r0, m.xyz), dot(r1, m.xyz), dot(r2, m.xyz));
-        float u = pc.fx * p.x / p.z + pc.cx;
-        float w = pc.fy * p.y / p.z + pc.cy;
-        /* Nearest pixel; the float comparison also rejects NaN. */
-        if (!(u > -0.5 && w > -0.5 && u < float(pc.width) - 0.5 && w < float(pc.height) - 0.5)) continue;
-        uint j = pc.off + uint(w + 0.5) * pc.width + uint(u + 0.5);
-        vec4 q = ref_v.v[j];
-        vec4 n4 = ref_n.v[j];
-        if (q.w == 0.0 || n4 == vec4(0.0)) continue;
-        vec3 n = n4.xyz;
-        vec3 d = p - q.xyz;
-        if (dot(d, d) > dist2 || dot(mr, n) < pc.cos_angle) continue;
-        float r = dot(n, d);
-        vec3 c = cross(p, n);
-        float a[6] = float[6](n.x, n.y, n.z, c.x, c.y, c.z);
-        uint e = 0u;
-        for (uint i = 0u; i < 6u; i++)
-            for (uint h = i; h < 6u; h++) acc[TRACK_SUM_ATA + e++] += a[i] * a[h];
-        for (uint i = 0u; i < 6u; i++) acc[TRACK_SUM_ATR + i] += a[i] * r;
-        acc[TRACK_SUM_RR] += r * r;
-        acc[TRACK_SUM_INLIERS] += 1.0;
-        acc[TRACK_SUM_Z] += p.z;
+    vec3 v = unproject(x, y, z);
+    vec3 p = vec3(dot(r0, v), dot(r1, v), dot(r2, v)) + vec3(pc.t[0], pc.t[1], pc.t[2]);
+    if (!(p.z > 0.0)) return;
+    float u = pc.fx * p.x / p.z + pc.cx;
+    float w = pc.fy * p.y / p.z + pc.cy;
+    /* Nearest pixel; the float comparison also rejects NaN. */
+    if (!(u > -0.5 && w > -0.5 && u < float(pc.width) - 0.5 && w < float(pc.height) - 0.5)) return;
+    uint ux = uint(u + 0.5), wy = uint(w + 0.5);
+    uint j = pc.off + wy * pc.width + ux;
+    float zq = ref_d.d[j];
+    uint nw = ref_n.n[j];
+    if (!(zq > 0.0) || nw == 0u) return;
+    vec3 q = unproject(ux, wy, zq);
+    vec3 n = track_oct_decode(nw);
+    vec3 d = p - q;
+    if (dot(d, d) > pc.dist_m * pc.dist_m) return;
+    vec3 m = track_oct_decode(mw);
+    vec3 mr = vec3(dot(r0, m), dot(r1, m), dot(r2, m));
+    if (dot(mr, n) < pc.cos_angle) return;
+    float r = dot(n, d);
+    vec3 c = cross(p, n);
+    float a[6] = float[6](n.x, n.y, n.z, c.x, c.y, c.z);
+    uint e = 0u;
+    /* Fully unrolled: every index into acc and a is a constant, so they
+     * stay in registers (llvmpipe runs a dynamically indexed private array
+     * through memory, lane by lane). */
+    [[unroll]] for (uint k = 0u; k < 6u; k++)
+        [[unroll]] for (uint h = k; h < 6u; h++) acc[TRACK_SUM_ATA + e++] += a[k] * a[h];
+    [[unroll]] for (uint k = 0u; k < 6u; k++) acc[TRACK_SUM_ATR + k] += a[k] * r;
+    acc[TRACK_SUM_RR] += r * r;
+    acc[TRACK_SUM_INLIERS] += 1.0;
+    acc[TRACK_SUM_Z] += p.z;
+}
+
+void main()
+{
+    float acc[TRACK_SUMS];
+    [[unroll]] for (uint k = 0u; k < TRACK_SUMS; k++) acc[k] = 0.0;
+    /* Samples k = id, id + n_threads, ... of the level; sample k is pixel
+     * k * sub (sub 2: even columns, shifted by one on odd rows, a
+     * checkerboard). x and y are stepped, not divided: one division per
+     * invocation (lavapipe divides lane by lane). */
+    uint W = pc.width;
+    uint k0 = gl_GlobalInvocationID.x * pc.sub, stride = pc.n_threads * pc.sub;
+    uint x = k0 % W, y = k0 / W;
+    uint sx = stride % W, sy = stride / W;
+    while (y < pc.height) {
+        uint xx = x + (pc.sub == 2u ? (y & 1u) : 0u);
+        if (xx < W) add_pixel(xx, y, acc);
+        x += sx;
+        y += sy;
+        if (x >= W) {
+            x -= W;
+            y++;
+        }
     }
 
     uint li = gl_LocalInvocationIndex;
     uint L = gl_WorkGroupSize.x;
 #ifdef TRACK_ICP_SUBGROUP
     /* Subgroup sums first; one shared word per subgroup and sum. */
-    for (uint k = 0u; k < TRACK_SUMS; k++) {
+    [[unroll]] for (uint k = 0u; k < TRACK_SUMS; k++) {
         float s = subgroupAdd(acc[k]);
         if (subgroupElect()) s_sum[k * TRACK_ICP_LOCAL_MAX + gl_SubgroupID] = s;
     }
@@ -90,7 +125,7 @@ void main()
     }
 #else
     /* Shared-memory tree reduction (L is a power of two). */
-    for (uint k = 0u; k < TRACK_SUMS; k++) s_sum[k * TRACK_ICP_LOCAL_MAX + li] = acc[k];
+    [[unroll]] for (uint k = 0u; k < TRACK_SUMS; k++) s_sum[k * TRACK_ICP_LOCAL_MAX + li] = acc[k];
     for (uint s = L / 2u; s > 0u; s >>= 1) {
         barrier();
         if (li < s)

@@ -15,20 +15,21 @@
  * adjoint); a neighbour outside the image or the mask contributes nothing
  * (Neumann at the mask's edge): the background never leaks in.
  *
- * pc.mode iterations; TRACK_FLAG_ROF_LOAD starts from p_in (binding 5),
+ * pc.mode iterations; TRACK_FLAG_ROF_LOAD starts from p_in (binding 4),
  * else from p = 0; TRACK_FLAG_ROF_FINAL writes the primal u = f - div p /
  * lambda into the depth (binding 1; kept at f where u <= 0), else the dual
- * field into p_out (binding 6). f is binding 7. tests/tracking/rof_ref.c
+ * field into p_out (binding 5). f is binding 6. tests/tracking/rof_ref.c
  * is the CPU oracle. */
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "track.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
 
 layout(std430, binding = 1) writeonly buffer Depth { float d[]; } depth;
-layout(std430, binding = 5) readonly buffer PIn { vec2 p[]; } p_in;
-layout(std430, binding = 6) writeonly buffer POut { vec2 p[]; } p_out;
-layout(std430, binding = 7) readonly buffer F { float d[]; } rof_f;
+layout(std430, binding = 4) readonly buffer PIn { vec2 p[]; } p_in;
+layout(std430, binding = 5) writeonly buffer POut { vec2 p[]; } p_out;
+layout(std430, binding = 6) readonly buffer F { float d[]; } rof_f;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 
@@ -51,7 +52,7 @@ void main()
      * step and mask bits stay in registers for all iterations. */
     float f[PER], lam[PER], s[PER];
     bool mx[PER], my[PER];
-    for (uint n = 0u; n < PER; n++) {
+    [[unroll]] for (uint n = 0u; n < PER; n++) {
         uint k = li + n * L;
         f[n] = 0.0, lam[n] = 1.0, s[n] = 0.0, mx[n] = false, my[n] = false;
         if (k >= N) continue;
@@ -83,7 +84,7 @@ void main()
     for (uint it = 0u; it < pc.mode; it++) {
         /* p of the last iteration (or the start) -> the divergences. */
         barrier();
-        for (uint n = 0u; n < PER; n++) {
+        [[unroll]] for (uint n = 0u; n < PER; n++) {
             uint k = li + n * L;
             if (k >= N || !(f[n] > 0.0)) continue;
             uint lx = k % R;
@@ -95,7 +96,7 @@ void main()
         }
         /* w -> the dual steps (each reads its own p only). */
         barrier();
-        for (uint n = 0u; n < PER; n++) {
+        [[unroll]] for (uint n = 0u; n < PER; n++) {
             uint k = li + n * L;
             if (k >= N || !(f[n] > 0.0)) continue;
             float w = s_w[k];
@@ -108,7 +109,7 @@ void main()
     }
     barrier();
     bool final_ = (pc.flags & TRACK_FLAG_ROF_FINAL) != 0u;
-    for (uint n = 0u; n < PER; n++) {
+    [[unroll]] for (uint n = 0u; n < PER; n++) {
         uint k = li + n * L;
         if (k >= N) continue;
         int lx = int(k % R), ly = int(k / R);

@@ -8,8 +8,8 @@
  * TV keeps a monotone staircase) depth are off by tens of degrees. The
  * range weight lets a staircase's step through and stops at real depth
  * edges. Vertices keep the unfiltered depth.
- * mode 0: horizontal, depth (binding 1) -> scratch (binding 5);
- * mode 1: vertical, scratch (binding 5) -> smoothed (binding 6); all at the
+ * mode 0: horizontal, depth (binding 1) -> scratch (binding 4);
+ * mode 1: vertical, scratch (binding 4) -> smoothed (binding 5); all at the
  * level's pixel offset. */
 #extension GL_GOOGLE_include_directive : require
 #include "track.glsl.h"
@@ -17,8 +17,8 @@
 BF_LOCAL_SIZE_FROM_SPEC
 
 layout(std430, binding = 1) readonly buffer Depth { float d[]; } depth;
-layout(std430, binding = 5) buffer Scratch { float d[]; } scratch;
-layout(std430, binding = 6) writeonly buffer Smooth { float d[]; } smoothed;
+layout(std430, binding = 4) buffer Scratch { float d[]; } scratch;
+layout(std430, binding = 5) writeonly buffer Smooth { float d[]; } smoothed;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 

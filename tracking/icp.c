@@ -5,6 +5,7 @@
  * partial sums in double, solves the 6x6 system in double and composes the
  * relative pose in double. Failure and degeneracy checks are at the end. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -58,7 +59,7 @@ bf_status track__icp_create(track_tracker *t)
     t->partial_host = malloc(bytes);
     if (!t->partial_host) return bf_fail(BF_NO_MEMORY, "tracking: partial sums");
     if ((s = gpu_bindings_create(t->ctx, TRACK_ICP_BUFFERS, "track.icp", &t->b_icp)) != BF_OK) return s;
-    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->frame_vertex, t->frame_normal, t->ref_vertex, t->ref_normal, t->partials};
+    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal, t->partials};
     for (uint32_t i = 0; i < TRACK_ICP_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(t->b_icp, i, bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
     /* Zero push constants: an empty level, the workgroup writes zeros. */
@@ -84,7 +85,8 @@ typedef struct icp_sums {
 
 static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, icp_sums *out, double *ms)
 {
-    uint32_t n = t->geom.w[l] * t->geom.h[l];
+    uint32_t sub = l == 0 && t->cfg.finest_sample_step == 2 ? 2u : 1u;
+    uint32_t n = t->geom.w[l] * t->geom.h[l] / sub;
     uint32_t per_group = t->icp_local * t->icp_px_per_thread;
     uint32_t g = (n + per_group - 1) / per_group;
     if (g > t->icp_groups_max) g = t->icp_groups_max;
@@ -100,6 +102,7 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
          * ICP then finds beyond max_motion is reported as a failure. */
         .dist_m = t->cfg.dist_m * (float)(1u << l),
         .cos_angle = (float)cos(t->cfg.angle_deg * M_PI / 180.0),
+        .sub = sub,
     };
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) pc.R[3 * i + j] = (float)T_rc->R[i][j];
@@ -114,6 +117,9 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_HOST);
     gpu_cmd_stage_end(t->ctx);
     if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    char what[32];
+    snprintf(what, sizeof what, "icp level %u", l);
+    track__profile_print(t, what);
     const gpu_stage_time *st;
     uint32_t n_st = gpu_stage_times(t->ctx, &st);
     for (uint32_t i = 0; i < n_st; i++) *ms += st[i].ms;

@@ -1,8 +1,10 @@
-/* Depth conversion, pyramids, vertex and normal maps, and the ROF
+/* Depth conversion, pyramids, normal maps, and the ROF
  * smoothing of the reference: host side of shaders/track_depth.comp,
  * track_pyrdown.comp, track_vn.comp, track_rof.comp and
  * track_rof_tile.comp (one binding layout, shaders/track.glsl.h). */
 #include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "bf_shaders_spv.h"
@@ -29,7 +31,6 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
     gpu_buffer *bufs[TRACK_IMAGE_BUFFERS] = {
         raw,
         is_ref ? t->ref_depth : t->frame_depth,
-        is_ref ? t->ref_vertex : t->frame_vertex,
         is_ref ? t->ref_normal : t->frame_normal,
         t->counters,
         t->rof_p[p_in],
@@ -42,6 +43,12 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
 
 bf_status track__pyramid_create(track_tracker *t)
 {
+    const char *prof = getenv("BITFUSE_TRACK_PROFILE");
+    t->profile = prof && !strcmp(prof, "1");
+    /* track_depth.comp counts valid pixels with subgroup additions. */
+    uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
+    if ((gpu_device_limits(t->ctx)->subgroup_ops & need) != need)
+        return bf_fail(BF_UNSUPPORTED, "tracking: the device lacks subgroup arithmetic in compute shaders");
     bf_status s;
     if ((s = image_pipeline(t, "track.depth", bf_spv_track_depth, bf_spv_track_depth_size, TRACK_IMAGE_TILE, &t->p_depth)) != BF_OK)
         return s;
@@ -108,14 +115,42 @@ static track_image_push base_push(const track_tracker *t, uint32_t l)
     return pc;
 }
 
+void track__stage_begin(track_tracker *t, const char *name)
+{
+    if (!t->profile) gpu_cmd_stage_begin(t->ctx, name);
+}
+void track__stage_end(track_tracker *t)
+{
+    if (!t->profile) gpu_cmd_stage_end(t->ctx);
+}
+void track__profile_print(track_tracker *t, const char *what)
+{
+    if (!t->profile) return;
+    const gpu_stage_time *st;
+    uint32_t n = gpu_stage_times(t->ctx, &st);
+    fprintf(stderr, "track profile %s:", what);
+    for (uint32_t i = 0; i < n; i++) fprintf(stderr, " %s %.2f", st[i].name, st[i].ms);
+    fprintf(stderr, "\n");
+}
+
+static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_image_push *pc)
+{
+    if (!t->profile) return;
+    char name[GPU_STAGE_NAME_MAX];
+    snprintf(name, sizeof name, "%s%ux%u", p == t->p_depth ? "depth" : p == t->p_pyrdown ? "pyr" : p == t->p_smooth ? "smooth" : p == t->p_vn ? "vn" : "rof", pc->width, pc->height);
+    gpu_cmd_stage_begin(t->ctx, name);
+}
+
 /* The image kernels run on 2D tiles (no integer division for x, y). */
 static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const track_image_push *pc)
 {
+    pstage_begin(t, p, pc);
     gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE), gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
+    if (t->profile) gpu_cmd_stage_end(t->ctx);
 }
 
-/* Depth of level 0 from the raw input, levels above, then vertex and
- * normal maps of every level, through binding set b. */
+/* Depth of level 0 from the raw input, levels above, then the normal maps
+ * of every level, through binding set b. */
 static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t mode, uint32_t counter)
 {
     track_image_push pc = base_push(t, 0);
@@ -144,40 +179,40 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
             dispatch(t, t->p_smooth, b, &pc);
         }
     }
-    /* The smoothed depth's writes -> the vertex and normal maps' reads. */
+    /* The smoothed depth's writes -> the normal maps' reads. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
     for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
         track_image_push pc = base_push(t, l);
         dispatch(t, t->p_vn, b, &pc);
     }
-    /* Vertex and normal writes -> ICP's reads (and the host's downloads). */
+    /* Normal writes -> ICP's reads (and the host's downloads). */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
 }
 
 void track__cmd_frame_pyramid(track_tracker *t)
 {
-    gpu_cmd_stage_begin(t->ctx, "track.frame");
+    track__stage_begin(t, "track.frame");
     cmd_depth(t, t->b_frame, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID);
     cmd_pyramid(t, t->b_frame);
-    gpu_cmd_stage_end(t->ctx);
+    track__stage_end(t);
 }
 
 void track__cmd_reference(track_tracker *t, bool from_gpu)
 {
     gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
     uint32_t n_it = t->cfg.rof_iterations;
-    gpu_cmd_stage_begin(t->ctx, "track.ref");
+    track__stage_begin(t, "track.ref");
     track_image_push pc = base_push(t, 0);
     pc.mode = from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16;
     pc.counter = TRACK_CNT_REF_VALID;
     pc.flags = n_it > 0 ? TRACK_FLAG_ROF_F : 0;
     dispatch(t, t->p_depth, b[0], &pc);
-    gpu_cmd_stage_end(t->ctx);
+    track__stage_end(t);
 
     /* TRACK_ROF_K iterations per dispatch on shared-memory tiles with a
      * halo (track_rof_tile.comp), the primal folded into the last: 10
      * iterations are 2 dispatches instead of 11 full-image passes. */
-    gpu_cmd_stage_begin(t->ctx, "track.rof");
+    track__stage_begin(t, "track.rof");
     pc = base_push(t, 0);
     uint32_t gx = (pc.width + TRACK_ROF_TILE - 1) / TRACK_ROF_TILE, gy = (pc.height + TRACK_ROF_TILE - 1) / TRACK_ROF_TILE;
     for (uint32_t done = 0, j = 0; done < n_it; j++) {
@@ -187,12 +222,14 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
         /* f (first) or the previous dispatch's dual field -> this one's
          * reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        pstage_begin(t, t->p_rof, &pc);
         gpu_cmd_dispatch(t->ctx, t->p_rof, b[j & 1u], &pc, gx, gy, 1);
+        if (t->profile) gpu_cmd_stage_end(t->ctx);
         done += k;
     }
-    gpu_cmd_stage_end(t->ctx);
+    track__stage_end(t);
 
-    gpu_cmd_stage_begin(t->ctx, "track.ref");
+    track__stage_begin(t, "track.ref");
     cmd_pyramid(t, b[0]);
-    gpu_cmd_stage_end(t->ctx);
+    track__stage_end(t);
 }

@@ -49,6 +49,7 @@ track_config track_config_default(void)
         .min_valid_frac = 0.01f,
         .converged_m = 1e-5f,
         .converged_deg = 1e-3f,
+        .finest_sample_step = 1,
     };
     return c;
 }
@@ -86,6 +87,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->max_depth_m > 0))
         return bf_fail(BF_INVALID_ARG, "tracking: gates must be positive (dist %g m, angle %g deg, depth %g m)",
                        c->dist_m, c->angle_deg, c->max_depth_m);
+    if (c->finest_sample_step != 1 && c->finest_sample_step != 2)
+        return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1 or 2)", c->finest_sample_step);
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
     if (!(c->rof_lambda0 > 0)) return bf_fail(BF_INVALID_ARG, "tracking: rof_lambda0 %g must be positive", c->rof_lambda0);
     if (!(c->degenerate_ratio >= 0 && c->degenerate_ratio < 1))
@@ -127,19 +130,17 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     if ((s = buffer(t, "track.upload", (n0 + 1) / 2 * 4, GPU_MEMORY_UPLOAD, &t->upload)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.ref_in", n0 * 4, GPU_MEMORY_DEVICE, &t->ref_in)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.frame_depth", np * 4, GPU_MEMORY_DEVICE, &t->frame_depth)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.frame_vertex", np * 16, GPU_MEMORY_DEVICE, &t->frame_vertex)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.frame_normal", np * 16, GPU_MEMORY_DEVICE, &t->frame_normal)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.frame_normal", np * 4, GPU_MEMORY_DEVICE, &t->frame_normal)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.ref_depth", np * 4, GPU_MEMORY_DEVICE, &t->ref_depth)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_vertex", np * 16, GPU_MEMORY_DEVICE, &t->ref_vertex)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_normal", np * 16, GPU_MEMORY_DEVICE, &t->ref_normal)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.ref_normal", np * 4, GPU_MEMORY_DEVICE, &t->ref_normal)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[0]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[0])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[1]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[1])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_f", n0 * 4, GPU_MEMORY_DEVICE, &t->rof_f)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
-    gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_vertex, t->frame_normal, t->ref_depth,
-                          t->ref_vertex, t->ref_normal, t->rof_p[0], t->rof_p[1], t->rof_f, t->counters};
+    gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
+                          t->rof_p[0], t->rof_p[1], t->rof_f, t->counters};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
     if (s != BF_OK) goto fail;
     if ((s = track__pyramid_create(t)) != BF_OK) goto fail;
@@ -156,8 +157,8 @@ void track_destroy(track_tracker *t)
     if (!t) return;
     track__icp_destroy(t);
     track__pyramid_destroy(t);
-    gpu_buffer *bufs[] = {t->counters, t->rof_f, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_vertex, t->ref_depth,
-                          t->frame_normal, t->frame_vertex, t->frame_depth, t->ref_in, t->upload};
+    gpu_buffer *bufs[] = {t->counters, t->rof_f, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_depth,
+                          t->frame_normal, t->frame_depth, t->ref_in, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
     free(t);
@@ -199,6 +200,7 @@ static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16
     }
     track__cmd_reference(t, depth != NULL);
     if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    track__profile_print(t, "reference");
     t->ms_rof = stage_ms(t->ctx, "track.rof");
     t->ms_ref = t->ms_rof + stage_ms(t->ctx, "track.ref");
     uint32_t n = 0;
@@ -256,6 +258,7 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     if ((s = gpu_begin(t->ctx)) != BF_OK) return s;
     track__cmd_frame_pyramid(t);
     if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    track__profile_print(t, "frame");
     r.ms_gpu = r.ms_frame = stage_ms(t->ctx, "track.frame");
     uint32_t n_depth = 0;
     if ((s = read_counter(t, TRACK_CNT_FRAME_VALID, &n_depth)) != BF_OK) return s;

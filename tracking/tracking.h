@@ -45,6 +45,8 @@ typedef struct track_config {
                                 TRACK_NO_REFERENCE (reference); default 0.01 */
     float converged_m;       /* a level stops iterating when the update moves less than this */
     float converged_deg;     /* and turns less than this; 0 and 0: always run all iterations */
+    uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one
+                                    (a checkerboard), half the cost (docs/tracking.md: speed against error) */
 } track_config;
 
 track_config track_config_default(void);

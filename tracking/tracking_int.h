@@ -23,13 +23,13 @@ struct track_tracker {
     bf_intrinsics K;
     track_pyramid_geom geom;
 
-    /* Frame: raw upload (u16, two per word), pyramids of depth, vertex and
-     * normal. Reference: float input, the same pyramids (level 0 of
+    /* Frame: raw upload (u16, two per word), pyramids of depth and normal
+     * (octahedral uint). Reference: float input, the same pyramids (level 0 of
      * ref_depth is the ROF-smoothed depth), the ROF dual fields (ping-pong). */
     gpu_buffer *upload;        /* UPLOAD: u16 depth of a frame */
     gpu_buffer *ref_in;        /* float depth of a reference given on the GPU */
-    gpu_buffer *frame_depth, *frame_vertex, *frame_normal;
-    gpu_buffer *ref_depth, *ref_vertex, *ref_normal;
+    gpu_buffer *frame_depth, *frame_normal;
+    gpu_buffer *ref_depth, *ref_normal;
     gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
     gpu_buffer *rof_f;         /* the reference's unsmoothed finest depth, the ROF's input */
     gpu_buffer *counters;      /* TRACK_CNT_* */
@@ -45,6 +45,7 @@ struct track_tracker {
     uint32_t icp_px_per_thread;
     uint32_t icp_groups_max;
     bool icp_subgroup;         /* the subgroup-arithmetic kernel is used */
+    bool profile;              /* BITFUSE_TRACK_PROFILE=1: every image dispatch its own timed stage, printed */
     float *partial_host;       /* icp_groups_max * TRACK_PARTIAL_WORDS, allocated at create */
 
     /* The reference. */
@@ -58,10 +59,15 @@ struct track_tracker {
 /* tracker.c: the geometry of level l from K. */
 void track__level_intrinsics(const bf_intrinsics *K, uint32_t l, float *fx, float *fy, float *cx, float *cy);
 
-/* pyramid.c: pipelines and binding sets of the image kernels. */
+/* pyramid.c: pipelines and binding sets of the image kernels. Timed stages
+ * of the image kernels (the outer ones are left out when profiling, as
+ * stages do not nest); the printout of the last submission's stages. */
+void track__stage_begin(track_tracker *t, const char *name);
+void track__stage_end(track_tracker *t);
+void track__profile_print(track_tracker *t, const char *what);
 bf_status track__pyramid_create(track_tracker *t);
 void track__pyramid_destroy(track_tracker *t);
-/* Records upload -> frame pyramids (depth, vertex, normal; counts the
+/* Records upload -> frame pyramids (depth, normal; counts the
  * valid pixels into TRACK_CNT_FRAME_VALID). The frame's depth must already
  * be in t->upload. */
 void track__cmd_frame_pyramid(track_tracker *t);
