@@ -6,7 +6,8 @@
  * given as a float depth buffer on the GPU (as a ray-cast would be), from
  * the previous true pose. Then the real TUM fr2_desk b1 -> b2 pair.
  *
- *   build/bench/bench_tracking [--frames N]
+ *   build/bench/bench_tracking [--frames N] [--quick]   (--quick: the default only)
+ *   BITFUSE_TRACK_PROFILE=1 prints every dispatch's GPU time
  */
 #include <math.h>
 #include <stdio.h>
@@ -26,6 +27,8 @@ typedef struct variant {
     uint32_t it[3];
     uint32_t rof;
     bool no_early_stop;
+    uint32_t sub;  /* finest_sample_step */
+    float angle;   /* 0: the default gate */
 } variant;
 
 static bf_se3 sway(const bf_se3 *T0, uint32_t k)
@@ -73,88 +76,68 @@ int main(int argc, char **argv)
     float *fdepth = malloc((size_t)n * 4);
 
     const variant vars[] = {
-        {"10/5/4, ROF 10", {10, 5, 4}, 10, false},
-        {"10/5/4, ROF 10, no early stop", {10, 5, 4}, 10, true},
-        {"10/5/4, ROF 0", {10, 5, 4}, 0, false},
-        {"10/5/4, ROF 5", {10, 5, 4}, 5, false},
-        {"10/5/4, ROF 20", {10, 5, 4}, 20, false},
-        {"5/5/4, ROF 10", {5, 5, 4}, 10, false},
-        {"3/5/8, ROF 10", {3, 5, 8}, 10, false},
-        {"2/4/8, ROF 10", {2, 4, 8}, 10, false},
+        {"default (10/5/4, ROF 10, every pixel)", {10, 5, 4}, 10, false, 1, 0},
+        {"finest level every 2nd pixel", {10, 5, 4}, 10, false, 2, 0},
+        {"ROF 5", {10, 5, 4}, 5, false, 1, 0},
+        {"ROF 0", {10, 5, 4}, 0, false, 1, 0},
+        {"no early stop", {10, 5, 4}, 10, true, 1, 0},
+        {"2/4/8", {2, 4, 8}, 10, false, 1, 0},
+        {"normal gate 45 deg", {10, 5, 4}, 10, false, 1, 45},
     };
-    printf("device: %s, 640x480, %u frames of the noisy room (~1 cm, ~1 deg per frame)\n\n", gpu_device_name(ctx),
-           n_frames);
-    printf("| variant | ROF ms (GPU) | ICP ms (GPU, incl. frame pyramid) | track_frame wall ms | iterations | "
-           "error mm (median / max) | error deg (median / max) | failures |\n|---|---|---|---|---|---|---|---|\n");
-    double *a = malloc(n_frames * sizeof *a), *b = malloc(n_frames * sizeof *b), *c = malloc(n_frames * sizeof *c),
-           *e = malloc(n_frames * sizeof *e), *g = malloc(n_frames * sizeof *g), *h = malloc(n_frames * sizeof *h);
-    if (quick) {
-        /* Reference preparation alone, ROF counts interleaved (the machine
-         * is shared: compare within one run). */
-        const uint32_t rofs[] = {0, 1, 5, 10, 20};
-        enum { NR = sizeof rofs / sizeof rofs[0], REPS = 7 };
-        track_tracker *tr[NR];
-        double ms[NR][REPS], ms_ref[NR][REPS];
-        for (uint32_t i = 0; i < NR; i++) {
-            track_config cfg = track_config_default();
-            cfg.rof_iterations = rofs[i];
-            if (track_create(ctx, &cfg, &K, &tr[i]) != BF_OK) return 1;
-        }
-        for (uint32_t i = 0; i < n; i++) fdepth[i] = (float)(depth[0][i] / K.depth_scale);
-        gpu_buffer_upload(ref, 0, fdepth, (uint64_t)n * 4);
-        bf_frame f = {.index = 1, .width = K.width, .height = K.height, .depth = depth[1]};
-        for (uint32_t rep = 0; rep < REPS; rep++)
-            for (uint32_t i = 0; i < NR; i++) {
-                track_set_reference_gpu(tr[i], ref, &T[0]);
-                track_result r;
-                track_frame(tr[i], &f, &T[0], &r);
-                ms[i][rep] = r.ms_rof;
-                ms_ref[i][rep] = r.ms_ref;
-            }
-        for (uint32_t i = 0; i < NR; i++) {
-            printf("ROF %2u: ROF %.2f ms, reference total %.2f ms (GPU, median of %d)\n", rofs[i], median(ms[i], REPS),
-                   median(ms_ref[i], REPS), REPS);
-            track_destroy(tr[i]);
-        }
-    }
-    size_t n_vars = quick ? 1 : sizeof vars / sizeof vars[0];
+    enum { NV = sizeof vars / sizeof vars[0] };
+    printf("device: %s, 640x480, %u frames of the noisy room (~1 cm, ~1 deg per frame); variants interleaved frame by "
+           "frame (the machine is shared), medians\n\n",
+           gpu_device_name(ctx), n_frames);
+    printf("| variant | reference ms (GPU: ROF / all) | frame preprocessing ms (GPU) | ICP ms (GPU, incl. frame) | "
+           "track_frame wall ms | iterations | error mm (median / max) | error deg (median / max) | failures |\n"
+           "|---|---|---|---|---|---|---|---|---|\n");
+    size_t n_vars = quick ? 1 : NV;
+    track_tracker *tv[NV] = {0};
+    double *m[NV][7];
+    uint32_t fails[NV] = {0}, iters[NV] = {0};
     for (size_t v = 0; v < n_vars; v++) {
         track_config cfg = track_config_default();
         memcpy(cfg.iterations, vars[v].it, sizeof cfg.iterations);
         cfg.rof_iterations = vars[v].rof;
+        cfg.finest_sample_step = vars[v].sub;
+        if (vars[v].angle > 0) cfg.angle_deg = vars[v].angle;
         if (vars[v].no_early_stop) cfg.converged_m = cfg.converged_deg = 0;
-        track_tracker *t;
-        if (track_create(ctx, &cfg, &K, &t) != BF_OK) {
+        if (track_create(ctx, &cfg, &K, &tv[v]) != BF_OK) {
             fprintf(stderr, "bench_tracking: %s\n", bf_last_error());
             return 1;
         }
-        uint32_t fails = 0, iters = 0;
-        double emax = 0, gmax = 0;
-        for (uint32_t k = 1; k <= n_frames; k++) {
-            for (uint32_t i = 0; i < n; i++) fdepth[i] = (float)(depth[k - 1][i] / K.depth_scale);
-            gpu_buffer_upload(ref, 0, fdepth, (uint64_t)n * 4);
+        for (int j = 0; j < 7; j++) m[v][j] = calloc(n_frames, sizeof(double));
+    }
+    for (uint32_t k = 1; k <= n_frames; k++) {
+        for (uint32_t i = 0; i < n; i++) fdepth[i] = (float)(depth[k - 1][i] / K.depth_scale);
+        gpu_buffer_upload(ref, 0, fdepth, (uint64_t)n * 4);
+        for (size_t v = 0; v < n_vars; v++) {
+            track_tracker *t = tv[v];
             track_set_reference_gpu(t, ref, &T[k - 1]);
             bf_frame f = {.index = k, .width = K.width, .height = K.height, .depth = depth[k]};
             track_result r;
             double t0 = bf_time_s();
             track_frame(t, &f, &T[k - 1], &r);
-            c[k - 1] = 1e3 * (bf_time_s() - t0);
-            a[k - 1] = r.ms_rof;
-            b[k - 1] = r.ms_gpu;
-            iters += r.iterations;
-            if (r.outcome != TRACK_OK) fails++;
+            double wall = 1e3 * (bf_time_s() - t0);
+            iters[v] += r.iterations;
+            if (r.outcome != TRACK_OK) fails[v]++;
             bf_se3 ti = bf_se3_inverse(&T[k]), err = bf_se3_mul(&ti, &r.T_wc);
-            e[k - 1] = 1e3 * bf_v3_norm(err.t);
-            g[k - 1] = bf_se3_angle(&err) * 180 / M_PI;
-            emax = fmax(emax, e[k - 1]);
-            gmax = fmax(gmax, g[k - 1]);
+            double row[7] = {r.ms_rof, r.ms_ref, r.ms_frame, r.ms_gpu, wall, 1e3 * bf_v3_norm(err.t),
+                             bf_se3_angle(&err) * 180 / M_PI};
+            for (int j = 0; j < 7; j++) m[v][j][k - 1] = row[j];
         }
-        printf("| %s | %.2f | %.2f | %.2f | %.1f | %.2f / %.2f | %.3f / %.3f | %u |\n", vars[v].name,
-               median(a, n_frames), median(b, n_frames), median(c, n_frames), (double)iters / n_frames,
-               median(e, n_frames), emax, median(g, n_frames), gmax, fails);
-        fflush(stdout);
-        track_destroy(t);
     }
+    for (size_t v = 0; v < n_vars; v++) {
+        double emax = 0, gmax = 0;
+        for (uint32_t k = 0; k < n_frames; k++) emax = fmax(emax, m[v][5][k]), gmax = fmax(gmax, m[v][6][k]);
+        printf("| %s | %.1f / %.1f | %.1f | %.1f | %.1f | %.1f | %.2f / %.2f | %.3f / %.3f | %u |\n", vars[v].name,
+               median(m[v][0], n_frames), median(m[v][1], n_frames), median(m[v][2], n_frames),
+               median(m[v][3], n_frames), median(m[v][4], n_frames), (double)iters[v] / n_frames,
+               median(m[v][5], n_frames), emax, median(m[v][6], n_frames), gmax, fails[v]);
+        track_destroy(tv[v]);
+        for (int j = 0; j < 7; j++) free(m[v][j]);
+    }
+    fflush(stdout);
 
     /* The real pair. */
     char path[512];
@@ -165,32 +148,46 @@ int main(int argc, char **argv)
     snprintf(path, sizeof path, "%s/../shared/data/tum/frames/fr2_desk_b2_depth.png", BF_SOURCE_DIR);
     have = have && replay_png_read_u16(path, &d2, &w, &hh) == BF_OK;
     if (have) {
+        /* The normal-angle gate and the finest level's sampling on the real
+         * pair (no ground truth: forward b1 -> b2 composed with backward
+         * b2 -> b1 should give the identity). */
         bf_intrinsics Kt = {w, hh, 520.9, 521.0, 325.1, 249.7, 5000};
-        track_config cfg = track_config_default();
-        track_tracker *t;
-        if (track_create(ctx, &cfg, &Kt, &t) == BF_OK) {
-            bf_se3 I = bf_se3_identity();
-            bf_frame f1 = {.width = w, .height = hh, .depth = d1}, f2 = {.index = 1, .width = w, .height = hh, .depth = d2};
-            track_result r;
-            double wall = 0;
-            for (int rep = 0; rep < 5; rep++) {
-                track_set_reference_frame(t, &f1, &I);
-                double t0 = bf_time_s();
-                track_frame(t, &f2, &I, &r);
-                wall = 1e3 * (bf_time_s() - t0);
+        const float angles[] = {20, 25, 30, 35, 45, 60};
+        printf("\nTUM fr2_desk b1 -> b2 (640x480, no ground truth):\n\n| gate deg | finest step | outcome | |t| mm | "
+               "deg | inliers | rms mm | eig ratio | fwd x bwd mm / deg | iterations | ICP ms GPU | wall ms |\n"
+               "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        for (size_t ai = 0; ai < sizeof angles / sizeof angles[0]; ai++)
+            for (uint32_t sub = 1; sub <= 2; sub++) {
+                if (quick && (ai > 0 || sub > 1)) continue;
+                track_config cfg = track_config_default();
+                cfg.angle_deg = angles[ai];
+                cfg.finest_sample_step = sub;
+                track_tracker *t;
+                if (track_create(ctx, &cfg, &Kt, &t) != BF_OK) continue;
+                bf_se3 I = bf_se3_identity();
+                bf_frame f1 = {.width = w, .height = hh, .depth = d1};
+                bf_frame f2 = {.index = 1, .width = w, .height = hh, .depth = d2};
+                track_result r, rb;
+                double wall[3];
+                for (int rep = 0; rep < 3; rep++) {
+                    track_set_reference_frame(t, &f1, &I);
+                    double t0 = bf_time_s();
+                    track_frame(t, &f2, &I, &r);
+                    wall[rep] = 1e3 * (bf_time_s() - t0);
+                }
+                track_set_reference_frame(t, &f2, &I);
+                track_frame(t, &f1, &I, &rb);
+                bf_se3 c = bf_se3_mul(&r.T_wc, &rb.T_wc);
+                printf("| %.0f | %u | %s%s | %.1f | %.2f | %.0f%% | %.2f | %.2g | %.2f / %.3f | %u | %.1f | %.1f |\n",
+                       angles[ai], sub, track_outcome_name(r.outcome), r.degenerate ? " (degenerate)" : "",
+                       1e3 * bf_v3_norm(r.T_wc.t), bf_se3_angle(&r.T_wc) * 180 / M_PI, 100 * r.inlier_frac,
+                       1e3 * r.residual_m, r.eig_min / r.eig_max, 1e3 * bf_v3_norm(c.t), bf_se3_angle(&c) * 180 / M_PI,
+                       r.iterations, r.ms_gpu, median(wall, 3));
+                track_destroy(t);
             }
-            bf_quat q;
-            bf_vec3 tr;
-            bf_se3_to_qt(&r.T_wc, &q, &tr);
-            printf("\nTUM fr2_desk b1 -> b2: %s, t = (%.1f, %.1f, %.1f) mm, %.3f deg, %u/%u inliers, rms %.2f mm, "
-                   "%u iterations, ROF %.2f ms, ICP %.2f ms GPU, %.2f ms wall\n",
-                   track_outcome_name(r.outcome), 1e3 * tr.x, 1e3 * tr.y, 1e3 * tr.z, bf_quat_angle(q) * 180 / M_PI,
-                   r.n_inliers, r.n_valid, 1e3 * r.residual_m, r.iterations, r.ms_rof, r.ms_gpu, wall);
-            track_destroy(t);
-        }
     }
     free(d1), free(d2);
-    free(a), free(b), free(c), free(e), free(g), free(h), free(fdepth);
+    free(fdepth);
     gpu_buffer_destroy(ref);
     gpu_context_destroy(ctx);
     for (uint32_t k = 0; k <= n_frames; k++) free(depth[k]);

@@ -23,8 +23,6 @@
  *   4 p_in     ROF dual field read (vec2); after the ROF: smoothing scratch (float)
  *   5 p_out    ROF dual field written (vec2); after the ROF: the depth pyramid
  *              that normals are computed from (float, track_smooth.comp)
- *   6 rof_f    the reference's unsmoothed finest depth, the ROF's data term f
- *              (float; written by track_depth with TRACK_FLAG_ROF_F)
  * The ICP kernel: 0 frame depth, 1 frame normal, 2 reference depth,
  * 3 reference normal (pyramids), 4 partial sums (TRACK_PARTIAL_WORDS floats
  * per workgroup).
@@ -35,7 +33,7 @@
 #include "bf_common.glsl.h"
 
 #define TRACK_LEVELS 3u
-#define TRACK_IMAGE_BUFFERS 7u
+#define TRACK_IMAGE_BUFFERS 6u
 #define TRACK_ICP_BUFFERS 5u
 
 /* Counters (uint words of the counters buffer). */
@@ -43,27 +41,6 @@
 #define TRACK_CNT_REF_VALID 1u   /* valid depth pixels of the reference, finest level */
 #define TRACK_CNT_WORDS 4u
 
-/* track_image_push.flags. */
-#define TRACK_FLAG_ROF_F 1u     /* track_depth: also write the depth into rof_f */
-#define TRACK_FLAG_ROF_LOAD 2u  /* track_rof_tile: start from p_in (else p = 0) */
-#define TRACK_FLAG_ROF_FINAL 4u /* track_rof_tile: write u = f - div p / lambda into depth (else p_out) */
-
-/* The tiled ROF kernel (track_rof_tile.comp): a 16 x 16 workgroup runs up
- * to TRACK_ROF_K dual iterations on a TRACK_ROF_REGION^2 region in shared
- * memory and writes its TRACK_ROF_TILE^2 interior. One iteration's p at a
- * pixel reads p within one pixel (the divergences of itself, its right and
- * its lower neighbour), so values at the region's border, where the
- * neighbours are missing, are wrong after the first iteration and the
- * error moves inward one pixel per iteration; the primal reads p one pixel
- * left and up. A halo of K + 1 keeps the interior exactly the global
- * iteration (Chambolle's, unchanged), at (52 / 40)^2 = 1.69x the pixel
- * updates. 3 floats per region pixel (p.x, p.y, w) fill 32448 of the
- * 32768 bytes of shared memory lavapipe offers. */
-#define TRACK_ROF_K 5u
-#define TRACK_ROF_HALO 6u
-#define TRACK_ROF_TILE 40u
-#define TRACK_ROF_REGION 52u
-#define TRACK_ROF_LOCAL_XY 16u
 
 /* Raw input modes of track_depth. */
 #define TRACK_RAW_U16 0u
@@ -97,7 +74,7 @@ struct track_image_push {
     bf_f32 lambda0;         /* ROF data weight at 1 m */
     bf_f32 tau;             /* ROF step (Chambolle 2004: 1/4) */
     bf_u32 src_width;       /* of the level read (pyrdown) */
-    bf_u32 flags;           /* TRACK_FLAG_* */
+    bf_u32 pad;
 };
 #ifndef BF_GLSL
 typedef struct track_image_push track_image_push;

@@ -5,8 +5,7 @@
  * become 0 (no depth). Counts the valid pixels into counters[pc.counter]:
  * one atomic per subgroup
  * (subgroup arithmetic is required: lavapipe has it, and a shared counter
- * costs a barrier and an atomic per lane there). With TRACK_FLAG_ROF_F the depth also goes to
- * rof_f, the ROF's input. */
+ * costs a barrier and an atomic per lane there). */
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
@@ -17,7 +16,6 @@ BF_LOCAL_SIZE_FROM_SPEC
 layout(std430, binding = 0) readonly buffer Raw { uint w[]; } raw;
 layout(std430, binding = 1) buffer Depth { float d[]; } depth;
 layout(std430, binding = 3) buffer Counters { uint c[]; } counters;
-layout(std430, binding = 6) writeonly buffer RofF { float d[]; } rof_f;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 
@@ -40,8 +38,6 @@ void main()
          * assume finite math. */
         ok = z > 0.0 && z <= pc.max_depth_m && !isnan(z) && !isinf(z);
         depth.d[pc.dst_off + i] = ok ? z : 0.0;
-        /* The ROF's data term: its output overwrites the depth. */
-        if ((pc.flags & TRACK_FLAG_ROF_F) != 0u) rof_f.d[i] = ok ? z : 0.0;
     }
     uint n = subgroupAdd(ok ? 1u : 0u);
     if (subgroupElect() && n != 0u) atomicAdd(counters.c[pc.counter], n);

@@ -19,7 +19,6 @@
 #ifndef BF_GLSL
 #error "track_icp.glsl.h is GLSL only"
 #endif
-#extension GL_EXT_control_flow_attributes : require
 #include "track.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
@@ -32,7 +31,7 @@ layout(std430, binding = 4) writeonly buffer Partial { float w[]; } partial;
 
 layout(push_constant) uniform Push { track_icp_push pc; };
 
-shared float s_sum[TRACK_SUMS * TRACK_ICP_LOCAL_MAX];
+shared vec4 s_sum[8u * TRACK_ICP_LOCAL_MAX];
 
 /* Pixel (x, y) of the level back-projected at depth z (as track_vn.comp). */
 vec3 unproject(uint x, uint y, float z)
@@ -40,14 +39,23 @@ vec3 unproject(uint x, uint y, float z)
     return vec3((float(x) - pc.cx) * z / pc.fx, (float(y) - pc.cy) * z / pc.fy, z);
 }
 
+/* The sums in eight vec4 registers, words 4q .. 4q + 3 of the TRACK_SUM_*
+ * layout in s[q] (the 32nd word stays 0). Plain variables, no arrays:
+ * llvmpipe keeps a private array it cannot fully resolve in memory and
+ * reads and writes it lane by lane, which made this kernel 5x slower. */
+#define TRACK_ICP_ZERO4 vec4(0.0)
+struct icp_acc {
+    vec4 s0, s1, s2, s3, s4, s5, s6, s7;
+};
+
 /* One frame pixel's association, gates and contribution. */
-void add_pixel(uint x, uint y, inout float acc[TRACK_SUMS])
+void add_pixel(uint x, uint y, inout icp_acc A)
 {
     uint i = pc.off + y * pc.width + x;
     float z = frame_d.d[i];
     uint mw = frame_n.n[i];
     if (!(z > 0.0) || mw == 0u) return;
-    acc[TRACK_SUM_VALID] += 1.0;
+    A.s7.y += 1.0; /* TRACK_SUM_VALID */
     vec3 r0 = vec3(pc.R[0], pc.R[1], pc.R[2]);
     vec3 r1 = vec3(pc.R[3], pc.R[4], pc.R[5]);
     vec3 r2 = vec3(pc.R[6], pc.R[7], pc.R[8]);
@@ -72,23 +80,21 @@ void add_pixel(uint x, uint y, inout float acc[TRACK_SUMS])
     if (dot(mr, n) < pc.cos_angle) return;
     float r = dot(n, d);
     vec3 c = cross(p, n);
-    float a[6] = float[6](n.x, n.y, n.z, c.x, c.y, c.z);
-    uint e = 0u;
-    /* Fully unrolled: every index into acc and a is a constant, so they
-     * stay in registers (llvmpipe runs a dynamically indexed private array
-     * through memory, lane by lane). */
-    [[unroll]] for (uint k = 0u; k < 6u; k++)
-        [[unroll]] for (uint h = k; h < 6u; h++) acc[TRACK_SUM_ATA + e++] += a[k] * a[h];
-    [[unroll]] for (uint k = 0u; k < 6u; k++) acc[TRACK_SUM_ATR + k] += a[k] * r;
-    acc[TRACK_SUM_RR] += r * r;
-    acc[TRACK_SUM_INLIERS] += 1.0;
-    acc[TRACK_SUM_Z] += p.z;
+    /* a = (n, c); the upper triangle of a a^T row by row (TRACK_SUM_ATA),
+     * then a r (TRACK_SUM_ATR), r^2, the inlier and its depth. */
+    A.s0 += n.x * vec4(n, c.x);
+    A.s1 += vec4(n.x * c.y, n.x * c.z, n.y * n.y, n.y * n.z);
+    A.s2 += vec4(n.y * c, n.z * n.z);
+    A.s3 += vec4(n.z * c, c.x * c.x);
+    A.s4 += vec4(c.x * c.y, c.x * c.z, c.y * c.y, c.y * c.z);
+    A.s5 += vec4(c.z * c.z, r * n);
+    A.s6 += vec4(r * c, r * r);
+    A.s7 += vec4(1.0, 0.0, p.z, 0.0);
 }
 
 void main()
 {
-    float acc[TRACK_SUMS];
-    [[unroll]] for (uint k = 0u; k < TRACK_SUMS; k++) acc[k] = 0.0;
+    icp_acc A = icp_acc(vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0));
     /* Samples k = id, id + n_threads, ... of the level; sample k is pixel
      * k * sub (sub 2: even columns, shifted by one on odd rows, a
      * checkerboard). x and y are stepped, not divided: one division per
@@ -99,7 +105,7 @@ void main()
     uint sx = stride % W, sy = stride / W;
     while (y < pc.height) {
         uint xx = x + (pc.sub == 2u ? (y & 1u) : 0u);
-        if (xx < W) add_pixel(xx, y, acc);
+        if (xx < W) add_pixel(xx, y, A);
         x += sx;
         y += sy;
         if (x >= W) {
@@ -110,30 +116,41 @@ void main()
 
     uint li = gl_LocalInvocationIndex;
     uint L = gl_WorkGroupSize.x;
+    uint base = gl_WorkGroupID.x * TRACK_PARTIAL_WORDS;
 #ifdef TRACK_ICP_SUBGROUP
-    /* Subgroup sums first; one shared word per subgroup and sum. */
-    [[unroll]] for (uint k = 0u; k < TRACK_SUMS; k++) {
-        float s = subgroupAdd(acc[k]);
-        if (subgroupElect()) s_sum[k * TRACK_ICP_LOCAL_MAX + gl_SubgroupID] = s;
+    /* Subgroup sums first; one shared vec4 per subgroup and quarter. */
+    vec4 t0 = subgroupAdd(A.s0), t1 = subgroupAdd(A.s1), t2 = subgroupAdd(A.s2), t3 = subgroupAdd(A.s3);
+    vec4 t4 = subgroupAdd(A.s4), t5 = subgroupAdd(A.s5), t6 = subgroupAdd(A.s6), t7 = subgroupAdd(A.s7);
+    if (subgroupElect()) {
+        uint g = gl_SubgroupID;
+        s_sum[0u * TRACK_ICP_LOCAL_MAX + g] = t0, s_sum[1u * TRACK_ICP_LOCAL_MAX + g] = t1;
+        s_sum[2u * TRACK_ICP_LOCAL_MAX + g] = t2, s_sum[3u * TRACK_ICP_LOCAL_MAX + g] = t3;
+        s_sum[4u * TRACK_ICP_LOCAL_MAX + g] = t4, s_sum[5u * TRACK_ICP_LOCAL_MAX + g] = t5;
+        s_sum[6u * TRACK_ICP_LOCAL_MAX + g] = t6, s_sum[7u * TRACK_ICP_LOCAL_MAX + g] = t7;
     }
     barrier();
-    for (uint k = li; k < TRACK_PARTIAL_WORDS; k += L) {
-        float s = 0.0;
-        if (k < TRACK_SUMS)
-            for (uint g = 0u; g < gl_NumSubgroups; g++) s += s_sum[k * TRACK_ICP_LOCAL_MAX + g];
-        partial.w[gl_WorkGroupID.x * TRACK_PARTIAL_WORDS + k] = s;
+    if (li < 8u) {
+        vec4 t = vec4(0.0);
+        for (uint g = 0u; g < gl_NumSubgroups; g++) t += s_sum[li * TRACK_ICP_LOCAL_MAX + g];
+        partial.w[base + 4u * li] = t.x, partial.w[base + 4u * li + 1u] = t.y;
+        partial.w[base + 4u * li + 2u] = t.z, partial.w[base + 4u * li + 3u] = t.w;
     }
 #else
     /* Shared-memory tree reduction (L is a power of two). */
-    [[unroll]] for (uint k = 0u; k < TRACK_SUMS; k++) s_sum[k * TRACK_ICP_LOCAL_MAX + li] = acc[k];
+    s_sum[0u * TRACK_ICP_LOCAL_MAX + li] = A.s0, s_sum[1u * TRACK_ICP_LOCAL_MAX + li] = A.s1;
+    s_sum[2u * TRACK_ICP_LOCAL_MAX + li] = A.s2, s_sum[3u * TRACK_ICP_LOCAL_MAX + li] = A.s3;
+    s_sum[4u * TRACK_ICP_LOCAL_MAX + li] = A.s4, s_sum[5u * TRACK_ICP_LOCAL_MAX + li] = A.s5;
+    s_sum[6u * TRACK_ICP_LOCAL_MAX + li] = A.s6, s_sum[7u * TRACK_ICP_LOCAL_MAX + li] = A.s7;
     for (uint s = L / 2u; s > 0u; s >>= 1) {
         barrier();
         if (li < s)
-            for (uint k = 0u; k < TRACK_SUMS; k++)
-                s_sum[k * TRACK_ICP_LOCAL_MAX + li] += s_sum[k * TRACK_ICP_LOCAL_MAX + li + s];
+            for (uint q = 0u; q < 8u; q++) s_sum[q * TRACK_ICP_LOCAL_MAX + li] += s_sum[q * TRACK_ICP_LOCAL_MAX + li + s];
     }
     barrier();
-    for (uint k = li; k < TRACK_PARTIAL_WORDS; k += L)
-        partial.w[gl_WorkGroupID.x * TRACK_PARTIAL_WORDS + k] = k < TRACK_SUMS ? s_sum[k * TRACK_ICP_LOCAL_MAX] : 0.0;
+    if (li < 8u) {
+        vec4 t = s_sum[li * TRACK_ICP_LOCAL_MAX];
+        partial.w[base + 4u * li] = t.x, partial.w[base + 4u * li + 1u] = t.y;
+        partial.w[base + 4u * li + 2u] = t.z, partial.w[base + 4u * li + 3u] = t.w;
+    }
 #endif
 }

@@ -14,7 +14,7 @@ BF_LOCAL_SIZE_FROM_SPEC
 
 layout(std430, binding = 1) readonly buffer Depth { float d[]; } depth;
 layout(std430, binding = 5) readonly buffer Smooth { float d[]; } smoothed;
-layout(std430, binding = 2) writeonly buffer Normal { uint n[]; } normal;
+layout(std430, binding = 2) buffer Normal { uint n[]; } normal;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 
@@ -31,6 +31,17 @@ void main()
     uint o = pc.dst_off;
     float z = depth.d[o + i];
     uint n = 0u;
+    if (pc.mode == 1u) {
+        /* The finest level's normal from its parent pixel on the level
+         * above (pc.src_off, pc.src_width) where the depths agree: no
+         * full-resolution smoothing, and the parent's normal spans twice
+         * the baseline, which averages more of the disparity staircase. */
+        uint j = pc.src_off + (y >> 1) * pc.src_width + (x >> 1);
+        float zp = depth.d[j];
+        if (z > 0.0 && zp > 0.0 && abs(z - zp) <= 2.0 * TRACK_NORMAL_JUMP_REL * z) n = normal.n[j];
+        normal.n[o + i] = n;
+        return;
+    }
     /* Differences over +-TRACK_NORMAL_STEP pixels: a wider baseline
      * averages what is left of the quantisation staircase. */
     uint r = TRACK_NORMAL_STEP;

@@ -83,7 +83,11 @@ typedef struct icp_sums {
     double s[TRACK_SUMS];
 } icp_sums;
 
-static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, icp_sums *out, double *ms)
+/* One iteration: one submission, one dispatch, 32 floats per workgroup
+ * read back. with_frame records the frame's preprocessing in front of it
+ * (the first iteration of a frame: one submission and wait fewer). */
+static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, bool with_frame, icp_sums *out,
+                               track_result *res)
 {
     uint32_t sub = l == 0 && t->cfg.finest_sample_step == 2 ? 2u : 1u;
     uint32_t n = t->geom.w[l] * t->geom.h[l] / sub;
@@ -111,6 +115,7 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
     track__level_intrinsics(&t->K, l, &pc.fx, &pc.fy, &pc.cx, &pc.cy);
     bf_status s = gpu_begin(t->ctx);
     if (s != BF_OK) return s;
+    if (with_frame) track__cmd_frame_pyramid(t);
     gpu_cmd_stage_begin(t->ctx, "track.icp");
     gpu_cmd_dispatch(t->ctx, t->p_icp, t->b_icp, &pc, g, 1, 1);
     /* The partial sums -> the host's read after the fence. */
@@ -122,7 +127,10 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
     track__profile_print(t, what);
     const gpu_stage_time *st;
     uint32_t n_st = gpu_stage_times(t->ctx, &st);
-    for (uint32_t i = 0; i < n_st; i++) *ms += st[i].ms;
+    for (uint32_t i = 0; i < n_st; i++) {
+        res->ms_gpu += st[i].ms;
+        if (strcmp(st[i].name, "track.icp")) res->ms_frame += st[i].ms;
+    }
     if ((s = gpu_buffer_download(t->partials, 0, t->partial_host, (uint64_t)g * TRACK_PARTIAL_WORDS * 4)) != BF_OK)
         return s;
     memset(out, 0, sizeof *out);
@@ -200,7 +208,7 @@ static void apply(bf_se3 *T_rc, const double xi[6])
     *T_rc = bf_se3_mul(&inc, T_rc);
 }
 
-bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, track_result *res)
+bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, track_result *res)
 {
     const track_config *c = &t->cfg;
     bf_se3 guess_rc = *T_rc;
@@ -209,8 +217,18 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, track_result *res)
     bool have_finest = false;
     for (int l = (int)c->levels - 1; l >= 0; l--) {
         for (uint32_t it = 0; it < c->iterations[l]; it++) {
-            bf_status s = run_iteration(t, (uint32_t)l, T_rc, &sums, &res->ms_gpu);
+            bool first = res->iterations == 0;
+            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, &sums, res);
             if (s != BF_OK) return s;
+            if (first) {
+                uint32_t n_depth = 0;
+                if ((s = gpu_buffer_download(t->counters, TRACK_CNT_FRAME_VALID * 4u, &n_depth, 4)) != BF_OK) return s;
+                if (n_depth < min_valid) {
+                    res->n_valid = n_depth;
+                    res->outcome = TRACK_NO_DEPTH;
+                    return BF_OK;
+                }
+            }
             res->iterations++;
             step = solve(&sums, c->degenerate_ratio);
             if (l == 0) have_finest = true;

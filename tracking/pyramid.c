@@ -1,7 +1,7 @@
 /* Depth conversion, pyramids, normal maps, and the ROF
  * smoothing of the reference: host side of shaders/track_depth.comp,
  * track_pyrdown.comp, track_vn.comp, track_rof.comp and
- * track_rof_tile.comp (one binding layout, shaders/track.glsl.h). */
+ * track_rof_primal.comp (one binding layout, shaders/track.glsl.h). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -35,7 +35,6 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
         t->counters,
         t->rof_p[p_in],
         t->rof_p[1 - p_in],
-        t->rof_f,
     };
     for (uint32_t i = 0; i < TRACK_IMAGE_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(*out, i, bufs[i], 0, GPU_WHOLE_SIZE);
     return s;
@@ -45,6 +44,8 @@ bf_status track__pyramid_create(track_tracker *t)
 {
     const char *prof = getenv("BITFUSE_TRACK_PROFILE");
     t->profile = prof && !strcmp(prof, "1");
+    const char *pn = getenv("BITFUSE_TRACK_PARENT_NORMALS");
+    t->parent_normals = pn ? strcmp(pn, "0") != 0 : true;
     /* track_depth.comp counts valid pixels with subgroup additions. */
     uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
     if ((gpu_device_limits(t->ctx)->subgroup_ops & need) != need)
@@ -58,8 +59,11 @@ bf_status track__pyramid_create(track_tracker *t)
     if ((s = image_pipeline(t, "track.smooth", bf_spv_track_smooth, bf_spv_track_smooth_size, TRACK_IMAGE_TILE, &t->p_smooth)) != BF_OK)
         return s;
     if ((s = image_pipeline(t, "track.vn", bf_spv_track_vn, bf_spv_track_vn_size, TRACK_IMAGE_TILE, &t->p_vn)) != BF_OK) return s;
-    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof_tile, bf_spv_track_rof_tile_size, TRACK_ROF_LOCAL_XY,
-                            &t->p_rof)) != BF_OK)
+    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof, bf_spv_track_rof_size, TRACK_IMAGE_TILE, &t->p_rof)) !=
+        BF_OK)
+        return s;
+    if ((s = image_pipeline(t, "track.rof_primal", bf_spv_track_rof_primal, bf_spv_track_rof_primal_size,
+                            TRACK_IMAGE_TILE, &t->p_primal)) != BF_OK)
         return s;
     if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
     for (uint32_t k = 0; k < 2; k++) {
@@ -71,7 +75,8 @@ bf_status track__pyramid_create(track_tracker *t)
             return s;
     }
     /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
-    return gpu_pipeline_warm_up(t->ctx, (gpu_pipeline *[]){t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof}, 5);
+    return gpu_pipeline_warm_up(t->ctx, (gpu_pipeline *[]){t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal},
+                                6);
 }
 
 void track__pyramid_destroy(track_tracker *t)
@@ -82,13 +87,14 @@ void track__pyramid_destroy(track_tracker *t)
         t->b_ref_gpu[k] = t->b_ref_up[k] = NULL;
     }
     gpu_bindings_destroy(t->b_frame);
+    gpu_pipeline_destroy(t->p_primal);
     gpu_pipeline_destroy(t->p_rof);
     gpu_pipeline_destroy(t->p_vn);
     gpu_pipeline_destroy(t->p_smooth);
     gpu_pipeline_destroy(t->p_pyrdown);
     gpu_pipeline_destroy(t->p_depth);
     t->b_frame = NULL;
-    t->p_rof = t->p_vn = t->p_smooth = t->p_pyrdown = t->p_depth = NULL;
+    t->p_primal = t->p_rof = t->p_vn = t->p_smooth = t->p_pyrdown = t->p_depth = NULL;
 }
 
 bf_status track__upload_depth(track_tracker *t, const uint16_t *depth)
@@ -137,7 +143,7 @@ static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_im
 {
     if (!t->profile) return;
     char name[GPU_STAGE_NAME_MAX];
-    snprintf(name, sizeof name, "%s%ux%u", p == t->p_depth ? "depth" : p == t->p_pyrdown ? "pyr" : p == t->p_smooth ? "smooth" : p == t->p_vn ? "vn" : "rof", pc->width, pc->height);
+    snprintf(name, sizeof name, "%s%ux%u", p == t->p_depth ? "depth" : p == t->p_pyrdown ? "pyr" : p == t->p_smooth ? "smooth" : p == t->p_vn ? "vn" : p == t->p_rof ? "rof" : "primal", pc->width, pc->height);
     gpu_cmd_stage_begin(t->ctx, name);
 }
 
@@ -169,11 +175,12 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
         pc.src_width = t->geom.w[l - 1];
         dispatch(t, t->p_pyrdown, b, &pc);
     }
+    uint32_t l0 = t->parent_normals ? 1u : 0u;
     for (uint32_t pass = 0; pass < 2; pass++) {
         /* The depth pyramid's (pass 0) or the horizontal pass's (pass 1)
          * writes -> this pass's reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
+        for (uint32_t l = l0; l < TRACK_LEVELS; l++) {
             track_image_push pc = base_push(t, l);
             pc.mode = pass;
             dispatch(t, t->p_smooth, b, &pc);
@@ -181,8 +188,17 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
     }
     /* The smoothed depth's writes -> the normal maps' reads. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-    for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
+    for (uint32_t l = l0; l < TRACK_LEVELS; l++) {
         track_image_push pc = base_push(t, l);
+        dispatch(t, t->p_vn, b, &pc);
+    }
+    if (t->parent_normals) {
+        /* Level 1's normals -> the finest level's copy of them. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        track_image_push pc = base_push(t, 0);
+        pc.mode = 1;
+        pc.src_off = t->geom.off[1];
+        pc.src_width = t->geom.w[1];
         dispatch(t, t->p_vn, b, &pc);
     }
     /* Normal writes -> ICP's reads (and the host's downloads). */
@@ -202,30 +218,24 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
     gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
     uint32_t n_it = t->cfg.rof_iterations;
     track__stage_begin(t, "track.ref");
-    track_image_push pc = base_push(t, 0);
-    pc.mode = from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16;
-    pc.counter = TRACK_CNT_REF_VALID;
-    pc.flags = n_it > 0 ? TRACK_FLAG_ROF_F : 0;
-    dispatch(t, t->p_depth, b[0], &pc);
+    gpu_cmd_fill(t->ctx, t->rof_p[0], 0, GPU_WHOLE_SIZE, 0);
+    /* The zero dual field -> the first ROF iteration's reads. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    cmd_depth(t, b[0], from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
     track__stage_end(t);
 
-    /* TRACK_ROF_K iterations per dispatch on shared-memory tiles with a
-     * halo (track_rof_tile.comp), the primal folded into the last: 10
-     * iterations are 2 dispatches instead of 11 full-image passes. */
     track__stage_begin(t, "track.rof");
-    pc = base_push(t, 0);
-    uint32_t gx = (pc.width + TRACK_ROF_TILE - 1) / TRACK_ROF_TILE, gy = (pc.height + TRACK_ROF_TILE - 1) / TRACK_ROF_TILE;
-    for (uint32_t done = 0, j = 0; done < n_it; j++) {
-        uint32_t k = n_it - done < TRACK_ROF_K ? n_it - done : TRACK_ROF_K;
-        pc.mode = k;
-        pc.flags = (done > 0 ? TRACK_FLAG_ROF_LOAD : 0) | (done + k == n_it ? TRACK_FLAG_ROF_FINAL : 0);
-        /* f (first) or the previous dispatch's dual field -> this one's
-         * reads. */
+    track_image_push pc = base_push(t, 0);
+    for (uint32_t it = 0; it < n_it; it++) {
+        /* The depth (first) or the previous iteration's dual writes -> this
+         * iteration's reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        pstage_begin(t, t->p_rof, &pc);
-        gpu_cmd_dispatch(t->ctx, t->p_rof, b[j & 1u], &pc, gx, gy, 1);
-        if (t->profile) gpu_cmd_stage_end(t->ctx);
-        done += k;
+        dispatch(t, t->p_rof, b[it & 1u], &pc);
+    }
+    if (n_it > 0) {
+        /* The last dual field -> the primal solution reading it. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        dispatch(t, t->p_primal, b[n_it & 1u], &pc);
     }
     track__stage_end(t);
 

@@ -135,12 +135,11 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     if ((s = buffer(t, "track.ref_normal", np * 4, GPU_MEMORY_DEVICE, &t->ref_normal)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[0]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[0])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[1]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[1])) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.rof_f", n0 * 4, GPU_MEMORY_DEVICE, &t->rof_f)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
     gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
-                          t->rof_p[0], t->rof_p[1], t->rof_f, t->counters};
+                          t->rof_p[0], t->rof_p[1], t->counters};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
     if (s != BF_OK) goto fail;
     if ((s = track__pyramid_create(t)) != BF_OK) goto fail;
@@ -157,7 +156,7 @@ void track_destroy(track_tracker *t)
     if (!t) return;
     track__icp_destroy(t);
     track__pyramid_destroy(t);
-    gpu_buffer *bufs[] = {t->counters, t->rof_f, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_depth,
+    gpu_buffer *bufs[] = {t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_depth,
                           t->frame_normal, t->frame_depth, t->ref_in, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
@@ -255,23 +254,12 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     }
     if ((s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0)) != BF_OK) return s;
     if ((s = track__upload_depth(t, f->depth)) != BF_OK) return s;
-    if ((s = gpu_begin(t->ctx)) != BF_OK) return s;
-    track__cmd_frame_pyramid(t);
-    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
-    track__profile_print(t, "frame");
-    r.ms_gpu = r.ms_frame = stage_ms(t->ctx, "track.frame");
-    uint32_t n_depth = 0;
-    if ((s = read_counter(t, TRACK_CNT_FRAME_VALID, &n_depth)) != BF_OK) return s;
-    r.n_valid = n_depth;
-    if (n_depth < min_valid(t)) {
-        r.outcome = TRACK_NO_DEPTH;
-        *out = r;
-        return BF_OK;
-    }
     /* Everything the GPU sees is relative to the reference camera. */
     bf_se3 T_rw = bf_se3_inverse(&t->T_wr);
     bf_se3 T_rc = bf_se3_mul(&T_rw, guess_wc);
-    if ((s = track__icp_run(t, &T_rc, &r)) != BF_OK) return s;
+    double t0 = bf_time_s();
+    if ((s = track__icp_run(t, &T_rc, min_valid(t), &r)) != BF_OK) return s;
+    r.ms_wall = 1e3 * (bf_time_s() - t0);
     if (r.outcome == TRACK_OK) r.T_wc = bf_se3_mul(&t->T_wr, &T_rc);
     else r.T_wc = *guess_wc;
     *out = r;

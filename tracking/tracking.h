@@ -76,6 +76,7 @@ typedef struct track_result {
     double ms_gpu;       /* GPU time of the tracking (pyramids + ICP), ms */
     double ms_rof;       /* GPU time of the last reference smoothing, ms */
     double ms_frame;     /* GPU time of the frame's preprocessing (depth, pyramids, normals), ms; in ms_gpu */
+    double ms_wall;      /* wall time of the frame's preprocessing and ICP (submissions, waits, solves), ms */
     double ms_ref;       /* GPU time of the last reference preparation (ROF, pyramids, normals), ms */
 } track_result;
 

@@ -31,11 +31,10 @@ struct track_tracker {
     gpu_buffer *frame_depth, *frame_normal;
     gpu_buffer *ref_depth, *ref_normal;
     gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
-    gpu_buffer *rof_f;         /* the reference's unsmoothed finest depth, the ROF's input */
     gpu_buffer *counters;      /* TRACK_CNT_* */
     gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
 
-    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_icp;
+    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp;
     /* Image binding sets: frame from the upload, reference from the upload
      * (raw frame) or ref_in (GPU depth) with the dual fields 0 -> 1 and
      * 1 -> 0. */
@@ -45,6 +44,7 @@ struct track_tracker {
     uint32_t icp_px_per_thread;
     uint32_t icp_groups_max;
     bool icp_subgroup;         /* the subgroup-arithmetic kernel is used */
+    bool parent_normals;       /* the finest level's normals from level 1 (pyramid.c) */
     bool profile;              /* BITFUSE_TRACK_PROFILE=1: every image dispatch its own timed stage, printed */
     float *partial_host;       /* icp_groups_max * TRACK_PARTIAL_WORDS, allocated at create */
 
@@ -80,10 +80,12 @@ bf_status track__upload_depth(track_tracker *t, const uint16_t *depth);
 /* icp.c */
 bf_status track__icp_create(track_tracker *t);
 void track__icp_destroy(track_tracker *t);
-/* Runs ICP (frame pyramids against the reference pyramids) from the
- * relative pose *T_rc (in/out) and fills the result's statistics and
- * outcome (except NO_DEPTH / NO_REFERENCE, checked by the caller). */
-bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, track_result *res);
+/* Runs ICP from the relative pose *T_rc (in/out): the frame's
+ * preprocessing (its depth must be in t->upload) in the first iteration's
+ * submission, then the levels; fills the result's statistics and outcome
+ * (NO_DEPTH when the frame has fewer than min_valid depth pixels;
+ * NO_REFERENCE is the caller's). */
+bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, track_result *res);
 
 /* For tests: the ROF iteration count used by the next reference. */
 void track__set_rof_iterations(track_tracker *t, uint32_t n);
