@@ -29,6 +29,7 @@ typedef struct variant {
     bool no_early_stop;
     uint32_t sub;  /* finest_sample_step */
     float angle;   /* 0: the default gate */
+    uint32_t rof_level;
 } variant;
 
 static bf_se3 sway(const bf_se3 *T0, uint32_t k)
@@ -76,13 +77,14 @@ int main(int argc, char **argv)
     float *fdepth = malloc((size_t)n * 4);
 
     const variant vars[] = {
-        {"default (10/5/4, ROF 10, every pixel)", {10, 5, 4}, 10, false, 1, 0},
-        {"finest level every 2nd pixel", {10, 5, 4}, 10, false, 2, 0},
-        {"ROF 5", {10, 5, 4}, 5, false, 1, 0},
-        {"ROF 0", {10, 5, 4}, 0, false, 1, 0},
-        {"no early stop", {10, 5, 4}, 10, true, 1, 0},
-        {"2/4/8", {2, 4, 8}, 10, false, 1, 0},
-        {"normal gate 45 deg", {10, 5, 4}, 10, false, 1, 45},
+        {"default (10/5/4, ROF 10 at level 1, gate 45, every pixel)", {10, 5, 4}, 10, false, 1, 0, 1},
+        {"ROF 10 at full resolution", {10, 5, 4}, 10, false, 1, 0, 0},
+        {"ROF 5 at level 1", {10, 5, 4}, 5, false, 1, 0, 1},
+        {"ROF off", {10, 5, 4}, 0, false, 1, 0, 1},
+        {"finest level every 2nd pixel", {10, 5, 4}, 10, false, 2, 0, 1},
+        {"no early stop", {10, 5, 4}, 10, true, 1, 0, 1},
+        {"2/4/8", {2, 4, 8}, 10, false, 1, 0, 1},
+        {"normal gate 20 deg", {10, 5, 4}, 10, false, 1, 20, 1},
     };
     enum { NV = sizeof vars / sizeof vars[0] };
     printf("device: %s, 640x480, %u frames of the noisy room (~1 cm, ~1 deg per frame); variants interleaved frame by "
@@ -100,6 +102,7 @@ int main(int argc, char **argv)
         memcpy(cfg.iterations, vars[v].it, sizeof cfg.iterations);
         cfg.rof_iterations = vars[v].rof;
         cfg.finest_sample_step = vars[v].sub;
+        cfg.rof_level = vars[v].rof_level;
         if (vars[v].angle > 0) cfg.angle_deg = vars[v].angle;
         if (vars[v].no_early_stop) cfg.converged_m = cfg.converged_deg = 0;
         if (track_create(ctx, &cfg, &K, &tv[v]) != BF_OK) {

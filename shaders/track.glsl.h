@@ -34,6 +34,10 @@
 
 #define TRACK_LEVELS 3u
 #define TRACK_IMAGE_BUFFERS 6u
+/* The image kernels' workgroups: TRACK_IMAGE_TILE^2 invocations; those that
+ * loop take TRACK_IMAGE_PX pixels each, TRACK_IMAGE_TILE apart in x. */
+#define TRACK_IMAGE_TILE 8u
+#define TRACK_IMAGE_PX 4u
 #define TRACK_ICP_BUFFERS 5u
 
 /* Counters (uint words of the counters buffer). */

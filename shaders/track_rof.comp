@@ -46,20 +46,19 @@ float w_at(uint i, uint x, uint y, float f, float lambda)
     return w;
 }
 
-void main()
+void rof_pixel(uint x, uint y)
 {
-    /* 2D dispatch: x and y without an integer division (lavapipe divides
-     * lane by lane). */
-    uint x = gl_GlobalInvocationID.x, y = gl_GlobalInvocationID.y;
     if (x >= pc.width || y >= pc.height) return;
     uint i = y * pc.width + x;
-    float f = depth.d[i];
+    /* The level's depth at pixel offset pc.dst_off; p is level-local. */
+    uint o = pc.dst_off;
+    float f = depth.d[o + i];
     if (!(f > 0.0)) {
         p_out.p[i] = vec2(0.0);
         return;
     }
-    float fr = x + 1u < pc.width ? depth.d[i + 1u] : 0.0;
-    float fd = y + 1u < pc.height ? depth.d[i + pc.width] : 0.0;
+    float fr = x + 1u < pc.width ? depth.d[o + i + 1u] : 0.0;
+    float fd = y + 1u < pc.height ? depth.d[o + i + pc.width] : 0.0;
     bool mx = fr > 0.0, my = fd > 0.0;
     float lambda = track_rof_lambda(f, pc.lambda0);
     float w = w_at(i, x, y, f, lambda);
@@ -79,4 +78,15 @@ void main()
     BF_PRECISE float gn = sqrt(gx * gx + gy * gy);
     vec2 p = p_in.p[i];
     p_out.p[i] = vec2(mx ? track_rof_step(p.x, gx, s, gn) : 0.0, my ? track_rof_step(p.y, gy, s, gn) : 0.0);
+}
+
+void main()
+{
+    /* 2D dispatch, TRACK_IMAGE_PX pixels per invocation TRACK_IMAGE_TILE
+     * apart in x (neighbouring lanes stay neighbouring pixels): x and y
+     * without an integer division (lavapipe divides lane by lane), and
+     * lavapipe's cost per invocation, which dominates a kernel this small,
+     * is shared by several pixels. */
+    uint x0 = gl_WorkGroupID.x * (TRACK_IMAGE_TILE * TRACK_IMAGE_PX) + gl_LocalInvocationID.x;
+    for (uint j = 0u; j < TRACK_IMAGE_PX; j++) rof_pixel(x0 + j * TRACK_IMAGE_TILE, gl_GlobalInvocationID.y);
 }

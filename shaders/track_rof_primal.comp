@@ -20,7 +20,8 @@ void main()
     uint x = gl_GlobalInvocationID.x, y = gl_GlobalInvocationID.y;
     if (x >= pc.width || y >= pc.height) return;
     uint i = y * pc.width + x;
-    float f = depth.d[i];
+    uint o = pc.dst_off; /* the level's pixel offset; p is level-local */
+    float f = depth.d[o + i];
     if (!(f > 0.0)) return;
     vec2 p = p_in.p[i];
     float pl = x > 0u ? p_in.p[i - 1u].x : 0.0;
@@ -29,5 +30,5 @@ void main()
     BF_PRECISE float u = f - d / track_rof_lambda(f, pc.lambda0);
     /* A smoothing strong enough to push a pixel to the camera would make
      * it invalid; keep the measurement there instead. */
-    depth.d[i] = u > 0.0 ? u : f;
+    depth.d[o + i] = u > 0.0 ? u : f;
 }

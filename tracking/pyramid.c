@@ -155,6 +155,15 @@ static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const t
     if (t->profile) gpu_cmd_stage_end(t->ctx);
 }
 
+/* The same for kernels taking TRACK_IMAGE_PX pixels per invocation. */
+static void dispatch_px(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const track_image_push *pc)
+{
+    pstage_begin(t, p, pc);
+    gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
+                     gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
+    if (t->profile) gpu_cmd_stage_end(t->ctx);
+}
+
 /* Depth of level 0 from the raw input, levels above, then the normal maps
  * of every level, through binding set b. */
 static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t mode, uint32_t counter)
@@ -165,9 +174,9 @@ static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t mode, uint32_t
     dispatch(t, t->p_depth, b, &pc);
 }
 
-static void cmd_pyramid(track_tracker *t, gpu_bindings *b)
+static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first_down)
 {
-    for (uint32_t l = 1; l < TRACK_LEVELS; l++) {
+    for (uint32_t l = first_down; l < TRACK_LEVELS; l++) {
         /* Level l - 1's depth writes -> level l's block reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
         track_image_push pc = base_push(t, l);
@@ -209,7 +218,7 @@ void track__cmd_frame_pyramid(track_tracker *t)
 {
     track__stage_begin(t, "track.frame");
     cmd_depth(t, t->b_frame, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID);
-    cmd_pyramid(t, t->b_frame);
+    cmd_pyramid(t, t->b_frame, 1);
     track__stage_end(t);
 }
 
@@ -217,20 +226,34 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
 {
     gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
     uint32_t n_it = t->cfg.rof_iterations;
+    /* The ROF runs on level rl; levels below it keep the unsmoothed depth. */
+    uint32_t rl = n_it > 0 ? t->cfg.rof_level : 0;
     track__stage_begin(t, "track.ref");
     gpu_cmd_fill(t->ctx, t->rof_p[0], 0, GPU_WHOLE_SIZE, 0);
     /* The zero dual field -> the first ROF iteration's reads. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
     cmd_depth(t, b[0], from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
+    for (uint32_t l = 1; l <= rl; l++) {
+        /* Level l - 1's depth writes -> level l's block reads. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        track_image_push pc = base_push(t, l);
+        pc.src_off = t->geom.off[l - 1];
+        pc.src_width = t->geom.w[l - 1];
+        dispatch(t, t->p_pyrdown, b[0], &pc);
+    }
     track__stage_end(t);
 
     track__stage_begin(t, "track.rof");
-    track_image_push pc = base_push(t, 0);
+    track_image_push pc = base_push(t, rl);
+    /* The same metric smoothing at every level: a detail of size rho at
+     * depth z spans rho f_l / z pixels with f_l = f / 2^l, and ROF
+     * flattens contrasts below 2 / (lambda r), so lambda scales by 2^l. */
+    pc.lambda0 = t->cfg.rof_lambda0 * (float)(1u << rl);
     for (uint32_t it = 0; it < n_it; it++) {
         /* The depth (first) or the previous iteration's dual writes -> this
          * iteration's reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        dispatch(t, t->p_rof, b[it & 1u], &pc);
+        dispatch_px(t, t->p_rof, b[it & 1u], &pc);
     }
     if (n_it > 0) {
         /* The last dual field -> the primal solution reading it. */
@@ -240,6 +263,6 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
     track__stage_end(t);
 
     track__stage_begin(t, "track.ref");
-    cmd_pyramid(t, b[0]);
+    cmd_pyramid(t, b[0], rl + 1);
     track__stage_end(t);
 }

@@ -55,6 +55,10 @@ track_config track_config_default(void)
         .degenerate_ratio = 5e-3,
         .rof_iterations = 10,
         .rof_lambda0 = 100.0f,
+        /* Half resolution: a quarter of the cost (lavapipe: ~10 ms per
+         * full-resolution iteration under load), the same tracking error in
+         * bench_tracking; the normals come from level 1 anyway. */
+        .rof_level = 1,
         .min_valid_frac = 0.01f,
         .converged_m = 1e-5f,
         .converged_deg = 1e-3f,
@@ -96,6 +100,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->max_depth_m > 0))
         return bf_fail(BF_INVALID_ARG, "tracking: gates must be positive (dist %g m, angle %g deg, depth %g m)",
                        c->dist_m, c->angle_deg, c->max_depth_m);
+    if (c->rof_level > 1 || c->rof_level >= c->levels)
+        return bf_fail(BF_INVALID_ARG, "tracking: rof_level %u (0 or 1, below levels %u)", c->rof_level, c->levels);
     if (c->finest_sample_step != 1 && c->finest_sample_step != 2)
         return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1 or 2)", c->finest_sample_step);
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");

@@ -40,6 +40,8 @@ typedef struct track_config {
     /* ROF smoothing of the reference (0 iterations: off). */
     uint32_t rof_iterations;
     float rof_lambda0;       /* data weight at 1 m; lambda(z) per the dissertation */
+    uint32_t rof_level;      /* pyramid level the ROF runs on: 0 full resolution, 1 half (default; the
+                                finest level then keeps the unsmoothed depth, docs/tracking.md) */
     /* Added with the implementation (docs/tracking.md has the reasons). */
     float min_valid_frac;    /* valid depth pixels / all below this: TRACK_NO_DEPTH (frame) or
                                 TRACK_NO_REFERENCE (reference); default 0.01 */

@@ -8,7 +8,7 @@
 /* Local sizes: 8x8 tiles for the per-pixel image kernels; the ICP
  * kernel's workgroup and the pixels each invocation walks are chosen at
  * create (icp.c). */
-#define TRACK_IMAGE_TILE 8u
+/* TRACK_IMAGE_TILE, TRACK_IMAGE_PX: shaders/track.glsl.h */
 
 /* A pyramid's geometry: level l is w[l] x h[l] pixels at pixel offset
  * off[l]; n_pix pixels in all. */
