@@ -3,7 +3,10 @@
  * (median and p95 of N casts) for the tracking and display options, at a
  * fused pose and at one between fused poses.
  *
- *   build/bench/bench_render [--frames N] [--runs N] [--ratio R]
+ *   build/bench/bench_render [--frames N] [--runs N] [--ratio R] [--wg 8x8,4x2,...]
+ *
+ * --wg compares workgroup shapes (render_create reads BF_RENDER_WG),
+ * interleaved run by run.
  */
 #include <math.h>
 #include <stdio.h>
@@ -25,32 +28,39 @@ static double cpu_ms(void)
     return 1e3 * (ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-3 * (ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
 }
 
-static bf_status cast_times(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T,
-                            const render_options *opt, uint32_t runs, double *median_ms, double *p95_ms,
-                            double *cpu_median_ms, double *hit_share)
+/* Up to 8 workgroup shapes, compared interleaved: run r casts with every
+ * shape before run r + 1, so the machine's load drifts over all alike. */
+#define MAX_SHAPES 8
+
+static bf_status cast_times(render_caster **rc, uint32_t n_rc, fusion_map *map, const bf_intrinsics *K,
+                            const bf_se3 *T, const render_options *opt, uint32_t runs, double *median_ms,
+                            double *p95_ms, double *cpu_median_ms, double *hit_share)
 {
-    bf_stats st = {0}, cpu = {0};
+    bf_stats st[MAX_SHAPES] = {{0}}, cpu[MAX_SHAPES] = {{0}};
     bf_status s = BF_OK;
-    for (uint32_t r = 0; r < runs && s == BF_OK; r++) {
-        double c0 = cpu_ms();
-        s = render_raycast(rc, map, K, T, opt);
-        double c1 = cpu_ms();
-        if (s == BF_OK) s = bf_stats_push(&st, render_last_ms(rc));
-        if (s == BF_OK) s = bf_stats_push(&cpu, c1 - c0);
+    for (uint32_t r = 0; r < runs && s == BF_OK; r++)
+        for (uint32_t v = 0; v < n_rc && s == BF_OK; v++) {
+            double c0 = cpu_ms();
+            s = render_raycast(rc[v], map, K, T, opt);
+            double c1 = cpu_ms();
+            if (s == BF_OK) s = bf_stats_push(&st[v], render_last_ms(rc[v]));
+            if (s == BF_OK) s = bf_stats_push(&cpu[v], c1 - c0);
+        }
+    for (uint32_t v = 0; v < n_rc; v++) {
+        cpu_median_ms[v] = bf_stats_percentile(&cpu[v], 50);
+        median_ms[v] = bf_stats_percentile(&st[v], 50);
+        p95_ms[v] = bf_stats_percentile(&st[v], 95);
+        bf_stats_free(&cpu[v]);
+        bf_stats_free(&st[v]);
     }
-    *cpu_median_ms = bf_stats_percentile(&cpu, 50);
-    bf_stats_free(&cpu);
     render_images im = {0};
-    if (s == BF_OK) s = render_download(rc, &im);
+    if (s == BF_OK) s = render_download(rc[0], &im);
     if (s == BF_OK) {
         size_t n = 0, np = (size_t)im.width * im.height;
         for (size_t i = 0; i < np; i++) n += im.depth[i] > 0;
         *hit_share = (double)n / np;
     }
     render_images_free(&im);
-    *median_ms = bf_stats_percentile(&st, 50);
-    *p95_ms = bf_stats_percentile(&st, 95);
-    bf_stats_free(&st);
     return s;
 }
 
@@ -58,7 +68,9 @@ int main(int argc, char **argv)
 {
     uint32_t n_frames = 20, runs = 15;
     double ratio = 1.0;
+    const char *shapes = "8x8";
     for (int i = 1; i + 1 < argc; i += 2) {
+        if (!strcmp(argv[i], "--wg")) shapes = argv[i + 1];
         if (!strcmp(argv[i], "--frames")) n_frames = (uint32_t)atoi(argv[i + 1]);
         else if (!strcmp(argv[i], "--runs")) runs = (uint32_t)atoi(argv[i + 1]);
         else if (!strcmp(argv[i], "--ratio")) ratio = atof(argv[i + 1]);
@@ -69,7 +81,9 @@ int main(int argc, char **argv)
     gpu_context *ctx = NULL;
     eval_renderer *ren = NULL;
     fusion_map *map = NULL;
-    render_caster *rc = NULL;
+    render_caster *rc[MAX_SHAPES] = {0};
+    char shape[MAX_SHAPES][16];
+    uint32_t n_rc = 0;
     uint16_t *depth = malloc((size_t)K.width * K.height * 2);
     bf_se3 *poses = malloc(n_frames * sizeof *poses);
     bf_status s = eval_scene_room(NULL, &scene);
@@ -96,29 +110,42 @@ int main(int argc, char **argv)
     if (s == BF_OK) s = fusion_flush(map);
     fusion_stats fs;
     if (s == BF_OK) s = fusion_get_stats(map, &fs);
-    if (s == BF_OK) s = render_create(ctx, K.width, K.height, &rc);
+    for (const char *p = shapes; s == BF_OK && *p && n_rc < MAX_SHAPES;) {
+        size_t len = strcspn(p, ",");
+        snprintf(shape[n_rc], sizeof shape[n_rc], "%.*s", (int)(len < 15 ? len : 15), p);
+        setenv("BF_RENDER_WG", shape[n_rc], 1); /* read by render_create */
+        s = render_create(ctx, K.width, K.height, &rc[n_rc]);
+        if (s == BF_OK) n_rc++;
+        p += len + (p[len] == ',');
+    }
+    unsetenv("BF_RENDER_WG");
     if (s != BF_OK) goto done;
     printf("# render bench: %s, room fused from %u frames 640x480 (ratio %.2g, %.0f ms/frame), %u bricks\n\n",
            gpu_device_name(ctx), n_frames, ratio, 1e3 * t_fuse / n_frames, fs.n_bricks);
-    printf("| pose | options | GPU median ms | GPU p95 ms | CPU ms (all threads) | pixels hit |\n"
-           "|---|---|---|---|---|---|\n");
+    printf("| pose | options | workgroup | GPU median ms | GPU p95 ms | CPU ms (all threads) | pixels hit |\n"
+           "|---|---|---|---|---|---|---|\n");
     bf_se3 between = bf_se3_interpolate(&poses[n_frames / 2 - 1], &poses[n_frames / 2], 0.5);
     const struct {
         const char *name;
         const bf_se3 *T;
     } where[2] = {{"fused", &poses[n_frames / 2]}, {"between", &between}};
     for (int w = 0; w < 2 && s == BF_OK; w++)
-        for (int m = 0; m < 2 && s == BF_OK; m++) {
-            render_options opt = m == 0 ? render_options_tracking() : render_options_display();
-            double med, p95, cpu, hit;
-            s = cast_times(rc, map, &K, where[w].T, &opt, runs, &med, &p95, &cpu, &hit);
-            if (s == BF_OK)
-                printf("| %s | %s | %.2f | %.2f | %.1f | %.1f%% |\n", where[w].name, m == 0 ? "tracking" : "display",
-                       med, p95, cpu, 100 * hit);
+        for (int m = 0; m < 3 && s == BF_OK; m++) {
+            /* tracking, tracking without the sub-voxel refinement (what it
+             * costs), display */
+            render_options opt = m == 2 ? render_options_display() : render_options_tracking();
+            if (m == 1) opt.refine = false;
+            const char *name = m == 0 ? "tracking" : (m == 1 ? "tracking, unrefined" : "display");
+            double med[MAX_SHAPES], p95[MAX_SHAPES], cpu[MAX_SHAPES], hit = 0;
+            s = cast_times(rc, n_rc, map, &K, where[w].T, &opt, runs, med, p95, cpu, &hit);
+            for (uint32_t v = 0; s == BF_OK && v < n_rc; v++)
+                printf("| %s | %s | %s | %.2f | %.2f | %.1f | %.1f%% |\n", where[w].name, name, shape[v], med[v],
+                       p95[v], cpu[v], 100 * hit);
+            fflush(stdout);
         }
 done:
     if (s != BF_OK) fprintf(stderr, "bench_render: %s: %s\n", bf_status_name(s), bf_last_error());
-    render_destroy(rc);
+    for (uint32_t v = 0; v < n_rc; v++) render_destroy(rc[v]);
     fusion_destroy(map);
     gpu_context_destroy(ctx);
     eval_renderer_destroy(ren);

@@ -2,6 +2,7 @@
  * transform and the two passes (shaders/render_raycast.comp,
  * shaders/render_shade.comp; parameters in shaders/render.glsl.h). */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -18,6 +19,7 @@ struct render_caster {
     /* The map buffers bound to b_raycast (rebound when another map comes). */
     gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf;
     double last_ms;
+    uint32_t local_x, local_y; /* workgroup shape of both passes */
 };
 
 render_options render_options_tracking(void)
@@ -47,6 +49,15 @@ bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, rende
     rc->targets.width = width;
     rc->targets.height = height;
     uint64_t n = (uint64_t)width * height;
+    /* Workgroup shape: RENDER_LOCAL_X x RENDER_LOCAL_Y, or BF_RENDER_WG=WxH
+     * (a tuning knob for bench/bench_render, which compares shapes in one
+     * run; lavapipe puts 8 consecutive invocations in one SIMD vector, so
+     * the shape decides which 8 rays run in lockstep). */
+    rc->local_x = RENDER_LOCAL_X, rc->local_y = RENDER_LOCAL_Y;
+    const char *wg = getenv("BF_RENDER_WG");
+    unsigned wx = 0, wy = 0;
+    if (wg && sscanf(wg, "%ux%u", &wx, &wy) == 2 && wx >= 1 && wy >= 1 && wx * wy <= 256 && wx * wy % 8 == 0)
+        rc->local_x = wx, rc->local_y = wy;
     bf_status s = target_create(ctx, "render.depth", 4 * n, &rc->targets.depth);
     if (s == BF_OK) s = target_create(ctx, "render.normal", 16 * n, &rc->targets.normal);
     if (s == BF_OK) s = target_create(ctx, "render.level", 4 * n, &rc->targets.level);
@@ -57,7 +68,7 @@ bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, rende
         .spirv_bytes = bf_spv_render_raycast_size,
         .n_buffers = 6,
         .push_bytes = sizeof(render_push),
-        .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
+        .local_size = {rc->local_x, rc->local_y, 1},
     };
     gpu_pipeline_desc ps = {
         .name = "render.shade",
@@ -65,7 +76,7 @@ bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, rende
         .spirv_bytes = bf_spv_render_shade_size,
         .n_buffers = 4,
         .push_bytes = sizeof(render_push),
-        .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
+        .local_size = {rc->local_x, rc->local_y, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pr, &rc->p_raycast);
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &ps, &rc->p_shade);
@@ -156,7 +167,7 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
     pc.t[1] = (float)(T_wc->t.y - v.origin_w.y);
     pc.t[2] = (float)(T_wc->t.z - v.origin_w.z);
 
-    uint32_t gx = gpu_groups(K->width, RENDER_LOCAL_X), gy = gpu_groups(K->height, RENDER_LOCAL_Y);
+    uint32_t gx = gpu_groups(K->width, rc->local_x), gy = gpu_groups(K->height, rc->local_y);
     if ((s = gpu_begin(rc->ctx)) != BF_OK) return s;
     bf_status ts = gpu_cmd_stage_begin(rc->ctx, "render.raycast");
     gpu_cmd_dispatch(rc->ctx, rc->p_raycast, rc->b_raycast, &pc, gx, gy, 1);
