@@ -188,6 +188,32 @@ int main(int argc, char **argv)
                        r.iterations, r.ms_gpu, median(wall, 3));
                 track_destroy(t);
             }
+        /* Iteration schedules on the real pair (the default gate). */
+        const uint32_t sched[][3] = {{10, 5, 4}, {3, 5, 8}, {2, 4, 8}};
+        printf("\n| iterations | outcome | |t| mm | deg | inliers | rms mm | iterations run | ICP ms GPU | wall ms |\n"
+               "|---|---|---|---|---|---|---|---|---|\n");
+        for (size_t si = 0; si < sizeof sched / sizeof sched[0] && !quick; si++) {
+            track_config cfg = track_config_default();
+            memcpy(cfg.iterations, sched[si], sizeof cfg.iterations);
+            track_tracker *t;
+            if (track_create(ctx, &cfg, &Kt, &t) != BF_OK) continue;
+            bf_se3 I = bf_se3_identity();
+            bf_frame f1 = {.width = w, .height = hh, .depth = d1};
+            bf_frame f2 = {.index = 1, .width = w, .height = hh, .depth = d2};
+            track_result r;
+            double wall[3];
+            for (int rep = 0; rep < 3; rep++) {
+                track_set_reference_frame(t, &f1, &I);
+                double t0 = bf_time_s();
+                track_frame(t, &f2, &I, &r);
+                wall[rep] = 1e3 * (bf_time_s() - t0);
+            }
+            printf("| %u/%u/%u | %s%s | %.1f | %.2f | %.0f%% | %.2f | %u | %.1f | %.1f |\n", sched[si][0], sched[si][1],
+                   sched[si][2], track_outcome_name(r.outcome), r.degenerate ? " (degenerate)" : "",
+                   1e3 * bf_v3_norm(r.T_wc.t), bf_se3_angle(&r.T_wc) * 180 / M_PI, 100 * r.inlier_frac,
+                   1e3 * r.residual_m, r.iterations, r.ms_gpu, median(wall, 3));
+            track_destroy(t);
+        }
     }
     free(d1), free(d2);
     free(fdepth);

@@ -144,7 +144,8 @@ void main()
     for (uint s = L / 2u; s > 0u; s >>= 1) {
         barrier();
         if (li < s)
-            for (uint q = 0u; q < 8u; q++) s_sum[q * TRACK_ICP_LOCAL_MAX + li] += s_sum[q * TRACK_ICP_LOCAL_MAX + li + s];
+            for (uint q = 0u; q < 8u; q++)
+                s_sum[q * TRACK_ICP_LOCAL_MAX + li] += s_sum[q * TRACK_ICP_LOCAL_MAX + li + s];
     }
     barrier();
     if (li < 8u) {

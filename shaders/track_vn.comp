@@ -6,7 +6,9 @@
  * octahedral coordinates (track.glsl.h). It is invalid (0) where a
  * neighbour is missing, outside the image, or across a depth
  * discontinuity (TRACK_NORMAL_JUMP_REL); ICP uses only pixels with a depth
- * and a normal. Vertices are not stored: ICP back-projects the depth. */
+ * and a normal. Vertices are not stored: ICP back-projects the depth.
+ * mode 1 (the finest level): each pixel takes its parent's normal on the
+ * level above (pc.src_off, pc.src_width) where the two depths agree. */
 #extension GL_GOOGLE_include_directive : require
 #include "track.glsl.h"
 

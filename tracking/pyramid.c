@@ -51,16 +51,20 @@ bf_status track__pyramid_create(track_tracker *t)
     if ((gpu_device_limits(t->ctx)->subgroup_ops & need) != need)
         return bf_fail(BF_UNSUPPORTED, "tracking: the device lacks subgroup arithmetic in compute shaders");
     bf_status s;
-    if ((s = image_pipeline(t, "track.depth", bf_spv_track_depth, bf_spv_track_depth_size, TRACK_IMAGE_TILE, &t->p_depth)) != BF_OK)
+    if ((s = image_pipeline(t, "track.depth", bf_spv_track_depth, bf_spv_track_depth_size, TRACK_IMAGE_TILE,
+                            &t->p_depth)) != BF_OK)
         return s;
-    if ((s = image_pipeline(t, "track.pyrdown", bf_spv_track_pyrdown, bf_spv_track_pyrdown_size, TRACK_IMAGE_TILE, &t->p_pyrdown)) !=
-        BF_OK)
+    if ((s = image_pipeline(t, "track.pyrdown", bf_spv_track_pyrdown, bf_spv_track_pyrdown_size, TRACK_IMAGE_TILE,
+                            &t->p_pyrdown)) != BF_OK)
         return s;
-    if ((s = image_pipeline(t, "track.smooth", bf_spv_track_smooth, bf_spv_track_smooth_size, TRACK_IMAGE_TILE, &t->p_smooth)) != BF_OK)
+    if ((s = image_pipeline(t, "track.smooth", bf_spv_track_smooth, bf_spv_track_smooth_size, TRACK_IMAGE_TILE,
+                            &t->p_smooth)) != BF_OK)
         return s;
-    if ((s = image_pipeline(t, "track.vn", bf_spv_track_vn, bf_spv_track_vn_size, TRACK_IMAGE_TILE, &t->p_vn)) != BF_OK) return s;
-    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof, bf_spv_track_rof_size, TRACK_IMAGE_TILE, &t->p_rof)) !=
-        BF_OK)
+    if ((s = image_pipeline(t, "track.vn", bf_spv_track_vn, bf_spv_track_vn_size, TRACK_IMAGE_TILE,
+                            &t->p_vn)) != BF_OK)
+        return s;
+    if ((s = image_pipeline(t, "track.rof", bf_spv_track_rof, bf_spv_track_rof_size, TRACK_IMAGE_TILE,
+                            &t->p_rof)) != BF_OK)
         return s;
     if ((s = image_pipeline(t, "track.rof_primal", bf_spv_track_rof_primal, bf_spv_track_rof_primal_size,
                             TRACK_IMAGE_TILE, &t->p_primal)) != BF_OK)
@@ -75,8 +79,8 @@ bf_status track__pyramid_create(track_tracker *t)
             return s;
     }
     /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
-    return gpu_pipeline_warm_up(t->ctx, (gpu_pipeline *[]){t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal},
-                                6);
+    gpu_pipeline *all[] = {t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal};
+    return gpu_pipeline_warm_up(t->ctx, all, 6);
 }
 
 void track__pyramid_destroy(track_tracker *t)
@@ -143,7 +147,13 @@ static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_im
 {
     if (!t->profile) return;
     char name[GPU_STAGE_NAME_MAX];
-    snprintf(name, sizeof name, "%s%ux%u", p == t->p_depth ? "depth" : p == t->p_pyrdown ? "pyr" : p == t->p_smooth ? "smooth" : p == t->p_vn ? "vn" : p == t->p_rof ? "rof" : "primal", pc->width, pc->height);
+    const char *k = p == t->p_depth     ? "depth"
+                    : p == t->p_pyrdown ? "pyr"
+                    : p == t->p_smooth  ? "smooth"
+                    : p == t->p_vn      ? "vn"
+                    : p == t->p_rof     ? "rof"
+                                        : "primal";
+    snprintf(name, sizeof name, "%s%ux%u", k, pc->width, pc->height);
     gpu_cmd_stage_begin(t->ctx, name);
 }
 
@@ -151,7 +161,8 @@ static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_im
 static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const track_image_push *pc)
 {
     pstage_begin(t, p, pc);
-    gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE), gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
+    gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE),
+                     gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
     if (t->profile) gpu_cmd_stage_end(t->ctx);
 }
 
