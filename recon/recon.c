@@ -11,6 +11,7 @@ struct recon {
     bf_intrinsics K;
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
+    bf_se3 V;            /* motion of the last tracked frame, T_prev^-1 T_last (constant-velocity guess) */
     fusion_map *map;     /* created at the first frame with depth */
     render_caster *caster;
     track_tracker *tracker;
@@ -51,6 +52,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->K = *K;
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
+    r->V = bf_se3_identity();
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
     bf_status s = render_create(ctx, K->width, K->height, &r->caster);
     if (s == BF_OK) s = track_create(ctx, &r->cfg.track, K, &r->tracker);
@@ -99,8 +101,7 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     out->fused = true;
     if ((s = render_raycast(r->caster, r->map, &r->K, T, &r->cfg.raycast)) != BF_OK) return s;
     out->ms_raycast = render_last_ms(r->caster);
-    if ((s = track_set_reference_gpu(r->tracker, render_get_targets(r->caster)->depth, T)) != BF_OK) return s;
-    return BF_OK;
+    return track_set_reference_gpu(r->tracker, render_get_targets(r->caster)->depth, T);
 }
 
 bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
@@ -125,7 +126,11 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, out);
         if (s == BF_OK) r->counts.tracked++;
     } else {
-        s = track_frame(r->tracker, f, &r->T_last, &out->track);
+        /* The guess: the last pose, or with constant_velocity the last
+         * motion repeated (off by default: on the synthetic fr1_xyz room it
+         * lost tracking 8 frames earlier than the last pose did). */
+        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
+        s = track_frame(r->tracker, f, &guess, &out->track);
         if (s == BF_OK) {
             out->ms_track = out->track.ms_gpu;
             bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
@@ -137,12 +142,15 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
             } else if (good) {
                 out->state = RECON_TRACKED;
                 out->T_wc = out->track.T_wc;
+                bf_se3 Li = bf_se3_inverse(&r->T_last);
+                r->V = bf_se3_mul(&Li, &out->track.T_wc);
                 r->T_last = out->track.T_wc;
                 r->counts.tracked++;
                 s = fuse_and_reference(r, f, &out->T_wc, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
+                r->V = bf_se3_identity(); /* the motion is unknown now */
             }
         }
     }

@@ -25,6 +25,7 @@ typedef struct recon_config {
     render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
+    bool constant_velocity;   /* guess = last pose times the last motion; default false (last pose) */
 } recon_config;
 
 recon_config recon_config_default(void);

@@ -92,15 +92,6 @@ static bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *
     return s;
 }
 
-/* RMS of the translation error without alignment: the loop starts at the
- * true first pose, so the trajectories share a frame. */
-static double rms_error(const run_out *o, const bf_se3 *true_pose, uint32_t n)
-{
-    double sum = 0;
-    for (uint32_t k = 0; k < n; k++) sum += pow(trans_dist(&o->est[k], &true_pose[k]), 2);
-    return sqrt(sum / n);
-}
-
 static double surface_p90(const eval_scene *sc, const eval_mesh *pts)
 {
     eval_surface_config ec = eval_surface_config_default();
@@ -109,57 +100,6 @@ static double surface_p90(const eval_scene *sc, const eval_mesh *pts)
     fprintf(stderr, "  surface: %u points, median %.2f mm, p90 %.2f mm\n", pts->n_verts, 1e3 * er.accuracy.median,
             1e3 * er.accuracy.p90);
     return er.accuracy.p90;
-}
-
-#define N_ROOM 40
-
-BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
-{
-    gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
-    CHECK_OK(eval_scene_room(NULL, &sc));
-    bf_se3 truth[N_ROOM];
-    for (uint32_t k = 0; k < N_ROOM; k++) truth[k] = sweep_pose(&sc, k);
-    static run_out a, b;
-    memset(&a, 0, sizeof a);
-    memset(&b, 0, sizeof b);
-    bf_se3 I = bf_se3_identity();
-    CHECK_OK(run_loop(ctx, &sc, truth, N_ROOM, &I, NULL, &a));
-    double rms = rms_error(&a, truth, N_ROOM);
-    for (uint32_t k = 0; k < N_ROOM; k++)
-        if (getenv("BF_TEST_VERBOSE"))
-            fprintf(stderr, "  %2u %-8s %-14s deg %d inl %.2f res %.2f mm err %.2f mm\n", k,
-                    recon_state_name(a.fr[k].state), track_outcome_name(a.fr[k].track.outcome),
-                    a.fr[k].track.degenerate, a.fr[k].track.inlier_frac, 1e3 * a.fr[k].track.residual_m,
-                    1e3 * trans_dist(&a.est[k], &truth[k]));
-    fprintf(stderr, "  room: %u tracked, %u lost, trajectory RMS %.2f mm, end %.2f mm / %.3f deg\n", a.counts.tracked,
-            a.counts.lost, 1e3 * rms, 1e3 * trans_dist(&a.est[N_ROOM - 1], &truth[N_ROOM - 1]),
-            rot_dist_deg(&a.est[N_ROOM - 1], &truth[N_ROOM - 1]));
-    CHECK_EQ_INT(a.counts.tracked, N_ROOM);
-    CHECK_LE(rms, 0.015); /* issue 4's ATE bound */
-    CHECK_LE(surface_p90(&sc, &a.points), 0.02);
-
-    /* The same frames with the whole world moved 10 km away: the map origin
-     * follows the first camera and the GPU only sees relative poses, so the
-     * estimates agree with the run at the origin to far below a millimetre. */
-    bf_se3 far = bf_se3_from_qt(bf_quat_identity(), bf_v3(10000.0, -7000.0, 30.0));
-    CHECK_OK(run_loop(ctx, &sc, truth, N_ROOM, &far, NULL, &b));
-    CHECK_EQ_INT(b.counts.tracked, N_ROOM);
-    double worst = 0;
-    for (uint32_t k = 0; k < N_ROOM; k++) {
-        bf_se3 moved = bf_se3_mul(&far, &a.est[k]);
-        double d = trans_dist(&moved, &b.est[k]);
-        if (d > worst) worst = d;
-    }
-    fprintf(stderr, "  10 km away: largest difference from the run at the origin %.3g m\n", worst);
-    CHECK_LE(worst, 1e-4);
-    CHECK_EQ_INT(a.map.n_bricks, b.map.n_bricks);
-    eval_mesh_free(&a.points);
-    eval_mesh_free(&b.points);
-    eval_scene_free(&sc);
-    GPU_FIXTURE_CHECK_CLEAN(ctx);
-    gpu_context_destroy(ctx);
 }
 
 /* Frames 8-10 lose their depth: 8 is all zero, 9 keeps a handful of
