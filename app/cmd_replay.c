@@ -41,6 +41,8 @@ static const char replay_help[] =
     "  --max-level L      finest octree level, default 8\n"
     "  --icp-iters A,B,C  ICP iterations per pyramid level, finest first, default 10,5,4\n"
     "  --rof-iters N      ROF iterations on the reference, default from tracking (0: off)\n"
+    "  --angle-gate DEG   ICP normal-angle gate, default from tracking (45)\n"
+    "  --degenerate-ratio R  eigenvalue ratio below which the ICP system counts as degenerate\n"
     "  --rof-lambda L     ROF data weight at 1 m\n"
     "  --view-every K     write a shaded view every K frames\n"
     "  --no-mesh          skip the mesh (points and stats only)\n"
@@ -154,6 +156,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             fc->max_level = u, i++;
         } else if (!strcmp(o, "--icp-iters") && parse_iters(v, tc->iterations, &tc->levels)) {
             i++;
+        } else if (!strcmp(o, "--degenerate-ratio") && bf_parse_double(v, &d) && d >= 0) {
+            tc->degenerate_ratio = d, i++;
+        } else if (!strcmp(o, "--angle-gate") && bf_parse_double(v, &d) && d > 0 && d < 90) {
+            tc->angle_deg = (float)d, i++;
         } else if (!strcmp(o, "--rof-iters") && bf_parse_u32(v, &u)) {
             tc->rof_iterations = u, i++;
         } else if (!strcmp(o, "--rof-lambda") && bf_parse_double(v, &d) && d > 0) {
