@@ -181,6 +181,48 @@ static void dummy_record_child(int fd, const char *path)
     _exit(0);
 }
 
+/* Child: opens the recording at arg through OpenNI2's file device and
+ * plays it. Debian's OpenNI2 2.2.0.33 file player reaches end-of-file on
+ * these recordings before it hands out a frame (the device state goes to
+ * ONI_DEVICE_STATE_EOF at once), and its file driver has crashed the
+ * process on the way out: so this runs in a child, like the Dummy tests.
+ * Where frames are delivered they must be the Dummy's; either way the
+ * stream must end cleanly. */
+static void oni_play_child(int fd, const char *path)
+{
+    char uri[4200];
+    snprintf(uri, sizeof uri, "openni2:%s", path);
+    rgbd_source *src = NULL;
+    if (capture_open(uri, &src)) {
+        report(fd, "open: %s", bf_last_error());
+        _exit(1);
+    }
+    const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    if (strcmp(src->kind, "openni2 (.oni file)") || K->width != 320 || K->height != 240 ||
+        K->depth_scale != 1000.0 || src->n_frames < 1 || src->n_frames > 12) {
+        report(fd, "kind '%s', %ux%u, scale %g, %u frames", src->kind, K->width, K->height, K->depth_scale,
+               src->n_frames);
+        _exit(1);
+    }
+    bf_frame f;
+    uint32_t n = 0;
+    bf_status s;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+        for (uint32_t x = 0; x < f.width; x++)
+            if (f.depth[x] != 2000) {
+                report(fd, "frame %u: depth[0][%u] = %u, want 2000", n, x, f.depth[x]);
+                _exit(1);
+            }
+        n++;
+    }
+    if (s != BF_END) {
+        report(fd, "stream ended with %s: %s", bf_status_name(s), bf_last_error());
+        _exit(1);
+    }
+    report(fd, "%u of %u recorded frames delivered", n, src->n_frames);
+    _exit(0); /* no close: see the top of this file */
+}
+
 BF_TEST(openni2_opens_an_oni_recording)
 {
     char path[4096];
@@ -191,29 +233,12 @@ BF_TEST(openni2_opens_an_oni_recording)
         bf__test_fail(__FILE__, __LINE__, "recording child: exit %d: %s", rc, rep);
         return;
     }
-    char uri[4200];
-    snprintf(uri, sizeof uri, "openni2:%s", path);
-    rgbd_source *src = NULL;
-    CHECK_OK(capture_open(uri, &src));
-    CHECK(!strcmp(src->kind, "openni2 (.oni file)"));
-    CHECK_EQ_INT(src->intrinsics.width, 320);
-    CHECK_EQ_INT(src->intrinsics.height, 240);
-    CHECK_NEAR(src->intrinsics.depth_scale, 1000, 0);
-    CHECK(src->n_frames >= 1 && src->n_frames <= 12);
-    /* Debian's OpenNI2 2.2.0.33 file player reaches end-of-file on these
-     * recordings before it hands out a frame (the device state goes to
-     * ONI_DEVICE_STATE_EOF at once); where it does deliver frames, they
-     * must be the Dummy's. Either way the stream must end cleanly. */
-    bf_frame f;
-    uint32_t n = 0;
-    bf_status s;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        for (uint32_t x = 0; x < f.width; x++) CHECK_EQ_INT(f.depth[x], 2000);
-        n++;
+    rc = run_child(oni_play_child, path, rep, sizeof rep);
+    if (rc != 0) {
+        bf__test_fail(__FILE__, __LINE__, "playback child: exit %d: %s", rc, rep);
+        return;
     }
-    CHECK_STATUS(s, BF_END);
-    printf("    .oni playback: %u of %u recorded frames delivered\n", n, src->n_frames);
-    rgbd_source_close(src);
+    printf("    .oni playback: %s\n", rep);
 }
 
 #else
