@@ -13,7 +13,11 @@
  *
  * Poses are camera to world in double. The GPU only ever sees the pose of
  * the new frame relative to the reference camera, so tracking 10 km from
- * the world origin is as accurate as at the origin.
+ * the world origin is as accurate as at the origin. Rotations that come
+ * in are replaced by the nearest rotation and the estimate is rigid to
+ * rounding, so a closed loop (reference and guess at the last estimate)
+ * cannot accumulate a non-orthonormal rotation; a rotation with det <= 0
+ * is BF_INVALID_ARG.
  */
 #ifndef BF_TRACKING_H
 #define BF_TRACKING_H

@@ -1,6 +1,7 @@
 /* tracking: the ROF filter against its CPU oracle and its energies, ICP on
  * rendered frames of the synthetic room (with and without Kinect v1
- * noise, at the origin and 10 km away), the real TUM fr2_desk pair, and
+ * noise, at the origin and 10 km away), closed-loop frame-to-frame
+ * tracking from any pose, the real TUM fr2_desk pair, and
  * the hard cases (a single plane, empty and NaN depth, a sudden jump).
  * Validation is on; any message fails a test. */
 #include <math.h>
@@ -376,6 +377,108 @@ BF_TEST(icp_recovers_2cm_2deg_noisy_room)
     /* Kinect v1 noise at 1-4 m is 2-25 mm per pixel; averaged over ~5e4
      * inliers the pose error stays at a few mm. */
     check_room(EVAL_NOISE_KINECT1, 0.004, 0.25);
+}
+
+/* max |R^T R - I|: how far a pose's rotation is from orthonormal. */
+static double rigidity_error(const bf_se3 *T)
+{
+    double e = 0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double g = T->R[0][i] * T->R[0][j] + T->R[1][i] * T->R[1][j] + T->R[2][i] * T->R[2][j];
+            e = fmax(e, fabs(g - (i == j)));
+        }
+    return e;
+}
+
+/* Frame-to-frame tracking in a closed loop, as recon runs it: the reference
+ * is set at the last estimate and the guess is the last estimate, so the
+ * relative pose starts at the identity every time. Here the pair is the
+ * same every round (reference frame 0, frame 1), so every round must find
+ * the same relative motion, from any starting pose. The tracker used to
+ * hand back R (I + E) for a reference rotation R with R^T R = I + E, which
+ * tripled E every round: from 1e-16, 1e-3 after ~25 rounds and the motion
+ * mm off (the synthetic fr1_xyz room lost tracking at frame 29). */
+static void closed_loop(track_tracker *t, const bf_frame *f0, const bf_frame *f1, const bf_se3 *start, uint32_t rounds,
+                        bf_se3 *motion0, bool have_motion0)
+{
+    bf_se3 T = *start;
+    double worst_dt = 0, worst_da = 0, worst_rigid = 0;
+    for (uint32_t k = 0; k < rounds; k++) {
+        track_result r;
+        CHECK_OK(track_set_reference_frame(t, f0, &T));
+        CHECK_OK(track_frame(t, f1, &T, &r));
+        CHECK_EQ_INT(r.outcome, TRACK_OK);
+        if (r.outcome != TRACK_OK) return;
+        bf_se3 inv = bf_se3_inverse(&T);
+        bf_se3 m = bf_se3_mul(&inv, &r.T_wc);
+        if (!have_motion0) *motion0 = m, have_motion0 = true;
+        double dt, da;
+        pose_error(motion0, &m, &dt, &da);
+        worst_dt = fmax(worst_dt, dt), worst_da = fmax(worst_da, da);
+        worst_rigid = fmax(worst_rigid, rigidity_error(&r.T_wc));
+        T = r.T_wc;
+    }
+    fprintf(stderr, "  %u rounds: motion differs by up to %.3g m, %.3g deg; |R^T R - I| up to %.3g\n", rounds,
+            worst_dt, worst_da, worst_rigid);
+    CHECK_LE(worst_dt, 1e-6);
+    CHECK_LE(worst_da, 1e-5);
+    CHECK_LE(worst_rigid, 1e-12);
+}
+
+BF_TEST(closed_loop_tracking_depends_only_on_the_relative_pose)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    room rm;
+    CHECK_OK(room_open(&rm, &K_SMALL, EVAL_NOISE_KINECT1));
+    bf_se3 T0 = rm.scene.T_wc_view, d = small_motion();
+    bf_se3 T1 = bf_se3_mul(&T0, &d);
+    uint16_t *d0 = render(&rm, 0, &T0), *d1 = render(&rm, 1, &T1);
+    bf_frame f0 = frame_of(&K_SMALL, d0, 0), f1 = frame_of(&K_SMALL, d1, 1);
+    track_config cfg = test_config(&K_SMALL);
+    track_tracker *t;
+    CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
+    /* 40 rounds from the true pose, then from the identity and from 10 km
+     * away, turned (B = C A): the same motion to 1e-6 m throughout, and
+     * every estimate a rotation to rounding. */
+    bf_se3 motion0, I = bf_se3_identity();
+    bf_se3 C = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0.2, 0.3, 1), 0.7), bf_v3(1e4, -3e3, 250));
+    bf_se3 far = bf_se3_mul(&C, &T0);
+    closed_loop(t, &f0, &f1, &T0, 40, &motion0, false);
+    closed_loop(t, &f0, &f1, &I, 40, &motion0, true);
+    closed_loop(t, &f0, &f1, &far, 40, &motion0, true);
+    /* A reference and guess whose rotation is off orthonormal by 1e-6 (a
+     * symmetric stretch): the estimate is a rotation, and the motion is the
+     * same as from the exact pose within that 1e-6. */
+    bf_se3 S = T0;
+    double e[3][3] = {{1e-6, 4e-7, -3e-7}, {4e-7, -5e-7, 2e-7}, {-3e-7, 2e-7, 8e-7}};
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            for (int k = 0; k < 3; k++) S.R[i][j] += T0.R[i][k] * e[k][j];
+    CHECK(rigidity_error(&S) > 1e-6);
+    track_result r;
+    CHECK_OK(track_set_reference_frame(t, &f0, &S));
+    CHECK_OK(track_frame(t, &f1, &S, &r));
+    CHECK_EQ_INT(r.outcome, TRACK_OK);
+    fprintf(stderr, "  stretched reference: |R^T R - I| %.3g in, %.3g out\n", rigidity_error(&S),
+            rigidity_error(&r.T_wc));
+    CHECK_LE(rigidity_error(&r.T_wc), 1e-12);
+    bf_se3 inv = bf_se3_inverse(&T0), m = bf_se3_mul(&inv, &r.T_wc);
+    double dt, da;
+    pose_error(&motion0, &m, &dt, &da);
+    CHECK_LE(dt, 1e-5);
+    CHECK_LE(da, 1e-3);
+    /* A reflection is not a pose. */
+    bf_se3 M = T0;
+    for (int j = 0; j < 3; j++) M.R[0][j] = -M.R[0][j];
+    CHECK_STATUS(track_set_reference_frame(t, &f0, &M), BF_INVALID_ARG);
+    CHECK_STATUS(track_frame(t, &f1, &M, &r), BF_INVALID_ARG);
+    track_destroy(t);
+    free(d0), free(d1);
+    room_close(&rm);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
 }
 
 BF_TEST(icp_reduction_paths_agree)
