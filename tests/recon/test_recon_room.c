@@ -1,11 +1,7 @@
 /* Issue 4's accuracy check at test size: a noisy room tracked over 40
- * frames within 1.5 cm, and the same run 10 km from the origin.
- *
- * OPEN: this test fails today (tracking diverges after ~28 frames of the
- * sweep, as on the 640x480 fr1_xyz room after ~28 frames; docs/tracking.md
- * and the issue's note). It carries the ctest label `open`, which
- * scripts/test.sh leaves out so that CI guards what works; run it with
- * `ctest -L open`. Validation is on. */
+ * frames (320x240) within 1.5 cm, and the same run 10 km from the origin
+ * with the same accuracy. (bench/ and docs/bench_replay.md have the
+ * 600-frame 640x480 run.) Validation is on. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -145,19 +141,27 @@ BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
 
     /* The same frames with the whole world moved 10 km away: the map origin
      * follows the first camera and the GPU only sees relative poses, so the
-     * estimates agree with the run at the origin to far below a millimetre. */
+     * run must be as accurate as at the origin. Not bit for bit: fusion on
+     * lavapipe is not deterministic from run to run (the allocation's
+     * atomics hand out brick slots in a different order, so the window
+     * slices hold different bricks on a given frame); two runs at the same
+     * origin part by ~0.2 mm after 8 frames. */
     bf_se3 far = bf_se3_from_qt(bf_quat_identity(), bf_v3(10000.0, -7000.0, 30.0));
     CHECK_OK(run_loop(ctx, &sc, truth, N_ROOM, &far, NULL, &b));
     CHECK_EQ_INT(b.counts.tracked, N_ROOM);
-    double worst = 0;
+    double worst = 0, sum = 0;
     for (uint32_t k = 0; k < N_ROOM; k++) {
-        bf_se3 moved = bf_se3_mul(&far, &a.est[k]);
+        bf_se3 moved = bf_se3_mul(&far, &a.est[k]), true_far = bf_se3_mul(&far, &truth[k]);
         double d = trans_dist(&moved, &b.est[k]);
         if (d > worst) worst = d;
+        sum += pow(trans_dist(&b.est[k], &true_far), 2);
     }
-    fprintf(stderr, "  10 km away: largest difference from the run at the origin %.3g m\n", worst);
-    CHECK_LE(worst, 1e-4);
-    CHECK_EQ_INT(a.map.n_bricks, b.map.n_bricks);
+    double rms_far = sqrt(sum / N_ROOM);
+    fprintf(stderr, "  10 km away: trajectory RMS %.2f mm (at the origin %.2f mm), largest difference %.2f mm\n",
+            1e3 * rms_far, 1e3 * rms, 1e3 * worst);
+    CHECK_LE(rms_far, 0.015);
+    CHECK_NEAR(rms_far, rms, 0.002);
+    CHECK_LE(worst, 0.005);
     eval_mesh_free(&a.points);
     eval_mesh_free(&b.points);
     eval_scene_free(&sc);
