@@ -75,6 +75,10 @@ int main(int argc, char **argv)
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     recon_config cfg = recon_config_default();
+    /* The synthetic sensor's disparity steps scale with 1/f: below 640
+     * wide its depth is coarser than a Kinect's, so the residual gate widens
+     * as in tests/tracking. */
+    cfg.track.max_residual_m *= (float)(640.0 / w);
     bf_se3 T0 = loop_pose(&sc, 0, m);
     if (s == BF_OK) s = recon_create(ctx, &cfg, &K, &T0, &r);
     FILE *out = s == BF_OK ? fopen(out_path, "w") : NULL;
