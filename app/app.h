@@ -40,6 +40,10 @@ bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, a
 void app_json_map(FILE *f, const app_map_report *r, uint32_t max_level);
 /* The map's lines of the printed summary. */
 void app_print_map(const app_map_report *r, uint32_t max_level);
+/* The map options fuse, replay and live share (--ratio, --chunk, --window,
+ * --subcache, --bricks, --max-level) into fc: true if o with value v was
+ * one of them (the caller skips v). */
+bool app_parse_map_option(const char *o, const char *v, fusion_config *fc);
 /* Writes dir/name atomically from what write() prints. */
 bf_status app_write_json(const char *dir, const char *name, void (*write)(FILE *f, const void *arg), const void *arg);
 

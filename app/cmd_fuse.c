@@ -57,8 +57,6 @@ static int parse_args(int argc, char **argv, fuse_args *a)
             continue;
         }
         const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        double d;
-        uint32_t u;
         if (app_is_help(o)) {
             printf(fuse_help, replay_options_help());
             return -1;
@@ -69,22 +67,12 @@ static int parse_args(int argc, char **argv, fuse_args *a)
             a->seq = o;
         } else if (!v) {
             return app_usage_error(cmd, "%s needs a value", o);
+        } else if (app_parse_map_option(o, v, &a->fcfg)) {
+            i++;
         } else if (!strcmp(o, "--poses")) {
             a->poses = v, i++;
         } else if (!strcmp(o, "--out")) {
             a->out = v, i++;
-        } else if (!strcmp(o, "--ratio") && bf_parse_double(v, &d)) {
-            a->fcfg.voxel_ratio = (float)d, i++;
-        } else if (!strcmp(o, "--chunk") && bf_parse_double(v, &d)) {
-            a->fcfg.chunk_m = (float)d, i++;
-        } else if (!strcmp(o, "--window") && bf_parse_u32(v, &u)) {
-            a->fcfg.window = u, i++;
-        } else if (!strcmp(o, "--subcache") && bf_parse_u32(v, &u)) {
-            a->fcfg.subcache = u, i++;
-        } else if (!strcmp(o, "--bricks") && bf_parse_u32(v, &u)) {
-            a->fcfg.brick_cap = u, i++;
-        } else if (!strcmp(o, "--max-level") && bf_parse_u32(v, &u)) {
-            a->fcfg.max_level = u, i++;
         } else {
             return app_usage_error(cmd, "unknown option or bad value: %s %s", o, v);
         }

@@ -138,22 +138,12 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             a->seq = o;
         } else if (!v) {
             return app_usage_error(cmd, "%s needs a value", o);
+        } else if (app_parse_map_option(o, v, fc)) {
+            i++;
         } else if (!strcmp(o, "--out")) {
             a->out = v, i++;
         } else if (!strcmp(o, "--init") && (!strcmp(v, "groundtruth") || !strcmp(v, "identity"))) {
             a->init_identity = !strcmp(v, "identity"), i++;
-        } else if (!strcmp(o, "--ratio") && bf_parse_double(v, &d)) {
-            fc->voxel_ratio = (float)d, i++;
-        } else if (!strcmp(o, "--chunk") && bf_parse_double(v, &d)) {
-            fc->chunk_m = (float)d, i++;
-        } else if (!strcmp(o, "--window") && bf_parse_u32(v, &u)) {
-            fc->window = u, i++;
-        } else if (!strcmp(o, "--subcache") && bf_parse_u32(v, &u)) {
-            fc->subcache = u, i++;
-        } else if (!strcmp(o, "--bricks") && bf_parse_u32(v, &u)) {
-            fc->brick_cap = u, i++;
-        } else if (!strcmp(o, "--max-level") && bf_parse_u32(v, &u)) {
-            fc->max_level = u, i++;
         } else if (!strcmp(o, "--icp-iters") && parse_iters(v, tc->iterations, &tc->levels)) {
             i++;
         } else if (!strcmp(o, "--degenerate-ratio") && bf_parse_double(v, &d) && d >= 0) {

@@ -4,6 +4,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "app.h"
 #include "eval/eval.h"
@@ -101,4 +102,19 @@ bf_status app_write_json(const char *dir, const char *name, void (*write)(FILE *
     s = bf_write_file_atomic(path, buf, len);
     free(buf);
     return s;
+}
+
+bool app_parse_map_option(const char *o, const char *v, fusion_config *fc)
+{
+    double d;
+    uint32_t u;
+    if (!v) return false;
+    if (!strcmp(o, "--ratio") && bf_parse_double(v, &d)) fc->voxel_ratio = (float)d;
+    else if (!strcmp(o, "--chunk") && bf_parse_double(v, &d)) fc->chunk_m = (float)d;
+    else if (!strcmp(o, "--window") && bf_parse_u32(v, &u)) fc->window = u;
+    else if (!strcmp(o, "--subcache") && bf_parse_u32(v, &u)) fc->subcache = u;
+    else if (!strcmp(o, "--bricks") && bf_parse_u32(v, &u)) fc->brick_cap = u;
+    else if (!strcmp(o, "--max-level") && bf_parse_u32(v, &u)) fc->max_level = u;
+    else return false;
+    return true;
 }

@@ -1,0 +1,39 @@
+/* Shared by the loop's tests: synthetic frames rendered in memory at
+ * 320x240 and run through recon (tests/recon/recon_fixture.c). */
+#ifndef BF_RECON_FIXTURE_H
+#define BF_RECON_FIXTURE_H
+
+#include "eval/eval.h"
+#include "gpu/gpu.h"
+#include "recon/recon.h"
+
+#define W 320
+#define H 240
+
+bf_intrinsics test_K(void);
+/* A hand-held sideways sweep with a little yaw and bob at 30 Hz, relative
+ * to the scene's first view. */
+bf_se3 sweep_pose(const eval_scene *sc, uint32_t k);
+double trans_dist(const bf_se3 *A, const bf_se3 *B);
+double rot_dist_deg(const bf_se3 *A, const bf_se3 *B);
+
+/* One run of the loop over n frames rendered at true_pose[k]; the loop
+ * starts at offset * true_pose[0] (offset moves the whole world) and
+ * est[k] receives each frame's pose. mutate (may be NULL) edits frame k's
+ * depth before it goes in. */
+typedef void (*mutate_fn)(uint32_t k, uint16_t *depth);
+
+typedef struct run_out {
+    bf_se3 est[64];
+    recon_frame_result fr[64];
+    recon_counts counts;
+    fusion_stats map;
+    eval_mesh points; /* surface voxels, world frame */
+} run_out;
+
+bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *true_pose, uint32_t n,
+                   const bf_se3 *offset, mutate_fn mutate, run_out *out);
+/* 90th percentile of the distance from pts to the scene's mesh [m]. */
+double surface_p90(const eval_scene *sc, const eval_mesh *pts);
+
+#endif
