@@ -12,22 +12,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 FRAMES=${1:-300}
 OUT=${2:-/tmp/bitfuse-sweep}
-BIN=${BITFUSE_BIN:-build/app/bitfuse}
-# Debian's python3 has numpy and matplotlib (scripts/install-deps.sh); a
-# python3 earlier on PATH may not.
-PY=python3
-[ -x /usr/bin/python3 ] && PY=/usr/bin/python3
-TRAJ=../shared/data/tum/fr1_xyz/groundtruth.txt
-[ -x "$BIN" ] || bash scripts/build.sh
+source bench/common.sh
 mkdir -p "$OUT"
 SEQ="$OUT/seq"
-if [ ! -f "$SEQ/depth.txt" ]; then
-  if [ ! -f "$TRAJ" ]; then
-    $BIN demo --frames 2 --out "$OUT/demo-traj" >/dev/null
-    TRAJ="$OUT/demo-traj/trajectory_input.txt"
-  fi
-  $BIN synth --scene room --trajectory "$TRAJ" --frames "$FRAMES" --noise kinect1 --seed 1 --out "$SEQ"
-fi
+bench_room_sequence "$SEQ" "$FRAMES"
 
 RESULTS="$OUT/results.tsv"
 printf "ratio\twindow\tframe_ms_median\tframe_ms_p95\talloc_ms\tsubcache_ms\twindow_ms\tmap_mib\tbits_per_voxel\tbricks\tacc_median_mm\tacc_p90_mm\tcompleteness_1cm\n" > "$RESULTS"

@@ -3,7 +3,7 @@
 # tracking + fusion + ray-cast + ROF) on one synthetic room sequence at
 # 640x480 with several voxel-to-pixel ratios, ICP iteration counts and window
 # sizes; ATE of each estimated trajectory and surface error of its mesh.
-# Writes docs/bench_replay.md (table) and docs/bench_replay.png (plot).
+# Writes docs/bench_replay_sweep.md (table) and docs/bench_replay_sweep.png (plot).
 #
 #   bench/replay_sweep.sh [FRAMES] [OUT_DIR]      (defaults 600, /tmp/bitfuse-replay)
 #   CONFIGS="1:10,5,4:40 2:10,5,4:40" bench/replay_sweep.sh   (ratio:icp:window)
@@ -14,21 +14,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 FRAMES=${1:-600}
 OUT=${2:-/tmp/bitfuse-replay}
-BIN=${BITFUSE_BIN:-build/app/bitfuse}
 CONFIGS=${CONFIGS:-"1:10,5,4:40 2:10,5,4:40 2:4,3,3:40 2:10,5,4:20 2:2,2,2:20"}
-PY=python3
-[ -x /usr/bin/python3 ] && PY=/usr/bin/python3
-TRAJ=../shared/data/tum/fr1_xyz/groundtruth.txt
-[ -x "$BIN" ] || bash scripts/build.sh
+source bench/common.sh
 mkdir -p "$OUT"
 SEQ="$OUT/seq$FRAMES"
-if [ ! -f "$SEQ/depth.txt" ]; then
-  if [ ! -f "$TRAJ" ]; then
-    $BIN demo --frames 2 --out "$OUT/demo-traj" >/dev/null
-    TRAJ="$OUT/demo-traj/trajectory_input.txt"
-  fi
-  $BIN synth --scene room --trajectory "$TRAJ" --frames "$FRAMES" --noise kinect1 --seed 1 --out "$SEQ"
-fi
+bench_room_sequence "$SEQ" "$FRAMES"
 
 RESULTS="$OUT/results.tsv"
 printf "ratio\ticp\twindow\tframe_ms_median\tframe_ms_p95\ttrack_ms\trof_ms\traycast_ms\talloc_ms\tsubcache_ms\twindow_ms\tate_rmse_mm\ttracked\tlost\tmap_mib\tacc_median_mm\tacc_p90_mm\tcompleteness_1cm\n" > "$RESULTS"
@@ -60,7 +50,7 @@ $PY - "$RESULTS" "${SWEEP_COMMIT:-$(git rev-parse --short HEAD)}" "$FRAMES" <<'P
 import csv, sys
 path, commit, frames = sys.argv[1:4]
 rows = list(csv.DictReader(open(path), delimiter="\t"))
-with open("docs/bench_replay.md", "w") as f:
+with open("docs/bench_replay_sweep.md", "w") as f:
     f.write("# Full loop: speed against error\n\n")
     f.write(f"`bench/replay_sweep.sh {frames}`, commit {commit}: `bitfuse replay` (ICP tracking against the "
             "ROF-smoothed ray-cast, fusion, ray-cast) on a synthetic room (640x480, Kinect v1 noise, seed 1) "
@@ -85,8 +75,8 @@ try:
     ax.set_ylabel("ATE RMSE [mm]")
     ax.set_title("bitfuse full loop on lavapipe: speed against error")
     fig.tight_layout()
-    fig.savefig("docs/bench_replay.png", dpi=100)
+    fig.savefig("docs/bench_replay_sweep.png", dpi=100)
 except ImportError:
     print("matplotlib missing: no plot", file=sys.stderr)
 PYEOF
-cat docs/bench_replay.md
+cat docs/bench_replay_sweep.md
