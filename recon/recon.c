@@ -127,8 +127,9 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
         if (s == BF_OK) r->counts.tracked++;
     } else {
         /* The guess: the last pose, or with constant_velocity the last
-         * motion repeated (off by default: on the synthetic fr1_xyz room it
-         * lost tracking 8 frames earlier than the last pose did). */
+         * motion repeated (off by default: measured on the synthetic
+         * fr1_xyz room before the tracker kept its poses rigid, it lost
+         * tracking 8 frames earlier; not measured since). */
         bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
         s = track_frame(r->tracker, f, &guess, &out->track);
         if (s == BF_OK) {
