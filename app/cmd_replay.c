@@ -40,12 +40,18 @@ static const char replay_help[] =
     "  --chunk M          chunk edge in metres, default 2\n"
     "  --max-level L      finest octree level, default 8\n"
     "  --icp-iters A,B,C  ICP iterations per pyramid level, finest first, default 10,5,4\n"
+    "  --huber K          ICP Huber threshold in units of the sensor noise sigma_z(z),\n"
+    "                     default 2 (0: plain least squares)\n"
+    "  --noise-weights on|off  weight ICP residuals by 1 / sigma_z(z)^2, default on\n"
     "  --rof-iters N      ROF iterations on the reference, default from tracking (0: off)\n"
     "  --angle-gate DEG   ICP normal-angle gate, default from tracking (45)\n"
     "  --degenerate-ratio R  eigenvalue ratio below which the ICP system counts as degenerate\n"
     "  --rof-lambda L     ROF data weight at 1 m\n"
     "  --view-every K     write a shaded view every K frames\n"
     "  --no-mesh          skip the mesh (points and stats only)\n"
+    "  --fuse-at-groundtruth  track every frame but fuse it at its true pose: the map is\n"
+    "                     the one the sensor gives and the trajectory's error is the\n"
+    "                     tracker's own, one frame at a time (needs ground truth)\n"
     "%s"
     "\n"
     "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
@@ -80,6 +86,7 @@ typedef struct replay_args {
     recon_config rcfg;
     uint32_t view_every;
     bool no_mesh;
+    bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
 static bool parse_iters(const char *v, uint32_t it[TRACK_MAX_LEVELS], uint32_t *levels)
@@ -124,6 +131,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             return -1;
         } else if (!strcmp(o, "--no-mesh")) {
             a->no_mesh = true;
+        } else if (!is_live_cmd && !strcmp(o, "--fuse-at-groundtruth")) {
+            a->fuse_at_gt = true;
         } else if (is_live_cmd && !strcmp(o, "--realtime")) {
             a->realtime = true;
         } else if (is_live_cmd && !strcmp(o, "--device") && v) {
@@ -150,6 +159,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             tc->degenerate_ratio = d, i++;
         } else if (!strcmp(o, "--angle-gate") && bf_parse_double(v, &d) && d > 0 && d < 90) {
             tc->angle_deg = (float)d, i++;
+        } else if (!strcmp(o, "--huber") && bf_parse_double(v, &d) && d >= 0) {
+            tc->huber_k = (float)d, i++;
+        } else if (!strcmp(o, "--noise-weights") && (!strcmp(v, "on") || !strcmp(v, "off"))) {
+            tc->weight_noise = !strcmp(v, "on"), i++;
         } else if (!strcmp(o, "--rof-iters") && bf_parse_u32(v, &u)) {
             tc->rof_iterations = u, i++;
         } else if (!strcmp(o, "--rof-lambda") && bf_parse_double(v, &d) && d > 0) {
@@ -348,7 +361,13 @@ static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_arg
             if ((s = recon_create(ctx, &a->rcfg, rgbd_source_intrinsics(src), &T0, &rc)) != BF_OK) break;
         }
         recon_frame_result fr;
-        if ((s = recon_add_frame(rc, &f, &fr)) != BF_OK) break;
+        if (a->fuse_at_gt && !f.has_pose) {
+            s = bf_fail(BF_FORMAT, "%s: frame %u (t = %.6f) has no ground-truth pose (--fuse-at-groundtruth)", a->seq,
+                        f.index, f.t_depth_s);
+            break;
+        }
+        s = a->fuse_at_gt ? recon_add_frame_known(rc, &f, &f.T_wc, &fr) : recon_add_frame(rc, &f, &fr);
+        if (s != BF_OK) break;
         if (fr.state == RECON_LOST)
             bf_warn("replay: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm): not fused",
                     f.index, f.t_depth_s, track_outcome_name(fr.track.outcome), 100 * fr.track.inlier_frac,

@@ -104,7 +104,9 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     return track_set_reference_gpu(r->tracker, render_get_targets(r->caster)->depth, T);
 }
 
-bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
+/* known: NULL for the loop; else the frame is tracked as usual but fused
+ * at *known, which becomes the last pose (recon_add_frame_known). */
+static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_result *out)
 {
     if (!r || !f || !out) return bf_fail(BF_INVALID_ARG, "recon_add_frame: NULL argument");
     if (f->width != r->K.width || f->height != r->K.height || !f->depth)
@@ -122,9 +124,11 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
         r->counts.no_depth++;
     } else if (!r->map) {
         out->state = RECON_FIRST;
+        if (known) r->T_first = r->T_last = *known;
         s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, out);
         if (s == BF_OK) r->counts.tracked++;
+        out->T_wc = r->T_first;
     } else {
         /* The guess: the last pose, or with constant_velocity the last
          * motion repeated (off by default: measured on the synthetic
@@ -143,21 +147,37 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
             } else if (good) {
                 out->state = RECON_TRACKED;
                 out->T_wc = out->track.T_wc;
+                const bf_se3 *T_new = known ? known : &out->track.T_wc;
                 bf_se3 Li = bf_se3_inverse(&r->T_last);
-                r->V = bf_se3_mul(&Li, &out->track.T_wc);
-                r->T_last = out->track.T_wc;
+                r->V = bf_se3_mul(&Li, T_new);
+                r->T_last = *T_new;
                 r->counts.tracked++;
-                s = fuse_and_reference(r, f, &out->T_wc, out);
+                s = fuse_and_reference(r, f, T_new, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
                 r->V = bf_se3_identity(); /* the motion is unknown now */
+                if (known) {
+                    r->T_last = *known;
+                    s = fuse_and_reference(r, f, known, out);
+                }
             }
         }
     }
     out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
     out->ms_frame = 1e3 * (bf_time_s() - t0);
     return s;
+}
+
+bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)
+{
+    return add_frame(r, f, NULL, out);
+}
+
+bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_known, recon_frame_result *out)
+{
+    if (!T_known || !bf_se3_is_finite(T_known)) return bf_fail(BF_INVALID_ARG, "recon_add_frame_known: no pose");
+    return add_frame(r, f, T_known, out);
 }
 
 bf_status recon_flush(recon *r)

@@ -63,6 +63,12 @@ void recon_destroy(recon *r); /* NULL is a no-op */
 /* Runs the loop on one frame. Errors are device failures and bad
  * arguments only; tracking failures and pool exhaustion are in *out. */
 bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out);
+/* The tracker's own error, without drift: the frame is tracked against the
+ * map as above (out->T_wc is the estimate), but fused at T_known, which
+ * also becomes the next frame's guess and reference pose. With the true
+ * poses the map is the one the sensor would give, and each estimate's error
+ * is one step's (`bitfuse replay --fuse-at-groundtruth`). */
+bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_known, recon_frame_result *out);
 /* Integrates what the fusion schedule still owes (end of sequence). */
 bf_status recon_flush(recon *r);
 

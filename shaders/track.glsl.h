@@ -98,11 +98,13 @@ struct track_icp_push {
     bf_f32 dist_m;          /* association gates */
     bf_f32 cos_angle;
     bf_u32 sub;             /* 1: every pixel; 2: every second (a checkerboard) */
-    bf_u32 pad;
+    bf_f32 huber_k;         /* Huber threshold on r / sigma_z(z); 0: no Huber weights */
+    bf_u32 weight_noise;    /* 1: each residual weighted by (sigma_z(1 m) / sigma_z(z))^2 */
+    bf_u32 pad[3];
 };
 #ifndef BF_GLSL
 typedef struct track_icp_push track_icp_push;
-_Static_assert(sizeof(track_icp_push) == 96, "track_icp_push must match std430");
+_Static_assert(sizeof(track_icp_push) == 112, "track_icp_push must match std430");
 #endif
 
 /* ------------------------------------------------------------ shared math */

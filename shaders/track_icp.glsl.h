@@ -79,16 +79,34 @@ void add_pixel(uint x, uint y, inout icp_acc A)
     vec3 mr = vec3(dot(r0, m), dot(r1, m), dot(r2, m));
     if (dot(mr, n) < pc.cos_angle) return;
     float r = dot(n, d);
-    vec3 c = cross(p, n);
+    /* Weighted least squares (IRLS): with weight_noise each residual counts
+     * by the inverse variance of the sensor's depth noise relative to 1 m
+     * (Kinect v1's grows with z^2: a sample at 3 m weighs ~50 times less
+     * than one at 1 m, where the map is finer and the frame less noisy), and
+     * Huber's weight on the residual in units of that noise bounds the pull
+     * of the few associations that land on a wrong surface (silhouettes,
+     * surfaces the map has not seen yet) without a hard gate that could
+     * reject everything while the motion is still large. */
+    float sig = track_sigma_z(max(p.z, zq));
+    float wgt = 1.0;
+    if (pc.weight_noise != 0u) {
+        float sw = track_sigma_z(1.0) / sig;
+        wgt = sw * sw;
+    }
+    float e = abs(r) / sig;
+    if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;
+    vec3 nq = wgt * n;
+    vec3 c = cross(p, n), cw = wgt * c;
+    float rw = wgt * r;
     /* a = (n, c); the upper triangle of a a^T row by row (TRACK_SUM_ATA),
      * then a r (TRACK_SUM_ATR), r^2, the inlier and its depth. */
-    A.s0 += n.x * vec4(n, c.x);
-    A.s1 += vec4(n.x * c.y, n.x * c.z, n.y * n.y, n.y * n.z);
-    A.s2 += vec4(n.y * c, n.z * n.z);
-    A.s3 += vec4(n.z * c, c.x * c.x);
-    A.s4 += vec4(c.x * c.y, c.x * c.z, c.y * c.y, c.y * c.z);
-    A.s5 += vec4(c.z * c.z, r * n);
-    A.s6 += vec4(r * c, r * r);
+    A.s0 += nq.x * vec4(n, c.x);
+    A.s1 += vec4(nq.x * c.y, nq.x * c.z, nq.y * n.y, nq.y * n.z);
+    A.s2 += vec4(nq.y * c, nq.z * n.z);
+    A.s3 += vec4(nq.z * c, cw.x * c.x);
+    A.s4 += vec4(cw.x * c.y, cw.x * c.z, cw.y * c.y, cw.y * c.z);
+    A.s5 += vec4(cw.z * c.z, rw * n);
+    A.s6 += vec4(rw * c, r * r);
     A.s7 += vec4(1.0, 0.0, p.z, 0.0);
 }
 

@@ -53,6 +53,9 @@ typedef struct track_config {
     float converged_deg;     /* and turns less than this; 0 and 0: always run all iterations */
     uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one
                                     (a checkerboard), half the cost (docs/tracking.md: speed against error) */
+    /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
+    float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 2; 0: off */
+    bool weight_noise;       /* weight residuals by the inverse noise variance sigma_z(z)^-2, default true */
 } track_config;
 
 track_config track_config_default(void);
