@@ -43,6 +43,8 @@ static const char replay_help[] =
     "  --huber K          ICP Huber threshold in units of the sensor noise sigma_z(z),\n"
     "                     default 2 (0: plain least squares)\n"
     "  --noise-weights on|off  weight ICP residuals by 1 / sigma_z(z)^2, default on\n"
+    "  --ref-level L      resolution of the tracking reference's ray-cast: 0 full, 1 half\n"
+    "                     (default from tracking)\n"
     "  --rof-iters N      ROF iterations on the reference, default from tracking (0: off)\n"
     "  --angle-gate DEG   ICP normal-angle gate, default from tracking (45)\n"
     "  --degenerate-ratio R  eigenvalue ratio below which the ICP system counts as degenerate\n"
@@ -163,6 +165,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             tc->huber_k = (float)d, i++;
         } else if (!strcmp(o, "--noise-weights") && (!strcmp(v, "on") || !strcmp(v, "off"))) {
             tc->weight_noise = !strcmp(v, "on"), i++;
+        } else if (!strcmp(o, "--ref-level") && bf_parse_u32(v, &u) && u <= 1) {
+            tc->ref_level = u, i++;
         } else if (!strcmp(o, "--rof-iters") && bf_parse_u32(v, &u)) {
             tc->rof_iterations = u, i++;
         } else if (!strcmp(o, "--rof-lambda") && bf_parse_double(v, &d) && d > 0) {

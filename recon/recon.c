@@ -13,7 +13,9 @@ struct recon {
     bf_se3 T_last;       /* last good pose */
     bf_se3 V;            /* motion of the last tracked frame, T_prev^-1 T_last (constant-velocity guess) */
     fusion_map *map;     /* created at the first frame with depth */
-    render_caster *caster;
+    bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
+    render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
+    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at the first view */
     track_tracker *tracker;
     recon_counts counts;
 };
@@ -54,8 +56,21 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->T_last = *T_wc0;
     r->V = bf_se3_identity();
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
-    bf_status s = render_create(ctx, K->width, K->height, &r->caster);
-    if (s == BF_OK) s = track_create(ctx, &r->cfg.track, K, &r->tracker);
+    /* The reference at track.ref_level (half resolution by default): the
+     * ray-cast, the loop's largest cost, then has a quarter of the rays.
+     * Level geometry as tracking's (pixel centres at integers). */
+    uint32_t l = r->cfg.track.ref_level < 2 ? r->cfg.track.ref_level : 0;
+    double sc = 1.0 / (double)(1u << l);
+    r->K_ref = *K;
+    r->K_ref.width = K->width >> l;
+    r->K_ref.height = K->height >> l;
+    r->K_ref.fx_px = K->fx_px * sc;
+    r->K_ref.fy_px = K->fy_px * sc;
+    r->K_ref.cx_px = (K->cx_px + 0.5) * sc - 0.5;
+    r->K_ref.cy_px = (K->cy_px + 0.5) * sc - 0.5;
+    bf_status s = track_create(ctx, &r->cfg.track, K, &r->tracker);
+    if (s == BF_OK) s = render_create(ctx, r->K_ref.width, r->K_ref.height, &r->ref_caster);
+    if (s == BF_OK && l == 0) r->caster = r->ref_caster;
     if (s != BF_OK) {
         recon_destroy(r);
         return s;
@@ -68,13 +83,23 @@ void recon_destroy(recon *r)
 {
     if (!r) return;
     track_destroy(r->tracker);
-    render_destroy(r->caster);
+    if (r->caster != r->ref_caster) render_destroy(r->caster);
+    render_destroy(r->ref_caster);
     fusion_destroy(r->map);
     free(r);
 }
 
 fusion_map *recon_map(recon *r) { return r->map; }
-render_caster *recon_caster(recon *r) { return r->caster; }
+
+/* The caster at the camera's size, made at the first view when the
+ * reference is cast at a coarser level. */
+static bf_status view_caster(recon *r)
+{
+    if (r->caster) return BF_OK;
+    return render_create(r->ctx, r->K.width, r->K.height, &r->caster);
+}
+
+render_caster *recon_caster(recon *r) { return view_caster(r) == BF_OK ? r->caster : NULL; }
 recon_counts recon_get_counts(const recon *r) { return r->counts; }
 
 static uint32_t count_valid(const bf_frame *f)
@@ -99,9 +124,9 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     }
     if (s != BF_OK) return s;
     out->fused = true;
-    if ((s = render_raycast(r->caster, r->map, &r->K, T, &r->cfg.raycast)) != BF_OK) return s;
-    out->ms_raycast = render_last_ms(r->caster);
-    return track_set_reference_gpu(r->tracker, render_get_targets(r->caster)->depth, T);
+    if ((s = render_raycast(r->ref_caster, r->map, &r->K_ref, T, &r->cfg.raycast)) != BF_OK) return s;
+    out->ms_raycast = render_last_ms(r->ref_caster);
+    return track_set_reference_gpu(r->tracker, render_get_targets(r->ref_caster)->depth, T);
 }
 
 /* known: NULL for the loop; else the frame is tracked as usual but fused
@@ -189,6 +214,8 @@ bf_status recon_flush(recon *r)
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc)
 {
     if (!r->map) return bf_fail(BF_INVALID_ARG, "recon: no map yet (no frame with depth)");
+    bf_status s = view_caster(r);
+    if (s != BF_OK) return s;
     render_options opt = render_options_display();
     return render_raycast(r->caster, r->map, &r->K, T_wc, &opt);
 }

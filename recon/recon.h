@@ -72,8 +72,9 @@ bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_kno
 /* Integrates what the fusion schedule still owes (end of sequence). */
 bf_status recon_flush(recon *r);
 
-/* The map (NULL before the first frame with depth) and the caster, for
- * export, statistics and views. */
+/* The map (NULL before the first frame with depth) and the caster at the
+ * camera's size, for export, statistics and views (NULL when it cannot be
+ * made; bf_last_error says why). */
 fusion_map *recon_map(recon *r);
 render_caster *recon_caster(recon *r);
 /* Ray-casts the map for display (confident voxels) at T_wc into the

@@ -100,11 +100,15 @@ struct track_icp_push {
     bf_u32 sub;             /* 1: every pixel; 2: every second (a checkerboard) */
     bf_f32 huber_k;         /* Huber threshold on r / sigma_z(z); 0: no Huber weights */
     bf_u32 weight_noise;    /* 1: each residual weighted by (sigma_z(1 m) / sigma_z(z))^2 */
+    /* The reference's level read: ref_shift levels above the frame's (0:
+     * the same level), w x h pixels at pixel offset ref_off; its
+     * intrinsics follow from the frame level's (track__level_intrinsics). */
+    bf_u32 ref_off, ref_width, ref_height, ref_shift;
     bf_u32 pad[3];
 };
 #ifndef BF_GLSL
 typedef struct track_icp_push track_icp_push;
-_Static_assert(sizeof(track_icp_push) == 112, "track_icp_push must match std430");
+_Static_assert(sizeof(track_icp_push) == 128, "track_icp_push must match std430");
 #endif
 
 /* ------------------------------------------------------------ shared math */

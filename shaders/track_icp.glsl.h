@@ -11,7 +11,8 @@
  *
  * For a frame pixel with depth z (vertex v, back-projected) and normal m
  * (frame camera; octahedral, track.glsl.h), p = T_rc v and m' = R_rc m live
- * in the reference camera; p projects to the nearest reference pixel with
+ * in the reference camera; p projects to the nearest pixel of the
+ * reference's level (the frame's, or one above it: track_config.ref_level) with
  * vertex q (its depth back-projected) and normal n. An inlier has |p - q| <=
  * dist_m and m' . n >= cos(angle). Its residual is r = n . (p - q) and its
  * row a = (n, p x n): moving p by a small twist (t, w) in the reference
@@ -39,6 +40,22 @@ vec3 unproject(uint x, uint y, float z)
     return vec3((float(x) - pc.cx) * z / pc.fx, (float(y) - pc.cy) * z / pc.fy, z);
 }
 
+/* The reference level's intrinsics: pc.ref_shift levels above the frame's
+ * (track__level_intrinsics: fx / 2^s, (cx + 1/2) / 2^s - 1/2). */
+struct ref_geom {
+    float fx, fy, cx, cy;
+};
+ref_geom ref_geometry()
+{
+    float s = 1.0 / float(1u << pc.ref_shift);
+    ref_geom g;
+    g.fx = pc.fx * s;
+    g.fy = pc.fy * s;
+    g.cx = (pc.cx + 0.5) * s - 0.5;
+    g.cy = (pc.cy + 0.5) * s - 0.5;
+    return g;
+}
+
 /* The sums in eight vec4 registers, words 4q .. 4q + 3 of the TRACK_SUM_*
  * layout in s[q] (the 32nd word stays 0). Plain variables, no arrays:
  * llvmpipe keeps a private array it cannot fully resolve in memory and
@@ -49,7 +66,7 @@ struct icp_acc {
 };
 
 /* One frame pixel's association, gates and contribution. */
-void add_pixel(uint x, uint y, inout icp_acc A)
+void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
 {
     uint i = pc.off + y * pc.width + x;
     float z = frame_d.d[i];
@@ -62,16 +79,16 @@ void add_pixel(uint x, uint y, inout icp_acc A)
     vec3 v = unproject(x, y, z);
     vec3 p = vec3(dot(r0, v), dot(r1, v), dot(r2, v)) + vec3(pc.t[0], pc.t[1], pc.t[2]);
     if (!(p.z > 0.0)) return;
-    float u = pc.fx * p.x / p.z + pc.cx;
-    float w = pc.fy * p.y / p.z + pc.cy;
-    /* Nearest pixel; the float comparison also rejects NaN. */
-    if (!(u > -0.5 && w > -0.5 && u < float(pc.width) - 0.5 && w < float(pc.height) - 0.5)) return;
+    float u = G.fx * p.x / p.z + G.cx;
+    float w = G.fy * p.y / p.z + G.cy;
+    /* Nearest reference pixel; the float comparison also rejects NaN. */
+    if (!(u > -0.5 && w > -0.5 && u < float(pc.ref_width) - 0.5 && w < float(pc.ref_height) - 0.5)) return;
     uint ux = uint(u + 0.5), wy = uint(w + 0.5);
-    uint j = pc.off + wy * pc.width + ux;
+    uint j = pc.ref_off + wy * pc.ref_width + ux;
     float zq = ref_d.d[j];
     uint nw = ref_n.n[j];
     if (!(zq > 0.0) || nw == 0u) return;
-    vec3 q = unproject(ux, wy, zq);
+    vec3 q = vec3((float(ux) - G.cx) * zq / G.fx, (float(wy) - G.cy) * zq / G.fy, zq);
     vec3 n = track_oct_decode(nw);
     vec3 d = p - q;
     if (dot(d, d) > pc.dist_m * pc.dist_m) return;
@@ -121,9 +138,10 @@ void main()
     uint k0 = gl_GlobalInvocationID.x * pc.sub, stride = pc.n_threads * pc.sub;
     uint x = k0 % W, y = k0 / W;
     uint sx = stride % W, sy = stride / W;
+    ref_geom G = ref_geometry();
     while (y < pc.height) {
         uint xx = x + (pc.sub == 2u ? (y & 1u) : 0u);
-        if (xx < W) add_pixel(xx, y, A);
+        if (xx < W) add_pixel(xx, y, G, A);
         x += sx;
         y += sy;
         if (x >= W) {

@@ -86,8 +86,8 @@ typedef struct icp_sums {
 /* One iteration: one submission, one dispatch, 32 floats per workgroup
  * read back. with_frame records the frame's preprocessing in front of it
  * (the first iteration of a frame: one submission and wait fewer). */
-static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, bool with_frame, icp_sums *out,
-                               track_result *res)
+static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, bool with_frame, bool weighted,
+                               icp_sums *out, track_result *res)
 {
     uint32_t sub = l == 0 && t->cfg.finest_sample_step == 2 ? 2u : 1u;
     uint32_t n = t->geom.w[l] * t->geom.h[l] / sub;
@@ -107,13 +107,15 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
         .dist_m = t->cfg.dist_m * (float)(1u << l),
         .cos_angle = (float)cos(t->cfg.angle_deg * M_PI / 180.0),
         .sub = sub,
-        /* Robust weights at the finest level only: coarse levels catch the
-         * bulk of a motion, when every residual is large and down-weighting
-         * them stops ICP early (the real TUM pair then stopped at 48 mm and
-         * 1.9 degrees instead of 131 mm and 3.3, docs/tracking.md). */
-        .huber_k = l == 0 ? t->cfg.huber_k : 0.0f,
-        .weight_noise = l == 0 && t->cfg.weight_noise ? 1u : 0u,
+        .huber_k = weighted ? t->cfg.huber_k : 0.0f,
+        .weight_noise = weighted && t->cfg.weight_noise ? 1u : 0u,
     };
+    /* Frame levels below the reference's finest are associated with it. */
+    uint32_t rl = l > t->ref_first ? l : t->ref_first;
+    pc.ref_off = t->geom.off[rl];
+    pc.ref_width = t->geom.w[rl];
+    pc.ref_height = t->geom.h[rl];
+    pc.ref_shift = rl - l;
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) pc.R[3 * i + j] = (float)T_rc->R[i][j];
     }
@@ -155,25 +157,35 @@ typedef struct icp_step {
     bool ok;             /* finite and solvable */
 } icp_step;
 
-/* Solves H xi = -g in double. Rotation columns are scaled by the mean
- * depth of the inliers (a rotation of w radians moves a point at depth z by
- * about w z metres), so the eigenvalues compare metres with metres. The
- * update keeps only the eigen-directions with eigenvalue >= ratio times the
- * largest: a single plane constrains 3 of 6, and the other 3 keep the guess
- * instead of following noise. */
-static icp_step solve(const icp_sums *s, double ratio)
+/* The directions the geometry constrains: eigenvectors (columns of B, in
+ * the depth-scaled coordinates below) of an unweighted system whose
+ * eigenvalue is >= ratio times the largest. A single plane constrains 3 of
+ * 6; the rest keep the guess instead of following noise. The ratio is a
+ * property of the scene's shape, so it is taken from a plain least-squares
+ * system: robust and noise weights shift the spectrum (on the synthetic
+ * room the median ratio fell from 1.3e-2 to 6e-3, below the 5e-3 gate on a
+ * third of the frames) without making the geometry any weaker. */
+typedef struct icp_subspace {
+    double B[36];        /* 6 x k, column-major: column c is B[6 c .. 6 c + 5] */
+    int k;
+    double eig_min, eig_max;
+    bool degenerate;
+} icp_subspace;
+
+/* The system's matrix and vector with rotation columns divided by the
+ * inliers' mean depth (a rotation of w radians moves a point at depth z by
+ * about w z metres), so eigenvalues compare metres with metres: with x =
+ * (t, w zbar), H'_ij = H_ij / (scale_i scale_j), g'_i = g_i / scale_i.
+ * False when there is nothing to solve. */
+static bool scaled_system(const icp_sums *s, double H[36], double g[6], double scale[6])
 {
-    icp_step st = {.ok = false};
     double n_in = s->s[TRACK_SUM_INLIERS];
     for (uint32_t i = 0; i < TRACK_SUMS; i++)
-        if (!isfinite(s->s[i])) return st;
-    if (n_in < 6) return st;
+        if (!isfinite(s->s[i])) return false;
+    if (n_in < 6) return false;
     double zbar = s->s[TRACK_SUM_Z] / n_in;
-    if (!(zbar > 0)) return st;
-    double scale[6] = {1, 1, 1, zbar, zbar, zbar};
-    /* With x = (t, w zbar) the system's columns for w are divided by zbar:
-     * H'_ij = H_ij / (scale_i scale_j), g'_i = g_i / scale_i. */
-    double H[36], g[6];
+    if (!(zbar > 0)) return false;
+    for (int i = 0; i < 6; i++) scale[i] = i < 3 ? 1.0 : zbar;
     uint32_t e = TRACK_SUM_ATA;
     for (int i = 0; i < 6; i++)
         for (int j = i; j < 6; j++) {
@@ -181,20 +193,58 @@ static icp_step solve(const icp_sums *s, double ratio)
             H[6 * i + j] = H[6 * j + i] = v;
         }
     for (int i = 0; i < 6; i++) g[i] = s->s[TRACK_SUM_ATR + i] / scale[i];
-    double w[6], V[36];
+    return true;
+}
+
+static bool subspace_of(const icp_sums *s, double ratio, icp_subspace *out)
+{
+    double H[36], g[6], scale[6], w[6], V[36];
+    if (!scaled_system(s, H, g, scale)) return false;
     bf_sym_eigen(6, H, w, V);
-    st.eig_min = w[0];
-    st.eig_max = w[5];
-    if (!(w[5] > 0) || !isfinite(w[0])) return st;
-    st.degenerate = w[0] < ratio * w[5];
-    double x[6] = {0};
-    for (int k = 0; k < 6; k++) {
-        if (w[k] < ratio * w[5] || !(w[k] > 0)) continue;
-        double c = 0;
-        for (int i = 0; i < 6; i++) c += V[6 * i + k] * g[i];
-        c /= w[k];
-        for (int i = 0; i < 6; i++) x[i] -= c * V[6 * i + k];
+    if (!(w[5] > 0) || !isfinite(w[0])) return false;
+    out->eig_min = w[0];
+    out->eig_max = w[5];
+    out->degenerate = w[0] < ratio * w[5];
+    out->k = 0;
+    for (int c = 0; c < 6; c++) {
+        if (w[c] < ratio * w[5] || !(w[c] > 0)) continue;
+        for (int i = 0; i < 6; i++) out->B[6 * out->k + i] = V[6 * i + c];
+        out->k++;
     }
+    return out->k > 0;
+}
+
+/* Solves H xi = -g in double within the subspace: xi = B (B^T H B)^-1
+ * B^T (-g), so directions outside it keep the guess. */
+static icp_step solve(const icp_sums *s, const icp_subspace *S)
+{
+    icp_step st = {.ok = false, .eig_min = S->eig_min, .eig_max = S->eig_max, .degenerate = S->degenerate};
+    double H[36], g[6], scale[6];
+    if (!scaled_system(s, H, g, scale)) return st;
+    int k = S->k;
+    double Hk[36], gk[6], wk[6], Vk[36];
+    for (int a = 0; a < k; a++) {
+        gk[a] = 0;
+        for (int i = 0; i < 6; i++) gk[a] += S->B[6 * a + i] * g[i];
+        for (int b = 0; b < k; b++) {
+            double v = 0;
+            for (int i = 0; i < 6; i++)
+                for (int j = 0; j < 6; j++) v += S->B[6 * a + i] * H[6 * i + j] * S->B[6 * b + j];
+            Hk[k * a + b] = v;
+        }
+    }
+    bf_sym_eigen(k, Hk, wk, Vk);
+    if (!(wk[k - 1] > 0)) return st;
+    double y[6] = {0}, x[6] = {0};
+    for (int c = 0; c < k; c++) {
+        if (!(wk[c] > 1e-12 * wk[k - 1])) continue;
+        double d = 0;
+        for (int a = 0; a < k; a++) d += Vk[k * a + c] * gk[a];
+        d /= wk[c];
+        for (int a = 0; a < k; a++) y[a] -= d * Vk[k * a + c];
+    }
+    for (int a = 0; a < k; a++)
+        for (int i = 0; i < 6; i++) x[i] += S->B[6 * a + i] * y[a];
     for (int i = 0; i < 6; i++) {
         st.xi[i] = x[i] / scale[i];
         if (!isfinite(st.xi[i])) return st;
@@ -220,11 +270,21 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
     bf_se3 guess_rc = *T_rc;
     icp_sums sums = {0};
     icp_step step = {.ok = false};
+    icp_subspace S = {.k = 0};
     bool have_finest = false;
+    bool robust = c->huber_k > 0 || c->weight_noise;
     for (int l = (int)c->levels - 1; l >= 0; l--) {
         for (uint32_t it = 0; it < c->iterations[l]; it++) {
             bool first = res->iterations == 0;
-            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, &sums, res);
+            /* Robust weights at the finest level only, after its first
+             * iteration: coarse levels catch the bulk of a motion, when every
+             * residual is large and down-weighting them stops ICP early (the
+             * real TUM pair then stopped at 48 mm and 1.9 degrees instead of
+             * 131 mm and 3.3, docs/tracking.md); the first, plain iteration
+             * gives the constrained directions (icp_subspace) that the
+             * weighted ones keep. */
+            bool weighted = robust && l == 0 && it > 0 && S.k > 0;
+            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, weighted, &sums, res);
             if (s != BF_OK) return s;
             if (first) {
                 uint32_t n_depth = 0;
@@ -236,7 +296,8 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
                 }
             }
             res->iterations++;
-            step = solve(&sums, c->degenerate_ratio);
+            if (!weighted && !subspace_of(&sums, c->degenerate_ratio, &S)) S.k = 0;
+            step = S.k > 0 ? solve(&sums, &S) : (icp_step){.ok = false};
             if (l == 0) have_finest = true;
             bf_debug("tracking: level %d iteration %u: %.0f/%.0f inliers, rms %.2f mm, eig %.3g/%.3g%s", l, it,
                      sums.s[TRACK_SUM_INLIERS], sums.s[TRACK_SUM_VALID],

@@ -177,15 +177,17 @@ static void dispatch_px(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, cons
 
 /* Depth of level 0 from the raw input, levels above, then the normal maps
  * of every level, through binding set b. */
-static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t mode, uint32_t counter)
+static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t level, uint32_t mode, uint32_t counter)
 {
-    track_image_push pc = base_push(t, 0);
+    track_image_push pc = base_push(t, level);
     pc.mode = mode;
     pc.counter = counter;
     dispatch(t, t->p_depth, b, &pc);
 }
 
-static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first_down)
+/* Depth levels first_down.. from the ones below, then the normals of every
+ * level from `first` (the image's finest) up. */
+static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first, uint32_t first_down)
 {
     for (uint32_t l = first_down; l < TRACK_LEVELS; l++) {
         /* Level l - 1's depth writes -> level l's block reads. */
@@ -195,7 +197,8 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first_down)
         pc.src_width = t->geom.w[l - 1];
         dispatch(t, t->p_pyrdown, b, &pc);
     }
-    uint32_t l0 = t->parent_normals ? 1u : 0u;
+    bool copy_parent = t->parent_normals && first == 0;
+    uint32_t l0 = copy_parent ? 1u : first;
     for (uint32_t pass = 0; pass < 2; pass++) {
         /* The depth pyramid's (pass 0) or the horizontal pass's (pass 1)
          * writes -> this pass's reads. */
@@ -212,7 +215,7 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first_down)
         track_image_push pc = base_push(t, l);
         dispatch(t, t->p_vn, b, &pc);
     }
-    if (t->parent_normals) {
+    if (copy_parent) {
         /* Level 1's normals -> the finest level's copy of them. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
         track_image_push pc = base_push(t, 0);
@@ -228,8 +231,8 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first_down)
 void track__cmd_frame_pyramid(track_tracker *t)
 {
     track__stage_begin(t, "track.frame");
-    cmd_depth(t, t->b_frame, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID);
-    cmd_pyramid(t, t->b_frame, 1);
+    cmd_depth(t, t->b_frame, 0, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID);
+    cmd_pyramid(t, t->b_frame, 0, 1);
     track__stage_end(t);
 }
 
@@ -237,14 +240,17 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
 {
     gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
     uint32_t n_it = t->cfg.rof_iterations;
-    /* The ROF runs on level rl; levels below it keep the unsmoothed depth. */
-    uint32_t rl = n_it > 0 ? t->cfg.rof_level : 0;
+    /* The image comes in at level l0 (a GPU reference at ref_level, a raw
+     * frame at full resolution). The ROF runs on level rl >= l0; levels
+     * between keep the unsmoothed depth. */
+    uint32_t l0 = from_gpu ? t->cfg.ref_level : 0;
+    uint32_t rl = n_it > 0 && t->cfg.rof_level > l0 ? t->cfg.rof_level : l0;
     track__stage_begin(t, "track.ref");
     gpu_cmd_fill(t->ctx, t->rof_p[0], 0, GPU_WHOLE_SIZE, 0);
     /* The zero dual field -> the first ROF iteration's reads. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    cmd_depth(t, b[0], from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
-    for (uint32_t l = 1; l <= rl; l++) {
+    cmd_depth(t, b[0], l0, from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
+    for (uint32_t l = l0 + 1; l <= rl; l++) {
         /* Level l - 1's depth writes -> level l's block reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
         track_image_push pc = base_push(t, l);
@@ -274,6 +280,6 @@ void track__cmd_reference(track_tracker *t, bool from_gpu)
     track__stage_end(t);
 
     track__stage_begin(t, "track.ref");
-    cmd_pyramid(t, b[0], rl + 1);
+    cmd_pyramid(t, b[0], l0, rl + 1);
     track__stage_end(t);
 }

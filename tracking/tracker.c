@@ -59,6 +59,7 @@ track_config track_config_default(void)
          * full-resolution iteration under load), the same tracking error in
          * bench_tracking; the normals come from level 1 anyway. */
         .rof_level = 1,
+        .ref_level = 1,
         .min_valid_frac = 0.01f,
         .converged_m = 1e-5f,
         .converged_deg = 1e-3f,
@@ -108,6 +109,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
                        c->dist_m, c->angle_deg, c->max_depth_m);
     if (c->rof_level > 1 || c->rof_level >= c->levels)
         return bf_fail(BF_INVALID_ARG, "tracking: rof_level %u (0 or 1, below levels %u)", c->rof_level, c->levels);
+    if (c->ref_level > 1 || c->ref_level >= c->levels)
+        return bf_fail(BF_INVALID_ARG, "tracking: ref_level %u (0 or 1, below levels %u)", c->ref_level, c->levels);
     if (c->finest_sample_step != 1 && c->finest_sample_step != 2)
         return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1 or 2)", c->finest_sample_step);
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
@@ -188,9 +191,10 @@ void track_destroy(track_tracker *t)
 
 void track__set_rof_iterations(track_tracker *t, uint32_t n) { t->cfg.rof_iterations = n; }
 
-static uint32_t min_valid(const track_tracker *t)
+/* Fewest valid pixels of level l (min_valid_frac of its pixels). */
+static uint32_t min_valid(const track_tracker *t, uint32_t l)
 {
-    double n = ceil((double)t->cfg.min_valid_frac * t->K.width * t->K.height);
+    double n = ceil((double)t->cfg.min_valid_frac * t->geom.w[l] * t->geom.h[l]);
     return n < 1 ? 1u : (uint32_t)n;
 }
 
@@ -256,8 +260,10 @@ static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16
     if (s == BF_OK && raw) s = track__upload_depth(t, raw);
     if (s == BF_OK) s = gpu_begin(t->ctx);
     if (s != BF_OK) return s;
+    t->ref_first = depth ? t->cfg.ref_level : 0;
     if (depth) {
-        gpu_cmd_copy(t->ctx, depth, 0, t->ref_in, 0, (uint64_t)t->K.width * t->K.height * 4);
+        uint32_t l = t->ref_first;
+        gpu_cmd_copy(t->ctx, depth, 0, t->ref_in, 0, (uint64_t)t->geom.w[l] * t->geom.h[l] * 4);
         /* The copy into ref_in -> the depth conversion reading it. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
     }
@@ -269,7 +275,7 @@ static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16
     uint32_t n = 0;
     if ((s = read_counter(t, TRACK_CNT_REF_VALID, &n)) != BF_OK) return s;
     t->ref_valid = n;
-    t->has_ref = n >= min_valid(t);
+    t->has_ref = n >= min_valid(t, t->ref_first);
     t->T_wr = nearest_rigid(T_wc);
     return BF_OK;
 }
@@ -277,10 +283,11 @@ static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16
 bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc)
 {
     if (!t || !depth || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
-    uint64_t need = (uint64_t)t->K.width * t->K.height * 4;
+    uint32_t l = t->cfg.ref_level;
+    uint64_t need = (uint64_t)t->geom.w[l] * t->geom.h[l] * 4;
     if (gpu_buffer_size(depth) < need)
         return bf_fail(BF_INVALID_ARG, "tracking: reference %s holds %llu bytes, %ux%u floats need %llu",
-                       gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth), t->K.width, t->K.height,
+                       gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth), t->geom.w[l], t->geom.h[l],
                        (unsigned long long)need);
     if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
         return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
@@ -328,7 +335,7 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     bf_se3 T_rc = bf_se3_mul(&T_rw, guess_wc);
     T_rc = nearest_rigid(&T_rc);
     double t0 = bf_time_s();
-    if ((s = track__icp_run(t, &T_rc, min_valid(t), &r)) != BF_OK) return s;
+    if ((s = track__icp_run(t, &T_rc, min_valid(t, 0), &r)) != BF_OK) return s;
     r.ms_wall = 1e3 * (bf_time_s() - t0);
     if (r.outcome == TRACK_OK) {
         T_rc = nearest_rigid(&T_rc);
@@ -344,5 +351,7 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
 bf_status track_download_reference(track_tracker *t, float *depth)
 {
     if (!t || !depth) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
-    return gpu_buffer_download(t->ref_depth, 0, depth, (uint64_t)t->K.width * t->K.height * 4);
+    uint32_t l = t->ref_first;
+    return gpu_buffer_download(t->ref_depth, (uint64_t)t->geom.off[l] * 4, depth,
+                               (uint64_t)t->geom.w[l] * t->geom.h[l] * 4);
 }

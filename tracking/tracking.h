@@ -46,6 +46,11 @@ typedef struct track_config {
     float rof_lambda0;       /* data weight at 1 m; lambda(z) per the dissertation */
     uint32_t rof_level;      /* pyramid level the ROF runs on: 0 full resolution, 1 half (default; the
                                 finest level then keeps the unsmoothed depth, docs/tracking.md) */
+    uint32_t ref_level;      /* the reference's finest level: 0 full resolution, 1 half (default: a
+                                ray-cast of a quarter of the pixels, docs/tracking.md). References on the
+                                GPU then come at (width >> ref_level) x (height >> ref_level); frame
+                                levels below it are associated with it. The ROF runs at
+                                max(rof_level, ref_level). */
     /* Added with the implementation (docs/tracking.md has the reasons). */
     float min_valid_frac;    /* valid depth pixels / all below this: TRACK_NO_DEPTH (frame) or
                                 TRACK_NO_REFERENCE (reference); default 0.01 */
@@ -107,8 +112,9 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
  * only for bad arguments or a device failure. */
 bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out);
 
-/* The smoothed reference depth (finest level), width * height floats, for
- * tests and snapshots. */
+/* The smoothed reference depth at its finest level (the level it came in
+ * at: ref_level for a GPU reference, 0 for a frame), (width >> l) * (height
+ * >> l) floats, for tests and snapshots. */
 bf_status track_download_reference(track_tracker *t, float *depth);
 
 #endif

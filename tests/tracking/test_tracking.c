@@ -130,6 +130,7 @@ BF_TEST(rof_gpu_matches_cpu_oracle)
     float *f = rof_image(0.01, NULL);
     track_config cfg = track_config_default();
     cfg.rof_level = 0; /* the filter itself, at full resolution */
+    cfg.ref_level = 0;
     track_tracker *t;
     CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
     gpu_buffer *buf;
@@ -221,6 +222,7 @@ BF_TEST(rof_smooths_noise_keeps_the_step_and_the_mask_edge)
     float *f = rof_image(0.006, clean), *u = malloc((size_t)n * 4);
     track_config cfg = track_config_default();
     cfg.rof_level = 0; /* the filter itself, at full resolution */
+    cfg.ref_level = 0;
     track_tracker *t;
     CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
     gpu_buffer *buf;
@@ -283,6 +285,7 @@ BF_TEST(rof_smooths_near_more_than_far)
     }
     track_config cfg = track_config_default();
     cfg.rof_level = 0; /* the filter itself, at full resolution */
+    cfg.ref_level = 0;
     track_tracker *t;
     CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
     gpu_buffer *buf;
@@ -377,6 +380,70 @@ BF_TEST(icp_recovers_2cm_2deg_noisy_room)
     /* Kinect v1 noise at 1-4 m is 2-25 mm per pixel; averaged over ~5e4
      * inliers the pose error stays at a few mm. */
     check_room(EVAL_NOISE_KINECT1, 0.004, 0.25);
+}
+
+/* The default reference level: a GPU reference at half resolution (the
+ * ray-cast of recon/), the frame at full resolution. The finest frame level
+ * is associated with the reference's level 1, so the motion must come out
+ * as well as with a full-resolution reference: noiseless 320x240 frames
+ * against a 160x120 reference rendered at level 1's intrinsics. */
+BF_TEST(half_resolution_reference_tracks_like_a_full_one)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    bf_intrinsics Kh = {K_MID.width / 2, K_MID.height / 2, K_MID.fx_px / 2, K_MID.fy_px / 2,
+                        (K_MID.cx_px + 0.5) / 2 - 0.5, (K_MID.cy_px + 0.5) / 2 - 0.5, K_MID.depth_scale};
+    room full, half;
+    CHECK_OK(room_open(&full, &K_MID, EVAL_NOISE_NONE));
+    CHECK_OK(room_open(&half, &Kh, EVAL_NOISE_NONE));
+    bf_se3 T0 = full.scene.T_wc_view, d = small_motion();
+    bf_se3 T1 = bf_se3_mul(&T0, &d);
+    uint16_t *ref = render(&half, 0, &T0), *d1 = render(&full, 1, &T1);
+    CHECK(ref && d1);
+    uint32_t nh = Kh.width * Kh.height;
+    float *zf = malloc(nh * 4);
+    for (uint32_t i = 0; i < nh; i++) zf[i] = (float)(ref[i] / Kh.depth_scale);
+    gpu_buffer *buf;
+    CHECK_OK(upload_float(ctx, zf, nh, &buf));
+    track_config cfg = test_config(&K_MID);
+    CHECK_EQ_INT(cfg.ref_level, 1);
+    track_tracker *t;
+    CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
+    CHECK_OK(track_set_reference_gpu(t, buf, &T0));
+    /* What comes back is the reference's own level, smoothed: no pixel
+     * moves by more than a few centimetres, holes stay holes. */
+    CHECK_OK(track_download_reference(t, zf));
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < nh; i++) {
+        double z = ref[i] / Kh.depth_scale;
+        if (z > 0 && z <= cfg.max_depth_m) kept += zf[i] > 0 && fabs(zf[i] - z) < 0.03;
+        else CHECK(zf[i] == 0);
+    }
+    track_result r;
+    bf_frame f1 = frame_of(&K_MID, d1, 1);
+    CHECK_OK(track_frame(t, &f1, &T0, &r));
+    double dt, da;
+    bf_se3 inv = bf_se3_inverse(&T0), est = bf_se3_mul(&inv, &r.T_wc);
+    pose_error(&d, &est, &dt, &da);
+    fprintf(stderr, "  half-resolution reference: %s, error %.3f mm %.4f deg; %u/%u inliers, %u of %u pixels kept\n",
+            track_outcome_name(r.outcome), 1e3 * dt, da, r.n_inliers, r.n_valid, kept, nh);
+    CHECK(kept >= nh * 9 / 10);
+    CHECK_EQ_INT(r.outcome, TRACK_OK);
+    CHECK_LE(dt, 0.001);
+    CHECK_LE(da, 0.1);
+    /* A reference of the full size is accepted (its first quarter is read);
+     * one too small is not. */
+    gpu_buffer *small;
+    CHECK_OK(upload_float(ctx, zf, nh / 2, &small));
+    CHECK_STATUS(track_set_reference_gpu(t, small, &T0), BF_INVALID_ARG);
+    gpu_buffer_destroy(small);
+    gpu_buffer_destroy(buf);
+    track_destroy(t);
+    free(ref), free(d1), free(zf);
+    room_close(&full);
+    room_close(&half);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
 }
 
 /* max |R^T R - I|: how far a pose's rotation is from orthonormal. */
@@ -686,6 +753,7 @@ BF_TEST(empty_saturated_and_nan_depth_are_reported_and_tracking_resumes)
     uint16_t *zero = calloc(n, 2), *far = malloc(n * 2);
     for (uint32_t i = 0; i < n; i++) far[i] = 65535; /* 13.1 m: beyond max_depth_m */
     track_config cfg = test_config(&K_SMALL);
+    cfg.ref_level = 0; /* the GPU references below are full-resolution images */
     track_tracker *t;
     CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
     track_result r;
