@@ -45,6 +45,8 @@ static const char replay_help[] =
     "  --noise-weights on|off  weight ICP residuals by 1 / sigma_z(z)^2, default on\n"
     "  --ref-level L      resolution of the tracking reference's ray-cast: 0 full, 1 half\n"
     "                     (default from tracking)\n"
+    "  --ray-start frame|near  the reference's rays start just in front of the tracked\n"
+    "                     frame's depth (default) or at the near plane\n"
     "  --rof-iters N      ROF iterations on the reference, default from tracking (0: off)\n"
     "  --angle-gate DEG   ICP normal-angle gate, default from tracking (45)\n"
     "  --degenerate-ratio R  eigenvalue ratio below which the ICP system counts as degenerate\n"
@@ -165,6 +167,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             tc->huber_k = (float)d, i++;
         } else if (!strcmp(o, "--noise-weights") && (!strcmp(v, "on") || !strcmp(v, "off"))) {
             tc->weight_noise = !strcmp(v, "on"), i++;
+        } else if (!strcmp(o, "--ray-start") && (!strcmp(v, "frame") || !strcmp(v, "near"))) {
+            a->rcfg.start_at_frame = !strcmp(v, "frame"), i++;
         } else if (!strcmp(o, "--ref-level") && bf_parse_u32(v, &u) && u <= 1) {
             tc->ref_level = u, i++;
         } else if (!strcmp(o, "--rof-iters") && bf_parse_u32(v, &u)) {

@@ -28,6 +28,7 @@ recon_config recon_config_default(void)
         .raycast = render_options_tracking(),
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
+        .start_at_frame = true,
     };
     return c;
 }
@@ -111,7 +112,8 @@ static uint32_t count_valid(const bf_frame *f)
 }
 
 /* Fuses f at T and makes the ray-cast of the map at T the next reference. */
-static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, recon_frame_result *out)
+static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, bool tracked,
+                                    recon_frame_result *out)
 {
     bf_status s = fusion_add_frame(r->map, f, T);
     out->fuse = fusion_last_stage_ms(r->map);
@@ -124,7 +126,17 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     }
     if (s != BF_OK) return s;
     out->fused = true;
-    if ((s = render_raycast(r->ref_caster, r->map, &r->K_ref, T, &r->cfg.raycast)) != BF_OK) return s;
+    render_options ro = r->cfg.raycast;
+    ro.no_shade = true; /* tracking takes its normals from the depth */
+    if (r->cfg.start_at_frame && tracked &&
+        track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
+        /* The rays start a margin in front of the depth this frame saw
+         * (docs/render.md): 3 sigma_z(z) of Kinect v1 noise bounds the map's
+         * surface behind the frame's, plus 2 cm for the map's own error. */
+        ro.start_margin_m = 0.02f + 3.0f * 0.0012f;
+        ro.start_margin_z2 = 3.0f * 0.0019f;
+    }
+    if ((s = render_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro)) != BF_OK) return s;
     out->ms_raycast = render_last_ms(r->ref_caster);
     return track_set_reference_gpu(r->tracker, render_get_targets(r->ref_caster)->depth, T);
 }
@@ -151,7 +163,7 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         out->state = RECON_FIRST;
         if (known) r->T_first = r->T_last = *known;
         s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
-        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, out);
+        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
         if (s == BF_OK) r->counts.tracked++;
         out->T_wc = r->T_first;
     } else {
@@ -177,14 +189,14 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
                 r->V = bf_se3_mul(&Li, T_new);
                 r->T_last = *T_new;
                 r->counts.tracked++;
-                s = fuse_and_reference(r, f, T_new, out);
+                s = fuse_and_reference(r, f, T_new, true, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
                 r->V = bf_se3_identity(); /* the motion is unknown now */
                 if (known) {
                     r->T_last = *known;
-                    s = fuse_and_reference(r, f, known, out);
+                    s = fuse_and_reference(r, f, known, false, out);
                 }
             }
         }

@@ -26,6 +26,7 @@ typedef struct recon_config {
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
     bool constant_velocity;   /* guess = last pose times the last motion; default false (last pose) */
+    bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
 } recon_config;
 
 recon_config recon_config_default(void);

@@ -18,6 +18,8 @@ struct render_caster {
     gpu_bindings *b_raycast, *b_shade;
     /* The map buffers bound to b_raycast (rebound when another map comes). */
     gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf;
+    gpu_buffer *bound_start; /* binding 6: the start depths, or the dummy */
+    gpu_buffer *dummy;       /* 16 bytes bound when there are no start depths */
     double last_ms;
     uint32_t local_x, local_y; /* workgroup shape of both passes */
 };
@@ -66,7 +68,7 @@ bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, rende
         .name = "render.raycast",
         .spirv = bf_spv_render_raycast,
         .spirv_bytes = bf_spv_render_raycast_size,
-        .n_buffers = 6,
+        .n_buffers = 7,
         .push_bytes = sizeof(render_push),
         .local_size = {rc->local_x, rc->local_y, 1},
     };
@@ -80,7 +82,11 @@ bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, rende
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pr, &rc->p_raycast);
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &ps, &rc->p_shade);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 6, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = target_create(ctx, "render.no_start", 16, &rc->dummy);
+    if (s == BF_OK) s = gpu_buffer_zero(rc->dummy);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 7, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 6, rc->dummy, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) rc->bound_start = rc->dummy;
     if (s == BF_OK) s = gpu_bindings_create(ctx, 4, "render.shade", &rc->b_shade);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 4, rc->targets.depth, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 5, rc->targets.level, 0, GPU_WHOLE_SIZE);
@@ -103,6 +109,7 @@ void render_destroy(render_caster *rc)
     gpu_bindings_destroy(rc->b_raycast);
     gpu_pipeline_destroy(rc->p_shade);
     gpu_pipeline_destroy(rc->p_raycast);
+    gpu_buffer_destroy(rc->dummy);
     gpu_buffer_destroy(rc->targets.colour);
     gpu_buffer_destroy(rc->targets.level);
     gpu_buffer_destroy(rc->targets.normal);
@@ -139,9 +146,23 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
     if (!bf_se3_is_finite(T_wc)) return bf_fail(BF_INVALID_ARG, "render: camera pose is not finite");
     if (!(opt->near_m > 0) || !(opt->far_m > opt->near_m) || !isfinite(opt->far_m))
         return bf_fail(BF_INVALID_ARG, "render: depth range [%g, %g] m", opt->near_m, opt->far_m);
+    uint64_t n_px = (uint64_t)K->width * K->height;
+    if (opt->start_depth && (opt->start_offset > UINT32_MAX ||
+                             gpu_buffer_size(opt->start_depth) < (opt->start_offset + n_px) * 4))
+        return bf_fail(BF_INVALID_ARG, "render: start depths %s hold %llu bytes, %llu floats from %llu needed",
+                       gpu_buffer_name(opt->start_depth), (unsigned long long)gpu_buffer_size(opt->start_depth),
+                       (unsigned long long)n_px, (unsigned long long)opt->start_offset);
+    if (opt->start_depth && !(opt->start_margin_m >= 0 && opt->start_margin_z2 >= 0))
+        return bf_fail(BF_INVALID_ARG, "render: start margins %g m, %g / m must be >= 0", opt->start_margin_m,
+                       opt->start_margin_z2);
     fusion_gpu_view v = fusion_gpu_view_get(map);
     bf_status s = bind_map(rc, &v);
     if (s != BF_OK) return s;
+    gpu_buffer *start = opt->start_depth ? opt->start_depth : rc->dummy;
+    if (start != rc->bound_start) {
+        if ((s = gpu_bindings_set(rc->b_raycast, 6, start, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
+        rc->bound_start = start;
+    }
 
     /* T_mc = T_wc with its translation made relative to the map origin in
      * double: the GPU's floats stay small however far the map is from the
@@ -159,7 +180,11 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
         .n_buckets = v.n_buckets,
         .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
         .max_level = v.max_level,
-        .flags = (opt->confident_only ? RENDER_FLAG_CONFIDENT_ONLY : 0u) | (opt->refine ? RENDER_FLAG_REFINE : 0u),
+        .flags = (opt->confident_only ? RENDER_FLAG_CONFIDENT_ONLY : 0u) | (opt->refine ? RENDER_FLAG_REFINE : 0u) |
+                 (opt->start_depth ? RENDER_FLAG_START : 0u),
+        .start_margin_m = opt->start_margin_m,
+        .start_margin_z2 = opt->start_margin_z2,
+        .start_off = (uint32_t)opt->start_offset,
     };
     for (int r = 0; r < 3; r++)
         for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_wc->R[r][c];
@@ -171,9 +196,11 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
     if ((s = gpu_begin(rc->ctx)) != BF_OK) return s;
     bf_status ts = gpu_cmd_stage_begin(rc->ctx, "render.raycast");
     gpu_cmd_dispatch(rc->ctx, rc->p_raycast, rc->b_raycast, &pc, gx, gy, 1);
-    /* The depth and level writes of the ray-cast -> the shading pass's reads. */
-    gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
-    gpu_cmd_dispatch(rc->ctx, rc->p_shade, rc->b_shade, &pc, gx, gy, 1);
+    if (!opt->no_shade) {
+        /* The depth and level writes of the ray-cast -> the shading pass's reads. */
+        gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
+        gpu_cmd_dispatch(rc->ctx, rc->p_shade, rc->b_shade, &pc, gx, gy, 1);
+    }
     /* All four images -> host downloads (render_download) and later readers. */
     gpu_cmd_barrier(rc->ctx, GPU_BARRIER_HOST);
     gpu_cmd_stage_end(rc->ctx);

@@ -27,6 +27,17 @@ typedef struct render_options {
     bool confident_only; /* display: only confident voxels are surface; tracking: every sign bit */
     bool refine;         /* sub-voxel hit: zero of the smoothed sign field on the ray (docs/render.md) */
     float near_m, far_m; /* ray range along the optical axis, default 0.2 / 6 */
+    /* Optional start depths (NULL: none): float camera depth per pixel of
+     * the caster's size at pixel offset start_offset in start_depth (0 =
+     * none), e.g. the frame just fused at this pose. A ray with a start
+     * depth z begins at z - (start_margin_m + start_margin_z2 z^2) instead
+     * of near_m, skipping the free space in front of the surface the frame
+     * saw (docs/render.md). A surface of the map closer than that is not
+     * seen on that pixel. */
+    gpu_buffer *start_depth;
+    uint64_t start_offset;
+    float start_margin_m, start_margin_z2;
+    bool no_shade;       /* depth and level only: normals and colour are not computed */
 } render_options;
 
 render_options render_options_tracking(void); /* every sign bit, refined */

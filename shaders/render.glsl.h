@@ -23,6 +23,7 @@
 /* render_push.flags */
 #define RENDER_FLAG_CONFIDENT_ONLY 1u /* non-confident voxels are unknown */
 #define RENDER_FLAG_REFINE 2u         /* hit between the two voxel centres */
+#define RENDER_FLAG_START 4u          /* rays start at the start image's depth minus a margin */
 
 /* Octree cells are addressed by integer coordinates on the finest grid
  * (2^FUSION_MAX_LEVEL = 256 cells per chunk edge); a cell at level L is
@@ -61,7 +62,11 @@ struct render_push {
     bf_u32 n_overflow;       /* overflow entries after the buckets' slots */
     bf_u32 max_level;
     bf_u32 flags;            /* RENDER_FLAG_* */
-    bf_u32 pad[3];
+    /* RENDER_FLAG_START: a ray whose pixel has depth z > 0 in the start
+     * image (binding 6, floats from start_off) begins at max(near_m, z -
+     * start_margin_m - start_margin_z2 z^2). */
+    bf_f32 start_margin_m, start_margin_z2;
+    bf_u32 start_off;
 };
 #define RENDER_PUSH_WORDS 28u
 #ifndef BF_GLSL

@@ -34,6 +34,7 @@ layout(std430, binding = 2) readonly buffer Sign { uint w[]; } sign_pool;
 layout(std430, binding = 3) readonly buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 4) writeonly buffer Depth { float v[]; } depth_out;
 layout(std430, binding = 5) writeonly buffer Level { uint v[]; } level_out;
+layout(std430, binding = 6) readonly buffer Start { float v[]; } start_in;
 
 layout(push_constant) uniform Push { render_push pc; };
 
@@ -240,6 +241,13 @@ void main()
     bool hit = false;
 
     float s = pc.near_m;
+    if ((pc.flags & RENDER_FLAG_START) != 0u) {
+        /* Skip the free space in front of a surface the caller knows (the
+         * frame just fused at this pose): the walk's per-cell cost is what
+         * a ray pays, and most of a ray's cells lie before its hit. */
+        float z0 = start_in.v[pc.start_off + pixel];
+        if (z0 > 0.0) s = max(s, z0 - (pc.start_margin_m + pc.start_margin_z2 * z0 * z0));
+    }
     for (uint iter = 0u; iter < RENDER_MAX_CELLS && s < pc.far_m; iter++) {
         float sp = s + RENDER_NUDGE;
         vec3 p = ray.o + sp * ray.dir;

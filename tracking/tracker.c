@@ -335,7 +335,9 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     bf_se3 T_rc = bf_se3_mul(&T_rw, guess_wc);
     T_rc = nearest_rigid(&T_rc);
     double t0 = bf_time_s();
+    t->has_frame = false;
     if ((s = track__icp_run(t, &T_rc, min_valid(t, 0), &r)) != BF_OK) return s;
+    t->has_frame = true;
     r.ms_wall = 1e3 * (bf_time_s() - t0);
     if (r.outcome == TRACK_OK) {
         T_rc = nearest_rigid(&T_rc);
@@ -345,6 +347,17 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
         r.T_wc = *guess_wc;
     }
     *out = r;
+    return BF_OK;
+}
+
+bf_status track_frame_depth_gpu(track_tracker *t, uint32_t level, gpu_buffer **buf, uint64_t *offset)
+{
+    if (!t || !buf || !offset) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    if (!t->has_frame || level >= TRACK_LEVELS)
+        return bf_fail(BF_INVALID_ARG, "tracking: no frame depth at level %u (%s)", level,
+                       t->has_frame ? "beyond the pyramid" : "no frame tracked yet");
+    *buf = t->frame_depth;
+    *offset = t->geom.off[level];
     return BF_OK;
 }
 

@@ -112,6 +112,13 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
  * only for bad arguments or a device failure. */
 bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out);
 
+/* The depth pyramid of the last frame track_frame saw, on the GPU: level l
+ * is (width >> l) x (height >> l) floats (metres, 0 = none) from pixel
+ * *offset of *buf (recon/ starts the reference's ray-cast there). Valid
+ * until the next track_frame. BF_INVALID_ARG before any frame or for a
+ * level beyond the pyramid. */
+bf_status track_frame_depth_gpu(track_tracker *t, uint32_t level, gpu_buffer **buf, uint64_t *offset);
+
 /* The smoothed reference depth at its finest level (the level it came in
  * at: ref_level for a GPU reference, 0 for a frame), (width >> l) * (height
  * >> l) floats, for tests and snapshots. */

@@ -52,6 +52,7 @@ struct track_tracker {
     bool has_ref;
     bf_se3 T_wr;               /* camera to world of the reference */
     uint32_t ref_valid;        /* valid depth pixels at the reference's finest level */
+    bool has_frame;            /* frame_depth holds a frame (track_frame_depth_gpu) */
     uint32_t ref_first;        /* that level: cfg.ref_level for a reference from the GPU, 0 for a frame */
     double ms_rof;             /* GPU time of the last smoothing */
     double ms_ref;             /* GPU time of the last reference preparation (smoothing included) */

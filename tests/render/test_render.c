@@ -609,6 +609,77 @@ BF_TEST(raycast_at_a_fused_pose_reproduces_its_depth_also_10_km_away)
  * depth against the ray-cast would find: it is what moves a static camera.
  * (The map itself is unbiased: half the voxels at the true surface are
  * front, with noise or without.) */
+/* Rays that start a margin in front of the depth a fused frame measured
+ * (recon/'s reference ray-cast) find what rays from the near plane find:
+ * the free space they skip holds no surface the frame did not see. */
+BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    CHECK_OK(room_frames());
+    bf_se3 id = bf_se3_identity();
+    fusion_map *map;
+    CHECK_OK(room_fuse(ctx, &id, &map));
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, K_ROOM.width, K_ROOM.height, &rc));
+    uint32_t np = K_ROOM.width * K_ROOM.height;
+    float *z = malloc((size_t)np * 4 + 64);
+    gpu_buffer *start;
+    for (uint32_t k = 0; k < ROOM_FRAMES; k += 4) {
+        render_options plain = render_options_tracking(), hinted = plain;
+        render_images a, b;
+        CHECK_OK(render_raycast(rc, map, &K_ROOM, &room.T_wc[k], &plain));
+        CHECK_OK(render_download(rc, &a));
+        /* The frame's depth in metres after 16 floats of padding, as in a
+         * pyramid buffer; every 50th pixel without a start depth. */
+        for (uint32_t i = 0; i < 16; i++) z[i] = 1.0f;
+        for (uint32_t i = 0; i < np; i++) z[16 + i] = i % 50 == 0 ? 0.0f : (float)(room.depth[k][i] / K_ROOM.depth_scale);
+        gpu_buffer_desc bd = {.name = "test.start", .size_bytes = (uint64_t)np * 4 + 64, .memory = GPU_MEMORY_DEVICE};
+        CHECK_OK(gpu_buffer_create(ctx, &bd, &start));
+        CHECK_OK(gpu_buffer_upload(start, 0, z, (uint64_t)np * 4 + 64));
+        hinted.start_depth = start;
+        hinted.start_offset = 16;
+        hinted.start_margin_m = 0.02f + 3.0f * 0.0012f; /* recon's margins */
+        hinted.start_margin_z2 = 3.0f * 0.0019f;
+        hinted.no_shade = true;
+        CHECK_OK(render_raycast(rc, map, &K_ROOM, &room.T_wc[k], &hinted));
+        CHECK_OK(render_download(rc, &b));
+        /* Where the plain hit lies beyond the start point the hinted ray
+         * must find it exactly; where it lies in the skipped space it is a
+         * surface in front of what the frame measured there (the map's
+         * phantom crossings, docs/render.md), which the hint drops. */
+        uint32_t beyond = 0, same = 0, skipped = 0, skipped_far = 0;
+        for (uint32_t i = 0; i < np; i++) {
+            if (!(a.depth[i] > 0)) continue;
+            float z0 = z[16 + i];
+            float s0 = z0 > 0 ? z0 - (hinted.start_margin_m + hinted.start_margin_z2 * z0 * z0) : 0.0f;
+            if (a.depth[i] >= s0 + 1e-3f) {
+                beyond++;
+                same += fabsf(a.depth[i] - b.depth[i]) <= 1e-5f;
+            } else if (a.depth[i] < s0) {
+                skipped++;
+                skipped_far += b.depth[i] > a.depth[i];
+            }
+        }
+        fprintf(stderr, "  frame %u: %u hits beyond the start, %u of them equal; %u in the skipped space (%u found "
+                        "farther)\n", k, beyond, same, skipped, skipped_far);
+        CHECK(beyond > np / 2);
+        CHECK(same >= beyond - beyond / 1000); /* 99.9% */
+        CHECK(skipped <= beyond / 50);
+        /* A start image smaller than the caster's is refused. */
+        hinted.start_offset = 32;
+        CHECK_STATUS(render_raycast(rc, map, &K_ROOM, &room.T_wc[k], &hinted), BF_INVALID_ARG);
+        gpu_buffer_destroy(start);
+        render_images_free(&a);
+        render_images_free(&b);
+    }
+    free(z);
+    render_destroy(rc);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 BF_TEST(raycast_of_a_static_camera_is_unbiased)
 {
     gpu_context *ctx;
