@@ -39,7 +39,7 @@ static const char replay_help[] =
     "  --bricks N         brick pool size, default 1048576\n"
     "  --chunk M          chunk edge in metres, default 2\n"
     "  --max-level L      finest octree level, default 8\n"
-    "  --icp-iters A,B,C  ICP iterations per pyramid level, finest first, default 10,5,4\n"
+    "  --icp-iters A,B,C  ICP iterations per pyramid level, finest first, default 5,5,4\n"
     "  --huber K          ICP Huber threshold in units of the sensor noise sigma_z(z),\n"
     "                     default 2 (0: plain least squares)\n"
     "  --noise-weights on|off  weight ICP residuals by 1 / sigma_z(z)^2, default on\n"

@@ -12,10 +12,13 @@ track_config track_config_default(void)
 {
     track_config c = {
         .levels = 3,
-        /* KinectFusion's counts (Newcombe et al. 2011, sec. 3.5): 10 at the
-         * finest level, 5 and 4 above. With the convergence test below a
-         * level usually stops early. */
-        .iterations = {10, 5, 4},
+        /* KinectFusion has 10 at the finest level, 5 and 4 above (Newcombe et
+         * al. 2011, sec. 3.5). 5 at the finest: in the full loop on the
+         * 640x480 synthetic fr1_xyz room (60 frames) ICP took 64 instead of
+         * 112 ms per frame for an ATE of 5.8 against 5.5 mm (3/4/8: 53 ms,
+         * 7.0 mm; docs/tracking.md). With the convergence test below a
+         * level may stop earlier. */
+        .iterations = {5, 5, 4},
         .dist_m = 0.1f,
         /* DESIGN.md says 20; docs/tracking.md has the measurements behind
          * 45: on the real TUM fr2_desk pair every gate from 20 to 35 degrees

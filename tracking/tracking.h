@@ -31,7 +31,7 @@ typedef struct track_tracker track_tracker; /* opaque */
 
 typedef struct track_config {
     uint32_t levels;                       /* pyramid levels, 1..3, default 3 */
-    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 10, 5, 4 */
+    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 5, 5, 4 (KinectFusion: 10, 5, 4) */
     float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 45 (DESIGN.md: 20; docs/tracking.md) */
     float max_depth_m;                     /* samples beyond are ignored, default 4.5 */
