@@ -33,7 +33,7 @@ static const char replay_help[] =
     "  --out DIR          output folder (created)\n"
     "  --init P           first pose: 'groundtruth' (the first frame's, when it has one;\n"
     "                     the default) or 'identity'\n"
-    "  --ratio R          voxel-to-pixel ratio of the level rule, default 1\n"
+    "  --ratio R          voxel-to-pixel ratio of the level rule, default 2 (fuse: 1)\n"
     "  --window N         frames per fusion window (even), default 40\n"
     "  --subcache N       frames of the new-brick pass, default 10\n"
     "  --bricks N         brick pool size, default 1048576\n"

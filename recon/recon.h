@@ -20,7 +20,7 @@
 typedef struct recon recon; /* opaque */
 
 typedef struct recon_config {
-    fusion_config fusion;
+    fusion_config fusion;     /* fusion's defaults but voxel_ratio 2 (docs/bench_replay_sweep.md) */
     track_config track;
     render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
@@ -65,8 +65,9 @@ void recon_destroy(recon *r); /* NULL is a no-op */
  * arguments only; tracking failures and pool exhaustion are in *out. */
 bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out);
 /* The tracker's own error, without drift: the frame is tracked against the
- * map as above (out->T_wc is the estimate), but fused at T_known, which
- * also becomes the next frame's guess and reference pose. With the true
+ * map as above (out->T_wc is the estimate), but fused at T_known, also when
+ * tracking fails (state RECON_LOST, fused true), and T_known becomes the
+ * next frame's guess and reference pose. With the true
  * poses the map is the one the sensor would give, and each estimate's error
  * is one step's (`bitfuse replay --fuse-at-groundtruth`). */
 bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_known, recon_frame_result *out);

@@ -211,6 +211,22 @@ mentions "--out is required"
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
 expect 3 "$B" replay "$T/missing" --out "$T/rp3"
 mentions "$T/missing"
+# The tracker alone: fused at the true poses, one estimate per frame, the
+# first one the true first pose; a sequence without ground truth is refused.
+expect 0 "$B" replay "$T/seq" --out "$T/rpgt" --fuse-at-groundtruth --ray-start near --huber 1.5 --noise-weights off \
+    --ref-level 0
+[ "$(grep -vc '^#' "$T/rpgt/trajectory.txt")" = 3 ] || fail "replay --fuse-at-groundtruth: trajectory.txt has not 3 poses"
+python3 - "$T/seq/groundtruth.txt" "$T/rpgt/trajectory.txt" <<'PYEOF' || fail "replay --fuse-at-groundtruth: first pose"
+import sys
+rows = [[float(x) for x in l.split()] for f in sys.argv[1:] for l in open(f) if l.strip() and l[0] != '#']
+gt, est = rows[:len(rows) // 2], rows[len(rows) // 2:]
+assert max(abs(a - b) for a, b in zip(gt[0][1:], est[0][1:])) < 1e-6, (gt[0], est[0])
+PYEOF
+expect 3 "$B" replay "$T/int.bflog" --out "$T/rpgt2" --fuse-at-groundtruth
+mentions "no ground-truth pose"
+expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ray-start middle
+expect 2 "$B" replay "$T/seq" --out "$T/rp4" --huber -1
+expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ref-level 2
 
 # live: the same loop on a device (here a recording standing in for one),
 # recording what it consumed on the side.

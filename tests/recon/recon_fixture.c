@@ -37,6 +37,10 @@ bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *true_po
     recon *r = NULL;
     uint16_t *depth = malloc((size_t)W * H * sizeof *depth);
     recon_config cfg = recon_config_default();
+    /* Ratio 1 at 320x240 gives the voxels of the default ratio 2 at
+     * 640x480 (the level rule follows the pixel footprint z / f, and f is
+     * half): the tests' surface bounds were set for that size. */
+    cfg.fusion.voxel_ratio = 1.0f;
     cfg.fusion.brick_cap = 1u << 17;
     cfg.fusion.window = 10;
     cfg.fusion.subcache = 4;

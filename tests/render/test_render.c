@@ -610,8 +610,9 @@ BF_TEST(raycast_at_a_fused_pose_reproduces_its_depth_also_10_km_away)
  * (The map itself is unbiased: half the voxels at the true surface are
  * front, with noise or without.) */
 /* Rays that start a margin in front of the depth a fused frame measured
- * (recon/'s reference ray-cast) find what rays from the near plane find:
- * the free space they skip holds no surface the frame did not see. */
+ * (recon/'s reference ray-cast) find what rays from the near plane find
+ * beyond that point; what they skip is a surface the map puts in front of
+ * what the frame measured, and there are few of those. */
 BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
 {
     gpu_context *ctx;
