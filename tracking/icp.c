@@ -168,6 +168,7 @@ typedef struct icp_step {
 typedef struct icp_subspace {
     double B[36];        /* 6 x k, column-major: column c is B[6 c .. 6 c + 5] */
     int k;
+    double zbar;         /* the depth scale B was taken in (the plain system's) */
     double eig_min, eig_max;
     bool degenerate;
 } icp_subspace;
@@ -176,14 +177,15 @@ typedef struct icp_subspace {
  * inliers' mean depth (a rotation of w radians moves a point at depth z by
  * about w z metres), so eigenvalues compare metres with metres: with x =
  * (t, w zbar), H'_ij = H_ij / (scale_i scale_j), g'_i = g_i / scale_i.
+ * zbar > 0 is used as given (a subspace's), else it is the system's own.
  * False when there is nothing to solve. */
-static bool scaled_system(const icp_sums *s, double H[36], double g[6], double scale[6])
+static bool scaled_system(const icp_sums *s, double zbar, double H[36], double g[6], double scale[6])
 {
     double n_in = s->s[TRACK_SUM_INLIERS];
     for (uint32_t i = 0; i < TRACK_SUMS; i++)
         if (!isfinite(s->s[i])) return false;
     if (n_in < 6) return false;
-    double zbar = s->s[TRACK_SUM_Z] / n_in;
+    if (!(zbar > 0)) zbar = s->s[TRACK_SUM_Z] / n_in;
     if (!(zbar > 0)) return false;
     for (int i = 0; i < 6; i++) scale[i] = i < 3 ? 1.0 : zbar;
     uint32_t e = TRACK_SUM_ATA;
@@ -199,7 +201,8 @@ static bool scaled_system(const icp_sums *s, double H[36], double g[6], double s
 static bool subspace_of(const icp_sums *s, double ratio, icp_subspace *out)
 {
     double H[36], g[6], scale[6], w[6], V[36];
-    if (!scaled_system(s, H, g, scale)) return false;
+    if (!scaled_system(s, 0, H, g, scale)) return false;
+    out->zbar = scale[3];
     bf_sym_eigen(6, H, w, V);
     if (!(w[5] > 0) || !isfinite(w[0])) return false;
     out->eig_min = w[0];
@@ -220,7 +223,7 @@ static icp_step solve(const icp_sums *s, const icp_subspace *S)
 {
     icp_step st = {.ok = false, .eig_min = S->eig_min, .eig_max = S->eig_max, .degenerate = S->degenerate};
     double H[36], g[6], scale[6];
-    if (!scaled_system(s, H, g, scale)) return st;
+    if (!scaled_system(s, S->zbar, H, g, scale)) return st;
     int k = S->k;
     double Hk[36], gk[6], wk[6], Vk[36];
     for (int a = 0; a < k; a++) {
