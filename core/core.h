@@ -149,6 +149,11 @@ typedef struct bf_intrinsics {
     double depth_scale; /* raw depth units per metre (TUM: 5000) */
 } bf_intrinsics;
 
+/* The camera of pyramid level l (each level halves the image): size >> l,
+ * focal lengths / 2^l, and with pixel centres at integers level l's pixel i
+ * covers [2^l i - 1/2, 2^l (i + 1) - 1/2) of the full image, so its centre
+ * is at 2^l i + (2^l - 1) / 2: c_l = (c + 1/2) / 2^l - 1/2. */
+bf_intrinsics bf_intrinsics_level(const bf_intrinsics *K, uint32_t l);
 /* Back-projects pixel (u, v) (pixel centres at integers) at depth z metres. */
 bf_vec3 bf_intrinsics_unproject(const bf_intrinsics *K, double u, double v, double z_m);
 /* Projects camera point p; returns false when z <= 0. */

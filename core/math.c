@@ -341,6 +341,19 @@ void bf_sym_eigen(int n, double *A, double *w, double *V)
     }
 }
 
+bf_intrinsics bf_intrinsics_level(const bf_intrinsics *K, uint32_t l)
+{
+    double s = 1.0 / (double)(1u << l);
+    bf_intrinsics L = *K;
+    L.width = K->width >> l;
+    L.height = K->height >> l;
+    L.fx_px = K->fx_px * s;
+    L.fy_px = K->fy_px * s;
+    L.cx_px = (K->cx_px + 0.5) * s - 0.5;
+    L.cy_px = (K->cy_px + 0.5) * s - 0.5;
+    return L;
+}
+
 bf_vec3 bf_intrinsics_unproject(const bf_intrinsics *K, double u, double v, double z_m)
 {
     return bf_v3((u - K->cx_px) * z_m / K->fx_px, (v - K->cy_px) * z_m / K->fy_px, z_m);

@@ -67,17 +67,10 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
     /* The reference at track.ref_level (half resolution by default): the
      * ray-cast, the loop's largest cost, then has a quarter of the rays.
-     * Level geometry as tracking's (pixel centres at integers). */
-    uint32_t l = r->cfg.track.ref_level < 2 ? r->cfg.track.ref_level : 0;
-    double sc = 1.0 / (double)(1u << l);
-    r->K_ref = *K;
-    r->K_ref.width = K->width >> l;
-    r->K_ref.height = K->height >> l;
-    r->K_ref.fx_px = K->fx_px * sc;
-    r->K_ref.fy_px = K->fy_px * sc;
-    r->K_ref.cx_px = (K->cx_px + 0.5) * sc - 0.5;
-    r->K_ref.cy_px = (K->cy_px + 0.5) * sc - 0.5;
+     * track_create checks the level. */
+    uint32_t l = r->cfg.track.ref_level;
     bf_status s = track_create(ctx, &r->cfg.track, K, &r->tracker);
+    if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
     if (s == BF_OK) s = render_create(ctx, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
     if (s != BF_OK) {
@@ -139,10 +132,11 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     if (r->cfg.start_at_frame && tracked &&
         track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
         /* The rays start a margin in front of the depth this frame saw
-         * (docs/render.md): 3 sigma_z(z) of Kinect v1 noise bounds the map's
-         * surface behind the frame's, plus 2 cm for the map's own error. */
-        ro.start_margin_m = 0.02f + 3.0f * 0.0012f;
-        ro.start_margin_z2 = 3.0f * 0.0019f;
+         * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
+         * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the
+         * map's surface behind the frame's, plus 2 cm for the map's own error. */
+        ro.start_margin_m = 0.02f + 3.0f * r->cfg.fusion.sigma_a;
+        ro.start_margin_z2 = 3.0f * r->cfg.fusion.sigma_b;
     }
     if ((s = render_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro)) != BF_OK) return s;
     out->ms_raycast = render_last_ms(r->ref_caster);

@@ -104,14 +104,16 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
      * of the few associations that land on a wrong surface (silhouettes,
      * surfaces the map has not seen yet) without a hard gate that could
      * reject everything while the motion is still large. */
-    float sig = track_sigma_z(max(p.z, zq));
     float wgt = 1.0;
-    if (pc.weight_noise != 0u) {
-        float sw = track_sigma_z(1.0) / sig;
-        wgt = sw * sw;
+    if (pc.weight_noise != 0u || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
+        float sig = track_sigma_z(max(p.z, zq));
+        if (pc.weight_noise != 0u) {
+            float sw = track_sigma_z(1.0) / sig;
+            wgt = sw * sw;
+        }
+        float e = abs(r) / sig;
+        if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;
     }
-    float e = abs(r) / sig;
-    if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;
     vec3 nq = wgt * n;
     vec3 c = cross(p, n), cw = wgt * c;
     float rw = wgt * r;

@@ -93,14 +93,11 @@ const char *track_outcome_name(track_outcome o)
 
 void track__level_intrinsics(const bf_intrinsics *K, uint32_t l, float *fx, float *fy, float *cx, float *cy)
 {
-    /* Pixel centres at integers: level l's pixel i covers [2^l i - 1/2,
-     * 2^l (i + 1) - 1/2) of the finest level, so its centre is at
-     * 2^l i + (2^l - 1) / 2. */
-    double s = 1.0 / (double)(1u << l);
-    *fx = (float)(K->fx_px * s);
-    *fy = (float)(K->fy_px * s);
-    *cx = (float)((K->cx_px + 0.5) * s - 0.5);
-    *cy = (float)((K->cy_px + 0.5) * s - 0.5);
+    bf_intrinsics L = bf_intrinsics_level(K, l);
+    *fx = (float)L.fx_px;
+    *fy = (float)L.fy_px;
+    *cx = (float)L.cx_px;
+    *cy = (float)L.cy_px;
 }
 
 static bf_status check_config(const track_config *c, const bf_intrinsics *K)

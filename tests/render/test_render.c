@@ -640,8 +640,9 @@ BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
         CHECK_OK(gpu_buffer_upload(start, 0, z, (uint64_t)np * 4 + 64));
         hinted.start_depth = start;
         hinted.start_offset = 16;
-        hinted.start_margin_m = 0.02f + 3.0f * 0.0012f; /* recon's margins */
-        hinted.start_margin_z2 = 3.0f * 0.0019f;
+        const fusion_config *fc = fusion_get_config(map); /* recon's margins */
+        hinted.start_margin_m = 0.02f + 3.0f * fc->sigma_a;
+        hinted.start_margin_z2 = 3.0f * fc->sigma_b;
         hinted.no_shade = true;
         CHECK_OK(render_raycast(rc, map, &K_ROOM, &room.T_wc[k], &hinted));
         CHECK_OK(render_download(rc, &b));

@@ -391,8 +391,9 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    bf_intrinsics Kh = {K_MID.width / 2, K_MID.height / 2, K_MID.fx_px / 2, K_MID.fy_px / 2,
-                        (K_MID.cx_px + 0.5) / 2 - 0.5, (K_MID.cy_px + 0.5) / 2 - 0.5, K_MID.depth_scale};
+    bf_intrinsics Kh = bf_intrinsics_level(&K_MID, 1);
+    CHECK_EQ_INT(Kh.width, 160);
+    CHECK(fabs(Kh.cx_px - 79.5) < 1e-12 && fabs(Kh.fx_px - 131.25) < 1e-12);
     room full, half;
     CHECK_OK(room_open(&full, &K_MID, EVAL_NOISE_NONE));
     CHECK_OK(room_open(&half, &Kh, EVAL_NOISE_NONE));
