@@ -8,7 +8,7 @@
 #include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
-#include "stream/stream.h"
+#include "export/export.h"
 
 /* Exit codes scripts can rely on (docs/cli.md). */
 enum {
@@ -32,7 +32,7 @@ bool app_is_help(const char *arg);
 /* output.c: what the commands that build a map report about it. */
 typedef struct app_map_report {
     fusion_stats map;
-    stream_export_stats mesh, points;
+    export_stats mesh, points;
 } app_map_report;
 /* Fills r->map, writes out_dir/points.ply and, with_mesh, out_dir/mesh.ply. */
 bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r);

@@ -12,11 +12,13 @@
 
 #include "app.h"
 #include "eval/eval.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 #include "fusion/fusion.h"
 #include "recon/recon.h"
 #include "gpu/gpu.h"
 #include "replay/replay.h"
-#include "stream/stream.h"
+#include "export/export.h"
 
 static const char demo_help[] =
     "usage: bitfuse demo [--out DIR] [--frames N] [--seed S] [--data DIR] [--no-gpu]\n"
@@ -45,9 +47,9 @@ static const char demo_help[] =
  * sampled at 100 Hz like a motion-capture log: sideways sway of +-0.3 m, a
  * little bob and push, yaw +-12 and pitch +-4 degrees. The first pose is the
  * identity, so `synth` places it at the room's viewpoint. */
-static bf_status demo_trajectory(double seconds, replay_traj *out)
+static bf_status demo_trajectory(double seconds, bf_traj *out)
 {
-    replay_traj traj = {0};
+    bf_traj traj = {0};
     const double t0 = 1000.0;
     for (int k = 0; k <= (int)(seconds * 100); k++) {
         double t = k / 100.0, w = 2 * M_PI * t / seconds;
@@ -55,9 +57,9 @@ static bf_status demo_trajectory(double seconds, replay_traj *out)
         bf_quat yaw = bf_quat_from_axis_angle(bf_v3(0, 1, 0), -0.21 * sin(w));
         bf_quat pitch = bf_quat_from_axis_angle(bf_v3(1, 0, 0), 0.07 * sin(2 * w));
         bf_se3 T = bf_se3_from_qt(bf_quat_mul(yaw, pitch), p);
-        bf_status s = replay_traj_push(&traj, t0 + t, &T);
+        bf_status s = bf_traj_push(&traj, t0 + t, &T);
         if (s != BF_OK) {
-            replay_traj_free(&traj);
+            bf_traj_free(&traj);
             return s;
         }
     }
@@ -67,14 +69,14 @@ static bf_status demo_trajectory(double seconds, replay_traj *out)
 
 /* Back-projects every step-th pixel of every frame_step-th frame with its
  * ground-truth pose into a coloured point cloud (world frame). */
-static bf_status demo_raw_points(const char *seq_dir, uint32_t frame_step, uint32_t step, eval_mesh *out,
+static bf_status demo_raw_points(const char *seq_dir, uint32_t frame_step, uint32_t step, mesh_data *out,
                                  uint32_t *n_frames)
 {
     rgbd_source *src;
     bf_status s = replay_open(seq_dir, NULL, &src);
     if (s != BF_OK) return s;
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
-    eval_mesh pts = {0};
+    mesh_data pts = {0};
     size_t cap = 0;
     bf_frame f;
     uint32_t n = 0;
@@ -111,7 +113,7 @@ static bf_status demo_raw_points(const char *seq_dir, uint32_t frame_step, uint3
 done:
     rgbd_source_close(src);
     if (s != BF_OK) {
-        eval_mesh_free(&pts);
+        mesh_free(&pts);
         return s;
     }
     *out = pts;
@@ -121,7 +123,7 @@ done:
 
 typedef struct demo_report {
     char device[256];
-    eval_synth_result synth;
+    synth_result synth;
     uint32_t n_replayed;
     uint32_t n_points;
     eval_surface_result surf;
@@ -204,8 +206,8 @@ static gpu_context *demo_device(bool use_gpu, demo_report *r)
 /* The full loop on the sequence (track, fuse, ray-cast, smooth), started at
  * the first true pose: the estimated trajectory against the truth (ATE) and
  * the surface voxels against the reference, as the raw depth was. */
-static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char *out_dir, const eval_mesh *ref,
-                                  const eval_mesh *seen, demo_report *r)
+static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char *out_dir, const mesh_data *ref,
+                                  const mesh_data *seen, demo_report *r)
 {
     rgbd_source *src;
     bf_status s = replay_open(seq, NULL, &src);
@@ -213,7 +215,7 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
     recon *rc = NULL;
     recon_config cfg = recon_config_default();
     bf_stats ms = {0};
-    replay_traj est = {0}, gt = {0};
+    bf_traj est = {0}, gt = {0};
     bf_frame f;
     bf_progress prog;
     bf_progress_begin(&prog, "track+fuse", src->n_frames);
@@ -222,8 +224,8 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
         recon_frame_result fr;
         if ((s = recon_add_frame(rc, &f, &fr)) != BF_OK) break;
         if ((s = bf_stats_push(&ms, fr.ms_frame)) != BF_OK) break;
-        if ((s = replay_traj_push(&est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
-        if (f.has_pose && (s = replay_traj_push(&gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
+        if ((s = bf_traj_push(&est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
+        if (f.has_pose && (s = bf_traj_push(&gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
         bf_progress_update(&prog, f.index + 1);
     }
     bf_progress_end(&prog, est.n);
@@ -233,14 +235,14 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
         s = replay_traj_write_tum(path, &est);
     if (s == BF_OK) s = eval_ate(&gt, &est, 0, &r->track_ate);
     if (s == BF_OK) r->counts = recon_get_counts(rc);
-    fusion_snapshot snap = {0};
-    eval_mesh pts = {0};
-    stream_export_stats st;
+    hostmap snap = {0};
+    mesh_data pts = {0};
+    export_stats st;
     if (s == BF_OK) s = fusion_get_stats(recon_map(rc), &r->map);
     if (s == BF_OK) s = fusion_snapshot_take(recon_map(rc), &snap);
-    if (s == BF_OK) s = stream_export_points(&snap, &pts, &st);
+    if (s == BF_OK) s = export_points(&snap, &pts, &st);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
-        s = eval_mesh_write_ply(path, &pts);
+        s = mesh_write_ply(path, &pts);
     if (s == BF_OK) {
         eval_surface_config scfg = eval_surface_config_default();
         scfg.max_dist_m = 0.5;
@@ -252,11 +254,11 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
         r->fuse_ms_median = bf_stats_percentile(&ms, 50);
         r->fuse_ms_p95 = bf_stats_percentile(&ms, 95);
     }
-    eval_mesh_free(&pts);
-    fusion_snapshot_free(&snap);
+    mesh_free(&pts);
+    hostmap_free(&snap);
     bf_stats_free(&ms);
-    replay_traj_free(&est);
-    replay_traj_free(&gt);
+    bf_traj_free(&est);
+    bf_traj_free(&gt);
     recon_destroy(rc);
     rgbd_source_close(src);
     return s;
@@ -271,33 +273,33 @@ static bf_status demo_run(gpu_context *ctx, const char *out_dir, uint32_t n_fram
     if ((s = bf_path_join(seq, sizeof seq, out_dir, "seq")) != BF_OK) return s;
 
     /* 1. The built-in trajectory, one extra second so every frame has a pose. */
-    replay_traj traj = {0};
+    bf_traj traj = {0};
     if ((s = demo_trajectory(n_frames / 30.0 + 1.0, &traj)) != BF_OK) return s;
     if ((s = bf_path_join(path, sizeof path, out_dir, "trajectory_input.txt")) == BF_OK)
         s = replay_traj_write_tum(path, &traj);
     if (s != BF_OK) goto done;
 
     /* 2. Render the room along it. */
-    eval_synth_config cfg = {
+    synth_config cfg = {
         .scene = "room", .data_dir = data_dir, .traj_path = path, .n_frames = n_frames,
-        .noise = EVAL_NOISE_KINECT1, .seed = seed, .out_dir = seq,
+        .noise = SYNTH_NOISE_KINECT1, .seed = seed, .out_dir = seq,
     };
     bf_info("rendering %u frames of the synthetic room into %s", n_frames, seq);
-    if ((s = eval_synth_run(&cfg, &r->synth)) != BF_OK) goto done;
+    if ((s = synth_run(&cfg, &r->synth)) != BF_OK) goto done;
 
     /* 3. Replay it and back-project the depth with the true poses. */
-    eval_mesh raw = {0};
+    mesh_data raw = {0};
     if ((s = demo_raw_points(seq, 3, 3, &raw, &r->n_replayed)) != BF_OK) goto done;
     r->n_points = raw.n_verts;
     if ((s = bf_path_join(path, sizeof path, out_dir, "raw_points.ply")) == BF_OK)
-        s = eval_mesh_write_ply(path, &raw);
+        s = mesh_write_ply(path, &raw);
 
     /* 4. Raw depth against the reference surface the camera saw. */
-    eval_mesh ref = {0}, seen = {0};
+    mesh_data ref = {0}, seen = {0};
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, seq, "scene.ply")) == BF_OK)
-        s = eval_mesh_read_ply(path, &ref);
+        s = mesh_read_ply(path, &ref);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, seq, "seen.ply")) == BF_OK)
-        s = eval_mesh_read_ply(path, &seen);
+        s = mesh_read_ply(path, &seen);
     if (s == BF_OK) {
         eval_surface_config scfg = eval_surface_config_default();
         scfg.max_dist_m = 0.5;
@@ -305,27 +307,27 @@ static bf_status demo_run(gpu_context *ctx, const char *out_dir, uint32_t n_fram
     }
     /* 6. The full loop: tracked trajectory and fused surface against the truth. */
     if (s == BF_OK && ctx) s = demo_reconstruct(ctx, seq, out_dir, &ref, &seen, r);
-    eval_mesh_free(&raw);
-    eval_mesh_free(&ref);
-    eval_mesh_free(&seen);
+    mesh_free(&raw);
+    mesh_free(&ref);
+    mesh_free(&seen);
 
     /* 5. The rendered ground truth against the trajectory it followed, sampled
      *    at the frame times: Horn's alignment must recover the placement
      *    exactly (the residual is file rounding, micrometres). */
     if (s == BF_OK) {
-        replay_traj gt = {0}, followed = {0};
+        bf_traj gt = {0}, followed = {0};
         if ((s = bf_path_join(path, sizeof path, seq, "groundtruth.txt")) == BF_OK &&
             (s = replay_traj_read_tum(path, &gt)) == BF_OK)
             for (size_t i = 0; i < gt.n && s == BF_OK; i++) {
                 bf_se3 T;
-                if (replay_traj_interpolate(&traj, gt.t_s[i], &T)) s = replay_traj_push(&followed, gt.t_s[i], &T);
+                if (bf_traj_interpolate(&traj, gt.t_s[i], &T)) s = bf_traj_push(&followed, gt.t_s[i], &T);
             }
         if (s == BF_OK) s = eval_ate(&gt, &followed, 0.02, &r->ate);
-        replay_traj_free(&gt);
-        replay_traj_free(&followed);
+        bf_traj_free(&gt);
+        bf_traj_free(&followed);
     }
 done:
-    replay_traj_free(&traj);
+    bf_traj_free(&traj);
     return s;
 }
 

@@ -6,6 +6,7 @@
 
 #include "app.h"
 #include "eval/eval.h"
+#include "mesh/mesh.h"
 
 static const char *usage_text =
     "usage: bitfuse eval-surface --reference MESH --reconstruction PLY [options]\n"
@@ -101,11 +102,11 @@ int cmd_eval_surface(int argc, char **argv)
     }
     if (!ref_path || !rec_path) return app_usage_error(cmd, "needs --reference and --reconstruction");
 
-    eval_mesh ref = {0}, rec = {0}, vis = {0};
+    mesh_data ref = {0}, rec = {0}, vis = {0};
     eval_surface_result r;
-    bf_status s = eval_mesh_read_ply(ref_path, &ref);
-    if (!s) s = eval_mesh_read_ply(rec_path, &rec);
-    if (!s && vis_path) s = eval_mesh_read_ply(vis_path, &vis);
+    bf_status s = mesh_read_ply(ref_path, &ref);
+    if (!s) s = mesh_read_ply(rec_path, &rec);
+    if (!s && vis_path) s = mesh_read_ply(vis_path, &vis);
     if (!s && ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", ref_path);
     if (!s && rec.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reconstruction has no vertices", rec_path);
     if (!s && vis_path && vis.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: no visible points", vis_path);
@@ -116,9 +117,9 @@ int cmd_eval_surface(int argc, char **argv)
         s = eval_surface(&ref, &rec, vis_path ? &vis : NULL, &cfg, &r);
     }
     uint32_t ref_v = ref.n_verts, ref_t = ref.n_tris, rec_v = rec.n_verts, rec_t = rec.n_tris;
-    eval_mesh_free(&ref);
-    eval_mesh_free(&rec);
-    eval_mesh_free(&vis);
+    mesh_free(&ref);
+    mesh_free(&rec);
+    mesh_free(&vis);
     if (s) return app_fail(cmd, s);
 
     const char *source = r.used_visible ? "visible" : ref_t ? "samples" : "vertices";

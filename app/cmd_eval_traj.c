@@ -6,6 +6,7 @@
 
 #include "app.h"
 #include "eval/eval.h"
+#include "replay/replay.h"
 
 static const char *usage_text =
     "usage: bitfuse eval-traj GT EST [--json] [--max-dt S] [--delta S | --per-frame]\n"
@@ -68,7 +69,7 @@ int cmd_eval_traj(int argc, char **argv)
     if (n_paths != 2) return app_usage_error(cmd, "needs GT and EST trajectory files");
     if (per_frame_only && delta_given) return app_usage_error(cmd, "--delta and --per-frame exclude each other");
 
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     eval_ate_result ate;
     eval_rpe_result rpe_s = {0}, rpe_f = {0};
     bool do_s = !per_frame_only, do_f = !delta_given;
@@ -96,8 +97,8 @@ int cmd_eval_traj(int argc, char **argv)
         }
     }
     size_t n_gt = gt.n, n_est = est.n;
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
     if (s) return app_fail(cmd, s);
 
     bf_quat q;

@@ -6,11 +6,11 @@
 #include <string.h>
 
 #include "app.h"
-#include "eval/eval.h"
+
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
 #include "replay/replay.h"
-#include "stream/stream.h"
+#include "export/export.h"
 
 static const char fuse_help[] =
     "usage: bitfuse fuse SEQUENCE --poses FILE|groundtruth --out DIR [options]\n"
@@ -99,14 +99,14 @@ static void timing_free(fuse_timing *t)
 
 /* The pose of frame f: its ground truth, or the trajectory at its depth
  * timestamp. False when there is none (the frame is skipped). */
-static bool frame_pose(const bf_frame *f, const replay_traj *traj, bf_se3 *T_wc)
+static bool frame_pose(const bf_frame *f, const bf_traj *traj, bf_se3 *T_wc)
 {
     if (!traj) {
         if (!f->has_pose) return false;
         *T_wc = f->T_wc;
         return true;
     }
-    return replay_traj_interpolate(traj, f->t_depth_s, T_wc);
+    return bf_traj_interpolate(traj, f->t_depth_s, T_wc);
 }
 
 typedef struct fuse_result {
@@ -166,7 +166,7 @@ static bf_status push_stage_times(fuse_timing *t, fusion_stage_ms ms)
 }
 
 /* Fuses every frame of src; the map is created at the first posed frame. */
-static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const replay_traj *traj, const fuse_args *a,
+static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const bf_traj *traj, const fuse_args *a,
                              fusion_map **map_out, fuse_result *r, fuse_timing *t)
 {
     fusion_map *map = NULL;
@@ -210,7 +210,7 @@ int cmd_fuse(int argc, char **argv)
     memset(&r, 0, sizeof r);
     fuse_timing t;
     memset(&t, 0, sizeof t);
-    replay_traj traj = {0};
+    bf_traj traj = {0};
     bool use_traj = strcmp(a.poses, "groundtruth") != 0;
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
@@ -239,7 +239,7 @@ int cmd_fuse(int argc, char **argv)
     fusion_destroy(map);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
-    replay_traj_free(&traj);
+    bf_traj_free(&traj);
     timing_free(&t);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

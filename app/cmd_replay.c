@@ -239,7 +239,7 @@ static bf_status timing_push(replay_timing *t, const recon_frame_result *fr)
 typedef struct replay_result {
     recon_counts counts;
     app_map_report out;
-    replay_traj est, gt;   /* gt: the frames' own poses, when they have them */
+    bf_traj est, gt;   /* gt: the frames' own poses, when they have them */
     bool has_ate;
     eval_ate_result ate;
     uint32_t n_views;
@@ -388,8 +388,8 @@ static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_arg
             r->n_recorded++;
         }
         if ((s = timing_push(t, &fr)) != BF_OK) break;
-        if ((s = replay_traj_push(&r->est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
-        if (f.has_pose && (s = replay_traj_push(&r->gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
+        if ((s = bf_traj_push(&r->est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
+        if (f.has_pose && (s = bf_traj_push(&r->gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
         if (a->view_every && recon_map(rc) && f.index % a->view_every == 0) {
             if ((s = write_view(rc, a->out, f.index, &fr.T_wc)) != BF_OK) break;
             r->n_views++;
@@ -511,8 +511,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     recon_destroy(rc);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
-    replay_traj_free(&r.est);
-    replay_traj_free(&r.gt);
+    bf_traj_free(&r.est);
+    bf_traj_free(&r.gt);
     timing_free(&t);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);

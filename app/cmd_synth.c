@@ -4,7 +4,8 @@
 #include <string.h>
 
 #include "app.h"
-#include "eval/eval.h"
+#include "synth/synth.h"
+#include "replay/replay.h"
 
 static const char synth_help[] =
     "usage: bitfuse synth --trajectory TUM_TRAJ --frames N --out DIR [options]\n"
@@ -45,7 +46,7 @@ static bool parse_u64(const char *s, uint64_t *out)
 int cmd_synth(int argc, char **argv)
 {
     const char *cmd = "synth";
-    eval_synth_config cfg = {.scene = "room", .noise = EVAL_NOISE_KINECT1, .seed = 1};
+    synth_config cfg = {.scene = "room", .noise = SYNTH_NOISE_KINECT1, .seed = 1};
     const char *data_dir = NULL;
     bool has_frames = false;
     for (int i = 1; i < argc; i++) {
@@ -80,9 +81,9 @@ int cmd_synth(int argc, char **argv)
                 return app_usage_error(cmd, "--rate wants a frequency in Hz, not '%s'", v);
         } else if (!strcmp(a, "--noise")) {
             if (!strcmp(v, "kinect1"))
-                cfg.noise = EVAL_NOISE_KINECT1;
+                cfg.noise = SYNTH_NOISE_KINECT1;
             else if (!strcmp(v, "none"))
-                cfg.noise = EVAL_NOISE_NONE;
+                cfg.noise = SYNTH_NOISE_NONE;
             else
                 return app_usage_error(cmd, "--noise is kinect1 or none, not '%s'", v);
         } else if (!strcmp(a, "--seed")) {
@@ -117,8 +118,8 @@ int cmd_synth(int argc, char **argv)
         cfg.data_dir = data_dir ? data_dir : app_default_data_dir();
         if (!cfg.data_dir) bf_info("synth: no shared data folder found: the room has no meshes");
     }
-    eval_synth_result res;
-    bf_status s = eval_synth_run(&cfg, &res);
+    synth_result res;
+    bf_status s = synth_run(&cfg, &res);
     if (s) return app_fail(cmd, s);
     printf("synth: %u frames -> %s\n", res.n_frames, cfg.out_dir);
     printf("  scene        %u triangles\n", res.n_scene_tris);
@@ -127,7 +128,7 @@ int cmd_synth(int argc, char **argv)
     printf("  end to end   %.1f s in all, %.3f s per frame (PNG encoding, scene and BVH included)\n", res.total_s,
            res.total_s / res.n_frames);
     printf("  valid depth  %.1f %% of pixels (noise %s, seed %llu)\n", 100 * res.valid_share,
-           cfg.noise == EVAL_NOISE_KINECT1 ? "kinect1" : "none", (unsigned long long)cfg.seed);
+           cfg.noise == SYNTH_NOISE_KINECT1 ? "kinect1" : "none", (unsigned long long)cfg.seed);
     printf("  seen.ply     %u points\n", res.n_seen);
     return APP_EXIT_OK;
 }

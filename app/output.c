@@ -7,13 +7,13 @@
 #include <string.h>
 
 #include "app.h"
-#include "eval/eval.h"
+#include "mesh/mesh.h"
 
 /* The mesh lattice level: the finest level that holds at least a tenth of
  * the bricks. A handful of bricks at a finer level (a sample that came very
  * close) must not put the whole room on their lattice, which would multiply
  * the triangles by 4 per level; their detail is averaged onto this one. */
-static uint32_t mesh_level(const fusion_snapshot *snap)
+static uint32_t mesh_level(const hostmap *snap)
 {
     uint32_t per_level[32] = {0};
     for (uint32_t i = 0; i < snap->n_bricks; i++) per_level[snap->bricks[i].level & 31]++;
@@ -28,24 +28,24 @@ static uint32_t mesh_level(const fusion_snapshot *snap)
 bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r)
 {
     char path[4096];
-    fusion_snapshot snap;
+    hostmap snap;
     bf_status s = fusion_get_stats(map, &r->map);
     if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
     if (s != BF_OK) return s;
-    eval_mesh mesh = {0}, pts = {0};
+    mesh_data mesh = {0}, pts = {0};
     if (with_mesh) {
-        stream_mesh_config mcfg = stream_mesh_config_default();
+        export_mesh_config mcfg = export_mesh_config_default();
         mcfg.max_level = mesh_level(&snap);
-        s = stream_export_mesh(&snap, &mcfg, &mesh, &r->mesh);
+        s = export_mesh(&snap, &mcfg, &mesh, &r->mesh);
         if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "mesh.ply")) == BF_OK)
-            s = eval_mesh_write_ply(path, &mesh);
+            s = mesh_write_ply(path, &mesh);
     }
-    if (s == BF_OK) s = stream_export_points(&snap, &pts, &r->points);
+    if (s == BF_OK) s = export_points(&snap, &pts, &r->points);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
-        s = eval_mesh_write_ply(path, &pts);
-    eval_mesh_free(&mesh);
-    eval_mesh_free(&pts);
-    fusion_snapshot_free(&snap);
+        s = mesh_write_ply(path, &pts);
+    mesh_free(&mesh);
+    mesh_free(&pts);
+    hostmap_free(&snap);
     return s;
 }
 

@@ -12,6 +12,9 @@
 #include <string.h>
 
 #include "eval/eval.h"
+#include "replay/replay.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 
 #ifndef BF_SOURCE_DIR
 #define BF_SOURCE_DIR "."
@@ -30,16 +33,16 @@ typedef struct bench_result {
     size_t ate_pairs;
 } bench_result;
 
-static bf_status bench_render(const eval_scene *scene, uint32_t n_frames, bench_result *r)
+static bf_status bench_render(const synth_scene *scene, uint32_t n_frames, bench_result *r)
 {
-    eval_render_config cfg = {
+    synth_render_config cfg = {
         .K = {640, 480, 525, 525, 319.5, 239.5, 5000},
-        .noise = EVAL_NOISE_KINECT1,
+        .noise = SYNTH_NOISE_KINECT1,
         .seed = 1,
     };
-    eval_renderer *ren;
+    synth_renderer *ren;
     double t0 = bf_time_s();
-    bf_status s = eval_renderer_create(scene, &cfg, &ren);
+    bf_status s = synth_renderer_create(scene, &cfg, &ren);
     if (s != BF_OK) return s;
     r->bvh_build_s = bf_time_s() - t0;
     uint16_t *depth = malloc(640 * 480 * sizeof *depth);
@@ -51,7 +54,7 @@ static bf_status bench_render(const eval_scene *scene, uint32_t n_frames, bench_
         bf_se3 step = bf_se3_from_qt(bf_quat_identity(), bf_v3(0.3 * sin(0.2 * k), 0, 0));
         bf_se3 T = bf_se3_mul(&scene->T_wc_view, &step);
         double t = bf_time_s();
-        s = eval_render(ren, k, &T, depth, rgb, NULL);
+        s = synth_render(ren, k, &T, depth, rgb, NULL);
         if (s == BF_OK) s = bf_stats_push(&st, 1e3 * (bf_time_s() - t));
     }
     r->n_frames = n_frames;
@@ -60,13 +63,13 @@ static bf_status bench_render(const eval_scene *scene, uint32_t n_frames, bench_
     bf_stats_free(&st);
     free(depth);
     free(rgb);
-    eval_renderer_destroy(ren);
+    synth_renderer_destroy(ren);
     return s;
 }
 
 /* n points on the reference surface, pushed off it by Gaussian-like noise of
  * 3 mm (sum of uniforms), then evaluated against it. */
-static bf_status bench_surface(const eval_mesh *ref, size_t n, bench_result *r)
+static bf_status bench_surface(const mesh_data *ref, size_t n, bench_result *r)
 {
     float *xyz = NULL;
     size_t got = 0;
@@ -81,7 +84,7 @@ static bf_status bench_surface(const eval_mesh *ref, size_t n, bench_result *r)
         }
         xyz[i] += (float)(g * 0.003 * sqrt(3.0));
     }
-    eval_mesh rec = {.n_verts = (uint32_t)got, .xyz = xyz};
+    mesh_data rec = {.n_verts = (uint32_t)got, .xyz = xyz};
     eval_surface_config cfg = eval_surface_config_default();
     eval_surface_result res;
     double t0 = bf_time_s();
@@ -100,7 +103,7 @@ static bf_status bench_ate(bench_result *r)
     snprintf(gt_path, sizeof gt_path, "%s/groundtruth.txt", dir);
     snprintf(est_path, sizeof est_path, "%s/rgbdslam_estimate.txt", dir);
     if (!bf_file_exists(gt_path)) return BF_OK;
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     bf_status s = replay_traj_read_tum(gt_path, &gt);
     if (s == BF_OK) s = replay_traj_read_tum(est_path, &est);
     eval_ate_result ate;
@@ -113,8 +116,8 @@ static bf_status bench_ate(bench_result *r)
         r->ate_rmse_m = ate.trans.rmse;
         r->ate_pairs = ate.n_matched;
     }
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
     return s;
 }
 
@@ -135,13 +138,13 @@ int main(int argc, char **argv)
         }
     }
     bench_result r = {.threads = (uint32_t)bf_thread_count()};
-    eval_scene scene;
-    bf_status s = eval_scene_room(BF_SOURCE_DIR "/../shared/data", &scene);
+    synth_scene scene;
+    bf_status s = synth_scene_room(BF_SOURCE_DIR "/../shared/data", &scene);
     if (s == BF_OK) {
         r.n_tris = scene.mesh.n_tris;
         s = bench_render(&scene, n_frames, &r);
         if (s == BF_OK) s = bench_surface(&scene.mesh, n_points, &r);
-        eval_scene_free(&scene);
+        synth_scene_free(&scene);
     }
     if (s == BF_OK) s = bench_ate(&r);
     if (s != BF_OK) {

@@ -14,7 +14,7 @@
 #include <string.h>
 #include <sys/resource.h>
 
-#include "eval/eval.h"
+#include "synth/synth.h"
 #include "fusion/fusion.h"
 #include "render/render.h"
 
@@ -77,19 +77,19 @@ int main(int argc, char **argv)
     }
     if (n_frames < 2) n_frames = 2;
     const bf_intrinsics K = {640, 480, 525, 525, 319.5, 239.5, 5000};
-    eval_scene scene = {0};
+    synth_scene scene = {0};
     gpu_context *ctx = NULL;
-    eval_renderer *ren = NULL;
+    synth_renderer *ren = NULL;
     fusion_map *map = NULL;
     render_caster *rc[MAX_SHAPES] = {0};
     char shape[MAX_SHAPES][16];
     uint32_t n_rc = 0;
     uint16_t *depth = malloc((size_t)K.width * K.height * 2);
     bf_se3 *poses = malloc(n_frames * sizeof *poses);
-    bf_status s = eval_scene_room(NULL, &scene);
+    bf_status s = synth_scene_room(NULL, &scene);
     if (s != BF_OK) goto done;
-    eval_render_config rcfg = {.K = K, .noise = EVAL_NOISE_KINECT1, .seed = 1};
-    if ((s = eval_renderer_create(&scene, &rcfg, &ren)) != BF_OK) goto done;
+    synth_render_config rcfg = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 1};
+    if ((s = synth_renderer_create(&scene, &rcfg, &ren)) != BF_OK) goto done;
     gpu_config gc = {0};
     if ((s = gpu_context_create(&gc, &ctx)) != BF_OK) goto done;
     fusion_config fc = fusion_config_default();
@@ -100,7 +100,7 @@ int main(int argc, char **argv)
         /* Sway 30 cm sideways around the room's viewpoint (bench_eval's path). */
         bf_se3 step = bf_se3_from_qt(bf_quat_identity(), bf_v3(0.3 * sin(0.2 * k), 0, 0));
         poses[k] = bf_se3_mul(&scene.T_wc_view, &step);
-        if ((s = eval_render(ren, k, &poses[k], depth, NULL, NULL)) != BF_OK) break;
+        if ((s = synth_render(ren, k, &poses[k], depth, NULL, NULL)) != BF_OK) break;
         if (!map && (s = fusion_create(ctx, &fc, &K, poses[0].t, &map)) != BF_OK) break;
         bf_frame f = {.index = k, .width = K.width, .height = K.height, .depth = depth};
         double t0 = bf_time_s();
@@ -148,8 +148,8 @@ done:
     for (uint32_t v = 0; v < n_rc; v++) render_destroy(rc[v]);
     fusion_destroy(map);
     gpu_context_destroy(ctx);
-    eval_renderer_destroy(ren);
-    eval_scene_free(&scene);
+    synth_renderer_destroy(ren);
+    synth_scene_free(&scene);
     free(depth);
     free(poses);
     return s == BF_OK ? 0 : 1;

@@ -13,7 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "eval/eval.h"
+#include "synth/synth.h"
 #include "recon/recon.h"
 
 static double rss_mib(void)
@@ -28,7 +28,7 @@ static double rss_mib(void)
 }
 
 /* A closed hand-held loop: sway, bob and yaw, period M frames. */
-static bf_se3 loop_pose(const eval_scene *sc, uint32_t k, uint32_t m)
+static bf_se3 loop_pose(const synth_scene *sc, uint32_t k, uint32_t m)
 {
     double w = 2 * M_PI * k / m;
     bf_se3 M = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), -0.2 * sin(w)),
@@ -58,19 +58,19 @@ int main(int argc, char **argv)
     if (m < 2 || block < 1 || w < 16 || h < 16) return 2;
     double f_px = 525.0 * w / 640.0;
     bf_intrinsics K = {w, h, f_px, f_px, (w - 1) / 2.0, (h - 1) / 2.0, 5000};
-    eval_scene sc = {0};
-    eval_renderer *ren = NULL;
+    synth_scene sc = {0};
+    synth_renderer *ren = NULL;
     gpu_context *ctx = NULL;
     recon *r = NULL;
     size_t np = (size_t)w * h;
     uint16_t *frames = malloc(np * m * sizeof *frames);
-    bf_status s = frames ? eval_scene_room(NULL, &sc) : BF_NO_MEMORY;
-    eval_render_config rc = {.K = K, .noise = EVAL_NOISE_KINECT1, .seed = 5};
-    if (s == BF_OK) s = eval_renderer_create(&sc, &rc, &ren);
+    bf_status s = frames ? synth_scene_room(NULL, &sc) : BF_NO_MEMORY;
+    synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 5};
+    if (s == BF_OK) s = synth_renderer_create(&sc, &rc, &ren);
     fprintf(stderr, "bench_soak: rendering a loop of %u frames at %ux%u\n", m, w, h);
     for (uint32_t k = 0; s == BF_OK && k < m; k++) {
         bf_se3 T = loop_pose(&sc, k, m);
-        s = eval_render(ren, k, &T, frames + np * k, NULL, NULL);
+        s = synth_render(ren, k, &T, frames + np * k, NULL, NULL);
     }
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
@@ -120,8 +120,8 @@ int main(int argc, char **argv)
     if (out) fclose(out);
     recon_destroy(r);
     gpu_context_destroy(ctx);
-    eval_renderer_destroy(ren);
-    eval_scene_free(&sc);
+    synth_renderer_destroy(ren);
+    synth_scene_free(&sc);
     free(frames);
     return s == BF_OK ? 0 : 1;
 }

@@ -14,7 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "eval/eval.h"
+#include "synth/synth.h"
 #include "replay/replay.h"
 #include "tracking/tracking.h"
 
@@ -52,10 +52,10 @@ int main(int argc, char **argv)
     }
     bf_intrinsics K = {640, 480, 525, 525, 319.5, 239.5, 5000};
     uint32_t n = K.width * K.height;
-    eval_scene scene;
-    eval_renderer *ren;
-    eval_render_config rc = {.K = K, .noise = EVAL_NOISE_KINECT1, .seed = 5};
-    if (eval_scene_room(NULL, &scene) != BF_OK || eval_renderer_create(&scene, &rc, &ren) != BF_OK) {
+    synth_scene scene;
+    synth_renderer *ren;
+    synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 5};
+    if (synth_scene_room(NULL, &scene) != BF_OK || synth_renderer_create(&scene, &rc, &ren) != BF_OK) {
         fprintf(stderr, "bench_tracking: scene: %s\n", bf_last_error());
         return 1;
     }
@@ -64,7 +64,7 @@ int main(int argc, char **argv)
     for (uint32_t k = 0; k <= n_frames; k++) {
         depth[k] = malloc(n * 2);
         T[k] = sway(&scene.T_wc_view, k);
-        if (eval_render(ren, k, &T[k], depth[k], NULL, NULL) != BF_OK) return 1;
+        if (synth_render(ren, k, &T[k], depth[k], NULL, NULL) != BF_OK) return 1;
     }
     gpu_context *ctx;
     if (gpu_context_create(NULL, &ctx) != BF_OK) {
@@ -221,7 +221,7 @@ int main(int argc, char **argv)
     gpu_context_destroy(ctx);
     for (uint32_t k = 0; k <= n_frames; k++) free(depth[k]);
     free(depth), free(T);
-    eval_renderer_destroy(ren);
-    eval_scene_free(&scene);
+    synth_renderer_destroy(ren);
+    synth_scene_free(&scene);
     return 0;
 }

@@ -240,6 +240,31 @@ bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name)
 bool bf_parse_double(const char *s, double *out);
 bool bf_parse_u32(const char *s, uint32_t *out);
 
+/* ---------------------------------------------------------------- trajectories */
+
+/* Timestamped camera poses (camera to world, metres), as a TUM trajectory
+ * holds them; the file format is replay's (replay_traj_read_tum). */
+typedef struct bf_traj {
+    size_t n;
+    double *t_s;   /* strictly increasing */
+    bf_se3 *T_wc;
+    size_t cap;    /* entries allocated (managed by push/read; 0 is fine) */
+} bf_traj;
+
+/* Appends one pose; grows the arrays. */
+bf_status bf_traj_push(bf_traj *traj, double t_s, const bf_se3 *T_wc);
+void bf_traj_free(bf_traj *traj);
+/* Pose at time t by linear position / slerp rotation between the two
+ * neighbouring samples; false if t is outside [t_0, t_n-1]. */
+bool bf_traj_interpolate(const bf_traj *traj, double t_s, bf_se3 *T_wc);
+/* TUM associate.py's rule for two strictly increasing stamp lists: every
+ * pair with |t_a - t_b| < max_dt_s is a candidate; candidates in order of
+ * |dt| (ties by a, then b) are taken greedily while neither stamp is taken.
+ * On success b_of_a[i] (n_a entries, caller's) is the index in t_b matched
+ * to t_a[i], or SIZE_MAX; on failure (out of memory) it is untouched. */
+bf_status bf_associate_stamps(const double *t_a, size_t n_a, const double *t_b, size_t n_b, double max_dt_s,
+                              size_t *b_of_a);
+
 /* ---------------------------------------------------------------- JSON */
 
 /* Writes s to f as a quoted JSON string, escaping quotes, backslashes and

@@ -3,7 +3,7 @@
 #ifndef BF_EVAL_INT_H
 #define BF_EVAL_INT_H
 
-#include "eval.h"
+#include "eval/eval.h"
 
 /* A balanced kd-tree (median splits on the widest axis, leaves of at most
  * EVAL__KD_LEAF points) over a copy of the points: the caller's array may be

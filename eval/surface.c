@@ -4,7 +4,7 @@
  * benchmark (Seitz et al., CVPR 2006) and the DTU set (Aanaes et al., IJCV
  * 2016); definitions and formulas in docs/eval.md.
  *
- * Closest points on a mesh come from the BVH (eval_bvh_closest), nearest
+ * Closest points on a mesh come from the BVH (mesh_bvh_closest), nearest
  * points of a cloud from the kd-tree (kdtree.c). Queries run in chunks on
  * bf_parallel_for; every random choice is a counter-based hash of (seed,
  * sample index), so results do not depend on the thread count. */
@@ -44,7 +44,7 @@ static uint64_t mix64(uint64_t z)
 static double unit_double(uint64_t x) { return (double)(x >> 11) * 0x1.0p-53; } /* [0, 1) */
 
 typedef struct sample_job {
-    const eval_mesh *m;
+    const mesh_data *m;
     const double *cdf; /* cdf[i] = area of triangles 0..i */
     double total;
     uint64_t seed;
@@ -53,7 +53,7 @@ typedef struct sample_job {
     uint32_t *tri;
 } sample_job;
 
-static bf_vec3 mesh_vertex(const eval_mesh *m, uint32_t v)
+static bf_vec3 mesh_vertex(const mesh_data *m, uint32_t v)
 {
     return bf_v3(m->xyz[3 * (size_t)v], m->xyz[3 * (size_t)v + 1], m->xyz[3 * (size_t)v + 2]);
 }
@@ -90,7 +90,7 @@ static void sample_chunk(void *ctx, size_t c)
     }
 }
 
-bf_status eval_mesh_sample_area(const eval_mesh *m, double samples_per_m2, uint64_t max_samples,
+bf_status eval_mesh_sample_area(const mesh_data *m, double samples_per_m2, uint64_t max_samples,
                                 uint64_t seed, float **xyz, uint32_t **tri, size_t *n_out)
 {
     if (!(samples_per_m2 > 0) || !isfinite(samples_per_m2) || max_samples == 0)
@@ -144,7 +144,7 @@ bf_status eval_mesh_sample_area(const eval_mesh *m, double samples_per_m2, uint6
 /* What distances are measured to: a mesh surface (BVH), a point set
  * (kd-tree), or both (the nearer wins). */
 typedef struct surf_target {
-    const eval_bvh *bvh;
+    const mesh_bvh *bvh;
     const eval_kdtree *kd;
 } surf_target;
 
@@ -167,7 +167,7 @@ static void dist_chunk(void *ctx, size_t c)
     for (size_t i = begin; i < end; i++) {
         bf_vec3 p = bf_v3(j->pts[3 * i], j->pts[3 * i + 1], j->pts[3 * i + 2]);
         double d = INFINITY;
-        if (j->tgt.bvh) d = eval_bvh_closest(j->tgt.bvh, p, j->max_dist, NULL, NULL);
+        if (j->tgt.bvh) d = mesh_bvh_closest(j->tgt.bvh, p, j->max_dist, NULL, NULL);
         if (j->tgt.kd) d = fmin(d, eval__kdtree_nearest(j->tgt.kd, p, fmin(d, j->max_dist), NULL));
         j->out[i] = d;
     }
@@ -222,7 +222,7 @@ static bf_status dist_stats(const double *d, size_t n, double threshold, double 
 
 /* ------------------------------------------------------------ evaluation */
 
-bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_mesh *visible,
+bf_status eval_surface(const mesh_data *ref, const mesh_data *rec, const mesh_data *visible,
                        const eval_surface_config *cfg_in, eval_surface_result *out)
 {
     eval_surface_config cfg = cfg_in ? *cfg_in : eval_surface_config_default();
@@ -236,7 +236,7 @@ bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_me
 
     double t0 = bf_time_s();
     bf_status s = BF_OK;
-    eval_bvh *ref_bvh = NULL, *rec_bvh = NULL;
+    mesh_bvh *ref_bvh = NULL, *rec_bvh = NULL;
     eval_kdtree *ref_kd = NULL, *rec_kd = NULL;
     float *rec_samples = NULL, *rec_pts = NULL, *ref_samples = NULL, *loose = NULL;
     double *acc = NULL, *comp = NULL;
@@ -245,7 +245,7 @@ bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_me
     /* Accuracy: reconstruction points to the reference surface. */
     surf_target to_ref = {0};
     if (ref->n_tris) {
-        if ((s = eval_bvh_build(ref, &ref_bvh))) goto done;
+        if ((s = mesh_bvh_build(ref, &ref_bvh))) goto done;
         to_ref.bvh = ref_bvh;
     } else {
         if ((s = eval__kdtree_build(ref->xyz, ref->n_verts, &ref_kd))) goto done;
@@ -291,7 +291,7 @@ bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_me
     }
     surf_target to_rec = {0};
     if (rec->n_tris) {
-        if ((s = eval_bvh_build(rec, &rec_bvh))) goto done;
+        if ((s = mesh_bvh_build(rec, &rec_bvh))) goto done;
         to_rec.bvh = rec_bvh;
         uint8_t *used = calloc(rec->n_verts, 1);
         loose = malloc((size_t)rec->n_verts * 3 * sizeof *loose);
@@ -343,8 +343,8 @@ bf_status eval_surface(const eval_mesh *ref, const eval_mesh *rec, const eval_me
     *out = r;
 
 done:
-    eval_bvh_destroy(ref_bvh);
-    eval_bvh_destroy(rec_bvh);
+    mesh_bvh_destroy(ref_bvh);
+    mesh_bvh_destroy(rec_bvh);
     eval__kdtree_destroy(ref_kd);
     eval__kdtree_destroy(rec_kd);
     free(rec_samples);

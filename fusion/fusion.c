@@ -277,7 +277,7 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
     uint32_t cnt[FUSION_CNT_WORDS];
     bf_status s = gpu_buffer_download(m->counters, 0, cnt, sizeof cnt);
     if (s != BF_OK) return s;
-    fusion_snapshot snap;
+    hostmap snap;
     if ((s = fusion_snapshot_take(m, &snap)) != BF_OK) return s;
     fusion_stats st;
     memset(&st, 0, sizeof st);
@@ -288,12 +288,12 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
     st.fail_bricks = cnt[FUSION_CNT_FAIL_BRICKS];
     st.fail_hash = cnt[FUSION_CNT_FAIL_HASH];
     for (uint32_t i = 0; i < snap.n_bricks; i++) {
-        const fusion_brick *b = &snap.bricks[i];
+        const hostmap_brick *b = &snap.bricks[i];
         st.bricks_per_level[b->level]++;
         for (uint32_t w = 0; w < BRICK_WORDS; w++) st.n_confident_voxels += (uint64_t)__builtin_popcount(b->conf[w]);
         st.n_surface_voxels += fusion__brick_surface_voxels(b->sign, b->conf);
     }
-    fusion_snapshot_free(&snap);
+    hostmap_free(&snap);
     /* Chunks: live hash entries. */
     uint32_t *hash = malloc((size_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
     if (!hash) return bf_fail(BF_NO_MEMORY, "fusion: stats");

@@ -10,13 +10,14 @@
  * n/2; its integration is spread over the next n/2 frames).
  *
  * Layout shared with the shaders: shaders/fusion.glsl.h. Host copies of the
- * map for export and tests: fusion_snapshot. See docs/fusion.md.
+ * map for export and tests: hostmap/hostmap.h. See docs/fusion.md.
  */
 #ifndef BF_FUSION_H
 #define BF_FUSION_H
 
 #include "core/core.h"
 #include "gpu/gpu.h"
+#include "hostmap/hostmap.h"
 
 typedef struct fusion_map fusion_map; /* opaque */
 
@@ -113,34 +114,8 @@ uint32_t fusion_frame_count(const fusion_map *map);
 
 /* ------------------------------------------------------------ host copies */
 
-/* One brick as the host sees it. Voxel (x, y, z) has its centre at
- * origin_w + key * chunk_m + ((cell * 8 + (x, y, z)) + 0.5) * voxel_m(level),
- * its sign bit at sign[brick_word(x,y,z)] >> brick_bit(x,y,z) (1 = in
- * front of the surface), likewise its confidence bit. */
-typedef struct fusion_brick {
-    int32_t key[3];      /* chunk coordinates */
-    uint32_t level;
-    uint32_t cell[3];    /* cell of the brick at its level inside the chunk, < 2^level */
-    float error;         /* average sigma of the window that last set it [m] */
-    uint32_t sign[16];
-    uint32_t conf[16];
-} fusion_brick;
-
-typedef struct fusion_snapshot {
-    float chunk_m;
-    bf_vec3 origin_w;
-    uint32_t n_bricks;
-    fusion_brick *bricks; /* malloc'd */
-} fusion_snapshot;
-
-/* Downloads every live brick. */
-bf_status fusion_snapshot_take(fusion_map *map, fusion_snapshot *out);
-void fusion_snapshot_free(fusion_snapshot *s);
-/* Voxel edge of a level [m]. */
-double fusion_level_voxel_m(float chunk_m, uint32_t level);
-/* World position of voxel (x, y, z) of brick b. */
-bf_vec3 fusion_voxel_center_w(const fusion_snapshot *s, const fusion_brick *b, uint32_t x, uint32_t y,
-                              uint32_t z);
+/* Downloads every live brick into a host copy (hostmap/hostmap.h). */
+bf_status fusion_snapshot_take(fusion_map *map, hostmap *out);
 
 /* Integrity check (SQLite's integrity_check): every hash entry, node and
  * brick is reachable exactly once, brick records agree with the nodes that

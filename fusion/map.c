@@ -200,18 +200,6 @@ bf_status fusion__bindings_create(fusion_map *m, const char *name, gpu_buffer *c
     return BF_OK;
 }
 
-double fusion_level_voxel_m(float chunk_m, uint32_t level) { return (double)fusion_voxel_m(chunk_m, level); }
-
-bf_vec3 fusion_voxel_center_w(const fusion_snapshot *s, const fusion_brick *b, uint32_t x, uint32_t y, uint32_t z)
-{
-    double v = fusion_level_voxel_m(s->chunk_m, b->level);
-    uint32_t xyz[3] = {x, y, z};
-    double p[3];
-    for (int i = 0; i < 3; i++)
-        p[i] = (double)b->key[i] * s->chunk_m + ((double)(b->cell[i] * 8 + xyz[i]) + 0.5) * v;
-    return bf_v3(s->origin_w.x + p[0], s->origin_w.y + p[1], s->origin_w.z + p[2]);
-}
-
 /* ------------------------------------------------------------ host mirror */
 
 /* A full host copy of the map's index structures (tests and checks only). */
@@ -366,11 +354,11 @@ bf_status fusion__debug_insert_brick(fusion_map *m, const int32_t key[3], uint32
 
 /* ------------------------------------------------------------ snapshot */
 
-bf_status fusion_snapshot_take(fusion_map *m, fusion_snapshot *out)
+bf_status fusion_snapshot_take(fusion_map *m, hostmap *out)
 {
     uint32_t cap = m->cfg.brick_cap;
     uint32_t *info = malloc((size_t)cap * FUSION_BRICK_INFO_WORDS * 4), *hash = NULL, *sign = NULL, *conf = NULL;
-    fusion_brick *bricks = NULL;
+    hostmap_brick *bricks = NULL;
     bf_status s = info ? gpu_buffer_download(m->info, 0, info, (uint64_t)cap * FUSION_BRICK_INFO_WORDS * 4)
                        : bf_fail(BF_NO_MEMORY, "fusion: snapshot");
     /* Live slots are mostly low (the free stack hands out slot 0 first):
@@ -393,7 +381,7 @@ bf_status fusion_snapshot_take(fusion_map *m, fusion_snapshot *out)
         const uint32_t *in = info + (size_t)b * FUSION_BRICK_INFO_WORDS;
         if (in[FUSION_INFO_CHUNK] >= m->n_entries) continue;
         const uint32_t *e = hash + (size_t)in[FUSION_INFO_CHUNK] * FUSION_ENTRY_WORDS;
-        fusion_brick *o = &bricks[k++];
+        hostmap_brick *o = &bricks[k++];
         for (int i = 0; i < 3; i++) o->key[i] = (int32_t)e[i];
         uint32_t p = in[FUSION_INFO_POS];
         o->level = fusion_pos_level(p);
@@ -415,14 +403,6 @@ bf_status fusion_snapshot_take(fusion_map *m, fusion_snapshot *out)
     out->n_bricks = n_live;
     out->bricks = bricks;
     return BF_OK;
-}
-
-void fusion_snapshot_free(fusion_snapshot *s)
-{
-    if (!s) return;
-    free(s->bricks);
-    s->bricks = NULL;
-    s->n_bricks = 0;
 }
 
 /* ------------------------------------------------------------ integrity */

@@ -58,34 +58,14 @@ bf_status replay_png_write_rgb8(const char *path, const uint8_t *pix, uint32_t w
 
 /* ------------------------------------------------------------ trajectories */
 
-/* A trajectory in TUM format: one pose per line, "t tx ty tz qx qy qz qw",
- * camera-to-world, metres; '#' lines are comments. */
-typedef struct replay_traj {
-    size_t n;
-    double *t_s;   /* strictly increasing */
-    bf_se3 *T_wc;
-    size_t cap;    /* entries allocated (managed by push/read; 0 is fine) */
-} replay_traj;
-
-/* Reads a TUM trajectory. Unsorted or duplicate timestamps, NaN or a
- * non-unit quaternion (|q| off by more than 1e-3) are BF_FORMAT naming the
- * file and line; an empty file is BF_FORMAT too. */
-bf_status replay_traj_read_tum(const char *path, replay_traj *out);
-/* Writes atomically, quaternions with qw >= 0, 9 decimals. */
-bf_status replay_traj_write_tum(const char *path, const replay_traj *traj);
-/* Appends one pose; grows the arrays. */
-bf_status replay_traj_push(replay_traj *traj, double t_s, const bf_se3 *T_wc);
-void replay_traj_free(replay_traj *traj);
-/* Pose at time t by linear position / slerp rotation between the two
- * neighbouring samples; false if t is outside [t_0, t_n-1]. */
-bool replay_traj_interpolate(const replay_traj *traj, double t_s, bf_se3 *T_wc);
-/* TUM associate.py's rule for two strictly increasing stamp lists: every
- * pair with |t_a - t_b| < max_dt_s is a candidate; candidates in order of
- * |dt| (ties by a, then b) are taken greedily while neither stamp is taken.
- * On success b_of_a[i] (n_a entries, caller's) is the index in t_b matched
- * to t_a[i], or SIZE_MAX; on failure (out of memory) it is untouched. */
-bf_status replay_associate_stamps(const double *t_a, size_t n_a, const double *t_b, size_t n_b, double max_dt_s,
-                                  size_t *b_of_a);
+/* TUM trajectory files (the type is core's bf_traj): one pose per line,
+ * "t tx ty tz qx qy qz qw", camera-to-world, metres; '#' lines are
+ * comments. Reading: unsorted or duplicate timestamps, NaN or a non-unit
+ * quaternion (|q| off by more than 1e-3) are BF_FORMAT naming the file and
+ * line; an empty file is BF_FORMAT too. Writing is atomic, quaternions with
+ * qw >= 0, 9 decimals. */
+bf_status replay_traj_read_tum(const char *path, bf_traj *out);
+bf_status replay_traj_write_tum(const char *path, const bf_traj *traj);
 
 /* ------------------------------------------------------------ writing */
 

@@ -82,9 +82,9 @@ fail:
 /* Ground truth for a frame at t: interpolated inside the trajectory's time
  * range; just outside it, the end pose if it is within REPLAY_MAX_DT_S (the
  * benchmark's own association tolerance); else none. */
-static bool tum_gt_pose(const replay_traj *gt, double t_s, bf_se3 *T_wc)
+static bool tum_gt_pose(const bf_traj *gt, double t_s, bf_se3 *T_wc)
 {
-    if (replay_traj_interpolate(gt, t_s, T_wc)) return true;
+    if (bf_traj_interpolate(gt, t_s, T_wc)) return true;
     if (t_s < gt->t_s[0] && gt->t_s[0] - t_s <= REPLAY_MAX_DT_S) {
         *T_wc = gt->T_wc[0];
         return true;
@@ -118,7 +118,7 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
 
     char file[4096];
     tum_index depth = {0}, rgb = {0};
-    replay_traj gt = {0};
+    bf_traj gt = {0};
     size_t *rgb_of = NULL; /* colour index of each depth image, or SIZE_MAX */
     if ((s = tum_index_read(dir, "depth.txt", list, &depth))) goto done;
     if ((s = bf_path_join(file, sizeof file, dir, "rgb.txt"))) goto done;
@@ -132,7 +132,7 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
         goto done;
     }
     /* associate.py's rule, depth as the first list. */
-    if (has_rgb && (s = replay_associate_stamps(depth.t_s, depth.n, rgb.t_s, rgb.n, REPLAY_MAX_DT_S, rgb_of)))
+    if (has_rgb && (s = bf_associate_stamps(depth.t_s, depth.n, rgb.t_s, rgb.n, REPLAY_MAX_DT_S, rgb_of)))
         goto done;
     uint32_t n_unpaired = 0;
     for (uint32_t i = 0; i < depth.n; i++) {
@@ -156,7 +156,7 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
                                   REPLAY_MAX_DT_S);
 done:
     free(rgb_of);
-    replay_traj_free(&gt);
+    bf_traj_free(&gt);
     tum_index_free(&depth);
     tum_index_free(&rgb);
     return s;

@@ -279,7 +279,7 @@ _Static_assert(sizeof(fusion_integrate_push) == 64, "fusion_integrate_push must 
 
 /* One axis of a voxel centre relative to the map origin: chunk corner
  * key * chunk_m plus (cell * 8 + xyz + 1/2) voxels (fusion.h's
- * fusion_voxel_center_w in float). */
+ * hostmap_voxel_center_w in float). */
 BF_FN bf_f32 fusion_voxel_centre(bf_i32 key, bf_u32 cell, bf_u32 xyz, bf_f32 chunk_m, bf_f32 voxel_m)
 {
     BF_PRECISE bf_f32 corner = BF_F32(key) * chunk_m;

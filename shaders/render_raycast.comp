@@ -84,7 +84,7 @@ float cell_exit(render_ray ray, vec3 lo, float size)
  * interpolated trilinearly between the centres, is a smooth field F whose
  * zero set follows a plane to a fraction of a voxel (the kernel, a box of 3
  * convolved with the trilinear tent, is flat over +-1 voxel along an axis,
- * so the filtered step is linear there; stream/export_mesh.c places mesh
+ * so the filtered step is linear there; export/export_mesh.c places mesh
  * vertices on the same field). The refined depth is that of F's zero on the
  * ray, found by Newton steps from the midpoint. On a plane parallel to the
  * image the field is symmetric about the face between the voxel layers, so

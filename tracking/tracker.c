@@ -30,7 +30,7 @@ track_config track_config_default(void)
          * normals of real frames disagree by more than 20 degrees on about
          * a third of the pixels at the right pose. */
         .angle_deg = 45.0f,
-        .max_depth_m = 4.5f, /* Kinect v1's range (EVAL_KINECT1_Z_MAX_M) */
+        .max_depth_m = 4.5f, /* Kinect v1's range (SYNTH_KINECT1_Z_MAX_M) */
         /* A quarter of the frame's samples must find a partner: frame to
          * frame at 30 Hz over 90% do; a lost or jumped camera leaves a few
          * percent (tests: 0.3 m / 20 degrees gives < 10%). */

@@ -2,6 +2,7 @@
 #include <stdint.h>
 
 #include "eval/eval.h"
+#include "mesh/mesh.h"
 #include "eval/eval_int.h"
 #include "test.h"
 
@@ -16,9 +17,9 @@ static double rnd(void)
     return (double)rnd_state / 4294967296.0;
 }
 
-static eval_mesh mesh_alloc(uint32_t n_verts, uint32_t n_tris)
+static mesh_data mesh_alloc(uint32_t n_verts, uint32_t n_tris)
 {
-    eval_mesh m = {0};
+    mesh_data m = {0};
     m.n_verts = n_verts;
     m.n_tris = n_tris;
     m.xyz = malloc((n_verts ? n_verts : 1) * 3 * sizeof(float));
@@ -27,14 +28,14 @@ static eval_mesh mesh_alloc(uint32_t n_verts, uint32_t n_tris)
     return m;
 }
 
-static void set_v(eval_mesh *m, uint32_t i, double x, double y, double z)
+static void set_v(mesh_data *m, uint32_t i, double x, double y, double z)
 {
     m->xyz[3 * i] = (float)x;
     m->xyz[3 * i + 1] = (float)y;
     m->xyz[3 * i + 2] = (float)z;
 }
 
-static void set_t(eval_mesh *m, uint32_t i, uint32_t a, uint32_t b, uint32_t c)
+static void set_t(mesh_data *m, uint32_t i, uint32_t a, uint32_t b, uint32_t c)
 {
     m->tri[3 * i] = a;
     m->tri[3 * i + 1] = b;
@@ -42,9 +43,9 @@ static void set_t(eval_mesh *m, uint32_t i, uint32_t a, uint32_t b, uint32_t c)
 }
 
 /* An axis-aligned box [0,sx] x [0,sy] x [0,sz] as 12 triangles. */
-static eval_mesh make_box(double sx, double sy, double sz)
+static mesh_data make_box(double sx, double sy, double sz)
 {
-    eval_mesh m = mesh_alloc(8, 12);
+    mesh_data m = mesh_alloc(8, 12);
     for (uint32_t i = 0; i < 8; i++) set_v(&m, i, (i & 1) * sx, (i >> 1 & 1) * sy, (i >> 2 & 1) * sz);
     static const uint32_t f[6][4] = {{0, 1, 3, 2}, {4, 5, 7, 6}, {0, 1, 5, 4},
                                      {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 3, 7, 5}};
@@ -57,10 +58,10 @@ static eval_mesh make_box(double sx, double sy, double sz)
 
 /* A latitude-longitude sphere of radius r: poles, n_lat - 1 rings (n_lat
  * even, so one ring is the equator z = 0), n_lon vertices per ring. */
-static eval_mesh make_uv_sphere(double r, uint32_t n_lat, uint32_t n_lon)
+static mesh_data make_uv_sphere(double r, uint32_t n_lat, uint32_t n_lon)
 {
     uint32_t n_rings = n_lat - 1;
-    eval_mesh m = mesh_alloc(2 + n_rings * n_lon, 2 * n_lon * n_rings);
+    mesh_data m = mesh_alloc(2 + n_rings * n_lon, 2 * n_lon * n_rings);
     set_v(&m, 0, 0, 0, r);
     set_v(&m, 1, 0, 0, -r);
     for (uint32_t i = 0; i < n_rings; i++) {
@@ -89,7 +90,7 @@ static eval_mesh make_uv_sphere(double r, uint32_t n_lat, uint32_t n_lon)
 
 /* The triangles of m whose vertices all satisfy sign * z >= 0, with only
  * the vertices they use. */
-static eval_mesh mesh_half(const eval_mesh *m, int sign)
+static mesh_data mesh_half(const mesh_data *m, int sign)
 {
     uint32_t *map = malloc(m->n_verts * sizeof *map);
     uint32_t nv = 0, nt = 0;
@@ -102,7 +103,7 @@ static eval_mesh mesh_half(const eval_mesh *m, int sign)
         for (int k = 0; k < 3; k++)
             if (map[m->tri[3 * t + k]] == UINT32_MAX) map[m->tri[3 * t + k]] = nv++;
     }
-    eval_mesh h = mesh_alloc(nv, nt);
+    mesh_data h = mesh_alloc(nv, nt);
     for (uint32_t v = 0; v < m->n_verts; v++)
         if (map[v] != UINT32_MAX) memcpy(&h.xyz[3 * map[v]], &m->xyz[3 * v], 3 * sizeof(float));
     nt = 0;
@@ -115,12 +116,12 @@ static eval_mesh mesh_half(const eval_mesh *m, int sign)
     return h;
 }
 
-static bf_vec3 vtx(const eval_mesh *m, uint32_t v)
+static bf_vec3 vtx(const mesh_data *m, uint32_t v)
 {
     return bf_v3(m->xyz[3 * (size_t)v], m->xyz[3 * (size_t)v + 1], m->xyz[3 * (size_t)v + 2]);
 }
 
-static bf_vec3 face_normal(const eval_mesh *m, uint32_t t)
+static bf_vec3 face_normal(const mesh_data *m, uint32_t t)
 {
     bf_vec3 a = vtx(m, m->tri[3 * t]), b = vtx(m, m->tri[3 * t + 1]), c = vtx(m, m->tri[3 * t + 2]);
     return bf_v3_normalize(bf_v3_cross(bf_v3_sub(b, a), bf_v3_sub(c, a)));
@@ -128,13 +129,13 @@ static bf_vec3 face_normal(const eval_mesh *m, uint32_t t)
 
 /* A point cloud: area samples of m moved by d along their face normal,
  * pointing away from centre (for the convex test meshes: outward). */
-static eval_mesh displaced_samples(const eval_mesh *m, double density, double d, bf_vec3 centre, uint64_t seed)
+static mesh_data displaced_samples(const mesh_data *m, double density, double d, bf_vec3 centre, uint64_t seed)
 {
     float *xyz;
     uint32_t *tri;
     size_t n;
     BF_ASSERT(eval_mesh_sample_area(m, density, 10000000, seed, &xyz, &tri, &n) == BF_OK);
-    eval_mesh pc = mesh_alloc((uint32_t)n, 0);
+    mesh_data pc = mesh_alloc((uint32_t)n, 0);
     for (size_t i = 0; i < n; i++) {
         bf_vec3 p = bf_v3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
         bf_vec3 nrm = face_normal(m, tri[i]);
@@ -196,7 +197,7 @@ BF_TEST(kdtree_nearest_matches_brute_force)
 BF_TEST(area_sampling_is_uniform_by_area_and_deterministic)
 {
     /* Two separate triangles of area 1 and 3 (m^2). */
-    eval_mesh m = mesh_alloc(6, 2);
+    mesh_data m = mesh_alloc(6, 2);
     set_v(&m, 0, 0, 0, 0);
     set_v(&m, 1, 2, 0, 0);
     set_v(&m, 2, 0, 1, 0);
@@ -240,7 +241,7 @@ BF_TEST(area_sampling_is_uniform_by_area_and_deterministic)
     free(b);
     free(a);
     free(ta);
-    eval_mesh_free(&m);
+    mesh_free(&m);
 }
 
 /* ------------------------------------------------------------ known offsets */
@@ -258,8 +259,8 @@ BF_TEST(area_sampling_is_uniform_by_area_and_deterministic)
 BF_TEST(surface_box_offset_by_d_gives_accuracy_d_and_sharp_completeness)
 {
     const double d = 0.002;
-    eval_mesh box = make_box(0.4, 0.3, 0.2);
-    eval_mesh rec = displaced_samples(&box, 2e5, d, bf_v3(0.2, 0.15, 0.1), 99);
+    mesh_data box = make_box(0.4, 0.3, 0.2);
+    mesh_data rec = displaced_samples(&box, 2e5, d, bf_v3(0.2, 0.15, 0.1), 99);
     eval_surface_config cfg = eval_surface_config_default();
     cfg.threshold_m = 0.01;
     eval_surface_result r;
@@ -279,8 +280,8 @@ BF_TEST(surface_box_offset_by_d_gives_accuracy_d_and_sharp_completeness)
     CHECK_OK(eval_surface(&box, &rec, NULL, &cfg, &r));
     CHECK_NEAR(r.completeness, 0.0, 0);
     CHECK_NEAR(r.precision, 0.0, 0);
-    eval_mesh_free(&rec);
-    eval_mesh_free(&box);
+    mesh_free(&rec);
+    mesh_free(&box);
 }
 
 /* Reference: a unit lat-long sphere mesh (inscribed polyhedron); the
@@ -291,12 +292,12 @@ BF_TEST(surface_box_offset_by_d_gives_accuracy_d_and_sharp_completeness)
 BF_TEST(surface_sphere_offset_by_d_has_median_d_within_the_facet_bound)
 {
     const double d = 0.01;
-    eval_mesh sph = make_uv_sphere(1.0, 64, 128);
+    mesh_data sph = make_uv_sphere(1.0, 64, 128);
     double r_in = 1;
     for (uint32_t t = 0; t < sph.n_tris; t++)
         r_in = fmin(r_in, fabs(bf_v3_dot(face_normal(&sph, t), vtx(&sph, sph.tri[3 * t]))));
     const uint32_t n = 20000;
-    eval_mesh rec = mesh_alloc(n, 0);
+    mesh_data rec = mesh_alloc(n, 0);
     for (uint32_t i = 0; i < n; i++) {
         double z = 1 - 2 * (i + 0.5) / n, rr = sqrt(1 - z * z), ph = i * M_PI * (3 - sqrt(5.0));
         set_v(&rec, i, (1 + d) * rr * cos(ph), (1 + d) * rr * sin(ph), (1 + d) * z);
@@ -310,8 +311,8 @@ BF_TEST(surface_sphere_offset_by_d_has_median_d_within_the_facet_bound)
     CHECK_LE(r.accuracy.median, d + (1 - r_in) + 1e-6);
     CHECK_LE(d - 1e-6, r.accuracy.mean);
     CHECK_LE(r.accuracy.max, d + (1 - r_in) + 1e-6);
-    eval_mesh_free(&rec);
-    eval_mesh_free(&sph);
+    mesh_free(&rec);
+    mesh_free(&sph);
 }
 
 /* The bunny scaled to 0.25 m; reconstruction = area samples moved by
@@ -322,8 +323,8 @@ BF_TEST(surface_sphere_offset_by_d_has_median_d_within_the_facet_bound)
 BF_TEST(surface_scaled_bunny_offset_by_d_has_median_d)
 {
     if (!bf_test_data("meshes/bunny.ply")) BF_SKIP("shared data absent");
-    eval_mesh bunny;
-    CHECK_OK(eval_mesh_read_ply(bf_test_data("meshes/bunny.ply"), &bunny));
+    mesh_data bunny;
+    CHECK_OK(mesh_read_ply(bf_test_data("meshes/bunny.ply"), &bunny));
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < bunny.n_verts; i++)
         for (int k = 0; k < 3; k++) {
@@ -338,7 +339,7 @@ BF_TEST(surface_scaled_bunny_offset_by_d_has_median_d)
     uint32_t *tri;
     size_t n;
     CHECK_OK(eval_mesh_sample_area(&bunny, 2e5, 1000000, 3, &xyz, &tri, &n));
-    eval_mesh rec = mesh_alloc((uint32_t)n, 0);
+    mesh_data rec = mesh_alloc((uint32_t)n, 0);
     for (size_t i = 0; i < n; i++) {
         bf_vec3 q = bf_v3_add(bf_v3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]),
                               bf_v3_scale(face_normal(&bunny, tri[i]), d));
@@ -351,8 +352,8 @@ BF_TEST(surface_scaled_bunny_offset_by_d_has_median_d)
     CHECK(n > 1000);
     CHECK_NEAR(r.accuracy.median, d, 1e-6);
     CHECK_LE(r.accuracy.max, d + 1e-6);
-    eval_mesh_free(&rec);
-    eval_mesh_free(&bunny);
+    mesh_free(&rec);
+    mesh_free(&bunny);
 }
 
 /* ------------------------------------------------------------ coverage */
@@ -366,8 +367,8 @@ BF_TEST(surface_scaled_bunny_offset_by_d_has_median_d)
  * sigma = sqrt(p (1 - p) / N); tolerance 5 sigma + the band. */
 BF_TEST(surface_half_coverage_gives_half_completeness_and_visibility_restricts_it)
 {
-    eval_mesh sph = make_uv_sphere(1.0, 64, 128);
-    eval_mesh upper = mesh_half(&sph, +1), lower = mesh_half(&sph, -1);
+    mesh_data sph = make_uv_sphere(1.0, 64, 128);
+    mesh_data upper = mesh_half(&sph, +1), lower = mesh_half(&sph, -1);
     eval_surface_config cfg = eval_surface_config_default();
     cfg.samples_per_m2 = 2e4;
     cfg.threshold_m = 0.001;
@@ -385,7 +386,7 @@ BF_TEST(surface_half_coverage_gives_half_completeness_and_visibility_restricts_i
     float *xyz;
     size_t n;
     CHECK_OK(eval_mesh_sample_area(&upper, 2e4, 1000000, 5, &xyz, NULL, &n));
-    eval_mesh seen = {.n_verts = (uint32_t)n, .xyz = xyz};
+    mesh_data seen = {.n_verts = (uint32_t)n, .xyz = xyz};
     CHECK_OK(eval_surface(&sph, &upper, &seen, &cfg, &r));
     CHECK(r.used_visible);
     CHECK_EQ_INT(r.n_ref_points, n);
@@ -394,16 +395,16 @@ BF_TEST(surface_half_coverage_gives_half_completeness_and_visibility_restricts_i
      * share below t / R of the seen hemisphere (+ 5 sigma). */
     CHECK_OK(eval_surface(&sph, &lower, &seen, &cfg, &r));
     CHECK_LE(r.completeness, cfg.threshold_m + 5 * sqrt(cfg.threshold_m / n));
-    eval_mesh_free(&seen);
-    eval_mesh_free(&upper);
-    eval_mesh_free(&lower);
-    eval_mesh_free(&sph);
+    mesh_free(&seen);
+    mesh_free(&upper);
+    mesh_free(&lower);
+    mesh_free(&sph);
 }
 
 BF_TEST(surface_far_points_are_counted_beyond_max_dist_not_averaged)
 {
-    eval_mesh box = make_box(1, 1, 1);
-    eval_mesh rec = mesh_alloc(3, 0);
+    mesh_data box = make_box(1, 1, 1);
+    mesh_data rec = mesh_alloc(3, 0);
     set_v(&rec, 0, 0.5, 0.5, 1.001); /* 1 mm above the top */
     set_v(&rec, 1, 0.5, 0.5, 1.003); /* 3 mm */
     set_v(&rec, 2, 0.5, 0.5, 3.0);   /* 2 m: an outlier */
@@ -422,13 +423,13 @@ BF_TEST(surface_far_points_are_counted_beyond_max_dist_not_averaged)
     CHECK_NEAR(r.precision, 2.0 / 3, 1e-12);
     /* Almost no reference sample is within 0.1 m of three points. */
     CHECK(r.completeness_dist.n_beyond > r.n_ref_points / 2);
-    eval_mesh_free(&rec);
-    eval_mesh_free(&box);
+    mesh_free(&rec);
+    mesh_free(&box);
 }
 
 BF_TEST(surface_rejects_empty_inputs_and_bad_thresholds)
 {
-    eval_mesh box = make_box(1, 1, 1), empty = {0};
+    mesh_data box = make_box(1, 1, 1), empty = {0};
     eval_surface_result r;
     CHECK_STATUS(eval_surface(&box, &empty, NULL, NULL, &r), BF_INVALID_ARG);
     CHECK_ERROR_MENTIONS("reconstruction");
@@ -437,12 +438,12 @@ BF_TEST(surface_rejects_empty_inputs_and_bad_thresholds)
     eval_surface_config cfg = eval_surface_config_default();
     cfg.threshold_m = 0;
     CHECK_STATUS(eval_surface(&box, &box, NULL, &cfg, &r), BF_INVALID_ARG);
-    eval_mesh_free(&box);
+    mesh_free(&box);
 }
 
 BF_TEST(surface_result_does_not_depend_on_the_thread_count)
 {
-    eval_mesh sph = make_uv_sphere(0.5, 16, 32), box = make_box(0.6, 0.5, 0.4);
+    mesh_data sph = make_uv_sphere(0.5, 16, 32), box = make_box(0.6, 0.5, 0.4);
     for (uint32_t i = 0; i < box.n_verts * 3; i++) box.xyz[i] -= 0.25f;
     eval_surface_config cfg = eval_surface_config_default();
     cfg.samples_per_m2 = 2e4;
@@ -454,8 +455,8 @@ BF_TEST(surface_result_does_not_depend_on_the_thread_count)
     CHECK_OK(eval_surface(&sph, &box, NULL, &cfg, &b));
     CHECK(a.accuracy.mean == b.accuracy.mean && a.accuracy.p90 == b.accuracy.p90);
     CHECK(a.completeness == b.completeness && a.completeness_dist.median == b.completeness_dist.median);
-    eval_mesh_free(&sph);
-    eval_mesh_free(&box);
+    mesh_free(&sph);
+    mesh_free(&box);
 }
 
 /* A point-cloud reference (no triangles) is measured as points: a 50 x 50
@@ -464,7 +465,7 @@ BF_TEST(surface_result_does_not_depend_on_the_thread_count)
  * neighbours are sqrt(0.01^2 + 0.003^2) away), in both directions. */
 BF_TEST(surface_point_cloud_reference_is_measured_point_to_point)
 {
-    eval_mesh ref = mesh_alloc(2500, 0), rec = mesh_alloc(2500, 0);
+    mesh_data ref = mesh_alloc(2500, 0), rec = mesh_alloc(2500, 0);
     for (uint32_t i = 0; i < 2500; i++) {
         set_v(&ref, i, 0.01 * (i % 50), 0.01 * (i / 50), 0);
         set_v(&rec, i, 0.01 * (i % 50), 0.01 * (i / 50), 0.003);
@@ -478,6 +479,6 @@ BF_TEST(surface_point_cloud_reference_is_measured_point_to_point)
     CHECK_NEAR(r.accuracy.mean, 0.003, 1e-7);
     CHECK_NEAR(r.completeness_dist.median, 0.003, 1e-7);
     CHECK_NEAR(r.completeness, 1.0, 0);
-    eval_mesh_free(&ref);
-    eval_mesh_free(&rec);
+    mesh_free(&ref);
+    mesh_free(&rec);
 }

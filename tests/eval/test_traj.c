@@ -1,5 +1,6 @@
 /* eval: trajectory error (association, Horn alignment, ATE, RPE). */
 #include "eval/eval.h"
+#include "replay/replay.h"
 #include "test.h"
 
 static double det3(const double R[3][3])
@@ -42,7 +43,7 @@ BF_TEST(ate_and_rpe_of_rgbdslam_on_fr1_xyz_match_the_tum_oracle)
     char p_gt[4200], p_est[4200];
     snprintf(p_gt, sizeof p_gt, "%s/groundtruth.txt", dir);
     snprintf(p_est, sizeof p_est, "%s/rgbdslam_estimate.txt", dir);
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     CHECK_OK(replay_traj_read_tum(p_gt, &gt));
     CHECK_OK(replay_traj_read_tum(p_est, &est));
 
@@ -51,8 +52,8 @@ BF_TEST(ate_and_rpe_of_rgbdslam_on_fr1_xyz_match_the_tum_oracle)
     bf_status s1 = eval_ate(&gt, &est, 0.02, &ate);
     bf_status s2 = eval_rpe(&gt, &est, 0, false, 1.0, &rs);
     bf_status s3 = eval_rpe(&gt, &est, 0, true, 0, &rf);
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
     CHECK_OK(s1);
     CHECK_OK(s2);
     CHECK_OK(s3);
@@ -99,19 +100,19 @@ BF_TEST(ate_and_rpe_of_rgbdslam_on_fr1_xyz_match_the_tum_oracle)
 
 BF_TEST(ate_of_a_rigidly_moved_copy_is_zero_and_recovers_the_inverse)
 {
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(1, -2, 0.5), 2.5), bf_v3(3, -1, 7));
     for (int i = 0; i < 300; i++) {
         double t = i / 30.0;
         bf_se3 P = path_pose(t), Q = bf_se3_mul(&T, &P);
-        CHECK_OK(replay_traj_push(&gt, 1000 + t, &P));
+        CHECK_OK(bf_traj_push(&gt, 1000 + t, &P));
         /* est stamps 3 ms late: still associated one to one. */
-        CHECK_OK(replay_traj_push(&est, 1000 + t + 0.003, &Q));
+        CHECK_OK(bf_traj_push(&est, 1000 + t + 0.003, &Q));
     }
     eval_ate_result r;
     CHECK_OK(eval_ate(&gt, &est, 0.02, &r));
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
     CHECK_EQ_INT(r.n_matched, 300);
     /* Coordinates of size ~10 m: rounding leaves ~1e-15 m per point. */
     CHECK_LE(r.trans.rmse, 1e-12);
@@ -128,7 +129,7 @@ BF_TEST(ate_of_a_rigidly_moved_copy_is_zero_and_recovers_the_inverse)
  * rotation) and each error is exactly |e_i|. */
 BF_TEST(ate_of_known_noise_gives_its_rmse)
 {
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     const int N = 400;
     double sum2 = 0, sum = 0;
     for (int i = 0; i < N; i++) {
@@ -140,13 +141,13 @@ BF_TEST(ate_of_known_noise_gives_its_rmse)
         bf_se3 P = bf_se3_from_qt(bf_quat_identity(), bf_v3(2 * cos(a), 2 * sin(a), 0));
         bf_se3 Q = P;
         Q.t.z += e;
-        CHECK_OK(replay_traj_push(&gt, i * 0.01, &P));
-        CHECK_OK(replay_traj_push(&est, i * 0.01, &Q));
+        CHECK_OK(bf_traj_push(&gt, i * 0.01, &P));
+        CHECK_OK(bf_traj_push(&est, i * 0.01, &Q));
     }
     eval_ate_result r;
     CHECK_OK(eval_ate(&gt, &est, 0.005, &r));
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
     CHECK_EQ_INT(r.n_matched, N);
     CHECK_NEAR(r.trans.rmse, sqrt(sum2 / N), 1e-12);
     CHECK_NEAR(r.trans.mean, sum / N, 1e-12);
@@ -208,31 +209,31 @@ BF_TEST(horn_never_returns_a_reflection)
 
 BF_TEST(ate_on_a_straight_line_trajectory_is_zero_without_reflection)
 {
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.5), bf_v3(0, 0, 1));
     for (int i = 0; i < 100; i++) {
         bf_se3 P = bf_se3_from_qt(bf_quat_identity(), bf_v3(0.01 * i, 0, 0)), Q = bf_se3_mul(&T, &P);
-        CHECK_OK(replay_traj_push(&gt, i * 0.1, &P));
-        CHECK_OK(replay_traj_push(&est, i * 0.1, &Q));
+        CHECK_OK(bf_traj_push(&gt, i * 0.1, &P));
+        CHECK_OK(bf_traj_push(&est, i * 0.1, &Q));
     }
     eval_ate_result r;
     CHECK_OK(eval_ate(&gt, &est, 0, &r));
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
     CHECK_LE(r.trans.rmse, 1e-13);
     CHECK_NEAR(det3(r.T_gt_est.R), 1.0, 1e-12);
 }
 
 BF_TEST(association_is_greedy_one_to_one_and_strict)
 {
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     bf_se3 I = bf_se3_identity();
     /* gt 0.00 and 1.00; est 0.005 and 0.008 both nearest to gt 0.00: only
      * the closer is taken. est 1.02 is exactly 0.02 away: not a candidate
      * (associate.py uses a strict <). */
     double tg[] = {0.0, 1.0}, te[] = {0.005, 0.008, 1.02};
-    for (int i = 0; i < 2; i++) CHECK_OK(replay_traj_push(&gt, tg[i], &I));
-    for (int i = 0; i < 3; i++) CHECK_OK(replay_traj_push(&est, te[i], &I));
+    for (int i = 0; i < 2; i++) CHECK_OK(bf_traj_push(&gt, tg[i], &I));
+    for (int i = 0; i < 3; i++) CHECK_OK(bf_traj_push(&est, te[i], &I));
     eval_match *m;
     size_t n;
     CHECK_OK(eval_associate(&gt, &est, 0.0200001, &m, &n));
@@ -247,8 +248,8 @@ BF_TEST(association_is_greedy_one_to_one_and_strict)
     eval_ate_result r;
     CHECK_STATUS(eval_ate(&gt, &est, 0.02, &r), BF_FORMAT);
     CHECK_ERROR_MENTIONS("pose pair");
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
 }
 
 /* ------------------------------------------------------------ RPE */
@@ -259,15 +260,15 @@ BF_TEST(rpe_of_a_constant_drift_is_the_drift_per_delta)
      * dt apart the error is a pure translation of 0.02 dt m. A second pair
      * checks rotation drift: gt static, est turning 3 deg/s about z in
      * place, so the error is a pure rotation of 3 dt deg. 10 s at 30 Hz. */
-    replay_traj gt = {0}, est = {0}, spin = {0};
+    bf_traj gt = {0}, est = {0}, spin = {0};
     for (int i = 0; i <= 300; i++) {
         double t = i / 30.0;
         bf_se3 G = bf_se3_from_qt(bf_quat_identity(), bf_v3(t, 0, 0));
         bf_se3 E = bf_se3_from_qt(bf_quat_identity(), bf_v3(1.02 * t, 0, 0));
         bf_se3 S = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 0, 1), 3 * M_PI / 180 * t), bf_v3(0, 0, 0));
-        CHECK_OK(replay_traj_push(&gt, 50 + t, &G));
-        CHECK_OK(replay_traj_push(&est, 50 + t, &E));
-        CHECK_OK(replay_traj_push(&spin, 50 + t, &S));
+        CHECK_OK(bf_traj_push(&gt, 50 + t, &G));
+        CHECK_OK(bf_traj_push(&est, 50 + t, &E));
+        CHECK_OK(bf_traj_push(&spin, 50 + t, &S));
     }
     eval_rpe_result r;
     CHECK_OK(eval_rpe(&gt, &est, 0, false, 1.0, &r));
@@ -284,32 +285,32 @@ BF_TEST(rpe_of_a_constant_drift_is_the_drift_per_delta)
     CHECK_NEAR(r.trans.median, 0.02 / 30, 1e-12);
 
     /* Rotation drift over 2 s: 6 deg; pairs i = 0..239 (j = i + 60 < 300). */
-    replay_traj still = {0};
+    bf_traj still = {0};
     for (size_t i = 0; i < spin.n; i++) {
         bf_se3 I = bf_se3_identity();
-        CHECK_OK(replay_traj_push(&still, spin.t_s[i], &I));
+        CHECK_OK(bf_traj_push(&still, spin.t_s[i], &I));
     }
     CHECK_OK(eval_rpe(&still, &spin, 0, false, 2.0, &r));
     CHECK_EQ_INT(r.n_pairs, 240);
     CHECK_NEAR(r.rot.mean, 6.0, 1e-9);
     CHECK_NEAR(r.rot.std, 0, 1e-9);
     CHECK_NEAR(r.trans.max, 0, 1e-12);
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
-    replay_traj_free(&spin);
-    replay_traj_free(&still);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
+    bf_traj_free(&spin);
+    bf_traj_free(&still);
 }
 
 BF_TEST(rpe_skips_pairs_without_nearby_ground_truth)
 {
     /* Ground truth with a 2 s hole: estimated poses inside the hole have no
      * gt within twice the median interval and their pairs are skipped. */
-    replay_traj gt = {0}, est = {0};
+    bf_traj gt = {0}, est = {0};
     bf_se3 I = bf_se3_identity();
     for (int i = 0; i <= 300; i++) {
         double t = i / 30.0;
-        if (t < 4 || t > 6) CHECK_OK(replay_traj_push(&gt, t, &I));
-        CHECK_OK(replay_traj_push(&est, t, &I));
+        if (t < 4 || t > 6) CHECK_OK(bf_traj_push(&gt, t, &I));
+        CHECK_OK(bf_traj_push(&est, t, &I));
     }
     eval_rpe_result r;
     CHECK_OK(eval_rpe(&gt, &est, 0, true, 0, &r));
@@ -318,8 +319,8 @@ BF_TEST(rpe_skips_pairs_without_nearby_ground_truth)
     CHECK(r.n_pairs < 299 && r.n_pairs > 230);
     CHECK_NEAR(r.trans.max, 0, 0);
     CHECK_STATUS(eval_rpe(&gt, &est, 0, false, -1, &r), BF_INVALID_ARG);
-    replay_traj_free(&gt);
-    replay_traj_free(&est);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
 }
 
 BF_TEST(error_stats_follow_numpy)
@@ -342,19 +343,19 @@ BF_TEST(association_matches_the_brute_force_greedy_rule)
 {
     unsigned st = 99;
     for (int round = 0; round < 20; round++) {
-        replay_traj gt = {0}, est = {0};
+        bf_traj gt = {0}, est = {0};
         bf_se3 I = bf_se3_identity();
         double t = 0;
         for (int i = 0; i < 200; i++) {
             st = st * 1103515245u + 12345u;
             t += 0.005 + 0.01 * ((st >> 8) % 1000) / 1000.0;
-            CHECK_OK(replay_traj_push(&gt, t, &I));
+            CHECK_OK(bf_traj_push(&gt, t, &I));
         }
         t = 0.003 * round;
         for (int i = 0; i < 120; i++) {
             st = st * 1103515245u + 12345u;
             t += 0.01 + 0.03 * ((st >> 8) % 1000) / 1000.0;
-            CHECK_OK(replay_traj_push(&est, t, &I));
+            CHECK_OK(bf_traj_push(&est, t, &I));
         }
         double max_dt = 0.004 + 0.002 * round;
         /* Brute force: repeatedly take the globally closest free pair. */
@@ -390,8 +391,8 @@ BF_TEST(association_matches_the_brute_force_greedy_rule)
         free(ua);
         free(ub);
         free(pair_of_gt);
-        replay_traj_free(&gt);
-        replay_traj_free(&est);
+        bf_traj_free(&gt);
+        bf_traj_free(&est);
         CHECK(same);
         CHECK(n_bf > 0);
     }

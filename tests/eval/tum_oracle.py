@@ -5,7 +5,7 @@ Re-implements, with numpy, the rules of the TUM RGB-D benchmark scripts
 (associate.py, evaluate_ate.py, evaluate_rpe.py by Juergen Sturm, TUM, BSD
 licence): association by greedy nearest timestamps (|dt| < 0.02 s), Horn
 alignment via the SVD of the cross-covariance (rot = U diag(1,1,det) V^T),
-and the fixed-delta RPE. It shares no code with eval/traj.c (which uses
+and the fixed-delta RPE. It shares no code with eval/traj_error.c (which uses
 Horn's quaternion method instead of the SVD). The numbers it prints are
 hard-coded in test_traj.c.
 

@@ -81,7 +81,7 @@ typedef struct expect_cell {
     bool ambiguous;
 } expect_cell;
 
-static bool same_cell(const expect_cell *a, const fusion_brick *b)
+static bool same_cell(const expect_cell *a, const hostmap_brick *b)
 {
     return a->key[0] == b->key[0] && a->key[1] == b->key[1] && a->key[2] == b->key[2] && a->level == b->level &&
            a->cell[0] == b->cell[0] && a->cell[1] == b->cell[1] && a->cell[2] == b->cell[2];
@@ -134,7 +134,7 @@ static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_
     bf_frame f = make_frame(K, depth, 0);
     CHECK_OK(fusion_add_frame(map, &f, &T_wc));
     CHECK_OK(fusion_check(map));
-    fusion_snapshot snap;
+    hostmap snap;
     CHECK_OK(fusion_snapshot_take(map, &snap));
     bf_se3 T_mc = T_wc;
     T_mc.t = bf_v3_sub(T_wc.t, origin_w);
@@ -166,7 +166,7 @@ static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_
     CHECK_EQ_INT(st.fail_bricks + st.fail_nodes + st.fail_hash, 0);
     free(exp);
     free(depth);
-    fusion_snapshot_free(&snap);
+    hostmap_free(&snap);
     fusion_destroy(map);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);

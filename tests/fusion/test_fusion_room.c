@@ -9,24 +9,26 @@
 #include <string.h>
 
 #include "eval/eval.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 #include "fusion/fusion.h"
 #include "gpu_fixture.h"
 #include "replay/replay.h"
-#include "stream/stream.h"
+#include "export/export.h"
 
 /* A hand-held sideways sweep with a little yaw, 100 Hz, first pose the
  * identity (synth places it at the room's viewpoint). */
 static void write_sweep(const char *path)
 {
-    replay_traj t = {0};
+    bf_traj t = {0};
     for (int k = 0; k <= 250; k++) {
         double s = k / 100.0;
         bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), -0.15 * sin(s)),
                                   bf_v3(0.25 * sin(s), 0.02 * sin(3 * s), 0.05 * (1 - cos(s))));
-        replay_traj_push(&t, 100.0 + s, &T);
+        bf_traj_push(&t, 100.0 + s, &T);
     }
     replay_traj_write_tum(path, &t);
-    replay_traj_free(&t);
+    bf_traj_free(&t);
 }
 
 BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
@@ -39,9 +41,9 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
     write_sweep(traj);
     /* Without the shared meshes the room is walls, table and boxes: the
      * test does not depend on ../shared/data. */
-    eval_synth_config sc = {.scene = "room", .traj_path = traj, .n_frames = 36, .noise = EVAL_NOISE_KINECT1,
+    synth_config sc = {.scene = "room", .traj_path = traj, .n_frames = 36, .noise = SYNTH_NOISE_KINECT1,
                             .seed = 3, .K = {320, 240, 262.5, 262.5, 159.5, 119.5, 5000}, .out_dir = seq};
-    CHECK_OK(eval_synth_run(&sc, NULL));
+    CHECK_OK(synth_run(&sc, NULL));
 
     rgbd_source *src;
     CHECK_OK(replay_open(seq, NULL, &src));
@@ -71,18 +73,18 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
     for (uint32_t l = 0; l < 16; l++)
         if (st.bricks_per_level[l] > st.bricks_per_level[typical]) typical = l;
 
-    fusion_snapshot snap;
+    hostmap snap;
     CHECK_OK(fusion_snapshot_take(map, &snap));
-    eval_mesh pts = {0}, ref = {0}, seen = {0};
-    CHECK_OK(stream_export_points(&snap, &pts, NULL));
+    mesh_data pts = {0}, ref = {0}, seen = {0};
+    CHECK_OK(export_points(&snap, &pts, NULL));
     snprintf(path, sizeof path, "%s/scene.ply", seq);
-    CHECK_OK(eval_mesh_read_ply(path, &ref));
+    CHECK_OK(mesh_read_ply(path, &ref));
     snprintf(path, sizeof path, "%s/seen.ply", seq);
-    CHECK_OK(eval_mesh_read_ply(path, &seen));
+    CHECK_OK(mesh_read_ply(path, &seen));
     eval_surface_config ec = eval_surface_config_default();
     eval_surface_result er;
     CHECK_OK(eval_surface(&ref, &pts, &seen, &ec, &er));
-    double voxel = fusion_level_voxel_m(fc.chunk_m, typical);
+    double voxel = hostmap_level_voxel_m(fc.chunk_m, typical);
     fprintf(stderr, "  %u bricks (most at level %u, %.1f mm), %u surface points: median %.2f mm, p90 %.2f mm, "
                     "completeness %.1f%%\n",
             st.n_bricks, typical, 1e3 * voxel, pts.n_verts, 1e3 * er.accuracy.median, 1e3 * er.accuracy.p90,
@@ -94,10 +96,10 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
      * issue holds for 640x480 frames (finer levels): bench/fusion_sweep.sh. */
     CHECK_LE(er.accuracy.median, voxel);
     CHECK(er.completeness >= 0.90);
-    eval_mesh_free(&pts);
-    eval_mesh_free(&ref);
-    eval_mesh_free(&seen);
-    fusion_snapshot_free(&snap);
+    mesh_free(&pts);
+    mesh_free(&ref);
+    mesh_free(&seen);
+    hostmap_free(&snap);
     fusion_destroy(map);
     rgbd_source_close(src);
     GPU_FIXTURE_CHECK_CLEAN(ctx);

@@ -17,7 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "eval/eval.h"
+#include "synth/synth.h"
 #include "fusion/fusion_int.h"
 #include "gpu/gpu.h"
 
@@ -49,13 +49,13 @@ int main(int argc, char **argv)
     uint32_t n_frames = argc > 1 ? (uint32_t)atoi(argv[1]) : 20;
     float ratio = argc > 2 ? (float)atof(argv[2]) : 1.0f;
     if (n_frames < 2 || n_frames > 128) n_frames = 20;
-    eval_scene scene;
-    TRY(eval_scene_room(NULL, &scene));
+    synth_scene scene;
+    TRY(synth_scene_room(NULL, &scene));
     bf_intrinsics K = {.width = 640, .height = 480, .fx_px = 525, .fy_px = 525, .cx_px = 319.5, .cy_px = 239.5,
                        .depth_scale = 5000};
-    eval_render_config rc = {.K = K, .noise = EVAL_NOISE_KINECT1, .seed = 1};
-    eval_renderer *rend;
-    TRY(eval_renderer_create(&scene, &rc, &rend));
+    synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 1};
+    synth_renderer *rend;
+    TRY(synth_renderer_create(&scene, &rc, &rend));
     gpu_config gc = {.validation = GPU_VALIDATION_OFF};
     gpu_context *ctx;
     TRY(gpu_context_create(&gc, &ctx));
@@ -74,7 +74,7 @@ int main(int argc, char **argv)
         bf_quat q = bf_quat_from_axis_angle(bf_v3(0.3, 1, 0.1), a);
         bf_se3 d = bf_se3_from_qt(q, bf_v3(0.01 * i, 0.002 * i, 0.004 * i));
         bf_se3 T = bf_se3_mul(&scene.T_wc_view, &d);
-        TRY(eval_render(rend, i, &T, depth, NULL, NULL));
+        TRY(synth_render(rend, i, &T, depth, NULL, NULL));
         bf_frame f = {.index = i, .width = K.width, .height = K.height, .depth = depth};
         bf_status s = fusion_add_frame(map, &f, &T);
         if (s != BF_OK && s != BF_POOL_FULL) TRY(s);
@@ -220,7 +220,7 @@ int main(int argc, char **argv)
     free(depth);
     fusion_destroy(map);
     gpu_context_destroy(ctx);
-    eval_renderer_destroy(rend);
-    eval_scene_free(&scene);
+    synth_renderer_destroy(rend);
+    synth_scene_free(&scene);
     return 0;
 }

@@ -362,7 +362,7 @@ static int64_t floor_div(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a +
 /* Inserts every brick of the scene's level meeting the map box [lo, hi]. */
 static bf_status add_box(scene *s, double x0, double y0, double z0, double x1, double y1, double z1)
 {
-    double brick_m = 8.0 * fusion_level_voxel_m(s->map->cfg.chunk_m, s->level);
+    double brick_m = 8.0 * hostmap_level_voxel_m(s->map->cfg.chunk_m, s->level);
     int64_t per = (int64_t)1 << s->level;
     double lo[3] = {x0, y0, z0}, hi[3] = {x1, y1, z1};
     int64_t g0[3], g1[3];
@@ -763,7 +763,7 @@ BF_TEST(plane_gives_front_sign_and_confidence_where_weight_suffices)
     for (uint32_t i = 0; i < 5; i++) put_frame(&s, i, cam_look(0.002 * i, 0, 0, 0.002 * i, 0, 1), surf_plane_z);
     pass_result r;
     PASS(&s, 0, s.n, 0, 5, true, true, &r, 0.01);
-    double voxel = fusion_level_voxel_m(s.map->cfg.chunk_m, s.level);
+    double voxel = hostmap_level_voxel_m(s.map->cfg.chunk_m, s.level);
     float d = 1000.0f * (float)UNIT;
     double sigma = fusion_sigma(d, s.map->cfg.sigma_a, s.map->cfg.sigma_b, s.map->cfg.sigma_c);
     uint32_t n_front = 0, n_behind = 0, n_far = 0;

@@ -5,13 +5,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-#include "stream/stream.h"
+#include "export/export.h"
 
 bf_intrinsics test_K(void) { return (bf_intrinsics){W, H, 262.5, 262.5, 159.5, 119.5, 5000}; }
 
 /* A hand-held sideways sweep with a little yaw and bob at 30 Hz, relative
  * to the scene's first view (the motion of tests/fusion's room test). */
-bf_se3 sweep_pose(const eval_scene *sc, uint32_t k)
+bf_se3 sweep_pose(const synth_scene *sc, uint32_t k)
 {
     double s = k / 30.0;
     bf_se3 M = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), -0.15 * sin(s)),
@@ -28,12 +28,12 @@ double rot_dist_deg(const bf_se3 *A, const bf_se3 *B)
     return acos(c > 1 ? 1 : (c < -1 ? -1 : c)) * 180 / M_PI;
 }
 
-bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *true_pose, uint32_t n,
+bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
                    const bf_se3 *offset, mutate_fn mutate, run_out *out)
 {
     bf_intrinsics K = test_K();
-    eval_render_config rc = {.K = K, .noise = EVAL_NOISE_KINECT1, .seed = 7};
-    eval_renderer *ren = NULL;
+    synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 7};
+    synth_renderer *ren = NULL;
     recon *r = NULL;
     uint16_t *depth = malloc((size_t)W * H * sizeof *depth);
     recon_config cfg = recon_config_default();
@@ -45,10 +45,10 @@ bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *true_po
     cfg.fusion.window = 10;
     cfg.fusion.subcache = 4;
     bf_se3 T0 = bf_se3_mul(offset, &true_pose[0]);
-    bf_status s = depth ? eval_renderer_create(sc, &rc, &ren) : BF_NO_MEMORY;
+    bf_status s = depth ? synth_renderer_create(sc, &rc, &ren) : BF_NO_MEMORY;
     if (s == BF_OK) s = recon_create(ctx, &cfg, &K, &T0, &r);
     for (uint32_t k = 0; s == BF_OK && k < n; k++) {
-        s = eval_render(ren, k, &true_pose[k], depth, NULL, NULL);
+        s = synth_render(ren, k, &true_pose[k], depth, NULL, NULL);
         if (s != BF_OK) break;
         if (mutate) mutate(k, depth);
         bf_frame f = {.index = k, .width = W, .height = H, .t_depth_s = 100 + k / 30.0, .depth = depth};
@@ -59,18 +59,18 @@ bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *true_po
     if (s == BF_OK) s = recon_flush(r);
     if (s == BF_OK) s = fusion_check(recon_map(r));
     if (s == BF_OK) s = fusion_get_stats(recon_map(r), &out->map);
-    fusion_snapshot snap = {0};
+    hostmap snap = {0};
     if (s == BF_OK) s = fusion_snapshot_take(recon_map(r), &snap);
-    if (s == BF_OK) s = stream_export_points(&snap, &out->points, NULL);
-    fusion_snapshot_free(&snap);
+    if (s == BF_OK) s = export_points(&snap, &out->points, NULL);
+    hostmap_free(&snap);
     if (r) out->counts = recon_get_counts(r);
     recon_destroy(r);
-    eval_renderer_destroy(ren);
+    synth_renderer_destroy(ren);
     free(depth);
     return s;
 }
 
-double surface_p90(const eval_scene *sc, const eval_mesh *pts)
+double surface_p90(const synth_scene *sc, const mesh_data *pts)
 {
     eval_surface_config ec = eval_surface_config_default();
     eval_surface_result er;

@@ -4,6 +4,8 @@
 #define BF_RECON_FIXTURE_H
 
 #include "eval/eval.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 #include "gpu/gpu.h"
 #include "recon/recon.h"
 
@@ -13,7 +15,7 @@
 bf_intrinsics test_K(void);
 /* A hand-held sideways sweep with a little yaw and bob at 30 Hz, relative
  * to the scene's first view. */
-bf_se3 sweep_pose(const eval_scene *sc, uint32_t k);
+bf_se3 sweep_pose(const synth_scene *sc, uint32_t k);
 double trans_dist(const bf_se3 *A, const bf_se3 *B);
 double rot_dist_deg(const bf_se3 *A, const bf_se3 *B);
 
@@ -28,12 +30,12 @@ typedef struct run_out {
     recon_frame_result fr[64];
     recon_counts counts;
     fusion_stats map;
-    eval_mesh points; /* surface voxels, world frame */
+    mesh_data points; /* surface voxels, world frame */
 } run_out;
 
-bf_status run_loop(gpu_context *ctx, const eval_scene *sc, const bf_se3 *true_pose, uint32_t n,
+bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
                    const bf_se3 *offset, mutate_fn mutate, run_out *out);
 /* 90th percentile of the distance from pts to the scene's mesh [m]. */
-double surface_p90(const eval_scene *sc, const eval_mesh *pts);
+double surface_p90(const synth_scene *sc, const mesh_data *pts);
 
 #endif

@@ -8,12 +8,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "eval/eval.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 #include "gpu_fixture.h"
 #include "recon_fixture.h"
 #include "recon/recon.h"
 #include "replay/replay.h"
-#include "stream/stream.h"
+#include "export/export.h"
 
 /* Frames 8-10 lose their depth: 8 is all zero, 9 keeps a handful of
  * samples (below the loop's 1% floor), 10 has only samples beyond the
@@ -28,8 +29,8 @@ BF_TEST(frames_without_depth_are_skipped_and_tracking_resumes)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
-    CHECK_OK(eval_scene_room(NULL, &sc));
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
     enum { N = 20 };
     bf_se3 truth[N];
     for (uint32_t k = 0; k < N; k++) truth[k] = sweep_pose(&sc, k);
@@ -49,8 +50,8 @@ BF_TEST(frames_without_depth_are_skipped_and_tracking_resumes)
         CHECK_EQ_INT(o.fr[k].state, RECON_TRACKED);
         CHECK_LE(trans_dist(&o.est[k], &truth[k]), 0.02);
     }
-    eval_mesh_free(&o.points);
-    eval_scene_free(&sc);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
@@ -59,8 +60,8 @@ BF_TEST(a_sudden_jump_is_detected_and_the_map_is_not_corrupted)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
-    CHECK_OK(eval_scene_room(NULL, &sc));
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
     enum { N = 20, JUMP = 12 };
     /* From frame 12 on, the camera is 0.3 m and 20 degrees away from where
      * the sweep would have it (a dropped connection, a fast swing). */
@@ -88,23 +89,23 @@ BF_TEST(a_sudden_jump_is_detected_and_the_map_is_not_corrupted)
     }
     /* The map holds the room where it is: no ghost surface from the jump. */
     CHECK_LE(surface_p90(&sc, &o.points), 0.02);
-    eval_mesh_free(&o.points);
-    eval_scene_free(&sc);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
 
 /* A wall 2 m in front of the first camera, 8 m wide: nothing in view but
  * one plane. */
-static bf_status plane_scene(eval_scene *out)
+static bf_status plane_scene(synth_scene *out)
 {
-    eval_mesh m = {0};
+    mesh_data m = {0};
     m.n_verts = 4;
     m.n_tris = 2;
     m.xyz = malloc(12 * sizeof *m.xyz);
     m.tri = malloc(6 * sizeof *m.tri);
     if (!m.xyz || !m.tri) {
-        eval_mesh_free(&m);
+        mesh_free(&m);
         return BF_NO_MEMORY;
     }
     const float v[12] = {-4, -4, 2, 4, -4, 2, 4, 4, 2, -4, 4, 2};
@@ -112,14 +113,14 @@ static bf_status plane_scene(eval_scene *out)
     memcpy(m.xyz, v, sizeof v);
     memcpy(m.tri, t, sizeof t);
     bf_se3 view = bf_se3_identity();
-    return eval_scene_from_mesh(&m, &view, out);
+    return synth_scene_from_mesh(&m, &view, out);
 }
 
 BF_TEST(a_single_plane_is_reported_degenerate_and_does_not_diverge)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
+    synth_scene sc;
     CHECK_OK(plane_scene(&sc));
     enum { N = 16 };
     /* The camera slides along the wall and tilts a little: the distance to
@@ -147,8 +148,8 @@ BF_TEST(a_single_plane_is_reported_degenerate_and_does_not_diverge)
         /* Unobservable: no divergence, the slide stays near where it started. */
         CHECK_LE(fabs(E->t.x) + fabs(E->t.y), 0.3);
     }
-    eval_mesh_free(&o.points);
-    eval_scene_free(&sc);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
@@ -195,7 +196,7 @@ BF_TEST(real_desk_frames_b1_reproduced_and_b2_tracked)
         n_hit++;
         double z = d1[i] / 5000.0, sigma = 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4);
         /* 3 sigma of noise plus half a voxel at the level of the sample. */
-        double voxel = fusion_level_voxel_m(2.0, 0), foot = z / 520.9;
+        double voxel = hostmap_level_voxel_m(2.0, 0), foot = z / 520.9;
         while (voxel > foot * 1.41421356) voxel *= 0.5;
         if (fabs(im.depth[i] - z) <= 3 * sigma + voxel) n_within++;
     }
@@ -232,8 +233,8 @@ BF_TEST(a_static_camera_stays_put)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
-    CHECK_OK(eval_scene_room(NULL, &sc));
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
     enum { N = 6 };
     bf_se3 truth[N];
     for (uint32_t k = 0; k < N; k++) truth[k] = sweep_pose(&sc, 0);
@@ -250,8 +251,8 @@ BF_TEST(a_static_camera_stays_put)
         CHECK_LE(d, 0.002);
         CHECK_LE(a, 0.1);
     }
-    eval_mesh_free(&o.points);
-    eval_scene_free(&sc);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }

@@ -7,12 +7,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "eval/eval.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 #include "gpu_fixture.h"
 #include "recon_fixture.h"
 #include "recon/recon.h"
 #include "replay/replay.h"
-#include "stream/stream.h"
+#include "export/export.h"
 
 static double rms_error(const run_out *o, const bf_se3 *true_pose, uint32_t n)
 {
@@ -27,8 +28,8 @@ BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
-    CHECK_OK(eval_scene_room(NULL, &sc));
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
     bf_se3 truth[N_ROOM];
     for (uint32_t k = 0; k < N_ROOM; k++) truth[k] = sweep_pose(&sc, k);
     static run_out a, b;
@@ -74,9 +75,9 @@ BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
      * (1 mm float spacing per coordinate, growing with every frame fused)
      * and in the RMS above. */
     CHECK_LE(worst, 0.01);
-    eval_mesh_free(&a.points);
-    eval_mesh_free(&b.points);
-    eval_scene_free(&sc);
+    mesh_free(&a.points);
+    mesh_free(&b.points);
+    synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }

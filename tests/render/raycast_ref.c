@@ -26,7 +26,7 @@ typedef struct ref_cell {
 } ref_cell;
 
 struct raycast_ref {
-    const fusion_snapshot *snap;
+    const hostmap *snap;
     uint32_t max_level;
     ref_cell *cells;
     size_t cap; /* power of two */
@@ -50,7 +50,7 @@ static ref_cell *cell_slot(const raycast_ref *r, const int32_t key[3], uint32_t 
     }
 }
 
-bf_status raycast_ref_create(const fusion_snapshot *snap, uint32_t max_level, raycast_ref **out)
+bf_status raycast_ref_create(const hostmap *snap, uint32_t max_level, raycast_ref **out)
 {
     raycast_ref *r = calloc(1, sizeof *r);
     if (!r) return bf_fail(BF_NO_MEMORY, "raycast_ref");
@@ -65,7 +65,7 @@ bf_status raycast_ref_create(const fusion_snapshot *snap, uint32_t max_level, ra
         return bf_fail(BF_NO_MEMORY, "raycast_ref: %zu cells", cap);
     }
     for (uint32_t b = 0; b < snap->n_bricks; b++) {
-        const fusion_brick *fb = &snap->bricks[b];
+        const hostmap_brick *fb = &snap->bricks[b];
         for (uint32_t l = 0; l <= fb->level; l++) {
             uint32_t sh = fb->level - l;
             uint32_t pos = fusion_pack_pos(fb->cell[0] >> sh, fb->cell[1] >> sh, fb->cell[2] >> sh, l);
@@ -120,7 +120,7 @@ static int voxel_value(const raycast_ref *r, const int64_t g[3], uint32_t level,
     }
     const ref_cell *c = cell_slot(r, key, fusion_pack_pos(cell[0], cell[1], cell[2], level));
     if (!c->used || c->brick < 0) return 0;
-    const fusion_brick *b = &r->snap->bricks[c->brick];
+    const hostmap_brick *b = &r->snap->bricks[c->brick];
     uint32_t w = brick_word(x[0], x[1], x[2]), bit = brick_bit(x[0], x[1], x[2]);
     if (confident_only && !((b->conf[w] >> bit) & 1u)) return 0;
     return ((b->sign[w] >> bit) & 1u) ? 1 : -1;
@@ -132,7 +132,7 @@ static int voxel_value(const raycast_ref *r, const int64_t g[3], uint32_t level,
 static double subvoxel(const raycast_ref *r, const double o[3], const double d[3], uint32_t level, double s0,
                        bool confident_only)
 {
-    double v = fusion_level_voxel_m(r->snap->chunk_m, level);
+    double v = hostmap_level_voxel_m(r->snap->chunk_m, level);
     double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     double step_max = RENDER_SUBVOXEL_MAX_STEP * v / len;
     double lo = s0 - RENDER_SUBVOXEL_MAX_MOVE * step_max, hi = s0 + RENDER_SUBVOXEL_MAX_MOVE * step_max, s = s0;
@@ -218,8 +218,8 @@ static void cast_one(const raycast_ref *r, const double o[3], const double d[3],
             s = (e > s ? e : s) + 1e-7;
             continue;
         }
-        const fusion_brick *b = &r->snap->bricks[best];
-        double v = fusion_level_voxel_m(chunk, best_level);
+        const hostmap_brick *b = &r->snap->bricks[best];
+        double v = hostmap_level_voxel_m(chunk, best_level);
         uint32_t x[3];
         double c_w[3];
         for (int a = 0; a < 3; a++) {

@@ -1,5 +1,5 @@
 /* A CPU oracle of the ray-caster (a test oracle, not a product path): walks
- * a fusion_snapshot in double precision by marching along each ray. */
+ * a hostmap in double precision by marching along each ray. */
 #ifndef BF_RAYCAST_REF_H
 #define BF_RAYCAST_REF_H
 
@@ -9,7 +9,7 @@
 typedef struct raycast_ref raycast_ref;
 
 /* Indexes the snapshot's bricks (borrowed: it must outlive the oracle). */
-bf_status raycast_ref_create(const fusion_snapshot *snap, uint32_t max_level, raycast_ref **out);
+bf_status raycast_ref_create(const hostmap *snap, uint32_t max_level, raycast_ref **out);
 void raycast_ref_destroy(raycast_ref *r);
 
 /* Ray-casts like render_raycast: depth[width * height] (0: no hit) and

@@ -6,7 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "eval/eval.h"
+#include "synth/synth.h"
 #include "fusion/fusion_int.h"
 #include "gpu_fixture.h"
 #include "raycast_ref.h"
@@ -155,7 +155,7 @@ BF_TEST(fronto_parallel_plane_depth_normal_and_level_are_exact)
                 double x = (u - K_SMALL.cx_px) / K_SMALL.fx_px * z0;
                 uint32_t level = x < 0.25 ? 5 : 6;
                 CHECK(im.level[i] == 5 || im.level[i] == 6);
-                double voxel = fusion_level_voxel_m(c.chunk_m, im.level[i]);
+                double voxel = hostmap_level_voxel_m(c.chunk_m, im.level[i]);
                 /* The sign bits put the surface between the centres on both
                  * sides of z0: the refined hit is the face between them,
                  * voxel * round(z0 / voxel), at most half a voxel from z0;
@@ -204,7 +204,7 @@ BF_TEST(tilted_plane_depth_within_a_voxel_and_normals_within_degrees)
     CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
     render_images im;
     CHECK_OK(render_download(rc, &im));
-    double voxel = fusion_level_voxel_m(c.chunk_m, 5);
+    double voxel = hostmap_level_voxel_m(c.chunk_m, 5);
     size_t np = (size_t)im.width * im.height, n_hit = 0, n_ang = 0, n_inside = 0, n_inside_hit = 0;
     double *err = malloc(np * sizeof *err), *ang = malloc(np * sizeof *ang), worst = 0, worst_norm = 0;
     double nrm[3] = {pl.n[0], pl.n[1], pl.n[2]};
@@ -401,13 +401,13 @@ static struct {
 static bf_status room_frames(void)
 {
     if (room.ready) return BF_OK;
-    eval_scene scene;
-    bf_status s = eval_scene_room(NULL, &scene);
+    synth_scene scene;
+    bf_status s = synth_scene_room(NULL, &scene);
     if (s != BF_OK) return s;
-    eval_render_config rcfg = {.K = K_ROOM, .noise = EVAL_NOISE_KINECT1, .seed = 7};
-    eval_renderer *ren;
-    if ((s = eval_renderer_create(&scene, &rcfg, &ren)) != BF_OK) {
-        eval_scene_free(&scene);
+    synth_render_config rcfg = {.K = K_ROOM, .noise = SYNTH_NOISE_KINECT1, .seed = 7};
+    synth_renderer *ren;
+    if ((s = synth_renderer_create(&scene, &rcfg, &ren)) != BF_OK) {
+        synth_scene_free(&scene);
         return s;
     }
     for (uint32_t k = 0; k < ROOM_FRAMES && s == BF_OK; k++) {
@@ -416,10 +416,10 @@ static bf_status room_frames(void)
                                      bf_v3(0.04 * k, 0.01 * sin(k), 0));
         room.T_wc[k] = bf_se3_mul(&scene.T_wc_view, &step);
         room.depth[k] = malloc((size_t)K_ROOM.width * K_ROOM.height * 2);
-        s = eval_render(ren, k, &room.T_wc[k], room.depth[k], NULL, NULL);
+        s = synth_render(ren, k, &room.T_wc[k], room.depth[k], NULL, NULL);
     }
-    eval_renderer_destroy(ren);
-    eval_scene_free(&scene);
+    synth_renderer_destroy(ren);
+    synth_scene_free(&scene);
     room.ready = s == BF_OK;
     return s;
 }
@@ -462,7 +462,7 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
     bf_se3 id = bf_se3_identity();
     fusion_map *map;
     CHECK_OK(room_fuse(ctx, &id, &map));
-    fusion_snapshot snap;
+    hostmap snap;
     CHECK_OK(fusion_snapshot_take(map, &snap));
     raycast_ref *ref;
     CHECK_OK(raycast_ref_create(&snap, fusion_get_config(map)->max_level, &ref));
@@ -493,9 +493,9 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
              * (float, nudged 10 um into each octree cell) and oracle (double)
              * may see a different voxel where the ray grazes a voxel edge. */
             uint32_t l = im.level[i] < ref_level[i] ? im.level[i] : ref_level[i];
-            within += fabs(im.depth[i] - ref_depth[i]) <= fusion_level_voxel_m(snap.chunk_m, l) + 1e-5;
+            within += fabs(im.depth[i] - ref_depth[i]) <= hostmap_level_voxel_m(snap.chunk_m, l) + 1e-5;
             same_level += im.level[i] == ref_level[i];
-            dv[n_close++] = fabs(im.depth[i] - ref_depth[i]) / fusion_level_voxel_m(snap.chunk_m, l);
+            dv[n_close++] = fabs(im.depth[i] - ref_depth[i]) / hostmap_level_voxel_m(snap.chunk_m, l);
         }
         qsort(dv, n_close, sizeof *dv, cmp_double);
         double d50 = n_close ? dv[n_close / 2] : 0, d98 = n_close ? dv[n_close * 98 / 100] : 0;
@@ -520,7 +520,7 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
     free(ref_level);
     render_destroy(rc);
     raycast_ref_destroy(ref);
-    fusion_snapshot_free(&snap);
+    hostmap_free(&snap);
     fusion_destroy(map);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
@@ -686,21 +686,21 @@ BF_TEST(raycast_of_a_static_camera_is_unbiased)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene scene;
-    CHECK_OK(eval_scene_room(NULL, &scene));
+    synth_scene scene;
+    CHECK_OK(synth_scene_room(NULL, &scene));
     size_t np = (size_t)K_ROOM.width * K_ROOM.height;
     uint16_t *truth = malloc(np * 2), *frame = malloc(np * 2);
-    eval_render_config t0 = {.K = K_ROOM, .noise = EVAL_NOISE_NONE, .seed = 7};
-    eval_renderer *ren;
-    CHECK_OK(eval_renderer_create(&scene, &t0, &ren));
-    CHECK_OK(eval_render(ren, 0, &scene.T_wc_view, truth, NULL, NULL));
-    eval_renderer_destroy(ren);
+    synth_render_config t0 = {.K = K_ROOM, .noise = SYNTH_NOISE_NONE, .seed = 7};
+    synth_renderer *ren;
+    CHECK_OK(synth_renderer_create(&scene, &t0, &ren));
+    CHECK_OK(synth_render(ren, 0, &scene.T_wc_view, truth, NULL, NULL));
+    synth_renderer_destroy(ren);
     render_caster *rc;
     CHECK_OK(render_create(ctx, K_ROOM.width, K_ROOM.height, &rc));
     double *err = malloc(np * sizeof *err);
     for (int noisy = 0; noisy < 2; noisy++) {
-        eval_render_config cfg = {.K = K_ROOM, .noise = noisy ? EVAL_NOISE_KINECT1 : EVAL_NOISE_NONE, .seed = 7};
-        CHECK_OK(eval_renderer_create(&scene, &cfg, &ren));
+        synth_render_config cfg = {.K = K_ROOM, .noise = noisy ? SYNTH_NOISE_KINECT1 : SYNTH_NOISE_NONE, .seed = 7};
+        CHECK_OK(synth_renderer_create(&scene, &cfg, &ren));
         fusion_config fc = fusion_config_default();
         fc.brick_cap = 1u << 16;
         fc.window = 10;
@@ -708,7 +708,7 @@ BF_TEST(raycast_of_a_static_camera_is_unbiased)
         fusion_map *map;
         CHECK_OK(fusion_create(ctx, &fc, &K_ROOM, scene.T_wc_view.t, &map));
         for (uint32_t k = 0; k < 6; k++) {
-            CHECK_OK(eval_render(ren, k, &scene.T_wc_view, frame, NULL, NULL));
+            CHECK_OK(synth_render(ren, k, &scene.T_wc_view, frame, NULL, NULL));
             bf_frame f = {.index = k, .width = K_ROOM.width, .height = K_ROOM.height, .depth = frame};
             CHECK_OK(fusion_add_frame(map, &f, &scene.T_wc_view));
             if (k != 0 && k != 5) continue;
@@ -787,13 +787,13 @@ BF_TEST(raycast_of_a_static_camera_is_unbiased)
             }
         }
         fusion_destroy(map);
-        eval_renderer_destroy(ren);
+        synth_renderer_destroy(ren);
     }
     free(err);
     free(truth);
     free(frame);
     render_destroy(rc);
-    eval_scene_free(&scene);
+    synth_scene_free(&scene);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }

@@ -12,15 +12,15 @@ static bf_se3 pose_at(double a)
 
 BF_TEST(traj_write_read_round_trip)
 {
-    replay_traj tr = {0};
+    bf_traj tr = {0};
     for (int i = 0; i < 200; i++) {
         bf_se3 T = pose_at(0.03 * i - 2.0); /* includes angles past pi/2, so qw < 0 before flipping */
-        CHECK_OK(replay_traj_push(&tr, 1305031102.175304 + 0.033 * i, &T));
+        CHECK_OK(bf_traj_push(&tr, 1305031102.175304 + 0.033 * i, &T));
     }
     char path[512];
     snprintf(path, sizeof path, "%s/traj_rt.txt", bf_test_tmpdir());
     CHECK_OK(replay_traj_write_tum(path, &tr));
-    replay_traj back = {0};
+    bf_traj back = {0};
     CHECK_OK(replay_traj_read_tum(path, &back));
     CHECK_EQ_INT(back.n, tr.n);
     for (size_t i = 0; i < tr.n; i++) {
@@ -47,44 +47,44 @@ BF_TEST(traj_write_read_round_trip)
     }
     free(text);
     CHECK_EQ_INT(bad, 0);
-    replay_traj_free(&tr);
-    replay_traj_free(&back);
+    bf_traj_free(&tr);
+    bf_traj_free(&back);
 }
 
 BF_TEST(traj_interpolates_linear_position_and_slerp)
 {
-    replay_traj tr = {0};
+    bf_traj tr = {0};
     bf_se3 A = bf_se3_from_qt(bf_quat_identity(), bf_v3(0, 0, 0));
     bf_se3 B = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 0, 1), 1.0), bf_v3(2, 4, -6));
-    CHECK_OK(replay_traj_push(&tr, 10.0, &A));
-    CHECK_OK(replay_traj_push(&tr, 11.0, &B));
+    CHECK_OK(bf_traj_push(&tr, 10.0, &A));
+    CHECK_OK(bf_traj_push(&tr, 11.0, &B));
     bf_se3 T;
-    CHECK(replay_traj_interpolate(&tr, 10.25, &T));
+    CHECK(bf_traj_interpolate(&tr, 10.25, &T));
     CHECK_NEAR(T.t.x, 0.5, 1e-12);
     CHECK_NEAR(T.t.y, 1.0, 1e-12);
     CHECK_NEAR(T.t.z, -1.5, 1e-12);
     CHECK_NEAR(bf_se3_angle(&T), 0.25, 1e-12);
     /* Ends are exact; outside the range there is no pose. */
-    CHECK(replay_traj_interpolate(&tr, 11.0, &T));
+    CHECK(bf_traj_interpolate(&tr, 11.0, &T));
     CHECK_NEAR(T.t.x, 2, 0);
-    CHECK(replay_traj_interpolate(&tr, 10.0, &T));
+    CHECK(bf_traj_interpolate(&tr, 10.0, &T));
     CHECK_NEAR(T.t.x, 0, 0);
-    CHECK(!replay_traj_interpolate(&tr, 9.999, &T));
-    CHECK(!replay_traj_interpolate(&tr, 11.001, &T));
-    replay_traj_free(&tr);
-    replay_traj empty = {0};
-    CHECK(!replay_traj_interpolate(&empty, 0, &T));
+    CHECK(!bf_traj_interpolate(&tr, 9.999, &T));
+    CHECK(!bf_traj_interpolate(&tr, 11.001, &T));
+    bf_traj_free(&tr);
+    bf_traj empty = {0};
+    CHECK(!bf_traj_interpolate(&empty, 0, &T));
 }
 
 BF_TEST(traj_reads_real_tum_groundtruth)
 {
     const char *p = bf_test_data("tum/fr1_xyz/groundtruth.txt");
     if (!p) BF_SKIP("tum/fr1_xyz absent");
-    replay_traj tr = {0};
+    bf_traj tr = {0};
     CHECK_OK(replay_traj_read_tum(p, &tr));
     CHECK_EQ_INT(tr.n, 3000);
     for (size_t i = 1; i < tr.n; i++) CHECK(tr.t_s[i] > tr.t_s[i - 1]);
-    replay_traj_free(&tr);
+    bf_traj_free(&tr);
 }
 
 static const char *write_text(const char *name, const char *text)
@@ -95,7 +95,7 @@ static const char *write_text(const char *name, const char *text)
 
 BF_TEST(traj_malformed_files_name_file_and_line)
 {
-    replay_traj tr = {0};
+    bf_traj tr = {0};
     const char *p = write_text("traj_unsorted.txt", "# c\n1 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n1.5 0 0 0 0 0 0 1\n");
     CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
     CHECK_ERROR_MENTIONS("traj_unsorted.txt:4");

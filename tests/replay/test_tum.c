@@ -31,14 +31,14 @@ static bf_se3 gt_pose(int k)
 
 static bool write_gt(const char *dir)
 {
-    replay_traj tr = {0};
+    bf_traj tr = {0};
     const double t[3] = {9.9, 10.1, 10.295};
     for (int k = 0; k < 3; k++) {
         bf_se3 T = gt_pose(k);
-        if (replay_traj_push(&tr, t[k], &T)) return false;
+        if (bf_traj_push(&tr, t[k], &T)) return false;
     }
     bool ok = replay_traj_write_tum(rt_join(dir, "groundtruth.txt"), &tr) == BF_OK;
-    replay_traj_free(&tr);
+    bf_traj_free(&tr);
     return ok;
 }
 

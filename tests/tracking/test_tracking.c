@@ -8,7 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "eval/eval.h"
+#include "mesh/mesh.h"
+#include "synth/synth.h"
 #include "gpu_fixture.h"
 #include "replay/replay.h"
 #include "rof_ref.h"
@@ -73,29 +74,29 @@ static bf_frame frame_of(const bf_intrinsics *K, const uint16_t *depth, uint32_t
 
 /* Renders the room at T_wc (noise as given) into a new depth image. */
 typedef struct room {
-    eval_scene scene;
-    eval_renderer *r;
+    synth_scene scene;
+    synth_renderer *r;
     bf_intrinsics K;
 } room;
 
-static bf_status room_open(room *rm, const bf_intrinsics *K, eval_noise noise)
+static bf_status room_open(room *rm, const bf_intrinsics *K, synth_noise noise)
 {
     memset(rm, 0, sizeof *rm);
     rm->K = *K;
-    bf_status s = eval_scene_room(NULL, &rm->scene);
-    eval_render_config rc = {.K = *K, .noise = noise, .seed = 7};
-    if (s == BF_OK) s = eval_renderer_create(&rm->scene, &rc, &rm->r);
+    bf_status s = synth_scene_room(NULL, &rm->scene);
+    synth_render_config rc = {.K = *K, .noise = noise, .seed = 7};
+    if (s == BF_OK) s = synth_renderer_create(&rm->scene, &rc, &rm->r);
     return s;
 }
 static void room_close(room *rm)
 {
-    eval_renderer_destroy(rm->r);
-    eval_scene_free(&rm->scene);
+    synth_renderer_destroy(rm->r);
+    synth_scene_free(&rm->scene);
 }
 static uint16_t *render(room *rm, uint32_t frame, const bf_se3 *T_wc)
 {
     uint16_t *d = malloc((size_t)rm->K.width * rm->K.height * 2);
-    if (d && eval_render(rm->r, frame, T_wc, d, NULL, NULL) != BF_OK) {
+    if (d && synth_render(rm->r, frame, T_wc, d, NULL, NULL) != BF_OK) {
         free(d);
         return NULL;
     }
@@ -307,7 +308,7 @@ BF_TEST(rof_smooths_near_more_than_far)
 /* ------------------------------------------------------------ ICP */
 
 /* Reference rendered at T0, frame at T0 * motion, guess T0. */
-static void track_room_pair(eval_noise noise, const bf_intrinsics *K, const bf_se3 *T_off, bf_se3 *est_rel,
+static void track_room_pair(synth_noise noise, const bf_intrinsics *K, const bf_se3 *T_off, bf_se3 *est_rel,
                             track_result *res, bool *ok)
 {
     *ok = false;
@@ -337,7 +338,7 @@ static void track_room_pair(eval_noise noise, const bf_intrinsics *K, const bf_s
     gpu_context_destroy(ctx);
 }
 
-static void check_room(eval_noise noise, double tol_m, double tol_deg)
+static void check_room(synth_noise noise, double tol_m, double tol_deg)
 {
     bf_se3 I = bf_se3_identity(), est, est_far;
     track_result r, r_far;
@@ -349,7 +350,7 @@ static void check_room(eval_noise noise, double tol_m, double tol_deg)
     pose_error(&truth, &est, &dt, &da);
     fprintf(stderr, "  %s: %s, error %.3f mm %.4f deg; %u/%u inliers, rms %.2f mm, eig %.3g/%.3g, %u iterations, "
                     "%.2f ms GPU\n",
-            noise == EVAL_NOISE_NONE ? "noiseless" : "kinect1", track_outcome_name(r.outcome), 1e3 * dt, da,
+            noise == SYNTH_NOISE_NONE ? "noiseless" : "kinect1", track_outcome_name(r.outcome), 1e3 * dt, da,
             r.n_inliers, r.n_valid, 1e3 * r.residual_m, r.eig_min, r.eig_max, r.iterations, r.ms_gpu);
     CHECK_EQ_INT(r.outcome, TRACK_OK);
     CHECK(!r.degenerate);
@@ -372,14 +373,14 @@ BF_TEST(icp_recovers_2cm_2deg_noiseless_room_at_origin_and_10km)
     /* Noiseless frames at 320x240: point-to-plane ICP converges to the
      * pose up to the projective association's sub-pixel bias; 1 mm and 0.1
      * degree are the issue's bounds. */
-    check_room(EVAL_NOISE_NONE, 0.001, 0.1);
+    check_room(SYNTH_NOISE_NONE, 0.001, 0.1);
 }
 
 BF_TEST(icp_recovers_2cm_2deg_noisy_room)
 {
     /* Kinect v1 noise at 1-4 m is 2-25 mm per pixel; averaged over ~5e4
      * inliers the pose error stays at a few mm. */
-    check_room(EVAL_NOISE_KINECT1, 0.004, 0.25);
+    check_room(SYNTH_NOISE_KINECT1, 0.004, 0.25);
 }
 
 /* The default reference level: a GPU reference at half resolution (the
@@ -395,8 +396,8 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     CHECK_EQ_INT(Kh.width, 160);
     CHECK(fabs(Kh.cx_px - 79.5) < 1e-12 && fabs(Kh.fx_px - 131.25) < 1e-12);
     room full, half;
-    CHECK_OK(room_open(&full, &K_MID, EVAL_NOISE_NONE));
-    CHECK_OK(room_open(&half, &Kh, EVAL_NOISE_NONE));
+    CHECK_OK(room_open(&full, &K_MID, SYNTH_NOISE_NONE));
+    CHECK_OK(room_open(&half, &Kh, SYNTH_NOISE_NONE));
     bf_se3 T0 = full.scene.T_wc_view, d = small_motion();
     bf_se3 T1 = bf_se3_mul(&T0, &d);
     uint16_t *ref = render(&half, 0, &T0), *d1 = render(&full, 1, &T1);
@@ -499,7 +500,7 @@ BF_TEST(closed_loop_tracking_depends_only_on_the_relative_pose)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     room rm;
-    CHECK_OK(room_open(&rm, &K_SMALL, EVAL_NOISE_KINECT1));
+    CHECK_OK(room_open(&rm, &K_SMALL, SYNTH_NOISE_KINECT1));
     bf_se3 T0 = rm.scene.T_wc_view, d = small_motion();
     bf_se3 T1 = bf_se3_mul(&T0, &d);
     uint16_t *d0 = render(&rm, 0, &T0), *d1 = render(&rm, 1, &T1);
@@ -556,7 +557,7 @@ BF_TEST(icp_reduction_paths_agree)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     room rm;
-    CHECK_OK(room_open(&rm, &K_SMALL, EVAL_NOISE_KINECT1));
+    CHECK_OK(room_open(&rm, &K_SMALL, SYNTH_NOISE_KINECT1));
     bf_se3 T0 = rm.scene.T_wc_view, d = small_motion();
     bf_se3 T1 = bf_se3_mul(&T0, &d);
     uint16_t *d0 = render(&rm, 0, &T0), *d1 = render(&rm, 1, &T1);
@@ -659,9 +660,9 @@ BF_TEST(icp_tum_fr2_desk_b1_to_b2)
 /* ------------------------------------------------------------ hard cases */
 
 /* A floor-sized plane z = 0 seen from 1.5 m, 35 degrees from straight down. */
-static bf_status plane_scene(eval_scene *sc, bf_se3 *T0)
+static bf_status plane_scene(synth_scene *sc, bf_se3 *T0)
 {
-    eval_mesh m = {0};
+    mesh_data m = {0};
     m.n_verts = 4, m.n_tris = 2;
     m.xyz = malloc(12 * sizeof(float));
     m.tri = malloc(6 * sizeof(uint32_t));
@@ -670,25 +671,25 @@ static bf_status plane_scene(eval_scene *sc, bf_se3 *T0)
     uint32_t tr[6] = {0, 1, 2, 0, 2, 3};
     memcpy(m.xyz, v, sizeof v);
     memcpy(m.tri, tr, sizeof tr);
-    *T0 = eval_look_at(bf_v3(0, -1.05, 1.5), bf_v3(0, 0, 0), bf_v3(0, 0, 1));
-    return eval_scene_from_mesh(&m, T0, sc);
+    *T0 = synth_look_at(bf_v3(0, -1.05, 1.5), bf_v3(0, 0, 0), bf_v3(0, 0, 1));
+    return synth_scene_from_mesh(&m, T0, sc);
 }
 
-static void check_plane(eval_noise noise, double tol_m)
+static void check_plane(synth_noise noise, double tol_m)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    eval_scene sc;
+    synth_scene sc;
     bf_se3 T0;
     CHECK_OK(plane_scene(&sc, &T0));
-    eval_renderer *rr;
-    eval_render_config rc = {.K = K_MID, .noise = noise, .seed = 11};
-    CHECK_OK(eval_renderer_create(&sc, &rc, &rr));
+    synth_renderer *rr;
+    synth_render_config rc = {.K = K_MID, .noise = noise, .seed = 11};
+    CHECK_OK(synth_renderer_create(&sc, &rc, &rr));
     bf_se3 d = small_motion(), T1 = bf_se3_mul(&T0, &d);
     uint32_t n = K_MID.width * K_MID.height;
     uint16_t *d0 = malloc(n * 2), *d1 = malloc(n * 2);
-    CHECK_OK(eval_render(rr, 0, &T0, d0, NULL, NULL));
-    CHECK_OK(eval_render(rr, 1, &T1, d1, NULL, NULL));
+    CHECK_OK(synth_render(rr, 0, &T0, d0, NULL, NULL));
+    CHECK_OK(synth_render(rr, 1, &T1, d1, NULL, NULL));
     track_config cfg = test_config(&K_MID);
     track_tracker *t;
     CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
@@ -720,7 +721,7 @@ static void check_plane(eval_noise noise, double tol_m)
     double w_n = bf_v3_dot(bf_v3(xi[3], xi[4], xi[5]), n_c) * 180 / M_PI;
     fprintf(stderr, "  %s plane: %s, degenerate %d (eig ratio %.3g); off the plane %.2f mm at most; "
                     "in-plane shift %.3f mm, turn about the normal %.4f deg\n",
-            noise == EVAL_NOISE_NONE ? "noiseless" : "kinect1", track_outcome_name(r.outcome), r.degenerate,
+            noise == SYNTH_NOISE_NONE ? "noiseless" : "kinect1", track_outcome_name(r.outcome), r.degenerate,
             r.eig_min / r.eig_max, 1e3 * worst, 1e3 * bf_v3_norm(t_in), w_n);
     CHECK_EQ_INT(r.outcome, TRACK_OK);
     CHECK(r.degenerate);
@@ -729,16 +730,16 @@ static void check_plane(eval_noise noise, double tol_m)
     CHECK_LE(fabs(w_n), 0.05);
     track_destroy(t);
     free(d0), free(d1);
-    eval_renderer_destroy(rr);
-    eval_scene_free(&sc);
+    synth_renderer_destroy(rr);
+    synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
 
 BF_TEST(single_plane_is_degenerate_and_keeps_the_guess_in_weak_directions)
 {
-    check_plane(EVAL_NOISE_NONE, 0.001);
-    check_plane(EVAL_NOISE_KINECT1, 0.004);
+    check_plane(SYNTH_NOISE_NONE, 0.001);
+    check_plane(SYNTH_NOISE_KINECT1, 0.004);
 }
 
 BF_TEST(empty_saturated_and_nan_depth_are_reported_and_tracking_resumes)
@@ -746,7 +747,7 @@ BF_TEST(empty_saturated_and_nan_depth_are_reported_and_tracking_resumes)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     room rm;
-    CHECK_OK(room_open(&rm, &K_SMALL, EVAL_NOISE_KINECT1));
+    CHECK_OK(room_open(&rm, &K_SMALL, SYNTH_NOISE_KINECT1));
     uint32_t n = K_SMALL.width * K_SMALL.height;
     bf_se3 T0 = rm.scene.T_wc_view, d = small_motion();
     bf_se3 T1 = bf_se3_mul(&T0, &d);
@@ -822,7 +823,7 @@ BF_TEST(sudden_jump_of_30cm_20deg_is_a_failure)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     room rm;
-    CHECK_OK(room_open(&rm, &K_SMALL, EVAL_NOISE_KINECT1));
+    CHECK_OK(room_open(&rm, &K_SMALL, SYNTH_NOISE_KINECT1));
     bf_se3 T0 = rm.scene.T_wc_view;
     track_config cfg = test_config(&K_SMALL);
     track_tracker *t;

@@ -1,0 +1,38 @@
+/* hostmap: the sign-bit map as the host holds it: every live brick with its
+ * chunk, level, cell and bit planes, in plain memory. fusion fills one from
+ * the GPU (fusion_snapshot_take); export, the tests and, later, the scene
+ * store read it without Vulkan. Depends on core (and the brick layout in
+ * shaders/fusion.glsl.h). */
+#ifndef BF_HOSTMAP_H
+#define BF_HOSTMAP_H
+
+#include "core/core.h"
+
+/* One brick. Voxel (x, y, z) has its centre at
+ * origin_w + key * chunk_m + ((cell * 8 + (x, y, z)) + 0.5) * voxel_m(level),
+ * its sign bit at sign[brick_word(x,y,z)] >> brick_bit(x,y,z) (1 = in
+ * front of the surface), likewise its confidence bit. */
+typedef struct hostmap_brick {
+    int32_t key[3];      /* chunk coordinates */
+    uint32_t level;
+    uint32_t cell[3];    /* cell of the brick at its level inside the chunk, < 2^level */
+    float error;         /* average sigma of the window that last set it [m] */
+    uint32_t sign[16];
+    uint32_t conf[16];
+} hostmap_brick;
+
+typedef struct hostmap {
+    float chunk_m;
+    bf_vec3 origin_w;      /* world point of the map's origin (chunk (0,0,0)'s corner) */
+    uint32_t n_bricks;
+    hostmap_brick *bricks; /* malloc'd */
+} hostmap;
+
+/* Frees the bricks and leaves an empty map. NULL is a no-op. */
+void hostmap_free(hostmap *m);
+/* Voxel edge of a level [m]. */
+double hostmap_level_voxel_m(float chunk_m, uint32_t level);
+/* World position of voxel (x, y, z) of brick b. */
+bf_vec3 hostmap_voxel_center_w(const hostmap *m, const hostmap_brick *b, uint32_t x, uint32_t y, uint32_t z);
+
+#endif

@@ -1,0 +1,143 @@
+/* synth: synthetic RGB-D sequences with ground truth (`bitfuse synth`): a
+ * CPU ray tracer renders depth and colour of a scene along a trajectory,
+ * with a Kinect v1 noise model, into a TUM folder. Scenes (room.c), sensor
+ * model (noise.c), renderer (raytrace.c), sequences (synth.c). Depends on
+ * core, mesh and replay (the TUM-folder writer and trajectory files).
+ * See docs/synth.md. */
+#ifndef BF_SYNTH_H
+#define BF_SYNTH_H
+
+#include "core/core.h"
+#include "mesh/mesh.h"
+
+typedef enum synth_noise {
+    SYNTH_NOISE_NONE,    /* ideal sensor: exact depth, rounded to 1/depth_scale */
+    SYNTH_NOISE_KINECT1, /* Kinect v1 (Nguyen, Izadi, Lovell 2012): synth_kinect1_* */
+} synth_noise;
+
+/* Procedural materials: the albedo is a function of the world point, so no
+ * texture coordinates are needed. */
+typedef enum synth_material {
+    SYNTH_MAT_PLAIN,   /* flat grey (meshes given with --scene MESH.ply) */
+    SYNTH_MAT_FLOOR,   /* wooden planks */
+    SYNTH_MAT_WALL,    /* painted plaster with blotches and posters */
+    SYNTH_MAT_CEILING, /* off-white tiles */
+    SYNTH_MAT_TABLE,   /* dark wood */
+    SYNTH_MAT_BOX,     /* two-tone checker, colour by variant */
+    SYNTH_MAT_OBJECT,  /* mottled solid colour, colour by variant */
+    SYNTH_MAT_COUNT
+} synth_material;
+
+/* A scene to render: one mesh in world coordinates (metres) plus a material
+ * and a variant (which colour) per triangle. Owns all arrays. */
+typedef struct synth_scene {
+    mesh_data mesh;          /* world frame, metres; mesh.normal holds vertex normals */
+    uint8_t *tri_material;   /* synth_material, one per triangle */
+    uint8_t *tri_variant;    /* one per triangle */
+    bf_vec3 light_w;         /* point light for Lambert shading */
+    bf_se3 T_wc_view;        /* where the first camera of a trajectory is placed */
+    char desc[512];          /* what went in, for the log and stats.json */
+} synth_scene;
+
+/* The procedural room (room.c): 4 x 3.5 x 2.5 m, z up, floor at z = 0, with a
+ * table, boxes and, when data_dir/meshes holds them, the bunny, armadillo and
+ * dragon scaled to 15-25 cm standing on the table. data_dir may be NULL or
+ * lack the meshes: the room is built without them (logged). */
+bf_status synth_scene_room(const char *data_dir, synth_scene *out);
+/* A scene of one PLY mesh, vertices multiplied by scale (metres after
+ * scaling). The view looks at the mesh's box centre along -z from where its
+ * bounding sphere fills the image (fx = 525, 480 rows), y up. */
+bf_status synth_scene_from_ply(const char *path, double scale, synth_scene *out);
+/* Takes ownership of mesh (left zeroed) as a scene with material PLAIN and
+ * the given view; for tests and custom scenes. Computes vertex normals. */
+bf_status synth_scene_from_mesh(mesh_data *mesh, const bf_se3 *T_wc_view, synth_scene *out);
+void synth_scene_free(synth_scene *s); /* NULL is a no-op */
+/* Camera-to-world pose of a camera at eye looking at target (camera x
+ * right, y down, z forward; up_w is the world's up). */
+bf_se3 synth_look_at(bf_vec3 eye_w, bf_vec3 target_w, bf_vec3 up_w);
+
+/* Kinect v1 sensor model (noise.c). z in metres along the optical axis,
+ * theta the angle between the viewing ray and the surface normal. */
+#define SYNTH_KINECT1_BASELINE_M 0.075  /* projector - IR camera */
+#define SYNTH_KINECT1_DISP_STEP_PX 0.125 /* disparity in 1/8 pixel steps */
+#define SYNTH_KINECT1_Z_MIN_M 0.5
+#define SYNTH_KINECT1_Z_MAX_M 4.5
+#define SYNTH_KINECT1_MAX_THETA_DEG 80.0 /* no depth at more grazing angles */
+/* Axial (depth) standard deviation of Nguyen et al. 2012, eq. (2) and (3):
+ * 0.0012 + 0.0019 (z - 0.4)^2 [+ 0.0001 / sqrt(z) theta^2 / (pi/2 - theta)^2
+ * beyond 60 degrees]. This is the total, quantisation included. */
+double synth_kinect1_axial_sigma(double z_m, double theta_rad);
+/* Lateral standard deviation in pixels: 0.8 + 0.035 theta / (pi/2 - theta). */
+double synth_kinect1_lateral_sigma_px(double theta_rad);
+/* Depth step of the disparity quantisation at z: z^2 step / (baseline fx). */
+double synth_kinect1_depth_step(double z_m, double fx_px);
+/* The Gaussian part: sqrt(axial^2 - step^2 / 12), so that the Gaussian plus
+ * the (uniform) quantisation error have the model's variance. */
+double synth_kinect1_gauss_sigma(double z_m, double theta_rad, double fx_px);
+/* Depth after quantising its disparity on the grid (k + offset) * step,
+ * offset in [0, 1); z <= 0 gives 0. */
+double synth_kinect1_quantize(double z_m, double fx_px, double offset);
+
+/* The renderer: one per image size and scene, reused for every frame. */
+typedef struct synth_render_config {
+    bf_intrinsics K;   /* size, pinhole (ray through the pixel centre), depth_scale */
+    synth_noise noise;
+    uint64_t seed;
+} synth_render_config;
+
+typedef struct synth_render_stats {
+    uint32_t n_hit;    /* pixels whose ray hit the scene */
+    uint32_t n_valid;  /* pixels with depth after the sensor model */
+    double seconds;
+} synth_render_stats;
+
+typedef struct synth_renderer synth_renderer;
+/* Builds the scene's BVH and the image buffers. The scene is borrowed and
+ * must outlive the renderer. */
+bf_status synth_renderer_create(const synth_scene *scene, const synth_render_config *cfg, synth_renderer **out);
+void synth_renderer_destroy(synth_renderer *r); /* NULL is a no-op */
+/* Renders the frame numbered frame (it keys the noise) at camera pose T_wc
+ * into depth (width*height raw units, 0 = none) and rgb (width*height*3,
+ * may be NULL). Multi-threaded; the result depends only on the scene, the
+ * config, frame and T_wc. st may be NULL. */
+bf_status synth_render(synth_renderer *r, uint32_t frame, const bf_se3 *T_wc, uint16_t *depth, uint8_t *rgb,
+                      synth_render_stats *st);
+/* The noise-free world point seen at pixel (u, v) in the last synth_render,
+ * true only if that pixel got valid depth. */
+bool synth_render_clean_point(const synth_renderer *r, uint32_t u, uint32_t v, bf_vec3 *p_w);
+
+/* A whole sequence (synth.c): what `bitfuse synth` runs. */
+typedef struct synth_config {
+    const char *scene;      /* "room" or a PLY path */
+    const char *data_dir;   /* shared data for the room's meshes; NULL = none */
+    double mesh_scale;      /* for a PLY scene; 0 = 1 */
+    const char *traj_path;  /* TUM trajectory the camera follows */
+    uint32_t n_frames;      /* frames to render (fewer if the trajectory ends) */
+    double rate_hz;         /* 0 = 30 */
+    synth_noise noise;
+    uint64_t seed;
+    bf_intrinsics K;        /* size 0 = 640x480; fx 0 = 525, 525, (w-1)/2, (h-1)/2;
+                               depth_scale 0 = 5000 */
+    const char *out_dir;
+    double seen_cell_m;     /* seen.ply grid; 0 = 0.005 */
+} synth_config;
+
+typedef struct synth_result {
+    uint32_t n_frames;      /* written */
+    double mean_frame_s, median_frame_s; /* render time per frame */
+    double total_s;         /* wall time of the whole run (scene, BVH, PNGs, ...) */
+    double valid_share;     /* valid depth pixels / all pixels */
+    bf_se3 T_world_traj;    /* placement: rendered pose = T_world_traj * trajectory pose */
+    uint32_t n_seen;        /* points in seen.ply */
+    uint32_t n_scene_tris;
+} synth_result;
+
+/* Renders cfg->n_frames frames at cfg->rate_hz from the trajectory's first
+ * timestamp, poses interpolated (bf_traj_interpolate) and placed by
+ * T_world_traj = scene.T_wc_view * inv(first pose), and writes out_dir:
+ * rgb/, depth/, rgb.txt, depth.txt, groundtruth.txt (rendered poses),
+ * camera.txt, scene.ply, seen.ply, stats.json. A trajectory shorter than
+ * requested stops early with a warning; no frame at all is BF_INVALID_ARG. */
+bf_status synth_run(const synth_config *cfg, synth_result *out);
+
+#endif
