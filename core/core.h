@@ -240,6 +240,25 @@ bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name)
 bool bf_parse_double(const char *s, double *out);
 bool bf_parse_u32(const char *s, uint32_t *out);
 
+/* ---------------------------------------------------------------- fault injection */
+
+/* One hook for tests to walk every failure path (SQLite's FAULT_INSTALL and
+ * tempfault idea): after bf_fault_arm(n), the n-th fault point reached from
+ * then on, in any thread, fails (and the countdown stops at 0). The fault
+ * points are the checked Vulkan calls in gpu/ and the host allocations of
+ * the modules that go through bf_malloc / bf_calloc / bf_realloc (fusion,
+ * replay, mesh, eval, export, core's trajectories). bf_fault_arm(0)
+ * disarms and returns the countdown it replaced: non-zero means the fault
+ * never fired, so the walk is past the last point. Never armed in the
+ * product: a disarmed point costs one atomic load. */
+uint32_t bf_fault_arm(uint32_t n);
+/* True exactly when an armed countdown reaches this point. */
+bool bf_fault_now(void);
+/* malloc, calloc, realloc, or NULL where a fault fires. */
+void *bf_malloc(size_t size);
+void *bf_calloc(size_t n, size_t size);
+void *bf_realloc(void *p, size_t size);
+
 /* ---------------------------------------------------------------- trajectories */
 
 /* Timestamped camera poses (camera to world, metres), as a TUM trajectory

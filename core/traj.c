@@ -11,10 +11,10 @@ bf_status bf_traj_push(bf_traj *traj, double t_s, const bf_se3 *T_wc)
     if (traj->n >= traj->cap) {
         size_t cap = traj->cap > traj->n ? traj->cap : traj->n;
         cap = cap < 64 ? 64 : 2 * cap;
-        double *t = realloc(traj->t_s, cap * sizeof *t);
+        double *t = bf_realloc(traj->t_s, cap * sizeof *t);
         if (!t) return bf_fail(BF_NO_MEMORY, "trajectory of %zu poses", cap);
         traj->t_s = t;
-        bf_se3 *T = realloc(traj->T_wc, cap * sizeof *T);
+        bf_se3 *T = bf_realloc(traj->T_wc, cap * sizeof *T);
         if (!T) return bf_fail(BF_NO_MEMORY, "trajectory of %zu poses", cap);
         traj->T_wc = T;
         traj->cap = cap;
@@ -98,7 +98,7 @@ bf_status bf_associate_stamps(const double *t_a, size_t n_a, const double *t_b, 
             }
             if (n == cap) {
                 size_t nc = cap ? 2 * cap : 1024;
-                assoc_cand *nb = realloc(c, nc * sizeof *nb);
+                assoc_cand *nb = bf_realloc(c, nc * sizeof *nb);
                 if (!nb) {
                     free(c);
                     return bf_fail(BF_NO_MEMORY, "associating %zu with %zu timestamps", n_a, n_b);
@@ -110,7 +110,7 @@ bf_status bf_associate_stamps(const double *t_a, size_t n_a, const double *t_b, 
         }
     }
     if (n) qsort(c, n, sizeof *c, assoc_cand_cmp);
-    bool *is_b_used = calloc(n_b ? n_b : 1, 1);
+    bool *is_b_used = bf_calloc(n_b ? n_b : 1, 1);
     if (!is_b_used) {
         free(c);
         return bf_fail(BF_NO_MEMORY, "associating %zu with %zu timestamps", n_a, n_b);

@@ -105,7 +105,7 @@ static uint32_t kd_build_node(kd_build *kb, size_t lo, size_t hi, const float bo
 bf_status eval__kdtree_build(const float *xyz, size_t n, eval_kdtree **out)
 {
     if (n >= UINT32_MAX) return bf_fail(BF_INVALID_ARG, "kd-tree: %zu points (at most 2^32-2)", n);
-    eval_kdtree *t = calloc(1, sizeof *t);
+    eval_kdtree *t = bf_calloc(1, sizeof *t);
     kd_build kb = {0};
     if (!t) goto oom;
     t->n = n;
@@ -113,9 +113,9 @@ bf_status eval__kdtree_build(const float *xyz, size_t n, eval_kdtree **out)
      * a node with more than EVAL__KD_LEAF), so there are fewer than
      * 2n / EVAL__KD_LEAF + 1 leaves and twice that many nodes. */
     kb.cap = 2 * (2 * n / EVAL__KD_LEAF + 1) + 1;
-    kb.nodes = malloc(kb.cap * sizeof *kb.nodes);
-    kb.idx = malloc((n ? n : 1) * sizeof *kb.idx);
-    kb.pts = malloc((n ? n : 1) * 3 * sizeof *kb.pts);
+    kb.nodes = bf_malloc(kb.cap * sizeof *kb.nodes);
+    kb.idx = bf_malloc((n ? n : 1) * sizeof *kb.idx);
+    kb.pts = bf_malloc((n ? n : 1) * 3 * sizeof *kb.pts);
     if (!kb.nodes || !kb.idx || !kb.pts) goto oom;
     if (n) memcpy(kb.pts, xyz, n * 3 * sizeof *kb.pts);
     for (size_t i = 0; i < n; i++) kb.idx[i] = (uint32_t)i;

@@ -100,7 +100,7 @@ bf_status eval_mesh_sample_area(const mesh_data *m, double samples_per_m2, uint6
         if (m->tri[i] >= m->n_verts)
             return bf_fail(BF_INVALID_ARG, "surface sampling: triangle %zu uses vertex %u of %u", i / 3,
                            m->tri[i], m->n_verts);
-    double *cdf = malloc((m->n_tris ? m->n_tris : 1) * sizeof *cdf);
+    double *cdf = bf_malloc((m->n_tris ? m->n_tris : 1) * sizeof *cdf);
     if (!cdf) return bf_fail(BF_NO_MEMORY, "surface sampling: out of memory");
     double total = 0;
     for (size_t i = 0; i < m->n_tris; i++) {
@@ -122,8 +122,8 @@ bf_status eval_mesh_sample_area(const mesh_data *m, double samples_per_m2, uint6
         free(cdf);
         return bf_fail(BF_INVALID_ARG, "surface sampling: %zu samples are too many", n);
     }
-    float *p = malloc(n * 3 * sizeof *p);
-    uint32_t *ti = tri ? malloc(n * sizeof *ti) : NULL;
+    float *p = bf_malloc(n * 3 * sizeof *p);
+    uint32_t *ti = tri ? bf_malloc(n * sizeof *ti) : NULL;
     if (!p || (tri && !ti)) {
         free(cdf);
         free(p);
@@ -193,7 +193,7 @@ static void run_distances(const float *pts, size_t n, surf_target tgt, double ma
 /* Statistics of d[0..n) (INFINITY = nothing within max_dist). */
 static bf_status dist_stats(const double *d, size_t n, double threshold, double max_dist, eval_dist_stats *out)
 {
-    double *v = malloc((n ? n : 1) * sizeof *v);
+    double *v = bf_malloc((n ? n : 1) * sizeof *v);
     if (!v) return bf_fail(BF_NO_MEMORY, "surface error: out of memory for %zu distances", n);
     eval_dist_stats s = {0};
     double sum = 0, sum2 = 0, mx = 0;
@@ -258,8 +258,8 @@ bf_status eval_surface(const mesh_data *ref, const mesh_data *rec, const mesh_da
                                    &rec_samples, NULL, &n_rec_samples)))
         goto done;
     size_t n_acc = (size_t)rec->n_verts + n_rec_samples;
-    rec_pts = malloc(n_acc * 3 * sizeof *rec_pts);
-    acc = malloc(n_acc * sizeof *acc);
+    rec_pts = bf_malloc(n_acc * 3 * sizeof *rec_pts);
+    acc = bf_malloc(n_acc * sizeof *acc);
     if (!rec_pts || !acc) {
         s = bf_fail(BF_NO_MEMORY, "surface error: out of memory for %zu points", n_acc);
         goto done;
@@ -293,8 +293,8 @@ bf_status eval_surface(const mesh_data *ref, const mesh_data *rec, const mesh_da
     if (rec->n_tris) {
         if ((s = mesh_bvh_build(rec, &rec_bvh))) goto done;
         to_rec.bvh = rec_bvh;
-        uint8_t *used = calloc(rec->n_verts, 1);
-        loose = malloc((size_t)rec->n_verts * 3 * sizeof *loose);
+        uint8_t *used = bf_calloc(rec->n_verts, 1);
+        loose = bf_malloc((size_t)rec->n_verts * 3 * sizeof *loose);
         if (!used || !loose) {
             free(used);
             s = bf_fail(BF_NO_MEMORY, "surface error: out of memory");
@@ -313,7 +313,7 @@ bf_status eval_surface(const mesh_data *ref, const mesh_data *rec, const mesh_da
         if ((s = eval__kdtree_build(rec->xyz, rec->n_verts, &rec_kd))) goto done;
         to_rec.kd = rec_kd;
     }
-    comp = malloc((n_comp ? n_comp : 1) * sizeof *comp);
+    comp = bf_malloc((n_comp ? n_comp : 1) * sizeof *comp);
     if (!comp) {
         s = bf_fail(BF_NO_MEMORY, "surface error: out of memory for %zu points", n_comp);
         goto done;

@@ -18,7 +18,7 @@
 bf_status eval_err_stats_compute(const double *v, size_t n, eval_err_stats *out)
 {
     if (n == 0) return bf_fail(BF_INVALID_ARG, "error statistics of an empty set");
-    double *tmp = malloc(n * sizeof *tmp);
+    double *tmp = bf_malloc(n * sizeof *tmp);
     if (!tmp) return bf_fail(BF_NO_MEMORY, "out of memory for %zu errors", n);
     double sum = 0, sum2 = 0, lo = INFINITY, hi = -INFINITY;
     for (size_t i = 0; i < n; i++) {
@@ -123,8 +123,8 @@ bf_status eval_associate(const bf_traj *gt, const bf_traj *est, double max_dt_s,
     if (max_dt_s <= 0) max_dt_s = EVAL_TUM_MAX_DT_S;
     /* TUM associate.py (bf_associate_stamps); matches are returned in
      * the order of the first stamp, as the script returns them. */
-    size_t *est_of = malloc(gt->n * sizeof *est_of);
-    eval_match *m = malloc(gt->n * sizeof *m);
+    size_t *est_of = bf_malloc(gt->n * sizeof *est_of);
+    eval_match *m = bf_malloc(gt->n * sizeof *m);
     if (!est_of || !m) {
         free(est_of);
         free(m);
@@ -158,8 +158,8 @@ bf_status eval_ate(const bf_traj *gt, const bf_traj *est, double max_dt_s, eval_
                                   "are these the same sequence?",
                        n, max_dt_s > 0 ? max_dt_s : EVAL_TUM_MAX_DT_S);
     }
-    bf_vec3 *p_est = malloc(n * sizeof *p_est), *p_gt = malloc(n * sizeof *p_gt);
-    double *err = malloc(n * sizeof *err);
+    bf_vec3 *p_est = bf_malloc(n * sizeof *p_est), *p_gt = bf_malloc(n * sizeof *p_gt);
+    double *err = bf_malloc(n * sizeof *err);
     if (!p_est || !p_gt || !err) {
         s = bf_fail(BF_NO_MEMORY, "out of memory for %zu pose pairs", n);
         goto done;
@@ -219,9 +219,9 @@ bf_status eval_rpe(const bf_traj *gt, const bf_traj *est, double max_dt_s, bool 
     if (gt->n < 2 || est->n < 2)
         return bf_fail(BF_FORMAT, "RPE: needs at least two poses in each trajectory");
     size_t n = est->n;
-    double *index = malloc(n * sizeof *index);
-    double *gap = malloc((gt->n - 1) * sizeof *gap);
-    double *e_t = malloc(n * sizeof *e_t), *e_r = malloc(n * sizeof *e_r);
+    double *index = bf_malloc(n * sizeof *index);
+    double *gap = bf_malloc((gt->n - 1) * sizeof *gap);
+    double *e_t = bf_malloc(n * sizeof *e_t), *e_r = bf_malloc(n * sizeof *e_r);
     if (!index || !gap || !e_t || !e_r) {
         s = bf_fail(BF_NO_MEMORY, "out of memory for RPE over %zu poses", n);
         goto done;

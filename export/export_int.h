@@ -82,15 +82,6 @@ double export__grid_field_nb(const export__grid *g, uint32_t level, const int64_
 /* Field of one voxel (level-L global coordinates), NAN when it has none. */
 double export__grid_voxel_field(const export__grid *g, uint32_t level, const int64_t v[3]);
 
-/* Allocation with fault injection for the tests (SQLite's FAULT_INSTALL
- * idea): when export__fail_countdown is set to n > 0, the n-th allocation
- * from then on returns NULL (and the countdown stops at 0). Every
- * allocation in export/ goes through these. */
-extern _Atomic long export__fail_countdown;
-void *export__malloc(size_t size);
-void *export__calloc(size_t n, size_t size);
-void *export__realloc(void *p, size_t size);
-
 static inline bool export__bit(const uint32_t *words, uint32_t x, uint32_t y, uint32_t z)
 {
     return (words[brick_word(x, y, z)] >> brick_bit(x, y, z)) & 1u;

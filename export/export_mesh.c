@@ -175,7 +175,7 @@ static bool out_reserve(brick_out *o, size_t more)
     if (o->n + more <= o->cap) return true;
     size_t cap = o->cap ? o->cap * 2 : 192;
     while (cap < o->n + more) cap *= 2;
-    tri_vert *v = export__realloc(o->v, cap * sizeof *v);
+    tri_vert *v = bf_realloc(o->v, cap * sizeof *v);
     if (!v) return false;
     o->v = v;
     o->cap = cap;
@@ -367,7 +367,7 @@ static void mesh_coarse(const mesh_job *j, uint32_t i, brick_out *o)
                 }
             }
     size_t nk = (size_t)(k + 1);
-    corner *cr = export__malloc(nk * nk * nk * sizeof *cr);
+    corner *cr = bf_malloc(nk * nk * nk * sizeof *cr);
     if (!cr) {
         o->failed = true;
         return;
@@ -500,10 +500,10 @@ static bf_status taubin(double *pos, uint32_t n_verts, const uint32_t *tri, uint
                         uint32_t iterations)
 {
     if (iterations == 0 || n_verts == 0) return BF_OK;
-    uint32_t *start = export__calloc((size_t)n_verts + 1, sizeof *start);
-    uint32_t *nb = export__malloc((size_t)n_tris * 6 * sizeof *nb);
-    uint32_t *fill = export__malloc((size_t)n_verts * sizeof *fill);
-    double *tmp = export__malloc((size_t)n_verts * 3 * sizeof *tmp);
+    uint32_t *start = bf_calloc((size_t)n_verts + 1, sizeof *start);
+    uint32_t *nb = bf_malloc((size_t)n_tris * 6 * sizeof *nb);
+    uint32_t *fill = bf_malloc((size_t)n_verts * sizeof *fill);
+    double *tmp = bf_malloc((size_t)n_verts * 3 * sizeof *tmp);
     if (!start || !nb || !fill || !tmp) {
         free(start), free(nb), free(fill), free(tmp);
         return bf_fail(BF_NO_MEMORY, "export: no memory to smooth %u vertices", n_verts);
@@ -579,7 +579,7 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
     for (uint32_t k = 0; k < g.n; k++) sx.bricks_per_level[export__level_slot(s->bricks[g.order[k]].level)]++;
     if (g.n == 0) goto done;
 
-    bo = export__calloc(g.n, sizeof *bo);
+    bo = bf_calloc(g.n, sizeof *bo);
     if (!bo) goto fail_mem;
     /* Batches only so that a progress line can follow long exports. */
     mesh_job job = {&g, lo, bo, 0};
@@ -611,9 +611,9 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
     uint64_t cap = 16;
     while (cap <= n_tv) cap <<= 1;
     size_t pos_cap = n_tv / 4 + 16; /* grown below if the mesh has many rim vertices */
-    ws = export__malloc(cap * sizeof *ws);
-    m.tri = export__malloc(n_tv * sizeof *m.tri);
-    pos = export__malloc(pos_cap * 3 * sizeof *pos);
+    ws = bf_malloc(cap * sizeof *ws);
+    m.tri = bf_malloc(n_tv * sizeof *m.tri);
+    pos = bf_malloc(pos_cap * 3 * sizeof *pos);
     if (!ws || !m.tri || !pos) goto fail_mem;
     for (uint64_t k = 0; k < cap; k++) ws[k].idx = UINT32_MAX;
     size_t t_i = 0;
@@ -627,7 +627,7 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
             while (ws[sl].idx != UINT32_MAX && (ws[sl].k0 != tv->k0 || ws[sl].k1 != tv->k1)) sl = (sl + 1) & (cap - 1);
             if (ws[sl].idx == UINT32_MAX) {
                 if (m.n_verts == pos_cap) {
-                    double *p = export__realloc(pos, pos_cap * 2 * 3 * sizeof *pos);
+                    double *p = bf_realloc(pos, pos_cap * 2 * 3 * sizeof *pos);
                     if (!p) goto fail_mem;
                     pos = p;
                     pos_cap *= 2;
@@ -653,9 +653,9 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
     /* Positions stay relative to origin_w while smoothing (small numbers). */
     rc = taubin(pos, m.n_verts, m.tri, m.n_tris, c.taubin_lambda, c.taubin_mu, c.taubin_iterations);
     if (rc != BF_OK) goto fail;
-    m.xyz = export__malloc((size_t)m.n_verts * 3 * sizeof *m.xyz);
-    m.normal = export__calloc((size_t)m.n_verts * 3, sizeof *m.normal);
-    double *acc = export__calloc((size_t)m.n_verts * 3, sizeof *acc);
+    m.xyz = bf_malloc((size_t)m.n_verts * 3 * sizeof *m.xyz);
+    m.normal = bf_calloc((size_t)m.n_verts * 3, sizeof *m.normal);
+    double *acc = bf_calloc((size_t)m.n_verts * 3, sizeof *acc);
     if (!m.xyz || !m.normal || !acc) {
         free(acc);
         goto fail_mem;

@@ -111,8 +111,8 @@ static void points_brick(void *ctx, size_t k)
                 n++;
             }
     if (n == 0) return;
-    o->xyz = export__malloc(n * 3 * sizeof *o->xyz);
-    o->normal = export__malloc(n * 3 * sizeof *o->normal);
+    o->xyz = bf_malloc(n * 3 * sizeof *o->xyz);
+    o->normal = bf_malloc(n * 3 * sizeof *o->normal);
     if (!o->xyz || !o->normal) {
         o->failed = true;
         return;
@@ -138,7 +138,7 @@ bf_status export_points(const hostmap *s, mesh_data *out, export_stats *st)
     point_out *po = NULL;
     for (uint32_t k = 0; k < g.n; k++) sx.bricks_per_level[export__level_slot(s->bricks[g.order[k]].level)]++;
     if (g.n) {
-        po = export__calloc(g.n, sizeof *po);
+        po = bf_calloc(g.n, sizeof *po);
         if (!po) goto fail_mem;
         point_job job = {&g, po};
         bf_parallel_for(g.n, points_brick, &job);
@@ -153,8 +153,8 @@ bf_status export_points(const hostmap *s, mesh_data *out, export_stats *st)
             goto fail;
         }
         if (n) {
-            m.xyz = export__malloc(n * 3 * sizeof *m.xyz);
-            m.normal = export__malloc(n * 3 * sizeof *m.normal);
+            m.xyz = bf_malloc(n * 3 * sizeof *m.xyz);
+            m.normal = bf_malloc(n * 3 * sizeof *m.normal);
             if (!m.xyz || !m.normal) goto fail_mem;
             for (uint32_t k = 0; k < g.n; k++) {
                 if (po[k].n == 0) continue;

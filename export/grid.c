@@ -2,25 +2,10 @@
  * global brick coordinates) to the snapshot's bricks, the finest-confident-
  * voxel lookup and the smoothed sign field. */
 #include <math.h>
-#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "export_int.h"
-
-_Atomic long export__fail_countdown = 0;
-
-static bool fault(void)
-{
-    long n = export__fail_countdown;
-    while (n > 0)
-        if (atomic_compare_exchange_weak(&export__fail_countdown, &n, n - 1)) return n == 1;
-    return false;
-}
-
-void *export__malloc(size_t size) { return fault() ? NULL : malloc(size); }
-void *export__calloc(size_t n, size_t size) { return fault() ? NULL : calloc(n, size); }
-void *export__realloc(void *p, size_t size) { return fault() ? NULL : realloc(p, size); }
 
 static uint64_t hash_key(uint32_t level, const int64_t b[3])
 {
@@ -277,11 +262,11 @@ bf_status export__grid_build(const hostmap *s, bool with_field, export__grid *g)
     uint64_t cap = 16;
     while (cap < 2ull * s->n_bricks) cap <<= 1;
     g->mask = cap - 1;
-    g->slots = export__malloc(cap * sizeof *g->slots);
-    g->bc = export__malloc((size_t)s->n_bricks * sizeof *g->bc);
-    g->has_finer = export__calloc(s->n_bricks, 1);
-    g->order = export__malloc((size_t)s->n_bricks * sizeof *g->order);
-    if (with_field) g->sfield = export__malloc((size_t)s->n_bricks * BRICK_VOXELS);
+    g->slots = bf_malloc(cap * sizeof *g->slots);
+    g->bc = bf_malloc((size_t)s->n_bricks * sizeof *g->bc);
+    g->has_finer = bf_calloc(s->n_bricks, 1);
+    g->order = bf_malloc((size_t)s->n_bricks * sizeof *g->order);
+    if (with_field) g->sfield = bf_malloc((size_t)s->n_bricks * BRICK_VOXELS);
     if (!g->slots || !g->bc || !g->has_finer || !g->order || (with_field && !g->sfield)) goto fail_mem;
     for (uint64_t k = 0; k < cap; k++) g->slots[k].idx = EXPORT__NONE;
     for (uint32_t i = 0; i < s->n_bricks; i++) {

@@ -8,18 +8,6 @@
 #include <string.h>
 
 _Atomic uint32_t gpu__messages_total;
-static _Atomic uint32_t fault_countdown; /* 0: disarmed */
-
-uint32_t gpu_debug_fail_after(uint32_t n_calls) { return atomic_exchange(&fault_countdown, n_calls); }
-
-bool gpu__fault_now(void)
-{
-    uint32_t n = atomic_load(&fault_countdown);
-    while (n > 0 && !atomic_compare_exchange_weak(&fault_countdown, &n, n - 1)) {
-    }
-    return n == 1;
-}
-
 static const char *const validation_layer = "VK_LAYER_KHRONOS_validation";
 
 /* ------------------------------------------------------------ results */

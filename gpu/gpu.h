@@ -320,13 +320,9 @@ typedef struct gpu_stage_time {
  * the next gpu_begin. Returns their number. */
 uint32_t gpu_stage_times(const gpu_context *ctx, const gpu_stage_time **out);
 
-/* ------------------------------------------------------------ testing */
-
-/* Fault injection for tests (SQLite's tempfault idea): the n-th checked
- * Vulkan call from now, in any context of the process, is not made and fails
- * with VK_ERROR_OUT_OF_DEVICE_MEMORY; 0 disarms. Returns the countdown it
- * replaces: non-zero means the previous fault never fired. Lets a test walk
- * every failure path and require a clean status and no leaked object. */
-uint32_t gpu_debug_fail_after(uint32_t n_calls);
+/* Fault injection for tests: every checked Vulkan call is a fault point of
+ * core's bf_fault_arm and fails with VK_ERROR_OUT_OF_DEVICE_MEMORY there,
+ * so a test can walk every failure path and require a clean status and no
+ * leaked object. */
 
 #endif

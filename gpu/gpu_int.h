@@ -176,10 +176,9 @@ struct gpu_bindings {
 
 extern _Atomic uint32_t gpu__messages_total;
 
-/* Fault injection (gpu_debug_fail_after): true when the armed countdown
- * reaches this call, which then is not made and fails instead. */
-bool gpu__fault_now(void);
-#define GPU__CALL(call) (gpu__fault_now() ? VK_ERROR_OUT_OF_DEVICE_MEMORY : (call))
+/* A fault point (core's bf_fault_arm): when the armed countdown reaches
+ * this call, it is not made and fails instead. */
+#define GPU__CALL(call) (bf_fault_now() ? VK_ERROR_OUT_OF_DEVICE_MEMORY : (call))
 
 /* Maps a VkResult to a status and records "call: object: VK_ERROR_..." */
 bf_status gpu__vk_fail(VkResult r, const char *call, const char *object);

@@ -208,19 +208,19 @@ bf_status mesh_bvh_build(const mesh_data *m, mesh_bvh **out)
         if (m->tri[i] >= m->n_verts)
             return bf_fail(BF_INVALID_ARG, "mesh_bvh_build: triangle %zu: vertex index %u out of range (%u vertices)",
                            i / 3, m->tri[i], m->n_verts);
-    mesh_bvh *b = calloc(1, sizeof *b);
+    mesh_bvh *b = bf_calloc(1, sizeof *b);
     double *box_lo = NULL, *box_hi = NULL, *centroid = NULL;
     uint32_t *prim = NULL;
     if (!b) goto fail;
     b->mesh = m;
     b->n_tris = n;
     if (n > 0) {
-        box_lo = malloc(3 * sizeof(double) * n);
-        box_hi = malloc(3 * sizeof(double) * n);
-        centroid = malloc(3 * sizeof(double) * n);
-        prim = malloc(sizeof(uint32_t) * n);
-        b->nodes = malloc(sizeof(bvh_node) * (2 * (size_t)n - 1));
-        b->tris = malloc(sizeof(bvh_tri) * n);
+        box_lo = bf_malloc(3 * sizeof(double) * n);
+        box_hi = bf_malloc(3 * sizeof(double) * n);
+        centroid = bf_malloc(3 * sizeof(double) * n);
+        prim = bf_malloc(sizeof(uint32_t) * n);
+        b->nodes = bf_malloc(sizeof(bvh_node) * (2 * (size_t)n - 1));
+        b->tris = bf_malloc(sizeof(bvh_tri) * n);
         if (!box_lo || !box_hi || !centroid || !prim || !b->nodes || !b->tris) goto fail;
         for (uint32_t t = 0; t < n; t++) {
             double *lo = box_lo + 3 * (size_t)t, *hi = box_hi + 3 * (size_t)t;

@@ -256,7 +256,7 @@ static bf_status ply_tris_push(ply_tris *t, uint32_t a, uint32_t b, uint32_t c)
 {
     if (t->n == t->cap) {
         size_t nc = t->cap ? 2 * t->cap : 1024;
-        uint32_t *nv = realloc(t->v, nc * 3 * sizeof *nv);
+        uint32_t *nv = bf_realloc(t->v, nc * 3 * sizeof *nv);
         if (!nv) return bf_fail(BF_NO_MEMORY, "out of memory for %zu triangles", nc);
         t->v = nv;
         t->cap = nc;
@@ -495,7 +495,7 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
     if (s) return s;
 
     ply_format fmt = PLY_ASCII;
-    ply_element *els = calloc(PLY_MAX_ELEMENTS, sizeof *els);
+    ply_element *els = bf_calloc(PLY_MAX_ELEMENTS, sizeof *els);
     mesh_data m = {0};
     ply_tris tris = {0};
     if (!els) {
@@ -564,9 +564,9 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
     }
     m.n_verts = (uint32_t)vel->count;
     size_t nv = (size_t)m.n_verts;
-    m.xyz = malloc((nv ? nv : 1) * 3 * sizeof *m.xyz);
-    if ((have & nrm) == nrm) m.normal = malloc((nv ? nv : 1) * 3 * sizeof *m.normal);
-    if ((have & rgb) == rgb) m.rgb = malloc((nv ? nv : 1) * 3);
+    m.xyz = bf_malloc((nv ? nv : 1) * 3 * sizeof *m.xyz);
+    if ((have & nrm) == nrm) m.normal = bf_malloc((nv ? nv : 1) * 3 * sizeof *m.normal);
+    if ((have & rgb) == rgb) m.rgb = bf_malloc((nv ? nv : 1) * 3);
     if (!m.xyz || ((have & nrm) == nrm && !m.normal) || ((have & rgb) == rgb && !m.rgb)) {
         s = bf_fail(BF_NO_MEMORY, "%s: out of memory for %u vertices", path, m.n_verts);
         goto fail;
@@ -648,7 +648,7 @@ bf_status mesh_write_ply(const char *path, const mesh_data *m)
                       m->n_tris);
     size_t vsize = 12 + (m->normal ? 12 : 0) + (m->rgb ? 3 : 0);
     size_t size = (size_t)hl + (size_t)m->n_verts * vsize + (size_t)m->n_tris * 13;
-    uint8_t *buf = malloc(size);
+    uint8_t *buf = bf_malloc(size);
     if (!buf) return bf_fail(BF_NO_MEMORY, "%s: out of memory for %zu bytes", path, size);
     uint8_t *p = buf;
     memcpy(p, header, (size_t)hl);
@@ -695,10 +695,10 @@ bf_status mesh_append(mesh_data *dst, const mesh_data *src, const bf_se3 *T)
     bool has_normal = is_empty ? src->normal != NULL : (dst->normal || src->normal);
     bool has_rgb = is_empty ? src->rgb != NULL : (dst->rgb || src->rgb);
     size_t alloc_v = nv ? nv : 1, alloc_t = nt ? nt : 1;
-    float *xyz = malloc(alloc_v * 3 * sizeof *xyz);
-    float *normal = has_normal ? malloc(alloc_v * 3 * sizeof *normal) : NULL;
-    uint8_t *rgb = has_rgb ? malloc(alloc_v * 3) : NULL;
-    uint32_t *tri = malloc(alloc_t * 3 * sizeof *tri);
+    float *xyz = bf_malloc(alloc_v * 3 * sizeof *xyz);
+    float *normal = has_normal ? bf_malloc(alloc_v * 3 * sizeof *normal) : NULL;
+    uint8_t *rgb = has_rgb ? bf_malloc(alloc_v * 3) : NULL;
+    uint32_t *tri = bf_malloc(alloc_t * 3 * sizeof *tri);
     if (!xyz || !tri || (has_normal && !normal) || (has_rgb && !rgb)) {
         free(xyz);
         free(normal);

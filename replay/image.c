@@ -107,7 +107,7 @@ static bf_status png_decode_body(png_structp png, png_infop info, const char *pa
     if (png_get_rowbytes(png, info) != row_bytes)
         return bf_fail(BF_FORMAT, "%s: unsupported PNG layout (%d-bit, colour type %d)", path, depth, color);
     if (do_alloc) {
-        buf = *owned = malloc(row_bytes * h);
+        buf = *owned = bf_malloc(row_bytes * h);
         if (!buf) return bf_fail(BF_NO_MEMORY, "%s: image of %ux%u", path, (unsigned)w, (unsigned)h);
     } else if ((size_t)w * h > cap_px) {
         return bf_fail(BF_FORMAT, "%s: image of %ux%u does not fit the buffer", path, (unsigned)w, (unsigned)h);
@@ -194,7 +194,7 @@ static bf_status jpeg_decode_body(struct jpeg_decompress_struct *cinfo, jpeg_err
     if (cinfo->jpeg_color_space == JCS_CMYK || cinfo->jpeg_color_space == JCS_YCCK)
         return bf_fail(BF_FORMAT, "%s: CMYK JPEG is not supported", path);
     if (do_alloc) {
-        buf = *owned = malloc((size_t)w * h * 3);
+        buf = *owned = bf_malloc((size_t)w * h * 3);
         if (!buf) return bf_fail(BF_NO_MEMORY, "%s: image of %ux%u", path, w, h);
     } else if ((size_t)w * h > cap_px) {
         return bf_fail(BF_FORMAT, "%s: image of %ux%u does not fit the buffer", path, w, h);

@@ -120,7 +120,7 @@ static bf_status offsets_reserve(log__source *ls, uint32_t n)
     if (n <= ls->n_cap) return BF_OK;
     uint32_t cap = ls->n_cap ? ls->n_cap : 1024;
     while (cap < n) cap = cap > UINT32_MAX / 2 ? UINT32_MAX : 2 * cap;
-    uint64_t *p = realloc(ls->offsets, (size_t)cap * sizeof *p);
+    uint64_t *p = bf_realloc(ls->offsets, (size_t)cap * sizeof *p);
     if (!p) return bf_fail(BF_NO_MEMORY, "%s: frame index of %u entries", ls->path, cap);
     ls->offsets = p;
     ls->n_cap = cap;
@@ -149,7 +149,7 @@ static bf_status index_read(log__source *ls)
         bf_warn("%s: the log's footer points outside the file; finding frames by reading them in order", ls->path);
         return BF_OK;
     }
-    uint8_t *buf = malloc(idx_bytes);
+    uint8_t *buf = bf_malloc(idx_bytes);
     if (!buf) return bf_fail(BF_NO_MEMORY, "%s: index of %u frames", ls->path, n);
     if ((s = read_at(ls, at, buf, idx_bytes, &got))) {
         free(buf);
@@ -350,7 +350,7 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
 {
     replay_options defaults = {0};
     if (!opt) opt = &defaults;
-    log__source *ls = calloc(1, sizeof *ls);
+    log__source *ls = bf_calloc(1, sizeof *ls);
     if (!ls) return bf_fail(BF_NO_MEMORY, "%s: log source", path);
     bf_status s = BF_OK;
     ls->tail_status = BF_END;
@@ -371,10 +371,10 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
     if ((s = header_read(ls))) goto fail;
     ls->n_px = (size_t)ls->hdr.K.width * ls->hdr.K.height;
     ls->zd = ZSTD_createDCtx();
-    ls->depth_payload = malloc(log__depth_bound(ls->n_px));
-    ls->rgb_payload = malloc(log__rgb_bound(ls->n_px));
-    ls->depth = malloc(ls->n_px * sizeof *ls->depth);
-    ls->rgb = malloc(ls->n_px * 3);
+    ls->depth_payload = bf_malloc(log__depth_bound(ls->n_px));
+    ls->rgb_payload = bf_malloc(log__rgb_bound(ls->n_px));
+    ls->depth = bf_malloc(ls->n_px * sizeof *ls->depth);
+    ls->rgb = bf_malloc(ls->n_px * 3);
     if (!ls->zd || !ls->depth_payload || !ls->rgb_payload || !ls->depth || !ls->rgb) {
         s = bf_fail(BF_NO_MEMORY, "%s: buffers for %ux%u frames", path, ls->hdr.K.width, ls->hdr.K.height);
         goto fail;

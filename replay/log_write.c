@@ -61,7 +61,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     size_t dev_len = cfg->device ? strlen(cfg->device) : 0;
     if (dev_len > LOG_DEVICE_MAX) dev_len = LOG_DEVICE_MAX; /* a label: cut, not refused */
 
-    replay_log_writer *w = calloc(1, sizeof *w);
+    replay_log_writer *w = bf_calloc(1, sizeof *w);
     if (!w) return bf_fail(BF_NO_MEMORY, "%s: log writer", path);
     bf_status s = BF_OK;
     w->K = *K;
@@ -74,9 +74,9 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     w->zc = ZSTD_createCCtx();
     uint16_t probe = 1;
     bool is_le = *(uint8_t *)&probe == 1;
-    w->swapped = is_le ? NULL : malloc(2 * w->n_px);
-    w->depth_buf = malloc(log__depth_bound(w->n_px));
-    w->rgb_buf = cfg->colour ? malloc(log__rgb_bound(w->n_px)) : NULL;
+    w->swapped = is_le ? NULL : bf_malloc(2 * w->n_px);
+    w->depth_buf = bf_malloc(log__depth_bound(w->n_px));
+    w->rgb_buf = cfg->colour ? bf_malloc(log__rgb_bound(w->n_px)) : NULL;
     if (!w->path || !w->zc || (!is_le && !w->swapped) || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
         s = bf_fail(BF_NO_MEMORY, "%s: log writer buffers for %ux%u frames", path, K->width, K->height);
         goto fail;
@@ -141,7 +141,7 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
     if (w->st.n_frames == UINT32_MAX) return bf_fail(BF_INVALID_ARG, "%s: too many frames", w->path);
     if (w->st.n_frames == w->index_cap) {
         size_t cap = w->index_cap ? 2 * w->index_cap : 1024;
-        uint8_t *p = realloc(w->index, cap * LOG_INDEX_ENTRY);
+        uint8_t *p = bf_realloc(w->index, cap * LOG_INDEX_ENTRY);
         if (!p) return bf_fail(BF_NO_MEMORY, "%s: frame index of %zu entries", w->path, cap);
         w->index = p;
         w->index_cap = cap;

@@ -17,7 +17,7 @@ bf_status replay__list_push(replay__list *l, const replay__frame_ref *f)
     if (l->n == UINT32_MAX) return bf_fail(BF_FORMAT, "too many frames");
     if (l->n == l->cap) {
         uint32_t cap = l->cap ? (l->cap > UINT32_MAX / 2 ? UINT32_MAX : 2 * l->cap) : 256;
-        replay__frame_ref *v = realloc(l->v, (size_t)cap * sizeof *v);
+        replay__frame_ref *v = bf_realloc(l->v, (size_t)cap * sizeof *v);
         if (!v) return bf_fail(BF_NO_MEMORY, "frame list of %u frames", cap);
         l->v = v;
         l->cap = cap;
@@ -30,7 +30,7 @@ const char *replay__list_str(replay__list *l, const char *s)
 {
     if (l->n_strings == l->strings_cap) {
         size_t cap = l->strings_cap ? 2 * l->strings_cap : 512;
-        char **v = realloc(l->strings, cap * sizeof *v);
+        char **v = bf_realloc(l->strings, cap * sizeof *v);
         if (!v) {
             bf_fail(BF_NO_MEMORY, "frame list strings");
             return NULL;
@@ -152,7 +152,7 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
             goto fail;
         }
     }
-    src = calloc(1, sizeof *src);
+    src = bf_calloc(1, sizeof *src);
     if (!src) {
         s = bf_fail(BF_NO_MEMORY, "%s source", kind);
         goto fail;
@@ -160,8 +160,8 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
     src->list = *list;
     memset(list, 0, sizeof *list);
     for (uint32_t i = 0; i < src->list.n; i++) src->has_rgb |= src->list.v[i].rgb_path != NULL;
-    src->depth = malloc((size_t)w * h * sizeof *src->depth);
-    src->rgb = src->has_rgb ? malloc((size_t)w * h * 3) : NULL;
+    src->depth = bf_malloc((size_t)w * h * sizeof *src->depth);
+    src->rgb = src->has_rgb ? bf_malloc((size_t)w * h * 3) : NULL;
     if (!src->depth || (src->has_rgb && !src->rgb)) {
         s = bf_fail(BF_NO_MEMORY, "%s source: frame buffers of %ux%u", kind, w, h);
         goto fail;

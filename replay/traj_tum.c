@@ -48,7 +48,7 @@ bf_status replay_traj_write_tum(const char *path, const bf_traj *traj)
 {
     /* One line is at most 8 numbers of ~30 characters. */
     size_t cap = 128 + traj->n * 8 * 32;
-    char *buf = malloc(cap);
+    char *buf = bf_malloc(cap);
     if (!buf) return bf_fail(BF_NO_MEMORY, "%s: %zu poses", path, traj->n);
     size_t len = (size_t)snprintf(buf, cap, "# timestamp tx ty tz qx qy qz qw (camera-to-world, metres)\n");
     for (size_t i = 0; i < traj->n; i++) {

@@ -47,9 +47,9 @@ static bf_status tum_index_read(const char *dir, const char *name, replay__list 
         }
         if (x.n == cap) {
             cap = cap ? 2 * cap : 1024;
-            double *nt = realloc(x.t_s, cap * sizeof *nt);
+            double *nt = bf_realloc(x.t_s, cap * sizeof *nt);
             if (nt) x.t_s = nt;
-            char **np = nt ? realloc(x.path, cap * sizeof *np) : NULL;
+            char **np = nt ? bf_realloc(x.path, cap * sizeof *np) : NULL;
             if (!np) {
                 s = bf_fail(BF_NO_MEMORY, "%s: %u lines", file, cap);
                 goto fail;
@@ -126,7 +126,7 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
     if (has_rgb && (s = tum_index_read(dir, "rgb.txt", list, &rgb))) goto done;
     if ((s = bf_path_join(file, sizeof file, dir, "groundtruth.txt"))) goto done;
     if (bf_file_exists(file) && (s = replay_traj_read_tum(file, &gt))) goto done;
-    rgb_of = malloc(depth.n * sizeof *rgb_of);
+    rgb_of = bf_malloc(depth.n * sizeof *rgb_of);
     if (!rgb_of) {
         s = bf_fail(BF_NO_MEMORY, "%s: %u frames", dir, depth.n);
         goto done;

@@ -30,7 +30,7 @@ static bf_status text_printf(text_buf *b, const char *fmt, ...)
         }
         size_t cap = b->cap ? b->cap : 4096;
         while (cap < b->len + (size_t)n + 1) cap *= 2;
-        char *p = realloc(b->p, cap);
+        char *p = bf_realloc(b->p, cap);
         if (!p) return bf_fail(BF_NO_MEMORY, "index file of %zu bytes", cap);
         b->p = p;
         b->cap = cap;
@@ -63,7 +63,7 @@ bf_status replay_tum_writer_create(const char *dir, const bf_intrinsics *K, repl
         return bf_fail(BF_INVALID_ARG, "%s: invalid intrinsics for the TUM writer", dir);
     bf_status s;
     if ((s = bf_mkdir_p(dir)) || (s = make_dir(dir, "rgb")) || (s = make_dir(dir, "depth"))) return s;
-    replay_tum_writer *w = calloc(1, sizeof *w);
+    replay_tum_writer *w = bf_calloc(1, sizeof *w);
     if (!w || !(w->dir = strdup(dir))) {
         free(w);
         return bf_fail(BF_NO_MEMORY, "%s: TUM writer", dir);

@@ -11,6 +11,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "core/core.h"
+
 typedef struct bf_test_case {
     const char *name;
     void (*fn)(void);
@@ -100,5 +102,13 @@ extern int bf__test_failed_now;
 const char *bf_test_data(const char *sub);
 /* A fresh empty temporary directory for this test binary. */
 const char *bf_test_tmpdir(void);
+
+/* Fails each fault point that run(arg) reaches in turn (core's
+ * bf_fault_arm; SQLite's fault-injection walk): every fired fault must come
+ * back as BF_NO_MEMORY with a message, and the run after the last point
+ * must succeed. run must release whatever it made either way (ASan checks
+ * that nothing leaks). Returns the number of fault points walked, or -1
+ * (with the offending point printed) on the first wrong outcome. */
+int bf_test_fault_walk(bf_status (*run)(void *arg), void *arg);
 
 #endif

@@ -87,6 +87,28 @@ const char *bf_test_tmpdir(void)
     return tmpdir;
 }
 
+int bf_test_fault_walk(bf_status (*run)(void *arg), void *arg)
+{
+    for (uint32_t k = 1; k < 1000000; k++) {
+        bf_fault_arm(k);
+        bf_clear_error();
+        bf_status s = run(arg);
+        bool is_fired = bf_fault_arm(0) == 0;
+        if (!is_fired) {
+            if (s == BF_OK) return (int)k - 1; /* past the last point: a clean run */
+            fprintf(stderr, "  fault walk: the run without a fault failed: %s: %s\n", bf_status_name(s),
+                    bf_last_error());
+            return -1;
+        }
+        if (s != BF_NO_MEMORY || !bf_last_error()[0]) {
+            fprintf(stderr, "  fault walk: point %u gave %s (\"%s\"), want BF_NO_MEMORY with a message\n", k,
+                    bf_status_name(s), bf_last_error());
+            return -1;
+        }
+    }
+    return -1;
+}
+
 static int rm_entry(const char *path, const struct stat *st, int flag, struct FTW *ftw)
 {
     (void)st;

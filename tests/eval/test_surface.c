@@ -482,3 +482,31 @@ BF_TEST(surface_point_cloud_reference_is_measured_point_to_point)
     mesh_free(&ref);
     mesh_free(&rec);
 }
+
+typedef struct surface_job {
+    const mesh_data *ref, *rec;
+    eval_surface_config cfg;
+} surface_job;
+
+static bf_status run_surface(void *arg)
+{
+    const surface_job *j = arg;
+    eval_surface_result r;
+    return eval_surface(j->ref, j->rec, NULL, &j->cfg, &r);
+}
+
+/* Every host allocation of the surface evaluation fails in turn (also
+ * those made by its worker threads): each is a clean BF_NO_MEMORY with a
+ * message, nothing leaks (ASan). */
+BF_TEST(surface_fails_cleanly_at_every_allocation)
+{
+    mesh_data box = make_box(0.4, 0.3, 0.2);
+    mesh_data rec = displaced_samples(&box, 2e3, 0.002, bf_v3(0.2, 0.15, 0.1), 99);
+    surface_job j = {&box, &rec, eval_surface_config_default()};
+    j.cfg.samples_per_m2 = 2e3;
+    int n = bf_test_fault_walk(run_surface, &j);
+    mesh_free(&rec);
+    mesh_free(&box);
+    CHECK(n >= 4);
+    fprintf(stderr, "  surface: %d allocations failed in turn\n", n);
+}

@@ -397,3 +397,38 @@ BF_TEST(association_matches_the_brute_force_greedy_rule)
         CHECK(n_bf > 0);
     }
 }
+
+typedef struct traj_pair {
+    bf_traj gt, est;
+} traj_pair;
+
+static bf_status run_ate_rpe(void *arg)
+{
+    const traj_pair *p = arg;
+    eval_ate_result ate;
+    eval_rpe_result rpe;
+    bf_status s = eval_ate(&p->gt, &p->est, 0.02, &ate);
+    if (s == BF_OK) s = eval_rpe(&p->gt, &p->est, 0, false, 1.0, &rpe);
+    if (s == BF_OK) s = eval_rpe(&p->gt, &p->est, 0, true, 0, &rpe);
+    return s;
+}
+
+/* Every host allocation of ATE and RPE fails in turn: each is a clean
+ * BF_NO_MEMORY with a message, nothing leaks (ASan). */
+BF_TEST(ate_and_rpe_fail_cleanly_at_every_allocation)
+{
+    const char *dir = bf_test_data("tum/fr1_xyz");
+    if (!dir) BF_SKIP("shared data absent");
+    char p_gt[4200], p_est[4200];
+    snprintf(p_gt, sizeof p_gt, "%s/groundtruth.txt", dir);
+    snprintf(p_est, sizeof p_est, "%s/rgbdslam_estimate.txt", dir);
+    traj_pair p = {{0}, {0}};
+    bf_status s = replay_traj_read_tum(p_gt, &p.gt);
+    if (s == BF_OK) s = replay_traj_read_tum(p_est, &p.est);
+    int n = s == BF_OK ? bf_test_fault_walk(run_ate_rpe, &p) : -1;
+    bf_traj_free(&p.gt);
+    bf_traj_free(&p.est);
+    CHECK_OK(s);
+    CHECK(n >= 3);
+    fprintf(stderr, "  ATE and RPE: %d allocations failed in turn\n", n);
+}

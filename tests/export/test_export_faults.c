@@ -1,4 +1,4 @@
-/* stream: every allocation of both exports fails in turn (SQLite's fault
+/* export: every allocation of both exports fails in turn (SQLite's fault
  * injection walk, libuv's loop_init_oom): the status is BF_NO_MEMORY with a
  * message, the output is untouched, nothing leaks (ASan), and the next
  * export without faults gives the same result as before. */
@@ -6,7 +6,6 @@
 #include <string.h>
 
 #include "fixture.h"
-#include "export/export_int.h"
 #include "test.h"
 
 static bool same_mesh(const mesh_data *a, const mesh_data *b)
@@ -41,10 +40,9 @@ static void fault_walk(bool points)
         mesh_data m;
         memset(&m, 0xAB, sizeof m);
         mesh_data sentinel = m;
-        export__fail_countdown = k;
+        bf_fault_arm((uint32_t)k);
         bf_status rc = points ? export_points(&s, &m, NULL) : export_mesh(&s, NULL, &m, NULL);
-        bool fired = export__fail_countdown == 0;
-        export__fail_countdown = 0;
+        bool fired = bf_fault_arm(0) == 0;
         if (!fired) {
             /* k is past the last allocation: a clean run. */
             CHECK_OK(rc);

@@ -823,10 +823,10 @@ BF_TEST(every_vulkan_failure_is_a_clean_status)
         CHECK_OK(s);
         uint32_t k = 1;
         for (; k < 1000; k++) {
-            gpu_debug_fail_after(k);
+            bf_fault_arm(k);
             bf_clear_error();
             s = small_stage(&cfg);
-            bool is_unfired = gpu_debug_fail_after(0) != 0;
+            bool is_unfired = bf_fault_arm(0) != 0;
             CHECK_EQ_INT(gpu_validation_message_total(), v0);
             if (is_unfired) break; /* k is past the last call: every point walked */
             if (s == BF_OK) continue; /* recovered (a rejected cache, a cache not saved) */

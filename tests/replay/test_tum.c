@@ -361,3 +361,39 @@ BF_TEST(tum_colour_depth_size_mismatch_fails_its_frame)
     CHECK_ERROR_MENTIONS("frame 1");
     rgbd_source_close(src);
 }
+
+/* Opens a TUM folder and reads every frame. */
+static bf_status read_whole_sequence(void *arg)
+{
+    rgbd_source *src;
+    bf_status s = replay_open(arg, NULL, &src);
+    if (s != BF_OK) return s;
+    bf_frame f;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+    }
+    rgbd_source_close(src);
+    return s == BF_END ? BF_OK : s;
+}
+
+static bf_status read_groundtruth(void *arg)
+{
+    char path[1200];
+    snprintf(path, sizeof path, "%s/groundtruth.txt", (const char *)arg);
+    bf_traj t = {0};
+    bf_status s = replay_traj_read_tum(path, &t);
+    bf_traj_free(&t);
+    return s;
+}
+
+/* Every host allocation of opening and reading a sequence fails in turn:
+ * each is a clean BF_NO_MEMORY with a message, nothing leaks (ASan). */
+BF_TEST(tum_reading_fails_cleanly_at_every_allocation)
+{
+    const char *dir = make_tum("tum_faults");
+    if (!dir) BF_SKIP("tum/frames absent");
+    int n = bf_test_fault_walk(read_whole_sequence, (void *)dir);
+    CHECK(n >= 8);
+    fprintf(stderr, "  sequence: %d allocations failed in turn\n", n);
+    n = bf_test_fault_walk(read_groundtruth, (void *)dir);
+    CHECK(n >= 1);
+}
