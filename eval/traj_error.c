@@ -151,7 +151,7 @@ bf_status eval_ate(const bf_traj *gt, const bf_traj *est, double max_dt_s, eval_
     eval_match *m;
     size_t n;
     bf_status s = eval_associate(gt, est, max_dt_s, &m, &n);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (n < 2) {
         free(m);
         return bf_fail(BF_FORMAT, "ATE: only %zu pose pair(s) have timestamps within %g s; "
@@ -171,11 +171,11 @@ bf_status eval_ate(const bf_traj *gt, const bf_traj *est, double max_dt_s, eval_
     /* TUM evaluate_ate.py: only positions are aligned and compared. */
     bf_se3 T_gt_est;
     s = eval_horn_align(p_est, p_gt, n, &T_gt_est);
-    if (s) goto done;
+    if (s != BF_OK) goto done;
     for (size_t k = 0; k < n; k++) err[k] = bf_v3_norm(bf_v3_sub(bf_se3_apply(&T_gt_est, p_est[k]), p_gt[k]));
     eval_ate_result r = {.n_matched = n, .T_gt_est = T_gt_est};
     s = eval_err_stats_compute(err, n, &r.trans);
-    if (!s) *out = r;
+    if (s == BF_OK) *out = r;
 done:
     free(m);
     free(p_est);

@@ -216,18 +216,18 @@ static bf_status staged(gpu_buffer *buf, uint64_t offset, void *host, uint64_t n
     if (is_up) {
         memcpy(st->mapped, host, n);
         bf_status s = gpu_buffer_flush(st);
-        if (s) return s;
+        if (s != BF_OK) return s;
     }
     bf_status s = gpu__xfer_begin(ctx);
-    if (s) return s;
+    if (s != BF_OK) return s;
     VkBufferCopy region = {.srcOffset = is_up ? 0 : offset, .dstOffset = is_up ? offset : 0, .size = n};
     ctx->inst.vk.CmdCopyBuffer(ctx->xfer_cmd, is_up ? st->buffer : buf->buffer, is_up ? buf->buffer : st->buffer,
                                1, &region);
     s = gpu__xfer_submit_wait(ctx);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (!is_up) {
         s = invalidate(st);
-        if (s) return s;
+        if (s != BF_OK) return s;
         memcpy(host, st->mapped, n);
     }
     return BF_OK;
@@ -236,7 +236,7 @@ static bf_status staged(gpu_buffer *buf, uint64_t offset, void *host, uint64_t n
 static bf_status transfer(gpu_buffer *buf, uint64_t offset, void *host, uint64_t size, bool is_up)
 {
     bf_status s = check_range(buf, is_up ? "upload" : "download", offset, size);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (size == 0) return BF_OK;
     if (buf->mapped) {
         if (is_up) {
@@ -244,7 +244,7 @@ static bf_status transfer(gpu_buffer *buf, uint64_t offset, void *host, uint64_t
             return gpu_buffer_flush(buf);
         }
         s = invalidate(buf);
-        if (s) return s;
+        if (s != BF_OK) return s;
         memcpy(host, (const char *)buf->mapped + offset, size);
         return BF_OK;
     }
@@ -253,7 +253,7 @@ static bf_status transfer(gpu_buffer *buf, uint64_t offset, void *host, uint64_t
     for (uint64_t done = 0; done < size; done += chunk) {
         uint64_t n = size - done < chunk ? size - done : chunk;
         s = staged(buf, offset + done, (char *)host + done, n, is_up);
-        if (s) return s;
+        if (s != BF_OK) return s;
     }
     return BF_OK;
 }
@@ -274,7 +274,7 @@ bf_status gpu_buffer_fill(gpu_buffer *buf, uint64_t offset, uint64_t size, uint3
         return bf_fail(BF_INVALID_ARG, "gpu buffer %s: fill offset %llu and size %llu must be multiples of 4",
                        buf->name, (unsigned long long)offset, (unsigned long long)size);
     bf_status s = check_range(buf, "fill", offset, size);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (size == 0) return BF_OK;
     if (buf->mapped) {
         uint32_t *w = (uint32_t *)((char *)buf->mapped + offset);
@@ -282,7 +282,7 @@ bf_status gpu_buffer_fill(gpu_buffer *buf, uint64_t offset, uint64_t size, uint3
         return gpu_buffer_flush(buf);
     }
     s = gpu__xfer_begin(buf->ctx);
-    if (s) return s;
+    if (s != BF_OK) return s;
     buf->ctx->inst.vk.CmdFillBuffer(buf->ctx->xfer_cmd, buf->buffer, offset, size, value);
     return gpu__xfer_submit_wait(buf->ctx);
 }

@@ -155,7 +155,7 @@ bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_conte
 {
     gpu__instance inst = {0};
     bf_status status = open_loader(cfg && cfg->loader ? cfg->loader : "libvulkan.so.1", &inst.vk);
-    if (status) return status;
+    if (status != BF_OK) return status;
 
     uint32_t api = VK_API_VERSION_1_0;
     if (inst.vk.EnumerateInstanceVersion) inst.vk.EnumerateInstanceVersion(&api);
@@ -436,12 +436,12 @@ bf_status gpu_device_list(const gpu_config *cfg, gpu_device_info out[GPU_MAX_DEV
 {
     gpu__instance inst;
     bf_status status = gpu__instance_create(cfg, false, NULL, &inst);
-    if (status) return status;
+    if (status != BF_OK) return status;
     VkPhysicalDevice phys[GPU_MAX_DEVICES];
     uint32_t count = 0;
     status = enumerate(&inst, phys, out, &count);
     gpu__instance_destroy(&inst);
-    if (status) return status;
+    if (status != BF_OK) return status;
     *n = count;
     *chosen = gpu__choose_device(out, count, gpu__wanted_device(cfg));
     return BF_OK;
@@ -582,7 +582,7 @@ static bf_status create_commands(gpu_context *ctx, const gpu_config *cfg)
             .usage = GPU_USAGE_TRANSFER,
         };
         status = gpu_buffer_create(ctx, &sd, &ctx->staging);
-        if (status) goto fail;
+        if (status != BF_OK) goto fail;
     }
 fail:
     return status;
@@ -595,13 +595,13 @@ bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
     if (!ctx) return bf_fail(BF_NO_MEMORY, "gpu: context");
     ctx->force_staging = cfg && cfg->force_staging;
     status = gpu__instance_create(cfg, gpu__validation_wanted(cfg), ctx, &ctx->inst);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
 
     VkPhysicalDevice phys[GPU_MAX_DEVICES];
     gpu_device_info infos[GPU_MAX_DEVICES];
     uint32_t n = 0;
     status = enumerate(&ctx->inst, phys, infos, &n);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     uint32_t pick = gpu__choose_device(infos, n, gpu__wanted_device(cfg));
     if (pick == UINT32_MAX) {
         status = BF_NO_DEVICE; /* message recorded by gpu__choose_device */
@@ -612,11 +612,11 @@ bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
     ctx->inst.vk.GetPhysicalDeviceMemoryProperties(ctx->phys, &ctx->mem_props);
 
     status = create_device(ctx);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     status = create_commands(ctx, cfg);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     status = gpu__pipeline_cache_open(ctx, cfg);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
 
     bf_info("gpu: %s (%s, Vulkan %u.%u.%u%s%s)", ctx->info.name, gpu_device_type_name(ctx->info.type),
             VK_API_VERSION_MAJOR(ctx->info.api_version), VK_API_VERSION_MINOR(ctx->info.api_version),

@@ -81,7 +81,7 @@ bf_status gpu_pipeline_create(gpu_context *ctx, const gpu_pipeline_desc *desc, g
 
     VkDescriptorSetLayout set_layout;
     status = gpu__set_layout(ctx, desc->n_buffers, &set_layout);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     VkPushConstantRange push = {.stageFlags = VK_SHADER_STAGE_COMPUTE_BIT, .size = desc->push_bytes};
     VkPipelineLayoutCreateInfo li = {
         .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO,
@@ -177,7 +177,7 @@ bf_status gpu_bindings_create(gpu_context *ctx, uint32_t n_buffers, const char *
     snprintf(b->name, sizeof b->name, "%s", name);
     VkDescriptorSetLayout layout;
     status = gpu__set_layout(ctx, n_buffers, &layout);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     VkDescriptorSetAllocateInfo ai = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO,
         .descriptorPool = ctx->descriptor_pool,
@@ -351,7 +351,7 @@ bf_status gpu_pipeline_cache_save(gpu_context *ctx)
     if (slash && slash != dir) {
         *slash = '\0';
         status = bf_mkdir_p(dir);
-        if (status) goto fail;
+        if (status != BF_OK) goto fail;
     }
     status = bf_write_file_atomic(ctx->cache_path, data, size);
 fail:
@@ -382,7 +382,7 @@ bf_status gpu_pipeline_warm_up(gpu_context *ctx, gpu_pipeline *const *pipes, uin
     double t0 = bf_time_s();
     gpu_buffer_desc sd = {.name = "gpu.warm_up_scratch", .size_bytes = 64u << 10, .memory = GPU_MEMORY_DEVICE};
     status = gpu_buffer_create(ctx, &sd, &scratch);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     for (uint32_t i = 0; i < n; i++) {
         uint32_t nb = pipes[i]->n_buffers;
         if (nb == 0 || binds[nb]) continue;
@@ -390,10 +390,10 @@ bf_status gpu_pipeline_warm_up(gpu_context *ctx, gpu_pipeline *const *pipes, uin
         snprintf(name, sizeof name, "gpu.warm_up[%u buffers]", nb);
         status = gpu_bindings_create(ctx, nb, name, &binds[nb]);
         for (uint32_t s = 0; s < nb && !status; s++) status = gpu_bindings_set(binds[nb], s, scratch, 0, GPU_WHOLE_SIZE);
-        if (status) goto fail;
+        if (status != BF_OK) goto fail;
     }
     status = gpu_begin(ctx);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     gpu_cmd_label_begin(ctx, "gpu.warm_up");
     for (uint32_t i = 0; i < n; i++) {
         const gpu_pipeline *p = pipes[i];
@@ -407,7 +407,7 @@ bf_status gpu_pipeline_warm_up(gpu_context *ctx, gpu_pipeline *const *pipes, uin
     }
     gpu_cmd_label_end(ctx);
     status = gpu_submit_wait(ctx);
-    if (status) goto fail;
+    if (status != BF_OK) goto fail;
     bf_debug("gpu: warmed up %u pipelines in %.1f ms", n, 1e3 * (bf_time_s() - t0));
 
 fail:

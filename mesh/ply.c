@@ -240,7 +240,7 @@ static bf_status ply_skip_values(ply_reader *rd, ply_type t, uint64_t n, const c
     for (uint64_t k = 0; k < n; k++) {
         double v;
         bf_status s = ply_read_value(rd, t, what, idx, &v);
-        if (s) return s;
+        if (s != BF_OK) return s;
     }
     return BF_OK;
 }
@@ -279,13 +279,13 @@ static bf_status ply_read_vertices(ply_reader *rd, const ply_element *el, mesh_d
                 if (!s && cnt < 0)
                     s = bf_fail(BF_FORMAT, "%s: vertex %llu: negative list length", rd->path,
                                 (unsigned long long)i);
-                if (!s) s = ply_skip_values(rd, pr->type, (uint64_t)cnt, "vertex", i);
-                if (s) return s;
+                if (s == BF_OK) s = ply_skip_values(rd, pr->type, (uint64_t)cnt, "vertex", i);
+                if (s != BF_OK) return s;
                 continue;
             }
             double v;
             bf_status s = ply_read_value(rd, pr->type, "vertex", i, &v);
-            if (s) return s;
+            if (s != BF_OK) return s;
             switch (pr->role) {
             case ROLE_X:
             case ROLE_Y:
@@ -333,18 +333,18 @@ static bf_status ply_read_faces(ply_reader *rd, const ply_element *el, ply_tris 
             bf_status s;
             if (pr->count_type == PLY_NONE) {
                 s = ply_skip_values(rd, pr->type, 1, "face", i);
-                if (s) return s;
+                if (s != BF_OK) return s;
                 continue;
             }
             double cnt;
             s = ply_read_value(rd, pr->count_type, "face", i, &cnt);
-            if (s) return s;
+            if (s != BF_OK) return s;
             if (cnt < 0)
                 return bf_fail(BF_FORMAT, "%s: face %llu: negative vertex count %.0f", rd->path,
                                (unsigned long long)i, cnt);
             if (pr->role != ROLE_INDICES) {
                 s = ply_skip_values(rd, pr->type, (uint64_t)cnt, "face", i);
-                if (s) return s;
+                if (s != BF_OK) return s;
                 continue;
             }
             /* Fan the polygon around its first vertex as it is read;
@@ -358,7 +358,7 @@ static bf_status ply_read_faces(ply_reader *rd, const ply_element *el, ply_tris 
             for (uint64_t j = 0; j < n; j++) {
                 double v;
                 s = ply_read_value(rd, pr->type, "face", i, &v);
-                if (s) return s;
+                if (s != BF_OK) return s;
                 if (v < 0 || v > (double)UINT32_MAX)
                     return bf_fail(BF_FORMAT, "%s: face %llu: vertex index %.0f out of range", rd->path,
                                    (unsigned long long)i, v);
@@ -383,14 +383,14 @@ static bf_status ply_skip_element(ply_reader *rd, const ply_element *el)
             if (pr->count_type != PLY_NONE) {
                 double cnt;
                 bf_status s = ply_read_value(rd, pr->count_type, el->name, i, &cnt);
-                if (s) return s;
+                if (s != BF_OK) return s;
                 if (cnt < 0)
                     return bf_fail(BF_FORMAT, "%s: %s %llu: negative list length", rd->path, el->name,
                                    (unsigned long long)i);
                 n = (uint64_t)cnt;
             }
             bf_status s = ply_skip_values(rd, pr->type, n, el->name, i);
-            if (s) return s;
+            if (s != BF_OK) return s;
         }
     return BF_OK;
 }
@@ -492,7 +492,7 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
     char *data = NULL;
     size_t size = 0;
     bf_status s = bf_read_file(path, &data, &size);
-    if (s) return s;
+    if (s != BF_OK) return s;
 
     ply_format fmt = PLY_ASCII;
     ply_element *els = bf_calloc(PLY_MAX_ELEMENTS, sizeof *els);
@@ -506,7 +506,7 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
     const uint8_t *body;
     size_t body_line;
     s = ply_parse_header(path, (const uint8_t *)data, size, &fmt, els, &n_els, &body, &body_line);
-    if (s) goto fail;
+    if (s != BF_OK) goto fail;
 
     /* Check the header before touching the body. */
     const ply_element *vel = NULL;
@@ -589,7 +589,7 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
             s = ply_read_faces(&rd, el, &tris);
         else
             s = ply_skip_element(&rd, el);
-        if (s) goto fail;
+        if (s != BF_OK) goto fail;
     }
     for (size_t i = 0; i < 3 * tris.n; i++)
         if (tris.v[i] >= m.n_verts) {

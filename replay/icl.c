@@ -18,7 +18,7 @@ static bf_status icl_path(replay__list *list, const char *dir, const char *sub, 
     char name[64], path[4096];
     snprintf(name, sizeof name, "%s/%u.%s", sub, n, ext);
     bf_status s = bf_path_join(path, sizeof path, dir, name);
-    if (s) return s;
+    if (s != BF_OK) return s;
     *out = replay__list_str(list, path);
     return *out ? BF_OK : BF_NO_MEMORY;
 }
@@ -28,7 +28,7 @@ bf_status replay__icl_list(const char *dir, const replay_options *opt, replay__l
     cam->K = icl_camera;
     cam->origin = "ICL-NUIM camera";
     bf_status s = replay__camera_resolve(dir, opt, cam);
-    if (s) return s;
+    if (s != BF_OK) return s;
     char path[4096];
     if ((s = bf_path_join(path, sizeof path, dir, "depth/0.png"))) return s;
     uint32_t first = bf_file_exists(path) ? 0 : 1;
@@ -49,7 +49,7 @@ bf_status replay__icl_list(const char *dir, const replay_options *opt, replay__l
             if (!bf_file_exists(f.rgb_path) && (s = icl_path(list, dir, colour_dir, k, "jpg", &jpg)) == BF_OK &&
                 bf_file_exists(jpg))
                 f.rgb_path = jpg;
-            if (s) return s;
+            if (s != BF_OK) return s;
         }
         f.t_depth_s = f.t_rgb_s = (double)list->n / REPLAY_NUMBERED_FPS;
         if ((s = replay__list_push(list, &f))) return s;
@@ -78,7 +78,7 @@ bf_status replay__icl_list(const char *dir, const replay_options *opt, replay__l
         n_poses++;
     }
     replay__text_close(&t);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (n_poses < list->n)
         return bf_fail(BF_FORMAT, "%s: %u poses for %u depth images", path, n_poses, list->n);
     return BF_OK;

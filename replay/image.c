@@ -143,7 +143,7 @@ static bf_status png_decode(FILE *f, const char *path, png_want want, void *buf,
     uint32_t w = 0, h = 0;
     bf_status s = png_decode_body(png, info, path, want, buf, cap_px, &owned, alloc != NULL, exp_w, exp_h, &w, &h);
     png_destroy_read_struct(&png, &info, NULL);
-    if (s) {
+    if (s != BF_OK) {
         free(owned);
         return s;
     }
@@ -241,7 +241,7 @@ static bf_status jpeg_decode(FILE *f, const char *path, bool header_only, uint8_
                                    exp_h, &w, &h);
     /* destroy also aborts a decompression left half-way. */
     jpeg_destroy_decompress(&cinfo);
-    if (s) {
+    if (s != BF_OK) {
         free(owned);
         return s;
     }
@@ -261,7 +261,7 @@ static bf_status image_read(const char *path, png_want want, void *buf, size_t c
     FILE *f = NULL;
     image_kind kind = IMAGE_OTHER;
     bf_status s = image_open(path, &f, &kind);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (kind == IMAGE_PNG)
         s = png_decode(f, path, want, buf, cap_px, alloc, exp_w, exp_h, w, h);
     else if (kind == IMAGE_JPEG && want != PNG_WANT_U16)
@@ -308,7 +308,7 @@ bf_status replay_png_read_u16(const char *path, uint16_t **pix, uint32_t *w, uin
     void *p = NULL;
     uint32_t ww, hh;
     bf_status s = read_u16(path, NULL, 0, &p, 0, 0, &ww, &hh);
-    if (s) return s;
+    if (s != BF_OK) return s;
     *pix = p;
     *w = ww;
     *h = hh;
@@ -320,7 +320,7 @@ bf_status replay_image_read_rgb8(const char *path, uint8_t **pix, uint32_t *w, u
     void *p = NULL;
     uint32_t ww, hh;
     bf_status s = read_rgb8(path, NULL, 0, &p, 0, 0, &ww, &hh);
-    if (s) return s;
+    if (s != BF_OK) return s;
     *pix = p;
     *w = ww;
     *h = hh;

@@ -65,7 +65,7 @@ static bf_status header_read(log__source *ls)
     uint8_t b[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
     size_t got;
     bf_status s = read_at(ls, 0, b, LOG_HEADER_FIXED, &got);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (got >= LOG_MAGIC_LEN && memcmp(b, LOG_MAGIC, LOG_MAGIC_LEN) != 0)
         return bf_fail(BF_FORMAT, "%s: not a bitfuse log (wrong magic bytes)", ls->path);
     if (got < LOG_HEADER_FIXED)
@@ -136,7 +136,7 @@ static bf_status index_read(log__source *ls)
     uint8_t foot[LOG_FOOTER];
     size_t got;
     bf_status s = read_at(ls, ls->file_size - LOG_FOOTER, foot, LOG_FOOTER, &got);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (got != LOG_FOOTER || memcmp(foot + 16, LOG_FOOTER_MAGIC, 8) != 0) return BF_OK;
     if (log__get_u32(foot + 12) != log__crc32(0, foot, 12)) {
         bf_warn("%s: the log's footer is damaged; finding frames by reading them in order", ls->path);
@@ -186,7 +186,7 @@ static bf_status scan(log__source *ls)
         uint8_t b[LOG_FRAME_HEADER];
         size_t got;
         bf_status s = read_at(ls, at, b, sizeof b, &got);
-        if (s) return s;
+        if (s != BF_OK) return s;
         /* The index chunk of a log whose footer is missing or damaged: the
          * frames end here. */
         if (got >= 4 && log__get_u32(b) == LOG_INDEX_MAGIC) break;
@@ -233,7 +233,7 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
     size_t got;
     char why[256];
     bf_status s = read_at(ls, at, b, sizeof b, &got);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (got < LOG_FRAME_HEADER) return frame_fail(ls, k, at, "the file ends inside the record header");
     log__frame_header h;
     if (!log__frame_header_unpack(b, &h))

@@ -177,7 +177,7 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
             snprintf(what, sizeof what, "%s: frame %u", w->path, f->index);
             bf_status s = log__jpeg_encode(f->rgb, f->width, f->height, w->cfg.jpeg_quality, w->rgb_buf,
                                            log__rgb_bound(w->n_px), &rz, what);
-            if (s) return s;
+            if (s != BF_OK) return s;
         }
         h.rgb_size = (uint32_t)rz;
     }

@@ -127,7 +127,7 @@ bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K)
 {
     replay__text t;
     bf_status s = replay__text_open(&t, path);
-    if (s) return s;
+    if (s != BF_OK) return s;
     char *f[6];
     int n = replay__text_next(&t, f, 6);
     double v[5] = {0, 0, 0, 0, 0};
@@ -165,7 +165,7 @@ bf_status replay__camera_resolve(const char *dir, const replay_options *opt, rep
 {
     char path[4096];
     bf_status s = bf_path_join(path, sizeof path, dir, "camera.txt");
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (bf_file_exists(path)) {
         bf_intrinsics K = cam->K;
         if ((s = replay__camera_txt_read(path, &K))) return s;

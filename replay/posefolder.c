@@ -21,7 +21,7 @@ static bf_status intrinsics_read(const char *path, bf_intrinsics *K)
 {
     replay__text t;
     bf_status s = replay__text_open(&t, path);
-    if (s) return s;
+    if (s != BF_OK) return s;
     /* Up to 4 content lines of up to 16 numbers. */
     double v[4][16];
     int len[4] = {0}, rows = 0, n;
@@ -85,7 +85,7 @@ bf_status replay__pose_matrix_read(const char *path, bf_se3 *T_wc)
         if (n != 4) return bf_fail(BF_FORMAT, "%s:%u: expected 4 numbers per row, found %d", path, t.line, n);
         for (int k = 0; k < 4; k++) {
             bf_status s = replay__text_double(&t, f[k], "pose entry", &M[rows][k]);
-            if (s) return s;
+            if (s != BF_OK) return s;
         }
         rows++;
     }
@@ -119,7 +119,7 @@ static bf_status frame_path(replay__list *list, const char *dir, uint32_t k, con
     char name[64], path[4096];
     snprintf(name, sizeof name, "frame-%06u.%s", k, suffix);
     bf_status s = bf_path_join(path, sizeof path, dir, name);
-    if (s) return s;
+    if (s != BF_OK) return s;
     *out = replay__list_str(list, path);
     return *out ? BF_OK : BF_NO_MEMORY;
 }
@@ -131,7 +131,7 @@ bf_status replay__posefolder_list(const char *dir, const replay_options *opt, re
     cam->origin = "7-Scenes default camera";
     char path[4096], parent[4096];
     bf_status s = bf_path_join(path, sizeof path, dir, "camera-intrinsics.txt");
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (!bf_file_exists(path)) {
         /* 3DMatch keeps it next to the seq-NN folders. */
         if ((s = bf_path_join(parent, sizeof parent, dir, "../camera-intrinsics.txt"))) return s;

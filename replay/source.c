@@ -76,13 +76,13 @@ static bf_status source_load(replay__source *src, uint32_t idx, bf_frame *out)
     uint32_t W = src->base.intrinsics.width, H = src->base.intrinsics.height, w, h;
     size_t n_px = (size_t)W * H;
     bf_status s = replay__png_decode_u16(f->depth_path, src->depth, n_px, W, H, &w, &h);
-    if (s) return replay__fail_frame(s, idx);
+    if (s != BF_OK) return replay__fail_frame(s, idx);
     if (src->list.depth_invalid)
         for (size_t i = 0; i < n_px; i++)
             if (src->depth[i] == src->list.depth_invalid) src->depth[i] = 0;
     if (f->rgb_path) {
         s = replay__image_decode_rgb8(f->rgb_path, src->rgb, n_px, W, H, &w, &h);
-        if (s) return replay__fail_frame(s, idx);
+        if (s != BF_OK) return replay__fail_frame(s, idx);
     }
     bool has_pose = f->has_pose;
     bf_se3 T_wc = f->T_wc;
@@ -234,7 +234,7 @@ bf_status replay_open(const char *path, const replay_options *opt, rgbd_source *
                        "depth/N.png + pose.txt (ICL-NUIM) or frame-000000.depth.png (pose per frame))",
                        path);
     }
-    if (s) {
+    if (s != BF_OK) {
         replay__list_free(&list);
         return s;
     }

@@ -12,7 +12,7 @@ bf_status replay__text_open(replay__text *t, const char *path)
 {
     char *buf;
     bf_status s = bf_read_file(path, &buf, NULL);
-    if (s) return s;
+    if (s != BF_OK) return s;
     t->path = path;
     t->buf = t->p = buf;
     t->line = 0;
@@ -74,7 +74,7 @@ bf_status replay__pose_from_fields(const replay__text *t, char **f, bf_se3 *T_wc
     double v[7];
     for (int k = 0; k < 7; k++) {
         bf_status s = replay__text_double(t, f[k], names[k], &v[k]);
-        if (s) return s;
+        if (s != BF_OK) return s;
     }
     bf_quat q = {v[6], v[3], v[4], v[5]};
     double norm = sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);

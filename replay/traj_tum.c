@@ -10,7 +10,7 @@ bf_status replay_traj_read_tum(const char *path, bf_traj *out)
 {
     replay__text txt;
     bf_status s = replay__text_open(&txt, path);
-    if (s) return s;
+    if (s != BF_OK) return s;
     bf_traj tr = {0};
     char *f[8];
     int n;

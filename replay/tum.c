@@ -26,7 +26,7 @@ static bf_status tum_index_read(const char *dir, const char *name, replay__list 
 {
     char file[4096], joined[4096];
     bf_status s = bf_path_join(file, sizeof file, dir, name);
-    if (s) return s;
+    if (s != BF_OK) return s;
     replay__text t;
     if ((s = replay__text_open(&t, file))) return s;
     tum_index x = {0};
@@ -111,7 +111,7 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
     cam->K = (bf_intrinsics){.fx_px = 525.0, .fy_px = 525.0, .cx_px = 319.5, .cy_px = 239.5, .depth_scale = 5000};
     cam->origin = "TUM default camera";
     bf_status s = replay__camera_resolve(dir, opt, cam);
-    if (s) return s;
+    if (s != BF_OK) return s;
     const char *hint = tum_preset_hint(dir);
     if (hint && !strcmp(cam->origin, "TUM default camera"))
         bf_warn("%s: using the default camera 525,525,319.5,239.5; the name suggests --camera %s", dir, hint);

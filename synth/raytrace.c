@@ -64,7 +64,7 @@ bf_status synth_renderer_create(const synth_scene *scene, const synth_render_con
         return bf_fail(BF_NO_MEMORY, "synth: image buffers for %ux%u", r->w, r->h);
     }
     bf_status s = mesh_bvh_build(&scene->mesh, &r->bvh);
-    if (s) {
+    if (s != BF_OK) {
         synth_renderer_destroy(r);
         return s;
     }

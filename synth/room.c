@@ -320,7 +320,7 @@ static bf_status add_object(builder *b, const char *data_dir, const room_object 
     char sub[256], path[4096];
     snprintf(sub, sizeof sub, "meshes/%s", o->file);
     bf_status s = bf_path_join(path, sizeof path, data_dir, sub);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (!bf_file_exists(path)) {
         bf_info("synth: room without %s (%s not found)", o->file, path);
         return BF_OK;
@@ -394,7 +394,7 @@ bf_status synth_scene_room(const char *data_dir, synth_scene *out)
     if (data_dir) {
         for (size_t i = 0; i < sizeof room_objects / sizeof room_objects[0]; i++) {
             bf_status s = add_object(&b, data_dir, &room_objects[i], desc, sizeof desc);
-            if (s) {
+            if (s != BF_OK) {
                 builder_free(&b);
                 return s;
             }
@@ -404,7 +404,7 @@ bf_status synth_scene_room(const char *data_dir, synth_scene *out)
     }
     bf_se3 T_view = synth_look_at(bf_v3(-0.9, -0.7, 1.45), bf_v3(0.6, 0, 0.85), bf_v3(0, 0, 1));
     bf_status s = scene_take(&b, &T_view, bf_v3(0.2, -0.4, 2.3), out);
-    if (!s) snprintf(out->desc, sizeof out->desc, "%s", desc);
+    if (s == BF_OK) snprintf(out->desc, sizeof out->desc, "%s", desc);
     return s;
 }
 
@@ -425,7 +425,7 @@ bf_status synth_scene_from_mesh(mesh_data *mesh, const bf_se3 *T_wc_view, synth_
     /* Light above the viewer's shoulder. */
     bf_vec3 light = bf_v3_add(T_wc_view->t, bf_se3_rotate(T_wc_view, bf_v3(0.5, -1.0, 0)));
     bf_status s = scene_take(&b, T_wc_view, light, out);
-    if (!s) snprintf(out->desc, sizeof out->desc, "mesh, %u triangles", out->mesh.n_tris);
+    if (s == BF_OK) snprintf(out->desc, sizeof out->desc, "mesh, %u triangles", out->mesh.n_tris);
     return s;
 }
 
@@ -434,7 +434,7 @@ bf_status synth_scene_from_ply(const char *path, double scale, synth_scene *out)
     if (!(scale > 0) || !isfinite(scale)) return bf_fail(BF_INVALID_ARG, "%s: scale %g is not positive", path, scale);
     mesh_data m;
     bf_status s = mesh_read_ply(path, &m);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (m.n_tris == 0) {
         mesh_free(&m);
         return bf_fail(BF_FORMAT, "%s: no triangles to render", path);
@@ -455,6 +455,6 @@ bf_status synth_scene_from_ply(const char *path, double scale, synth_scene *out)
                 "%.1f-%.1f m; use --scale", path, dist, r, SYNTH_KINECT1_Z_MIN_M, SYNTH_KINECT1_Z_MAX_M);
     bf_se3 T_view = synth_look_at(bf_v3(c.x, c.y, c.z + dist), c, bf_v3(0, 1, 0));
     s = synth_scene_from_mesh(&m, &T_view, out);
-    if (!s) snprintf(out->desc, sizeof out->desc, "%s x %g, %u triangles", path, scale, out->mesh.n_tris);
+    if (s == BF_OK) snprintf(out->desc, sizeof out->desc, "%s x %g, %u triangles", path, scale, out->mesh.n_tris);
     return s;
 }

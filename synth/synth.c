@@ -175,7 +175,7 @@ static bf_status png_stage_wait(png_stage *st)
 static bf_status png_stage_post(png_stage *st, const bf_frame *f)
 {
     bf_status s = png_stage_wait(st);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (!st->is_threaded) return st->status = replay_tum_writer_add(st->w, f);
     pthread_mutex_lock(&st->mu);
     st->job = *f;
@@ -208,7 +208,7 @@ static bf_status write_scene_ply(const char *dir, const synth_scene *sc)
 {
     char path[4096];
     bf_status s = bf_path_join(path, sizeof path, dir, "scene.ply");
-    if (s) return s;
+    if (s != BF_OK) return s;
     /* Vertex colours: the albedo where the vertex sits, for viewing. */
     mesh_data m = sc->mesh;
     m.rgb = malloc((size_t)m.n_verts * 3 + 1);
@@ -239,7 +239,7 @@ static bf_status write_seen_ply(const char *dir, const seen_set *seen)
 {
     char path[4096];
     bf_status s = bf_path_join(path, sizeof path, dir, "seen.ply");
-    if (s) return s;
+    if (s != BF_OK) return s;
     mesh_data m = {.n_verts = (uint32_t)seen->n, .xyz = seen->xyz};
     return mesh_write_ply(path, &m);
 }
@@ -252,7 +252,7 @@ static bf_status write_stats(const synth_config *cfg, const bf_intrinsics *K, co
 {
     char path[4096];
     bf_status s = bf_path_join(path, sizeof path, cfg->out_dir, "stats.json");
-    if (s) return s;
+    if (s != BF_OK) return s;
     bf_quat q;
     bf_vec3 t;
     bf_se3_to_qt(&res->T_world_traj, &q, &t);
@@ -332,7 +332,7 @@ bf_status synth_run(const synth_config *cfg, synth_result *out)
         s = synth_scene_room(cfg->data_dir, &scene);
     else
         s = synth_scene_from_ply(cfg->scene, cfg->mesh_scale > 0 ? cfg->mesh_scale : 1.0, &scene);
-    if (s) goto done;
+    if (s != BF_OK) goto done;
     bf_info("synth: scene: %s", scene.desc);
 
     bf_se3 T_first_inv = bf_se3_inverse(&traj.T_wc[0]);
