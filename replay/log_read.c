@@ -230,7 +230,7 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
 {
     uint64_t at = ls->offsets[k];
     uint8_t b[LOG_FRAME_HEADER];
-    size_t got;
+    size_t got = 0;
     char why[256];
     bf_status s = read_at(ls, at, b, sizeof b, &got);
     if (s != BF_OK) return s;

@@ -61,7 +61,7 @@ bf_status synth_renderer_create(const synth_scene *scene, const synth_render_con
     r->row_valid = calloc(r->h, sizeof *r->row_valid);
     if (!r->z_m || !r->cos_theta || !r->is_shadowed || !r->is_valid || !r->row_hit || !r->row_valid) {
         synth_renderer_destroy(r);
-        return bf_fail(BF_NO_MEMORY, "synth: image buffers for %ux%u", r->w, r->h);
+        return bf_fail(BF_NO_MEMORY, "synth: image buffers for %ux%u", K->width, K->height);
     }
     bf_status s = mesh_bvh_build(&scene->mesh, &r->bvh);
     if (s != BF_OK) {
