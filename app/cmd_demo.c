@@ -212,34 +212,21 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
     rgbd_source *src;
     bf_status s = replay_open(seq, NULL, &src);
     if (s != BF_OK) return s;
-    recon *rc = NULL;
-    recon_config cfg = recon_config_default();
-    bf_stats ms = {0};
-    bf_traj est = {0}, gt = {0};
-    bf_frame f;
-    bf_progress prog;
-    bf_progress_begin(&prog, "track+fuse", src->n_frames);
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        if (!rc && (s = recon_create(ctx, &cfg, rgbd_source_intrinsics(src), &f.T_wc, &rc)) != BF_OK) break;
-        recon_frame_result fr;
-        if ((s = recon_add_frame(rc, &f, &fr)) != BF_OK) break;
-        if ((s = bf_stats_push(&ms, fr.ms_frame)) != BF_OK) break;
-        if ((s = bf_traj_push(&est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
-        if (f.has_pose && (s = bf_traj_push(&gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
-        bf_progress_update(&prog, f.index + 1);
-    }
-    bf_progress_end(&prog, est.n);
-    if (s == BF_END) s = rc ? recon_flush(rc) : bf_fail(BF_FORMAT, "%s: no frame", seq);
+    recon_run run;
+    recon_run_config cfg = recon_run_config_default();
+    cfg.name = seq;
+    cfg.label = "track+fuse";
+    s = recon_run_sequence(ctx, src, &cfg, NULL, NULL, &run);
     char path[4096];
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "trajectory.txt")) == BF_OK)
-        s = replay_traj_write_tum(path, &est);
-    if (s == BF_OK) s = eval_ate(&gt, &est, 0, &r->track_ate);
-    if (s == BF_OK) r->counts = recon_get_counts(rc);
+        s = replay_traj_write_tum(path, &run.est);
+    if (s == BF_OK) s = eval_ate(&run.gt, &run.est, 0, &r->track_ate);
+    if (s == BF_OK) r->counts = run.counts;
     hostmap snap = {0};
     mesh_data pts = {0};
     export_stats st;
-    if (s == BF_OK) s = fusion_get_stats(recon_map(rc), &r->map);
-    if (s == BF_OK) s = fusion_snapshot_take(recon_map(rc), &snap);
+    if (s == BF_OK) s = fusion_get_stats(run.map, &r->map);
+    if (s == BF_OK) s = fusion_snapshot_take(run.map, &snap);
     if (s == BF_OK) s = export_points(&snap, &pts, &st);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
         s = mesh_write_ply(path, &pts);
@@ -251,15 +238,12 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
     if (s == BF_OK) {
         r->fused = true;
         r->n_surface_points = pts.n_verts;
-        r->fuse_ms_median = bf_stats_percentile(&ms, 50);
-        r->fuse_ms_p95 = bf_stats_percentile(&ms, 95);
+        r->fuse_ms_median = bf_stats_percentile(&run.series.frame_ms, 50);
+        r->fuse_ms_p95 = bf_stats_percentile(&run.series.frame_ms, 95);
     }
     mesh_free(&pts);
     hostmap_free(&snap);
-    bf_stats_free(&ms);
-    bf_traj_free(&est);
-    bf_traj_free(&gt);
-    recon_destroy(rc);
+    recon_run_free(&run);
     rgbd_source_close(src);
     return s;
 }

@@ -9,6 +9,7 @@
 
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
+#include "recon/recon.h"
 #include "replay/replay.h"
 #include "export/export.h"
 
@@ -83,34 +84,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     return 0;
 }
 
-/* Per-frame measurements. */
-typedef struct fuse_timing {
-    bf_stats frame_ms, upload_ms, alloc_ms, subcache_ms, window_ms;
-} fuse_timing;
-
-static void timing_free(fuse_timing *t)
-{
-    bf_stats_free(&t->frame_ms);
-    bf_stats_free(&t->upload_ms);
-    bf_stats_free(&t->alloc_ms);
-    bf_stats_free(&t->subcache_ms);
-    bf_stats_free(&t->window_ms);
-}
-
-/* The pose of frame f: its ground truth, or the trajectory at its depth
- * timestamp. False when there is none (the frame is skipped). */
-static bool frame_pose(const bf_frame *f, const bf_traj *traj, bf_se3 *T_wc)
-{
-    if (!traj) {
-        if (!f->has_pose) return false;
-        *T_wc = f->T_wc;
-        return true;
-    }
-    return bf_traj_interpolate(traj, f->t_depth_s, T_wc);
-}
-
 typedef struct fuse_result {
-    uint32_t n_fused, n_skipped;
+    recon_run run;
     app_map_report out;
     double seconds;
     char device[256];
@@ -119,7 +94,6 @@ typedef struct fuse_result {
 typedef struct fuse_report {
     const fuse_args *a;
     const fuse_result *r;
-    const fuse_timing *t;
 } fuse_report;
 
 static void write_stats_json(FILE *f, const void *arg)
@@ -127,7 +101,7 @@ static void write_stats_json(FILE *f, const void *arg)
     const fuse_report *rep = arg;
     const fuse_args *a = rep->a;
     const fuse_result *r = rep->r;
-    const fuse_timing *t = rep->t;
+    const recon_run_series *t = &r->run.series;
     fprintf(f, "{\n  \"command\": \"fuse\",\n  \"sequence\": ");
     bf_json_string(f, a->seq);
     fprintf(f, ",\n  \"device\": ");
@@ -136,7 +110,7 @@ static void write_stats_json(FILE *f, const void *arg)
                "\"max_level\": %u, \"brick_cap\": %u},\n",
             a->fcfg.voxel_ratio, a->fcfg.window, a->fcfg.subcache, a->fcfg.chunk_m, a->fcfg.max_level,
             a->fcfg.brick_cap);
-    fprintf(f, "  \"frames\": %u,\n  \"frames_skipped\": %u,\n", r->n_fused, r->n_skipped);
+    fprintf(f, "  \"frames\": %u,\n  \"frames_skipped\": %u,\n", r->run.n_fused, r->run.n_skipped);
     fprintf(f, "  \"frame_ms\": {\"median\": ");
     bf_json_number(f, bf_stats_percentile(&t->frame_ms, 50), 5);
     fprintf(f, ", \"p95\": ");
@@ -156,49 +130,6 @@ static void write_stats_json(FILE *f, const void *arg)
     fprintf(f, "  \"seconds\": %.3f\n}\n", r->seconds);
 }
 
-static bf_status push_stage_times(fuse_timing *t, fusion_stage_ms ms)
-{
-    bf_status s = bf_stats_push(&t->upload_ms, ms.upload);
-    if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, ms.alloc);
-    if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, ms.subcache);
-    if (s == BF_OK) s = bf_stats_push(&t->window_ms, ms.window);
-    return s;
-}
-
-/* Fuses every frame of src; the map is created at the first posed frame. */
-static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const bf_traj *traj, const fuse_args *a,
-                             fusion_map **map_out, fuse_result *r, fuse_timing *t)
-{
-    fusion_map *map = NULL;
-    bf_frame f;
-    bf_status s;
-    bf_progress prog;
-    bf_progress_begin(&prog, "fuse", src->n_frames);
-    uint32_t seen = 0;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        seen++;
-        bf_se3 T_wc;
-        if (!frame_pose(&f, traj, &T_wc)) {
-            r->n_skipped++;
-            bf_warn("fuse: frame %u (t = %.6f): no pose, skipped", f.index, f.t_depth_s);
-            continue;
-        }
-        if (!map && (s = fusion_create(ctx, &a->fcfg, rgbd_source_intrinsics(src), T_wc.t, &map)) != BF_OK) break;
-        double t0 = bf_time_s();
-        s = fusion_add_frame(map, &f, &T_wc);
-        if (s != BF_OK) break;
-        double ms = 1e3 * (bf_time_s() - t0);
-        if ((s = bf_stats_push(&t->frame_ms, ms)) != BF_OK) break;
-        if ((s = push_stage_times(t, fusion_last_stage_ms(map))) != BF_OK) break;
-        r->n_fused++;
-        bf_progress_update(&prog, seen);
-    }
-    bf_progress_end(&prog, seen);
-    if (s == BF_END) s = map ? fusion_flush(map) : bf_fail(BF_FORMAT, "%s: no frame with a pose", a->seq);
-    *map_out = map;
-    return s;
-}
-
 int cmd_fuse(int argc, char **argv)
 {
     const char *cmd = "fuse";
@@ -208,13 +139,10 @@ int cmd_fuse(int argc, char **argv)
     double t_start = bf_time_s();
     fuse_result r;
     memset(&r, 0, sizeof r);
-    fuse_timing t;
-    memset(&t, 0, sizeof t);
     bf_traj traj = {0};
     bool use_traj = strcmp(a.poses, "groundtruth") != 0;
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
-    fusion_map *map = NULL;
     bf_status s = bf_mkdir_p(a.out);
     if (s == BF_OK && use_traj) s = replay_traj_read_tum(a.poses, &traj);
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
@@ -223,23 +151,30 @@ int cmd_fuse(int argc, char **argv)
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
-    if (s == BF_OK) s = fuse_frames(ctx, src, use_traj ? &traj : NULL, &a, &map, &r, &t);
-    if (s == BF_OK) s = app_export_map(map, a.out, !a.no_mesh, &r.out);
+    if (s == BF_OK) {
+        recon_run_config rcfg = recon_run_config_default();
+        rcfg.loop.fusion = a.fcfg;
+        rcfg.poses = RECON_POSES_KNOWN;
+        rcfg.known = use_traj ? &traj : NULL;
+        rcfg.name = a.seq;
+        rcfg.label = cmd;
+        s = recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run);
+    }
+    if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
     r.seconds = bf_time_s() - t_start;
-    fuse_report rep = {&a, &r, &t};
+    fuse_report rep = {&a, &r};
     if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
     if (s == BF_OK) {
-        printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.n_fused, r.n_skipped, r.device);
-        printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&t.frame_ms, 50),
-               bf_stats_percentile(&t.frame_ms, 95));
+        printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.run.n_fused, r.run.n_skipped, r.device);
+        printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
+               bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);
         printf("  wrote            %s/{%spoints.ply,stats.json} in %.1f s\n", a.out, a.no_mesh ? "" : "mesh.ply,",
                r.seconds);
     }
-    fusion_destroy(map);
+    recon_run_free(&r.run);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
     bf_traj_free(&traj);
-    timing_free(&t);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

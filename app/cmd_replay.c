@@ -198,48 +198,9 @@ static void on_stop_signal(int sig)
     capture_threaded_stop(g_live_src); /* an atomic flag: async-signal-safe */
 }
 
-/* Per-frame measurements over the run. */
-typedef struct replay_timing {
-    bf_stats frame_ms, track_ms, rof_ms, raycast_ms, upload_ms, alloc_ms, subcache_ms, window_ms;
-    bf_stats inlier_frac, residual_mm;
-} replay_timing;
-
-static bf_stats *timing_series(replay_timing *t, int i)
-{
-    bf_stats *all[] = {&t->frame_ms,  &t->track_ms,    &t->rof_ms,    &t->raycast_ms, &t->upload_ms,
-                       &t->alloc_ms,  &t->subcache_ms, &t->window_ms, &t->inlier_frac, &t->residual_mm};
-    return i < (int)(sizeof all / sizeof all[0]) ? all[i] : NULL;
-}
-
-static void timing_free(replay_timing *t)
-{
-    bf_stats *s;
-    for (int i = 0; (s = timing_series(t, i)); i++) bf_stats_free(s);
-}
-
-static bf_status timing_push(replay_timing *t, const recon_frame_result *fr)
-{
-    bf_status s = bf_stats_push(&t->frame_ms, fr->ms_frame);
-    if (fr->state == RECON_TRACKED || fr->state == RECON_LOST) {
-        if (s == BF_OK) s = bf_stats_push(&t->track_ms, fr->ms_track);
-        if (s == BF_OK) s = bf_stats_push(&t->inlier_frac, fr->track.inlier_frac);
-        if (s == BF_OK && fr->track.outcome == TRACK_OK) s = bf_stats_push(&t->residual_mm, 1e3 * fr->track.residual_m);
-    }
-    if (fr->fused) {
-        if (s == BF_OK) s = bf_stats_push(&t->rof_ms, fr->ms_rof);
-        if (s == BF_OK) s = bf_stats_push(&t->raycast_ms, fr->ms_raycast);
-        if (s == BF_OK) s = bf_stats_push(&t->upload_ms, fr->fuse.upload);
-        if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, fr->fuse.alloc);
-        if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, fr->fuse.subcache);
-        if (s == BF_OK) s = bf_stats_push(&t->window_ms, fr->fuse.window);
-    }
-    return s;
-}
-
 typedef struct replay_result {
-    recon_counts counts;
+    recon_run run;
     app_map_report out;
-    bf_traj est, gt;   /* gt: the frames' own poses, when they have them */
     bool has_ate;
     eval_ate_result ate;
     uint32_t n_views;
@@ -247,14 +208,12 @@ typedef struct replay_result {
     char device[256];
     bool has_capture;          /* live: the capture thread's counts */
     capture_thread_stats cap;
-    bool interrupted;
     uint32_t n_recorded;
 } replay_result;
 
 typedef struct replay_report {
     const replay_args *a;
     const replay_result *r;
-    const replay_timing *t;
 } replay_report;
 
 static void json_series(FILE *f, const char *name, const bf_stats *s, const char *tail)
@@ -273,7 +232,7 @@ static void write_stats_json(FILE *f, const void *arg)
     const replay_report *rep = arg;
     const replay_args *a = rep->a;
     const replay_result *r = rep->r;
-    const replay_timing *t = rep->t;
+    const recon_run_series *t = &r->run.series;
     const fusion_config *fc = &a->rcfg.fusion;
     const track_config *tc = &a->rcfg.track;
     fprintf(f, "{\n  \"command\": \"%s\",\n  \"%s\": ", a->is_live_cmd ? "live" : "replay",
@@ -286,7 +245,7 @@ static void write_stats_json(FILE *f, const void *arg)
             fc->voxel_ratio, fc->window, fc->subcache, fc->chunk_m, fc->max_level, fc->brick_cap);
     for (uint32_t l = 0; l < tc->levels; l++) fprintf(f, "%s%u", l ? ", " : "", tc->iterations[l]);
     fprintf(f, "], \"rof_iterations\": %u, \"rof_lambda0\": %g},\n", tc->rof_iterations, tc->rof_lambda0);
-    const recon_counts *c = &r->counts;
+    const recon_counts *c = &r->run.counts;
     fprintf(f, "  \"frames\": %u,\n  \"tracking\": {\"tracked\": %u, \"lost\": %u, \"no_depth\": %u, "
                "\"degenerate\": %u, \"pool_full\": %u, ",
             c->frames, c->tracked, c->lost, c->no_depth, c->degenerate, c->pool_full);
@@ -320,7 +279,7 @@ static void write_stats_json(FILE *f, const void *arg)
         fprintf(f, "  \"capture\": {\"captured\": %llu, \"delivered\": %llu, \"dropped\": %llu, "
                    "\"interrupted\": %s, \"recorded\": %u},\n",
                 (unsigned long long)r->cap.captured, (unsigned long long)r->cap.delivered,
-                (unsigned long long)r->cap.dropped, r->interrupted ? "true" : "false", r->n_recorded);
+                (unsigned long long)r->cap.dropped, r->run.is_interrupted ? "true" : "false", r->n_recorded);
     app_json_map(f, &r->out, fc->max_level);
     fprintf(f, "  \"views\": %u,\n  \"seconds\": %.3f\n}\n", r->n_views, r->seconds);
 }
@@ -351,69 +310,36 @@ static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr
             fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window);
 }
 
-/* Runs the loop over every frame of src. The loop is created at the first
- * frame (its pose is the first ground-truth pose, or the identity). */
-static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_args *a, FILE *csv,
-                            replay_log_writer *log, recon **rc_out, replay_result *r, replay_timing *t)
+/* What the replay writes per frame beside the runner's own records. */
+typedef struct replay_sink {
+    const replay_args *a;
+    FILE *csv;
+    replay_log_writer *log; /* live --record, else NULL */
+    replay_result *r;
+} replay_sink;
+
+static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
 {
-    recon *rc = NULL;
-    bf_frame f;
-    bf_status s;
-    bf_progress prog;
-    bf_progress_begin(&prog, "replay", src->n_frames);
-    uint32_t seen = 0;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        seen++;
-        if (!rc) {
-            bf_se3 T0 = (!a->init_identity && f.has_pose) ? f.T_wc : bf_se3_identity();
-            if ((s = recon_create(ctx, &a->rcfg, rgbd_source_intrinsics(src), &T0, &rc)) != BF_OK) break;
-        }
-        recon_frame_result fr;
-        if (a->fuse_at_gt && !f.has_pose) {
-            s = bf_fail(BF_FORMAT, "%s: frame %u (t = %.6f) has no ground-truth pose (--fuse-at-groundtruth)", a->seq,
-                        f.index, f.t_depth_s);
-            break;
-        }
-        s = a->fuse_at_gt ? recon_add_frame_known(rc, &f, &f.T_wc, &fr) : recon_add_frame(rc, &f, &fr);
-        if (s != BF_OK) break;
-        if (fr.state == RECON_LOST)
-            bf_warn("replay: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm): not fused",
-                    f.index, f.t_depth_s, track_outcome_name(fr.track.outcome), 100 * fr.track.inlier_frac,
-                    1e3 * fr.track.residual_m);
-        else if (fr.state == RECON_NO_DEPTH)
-            bf_warn("replay: frame %u (t = %.6f): %u valid depth samples: skipped", f.index, f.t_depth_s, fr.n_valid);
-        csv_frame(csv, &f, &fr);
-        if (log) {
-            if ((s = replay_log_writer_add(log, &f)) != BF_OK) break;
-            r->n_recorded++;
-        }
-        if ((s = timing_push(t, &fr)) != BF_OK) break;
-        if ((s = bf_traj_push(&r->est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
-        if (f.has_pose && (s = bf_traj_push(&r->gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
-        if (a->view_every && recon_map(rc) && f.index % a->view_every == 0) {
-            if ((s = write_view(rc, a->out, f.index, &fr.T_wc)) != BF_OK) break;
-            r->n_views++;
-        }
-        bf_progress_update(&prog, seen);
-    }
-    bf_progress_end(&prog, seen);
-    if (s == BF_END) {
-        s = rc && recon_map(rc) ? recon_flush(rc) : bf_fail(BF_FORMAT, "%s: no frame with depth", a->seq);
-    }
-    if (rc) r->counts = recon_get_counts(rc);
-    *rc_out = rc;
+    replay_sink *k = user;
+    bf_status s = BF_OK;
+    csv_frame(k->csv, f, fr);
+    if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
+    if (s == BF_OK && k->a->view_every && run->map && f->index % k->a->view_every == 0 &&
+        (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
+        k->r->n_views++;
     return s;
 }
 
-static void print_summary(const replay_args *a, const replay_result *r, const replay_timing *t)
+static void print_summary(const replay_args *a, const replay_result *r)
 {
-    const recon_counts *c = &r->counts;
+    const recon_counts *c = &r->run.counts;
+    const recon_run_series *t = &r->run.series;
     printf("bitfuse %s: %u frames on %s: %u tracked, %u lost, %u without depth (%u degenerate)\n",
            a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->lost, c->no_depth, c->degenerate);
     if (r->has_capture)
         printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
-               r->interrupted ? " (stopped by a signal)" : "");
+               r->run.is_interrupted ? " (stopped by a signal)" : "");
     printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
            "                   alloc %.1f, sub-cache %.1f, window %.1f ms)\n",
            bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
@@ -438,11 +364,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     double t_start = bf_time_s();
     replay_result r;
     memset(&r, 0, sizeof r);
-    replay_timing t;
-    memset(&t, 0, sizeof t);
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
-    recon *rc = NULL;
     replay_log_writer *log = NULL;
     FILE *csv = NULL;
     char path[4096];
@@ -476,19 +399,17 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
-    bf_status s_dev = BF_OK;
     if (s == BF_OK) {
-        s = run_frames(ctx, src, &a, csv, log, &rc, &r, &t);
-        /* A device that failed mid-scan keeps what was reconstructed so far. */
-        if (s != BF_OK && is_live_cmd && rc && recon_map(rc) && s != BF_VULKAN && s != BF_NO_MEMORY) {
-            s_dev = s;
-            bf_warn("%s: %s: device failed (%s); writing what was reconstructed", cmd, a.seq, bf_last_error());
-            s = recon_flush(rc);
-        }
+        recon_run_config rcfg = {
+            .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,
+            .init_identity = a.init_identity, .keep_on_source_error = is_live_cmd, .name = a.seq,
+            .label = cmd, .stop = is_live_cmd ? &g_stopped : NULL,
+        };
+        replay_sink sink = {&a, csv, log, &r};
+        s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
     }
     if (is_live_cmd && r.has_capture) {
         r.cap = capture_threaded_stats(src);
-        r.interrupted = g_stopped;
         sigaction(SIGINT, &old_int, NULL);
         sigaction(SIGTERM, &old_term, NULL);
         g_live_src = NULL;
@@ -499,21 +420,20 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     }
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
-        s = replay_traj_write_tum(path, &r.est);
-    if (s == BF_OK && r.gt.n >= 2 && eval_ate(&r.gt, &r.est, 0, &r.ate) == BF_OK) r.has_ate = true;
-    if (s == BF_OK) s = app_export_map(recon_map(rc), a.out, !a.no_mesh, &r.out);
+        s = replay_traj_write_tum(path, &r.run.est);
+    if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
+    if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
     r.seconds = bf_time_s() - t_start;
-    replay_report rep = {&a, &r, &t};
+    replay_report rep = {&a, &r};
     if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
-    if (s == BF_OK) print_summary(&a, &r, &t);
+    if (s == BF_OK) print_summary(&a, &r);
+    bf_status s_dev = r.run.source_status;
+    if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
-    recon_destroy(rc);
+    recon_run_free(&r.run);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
-    bf_traj_free(&r.est);
-    bf_traj_free(&r.gt);
-    timing_free(&t);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

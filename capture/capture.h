@@ -41,6 +41,15 @@ static inline const bf_intrinsics *rgbd_source_intrinsics(const rgbd_source *src
     return &src->intrinsics;
 }
 
+/* A source whose frames a function makes: frames rendered in memory by a
+ * test or a benchmark. next() calls fn(user, i, out) for i = 0, 1, ... and
+ * returns what it returns; after n_frames frames (0: no limit) it returns
+ * BF_END. fn fills *out with buffers it owns, valid until its next call.
+ * On success *out owns nothing of user's; rgbd_source_close frees it. */
+typedef bf_status (*rgbd_frame_fn)(void *user, uint32_t index, bf_frame *out);
+bf_status capture_source_from_fn(const bf_intrinsics *K, uint32_t n_frames, bool has_groundtruth, rgbd_frame_fn fn,
+                                 void *user, rgbd_source **out);
+
 /* ------------------------------------------------------------ capture thread
  * capture_threaded() runs any source on its own thread, feeding a bounded
  * queue of deep-copied frames (DESIGN.md section 1: capture thread -> bounded
