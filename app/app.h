@@ -3,6 +3,7 @@
 #ifndef BF_APP_H
 #define BF_APP_H
 
+#include <signal.h>
 #include <stdio.h>
 
 #include "capture/capture.h"
@@ -58,16 +59,17 @@ int cmd_info(int argc, char **argv);
 int cmd_record(int argc, char **argv);
 int cmd_convert(int argc, char **argv);
 int cmd_live(int argc, char **argv);
-/* The body of record and live (cmd_record.c): live writes DIR/capture.bflog. */
-int app_record(const char *cmd, int argc, char **argv, bool is_live_cmd);
-/* cmd_record.c: opens uri (a live URI for capture_open, or a recorded
- * sequence standing in for a camera, paced at its own frame rate with
- * realtime) behind the capture thread with a queue of `queue` frames: a live
- * or paced source drops the oldest frame when the consumer falls behind, a
- * file read as fast as it decodes loses nothing. *is_live says which. */
+/* device.c: opens uri (a live URI, or a recorded sequence replay reads
+ * standing in for a camera) behind the capture thread, as
+ * capture_open_device does. */
 struct replay_options;
 bf_status app_open_device(const char *uri, const struct replay_options *ropt, bool realtime, uint32_t queue,
                           bool *is_live, rgbd_source **out);
+/* Until app_stop_end, Ctrl-C and SIGTERM stop src's capture thread and set
+ * the returned flag instead of ending the program; a second one ends it. */
+const volatile sig_atomic_t *app_stop_begin(rgbd_source *src);
+/* Restores the handlers; true if a signal came. */
+bool app_stop_end(void);
 /* cmd_replay.c: the full loop on a sequence (replay) or a device (live). */
 int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd);
 

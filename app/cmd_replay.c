@@ -3,7 +3,6 @@
  * the estimated trajectory, the map's mesh and points, per-frame tracking
  * records and stats.json. */
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -186,18 +185,6 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     return 0;
 }
 
-/* ------------------------------------------------------------ Ctrl-C (live) */
-
-static rgbd_source *volatile g_live_src;
-static volatile sig_atomic_t g_stopped;
-
-static void on_stop_signal(int sig)
-{
-    (void)sig;
-    g_stopped = 1;
-    capture_threaded_stop(g_live_src); /* an atomic flag: async-signal-safe */
-}
-
 typedef struct replay_result {
     recon_run run;
     app_map_report out;
@@ -369,20 +356,14 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     replay_log_writer *log = NULL;
     FILE *csv = NULL;
     char path[4096];
-    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND}, old_int, old_term;
+    const volatile sig_atomic_t *stop = NULL;
     bf_status s = bf_mkdir_p(a.out);
     if (s == BF_OK && is_live_cmd) {
         bool is_live;
         s = app_open_device(a.seq, &a.ropt, a.realtime, a.queue, &is_live, &src);
         r.has_capture = s == BF_OK;
-        if (s == BF_OK) {
-            /* Ctrl-C ends the scan, not the program: what was seen is kept. */
-            g_live_src = src;
-            g_stopped = 0;
-            sigemptyset(&sa.sa_mask);
-            sigaction(SIGINT, &sa, &old_int);
-            sigaction(SIGTERM, &sa, &old_term);
-        }
+        /* Ctrl-C ends the scan, not the program: what was seen is kept. */
+        if (s == BF_OK) stop = app_stop_begin(src);
     } else if (s == BF_OK) {
         s = replay_open(a.seq, &a.ropt, &src);
     }
@@ -403,16 +384,14 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         recon_run_config rcfg = {
             .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,
             .init_identity = a.init_identity, .keep_on_source_error = is_live_cmd, .name = a.seq,
-            .label = cmd, .stop = is_live_cmd ? &g_stopped : NULL,
+            .label = cmd, .stop = stop,
         };
         replay_sink sink = {&a, csv, log, &r};
         s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
     }
-    if (is_live_cmd && r.has_capture) {
+    if (r.has_capture) {
         r.cap = capture_threaded_stats(src);
-        sigaction(SIGINT, &old_int, NULL);
-        sigaction(SIGTERM, &old_term, NULL);
-        g_live_src = NULL;
+        app_stop_end();
     }
     if (log) {
         bf_status s_log = replay_log_writer_finish(log);

@@ -77,6 +77,41 @@ bf_status capture_open(const char *uri, rgbd_source **out)
                    (int)scheme_len, uri);
 }
 
+bool capture_is_device_uri(const char *uri)
+{
+    for (size_t i = 0; uri && i < CAPTURE_N_BACKENDS; i++) {
+        size_t n = strlen(capture_backends[i].scheme);
+        if (!strncmp(uri, capture_backends[i].scheme, n) && uri[n] == ':') return true;
+    }
+    return false;
+}
+
+bf_status capture_open_device(const char *uri, capture_open_fn open_recording, void *user, bool realtime,
+                              uint32_t queue, bool *is_live, rgbd_source **out)
+{
+    rgbd_source *dev = NULL, *paced = NULL;
+    bool live = capture_is_device_uri(uri);
+    if (!live && !open_recording) return bf_fail(BF_INVALID_ARG, "%s: not a device URI", uri);
+    bf_status s = live ? capture_open(uri, &dev) : open_recording(user, uri, &dev);
+    if (s) return s;
+    if (!live && realtime) {
+        if ((s = capture_paced(dev, &paced))) {
+            rgbd_source_close(dev);
+            return s;
+        }
+        dev = paced;
+    }
+    /* A camera (or a file played as one) must never wait for us; a file
+     * read as fast as it decodes must not lose frames. */
+    s = live || realtime ? capture_threaded(dev, queue, out) : capture_threaded_lossless(dev, queue, out);
+    if (s) {
+        rgbd_source_close(dev);
+        return s;
+    }
+    *is_live = live;
+    return BF_OK;
+}
+
 uint32_t capture_list_devices(capture_device_info *out, uint32_t cap)
 {
     uint32_t n = 0;

@@ -167,7 +167,7 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
     bf_frame f;
     bf_status s = BF_END;
     uint32_t seen = 0;
-    while (!(out->is_interrupted = cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
+    while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
         bf_status sf = run_frame(ctx, src, &cfg, &f, on_frame, user, out);
         if (sf != BF_OK) {
@@ -177,5 +177,8 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
         bf_progress_update(&prog, seen);
     }
     bf_progress_end(&prog, seen);
+    /* A stop may also reach the source first (a capture thread told to
+     * stop ends its frames): the flag says it was the stop. */
+    out->is_interrupted = cfg.stop && *cfg.stop;
     return finish(&cfg, out->is_interrupted ? BF_END : s, out);
 }
