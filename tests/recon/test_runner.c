@@ -28,6 +28,11 @@ static bf_status faulty_frame(void *user, uint32_t k, bf_frame *f)
 
 static volatile sig_atomic_t g_stop;
 
+/* The device (the test skips without one) and the room every test runs in. */
+#define OPEN_ROOM(ctx, sc)                                                                                   \
+    GPU_FIXTURE_OPEN(ctx);                                                                                 \
+    CHECK_OK(synth_scene_room(NULL, &(sc)))
+
 static bf_status stop_after_3(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
 {
     (void)user, (void)run, (void)fr;
@@ -55,9 +60,8 @@ static bf_status run(gpu_context *ctx, const synth_scene *sc, faulty fy, const r
 BF_TEST(runner_keeps_the_map_of_a_source_that_fails_mid_scan)
 {
     gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
+    OPEN_ROOM(ctx, sc);
     recon_run_config cfg = fixture_run_config();
     recon_run r;
     CHECK_STATUS(run(ctx, &sc, (faulty){.fail = true}, &cfg, NULL, &r), BF_IO);
@@ -79,9 +83,8 @@ BF_TEST(runner_keeps_the_map_of_a_source_that_fails_mid_scan)
 BF_TEST(runner_stops_at_the_flag_and_starts_at_identity_when_asked)
 {
     gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
+    OPEN_ROOM(ctx, sc);
     recon_run_config cfg = fixture_run_config();
     cfg.stop = &g_stop;
     cfg.init_identity = true;
@@ -100,9 +103,8 @@ BF_TEST(runner_stops_at_the_flag_and_starts_at_identity_when_asked)
 BF_TEST(runner_fuses_at_known_poses_and_skips_frames_without_one)
 {
     gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
+    OPEN_ROOM(ctx, sc);
     recon_run_config cfg = fixture_run_config();
     cfg.poses = RECON_POSES_KNOWN;
     recon_run r;
