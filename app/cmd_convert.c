@@ -114,7 +114,7 @@ int cmd_convert(int argc, char **argv)
     if (a.to_log) app_json_log_stats(o, &a.lcfg, &L, seconds);
     cJSON_AddNumberToObject(o, "seconds", seconds);
     cJSON_AddNumberToObject(o, "fps", seconds > 0 ? n / seconds : NAN);
-    if ((s = app_json_write(json_path, o))) return app_fail(cmd, s);
+    if ((s = app_json_write(json_path, o)) != BF_OK) return app_fail(cmd, s);
 
     printf("bitfuse convert: %u frames (%u skipped) from %s to %s (%s)\n", n, skipped, a.in, a.out,
            a.to_log ? "bitfuse log" : "TUM folder");

@@ -171,7 +171,7 @@ int cmd_devices(int argc, char **argv)
     }
     if (is_json) {
         bf_status sj = app_json_print(devices_json(devs, n, chosen, cams, n_cams));
-        if (sj) return app_fail("devices", sj);
+        if (sj != BF_OK) return app_fail("devices", sj);
     } else {
         print_text(devs, n, chosen);
         print_text_capture(cams, n_cams);

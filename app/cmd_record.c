@@ -132,7 +132,7 @@ int cmd_record(int argc, char **argv)
     const char *log_path = a.out;
     char json_path[4200];
     bf_status s = stats_path(log_path, json_path, sizeof json_path);
-    if (s) return app_fail(cmd, s);
+    if (s != BF_OK) return app_fail(cmd, s);
 
     record_result r;
     memset(&r, 0, sizeof r);
@@ -175,7 +175,7 @@ int cmd_record(int argc, char **argv)
            r.seconds > 0 ? L->n_frames / r.seconds : 0.0, r.seconds > 0 ? L->file_bytes / 1e6 / r.seconds : 0.0,
            json_path);
     if (s) return app_fail(cmd, s);
-    if (s_json) return app_fail(cmd, s_json);
+    if (s_json != BF_OK) return app_fail(cmd, s_json);
     return APP_EXIT_OK;
 }
 

@@ -93,9 +93,9 @@ bf_status capture_open_device(const char *uri, capture_open_fn open_recording, v
     bool live = capture_is_device_uri(uri);
     if (!live && !open_recording) return bf_fail(BF_INVALID_ARG, "%s: not a device URI", uri);
     bf_status s = live ? capture_open(uri, &dev) : open_recording(user, uri, &dev);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (!live && realtime) {
-        if ((s = capture_paced(dev, &paced))) {
+        if ((s = capture_paced(dev, &paced)) != BF_OK) {
             rgbd_source_close(dev);
             return s;
         }
@@ -104,7 +104,7 @@ bf_status capture_open_device(const char *uri, capture_open_fn open_recording, v
     /* A camera (or a file played as one) must never wait for us; a file
      * read as fast as it decodes must not lose frames. */
     s = live || realtime ? capture_threaded(dev, queue, out) : capture_threaded_lossless(dev, queue, out);
-    if (s) {
+    if (s != BF_OK) {
         rgbd_source_close(dev);
         return s;
     }

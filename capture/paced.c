@@ -19,7 +19,7 @@ static bf_status paced_next(rgbd_source *base, bf_frame *out)
 {
     paced_source *p = (paced_source *)base;
     bf_status s = rgbd_source_next(p->inner, out);
-    if (s) return s;
+    if (s != BF_OK) return s;
     if (!p->is_started) {
         p->is_started = true;
         p->t0_wall_s = bf_time_s();

@@ -110,7 +110,8 @@ recon_counts recon_get_counts(const recon *r);
 typedef enum recon_pose_source {
     RECON_POSES_TRACK = 0,    /* track every frame, fuse at the pose found */
     RECON_POSES_TRACK_FUSE_GT, /* track every frame, fuse at its ground truth: the tracker's one-step error */
-    RECON_POSES_KNOWN,        /* no tracking: fuse at known poses, skip frames without one */
+    RECON_POSES_KNOWN,        /* no tracking: fuse at known poses, skip frames without one; a full
+                                 pool fails the run (the loop drops and counts instead) */
 } recon_pose_source;
 
 typedef struct recon_run_config {

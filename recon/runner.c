@@ -118,9 +118,9 @@ static bf_status run_frame(gpu_context *ctx, rgbd_source *src, const recon_run_c
 {
     recon_frame_result fr;
     bf_status s;
-    run->counts.frames += cfg->poses == RECON_POSES_KNOWN;
     if (cfg->poses == RECON_POSES_KNOWN) {
         bf_se3 T_wc;
+        run->counts.frames++; /* the loop counts its own */
         if (!known_pose(cfg, f, &T_wc)) {
             run->n_skipped++;
             bf_warn("%s: frame %u (t = %.6f): no pose, skipped", cfg->label, f->index, f->t_depth_s);
