@@ -7,6 +7,7 @@
 #include "live_int.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -73,8 +74,12 @@ bf_status capture_open(const char *uri, rgbd_source **out)
         *out = src;
         return BF_OK;
     }
-    return bf_fail(BF_INVALID_ARG, "%s: unknown capture scheme '%.*s' (known: freenect, openni2, v4l2)", uri,
-                   (int)scheme_len, uri);
+    char known[128] = "";
+    for (size_t i = 0; i < CAPTURE_N_BACKENDS; i++) {
+        size_t used = strlen(known);
+        snprintf(known + used, sizeof known - used, "%s%s", i ? ", " : "", capture_backends[i].scheme);
+    }
+    return bf_fail(BF_INVALID_ARG, "%s: unknown capture scheme '%.*s' (known: %s)", uri, (int)scheme_len, uri, known);
 }
 
 bool capture_is_device_uri(const char *uri)

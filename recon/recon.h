@@ -144,7 +144,7 @@ typedef struct recon_run {
     fusion_map *map;     /* the map: the loop's, or the run's own with known poses; NULL until a frame is fused */
     recon_counts counts; /* the loop's counts; with known poses frames and pool_full only */
     uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
-    bf_traj est;         /* one pose per frame: tracked, the last good one, or the known one */
+    bf_traj est;         /* one pose per frame handled: tracked, the last good one, or the known one */
     bf_traj gt;          /* the frames' ground truth, where they have it */
     recon_run_series series;
     bool is_interrupted; /* the stop flag ended the run */
