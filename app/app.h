@@ -3,7 +3,10 @@
 #ifndef BF_APP_H
 #define BF_APP_H
 
+#include <signal.h>
 #include <stdio.h>
+
+#include <cjson/cJSON.h>
 
 #include "capture/capture.h"
 #include "core/core.h"
@@ -19,15 +22,84 @@ enum {
     APP_EXIT_DEVICE = 4,  /* no usable Vulkan device or a device error */
 };
 
-/* Maps a status to an exit code and prints "bitfuse CMD: error: message". */
+/* main.c: maps a status to an exit code and prints "bitfuse CMD: error:
+ * message". */
 int app_fail(const char *cmd, bf_status s);
-/* Prints a usage error and returns APP_EXIT_USAGE. */
-int app_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* The shared real-data folder (meshes/, tum/...): ../shared/data beside the
  * source tree, else beside the current folder; NULL when neither exists. */
 const char *app_default_data_dir(void);
-/* True if argv[i] is -h or --help. */
-bool app_is_help(const char *arg);
+
+/* options.c: the one option parser. A command lists its options as rows
+ * (name, kind, destination, bounds, help) in tables; the parser checks every
+ * value (bounds, choices, the row's check) before writing it, so a command
+ * line is refused before any device opens or any folder is made, and the
+ * help text, defaults included, is generated from the same rows. Options
+ * take "--name value" or "--name=value". */
+typedef enum app_opt_kind {
+    APP_OPT_FLAG,   /* bool, set to true; no value */
+    APP_OPT_U32,    /* uint32_t within [min, max] */
+    APP_OPT_U64,    /* uint64_t, any */
+    APP_OPT_DOUBLE, /* double within [min, max] (min excluded with min_open) */
+    APP_OPT_FLOAT,  /* float, the same */
+    APP_OPT_STRING, /* const char *, borrowed from argv */
+    APP_OPT_ENUM,   /* int: codes[k] (or k) for the k-th of meta's "a|b|c" */
+    APP_OPT_CHOICE, /* bool: true for the first of meta's "a|b", false for the second */
+    APP_OPT_LIST,   /* uint32_t array "A,B,C" within [min, max], its length into *count (1..max_n) */
+} app_opt_kind;
+
+#define APP_OPT_LIST_MAX 8   /* values of one list option */
+#define APP_OPT_ROWS_MAX 128 /* rows of one command */
+
+typedef struct app_option {
+    const char *name;  /* "--ratio"; NULL ends a table */
+    app_opt_kind kind;
+    void *dest;        /* what the kind says; its value before parsing is the default the help states */
+    const char *meta;  /* the value's name in the help ("R"), or the choices ("on|off") */
+    const char *help;  /* NULL: an alias, left out of the help */
+    double min, max;   /* bounds of numbers and list values; max <= min: no upper bound */
+    bool min_open;     /* min itself is refused (a value must be above it) */
+    const int *codes;  /* APP_OPT_ENUM: the value of each choice; NULL: its index */
+    uint32_t *count;   /* APP_OPT_LIST */
+    uint32_t max_n;
+    bool required;
+    bool no_default;   /* the help states no default (it depends on the input) */
+    /* More checks on the value text: NULL, or the whole message. */
+    const char *(*check)(const char *name, const char *value);
+} app_option;
+
+/* A row: the first five fields in order, then any others by name. */
+#define APP_OPT(name_, kind_, dest_, meta_, help_, ...)                                                      \
+    {.name = (name_), .kind = (kind_), .dest = (dest_), .meta = (meta_), .help = (help_), __VA_ARGS__}
+#define APP_OPT_END {.name = NULL}
+
+typedef struct app_command_spec {
+    const char *name;                /* "replay", for messages */
+    const char *usage;               /* usage line and description */
+    const app_option *const *tables; /* NULL-terminated list of tables */
+    const char **positional;         /* max_positional slots for the plain arguments */
+    int min_positional, max_positional;
+    const char *positional_missing;  /* the message when fewer were given */
+    const char *epilog;              /* after the options: exit codes */
+} app_command_spec;
+
+/* Prints "bitfuse CMD: message" and where the help is; returns APP_EXIT_USAGE. */
+int app_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* 0: parsed; -1: --help was printed (exit 0); else the usage exit code,
+ * the message printed. */
+int app_options_parse(const app_command_spec *spec, int argc, char **argv);
+void app_options_help(FILE *f, const app_command_spec *spec);
+
+/* Rows several commands share: the sequence options (--camera,
+ * --depth-scale, --frames, --skip-bad-frames) and the map options (--ratio,
+ * --window, --subcache, --bricks, --chunk, --max-level). */
+struct replay_options;
+#define APP_SEQUENCE_ROWS 5
+#define APP_MAP_ROWS 7
+void app_sequence_options(app_option rows[APP_SEQUENCE_ROWS], struct replay_options *o);
+void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc);
+/* What the map rows cannot check alone (the sub-cache within the window):
+ * 0 or the usage exit code, the message printed. */
+int app_check_map_options(const char *cmd, const fusion_config *fc);
 
 /* output.c: what the commands that build a map report about it. */
 typedef struct app_map_report {
@@ -36,16 +108,55 @@ typedef struct app_map_report {
 } app_map_report;
 /* Fills r->map, writes out_dir/points.ply and, with_mesh, out_dir/mesh.ply. */
 bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r);
-/* The map's lines of stats.json ("map_bytes" .. "mesh", each ending ",\n"). */
-void app_json_map(FILE *f, const app_map_report *r, uint32_t max_level);
+/* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
+void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
 /* The map's lines of the printed summary. */
 void app_print_map(const app_map_report *r, uint32_t max_level);
-/* The map options fuse, replay and live share (--ratio, --chunk, --window,
- * --subcache, --bricks, --max-level) into fc: true if o with value v was
- * one of them (the caller skips v). */
-bool app_parse_map_option(const char *o, const char *v, fusion_config *fc);
-/* Writes dir/name atomically from what write() prints. */
-bf_status app_write_json(const char *dir, const char *name, void (*write)(FILE *f, const void *arg), const void *arg);
+
+/* json.c: JSON through cJSON. Objects are built with cJSON's own calls;
+ * NaN and infinities come out as null. */
+/* A new object, added to parent under name when parent is not NULL. */
+cJSON *app_json_object(cJSON *parent, const char *name);
+/* {"median", "p95", "mean"} of s under name. */
+void app_json_series(cJSON *parent, const char *name, const bf_stats *s);
+/* An array of n numbers under name. */
+void app_json_numbers(cJSON *parent, const char *name, const double *v, size_t n);
+/* Every field of the config under name: the loop's ("fusion", "track",
+ * "loop") or fusion's alone. */
+struct recon_config;
+void app_json_recon_config(cJSON *parent, const char *name, const struct recon_config *c);
+void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config *c);
+/* Write root to path atomically (dir/name), or print it on stdout; each
+ * takes root and deletes it. */
+bf_status app_json_write(const char *path, cJSON *root);
+bf_status app_json_write_in(const char *dir, const char *name, cJSON *root);
+bf_status app_json_print(cJSON *root);
+
+/* log_report.c: what record and convert say about the log they wrote. */
+struct replay_log_config;
+struct replay_log_stats;
+double app_ratio(uint64_t raw, uint64_t packed); /* raw / packed, NaN for 0 */
+const char *app_colour_name(int colour);         /* a replay_log_colour: "jpeg", "zstd", "none" */
+/* colour_codec, bytes by part, compression ratios and write rate into o. */
+void app_json_log_stats(cJSON *o, const struct replay_log_config *lcfg, const struct replay_log_stats *L,
+                        double seconds);
+
+/* --out / --record checks: the path must end in .bflog. */
+const char *app_check_log_path(const char *name, const char *value);
+/* The log's codec options record and convert share (--colour, --jpeg-quality,
+ * --zstd-level), applied to a replay_log_config after parsing. */
+typedef struct app_log_codec {
+    int colour; /* a replay_log_colour */
+    uint32_t jpeg_quality, zstd_level;
+} app_log_codec;
+#define APP_LOG_ROWS 5
+void app_log_codec_options(app_option rows[APP_LOG_ROWS], app_log_codec *c);
+void app_log_codec_apply(const app_log_codec *c, struct replay_log_config *lcfg);
+/* Parses a command that writes a log from a source (record, convert): spec
+ * with its own rows, then the codec's and the sequence's; the codec lands
+ * in lcfg. Returns as app_options_parse. */
+int app_parse_log_command(app_command_spec *spec, const app_option *own, app_log_codec *codec,
+                          struct replay_options *ropt, struct replay_log_config *lcfg, int argc, char **argv);
 
 int cmd_demo(int argc, char **argv);
 int cmd_synth(int argc, char **argv);
@@ -58,16 +169,17 @@ int cmd_info(int argc, char **argv);
 int cmd_record(int argc, char **argv);
 int cmd_convert(int argc, char **argv);
 int cmd_live(int argc, char **argv);
-/* The body of record and live (cmd_record.c): live writes DIR/capture.bflog. */
-int app_record(const char *cmd, int argc, char **argv, bool is_live_cmd);
-/* cmd_record.c: opens uri (a live URI for capture_open, or a recorded
- * sequence standing in for a camera, paced at its own frame rate with
- * realtime) behind the capture thread with a queue of `queue` frames: a live
- * or paced source drops the oldest frame when the consumer falls behind, a
- * file read as fast as it decodes loses nothing. *is_live says which. */
+/* device.c: opens uri (a live URI, or a recorded sequence replay reads
+ * standing in for a camera) behind the capture thread, as
+ * capture_open_device does. */
 struct replay_options;
 bf_status app_open_device(const char *uri, const struct replay_options *ropt, bool realtime, uint32_t queue,
                           bool *is_live, rgbd_source **out);
+/* Until app_stop_end, Ctrl-C and SIGTERM stop src's capture thread and set
+ * the returned flag instead of ending the program; a second one ends it. */
+const volatile sig_atomic_t *app_stop_begin(rgbd_source *src);
+/* Restores the handlers; true if a signal came. */
+bool app_stop_end(void);
 /* cmd_replay.c: the full loop on a sequence (replay) or a device (live). */
 int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd);
 

@@ -11,81 +11,40 @@
 #include "capture/capture.h"
 #include "replay/replay.h"
 
-static void convert_help(FILE *f)
-{
-    fprintf(f,
-            "usage: bitfuse convert SEQUENCE --out DEST [options]\n\n"
-            "Reads SEQUENCE (a TUM, ICL-NUIM or pose-per-frame folder, or a .bflog) and writes it\n"
-            "as a bitfuse log when DEST ends in .bflog, else as a TUM folder (docs/formats.md).\n"
-            "Depth, timestamps and poses carry over exactly; colour too, except with --colour jpeg.\n"
-            "Writes DEST's stats (frames, bytes, compression ratio, fps) to X.stats.json beside\n"
-            "X.bflog, or to DEST/stats.json for a folder.\n\n"
-            "options:\n"
-            "  --out DEST         X.bflog or a folder (created)\n"
-            "  --colour C         log colour: zstd (default, lossless), jpeg or none\n"
-            "  --jpeg-quality Q   1..100, default 90\n"
-            "  --zstd-level L     1..19, default 1\n"
-            "%s"
-            "  -h, --help         this text\n\n"
-            "exit codes: 0 ok, 1 failure, 2 usage, 3 unreadable or malformed input\n",
-            replay_options_help());
-}
+static const char convert_usage[] =
+    "usage: bitfuse convert SEQUENCE --out DEST [options]\n\n"
+    "Reads SEQUENCE (a TUM, ICL-NUIM or pose-per-frame folder, or a .bflog) and writes it\n"
+    "as a bitfuse log when DEST ends in .bflog, else as a TUM folder (docs/formats.md).\n"
+    "Depth, timestamps and poses carry over exactly; colour too, except with --colour jpeg.\n"
+    "Writes DEST's stats (frames, bytes, compression ratio, fps) to X.stats.json beside\n"
+    "X.bflog, or to DEST/stats.json for a folder.\n";
 
 typedef struct convert_args {
     const char *in, *out;
     replay_options ropt;
     replay_log_config lcfg;
+    app_log_codec codec;
     bool to_log;
 } convert_args;
 
 static int parse_args(int argc, char **argv, convert_args *a)
 {
-    const char *cmd = "convert";
     memset(a, 0, sizeof *a);
-    a->lcfg.colour = REPLAY_LOG_COLOUR_ZSTD;
-    for (int i = 1; i < argc;) {
-        const char *o = argv[i];
-        if (app_is_help(o)) {
-            convert_help(stdout);
-            return -1;
-        }
-        int r = replay_parse_option(argc, argv, &i, &a->ropt);
-        if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
-        if (r > 0) continue;
-        if (o[0] != '-') {
-            if (a->in) return app_usage_error(cmd, "more than one sequence given ('%s' and '%s')", a->in, o);
-            a->in = o;
-            i++;
-            continue;
-        }
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!v) return app_usage_error(cmd, "%s needs a value", o);
-        uint32_t u;
-        if (!strcmp(o, "--out")) {
-            a->out = v;
-        } else if (!strcmp(o, "--colour") || !strcmp(o, "--color")) {
-            if (!strcmp(v, "jpeg")) a->lcfg.colour = REPLAY_LOG_COLOUR_JPEG;
-            else if (!strcmp(v, "zstd")) a->lcfg.colour = REPLAY_LOG_COLOUR_ZSTD;
-            else if (!strcmp(v, "none")) a->lcfg.colour = REPLAY_LOG_COLOUR_NONE;
-            else return app_usage_error(cmd, "--colour takes jpeg, zstd or none, not '%s'", v);
-        } else if (!strcmp(o, "--jpeg-quality") && bf_parse_u32(v, &u) && u >= 1 && u <= 100) {
-            a->lcfg.jpeg_quality = (int)u;
-        } else if (!strcmp(o, "--zstd-level") && bf_parse_u32(v, &u) && u >= 1 && u <= 19) {
-            a->lcfg.zstd_level = (int)u;
-        } else if (!strcmp(o, "--jpeg-quality") || !strcmp(o, "--zstd-level")) {
-            return app_usage_error(cmd, "bad value for %s: '%s'", o, v);
-        } else {
-            return app_usage_error(cmd, "unknown option '%s'", o);
-        }
-        i += 2;
-    }
-    if (!a->in) return app_usage_error(cmd, "no sequence given");
-    if (!a->out) return app_usage_error(cmd, "--out is required");
+    a->codec = (app_log_codec){REPLAY_LOG_COLOUR_ZSTD, 90, 1};
+    const app_option own[] = {
+        APP_OPT("--out", APP_OPT_STRING, &a->out, "DEST", "X.bflog or a folder (created)", .required = true),
+        APP_OPT_END,
+    };
+    app_command_spec spec = {
+        .name = "convert", .usage = convert_usage, .positional = &a->in, .min_positional = 1, .max_positional = 1,
+        .positional_missing = "no sequence given",
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 unreadable or malformed input\n",
+    };
+    int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
+    if (rc) return rc;
     a->to_log = replay_is_log_path(a->out);
     return 0;
 }
-
-static double ratio(uint64_t raw, uint64_t packed) { return packed ? (double)raw / (double)packed : NAN; }
 
 /* The frames of src into the log or TUM writer (exactly one is set). */
 static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_tum_writer *tw, uint32_t *n_out)
@@ -144,48 +103,27 @@ int cmd_convert(int argc, char **argv)
         snprintf(json_path, sizeof json_path, "%.*s.stats.json", (int)(len - 6), a.out);
     else if ((s = bf_path_join(json_path, sizeof json_path, a.out, "stats.json")))
         return app_fail(cmd, s);
-    bf_membuf mb;
-    FILE *f = bf_membuf_open(&mb);
-    if (!f) return app_fail(cmd, BF_NO_MEMORY);
-    fprintf(f, "{\n  \"command\": \"convert\",\n  \"in\": ");
-    bf_json_string(f, a.in);
-    fprintf(f, ",\n  \"out\": ");
-    bf_json_string(f, a.out);
-    fprintf(f, ",\n  \"format\": \"%s\",\n  \"frames\": %u,\n  \"skipped\": %u,\n  \"dropped\": 0,\n",
-            a.to_log ? "bflog" : "tum", n, skipped);
-    if (a.to_log) {
-        fprintf(f, "  \"colour_codec\": \"%s\",\n", a.lcfg.colour == REPLAY_LOG_COLOUR_JPEG   ? "jpeg"
-                                                    : a.lcfg.colour == REPLAY_LOG_COLOUR_ZSTD ? "zstd"
-                                                                                              : "none");
-        fprintf(f, "  \"bytes\": %llu,\n  \"depth_raw_bytes\": %llu,\n  \"depth_bytes\": %llu,\n",
-                (unsigned long long)L.file_bytes, (unsigned long long)L.depth_raw_bytes,
-                (unsigned long long)L.depth_bytes);
-        fprintf(f, "  \"rgb_raw_bytes\": %llu,\n  \"rgb_bytes\": %llu,\n  \"depth_compression_ratio\": ",
-                (unsigned long long)L.rgb_raw_bytes, (unsigned long long)L.rgb_bytes);
-        bf_json_number(f, ratio(L.depth_raw_bytes, L.depth_bytes), 5);
-        fprintf(f, ",\n  \"rgb_compression_ratio\": ");
-        bf_json_number(f, ratio(L.rgb_raw_bytes, L.rgb_bytes), 5);
-        fprintf(f, ",\n  \"compression_ratio\": ");
-        bf_json_number(f, ratio(L.depth_raw_bytes + L.rgb_raw_bytes, L.file_bytes), 5);
-        fprintf(f, ",\n  \"write_mb_per_s\": ");
-        bf_json_number(f, seconds > 0 ? L.file_bytes / 1e6 / seconds : NAN, 5);
-        fprintf(f, ",\n");
-    }
-    fprintf(f, "  \"seconds\": ");
-    bf_json_number(f, seconds, 5);
-    fprintf(f, ",\n  \"fps\": ");
-    bf_json_number(f, seconds > 0 ? n / seconds : NAN, 5);
-    fprintf(f, "\n}\n");
-    if ((s = bf_membuf_write_atomic(&mb, json_path))) return app_fail(cmd, s);
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", "convert");
+    cJSON_AddStringToObject(o, "in", a.in);
+    cJSON_AddStringToObject(o, "out", a.out);
+    cJSON_AddStringToObject(o, "format", a.to_log ? "bflog" : "tum");
+    cJSON_AddNumberToObject(o, "frames", n);
+    cJSON_AddNumberToObject(o, "skipped", skipped);
+    cJSON_AddNumberToObject(o, "dropped", 0);
+    if (a.to_log) app_json_log_stats(o, &a.lcfg, &L, seconds);
+    cJSON_AddNumberToObject(o, "seconds", seconds);
+    cJSON_AddNumberToObject(o, "fps", seconds > 0 ? n / seconds : NAN);
+    if ((s = app_json_write(json_path, o)) != BF_OK) return app_fail(cmd, s);
 
     printf("bitfuse convert: %u frames (%u skipped) from %s to %s (%s)\n", n, skipped, a.in, a.out,
            a.to_log ? "bitfuse log" : "TUM folder");
     if (a.to_log) {
         printf("  depth     %.2f MB raw -> %.2f MB (%.2fx)\n", L.depth_raw_bytes / 1e6, L.depth_bytes / 1e6,
-               ratio(L.depth_raw_bytes, L.depth_bytes));
+               app_ratio(L.depth_raw_bytes, L.depth_bytes));
         if (L.rgb_raw_bytes)
             printf("  colour    %.2f MB raw -> %.2f MB (%.2fx)\n", L.rgb_raw_bytes / 1e6, L.rgb_bytes / 1e6,
-                   ratio(L.rgb_raw_bytes, L.rgb_bytes));
+                   app_ratio(L.rgb_raw_bytes, L.rgb_bytes));
         printf("  file      %.2f MB, %.1f MB/s\n", L.file_bytes / 1e6, seconds > 0 ? L.file_bytes / 1e6 / seconds : 0);
     }
     printf("  time      %.2f s, %.1f frames/s; stats in %s\n", seconds, seconds > 0 ? n / seconds : 0.0, json_path);

@@ -20,7 +20,7 @@
 #include "replay/replay.h"
 #include "export/export.h"
 
-static const char demo_help[] =
+static const char demo_usage[] =
     "usage: bitfuse demo [--out DIR] [--frames N] [--seed S] [--data DIR] [--no-gpu]\n"
     "\n"
     "Renders a synthetic room (Kinect v1 noise) along a built-in hand-held trajectory,\n"
@@ -28,20 +28,13 @@ static const char demo_help[] =
     "much of the seen surface it covers; then runs the full loop on the GPU (tracks the\n"
     "camera by ICP against the map and fuses the frames into the sign-bit map) and reports\n"
     "the trajectory error (ATE), the fused surface's error, the time per frame and the\n"
-    "map's memory. Writes into DIR (default out/demo):\n"
+    "map's memory. Writes into DIR:\n"
     "  seq/            the TUM-format sequence (bitfuse synth output)\n"
     "  trajectory_input.txt  the built-in trajectory\n"
     "  raw_points.ply  back-projected depth with ground-truth poses\n"
     "  trajectory.txt  the tracked trajectory (TUM format)\n"
     "  points.ply      surface voxels of the map\n"
-    "  stats.json      everything printed, machine-readable\n"
-    "\n"
-    "options:\n"
-    "  --out DIR       output folder, default out/demo\n"
-    "  --frames N      frames to render, default 60 (2 s at 30 Hz)\n"
-    "  --seed S        noise seed, default 1\n"
-    "  --data DIR      shared data (meshes for the room); default ../shared/data\n"
-    "  --no-gpu        skip the GPU reconstruction\n";
+    "  stats.json      everything printed, machine-readable, and the loop's config\n";
 
 /* A hand-held sweep in the first camera's frame (x right, y down, z forward),
  * sampled at 100 Hz like a motion-capture log: sideways sway of +-0.3 m, a
@@ -136,55 +129,50 @@ typedef struct demo_report {
     fusion_stats map;
     uint64_t n_surface_points;
     eval_surface_result fused_surf;
+    recon_config config; /* the loop's, echoed in stats.json */
     double seconds;
 } demo_report;
 
-static bf_status demo_write_json(const char *path, const demo_report *r)
+/* Distances are null when nothing was measured (JSON has no NaN). */
+static cJSON *demo_json(const demo_report *r)
 {
-    bf_membuf mb;
-    FILE *f = bf_membuf_open(&mb);
-    if (!f) return BF_NO_MEMORY;
-    fputs("{\n  \"command\": \"demo\",\n  \"device\": ", f);
-    bf_json_string(f, r->device);
-    fprintf(f,
-            ",\n"
-            "  \"frames\": %u,\n"
-            "  \"render_ms_per_frame_median\": %.3f,\n"
-            "  \"valid_depth_share\": %.4f,\n"
-            "  \"frames_replayed\": %u,\n"
-            "  \"raw_points\": %u,\n"
-            "  \"raw_accuracy_m\": {\"mean\": ",
-            r->synth.n_frames, 1e3 * r->synth.median_frame_s, r->synth.valid_share, r->n_replayed, r->n_points);
-    /* Distances are null when nothing was measured (JSON has no NaN). */
-    bf_json_number(f, r->surf.accuracy.mean, 6);
-    fputs(", \"median\": ", f);
-    bf_json_number(f, r->surf.accuracy.median, 6);
-    fputs(", \"p90\": ", f);
-    bf_json_number(f, r->surf.accuracy.p90, 6);
-    fputs(", \"rmse\": ", f);
-    bf_json_number(f, r->surf.accuracy.rmse, 6);
-    fprintf(f, "},\n  \"seen_completeness\": {\"threshold_m\": 0.01, \"share\": %.4f, \"median_m\": ",
-            r->surf.completeness);
-    bf_json_number(f, r->surf.completeness_dist.median, 6);
-    fprintf(f,
-            "},\n"
-            "  \"trajectory_check\": {\"pairs\": %zu, \"ate_rmse_m\": %.9f},\n",
-            r->ate.n_matched, r->ate.trans.rmse);
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", "demo");
+    cJSON_AddStringToObject(o, "device", r->device);
+    cJSON_AddNumberToObject(o, "frames", r->synth.n_frames);
+    cJSON_AddNumberToObject(o, "render_ms_per_frame_median", 1e3 * r->synth.median_frame_s);
+    cJSON_AddNumberToObject(o, "valid_depth_share", r->synth.valid_share);
+    cJSON_AddNumberToObject(o, "frames_replayed", r->n_replayed);
+    cJSON_AddNumberToObject(o, "raw_points", r->n_points);
+    cJSON *acc = app_json_object(o, "raw_accuracy_m");
+    cJSON_AddNumberToObject(acc, "mean", r->surf.accuracy.mean);
+    cJSON_AddNumberToObject(acc, "median", r->surf.accuracy.median);
+    cJSON_AddNumberToObject(acc, "p90", r->surf.accuracy.p90);
+    cJSON_AddNumberToObject(acc, "rmse", r->surf.accuracy.rmse);
+    cJSON *seen = app_json_object(o, "seen_completeness");
+    cJSON_AddNumberToObject(seen, "threshold_m", 0.01);
+    cJSON_AddNumberToObject(seen, "share", r->surf.completeness);
+    cJSON_AddNumberToObject(seen, "median_m", r->surf.completeness_dist.median);
+    cJSON *check = app_json_object(o, "trajectory_check");
+    cJSON_AddNumberToObject(check, "pairs", (double)r->ate.n_matched);
+    cJSON_AddNumberToObject(check, "ate_rmse_m", r->ate.trans.rmse);
     if (r->fused) {
-        fprintf(f, "  \"reconstruction\": {\"tracked\": %u, \"lost\": %u, \"ate_rmse_m\": ", r->counts.tracked,
-                r->counts.lost);
-        bf_json_number(f, r->track_ate.trans.rmse, 6);
-        fprintf(f, ", \"frame_ms_median\": %.2f, \"frame_ms_p95\": %.2f, \"map_bytes\": %llu, "
-                   "\"bricks\": %u, \"surface_points\": %llu, \"accuracy_median_m\": ",
-                r->fuse_ms_median, r->fuse_ms_p95, (unsigned long long)r->map.bytes_total, r->map.n_bricks,
-                (unsigned long long)r->n_surface_points);
-        bf_json_number(f, r->fused_surf.accuracy.median, 6);
-        fputs(", \"accuracy_p90_m\": ", f);
-        bf_json_number(f, r->fused_surf.accuracy.p90, 6);
-        fprintf(f, ", \"completeness_1cm\": %.4f},\n", r->fused_surf.completeness);
+        cJSON *rec = app_json_object(o, "reconstruction");
+        cJSON_AddNumberToObject(rec, "tracked", r->counts.tracked);
+        cJSON_AddNumberToObject(rec, "lost", r->counts.lost);
+        cJSON_AddNumberToObject(rec, "ate_rmse_m", r->track_ate.trans.rmse);
+        cJSON_AddNumberToObject(rec, "frame_ms_median", r->fuse_ms_median);
+        cJSON_AddNumberToObject(rec, "frame_ms_p95", r->fuse_ms_p95);
+        cJSON_AddNumberToObject(rec, "map_bytes", (double)r->map.bytes_total);
+        cJSON_AddNumberToObject(rec, "bricks", r->map.n_bricks);
+        cJSON_AddNumberToObject(rec, "surface_points", (double)r->n_surface_points);
+        cJSON_AddNumberToObject(rec, "accuracy_median_m", r->fused_surf.accuracy.median);
+        cJSON_AddNumberToObject(rec, "accuracy_p90_m", r->fused_surf.accuracy.p90);
+        cJSON_AddNumberToObject(rec, "completeness_1cm", r->fused_surf.completeness);
+        app_json_recon_config(rec, "config", &r->config);
     }
-    fprintf(f, "  \"seconds\": %.3f\n}\n", r->seconds);
-    return bf_membuf_write_atomic(&mb, path);
+    cJSON_AddNumberToObject(o, "seconds", r->seconds);
+    return o;
 }
 
 /* The device the reconstruction uses; a missing one is reported and the
@@ -212,34 +200,22 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
     rgbd_source *src;
     bf_status s = replay_open(seq, NULL, &src);
     if (s != BF_OK) return s;
-    recon *rc = NULL;
-    recon_config cfg = recon_config_default();
-    bf_stats ms = {0};
-    bf_traj est = {0}, gt = {0};
-    bf_frame f;
-    bf_progress prog;
-    bf_progress_begin(&prog, "track+fuse", src->n_frames);
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        if (!rc && (s = recon_create(ctx, &cfg, rgbd_source_intrinsics(src), &f.T_wc, &rc)) != BF_OK) break;
-        recon_frame_result fr;
-        if ((s = recon_add_frame(rc, &f, &fr)) != BF_OK) break;
-        if ((s = bf_stats_push(&ms, fr.ms_frame)) != BF_OK) break;
-        if ((s = bf_traj_push(&est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
-        if (f.has_pose && (s = bf_traj_push(&gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
-        bf_progress_update(&prog, f.index + 1);
-    }
-    bf_progress_end(&prog, est.n);
-    if (s == BF_END) s = rc ? recon_flush(rc) : bf_fail(BF_FORMAT, "%s: no frame", seq);
+    recon_run run;
+    recon_run_config cfg = recon_run_config_default();
+    r->config = cfg.loop;
+    cfg.name = seq;
+    cfg.label = "track+fuse";
+    s = recon_run_sequence(ctx, src, &cfg, NULL, NULL, &run);
     char path[4096];
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "trajectory.txt")) == BF_OK)
-        s = replay_traj_write_tum(path, &est);
-    if (s == BF_OK) s = eval_ate(&gt, &est, 0, &r->track_ate);
-    if (s == BF_OK) r->counts = recon_get_counts(rc);
+        s = replay_traj_write_tum(path, &run.est);
+    if (s == BF_OK) s = eval_ate(&run.gt, &run.est, 0, &r->track_ate);
+    if (s == BF_OK) r->counts = run.counts;
     hostmap snap = {0};
     mesh_data pts = {0};
     export_stats st;
-    if (s == BF_OK) s = fusion_get_stats(recon_map(rc), &r->map);
-    if (s == BF_OK) s = fusion_snapshot_take(recon_map(rc), &snap);
+    if (s == BF_OK) s = fusion_get_stats(run.map, &r->map);
+    if (s == BF_OK) s = fusion_snapshot_take(run.map, &snap);
     if (s == BF_OK) s = export_points(&snap, &pts, &st);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
         s = mesh_write_ply(path, &pts);
@@ -251,15 +227,12 @@ static bf_status demo_reconstruct(gpu_context *ctx, const char *seq, const char 
     if (s == BF_OK) {
         r->fused = true;
         r->n_surface_points = pts.n_verts;
-        r->fuse_ms_median = bf_stats_percentile(&ms, 50);
-        r->fuse_ms_p95 = bf_stats_percentile(&ms, 95);
+        r->fuse_ms_median = bf_stats_percentile(&run.series.frame_ms, 50);
+        r->fuse_ms_p95 = bf_stats_percentile(&run.series.frame_ms, 95);
     }
     mesh_free(&pts);
     hostmap_free(&snap);
-    bf_stats_free(&ms);
-    bf_traj_free(&est);
-    bf_traj_free(&gt);
-    recon_destroy(rc);
+    recon_run_free(&run);
     rgbd_source_close(src);
     return s;
 }
@@ -335,31 +308,21 @@ int cmd_demo(int argc, char **argv)
 {
     const char *cmd = "demo", *out_dir = "out/demo", *data_dir = NULL;
     uint32_t n_frames = 60, seed = 1;
-    bool use_gpu = true;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (app_is_help(a)) {
-            fputs(demo_help, stdout);
-            return APP_EXIT_OK;
-        } else if (!strcmp(a, "--no-gpu")) {
-            use_gpu = false;
-        } else if (!v) {
-            return app_usage_error(cmd, "unknown option or missing value: %s", a);
-        } else if (!strcmp(a, "--out")) {
-            out_dir = argv[++i];
-        } else if (!strcmp(a, "--data")) {
-            data_dir = argv[++i];
-        } else if (!strcmp(a, "--frames")) {
-            if (!bf_parse_u32(v, &n_frames) || n_frames < 2 || n_frames > 3000)
-                return app_usage_error(cmd, "--frames: want 2..3000, got '%s'", v);
-            i++;
-        } else if (!strcmp(a, "--seed")) {
-            if (!bf_parse_u32(v, &seed)) return app_usage_error(cmd, "--seed: bad value '%s'", v);
-            i++;
-        } else {
-            return app_usage_error(cmd, "unknown option %s", a);
-        }
-    }
+    bool no_gpu = false;
+    const app_option own[] = {
+        APP_OPT("--out", APP_OPT_STRING, &out_dir, "DIR", "output folder"),
+        APP_OPT("--frames", APP_OPT_U32, &n_frames, "N", "frames to render (2 s at 30 Hz)", .min = 2, .max = 3000),
+        APP_OPT("--seed", APP_OPT_U32, &seed, "S", "noise seed"),
+        APP_OPT("--data", APP_OPT_STRING, &data_dir, "DIR",
+                "shared data (meshes for the room), default ../shared/data"),
+        APP_OPT("--no-gpu", APP_OPT_FLAG, &no_gpu, NULL, "skip the GPU reconstruction"),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {.name = cmd, .usage = demo_usage, .tables = tables};
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    bool use_gpu = !no_gpu;
     if (!data_dir) data_dir = app_default_data_dir();
 
     demo_report r;
@@ -371,10 +334,7 @@ int cmd_demo(int argc, char **argv)
     if (s != BF_OK) return app_fail(cmd, s);
     r.seconds = bf_time_s() - t0;
 
-    char path[4096];
-    if ((s = bf_path_join(path, sizeof path, out_dir, "stats.json")) != BF_OK ||
-        (s = demo_write_json(path, &r)) != BF_OK)
-        return app_fail(cmd, s);
+    if ((s = app_json_write_in(out_dir, "stats.json", demo_json(&r))) != BF_OK) return app_fail(cmd, s);
 
     printf("bitfuse demo: synthetic room, %u frames, Kinect v1 noise (seed %u)\n", r.synth.n_frames, seed);
     printf("  device                 %s\n", r.device);

@@ -10,87 +10,92 @@
 
 #define DEVICES_MAX_CAMERAS 16
 
-static void devices_help(FILE *f)
+static const char devices_usage[] =
+    "usage: bitfuse devices [--device NAME] [--json]\n\n"
+    "Lists the Vulkan devices and marks with '*' the one bitfuse would use:\n"
+    "discrete GPU first, then integrated, virtual, CPU (lavapipe). A device is\n"
+    "picked by a case-insensitive part of its name or by its index, from\n"
+    "--device or the BITFUSE_DEVICE environment variable. Prints the limits\n"
+    "bitfuse sizes its work by. Then lists the capture backends built in\n"
+    "(freenect, openni2, v4l2) and the cameras they find, with the URI to\n"
+    "pass to bitfuse (docs/devices.md).\n";
+
+static void uuid_text(const uint8_t *u, char out[2 * VK_UUID_SIZE + 5])
 {
-    fprintf(f,
-            "usage: bitfuse devices [--device NAME] [--json]\n\n"
-            "Lists the Vulkan devices and marks with '*' the one bitfuse would use:\n"
-            "discrete GPU first, then integrated, virtual, CPU (lavapipe). A device is\n"
-            "picked by a case-insensitive part of its name or by its index, from\n"
-            "--device or the BITFUSE_DEVICE environment variable. Prints the limits\n"
-            "bitfuse sizes its work by. Then lists the capture backends built in\n"
-            "(freenect, openni2, v4l2) and the cameras they find, with the URI to\n"
-            "pass to bitfuse (docs/devices.md).\n\n"
-            "options:\n"
-            "  --device NAME     the device to mark (as BITFUSE_DEVICE)\n"
-            "  --json            print one JSON object on stdout\n"
-            "  -h, --help        this text\n\n"
-            "exit codes: 0 ok, 2 usage, 4 no (matching) Vulkan device\n");
+    char *p = out;
+    for (unsigned i = 0; i < VK_UUID_SIZE; i++)
+        p += sprintf(p, "%s%02x", i == 4 || i == 6 || i == 8 || i == 10 ? "-" : "", u[i]);
 }
 
-static void print_uuid(const uint8_t *u)
+static void json_uints(cJSON *o, const char *name, const uint32_t *v, size_t n)
 {
-    for (unsigned i = 0; i < VK_UUID_SIZE; i++) printf("%s%02x", i == 4 || i == 6 || i == 8 || i == 10 ? "-" : "", u[i]);
+    double d[3];
+    for (size_t i = 0; i < n && i < 3; i++) d[i] = v[i];
+    app_json_numbers(o, name, d, n < 3 ? n : 3);
 }
 
-static void print_json(const gpu_device_info *d, uint32_t n, uint32_t chosen)
+static cJSON *json_limits(const gpu_limits *l)
 {
-    printf("{\"chosen\": ");
-    if (chosen < n) printf("%u", chosen);
-    else printf("null");
-    printf(", \"devices\": [");
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "max_storage_buffer_range", (double)l->max_storage_buffer_range);
+    cJSON_AddNumberToObject(o, "max_memory_allocation_size", (double)l->max_memory_allocation_size);
+    cJSON_AddNumberToObject(o, "min_storage_buffer_offset_alignment", (double)l->min_storage_buffer_offset_alignment);
+    cJSON_AddNumberToObject(o, "subgroup_size", l->subgroup_size);
+    cJSON_AddNumberToObject(o, "max_compute_workgroup_invocations", l->max_compute_workgroup_invocations);
+    json_uints(o, "max_compute_workgroup_size", l->max_compute_workgroup_size, 3);
+    json_uints(o, "max_compute_workgroup_count", l->max_compute_workgroup_count, 3);
+    cJSON_AddNumberToObject(o, "max_compute_shared_memory_size", l->max_compute_shared_memory_size);
+    cJSON_AddNumberToObject(o, "max_push_constants_size", l->max_push_constants_size);
+    cJSON_AddNumberToObject(o, "max_per_stage_storage_buffers", l->max_per_stage_storage_buffers);
+    cJSON_AddBoolToObject(o, "has_timestamps", l->has_timestamps);
+    cJSON_AddNumberToObject(o, "timestamp_valid_bits", l->timestamp_valid_bits);
+    cJSON_AddNumberToObject(o, "timestamp_period_ns", l->timestamp_period_ns);
+    cJSON *heaps = cJSON_AddArrayToObject(o, "heaps");
+    for (uint32_t h = 0; h < l->n_heaps; h++) {
+        cJSON *heap = cJSON_CreateObject();
+        cJSON_AddNumberToObject(heap, "size_bytes", (double)l->heaps[h].size_bytes);
+        cJSON_AddBoolToObject(heap, "is_device_local", l->heaps[h].is_device_local);
+        cJSON_AddItemToArray(heaps, heap);
+    }
+    return o;
+}
+
+/* The Vulkan devices (n may be 0) and the cameras as one object. */
+static cJSON *devices_json(const gpu_device_info *d, uint32_t n, uint32_t chosen, const capture_device_info *cams,
+                           uint32_t n_cams)
+{
+    cJSON *o = cJSON_CreateObject();
+    if (chosen < n) cJSON_AddNumberToObject(o, "chosen", chosen);
+    else cJSON_AddNullToObject(o, "chosen");
+    cJSON *devs = cJSON_AddArrayToObject(o, "devices");
     for (uint32_t i = 0; i < n; i++) {
-        const gpu_limits *l = &d[i].limits;
-        printf("%s\n  {\"index\": %u, \"name\": ", i ? "," : "", i);
-        bf_json_string(stdout, d[i].name);
-        printf(", \"type\": \"%s\", \"is_chosen\": %s, \"is_usable\": %s, \"api_version\": \"%u.%u.%u\", "
-               "\"driver\": ",
-               gpu_device_type_name(d[i].type), i == chosen ? "true" : "false", d[i].is_usable ? "true" : "false",
-               VK_API_VERSION_MAJOR(d[i].api_version), VK_API_VERSION_MINOR(d[i].api_version),
-               VK_API_VERSION_PATCH(d[i].api_version));
-        bf_json_string(stdout, d[i].driver_info[0] ? d[i].driver_info : d[i].driver_name);
-        printf(", \"device_uuid\": \"");
-        print_uuid(d[i].device_uuid);
-        printf("\",\n   \"limits\": {\"max_storage_buffer_range\": %llu, \"max_memory_allocation_size\": %llu, "
-               "\"min_storage_buffer_offset_alignment\": %llu, \"subgroup_size\": %u, "
-               "\"max_compute_workgroup_invocations\": %u, \"max_compute_workgroup_size\": [%u, %u, %u], "
-               "\"max_compute_workgroup_count\": [%u, %u, %u], \"max_compute_shared_memory_size\": %u, "
-               "\"max_push_constants_size\": %u, \"max_per_stage_storage_buffers\": %u, "
-               "\"has_timestamps\": %s, \"timestamp_valid_bits\": %u, \"timestamp_period_ns\": %g, "
-               "\"heaps\": [",
-               (unsigned long long)l->max_storage_buffer_range, (unsigned long long)l->max_memory_allocation_size,
-               (unsigned long long)l->min_storage_buffer_offset_alignment, l->subgroup_size,
-               l->max_compute_workgroup_invocations, l->max_compute_workgroup_size[0],
-               l->max_compute_workgroup_size[1], l->max_compute_workgroup_size[2], l->max_compute_workgroup_count[0],
-               l->max_compute_workgroup_count[1], l->max_compute_workgroup_count[2],
-               l->max_compute_shared_memory_size, l->max_push_constants_size, l->max_per_stage_storage_buffers,
-               l->has_timestamps ? "true" : "false", l->timestamp_valid_bits, (double)l->timestamp_period_ns);
-        for (uint32_t h = 0; h < l->n_heaps; h++)
-            printf("%s{\"size_bytes\": %llu, \"is_device_local\": %s}", h ? ", " : "",
-                   (unsigned long long)l->heaps[h].size_bytes, l->heaps[h].is_device_local ? "true" : "false");
-        printf("]}}");
+        char version[48], uuid[2 * VK_UUID_SIZE + 5];
+        snprintf(version, sizeof version, "%u.%u.%u", VK_API_VERSION_MAJOR(d[i].api_version),
+                 VK_API_VERSION_MINOR(d[i].api_version), VK_API_VERSION_PATCH(d[i].api_version));
+        uuid_text(d[i].device_uuid, uuid);
+        cJSON *dev = cJSON_CreateObject();
+        cJSON_AddNumberToObject(dev, "index", i);
+        cJSON_AddStringToObject(dev, "name", d[i].name);
+        cJSON_AddStringToObject(dev, "type", gpu_device_type_name(d[i].type));
+        cJSON_AddBoolToObject(dev, "is_chosen", i == chosen);
+        cJSON_AddBoolToObject(dev, "is_usable", d[i].is_usable);
+        cJSON_AddStringToObject(dev, "api_version", version);
+        cJSON_AddStringToObject(dev, "driver", d[i].driver_info[0] ? d[i].driver_info : d[i].driver_name);
+        cJSON_AddStringToObject(dev, "device_uuid", uuid);
+        cJSON_AddItemToObject(dev, "limits", json_limits(&d[i].limits));
+        cJSON_AddItemToArray(devs, dev);
     }
-    printf("\n]");
-}
-
-/* Appends the capture part to the JSON object print_json left open. */
-static void print_json_capture(const capture_device_info *cams, uint32_t n_cams)
-{
-    printf(", \"capture_backends\": [");
     const char *const *b = capture_backend_names();
-    for (int i = 0; b[i]; i++) {
-        printf("%s", i ? ", " : "");
-        bf_json_string(stdout, b[i]);
-    }
-    printf("], \"capture_devices\": [");
+    cJSON *backends = cJSON_AddArrayToObject(o, "capture_backends");
+    for (int i = 0; b[i]; i++) cJSON_AddItemToArray(backends, cJSON_CreateString(b[i]));
+    cJSON *cameras = cJSON_AddArrayToObject(o, "capture_devices");
     for (uint32_t i = 0; i < n_cams && i < DEVICES_MAX_CAMERAS; i++) {
-        printf("%s{\"uri\": ", i ? ", " : "");
-        bf_json_string(stdout, cams[i].uri);
-        printf(", \"name\": ");
-        bf_json_string(stdout, cams[i].name);
-        printf("}");
+        cJSON *cam = cJSON_CreateObject();
+        cJSON_AddStringToObject(cam, "uri", cams[i].uri);
+        cJSON_AddStringToObject(cam, "name", cams[i].name);
+        cJSON_AddItemToArray(cameras, cam);
     }
-    printf("]}\n");
+    return o;
 }
 
 static void print_text_capture(const capture_device_info *cams, uint32_t n_cams)
@@ -139,19 +144,16 @@ int cmd_devices(int argc, char **argv)
 {
     bool is_json = false;
     gpu_config cfg = {0};
-    for (int i = 1; i < argc; i++) {
-        if (app_is_help(argv[i])) {
-            devices_help(stdout);
-            return APP_EXIT_OK;
-        } else if (!strcmp(argv[i], "--json")) {
-            is_json = true;
-        } else if (!strcmp(argv[i], "--device")) {
-            if (i + 1 >= argc) return app_usage_error("devices", "--device needs a name or index");
-            cfg.device = argv[++i];
-        } else {
-            return app_usage_error("devices", "unknown argument '%s'", argv[i]);
-        }
-    }
+    const app_option own[] = {
+        APP_OPT("--device", APP_OPT_STRING, &cfg.device, "NAME", "the device to mark (as BITFUSE_DEVICE)"),
+        APP_OPT("--json", APP_OPT_FLAG, &is_json, NULL, "print one JSON object on stdout"),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {.name = "devices", .usage = devices_usage, .tables = tables,
+                             .epilog = "exit codes: 0 ok, 2 usage, 4 no (matching) Vulkan device\n"};
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     static gpu_device_info devs[GPU_MAX_DEVICES];
     uint32_t n = 0, chosen = UINT32_MAX;
     bf_status s = gpu_device_list(&cfg, devs, &n, &chosen);
@@ -163,17 +165,13 @@ int cmd_devices(int argc, char **argv)
     static capture_device_info cams[DEVICES_MAX_CAMERAS];
     uint32_t n_cams = capture_list_devices(cams, DEVICES_MAX_CAMERAS);
     if (s) {
-        if (is_json) {
-            printf("{\"chosen\": null, \"devices\": []");
-            print_json_capture(cams, n_cams);
-        } else {
-            print_text_capture(cams, n_cams);
-        }
+        if (is_json) app_json_print(devices_json(devs, 0, chosen, cams, n_cams));
+        else print_text_capture(cams, n_cams);
         return app_fail("devices", bf_fail(s, "%s", why));
     }
     if (is_json) {
-        print_json(devs, n, chosen);
-        print_json_capture(cams, n_cams);
+        bf_status sj = app_json_print(devices_json(devs, n, chosen, cams, n_cams));
+        if (sj != BF_OK) return app_fail("devices", sj);
     } else {
         print_text(devs, n, chosen);
         print_text_capture(cams, n_cams);

@@ -8,37 +8,22 @@
 #include "eval/eval.h"
 #include "mesh/mesh.h"
 
-static const char *usage_text =
+static const char usage_text[] =
     "usage: bitfuse eval-surface --reference MESH --reconstruction PLY [options]\n"
     "\n"
     "Accuracy: distance from each reconstruction point (its vertices, plus area\n"
     "samples of its triangles if it is a mesh) to the reference surface.\n"
     "Completeness: share of reference surface samples (area-uniform) within the\n"
-    "threshold of the reconstruction, and their distances.\n"
-    "\n"
-    "  --visible SEEN.ply    completeness over these observed reference points\n"
-    "                        instead of samples of the whole reference\n"
-    "  --threshold M         completeness / precision threshold, metres (0.01)\n"
-    "  --max-dist M          distances beyond M are left out of the statistics\n"
-    "                        and counted as beyond (default: no limit)\n"
-    "  --samples-per-m2 N    area sampling density (200000: one per 5 mm^2)\n"
-    "  --max-samples N       cap on samples per mesh (1000000)\n"
-    "  --seed N              sampling seed (1)\n"
-    "  --json                machine-readable output on stdout (docs/eval.md)\n";
+    "threshold of the reconstruction, and their distances.\n";
 
-static void print_dist_json(const eval_dist_stats *d)
+static void json_dist(cJSON *o, const eval_dist_stats *d)
 {
-    printf("\"mean_m\": ");
-    bf_json_number(stdout, d->mean, 9);
-    printf(", \"median_m\": ");
-    bf_json_number(stdout, d->median, 9);
-    printf(", \"p90_m\": ");
-    bf_json_number(stdout, d->p90, 9);
-    printf(", \"rmse_m\": ");
-    bf_json_number(stdout, d->rmse, 9);
-    printf(", \"max_m\": ");
-    bf_json_number(stdout, d->max, 9);
-    printf(", \"beyond_max_dist\": %zu", d->n_beyond);
+    cJSON_AddNumberToObject(o, "mean_m", d->mean);
+    cJSON_AddNumberToObject(o, "median_m", d->median);
+    cJSON_AddNumberToObject(o, "p90_m", d->p90);
+    cJSON_AddNumberToObject(o, "rmse_m", d->rmse);
+    cJSON_AddNumberToObject(o, "max_m", d->max);
+    cJSON_AddNumberToObject(o, "beyond_max_dist", (double)d->n_beyond);
 }
 
 static void print_dist_text(const eval_dist_stats *d)
@@ -54,53 +39,28 @@ int cmd_eval_surface(int argc, char **argv)
     const char *cmd = "eval-surface", *ref_path = NULL, *rec_path = NULL, *vis_path = NULL;
     bool json = false;
     eval_surface_config cfg = eval_surface_config_default();
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *val = i + 1 < argc ? argv[i + 1] : NULL;
-        if (app_is_help(a)) {
-            fputs(usage_text, stdout);
-            return APP_EXIT_OK;
-        } else if (!strcmp(a, "--json")) {
-            json = true;
-            continue;
-        }
-        static const char *const with_value[] = {"--reference", "--reconstruction", "--visible", "--threshold",
-                                                 "--max-dist", "--samples-per-m2", "--max-samples", "--seed"};
-        bool is_known = false;
-        for (size_t k = 0; k < sizeof with_value / sizeof with_value[0]; k++) is_known |= !strcmp(a, with_value[k]);
-        if (!is_known) return app_usage_error(cmd, "unknown argument '%s'", a);
-        if (!val) return app_usage_error(cmd, "%s needs a value", a);
-        double v;
-        uint32_t u;
-        if (!strcmp(a, "--reference")) {
-            ref_path = val;
-        } else if (!strcmp(a, "--reconstruction")) {
-            rec_path = val;
-        } else if (!strcmp(a, "--visible")) {
-            vis_path = val;
-        } else if (!strcmp(a, "--threshold") || !strcmp(a, "--max-dist") || !strcmp(a, "--samples-per-m2")) {
-            if (!bf_parse_double(val, &v) || !(v > 0))
-                return app_usage_error(cmd, "%s needs a positive number (got '%s')", a, val);
-            if (!strcmp(a, "--threshold"))
-                cfg.threshold_m = v;
-            else if (!strcmp(a, "--max-dist"))
-                cfg.max_dist_m = v;
-            else
-                cfg.samples_per_m2 = v;
-        } else if (!strcmp(a, "--max-samples") || !strcmp(a, "--seed")) {
-            if (!bf_parse_u32(val, &u) || (u == 0 && !strcmp(a, "--max-samples")))
-                return app_usage_error(cmd, "%s needs a %s integer (got '%s')", a,
-                                       strcmp(a, "--seed") ? "positive" : "non-negative", val);
-            if (!strcmp(a, "--seed"))
-                cfg.seed = u;
-            else
-                cfg.max_samples = u;
-        } else {
-            return app_usage_error(cmd, "unknown argument '%s'", a);
-        }
-        i++;
-    }
-    if (!ref_path || !rec_path) return app_usage_error(cmd, "needs --reference and --reconstruction");
+    const app_option own[] = {
+        APP_OPT("--reference", APP_OPT_STRING, &ref_path, "MESH", "the reference mesh (PLY)", .required = true),
+        APP_OPT("--reconstruction", APP_OPT_STRING, &rec_path, "PLY", "the reconstruction: points or a mesh",
+                .required = true),
+        APP_OPT("--visible", APP_OPT_STRING, &vis_path, "SEEN.ply",
+                "completeness over these observed reference points instead of samples of the whole reference"),
+        APP_OPT("--threshold", APP_OPT_DOUBLE, &cfg.threshold_m, "M", "completeness / precision threshold, metres",
+                .min_open = true),
+        APP_OPT("--max-dist", APP_OPT_DOUBLE, &cfg.max_dist_m, "M",
+                "distances beyond M are left out of the statistics and counted as beyond (default: no limit)",
+                .min_open = true, .no_default = true),
+        APP_OPT("--samples-per-m2", APP_OPT_DOUBLE, &cfg.samples_per_m2, "N", "area sampling density (one per 5 mm^2)",
+                .min_open = true),
+        APP_OPT("--max-samples", APP_OPT_U64, &cfg.max_samples, "N", "cap on samples per mesh", .min = 1),
+        APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "N", "sampling seed"),
+        APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "machine-readable output on stdout (docs/eval.md)"),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {.name = cmd, .usage = usage_text, .tables = tables};
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
 
     mesh_data ref = {0}, rec = {0}, vis = {0};
     eval_surface_result r;
@@ -124,26 +84,32 @@ int cmd_eval_surface(int argc, char **argv)
 
     const char *source = r.used_visible ? "visible" : ref_t ? "samples" : "vertices";
     if (json) {
-        printf("{\n  \"reference\": ");
-        bf_json_string(stdout, ref_path);
-        printf(",\n  \"reconstruction\": ");
-        bf_json_string(stdout, rec_path);
-        printf(",\n  \"visible\": ");
-        bf_json_string(stdout, vis_path);
-        printf(",\n  \"reference_vertices\": %u,\n  \"reference_triangles\": %u,\n", ref_v, ref_t);
-        printf("  \"threshold_m\": %.9g,\n  \"max_dist_m\": ", cfg.threshold_m);
-        bf_json_number(stdout, cfg.max_dist_m, 9);
-        printf(",\n  \"samples_per_m2\": %.9g,\n  \"max_samples\": %llu,\n  \"seed\": %llu,\n",
-               cfg.samples_per_m2, (unsigned long long)cfg.max_samples, (unsigned long long)cfg.seed);
-        printf("  \"accuracy\": {\"points\": %zu, \"rec_vertices\": %zu, \"rec_samples\": %zu, ",
-               r.n_rec_vertices + r.n_rec_samples, r.n_rec_vertices, r.n_rec_samples);
-        print_dist_json(&r.accuracy);
-        printf(", \"within_threshold\": %.9g},\n", r.precision);
-        printf("  \"completeness\": {\"points\": %zu, \"source\": \"%s\", \"ratio\": %.9g, ", r.n_ref_points,
-               source, r.completeness);
-        print_dist_json(&r.completeness_dist);
-        printf("},\n  \"seconds\": %.3f,\n  \"threads\": %d\n}\n", r.seconds, bf_thread_count());
-        return APP_EXIT_OK;
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "reference", ref_path);
+        cJSON_AddStringToObject(o, "reconstruction", rec_path);
+        if (vis_path) cJSON_AddStringToObject(o, "visible", vis_path);
+        else cJSON_AddNullToObject(o, "visible");
+        cJSON_AddNumberToObject(o, "reference_vertices", ref_v);
+        cJSON_AddNumberToObject(o, "reference_triangles", ref_t);
+        cJSON_AddNumberToObject(o, "threshold_m", cfg.threshold_m);
+        cJSON_AddNumberToObject(o, "max_dist_m", cfg.max_dist_m);
+        cJSON_AddNumberToObject(o, "samples_per_m2", cfg.samples_per_m2);
+        cJSON_AddNumberToObject(o, "max_samples", (double)cfg.max_samples);
+        cJSON_AddNumberToObject(o, "seed", (double)cfg.seed);
+        cJSON *acc = app_json_object(o, "accuracy");
+        cJSON_AddNumberToObject(acc, "points", (double)(r.n_rec_vertices + r.n_rec_samples));
+        cJSON_AddNumberToObject(acc, "rec_vertices", (double)r.n_rec_vertices);
+        cJSON_AddNumberToObject(acc, "rec_samples", (double)r.n_rec_samples);
+        json_dist(acc, &r.accuracy);
+        cJSON_AddNumberToObject(acc, "within_threshold", r.precision);
+        cJSON *com = app_json_object(o, "completeness");
+        cJSON_AddNumberToObject(com, "points", (double)r.n_ref_points);
+        cJSON_AddStringToObject(com, "source", source);
+        cJSON_AddNumberToObject(com, "ratio", r.completeness);
+        json_dist(com, &r.completeness_dist);
+        cJSON_AddNumberToObject(o, "seconds", r.seconds);
+        cJSON_AddNumberToObject(o, "threads", bf_thread_count());
+        return (s = app_json_print(o)) == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
     }
     printf("reference %s: %u vertices, %u triangles\n", ref_path, ref_v, ref_t);
     printf("reconstruction %s: %u vertices, %u triangles\n", rec_path, rec_v, rec_t);

@@ -8,7 +8,7 @@
 #include "eval/eval.h"
 #include "replay/replay.h"
 
-static const char *usage_text =
+static const char usage_text[] =
     "usage: bitfuse eval-traj GT EST [--json] [--max-dt S] [--delta S | --per-frame]\n"
     "\n"
     "GT and EST are TUM trajectories (t tx ty tz qx qy qz qw, camera-to-world).\n"
@@ -17,56 +17,55 @@ static const char *usage_text =
     "std/min/max of the distances (TUM evaluate_ate.py).\n"
     "RPE: relative motion error over pose pairs delta apart (TUM evaluate_rpe.py\n"
     "--fixed_delta, all pairs); by default both per second and per frame, each\n"
-    "left out with a warning when the trajectories are too short for it.\n"
-    "\n"
-    "  --json        machine-readable output on stdout (fields in docs/eval.md)\n"
-    "  --max-dt S    association tolerance in seconds (default: ATE 0.02, RPE\n"
-    "                twice the median ground-truth interval, as TUM)\n"
-    "  --delta S     RPE only over pairs S seconds apart\n"
-    "  --per-frame   RPE only over consecutive frames\n";
+    "left out with a warning when the trajectories are too short for it.\n";
 
-static void print_stats_json(const char *name, const eval_err_stats *s, bool last)
+static void json_err_stats(cJSON *parent, const char *name, const eval_err_stats *s)
 {
-    printf("      \"%s\": {\"rmse\": %.9g, \"mean\": %.9g, \"median\": %.9g, \"std\": %.9g, "
-           "\"min\": %.9g, \"max\": %.9g}%s\n",
-           name, s->rmse, s->mean, s->median, s->std, s->min, s->max, last ? "" : ",");
+    cJSON *o = app_json_object(parent, name);
+    cJSON_AddNumberToObject(o, "rmse", s->rmse);
+    cJSON_AddNumberToObject(o, "mean", s->mean);
+    cJSON_AddNumberToObject(o, "median", s->median);
+    cJSON_AddNumberToObject(o, "std", s->std);
+    cJSON_AddNumberToObject(o, "min", s->min);
+    cJSON_AddNumberToObject(o, "max", s->max);
+}
+
+static cJSON *rpe_json(const char *unit, double delta, const eval_rpe_result *r)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "unit", unit);
+    cJSON_AddNumberToObject(o, "delta", delta);
+    cJSON_AddNumberToObject(o, "pairs", (double)r->n_pairs);
+    json_err_stats(o, "trans_m", &r->trans);
+    json_err_stats(o, "rot_deg", &r->rot);
+    return o;
 }
 
 int cmd_eval_traj(int argc, char **argv)
 {
     const char *cmd = "eval-traj", *paths[2] = {NULL, NULL};
-    int n_paths = 0;
-    bool json = false, per_frame_only = false, delta_given = false;
-    double max_dt = 0, delta_s = 1.0;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (app_is_help(a)) {
-            fputs(usage_text, stdout);
-            return APP_EXIT_OK;
-        } else if (!strcmp(a, "--json")) {
-            json = true;
-        } else if (!strcmp(a, "--per-frame")) {
-            per_frame_only = true;
-        } else if (!strcmp(a, "--max-dt") || !strcmp(a, "--delta")) {
-            double v;
-            if (i + 1 >= argc || !bf_parse_double(argv[i + 1], &v) || !(v > 0))
-                return app_usage_error(cmd, "%s needs a positive number of seconds", a);
-            if (!strcmp(a, "--max-dt")) {
-                max_dt = v;
-            } else {
-                delta_s = v;
-                delta_given = true;
-            }
-            i++;
-        } else if (a[0] == '-' && a[1]) {
-            return app_usage_error(cmd, "unknown option '%s'", a);
-        } else if (n_paths < 2) {
-            paths[n_paths++] = a;
-        } else {
-            return app_usage_error(cmd, "too many arguments ('%s')", a);
-        }
-    }
-    if (n_paths != 2) return app_usage_error(cmd, "needs GT and EST trajectory files");
+    bool json = false, per_frame_only = false;
+    double max_dt = 0, delta_s = 0;
+    const app_option own[] = {
+        APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "machine-readable output on stdout (fields in docs/eval.md)"),
+        APP_OPT("--max-dt", APP_OPT_DOUBLE, &max_dt, "S",
+                "association tolerance in seconds (default: ATE 0.02, RPE twice the median ground-truth "
+                "interval, as TUM)",
+                .min_open = true, .no_default = true),
+        APP_OPT("--delta", APP_OPT_DOUBLE, &delta_s, "S", "RPE only over pairs S seconds apart", .min_open = true,
+                .no_default = true),
+        APP_OPT("--per-frame", APP_OPT_FLAG, &per_frame_only, NULL, "RPE only over consecutive frames"),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {
+        .name = cmd, .usage = usage_text, .tables = tables, .positional = paths, .min_positional = 2,
+        .max_positional = 2, .positional_missing = "needs GT and EST trajectory files",
+    };
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    bool delta_given = delta_s > 0;
+    if (!delta_given) delta_s = 1.0;
     if (per_frame_only && delta_given) return app_usage_error(cmd, "--delta and --per-frame exclude each other");
 
     bf_traj gt = {0}, est = {0};
@@ -105,30 +104,22 @@ int cmd_eval_traj(int argc, char **argv)
     bf_vec3 t;
     bf_se3_to_qt(&ate.T_gt_est, &q, &t);
     if (json) {
-        printf("{\n  \"gt\": ");
-        bf_json_string(stdout, paths[0]);
-        printf(",\n  \"est\": ");
-        bf_json_string(stdout, paths[1]);
-        printf(",\n  \"n_gt\": %zu,\n  \"n_est\": %zu,\n", n_gt, n_est);
-        printf("  \"ate\": {\n    \"pairs\": %zu,\n    \"max_dt_s\": %.9g,\n", ate.n_matched,
-               max_dt > 0 ? max_dt : 0.02);
-        printf("    \"trans_m\": {\"rmse\": %.9g, \"mean\": %.9g, \"median\": %.9g, \"std\": %.9g, "
-               "\"min\": %.9g, \"max\": %.9g},\n",
-               ate.trans.rmse, ate.trans.mean, ate.trans.median, ate.trans.std, ate.trans.min, ate.trans.max);
-        printf("    \"T_gt_est\": {\"t\": [%.9g, %.9g, %.9g], \"q_xyzw\": [%.9g, %.9g, %.9g, %.9g]}\n  },\n",
-               t.x, t.y, t.z, q.x, q.y, q.z, q.w);
-        printf("  \"rpe\": [");
-        for (int k = 0; k < 2; k++) {
-            if ((k == 0 && !do_s) || (k == 1 && !do_f)) continue;
-            const eval_rpe_result *r = k == 0 ? &rpe_s : &rpe_f;
-            printf("%s\n    {\n      \"unit\": \"%s\",\n      \"delta\": %.9g,\n      \"pairs\": %zu,\n",
-                   (k == 1 && do_s) ? "," : "", k == 0 ? "s" : "frame", k == 0 ? delta_s : 1.0, r->n_pairs);
-            print_stats_json("trans_m", &r->trans, false);
-            print_stats_json("rot_deg", &r->rot, true);
-            printf("    }");
-        }
-        printf("\n  ]\n}\n");
-        return APP_EXIT_OK;
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "gt", paths[0]);
+        cJSON_AddStringToObject(o, "est", paths[1]);
+        cJSON_AddNumberToObject(o, "n_gt", (double)n_gt);
+        cJSON_AddNumberToObject(o, "n_est", (double)n_est);
+        cJSON *a = app_json_object(o, "ate");
+        cJSON_AddNumberToObject(a, "pairs", (double)ate.n_matched);
+        cJSON_AddNumberToObject(a, "max_dt_s", max_dt > 0 ? max_dt : 0.02);
+        json_err_stats(a, "trans_m", &ate.trans);
+        cJSON *T = app_json_object(a, "T_gt_est");
+        app_json_numbers(T, "t", (double[]){t.x, t.y, t.z}, 3);
+        app_json_numbers(T, "q_xyzw", (double[]){q.x, q.y, q.z, q.w}, 4);
+        cJSON *rpe = cJSON_AddArrayToObject(o, "rpe");
+        if (do_s) cJSON_AddItemToArray(rpe, rpe_json("s", delta_s, &rpe_s));
+        if (do_f) cJSON_AddItemToArray(rpe, rpe_json("frame", 1.0, &rpe_f));
+        return (s = app_json_print(o)) == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
     }
     printf("ground truth %s: %zu poses; estimate %s: %zu poses\n", paths[0], n_gt, paths[1], n_est);
     printf("ATE (%zu pairs, |dt| < %g s, Horn-aligned)\n", ate.n_matched, max_dt > 0 ? max_dt : 0.02);

@@ -9,33 +9,19 @@
 
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
+#include "recon/recon.h"
 #include "replay/replay.h"
 #include "export/export.h"
 
-static const char fuse_help[] =
+static const char fuse_usage[] =
     "usage: bitfuse fuse SEQUENCE --poses FILE|groundtruth --out DIR [options]\n"
     "\n"
     "Fuses every frame of SEQUENCE into the sign-bit map (DESIGN.md sections 3-4) with the\n"
     "given camera poses, then writes into DIR:\n"
     "  mesh.ply     triangle mesh of the confident surface (binary PLY, normals)\n"
     "  points.ply   surface voxel centres with normals (binary PLY)\n"
-    "  stats.json   frames, time per frame (median, p95), GPU time per stage, map bytes\n"
-    "               by part, bricks per level, surface voxels, bits per voxel\n"
-    "\n"
-    "options:\n"
-    "  --poses P          'groundtruth' (the sequence's own) or a TUM trajectory file\n"
-    "                     (camera-to-world; poses interpolated at the depth timestamps)\n"
-    "  --out DIR          output folder (created)\n"
-    "  --ratio R          voxel-to-pixel ratio of the level rule, default 1\n"
-    "  --window N         frames per window (even), default 40\n"
-    "  --subcache N       frames of the new-brick pass, default 10\n"
-    "  --bricks N         brick pool size, default 1048576\n"
-    "  --chunk M          chunk edge in metres, default 2\n"
-    "  --max-level L      finest octree level, default 8\n"
-    "  --no-mesh          skip the mesh (points and stats only)\n"
-    "%s"
-    "\n"
-    "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input, 4 no Vulkan device\n";
+    "  stats.json   the map's config, frames, time per frame (median, p95), GPU time per\n"
+    "               stage, map bytes by part, bricks per level, surface voxels, bits per voxel\n";
 
 typedef struct fuse_args {
     const char *seq, *poses, *out;
@@ -46,157 +32,56 @@ typedef struct fuse_args {
 
 static int parse_args(int argc, char **argv, fuse_args *a)
 {
-    const char *cmd = "fuse";
     memset(a, 0, sizeof *a);
     a->fcfg = fusion_config_default();
-    for (int i = 1; i < argc; i++) {
-        int r = replay_parse_option(argc, argv, &i, &a->ropt);
-        if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
-        if (r > 0) { /* it moved i past the option: the loop's i++ must not skip one more */
-            i--;
-            continue;
-        }
-        const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (app_is_help(o)) {
-            printf(fuse_help, replay_options_help());
-            return -1;
-        } else if (!strcmp(o, "--no-mesh")) {
-            a->no_mesh = true;
-        } else if (o[0] != '-') {
-            if (a->seq) return app_usage_error(cmd, "more than one sequence: %s", o);
-            a->seq = o;
-        } else if (!v) {
-            return app_usage_error(cmd, "%s needs a value", o);
-        } else if (app_parse_map_option(o, v, &a->fcfg)) {
-            i++;
-        } else if (!strcmp(o, "--poses")) {
-            a->poses = v, i++;
-        } else if (!strcmp(o, "--out")) {
-            a->out = v, i++;
-        } else {
-            return app_usage_error(cmd, "unknown option or bad value: %s %s", o, v);
-        }
-    }
-    if (!a->seq) return app_usage_error(cmd, "no sequence given");
-    if (!a->poses) return app_usage_error(cmd, "--poses is required (groundtruth or a TUM file)");
-    if (!a->out) return app_usage_error(cmd, "--out is required");
-    return 0;
-}
-
-/* Per-frame measurements. */
-typedef struct fuse_timing {
-    bf_stats frame_ms, upload_ms, alloc_ms, subcache_ms, window_ms;
-} fuse_timing;
-
-static void timing_free(fuse_timing *t)
-{
-    bf_stats_free(&t->frame_ms);
-    bf_stats_free(&t->upload_ms);
-    bf_stats_free(&t->alloc_ms);
-    bf_stats_free(&t->subcache_ms);
-    bf_stats_free(&t->window_ms);
-}
-
-/* The pose of frame f: its ground truth, or the trajectory at its depth
- * timestamp. False when there is none (the frame is skipped). */
-static bool frame_pose(const bf_frame *f, const bf_traj *traj, bf_se3 *T_wc)
-{
-    if (!traj) {
-        if (!f->has_pose) return false;
-        *T_wc = f->T_wc;
-        return true;
-    }
-    return bf_traj_interpolate(traj, f->t_depth_s, T_wc);
+    const app_option own[] = {
+        APP_OPT("--poses", APP_OPT_STRING, &a->poses, "P",
+                "'groundtruth' (the sequence's own) or a TUM trajectory file (camera-to-world; poses interpolated at "
+                "the depth timestamps)",
+                .required = true),
+        APP_OPT("--out", APP_OPT_STRING, &a->out, "DIR", "output folder (created)", .required = true),
+        APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
+        APP_OPT_END,
+    };
+    app_option map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS];
+    app_map_options(map, &a->fcfg);
+    app_sequence_options(seq, &a->ropt);
+    const app_option *tables[] = {own, map, seq, NULL};
+    app_command_spec spec = {
+        .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
+        .max_positional = 1, .positional_missing = "no sequence given",
+        .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input, 4 no Vulkan device\n",
+    };
+    int rc = app_options_parse(&spec, argc, argv);
+    return rc ? rc : app_check_map_options("fuse", &a->fcfg);
 }
 
 typedef struct fuse_result {
-    uint32_t n_fused, n_skipped;
+    recon_run run;
     app_map_report out;
     double seconds;
     char device[256];
 } fuse_result;
 
-typedef struct fuse_report {
-    const fuse_args *a;
-    const fuse_result *r;
-    const fuse_timing *t;
-} fuse_report;
-
-static void write_stats_json(FILE *f, const void *arg)
+static cJSON *stats_json(const fuse_args *a, const fuse_result *r)
 {
-    const fuse_report *rep = arg;
-    const fuse_args *a = rep->a;
-    const fuse_result *r = rep->r;
-    const fuse_timing *t = rep->t;
-    fprintf(f, "{\n  \"command\": \"fuse\",\n  \"sequence\": ");
-    bf_json_string(f, a->seq);
-    fprintf(f, ",\n  \"device\": ");
-    bf_json_string(f, r->device);
-    fprintf(f, ",\n  \"config\": {\"voxel_ratio\": %g, \"window\": %u, \"subcache\": %u, \"chunk_m\": %g, "
-               "\"max_level\": %u, \"brick_cap\": %u},\n",
-            a->fcfg.voxel_ratio, a->fcfg.window, a->fcfg.subcache, a->fcfg.chunk_m, a->fcfg.max_level,
-            a->fcfg.brick_cap);
-    fprintf(f, "  \"frames\": %u,\n  \"frames_skipped\": %u,\n", r->n_fused, r->n_skipped);
-    fprintf(f, "  \"frame_ms\": {\"median\": ");
-    bf_json_number(f, bf_stats_percentile(&t->frame_ms, 50), 5);
-    fprintf(f, ", \"p95\": ");
-    bf_json_number(f, bf_stats_percentile(&t->frame_ms, 95), 5);
-    fprintf(f, ", \"mean\": ");
-    bf_json_number(f, bf_stats_mean(&t->frame_ms), 5);
-    fprintf(f, "},\n  \"gpu_stage_ms_median\": {\"upload\": ");
-    bf_json_number(f, bf_stats_percentile(&t->upload_ms, 50), 4);
-    fprintf(f, ", \"alloc\": ");
-    bf_json_number(f, bf_stats_percentile(&t->alloc_ms, 50), 4);
-    fprintf(f, ", \"subcache\": ");
-    bf_json_number(f, bf_stats_percentile(&t->subcache_ms, 50), 4);
-    fprintf(f, ", \"window\": ");
-    bf_json_number(f, bf_stats_percentile(&t->window_ms, 50), 4);
-    fprintf(f, "},\n");
-    app_json_map(f, &r->out, a->fcfg.max_level);
-    fprintf(f, "  \"seconds\": %.3f\n}\n", r->seconds);
-}
-
-static bf_status push_stage_times(fuse_timing *t, fusion_stage_ms ms)
-{
-    bf_status s = bf_stats_push(&t->upload_ms, ms.upload);
-    if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, ms.alloc);
-    if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, ms.subcache);
-    if (s == BF_OK) s = bf_stats_push(&t->window_ms, ms.window);
-    return s;
-}
-
-/* Fuses every frame of src; the map is created at the first posed frame. */
-static bf_status fuse_frames(gpu_context *ctx, rgbd_source *src, const bf_traj *traj, const fuse_args *a,
-                             fusion_map **map_out, fuse_result *r, fuse_timing *t)
-{
-    fusion_map *map = NULL;
-    bf_frame f;
-    bf_status s;
-    bf_progress prog;
-    bf_progress_begin(&prog, "fuse", src->n_frames);
-    uint32_t seen = 0;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        seen++;
-        bf_se3 T_wc;
-        if (!frame_pose(&f, traj, &T_wc)) {
-            r->n_skipped++;
-            bf_warn("fuse: frame %u (t = %.6f): no pose, skipped", f.index, f.t_depth_s);
-            continue;
-        }
-        if (!map && (s = fusion_create(ctx, &a->fcfg, rgbd_source_intrinsics(src), T_wc.t, &map)) != BF_OK) break;
-        double t0 = bf_time_s();
-        s = fusion_add_frame(map, &f, &T_wc);
-        if (s != BF_OK) break;
-        double ms = 1e3 * (bf_time_s() - t0);
-        if ((s = bf_stats_push(&t->frame_ms, ms)) != BF_OK) break;
-        if ((s = push_stage_times(t, fusion_last_stage_ms(map))) != BF_OK) break;
-        r->n_fused++;
-        bf_progress_update(&prog, seen);
-    }
-    bf_progress_end(&prog, seen);
-    if (s == BF_END) s = map ? fusion_flush(map) : bf_fail(BF_FORMAT, "%s: no frame with a pose", a->seq);
-    *map_out = map;
-    return s;
+    const recon_run_series *t = &r->run.series;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", "fuse");
+    cJSON_AddStringToObject(o, "sequence", a->seq);
+    cJSON_AddStringToObject(o, "device", r->device);
+    app_json_fusion_config(o, "config", &a->fcfg);
+    cJSON_AddNumberToObject(o, "frames", r->run.n_fused);
+    cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped);
+    app_json_series(o, "frame_ms", &t->frame_ms);
+    cJSON *g = app_json_object(o, "gpu_stage_ms_median");
+    cJSON_AddNumberToObject(g, "upload", bf_stats_percentile(&t->upload_ms, 50));
+    cJSON_AddNumberToObject(g, "alloc", bf_stats_percentile(&t->alloc_ms, 50));
+    cJSON_AddNumberToObject(g, "subcache", bf_stats_percentile(&t->subcache_ms, 50));
+    cJSON_AddNumberToObject(g, "window", bf_stats_percentile(&t->window_ms, 50));
+    app_json_map(o, &r->out, a->fcfg.max_level);
+    cJSON_AddNumberToObject(o, "seconds", r->seconds);
+    return o;
 }
 
 int cmd_fuse(int argc, char **argv)
@@ -208,38 +93,42 @@ int cmd_fuse(int argc, char **argv)
     double t_start = bf_time_s();
     fuse_result r;
     memset(&r, 0, sizeof r);
-    fuse_timing t;
-    memset(&t, 0, sizeof t);
     bf_traj traj = {0};
     bool use_traj = strcmp(a.poses, "groundtruth") != 0;
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
-    fusion_map *map = NULL;
-    bf_status s = bf_mkdir_p(a.out);
-    if (s == BF_OK && use_traj) s = replay_traj_read_tum(a.poses, &traj);
+    /* The inputs first: a missing one leaves no empty output folder. */
+    bf_status s = use_traj ? replay_traj_read_tum(a.poses, &traj) : BF_OK;
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
+    if (s == BF_OK) s = bf_mkdir_p(a.out);
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
-    if (s == BF_OK) s = fuse_frames(ctx, src, use_traj ? &traj : NULL, &a, &map, &r, &t);
-    if (s == BF_OK) s = app_export_map(map, a.out, !a.no_mesh, &r.out);
-    r.seconds = bf_time_s() - t_start;
-    fuse_report rep = {&a, &r, &t};
-    if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
     if (s == BF_OK) {
-        printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.n_fused, r.n_skipped, r.device);
-        printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&t.frame_ms, 50),
-               bf_stats_percentile(&t.frame_ms, 95));
+        recon_run_config rcfg = recon_run_config_default();
+        rcfg.loop.fusion = a.fcfg;
+        rcfg.poses = RECON_POSES_KNOWN;
+        rcfg.known = use_traj ? &traj : NULL;
+        rcfg.name = a.seq;
+        rcfg.label = cmd;
+        s = recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run);
+    }
+    if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
+    r.seconds = bf_time_s() - t_start;
+    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
+    if (s == BF_OK) {
+        printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.run.n_fused, r.run.n_skipped, r.device);
+        printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
+               bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);
         printf("  wrote            %s/{%spoints.ply,stats.json} in %.1f s\n", a.out, a.no_mesh ? "" : "mesh.ply,",
                r.seconds);
     }
-    fusion_destroy(map);
+    recon_run_free(&r.run);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
     bf_traj_free(&traj);
-    timing_free(&t);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -8,19 +8,11 @@
 #include "app.h"
 #include "replay/replay.h"
 
-static void info_help(FILE *f)
-{
-    fprintf(f,
-            "usage: bitfuse info SEQUENCE [options] [--json]\n\n"
-            "Reads every frame of a TUM RGB-D, ICL-NUIM or pose-per-frame folder and prints\n"
-            "its kind, intrinsics, frame count, time span, share of pixels with depth,\n"
-            "depth range (min/median/max, metres), ground truth and skipped frames.\n\n"
-            "options:\n%s"
-            "  --json            print the same as one JSON object on stdout\n"
-            "  -h, --help        this text\n\n"
-            "exit codes: 0 ok, 2 usage, 3 unreadable or malformed input\n",
-            replay_options_help());
-}
+static const char info_usage[] =
+    "usage: bitfuse info SEQUENCE [options] [--json]\n\n"
+    "Reads every frame of a TUM RGB-D, ICL-NUIM or pose-per-frame folder and prints\n"
+    "its kind, intrinsics, frame count, time span, share of pixels with depth,\n"
+    "depth range (min/median/max, metres), ground truth and skipped frames.\n";
 
 /* What one pass over the sequence gathers. The depth histogram has one bin
  * per raw value, so the median is exact without keeping any frame. */
@@ -70,26 +62,20 @@ int cmd_info(int argc, char **argv)
     replay_options opt = {0};
     const char *path = NULL;
     bool is_json = false;
-    for (int i = 1; i < argc;) {
-        if (app_is_help(argv[i])) {
-            info_help(stdout);
-            return APP_EXIT_OK;
-        }
-        int r = replay_parse_option(argc, argv, &i, &opt);
-        if (r < 0) return app_usage_error("info", "%s", bf_last_error());
-        if (r > 0) continue;
-        if (!strcmp(argv[i], "--json")) {
-            is_json = true;
-        } else if (argv[i][0] == '-' && argv[i][1] != '\0') {
-            return app_usage_error("info", "unknown option '%s'", argv[i]);
-        } else if (path) {
-            return app_usage_error("info", "more than one sequence given ('%s' and '%s')", path, argv[i]);
-        } else {
-            path = argv[i];
-        }
-        i++;
-    }
-    if (!path) return app_usage_error("info", "no sequence given");
+    const app_option own[] = {
+        APP_OPT("--json", APP_OPT_FLAG, &is_json, NULL, "print the same as one JSON object on stdout"),
+        APP_OPT_END,
+    };
+    app_option seq[APP_SEQUENCE_ROWS];
+    app_sequence_options(seq, &opt);
+    const app_option *tables[] = {seq, own, NULL};
+    app_command_spec spec = {
+        .name = "info", .usage = info_usage, .tables = tables, .positional = &path, .min_positional = 1,
+        .max_positional = 1, .positional_missing = "no sequence given",
+        .epilog = "exit codes: 0 ok, 2 usage, 3 unreadable or malformed input\n",
+    };
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
 
     rgbd_source *src = NULL;
     info_stats st = {0};
@@ -120,34 +106,31 @@ int cmd_info(int argc, char **argv)
     uint32_t skipped = replay_skipped_frames(src);
 
     if (is_json) {
-        printf("{\"path\": ");
-        bf_json_string(stdout, path);
-        printf(", \"kind\": ");
-        bf_json_string(stdout, src->kind);
-        printf(", \"width\": %u, \"height\": %u", K->width, K->height);
-        printf(", \"fx\": %.10g, \"fy\": %.10g, \"cx\": %.10g, \"cy\": %.10g, \"depth_scale\": %.10g", K->fx_px,
-               K->fy_px, K->cx_px, K->cy_px, K->depth_scale);
-        printf(", \"frames\": %u, \"frames_listed\": %u, \"skipped_frames\": %u", st.n_frames, src->n_frames,
-               skipped);
-        printf(", \"frames_with_colour\": %u", st.n_with_rgb);
-        /* Timestamps are ~1e9 s with microseconds: 17 digits round-trip a
-         * double, 10 would round them to whole seconds. */
-        printf(", \"t_first_s\": ");
-        bf_json_number(stdout, st.n_frames ? st.t_first_s : NAN, 17);
-        printf(", \"t_last_s\": ");
-        bf_json_number(stdout, st.n_frames ? st.t_last_s : NAN, 17);
-        printf(", \"duration_s\": ");
-        bf_json_number(stdout, span, 10);
-        printf(", \"valid_depth_share\": ");
-        bf_json_number(stdout, valid_share, 10);
-        printf(", \"depth_min_m\": ");
-        bf_json_number(stdout, d_min, 10);
-        printf(", \"depth_median_m\": ");
-        bf_json_number(stdout, d_med, 10);
-        printf(", \"depth_max_m\": ");
-        bf_json_number(stdout, d_max, 10);
-        printf(", \"has_groundtruth\": %s, \"frames_with_pose\": %u}\n", src->has_groundtruth ? "true" : "false",
-               st.n_with_pose);
+        /* cJSON prints doubles that round-trip: timestamps keep their microseconds. */
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "path", path);
+        cJSON_AddStringToObject(o, "kind", src->kind);
+        cJSON_AddNumberToObject(o, "width", K->width);
+        cJSON_AddNumberToObject(o, "height", K->height);
+        cJSON_AddNumberToObject(o, "fx", K->fx_px);
+        cJSON_AddNumberToObject(o, "fy", K->fy_px);
+        cJSON_AddNumberToObject(o, "cx", K->cx_px);
+        cJSON_AddNumberToObject(o, "cy", K->cy_px);
+        cJSON_AddNumberToObject(o, "depth_scale", K->depth_scale);
+        cJSON_AddNumberToObject(o, "frames", st.n_frames);
+        cJSON_AddNumberToObject(o, "frames_listed", src->n_frames);
+        cJSON_AddNumberToObject(o, "skipped_frames", skipped);
+        cJSON_AddNumberToObject(o, "frames_with_colour", st.n_with_rgb);
+        cJSON_AddNumberToObject(o, "t_first_s", st.n_frames ? st.t_first_s : NAN);
+        cJSON_AddNumberToObject(o, "t_last_s", st.n_frames ? st.t_last_s : NAN);
+        cJSON_AddNumberToObject(o, "duration_s", span);
+        cJSON_AddNumberToObject(o, "valid_depth_share", valid_share);
+        cJSON_AddNumberToObject(o, "depth_min_m", d_min);
+        cJSON_AddNumberToObject(o, "depth_median_m", d_med);
+        cJSON_AddNumberToObject(o, "depth_max_m", d_max);
+        cJSON_AddBoolToObject(o, "has_groundtruth", src->has_groundtruth);
+        cJSON_AddNumberToObject(o, "frames_with_pose", st.n_with_pose);
+        s = app_json_print(o);
     } else {
         printf("sequence      %s\n", path);
         printf("kind          %s\n", src->kind);
@@ -167,5 +150,5 @@ int cmd_info(int argc, char **argv)
     }
     free(st.hist);
     rgbd_source_close(src);
-    return APP_EXIT_OK;
+    return s == BF_OK ? APP_EXIT_OK : app_fail("info", s);
 }

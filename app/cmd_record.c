@@ -1,135 +1,28 @@
 /* bitfuse record: a device (a live camera, or a recorded sequence standing
- * in for one) through the capture thread into a bitfuse log. Also the body
- * of `bitfuse live` until the reconstruction pipeline takes live input. */
+ * in for one) through the capture thread into a bitfuse log. */
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "app.h"
 #include "capture/capture.h"
 #include "replay/replay.h"
 
-static void record_help(FILE *f, const char *cmd)
-{
-    bool is_live = !strcmp(cmd, "live");
-    if (is_live)
-        fprintf(f, "usage: bitfuse live --device URI --out DIR [options]\n\n"
-                   "Runs the reconstruction on a live source. Until the tracking pipeline takes live\n"
-                   "input, it records the source to DIR/capture.bflog (and DIR/stats.json) instead,\n"
-                   "exactly as `bitfuse record` does; replay the log with any command later.\n\n");
-    else
-        fprintf(f, "usage: bitfuse record --device URI --out FILE.bflog [options]\n\n"
-                   "Records a device into a bitfuse log (docs/formats.md): depth compressed losslessly\n"
-                   "(zstd), colour as JPEG or zstd, a frame index for seeking. A capture thread reads\n"
-                   "the device into a bounded queue; when writing falls behind, the oldest queued\n"
-                   "frame is dropped and counted, the device is never blocked. Ctrl-C stops the\n"
-                   "recording and keeps every frame recorded so far in a complete log. Writes\n"
-                   "FILE.stats.json beside the log (frames, dropped, bytes, compression, fps).\n\n");
-    fprintf(f,
-            "options:\n"
-            "  --device URI       freenect:N, openni2:[URI|FILE.oni], v4l2:/dev/videoN (docs/devices.md),\n"
-            "                     or a recorded sequence standing in for a camera: a TUM, ICL-NUIM or\n"
-            "                     pose-per-frame folder or a .bflog (read whole, nothing dropped,\n"
-            "                     unless --realtime)\n"
-            "  --out %-12s %s\n"
-            "  --frames N         stop after N frames (default: until the device ends or Ctrl-C)\n"
-            "  --colour C         jpeg (default), zstd (lossless) or none\n"
-            "  --jpeg-quality Q   1..100, default 90\n"
-            "  --zstd-level L     zstd level for depth (and zstd colour), default 1\n"
-            "  --queue N          capture queue length in frames, default 8\n"
-            "  --realtime         deliver a recorded sequence at its own frame rate, as a camera\n"
-            "                     would (frames are dropped when writing falls behind)\n"
-            "  --camera C, --depth-scale S, --skip-bad-frames   for a recorded sequence, as in\n"
-            "                     bitfuse info (docs/formats.md)\n"
-            "  -h, --help         this text\n\n"
-            "exit codes: 0 ok (also when stopped by Ctrl-C), 1 failure, 2 usage, 3 unreadable input\n"
-            "or device error mid-recording (the log keeps the frames before it), 4 no device\n",
-            is_live ? "DIR" : "FILE.bflog", is_live ? "folder for capture.bflog and stats.json (created)"
-                                                    : "the log to write (replaced if it exists)");
-}
-
-/* ------------------------------------------------------------ devices */
-
-/* A URI naming a live backend: "scheme:" with a scheme capture_open knows.
- * Anything else (a folder, a .bflog, a path with a colon) is a recording. */
-static bool is_live_uri(const char *uri)
-{
-    static const char *const schemes[] = {"freenect:", "openni2:", "v4l2:"};
-    for (size_t i = 0; i < sizeof schemes / sizeof schemes[0]; i++)
-        if (!strncmp(uri, schemes[i], strlen(schemes[i]))) return true;
-    return false;
-}
-
-/* A recorded sequence delivered at its own pace: next() sleeps until the
- * frame's time since the first frame has passed on the monotonic clock. It
- * runs on the capture thread, so the queue sees a camera's timing. */
-typedef struct paced_source {
-    rgbd_source base;
-    rgbd_source *inner;
-    double t0_wall_s, t0_frame_s;
-    bool is_started;
-} paced_source;
-
-static bf_status paced_next(rgbd_source *base, bf_frame *out)
-{
-    paced_source *p = (paced_source *)base;
-    bf_status s = rgbd_source_next(p->inner, out);
-    if (s) return s;
-    if (!p->is_started) {
-        p->is_started = true;
-        p->t0_wall_s = bf_time_s();
-        p->t0_frame_s = out->t_depth_s;
-    }
-    double wait = (out->t_depth_s - p->t0_frame_s) - (bf_time_s() - p->t0_wall_s);
-    if (wait > 0 && wait < 10) {
-        struct timespec ts = {(time_t)wait, (long)((wait - floor(wait)) * 1e9)};
-        nanosleep(&ts, NULL);
-    }
-    return BF_OK;
-}
-
-static void paced_close(rgbd_source *base)
-{
-    paced_source *p = (paced_source *)base;
-    rgbd_source_close(p->inner);
-    free(p);
-}
-
-static const rgbd_source_ops paced_ops = {paced_next, paced_close};
-
-/* On success *out owns inner; on failure inner is still the caller's. */
-static bf_status paced_wrap(rgbd_source *inner, rgbd_source **out)
-{
-    paced_source *p = calloc(1, sizeof *p);
-    if (!p) return bf_fail(BF_NO_MEMORY, "paced source");
-    p->base = *inner;
-    p->base.ops = &paced_ops;
-    p->inner = inner;
-    *out = &p->base;
-    return BF_OK;
-}
-
-/* ------------------------------------------------------------ Ctrl-C */
-
-static rgbd_source *volatile g_record_src;
-static volatile sig_atomic_t g_signalled;
-
-static void on_stop_signal(int sig)
-{
-    (void)sig;
-    g_signalled = 1;
-    capture_threaded_stop(g_record_src); /* sets an atomic flag: async-signal-safe */
-}
-
-/* ------------------------------------------------------------ the command */
+static const char record_usage[] =
+    "usage: bitfuse record --device URI --out FILE.bflog [options]\n\n"
+    "Records a device into a bitfuse log (docs/formats.md): depth compressed losslessly\n"
+    "(zstd), colour as JPEG or zstd, a frame index for seeking. A capture thread reads\n"
+    "the device into a bounded queue; when writing falls behind, the oldest queued\n"
+    "frame is dropped and counted, the device is never blocked. Ctrl-C stops the\n"
+    "recording and keeps every frame recorded so far in a complete log. Writes\n"
+    "FILE.stats.json beside the log (frames, dropped, bytes, compression, fps).\n";
 
 typedef struct record_args {
     const char *device, *out;
     replay_options ropt;
     replay_log_config lcfg;
+    app_log_codec codec;
     uint32_t queue;
     bool realtime;
 } record_args;
@@ -137,51 +30,28 @@ typedef struct record_args {
 static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
 {
     memset(a, 0, sizeof *a);
-    a->lcfg.colour = REPLAY_LOG_COLOUR_JPEG;
+    a->codec = (app_log_codec){REPLAY_LOG_COLOUR_JPEG, 90, 1};
     a->queue = 8;
-    for (int i = 1; i < argc;) {
-        const char *o = argv[i];
-        if (app_is_help(o)) {
-            record_help(stdout, cmd);
-            return -1;
-        }
-        int r = replay_parse_option(argc, argv, &i, &a->ropt);
-        if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
-        if (r > 0) continue;
-        if (!strcmp(o, "--realtime")) {
-            a->realtime = true;
-            i++;
-            continue;
-        }
-        if (o[0] != '-') return app_usage_error(cmd, "unknown argument '%s'", o);
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!v) return app_usage_error(cmd, "%s needs a value", o);
-        uint32_t u;
-        if (!strcmp(o, "--device")) {
-            a->device = v;
-        } else if (!strcmp(o, "--out")) {
-            a->out = v;
-        } else if (!strcmp(o, "--colour") || !strcmp(o, "--color")) {
-            if (!strcmp(v, "jpeg")) a->lcfg.colour = REPLAY_LOG_COLOUR_JPEG;
-            else if (!strcmp(v, "zstd")) a->lcfg.colour = REPLAY_LOG_COLOUR_ZSTD;
-            else if (!strcmp(v, "none")) a->lcfg.colour = REPLAY_LOG_COLOUR_NONE;
-            else return app_usage_error(cmd, "--colour takes jpeg, zstd or none, not '%s'", v);
-        } else if (!strcmp(o, "--jpeg-quality") && bf_parse_u32(v, &u) && u >= 1 && u <= 100) {
-            a->lcfg.jpeg_quality = (int)u;
-        } else if (!strcmp(o, "--zstd-level") && bf_parse_u32(v, &u) && u >= 1 && u <= 19) {
-            a->lcfg.zstd_level = (int)u;
-        } else if (!strcmp(o, "--queue") && bf_parse_u32(v, &u) && u >= 1 && u <= 1024) {
-            a->queue = u;
-        } else if (!strcmp(o, "--jpeg-quality") || !strcmp(o, "--zstd-level") || !strcmp(o, "--queue")) {
-            return app_usage_error(cmd, "bad value for %s: '%s'", o, v);
-        } else {
-            return app_usage_error(cmd, "unknown option '%s'", o);
-        }
-        i += 2;
-    }
-    if (!a->device) return app_usage_error(cmd, "--device is required");
-    if (!a->out) return app_usage_error(cmd, "--out is required");
-    return 0;
+    const app_option own[] = {
+        APP_OPT("--device", APP_OPT_STRING, &a->device, "URI",
+                "freenect:N, openni2:[URI|FILE.oni], v4l2:/dev/videoN (docs/devices.md), or a recorded sequence "
+                "standing in for a camera: a TUM, ICL-NUIM or pose-per-frame folder or a .bflog (read whole, nothing "
+                "dropped, unless --realtime)",
+                .required = true),
+        APP_OPT("--out", APP_OPT_STRING, &a->out, "FILE.bflog", "the log to write (replaced if it exists)",
+                .required = true, .check = app_check_log_path),
+        APP_OPT("--queue", APP_OPT_U32, &a->queue, "N", "capture queue length in frames", .min = 1, .max = 1024),
+        APP_OPT("--realtime", APP_OPT_FLAG, &a->realtime, NULL,
+                "deliver a recorded sequence at its own frame rate, as a camera would (frames are dropped when "
+                "writing falls behind)"),
+        APP_OPT_END,
+    };
+    app_command_spec spec = {
+        .name = cmd, .usage = record_usage,
+        .epilog = "exit codes: 0 ok (also when stopped by Ctrl-C), 1 failure, 2 usage, 3 unreadable input\n"
+                  "or device error mid-recording (the log keeps the frames before it), 4 no device\n",
+    };
+    return app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
 }
 
 /* What a recording did, for the summary and stats.json. */
@@ -193,82 +63,32 @@ typedef struct record_result {
     bool is_live;
 } record_result;
 
-static double ratio(uint64_t raw, uint64_t packed) { return packed ? (double)raw / (double)packed : NAN; }
-
-static void write_stats_json(FILE *f, const char *cmd, const record_args *a, const char *log_path,
-                             const record_result *r, bf_status s)
+static cJSON *stats_json(const record_args *a, const char *log_path, const record_result *r, bf_status s)
 {
     const replay_log_stats *L = &r->log;
-    double mb = (double)L->file_bytes / 1e6;
-    fprintf(f, "{\n  \"command\": ");
-    bf_json_string(f, cmd);
-    fprintf(f, ",\n  \"device\": ");
-    bf_json_string(f, a->device);
-    fprintf(f, ",\n  \"live\": %s,\n  \"out\": ", r->is_live ? "true" : "false");
-    bf_json_string(f, log_path);
-    fprintf(f, ",\n  \"colour_codec\": \"%s\",\n", a->lcfg.colour == REPLAY_LOG_COLOUR_JPEG   ? "jpeg"
-                                                  : a->lcfg.colour == REPLAY_LOG_COLOUR_ZSTD ? "zstd"
-                                                                                             : "none");
-    fprintf(f, "  \"frames\": %u,\n  \"captured\": %llu,\n  \"dropped\": %llu,\n  \"interrupted\": %s,\n", L->n_frames,
-            (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped,
-            r->is_interrupted ? "true" : "false");
-    fprintf(f, "  \"status\": ");
-    bf_json_string(f, s == BF_OK ? "ok" : bf_status_name(s));
-    fprintf(f, ",\n  \"bytes\": %llu,\n  \"depth_raw_bytes\": %llu,\n  \"depth_bytes\": %llu,\n",
-            (unsigned long long)L->file_bytes, (unsigned long long)L->depth_raw_bytes,
-            (unsigned long long)L->depth_bytes);
-    fprintf(f, "  \"rgb_raw_bytes\": %llu,\n  \"rgb_bytes\": %llu,\n  \"depth_compression_ratio\": ",
-            (unsigned long long)L->rgb_raw_bytes, (unsigned long long)L->rgb_bytes);
-    bf_json_number(f, ratio(L->depth_raw_bytes, L->depth_bytes), 5);
-    fprintf(f, ",\n  \"rgb_compression_ratio\": ");
-    bf_json_number(f, ratio(L->rgb_raw_bytes, L->rgb_bytes), 5);
-    fprintf(f, ",\n  \"compression_ratio\": ");
-    bf_json_number(f, ratio(L->depth_raw_bytes + L->rgb_raw_bytes, L->file_bytes), 5);
-    fprintf(f, ",\n  \"seconds\": ");
-    bf_json_number(f, r->seconds, 5);
-    fprintf(f, ",\n  \"fps\": ");
-    bf_json_number(f, r->seconds > 0 ? L->n_frames / r->seconds : NAN, 5);
-    fprintf(f, ",\n  \"write_mb_per_s\": ");
-    bf_json_number(f, r->seconds > 0 ? mb / r->seconds : NAN, 5);
-    fprintf(f, "\n}\n");
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", "record");
+    cJSON_AddStringToObject(o, "device", a->device);
+    cJSON_AddBoolToObject(o, "live", r->is_live);
+    cJSON_AddStringToObject(o, "out", log_path);
+    cJSON_AddNumberToObject(o, "frames", L->n_frames);
+    cJSON_AddNumberToObject(o, "captured", (double)r->cap.captured);
+    cJSON_AddNumberToObject(o, "dropped", (double)r->cap.dropped);
+    cJSON_AddBoolToObject(o, "interrupted", r->is_interrupted);
+    cJSON_AddStringToObject(o, "status", s == BF_OK ? "ok" : bf_status_name(s));
+    app_json_log_stats(o, &a->lcfg, L, r->seconds);
+    cJSON_AddNumberToObject(o, "seconds", r->seconds);
+    cJSON_AddNumberToObject(o, "fps", r->seconds > 0 ? L->n_frames / r->seconds : NAN);
+    return o;
 }
 
-/* stats.json beside the log: DIR/stats.json for live, X.stats.json for
- * record X.bflog. */
-static bf_status stats_path(const char *log_path, const char *live_dir, char *out, size_t cap)
+/* X.stats.json beside X.bflog. */
+static bf_status stats_path(const char *log_path, char *out, size_t cap)
 {
-    if (live_dir) return bf_path_join(out, cap, live_dir, "stats.json");
     size_t n = strlen(log_path);
     if (n + 12 >= cap) return bf_fail(BF_INVALID_ARG, "path too long: %s", log_path);
     snprintf(out, cap, "%.*s.stats.json", (int)(n - 6), log_path); /* minus ".bflog" */
     return BF_OK;
-}
-
-bf_status app_open_device(const char *uri, const replay_options *ropt, bool realtime, uint32_t queue, bool *is_live,
-                          rgbd_source **out)
-{
-    rgbd_source *dev = NULL, *paced = NULL;
-    *is_live = is_live_uri(uri);
-    bf_status s = *is_live ? capture_open(uri, &dev) : replay_open(uri, ropt, &dev);
-    if (s) return s;
-    if (!*is_live && realtime) {
-        if ((s = paced_wrap(dev, &paced))) {
-            rgbd_source_close(dev);
-            return s;
-        }
-        dev = paced;
-    }
-    /* A camera (or a file played as one) must never wait for us; a file
-     * read as fast as it decodes must not lose frames. */
-    s = *is_live || realtime ? capture_threaded(dev, queue, out) : capture_threaded_lossless(dev, queue, out);
-    if (s) rgbd_source_close(dev);
-    return s;
-}
-
-/* Opens the device and wraps it in the capture thread. */
-static bf_status open_device(const record_args *a, bool *is_live, rgbd_source **out)
-{
-    return app_open_device(a->device, &a->ropt, a->realtime, a->queue, is_live, out);
 }
 
 /* Records until the device ends, --frames is reached, or Ctrl-C. A device
@@ -276,12 +96,7 @@ static bf_status open_device(const record_args *a, bool *is_live, rgbd_source **
  * returned; a writer error leaves the log as a crash would. */
 static bf_status record_frames(const record_args *a, rgbd_source *src, replay_log_writer *w, record_result *r)
 {
-    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND}, old_int, old_term;
-    sigemptyset(&sa.sa_mask);
-    g_record_src = src;
-    g_signalled = 0;
-    sigaction(SIGINT, &sa, &old_int);
-    sigaction(SIGTERM, &sa, &old_term);
+    app_stop_begin(src);
     uint32_t limit = a->ropt.max_frames;
     bf_progress prog;
     char label[96] = "record";
@@ -304,40 +119,27 @@ static bf_status record_frames(const record_args *a, rgbd_source *src, replay_lo
     }
     bf_progress_end(&prog, n);
     r->cap = capture_threaded_stats(src);
-    r->is_interrupted = g_signalled;
-    sigaction(SIGINT, &old_int, NULL);
-    sigaction(SIGTERM, &old_term, NULL);
-    g_record_src = NULL;
+    r->is_interrupted = app_stop_end();
     return s;
 }
 
-int app_record(const char *cmd, int argc, char **argv, bool is_live_cmd)
+int cmd_record(int argc, char **argv)
 {
+    const char *cmd = "record";
     record_args a;
     int rc = parse_args(cmd, argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    char log_path[4096], json_path[4200];
-    const char *live_dir = is_live_cmd ? a.out : NULL;
-    bf_status s = BF_OK;
-    if (is_live_cmd) {
-        if ((s = bf_mkdir_p(a.out)) || (s = bf_path_join(log_path, sizeof log_path, a.out, "capture.bflog")))
-            return app_fail(cmd, s);
-        fprintf(stderr,
-                "bitfuse live: the reconstruction pipeline does not take live input yet (tracking issue); "
-                "recording to %s instead\n",
-                log_path);
-    } else {
-        if (!replay_is_log_path(a.out)) return app_usage_error(cmd, "--out must name a .bflog file, not '%s'", a.out);
-        snprintf(log_path, sizeof log_path, "%s", a.out);
-    }
-    if ((s = stats_path(log_path, live_dir, json_path, sizeof json_path))) return app_fail(cmd, s);
+    const char *log_path = a.out;
+    char json_path[4200];
+    bf_status s = stats_path(log_path, json_path, sizeof json_path);
+    if (s != BF_OK) return app_fail(cmd, s);
 
     record_result r;
     memset(&r, 0, sizeof r);
     rgbd_source *src = NULL;
     replay_log_writer *w = NULL;
     double t0 = bf_time_s();
-    s = open_device(&a, &r.is_live, &src);
+    s = app_open_device(a.device, &a.ropt, a.realtime, a.queue, &r.is_live, &src);
     if (s) return app_fail(cmd, s);
     a.lcfg.device = a.device;
     a.lcfg.has_groundtruth = src->has_groundtruth;
@@ -358,29 +160,22 @@ int app_record(const char *cmd, int argc, char **argv, bool is_live_cmd)
     s = s_dev ? s_dev : s_fin;
     if (s_dev && dev_err[0]) bf_fail(s_dev, "%s", dev_err);
 
-    bf_membuf mb;
-    FILE *jf = bf_membuf_open(&mb);
-    bf_status s_json = BF_OK;
-    if (jf) {
-        write_stats_json(jf, cmd, &a, log_path, &r, s);
-        s_json = bf_membuf_write_atomic(&mb, json_path);
-    }
+    bf_status s_json = app_json_write(json_path, stats_json(&a, log_path, &r, s));
     const replay_log_stats *L = &r.log;
     printf("bitfuse %s: %u frames from %s to %s%s\n", cmd, L->n_frames, a.device, log_path,
            r.is_interrupted ? " (stopped by a signal; the log is complete up to there)" : "");
     printf("  capture   %llu captured, %llu dropped by the queue of %u\n", (unsigned long long)r.cap.captured,
            (unsigned long long)r.cap.dropped, a.queue);
     printf("  depth     %.2f MB raw -> %.2f MB (%.2fx, zstd)\n", L->depth_raw_bytes / 1e6, L->depth_bytes / 1e6,
-           ratio(L->depth_raw_bytes, L->depth_bytes));
+           app_ratio(L->depth_raw_bytes, L->depth_bytes));
     if (L->rgb_raw_bytes)
         printf("  colour    %.2f MB raw -> %.2f MB (%.2fx, %s)\n", L->rgb_raw_bytes / 1e6, L->rgb_bytes / 1e6,
-               ratio(L->rgb_raw_bytes, L->rgb_bytes), a.lcfg.colour == REPLAY_LOG_COLOUR_JPEG ? "jpeg" : "zstd");
+               app_ratio(L->rgb_raw_bytes, L->rgb_bytes), app_colour_name(a.lcfg.colour));
     printf("  file      %.2f MB in %.2f s: %.1f frames/s, %.1f MB/s; stats in %s\n", L->file_bytes / 1e6, r.seconds,
            r.seconds > 0 ? L->n_frames / r.seconds : 0.0, r.seconds > 0 ? L->file_bytes / 1e6 / r.seconds : 0.0,
            json_path);
     if (s) return app_fail(cmd, s);
-    if (!jf || s_json) return app_fail(cmd, jf ? s_json : BF_NO_MEMORY);
+    if (s_json != BF_OK) return app_fail(cmd, s_json);
     return APP_EXIT_OK;
 }
 
-int cmd_record(int argc, char **argv) { return app_record("record", argc, argv, false); }

@@ -3,7 +3,6 @@
  * the estimated trajectory, the map's mesh and points, per-frame tracking
  * records and stats.json. */
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -13,7 +12,7 @@
 #include "recon/recon.h"
 #include "replay/replay.h"
 
-static const char replay_help[] =
+static const char replay_usage[] =
     "usage: bitfuse replay SEQUENCE --out DIR [options]\n"
     "\n"
     "Runs the full loop on every frame of SEQUENCE (DESIGN.md section 1): ICP against the\n"
@@ -25,58 +24,23 @@ static const char replay_help[] =
     "  frames.csv      per frame: state, ICP outcome, inliers, residual, times\n"
     "  mesh.ply        triangle mesh of the confident surface (binary PLY)\n"
     "  points.ply      surface voxel centres with normals\n"
-    "  stats.json      time per frame and per stage, tracking counts, ATE when the\n"
-    "                  sequence has ground truth, map memory\n"
-    "  views/N.png     shaded ray-cast views, with --view-every\n"
-    "\n"
-    "options:\n"
-    "  --out DIR          output folder (created)\n"
-    "  --init P           first pose: 'groundtruth' (the first frame's, when it has one;\n"
-    "                     the default) or 'identity'\n"
-    "  --ratio R          voxel-to-pixel ratio of the level rule, default 2 (fuse: 1)\n"
-    "  --window N         frames per fusion window (even), default 40\n"
-    "  --subcache N       frames of the new-brick pass, default 10\n"
-    "  --bricks N         brick pool size, default 1048576\n"
-    "  --chunk M          chunk edge in metres, default 2\n"
-    "  --max-level L      finest octree level, default 8\n"
-    "  --icp-iters A,B,C  ICP iterations per pyramid level, finest first, default 5,5,4\n"
-    "  --huber K          ICP Huber threshold in units of the sensor noise sigma_z(z),\n"
-    "                     default 2 (0: plain least squares)\n"
-    "  --noise-weights on|off  weight ICP residuals by 1 / sigma_z(z)^2, default on\n"
-    "  --ref-level L      resolution of the tracking reference's ray-cast: 0 full, 1 half\n"
-    "                     (default from tracking)\n"
-    "  --ray-start frame|near  the reference's rays start just in front of the tracked\n"
-    "                     frame's depth (default) or at the near plane\n"
-    "  --rof-iters N      ROF iterations on the reference, default from tracking (0: off)\n"
-    "  --angle-gate DEG   ICP normal-angle gate, default from tracking (45)\n"
-    "  --degenerate-ratio R  eigenvalue ratio below which the ICP system counts as degenerate\n"
-    "  --rof-lambda L     ROF data weight at 1 m\n"
-    "  --view-every K     write a shaded view every K frames\n"
-    "  --no-mesh          skip the mesh (points and stats only)\n"
-    "  --fuse-at-groundtruth  track every frame but fuse it at its true pose: the map is\n"
-    "                     the one the sensor gives and the trajectory's error is the\n"
-    "                     tracker's own, one frame at a time (needs ground truth)\n"
-    "%s"
-    "\n"
+    "  stats.json      the whole config, time per frame and per stage, tracking counts,\n"
+    "                  ATE when the sequence has ground truth, map memory\n"
+    "  views/N.png     shaded ray-cast views, with --view-every\n";
+
+static const char replay_epilog[] =
     "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
     "3 bad input, 4 no Vulkan device\n";
 
-static const char live_help[] =
+static const char live_usage[] =
     "usage: bitfuse live --device URI --out DIR [options]\n"
     "\n"
     "Runs the full loop (as bitfuse replay) on a live camera: a capture thread reads the\n"
     "device into a bounded queue and drops the oldest frame when the loop falls behind\n"
     "(counted in stats.json). Ctrl-C ends the scan: the map is flushed and everything is\n"
-    "written as after a replay. Writes the files of bitfuse replay into DIR.\n"
-    "\n"
-    "options:\n"
-    "  --device URI       freenect:N, openni2:[URI|FILE.oni], v4l2:/dev/videoN (docs/devices.md),\n"
-    "                     or a recorded sequence standing in for a camera\n"
-    "  --realtime         play a recorded sequence at its own frame rate, as a camera would\n"
-    "  --queue N          capture queue length in frames, default 8\n"
-    "  --record FILE      also record the frames the loop consumed into a bitfuse log\n"
-    "  and every option of bitfuse replay (--ratio, --window, --icp-iters, --view-every, ...)\n"
-    "\n"
+    "written as after a replay. Writes the files of bitfuse replay into DIR.\n";
+
+static const char live_epilog[] =
     "exit codes: 0 ok (also when stopped by Ctrl-C), 1 failure, 2 usage, 3 bad input or a\n"
     "device error mid-scan (what was reconstructed is still written), 4 no device\n";
 
@@ -85,7 +49,7 @@ typedef struct replay_args {
     bool is_live_cmd, realtime;
     uint32_t queue;
     const char *record_path; /* live: also record into this log */
-    bool init_identity;
+    int init;                /* 0: the first frame's ground truth, 1: identity */
     replay_options ropt;
     recon_config rcfg;
     uint32_t view_every;
@@ -93,22 +57,57 @@ typedef struct replay_args {
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
-static bool parse_iters(const char *v, uint32_t it[TRACK_MAX_LEVELS], uint32_t *levels)
+#define LOOP_ROWS 14
+#define LIVE_ROWS 5
+
+/* The options of the loop itself: tracking, ray-cast and outputs. */
+static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
 {
-    uint32_t n = 0;
-    const char *p = v;
-    while (*p && n < TRACK_MAX_LEVELS) {
-        char *end;
-        unsigned long x = strtoul(p, &end, 10);
-        if (end == p || x > 1000) return false;
-        it[n++] = (uint32_t)x;
-        if (*end == ',') end++;
-        else if (*end) return false;
-        p = end;
-    }
-    if (*p || n == 0) return false;
-    *levels = n;
-    return true;
+    track_config *tc = &a->rcfg.track;
+    const app_option r[LOOP_ROWS] = {
+        APP_OPT("--out", APP_OPT_STRING, &a->out, "DIR", "output folder (created)", .required = true),
+        APP_OPT("--init", APP_OPT_ENUM, &a->init, "groundtruth|identity",
+                "first pose: the first frame's ground truth (when it has one) or the identity"),
+        APP_OPT("--icp-iters", APP_OPT_LIST, tc->iterations, "A,B,C",
+                "ICP iterations per pyramid level, finest first", .max = 1000, .count = &tc->levels,
+                .max_n = TRACK_MAX_LEVELS),
+        APP_OPT("--huber", APP_OPT_FLOAT, &tc->huber_k, "K",
+                "ICP Huber threshold in units of the sensor noise sigma_z(z) (0: plain least squares)"),
+        APP_OPT("--noise-weights", APP_OPT_CHOICE, &tc->weight_noise, "on|off",
+                "weight ICP residuals by 1 / sigma_z(z)^2"),
+        APP_OPT("--ref-level", APP_OPT_U32, &tc->ref_level, "L",
+                "resolution of the tracking reference's ray-cast: 0 full, 1 half", .max = 1),
+        APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
+                "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
+        APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),
+        APP_OPT("--rof-lambda", APP_OPT_FLOAT, &tc->rof_lambda0, "L", "ROF data weight at 1 m", .min_open = true),
+        APP_OPT("--angle-gate", APP_OPT_FLOAT, &tc->angle_deg, "DEG", "ICP normal-angle gate in degrees", .max = 90,
+                .min_open = true),
+        APP_OPT("--degenerate-ratio", APP_OPT_DOUBLE, &tc->degenerate_ratio, "R",
+                "eigenvalue ratio below which the ICP system counts as degenerate", .max = 1),
+        APP_OPT("--view-every", APP_OPT_U32, &a->view_every, "K", "write a shaded view every K frames", .min = 1,
+                .no_default = true),
+        APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
+
+static void live_options(app_option rows[LIVE_ROWS], replay_args *a)
+{
+    const app_option r[LIVE_ROWS] = {
+        APP_OPT("--device", APP_OPT_STRING, &a->seq, "URI",
+                "freenect:N, openni2:[URI|FILE.oni], v4l2:/dev/videoN (docs/devices.md), or a recorded sequence "
+                "standing in for a camera",
+                .required = true),
+        APP_OPT("--realtime", APP_OPT_FLAG, &a->realtime, NULL,
+                "play a recorded sequence at its own frame rate, as a camera would"),
+        APP_OPT("--queue", APP_OPT_U32, &a->queue, "N", "capture queue length in frames", .min = 1, .max = 1024),
+        APP_OPT("--record", APP_OPT_STRING, &a->record_path, "FILE",
+                "also record the frames the loop consumed into a bitfuse log", .check = app_check_log_path),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
 }
 
 static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, replay_args *a)
@@ -117,129 +116,32 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     a->is_live_cmd = is_live_cmd;
     a->queue = 8;
     a->rcfg = recon_config_default();
-    for (int i = 1; i < argc; i++) {
-        int r = replay_parse_option(argc, argv, &i, &a->ropt);
-        if (r < 0) return app_usage_error(cmd, "%s", bf_last_error());
-        if (r > 0) { /* it moved i past the option: the loop's i++ must not skip one more */
-            i--;
-            continue;
-        }
-        const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        double d;
-        uint32_t u;
-        fusion_config *fc = &a->rcfg.fusion;
-        track_config *tc = &a->rcfg.track;
-        if (app_is_help(o)) {
-            if (is_live_cmd) fputs(live_help, stdout);
-            else printf(replay_help, replay_options_help());
-            return -1;
-        } else if (!strcmp(o, "--no-mesh")) {
-            a->no_mesh = true;
-        } else if (!is_live_cmd && !strcmp(o, "--fuse-at-groundtruth")) {
-            a->fuse_at_gt = true;
-        } else if (is_live_cmd && !strcmp(o, "--realtime")) {
-            a->realtime = true;
-        } else if (is_live_cmd && !strcmp(o, "--device") && v) {
-            a->seq = v, i++;
-        } else if (is_live_cmd && !strcmp(o, "--queue") && v && bf_parse_u32(v, &u) && u > 0) {
-            a->queue = u, i++;
-        } else if (is_live_cmd && !strcmp(o, "--record") && v) {
-            if (!replay_is_log_path(v)) return app_usage_error(cmd, "--record must name a .bflog file, not '%s'", v);
-            a->record_path = v, i++;
-        } else if (!is_live_cmd && o[0] != '-') {
-            if (a->seq) return app_usage_error(cmd, "more than one sequence: %s", o);
-            a->seq = o;
-        } else if (!v) {
-            return app_usage_error(cmd, "%s needs a value", o);
-        } else if (app_parse_map_option(o, v, fc)) {
-            i++;
-        } else if (!strcmp(o, "--out")) {
-            a->out = v, i++;
-        } else if (!strcmp(o, "--init") && (!strcmp(v, "groundtruth") || !strcmp(v, "identity"))) {
-            a->init_identity = !strcmp(v, "identity"), i++;
-        } else if (!strcmp(o, "--icp-iters") && parse_iters(v, tc->iterations, &tc->levels)) {
-            i++;
-        } else if (!strcmp(o, "--degenerate-ratio") && bf_parse_double(v, &d) && d >= 0) {
-            tc->degenerate_ratio = d, i++;
-        } else if (!strcmp(o, "--angle-gate") && bf_parse_double(v, &d) && d > 0 && d < 90) {
-            tc->angle_deg = (float)d, i++;
-        } else if (!strcmp(o, "--huber") && bf_parse_double(v, &d) && d >= 0) {
-            tc->huber_k = (float)d, i++;
-        } else if (!strcmp(o, "--noise-weights") && (!strcmp(v, "on") || !strcmp(v, "off"))) {
-            tc->weight_noise = !strcmp(v, "on"), i++;
-        } else if (!strcmp(o, "--ray-start") && (!strcmp(v, "frame") || !strcmp(v, "near"))) {
-            a->rcfg.start_at_frame = !strcmp(v, "frame"), i++;
-        } else if (!strcmp(o, "--ref-level") && bf_parse_u32(v, &u) && u <= 1) {
-            tc->ref_level = u, i++;
-        } else if (!strcmp(o, "--rof-iters") && bf_parse_u32(v, &u)) {
-            tc->rof_iterations = u, i++;
-        } else if (!strcmp(o, "--rof-lambda") && bf_parse_double(v, &d) && d > 0) {
-            tc->rof_lambda0 = (float)d, i++;
-        } else if (!strcmp(o, "--view-every") && bf_parse_u32(v, &u) && u > 0) {
-            a->view_every = u, i++;
-        } else {
-            return app_usage_error(cmd, "unknown option or bad value: %s %s", o, v);
-        }
-    }
-    if (!a->seq) return app_usage_error(cmd, is_live_cmd ? "--device is required" : "no sequence given");
-    if (!a->out) return app_usage_error(cmd, "--out is required");
-    return 0;
-}
-
-/* ------------------------------------------------------------ Ctrl-C (live) */
-
-static rgbd_source *volatile g_live_src;
-static volatile sig_atomic_t g_stopped;
-
-static void on_stop_signal(int sig)
-{
-    (void)sig;
-    g_stopped = 1;
-    capture_threaded_stop(g_live_src); /* an atomic flag: async-signal-safe */
-}
-
-/* Per-frame measurements over the run. */
-typedef struct replay_timing {
-    bf_stats frame_ms, track_ms, rof_ms, raycast_ms, upload_ms, alloc_ms, subcache_ms, window_ms;
-    bf_stats inlier_frac, residual_mm;
-} replay_timing;
-
-static bf_stats *timing_series(replay_timing *t, int i)
-{
-    bf_stats *all[] = {&t->frame_ms,  &t->track_ms,    &t->rof_ms,    &t->raycast_ms, &t->upload_ms,
-                       &t->alloc_ms,  &t->subcache_ms, &t->window_ms, &t->inlier_frac, &t->residual_mm};
-    return i < (int)(sizeof all / sizeof all[0]) ? all[i] : NULL;
-}
-
-static void timing_free(replay_timing *t)
-{
-    bf_stats *s;
-    for (int i = 0; (s = timing_series(t, i)); i++) bf_stats_free(s);
-}
-
-static bf_status timing_push(replay_timing *t, const recon_frame_result *fr)
-{
-    bf_status s = bf_stats_push(&t->frame_ms, fr->ms_frame);
-    if (fr->state == RECON_TRACKED || fr->state == RECON_LOST) {
-        if (s == BF_OK) s = bf_stats_push(&t->track_ms, fr->ms_track);
-        if (s == BF_OK) s = bf_stats_push(&t->inlier_frac, fr->track.inlier_frac);
-        if (s == BF_OK && fr->track.outcome == TRACK_OK) s = bf_stats_push(&t->residual_mm, 1e3 * fr->track.residual_m);
-    }
-    if (fr->fused) {
-        if (s == BF_OK) s = bf_stats_push(&t->rof_ms, fr->ms_rof);
-        if (s == BF_OK) s = bf_stats_push(&t->raycast_ms, fr->ms_raycast);
-        if (s == BF_OK) s = bf_stats_push(&t->upload_ms, fr->fuse.upload);
-        if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, fr->fuse.alloc);
-        if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, fr->fuse.subcache);
-        if (s == BF_OK) s = bf_stats_push(&t->window_ms, fr->fuse.window);
-    }
-    return s;
+    app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS];
+    const app_option fuse_gt[] = {
+        APP_OPT("--fuse-at-groundtruth", APP_OPT_FLAG, &a->fuse_at_gt, NULL,
+                "track every frame but fuse it at its true pose: the map is the one the sensor gives and the "
+                "trajectory's error is the tracker's own, one frame at a time (needs ground truth)"),
+        APP_OPT_END,
+    };
+    loop_options(own, a);
+    live_options(dev, a);
+    app_map_options(map, &a->rcfg.fusion);
+    app_sequence_options(seq, &a->ropt);
+    const app_option *replay_tables[] = {own, fuse_gt, map, seq, NULL};
+    const app_option *live_tables[] = {dev, own, map, seq, NULL};
+    app_command_spec spec = {
+        .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
+        .tables = is_live_cmd ? live_tables : replay_tables, .positional = &a->seq,
+        .min_positional = is_live_cmd ? 0 : 1, .max_positional = is_live_cmd ? 0 : 1,
+        .positional_missing = "no sequence given", .epilog = is_live_cmd ? live_epilog : replay_epilog,
+    };
+    int rc = app_options_parse(&spec, argc, argv);
+    return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
 }
 
 typedef struct replay_result {
-    recon_counts counts;
+    recon_run run;
     app_map_report out;
-    bf_traj est, gt;   /* gt: the frames' own poses, when they have them */
     bool has_ate;
     eval_ate_result ate;
     uint32_t n_views;
@@ -247,82 +149,58 @@ typedef struct replay_result {
     char device[256];
     bool has_capture;          /* live: the capture thread's counts */
     capture_thread_stats cap;
-    bool interrupted;
     uint32_t n_recorded;
 } replay_result;
 
-typedef struct replay_report {
-    const replay_args *a;
-    const replay_result *r;
-    const replay_timing *t;
-} replay_report;
-
-static void json_series(FILE *f, const char *name, const bf_stats *s, const char *tail)
+static cJSON *stats_json(const replay_args *a, const replay_result *r)
 {
-    fprintf(f, "\"%s\": {\"median\": ", name);
-    bf_json_number(f, bf_stats_percentile(s, 50), 5);
-    fprintf(f, ", \"p95\": ");
-    bf_json_number(f, bf_stats_percentile(s, 95), 5);
-    fprintf(f, ", \"mean\": ");
-    bf_json_number(f, bf_stats_mean(s), 5);
-    fprintf(f, "}%s", tail);
-}
-
-static void write_stats_json(FILE *f, const void *arg)
-{
-    const replay_report *rep = arg;
-    const replay_args *a = rep->a;
-    const replay_result *r = rep->r;
-    const replay_timing *t = rep->t;
-    const fusion_config *fc = &a->rcfg.fusion;
-    const track_config *tc = &a->rcfg.track;
-    fprintf(f, "{\n  \"command\": \"%s\",\n  \"%s\": ", a->is_live_cmd ? "live" : "replay",
-            a->is_live_cmd ? "source" : "sequence");
-    bf_json_string(f, a->seq);
-    fprintf(f, ",\n  \"device\": ");
-    bf_json_string(f, r->device);
-    fprintf(f, ",\n  \"config\": {\"voxel_ratio\": %g, \"window\": %u, \"subcache\": %u, \"chunk_m\": %g, "
-               "\"max_level\": %u, \"brick_cap\": %u, \"icp_iterations\": [",
-            fc->voxel_ratio, fc->window, fc->subcache, fc->chunk_m, fc->max_level, fc->brick_cap);
-    for (uint32_t l = 0; l < tc->levels; l++) fprintf(f, "%s%u", l ? ", " : "", tc->iterations[l]);
-    fprintf(f, "], \"rof_iterations\": %u, \"rof_lambda0\": %g},\n", tc->rof_iterations, tc->rof_lambda0);
-    const recon_counts *c = &r->counts;
-    fprintf(f, "  \"frames\": %u,\n  \"tracking\": {\"tracked\": %u, \"lost\": %u, \"no_depth\": %u, "
-               "\"degenerate\": %u, \"pool_full\": %u, ",
-            c->frames, c->tracked, c->lost, c->no_depth, c->degenerate, c->pool_full);
-    json_series(f, "inlier_fraction", &t->inlier_frac, ", ");
-    json_series(f, "residual_mm", &t->residual_mm, "},\n");
-    fprintf(f, "  \"ate_m\": ");
+    const recon_run_series *t = &r->run.series;
+    const recon_counts *c = &r->run.counts;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", a->is_live_cmd ? "live" : "replay");
+    cJSON_AddStringToObject(o, a->is_live_cmd ? "source" : "sequence", a->seq);
+    cJSON_AddStringToObject(o, "device", r->device);
+    app_json_recon_config(o, "config", &a->rcfg);
+    cJSON_AddNumberToObject(o, "frames", c->frames);
+    cJSON *tr = app_json_object(o, "tracking");
+    cJSON_AddNumberToObject(tr, "tracked", c->tracked);
+    cJSON_AddNumberToObject(tr, "lost", c->lost);
+    cJSON_AddNumberToObject(tr, "no_depth", c->no_depth);
+    cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
+    cJSON_AddNumberToObject(tr, "pool_full", c->pool_full);
+    app_json_series(tr, "inlier_fraction", &t->inlier_frac);
+    app_json_series(tr, "residual_mm", &t->residual_mm);
     if (r->has_ate) {
-        fprintf(f, "{\"rmse\": ");
-        bf_json_number(f, r->ate.trans.rmse, 6);
-        fprintf(f, ", \"mean\": ");
-        bf_json_number(f, r->ate.trans.mean, 6);
-        fprintf(f, ", \"median\": ");
-        bf_json_number(f, r->ate.trans.median, 6);
-        fprintf(f, ", \"max\": ");
-        bf_json_number(f, r->ate.trans.max, 6);
-        fprintf(f, ", \"pairs\": %zu},\n", r->ate.n_matched);
+        cJSON *ate = app_json_object(o, "ate_m");
+        cJSON_AddNumberToObject(ate, "rmse", r->ate.trans.rmse);
+        cJSON_AddNumberToObject(ate, "mean", r->ate.trans.mean);
+        cJSON_AddNumberToObject(ate, "median", r->ate.trans.median);
+        cJSON_AddNumberToObject(ate, "max", r->ate.trans.max);
+        cJSON_AddNumberToObject(ate, "pairs", (double)r->ate.n_matched);
     } else {
-        fprintf(f, "null,\n");
+        cJSON_AddNullToObject(o, "ate_m");
     }
-    fprintf(f, "  ");
-    json_series(f, "frame_ms", &t->frame_ms, ",\n");
-    fprintf(f, "  \"gpu_stage_ms\": {");
-    json_series(f, "track", &t->track_ms, ", ");
-    json_series(f, "rof", &t->rof_ms, ", ");
-    json_series(f, "raycast", &t->raycast_ms, ", ");
-    json_series(f, "upload", &t->upload_ms, ", ");
-    json_series(f, "alloc", &t->alloc_ms, ", ");
-    json_series(f, "subcache", &t->subcache_ms, ", ");
-    json_series(f, "window", &t->window_ms, "},\n");
-    if (r->has_capture)
-        fprintf(f, "  \"capture\": {\"captured\": %llu, \"delivered\": %llu, \"dropped\": %llu, "
-                   "\"interrupted\": %s, \"recorded\": %u},\n",
-                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.delivered,
-                (unsigned long long)r->cap.dropped, r->interrupted ? "true" : "false", r->n_recorded);
-    app_json_map(f, &r->out, fc->max_level);
-    fprintf(f, "  \"views\": %u,\n  \"seconds\": %.3f\n}\n", r->n_views, r->seconds);
+    app_json_series(o, "frame_ms", &t->frame_ms);
+    cJSON *g = app_json_object(o, "gpu_stage_ms");
+    app_json_series(g, "track", &t->track_ms);
+    app_json_series(g, "rof", &t->rof_ms);
+    app_json_series(g, "raycast", &t->raycast_ms);
+    app_json_series(g, "upload", &t->upload_ms);
+    app_json_series(g, "alloc", &t->alloc_ms);
+    app_json_series(g, "subcache", &t->subcache_ms);
+    app_json_series(g, "window", &t->window_ms);
+    if (r->has_capture) {
+        cJSON *cap = app_json_object(o, "capture");
+        cJSON_AddNumberToObject(cap, "captured", (double)r->cap.captured);
+        cJSON_AddNumberToObject(cap, "delivered", (double)r->cap.delivered);
+        cJSON_AddNumberToObject(cap, "dropped", (double)r->cap.dropped);
+        cJSON_AddBoolToObject(cap, "interrupted", r->run.is_interrupted);
+        cJSON_AddNumberToObject(cap, "recorded", r->n_recorded);
+    }
+    app_json_map(o, &r->out, a->rcfg.fusion.max_level);
+    cJSON_AddNumberToObject(o, "views", r->n_views);
+    cJSON_AddNumberToObject(o, "seconds", r->seconds);
+    return o;
 }
 
 static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, const bf_se3 *T_wc)
@@ -351,69 +229,36 @@ static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr
             fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window);
 }
 
-/* Runs the loop over every frame of src. The loop is created at the first
- * frame (its pose is the first ground-truth pose, or the identity). */
-static bf_status run_frames(gpu_context *ctx, rgbd_source *src, const replay_args *a, FILE *csv,
-                            replay_log_writer *log, recon **rc_out, replay_result *r, replay_timing *t)
+/* What the replay writes per frame beside the runner's own records. */
+typedef struct replay_sink {
+    const replay_args *a;
+    FILE *csv;
+    replay_log_writer *log; /* live --record, else NULL */
+    replay_result *r;
+} replay_sink;
+
+static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
 {
-    recon *rc = NULL;
-    bf_frame f;
-    bf_status s;
-    bf_progress prog;
-    bf_progress_begin(&prog, "replay", src->n_frames);
-    uint32_t seen = 0;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        seen++;
-        if (!rc) {
-            bf_se3 T0 = (!a->init_identity && f.has_pose) ? f.T_wc : bf_se3_identity();
-            if ((s = recon_create(ctx, &a->rcfg, rgbd_source_intrinsics(src), &T0, &rc)) != BF_OK) break;
-        }
-        recon_frame_result fr;
-        if (a->fuse_at_gt && !f.has_pose) {
-            s = bf_fail(BF_FORMAT, "%s: frame %u (t = %.6f) has no ground-truth pose (--fuse-at-groundtruth)", a->seq,
-                        f.index, f.t_depth_s);
-            break;
-        }
-        s = a->fuse_at_gt ? recon_add_frame_known(rc, &f, &f.T_wc, &fr) : recon_add_frame(rc, &f, &fr);
-        if (s != BF_OK) break;
-        if (fr.state == RECON_LOST)
-            bf_warn("replay: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm): not fused",
-                    f.index, f.t_depth_s, track_outcome_name(fr.track.outcome), 100 * fr.track.inlier_frac,
-                    1e3 * fr.track.residual_m);
-        else if (fr.state == RECON_NO_DEPTH)
-            bf_warn("replay: frame %u (t = %.6f): %u valid depth samples: skipped", f.index, f.t_depth_s, fr.n_valid);
-        csv_frame(csv, &f, &fr);
-        if (log) {
-            if ((s = replay_log_writer_add(log, &f)) != BF_OK) break;
-            r->n_recorded++;
-        }
-        if ((s = timing_push(t, &fr)) != BF_OK) break;
-        if ((s = bf_traj_push(&r->est, f.t_depth_s, &fr.T_wc)) != BF_OK) break;
-        if (f.has_pose && (s = bf_traj_push(&r->gt, f.t_depth_s, &f.T_wc)) != BF_OK) break;
-        if (a->view_every && recon_map(rc) && f.index % a->view_every == 0) {
-            if ((s = write_view(rc, a->out, f.index, &fr.T_wc)) != BF_OK) break;
-            r->n_views++;
-        }
-        bf_progress_update(&prog, seen);
-    }
-    bf_progress_end(&prog, seen);
-    if (s == BF_END) {
-        s = rc && recon_map(rc) ? recon_flush(rc) : bf_fail(BF_FORMAT, "%s: no frame with depth", a->seq);
-    }
-    if (rc) r->counts = recon_get_counts(rc);
-    *rc_out = rc;
+    replay_sink *k = user;
+    bf_status s = BF_OK;
+    csv_frame(k->csv, f, fr);
+    if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
+    if (s == BF_OK && k->a->view_every && run->map && f->index % k->a->view_every == 0 &&
+        (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
+        k->r->n_views++;
     return s;
 }
 
-static void print_summary(const replay_args *a, const replay_result *r, const replay_timing *t)
+static void print_summary(const replay_args *a, const replay_result *r)
 {
-    const recon_counts *c = &r->counts;
+    const recon_counts *c = &r->run.counts;
+    const recon_run_series *t = &r->run.series;
     printf("bitfuse %s: %u frames on %s: %u tracked, %u lost, %u without depth (%u degenerate)\n",
            a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->lost, c->no_depth, c->degenerate);
     if (r->has_capture)
         printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
-               r->interrupted ? " (stopped by a signal)" : "");
+               r->run.is_interrupted ? " (stopped by a signal)" : "");
     printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
            "                   alloc %.1f, sub-cache %.1f, window %.1f ms)\n",
            bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
@@ -438,31 +283,24 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     double t_start = bf_time_s();
     replay_result r;
     memset(&r, 0, sizeof r);
-    replay_timing t;
-    memset(&t, 0, sizeof t);
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
-    recon *rc = NULL;
     replay_log_writer *log = NULL;
     FILE *csv = NULL;
     char path[4096];
-    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND}, old_int, old_term;
-    bf_status s = bf_mkdir_p(a.out);
-    if (s == BF_OK && is_live_cmd) {
+    const volatile sig_atomic_t *stop = NULL;
+    /* The input first: a missing one leaves no empty output folder. */
+    bf_status s;
+    if (is_live_cmd) {
         bool is_live;
         s = app_open_device(a.seq, &a.ropt, a.realtime, a.queue, &is_live, &src);
         r.has_capture = s == BF_OK;
-        if (s == BF_OK) {
-            /* Ctrl-C ends the scan, not the program: what was seen is kept. */
-            g_live_src = src;
-            g_stopped = 0;
-            sigemptyset(&sa.sa_mask);
-            sigaction(SIGINT, &sa, &old_int);
-            sigaction(SIGTERM, &sa, &old_term);
-        }
-    } else if (s == BF_OK) {
+        /* Ctrl-C ends the scan, not the program: what was seen is kept. */
+        if (s == BF_OK) stop = app_stop_begin(src);
+    } else {
         s = replay_open(a.seq, &a.ropt, &src);
     }
+    if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
                                 .has_groundtruth = src->has_groundtruth};
@@ -476,22 +314,18 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
-    bf_status s_dev = BF_OK;
     if (s == BF_OK) {
-        s = run_frames(ctx, src, &a, csv, log, &rc, &r, &t);
-        /* A device that failed mid-scan keeps what was reconstructed so far. */
-        if (s != BF_OK && is_live_cmd && rc && recon_map(rc) && s != BF_VULKAN && s != BF_NO_MEMORY) {
-            s_dev = s;
-            bf_warn("%s: %s: device failed (%s); writing what was reconstructed", cmd, a.seq, bf_last_error());
-            s = recon_flush(rc);
-        }
+        recon_run_config rcfg = {
+            .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,
+            .init_identity = a.init == 1, .keep_on_source_error = is_live_cmd, .name = a.seq,
+            .label = cmd, .stop = stop,
+        };
+        replay_sink sink = {&a, csv, log, &r};
+        s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
     }
-    if (is_live_cmd && r.has_capture) {
+    if (r.has_capture) {
         r.cap = capture_threaded_stats(src);
-        r.interrupted = g_stopped;
-        sigaction(SIGINT, &old_int, NULL);
-        sigaction(SIGTERM, &old_term, NULL);
-        g_live_src = NULL;
+        app_stop_end();
     }
     if (log) {
         bf_status s_log = replay_log_writer_finish(log);
@@ -499,21 +333,19 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     }
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
-        s = replay_traj_write_tum(path, &r.est);
-    if (s == BF_OK && r.gt.n >= 2 && eval_ate(&r.gt, &r.est, 0, &r.ate) == BF_OK) r.has_ate = true;
-    if (s == BF_OK) s = app_export_map(recon_map(rc), a.out, !a.no_mesh, &r.out);
+        s = replay_traj_write_tum(path, &r.run.est);
+    if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
+    if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
     r.seconds = bf_time_s() - t_start;
-    replay_report rep = {&a, &r, &t};
-    if (s == BF_OK) s = app_write_json(a.out, "stats.json", write_stats_json, &rep);
+    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
-    if (s == BF_OK) print_summary(&a, &r, &t);
+    if (s == BF_OK) print_summary(&a, &r);
+    bf_status s_dev = r.run.source_status;
+    if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
-    recon_destroy(rc);
+    recon_run_free(&r.run);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
-    bf_traj_free(&r.est);
-    bf_traj_free(&r.gt);
-    timing_free(&t);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

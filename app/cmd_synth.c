@@ -7,111 +7,85 @@
 #include "synth/synth.h"
 #include "replay/replay.h"
 
-static const char synth_help[] =
+static const char synth_usage[] =
     "usage: bitfuse synth --trajectory TUM_TRAJ --frames N --out DIR [options]\n"
     "\n"
     "Renders depth and colour along a trajectory with a CPU ray tracer and writes a TUM\n"
     "RGB-D folder: rgb/, depth/ (16-bit, 5000 per metre), rgb.txt, depth.txt,\n"
     "groundtruth.txt (the poses rendered), camera.txt, scene.ply (reference mesh, world\n"
-    "frame), seen.ply (surface points the camera saw with valid depth), stats.json.\n"
-    "\n"
-    "options:\n"
-    "  --scene room|MESH.ply   procedural room (default) or one mesh\n"
-    "  --trajectory FILE       TUM trajectory the camera follows (required); it is moved\n"
-    "                          rigidly so its first pose looks at the scene\n"
-    "  --frames N              frames to render (required); fewer if the trajectory ends\n"
-    "  --rate HZ               frame rate along the trajectory's time, default 30\n"
-    "  --noise kinect1|none    depth noise model, default kinect1 (Nguyen et al. 2012)\n"
-    "  --seed S                noise seed, default 1\n"
-    "  --out DIR               output folder (required)\n"
-    "  --camera fx,fy,cx,cy    intrinsics, default 525,525,319.5,239.5 (or fr1|fr2|fr3)\n"
-    "  --size WxH              image size, default 640x480\n"
-    "  --data DIR              shared data folder with meshes/ for the room; default\n"
-    "                          ../shared/data beside the source tree or the current folder\n"
-    "  --scale S               multiply a MESH.ply scene's coordinates by S (to metres)\n"
-    "  --seen-cell M           grid of seen.ply in metres, default 0.005\n"
-    "\n"
-    "Threads: BITFUSE_THREADS (default: all cores). See docs/synth.md.\n";
+    "frame), seen.ply (surface points the camera saw with valid depth), stats.json.\n";
 
-static bool parse_u64(const char *s, uint64_t *out)
+/* --camera: a preset or fx,fy,cx,cy, with positive focal lengths. */
+static const char *check_camera(const char *name, const char *v)
 {
-    char *end;
-    if (!s[0] || s[0] == '-') return false;
-    unsigned long long v = strtoull(s, &end, 10);
-    if (*end) return false;
-    *out = v;
-    return true;
+    static char msg[512];
+    bf_intrinsics K = {0};
+    if (replay_parse_camera(v, &K) != BF_OK) snprintf(msg, sizeof msg, "%s: %s", name, bf_last_error());
+    else if (!(K.fx_px > 0) || !(K.fy_px > 0)) snprintf(msg, sizeof msg, "%s: focal lengths must be positive", name);
+    else return NULL;
+    return msg;
 }
+
+/* --size: WxH, each 1..8192. */
+static bool parse_size(const char *v, unsigned *w, unsigned *h)
+{
+    char tail;
+    return sscanf(v, "%ux%u%c", w, h, &tail) == 2 && *w > 0 && *h > 0 && *w <= 8192 && *h <= 8192;
+}
+
+static const char *check_size(const char *name, const char *v)
+{
+    static char msg[512];
+    unsigned w, h;
+    if (parse_size(v, &w, &h)) return NULL;
+    snprintf(msg, sizeof msg, "%s wants WxH (e.g. 640x480), not '%.400s'", name, v);
+    return msg;
+}
+
+static const int noise_codes[] = {SYNTH_NOISE_KINECT1, SYNTH_NOISE_NONE};
 
 int cmd_synth(int argc, char **argv)
 {
     const char *cmd = "synth";
-    synth_config cfg = {.scene = "room", .noise = SYNTH_NOISE_KINECT1, .seed = 1};
-    const char *data_dir = NULL;
-    bool has_frames = false;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (app_is_help(a)) {
-            fputs(synth_help, stdout);
-            return APP_EXIT_OK;
-        }
-        if (strncmp(a, "--", 2)) return app_usage_error(cmd, "unexpected argument '%s'", a);
-        static const char *const known[] = {"--scene", "--trajectory", "--out",   "--data",  "--frames",
-                                            "--rate",  "--noise",      "--seed",  "--camera", "--size",
-                                            "--scale", "--seen-cell"};
-        bool is_known = false;
-        for (size_t k = 0; k < sizeof known / sizeof known[0]; k++) is_known |= !strcmp(a, known[k]);
-        if (!is_known) return app_usage_error(cmd, "unknown option '%s'", a);
-        if (i + 1 >= argc) return app_usage_error(cmd, "%s needs a value", a);
-        const char *v = argv[++i];
-        if (!strcmp(a, "--scene")) {
-            cfg.scene = v;
-        } else if (!strcmp(a, "--trajectory")) {
-            cfg.traj_path = v;
-        } else if (!strcmp(a, "--out")) {
-            cfg.out_dir = v;
-        } else if (!strcmp(a, "--data")) {
-            data_dir = v;
-        } else if (!strcmp(a, "--frames")) {
-            if (!bf_parse_u32(v, &cfg.n_frames) || cfg.n_frames == 0)
-                return app_usage_error(cmd, "--frames wants a positive integer, not '%s'", v);
-            has_frames = true;
-        } else if (!strcmp(a, "--rate")) {
-            if (!bf_parse_double(v, &cfg.rate_hz) || !(cfg.rate_hz > 0) || cfg.rate_hz > 1e5)
-                return app_usage_error(cmd, "--rate wants a frequency in Hz, not '%s'", v);
-        } else if (!strcmp(a, "--noise")) {
-            if (!strcmp(v, "kinect1"))
-                cfg.noise = SYNTH_NOISE_KINECT1;
-            else if (!strcmp(v, "none"))
-                cfg.noise = SYNTH_NOISE_NONE;
-            else
-                return app_usage_error(cmd, "--noise is kinect1 or none, not '%s'", v);
-        } else if (!strcmp(a, "--seed")) {
-            if (!parse_u64(v, &cfg.seed)) return app_usage_error(cmd, "--seed wants an integer, not '%s'", v);
-        } else if (!strcmp(a, "--camera")) {
-            if (replay_parse_camera(v, &cfg.K)) return app_usage_error(cmd, "--camera: %s", bf_last_error());
-            if (!(cfg.K.fx_px > 0) || !(cfg.K.fy_px > 0))
-                return app_usage_error(cmd, "--camera: focal lengths must be positive");
-        } else if (!strcmp(a, "--size")) {
-            unsigned w, h;
-            char tail;
-            if (sscanf(v, "%ux%u%c", &w, &h, &tail) != 2 || w == 0 || h == 0 || w > 8192 || h > 8192)
-                return app_usage_error(cmd, "--size wants WxH (e.g. 640x480), not '%s'", v);
-            cfg.K.width = w;
-            cfg.K.height = h;
-        } else if (!strcmp(a, "--scale")) {
-            if (!bf_parse_double(v, &cfg.mesh_scale) || !(cfg.mesh_scale > 0))
-                return app_usage_error(cmd, "--scale wants a positive number, not '%s'", v);
-        } else if (!strcmp(a, "--seen-cell")) {
-            if (!bf_parse_double(v, &cfg.seen_cell_m) || !(cfg.seen_cell_m > 0))
-                return app_usage_error(cmd, "--seen-cell wants a positive length in metres, not '%s'", v);
-        } else {
-            return app_usage_error(cmd, "unknown option '%s'", a);
-        }
-    }
-    if (!cfg.traj_path) return app_usage_error(cmd, "--trajectory is required");
-    if (!has_frames) return app_usage_error(cmd, "--frames is required");
-    if (!cfg.out_dir) return app_usage_error(cmd, "--out is required");
+    synth_config cfg = {.scene = "room", .noise = SYNTH_NOISE_KINECT1, .seed = 1, .rate_hz = 30, .seen_cell_m = 0.005,
+                        .mesh_scale = 1};
+    const char *data_dir = NULL, *camera = NULL, *size = NULL;
+    int noise = SYNTH_NOISE_KINECT1;
+    const app_option own[] = {
+        APP_OPT("--scene", APP_OPT_STRING, &cfg.scene, "room|MESH.ply", "procedural room or one mesh"),
+        APP_OPT("--trajectory", APP_OPT_STRING, &cfg.traj_path, "FILE",
+                "TUM trajectory the camera follows; it is moved rigidly so its first pose looks at the scene",
+                .required = true),
+        APP_OPT("--frames", APP_OPT_U32, &cfg.n_frames, "N", "frames to render; fewer if the trajectory ends", .min = 1,
+                .required = true, .no_default = true),
+        APP_OPT("--rate", APP_OPT_DOUBLE, &cfg.rate_hz, "HZ", "frame rate along the trajectory's time", .max = 1e5,
+                .min_open = true),
+        APP_OPT("--noise", APP_OPT_ENUM, &noise, "kinect1|none", "depth noise model (Nguyen et al. 2012)",
+                .codes = noise_codes),
+        APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "S", "noise seed"),
+        APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
+        APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
+                "intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5",
+                .check = check_camera),
+        APP_OPT("--size", APP_OPT_STRING, &size, "WxH", "image size, default 640x480", .check = check_size),
+        APP_OPT("--data", APP_OPT_STRING, &data_dir, "DIR",
+                "shared data folder with meshes/ for the room; default ../shared/data beside the source tree or the "
+                "current folder"),
+        APP_OPT("--scale", APP_OPT_DOUBLE, &cfg.mesh_scale, "S",
+                "multiply a MESH.ply scene's coordinates by S (to metres)",
+                .min_open = true),
+        APP_OPT("--seen-cell", APP_OPT_DOUBLE, &cfg.seen_cell_m, "M", "grid of seen.ply in metres", .min_open = true),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {.name = cmd, .usage = synth_usage, .tables = tables,
+                             .epilog = "Threads: BITFUSE_THREADS (default: all cores). See docs/synth.md.\n"};
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    cfg.noise = (synth_noise)noise;
+    if (camera) replay_parse_camera(camera, &cfg.K); /* checked above */
+    unsigned w, h;
+    if (size && parse_size(size, &w, &h)) cfg.K.width = w, cfg.K.height = h;
     if (!strcmp(cfg.scene, "room")) {
         if (data_dir && !bf_file_exists(data_dir))
             return app_usage_error(cmd, "--data: folder '%s' does not exist", data_dir);

@@ -1,5 +1,4 @@
 /* bitfuse: real-time RGB-D reconstruction with a sign-bit map. */
-#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -50,17 +49,6 @@ int app_fail(const char *cmd, bf_status s)
     }
 }
 
-int app_usage_error(const char *cmd, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "bitfuse %s: ", cmd);
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n(see bitfuse %s --help)\n", cmd);
-    va_end(ap);
-    return APP_EXIT_USAGE;
-}
-
 const char *app_default_data_dir(void)
 {
     static const char *const candidates[] = {BF_SOURCE_DIR "/../shared/data", "../shared/data"};
@@ -69,15 +57,13 @@ const char *app_default_data_dir(void)
     return NULL;
 }
 
-bool app_is_help(const char *arg) { return !strcmp(arg, "-h") || !strcmp(arg, "--help"); }
-
 int main(int argc, char **argv)
 {
     if (argc < 2) {
         usage(stderr);
         return APP_EXIT_USAGE;
     }
-    if (app_is_help(argv[1]) || !strcmp(argv[1], "help")) {
+    if (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help")) {
         usage(stdout);
         return APP_EXIT_OK;
     }

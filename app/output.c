@@ -49,30 +49,40 @@ bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, a
     return s;
 }
 
-void app_json_map(FILE *f, const app_map_report *r, uint32_t max_level)
+void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
 {
     const fusion_stats *m = &r->map;
     uint64_t voxels = (uint64_t)m->n_bricks * 512;
-    fprintf(f, "  \"map_bytes\": {\"sign\": %llu, \"confidence\": %llu, \"brick_records\": %llu, "
-               "\"nodes\": %llu, \"hash\": %llu, \"total\": %llu, \"reserved\": %llu},\n",
-            (unsigned long long)m->bytes_sign, (unsigned long long)m->bytes_conf, (unsigned long long)m->bytes_info,
-            (unsigned long long)m->bytes_nodes, (unsigned long long)m->bytes_hash, (unsigned long long)m->bytes_total,
-            (unsigned long long)m->bytes_reserved);
-    fprintf(f, "  \"chunks\": %u,\n  \"nodes\": %u,\n  \"bricks\": %u,\n  \"bricks_per_level\": [", m->n_chunks,
-            m->n_nodes, m->n_bricks);
-    for (uint32_t l = 0; l <= max_level && l < 16; l++) fprintf(f, "%s%u", l ? ", " : "", m->bricks_per_level[l]);
-    fprintf(f, "],\n  \"allocated_voxels\": %llu,\n  \"confident_voxels\": %llu,\n  \"surface_voxels\": %llu,\n",
-            (unsigned long long)voxels, (unsigned long long)m->n_confident_voxels,
-            (unsigned long long)r->points.n_points);
-    fprintf(f, "  \"bits_per_allocated_voxel\": ");
-    bf_json_number(f, voxels ? 8.0 * (double)m->bytes_total / (double)voxels : NAN, 4);
-    fprintf(f, ",\n  \"bits_per_surface_voxel\": ");
-    bf_json_number(f, r->points.n_points ? 8.0 * (double)m->bytes_total / (double)r->points.n_points : NAN, 4);
-    fprintf(f, ",\n  \"tsdf_4byte_bytes_same_voxels\": %llu,\n", (unsigned long long)(voxels * 4));
-    fprintf(f, "  \"pool_full_drops\": {\"nodes\": %u, \"bricks\": %u, \"chunks\": %u},\n", m->fail_nodes,
-            m->fail_bricks, m->fail_hash);
-    fprintf(f, "  \"mesh\": {\"vertices\": %llu, \"triangles\": %llu, \"seconds\": %.3f},\n",
-            (unsigned long long)r->mesh.n_vertices, (unsigned long long)r->mesh.n_triangles, r->mesh.seconds);
+    cJSON *b = app_json_object(o, "map_bytes");
+    cJSON_AddNumberToObject(b, "sign", (double)m->bytes_sign);
+    cJSON_AddNumberToObject(b, "confidence", (double)m->bytes_conf);
+    cJSON_AddNumberToObject(b, "brick_records", (double)m->bytes_info);
+    cJSON_AddNumberToObject(b, "nodes", (double)m->bytes_nodes);
+    cJSON_AddNumberToObject(b, "hash", (double)m->bytes_hash);
+    cJSON_AddNumberToObject(b, "total", (double)m->bytes_total);
+    cJSON_AddNumberToObject(b, "reserved", (double)m->bytes_reserved);
+    cJSON_AddNumberToObject(o, "chunks", m->n_chunks);
+    cJSON_AddNumberToObject(o, "nodes", m->n_nodes);
+    cJSON_AddNumberToObject(o, "bricks", m->n_bricks);
+    cJSON *per_level = cJSON_AddArrayToObject(o, "bricks_per_level");
+    for (uint32_t l = 0; l <= max_level && l < 16; l++)
+        cJSON_AddItemToArray(per_level, cJSON_CreateNumber(m->bricks_per_level[l]));
+    cJSON_AddNumberToObject(o, "allocated_voxels", (double)voxels);
+    cJSON_AddNumberToObject(o, "confident_voxels", (double)m->n_confident_voxels);
+    cJSON_AddNumberToObject(o, "surface_voxels", (double)r->points.n_points);
+    cJSON_AddNumberToObject(o, "bits_per_allocated_voxel",
+                            voxels ? 8.0 * (double)m->bytes_total / (double)voxels : NAN);
+    cJSON_AddNumberToObject(o, "bits_per_surface_voxel",
+                            r->points.n_points ? 8.0 * (double)m->bytes_total / (double)r->points.n_points : NAN);
+    cJSON_AddNumberToObject(o, "tsdf_4byte_bytes_same_voxels", (double)(voxels * 4));
+    cJSON *drops = app_json_object(o, "pool_full_drops");
+    cJSON_AddNumberToObject(drops, "nodes", m->fail_nodes);
+    cJSON_AddNumberToObject(drops, "bricks", m->fail_bricks);
+    cJSON_AddNumberToObject(drops, "chunks", m->fail_hash);
+    cJSON *mesh = app_json_object(o, "mesh");
+    cJSON_AddNumberToObject(mesh, "vertices", (double)r->mesh.n_vertices);
+    cJSON_AddNumberToObject(mesh, "triangles", (double)r->mesh.n_triangles);
+    cJSON_AddNumberToObject(mesh, "seconds", r->mesh.seconds);
 }
 
 void app_print_map(const app_map_report *r, uint32_t max_level)
@@ -86,35 +96,4 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
         if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);
     printf("\n  surface          %llu voxels, mesh %llu triangles\n", (unsigned long long)r->points.n_points,
            (unsigned long long)r->mesh.n_triangles);
-}
-
-bf_status app_write_json(const char *dir, const char *name, void (*write)(FILE *f, const void *arg), const void *arg)
-{
-    char path[4096];
-    bf_status s = bf_path_join(path, sizeof path, dir, name);
-    if (s != BF_OK) return s;
-    char *buf = NULL;
-    size_t len = 0;
-    FILE *mf = open_memstream(&buf, &len);
-    if (!mf) return bf_fail(BF_NO_MEMORY, "%s: stats buffer", path);
-    write(mf, arg);
-    fclose(mf);
-    s = bf_write_file_atomic(path, buf, len);
-    free(buf);
-    return s;
-}
-
-bool app_parse_map_option(const char *o, const char *v, fusion_config *fc)
-{
-    double d;
-    uint32_t u;
-    if (!v) return false;
-    if (!strcmp(o, "--ratio") && bf_parse_double(v, &d)) fc->voxel_ratio = (float)d;
-    else if (!strcmp(o, "--chunk") && bf_parse_double(v, &d)) fc->chunk_m = (float)d;
-    else if (!strcmp(o, "--window") && bf_parse_u32(v, &u)) fc->window = u;
-    else if (!strcmp(o, "--subcache") && bf_parse_u32(v, &u)) fc->subcache = u;
-    else if (!strcmp(o, "--bricks") && bf_parse_u32(v, &u)) fc->brick_cap = u;
-    else if (!strcmp(o, "--max-level") && bf_parse_u32(v, &u)) fc->max_level = u;
-    else return false;
-    return true;
 }

@@ -36,6 +36,58 @@ static bf_se3 loop_pose(const synth_scene *sc, uint32_t k, uint32_t m)
     return bf_se3_mul(&sc->T_wc_view, &M);
 }
 
+/* The frames, rendered once: frame i plays loop frame k of a ping-pong
+ * through the loop (0..m-1, m-2..1, 0..), so the motion stays continuous. */
+typedef struct soak_frames {
+    const synth_scene *sc;
+    const uint16_t *depth; /* m frames of w x h */
+    uint32_t m, w, h;
+} soak_frames;
+
+static bf_status soak_frame(void *user, uint32_t i, bf_frame *f)
+{
+    const soak_frames *sf = user;
+    uint32_t period = 2 * (sf->m - 1), p = i % period, k = p < sf->m ? p : period - p;
+    *f = (bf_frame){.index = i, .width = sf->w, .height = sf->h, .t_depth_s = i / 30.0,
+                    .depth = sf->depth + (size_t)sf->w * sf->h * k, .has_pose = true,
+                    .T_wc = loop_pose(sf->sc, k, sf->m)};
+    f->t_rgb_s = f->t_depth_s;
+    return BF_OK;
+}
+
+/* One line per block of frames: time, memory, map, tracking. */
+typedef struct soak_report {
+    FILE *out;
+    uint32_t n, block;
+    bf_stats ms;
+    double max_err, t_start;
+} soak_report;
+
+static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
+{
+    soak_report *sr = user;
+    uint32_t i = f->index;
+    double err = bf_v3_norm(bf_v3_sub(f->T_wc.t, fr->T_wc.t));
+    if (err > sr->max_err) sr->max_err = err;
+    bf_status s = bf_stats_push(&sr->ms, fr->ms_frame);
+    if (s != BF_OK || ((i + 1) % sr->block != 0 && i + 1 != sr->n)) return s;
+    fusion_stats st;
+    if ((s = fusion_get_stats(run->map, &st)) != BF_OK) return s;
+    recon_counts c = run->counts;
+    fprintf(sr->out, "%u\t%.2f\t%.2f\t%.1f\t%.2f\t%u\t%u\t%u\t%.2f\n", i + 1, bf_stats_percentile(&sr->ms, 50),
+            bf_stats_percentile(&sr->ms, 95), rss_mib(), st.bytes_total / 1048576.0, st.n_bricks, c.tracked, c.lost,
+            1e3 * sr->max_err);
+    fflush(sr->out);
+    fprintf(stderr, "bench_soak: %u/%u frames, %.1f ms median, RSS %.0f MiB, map %.2f MiB, %u lost, "
+                    "max error %.1f mm, %.0f s\n",
+            i + 1, sr->n, bf_stats_percentile(&sr->ms, 50), rss_mib(), st.bytes_total / 1048576.0, c.lost,
+            1e3 * sr->max_err, bf_time_s() - sr->t_start);
+    bf_stats_free(&sr->ms);
+    memset(&sr->ms, 0, sizeof sr->ms);
+    sr->max_err = 0;
+    return BF_OK;
+}
+
 int main(int argc, char **argv)
 {
     uint32_t n = 10000, m = 300, block = 250, w = 640, h = 480;
@@ -61,7 +113,9 @@ int main(int argc, char **argv)
     synth_scene sc = {0};
     synth_renderer *ren = NULL;
     gpu_context *ctx = NULL;
-    recon *r = NULL;
+    rgbd_source *src = NULL;
+    recon_run run;
+    memset(&run, 0, sizeof run);
     size_t np = (size_t)w * h;
     uint16_t *frames = malloc(np * m * sizeof *frames);
     bf_status s = frames ? synth_scene_room(NULL, &sc) : BF_NO_MEMORY;
@@ -74,51 +128,23 @@ int main(int argc, char **argv)
     }
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
-    recon_config cfg = recon_config_default();
+    recon_run_config cfg = recon_run_config_default();
     /* The synthetic sensor's disparity steps scale with 1/f: below 640
      * wide its depth is coarser than a Kinect's, so the residual gate widens
-     * as in tests/tracking. */
-    cfg.track.max_residual_m *= (float)(640.0 / w);
-    bf_se3 T0 = loop_pose(&sc, 0, m);
-    if (s == BF_OK) s = recon_create(ctx, &cfg, &K, &T0, &r);
-    FILE *out = s == BF_OK ? fopen(out_path, "w") : NULL;
-    if (s == BF_OK && !out) s = bf_fail(BF_IO, "%s: cannot create", out_path);
-    if (out) fprintf(out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\n");
-    bf_stats ms = {0};
-    double max_err = 0;
-    double t_start = bf_time_s();
-    for (uint32_t i = 0; s == BF_OK && i < n; i++) {
-        /* Ping-pong through the loop: 0..m-1, m-2..1, 0.. */
-        uint32_t period = 2 * (m - 1), p = i % period, k = p < m ? p : period - p;
-        bf_frame f = {.index = i, .width = w, .height = h, .t_depth_s = i / 30.0, .depth = frames + np * k};
-        f.t_rgb_s = f.t_depth_s;
-        recon_frame_result fr;
-        if ((s = recon_add_frame(r, &f, &fr)) != BF_OK) break;
-        bf_se3 T = loop_pose(&sc, k, m);
-        double err = bf_v3_norm(bf_v3_sub(T.t, fr.T_wc.t));
-        if (err > max_err) max_err = err;
-        if ((s = bf_stats_push(&ms, fr.ms_frame)) != BF_OK) break;
-        if ((i + 1) % block == 0 || i + 1 == n) {
-            fusion_stats st;
-            if ((s = fusion_get_stats(recon_map(r), &st)) != BF_OK) break;
-            recon_counts c = recon_get_counts(r);
-            fprintf(out, "%u\t%.2f\t%.2f\t%.1f\t%.2f\t%u\t%u\t%u\t%.2f\n", i + 1, bf_stats_percentile(&ms, 50),
-                    bf_stats_percentile(&ms, 95), rss_mib(), st.bytes_total / 1048576.0, st.n_bricks, c.tracked,
-                    c.lost, 1e3 * max_err);
-            fflush(out);
-            fprintf(stderr, "bench_soak: %u/%u frames, %.1f ms median, RSS %.0f MiB, map %.2f MiB, %u lost, "
-                            "max error %.1f mm, %.0f s\n",
-                    i + 1, n, bf_stats_percentile(&ms, 50), rss_mib(), st.bytes_total / 1048576.0, c.lost,
-                    1e3 * max_err, bf_time_s() - t_start);
-            bf_stats_free(&ms);
-            memset(&ms, 0, sizeof ms);
-            max_err = 0;
-        }
-    }
+     * as in tests/tracking. The loop starts at the first frame's true pose. */
+    cfg.loop.track.max_residual_m *= (float)(640.0 / w);
+    cfg.label = "bench_soak";
+    soak_frames sf = {&sc, frames, m, w, h};
+    if (s == BF_OK) s = capture_source_from_fn(&K, n, true, soak_frame, &sf, &src);
+    soak_report sr = {.n = n, .block = block, .t_start = bf_time_s()};
+    if (s == BF_OK && !(sr.out = fopen(out_path, "w"))) s = bf_fail(BF_IO, "%s: cannot create", out_path);
+    if (sr.out) fprintf(sr.out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\n");
+    if (s == BF_OK) s = recon_run_sequence(ctx, src, &cfg, soak_on_frame, &sr, &run);
     if (s != BF_OK) fprintf(stderr, "bench_soak: %s: %s\n", bf_status_name(s), bf_last_error());
-    bf_stats_free(&ms);
-    if (out) fclose(out);
-    recon_destroy(r);
+    bf_stats_free(&sr.ms);
+    if (sr.out) fclose(sr.out);
+    recon_run_free(&run);
+    rgbd_source_close(src);
     gpu_context_destroy(ctx);
     synth_renderer_destroy(ren);
     synth_scene_free(&sc);

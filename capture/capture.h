@@ -41,6 +41,15 @@ static inline const bf_intrinsics *rgbd_source_intrinsics(const rgbd_source *src
     return &src->intrinsics;
 }
 
+/* A source whose frames a function makes: frames rendered in memory by a
+ * test or a benchmark. next() calls fn(user, i, out) for i = 0, 1, ... and
+ * returns what it returns; after n_frames frames (0: no limit) it returns
+ * BF_END. fn fills *out with buffers it owns, valid until its next call.
+ * On success *out owns nothing of user's; rgbd_source_close frees it. */
+typedef bf_status (*rgbd_frame_fn)(void *user, uint32_t index, bf_frame *out);
+bf_status capture_source_from_fn(const bf_intrinsics *K, uint32_t n_frames, bool has_groundtruth, rgbd_frame_fn fn,
+                                 void *user, rgbd_source **out);
+
 /* ------------------------------------------------------------ capture thread
  * capture_threaded() runs any source on its own thread, feeding a bounded
  * queue of deep-copied frames (DESIGN.md section 1: capture thread -> bounded
@@ -80,6 +89,12 @@ capture_thread_stats capture_threaded_stats(const rgbd_source *src);
  * and NULL. */
 void capture_threaded_stop(rgbd_source *src);
 
+/* Delivers inner's frames at their own pace: each next() waits until the
+ * frame's timestamp, counted from the first frame's, has passed. A recorded
+ * sequence behind the capture thread then behaves like a camera. On success
+ * *out owns inner; on failure inner is untouched and still the caller's. */
+bf_status capture_paced(rgbd_source *inner, rgbd_source **out);
+
 /* ------------------------------------------------------------ live capture
  * (capture/open.c; backends capture/freenect.c, openni2.c, v4l2.c) */
 
@@ -99,6 +114,22 @@ void capture_threaded_stop(rgbd_source *src);
  * BF_NO_DEVICE with the URI in the message. Never crashes on a missing
  * device. */
 bf_status capture_open(const char *uri, rgbd_source **out);
+
+/* True when uri starts with a scheme capture_open knows ("freenect:",
+ * "openni2:", "v4l2:"), compiled in or not. Anything else (a folder, a
+ * .bflog, a path with a colon) is a recording. */
+bool capture_is_device_uri(const char *uri);
+
+/* Opens what a user names as a device: a live URI (capture_open), or
+ * anything else through open_recording (a recorded sequence standing in for
+ * a camera; capture does not read files), paced at its own frame rate with
+ * realtime. The source then runs behind the capture thread with a queue of
+ * queue frames: a camera or a paced recording drops the oldest frame when
+ * the consumer falls behind; a recording read as fast as it decodes loses
+ * nothing. *is_live says which kind it was. On success *out owns it all. */
+typedef bf_status (*capture_open_fn)(void *user, const char *path, rgbd_source **out);
+bf_status capture_open_device(const char *uri, capture_open_fn open_recording, void *user, bool realtime,
+                              uint32_t queue, bool *is_live, rgbd_source **out);
 
 /* NULL-terminated names of the backends compiled into this build, in the
  * order capture_open tries them ("freenect", "openni2", "v4l2"). */

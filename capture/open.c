@@ -7,6 +7,7 @@
 #include "live_int.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -73,8 +74,47 @@ bf_status capture_open(const char *uri, rgbd_source **out)
         *out = src;
         return BF_OK;
     }
-    return bf_fail(BF_INVALID_ARG, "%s: unknown capture scheme '%.*s' (known: freenect, openni2, v4l2)", uri,
-                   (int)scheme_len, uri);
+    char known[128] = "";
+    for (size_t i = 0; i < CAPTURE_N_BACKENDS; i++) {
+        size_t used = strlen(known);
+        snprintf(known + used, sizeof known - used, "%s%s", i ? ", " : "", capture_backends[i].scheme);
+    }
+    return bf_fail(BF_INVALID_ARG, "%s: unknown capture scheme '%.*s' (known: %s)", uri, (int)scheme_len, uri, known);
+}
+
+bool capture_is_device_uri(const char *uri)
+{
+    for (size_t i = 0; uri && i < CAPTURE_N_BACKENDS; i++) {
+        size_t n = strlen(capture_backends[i].scheme);
+        if (!strncmp(uri, capture_backends[i].scheme, n) && uri[n] == ':') return true;
+    }
+    return false;
+}
+
+bf_status capture_open_device(const char *uri, capture_open_fn open_recording, void *user, bool realtime,
+                              uint32_t queue, bool *is_live, rgbd_source **out)
+{
+    rgbd_source *dev = NULL, *paced = NULL;
+    bool live = capture_is_device_uri(uri);
+    if (!live && !open_recording) return bf_fail(BF_INVALID_ARG, "%s: not a device URI", uri);
+    bf_status s = live ? capture_open(uri, &dev) : open_recording(user, uri, &dev);
+    if (s != BF_OK) return s;
+    if (!live && realtime) {
+        if ((s = capture_paced(dev, &paced)) != BF_OK) {
+            rgbd_source_close(dev);
+            return s;
+        }
+        dev = paced;
+    }
+    /* A camera (or a file played as one) must never wait for us; a file
+     * read as fast as it decodes must not lose frames. */
+    s = live || realtime ? capture_threaded(dev, queue, out) : capture_threaded_lossless(dev, queue, out);
+    if (s != BF_OK) {
+        rgbd_source_close(dev);
+        return s;
+    }
+    *is_live = live;
+    return BF_OK;
 }
 
 uint32_t capture_list_devices(capture_device_info *out, uint32_t cap)

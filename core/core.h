@@ -222,17 +222,6 @@ bf_status bf_mkdir_p(const char *path);
 /* Writes data to path atomically: temporary file, fsync, rename. */
 bf_status bf_write_file_atomic(const char *path, const void *data, size_t size);
 bool bf_file_exists(const char *path);
-/* A file built in memory and then written atomically: bf_membuf_open
- * returns a stream to print into (NULL, with a message, when out of
- * memory); bf_membuf_write_atomic closes it and writes what was printed to
- * path with bf_write_file_atomic. The buffer is freed either way. */
-typedef struct bf_membuf {
-    FILE *f;
-    char *buf;
-    size_t len;
-} bf_membuf;
-FILE *bf_membuf_open(bf_membuf *m);
-bf_status bf_membuf_write_atomic(bf_membuf *m, const char *path);
 /* Joins dir and name into out (size cap); fails with BF_INVALID_ARG if too long. */
 bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name);
 
@@ -283,14 +272,5 @@ bool bf_traj_interpolate(const bf_traj *traj, double t_s, bf_se3 *T_wc);
  * to t_a[i], or SIZE_MAX; on failure (out of memory) it is untouched. */
 bf_status bf_associate_stamps(const double *t_a, size_t n_a, const double *t_b, size_t n_b, double max_dt_s,
                               size_t *b_of_a);
-
-/* ---------------------------------------------------------------- JSON */
-
-/* Writes s to f as a quoted JSON string, escaping quotes, backslashes and
- * control characters (RFC 8259, section 7); NULL is written as null. */
-void bf_json_string(FILE *f, const char *s);
-/* Writes v to f with printf's %.<digits>g, or null when v is NaN or
- * infinite (JSON has no such numbers). */
-void bf_json_number(FILE *f, double v, int digits);
 
 #endif

@@ -102,26 +102,6 @@ bf_status bf_write_file_atomic(const char *path, const void *data, size_t size)
     return BF_OK;
 }
 
-FILE *bf_membuf_open(bf_membuf *m)
-{
-    *m = (bf_membuf){0};
-    m->f = open_memstream(&m->buf, &m->len);
-    if (!m->f) bf_fail(BF_NO_MEMORY, "cannot open a memory stream: %s", strerror(errno));
-    return m->f;
-}
-
-bf_status bf_membuf_write_atomic(bf_membuf *m, const char *path)
-{
-    bf_status s = BF_OK;
-    if (!m->f || fclose(m->f) != 0)
-        s = bf_fail(BF_NO_MEMORY, "%s: out of memory building the file", path);
-    else
-        s = bf_write_file_atomic(path, m->buf, m->len);
-    free(m->buf);
-    *m = (bf_membuf){0};
-    return s;
-}
-
 bool bf_file_exists(const char *path)
 {
     struct stat st;
@@ -161,29 +141,3 @@ bool bf_parse_u32(const char *s, uint32_t *out)
     return true;
 }
 
-void bf_json_string(FILE *f, const char *s)
-{
-    if (!s) {
-        fputs("null", f);
-        return;
-    }
-    putc('"', f);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20)
-            fprintf(f, "\\u%04x", c);
-        else
-            putc(c, f);
-    }
-    putc('"', f);
-}
-
-void bf_json_number(FILE *f, double v, int digits)
-{
-    if (isfinite(v))
-        fprintf(f, "%.*g", digits, v);
-    else
-        fputs("null", f);
-}

@@ -1,8 +1,10 @@
 /* recon: the full reconstruction loop of one sequence (DESIGN.md section 1):
  * track the frame against the smoothed ray-cast of the map, fuse it at the
  * pose found, ray-cast the map at that pose, smooth it as the next frame's
- * reference. The loop is what `bitfuse replay`, `bitfuse demo` and
- * `bitfuse live` run; the tests drive it directly.
+ * reference. recon_run_sequence runs it over a whole source with the
+ * policies every caller shares (first pose, pose source, failures, Ctrl-C);
+ * `bitfuse replay`, `live`, `fuse`, `demo`, the tests and the soak
+ * benchmark all go through it.
  *
  * Frames tracked badly are not fused (the map stays as it was) and the
  * camera keeps its last good pose; frames without depth are skipped. Both
@@ -11,6 +13,9 @@
 #ifndef BF_RECON_H
 #define BF_RECON_H
 
+#include <signal.h>
+
+#include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
@@ -88,5 +93,77 @@ typedef struct recon_counts {
     uint32_t frames, tracked, lost, no_depth, degenerate, pool_full;
 } recon_counts;
 recon_counts recon_get_counts(const recon *r);
+
+/* ------------------------------------------------------------ the runner
+ * One sequence through the loop (recon/runner.c), with the policies in one
+ * place:
+ * - first pose: the first frame's ground truth when it has one (else the
+ *   identity), or the identity with init_identity;
+ * - pose source: track (the loop), track but fuse at the frames' ground
+ *   truth (recon_add_frame_known), or fuse at known poses without tracking;
+ * - a source that fails mid-sequence (a device unplugged) ends the run like
+ *   its end when keep_on_source_error: what was reconstructed is flushed
+ *   and the failure is reported in source_status;
+ * - a progress line, per-frame warnings for lost and skipped frames, and a
+ *   stop flag (Ctrl-C) checked before each frame. */
+
+typedef enum recon_pose_source {
+    RECON_POSES_TRACK = 0,    /* track every frame, fuse at the pose found */
+    RECON_POSES_TRACK_FUSE_GT, /* track every frame, fuse at its ground truth: the tracker's one-step error */
+    RECON_POSES_KNOWN,        /* no tracking: fuse at known poses, skip frames without one; a full
+                                 pool fails the run (the loop drops and counts instead) */
+} recon_pose_source;
+
+typedef struct recon_run_config {
+    recon_config loop;
+    recon_pose_source poses;
+    bool init_identity;        /* start at the identity even when the first frame has ground truth */
+    const bf_traj *known;      /* RECON_POSES_KNOWN: poses interpolated at the depth timestamps; NULL: the
+                                  frames' own ground truth. Borrowed for the run. */
+    bool keep_on_source_error; /* see above; otherwise a source failure is the run's failure */
+    const char *name;          /* the source in messages (its path or URI), default "sequence" */
+    const char *label;         /* the progress line's and warnings' prefix, default "recon" */
+    const volatile sig_atomic_t *stop; /* non-zero ends the run before the next frame; may be NULL */
+} recon_run_config;
+
+/* recon_config_default(), tracking, first pose from ground truth. */
+recon_run_config recon_run_config_default(void);
+
+/* Per-frame series over the run: one sample per frame where the stage ran. */
+typedef struct recon_run_series {
+    bf_stats frame_ms;                      /* wall clock of the whole frame */
+    bf_stats track_ms, inlier_frac, residual_mm; /* tracked or lost frames; residual of tracked ones only */
+    bf_stats rof_ms, raycast_ms;            /* fused frames with a loop */
+    bf_stats upload_ms, alloc_ms, subcache_ms, window_ms; /* fused frames */
+} recon_run_series;
+
+/* What a run made. Filled also when the run fails; recon_run_free
+ * releases it either way. */
+typedef struct recon_run {
+    recon *loop;         /* the loop; NULL with RECON_POSES_KNOWN */
+    fusion_map *map;     /* the map: the loop's, or the run's own with known poses; NULL until a frame is fused */
+    recon_counts counts; /* the loop's counts; with known poses frames and pool_full only */
+    uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
+    bf_traj est;         /* one pose per frame handled: tracked, the last good one, or the known one */
+    bf_traj gt;          /* the frames' ground truth, where they have it */
+    recon_run_series series;
+    bool is_interrupted; /* the stop flag ended the run */
+    bf_status source_status; /* keep_on_source_error: the failure that ended the run early, else BF_OK */
+    char source_error[1024]; /* its message */
+} recon_run;
+
+/* Called after every frame the run handles (frames skipped for want of a
+ * known pose excepted); a status other than BF_OK ends the run with it.
+ * With known poses fr->state is RECON_FIRST or RECON_TRACKED and fr->T_wc
+ * the known pose. */
+typedef bf_status (*recon_frame_fn)(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr);
+
+/* Runs every frame of src (borrowed) through the loop and flushes the map.
+ * ctx is borrowed and must outlive *out. on_frame may be NULL. Fails with
+ * the source's or the loop's status, BF_FORMAT when no frame had depth (or
+ * a pose), or no ground truth for RECON_POSES_TRACK_FUSE_GT. */
+bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, recon_frame_fn on_frame,
+                             void *user, recon_run *out);
+void recon_run_free(recon_run *run);
 
 #endif

@@ -1,6 +1,6 @@
 /* replay: file sources behind the rgbd_source interface (TUM RGB-D folders,
- * ICL-NUIM, pose-per-frame folders), the options every sequence-reading
- * command shares, image codecs (PNG, JPEG), TUM trajectory files and the
+ * ICL-NUIM, pose-per-frame folders), the options they take (what
+ * bitfuse's --camera, --depth-scale, --frames and --skip-bad-frames set), image codecs (PNG, JPEG), TUM trajectory files and the
  * TUM-folder writer used by `bitfuse synth`.
  * Depends on core and capture (the interface only). See docs/formats.md. */
 #ifndef BF_REPLAY_H
@@ -32,14 +32,6 @@ bf_status replay_open(const char *path, const replay_options *opt, rgbd_source *
  * source not made by replay_open). Frame indices keep their place in the
  * sequence, so a skipped frame leaves a gap in bf_frame.index. */
 uint32_t replay_skipped_frames(const rgbd_source *src);
-
-/* Parses one of the shared sequence options at argv[*i] (--camera,
- * --depth-scale, --frames, --skip-bad-frames), advancing *i past its value.
- * Returns 1 if it consumed an option, 0 if argv[*i] is not one of them, and
- * -1 (with bf_last_error set) if the value is bad. */
-int replay_parse_option(int argc, char **argv, int *i, replay_options *opt);
-/* Help text for the shared options, one line per option. */
-const char *replay_options_help(void);
 
 /* Fills K (fx, fy, cx, cy) from "fr1" | "fr2" | "fr3" (TUM's published
  * calibration), "icl" (ICL-NUIM, fy < 0) or "fx,fy,cx,cy"; width/height/

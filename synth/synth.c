@@ -17,6 +17,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <cjson/cJSON.h>
+
 #include "synth_int.h"
 
 #include "replay/replay.h"
@@ -257,34 +259,51 @@ static bf_status write_stats(const synth_config *cfg, const bf_intrinsics *K, co
     bf_vec3 t;
     bf_se3_to_qt(&res->T_world_traj, &q, &t);
     const double(*R)[3] = res->T_world_traj.R;
-    bf_membuf mb;
-    FILE *f = bf_membuf_open(&mb);
-    if (!f) return BF_NO_MEMORY;
-    fputs("{\n  \"command\": \"synth\",\n  \"scene\": ", f);
-    bf_json_string(f, sc->desc);
-    fprintf(f, ",\n  \"scene_triangles\": %u,\n  \"trajectory\": ", sc->mesh.n_tris);
-    bf_json_string(f, cfg->traj_path);
-    fprintf(
-        f,
-        ",\n  \"t_first_s\": %.6f,\n  \"rate_hz\": %.9g,\n"
-        "  \"frames\": %u,\n  \"frames_requested\": %u,\n  \"noise\": \"%s\",\n  \"seed\": %llu,\n"
-        "  \"camera\": {\"width\": %u, \"height\": %u, \"fx\": %.9g, \"fy\": %.9g, \"cx\": %.9g, \"cy\": %.9g, "
-        "\"depth_scale\": %.9g},\n"
-        "  \"time_per_frame_s\": {\"mean\": %.4f, \"median\": %.4f, \"p95\": %.4f},\n"
-        "  \"frames_per_s\": %.3f,\n  \"total_s\": %.3f,\n  \"threads\": %d,\n  \"valid_depth_share\": %.4f,\n"
-        "  \"seen_points\": %u,\n  \"seen_cell_m\": %.4g,\n"
-        "  \"placement\": {\n    \"rule\": \"T_world_traj = T_view * inv(T_traj(t_first)); rendered pose = T_world_traj * "
-        "T_traj(t)\",\n"
-        "    \"t\": [%.9f, %.9f, %.9f],\n    \"q_xyzw\": [%.9f, %.9f, %.9f, %.9f],\n"
-        "    \"matrix\": [[%.9f, %.9f, %.9f, %.9f], [%.9f, %.9f, %.9f, %.9f], [%.9f, %.9f, %.9f, %.9f], [0, 0, 0, 1]]\n"
-        "  }\n}\n",
-        t0_s, rate_hz, res->n_frames, n_requested, noise_name(cfg->noise), (unsigned long long)cfg->seed, K->width,
-        K->height, K->fx_px, K->fy_px, K->cx_px, K->cy_px, K->depth_scale, res->mean_frame_s, res->median_frame_s,
-        p95_s, res->mean_frame_s > 0 ? 1.0 / res->mean_frame_s : 0, res->total_s, bf_thread_count(),
-        res->valid_share, res->n_seen, cell_m, t.x, t.y, t.z, q.x, q.y, q.z, q.w, R[0][0], R[0][1], R[0][2],
-        res->T_world_traj.t.x, R[1][0], R[1][1], R[1][2], res->T_world_traj.t.y, R[2][0], R[2][1], R[2][2],
-        res->T_world_traj.t.z);
-    return bf_membuf_write_atomic(&mb, path);
+    const bf_vec3 *tw = &res->T_world_traj.t;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", "synth");
+    cJSON_AddStringToObject(o, "scene", sc->desc);
+    cJSON_AddNumberToObject(o, "scene_triangles", sc->mesh.n_tris);
+    cJSON_AddStringToObject(o, "trajectory", cfg->traj_path);
+    cJSON_AddNumberToObject(o, "t_first_s", t0_s);
+    cJSON_AddNumberToObject(o, "rate_hz", rate_hz);
+    cJSON_AddNumberToObject(o, "frames", res->n_frames);
+    cJSON_AddNumberToObject(o, "frames_requested", n_requested);
+    cJSON_AddStringToObject(o, "noise", noise_name(cfg->noise));
+    cJSON_AddNumberToObject(o, "seed", (double)cfg->seed);
+    cJSON *cam = cJSON_AddObjectToObject(o, "camera");
+    cJSON_AddNumberToObject(cam, "width", K->width);
+    cJSON_AddNumberToObject(cam, "height", K->height);
+    cJSON_AddNumberToObject(cam, "fx", K->fx_px);
+    cJSON_AddNumberToObject(cam, "fy", K->fy_px);
+    cJSON_AddNumberToObject(cam, "cx", K->cx_px);
+    cJSON_AddNumberToObject(cam, "cy", K->cy_px);
+    cJSON_AddNumberToObject(cam, "depth_scale", K->depth_scale);
+    cJSON *tpf = cJSON_AddObjectToObject(o, "time_per_frame_s");
+    cJSON_AddNumberToObject(tpf, "mean", res->mean_frame_s);
+    cJSON_AddNumberToObject(tpf, "median", res->median_frame_s);
+    cJSON_AddNumberToObject(tpf, "p95", p95_s);
+    cJSON_AddNumberToObject(o, "frames_per_s", res->mean_frame_s > 0 ? 1.0 / res->mean_frame_s : 0);
+    cJSON_AddNumberToObject(o, "total_s", res->total_s);
+    cJSON_AddNumberToObject(o, "threads", bf_thread_count());
+    cJSON_AddNumberToObject(o, "valid_depth_share", res->valid_share);
+    cJSON_AddNumberToObject(o, "seen_points", res->n_seen);
+    cJSON_AddNumberToObject(o, "seen_cell_m", cell_m);
+    cJSON *pl = cJSON_AddObjectToObject(o, "placement");
+    cJSON_AddStringToObject(pl, "rule",
+                            "T_world_traj = T_view * inv(T_traj(t_first)); rendered pose = T_world_traj * T_traj(t)");
+    cJSON_AddItemToObject(pl, "t", cJSON_CreateDoubleArray((double[]){t.x, t.y, t.z}, 3));
+    cJSON_AddItemToObject(pl, "q_xyzw", cJSON_CreateDoubleArray((double[]){q.x, q.y, q.z, q.w}, 4));
+    cJSON *M = cJSON_AddArrayToObject(pl, "matrix");
+    double rows[4][4] = {{R[0][0], R[0][1], R[0][2], tw->x}, {R[1][0], R[1][1], R[1][2], tw->y},
+                         {R[2][0], R[2][1], R[2][2], tw->z}, {0, 0, 0, 1}};
+    for (int i = 0; i < 4; i++) cJSON_AddItemToArray(M, cJSON_CreateDoubleArray(rows[i], 4));
+    char *text = cJSON_Print(o);
+    cJSON_Delete(o);
+    if (!text) return bf_fail(BF_NO_MEMORY, "%s: out of memory building the JSON", path);
+    s = bf_write_file_atomic(path, text, strlen(text));
+    cJSON_free(text);
+    return s;
 }
 
 /* ------------------------------------------------------------ the sequence */

@@ -211,6 +211,23 @@ mentions "--out is required"
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
 expect 3 "$B" replay "$T/missing" --out "$T/rp3"
 mentions "$T/missing"
+[ ! -e "$T/rp3" ] || fail "replay on a missing input created its output folder"
+expect 3 "$B" fuse "$T/missing" --poses groundtruth --out "$T/fu3"
+mentions "$T/missing"
+[ ! -e "$T/fu3" ] || fail "fuse on a missing input created its output folder"
+# Bad values are refused before the GPU opens (it logs "gpu:") and before
+# the output folder is made.
+for bad in "--ratio -1" "--ratio 100" "--window 7" "--subcache 50 --window 20" "--angle-gate 95" "--frames 0" \
+    "--camera fr9" "--init zero"; do
+    expect 2 "$B" replay "$T/seq" --out "$T/rp5" $bad
+    ! grep -q "gpu:" "$T/err" || fail "replay $bad: the GPU opened before the value was refused"
+    [ ! -e "$T/rp5" ] || fail "replay $bad: the output folder was made"
+done
+mentions "--init takes groundtruth or identity, not 'zero'"
+expect 2 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fu5" --ratio=-1
+mentions "--ratio: '-1'"
+expect 2 "$B" live --device "$T/seq" --out "$T/lv5" --queue 0
+expect 2 "$B" record --device "$T/seq" --out "$T/x.bflog" --jpeg-quality 101
 # The tracker alone: fused at the true poses, one estimate per frame, the
 # first one the true first pose; a sequence without ground truth is refused.
 expect 0 "$B" replay "$T/seq" --out "$T/rpgt" --fuse-at-groundtruth --ray-start near --huber 1.5 --noise-weights off \
@@ -251,7 +268,13 @@ expect 3 "$B" record --device "$T/missing" --out "$T/x.bflog"
 mentions "$T/missing"
 expect 4 "$B" record --device "v4l2:$T/no-such-video" --out "$T/x.bflog"
 mentions "$T/no-such-video"
-for c in record convert live replay; do expect 0 "$B" $c --help; done
+for c in demo synth replay fuse info record convert live eval-traj eval-surface devices; do
+    expect 0 "$B" $c --help
+    grep -q "^usage: bitfuse $c" "$T/out" || fail "$c --help: no usage line"
+    grep -q -- "--help" "$T/out" || fail "$c --help: the help does not list --help"
+done
+grep -q -- "--ratio R .*default 2" <("$B" replay --help) || fail "replay --help: no --ratio default 2"
+grep -q -- "--ratio R .*default 1" <("$B" fuse --help) || fail "fuse --help: no --ratio default 1"
 
 [ $fails = 0 ] && echo "all CLI checks passed"
 [ $fails = 0 ]

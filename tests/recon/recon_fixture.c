@@ -4,6 +4,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "export/export.h"
 
@@ -28,45 +29,82 @@ double rot_dist_deg(const bf_se3 *A, const bf_se3 *B)
     return acos(c > 1 ? 1 : (c < -1 ? -1 : c)) * 180 / M_PI;
 }
 
-bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
-                   const bf_se3 *offset, mutate_fn mutate, run_out *out)
+static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
+{
+    fixture_render *fr = user;
+    bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, NULL, NULL);
+    if (s != BF_OK) return s;
+    if (fr->mutate) fr->mutate(k, fr->depth);
+    *f = (bf_frame){.index = k, .width = W, .height = H, .t_depth_s = 100 + k / 30.0, .depth = fr->depth,
+                    .has_pose = true, .T_wc = bf_se3_mul(&fr->offset, &fr->true_pose[k])};
+    f->t_rgb_s = f->t_depth_s;
+    return BF_OK;
+}
+
+bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
+                              mutate_fn mutate, fixture_render *fr, rgbd_source **src)
 {
     bf_intrinsics K = test_K();
     synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 7};
-    synth_renderer *ren = NULL;
-    recon *r = NULL;
-    uint16_t *depth = malloc((size_t)W * H * sizeof *depth);
-    recon_config cfg = recon_config_default();
+    *fr = (fixture_render){.true_pose = true_pose, .offset = *offset, .mutate = mutate};
+    fr->depth = malloc((size_t)W * H * sizeof *fr->depth);
+    bf_status s = fr->depth ? synth_renderer_create(sc, &rc, &fr->ren) : BF_NO_MEMORY;
+    if (s == BF_OK) s = capture_source_from_fn(&K, n, true, render_frame, fr, src);
+    if (s != BF_OK) fixture_render_close(fr, NULL);
+    return s;
+}
+
+void fixture_render_close(fixture_render *fr, rgbd_source *src)
+{
+    rgbd_source_close(src);
+    synth_renderer_destroy(fr->ren);
+    free(fr->depth);
+    memset(fr, 0, sizeof *fr);
+}
+
+recon_run_config fixture_run_config(void)
+{
+    recon_run_config cfg = recon_run_config_default();
     /* Ratio 1 at 320x240 gives the voxels of the default ratio 2 at
      * 640x480 (the level rule follows the pixel footprint z / f, and f is
      * half): the tests' surface bounds were set for that size. */
-    cfg.fusion.voxel_ratio = 1.0f;
-    cfg.fusion.brick_cap = 1u << 17;
-    cfg.fusion.window = 10;
-    cfg.fusion.subcache = 4;
-    bf_se3 T0 = bf_se3_mul(offset, &true_pose[0]);
-    bf_status s = depth ? synth_renderer_create(sc, &rc, &ren) : BF_NO_MEMORY;
-    if (s == BF_OK) s = recon_create(ctx, &cfg, &K, &T0, &r);
-    for (uint32_t k = 0; s == BF_OK && k < n; k++) {
-        s = synth_render(ren, k, &true_pose[k], depth, NULL, NULL);
-        if (s != BF_OK) break;
-        if (mutate) mutate(k, depth);
-        bf_frame f = {.index = k, .width = W, .height = H, .t_depth_s = 100 + k / 30.0, .depth = depth};
-        f.t_rgb_s = f.t_depth_s;
-        s = recon_add_frame(r, &f, &out->fr[k]);
-        out->est[k] = out->fr[k].T_wc;
-    }
-    if (s == BF_OK) s = recon_flush(r);
-    if (s == BF_OK) s = fusion_check(recon_map(r));
-    if (s == BF_OK) s = fusion_get_stats(recon_map(r), &out->map);
+    cfg.loop.fusion.voxel_ratio = 1.0f;
+    cfg.loop.fusion.brick_cap = 1u << 17;
+    cfg.loop.fusion.window = 10;
+    cfg.loop.fusion.subcache = 4;
+    return cfg;
+}
+
+static bf_status keep_result(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
+{
+    (void)run;
+    run_out *out = user;
+    out->fr[f->index] = *fr;
+    out->est[f->index] = fr->T_wc;
+    return BF_OK;
+}
+
+bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
+                   const bf_se3 *offset, mutate_fn mutate, run_out *out)
+{
+    /* The frames carry offset * true_pose[k] as ground truth: the loop
+     * starts at the first one. */
+    recon_run_config cfg = fixture_run_config();
+    fixture_render fr;
+    rgbd_source *src = NULL;
+    recon_run run;
+    memset(&run, 0, sizeof run);
+    bf_status s = fixture_render_open(sc, true_pose, n, offset, mutate, &fr, &src);
+    if (s == BF_OK) s = recon_run_sequence(ctx, src, &cfg, keep_result, out, &run);
+    if (s == BF_OK) s = fusion_check(run.map);
+    if (s == BF_OK) s = fusion_get_stats(run.map, &out->map);
     hostmap snap = {0};
-    if (s == BF_OK) s = fusion_snapshot_take(recon_map(r), &snap);
+    if (s == BF_OK) s = fusion_snapshot_take(run.map, &snap);
     if (s == BF_OK) s = export_points(&snap, &out->points, NULL);
     hostmap_free(&snap);
-    if (r) out->counts = recon_get_counts(r);
-    recon_destroy(r);
-    synth_renderer_destroy(ren);
-    free(depth);
+    out->counts = run.counts;
+    recon_run_free(&run);
+    if (src) fixture_render_close(&fr, src);
     return s;
 }
 

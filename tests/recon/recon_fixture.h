@@ -33,6 +33,23 @@ typedef struct run_out {
     mesh_data points; /* surface voxels, world frame */
 } run_out;
 
+/* A source of n frames rendered at true_pose[k] (mutate, may be NULL,
+ * edits frame k's depth), each carrying offset * true_pose[k] as its
+ * ground truth. fr holds the renderer; fixture_render_close closes both. */
+typedef struct fixture_render {
+    synth_renderer *ren;
+    const bf_se3 *true_pose;
+    bf_se3 offset;
+    mutate_fn mutate;
+    uint16_t *depth;
+} fixture_render;
+bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
+                              mutate_fn mutate, fixture_render *fr, rgbd_source **src);
+void fixture_render_close(fixture_render *fr, rgbd_source *src);
+/* The runner's config for the fixture's 320x240 frames. */
+recon_run_config fixture_run_config(void);
+
+/* The run above through recon_run_sequence, with the fixture's config. */
 bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
                    const bf_se3 *offset, mutate_fn mutate, run_out *out);
 /* 90th percentile of the distance from pts to the scene's mesh [m]. */

@@ -3,6 +3,8 @@
  * placement, and a whole room sequence read back by replay. */
 #include <unistd.h>
 
+#include <cjson/cJSON.h>
+
 #include "mesh/mesh.h"
 #include "synth/synth.h"
 #include "replay/replay.h"
@@ -359,6 +361,25 @@ static void check_relative_motion(const char *traj_path, const char *out_dir, ui
     bf_traj_free(&out);
 }
 
+/* stats.json, read back with cJSON: what synth_run returned and was asked. */
+static void check_stats_json(const char *out, const synth_config *cfg, const synth_result *res)
+{
+    char path[600], *text;
+    snprintf(path, sizeof path, "%s/stats.json", out);
+    CHECK_OK(bf_read_file(path, &text, NULL));
+    cJSON *o = cJSON_Parse(text);
+    free(text);
+    CHECK(o != NULL);
+    CHECK(!strcmp(cJSON_GetObjectItem(o, "trajectory")->valuestring, cfg->traj_path));
+    CHECK_EQ_INT(cJSON_GetObjectItem(o, "frames")->valueint, (int)res->n_frames);
+    CHECK_EQ_INT(cJSON_GetObjectItem(o, "seed")->valueint, (int)cfg->seed);
+    cJSON *cam = cJSON_GetObjectItem(o, "camera");
+    double fx = cfg->K.fx_px > 0 ? cfg->K.fx_px : 525; /* 525: synth's default camera */
+    CHECK(cJSON_GetObjectItem(cam, "fx")->valuedouble == fx);
+    CHECK_EQ_INT(cJSON_GetArraySize(cJSON_GetObjectItem(cJSON_GetObjectItem(o, "placement"), "matrix")), 4);
+    cJSON_Delete(o);
+}
+
 BF_TEST(placement_preserves_relative_motion)
 {
     const char *traj = write_test_traj();
@@ -372,6 +393,7 @@ BF_TEST(placement_preserves_relative_motion)
     CHECK_OK(synth_run(&cfg, &res));
     CHECK_EQ_INT(res.n_frames, 12);
     check_relative_motion(traj, out, 12);
+    check_stats_json(out, &cfg, &res);
 }
 
 BF_TEST(trajectory_errors_and_short_trajectory)
@@ -484,8 +506,7 @@ BF_TEST(room_sequence_along_fr1_xyz_reads_back)
     free(txt);
     CHECK_EQ_INT(got, 5);
     CHECK(cam[0] == 525 && cam[1] == 525 && cam[2] == 319.5 && cam[3] == 239.5 && cam[4] == 5000);
-    snprintf(path, sizeof path, "%s/stats.json", out);
-    CHECK(bf_file_exists(path));
+    check_stats_json(out, &cfg, &res);
 
     /* seen.ply: noise-free points on scene.ply, at most one per 5 mm cell. */
     mesh_data scene, seen;

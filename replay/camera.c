@@ -1,5 +1,4 @@
-/* replay: the options every sequence-reading command shares, camera presets
- * and camera.txt. */
+/* replay: camera presets, --camera specifications and camera.txt. */
 #include "replay_int.h"
 
 #include <math.h>
@@ -53,74 +52,6 @@ bf_status replay_parse_camera(const char *spec, bf_intrinsics *K)
     K->cx_px = v[2];
     K->cy_px = v[3];
     return BF_OK;
-}
-
-/* The value of an option given as "--name value" or "--name=value". */
-static const char *option_value(int argc, char **argv, int *i, const char *name, bool *matched)
-{
-    size_t len = strlen(name);
-    const char *a = argv[*i];
-    *matched = false;
-    if (strncmp(a, name, len) != 0) return NULL;
-    if (a[len] == '=') {
-        *matched = true;
-        return a + len + 1;
-    }
-    if (a[len] != '\0') return NULL;
-    *matched = true;
-    if (*i + 1 >= argc) return NULL;
-    (*i)++;
-    return argv[*i];
-}
-
-int replay_parse_option(int argc, char **argv, int *i, replay_options *opt)
-{
-    if (*i >= argc) return 0;
-    const char *a = argv[*i];
-    bool m;
-    const char *v;
-    if (!strcmp(a, "--skip-bad-frames")) {
-        opt->skip_bad_frames = true;
-        (*i)++;
-        return 1;
-    }
-    if ((v = option_value(argc, argv, i, "--camera", &m)), m) {
-        if (!v) return bf_fail(BF_INVALID_ARG, "--camera: missing value (fr1|fr2|fr3|icl|fx,fy,cx,cy)"), -1;
-        bf_intrinsics K = {0};
-        if (replay_parse_camera(v, &K)) return -1;
-        opt->camera = v;
-        (*i)++;
-        return 1;
-    }
-    if ((v = option_value(argc, argv, i, "--depth-scale", &m)), m) {
-        double s;
-        if (!v) return bf_fail(BF_INVALID_ARG, "--depth-scale: missing value (raw units per metre)"), -1;
-        if (!bf_parse_double(v, &s) || !(s > 0))
-            return bf_fail(BF_INVALID_ARG, "--depth-scale '%s': expected a positive number (units per metre)", v),
-                   -1;
-        opt->depth_scale = s;
-        (*i)++;
-        return 1;
-    }
-    if ((v = option_value(argc, argv, i, "--frames", &m)), m) {
-        uint32_t n;
-        if (!v) return bf_fail(BF_INVALID_ARG, "--frames: missing value"), -1;
-        if (!bf_parse_u32(v, &n) || n == 0)
-            return bf_fail(BF_INVALID_ARG, "--frames '%s': expected a positive whole number", v), -1;
-        opt->max_frames = n;
-        (*i)++;
-        return 1;
-    }
-    return 0;
-}
-
-const char *replay_options_help(void)
-{
-    return "  --camera C        intrinsics: fr1 | fr2 | fr3 (TUM), icl (ICL-NUIM) or fx,fy,cx,cy in pixels\n"
-           "                    (default: camera.txt in the folder, else the format's camera)\n"
-           "  --depth-scale S   raw depth units per metre (default: TUM/ICL 5000, pose folders 1000)\n"
-           "  --frames N        read only the first N frames\n"
-           "  --skip-bad-frames skip an unreadable frame with a warning instead of failing\n";
 }
 
 bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K)

@@ -1,0 +1,49 @@
+/* The device part of record and live: what opens a device (capture owns
+ * that; app adds the recordings replay reads) and the one Ctrl-C handler,
+ * which ends the capture instead of the program. */
+#include <signal.h>
+
+#include "app.h"
+#include "replay/replay.h"
+
+static bf_status open_recording(void *user, const char *path, rgbd_source **out)
+{
+    return replay_open(path, user, out);
+}
+
+bf_status app_open_device(const char *uri, const replay_options *ropt, bool realtime, uint32_t queue, bool *is_live,
+                          rgbd_source **out)
+{
+    return capture_open_device(uri, open_recording, (void *)ropt, realtime, queue, is_live, out);
+}
+
+static rgbd_source *volatile g_stop_src;
+static volatile sig_atomic_t g_stopped;
+static struct sigaction g_old_int, g_old_term;
+
+static void on_stop_signal(int sig)
+{
+    (void)sig;
+    g_stopped = 1;
+    capture_threaded_stop(g_stop_src); /* sets an atomic flag: async-signal-safe */
+}
+
+const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)
+{
+    /* SA_RESETHAND: a second Ctrl-C kills the program (the default action). */
+    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND};
+    sigemptyset(&sa.sa_mask);
+    g_stop_src = src;
+    g_stopped = 0;
+    sigaction(SIGINT, &sa, &g_old_int);
+    sigaction(SIGTERM, &sa, &g_old_term);
+    return &g_stopped;
+}
+
+bool app_stop_end(void)
+{
+    sigaction(SIGINT, &g_old_int, NULL);
+    sigaction(SIGTERM, &g_old_term, NULL);
+    g_stop_src = NULL;
+    return g_stopped;
+}

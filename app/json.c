@@ -1,0 +1,153 @@
+/* stats.json and --json output through cJSON (Debian's libcjson): objects
+ * are built, then printed once. cJSON writes NaN and infinities as null,
+ * which is what JSON allows for "not measured". */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "app.h"
+#include "recon/recon.h"
+
+cJSON *app_json_object(cJSON *parent, const char *name)
+{
+    cJSON *o = cJSON_CreateObject();
+    if (parent && o) cJSON_AddItemToObject(parent, name, o);
+    return o;
+}
+
+void app_json_series(cJSON *parent, const char *name, const bf_stats *s)
+{
+    cJSON *o = app_json_object(parent, name);
+    cJSON_AddNumberToObject(o, "median", bf_stats_percentile(s, 50));
+    cJSON_AddNumberToObject(o, "p95", bf_stats_percentile(s, 95));
+    cJSON_AddNumberToObject(o, "mean", bf_stats_mean(s));
+}
+
+void app_json_numbers(cJSON *parent, const char *name, const double *v, size_t n)
+{
+    cJSON *a = cJSON_AddArrayToObject(parent, name);
+    for (size_t i = 0; i < n; i++) cJSON_AddItemToArray(a, cJSON_CreateNumber(v[i]));
+}
+
+/* cJSON reports an allocation failure as a NULL print. */
+static char *print(const cJSON *root, const char *what)
+{
+    char *text = root ? cJSON_Print(root) : NULL;
+    if (!text) bf_fail(BF_NO_MEMORY, "%s: out of memory building the JSON", what);
+    return text;
+}
+
+bf_status app_json_write(const char *path, cJSON *root)
+{
+    char *text = print(root, path);
+    bf_status s = BF_NO_MEMORY;
+    if (text) {
+        size_t n = strlen(text);
+        text[n] = '\n'; /* the terminator becomes the file's last newline */
+        s = bf_write_file_atomic(path, text, n + 1);
+    }
+    cJSON_free(text);
+    cJSON_Delete(root);
+    return s;
+}
+
+bf_status app_json_write_in(const char *dir, const char *name, cJSON *root)
+{
+    char path[4096];
+    bf_status s = bf_path_join(path, sizeof path, dir, name);
+    if (s != BF_OK) {
+        cJSON_Delete(root);
+        return s;
+    }
+    return app_json_write(path, root);
+}
+
+bf_status app_json_print(cJSON *root)
+{
+    char *text = print(root, "stdout");
+    if (text) puts(text);
+    cJSON_free(text);
+    cJSON_Delete(root);
+    return text ? BF_OK : BF_NO_MEMORY;
+}
+
+/* A float as it was set (0.1, not 0.100000001): seven significant digits
+ * round-trip a float. */
+static void add_float(cJSON *o, const char *name, float v)
+{
+    char buf[32];
+    if (!isfinite(v)) {
+        cJSON_AddNullToObject(o, name);
+        return;
+    }
+    snprintf(buf, sizeof buf, "%.7g", v);
+    cJSON_AddRawToObject(o, name, buf);
+}
+
+void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config *c)
+{
+    cJSON *o = app_json_object(parent, name);
+    add_float(o, "chunk_m", c->chunk_m);
+    cJSON_AddNumberToObject(o, "max_level", c->max_level);
+    add_float(o, "voxel_ratio", c->voxel_ratio);
+    cJSON_AddNumberToObject(o, "window", c->window);
+    cJSON_AddNumberToObject(o, "subcache", c->subcache);
+    cJSON_AddNumberToObject(o, "brick_cap", c->brick_cap);
+    cJSON_AddNumberToObject(o, "node_cap", c->node_cap);
+    cJSON_AddNumberToObject(o, "hash_buckets", c->hash_buckets);
+    cJSON_AddNumberToObject(o, "hash_overflow", c->hash_overflow);
+    add_float(o, "sigma_a", c->sigma_a);
+    add_float(o, "sigma_b", c->sigma_b);
+    add_float(o, "sigma_c", c->sigma_c);
+    add_float(o, "conf_weight", c->conf_weight);
+    add_float(o, "band_sigmas", c->band_sigmas);
+    add_float(o, "max_depth_m", c->max_depth_m);
+}
+
+static void json_track_config(cJSON *parent, const char *name, const track_config *c)
+{
+    cJSON *o = app_json_object(parent, name);
+    cJSON_AddNumberToObject(o, "levels", c->levels);
+    cJSON *it = cJSON_AddArrayToObject(o, "iterations");
+    for (uint32_t l = 0; l < c->levels && l < TRACK_MAX_LEVELS; l++)
+        cJSON_AddItemToArray(it, cJSON_CreateNumber(c->iterations[l]));
+    add_float(o, "dist_m", c->dist_m);
+    add_float(o, "angle_deg", c->angle_deg);
+    add_float(o, "max_depth_m", c->max_depth_m);
+    add_float(o, "min_inlier_frac", c->min_inlier_frac);
+    add_float(o, "max_residual_m", c->max_residual_m);
+    add_float(o, "max_motion_m", c->max_motion_m);
+    add_float(o, "max_motion_deg", c->max_motion_deg);
+    cJSON_AddNumberToObject(o, "degenerate_ratio", c->degenerate_ratio);
+    cJSON_AddNumberToObject(o, "rof_iterations", c->rof_iterations);
+    add_float(o, "rof_lambda0", c->rof_lambda0);
+    cJSON_AddNumberToObject(o, "rof_level", c->rof_level);
+    cJSON_AddNumberToObject(o, "ref_level", c->ref_level);
+    add_float(o, "min_valid_frac", c->min_valid_frac);
+    add_float(o, "converged_m", c->converged_m);
+    add_float(o, "converged_deg", c->converged_deg);
+    cJSON_AddNumberToObject(o, "finest_sample_step", c->finest_sample_step);
+    add_float(o, "huber_k", c->huber_k);
+    cJSON_AddBoolToObject(o, "weight_noise", c->weight_noise);
+}
+
+void app_json_recon_config(cJSON *parent, const char *name, const recon_config *c)
+{
+    cJSON *o = app_json_object(parent, name);
+    app_json_fusion_config(o, "fusion", &c->fusion);
+    json_track_config(o, "track", &c->track);
+    cJSON *l = app_json_object(o, "loop");
+    cJSON_AddNumberToObject(l, "min_valid_pixels", c->min_valid_pixels);
+    cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
+    cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
+    cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
+    cJSON *r = app_json_object(l, "raycast");
+    cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);
+    cJSON_AddBoolToObject(r, "refine", c->raycast.refine);
+    add_float(r, "near_m", c->raycast.near_m);
+    add_float(r, "far_m", c->raycast.far_m);
+    add_float(r, "start_margin_m", c->raycast.start_margin_m);
+    add_float(r, "start_margin_z2", c->raycast.start_margin_z2);
+    cJSON_AddBoolToObject(r, "no_shade", c->raycast.no_shade);
+}

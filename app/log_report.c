@@ -1,0 +1,74 @@
+/* What record and convert report about a bitfuse log they wrote. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "app.h"
+#include "replay/replay.h"
+
+double app_ratio(uint64_t raw, uint64_t packed) { return packed ? (double)raw / (double)packed : NAN; }
+
+const char *app_colour_name(int colour)
+{
+    return colour == REPLAY_LOG_COLOUR_JPEG ? "jpeg" : colour == REPLAY_LOG_COLOUR_ZSTD ? "zstd" : "none";
+}
+
+void app_json_log_stats(cJSON *o, const replay_log_config *lcfg, const replay_log_stats *L, double seconds)
+{
+    cJSON_AddStringToObject(o, "colour_codec", app_colour_name(lcfg->colour));
+    cJSON_AddNumberToObject(o, "bytes", (double)L->file_bytes);
+    cJSON_AddNumberToObject(o, "depth_raw_bytes", (double)L->depth_raw_bytes);
+    cJSON_AddNumberToObject(o, "depth_bytes", (double)L->depth_bytes);
+    cJSON_AddNumberToObject(o, "rgb_raw_bytes", (double)L->rgb_raw_bytes);
+    cJSON_AddNumberToObject(o, "rgb_bytes", (double)L->rgb_bytes);
+    cJSON_AddNumberToObject(o, "depth_compression_ratio", app_ratio(L->depth_raw_bytes, L->depth_bytes));
+    cJSON_AddNumberToObject(o, "rgb_compression_ratio", app_ratio(L->rgb_raw_bytes, L->rgb_bytes));
+    cJSON_AddNumberToObject(o, "compression_ratio",
+                            app_ratio(L->depth_raw_bytes + L->rgb_raw_bytes, L->file_bytes));
+    cJSON_AddNumberToObject(o, "write_mb_per_s", seconds > 0 ? L->file_bytes / 1e6 / seconds : NAN);
+}
+
+const char *app_check_log_path(const char *name, const char *v)
+{
+    static char msg[512];
+    if (replay_is_log_path(v)) return NULL;
+    snprintf(msg, sizeof msg, "%s must name a .bflog file, not '%.400s'", name, v);
+    return msg;
+}
+
+static const int colour_codes[] = {REPLAY_LOG_COLOUR_JPEG, REPLAY_LOG_COLOUR_ZSTD, REPLAY_LOG_COLOUR_NONE};
+
+void app_log_codec_options(app_option rows[APP_LOG_ROWS], app_log_codec *c)
+{
+    const app_option r[APP_LOG_ROWS] = {
+        APP_OPT("--colour", APP_OPT_ENUM, &c->colour, "jpeg|zstd|none", "colour codec (zstd is lossless)",
+                .codes = colour_codes),
+        APP_OPT("--color", APP_OPT_ENUM, &c->colour, "jpeg|zstd|none", NULL, .codes = colour_codes),
+        APP_OPT("--jpeg-quality", APP_OPT_U32, &c->jpeg_quality, "Q", "JPEG quality", .min = 1, .max = 100),
+        APP_OPT("--zstd-level", APP_OPT_U32, &c->zstd_level, "L", "zstd level for depth (and zstd colour)", .min = 1,
+                .max = 19),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
+
+void app_log_codec_apply(const app_log_codec *c, replay_log_config *lcfg)
+{
+    lcfg->colour = (replay_log_colour)c->colour;
+    lcfg->jpeg_quality = (int)c->jpeg_quality;
+    lcfg->zstd_level = (int)c->zstd_level;
+}
+
+int app_parse_log_command(app_command_spec *spec, const app_option *own, app_log_codec *codec, replay_options *ropt,
+                          replay_log_config *lcfg, int argc, char **argv)
+{
+    app_option codec_rows[APP_LOG_ROWS], seq[APP_SEQUENCE_ROWS];
+    app_log_codec_options(codec_rows, codec);
+    app_sequence_options(seq, ropt);
+    const app_option *tables[] = {own, codec_rows, seq, NULL};
+    spec->tables = tables;
+    int rc = app_options_parse(spec, argc, argv);
+    spec->tables = NULL; /* they live on this stack */
+    if (rc == 0) app_log_codec_apply(codec, lcfg);
+    return rc;
+}

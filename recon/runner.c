@@ -1,0 +1,184 @@
+/* recon: one sequence through the loop, with the policies every caller
+ * shares (recon.h, "the runner"). */
+#include "recon.h"
+
+#include <stdio.h>
+#include <string.h>
+
+recon_run_config recon_run_config_default(void)
+{
+    return (recon_run_config){.loop = recon_config_default(), .poses = RECON_POSES_TRACK};
+}
+
+void recon_run_free(recon_run *run)
+{
+    if (!run) return;
+    if (run->loop) recon_destroy(run->loop);
+    else fusion_destroy(run->map);
+    bf_traj_free(&run->est);
+    bf_traj_free(&run->gt);
+    recon_run_series *t = &run->series;
+    bf_stats *all[] = {&t->frame_ms,  &t->track_ms, &t->inlier_frac, &t->residual_mm, &t->rof_ms,
+                       &t->raycast_ms, &t->upload_ms, &t->alloc_ms,   &t->subcache_ms, &t->window_ms};
+    for (size_t i = 0; i < sizeof all / sizeof all[0]; i++) bf_stats_free(all[i]);
+    memset(run, 0, sizeof *run);
+}
+
+static bf_status push_fuse_times(recon_run_series *t, const fusion_stage_ms *ms)
+{
+    bf_status s = bf_stats_push(&t->upload_ms, ms->upload);
+    if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, ms->alloc);
+    if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, ms->subcache);
+    if (s == BF_OK) s = bf_stats_push(&t->window_ms, ms->window);
+    return s;
+}
+
+static bf_status push_series(recon_run_series *t, const recon_frame_result *fr, bool has_loop)
+{
+    bf_status s = bf_stats_push(&t->frame_ms, fr->ms_frame);
+    if (has_loop && (fr->state == RECON_TRACKED || fr->state == RECON_LOST)) {
+        if (s == BF_OK) s = bf_stats_push(&t->track_ms, fr->ms_track);
+        if (s == BF_OK) s = bf_stats_push(&t->inlier_frac, fr->track.inlier_frac);
+        if (s == BF_OK && fr->track.outcome == TRACK_OK) s = bf_stats_push(&t->residual_mm, 1e3 * fr->track.residual_m);
+    }
+    if (fr->fused && has_loop) {
+        if (s == BF_OK) s = bf_stats_push(&t->rof_ms, fr->ms_rof);
+        if (s == BF_OK) s = bf_stats_push(&t->raycast_ms, fr->ms_raycast);
+    }
+    if (fr->fused && s == BF_OK) s = push_fuse_times(t, &fr->fuse);
+    return s;
+}
+
+/* The pose to fuse frame f at with known poses: its ground truth, or the
+ * trajectory at its depth timestamp. False when there is none. */
+static bool known_pose(const recon_run_config *cfg, const bf_frame *f, bf_se3 *T_wc)
+{
+    if (cfg->known) return bf_traj_interpolate(cfg->known, f->t_depth_s, T_wc);
+    if (!f->has_pose) return false;
+    *T_wc = f->T_wc;
+    return true;
+}
+
+/* Fusion alone at a known pose: the map is made at the first posed frame. */
+static bf_status fuse_known(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, const bf_frame *f,
+                            const bf_se3 *T_wc, recon_run *run, recon_frame_result *fr)
+{
+    double t0 = bf_time_s();
+    memset(fr, 0, sizeof *fr);
+    fr->index = f->index;
+    fr->state = run->map ? RECON_TRACKED : RECON_FIRST;
+    fr->T_wc = *T_wc;
+    bf_status s = BF_OK;
+    if (!run->map) s = fusion_create(ctx, &cfg->loop.fusion, rgbd_source_intrinsics(src), T_wc->t, &run->map);
+    if (s == BF_OK) s = fusion_add_frame(run->map, f, T_wc);
+    if (run->map) fr->fuse = fusion_last_stage_ms(run->map);
+    fr->fuse_status = s;
+    if (s == BF_POOL_FULL) run->counts.pool_full++;
+    if (s != BF_OK) return s;
+    fr->fused = true;
+    fr->ms_frame = 1e3 * (bf_time_s() - t0);
+    run->n_fused++;
+    return BF_OK;
+}
+
+/* One frame through the loop; the loop is made at the first frame. */
+static bf_status track_frame_in_loop(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg,
+                                     const bf_frame *f, recon_run *run, recon_frame_result *fr)
+{
+    bf_status s;
+    if (!run->loop) {
+        bf_se3 T0 = (!cfg->init_identity && f->has_pose) ? f->T_wc : bf_se3_identity();
+        if ((s = recon_create(ctx, &cfg->loop, rgbd_source_intrinsics(src), &T0, &run->loop)) != BF_OK) return s;
+    }
+    if (cfg->poses == RECON_POSES_TRACK_FUSE_GT) {
+        if (!f->has_pose)
+            return bf_fail(BF_FORMAT, "%s: frame %u (t = %.6f) has no ground-truth pose (--fuse-at-groundtruth)",
+                           cfg->name, f->index, f->t_depth_s);
+        s = recon_add_frame_known(run->loop, f, &f->T_wc, fr);
+    } else {
+        s = recon_add_frame(run->loop, f, fr);
+    }
+    if (s != BF_OK) return s;
+    run->map = recon_map(run->loop);
+    run->counts = recon_get_counts(run->loop);
+    if (fr->state == RECON_LOST)
+        bf_warn("%s: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm): not fused", cfg->label,
+                f->index, f->t_depth_s, track_outcome_name(fr->track.outcome), 100 * fr->track.inlier_frac,
+                1e3 * fr->track.residual_m);
+    else if (fr->state == RECON_NO_DEPTH)
+        bf_warn("%s: frame %u (t = %.6f): %u valid depth samples: skipped", cfg->label, f->index, f->t_depth_s,
+                fr->n_valid);
+    return BF_OK;
+}
+
+/* One frame: loop or known pose, then the series, trajectories and the
+ * caller's callback. */
+static bf_status run_frame(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, const bf_frame *f,
+                           recon_frame_fn on_frame, void *user, recon_run *run)
+{
+    recon_frame_result fr;
+    bf_status s;
+    if (cfg->poses == RECON_POSES_KNOWN) {
+        bf_se3 T_wc;
+        run->counts.frames++; /* the loop counts its own */
+        if (!known_pose(cfg, f, &T_wc)) {
+            run->n_skipped++;
+            bf_warn("%s: frame %u (t = %.6f): no pose, skipped", cfg->label, f->index, f->t_depth_s);
+            return BF_OK;
+        }
+        s = fuse_known(ctx, src, cfg, f, &T_wc, run, &fr);
+    } else {
+        s = track_frame_in_loop(ctx, src, cfg, f, run, &fr);
+    }
+    if (s == BF_OK) s = push_series(&run->series, &fr, run->loop != NULL);
+    if (s == BF_OK) s = bf_traj_push(&run->est, f->t_depth_s, &fr.T_wc);
+    if (s == BF_OK && f->has_pose) s = bf_traj_push(&run->gt, f->t_depth_s, &f->T_wc);
+    if (s == BF_OK && on_frame) s = on_frame(user, run, f, &fr);
+    return s;
+}
+
+/* The end of the frames: BF_END, a stop, or a source failure the run keeps. */
+static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run)
+{
+    if (s != BF_END && cfg->keep_on_source_error && run->map && s != BF_VULKAN && s != BF_NO_MEMORY) {
+        run->source_status = s;
+        snprintf(run->source_error, sizeof run->source_error, "%s", bf_last_error());
+        bf_warn("%s: %s: the source failed (%s); keeping what was reconstructed", cfg->label, cfg->name,
+                run->source_error);
+        s = BF_END;
+    }
+    if (s != BF_END) return s;
+    if (!run->map)
+        return bf_fail(BF_FORMAT, "%s: no frame with %s", cfg->name,
+                       cfg->poses == RECON_POSES_KNOWN ? "a pose" : "depth");
+    return run->loop ? recon_flush(run->loop) : fusion_flush(run->map);
+}
+
+bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg_in,
+                             recon_frame_fn on_frame, void *user, recon_run *out)
+{
+    memset(out, 0, sizeof *out);
+    if (!ctx || !src || !cfg_in) return bf_fail(BF_INVALID_ARG, "recon_run_sequence: NULL argument");
+    recon_run_config cfg = *cfg_in;
+    if (!cfg.name) cfg.name = "sequence";
+    if (!cfg.label) cfg.label = "recon";
+    bf_progress prog;
+    bf_progress_begin(&prog, cfg.label, src->n_frames);
+    bf_frame f;
+    bf_status s = BF_END;
+    uint32_t seen = 0;
+    while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
+        seen++;
+        bf_status sf = run_frame(ctx, src, &cfg, &f, on_frame, user, out);
+        if (sf != BF_OK) {
+            bf_progress_end(&prog, seen);
+            return sf;
+        }
+        bf_progress_update(&prog, seen);
+    }
+    bf_progress_end(&prog, seen);
+    /* A stop may also reach the source first (a capture thread told to
+     * stop ends its frames): the flag says it was the stop. */
+    out->is_interrupted = cfg.stop && *cfg.stop;
+    return finish(&cfg, out->is_interrupted ? BF_END : s, out);
+}
