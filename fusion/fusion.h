@@ -34,6 +34,10 @@ typedef struct fusion_config {
     float conf_weight;      /* accumulated weight that makes a voxel confident, default 4 */
     float band_sigmas;      /* allocation band around a sample: +-k sigma(z), default 3 */
     float max_depth_m;      /* samples beyond are ignored, default 4.5 */
+    /* Shape of the integration kernel (docs/fusion_integrate.md): tuning for benchmarks and
+       tests; every choice gives the same bits. 0: chosen by device type (the default). */
+    uint32_t integrate_vpt; /* voxels per invocation, a power of two up to 64 */
+    uint32_t integrate_bpg; /* list entries (bricks) per workgroup, 1..1024 */
 } fusion_config;
 
 /* The defaults above. */

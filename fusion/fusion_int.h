@@ -29,12 +29,11 @@ struct fusion_map {
     gpu_buffer *window_list;  /* bricks of the window being integrated */
 
     /* Pipelines and binding sets, created by each stage's file. */
-    gpu_pipeline *p_alloc, *p_alloc_retry, *p_alloc_args;
+    gpu_pipeline *p_alloc, *p_alloc_args;
     gpu_bindings *b_alloc, *b_alloc_args;
     gpu_pipeline *p_integrate, *p_integrate_args, *p_window_list;
     gpu_bindings *b_integrate_new, *b_integrate_window, *b_window_list;
     uint32_t integrate_bpg;   /* list entries per workgroup of the integration kernel */
-#define FUSION_INTEGRATE_HAS_BPG 1
     gpu_pipeline *p_remove;
     gpu_bindings *b_remove;
 

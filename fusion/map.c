@@ -45,6 +45,10 @@ static bf_status config_check(const fusion_config *c, const bf_intrinsics *K)
     if (!(c->conf_weight > 0) || !(c->band_sigmas > 0) || !(c->max_depth_m > 0) || !(c->sigma_a > 0) ||
         !(c->sigma_b >= 0))
         return bf_fail(BF_INVALID_ARG, "fusion: weights, band, depth range and sigma must be positive");
+    if (c->integrate_vpt > 64 || (c->integrate_vpt & (c->integrate_vpt - 1)))
+        return bf_fail(BF_INVALID_ARG, "fusion: integrate_vpt %u (0, or a power of two up to 64)", c->integrate_vpt);
+    if (c->integrate_bpg > 1024)
+        return bf_fail(BF_INVALID_ARG, "fusion: integrate_bpg %u (0, or 1..1024)", c->integrate_bpg);
     if (K->width < 2 || K->height < 2 || K->width > 8192 || K->height > 8192 || !(K->depth_scale > 0) ||
         !isfinite(K->fx_px) || !isfinite(K->fy_px) || K->fx_px == 0 || K->fy_px == 0)
         return bf_fail(BF_INVALID_ARG, "fusion: bad intrinsics (%ux%u, fx %g, fy %g, depth scale %g)", K->width,

@@ -11,7 +11,6 @@ struct recon {
     bf_intrinsics K;
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
-    bf_se3 V;            /* motion of the last tracked frame, T_prev^-1 T_last (constant-velocity guess) */
     fusion_map *map;     /* created at the first frame with depth */
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
@@ -26,6 +25,7 @@ recon_config recon_config_default(void)
         .fusion = fusion_config_default(),
         .track = track_config_default(),
         .raycast = render_options_tracking(),
+        .caster = render_config_default(),
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
         .start_at_frame = true,
@@ -63,7 +63,6 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->K = *K;
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
-    r->V = bf_se3_identity();
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
     /* The reference at track.ref_level (half resolution by default): the
      * ray-cast, the loop's largest cost, then has a quarter of the rays.
@@ -71,7 +70,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     uint32_t l = r->cfg.track.ref_level;
     bf_status s = track_create(ctx, &r->cfg.track, K, &r->tracker);
     if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
-    if (s == BF_OK) s = render_create(ctx, r->K_ref.width, r->K_ref.height, &r->ref_caster);
+    if (s == BF_OK) s = render_create(ctx, &r->cfg.caster, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
     if (s != BF_OK) {
         recon_destroy(r);
@@ -98,7 +97,7 @@ fusion_map *recon_map(recon *r) { return r->map; }
 static bf_status view_caster(recon *r)
 {
     if (r->caster) return BF_OK;
-    return render_create(r->ctx, r->K.width, r->K.height, &r->caster);
+    return render_create(r->ctx, &r->cfg.caster, r->K.width, r->K.height, &r->caster);
 }
 
 render_caster *recon_caster(recon *r) { return view_caster(r) == BF_OK ? r->caster : NULL; }
@@ -169,12 +168,8 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         if (s == BF_OK) r->counts.tracked++;
         out->T_wc = r->T_first;
     } else {
-        /* The guess: the last pose, or with constant_velocity the last
-         * motion repeated (off by default: measured on the synthetic
-         * fr1_xyz room before the tracker kept its poses rigid, it lost
-         * tracking 8 frames earlier; not measured since). */
-        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
-        s = track_frame(r->tracker, f, &guess, &out->track);
+        /* The guess is the last pose (DESIGN.md section 6: no motion model). */
+        s = track_frame(r->tracker, f, &r->T_last, &out->track);
         if (s == BF_OK) {
             out->ms_track = out->track.ms_gpu;
             bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
@@ -187,15 +182,12 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
                 out->state = RECON_TRACKED;
                 out->T_wc = out->track.T_wc;
                 const bf_se3 *T_new = known ? known : &out->track.T_wc;
-                bf_se3 Li = bf_se3_inverse(&r->T_last);
-                r->V = bf_se3_mul(&Li, T_new);
                 r->T_last = *T_new;
                 r->counts.tracked++;
                 s = fuse_and_reference(r, f, T_new, true, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
-                r->V = bf_se3_identity(); /* the motion is unknown now */
                 if (known) {
                     r->T_last = *known;
                     s = fuse_and_reference(r, f, known, false, out);

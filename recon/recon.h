@@ -23,9 +23,9 @@ typedef struct recon_config {
     fusion_config fusion;     /* fusion's defaults but voxel_ratio 2 (docs/bench_replay_sweep.md) */
     track_config track;
     render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */
+    render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
-    bool constant_velocity;   /* guess = last pose times the last motion; default false (last pose) */
     bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
 } recon_config;
 

@@ -41,25 +41,27 @@ static bf_status target_create(gpu_context *ctx, const char *name, uint64_t byte
     return gpu_buffer_create(ctx, &d, out);
 }
 
-bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, render_caster **out)
+render_config render_config_default(void)
+{
+    return (render_config){.local_x = RENDER_LOCAL_X, .local_y = RENDER_LOCAL_Y};
+}
+
+bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t width, uint32_t height,
+                        render_caster **out)
 {
     if (!ctx || !out || width == 0 || height == 0 || width > 16384 || height > 16384)
         return bf_fail(BF_INVALID_ARG, "render: image size %ux%u (1..16384 each)", width, height);
+    render_config c = cfg ? *cfg : render_config_default();
+    uint32_t wx = c.local_x, wy = c.local_y;
+    if (wx < 1 || wy < 1 || wx * wy > 256 || wx * wy % 8)
+        return bf_fail(BF_INVALID_ARG, "render: workgroup %ux%u (x * y a multiple of 8, at most 256)", wx, wy);
     render_caster *rc = calloc(1, sizeof *rc);
     if (!rc) return bf_fail(BF_NO_MEMORY, "render: caster");
     rc->ctx = ctx;
     rc->targets.width = width;
     rc->targets.height = height;
     uint64_t n = (uint64_t)width * height;
-    /* Workgroup shape: RENDER_LOCAL_X x RENDER_LOCAL_Y, or BF_RENDER_WG=WxH
-     * (a tuning knob for bench/bench_render, which compares shapes in one
-     * run; lavapipe puts 8 consecutive invocations in one SIMD vector, so
-     * the shape decides which 8 rays run in lockstep). */
-    rc->local_x = RENDER_LOCAL_X, rc->local_y = RENDER_LOCAL_Y;
-    const char *wg = getenv("BF_RENDER_WG");
-    unsigned wx = 0, wy = 0;
-    if (wg && sscanf(wg, "%ux%u", &wx, &wy) == 2 && wx >= 1 && wy >= 1 && wx * wy <= 256 && wx * wy % 8 == 0)
-        rc->local_x = wx, rc->local_y = wy;
+    rc->local_x = wx, rc->local_y = wy;
     bf_status s = target_create(ctx, "render.depth", 4 * n, &rc->targets.depth);
     if (s == BF_OK) s = target_create(ctx, "render.normal", 16 * n, &rc->targets.normal);
     if (s == BF_OK) s = target_create(ctx, "render.level", 4 * n, &rc->targets.level);

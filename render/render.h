@@ -23,6 +23,16 @@
 
 typedef struct render_caster render_caster; /* opaque */
 
+/* How a caster is built. */
+typedef struct render_config {
+    /* Workgroup shape of both passes, default 8 x 8 (RENDER_LOCAL_X/Y); x * y a multiple of 8, at
+       most 256. lavapipe puts 8 consecutive invocations in one SIMD vector, so the shape decides
+       which rays run in lockstep (bench/bench_render compares shapes, docs/render.md). */
+    uint32_t local_x, local_y;
+} render_config;
+
+render_config render_config_default(void);
+
 typedef struct render_options {
     bool confident_only; /* display: only confident voxels are surface; tracking: every sign bit */
     bool refine;         /* sub-voxel hit: zero of the smoothed sign field on the ray (docs/render.md) */
@@ -52,8 +62,10 @@ typedef struct render_targets {
     gpu_buffer *colour; /* uint per pixel: shaded RGBA8 (R in the low byte); 0 = no hit */
 } render_targets;
 
-/* Creates a caster for images of width x height. ctx is borrowed. */
-bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, render_caster **out);
+/* Creates a caster for images of width x height. cfg NULL: the defaults.
+ * ctx is borrowed. BF_INVALID_ARG for a bad size or workgroup shape. */
+bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t width, uint32_t height,
+                        render_caster **out);
 /* NULL is a no-op. */
 void render_destroy(render_caster *rc);
 

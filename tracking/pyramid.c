@@ -42,10 +42,6 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
 
 bf_status track__pyramid_create(track_tracker *t)
 {
-    const char *prof = getenv("BITFUSE_TRACK_PROFILE");
-    t->profile = prof && !strcmp(prof, "1");
-    const char *pn = getenv("BITFUSE_TRACK_PARENT_NORMALS");
-    t->parent_normals = pn ? strcmp(pn, "0") != 0 : true;
     /* track_depth.comp counts valid pixels with subgroup additions. */
     uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
     if ((gpu_device_limits(t->ctx)->subgroup_ops & need) != need)
@@ -127,15 +123,15 @@ static track_image_push base_push(const track_tracker *t, uint32_t l)
 
 void track__stage_begin(track_tracker *t, const char *name)
 {
-    if (!t->profile) gpu_cmd_stage_begin(t->ctx, name);
+    if (!t->cfg.profile) gpu_cmd_stage_begin(t->ctx, name);
 }
 void track__stage_end(track_tracker *t)
 {
-    if (!t->profile) gpu_cmd_stage_end(t->ctx);
+    if (!t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 void track__profile_print(track_tracker *t, const char *what)
 {
-    if (!t->profile) return;
+    if (!t->cfg.profile) return;
     const gpu_stage_time *st;
     uint32_t n = gpu_stage_times(t->ctx, &st);
     fprintf(stderr, "track profile %s:", what);
@@ -145,7 +141,7 @@ void track__profile_print(track_tracker *t, const char *what)
 
 static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_image_push *pc)
 {
-    if (!t->profile) return;
+    if (!t->cfg.profile) return;
     char name[GPU_STAGE_NAME_MAX];
     const char *k = p == t->p_depth     ? "depth"
                     : p == t->p_pyrdown ? "pyr"
@@ -163,7 +159,7 @@ static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const t
     pstage_begin(t, p, pc);
     gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE),
                      gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
-    if (t->profile) gpu_cmd_stage_end(t->ctx);
+    if (t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 
 /* The same for kernels taking TRACK_IMAGE_PX pixels per invocation. */
@@ -172,7 +168,7 @@ static void dispatch_px(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, cons
     pstage_begin(t, p, pc);
     gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
                      gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
-    if (t->profile) gpu_cmd_stage_end(t->ctx);
+    if (t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 
 /* Depth of level 0 from the raw input, levels above, then the normal maps
@@ -197,7 +193,7 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first, uint3
         pc.src_width = t->geom.w[l - 1];
         dispatch(t, t->p_pyrdown, b, &pc);
     }
-    bool copy_parent = t->parent_normals && first == 0;
+    bool copy_parent = t->cfg.parent_normals && first == 0;
     uint32_t l0 = copy_parent ? 1u : first;
     for (uint32_t pass = 0; pass < 2; pass++) {
         /* The depth pyramid's (pass 0) or the horizontal pass's (pass 1)

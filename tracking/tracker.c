@@ -73,6 +73,12 @@ track_config track_config_default(void)
          * at full weight. */
         .huber_k = 2.0f,
         .weight_noise = true,
+        /* bench/bench_tracking.c measured the ICP shapes on lavapipe (docs/tracking.md). */
+        .icp_local = 64,
+        .icp_px_per_thread = 16,
+        .icp_subgroup = true,
+        /* Level 1's normals at the finest level: less noisy, and as accurate (docs/tracking.md). */
+        .parent_normals = true,
     };
     return c;
 }
@@ -113,6 +119,11 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
         return bf_fail(BF_INVALID_ARG, "tracking: ref_level %u (0 or 1, below levels %u)", c->ref_level, c->levels);
     if (c->finest_sample_step != 1 && c->finest_sample_step != 2)
         return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1 or 2)", c->finest_sample_step);
+    if (c->icp_local < 1 || c->icp_local > TRACK_ICP_LOCAL_MAX || (c->icp_local & (c->icp_local - 1)))
+        return bf_fail(BF_INVALID_ARG, "tracking: icp_local %u (a power of two up to %u)", c->icp_local,
+                       TRACK_ICP_LOCAL_MAX);
+    if (c->icp_px_per_thread < 1 || c->icp_px_per_thread > 4096)
+        return bf_fail(BF_INVALID_ARG, "tracking: icp_px_per_thread %u (1..4096)", c->icp_px_per_thread);
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
     if (!(c->huber_k >= 0) || !isfinite(c->huber_k))
         return bf_fail(BF_INVALID_ARG, "tracking: huber_k %g must be >= 0 (0: off)", c->huber_k);

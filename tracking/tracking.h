@@ -61,6 +61,15 @@ typedef struct track_config {
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
     float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 2; 0: off */
     bool weight_noise;       /* weight residuals by the inverse noise variance sigma_z(z)^-2, default true */
+    /* Kernel shapes and diagnostics (docs/tracking.md): tuning for benchmarks and tests; every
+       choice tracks to the same pose within float rounding. */
+    uint32_t icp_local;         /* ICP invocations per workgroup, a power of two up to 64, default 64
+                                   (fewer where the device allows fewer) */
+    uint32_t icp_px_per_thread; /* finest-level pixels each ICP invocation walks, default 16 */
+    bool icp_subgroup;          /* subgroup additions in the ICP reduction where the device has them
+                                   (default); false: the shared-memory reduction */
+    bool parent_normals;        /* the finest level's normals copied from level 1, default true */
+    bool profile;               /* every image dispatch its own timed stage, printed to stderr; default false */
 } track_config;
 
 track_config track_config_default(void);

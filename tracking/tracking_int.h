@@ -44,8 +44,6 @@ struct track_tracker {
     uint32_t icp_px_per_thread;
     uint32_t icp_groups_max;
     bool icp_subgroup;         /* the subgroup-arithmetic kernel is used */
-    bool parent_normals;       /* the finest level's normals from level 1 (pyramid.c) */
-    bool profile;              /* BITFUSE_TRACK_PROFILE=1: every image dispatch its own timed stage, printed */
     float *partial_host;       /* icp_groups_max * TRACK_PARTIAL_WORDS, allocated at create */
 
     /* The reference. */

@@ -324,6 +324,9 @@ static bf_intrinsics test_K(void)
         CHECK_STATUS(_st, BF_OK);                                                    \
     } while (0)
 
+/* fusion_config.integrate_vpt of the scenes opened next (0: by device). */
+static uint32_t s_integrate_vpt;
+
 static bf_status scene_open(scene *s)
 {
     memset(s, 0, sizeof *s);
@@ -340,6 +343,7 @@ static bf_status scene_open(scene *s)
     cfg.hash_buckets = 64;
     cfg.hash_overflow = 64;
     cfg.sigma_a = 0.008f; /* a sigma band of about a voxel, so ramps matter */
+    cfg.integrate_vpt = s_integrate_vpt;
     bf_intrinsics K = test_K();
     st = fusion_create(s->ctx, &cfg, &K, bf_v3(0, 0, 0), &s->map);
     if (st != BF_OK) return st;
@@ -529,12 +533,12 @@ BF_TEST(gpu_equals_cpu_invalid_pixels) { run_surface_case(surf_holes, 4, 0.05); 
  * a tuning choice: every size gives the same bits. */
 BF_TEST(gpu_equals_cpu_at_every_workgroup_size)
 {
-    static const char *vpt[] = {"1", "8", "16", "32"};
+    static const uint32_t vpt[] = {1, 8, 16, 32};
     for (size_t k = 0; k < sizeof vpt / sizeof vpt[0]; k++) {
-        setenv("BITFUSE_INTEGRATE_VPT", vpt[k], 1);
-        fprintf(stderr, "  %s voxels per invocation\n", vpt[k]);
+        s_integrate_vpt = vpt[k];
+        fprintf(stderr, "  %u voxels per invocation\n", vpt[k]);
         run_surface_case(surf_sphere, 4, 0.05);
-        unsetenv("BITFUSE_INTEGRATE_VPT");
+        s_integrate_vpt = 0;
         if (bf__test_failed_now) return;
     }
 }

@@ -137,7 +137,7 @@ BF_TEST(fronto_parallel_plane_depth_normal_and_level_are_exact)
     CHECK_OK(fusion_check(map));
 
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     for (int mode = 0; mode < 3; mode++) {
         render_options opt = mode == 0 ? render_options_tracking() : render_options_display();
@@ -198,7 +198,7 @@ BF_TEST(tilted_plane_depth_within_a_voxel_and_normals_within_degrees)
     uint32_t n = insert_plane(map, &pl, 5, (double[]){-1.0, -0.8, 0.6}, (double[]){1.0, 0.8, 2.4}, CONF_ALL);
     CHECK(n > 100);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     render_options opt = render_options_tracking();
     CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
@@ -272,7 +272,7 @@ BF_TEST(display_mode_hides_bricks_without_confident_voxels)
     plane pl = {{0, 0, z0}, {0, 0, -1}};
     CHECK(insert_plane(map, &pl, 5, (double[]){-0.9, -0.7, 1.0}, (double[]){0.9, 0.7, 1.2}, CONF_EVEN_X) > 100);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     render_options track = render_options_tracking(), show = render_options_display();
     render_images a, b;
@@ -331,7 +331,7 @@ BF_TEST(empty_map_and_pose_looking_away_give_no_hits_and_bad_sizes_are_refused)
     fusion_map *map;
     CHECK_OK(fusion_create(ctx, &c, &K_SMALL, bf_v3(3, -2, 1), &map));
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     T.t = bf_v3(3, -2, 1);
     render_options opt = render_options_tracking();
@@ -377,7 +377,7 @@ BF_TEST(empty_map_and_pose_looking_away_give_no_hits_and_bad_sizes_are_refused)
     r.far_m = r.near_m;
     CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &r), BF_INVALID_ARG);
     render_caster *none = NULL;
-    CHECK_STATUS(render_create(ctx, 0, 10, &none), BF_INVALID_ARG);
+    CHECK_STATUS(render_create(ctx, NULL, 0, 10, &none), BF_INVALID_ARG);
     CHECK(none == NULL);
     render_destroy(NULL);
     render_destroy(rc);
@@ -471,7 +471,7 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
     const bf_intrinsics K = {160, 120, 131.25, 131.25, 79.5, 59.5, 5000};
     bf_se3 T = bf_se3_interpolate(&room.T_wc[2], &room.T_wc[3], 0.5);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K.width, K.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K.width, K.height, &rc));
     size_t np = (size_t)K.width * K.height;
     float *ref_depth = malloc(np * sizeof *ref_depth);
     uint32_t *ref_level = malloc(np * sizeof *ref_level);
@@ -531,7 +531,7 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
 static bf_status room_cast(gpu_context *ctx, fusion_map *map, const bf_se3 *T_shift, float *depth[ROOM_FRAMES])
 {
     render_caster *rc = NULL;
-    bf_status s = render_create(ctx, K_ROOM.width, K_ROOM.height, &rc);
+    bf_status s = render_create(ctx, NULL, K_ROOM.width, K_ROOM.height, &rc);
     render_options opt = render_options_tracking();
     for (uint32_t k = 0; k < ROOM_FRAMES && s == BF_OK; k += 3) {
         bf_se3 T = bf_se3_mul(T_shift, &room.T_wc[k]);
@@ -622,7 +622,7 @@ BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
     fusion_map *map;
     CHECK_OK(room_fuse(ctx, &id, &map));
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_ROOM.width, K_ROOM.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_ROOM.width, K_ROOM.height, &rc));
     uint32_t np = K_ROOM.width * K_ROOM.height;
     float *z = malloc((size_t)np * 4 + 64);
     gpu_buffer *start;
@@ -696,7 +696,7 @@ BF_TEST(raycast_of_a_static_camera_is_unbiased)
     CHECK_OK(eval_render(ren, 0, &scene.T_wc_view, truth, NULL, NULL));
     eval_renderer_destroy(ren);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_ROOM.width, K_ROOM.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_ROOM.width, K_ROOM.height, &rc));
     double *err = malloc(np * sizeof *err);
     for (int noisy = 0; noisy < 2; noisy++) {
         eval_render_config cfg = {.K = K_ROOM, .noise = noisy ? EVAL_NOISE_KINECT1 : EVAL_NOISE_NONE, .seed = 7};

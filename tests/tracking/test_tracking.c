@@ -565,7 +565,7 @@ BF_TEST(icp_reduction_paths_agree)
     track_result r[2];
     bool sg[2];
     for (int k = 0; k < 2; k++) {
-        if (k) setenv("BITFUSE_TRACK_ICP_SUBGROUP", "0", 1);
+        cfg.icp_subgroup = k == 0;
         track_tracker *t;
         CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
         sg[k] = t->icp_subgroup;
@@ -573,7 +573,6 @@ BF_TEST(icp_reduction_paths_agree)
         CHECK_OK(track_frame(t, &f1, &T0, &r[k]));
         track_destroy(t);
     }
-    unsetenv("BITFUSE_TRACK_ICP_SUBGROUP");
     CHECK(!sg[1]);
     double dt, da;
     pose_error(&r[0].T_wc, &r[1].T_wc, &dt, &da);
