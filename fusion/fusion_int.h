@@ -22,7 +22,8 @@ struct fusion_map {
     /* The frame ring. */
     gpu_buffer *frames;       /* ring_slots fusion_frame records */
     gpu_buffer *depth_ring;   /* ring_slots depth images, 2 pixels per word */
-    gpu_buffer *upload;       /* host-visible staging of one frame: record + depth */
+    gpu_buffer *upload;       /* the incoming slot, host-visible: record + depth of the next frame */
+    gpu_buffer *readback;     /* host-visible: the counters and a new window's brick count, per frame */
     /* Work lists. */
     gpu_buffer *samples;      /* retry queue of the allocation passes */
     gpu_buffer *new_list;     /* bricks created by the current frame */
@@ -45,6 +46,10 @@ struct fusion_map {
     uint32_t window_slices_done;
     bool window_pending;
     uint32_t fails_seen;      /* pool-full drops already reported */
+    bool has_incoming;        /* the incoming slot holds a frame's depth (fusion_upload_frame) */
+    uint32_t incoming_index;  /* its bf_frame index, for messages */
+    bool fuse_pending;        /* fusion_cmd_fuse recorded, fusion_finish_frame not yet run */
+    bool pending_closes;      /* that frame closes a window: its count comes back in readback */
 
     double ms_upload, ms_alloc, ms_subcache, ms_window;
 };

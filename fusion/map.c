@@ -83,6 +83,7 @@ static bf_status create_buffers(fusion_map *m)
         {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
         {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
         {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4, GPU_MEMORY_UPLOAD, st},
+        {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + 1) * 4, GPU_MEMORY_READBACK, st},
         /* Up to 3 band points per pixel wait for a retry pass. */
         {&m->samples, "fusion.retry", (FUSION_QUEUE_ENTRIES + 2 * 3 * pixels) * 4, GPU_MEMORY_DEVICE,
          st | GPU_USAGE_INDIRECT},
@@ -137,6 +138,7 @@ static bf_status init_buffers(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_zero(m->samples);
     if (s == BF_OK) s = gpu_buffer_zero(m->new_list);
     if (s == BF_OK) s = gpu_buffer_zero(m->window_list);
+    if (s == BF_OK) s = gpu_buffer_zero(m->readback);
     uint32_t cnt[FUSION_CNT_WORDS] = {0};
     cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
     if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
@@ -183,7 +185,7 @@ void fusion_destroy(fusion_map *m)
     fusion__schedule_destroy(m);
     fusion__integrate_destroy(m);
     fusion__alloc_destroy(m);
-    gpu_buffer *bufs[] = {m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
+    gpu_buffer *bufs[] = {m->readback, m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
                           m->locks, m->hash};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);

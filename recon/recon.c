@@ -111,11 +111,36 @@ static uint32_t count_valid(const bf_frame *f)
     return n;
 }
 
-/* Fuses f at T and makes the ray-cast of the map at T the next reference. */
+/* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
+ * next reference, in one submission: fusion, the ray-cast (written straight
+ * into the tracker's reference) and the reference's preparation share it,
+ * so the frame costs one host wait besides its ICP iterations. */
 static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, bool tracked,
                                     recon_frame_result *out)
 {
-    bf_status s = fusion_add_frame(r->map, f, T);
+    render_options ro = r->cfg.raycast;
+    ro.no_shade = true; /* tracking takes its normals from the depth */
+    bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
+    if (s != BF_OK) return s;
+    if (r->cfg.start_at_frame && tracked &&
+        track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
+        /* The rays start a margin in front of the depth this frame saw
+         * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
+         * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the
+         * map's surface behind the frame's, plus 2 cm for the map's own error. */
+        ro.start_margin_m = 0.02f + 3.0f * r->cfg.fusion.sigma_a;
+        ro.start_margin_z2 = 3.0f * r->cfg.fusion.sigma_b;
+    }
+    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
+    s = fusion_cmd_fuse(r->map, T);
+    if (s == BF_OK) s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro);
+    if (s == BF_OK) s = track_cmd_reference(r->tracker, T);
+    /* The counters fusion copied and the reference's count -> the host. */
+    gpu_cmd_barrier(r->ctx, GPU_BARRIER_HOST);
+    bf_status sw = gpu_submit_wait(r->ctx);
+    if (s == BF_OK) s = sw;
+    if (s != BF_OK) return s;
+    s = fusion_finish_frame(r->map);
     out->fuse = fusion_last_stage_ms(r->map);
     out->fuse_status = s;
     if (s == BF_POOL_FULL) {
@@ -126,20 +151,9 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     }
     if (s != BF_OK) return s;
     out->fused = true;
-    render_options ro = r->cfg.raycast;
-    ro.no_shade = true; /* tracking takes its normals from the depth */
-    if (r->cfg.start_at_frame && tracked &&
-        track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
-        /* The rays start a margin in front of the depth this frame saw
-         * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
-         * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the
-         * map's surface behind the frame's, plus 2 cm for the map's own error. */
-        ro.start_margin_m = 0.02f + 3.0f * r->cfg.fusion.sigma_a;
-        ro.start_margin_z2 = 3.0f * r->cfg.fusion.sigma_b;
-    }
-    if ((s = render_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro)) != BF_OK) return s;
+    render_finish_raycast(r->ref_caster);
     out->ms_raycast = render_last_ms(r->ref_caster);
-    return track_set_reference_gpu(r->tracker, render_get_targets(r->ref_caster)->depth, T);
+    return track_finish_reference(r->tracker);
 }
 
 /* known: NULL for the loop; else the frame is tracked as usual but fused
@@ -164,12 +178,17 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         out->state = RECON_FIRST;
         if (known) r->T_first = r->T_last = *known;
         s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
+        if (s == BF_OK) s = fusion_upload_frame(r->map, f, NULL);
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
         if (s == BF_OK) r->counts.tracked++;
         out->T_wc = r->T_first;
     } else {
-        /* The guess is the last pose (DESIGN.md section 6: no motion model). */
-        s = track_frame(r->tracker, f, &r->T_last, &out->track);
+        /* The frame goes up once, into fusion's incoming slot: the tracker
+         * reads it there, fusing copies it into the ring. The guess is the
+         * last pose (DESIGN.md section 6: no motion model). */
+        fusion_frame_slot slot;
+        s = fusion_upload_frame(r->map, f, &slot);
+        if (s == BF_OK) s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &r->T_last, &out->track);
         if (s == BF_OK) {
             out->ms_track = out->track.ms_gpu;
             bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);

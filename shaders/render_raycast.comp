@@ -317,6 +317,6 @@ void main()
     if (hit && (pc.flags & RENDER_FLAG_REFINE) != 0u)
         tr.hit_depth = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
                                       (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u);
-    depth_out.v[pixel] = hit ? tr.hit_depth : 0.0;
+    depth_out.v[pc.depth_off + pixel] = hit ? tr.hit_depth : 0.0;
     level_out.v[pixel] = hit ? tr.hit_level : FUSION_NONE;
 }

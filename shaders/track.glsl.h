@@ -16,7 +16,8 @@
  *
  * Buffers of the image kernels (track_depth, track_pyrdown, track_smooth,
  * track_vn, track_rof, track_rof_primal), one binding layout for all:
- *   0 raw      input: u16 depth two per word (low half first), or float bits
+ *   0 raw      input: u16 depth two per word (low half first), or float bits,
+ *              from word raw_off (a frame in fusion's incoming slot)
  *   1 depth    depth pyramid (float)
  *   2 normal   normal pyramid (uint, octahedral)
  *   3 counters TRACK_CNT_* (uint)
@@ -46,9 +47,10 @@
 #define TRACK_CNT_WORDS 4u
 
 
-/* Raw input modes of track_depth. */
-#define TRACK_RAW_U16 0u
-#define TRACK_RAW_F32 1u
+/* Input modes of track_depth. */
+#define TRACK_RAW_U16 0u      /* raw binding: u16 sensor units, two per word */
+#define TRACK_RAW_F32 1u      /* raw binding: float metres */
+#define TRACK_RAW_IN_PLACE 2u /* the depth level itself (float metres written there by the ray-cast) */
 
 /* ------------------------------------------------------------ ICP sums
  * One workgroup's partial sums of the point-to-plane system (Low 2004):
@@ -78,7 +80,7 @@ struct track_image_push {
     bf_f32 lambda0;         /* ROF data weight at 1 m */
     bf_f32 tau;             /* ROF step (Chambolle 2004: 1/4) */
     bf_u32 src_width;       /* of the level read (pyrdown) */
-    bf_u32 pad;
+    bf_u32 raw_off;         /* word offset of the raw image in binding 0 (depth, TRACK_RAW_U16 / F32) */
 };
 #ifndef BF_GLSL
 typedef struct track_image_push track_image_push;

@@ -165,7 +165,6 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     t->geom.n_pix = off;
     uint64_t n0 = (uint64_t)K->width * K->height, np = t->geom.n_pix;
     if ((s = buffer(t, "track.upload", (n0 + 1) / 2 * 4, GPU_MEMORY_UPLOAD, &t->upload)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_in", n0 * 4, GPU_MEMORY_DEVICE, &t->ref_in)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.frame_depth", np * 4, GPU_MEMORY_DEVICE, &t->frame_depth)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.frame_normal", np * 4, GPU_MEMORY_DEVICE, &t->frame_normal)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.ref_depth", np * 4, GPU_MEMORY_DEVICE, &t->ref_depth)) != BF_OK) goto fail;
@@ -175,7 +174,7 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
-    gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
+    gpu_buffer *zero[] = {t->upload, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
                           t->rof_p[0], t->rof_p[1], t->counters};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
     if (s != BF_OK) goto fail;
@@ -194,7 +193,7 @@ void track_destroy(track_tracker *t)
     track__icp_destroy(t);
     track__pyramid_destroy(t);
     gpu_buffer *bufs[] = {t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_depth,
-                          t->frame_normal, t->frame_depth, t->ref_in, t->upload};
+                          t->frame_normal, t->frame_depth, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
     free(t);
@@ -212,16 +211,6 @@ static uint32_t min_valid(const track_tracker *t, uint32_t l)
 static bf_status read_counter(track_tracker *t, uint32_t idx, uint32_t *v)
 {
     return gpu_buffer_download(t->counters, idx * 4u, v, 4);
-}
-
-static double stage_ms(const gpu_context *ctx, const char *name)
-{
-    const gpu_stage_time *st;
-    uint32_t n = gpu_stage_times(ctx, &st);
-    double ms = 0;
-    for (uint32_t i = 0; i < n; i++)
-        if (!strcmp(st[i].name, name)) ms += st[i].ms;
-    return ms;
 }
 
 /* The nearest rigid motion: the rotation's polar factor (Higham's Newton
@@ -265,30 +254,81 @@ static double det3(const double R[3][3])
            R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]);
 }
 
-static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16_t *raw, const bf_se3 *T_wc)
+static bf_status check_pose(const bf_se3 *T_wc)
 {
-    bf_status s = gpu_buffer_fill(t->counters, TRACK_CNT_REF_VALID * 4u, 4, 0);
-    if (s == BF_OK && raw) s = track__upload_depth(t, raw);
-    if (s == BF_OK) s = gpu_begin(t->ctx);
+    if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
+        return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
+    return BF_OK;
+}
+
+bf_status track_reference_target(track_tracker *t, gpu_buffer **buf, uint64_t *offset)
+{
+    if (!t || !buf || !offset) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    *buf = t->ref_depth;
+    *offset = t->geom.off[t->cfg.ref_level];
+    return BF_OK;
+}
+
+/* Records the preparation of the reference (in place: from its target;
+ * else from the raw frame in the upload buffer). */
+static void cmd_reference(track_tracker *t, bool in_place, const bf_se3 *T_wc)
+{
+    t->has_ref = false; /* the pyramids are being rewritten */
+    t->ref_pending = true;
+    t->ref_first = in_place ? t->cfg.ref_level : 0;
+    t->T_wr_pending = *T_wc;
+    track__cmd_reference(t, in_place);
+}
+
+bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc)
+{
+    if (!t || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_pose(T_wc);
     if (s != BF_OK) return s;
-    t->ref_first = depth ? t->cfg.ref_level : 0;
-    if (depth) {
-        uint32_t l = t->ref_first;
-        gpu_cmd_copy(t->ctx, depth, 0, t->ref_in, 0, (uint64_t)t->geom.w[l] * t->geom.h[l] * 4);
-        /* The copy into ref_in -> the depth conversion reading it. */
-        gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    }
-    track__cmd_reference(t, depth != NULL);
-    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    cmd_reference(t, true, T_wc);
+    return BF_OK;
+}
+
+bf_status track_finish_reference(track_tracker *t)
+{
+    if (!t || !t->ref_pending) return bf_fail(BF_INVALID_ARG, "tracking: no reference recorded to finish");
+    t->ref_pending = false;
     track__profile_print(t, "reference");
-    t->ms_rof = stage_ms(t->ctx, "track.rof");
-    t->ms_ref = t->ms_rof + stage_ms(t->ctx, "track.ref");
+    t->ms_rof = gpu_stage_ms(t->ctx, "track.rof");
+    t->ms_ref = t->ms_rof + gpu_stage_ms(t->ctx, "track.ref");
     uint32_t n = 0;
-    if ((s = read_counter(t, TRACK_CNT_REF_VALID, &n)) != BF_OK) return s;
+    bf_status s = read_counter(t, TRACK_CNT_REF_VALID, &n);
+    if (s != BF_OK) return s;
     t->ref_valid = n;
     t->has_ref = n >= min_valid(t, t->ref_first);
-    t->T_wr = nearest_rigid(T_wc);
+    t->T_wr = nearest_rigid(&t->T_wr_pending);
     return BF_OK;
+}
+
+/* One submission of its own: the reference from depth (a GPU float image,
+ * copied to the target) or raw (a frame's u16 depth). */
+static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16_t *raw, const bf_se3 *T_wc)
+{
+    bf_status s = raw ? track__upload_depth(t, raw) : BF_OK;
+    if (s == BF_OK) s = gpu_begin(t->ctx);
+    if (s != BF_OK) return s;
+    if (depth) {
+        uint32_t l = t->cfg.ref_level;
+        /* The previous reference's readers -> the copy over it. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
+        gpu_cmd_copy(t->ctx, depth, 0, t->ref_depth, (uint64_t)t->geom.off[l] * 4,
+                     (uint64_t)t->geom.w[l] * t->geom.h[l] * 4);
+        /* The copy into the target -> the depth pass reading it in place. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    }
+    cmd_reference(t, depth != NULL, T_wc);
+    /* The count of valid pixels -> the host's read. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_HOST);
+    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) {
+        t->ref_pending = false;
+        return s;
+    }
+    return track_finish_reference(t);
 }
 
 bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc)
@@ -300,8 +340,8 @@ bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_
         return bf_fail(BF_INVALID_ARG, "tracking: reference %s holds %llu bytes, %ux%u floats need %llu",
                        gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth), t->geom.w[l], t->geom.h[l],
                        (unsigned long long)need);
-    if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
+    bf_status s = check_pose(T_wc);
+    if (s != BF_OK) return s;
     return set_reference(t, depth, NULL, T_wc);
 }
 
@@ -318,27 +358,30 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
 {
     if (!t || !f || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
     bf_status s = check_frame(t, f);
+    if (s == BF_OK) s = check_pose(T_wc);
     if (s != BF_OK) return s;
-    if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
     return set_reference(t, NULL, f->depth, T_wc);
 }
 
-bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out)
+/* Tracks the frame whose raw depth is at word raw_off of raw. */
+static bf_status frame_from(track_tracker *t, gpu_buffer *raw, uint32_t raw_off, uint32_t index,
+                            const bf_se3 *guess_wc, track_result *out)
 {
-    if (!t || !f || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
-    bf_status s = check_frame(t, f);
-    if (s != BF_OK) return s;
     if (!bf_se3_is_finite(guess_wc) || !(det3(guess_wc->R) > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: frame %u: guess is not finite or not a rotation", f->index);
+        return bf_fail(BF_INVALID_ARG, "tracking: frame %u: guess is not finite or not a rotation", index);
     track_result r = {.outcome = TRACK_OK, .T_wc = *guess_wc, .ms_rof = t->ms_rof, .ms_ref = t->ms_ref};
     if (!t->has_ref) {
         r.outcome = TRACK_NO_REFERENCE;
         *out = r;
         return BF_OK;
     }
+    bf_status s;
+    if (raw != t->frame_raw) {
+        if ((s = gpu_bindings_set(t->b_frame, 0, raw, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
+        t->frame_raw = raw;
+    }
+    t->frame_raw_off = raw_off;
     if ((s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0)) != BF_OK) return s;
-    if ((s = track__upload_depth(t, f->depth)) != BF_OK) return s;
     /* Everything the GPU sees is relative to the reference camera, and
      * rigid (nearest_rigid: a guess that is not quite orthonormal must not
      * make its error part of the relative pose). */
@@ -359,6 +402,27 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     }
     *out = r;
     return BF_OK;
+}
+
+bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out)
+{
+    if (!t || !f || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_frame(t, f);
+    if (s != BF_OK) return s;
+    if (t->has_ref && (s = track__upload_depth(t, f->depth)) != BF_OK) return s;
+    return frame_from(t, t->upload, 0, f->index, guess_wc, out);
+}
+
+bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
+                          const bf_se3 *guess_wc, track_result *out)
+{
+    if (!t || !depth || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    uint64_t words = ((uint64_t)t->K.width * t->K.height + 1) / 2;
+    if (offset % 4 || offset / 4 > UINT32_MAX || gpu_buffer_size(depth) < offset + words * 4)
+        return bf_fail(BF_INVALID_ARG, "tracking: frame %u: %s holds %llu bytes, %llu words of depth from byte %llu",
+                       index, gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth),
+                       (unsigned long long)words, (unsigned long long)offset);
+    return frame_from(t, depth, (uint32_t)(offset / 4), index, guess_wc, out);
 }
 
 bf_status track_frame_depth_gpu(track_tracker *t, uint32_t level, gpu_buffer **buf, uint64_t *offset)

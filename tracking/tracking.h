@@ -107,10 +107,25 @@ typedef struct track_result {
 bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out);
 void track_destroy(track_tracker *t); /* NULL is a no-op */
 
+/* The reference, written in place (recon/: the ray-cast writes it there,
+ * nothing is copied): where a depth image must be written to become the
+ * reference, (width >> ref_level) x (height >> ref_level) floats (camera z
+ * in metres, 0 = none) from pixel *offset of *buf. Valid until
+ * track_destroy. */
+bf_status track_reference_target(track_tracker *t, gpu_buffer **buf, uint64_t *offset);
+/* Records, into the context's open command buffer (gpu_begin) after the
+ * commands that wrote the target (they end with a barrier), the reference's
+ * preparation seen from T_wc: ROF smoothing on its foreground, then the
+ * vertex and normal pyramids. The caller submits, then calls
+ * track_finish_reference; until then there is no reference. */
+bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc);
+/* After the submission holding track_cmd_reference finished: the reference
+ * takes effect (its valid pixels counted, its pose kept). */
+bf_status track_finish_reference(track_tracker *t);
 /* Sets the reference from a depth image on the GPU (float camera z in
- * metres per pixel, 0 = none; render_targets.depth) seen from T_wc: ROF
- * smoothing on its foreground, then the vertex and normal pyramids. The
- * buffer is read now and may change afterwards. */
+ * metres per pixel, 0 = none; render_targets.depth) seen from T_wc, in a
+ * submission of its own: the image is copied to the target, then as
+ * track_cmd_reference. The buffer is read now and may change afterwards. */
 bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc);
 /* Sets the reference from a raw frame (frame-to-frame tracking, tests):
  * the same path after converting its depth to metres. */
@@ -118,8 +133,16 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
 
 /* Tracks frame f against the reference, starting from guess_wc. Returns
  * BF_OK whenever tracking ran (out->outcome says how it went) and an error
- * only for bad arguments or a device failure. */
+ * only for bad arguments or a device failure. Uploads f's depth to the
+ * tracker's own buffer, then as track_frame_gpu. */
 bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out);
+/* Tracks a frame whose raw depth is already on the GPU: width x height
+ * uint16 in K's depth units, two per word (the lower half first), from byte
+ * offset `offset` (a multiple of 4) of `depth` (recon/: fusion's incoming
+ * frame slot, so the frame is uploaded once). index names the frame in
+ * messages. The image must stay there until this returns. */
+bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
+                          const bf_se3 *guess_wc, track_result *out);
 
 /* The depth pyramid of the last frame track_frame saw, on the GPU: level l
  * is (width >> l) x (height >> l) floats (metres, 0 = none) from pixel
