@@ -30,10 +30,9 @@ typedef struct fusion_config {
     uint32_t node_cap;      /* octree nodes, default 2 * brick_cap */
     uint32_t hash_buckets;  /* chunk hash buckets, default 4096 */
     uint32_t hash_overflow; /* overflow entries, default 4096 */
-    float sigma_a, sigma_b, sigma_c; /* sensor sigma(z) = a + b (z - c)^2, default Kinect v1 */
+    bf_sensor sensor;       /* noise model and range, default Kinect v1 (recon/ sets its own) */
     float conf_weight;      /* accumulated weight that makes a voxel confident, default 4 */
     float band_sigmas;      /* allocation band around a sample: +-k sigma(z), default 3 */
-    float max_depth_m;      /* samples beyond are ignored, default 4.5 */
     /* Shape of the integration kernel (docs/fusion_integrate.md): tuning for benchmarks and
        tests; every choice gives the same bits. 0: chosen by device type (the default). */
     uint32_t integrate_vpt; /* voxels per invocation, a power of two up to 64 */

@@ -1,6 +1,6 @@
 /* Windowed integration: host side of shaders/fusion_integrate.comp and
  * shaders/fusion_integrate_args.comp (DESIGN.md section 4). The per-voxel
- * math is shared with the CPU oracle fusion/integrate_ref.c through
+ * math is shared with the CPU oracle tests/fusion/integrate_ref.c through
  * shaders/fusion.glsl.h; docs/fusion_integrate.md describes the rule. */
 #include "bf_shaders_spv.h"
 #include "fusion_int.h"
@@ -116,9 +116,9 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         /* A window shorter than the threshold (a sequence of fewer frames)
          * can still make a voxel confident: seen in every one of its frames. */
         .conf_weight = m->cfg.conf_weight < (float)n_frames ? m->cfg.conf_weight : (float)n_frames,
-        .sigma_a = m->cfg.sigma_a,
-        .sigma_b = m->cfg.sigma_b,
-        .sigma_c = m->cfg.sigma_c,
+        .sigma_a = m->cfg.sensor.sigma_a,
+        .sigma_b = m->cfg.sensor.sigma_b,
+        .sigma_c = m->cfg.sensor.sigma_c,
         .prior_weight = FUSION_PRIOR_WEIGHT,
         .bricks_per_group = m->integrate_bpg ? m->integrate_bpg : 1,
     };

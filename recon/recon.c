@@ -22,6 +22,7 @@ struct recon {
 recon_config recon_config_default(void)
 {
     recon_config c = {
+        .sensor = bf_sensor_kinect1(),
         .fusion = fusion_config_default(),
         .track = track_config_default(),
         .raycast = render_options_tracking(),
@@ -63,6 +64,8 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->K = *K;
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
+    /* One noise model and range for the whole loop. */
+    r->cfg.fusion.sensor = r->cfg.track.sensor = r->cfg.sensor;
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
     /* The reference at track.ref_level (half resolution by default): the
      * ray-cast, the loop's largest cost, then has a quarter of the rays.
@@ -128,8 +131,8 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
          * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
          * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the
          * map's surface behind the frame's, plus 2 cm for the map's own error. */
-        ro.start_margin_m = 0.02f + 3.0f * r->cfg.fusion.sigma_a;
-        ro.start_margin_z2 = 3.0f * r->cfg.fusion.sigma_b;
+        ro.start_margin_m = 0.02f + 3.0f * r->cfg.sensor.sigma_a;
+        ro.start_margin_z2 = 3.0f * r->cfg.sensor.sigma_b;
     }
     if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
     s = fusion_cmd_fuse(r->map, T);

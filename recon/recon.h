@@ -20,6 +20,8 @@
 typedef struct recon recon; /* opaque */
 
 typedef struct recon_config {
+    bf_sensor sensor;         /* the depth sensor, default Kinect v1: recon_create hands it to fusion and
+                                 tracking (the sensor fields of .fusion and .track are not read) */
     fusion_config fusion;     /* fusion's defaults but voxel_ratio 2 (docs/bench_replay_sweep.md) */
     track_config track;
     render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */

@@ -97,6 +97,9 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
         .sub = sub,
         .huber_k = weighted ? t->cfg.huber_k : 0.0f,
         .weight_noise = weighted && t->cfg.weight_noise ? 1u : 0u,
+        .sigma_a = t->cfg.sensor.sigma_a,
+        .sigma_b = t->cfg.sensor.sigma_b,
+        .sigma_c = t->cfg.sensor.sigma_c,
     };
     /* Frame levels below the reference's finest are associated with it. */
     uint32_t rl = l > t->ref_first ? l : t->ref_first;

@@ -109,7 +109,10 @@ static track_image_push base_push(const track_tracker *t, uint32_t l)
         .height = t->geom.h[l],
         .dst_off = t->geom.off[l],
         .unit_m = (float)(1.0 / t->K.depth_scale),
-        .max_depth_m = t->cfg.max_depth_m,
+        .max_depth_m = t->cfg.sensor.max_depth_m,
+        .sigma_a = t->cfg.sensor.sigma_a,
+        .sigma_b = t->cfg.sensor.sigma_b,
+        .sigma_c = t->cfg.sensor.sigma_c,
         .lambda0 = t->cfg.rof_lambda0,
         .tau = 0.25f, /* Chambolle 2004: converges in practice up to 1/4 */
     };

@@ -30,7 +30,7 @@ track_config track_config_default(void)
          * normals of real frames disagree by more than 20 degrees on about
          * a third of the pixels at the right pose. */
         .angle_deg = 45.0f,
-        .max_depth_m = 4.5f, /* Kinect v1's range (EVAL_KINECT1_Z_MAX_M) */
+        .sensor = bf_sensor_kinect1(),
         /* A quarter of the frame's samples must find a partner: frame to
          * frame at 30 Hz over 90% do; a lost or jumped camera leaves a few
          * percent (tests: 0.3 m / 20 degrees gives < 10%). */
@@ -110,9 +110,11 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
 {
     if (c->levels < 1 || c->levels > TRACK_MAX_LEVELS)
         return bf_fail(BF_INVALID_ARG, "tracking: %u levels (1..%u)", c->levels, TRACK_MAX_LEVELS);
-    if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->max_depth_m > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: gates must be positive (dist %g m, angle %g deg, depth %g m)",
-                       c->dist_m, c->angle_deg, c->max_depth_m);
+    if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->sensor.max_depth_m > 0) ||
+        !(c->sensor.sigma_a > 0) || !(c->sensor.sigma_b >= 0))
+        return bf_fail(BF_INVALID_ARG,
+                       "tracking: gates and sensor must be positive (dist %g m, angle %g deg, depth %g m, sigma %g)",
+                       c->dist_m, c->angle_deg, c->sensor.max_depth_m, c->sensor.sigma_a);
     if (c->rof_level > 1 || c->rof_level >= c->levels)
         return bf_fail(BF_INVALID_ARG, "tracking: rof_level %u (0 or 1, below levels %u)", c->rof_level, c->levels);
     if (c->ref_level > 1 || c->ref_level >= c->levels)

@@ -34,7 +34,7 @@ typedef struct track_config {
     uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 5, 5, 4 (KinectFusion: 10, 5, 4) */
     float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 45 (DESIGN.md: 20; docs/tracking.md) */
-    float max_depth_m;                     /* samples beyond are ignored, default 4.5 */
+    bf_sensor sensor;                      /* noise model and range, default Kinect v1 (recon/ sets its own) */
     /* Failure and degeneracy (checked at the end of the finest level). */
     float min_inlier_frac;   /* inliers / valid samples of the frame below this: failure */
     float max_residual_m;    /* RMS point-to-plane residual of the inliers above this: failure */

@@ -19,7 +19,7 @@
 #include <string.h>
 
 #include "eval/eval.h"
-#include "fusion/fusion_int.h"
+#include "fusion_ref.h"
 #include "gpu/gpu.h"
 
 static double cpu_seconds(void)
@@ -169,7 +169,7 @@ int main(int argc, char **argv)
                     TRY(gpu_buffer_download(map->sign, (uint64_t)b * 64, sign, 64));
                     TRY(gpu_buffer_download(map->conf, (uint64_t)b * 64, conf, 64));
                     fusion_ref_margins mg;
-                    fusion__integrate_ref(&pc, frames, depth_ring, &ref[j], &mg);
+                    fusion_ref_integrate(&pc, frames, depth_ring, &ref[j], &mg);
                     fragile += mg.n_fragile;
                     for (int w = 0; w < 16; w++) {
                         uint32_t d = (sign[w] ^ ref[j].sign[w]) | (conf[w] ^ ref[j].conf[w]);

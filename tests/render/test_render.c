@@ -7,7 +7,7 @@
 #include <string.h>
 
 #include "eval/eval.h"
-#include "fusion/fusion_int.h"
+#include "fusion_ref.h"
 #include "gpu_fixture.h"
 #include "raycast_ref.h"
 #include "render/render.h"
@@ -70,7 +70,7 @@ static uint32_t insert_plane(fusion_map *map, const plane *pl, uint32_t level, c
                     cell[a] = (uint32_t)(g[a] - k * per);
                 }
                 uint32_t slot;
-                if (fusion__debug_insert_brick(map, key, level, cell, &slot) != BF_OK) return 0;
+                if (fusion_ref_insert_brick(map, key, level, cell, &slot) != BF_OK) return 0;
                 uint32_t sign[16] = {0}, conf[16] = {0};
                 bool confident = rule == CONF_ALL || (gx % 2 == 0);
                 for (uint32_t z = 0; z < 8; z++)
@@ -577,7 +577,7 @@ BF_TEST(raycast_at_a_fused_pose_reproduces_its_depth_also_10_km_away)
             if (!(dn[k][i] > 0)) continue;
             n_hit++;
             if (!(z > 0)) continue;
-            double sigma = fc->sigma_a + fc->sigma_b * (z - fc->sigma_c) * (z - fc->sigma_c);
+            double sigma = fc->sensor.sigma_a + fc->sensor.sigma_b * (z - fc->sensor.sigma_c) * (z - fc->sensor.sigma_c);
             ratio[n++] = fabs(dn[k][i] - z) / sigma;
         }
         double med = median(ratio, n);
@@ -641,8 +641,8 @@ BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
         hinted.start_depth = start;
         hinted.start_offset = 16;
         const fusion_config *fc = fusion_get_config(map); /* recon's margins */
-        hinted.start_margin_m = 0.02f + 3.0f * fc->sigma_a;
-        hinted.start_margin_z2 = 3.0f * fc->sigma_b;
+        hinted.start_margin_m = 0.02f + 3.0f * fc->sensor.sigma_a;
+        hinted.start_margin_z2 = 3.0f * fc->sensor.sigma_b;
         hinted.no_shade = true;
         CHECK_OK(render_raycast(rc, map, &K_ROOM, &room.T_wc[k], &hinted));
         CHECK_OK(render_download(rc, &b));

@@ -417,7 +417,7 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     uint32_t kept = 0;
     for (uint32_t i = 0; i < nh; i++) {
         double z = ref[i] / Kh.depth_scale;
-        if (z > 0 && z <= cfg.max_depth_m) kept += zf[i] > 0 && fabs(zf[i] - z) < 0.03;
+        if (z > 0 && z <= cfg.sensor.max_depth_m) kept += zf[i] > 0 && fabs(zf[i] - z) < 0.03;
         else CHECK(zf[i] == 0);
     }
     track_result r;
