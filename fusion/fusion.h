@@ -9,8 +9,15 @@
  * slice of the current window's bricks (the window of n frames slides by
  * n/2; its integration is spread over the next n/2 frames).
  *
- * Layout shared with the shaders: shaders/fusion.glsl.h. Host copies of the
- * map for export and tests: fusion_snapshot. See docs/fusion.md.
+ * A frame comes in once, through the frame ring's host-visible incoming
+ * slot (fusion_upload_frame), where tracking reads it too; fusing copies it
+ * into the ring. fusion_add_frame does a frame in a submission of its own;
+ * recon/ records fusion_cmd_fuse into the submission it shares with the
+ * ray-cast and the tracking reference.
+ *
+ * Layout shared with the shaders: shaders/fusion.glsl.h (the chunk lookup:
+ * shaders/fusion_hash.glsl.h). Host copies of the map for export and tests:
+ * fusion_snapshot. See docs/fusion.md.
  */
 #ifndef BF_FUSION_H
 #define BF_FUSION_H

@@ -4,6 +4,11 @@
  * reference. The loop is what `bitfuse replay`, `bitfuse demo` and
  * `bitfuse live` run; the tests drive it directly.
  *
+ * Per frame the host waits once per ICP iteration and once for the rest:
+ * the frame goes up once (fusion's incoming slot, read by tracking), and
+ * fusion, the ray-cast (written straight into the tracking reference) and
+ * the reference's smoothing share one submission (DESIGN.md section 1).
+ *
  * Frames tracked badly are not fused (the map stays as it was) and the
  * camera keeps its last good pose; frames without depth are skipped. Both
  * are reported per frame and counted.

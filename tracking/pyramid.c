@@ -66,7 +66,6 @@ bf_status track__pyramid_create(track_tracker *t)
                             TRACK_IMAGE_TILE, &t->p_primal)) != BF_OK)
         return s;
     if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
-    t->frame_raw = t->upload;
     t->frame_raw_off = 0;
     for (uint32_t k = 0; k < 2; k++)
         if ((s = image_bindings(t, k ? "track.ref[1]" : "track.ref[0]", t->upload, true, k, &t->b_ref_up[k])) != BF_OK)

@@ -377,11 +377,10 @@ static bf_status frame_from(track_tracker *t, gpu_buffer *raw, uint32_t raw_off,
         *out = r;
         return BF_OK;
     }
-    bf_status s;
-    if (raw != t->frame_raw) {
-        if ((s = gpu_bindings_set(t->b_frame, 0, raw, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
-        t->frame_raw = raw;
-    }
+    /* Bound every frame (a host-side descriptor write): a buffer pointer
+     * seen before may be a new buffer at a freed one's address. */
+    bf_status s = gpu_bindings_set(t->b_frame, 0, raw, 0, GPU_WHOLE_SIZE);
+    if (s != BF_OK) return s;
     t->frame_raw_off = raw_off;
     if ((s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0)) != BF_OK) return s;
     /* Everything the GPU sees is relative to the reference camera, and

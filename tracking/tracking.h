@@ -11,6 +11,13 @@
  * each iteration reduces the 6x6 system on the GPU in partial sums and
  * solves it on the CPU in double.
  *
+ * Frames come as raw depth on the GPU (fusion's incoming frame slot,
+ * track_frame_gpu) or from the host (track_frame). A reference from the
+ * GPU is written in place at track_reference_target (recon/'s ray-cast)
+ * and prepared in the caller's submission (track_cmd_reference), so the
+ * loop copies nothing. The sensor's noise model and range come from
+ * track_config.sensor (the bf_sensor fusion gets too).
+ *
  * Poses are camera to world in double. The GPU only ever sees the pose of
  * the new frame relative to the reference camera, so tracking 10 km from
  * the world origin is as accurate as at the origin. Rotations that come

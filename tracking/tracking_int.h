@@ -29,8 +29,8 @@ struct track_tracker {
      * frame, the same pyramids (that level of ref_depth is then the
      * ROF-smoothed depth), the ROF dual fields (ping-pong). */
     gpu_buffer *upload;        /* UPLOAD: u16 depth of a frame given on the host (track_frame, references from frames) */
-    gpu_buffer *frame_raw;     /* the buffer b_frame's binding 0 holds now: upload, or the caller's (track_frame_gpu) */
-    uint32_t frame_raw_off;    /* word offset of the frame's raw depth in it */
+    uint32_t frame_raw_off;    /* word offset of the frame's raw depth in b_frame's binding 0 (upload, or
+                                  the caller's buffer: track_frame_gpu) */
     gpu_buffer *frame_depth, *frame_normal;
     gpu_buffer *ref_depth, *ref_normal;
     gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
@@ -38,7 +38,7 @@ struct track_tracker {
     gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
 
     gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp;
-    /* Image binding sets: frame from frame_raw, reference from the upload
+    /* Image binding sets: frame from its raw depth, reference from the upload
      * (a raw frame; unused in place) with the dual fields 0 -> 1 and 1 -> 0. */
     gpu_bindings *b_frame, *b_ref_up[2], *b_icp;
 
@@ -71,7 +71,7 @@ void track__stage_end(track_tracker *t);
 void track__profile_print(track_tracker *t, const char *what);
 bf_status track__pyramid_create(track_tracker *t);
 void track__pyramid_destroy(track_tracker *t);
-/* Records the raw frame (frame_raw at frame_raw_off) -> frame pyramids
+/* Records the raw frame (b_frame's binding 0 at frame_raw_off) -> frame pyramids
  * (depth, normal; counts the valid pixels into TRACK_CNT_FRAME_VALID). */
 void track__cmd_frame_pyramid(track_tracker *t);
 /* Records the reference: the count of its valid pixels cleared, depth
@@ -86,7 +86,7 @@ bf_status track__upload_depth(track_tracker *t, const uint16_t *depth);
 bf_status track__icp_create(track_tracker *t);
 void track__icp_destroy(track_tracker *t);
 /* Runs ICP from the relative pose *T_rc (in/out): the frame's
- * preprocessing (its depth at frame_raw) in the first iteration's
+ * preprocessing (its raw depth bound to b_frame) in the first iteration's
  * submission, then the levels; fills the result's statistics and outcome
  * (NO_DEPTH when the frame has fewer than min_valid depth pixels;
  * NO_REFERENCE is the caller's). */
