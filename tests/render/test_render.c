@@ -178,6 +178,32 @@ BF_TEST(fronto_parallel_plane_depth_normal_and_level_are_exact)
         render_images_free(&im);
     }
     CHECK(render_last_ms(rc) > 0);
+    /* The depth sent to another buffer at an offset (recon/ writes the
+     * tracking reference in place this way): the same bits. */
+    render_options opt = render_options_tracking();
+    opt.no_shade = true;
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    uint32_t n_px = K_SMALL.width * K_SMALL.height;
+    float *own = malloc(n_px * 4), *sent = malloc(n_px * 4);
+    CHECK_OK(gpu_buffer_download(render_get_targets(rc)->depth, 0, own, (uint64_t)n_px * 4));
+    gpu_buffer *dst;
+    gpu_buffer_desc dd = {.name = "test.depth_out", .size_bytes = (uint64_t)(n_px + 7) * 4,
+                          .memory = GPU_MEMORY_DEVICE};
+    CHECK_OK(gpu_buffer_create(ctx, &dd, &dst));
+    CHECK_OK(gpu_buffer_zero(dst));
+    opt.depth_out = dst;
+    opt.depth_offset = 7;
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    CHECK_OK(gpu_buffer_download(dst, 7 * 4, sent, (uint64_t)n_px * 4));
+    CHECK(memcmp(own, sent, (size_t)n_px * 4) == 0);
+    /* Shading reads the caster's own image; a buffer too small is refused. */
+    opt.no_shade = false;
+    CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &opt), BF_INVALID_ARG);
+    opt.no_shade = true;
+    opt.depth_offset = 8;
+    CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &opt), BF_INVALID_ARG);
+    gpu_buffer_destroy(dst);
+    free(own), free(sent);
     render_destroy(rc);
     fusion_destroy(map);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
