@@ -85,6 +85,15 @@ static void add_float(cJSON *o, const char *name, float v)
     cJSON_AddRawToObject(o, name, buf);
 }
 
+static void json_sensor(cJSON *parent, const char *name, const bf_sensor *c)
+{
+    cJSON *o = app_json_object(parent, name);
+    add_float(o, "sigma_a", c->sigma_a);
+    add_float(o, "sigma_b", c->sigma_b);
+    add_float(o, "sigma_c", c->sigma_c);
+    add_float(o, "max_depth_m", c->max_depth_m);
+}
+
 void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config *c)
 {
     cJSON *o = app_json_object(parent, name);
@@ -97,12 +106,11 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     cJSON_AddNumberToObject(o, "node_cap", c->node_cap);
     cJSON_AddNumberToObject(o, "hash_buckets", c->hash_buckets);
     cJSON_AddNumberToObject(o, "hash_overflow", c->hash_overflow);
-    add_float(o, "sigma_a", c->sigma_a);
-    add_float(o, "sigma_b", c->sigma_b);
-    add_float(o, "sigma_c", c->sigma_c);
+    json_sensor(o, "sensor", &c->sensor);
     add_float(o, "conf_weight", c->conf_weight);
     add_float(o, "band_sigmas", c->band_sigmas);
-    add_float(o, "max_depth_m", c->max_depth_m);
+    cJSON_AddNumberToObject(o, "integrate_vpt", c->integrate_vpt);
+    cJSON_AddNumberToObject(o, "integrate_bpg", c->integrate_bpg);
 }
 
 static void json_track_config(cJSON *parent, const char *name, const track_config *c)
@@ -114,7 +122,7 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
         cJSON_AddItemToArray(it, cJSON_CreateNumber(c->iterations[l]));
     add_float(o, "dist_m", c->dist_m);
     add_float(o, "angle_deg", c->angle_deg);
-    add_float(o, "max_depth_m", c->max_depth_m);
+    json_sensor(o, "sensor", &c->sensor);
     add_float(o, "min_inlier_frac", c->min_inlier_frac);
     add_float(o, "max_residual_m", c->max_residual_m);
     add_float(o, "max_motion_m", c->max_motion_m);
@@ -130,17 +138,26 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     cJSON_AddNumberToObject(o, "finest_sample_step", c->finest_sample_step);
     add_float(o, "huber_k", c->huber_k);
     cJSON_AddBoolToObject(o, "weight_noise", c->weight_noise);
+    cJSON_AddNumberToObject(o, "icp_local", c->icp_local);
+    cJSON_AddNumberToObject(o, "icp_px_per_thread", c->icp_px_per_thread);
+    cJSON_AddBoolToObject(o, "icp_subgroup", c->icp_subgroup);
+    cJSON_AddBoolToObject(o, "parent_normals", c->parent_normals);
+    cJSON_AddBoolToObject(o, "profile", c->profile);
 }
 
 void app_json_recon_config(cJSON *parent, const char *name, const recon_config *c)
 {
     cJSON *o = app_json_object(parent, name);
-    app_json_fusion_config(o, "fusion", &c->fusion);
-    json_track_config(o, "track", &c->track);
+    /* The loop hands its sensor to fusion and tracking: echo what they use. */
+    fusion_config fc = c->fusion;
+    track_config tc = c->track;
+    fc.sensor = tc.sensor = c->sensor;
+    json_sensor(o, "sensor", &c->sensor);
+    app_json_fusion_config(o, "fusion", &fc);
+    json_track_config(o, "track", &tc);
     cJSON *l = app_json_object(o, "loop");
     cJSON_AddNumberToObject(l, "min_valid_pixels", c->min_valid_pixels);
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
-    cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);
@@ -150,4 +167,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     add_float(r, "start_margin_m", c->raycast.start_margin_m);
     add_float(r, "start_margin_z2", c->raycast.start_margin_z2);
     cJSON_AddBoolToObject(r, "no_shade", c->raycast.no_shade);
+    cJSON *cs = app_json_object(l, "caster");
+    cJSON_AddNumberToObject(cs, "local_x", c->caster.local_x);
+    cJSON_AddNumberToObject(cs, "local_y", c->caster.local_y);
 }

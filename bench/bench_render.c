@@ -5,7 +5,7 @@
  *
  *   build/bench/bench_render [--frames N] [--runs N] [--ratio R] [--wg 8x8,4x2,...]
  *
- * --wg compares workgroup shapes (render_create reads BF_RENDER_WG),
+ * --wg compares workgroup shapes (render_config.local_x, local_y),
  * interleaved run by run.
  */
 #include <math.h>
@@ -113,12 +113,15 @@ int main(int argc, char **argv)
     for (const char *p = shapes; s == BF_OK && *p && n_rc < MAX_SHAPES;) {
         size_t len = strcspn(p, ",");
         snprintf(shape[n_rc], sizeof shape[n_rc], "%.*s", (int)(len < 15 ? len : 15), p);
-        setenv("BF_RENDER_WG", shape[n_rc], 1); /* read by render_create */
-        s = render_create(ctx, K.width, K.height, &rc[n_rc]);
+        render_config rcfg = render_config_default();
+        if (sscanf(shape[n_rc], "%ux%u", &rcfg.local_x, &rcfg.local_y) != 2) {
+            s = bf_fail(BF_INVALID_ARG, "bench_render: --wg %s is not WxH", shape[n_rc]);
+            break;
+        }
+        s = render_create(ctx, &rcfg, K.width, K.height, &rc[n_rc]);
         if (s == BF_OK) n_rc++;
         p += len + (p[len] == ',');
     }
-    unsetenv("BF_RENDER_WG");
     if (s != BF_OK) goto done;
     printf("# render bench: %s, room fused from %u frames 640x480 (ratio %.2g, %.0f ms/frame), %u bricks\n\n",
            gpu_device_name(ctx), n_frames, ratio, 1e3 * t_fuse / n_frames, fs.n_bricks);

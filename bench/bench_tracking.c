@@ -6,8 +6,8 @@
  * given as a float depth buffer on the GPU (as a ray-cast would be), from
  * the previous true pose. Then the real TUM fr2_desk b1 -> b2 pair.
  *
- *   build/bench/bench_tracking [--frames N] [--quick]   (--quick: the default only)
- *   BITFUSE_TRACK_PROFILE=1 prints every dispatch's GPU time
+ *   build/bench/bench_tracking [--frames N] [--quick] [--profile]
+ *   (--quick: the default only; --profile: track_config.profile, every dispatch's GPU time)
  */
 #include <math.h>
 #include <stdio.h>
@@ -45,10 +45,11 @@ static double median(double *v, uint32_t n) { return bf_percentile_inplace(v, n,
 int main(int argc, char **argv)
 {
     uint32_t n_frames = 16;
-    bool quick = false;
+    bool quick = false, profile = false;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--frames") && i + 1 < argc) n_frames = (uint32_t)atoi(argv[++i]);
         else if (!strcmp(argv[i], "--quick")) quick = true; /* the default variant only */
+        else if (!strcmp(argv[i], "--profile")) profile = true;
     }
     bf_intrinsics K = {640, 480, 525, 525, 319.5, 239.5, 5000};
     uint32_t n = K.width * K.height;
@@ -99,6 +100,7 @@ int main(int argc, char **argv)
     uint32_t fails[NV] = {0}, iters[NV] = {0};
     for (size_t v = 0; v < n_vars; v++) {
         track_config cfg = track_config_default();
+        cfg.profile = profile;
         memcpy(cfg.iterations, vars[v].it, sizeof cfg.iterations);
         cfg.rof_iterations = vars[v].rof;
         cfg.finest_sample_step = vars[v].sub;
@@ -163,6 +165,7 @@ int main(int argc, char **argv)
             for (uint32_t sub = 1; sub <= 2; sub++) {
                 if (quick && (ai > 0 || sub > 1)) continue;
                 track_config cfg = track_config_default();
+                cfg.profile = profile;
                 cfg.angle_deg = angles[ai];
                 cfg.finest_sample_step = sub;
                 track_tracker *t;
@@ -194,6 +197,7 @@ int main(int argc, char **argv)
                "|---|---|---|---|---|---|---|---|---|\n");
         for (size_t si = 0; si < sizeof sched / sizeof sched[0] && !quick; si++) {
             track_config cfg = track_config_default();
+            cfg.profile = profile;
             memcpy(cfg.iterations, sched[si], sizeof cfg.iterations);
             track_tracker *t;
             if (track_create(ctx, &cfg, &Kt, &t) != BF_OK) continue;

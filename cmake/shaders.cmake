@@ -13,6 +13,9 @@ function(bf_add_shaders)
   file(GLOB glsl_headers ${CMAKE_SOURCE_DIR}/shaders/*.glsl.h ${CMAKE_SOURCE_DIR}/shaders/*.glsl)
   foreach(src ${S_SOURCES})
     get_filename_component(abs ${src} ABSOLUTE)
+    # Headers next to the shader (a test's own kernels) are dependencies too.
+    get_filename_component(src_dir ${abs} DIRECTORY)
+    file(GLOB local_headers ${src_dir}/*.glsl.h)
     get_filename_component(name ${src} NAME_WE)
     set(spv ${gen_dir}/${name}.spv)
     set(cfile ${gen_dir}/${name}.spv.c)
@@ -20,7 +23,7 @@ function(bf_add_shaders)
       OUTPUT ${spv}
       COMMAND ${GLSLC} -fshader-stage=compute --target-env=vulkan1.2 -O -DBF_GLSL=1
               -I ${CMAKE_SOURCE_DIR}/shaders -o ${spv} ${abs}
-      DEPENDS ${abs} ${glsl_headers}
+      DEPENDS ${abs} ${glsl_headers} ${local_headers}
       COMMENT "glslc ${name}.comp")
     add_custom_command(
       OUTPUT ${cfile}

@@ -159,6 +159,20 @@ bf_vec3 bf_intrinsics_unproject(const bf_intrinsics *K, double u, double v, doub
 /* Projects camera point p; returns false when z <= 0. */
 bool bf_intrinsics_project(const bf_intrinsics *K, bf_vec3 p_c, double *u, double *v);
 
+/* The depth sensor: its axial noise sigma(z) = sigma_a + sigma_b (z -
+ * sigma_c)^2 [m] (bf_sensor_sigma in shaders/bf_common.glsl.h, the one
+ * definition C and the shaders use) and its range. Fusion (allocation band,
+ * integration weights) and tracking (pyramid thresholds, smoothing, ICP
+ * weights) read the same one: recon/ hands its sensor to both. */
+typedef struct bf_sensor {
+    float sigma_a, sigma_b, sigma_c;
+    float max_depth_m; /* samples beyond are ignored */
+} bf_sensor;
+
+/* Kinect v1 (Nguyen, Izadi, Lovell 2012: a = 0.0012, b = 0.0019, c = 0.4;
+ * range 4.5 m). */
+bf_sensor bf_sensor_kinect1(void);
+
 /* ---------------------------------------------------------------- frames */
 
 /* One RGB-D frame. The pixel buffers are borrowed from whoever produced the

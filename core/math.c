@@ -341,6 +341,11 @@ void bf_sym_eigen(int n, double *A, double *w, double *V)
     }
 }
 
+bf_sensor bf_sensor_kinect1(void)
+{
+    return (bf_sensor){.sigma_a = 0.0012f, .sigma_b = 0.0019f, .sigma_c = 0.4f, .max_depth_m = 4.5f};
+}
+
 bf_intrinsics bf_intrinsics_level(const bf_intrinsics *K, uint32_t l)
 {
     double s = 1.0 / (double)(1u << l);

@@ -67,10 +67,10 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
         .chunk_m = m->cfg.chunk_m,
         .voxel_ratio = m->cfg.voxel_ratio,
         .band_sigmas = m->cfg.band_sigmas,
-        .max_depth_m = m->cfg.max_depth_m,
-        .sigma_a = m->cfg.sigma_a,
-        .sigma_b = m->cfg.sigma_b,
-        .sigma_c = m->cfg.sigma_c,
+        .max_depth_m = m->cfg.sensor.max_depth_m,
+        .sigma_a = m->cfg.sensor.sigma_a,
+        .sigma_b = m->cfg.sensor.sigma_b,
+        .sigma_c = m->cfg.sensor.sigma_c,
     };
     uint32_t lock_groups = gpu_groups(m->cfg.hash_buckets, 64);
     /* Empty retry queues and the frame's new-brick list; clear the locks. */

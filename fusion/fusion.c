@@ -82,8 +82,7 @@ static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
  * the camera. Computed in double, handed over in float (DESIGN.md 10). */
 static void frame_record(const fusion_map *m, const bf_se3 *T_wc, uint32_t index, fusion_frame *r)
 {
-    bf_se3 T_mc = *T_wc;
-    T_mc.t = bf_v3_sub(T_wc->t, m->origin_w);
+    bf_se3 T_mc = fusion_camera_to_map(m, T_wc);
     bf_se3 T_cm = bf_se3_inverse(&T_mc);
     memset(r, 0, sizeof *r);
     for (int i = 0; i < 3; i++)
@@ -96,20 +95,37 @@ static void frame_record(const fusion_map *m, const bf_se3 *T_wc, uint32_t index
     r->index = index;
 }
 
-/* Writes the record and the depth image into the upload buffer and records
- * their copies into ring slot `slot`. */
-static bf_status cmd_upload(fusion_map *m, const bf_frame *f, const fusion_frame *rec, uint32_t slot)
+static uint64_t depth_bytes(const fusion_map *m) { return ((uint64_t)m->K.width * m->K.height + 1) / 2 * 4; }
+
+bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slot *out)
+{
+    if (f->width != m->K.width || f->height != m->K.height || !f->depth)
+        return bf_fail(BF_INVALID_ARG, "fusion: frame %u is %ux%u, the map was made for %ux%u", f->index, f->width,
+                       f->height, m->K.width, m->K.height);
+    uint8_t *up = gpu_buffer_map(m->upload);
+    if (!up) return bf_fail(BF_VULKAN, "fusion: upload buffer is not mapped");
+    uint64_t pixels = (uint64_t)m->K.width * m->K.height;
+    memcpy(up + FUSION_FRAME_WORDS * 4, f->depth, pixels * 2);
+    if (pixels % 2) memset(up + FUSION_FRAME_WORDS * 4 + pixels * 2, 0, 2);
+    bf_status s = gpu_buffer_flush(m->upload);
+    if (s != BF_OK) return s;
+    m->has_incoming = true;
+    m->incoming_index = f->index;
+    if (out) *out = (fusion_frame_slot){.depth = m->upload, .offset = FUSION_FRAME_WORDS * 4};
+    return BF_OK;
+}
+
+/* Writes the record into the incoming slot and records the copy of record
+ * and depth into ring slot `slot`. */
+static bf_status cmd_upload(fusion_map *m, const fusion_frame *rec, uint32_t slot)
 {
     uint8_t *up = gpu_buffer_map(m->upload);
     if (!up) return bf_fail(BF_VULKAN, "fusion: upload buffer is not mapped");
-    uint64_t pixels = (uint64_t)m->K.width * m->K.height, depth_bytes = (pixels + 1) / 2 * 4;
     memcpy(up, rec, sizeof *rec);
-    memcpy(up + sizeof *rec, f->depth, pixels * 2);
-    if (pixels % 2) memset(up + sizeof *rec + pixels * 2, 0, 2);
     bf_status s = gpu_buffer_flush(m->upload);
     if (s != BF_OK) return s;
     gpu_cmd_copy(m->ctx, m->upload, 0, m->frames, (uint64_t)slot * sizeof *rec, sizeof *rec);
-    gpu_cmd_copy(m->ctx, m->upload, sizeof *rec, m->depth_ring, (uint64_t)slot * depth_bytes, depth_bytes);
+    gpu_cmd_copy(m->ctx, m->upload, sizeof *rec, m->depth_ring, (uint64_t)slot * depth_bytes(m), depth_bytes(m));
     return BF_OK;
 }
 
@@ -135,18 +151,14 @@ static void cmd_window_slice(fusion_map *m)
 
 static void read_stage_times(fusion_map *m)
 {
-    const gpu_stage_time *t;
-    uint32_t n = gpu_stage_times(m->ctx, &t);
-    m->ms_upload = m->ms_alloc = m->ms_subcache = m->ms_window = 0;
-    for (uint32_t i = 0; i < n; i++) {
-        if (!strcmp(t[i].name, "fusion.upload")) m->ms_upload += t[i].ms;
-        else if (!strcmp(t[i].name, "fusion.alloc")) m->ms_alloc += t[i].ms;
-        else if (!strcmp(t[i].name, "fusion.subcache")) m->ms_subcache += t[i].ms;
-        else if (!strncmp(t[i].name, "fusion.window", 13)) m->ms_window += t[i].ms;
-    }
+    m->ms_upload = gpu_stage_ms(m->ctx, "fusion.upload");
+    m->ms_alloc = gpu_stage_ms(m->ctx, "fusion.alloc");
+    m->ms_subcache = gpu_stage_ms(m->ctx, "fusion.subcache");
+    m->ms_window = gpu_stage_ms(m->ctx, "fusion.window");
 }
 
-/* Reads the count of the window list gathered in the last submission. */
+/* Reads the count of the window list gathered in the last submission
+ * (fusion_flush; a frame copies it into the readback buffer instead). */
 static bf_status read_window_count(fusion_map *m)
 {
     uint32_t n;
@@ -170,12 +182,10 @@ static void start_window(fusion_map *m, uint32_t last)
 }
 
 /* Reports requests dropped for a full pool since the last frame (the map
- * stays consistent: a dropped request changes nothing). */
-static bf_status check_pools(fusion_map *m, uint32_t index)
+ * stays consistent: a dropped request changes nothing), from the counters
+ * the frame's submission copied into the readback buffer. */
+static bf_status check_pools(fusion_map *m, const uint32_t *cnt, uint32_t index)
 {
-    uint32_t cnt[FUSION_CNT_WORDS];
-    bf_status s = gpu_buffer_download(m->counters, 0, cnt, sizeof cnt);
-    if (s != BF_OK) return s;
     uint32_t fails = cnt[FUSION_CNT_FAIL_NODES] + cnt[FUSION_CNT_FAIL_BRICKS] + cnt[FUSION_CNT_FAIL_HASH];
     if (fails == m->fails_seen) return BF_OK;
     m->fails_seen = fails;
@@ -186,20 +196,19 @@ static bf_status check_pools(fusion_map *m, uint32_t index)
                    cnt[FUSION_CNT_FAIL_HASH], m->cfg.hash_overflow);
 }
 
-bf_status fusion_add_frame(fusion_map *m, const bf_frame *f, const bf_se3 *T_wc)
+bf_status fusion_cmd_fuse(fusion_map *m, const bf_se3 *T_wc)
 {
-    if (f->width != m->K.width || f->height != m->K.height || !f->depth)
-        return bf_fail(BF_INVALID_ARG, "fusion: frame %u is %ux%u, the map was made for %ux%u", f->index, f->width,
-                       f->height, m->K.width, m->K.height);
+    if (!m->has_incoming) return bf_fail(BF_INVALID_ARG, "fusion: no frame uploaded to fuse");
     if (!bf_se3_is_finite(T_wc))
-        return bf_fail(BF_INVALID_ARG, "fusion: frame %u: camera pose is not finite", f->index);
+        return bf_fail(BF_INVALID_ARG, "fusion: frame %u: camera pose is not finite", m->incoming_index);
     uint32_t index = m->n_frames, slot = fusion__ring_slot(m, index);
     fusion_frame rec;
     frame_record(m, T_wc, index, &rec);
-    bf_status s = gpu_begin(m->ctx);
-    if (s != BF_OK) return s;
+    /* Whatever was recorded before (another module's reads of the map) ->
+     * this frame's copies and passes. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_stage_begin(m->ctx, "fusion.upload");
-    s = cmd_upload(m, f, &rec, slot);
+    bf_status s = cmd_upload(m, &rec, slot);
     gpu_cmd_stage_end(m->ctx);
     gpu_cmd_stage_begin(m->ctx, "fusion.alloc");
     fusion__cmd_alloc(m, slot, index);
@@ -227,14 +236,49 @@ bf_status fusion_add_frame(fusion_map *m, const bf_frame *f, const bf_se3 *T_wc)
         }
         start_window(m, index);
     }
+    /* The counters (and a new window's brick count) -> their copies into
+     * the readback buffer, which the host reads after the fence: no
+     * download of its own per frame. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
+    gpu_cmd_copy(m->ctx, m->counters, 0, m->readback, 0, FUSION_CNT_WORDS * 4);
+    if (closes) gpu_cmd_copy(m->ctx, m->window_list, 0, m->readback, FUSION_CNT_WORDS * 4, 4);
+    /* The copies -> the host's reads in fusion_finish_frame; the map's
+     * writes -> readers recorded next (the ray-cast). */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
-    if (s == BF_OK) s = gpu_submit_wait(m->ctx);
-    else (void)gpu_submit_wait(m->ctx);
-    if (s != BF_OK) return s;
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+    m->fuse_pending = true;
+    m->pending_closes = closes;
+    return s;
+}
+
+bf_status fusion_finish_frame(fusion_map *m)
+{
+    if (!m->fuse_pending) return bf_fail(BF_INVALID_ARG, "fusion: no frame fused to finish");
+    m->fuse_pending = false;
+    m->has_incoming = false;
     read_stage_times(m);
-    if (closes && (s = read_window_count(m)) != BF_OK) return s;
-    m->n_frames++;
-    return check_pools(m, index);
+    const uint32_t *rb = gpu_buffer_map(m->readback);
+    if (!rb) return bf_fail(BF_VULKAN, "fusion: readback buffer is not mapped");
+    if (m->pending_closes) m->window_count = rb[FUSION_CNT_WORDS];
+    uint32_t index = m->n_frames++;
+    return check_pools(m, rb, index);
+}
+
+bf_status fusion_add_frame(fusion_map *m, const bf_frame *f, const bf_se3 *T_wc)
+{
+    bf_status s = fusion_upload_frame(m, f, NULL);
+    if (s == BF_OK && !bf_se3_is_finite(T_wc))
+        s = bf_fail(BF_INVALID_ARG, "fusion: frame %u: camera pose is not finite", f->index);
+    if (s == BF_OK) s = gpu_begin(m->ctx);
+    if (s != BF_OK) return s;
+    s = fusion_cmd_fuse(m, T_wc);
+    bf_status sw = gpu_submit_wait(m->ctx);
+    if (s == BF_OK) s = sw;
+    if (s != BF_OK) {
+        m->fuse_pending = false;
+        return s;
+    }
+    return fusion_finish_frame(m);
 }
 
 bf_status fusion_flush(fusion_map *m)
@@ -265,6 +309,13 @@ bf_status fusion_flush(fusion_map *m)
 }
 
 /* ------------------------------------------------------------ statistics */
+
+bf_se3 fusion_camera_to_map(const fusion_map *m, const bf_se3 *T_wc)
+{
+    bf_se3 T_mc = *T_wc;
+    T_mc.t = bf_v3_sub(T_wc->t, m->origin_w);
+    return T_mc;
+}
 
 fusion_stage_ms fusion_last_stage_ms(const fusion_map *m)
 {

@@ -9,8 +9,15 @@
  * slice of the current window's bricks (the window of n frames slides by
  * n/2; its integration is spread over the next n/2 frames).
  *
- * Layout shared with the shaders: shaders/fusion.glsl.h. Host copies of the
- * map for export and tests: hostmap/hostmap.h. See docs/fusion.md.
+ * A frame comes in once, through the frame ring's host-visible incoming
+ * slot (fusion_upload_frame), where tracking reads it too; fusing copies it
+ * into the ring. fusion_add_frame does a frame in a submission of its own;
+ * recon/ records fusion_cmd_fuse into the submission it shares with the
+ * ray-cast and the tracking reference.
+ *
+ * Layout shared with the shaders: shaders/fusion.glsl.h (the chunk lookup:
+ * shaders/fusion_hash.glsl.h). Host copies of the map for export and tests:
+ * hostmap/hostmap.h (fusion_snapshot_take). See docs/fusion.md.
  */
 #ifndef BF_FUSION_H
 #define BF_FUSION_H
@@ -31,10 +38,13 @@ typedef struct fusion_config {
     uint32_t node_cap;      /* octree nodes, default 2 * brick_cap */
     uint32_t hash_buckets;  /* chunk hash buckets, default 4096 */
     uint32_t hash_overflow; /* overflow entries, default 4096 */
-    float sigma_a, sigma_b, sigma_c; /* sensor sigma(z) = a + b (z - c)^2, default Kinect v1 */
+    bf_sensor sensor;       /* noise model and range, default Kinect v1 (recon/ sets its own) */
     float conf_weight;      /* accumulated weight that makes a voxel confident, default 4 */
     float band_sigmas;      /* allocation band around a sample: +-k sigma(z), default 3 */
-    float max_depth_m;      /* samples beyond are ignored, default 4.5 */
+    /* Shape of the integration kernel (docs/fusion_integrate.md): tuning for benchmarks and
+       tests; every choice gives the same bits. 0: chosen by device type (the default). */
+    uint32_t integrate_vpt; /* voxels per invocation, a power of two up to 64 */
+    uint32_t integrate_bpg; /* list entries (bricks) per workgroup, 1..1024 */
 } fusion_config;
 
 /* The defaults above. */
@@ -52,10 +62,46 @@ void fusion_destroy(fusion_map *map);
 
 /* Adds one frame seen from T_wc (camera to world): uploads it to the frame
  * ring, allocates bricks, integrates (sub-cache and the current window
- * slice). Depth must have K's size. BF_POOL_FULL when a pool ran out: the
- * requests that did not fit are dropped and counted, the map stays
- * consistent (fusion_check passes). */
+ * slice), in one submission that it waits for. Depth must have K's size.
+ * BF_POOL_FULL when a pool ran out: the requests that did not fit are
+ * dropped and counted, the map stays consistent (fusion_check passes).
+ * The same as fusion_upload_frame, then fusion_cmd_fuse in a submission of
+ * its own, then fusion_finish_frame. */
 bf_status fusion_add_frame(fusion_map *map, const bf_frame *f, const bf_se3 *T_wc);
+
+/* ------------------------------------------------------------ the frame ring
+ * The ring holds the last 2n frames on the GPU (depth and a record with the
+ * map-to-camera transform) for the window's integration. A frame comes in
+ * once, through the ring's incoming slot (host-visible): tracking reads it
+ * there as a plain buffer and offset, and fusing it copies it into its ring
+ * slot on the GPU. recon/ uses the steps below so that fusing, the ray-cast
+ * and the tracking reference share one submission (DESIGN.md section 1). */
+
+/* Where an uploaded frame's depth is, as readers on the GPU see it: raw
+ * depth in the camera's units (K.depth_scale), width x height uint16 two per
+ * word (the lower half first), from byte offset `offset` of `depth`. */
+typedef struct fusion_frame_slot {
+    gpu_buffer *depth;
+    uint64_t offset;        /* bytes, a multiple of 4 */
+} fusion_frame_slot;
+
+/* Writes f's depth into the incoming slot (a host copy; no GPU work) and
+ * says where it is (out may be NULL). It stays there until the next upload;
+ * readers must have finished with it before then. Depth must have K's size
+ * (BF_INVALID_ARG). */
+bf_status fusion_upload_frame(fusion_map *map, const bf_frame *f, fusion_frame_slot *out);
+/* Records, into the context's open command buffer (gpu_begin), the fusion
+ * of the uploaded frame seen from T_wc: its copy into the ring, allocation,
+ * the sub-cache pass, the window's slice; it waits (a barrier) for what was
+ * recorded before it, and what is recorded after it sees the new map. The
+ * caller submits, then calls fusion_finish_frame. BF_INVALID_ARG without an
+ * uploaded frame or for a pose that is not finite. */
+bf_status fusion_cmd_fuse(fusion_map *map, const bf_se3 *T_wc);
+/* After the submission holding fusion_cmd_fuse finished: reads the stage
+ * times, the new window's brick count and the pool counters (copied into a
+ * host-visible buffer by that submission, so nothing is downloaded), and
+ * counts the frame. BF_POOL_FULL as fusion_add_frame. */
+bf_status fusion_finish_frame(fusion_map *map);
 /* Integrates whatever the schedule still owes (the last, partial windows),
  * as at the end of a sequence. */
 bf_status fusion_flush(fusion_map *map);
@@ -93,7 +139,8 @@ bf_status fusion_get_stats(fusion_map *map, fusion_stats *out);
 /* The map's buffers as readers on the GPU see them (render/'s ray-caster):
  * layouts in shaders/fusion.glsl.h. Readers must not write them, and must
  * record their work after fusion_add_frame / fusion_flush returned (those
- * wait for their own submissions). Valid until fusion_destroy. */
+ * wait for their own submissions) or after fusion_cmd_fuse in the same
+ * recording (it ends with a barrier). Valid until fusion_destroy. */
 typedef struct fusion_gpu_view {
     gpu_buffer *hash;       /* n_entries entries of FUSION_ENTRY_WORDS */
     gpu_buffer *nodes;      /* FUSION_NODE_WORDS per node */
@@ -107,6 +154,11 @@ typedef struct fusion_gpu_view {
 } fusion_gpu_view;
 
 fusion_gpu_view fusion_gpu_view_get(const fusion_map *map);
+/* The camera pose relative to the map origin, T_mc (camera to map frame):
+ * T_wc with the origin subtracted from its translation in double. The GPU
+ * sees only this (fusion's frame records, the ray-cast), so a map 10 km
+ * from the world origin works as one at the origin (DESIGN.md section 10). */
+bf_se3 fusion_camera_to_map(const fusion_map *map, const bf_se3 *T_wc);
 /* The config the map was created with (defaults filled in). */
 const fusion_config *fusion_get_config(const fusion_map *map);
 /* Frames added so far. */

@@ -4,6 +4,7 @@
 
 #include "fusion.h"
 #include "shaders/fusion.glsl.h"
+#include "shaders/fusion_hash.glsl.h"
 
 /* Work lists of brick slots: FUSION_LIST_* in shaders/fusion.glsl.h. */
 
@@ -22,19 +23,19 @@ struct fusion_map {
     /* The frame ring. */
     gpu_buffer *frames;       /* ring_slots fusion_frame records */
     gpu_buffer *depth_ring;   /* ring_slots depth images, 2 pixels per word */
-    gpu_buffer *upload;       /* host-visible staging of one frame: record + depth */
+    gpu_buffer *upload;       /* the incoming slot, host-visible: record + depth of the next frame */
+    gpu_buffer *readback;     /* host-visible: the counters and a new window's brick count, per frame */
     /* Work lists. */
     gpu_buffer *samples;      /* retry queue of the allocation passes */
     gpu_buffer *new_list;     /* bricks created by the current frame */
     gpu_buffer *window_list;  /* bricks of the window being integrated */
 
     /* Pipelines and binding sets, created by each stage's file. */
-    gpu_pipeline *p_alloc, *p_alloc_retry, *p_alloc_args;
+    gpu_pipeline *p_alloc, *p_alloc_args;
     gpu_bindings *b_alloc, *b_alloc_args;
     gpu_pipeline *p_integrate, *p_integrate_args, *p_window_list;
     gpu_bindings *b_integrate_new, *b_integrate_window, *b_window_list;
     uint32_t integrate_bpg;   /* list entries per workgroup of the integration kernel */
-#define FUSION_INTEGRATE_HAS_BPG 1
     gpu_pipeline *p_remove;
     gpu_bindings *b_remove;
 
@@ -46,15 +47,22 @@ struct fusion_map {
     uint32_t window_slices_done;
     bool window_pending;
     uint32_t fails_seen;      /* pool-full drops already reported */
+    bool has_incoming;        /* the incoming slot holds a frame's depth (fusion_upload_frame) */
+    uint32_t incoming_index;  /* its bf_frame index, for messages */
+    bool fuse_pending;        /* fusion_cmd_fuse recorded, fusion_finish_frame not yet run */
+    bool pending_closes;      /* that frame closes a window: its count comes back in readback */
 
     double ms_upload, ms_alloc, ms_subcache, ms_window;
 };
 
-/* map.c: insert one brick from the host, creating its chunk and octree path
- * (tests build maps with it). Must not run while GPU work is pending.
- * *slot receives the brick slot. */
-bf_status fusion__debug_insert_brick(fusion_map *map, const int32_t key[3], uint32_t level, const uint32_t cell[3],
-                                     uint32_t *slot);
+/* map.c: a full host copy of the map's index structures (fusion_check;
+ * the tests' host inserter edits it and uploads it back). Must not be
+ * taken while GPU work is pending. */
+typedef struct fusion_host_map {
+    uint32_t *hash, *nodes, *info, *counters, *free_stack;
+} fusion_host_map;
+bf_status fusion__host_map_load(fusion_map *map, fusion_host_map *h);
+void fusion__host_map_free(fusion_host_map *h);
 /* map.c: a binding set named name with bufs[i], whole, at binding i. */
 bf_status fusion__bindings_create(fusion_map *map, const char *name, gpu_buffer *const *bufs, uint32_t n,
                                   gpu_bindings **out);
@@ -86,56 +94,12 @@ void fusion__cmd_integrate(fusion_map *map, gpu_bindings *b, uint32_t first, uin
                            uint32_t frame_first, uint32_t n_frames, bool set_confidence);
 
 /* ------------------------------------------------------------ integration
- * (integrate.c, integrate_ref.c; the rule is in shaders/fusion.glsl.h and
- * docs/fusion_integrate.md.) */
+ * (integrate.c; the rule is in shaders/fusion.glsl.h and
+ * docs/fusion_integrate.md; the CPU oracle is tests/fusion/integrate_ref.c.) */
 
 /* The push constants fusion__cmd_integrate records for a pass (the
- * reference takes the same block). */
+ * oracle takes the same block). */
 fusion_integrate_push fusion__integrate_params(const fusion_map *map, uint32_t first, uint32_t max_count,
                                                uint32_t frame_first, uint32_t n_frames, bool set_confidence);
-
-/* One brick as the integration sees it: its chunk key, packed position,
- * stored error (float bits of FUSION_INFO_ERROR) and bit planes. */
-typedef struct fusion_ref_brick {
-    int32_t key[3];
-    uint32_t pos;                 /* fusion_pack_pos(cell, level) */
-    float error;
-    uint32_t sign[BRICK_WORDS], conf[BRICK_WORDS];
-} fusion_ref_brick;
-
-/* What the oracle saw, for tests: how far the inputs kept from the
- * boundaries where a last-bit difference in a GPU division (2.5 ulp allowed
- * by Vulkan) could flip a bit. Only divisions can differ: adds, multiplies
- * and conversions are correctly rounded on both sides, and BF_PRECISE
- * forbids contraction. A voxel is fragile when one of its projections lies
- * within FUSION_REF_TOL px of a pixel edge whose other side holds another
- * depth (or the image border), or when its decision sums hold a divided
- * term and its numerator or its confidence test is within a relative
- * FUSION_REF_TOL of the boundary. Elsewhere GPU == CPU bit for bit is a
- * fair requirement. */
-#define FUSION_REF_TOL 1e-4
-typedef struct fusion_ref_margins {
-    double pixel;        /* smallest distance of u + 1/2 or v + 1/2 to an integer (pixel edge, image border), px */
-    double sign;         /* smallest |numerator| / (|psi phi| + sum |W_i D_i|) of a voxel with a divided term */
-    double conf;         /* smallest |denominator - conf_weight| / conf_weight of such a voxel */
-    uint32_t n_pairs;    /* (voxel, frame) pairs with W > 0 */
-    uint32_t n_observed; /* voxels with at least one such pair */
-    uint32_t n_divided;  /* voxels whose sums hold a ramp weight or a scaled psi */
-    uint32_t n_fragile;  /* voxels set in fragile */
-    uint32_t fragile[BRICK_WORDS]; /* bit planes' layout */
-    float window_err;    /* fusion_window_error of the brick */
-    double error_gap;    /* |window_err - brick error| / brick error when the rule compares them, else inf */
-    bool error_written;  /* the pass stored window_err as the brick's error */
-} fusion_ref_margins;
-
-/* integrate_ref.c: the CPU oracle of one brick's integration (a test
- * oracle, not a product path). Runs the shared functions of
- * shaders/fusion.glsl.h in the kernel's order on brick b in place, against
- * the frame ring as the GPU holds it: frames[pc->ring_slots] records and
- * depth_ring (pc->ring_slots images of pc->depth_words words). No culling:
- * the kernel's culling must not change a bit, and the comparison checks it.
- * margins may be NULL. */
-void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *frames, const uint32_t *depth_ring,
-                           fusion_ref_brick *b, fusion_ref_margins *margins);
 
 #endif

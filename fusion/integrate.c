@@ -1,9 +1,7 @@
 /* Windowed integration: host side of shaders/fusion_integrate.comp and
  * shaders/fusion_integrate_args.comp (DESIGN.md section 4). The per-voxel
- * math is shared with the CPU oracle fusion/integrate_ref.c through
+ * math is shared with the CPU oracle tests/fusion/integrate_ref.c through
  * shaders/fusion.glsl.h; docs/fusion_integrate.md describes the rule. */
-#include <stdlib.h>
-
 #include "bf_shaders_spv.h"
 #include "fusion_int.h"
 
@@ -15,9 +13,9 @@ enum { INTEGRATE_BUFFERS = 7 }; /* hash, info, sign, conf, frames, depth ring, l
  * subgroups (lavapipe runs a workgroup's subgroups as coroutines), which
  * halves the per-brick cost against 64 invocations and beats 512 by 4x
  * (docs/fusion_integrate.md). A GPU wants wide workgroups: 2 voxels x 256.
- * BITFUSE_INTEGRATE_VPT overrides it (a power of two up to 64; benchmarks,
- * tests). Every choice gives the same bits. */
-static uint32_t voxels_per_thread(const gpu_context *ctx)
+ * fusion_config.integrate_vpt overrides it (benchmarks, tests). Every
+ * choice gives the same bits. */
+static uint32_t voxels_per_thread(const gpu_context *ctx, uint32_t configured)
 {
     const gpu_limits *l = gpu_device_limits(ctx);
     uint32_t vpt = 2;
@@ -27,11 +25,7 @@ static uint32_t voxels_per_thread(const gpu_context *ctx)
         if (vpt < 1) vpt = 1;
         if (vpt > 64) vpt = 64;
     }
-    const char *env = getenv("BITFUSE_INTEGRATE_VPT");
-    if (env) {
-        uint32_t v = (uint32_t)strtoul(env, NULL, 10);
-        if (v && v <= 64 && !(v & (v - 1))) vpt = v;
-    }
+    if (configured) vpt = configured;
     while (BRICK_VOXELS / vpt > l->max_compute_workgroup_invocations ||
            BRICK_VOXELS / vpt > l->max_compute_workgroup_size[0])
         vpt *= 2;
@@ -42,17 +36,12 @@ static uint32_t voxels_per_thread(const gpu_context *ctx)
  * workgroup of the integration kernel (whatever the workgroup then does:
  * measured with an immediate return), about as much as a (brick, frame)
  * pair costs: on a CPU device a workgroup takes 16 consecutive bricks. A
- * GPU wants one brick per workgroup. BITFUSE_INTEGRATE_BPG overrides it
- * (1..1024; benchmarks, tests). Every choice gives the same bits. */
-static uint32_t bricks_per_group(const gpu_context *ctx)
+ * GPU wants one brick per workgroup. fusion_config.integrate_bpg overrides
+ * it (benchmarks, tests). Every choice gives the same bits. */
+static uint32_t bricks_per_group(const gpu_context *ctx, uint32_t configured)
 {
-    uint32_t bpg = gpu_device(ctx)->type == VK_PHYSICAL_DEVICE_TYPE_CPU ? 16 : 1;
-    const char *env = getenv("BITFUSE_INTEGRATE_BPG");
-    if (env) {
-        uint32_t v = (uint32_t)strtoul(env, NULL, 10);
-        if (v >= 1 && v <= 1024) bpg = v;
-    }
-    return bpg;
+    if (configured) return configured;
+    return gpu_device(ctx)->type == VK_PHYSICAL_DEVICE_TYPE_CPU ? 16 : 1;
 }
 
 static bf_status bind_all(fusion_map *m, gpu_bindings *b, gpu_buffer *list)
@@ -66,8 +55,8 @@ static bf_status bind_all(fusion_map *m, gpu_bindings *b, gpu_buffer *list)
 
 bf_status fusion__integrate_create(fusion_map *m)
 {
-    uint32_t vpt = voxels_per_thread(m->ctx);
-    m->integrate_bpg = bricks_per_group(m->ctx);
+    uint32_t vpt = voxels_per_thread(m->ctx, m->cfg.integrate_vpt);
+    m->integrate_bpg = bricks_per_group(m->ctx, m->cfg.integrate_bpg);
     gpu_pipeline_desc d = {
         .name = "fusion.integrate",
         .spirv = bf_spv_fusion_integrate,
@@ -127,9 +116,9 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         /* A window shorter than the threshold (a sequence of fewer frames)
          * can still make a voxel confident: seen in every one of its frames. */
         .conf_weight = m->cfg.conf_weight < (float)n_frames ? m->cfg.conf_weight : (float)n_frames,
-        .sigma_a = m->cfg.sigma_a,
-        .sigma_b = m->cfg.sigma_b,
-        .sigma_c = m->cfg.sigma_c,
+        .sigma_a = m->cfg.sensor.sigma_a,
+        .sigma_b = m->cfg.sensor.sigma_b,
+        .sigma_c = m->cfg.sensor.sigma_c,
         .prior_weight = FUSION_PRIOR_WEIGHT,
         .bricks_per_group = m->integrate_bpg ? m->integrate_bpg : 1,
     };

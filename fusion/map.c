@@ -1,5 +1,5 @@
-/* The map's buffers: creation, destruction, host copies (snapshot), the
- * integrity check and host-side insertion for tests. */
+/* The map's buffers: creation, destruction, host copies (snapshot) and the
+ * integrity check. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,12 +18,9 @@ fusion_config fusion_config_default(void)
         .node_cap = 0,
         .hash_buckets = 4096,
         .hash_overflow = 4096,
-        .sigma_a = 0.0012f,
-        .sigma_b = 0.0019f,
-        .sigma_c = 0.4f,
+        .sensor = bf_sensor_kinect1(),
         .conf_weight = 4.0f,
         .band_sigmas = 3.0f,
-        .max_depth_m = 4.5f,
     };
     return c;
 }
@@ -42,9 +39,13 @@ static bf_status config_check(const fusion_config *c, const bf_intrinsics *K)
         return bf_fail(BF_INVALID_ARG, "fusion: subcache %u must be 1..window", c->subcache);
     if (c->brick_cap < 1 || c->node_cap < 9 || c->hash_buckets < 1)
         return bf_fail(BF_INVALID_ARG, "fusion: brick_cap, node_cap and hash_buckets must be positive");
-    if (!(c->conf_weight > 0) || !(c->band_sigmas > 0) || !(c->max_depth_m > 0) || !(c->sigma_a > 0) ||
-        !(c->sigma_b >= 0))
+    if (!(c->conf_weight > 0) || !(c->band_sigmas > 0) || !(c->sensor.max_depth_m > 0) || !(c->sensor.sigma_a > 0) ||
+        !(c->sensor.sigma_b >= 0))
         return bf_fail(BF_INVALID_ARG, "fusion: weights, band, depth range and sigma must be positive");
+    if (c->integrate_vpt > 64 || (c->integrate_vpt & (c->integrate_vpt - 1)))
+        return bf_fail(BF_INVALID_ARG, "fusion: integrate_vpt %u (0, or a power of two up to 64)", c->integrate_vpt);
+    if (c->integrate_bpg > 1024)
+        return bf_fail(BF_INVALID_ARG, "fusion: integrate_bpg %u (0, or 1..1024)", c->integrate_bpg);
     if (K->width < 2 || K->height < 2 || K->width > 8192 || K->height > 8192 || !(K->depth_scale > 0) ||
         !isfinite(K->fx_px) || !isfinite(K->fy_px) || K->fx_px == 0 || K->fy_px == 0)
         return bf_fail(BF_INVALID_ARG, "fusion: bad intrinsics (%ux%u, fx %g, fy %g, depth scale %g)", K->width,
@@ -79,6 +80,7 @@ static bf_status create_buffers(fusion_map *m)
         {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
         {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
         {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4, GPU_MEMORY_UPLOAD, st},
+        {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + 1) * 4, GPU_MEMORY_READBACK, st},
         /* Up to 3 band points per pixel wait for a retry pass. */
         {&m->samples, "fusion.retry", (FUSION_QUEUE_ENTRIES + 2 * 3 * pixels) * 4, GPU_MEMORY_DEVICE,
          st | GPU_USAGE_INDIRECT},
@@ -133,6 +135,7 @@ static bf_status init_buffers(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_zero(m->samples);
     if (s == BF_OK) s = gpu_buffer_zero(m->new_list);
     if (s == BF_OK) s = gpu_buffer_zero(m->window_list);
+    if (s == BF_OK) s = gpu_buffer_zero(m->readback);
     uint32_t cnt[FUSION_CNT_WORDS] = {0};
     cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
     if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
@@ -179,7 +182,7 @@ void fusion_destroy(fusion_map *m)
     fusion__schedule_destroy(m);
     fusion__integrate_destroy(m);
     fusion__alloc_destroy(m);
-    gpu_buffer *bufs[] = {m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
+    gpu_buffer *bufs[] = {m->readback, m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
                           m->locks, m->hash};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
@@ -202,12 +205,7 @@ bf_status fusion__bindings_create(fusion_map *m, const char *name, gpu_buffer *c
 
 /* ------------------------------------------------------------ host mirror */
 
-/* A full host copy of the map's index structures (tests and checks only). */
-typedef struct host_map {
-    uint32_t *hash, *nodes, *info, *counters, *free_stack;
-} host_map;
-
-static void host_map_free(host_map *h)
+void fusion__host_map_free(fusion_host_map *h)
 {
     free(h->hash);
     free(h->nodes);
@@ -232,7 +230,7 @@ static bf_status download_whole(gpu_buffer *b, uint32_t **out)
     return BF_OK;
 }
 
-static bf_status host_map_load(fusion_map *m, host_map *h)
+bf_status fusion__host_map_load(fusion_map *m, fusion_host_map *h)
 {
     memset(h, 0, sizeof *h);
     bf_status s = download_whole(m->hash, &h->hash);
@@ -240,116 +238,14 @@ static bf_status host_map_load(fusion_map *m, host_map *h)
     if (s == BF_OK) s = download_whole(m->info, &h->info);
     if (s == BF_OK) s = download_whole(m->counters, &h->counters);
     if (s == BF_OK) s = download_whole(m->free_stack, &h->free_stack);
-    if (s != BF_OK) host_map_free(h);
+    if (s != BF_OK) fusion__host_map_free(h);
     return s;
 }
 
-/* Hash entry of chunk key, or FUSION_NONE. */
-static uint32_t host_find_chunk(const fusion_map *m, const host_map *h, const int32_t key[3])
+/* Hash entry of chunk key, or FUSION_NONE (the shaders' lookup). */
+static uint32_t host_find_chunk(const fusion_map *m, const fusion_host_map *h, const int32_t key[3])
 {
-    uint32_t bucket = fusion_hash(key[0], key[1], key[2], m->cfg.hash_buckets);
-    for (uint32_t k = 0; k < FUSION_BUCKET_SLOTS; k++) {
-        const uint32_t *e = h->hash + (size_t)(bucket * FUSION_BUCKET_SLOTS + k) * FUSION_ENTRY_WORDS;
-        if (e[FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID && (int32_t)e[0] == key[0] && (int32_t)e[1] == key[1] &&
-            (int32_t)e[2] == key[2])
-            return bucket * FUSION_BUCKET_SLOTS + k;
-    }
-    uint32_t next = h->hash[(size_t)(bucket * FUSION_BUCKET_SLOTS + FUSION_BUCKET_SLOTS - 1) * FUSION_ENTRY_WORDS +
-                            FUSION_ENTRY_NEXT];
-    for (uint32_t guard = 0; next != FUSION_NONE && guard < m->n_entries; guard++) {
-        const uint32_t *e = h->hash + (size_t)next * FUSION_ENTRY_WORDS;
-        if (e[FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID && (int32_t)e[0] == key[0] && (int32_t)e[1] == key[1] &&
-            (int32_t)e[2] == key[2])
-            return next;
-        next = e[FUSION_ENTRY_NEXT];
-    }
-    return FUSION_NONE;
-}
-
-static bf_status host_alloc_nodes(const fusion_map *m, host_map *h, uint32_t n, uint32_t *first)
-{
-    uint32_t used = h->counters[FUSION_CNT_NODES];
-    if (used + n > m->cfg.node_cap) return bf_fail(BF_POOL_FULL, "fusion: node pool full (%u nodes)", m->cfg.node_cap);
-    h->counters[FUSION_CNT_NODES] = used + n;
-    *first = used;
-    return BF_OK;
-}
-
-static bf_status host_insert_chunk(fusion_map *m, host_map *h, const int32_t key[3], uint32_t *entry)
-{
-    uint32_t bucket = fusion_hash(key[0], key[1], key[2], m->cfg.hash_buckets), e = FUSION_NONE;
-    for (uint32_t k = 0; k < FUSION_BUCKET_SLOTS && e == FUSION_NONE; k++)
-        if (h->hash[(size_t)(bucket * FUSION_BUCKET_SLOTS + k) * FUSION_ENTRY_WORDS + FUSION_ENTRY_STATE] ==
-            FUSION_ENTRY_FREE)
-            e = bucket * FUSION_BUCKET_SLOTS + k;
-    if (e == FUSION_NONE) { /* overflow: link from the bucket's last slot */
-        uint32_t idx = h->counters[FUSION_CNT_OVERFLOW];
-        if (idx >= m->cfg.hash_overflow) return bf_fail(BF_POOL_FULL, "fusion: chunk hash overflow full");
-        h->counters[FUSION_CNT_OVERFLOW] = idx + 1;
-        e = m->cfg.hash_buckets * FUSION_BUCKET_SLOTS + idx;
-        uint32_t *link = h->hash + (size_t)(bucket * FUSION_BUCKET_SLOTS + FUSION_BUCKET_SLOTS - 1) * FUSION_ENTRY_WORDS +
-                         FUSION_ENTRY_NEXT;
-        while (*link != FUSION_NONE) link = h->hash + (size_t)*link * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT;
-        *link = e;
-    }
-    uint32_t root = 0;
-    bf_status s = host_alloc_nodes(m, h, 1, &root);
-    if (s != BF_OK) return s;
-    uint32_t *w = h->hash + (size_t)e * FUSION_ENTRY_WORDS;
-    w[0] = (uint32_t)key[0], w[1] = (uint32_t)key[1], w[2] = (uint32_t)key[2];
-    w[FUSION_ENTRY_ROOT] = root;
-    w[FUSION_ENTRY_STATE] = FUSION_ENTRY_VALID;
-    *entry = e;
-    return BF_OK;
-}
-
-bf_status fusion__debug_insert_brick(fusion_map *m, const int32_t key[3], uint32_t level, const uint32_t cell[3],
-                                     uint32_t *slot)
-{
-    if (level > m->cfg.max_level || cell[0] >> level || cell[1] >> level || cell[2] >> level)
-        return bf_fail(BF_INVALID_ARG, "fusion: cell (%u,%u,%u) outside level %u", cell[0], cell[1], cell[2], level);
-    host_map h;
-    bf_status s = host_map_load(m, &h);
-    if (s != BF_OK) return s;
-    uint32_t entry = host_find_chunk(m, &h, key);
-    if (entry == FUSION_NONE) s = host_insert_chunk(m, &h, key, &entry);
-    uint32_t node = s == BF_OK ? h.hash[(size_t)entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT] : 0;
-    for (uint32_t l = 1; s == BF_OK && l <= level; l++) {
-        uint32_t sh = level - l;
-        uint32_t oct = fusion_octant(cell[0] >> sh, cell[1] >> sh, cell[2] >> sh);
-        uint32_t *child = &h.nodes[(size_t)node * FUSION_NODE_WORDS + FUSION_NODE_CHILD];
-        if (*child == FUSION_NONE) {
-            uint32_t first = 0;
-            if ((s = host_alloc_nodes(m, &h, 8, &first)) != BF_OK) break;
-            *child = first;
-        }
-        node = *child + oct;
-    }
-    uint32_t *brick = s == BF_OK ? &h.nodes[(size_t)node * FUSION_NODE_WORDS + FUSION_NODE_BRICK] : NULL;
-    if (s == BF_OK && *brick == FUSION_NONE) {
-        uint32_t top = h.counters[FUSION_CNT_FREE_TOP];
-        if (top == 0) {
-            s = bf_fail(BF_POOL_FULL, "fusion: brick pool full (%u bricks)", m->cfg.brick_cap);
-        } else {
-            uint32_t b = h.free_stack[top - 1];
-            h.counters[FUSION_CNT_FREE_TOP] = top - 1;
-            h.counters[FUSION_CNT_BRICKS]++;
-            *brick = b;
-            uint32_t *info = h.info + (size_t)b * FUSION_BRICK_INFO_WORDS;
-            info[FUSION_INFO_CHUNK] = entry;
-            info[FUSION_INFO_POS] = fusion_pack_pos(cell[0], cell[1], cell[2], level);
-            info[FUSION_INFO_NODE] = node;
-            float inf = INFINITY;
-            memcpy(&info[FUSION_INFO_ERROR], &inf, 4);
-        }
-    }
-    if (s == BF_OK) s = gpu_buffer_upload(m->hash, 0, h.hash, gpu_buffer_size(m->hash));
-    if (s == BF_OK) s = gpu_buffer_upload(m->nodes, 0, h.nodes, gpu_buffer_size(m->nodes));
-    if (s == BF_OK) s = gpu_buffer_upload(m->info, 0, h.info, gpu_buffer_size(m->info));
-    if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, h.counters, gpu_buffer_size(m->counters));
-    if (s == BF_OK) *slot = *brick;
-    host_map_free(&h);
-    return s;
+    return fusion_find_chunk(h->hash, key[0], key[1], key[2], m->cfg.hash_buckets, m->cfg.hash_overflow);
 }
 
 /* ------------------------------------------------------------ snapshot */
@@ -408,7 +304,7 @@ bf_status fusion_snapshot_take(fusion_map *m, hostmap *out)
 /* ------------------------------------------------------------ integrity */
 
 /* Walks one octree, checking every node and brick it reaches. */
-static bf_status check_tree(const fusion_map *m, const host_map *h, uint32_t entry, uint32_t node, uint32_t level,
+static bf_status check_tree(const fusion_map *m, const fusion_host_map *h, uint32_t entry, uint32_t node, uint32_t level,
                             const uint32_t cell[3], uint8_t *node_seen, uint8_t *brick_seen, uint32_t *n_bricks)
 {
     uint32_t n_nodes = h->counters[FUSION_CNT_NODES] < m->cfg.node_cap ? h->counters[FUSION_CNT_NODES] : m->cfg.node_cap;
@@ -440,7 +336,7 @@ static bf_status check_tree(const fusion_map *m, const host_map *h, uint32_t ent
     return BF_OK;
 }
 
-static bf_status check_map(const fusion_map *m, const host_map *h)
+static bf_status check_map(const fusion_map *m, const fusion_host_map *h)
 {
     uint8_t *node_seen = calloc(m->cfg.node_cap, 1), *brick_seen = calloc(m->cfg.brick_cap, 1);
     uint8_t *entry_seen = calloc(m->n_entries, 1);
@@ -494,11 +390,11 @@ static bf_status check_map(const fusion_map *m, const host_map *h)
 
 bf_status fusion_check(fusion_map *m)
 {
-    host_map h;
-    bf_status s = host_map_load(m, &h);
+    fusion_host_map h;
+    bf_status s = fusion__host_map_load(m, &h);
     if (s != BF_OK) return s;
     s = check_map(m, &h);
-    host_map_free(&h);
+    fusion__host_map_free(&h);
     return s;
 }
 

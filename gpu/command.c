@@ -248,3 +248,12 @@ uint32_t gpu_stage_times(const gpu_context *ctx, const gpu_stage_time **out)
     *out = ctx->stages;
     return ctx->n_stages;
 }
+
+double gpu_stage_ms(const gpu_context *ctx, const char *prefix)
+{
+    size_t n = strlen(prefix);
+    double ms = 0;
+    for (uint32_t i = 0; i < ctx->n_stages; i++)
+        if (!strncmp(ctx->stages[i].name, prefix, n)) ms += ctx->stages[i].ms;
+    return ms;
+}

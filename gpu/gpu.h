@@ -319,6 +319,11 @@ typedef struct gpu_stage_time {
 /* Stages of the last submission, in recording order; *out stays valid until
  * the next gpu_begin. Returns their number. */
 uint32_t gpu_stage_times(const gpu_context *ctx, const gpu_stage_time **out);
+/* The summed time [ms] of the last submission's stages whose names start
+ * with prefix ("fusion.window" also counts "fusion.window_list"); 0 when
+ * there are none. Several modules record into one submission and each
+ * reads its own stages this way. */
+double gpu_stage_ms(const gpu_context *ctx, const char *prefix);
 
 /* Fault injection for tests: every checked Vulkan call is a fault point of
  * core's bf_fault_arm and fails with VK_ERROR_OUT_OF_DEVICE_MEMORY there,

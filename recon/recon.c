@@ -11,7 +11,6 @@ struct recon {
     bf_intrinsics K;
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
-    bf_se3 V;            /* motion of the last tracked frame, T_prev^-1 T_last (constant-velocity guess) */
     fusion_map *map;     /* created at the first frame with depth */
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
@@ -23,20 +22,20 @@ struct recon {
 recon_config recon_config_default(void)
 {
     recon_config c = {
+        .sensor = bf_sensor_kinect1(),
         .fusion = fusion_config_default(),
         .track = track_config_default(),
         .raycast = render_options_tracking(),
+        .caster = render_config_default(),
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
         .start_at_frame = true,
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
-     * and more accurate than fusion's own default of 1 (600 frames of the
-     * 640x480 synthetic fr1_xyz room, docs/bench_replay_sweep.md: ATE 3.0
-     * against 7.8 mm, surface p90 4.9 against 8.5 mm, 218 against 322 ms
-     * per frame, 2.5 against 13.5 MiB of map): a coarser voxel holds the
-     * average of more samples, so the sign field the tracker casts is less
-     * noisy, and the window integrates a quarter of the voxels. */
+     * and more accurate than fusion's own default of 1
+     * (docs/bench_replay_sweep.md): a coarser voxel holds the average of
+     * more samples, so the sign field the tracker casts is less noisy, and
+     * the window integrates a quarter of the voxels. */
     c.fusion.voxel_ratio = 2.0f;
     return c;
 }
@@ -63,7 +62,8 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->K = *K;
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
-    r->V = bf_se3_identity();
+    /* One noise model and range for the whole loop. */
+    r->cfg.fusion.sensor = r->cfg.track.sensor = r->cfg.sensor;
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
     /* The reference at track.ref_level (half resolution by default): the
      * ray-cast, the loop's largest cost, then has a quarter of the rays.
@@ -71,7 +71,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     uint32_t l = r->cfg.track.ref_level;
     bf_status s = track_create(ctx, &r->cfg.track, K, &r->tracker);
     if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
-    if (s == BF_OK) s = render_create(ctx, r->K_ref.width, r->K_ref.height, &r->ref_caster);
+    if (s == BF_OK) s = render_create(ctx, &r->cfg.caster, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
     if (s != BF_OK) {
         recon_destroy(r);
@@ -98,7 +98,7 @@ fusion_map *recon_map(recon *r) { return r->map; }
 static bf_status view_caster(recon *r)
 {
     if (r->caster) return BF_OK;
-    return render_create(r->ctx, r->K.width, r->K.height, &r->caster);
+    return render_create(r->ctx, &r->cfg.caster, r->K.width, r->K.height, &r->caster);
 }
 
 render_caster *recon_caster(recon *r) { return view_caster(r) == BF_OK ? r->caster : NULL; }
@@ -112,11 +112,36 @@ static uint32_t count_valid(const bf_frame *f)
     return n;
 }
 
-/* Fuses f at T and makes the ray-cast of the map at T the next reference. */
+/* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
+ * next reference, in one submission: fusion, the ray-cast (written straight
+ * into the tracker's reference) and the reference's preparation share it,
+ * so the frame costs one host wait besides its ICP iterations. */
 static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, bool tracked,
                                     recon_frame_result *out)
 {
-    bf_status s = fusion_add_frame(r->map, f, T);
+    render_options ro = r->cfg.raycast;
+    ro.no_shade = true; /* tracking takes its normals from the depth */
+    bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
+    if (s != BF_OK) return s;
+    if (r->cfg.start_at_frame && tracked &&
+        track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
+        /* The rays start a margin in front of the depth this frame saw
+         * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
+         * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the
+         * map's surface behind the frame's, plus 2 cm for the map's own error. */
+        ro.start_margin_m = 0.02f + 3.0f * r->cfg.sensor.sigma_a;
+        ro.start_margin_z2 = 3.0f * r->cfg.sensor.sigma_b;
+    }
+    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
+    s = fusion_cmd_fuse(r->map, T);
+    if (s == BF_OK) s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro);
+    if (s == BF_OK) s = track_cmd_reference(r->tracker, T);
+    /* The counters fusion copied and the reference's count -> the host. */
+    gpu_cmd_barrier(r->ctx, GPU_BARRIER_HOST);
+    bf_status sw = gpu_submit_wait(r->ctx);
+    if (s == BF_OK) s = sw;
+    if (s != BF_OK) return s;
+    s = fusion_finish_frame(r->map);
     out->fuse = fusion_last_stage_ms(r->map);
     out->fuse_status = s;
     if (s == BF_POOL_FULL) {
@@ -127,20 +152,9 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     }
     if (s != BF_OK) return s;
     out->fused = true;
-    render_options ro = r->cfg.raycast;
-    ro.no_shade = true; /* tracking takes its normals from the depth */
-    if (r->cfg.start_at_frame && tracked &&
-        track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
-        /* The rays start a margin in front of the depth this frame saw
-         * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
-         * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the
-         * map's surface behind the frame's, plus 2 cm for the map's own error. */
-        ro.start_margin_m = 0.02f + 3.0f * r->cfg.fusion.sigma_a;
-        ro.start_margin_z2 = 3.0f * r->cfg.fusion.sigma_b;
-    }
-    if ((s = render_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro)) != BF_OK) return s;
+    render_finish_raycast(r->ref_caster);
     out->ms_raycast = render_last_ms(r->ref_caster);
-    return track_set_reference_gpu(r->tracker, render_get_targets(r->ref_caster)->depth, T);
+    return track_finish_reference(r->tracker);
 }
 
 /* known: NULL for the loop; else the frame is tracked as usual but fused
@@ -165,16 +179,17 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         out->state = RECON_FIRST;
         if (known) r->T_first = r->T_last = *known;
         s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
+        if (s == BF_OK) s = fusion_upload_frame(r->map, f, NULL);
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
         if (s == BF_OK) r->counts.tracked++;
         out->T_wc = r->T_first;
     } else {
-        /* The guess: the last pose, or with constant_velocity the last
-         * motion repeated (off by default: measured on the synthetic
-         * fr1_xyz room before the tracker kept its poses rigid, it lost
-         * tracking 8 frames earlier; not measured since). */
-        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
-        s = track_frame(r->tracker, f, &guess, &out->track);
+        /* The frame goes up once, into fusion's incoming slot: the tracker
+         * reads it there, fusing copies it into the ring. The guess is the
+         * last pose (DESIGN.md section 6: no motion model). */
+        fusion_frame_slot slot;
+        s = fusion_upload_frame(r->map, f, &slot);
+        if (s == BF_OK) s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &r->T_last, &out->track);
         if (s == BF_OK) {
             out->ms_track = out->track.ms_gpu;
             bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
@@ -187,15 +202,12 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
                 out->state = RECON_TRACKED;
                 out->T_wc = out->track.T_wc;
                 const bf_se3 *T_new = known ? known : &out->track.T_wc;
-                bf_se3 Li = bf_se3_inverse(&r->T_last);
-                r->V = bf_se3_mul(&Li, T_new);
                 r->T_last = *T_new;
                 r->counts.tracked++;
                 s = fuse_and_reference(r, f, T_new, true, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
-                r->V = bf_se3_identity(); /* the motion is unknown now */
                 if (known) {
                     r->T_last = *known;
                     s = fuse_and_reference(r, f, known, false, out);

@@ -6,6 +6,11 @@
  * `bitfuse replay`, `live`, `fuse`, `demo`, the tests and the soak
  * benchmark all go through it.
  *
+ * Per frame the host waits once per ICP iteration and once for the rest:
+ * the frame goes up once (fusion's incoming slot, read by tracking), and
+ * fusion, the ray-cast (written straight into the tracking reference) and
+ * the reference's smoothing share one submission (DESIGN.md section 1).
+ *
  * Frames tracked badly are not fused (the map stays as it was) and the
  * camera keeps its last good pose; frames without depth are skipped. Both
  * are reported per frame and counted.
@@ -25,12 +30,14 @@
 typedef struct recon recon; /* opaque */
 
 typedef struct recon_config {
+    bf_sensor sensor;         /* the depth sensor, default Kinect v1: recon_create hands it to fusion and
+                                 tracking (the sensor fields of .fusion and .track are not read) */
     fusion_config fusion;     /* fusion's defaults but voxel_ratio 2 (docs/bench_replay_sweep.md) */
     track_config track;
     render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */
+    render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
-    bool constant_velocity;   /* guess = last pose times the last motion; default false (last pose) */
     bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
 } recon_config;
 

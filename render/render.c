@@ -19,6 +19,7 @@ struct render_caster {
     /* The map buffers bound to b_raycast (rebound when another map comes). */
     gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf;
     gpu_buffer *bound_start; /* binding 6: the start depths, or the dummy */
+    gpu_buffer *bound_depth; /* binding 4: the depth destination, targets.depth or render_options.depth_out */
     gpu_buffer *dummy;       /* 16 bytes bound when there are no start depths */
     double last_ms;
     uint32_t local_x, local_y; /* workgroup shape of both passes */
@@ -41,25 +42,27 @@ static bf_status target_create(gpu_context *ctx, const char *name, uint64_t byte
     return gpu_buffer_create(ctx, &d, out);
 }
 
-bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, render_caster **out)
+render_config render_config_default(void)
+{
+    return (render_config){.local_x = RENDER_LOCAL_X, .local_y = RENDER_LOCAL_Y};
+}
+
+bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t width, uint32_t height,
+                        render_caster **out)
 {
     if (!ctx || !out || width == 0 || height == 0 || width > 16384 || height > 16384)
         return bf_fail(BF_INVALID_ARG, "render: image size %ux%u (1..16384 each)", width, height);
+    render_config c = cfg ? *cfg : render_config_default();
+    uint32_t wx = c.local_x, wy = c.local_y;
+    if (wx < 1 || wy < 1 || wx * wy > 256 || wx * wy % 8)
+        return bf_fail(BF_INVALID_ARG, "render: workgroup %ux%u (x * y a multiple of 8, at most 256)", wx, wy);
     render_caster *rc = calloc(1, sizeof *rc);
     if (!rc) return bf_fail(BF_NO_MEMORY, "render: caster");
     rc->ctx = ctx;
     rc->targets.width = width;
     rc->targets.height = height;
     uint64_t n = (uint64_t)width * height;
-    /* Workgroup shape: RENDER_LOCAL_X x RENDER_LOCAL_Y, or BF_RENDER_WG=WxH
-     * (a tuning knob for bench/bench_render, which compares shapes in one
-     * run; lavapipe puts 8 consecutive invocations in one SIMD vector, so
-     * the shape decides which 8 rays run in lockstep). */
-    rc->local_x = RENDER_LOCAL_X, rc->local_y = RENDER_LOCAL_Y;
-    const char *wg = getenv("BF_RENDER_WG");
-    unsigned wx = 0, wy = 0;
-    if (wg && sscanf(wg, "%ux%u", &wx, &wy) == 2 && wx >= 1 && wy >= 1 && wx * wy <= 256 && wx * wy % 8 == 0)
-        rc->local_x = wx, rc->local_y = wy;
+    rc->local_x = wx, rc->local_y = wy;
     bf_status s = target_create(ctx, "render.depth", 4 * n, &rc->targets.depth);
     if (s == BF_OK) s = target_create(ctx, "render.normal", 16 * n, &rc->targets.normal);
     if (s == BF_OK) s = target_create(ctx, "render.level", 4 * n, &rc->targets.level);
@@ -89,6 +92,7 @@ bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, rende
     if (s == BF_OK) rc->bound_start = rc->dummy;
     if (s == BF_OK) s = gpu_bindings_create(ctx, 4, "render.shade", &rc->b_shade);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 4, rc->targets.depth, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) rc->bound_depth = rc->targets.depth;
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 5, rc->targets.level, 0, GPU_WHOLE_SIZE);
     gpu_buffer *shade[4] = {rc->targets.depth, rc->targets.level, rc->targets.normal, rc->targets.colour};
     for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_shade, i, shade[i], 0, GPU_WHOLE_SIZE);
@@ -133,8 +137,8 @@ static bf_status bind_map(render_caster *rc, const fusion_gpu_view *v)
     return BF_OK;
 }
 
-bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
-                         const render_options *opt)
+bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
+                             const render_options *opt)
 {
     if (!rc || !map || !K || !T_wc || !opt) return bf_fail(BF_INVALID_ARG, "render: NULL argument");
     if (K->width != rc->targets.width || K->height != rc->targets.height)
@@ -155,6 +159,12 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
     if (opt->start_depth && !(opt->start_margin_m >= 0 && opt->start_margin_z2 >= 0))
         return bf_fail(BF_INVALID_ARG, "render: start margins %g m, %g / m must be >= 0", opt->start_margin_m,
                        opt->start_margin_z2);
+    if (opt->depth_out && (!opt->no_shade || opt->depth_offset > UINT32_MAX ||
+                           gpu_buffer_size(opt->depth_out) < (opt->depth_offset + n_px) * 4))
+        return bf_fail(BF_INVALID_ARG, "render: depth destination %s (%llu bytes) for %llu floats from %llu%s",
+                       gpu_buffer_name(opt->depth_out), (unsigned long long)gpu_buffer_size(opt->depth_out),
+                       (unsigned long long)n_px, (unsigned long long)opt->depth_offset,
+                       opt->no_shade ? "" : " needs no_shade");
     fusion_gpu_view v = fusion_gpu_view_get(map);
     bf_status s = bind_map(rc, &v);
     if (s != BF_OK) return s;
@@ -163,10 +173,15 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
         if ((s = gpu_bindings_set(rc->b_raycast, 6, start, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
         rc->bound_start = start;
     }
+    gpu_buffer *depth = opt->depth_out ? opt->depth_out : rc->targets.depth;
+    if (depth != rc->bound_depth) {
+        if ((s = gpu_bindings_set(rc->b_raycast, 4, depth, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
+        rc->bound_depth = depth;
+    }
 
-    /* T_mc = T_wc with its translation made relative to the map origin in
-     * double: the GPU's floats stay small however far the map is from the
-     * world origin (DESIGN.md section 10). */
+    /* The map-relative pose: the GPU's floats stay small however far the
+     * map is from the world origin (DESIGN.md section 10). */
+    bf_se3 T_mc = fusion_camera_to_map(map, T_wc);
     render_push pc = {
         .fx = (float)K->fx_px,
         .fy = (float)K->fy_px,
@@ -185,33 +200,44 @@ bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics
         .start_margin_m = opt->start_margin_m,
         .start_margin_z2 = opt->start_margin_z2,
         .start_off = (uint32_t)opt->start_offset,
+        .depth_off = opt->depth_out ? (uint32_t)opt->depth_offset : 0u,
     };
     for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_wc->R[r][c];
-    pc.t[0] = (float)(T_wc->t.x - v.origin_w.x);
-    pc.t[1] = (float)(T_wc->t.y - v.origin_w.y);
-    pc.t[2] = (float)(T_wc->t.z - v.origin_w.z);
+        for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_mc.R[r][c];
+    pc.t[0] = (float)T_mc.t.x, pc.t[1] = (float)T_mc.t.y, pc.t[2] = (float)T_mc.t.z;
 
     uint32_t gx = gpu_groups(K->width, rc->local_x), gy = gpu_groups(K->height, rc->local_y);
-    if ((s = gpu_begin(rc->ctx)) != BF_OK) return s;
-    bf_status ts = gpu_cmd_stage_begin(rc->ctx, "render.raycast");
+    /* The map's writes recorded before (fusion) and the earlier readers of
+     * the images -> the ray-cast's reads of the map and writes of the images. */
+    gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
+    gpu_cmd_stage_begin(rc->ctx, "render.raycast");
     gpu_cmd_dispatch(rc->ctx, rc->p_raycast, rc->b_raycast, &pc, gx, gy, 1);
     if (!opt->no_shade) {
         /* The depth and level writes of the ray-cast -> the shading pass's reads. */
         gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
         gpu_cmd_dispatch(rc->ctx, rc->p_shade, rc->b_shade, &pc, gx, gy, 1);
     }
+    gpu_cmd_stage_end(rc->ctx);
+    /* The images -> the readers recorded next (the tracking reference). */
+    gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
+    return BF_OK;
+}
+
+void render_finish_raycast(render_caster *rc) { rc->last_ms = gpu_stage_ms(rc->ctx, "render.raycast"); }
+
+bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
+                         const render_options *opt)
+{
+    if (!rc) return bf_fail(BF_INVALID_ARG, "render: NULL argument");
+    bf_status s = gpu_begin(rc->ctx);
+    if (s != BF_OK) return s;
+    s = render_cmd_raycast(rc, map, K, T_wc, opt);
     /* All four images -> host downloads (render_download) and later readers. */
     gpu_cmd_barrier(rc->ctx, GPU_BARRIER_HOST);
-    gpu_cmd_stage_end(rc->ctx);
-    if ((s = gpu_submit_wait(rc->ctx)) != BF_OK) return s;
-    rc->last_ms = 0;
-    if (ts == BF_OK) {
-        const gpu_stage_time *t;
-        uint32_t n = gpu_stage_times(rc->ctx, &t);
-        for (uint32_t i = 0; i < n; i++)
-            if (!strcmp(t[i].name, "render.raycast")) rc->last_ms += t[i].ms;
-    }
+    bf_status sw = gpu_submit_wait(rc->ctx);
+    if (s != BF_OK) return s;
+    if (sw != BF_OK) return sw;
+    render_finish_raycast(rc);
     return BF_OK;
 }
 

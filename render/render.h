@@ -23,6 +23,16 @@
 
 typedef struct render_caster render_caster; /* opaque */
 
+/* How a caster is built. */
+typedef struct render_config {
+    /* Workgroup shape of both passes, default 8 x 8 (RENDER_LOCAL_X/Y); x * y a multiple of 8, at
+       most 256. lavapipe puts 8 consecutive invocations in one SIMD vector, so the shape decides
+       which rays run in lockstep (bench/bench_render compares shapes, docs/render.md). */
+    uint32_t local_x, local_y;
+} render_config;
+
+render_config render_config_default(void);
+
 typedef struct render_options {
     bool confident_only; /* display: only confident voxels are surface; tracking: every sign bit */
     bool refine;         /* sub-voxel hit: zero of the smoothed sign field on the ray (docs/render.md) */
@@ -38,6 +48,12 @@ typedef struct render_options {
     uint64_t start_offset;
     float start_margin_m, start_margin_z2;
     bool no_shade;       /* depth and level only: normals and colour are not computed */
+    /* Optional depth destination (NULL: the caster's depth image): the depth is written as
+     * width x height floats from pixel depth_offset of depth_out instead, e.g. straight into the
+     * tracking reference (track_reference_target), so nothing is copied. Needs no_shade (the
+     * shading pass reads the caster's image); targets.depth then keeps its old content. */
+    gpu_buffer *depth_out;
+    uint64_t depth_offset;
 } render_options;
 
 render_options render_options_tracking(void); /* every sign bit, refined */
@@ -52,18 +68,31 @@ typedef struct render_targets {
     gpu_buffer *colour; /* uint per pixel: shaded RGBA8 (R in the low byte); 0 = no hit */
 } render_targets;
 
-/* Creates a caster for images of width x height. ctx is borrowed. */
-bf_status render_create(gpu_context *ctx, uint32_t width, uint32_t height, render_caster **out);
+/* Creates a caster for images of width x height. cfg NULL: the defaults.
+ * ctx is borrowed. BF_INVALID_ARG for a bad size or workgroup shape. */
+bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t width, uint32_t height,
+                        render_caster **out);
 /* NULL is a no-op. */
 void render_destroy(render_caster *rc);
 
 /* Ray-casts map from camera pose T_wc (camera to world, double; the caster
- * hands the GPU a transform relative to the map's origin) with intrinsics
- * K (K's size must be the caster's). Waits for the GPU. */
+ * hands the GPU the map-relative pose, fusion_camera_to_map) with
+ * intrinsics K (K's size must be the caster's), in a submission of its own
+ * that it waits for: render_cmd_raycast, submit, render_finish_raycast. */
 bf_status render_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
                          const render_options *opt);
+/* Records the same ray-cast into the context's open command buffer
+ * (gpu_begin), after a barrier on what was recorded before it (fusion's
+ * writes to the map); commands recorded after it see its images (it ends
+ * with a barrier). The caller submits, then calls render_finish_raycast. The
+ * same arguments and refusals as render_raycast. */
+bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrinsics *K, const bf_se3 *T_wc,
+                             const render_options *opt);
+/* After the submission holding render_cmd_raycast finished: reads its GPU
+ * time (render_last_ms). */
+void render_finish_raycast(render_caster *rc);
 const render_targets *render_get_targets(const render_caster *rc);
-/* GPU time of the last render_raycast [ms] (Vulkan timestamps). */
+/* GPU time of the last ray-cast [ms] (Vulkan timestamps). */
 double render_last_ms(const render_caster *rc);
 
 /* Host copies of the images (malloc'd arrays, freed by render_images_free). */

@@ -15,6 +15,7 @@
  * and GLSL then round every float operation the same way. */
 #  define BF_PRECISE precise
 #  define BF_U32(x) uint(x)
+#  define BF_I32(x) int(x)
 #  define BF_F32(x) float(x)
 #else
 #  include <stdint.h>
@@ -25,6 +26,7 @@ typedef float bf_f32;
 #  define bf_popcount(x) ((bf_u32)__builtin_popcount(x))
 #  define BF_PRECISE
 #  define BF_U32(x) ((bf_u32)(x))
+#  define BF_I32(x) ((bf_i32)(x))
 #  define BF_F32(x) ((bf_f32)(x))
 #endif
 
@@ -39,6 +41,18 @@ typedef float bf_f32;
 #  define BF_LOCAL_SIZE_FROM_SPEC \
     layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z_id = 2) in;
 #endif
+
+/* ------------------------------------------------------------ the sensor */
+
+/* Axial depth noise sigma(z) = a + b (z - c)^2 [m] (Nguyen, Izadi, Lovell
+ * 2012), with a, b, c from the one bf_sensor (core/core.h) that fusion and
+ * tracking both receive. */
+BF_FN bf_f32 bf_sensor_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
+{
+    BF_PRECISE bf_f32 d = z - c;
+    BF_PRECISE bf_f32 s = a + b * d * d;
+    return s;
+}
 
 /* ------------------------------------------------------------ bricks */
 

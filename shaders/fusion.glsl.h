@@ -120,15 +120,6 @@ typedef struct fusion_frame fusion_frame;
 _Static_assert(sizeof(fusion_frame) == FUSION_FRAME_WORDS * 4, "fusion_frame must match std430");
 #endif
 
-/* Depth sensor uncertainty sigma(z) = a + b (z - c)^2 [m] (Kinect v1:
- * Nguyen, Izadi, Lovell 2012: a = 0.0012, b = 0.0019, c = 0.4). */
-BF_FN bf_f32 fusion_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
-{
-    BF_PRECISE bf_f32 d = z - c;
-    BF_PRECISE bf_f32 s = a + b * d * d;
-    return s;
-}
-
 /* ------------------------------------------------------------ work lists */
 /* A list of brick slots (new bricks of a frame, a window's bricks): word
  * FUSION_LIST_COUNT holds the count, words FUSION_LIST_ARGS .. + 2 the
@@ -217,7 +208,7 @@ _Static_assert(sizeof(fusion_remove_push) == 16, "fusion_remove_push must match 
  * Windowed integration of one brick (DESIGN.md section 4; Reichl, Weiss,
  * Westermann 2016, section 4; the host side is fusion/integrate.c, the
  * kernel shaders/fusion_integrate.comp, the CPU oracle
- * fusion/integrate_ref.c). The per-voxel math lives here once, so GPU and
+ * tests/fusion/integrate_ref.c). The per-voxel math lives here once, so GPU and
  * CPU round every float operation the same way (BF_PRECISE: no contraction
  * or reassociation in GLSL; C builds with -ffp-contract=off by -std=c17).
  *
@@ -225,7 +216,7 @@ _Static_assert(sizeof(fusion_remove_push) == 16, "fusion_remove_push must match 
  * window still in the ring: p_c = R p + t, nearest pixel of (fx x/z + cx,
  * fy y/z + cy), d_i = raw depth * depth_unit_m (0: no sample),
  * D_i = d_i - p_c.z (positive in front of the surface), sigma_i =
- * fusion_sigma(d_i), and
+ * bf_sensor_sigma(d_i), and
  *   W_i = 1,                         D_i > -2 sigma_i,
  *   W_i = (3 sigma_i + D_i)/sigma_i, -3 sigma_i < D_i <= -2 sigma_i (fade-out),
  *   W_i = 0,                         D_i <= -3 sigma_i (occluded),
@@ -420,7 +411,7 @@ BF_FN fusion_obs fusion_observe(bf_u32 raw, bf_f32 depth_unit_m, bf_f32 z, bf_f3
     o.sigma = 0.0f;
     if (raw == 0u) return o;
     BF_PRECISE bf_f32 d = BF_F32(raw) * depth_unit_m;
-    BF_PRECISE bf_f32 sigma = fusion_sigma(d, a, b, c);
+    BF_PRECISE bf_f32 sigma = bf_sensor_sigma(d, a, b, c);
     BF_PRECISE bf_f32 dist = d - z;
     if (!(sigma > 0.0f) || !(dist > -3.0f * sigma)) return o; /* occluded (or NaN) */
     BF_PRECISE bf_f32 dc = dist < sigma ? (dist > -sigma ? dist : -sigma) : sigma;

@@ -47,27 +47,8 @@ void retry(uint item)
     if (i < pc.queue_cap) queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i] = item;
 }
 
-bool entry_has(uint e, ivec3 key)
-{
-    uint base = e * FUSION_ENTRY_WORDS;
-    return hash.w[base + FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID &&
-           int(hash.w[base + FUSION_ENTRY_X]) == key.x && int(hash.w[base + FUSION_ENTRY_Y]) == key.y &&
-           int(hash.w[base + FUSION_ENTRY_Z]) == key.z;
-}
-
-/* Hash entry of the chunk, FUSION_NONE if absent. */
-uint find_chunk(uint bucket, ivec3 key)
-{
-    uint first = bucket * FUSION_BUCKET_SLOTS;
-    for (uint k = 0u; k < FUSION_BUCKET_SLOTS; k++)
-        if (entry_has(first + k, key)) return first + k;
-    uint e = hash.w[(first + FUSION_BUCKET_SLOTS - 1u) * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT];
-    for (uint guard = 0u; e != FUSION_NONE && guard < pc.n_overflow; guard++) {
-        if (entry_has(e, key)) return e;
-        e = hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT];
-    }
-    return FUSION_NONE;
-}
+uint fusion_hash_word(uint i) { return hash.w[i]; }
+#include "fusion_hash.glsl.h"
 
 /* Inserts the chunk; the caller holds the bucket's lock for this pass, so
  * nobody else writes this bucket's slots or chain. FUSION_NONE if a pool
@@ -163,7 +144,7 @@ void locate(vec3 p, uint level, out ivec3 key, out uvec3 cell)
 bool insert_cell(ivec3 key, uvec3 cell, uint level)
 {
     uint bucket = fusion_hash(key.x, key.y, key.z, pc.n_buckets);
-    uint entry = find_chunk(bucket, key);
+    uint entry = fusion_find_in_bucket(bucket, key.x, key.y, key.z, pc.n_overflow);
     if (entry == FUSION_NONE) {
         if (atomicCompSwap(locks.w[bucket], 0u, 1u) != 0u) return false;
         entry = insert_chunk(bucket, key);
@@ -234,7 +215,7 @@ bool sample_at(mat3 Rt, uint x, uint y, out sample_ray s)
     s.band = 0.0;
     s.level = 0u;
     if (!(s.z > 0.0) || s.z > pc.max_depth_m) return false;
-    s.band = pc.band_sigmas * fusion_sigma(s.z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
+    s.band = pc.band_sigmas * bf_sensor_sigma(s.z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
     s.level = fusion_level_for_footprint(pc.voxel_ratio * s.z * g_inv_abs_fx, pc.chunk_m, pc.max_level);
     s.d = Rt * vec3((float(x) - g_cx) * g_inv_fx, (float(y) - g_cy) * g_inv_fy, 1.0);
     return true;

@@ -67,8 +67,11 @@ struct render_push {
      * start_margin_m - start_margin_z2 z^2). */
     bf_f32 start_margin_m, start_margin_z2;
     bf_u32 start_off;
+    /* The depth image (binding 4) starts at pixel depth_off: 0 for the
+     * caster's own, another buffer's level (the tracking reference) else. */
+    bf_u32 depth_off;
 };
-#define RENDER_PUSH_WORDS 28u
+#define RENDER_PUSH_WORDS 29u
 #ifndef BF_GLSL
 typedef struct render_push render_push;
 _Static_assert(sizeof(render_push) == RENDER_PUSH_WORDS * 4, "render_push must match std430");

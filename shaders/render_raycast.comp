@@ -43,27 +43,11 @@ uint render_conf_word(uint slot, uint w) { return conf_pool.w[slot * BRICK_WORDS
 
 #include "render_traverse.glsl.h"
 
-bool entry_has(uint e, ivec3 key)
-{
-    uint base = e * FUSION_ENTRY_WORDS;
-    return hash.w[base + FUSION_ENTRY_STATE] == FUSION_ENTRY_VALID && int(hash.w[base + FUSION_ENTRY_X]) == key.x &&
-           int(hash.w[base + FUSION_ENTRY_Y]) == key.y && int(hash.w[base + FUSION_ENTRY_Z]) == key.z;
-}
+uint fusion_hash_word(uint i) { return hash.w[i]; }
+#include "fusion_hash.glsl.h"
 
-/* Hash entry of the chunk, FUSION_NONE if absent (fusion_alloc.comp's
- * lookup, read-only). */
-uint find_chunk(ivec3 key)
-{
-    uint first = fusion_hash(key.x, key.y, key.z, pc.n_buckets) * FUSION_BUCKET_SLOTS;
-    for (uint k = 0u; k < FUSION_BUCKET_SLOTS; k++)
-        if (entry_has(first + k, key)) return first + k;
-    uint e = hash.w[(first + FUSION_BUCKET_SLOTS - 1u) * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT];
-    for (uint guard = 0u; e != FUSION_NONE && guard < pc.n_overflow; guard++) {
-        if (entry_has(e, key)) return e;
-        e = hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT];
-    }
-    return FUSION_NONE;
-}
+/* Hash entry of the chunk, FUSION_NONE if absent (fusion's lookup). */
+uint find_chunk(ivec3 key) { return fusion_find_chunk(key.x, key.y, key.z, pc.n_buckets, pc.n_overflow); }
 
 /* Depth at which the ray leaves the axis-aligned cube [lo, lo + size]. */
 float cell_exit(render_ray ray, vec3 lo, float size)
@@ -317,6 +301,6 @@ void main()
     if (hit && (pc.flags & RENDER_FLAG_REFINE) != 0u)
         tr.hit_depth = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
                                       (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u);
-    depth_out.v[pixel] = hit ? tr.hit_depth : 0.0;
+    depth_out.v[pc.depth_off + pixel] = hit ? tr.hit_depth : 0.0;
     level_out.v[pixel] = hit ? tr.hit_level : FUSION_NONE;
 }

@@ -16,7 +16,8 @@
  *
  * Buffers of the image kernels (track_depth, track_pyrdown, track_smooth,
  * track_vn, track_rof, track_rof_primal), one binding layout for all:
- *   0 raw      input: u16 depth two per word (low half first), or float bits
+ *   0 raw      input: u16 depth two per word (low half first), or float bits,
+ *              from word raw_off (a frame in fusion's incoming slot)
  *   1 depth    depth pyramid (float)
  *   2 normal   normal pyramid (uint, octahedral)
  *   3 counters TRACK_CNT_* (uint)
@@ -46,9 +47,10 @@
 #define TRACK_CNT_WORDS 4u
 
 
-/* Raw input modes of track_depth. */
-#define TRACK_RAW_U16 0u
-#define TRACK_RAW_F32 1u
+/* Input modes of track_depth. */
+#define TRACK_RAW_U16 0u      /* raw binding: u16 sensor units, two per word */
+#define TRACK_RAW_F32 1u      /* raw binding: float metres */
+#define TRACK_RAW_IN_PLACE 2u /* the depth level itself (float metres written there by the ray-cast) */
 
 /* ------------------------------------------------------------ ICP sums
  * One workgroup's partial sums of the point-to-plane system (Low 2004):
@@ -78,11 +80,13 @@ struct track_image_push {
     bf_f32 lambda0;         /* ROF data weight at 1 m */
     bf_f32 tau;             /* ROF step (Chambolle 2004: 1/4) */
     bf_u32 src_width;       /* of the level read (pyrdown) */
+    bf_u32 raw_off;         /* word offset of the raw image in binding 0 (depth, TRACK_RAW_U16 / F32) */
+    bf_f32 sigma_a, sigma_b, sigma_c; /* the sensor's noise (bf_sensor_sigma; pyrdown, smooth) */
     bf_u32 pad;
 };
 #ifndef BF_GLSL
 typedef struct track_image_push track_image_push;
-_Static_assert(sizeof(track_image_push) == 64, "track_image_push must match std430");
+_Static_assert(sizeof(track_image_push) == 80, "track_image_push must match std430");
 #endif
 
 /* Push constants of the ICP kernel: the frame's pose relative to the
@@ -104,7 +108,7 @@ struct track_icp_push {
      * the same level), w x h pixels at pixel offset ref_off; its
      * intrinsics follow from the frame level's (track__level_intrinsics). */
     bf_u32 ref_off, ref_width, ref_height, ref_shift;
-    bf_u32 pad[3];
+    bf_f32 sigma_a, sigma_b, sigma_c; /* the sensor's noise (bf_sensor_sigma; the weights) */
 };
 #ifndef BF_GLSL
 typedef struct track_icp_push track_icp_push;
@@ -133,29 +137,23 @@ vec3 track_oct_decode(uint w)
 }
 #endif
 
-/* Kinect v1 axial noise (Nguyen, Izadi, Lovell 2012), metres. */
-BF_FN bf_f32 track_sigma_z(bf_f32 z)
-{
-    BF_PRECISE bf_f32 d = z - 0.4f;
-    BF_PRECISE bf_f32 s = 0.0012f + 0.0019f * d * d;
-    return s;
-}
-
 /* Pyramid: depths of a 2x2 block within this of the block's nearest depth
  * are averaged (KinectFusion averages within 3 sigma of the centre; a 2x2
  * block has no centre, the nearest sample stands in so that a background
- * sample never drags a foreground edge back). */
-BF_FN bf_f32 track_block_thresh(bf_f32 z) { return 3.0f * track_sigma_z(z); }
+ * sample never drags a foreground edge back). sigma_z: the sensor's noise
+ * at that depth (bf_sensor_sigma). */
+BF_FN bf_f32 track_block_thresh(bf_f32 sigma_z) { return 3.0f * sigma_z; }
 
 /* Bilateral smoothing of the depth that normals are computed from
  * (track_smooth.comp): radius in pixels, spatial weight exp(-k^2 W) with
- * W = 1 / (2 sigma_s^2), sigma_s = 2 px, and the range sigma 4 sigma_z(z):
+ * W = 1 / (2 sigma_s^2), sigma_s = 2 px, and the range sigma 4 sigma_z(z)
+ * (the sensor's noise at z, bf_sensor_sigma):
  * wide enough to pass a disparity quantisation step (Kinect v1 at 640x480:
  * 0.0032 z^2, e.g. 2.9 cm at 3 m against 5.6 cm), narrow enough to stop at
  * a real edge of 10 cm or more up to 3 m. */
 #define TRACK_SMOOTH_RADIUS 3u
 #define TRACK_SMOOTH_SPACE_W 0.125f
-BF_FN bf_f32 track_smooth_range(bf_f32 z) { return 4.0f * track_sigma_z(z); }
+BF_FN bf_f32 track_smooth_range(bf_f32 sigma_z) { return 4.0f * sigma_z; }
 
 /* Normals: a neighbour farther than this in depth (per pixel of distance)
  * is across a discontinuity and the normal is invalid: 5% of z allows

@@ -1,7 +1,7 @@
 #version 450
 /* Raw depth -> metres, finest level of a depth pyramid (DESIGN.md section
- * 1, preprocess): u16 sensor units times unit_m, or float metres (a
- * ray-cast reference). 0, NaN, infinite, negative or beyond max_depth_m
+ * 1, preprocess): u16 sensor units times unit_m, float metres, or the
+ * level's own floats (a ray-cast reference written in place). 0, NaN, infinite, negative or beyond max_depth_m
  * become 0 (no depth). Counts the valid pixels into counters[pc.counter]:
  * one atomic per subgroup
  * (subgroup arithmetic is required: lavapipe has it, and a shared counter
@@ -29,10 +29,12 @@ void main()
     if (xy.x < pc.width && xy.y < pc.height) {
         float z;
         if (pc.mode == TRACK_RAW_U16) {
-            uint v = (raw.w[i >> 1] >> ((i & 1u) * 16u)) & 0xFFFFu;
+            uint v = (raw.w[pc.raw_off + (i >> 1)] >> ((i & 1u) * 16u)) & 0xFFFFu;
             z = float(v) * pc.unit_m;
+        } else if (pc.mode == TRACK_RAW_F32) {
+            z = uintBitsToFloat(raw.w[pc.raw_off + i]);
         } else {
-            z = uintBitsToFloat(raw.w[i]);
+            z = depth.d[pc.dst_off + i]; /* each invocation reads and writes only its own pixel */
         }
         /* The comparison is false for NaN; isinf / isnan guard drivers that
          * assume finite math. */

@@ -98,7 +98,7 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     float r = dot(n, d);
     /* Weighted least squares (IRLS): with weight_noise each residual counts
      * by the inverse variance of the sensor's depth noise relative to 1 m
-     * (Kinect v1's grows with z^2: a sample at 3 m weighs ~50 times less
+     * (bf_sensor_sigma; Kinect v1's grows with z^2: a sample at 3 m weighs ~50 times less
      * than one at 1 m, where the map is finer and the frame less noisy), and
      * Huber's weight on the residual in units of that noise bounds the pull
      * of the few associations that land on a wrong surface (silhouettes,
@@ -106,9 +106,9 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
      * reject everything while the motion is still large. */
     float wgt = 1.0;
     if (pc.weight_noise != 0u || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
-        float sig = track_sigma_z(max(p.z, zq));
+        float sig = bf_sensor_sigma(max(p.z, zq), pc.sigma_a, pc.sigma_b, pc.sigma_c);
         if (pc.weight_noise != 0u) {
-            float sw = track_sigma_z(1.0) / sig;
+            float sw = bf_sensor_sigma(1.0, pc.sigma_a, pc.sigma_b, pc.sigma_c) / sig;
             wgt = sw * sw;
         }
         float e = abs(r) / sig;

@@ -26,7 +26,7 @@ void main()
     }
     float sum = 0.0, n = 0.0;
     if (zmin < 1e30) {
-        float thr = track_block_thresh(zmin);
+        float thr = track_block_thresh(bf_sensor_sigma(zmin, pc.sigma_a, pc.sigma_b, pc.sigma_c));
         for (uint k = 0u; k < 4u; k++)
             if (z[k] > 0.0 && z[k] - zmin <= thr) { sum += z[k]; n += 1.0; }
     }

@@ -33,7 +33,7 @@ void main()
     float z = src(o + i);
     float out_z = 0.0;
     if (z > 0.0) {
-        float sr = track_smooth_range(z);
+        float sr = track_smooth_range(bf_sensor_sigma(z, pc.sigma_a, pc.sigma_b, pc.sigma_c));
         float inv_r = 1.0 / (2.0 * sr * sr);
         float sum = 0.0, wsum = 0.0;
         for (int k = -int(TRACK_SMOOTH_RADIUS); k <= int(TRACK_SMOOTH_RADIUS); k++) {

@@ -12,36 +12,24 @@
 #include "bf_shaders_spv.h"
 #include "tracking_int.h"
 
-static uint32_t env_u32(const char *name, uint32_t def)
-{
-    const char *s = getenv(name);
-    uint32_t v;
-    return s && bf_parse_u32(s, &v) && v > 0 ? v : def;
-}
-
 bf_status track__icp_create(track_tracker *t)
 {
     const gpu_limits *lim = gpu_device_limits(t->ctx);
-    /* 64 invocations, each walking 16 pixels of the finest level
-     * (bench/bench_tracking.c measured the choices on lavapipe:
-     * docs/tracking.md). BITFUSE_TRACK_ICP_LOCAL (a power of two up to 64)
-     * and BITFUSE_TRACK_ICP_PPT override them for benchmarks. */
-    uint32_t local = env_u32("BITFUSE_TRACK_ICP_LOCAL", 64);
-    if (local > TRACK_ICP_LOCAL_MAX || (local & (local - 1))) local = 64;
+    /* The configured shape (track_config.icp_local, icp_px_per_thread),
+     * narrowed to what the device allows. */
+    uint32_t local = t->cfg.icp_local;
     while (local > lim->max_compute_workgroup_invocations || local > lim->max_compute_workgroup_size[0]) local /= 2;
     t->icp_local = local;
-    t->icp_px_per_thread = env_u32("BITFUSE_TRACK_ICP_PPT", 16);
+    t->icp_px_per_thread = t->cfg.icp_px_per_thread;
     uint64_t n0 = (uint64_t)t->geom.w[0] * t->geom.h[0];
     t->icp_groups_max = (uint32_t)((n0 + (uint64_t)local * t->icp_px_per_thread - 1) / ((uint64_t)local * t->icp_px_per_thread));
     if (t->icp_groups_max > lim->max_compute_workgroup_count[0]) {
         t->icp_groups_max = lim->max_compute_workgroup_count[0];
     }
     /* Subgroup additions where the device has them; the shared-memory
-     * kernel otherwise (and with BITFUSE_TRACK_ICP_SUBGROUP=0, so tests
-     * exercise both). */
+     * kernel otherwise (and with icp_subgroup false, so tests exercise both). */
     uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
-    const char *env = getenv("BITFUSE_TRACK_ICP_SUBGROUP");
-    t->icp_subgroup = (lim->subgroup_ops & need) == need && !(env && !strcmp(env, "0"));
+    t->icp_subgroup = (lim->subgroup_ops & need) == need && t->cfg.icp_subgroup;
     gpu_pipeline_desc d = {
         .name = t->icp_subgroup ? "track.icp_sg" : "track.icp",
         .spirv = t->icp_subgroup ? bf_spv_track_icp_sg : bf_spv_track_icp,
@@ -109,6 +97,9 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
         .sub = sub,
         .huber_k = weighted ? t->cfg.huber_k : 0.0f,
         .weight_noise = weighted && t->cfg.weight_noise ? 1u : 0u,
+        .sigma_a = t->cfg.sensor.sigma_a,
+        .sigma_b = t->cfg.sensor.sigma_b,
+        .sigma_c = t->cfg.sensor.sigma_c,
     };
     /* Frame levels below the reference's finest are associated with it. */
     uint32_t rl = l > t->ref_first ? l : t->ref_first;

@@ -42,10 +42,6 @@ static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *
 
 bf_status track__pyramid_create(track_tracker *t)
 {
-    const char *prof = getenv("BITFUSE_TRACK_PROFILE");
-    t->profile = prof && !strcmp(prof, "1");
-    const char *pn = getenv("BITFUSE_TRACK_PARENT_NORMALS");
-    t->parent_normals = pn ? strcmp(pn, "0") != 0 : true;
     /* track_depth.comp counts valid pixels with subgroup additions. */
     uint32_t need = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
     if ((gpu_device_limits(t->ctx)->subgroup_ops & need) != need)
@@ -70,14 +66,10 @@ bf_status track__pyramid_create(track_tracker *t)
                             TRACK_IMAGE_TILE, &t->p_primal)) != BF_OK)
         return s;
     if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
-    for (uint32_t k = 0; k < 2; k++) {
-        if ((s = image_bindings(t, k ? "track.ref_up[1]" : "track.ref_up[0]", t->upload, true, k, &t->b_ref_up[k])) !=
-            BF_OK)
+    t->frame_raw_off = 0;
+    for (uint32_t k = 0; k < 2; k++)
+        if ((s = image_bindings(t, k ? "track.ref[1]" : "track.ref[0]", t->upload, true, k, &t->b_ref_up[k])) != BF_OK)
             return s;
-        if ((s = image_bindings(t, k ? "track.ref_gpu[1]" : "track.ref_gpu[0]", t->ref_in, true, k,
-                                &t->b_ref_gpu[k])) != BF_OK)
-            return s;
-    }
     /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
     gpu_pipeline *all[] = {t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal};
     return gpu_pipeline_warm_up(t->ctx, all, 6);
@@ -86,9 +78,8 @@ bf_status track__pyramid_create(track_tracker *t)
 void track__pyramid_destroy(track_tracker *t)
 {
     for (int k = 1; k >= 0; k--) {
-        gpu_bindings_destroy(t->b_ref_gpu[k]);
         gpu_bindings_destroy(t->b_ref_up[k]);
-        t->b_ref_gpu[k] = t->b_ref_up[k] = NULL;
+        t->b_ref_up[k] = NULL;
     }
     gpu_bindings_destroy(t->b_frame);
     gpu_pipeline_destroy(t->p_primal);
@@ -117,7 +108,10 @@ static track_image_push base_push(const track_tracker *t, uint32_t l)
         .height = t->geom.h[l],
         .dst_off = t->geom.off[l],
         .unit_m = (float)(1.0 / t->K.depth_scale),
-        .max_depth_m = t->cfg.max_depth_m,
+        .max_depth_m = t->cfg.sensor.max_depth_m,
+        .sigma_a = t->cfg.sensor.sigma_a,
+        .sigma_b = t->cfg.sensor.sigma_b,
+        .sigma_c = t->cfg.sensor.sigma_c,
         .lambda0 = t->cfg.rof_lambda0,
         .tau = 0.25f, /* Chambolle 2004: converges in practice up to 1/4 */
     };
@@ -127,15 +121,15 @@ static track_image_push base_push(const track_tracker *t, uint32_t l)
 
 void track__stage_begin(track_tracker *t, const char *name)
 {
-    if (!t->profile) gpu_cmd_stage_begin(t->ctx, name);
+    if (!t->cfg.profile) gpu_cmd_stage_begin(t->ctx, name);
 }
 void track__stage_end(track_tracker *t)
 {
-    if (!t->profile) gpu_cmd_stage_end(t->ctx);
+    if (!t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 void track__profile_print(track_tracker *t, const char *what)
 {
-    if (!t->profile) return;
+    if (!t->cfg.profile) return;
     const gpu_stage_time *st;
     uint32_t n = gpu_stage_times(t->ctx, &st);
     fprintf(stderr, "track profile %s:", what);
@@ -145,7 +139,7 @@ void track__profile_print(track_tracker *t, const char *what)
 
 static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_image_push *pc)
 {
-    if (!t->profile) return;
+    if (!t->cfg.profile) return;
     char name[GPU_STAGE_NAME_MAX];
     const char *k = p == t->p_depth     ? "depth"
                     : p == t->p_pyrdown ? "pyr"
@@ -163,7 +157,7 @@ static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const t
     pstage_begin(t, p, pc);
     gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE),
                      gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
-    if (t->profile) gpu_cmd_stage_end(t->ctx);
+    if (t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 
 /* The same for kernels taking TRACK_IMAGE_PX pixels per invocation. */
@@ -172,16 +166,18 @@ static void dispatch_px(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, cons
     pstage_begin(t, p, pc);
     gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
                      gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
-    if (t->profile) gpu_cmd_stage_end(t->ctx);
+    if (t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 
 /* Depth of level 0 from the raw input, levels above, then the normal maps
  * of every level, through binding set b. */
-static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t level, uint32_t mode, uint32_t counter)
+static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t level, uint32_t mode, uint32_t counter,
+                      uint32_t raw_off)
 {
     track_image_push pc = base_push(t, level);
     pc.mode = mode;
     pc.counter = counter;
+    pc.raw_off = raw_off;
     dispatch(t, t->p_depth, b, &pc);
 }
 
@@ -197,7 +193,7 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first, uint3
         pc.src_width = t->geom.w[l - 1];
         dispatch(t, t->p_pyrdown, b, &pc);
     }
-    bool copy_parent = t->parent_normals && first == 0;
+    bool copy_parent = t->cfg.parent_normals && first == 0;
     uint32_t l0 = copy_parent ? 1u : first;
     for (uint32_t pass = 0; pass < 2; pass++) {
         /* The depth pyramid's (pass 0) or the horizontal pass's (pass 1)
@@ -231,25 +227,30 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first, uint3
 void track__cmd_frame_pyramid(track_tracker *t)
 {
     track__stage_begin(t, "track.frame");
-    cmd_depth(t, t->b_frame, 0, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID);
+    cmd_depth(t, t->b_frame, 0, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID, t->frame_raw_off);
     cmd_pyramid(t, t->b_frame, 0, 1);
     track__stage_end(t);
 }
 
-void track__cmd_reference(track_tracker *t, bool from_gpu)
+void track__cmd_reference(track_tracker *t, bool in_place)
 {
-    gpu_bindings **b = from_gpu ? t->b_ref_gpu : t->b_ref_up;
+    gpu_bindings **b = t->b_ref_up;
     uint32_t n_it = t->cfg.rof_iterations;
     /* The image comes in at level l0 (a GPU reference at ref_level, a raw
      * frame at full resolution). The ROF runs on level rl >= l0; levels
      * between keep the unsmoothed depth. */
-    uint32_t l0 = from_gpu ? t->cfg.ref_level : 0;
+    uint32_t l0 = in_place ? t->cfg.ref_level : 0;
     uint32_t rl = n_it > 0 && t->cfg.rof_level > l0 ? t->cfg.rof_level : l0;
     track__stage_begin(t, "track.ref");
+    /* The previous frame's ICP and pyramid passes read the dual field's
+     * buffer (scratch) -> the fills. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_fill(t->ctx, t->rof_p[0], 0, GPU_WHOLE_SIZE, 0);
-    /* The zero dual field -> the first ROF iteration's reads. */
+    gpu_cmd_fill(t->ctx, t->counters, TRACK_CNT_REF_VALID * 4u, 4, 0);
+    /* The zero dual field and count -> the depth pass and the first ROF
+     * iteration. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    cmd_depth(t, b[0], l0, from_gpu ? TRACK_RAW_F32 : TRACK_RAW_U16, TRACK_CNT_REF_VALID);
+    cmd_depth(t, b[0], l0, in_place ? TRACK_RAW_IN_PLACE : TRACK_RAW_U16, TRACK_CNT_REF_VALID, 0);
     for (uint32_t l = l0 + 1; l <= rl; l++) {
         /* Level l - 1's depth writes -> level l's block reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);

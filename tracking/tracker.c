@@ -13,24 +13,19 @@ track_config track_config_default(void)
     track_config c = {
         .levels = 3,
         /* KinectFusion has 10 at the finest level, 5 and 4 above (Newcombe et
-         * al. 2011, sec. 3.5). 5 at the finest: in the full loop on the
-         * 640x480 synthetic fr1_xyz room (60 frames) ICP took 64 instead of
-         * 112 ms per frame for an ATE of 5.8 against 5.5 mm (3/4/8: 53 ms,
-         * 7.0 mm; docs/tracking.md). With the convergence test below a
-         * level may stop earlier. */
+         * al. 2011, sec. 3.5). 5 at the finest costs about half the ICP time
+         * for nearly the same error in the full loop (docs/tracking.md has
+         * the sweep). With the convergence test below a level may stop
+         * earlier. */
         .iterations = {5, 5, 4},
         .dist_m = 0.1f,
-        /* DESIGN.md says 20; docs/tracking.md has the measurements behind
-         * 45: on the real TUM fr2_desk pair every gate from 20 to 35 degrees
-         * stops in the same wrong minimum (|t| 49-57 mm, degenerate, forward
-         * and backward disagree by 2-37 mm), 45 and 60 find the same pose
-         * (131 mm, 3.3 degrees, 85% inliers, consistent to 0.5 mm), and the
-         * synthetic room tracks as well as with 20 (0.18 against 0.21 mm).
-         * Kinect v1 depth is quantised in disparity, so even smoothed
-         * normals of real frames disagree by more than 20 degrees on about
-         * a third of the pixels at the right pose. */
+        /* KinectFusion uses 20; Kinect v1 depth is quantised in disparity,
+         * so even smoothed normals of real frames disagree by more than 20
+         * degrees on about a third of the pixels at the right pose, and
+         * narrow gates stop the real TUM fr2_desk pair in a wrong minimum
+         * where 45 finds the consistent pose (docs/tracking.md). */
         .angle_deg = 45.0f,
-        .max_depth_m = 4.5f, /* Kinect v1's range (SYNTH_KINECT1_Z_MAX_M) */
+        .sensor = bf_sensor_kinect1(),
         /* A quarter of the frame's samples must find a partner: frame to
          * frame at 30 Hz over 90% do; a lost or jumped camera leaves a few
          * percent (tests: 0.3 m / 20 degrees gives < 10%). */
@@ -58,21 +53,26 @@ track_config track_config_default(void)
         .degenerate_ratio = 5e-3,
         .rof_iterations = 10,
         .rof_lambda0 = 100.0f,
-        /* Half resolution: a quarter of the cost (lavapipe: ~10 ms per
-         * full-resolution iteration under load), the same tracking error in
-         * bench_tracking; the normals come from level 1 anyway. */
+        /* Half resolution: a quarter of the cost for the same tracking
+         * error (bench_tracking, docs/tracking.md); the normals come from
+         * level 1 anyway. */
         .rof_level = 1,
         .ref_level = 1,
         .min_valid_frac = 0.01f,
         .converged_m = 1e-5f,
         .converged_deg = 1e-3f,
         .finest_sample_step = 1,
-        /* At the finest level. On the 640x480 synthetic fr1_xyz room (60
-         * frames of the full loop) the ATE went from 13.4 to 6.2 mm with
-         * both (docs/tracking.md). k = 2 keeps 95% of Gaussian residuals
-         * at full weight. */
+        /* At the finest level: together they halve the loop's error on the
+         * synthetic room (docs/tracking.md). k = 2 keeps 95% of Gaussian
+         * residuals at full weight. */
         .huber_k = 2.0f,
         .weight_noise = true,
+        /* bench/bench_tracking.c measured the ICP shapes on lavapipe (docs/tracking.md). */
+        .icp_local = 64,
+        .icp_px_per_thread = 16,
+        .icp_subgroup = true,
+        /* Level 1's normals at the finest level: less noisy, and as accurate (docs/tracking.md). */
+        .parent_normals = true,
     };
     return c;
 }
@@ -104,15 +104,22 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
 {
     if (c->levels < 1 || c->levels > TRACK_MAX_LEVELS)
         return bf_fail(BF_INVALID_ARG, "tracking: %u levels (1..%u)", c->levels, TRACK_MAX_LEVELS);
-    if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->max_depth_m > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: gates must be positive (dist %g m, angle %g deg, depth %g m)",
-                       c->dist_m, c->angle_deg, c->max_depth_m);
+    if (!(c->dist_m > 0) || !(c->angle_deg > 0 && c->angle_deg <= 180) || !(c->sensor.max_depth_m > 0) ||
+        !(c->sensor.sigma_a > 0) || !(c->sensor.sigma_b >= 0))
+        return bf_fail(BF_INVALID_ARG,
+                       "tracking: gates and sensor must be positive (dist %g m, angle %g deg, depth %g m, sigma %g)",
+                       c->dist_m, c->angle_deg, c->sensor.max_depth_m, c->sensor.sigma_a);
     if (c->rof_level > 1 || c->rof_level >= c->levels)
         return bf_fail(BF_INVALID_ARG, "tracking: rof_level %u (0 or 1, below levels %u)", c->rof_level, c->levels);
     if (c->ref_level > 1 || c->ref_level >= c->levels)
         return bf_fail(BF_INVALID_ARG, "tracking: ref_level %u (0 or 1, below levels %u)", c->ref_level, c->levels);
     if (c->finest_sample_step != 1 && c->finest_sample_step != 2)
         return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1 or 2)", c->finest_sample_step);
+    if (c->icp_local < 1 || c->icp_local > TRACK_ICP_LOCAL_MAX || (c->icp_local & (c->icp_local - 1)))
+        return bf_fail(BF_INVALID_ARG, "tracking: icp_local %u (a power of two up to %u)", c->icp_local,
+                       TRACK_ICP_LOCAL_MAX);
+    if (c->icp_px_per_thread < 1 || c->icp_px_per_thread > 4096)
+        return bf_fail(BF_INVALID_ARG, "tracking: icp_px_per_thread %u (1..4096)", c->icp_px_per_thread);
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
     if (!(c->huber_k >= 0) || !isfinite(c->huber_k))
         return bf_fail(BF_INVALID_ARG, "tracking: huber_k %g must be >= 0 (0: off)", c->huber_k);
@@ -154,7 +161,6 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     t->geom.n_pix = off;
     uint64_t n0 = (uint64_t)K->width * K->height, np = t->geom.n_pix;
     if ((s = buffer(t, "track.upload", (n0 + 1) / 2 * 4, GPU_MEMORY_UPLOAD, &t->upload)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_in", n0 * 4, GPU_MEMORY_DEVICE, &t->ref_in)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.frame_depth", np * 4, GPU_MEMORY_DEVICE, &t->frame_depth)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.frame_normal", np * 4, GPU_MEMORY_DEVICE, &t->frame_normal)) != BF_OK) goto fail;
     if ((s = buffer(t, "track.ref_depth", np * 4, GPU_MEMORY_DEVICE, &t->ref_depth)) != BF_OK) goto fail;
@@ -164,7 +170,7 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
-    gpu_buffer *zero[] = {t->upload, t->ref_in, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
+    gpu_buffer *zero[] = {t->upload, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
                           t->rof_p[0], t->rof_p[1], t->counters};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
     if (s != BF_OK) goto fail;
@@ -183,7 +189,7 @@ void track_destroy(track_tracker *t)
     track__icp_destroy(t);
     track__pyramid_destroy(t);
     gpu_buffer *bufs[] = {t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_depth,
-                          t->frame_normal, t->frame_depth, t->ref_in, t->upload};
+                          t->frame_normal, t->frame_depth, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
     free(t);
@@ -201,16 +207,6 @@ static uint32_t min_valid(const track_tracker *t, uint32_t l)
 static bf_status read_counter(track_tracker *t, uint32_t idx, uint32_t *v)
 {
     return gpu_buffer_download(t->counters, idx * 4u, v, 4);
-}
-
-static double stage_ms(const gpu_context *ctx, const char *name)
-{
-    const gpu_stage_time *st;
-    uint32_t n = gpu_stage_times(ctx, &st);
-    double ms = 0;
-    for (uint32_t i = 0; i < n; i++)
-        if (!strcmp(st[i].name, name)) ms += st[i].ms;
-    return ms;
 }
 
 /* The nearest rigid motion: the rotation's polar factor (Higham's Newton
@@ -254,30 +250,81 @@ static double det3(const double R[3][3])
            R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]);
 }
 
-static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16_t *raw, const bf_se3 *T_wc)
+static bf_status check_pose(const bf_se3 *T_wc)
 {
-    bf_status s = gpu_buffer_fill(t->counters, TRACK_CNT_REF_VALID * 4u, 4, 0);
-    if (s == BF_OK && raw) s = track__upload_depth(t, raw);
-    if (s == BF_OK) s = gpu_begin(t->ctx);
+    if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
+        return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
+    return BF_OK;
+}
+
+bf_status track_reference_target(track_tracker *t, gpu_buffer **buf, uint64_t *offset)
+{
+    if (!t || !buf || !offset) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    *buf = t->ref_depth;
+    *offset = t->geom.off[t->cfg.ref_level];
+    return BF_OK;
+}
+
+/* Records the preparation of the reference (in place: from its target;
+ * else from the raw frame in the upload buffer). */
+static void cmd_reference(track_tracker *t, bool in_place, const bf_se3 *T_wc)
+{
+    t->has_ref = false; /* the pyramids are being rewritten */
+    t->ref_pending = true;
+    t->ref_first = in_place ? t->cfg.ref_level : 0;
+    t->T_wr_pending = *T_wc;
+    track__cmd_reference(t, in_place);
+}
+
+bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc)
+{
+    if (!t || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_pose(T_wc);
     if (s != BF_OK) return s;
-    t->ref_first = depth ? t->cfg.ref_level : 0;
-    if (depth) {
-        uint32_t l = t->ref_first;
-        gpu_cmd_copy(t->ctx, depth, 0, t->ref_in, 0, (uint64_t)t->geom.w[l] * t->geom.h[l] * 4);
-        /* The copy into ref_in -> the depth conversion reading it. */
-        gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    }
-    track__cmd_reference(t, depth != NULL);
-    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) return s;
+    cmd_reference(t, true, T_wc);
+    return BF_OK;
+}
+
+bf_status track_finish_reference(track_tracker *t)
+{
+    if (!t || !t->ref_pending) return bf_fail(BF_INVALID_ARG, "tracking: no reference recorded to finish");
+    t->ref_pending = false;
     track__profile_print(t, "reference");
-    t->ms_rof = stage_ms(t->ctx, "track.rof");
-    t->ms_ref = t->ms_rof + stage_ms(t->ctx, "track.ref");
+    t->ms_rof = gpu_stage_ms(t->ctx, "track.rof");
+    t->ms_ref = t->ms_rof + gpu_stage_ms(t->ctx, "track.ref");
     uint32_t n = 0;
-    if ((s = read_counter(t, TRACK_CNT_REF_VALID, &n)) != BF_OK) return s;
+    bf_status s = read_counter(t, TRACK_CNT_REF_VALID, &n);
+    if (s != BF_OK) return s;
     t->ref_valid = n;
     t->has_ref = n >= min_valid(t, t->ref_first);
-    t->T_wr = nearest_rigid(T_wc);
+    t->T_wr = nearest_rigid(&t->T_wr_pending);
     return BF_OK;
+}
+
+/* One submission of its own: the reference from depth (a GPU float image,
+ * copied to the target) or raw (a frame's u16 depth). */
+static bf_status set_reference(track_tracker *t, gpu_buffer *depth, const uint16_t *raw, const bf_se3 *T_wc)
+{
+    bf_status s = raw ? track__upload_depth(t, raw) : BF_OK;
+    if (s == BF_OK) s = gpu_begin(t->ctx);
+    if (s != BF_OK) return s;
+    if (depth) {
+        uint32_t l = t->cfg.ref_level;
+        /* The previous reference's readers -> the copy over it. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
+        gpu_cmd_copy(t->ctx, depth, 0, t->ref_depth, (uint64_t)t->geom.off[l] * 4,
+                     (uint64_t)t->geom.w[l] * t->geom.h[l] * 4);
+        /* The copy into the target -> the depth pass reading it in place. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    }
+    cmd_reference(t, depth != NULL, T_wc);
+    /* The count of valid pixels -> the host's read. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_HOST);
+    if ((s = gpu_submit_wait(t->ctx)) != BF_OK) {
+        t->ref_pending = false;
+        return s;
+    }
+    return track_finish_reference(t);
 }
 
 bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc)
@@ -289,8 +336,8 @@ bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_
         return bf_fail(BF_INVALID_ARG, "tracking: reference %s holds %llu bytes, %ux%u floats need %llu",
                        gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth), t->geom.w[l], t->geom.h[l],
                        (unsigned long long)need);
-    if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
+    bf_status s = check_pose(T_wc);
+    if (s != BF_OK) return s;
     return set_reference(t, depth, NULL, T_wc);
 }
 
@@ -307,27 +354,29 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
 {
     if (!t || !f || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
     bf_status s = check_frame(t, f);
+    if (s == BF_OK) s = check_pose(T_wc);
     if (s != BF_OK) return s;
-    if (!bf_se3_is_finite(T_wc) || !(det3(T_wc->R) > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: reference pose is not finite or not a rotation");
     return set_reference(t, NULL, f->depth, T_wc);
 }
 
-bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out)
+/* Tracks the frame whose raw depth is at word raw_off of raw. */
+static bf_status frame_from(track_tracker *t, gpu_buffer *raw, uint32_t raw_off, uint32_t index,
+                            const bf_se3 *guess_wc, track_result *out)
 {
-    if (!t || !f || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
-    bf_status s = check_frame(t, f);
-    if (s != BF_OK) return s;
     if (!bf_se3_is_finite(guess_wc) || !(det3(guess_wc->R) > 0))
-        return bf_fail(BF_INVALID_ARG, "tracking: frame %u: guess is not finite or not a rotation", f->index);
+        return bf_fail(BF_INVALID_ARG, "tracking: frame %u: guess is not finite or not a rotation", index);
     track_result r = {.outcome = TRACK_OK, .T_wc = *guess_wc, .ms_rof = t->ms_rof, .ms_ref = t->ms_ref};
     if (!t->has_ref) {
         r.outcome = TRACK_NO_REFERENCE;
         *out = r;
         return BF_OK;
     }
+    /* Bound every frame (a host-side descriptor write): a buffer pointer
+     * seen before may be a new buffer at a freed one's address. */
+    bf_status s = gpu_bindings_set(t->b_frame, 0, raw, 0, GPU_WHOLE_SIZE);
+    if (s != BF_OK) return s;
+    t->frame_raw_off = raw_off;
     if ((s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0)) != BF_OK) return s;
-    if ((s = track__upload_depth(t, f->depth)) != BF_OK) return s;
     /* Everything the GPU sees is relative to the reference camera, and
      * rigid (nearest_rigid: a guess that is not quite orthonormal must not
      * make its error part of the relative pose). */
@@ -348,6 +397,27 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     }
     *out = r;
     return BF_OK;
+}
+
+bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out)
+{
+    if (!t || !f || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_frame(t, f);
+    if (s != BF_OK) return s;
+    if (t->has_ref && (s = track__upload_depth(t, f->depth)) != BF_OK) return s;
+    return frame_from(t, t->upload, 0, f->index, guess_wc, out);
+}
+
+bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
+                          const bf_se3 *guess_wc, track_result *out)
+{
+    if (!t || !depth || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    uint64_t words = ((uint64_t)t->K.width * t->K.height + 1) / 2;
+    if (offset % 4 || offset / 4 > UINT32_MAX || gpu_buffer_size(depth) < offset + words * 4)
+        return bf_fail(BF_INVALID_ARG, "tracking: frame %u: %s holds %llu bytes, %llu words of depth from byte %llu",
+                       index, gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth),
+                       (unsigned long long)words, (unsigned long long)offset);
+    return frame_from(t, depth, (uint32_t)(offset / 4), index, guess_wc, out);
 }
 
 bf_status track_frame_depth_gpu(track_tracker *t, uint32_t level, gpu_buffer **buf, uint64_t *offset)

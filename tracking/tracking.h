@@ -11,6 +11,13 @@
  * each iteration reduces the 6x6 system on the GPU in partial sums and
  * solves it on the CPU in double.
  *
+ * Frames come as raw depth on the GPU (fusion's incoming frame slot,
+ * track_frame_gpu) or from the host (track_frame). A reference from the
+ * GPU is written in place at track_reference_target (recon/'s ray-cast)
+ * and prepared in the caller's submission (track_cmd_reference), so the
+ * loop copies nothing. The sensor's noise model and range come from
+ * track_config.sensor (the bf_sensor fusion gets too).
+ *
  * Poses are camera to world in double. The GPU only ever sees the pose of
  * the new frame relative to the reference camera, so tracking 10 km from
  * the world origin is as accurate as at the origin. Rotations that come
@@ -34,7 +41,7 @@ typedef struct track_config {
     uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 5, 5, 4 (KinectFusion: 10, 5, 4) */
     float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 45 (DESIGN.md: 20; docs/tracking.md) */
-    float max_depth_m;                     /* samples beyond are ignored, default 4.5 */
+    bf_sensor sensor;                      /* noise model and range, default Kinect v1 (recon/ sets its own) */
     /* Failure and degeneracy (checked at the end of the finest level). */
     float min_inlier_frac;   /* inliers / valid samples of the frame below this: failure */
     float max_residual_m;    /* RMS point-to-plane residual of the inliers above this: failure */
@@ -51,7 +58,7 @@ typedef struct track_config {
                                 GPU then come at (width >> ref_level) x (height >> ref_level); frame
                                 levels below it are associated with it. The ROF runs at
                                 max(rof_level, ref_level). */
-    /* Added with the implementation (docs/tracking.md has the reasons). */
+    /* Thresholds and sampling (docs/tracking.md has the reasons). */
     float min_valid_frac;    /* valid depth pixels / all below this: TRACK_NO_DEPTH (frame) or
                                 TRACK_NO_REFERENCE (reference); default 0.01 */
     float converged_m;       /* a level stops iterating when the update moves less than this */
@@ -61,6 +68,15 @@ typedef struct track_config {
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
     float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 2; 0: off */
     bool weight_noise;       /* weight residuals by the inverse noise variance sigma_z(z)^-2, default true */
+    /* Kernel shapes and diagnostics (docs/tracking.md): tuning for benchmarks and tests; every
+       choice tracks to the same pose within float rounding. */
+    uint32_t icp_local;         /* ICP invocations per workgroup, a power of two up to 64, default 64
+                                   (fewer where the device allows fewer) */
+    uint32_t icp_px_per_thread; /* finest-level pixels each ICP invocation walks, default 16 */
+    bool icp_subgroup;          /* subgroup additions in the ICP reduction where the device has them
+                                   (default); false: the shared-memory reduction */
+    bool parent_normals;        /* the finest level's normals copied from level 1, default true */
+    bool profile;               /* every image dispatch its own timed stage, printed to stderr; default false */
 } track_config;
 
 track_config track_config_default(void);
@@ -98,10 +114,25 @@ typedef struct track_result {
 bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out);
 void track_destroy(track_tracker *t); /* NULL is a no-op */
 
+/* The reference, written in place (recon/: the ray-cast writes it there,
+ * nothing is copied): where a depth image must be written to become the
+ * reference, (width >> ref_level) x (height >> ref_level) floats (camera z
+ * in metres, 0 = none) from pixel *offset of *buf. Valid until
+ * track_destroy. */
+bf_status track_reference_target(track_tracker *t, gpu_buffer **buf, uint64_t *offset);
+/* Records, into the context's open command buffer (gpu_begin) after the
+ * commands that wrote the target (they end with a barrier), the reference's
+ * preparation seen from T_wc: ROF smoothing on its foreground, then the
+ * vertex and normal pyramids. The caller submits, then calls
+ * track_finish_reference; until then there is no reference. */
+bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc);
+/* After the submission holding track_cmd_reference finished: the reference
+ * takes effect (its valid pixels counted, its pose kept). */
+bf_status track_finish_reference(track_tracker *t);
 /* Sets the reference from a depth image on the GPU (float camera z in
- * metres per pixel, 0 = none; render_targets.depth) seen from T_wc: ROF
- * smoothing on its foreground, then the vertex and normal pyramids. The
- * buffer is read now and may change afterwards. */
+ * metres per pixel, 0 = none; render_targets.depth) seen from T_wc, in a
+ * submission of its own: the image is copied to the target, then as
+ * track_cmd_reference. The buffer is read now and may change afterwards. */
 bf_status track_set_reference_gpu(track_tracker *t, gpu_buffer *depth, const bf_se3 *T_wc);
 /* Sets the reference from a raw frame (frame-to-frame tracking, tests):
  * the same path after converting its depth to metres. */
@@ -109,8 +140,16 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
 
 /* Tracks frame f against the reference, starting from guess_wc. Returns
  * BF_OK whenever tracking ran (out->outcome says how it went) and an error
- * only for bad arguments or a device failure. */
+ * only for bad arguments or a device failure. Uploads f's depth to the
+ * tracker's own buffer, then as track_frame_gpu. */
 bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_wc, track_result *out);
+/* Tracks a frame whose raw depth is already on the GPU: width x height
+ * uint16 in K's depth units, two per word (the lower half first), from byte
+ * offset `offset` (a multiple of 4) of `depth` (recon/: fusion's incoming
+ * frame slot, so the frame is uploaded once). index names the frame in
+ * messages. The image must stay there until this returns. */
+bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
+                          const bf_se3 *guess_wc, track_result *out);
 
 /* The depth pyramid of the last frame track_frame saw, on the GPU: level l
  * is (width >> l) x (height >> l) floats (metres, 0 = none) from pixel

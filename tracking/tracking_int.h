@@ -23,11 +23,14 @@ struct track_tracker {
     bf_intrinsics K;
     track_pyramid_geom geom;
 
-    /* Frame: raw upload (u16, two per word), pyramids of depth and normal
-     * (octahedral uint). Reference: float input, the same pyramids (level 0 of
-     * ref_depth is the ROF-smoothed depth), the ROF dual fields (ping-pong). */
-    gpu_buffer *upload;        /* UPLOAD: u16 depth of a frame */
-    gpu_buffer *ref_in;        /* float depth of a reference given on the GPU */
+    /* Frame: raw depth (u16, two per word) on the GPU, pyramids of depth and
+     * normal (octahedral uint). Reference: written in place at its finest
+     * level (the ray-cast, track_reference_target) or converted from a raw
+     * frame, the same pyramids (that level of ref_depth is then the
+     * ROF-smoothed depth), the ROF dual fields (ping-pong). */
+    gpu_buffer *upload;        /* UPLOAD: u16 depth of a frame given on the host (track_frame, references from frames) */
+    uint32_t frame_raw_off;    /* word offset of the frame's raw depth in b_frame's binding 0 (upload, or
+                                  the caller's buffer: track_frame_gpu) */
     gpu_buffer *frame_depth, *frame_normal;
     gpu_buffer *ref_depth, *ref_normal;
     gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
@@ -35,22 +38,21 @@ struct track_tracker {
     gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
 
     gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp;
-    /* Image binding sets: frame from the upload, reference from the upload
-     * (raw frame) or ref_in (GPU depth) with the dual fields 0 -> 1 and
-     * 1 -> 0. */
-    gpu_bindings *b_frame, *b_ref_up[2], *b_ref_gpu[2], *b_icp;
+    /* Image binding sets: frame from its raw depth, reference from the upload
+     * (a raw frame; unused in place) with the dual fields 0 -> 1 and 1 -> 0. */
+    gpu_bindings *b_frame, *b_ref_up[2], *b_icp;
 
     uint32_t icp_local;        /* ICP invocations per workgroup */
     uint32_t icp_px_per_thread;
     uint32_t icp_groups_max;
     bool icp_subgroup;         /* the subgroup-arithmetic kernel is used */
-    bool parent_normals;       /* the finest level's normals from level 1 (pyramid.c) */
-    bool profile;              /* BITFUSE_TRACK_PROFILE=1: every image dispatch its own timed stage, printed */
     float *partial_host;       /* icp_groups_max * TRACK_PARTIAL_WORDS, allocated at create */
 
     /* The reference. */
     bool has_ref;
+    bool ref_pending;          /* track_cmd_reference recorded, track_finish_reference not yet run */
     bf_se3 T_wr;               /* camera to world of the reference */
+    bf_se3 T_wr_pending;       /* the pose of the reference being prepared */
     uint32_t ref_valid;        /* valid depth pixels at the reference's finest level */
     bool has_frame;            /* frame_depth holds a frame (track_frame_depth_gpu) */
     uint32_t ref_first;        /* that level: cfg.ref_level for a reference from the GPU, 0 for a frame */
@@ -69,13 +71,14 @@ void track__stage_end(track_tracker *t);
 void track__profile_print(track_tracker *t, const char *what);
 bf_status track__pyramid_create(track_tracker *t);
 void track__pyramid_destroy(track_tracker *t);
-/* Records upload -> frame pyramids (depth, normal; counts the
- * valid pixels into TRACK_CNT_FRAME_VALID). The frame's depth must already
- * be in t->upload. */
+/* Records the raw frame (b_frame's binding 0 at frame_raw_off) -> frame pyramids
+ * (depth, normal; counts the valid pixels into TRACK_CNT_FRAME_VALID). */
 void track__cmd_frame_pyramid(track_tracker *t);
-/* Records the reference: depth conversion from the upload (from_gpu false)
- * or ref_in, ROF smoothing (its own timed stage "track.rof"), pyramids. */
-void track__cmd_reference(track_tracker *t, bool from_gpu);
+/* Records the reference: the count of its valid pixels cleared, depth
+ * conversion from the upload (in_place false: a raw frame) or in place at
+ * ref_level (a GPU reference), ROF smoothing (its own timed stage
+ * "track.rof"), pyramids. */
+void track__cmd_reference(track_tracker *t, bool in_place);
 /* Writes a frame's depth into the upload buffer. */
 bf_status track__upload_depth(track_tracker *t, const uint16_t *depth);
 
@@ -83,7 +86,7 @@ bf_status track__upload_depth(track_tracker *t, const uint16_t *depth);
 bf_status track__icp_create(track_tracker *t);
 void track__icp_destroy(track_tracker *t);
 /* Runs ICP from the relative pose *T_rc (in/out): the frame's
- * preprocessing (its depth must be in t->upload) in the first iteration's
+ * preprocessing (its raw depth bound to b_frame) in the first iteration's
  * submission, then the levels; fills the result's statistics and outcome
  * (NO_DEPTH when the frame has fewer than min_valid depth pixels;
  * NO_REFERENCE is the caller's). */

@@ -91,7 +91,7 @@ static size_t expected_cells(const bf_intrinsics *K, const fusion_config *c, con
                              expect_cell *out, size_t cap)
 {
     size_t n = 0;
-    double sigma = c->sigma_a + c->sigma_b * (z - c->sigma_c) * (z - c->sigma_c);
+    double sigma = c->sensor.sigma_a + c->sensor.sigma_b * (z - c->sensor.sigma_c) * (z - c->sensor.sigma_c);
     uint32_t level = fusion_level_for_footprint((float)(c->voxel_ratio * z / K->fx_px), c->chunk_m, c->max_level);
     double cell_m = c->chunk_m / (double)(1u << level);
     for (uint32_t v = 0; v < K->height; v++)

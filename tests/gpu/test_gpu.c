@@ -10,9 +10,9 @@
 #include <string.h>
 #include <ctype.h>
 
-#include "bf_shaders_spv.h"
+#include "bf_test_shaders_spv.h"
 #include "gpu/gpu.h"
-#include "shaders/gpu_test.glsl.h"
+#include "shaders/gpu_test.glsl.h" /* tests/gpu/shaders */
 
 /* ------------------------------------------------------------ helpers */
 

@@ -7,7 +7,7 @@
 #include <string.h>
 
 #include "synth/synth.h"
-#include "fusion/fusion_int.h"
+#include "fusion_ref.h"
 #include "gpu_fixture.h"
 #include "raycast_ref.h"
 #include "render/render.h"
@@ -70,7 +70,7 @@ static uint32_t insert_plane(fusion_map *map, const plane *pl, uint32_t level, c
                     cell[a] = (uint32_t)(g[a] - k * per);
                 }
                 uint32_t slot;
-                if (fusion__debug_insert_brick(map, key, level, cell, &slot) != BF_OK) return 0;
+                if (fusion_ref_insert_brick(map, key, level, cell, &slot) != BF_OK) return 0;
                 uint32_t sign[16] = {0}, conf[16] = {0};
                 bool confident = rule == CONF_ALL || (gx % 2 == 0);
                 for (uint32_t z = 0; z < 8; z++)
@@ -137,7 +137,7 @@ BF_TEST(fronto_parallel_plane_depth_normal_and_level_are_exact)
     CHECK_OK(fusion_check(map));
 
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     for (int mode = 0; mode < 3; mode++) {
         render_options opt = mode == 0 ? render_options_tracking() : render_options_display();
@@ -178,6 +178,32 @@ BF_TEST(fronto_parallel_plane_depth_normal_and_level_are_exact)
         render_images_free(&im);
     }
     CHECK(render_last_ms(rc) > 0);
+    /* The depth sent to another buffer at an offset (recon/ writes the
+     * tracking reference in place this way): the same bits. */
+    render_options opt = render_options_tracking();
+    opt.no_shade = true;
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    uint32_t n_px = K_SMALL.width * K_SMALL.height;
+    float *own = malloc(n_px * 4), *sent = malloc(n_px * 4);
+    CHECK_OK(gpu_buffer_download(render_get_targets(rc)->depth, 0, own, (uint64_t)n_px * 4));
+    gpu_buffer *dst;
+    gpu_buffer_desc dd = {.name = "test.depth_out", .size_bytes = (uint64_t)(n_px + 7) * 4,
+                          .memory = GPU_MEMORY_DEVICE};
+    CHECK_OK(gpu_buffer_create(ctx, &dd, &dst));
+    CHECK_OK(gpu_buffer_zero(dst));
+    opt.depth_out = dst;
+    opt.depth_offset = 7;
+    CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
+    CHECK_OK(gpu_buffer_download(dst, 7 * 4, sent, (uint64_t)n_px * 4));
+    CHECK(memcmp(own, sent, (size_t)n_px * 4) == 0);
+    /* Shading reads the caster's own image; a buffer too small is refused. */
+    opt.no_shade = false;
+    CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &opt), BF_INVALID_ARG);
+    opt.no_shade = true;
+    opt.depth_offset = 8;
+    CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &opt), BF_INVALID_ARG);
+    gpu_buffer_destroy(dst);
+    free(own), free(sent);
     render_destroy(rc);
     fusion_destroy(map);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
@@ -198,7 +224,7 @@ BF_TEST(tilted_plane_depth_within_a_voxel_and_normals_within_degrees)
     uint32_t n = insert_plane(map, &pl, 5, (double[]){-1.0, -0.8, 0.6}, (double[]){1.0, 0.8, 2.4}, CONF_ALL);
     CHECK(n > 100);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     render_options opt = render_options_tracking();
     CHECK_OK(render_raycast(rc, map, &K_SMALL, &T, &opt));
@@ -272,7 +298,7 @@ BF_TEST(display_mode_hides_bricks_without_confident_voxels)
     plane pl = {{0, 0, z0}, {0, 0, -1}};
     CHECK(insert_plane(map, &pl, 5, (double[]){-0.9, -0.7, 1.0}, (double[]){0.9, 0.7, 1.2}, CONF_EVEN_X) > 100);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     render_options track = render_options_tracking(), show = render_options_display();
     render_images a, b;
@@ -331,7 +357,7 @@ BF_TEST(empty_map_and_pose_looking_away_give_no_hits_and_bad_sizes_are_refused)
     fusion_map *map;
     CHECK_OK(fusion_create(ctx, &c, &K_SMALL, bf_v3(3, -2, 1), &map));
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_SMALL.width, K_SMALL.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_SMALL.width, K_SMALL.height, &rc));
     bf_se3 T = bf_se3_identity();
     T.t = bf_v3(3, -2, 1);
     render_options opt = render_options_tracking();
@@ -377,7 +403,7 @@ BF_TEST(empty_map_and_pose_looking_away_give_no_hits_and_bad_sizes_are_refused)
     r.far_m = r.near_m;
     CHECK_STATUS(render_raycast(rc, map, &K_SMALL, &T, &r), BF_INVALID_ARG);
     render_caster *none = NULL;
-    CHECK_STATUS(render_create(ctx, 0, 10, &none), BF_INVALID_ARG);
+    CHECK_STATUS(render_create(ctx, NULL, 0, 10, &none), BF_INVALID_ARG);
     CHECK(none == NULL);
     render_destroy(NULL);
     render_destroy(rc);
@@ -471,7 +497,7 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
     const bf_intrinsics K = {160, 120, 131.25, 131.25, 79.5, 59.5, 5000};
     bf_se3 T = bf_se3_interpolate(&room.T_wc[2], &room.T_wc[3], 0.5);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K.width, K.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K.width, K.height, &rc));
     size_t np = (size_t)K.width * K.height;
     float *ref_depth = malloc(np * sizeof *ref_depth);
     uint32_t *ref_level = malloc(np * sizeof *ref_level);
@@ -531,7 +557,7 @@ BF_TEST(gpu_matches_cpu_oracle_on_fused_room)
 static bf_status room_cast(gpu_context *ctx, fusion_map *map, const bf_se3 *T_shift, float *depth[ROOM_FRAMES])
 {
     render_caster *rc = NULL;
-    bf_status s = render_create(ctx, K_ROOM.width, K_ROOM.height, &rc);
+    bf_status s = render_create(ctx, NULL, K_ROOM.width, K_ROOM.height, &rc);
     render_options opt = render_options_tracking();
     for (uint32_t k = 0; k < ROOM_FRAMES && s == BF_OK; k += 3) {
         bf_se3 T = bf_se3_mul(T_shift, &room.T_wc[k]);
@@ -577,7 +603,7 @@ BF_TEST(raycast_at_a_fused_pose_reproduces_its_depth_also_10_km_away)
             if (!(dn[k][i] > 0)) continue;
             n_hit++;
             if (!(z > 0)) continue;
-            double sigma = fc->sigma_a + fc->sigma_b * (z - fc->sigma_c) * (z - fc->sigma_c);
+            double sigma = fc->sensor.sigma_a + fc->sensor.sigma_b * (z - fc->sensor.sigma_c) * (z - fc->sensor.sigma_c);
             ratio[n++] = fabs(dn[k][i] - z) / sigma;
         }
         double med = median(ratio, n);
@@ -622,7 +648,7 @@ BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
     fusion_map *map;
     CHECK_OK(room_fuse(ctx, &id, &map));
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_ROOM.width, K_ROOM.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_ROOM.width, K_ROOM.height, &rc));
     uint32_t np = K_ROOM.width * K_ROOM.height;
     float *z = malloc((size_t)np * 4 + 64);
     gpu_buffer *start;
@@ -641,8 +667,8 @@ BF_TEST(rays_started_in_front_of_the_frame_depth_find_the_same_surface)
         hinted.start_depth = start;
         hinted.start_offset = 16;
         const fusion_config *fc = fusion_get_config(map); /* recon's margins */
-        hinted.start_margin_m = 0.02f + 3.0f * fc->sigma_a;
-        hinted.start_margin_z2 = 3.0f * fc->sigma_b;
+        hinted.start_margin_m = 0.02f + 3.0f * fc->sensor.sigma_a;
+        hinted.start_margin_z2 = 3.0f * fc->sensor.sigma_b;
         hinted.no_shade = true;
         CHECK_OK(render_raycast(rc, map, &K_ROOM, &room.T_wc[k], &hinted));
         CHECK_OK(render_download(rc, &b));
@@ -696,7 +722,7 @@ BF_TEST(raycast_of_a_static_camera_is_unbiased)
     CHECK_OK(synth_render(ren, 0, &scene.T_wc_view, truth, NULL, NULL));
     synth_renderer_destroy(ren);
     render_caster *rc;
-    CHECK_OK(render_create(ctx, K_ROOM.width, K_ROOM.height, &rc));
+    CHECK_OK(render_create(ctx, NULL, K_ROOM.width, K_ROOM.height, &rc));
     double *err = malloc(np * sizeof *err);
     for (int noisy = 0; noisy < 2; noisy++) {
         synth_render_config cfg = {.K = K_ROOM, .noise = noisy ? SYNTH_NOISE_KINECT1 : SYNTH_NOISE_NONE, .seed = 7};

@@ -418,7 +418,7 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     uint32_t kept = 0;
     for (uint32_t i = 0; i < nh; i++) {
         double z = ref[i] / Kh.depth_scale;
-        if (z > 0 && z <= cfg.max_depth_m) kept += zf[i] > 0 && fabs(zf[i] - z) < 0.03;
+        if (z > 0 && z <= cfg.sensor.max_depth_m) kept += zf[i] > 0 && fabs(zf[i] - z) < 0.03;
         else CHECK(zf[i] == 0);
     }
     track_result r;
@@ -442,6 +442,75 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     gpu_buffer_destroy(buf);
     track_destroy(t);
     free(ref), free(d1), free(zf);
+    room_close(&full);
+    room_close(&half);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* The loop's paths (recon/) read the frame where fusion uploaded it and
+ * prepare a reference written in place in the caller's submission: the
+ * same inputs through the same kernels as the host copies, so the same
+ * bits. */
+BF_TEST(frame_on_the_gpu_and_reference_in_place_match_the_copying_paths)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    bf_intrinsics Kh = bf_intrinsics_level(&K_MID, 1);
+    room full, half;
+    CHECK_OK(room_open(&full, &K_MID, SYNTH_NOISE_KINECT1));
+    CHECK_OK(room_open(&half, &Kh, SYNTH_NOISE_KINECT1));
+    bf_se3 T0 = full.scene.T_wc_view, d = small_motion();
+    bf_se3 T1 = bf_se3_mul(&T0, &d);
+    uint16_t *ref = render(&half, 0, &T0), *d1 = render(&full, 1, &T1);
+    CHECK(ref && d1);
+    uint32_t nh = Kh.width * Kh.height, n1 = K_MID.width * K_MID.height;
+    float *zf = malloc(nh * 4), *za = malloc(nh * 4), *zb = malloc(nh * 4);
+    for (uint32_t i = 0; i < nh; i++) zf[i] = (float)(ref[i] / Kh.depth_scale);
+    gpu_buffer *buf;
+    CHECK_OK(upload_float(ctx, zf, nh, &buf));
+    /* The frame's raw depth 12 bytes into a buffer, as in fusion's slot. */
+    gpu_buffer *raw;
+    gpu_buffer_desc rd = {.name = "test.raw", .size_bytes = 12 + (uint64_t)(n1 + 1) / 2 * 4,
+                          .memory = GPU_MEMORY_UPLOAD};
+    CHECK_OK(gpu_buffer_create(ctx, &rd, &raw));
+    CHECK_OK(gpu_buffer_fill(raw, 0, 12, 0xdeadbeefu));
+    CHECK_OK(gpu_buffer_upload(raw, 12, d1, (uint64_t)n1 * 2));
+    track_config cfg = test_config(&K_MID);
+    track_tracker *t;
+    CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
+    bf_frame f1 = frame_of(&K_MID, d1, 1);
+    track_result ra, rb;
+    /* Copying paths. */
+    CHECK_OK(track_set_reference_gpu(t, buf, &T0));
+    CHECK_OK(track_download_reference(t, za));
+    CHECK_OK(track_frame(t, &f1, &T0, &ra));
+    /* In place, in a submission the caller owns, and the frame on the GPU. */
+    gpu_buffer *target;
+    uint64_t target_px;
+    CHECK_OK(track_reference_target(t, &target, &target_px));
+    CHECK_OK(gpu_begin(ctx));
+    gpu_cmd_copy(ctx, buf, 0, target, target_px * 4, (uint64_t)nh * 4);
+    gpu_cmd_barrier(ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    CHECK_OK(track_cmd_reference(t, &T0));
+    gpu_cmd_barrier(ctx, GPU_BARRIER_HOST);
+    CHECK_OK(gpu_submit_wait(ctx));
+    CHECK_OK(track_finish_reference(t));
+    CHECK_OK(track_download_reference(t, zb));
+    CHECK_OK(track_frame_gpu(t, raw, 12, 1, &T0, &rb));
+    CHECK(memcmp(za, zb, nh * 4) == 0);
+    CHECK_EQ_INT(ra.outcome, TRACK_OK);
+    CHECK_EQ_INT(rb.outcome, ra.outcome);
+    CHECK_EQ_INT(rb.n_inliers, ra.n_inliers);
+    CHECK_EQ_INT(rb.iterations, ra.iterations);
+    CHECK(memcmp(&rb.T_wc, &ra.T_wc, sizeof ra.T_wc) == 0);
+    /* A slot that does not hold the image, or is misaligned, is refused. */
+    CHECK_STATUS(track_frame_gpu(t, raw, 16, 1, &T0, &rb), BF_INVALID_ARG);
+    CHECK_STATUS(track_frame_gpu(t, raw, 14, 1, &T0, &rb), BF_INVALID_ARG);
+    gpu_buffer_destroy(raw);
+    gpu_buffer_destroy(buf);
+    track_destroy(t);
+    free(ref), free(d1), free(zf), free(za), free(zb);
     room_close(&full);
     room_close(&half);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
@@ -566,7 +635,7 @@ BF_TEST(icp_reduction_paths_agree)
     track_result r[2];
     bool sg[2];
     for (int k = 0; k < 2; k++) {
-        if (k) setenv("BITFUSE_TRACK_ICP_SUBGROUP", "0", 1);
+        cfg.icp_subgroup = k == 0;
         track_tracker *t;
         CHECK_OK(track_create(ctx, &cfg, &K_SMALL, &t));
         sg[k] = t->icp_subgroup;
@@ -574,7 +643,6 @@ BF_TEST(icp_reduction_paths_agree)
         CHECK_OK(track_frame(t, &f1, &T0, &r[k]));
         track_destroy(t);
     }
-    unsetenv("BITFUSE_TRACK_ICP_SUBGROUP");
     CHECK(!sg[1]);
     double dt, da;
     pose_error(&r[0].T_wc, &r[1].T_wc, &dt, &da);

@@ -1,6 +1,6 @@
 /* Tests of the windowed integration (fusion/integrate.c,
  * shaders/fusion_integrate.comp): the shared per-voxel functions alone, then
- * the GPU kernel against the CPU oracle fusion/integrate_ref.c bit for bit on
+ * the GPU kernel against the CPU oracle tests/fusion/integrate_ref.c bit for bit on
  * small synthetic scenes, then physics checks. Validation is on and any
  * message fails a test.
  *
@@ -22,7 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fusion/fusion_int.h"
+#include "fusion_ref.h"
 #include "gpu/gpu.h"
 
 /* Under ASan, tests/test_main.c pins the validation layer and suppresses its leaks. */
@@ -39,7 +39,7 @@ static fusion_frame identity_frame(void)
 BF_TEST(observe_weights_follow_the_rule)
 {
     float a = 0.008f, b = 0.0019f, c = 0.4f;
-    float sigma = fusion_sigma(1.0f, a, b, c);
+    float sigma = bf_sensor_sigma(1.0f, a, b, c);
     /* Free space: W = 1, D clamped to +sigma. */
     fusion_obs o = fusion_observe(1000, 0.001f, 0.9f, a, b, c);
     CHECK_EQ_INT(o.w, 1);
@@ -324,6 +324,9 @@ static bf_intrinsics test_K(void)
         CHECK_STATUS(_st, BF_OK);                                                    \
     } while (0)
 
+/* fusion_config.integrate_vpt of the scenes opened next (0: by device). */
+static uint32_t s_integrate_vpt;
+
 static bf_status scene_open(scene *s)
 {
     memset(s, 0, sizeof *s);
@@ -339,7 +342,8 @@ static bf_status scene_open(scene *s)
     cfg.brick_cap = 4096;
     cfg.hash_buckets = 64;
     cfg.hash_overflow = 64;
-    cfg.sigma_a = 0.008f; /* a sigma band of about a voxel, so ramps matter */
+    cfg.sensor.sigma_a = 0.008f; /* a sigma band of about a voxel, so ramps matter */
+    cfg.integrate_vpt = s_integrate_vpt;
     bf_intrinsics K = test_K();
     st = fusion_create(s->ctx, &cfg, &K, bf_v3(0, 0, 0), &s->map);
     if (st != BF_OK) return st;
@@ -379,7 +383,7 @@ static bf_status add_box(scene *s, double x0, double y0, double z0, double x1, d
                     cell[a] = (uint32_t)(g[a] - (int64_t)key[a] * per);
                 }
                 uint32_t slot;
-                bf_status st = fusion__debug_insert_brick(s->map, key, s->level, cell, &slot);
+                bf_status st = fusion_ref_insert_brick(s->map, key, s->level, cell, &slot);
                 if (st != BF_OK) return st;
                 fusion_ref_brick *b = &s->b[s->n];
                 memset(b, 0, sizeof *b);
@@ -447,7 +451,7 @@ static bf_status run_pass(scene *s, uint32_t first, uint32_t count, uint32_t fra
         fusion_ref_margins mg;
         bool in_pass = i >= first && i - first < count;
         if (in_pass) {
-            fusion__integrate_ref(&pc, s->frames, s->depth, &ref, &mg);
+            fusion_ref_integrate(&pc, s->frames, s->depth, &ref, &mg);
             res->n_fragile += mg.n_fragile;
             res->n_voxels_observed += mg.n_observed;
             res->n_error_written += mg.error_written;
@@ -529,12 +533,12 @@ BF_TEST(gpu_equals_cpu_invalid_pixels) { run_surface_case(surf_holes, 4, 0.05); 
  * a tuning choice: every size gives the same bits. */
 BF_TEST(gpu_equals_cpu_at_every_workgroup_size)
 {
-    static const char *vpt[] = {"1", "8", "16", "32"};
+    static const uint32_t vpt[] = {1, 8, 16, 32};
     for (size_t k = 0; k < sizeof vpt / sizeof vpt[0]; k++) {
-        setenv("BITFUSE_INTEGRATE_VPT", vpt[k], 1);
-        fprintf(stderr, "  %s voxels per invocation\n", vpt[k]);
+        s_integrate_vpt = vpt[k];
+        fprintf(stderr, "  %u voxels per invocation\n", vpt[k]);
         run_surface_case(surf_sphere, 4, 0.05);
-        unsetenv("BITFUSE_INTEGRATE_VPT");
+        s_integrate_vpt = 0;
         if (bf__test_failed_now) return;
     }
 }
@@ -587,7 +591,7 @@ BF_TEST(gpu_equals_cpu_prior_and_replacement_rule)
     for (uint32_t i = 0; i < s.n; i++) {
         fusion_ref_brick cf = before[i];
         cf.error = INFINITY;
-        fusion__integrate_ref(&pc, s.frames, s.depth, &cf, NULL);
+        fusion_ref_integrate(&pc, s.frames, s.depth, &cf, NULL);
         for (uint32_t w = 0; w < BRICK_WORDS; w++)
             would_flip += (uint32_t)__builtin_popcount((cf.sign[w] ^ before[i].sign[w]) & before[i].conf[w]);
     }
@@ -765,7 +769,7 @@ BF_TEST(plane_gives_front_sign_and_confidence_where_weight_suffices)
     PASS(&s, 0, s.n, 0, 5, true, true, &r, 0.01);
     double voxel = hostmap_level_voxel_m(s.map->cfg.chunk_m, s.level);
     float d = 1000.0f * (float)UNIT;
-    double sigma = fusion_sigma(d, s.map->cfg.sigma_a, s.map->cfg.sigma_b, s.map->cfg.sigma_c);
+    double sigma = bf_sensor_sigma(d, s.map->cfg.sensor.sigma_a, s.map->cfg.sensor.sigma_b, s.map->cfg.sensor.sigma_c);
     uint32_t n_front = 0, n_behind = 0, n_far = 0;
     for (uint32_t i = 0; i < s.n; i++) {
         const fusion_ref_brick *b = &s.b[i];

@@ -5,8 +5,9 @@
  * pass over every live brick against all frames of the window, and checks a
  * sample of bricks against the CPU oracle on this noisy, real-sized input.
  *
- *   bench_fusion_integrate [n_frames [ratio]]     (defaults 20, 1)
- *   BITFUSE_INTEGRATE_VPT=1|2|4|8|16 picks voxels per invocation.
+ *   bench_fusion_integrate [n_frames [ratio [vpt]]]   (defaults 20, 1, 0)
+ *   vpt 1|2|4|8|16 picks voxels per invocation (fusion_config.integrate_vpt;
+ *   0: by device).
  *   BENCH_BPG=16,1,... compares bricks per workgroup, interleaved.
  * Every timed pass reports the GPU timestamps (wall) and the CPU time the
  * process spent (lavapipe's worker threads): on a shared machine the CPU
@@ -18,7 +19,7 @@
 #include <string.h>
 
 #include "synth/synth.h"
-#include "fusion/fusion_int.h"
+#include "fusion_ref.h"
 #include "gpu/gpu.h"
 
 static double cpu_seconds(void)
@@ -48,6 +49,7 @@ int main(int argc, char **argv)
 {
     uint32_t n_frames = argc > 1 ? (uint32_t)atoi(argv[1]) : 20;
     float ratio = argc > 2 ? (float)atof(argv[2]) : 1.0f;
+    uint32_t vpt = argc > 3 ? (uint32_t)atoi(argv[3]) : 0;
     if (n_frames < 2 || n_frames > 128) n_frames = 20;
     synth_scene scene;
     TRY(synth_scene_room(NULL, &scene));
@@ -64,6 +66,7 @@ int main(int argc, char **argv)
     if (cfg.subcache > cfg.window) cfg.subcache = cfg.window;
     cfg.brick_cap = 1u << 18;
     cfg.voxel_ratio = ratio;
+    cfg.integrate_vpt = vpt;
     fusion_map *map;
     TRY(fusion_create(ctx, &cfg, &K, scene.T_wc_view.t, &map));
 
@@ -138,21 +141,16 @@ int main(int argc, char **argv)
     /* Variants (bricks per workgroup), interleaved run by run. */
     uint32_t bpg[8], n_var = 0;
     const char *env = getenv("BENCH_BPG");
-#ifdef FUSION_INTEGRATE_HAS_BPG
     for (const char *c = env; c && *c && n_var < 8;) {
         bpg[n_var++] = (uint32_t)strtoul(c, (char **)&c, 10);
         if (*c == ',') c++;
     }
-#endif
-    (void)env;
     if (n_var == 0) n_var = 1, bpg[0] = 0;
     enum { RUNS = 7 };
     double ms[8][RUNS], cpu[8][RUNS];
     for (int r = 0; r < RUNS; r++)
         for (uint32_t k = 0; k < n_var; k++) {
-#ifdef FUSION_INTEGRATE_HAS_BPG
             if (bpg[k]) map->integrate_bpg = bpg[k];
-#endif
             double c0 = cpu_seconds();
             TRY(gpu_begin(ctx));
             gpu_cmd_stage_begin(ctx, "integrate");
@@ -171,7 +169,7 @@ int main(int argc, char **argv)
                     TRY(gpu_buffer_download(map->sign, (uint64_t)b * 64, sign, 64));
                     TRY(gpu_buffer_download(map->conf, (uint64_t)b * 64, conf, 64));
                     fusion_ref_margins mg;
-                    fusion__integrate_ref(&pc, frames, depth_ring, &ref[j], &mg);
+                    fusion_ref_integrate(&pc, frames, depth_ring, &ref[j], &mg);
                     fragile += mg.n_fragile;
                     for (int w = 0; w < 16; w++) {
                         uint32_t d = (sign[w] ^ ref[j].sign[w]) | (conf[w] ^ ref[j].conf[w]);

@@ -6,7 +6,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "fusion_int.h"
+#include "fusion_ref.h"
 
 static uint32_t voxel_bit(const uint32_t w[BRICK_WORDS], uint32_t x, uint32_t y, uint32_t z)
 {
@@ -44,8 +44,8 @@ static bool pixel_fragile(const fusion_frame *f, const uint32_t *image, float u,
     return raw_at(f, image, i2, j) != r || raw_at(f, image, i, j2) != r || raw_at(f, image, i2, j2) != r;
 }
 
-void fusion__integrate_ref(const fusion_integrate_push *pc, const fusion_frame *frames, const uint32_t *depth_ring,
-                           fusion_ref_brick *b, fusion_ref_margins *margins)
+void fusion_ref_integrate(const fusion_integrate_push *pc, const fusion_frame *frames, const uint32_t *depth_ring,
+                          fusion_ref_brick *b, fusion_ref_margins *margins)
 {
     fusion_ref_margins mg = {.pixel = INFINITY, .sign = INFINITY, .conf = INFINITY, .error_gap = INFINITY};
     bool fragile[BRICK_VOXELS];
