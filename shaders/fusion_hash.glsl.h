@@ -25,7 +25,9 @@
 #endif
 
 /* Whether hash entry e holds chunk (x, y, z) (its state is read first: an
- * inserter writes it last). */
+ * inserter writes it last). One boolean expression: llvmpipe runs an
+ * early-return form of it measurably slower in the ray-cast
+ * (docs/bench_replay.md). */
 BF_FN bool fusion_entry_holds(FUSION_HASH_IN bf_u32 e, bf_i32 x, bf_i32 y, bf_i32 z)
 {
     bf_u32 base = e * FUSION_ENTRY_WORDS;
