@@ -18,6 +18,7 @@
 #  define BF_I32(x) int(x)
 #  define BF_F32(x) float(x)
 #else
+#  include <stdbool.h>
 #  include <stdint.h>
 #  define BF_FN static inline
 typedef uint32_t bf_u32;

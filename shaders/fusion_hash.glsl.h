@@ -24,16 +24,16 @@
 #  define FUSION_HASH_WORD(i) hash_words[i]
 #endif
 
-/* 1 when hash entry e holds chunk (x, y, z) (its state is read first: an
- * inserter writes it last). */
-BF_FN bf_u32 fusion_entry_holds(FUSION_HASH_IN bf_u32 e, bf_i32 x, bf_i32 y, bf_i32 z)
+/* Whether hash entry e holds chunk (x, y, z) (its state is read first: an
+ * inserter writes it last). One boolean expression: llvmpipe runs an
+ * early-return form of it measurably slower in the ray-cast
+ * (docs/bench_replay.md). */
+BF_FN bool fusion_entry_holds(FUSION_HASH_IN bf_u32 e, bf_i32 x, bf_i32 y, bf_i32 z)
 {
     bf_u32 base = e * FUSION_ENTRY_WORDS;
-    if (FUSION_HASH_WORD(base + FUSION_ENTRY_STATE) != FUSION_ENTRY_VALID) return 0u;
-    return BF_I32(FUSION_HASH_WORD(base + FUSION_ENTRY_X)) == x && BF_I32(FUSION_HASH_WORD(base + FUSION_ENTRY_Y)) == y &&
-                   BF_I32(FUSION_HASH_WORD(base + FUSION_ENTRY_Z)) == z
-               ? 1u
-               : 0u;
+    return FUSION_HASH_WORD(base + FUSION_ENTRY_STATE) == FUSION_ENTRY_VALID &&
+           BF_I32(FUSION_HASH_WORD(base + FUSION_ENTRY_X)) == x && BF_I32(FUSION_HASH_WORD(base + FUSION_ENTRY_Y)) == y &&
+           BF_I32(FUSION_HASH_WORD(base + FUSION_ENTRY_Z)) == z;
 }
 
 /* Hash entry of chunk (x, y, z) in its bucket (fusion_hash), FUSION_NONE if
@@ -42,10 +42,10 @@ BF_FN bf_u32 fusion_find_in_bucket(FUSION_HASH_IN bf_u32 bucket, bf_i32 x, bf_i3
 {
     bf_u32 first = bucket * FUSION_BUCKET_SLOTS;
     for (bf_u32 k = 0u; k < FUSION_BUCKET_SLOTS; k++)
-        if (fusion_entry_holds(FUSION_HASH_ARG first + k, x, y, z) != 0u) return first + k;
+        if (fusion_entry_holds(FUSION_HASH_ARG first + k, x, y, z)) return first + k;
     bf_u32 e = FUSION_HASH_WORD((first + FUSION_BUCKET_SLOTS - 1u) * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT);
     for (bf_u32 guard = 0u; e != FUSION_NONE && guard < n_overflow; guard++) {
-        if (fusion_entry_holds(FUSION_HASH_ARG e, x, y, z) != 0u) return e;
+        if (fusion_entry_holds(FUSION_HASH_ARG e, x, y, z)) return e;
         e = FUSION_HASH_WORD(e * FUSION_ENTRY_WORDS + FUSION_ENTRY_NEXT);
     }
     return FUSION_NONE;

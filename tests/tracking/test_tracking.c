@@ -383,6 +383,35 @@ BF_TEST(icp_recovers_2cm_2deg_noisy_room)
     check_room(SYNTH_NOISE_KINECT1, 0.004, 0.25);
 }
 
+/* A reference rendered at K_MID's level 1 from the room's viewpoint T0 and
+ * a full-resolution frame moved by small_motion() from it. */
+typedef struct half_pair {
+    room full, half;
+    bf_intrinsics Kh; /* K_MID at level 1 */
+    bf_se3 T0, d;     /* the reference's pose; the frame's motion from it */
+    uint16_t *ref, *d1;
+} half_pair;
+
+static bf_status half_pair_open(half_pair *p, synth_noise noise)
+{
+    memset(p, 0, sizeof *p);
+    p->Kh = bf_intrinsics_level(&K_MID, 1);
+    bf_status s = room_open(&p->full, &K_MID, noise);
+    if (s == BF_OK) s = room_open(&p->half, &p->Kh, noise);
+    if (s != BF_OK) return s;
+    p->T0 = p->full.scene.T_wc_view, p->d = small_motion();
+    bf_se3 T1 = bf_se3_mul(&p->T0, &p->d);
+    p->ref = render(&p->half, 0, &p->T0), p->d1 = render(&p->full, 1, &T1);
+    return p->ref && p->d1 ? BF_OK : bf_fail(BF_NO_MEMORY, "test: rendering the pair");
+}
+
+static void half_pair_close(half_pair *p)
+{
+    free(p->ref), free(p->d1);
+    room_close(&p->full);
+    room_close(&p->half);
+}
+
 /* The default reference level: a GPU reference at half resolution (the
  * ray-cast of recon/), the frame at full resolution. The finest frame level
  * is associated with the reference's level 1, so the motion must come out
@@ -392,16 +421,13 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    bf_intrinsics Kh = bf_intrinsics_level(&K_MID, 1);
+    half_pair hp;
+    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_NONE));
+    bf_intrinsics Kh = hp.Kh;
     CHECK_EQ_INT(Kh.width, 160);
     CHECK(fabs(Kh.cx_px - 79.5) < 1e-12 && fabs(Kh.fx_px - 131.25) < 1e-12);
-    room full, half;
-    CHECK_OK(room_open(&full, &K_MID, SYNTH_NOISE_NONE));
-    CHECK_OK(room_open(&half, &Kh, SYNTH_NOISE_NONE));
-    bf_se3 T0 = full.scene.T_wc_view, d = small_motion();
-    bf_se3 T1 = bf_se3_mul(&T0, &d);
-    uint16_t *ref = render(&half, 0, &T0), *d1 = render(&full, 1, &T1);
-    CHECK(ref && d1);
+    bf_se3 T0 = hp.T0, d = hp.d;
+    const uint16_t *ref = hp.ref, *d1 = hp.d1;
     uint32_t nh = Kh.width * Kh.height;
     float *zf = malloc(nh * 4);
     for (uint32_t i = 0; i < nh; i++) zf[i] = (float)(ref[i] / Kh.depth_scale);
@@ -441,9 +467,8 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     gpu_buffer_destroy(small);
     gpu_buffer_destroy(buf);
     track_destroy(t);
-    free(ref), free(d1), free(zf);
-    room_close(&full);
-    room_close(&half);
+    free(zf);
+    half_pair_close(&hp);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
@@ -456,14 +481,11 @@ BF_TEST(frame_on_the_gpu_and_reference_in_place_match_the_copying_paths)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    bf_intrinsics Kh = bf_intrinsics_level(&K_MID, 1);
-    room full, half;
-    CHECK_OK(room_open(&full, &K_MID, SYNTH_NOISE_KINECT1));
-    CHECK_OK(room_open(&half, &Kh, SYNTH_NOISE_KINECT1));
-    bf_se3 T0 = full.scene.T_wc_view, d = small_motion();
-    bf_se3 T1 = bf_se3_mul(&T0, &d);
-    uint16_t *ref = render(&half, 0, &T0), *d1 = render(&full, 1, &T1);
-    CHECK(ref && d1);
+    half_pair hp;
+    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_KINECT1));
+    bf_intrinsics Kh = hp.Kh;
+    bf_se3 T0 = hp.T0;
+    const uint16_t *ref = hp.ref, *d1 = hp.d1;
     uint32_t nh = Kh.width * Kh.height, n1 = K_MID.width * K_MID.height;
     float *zf = malloc(nh * 4), *za = malloc(nh * 4), *zb = malloc(nh * 4);
     for (uint32_t i = 0; i < nh; i++) zf[i] = (float)(ref[i] / Kh.depth_scale);
@@ -510,9 +532,8 @@ BF_TEST(frame_on_the_gpu_and_reference_in_place_match_the_copying_paths)
     gpu_buffer_destroy(raw);
     gpu_buffer_destroy(buf);
     track_destroy(t);
-    free(ref), free(d1), free(zf), free(za), free(zb);
-    room_close(&full);
-    room_close(&half);
+    free(zf), free(za), free(zb);
+    half_pair_close(&hp);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
