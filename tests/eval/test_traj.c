@@ -36,16 +36,22 @@ static bf_se3 path_pose(double t)
  * The oracle uses the SVD, traj.c the quaternion eigenvector: both are
  * exact up to rounding, so 1e-9 (relative) is far above the double-precision
  * disagreement (~1e-13) and far below any real change of rule. */
+/* fr1_xyz's ground truth and RGBD-SLAM's estimate of it (shared data). */
+static bf_status read_fr1_xyz(const char *dir, bf_traj *gt, bf_traj *est)
+{
+    char p_gt[4200], p_est[4200];
+    snprintf(p_gt, sizeof p_gt, "%s/groundtruth.txt", dir);
+    snprintf(p_est, sizeof p_est, "%s/rgbdslam_estimate.txt", dir);
+    bf_status s = replay_traj_read_tum(p_gt, gt);
+    return s == BF_OK ? replay_traj_read_tum(p_est, est) : s;
+}
+
 BF_TEST(ate_and_rpe_of_rgbdslam_on_fr1_xyz_match_the_tum_oracle)
 {
     const char *dir = bf_test_data("tum/fr1_xyz");
     if (!dir) BF_SKIP("shared data absent");
-    char p_gt[4200], p_est[4200];
-    snprintf(p_gt, sizeof p_gt, "%s/groundtruth.txt", dir);
-    snprintf(p_est, sizeof p_est, "%s/rgbdslam_estimate.txt", dir);
     bf_traj gt = {0}, est = {0};
-    CHECK_OK(replay_traj_read_tum(p_gt, &gt));
-    CHECK_OK(replay_traj_read_tum(p_est, &est));
+    CHECK_OK(read_fr1_xyz(dir, &gt, &est));
 
     eval_ate_result ate;
     eval_rpe_result rs, rf;
@@ -419,12 +425,8 @@ BF_TEST(ate_and_rpe_fail_cleanly_at_every_allocation)
 {
     const char *dir = bf_test_data("tum/fr1_xyz");
     if (!dir) BF_SKIP("shared data absent");
-    char p_gt[4200], p_est[4200];
-    snprintf(p_gt, sizeof p_gt, "%s/groundtruth.txt", dir);
-    snprintf(p_est, sizeof p_est, "%s/rgbdslam_estimate.txt", dir);
     traj_pair p = {{0}, {0}};
-    bf_status s = replay_traj_read_tum(p_gt, &p.gt);
-    if (s == BF_OK) s = replay_traj_read_tum(p_est, &p.est);
+    bf_status s = read_fr1_xyz(dir, &p.gt, &p.est);
     int n = s == BF_OK ? bf_test_fault_walk(run_ate_rpe, &p) : -1;
     bf_traj_free(&p.gt);
     bf_traj_free(&p.est);

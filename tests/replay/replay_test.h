@@ -34,4 +34,8 @@ bool rt_link(const char *target, const char *dir, const char *name);
 /* Path of dir/name in a static slot (as rt_tmp). */
 const char *rt_join(const char *dir, const char *name);
 
+/* Opens the sequence or log at path (a char *), reads every frame and
+ * closes it: the status of the first failure, or BF_OK (a fault-walk run). */
+bf_status rt_read_all(void *path);
+
 #endif

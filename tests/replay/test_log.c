@@ -10,6 +10,7 @@
 
 #include "capture/capture.h"
 #include "replay/replay.h"
+#include "replay_test.h"
 #include "test.h"
 
 #define LW 40u
@@ -576,18 +577,6 @@ BF_TEST(recording_a_real_sequence_through_the_capture_thread_is_bit_exact)
     rgbd_source_close(b);
 }
 
-static bf_status read_whole_log(void *arg)
-{
-    rgbd_source *src;
-    bf_status s = replay_open(arg, NULL, &src);
-    if (s != BF_OK) return s;
-    bf_frame f;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-    }
-    rgbd_source_close(src);
-    return s == BF_END ? BF_OK : s;
-}
-
 static bf_status write_whole_log(void *arg)
 {
     const synth_seq *q = arg;
@@ -601,7 +590,7 @@ BF_TEST(log_writing_and_reading_fail_cleanly_at_every_allocation)
     CHECK(synth_make(&q, 3, LW, LH));
     const char *path = tmp_path("faults.bflog");
     bf_status s = write_log(path, &q, REPLAY_LOG_COLOUR_ZSTD, true);
-    int n_read = s == BF_OK ? bf_test_fault_walk(read_whole_log, (void *)path) : -1;
+    int n_read = s == BF_OK ? bf_test_fault_walk(rt_read_all, (void *)path) : -1;
     int n_write = s == BF_OK ? bf_test_fault_walk(write_whole_log, &q) : -1;
     synth_free(&q);
     CHECK_OK(s);

@@ -362,19 +362,6 @@ BF_TEST(tum_colour_depth_size_mismatch_fails_its_frame)
     rgbd_source_close(src);
 }
 
-/* Opens a TUM folder and reads every frame. */
-static bf_status read_whole_sequence(void *arg)
-{
-    rgbd_source *src;
-    bf_status s = replay_open(arg, NULL, &src);
-    if (s != BF_OK) return s;
-    bf_frame f;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-    }
-    rgbd_source_close(src);
-    return s == BF_END ? BF_OK : s;
-}
-
 static bf_status read_groundtruth(void *arg)
 {
     char path[1200];
@@ -391,7 +378,7 @@ BF_TEST(tum_reading_fails_cleanly_at_every_allocation)
 {
     const char *dir = make_tum("tum_faults");
     if (!dir) BF_SKIP("tum/frames absent");
-    int n = bf_test_fault_walk(read_whole_sequence, (void *)dir);
+    int n = bf_test_fault_walk(rt_read_all, (void *)dir);
     CHECK(n >= 8);
     fprintf(stderr, "  sequence: %d allocations failed in turn\n", n);
     n = bf_test_fault_walk(read_groundtruth, (void *)dir);

@@ -6,6 +6,7 @@
 
 #include <jpeglib.h>
 
+#include "replay/replay.h"
 #include "replay_test.h"
 #include "test.h"
 
@@ -148,4 +149,16 @@ bool rt_link(const char *target, const char *dir, const char *name)
     if (bf_mkdir_p(sub)) return false;
     unlink(path);
     return symlink(target, path) == 0;
+}
+
+bf_status rt_read_all(void *path)
+{
+    rgbd_source *src;
+    bf_status s = replay_open(path, NULL, &src);
+    if (s != BF_OK) return s;
+    bf_frame f;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+    }
+    rgbd_source_close(src);
+    return s == BF_END ? BF_OK : s;
 }
