@@ -1,14 +1,14 @@
 /* Speed of the integration kernel (not a test: run by hand, see
- * docs/fusion_integrate.md). Renders the synthetic room (eval/) along a short
+ * docs/fusion_integrate.md). Renders the synthetic room (synth/) along a short
  * hand-held path at 640x480, adds the frames to a map (allocation, sub-cache
  * and window passes as fusion_add_frame runs them), then times one window
  * pass over every live brick against all frames of the window, and checks a
  * sample of bricks against the CPU oracle on this noisy, real-sized input.
  *
- *   bench_fusion_integrate [n_frames [ratio [vpt]]]   (defaults 20, 1, 0)
+ *   bench_fusion_integrate [n_frames [ratio [vpt [bpg,bpg,...]]]]   (defaults 20, 1, 0, 0)
  *   vpt 1|2|4|8|16 picks voxels per invocation (fusion_config.integrate_vpt;
- *   0: by device).
- *   BENCH_BPG=16,1,... compares bricks per workgroup, interleaved.
+ *   0: by device); a list of bricks per workgroup (integrate_bpg) compares
+ *   them, interleaved.
  * Every timed pass reports the GPU timestamps (wall) and the CPU time the
  * process spent (lavapipe's worker threads): on a shared machine the CPU
  * time is the steadier of the two. */
@@ -140,8 +140,8 @@ int main(int argc, char **argv)
 
     /* Variants (bricks per workgroup), interleaved run by run. */
     uint32_t bpg[8], n_var = 0;
-    const char *env = getenv("BENCH_BPG");
-    for (const char *c = env; c && *c && n_var < 8;) {
+    const char *list = argc > 4 ? argv[4] : NULL;
+    for (const char *c = list; c && *c && n_var < 8;) {
         bpg[n_var++] = (uint32_t)strtoul(c, (char **)&c, 10);
         if (*c == ',') c++;
     }
