@@ -140,8 +140,8 @@ int main(int argc, char **argv)
 
     /* Variants (bricks per workgroup), interleaved run by run. */
     uint32_t bpg[8], n_var = 0;
-    const char *list = argc > 4 ? argv[4] : NULL;
-    for (const char *c = list; c && *c && n_var < 8;) {
+    const char *bpg_arg = argc > 4 ? argv[4] : NULL;
+    for (const char *c = bpg_arg; c && *c && n_var < 8;) {
         bpg[n_var++] = (uint32_t)strtoul(c, (char **)&c, 10);
         if (*c == ',') c++;
     }
