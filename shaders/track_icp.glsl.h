@@ -105,11 +105,11 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
      * surfaces the map has not seen yet) without a hard gate that could
      * reject everything while the motion is still large. */
     float wgt = 1.0;
-    if (pc.weight_noise != 0u || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
+    if (pc.noise_exp > 0.0 || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
         float sig = bf_sensor_sigma(max(p.z, zq), pc.sigma_a, pc.sigma_b, pc.sigma_c);
-        if (pc.weight_noise != 0u) {
+        if (pc.noise_exp > 0.0) {
             float sw = bf_sensor_sigma(1.0, pc.sigma_a, pc.sigma_b, pc.sigma_c) / sig;
-            wgt = sw * sw;
+            wgt = pc.noise_exp == 2.0 ? sw * sw : pow(sw, pc.noise_exp);
         }
         float e = abs(r) / sig;
         if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;
