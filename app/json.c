@@ -159,6 +159,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON *l = app_json_object(o, "loop");
     cJSON_AddNumberToObject(l, "min_valid_pixels", c->min_valid_pixels);
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
+    cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);
