@@ -188,10 +188,10 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     } else {
         /* The frame goes up once, into fusion's incoming slot: the tracker
          * reads it there, fusing copies it into the ring. The guess is the
-         * last pose, or with constant_velocity the last motion repeated:
-         * the directions the frame constrains only weakly keep the guess
-         * (docs/tracking.md), and on real frames the last pose there lost
-         * most of a slow pan (docs/real_frames.md). */
+         * last pose (DESIGN.md section 6: no motion model), or with
+         * constant_velocity the last motion repeated, which catches steps
+         * beyond max_motion_m from the last pose; on the real frames it
+         * moved nothing (docs/real_frames.md), so it is off by default. */
         fusion_frame_slot slot;
         bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
         s = fusion_upload_frame(r->map, f, &slot);
