@@ -57,7 +57,7 @@ typedef struct replay_args {
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
-#define LOOP_ROWS 14
+#define LOOP_ROWS 16
 #define LIVE_ROWS 5
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
@@ -74,9 +74,14 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--huber", APP_OPT_FLOAT, &tc->huber_k, "K",
                 "ICP Huber threshold in units of the sensor noise sigma_z(z) (0: plain least squares)"),
         APP_OPT("--noise-weights", APP_OPT_CHOICE, &tc->weight_noise, "on|off",
-                "weight ICP residuals by 1 / sigma_z(z)^2"),
+                "weight ICP residuals by the sensor noise, (sigma_z(1 m) / sigma_z(z))^E (--noise-exp)"),
+        APP_OPT("--noise-exp", APP_OPT_FLOAT, &tc->noise_weight_exp, "E",
+                "exponent of the ICP noise weight: 2 the inverse variance, smaller lets far samples count more",
+                .min_open = true, .max = 4),
         APP_OPT("--ref-level", APP_OPT_U32, &tc->ref_level, "L",
                 "resolution of the tracking reference's ray-cast: 0 full, 1 half", .max = 1),
+        APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
+                "the tracker's first guess: the last pose times the last motion, or the last pose"),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),

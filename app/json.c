@@ -138,6 +138,7 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     cJSON_AddNumberToObject(o, "finest_sample_step", c->finest_sample_step);
     add_float(o, "huber_k", c->huber_k);
     cJSON_AddBoolToObject(o, "weight_noise", c->weight_noise);
+    add_float(o, "noise_weight_exp", c->noise_weight_exp);
     cJSON_AddNumberToObject(o, "icp_local", c->icp_local);
     cJSON_AddNumberToObject(o, "icp_px_per_thread", c->icp_px_per_thread);
     cJSON_AddBoolToObject(o, "icp_subgroup", c->icp_subgroup);
@@ -158,6 +159,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON *l = app_json_object(o, "loop");
     cJSON_AddNumberToObject(l, "min_valid_pixels", c->min_valid_pixels);
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
+    cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);

@@ -11,6 +11,7 @@ struct recon {
     bf_intrinsics K;
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
+    bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
     fusion_map *map;     /* created at the first frame with depth */
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
@@ -62,6 +63,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->K = *K;
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
+    r->V = bf_se3_identity();
     /* One noise model and range for the whole loop. */
     r->cfg.fusion.sensor = r->cfg.track.sensor = r->cfg.sensor;
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
@@ -186,10 +188,14 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     } else {
         /* The frame goes up once, into fusion's incoming slot: the tracker
          * reads it there, fusing copies it into the ring. The guess is the
-         * last pose (DESIGN.md section 6: no motion model). */
+         * last pose (DESIGN.md section 6: no motion model), or with
+         * constant_velocity the last motion repeated, which catches steps
+         * beyond max_motion_m from the last pose; on the real frames it
+         * moved nothing (docs/real_frames.md), so it is off by default. */
         fusion_frame_slot slot;
+        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
         s = fusion_upload_frame(r->map, f, &slot);
-        if (s == BF_OK) s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &r->T_last, &out->track);
+        if (s == BF_OK) s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &guess, &out->track);
         if (s == BF_OK) {
             out->ms_track = out->track.ms_gpu;
             bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
@@ -202,12 +208,15 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
                 out->state = RECON_TRACKED;
                 out->T_wc = out->track.T_wc;
                 const bf_se3 *T_new = known ? known : &out->track.T_wc;
+                bf_se3 Li = bf_se3_inverse(&r->T_last);
+                r->V = bf_se3_mul(&Li, T_new);
                 r->T_last = *T_new;
                 r->counts.tracked++;
                 s = fuse_and_reference(r, f, T_new, true, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
+                r->V = bf_se3_identity(); /* the motion is unknown now */
                 if (known) {
                     r->T_last = *known;
                     s = fuse_and_reference(r, f, known, false, out);

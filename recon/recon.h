@@ -38,6 +38,8 @@ typedef struct recon_config {
     render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
+    bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
+                                 last pose (docs/real_frames.md, the guess); default false */
     bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
 } recon_config;
 

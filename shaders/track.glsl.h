@@ -103,7 +103,7 @@ struct track_icp_push {
     bf_f32 cos_angle;
     bf_u32 sub;             /* 1: every pixel; 2: every second (a checkerboard) */
     bf_f32 huber_k;         /* Huber threshold on r / sigma_z(z); 0: no Huber weights */
-    bf_u32 weight_noise;    /* 1: each residual weighted by (sigma_z(1 m) / sigma_z(z))^2 */
+    bf_f32 noise_exp;       /* each residual weighted by (sigma_z(1 m) / sigma_z(z))^noise_exp; 0: no noise weights */
     /* The reference's level read: ref_shift levels above the frame's (0:
      * the same level), w x h pixels at pixel offset ref_off; its
      * intrinsics follow from the frame level's (track__level_intrinsics). */

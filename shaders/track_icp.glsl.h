@@ -96,20 +96,22 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     vec3 mr = vec3(dot(r0, m), dot(r1, m), dot(r2, m));
     if (dot(mr, n) < pc.cos_angle) return;
     float r = dot(n, d);
-    /* Weighted least squares (IRLS): with weight_noise each residual counts
-     * by the inverse variance of the sensor's depth noise relative to 1 m
-     * (bf_sensor_sigma; Kinect v1's grows with z^2: a sample at 3 m weighs ~50 times less
-     * than one at 1 m, where the map is finer and the frame less noisy), and
+    /* Weighted least squares (IRLS): with noise weights each residual counts
+     * by the sensor's depth noise relative to 1 m to the power noise_exp, 2
+     * by default: the inverse variance (bf_sensor_sigma; Kinect v1's grows
+     * with z^2: a sample at 3 m weighs ~50 times less than one at 1 m, where
+     * the map is finer and the frame less noisy; docs/real_frames.md has
+     * other powers on real frames), and
      * Huber's weight on the residual in units of that noise bounds the pull
      * of the few associations that land on a wrong surface (silhouettes,
      * surfaces the map has not seen yet) without a hard gate that could
      * reject everything while the motion is still large. */
     float wgt = 1.0;
-    if (pc.weight_noise != 0u || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
+    if (pc.noise_exp > 0.0 || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
         float sig = bf_sensor_sigma(max(p.z, zq), pc.sigma_a, pc.sigma_b, pc.sigma_c);
-        if (pc.weight_noise != 0u) {
+        if (pc.noise_exp > 0.0) {
             float sw = bf_sensor_sigma(1.0, pc.sigma_a, pc.sigma_b, pc.sigma_c) / sig;
-            wgt = sw * sw;
+            wgt = pc.noise_exp == 2.0 ? sw * sw : pow(sw, pc.noise_exp);
         }
         float e = abs(r) / sig;
         if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;

@@ -67,6 +67,7 @@ track_config track_config_default(void)
          * residuals at full weight. */
         .huber_k = 2.0f,
         .weight_noise = true,
+        .noise_weight_exp = 2.0f,
         /* bench/bench_tracking.c measured the ICP shapes on lavapipe (docs/tracking.md). */
         .icp_local = 64,
         .icp_px_per_thread = 16,
@@ -123,6 +124,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
     if (!(c->huber_k >= 0) || !isfinite(c->huber_k))
         return bf_fail(BF_INVALID_ARG, "tracking: huber_k %g must be >= 0 (0: off)", c->huber_k);
+    if (c->weight_noise && !(c->noise_weight_exp > 0 && c->noise_weight_exp <= 4))
+        return bf_fail(BF_INVALID_ARG, "tracking: noise_weight_exp %g not in (0, 4]", c->noise_weight_exp);
     if (!(c->rof_lambda0 > 0)) return bf_fail(BF_INVALID_ARG, "tracking: rof_lambda0 %g must be positive", c->rof_lambda0);
     if (!(c->degenerate_ratio >= 0 && c->degenerate_ratio < 1))
         return bf_fail(BF_INVALID_ARG, "tracking: degenerate_ratio %g not in [0, 1)", c->degenerate_ratio);

@@ -67,7 +67,10 @@ typedef struct track_config {
                                     (a checkerboard), half the cost (docs/tracking.md: speed against error) */
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
     float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 2; 0: off */
-    bool weight_noise;       /* weight residuals by the inverse noise variance sigma_z(z)^-2, default true */
+    bool weight_noise;       /* weight residuals by the sensor's noise (sigma_z(1 m) / sigma_z(z))^noise_weight_exp,
+                                default true */
+    float noise_weight_exp;  /* 2: the inverse noise variance; smaller bounds how much less far samples count
+                                (docs/real_frames.md, the noise weight's range); default 2 */
     /* Kernel shapes and diagnostics (docs/tracking.md): tuning for benchmarks and tests; every
        choice tracks to the same pose within float rounding. */
     uint32_t icp_local;         /* ICP invocations per workgroup, a power of two up to 64, default 64

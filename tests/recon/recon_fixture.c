@@ -87,15 +87,21 @@ static bf_status keep_result(void *user, recon_run *run, const bf_frame *f, cons
 bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
                    const bf_se3 *offset, mutate_fn mutate, run_out *out)
 {
+    recon_run_config cfg = fixture_run_config();
+    return run_loop_with(ctx, &cfg, sc, true_pose, n, offset, mutate, out);
+}
+
+bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                        const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out)
+{
     /* The frames carry offset * true_pose[k] as ground truth: the loop
      * starts at the first one. */
-    recon_run_config cfg = fixture_run_config();
     fixture_render fr;
     rgbd_source *src = NULL;
     recon_run run;
     memset(&run, 0, sizeof run);
     bf_status s = fixture_render_open(sc, true_pose, n, offset, mutate, &fr, &src);
-    if (s == BF_OK) s = recon_run_sequence(ctx, src, &cfg, keep_result, out, &run);
+    if (s == BF_OK) s = recon_run_sequence(ctx, src, cfg, keep_result, out, &run);
     if (s == BF_OK) s = fusion_check(run.map);
     if (s == BF_OK) s = fusion_get_stats(run.map, &out->map);
     hostmap snap = {0};

@@ -52,6 +52,9 @@ recon_run_config fixture_run_config(void);
 /* The run above through recon_run_sequence, with the fixture's config. */
 bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_pose, uint32_t n,
                    const bf_se3 *offset, mutate_fn mutate, run_out *out);
+/* The same with the caller's config. */
+bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                        const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
 /* 90th percentile of the distance from pts to the scene's mesh [m]. */
 double surface_p90(const synth_scene *sc, const mesh_data *pts);
 

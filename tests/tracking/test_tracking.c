@@ -308,8 +308,8 @@ BF_TEST(rof_smooths_near_more_than_far)
 /* ------------------------------------------------------------ ICP */
 
 /* Reference rendered at T0, frame at T0 * motion, guess T0. */
-static void track_room_pair(synth_noise noise, const bf_intrinsics *K, const bf_se3 *T_off, bf_se3 *est_rel,
-                            track_result *res, bool *ok)
+static void track_room_pair(synth_noise noise, const bf_intrinsics *K, const bf_se3 *T_off, float noise_exp,
+                            bf_se3 *est_rel, track_result *res, bool *ok)
 {
     *ok = false;
     gpu_context *ctx;
@@ -321,6 +321,7 @@ static void track_room_pair(synth_noise noise, const bf_intrinsics *K, const bf_
     bf_se3 T1 = bf_se3_mul(&T0, &d);
     uint16_t *d0 = render(&rm, 0, &T0), *d1 = render(&rm, 1, &T1);
     track_config cfg = test_config(K);
+    cfg.noise_weight_exp = noise_exp;
     track_tracker *t;
     if (d0 && d1 && track_create(ctx, &cfg, K, &t) == BF_OK) {
         bf_frame f0 = frame_of(K, d0, 0), f1 = frame_of(K, d1, 1);
@@ -343,7 +344,7 @@ static void check_room(synth_noise noise, double tol_m, double tol_deg)
     bf_se3 I = bf_se3_identity(), est, est_far;
     track_result r, r_far;
     bool ok;
-    track_room_pair(noise, &K_MID, &I, &est, &r, &ok);
+    track_room_pair(noise, &K_MID, &I, track_config_default().noise_weight_exp, &est, &r, &ok);
     CHECK(ok);
     double dt, da;
     bf_se3 truth = small_motion();
@@ -359,7 +360,7 @@ static void check_room(synth_noise noise, double tol_m, double tol_deg)
     /* 10 km from the world origin, turned: the same relative estimate (the
      * GPU sees the same relative pose; composition is in double). */
     bf_se3 off = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0.2, 0.3, 1), 0.7), bf_v3(1e4, -3e3, 250));
-    track_room_pair(noise, &K_MID, &off, &est_far, &r_far, &ok);
+    track_room_pair(noise, &K_MID, &off, track_config_default().noise_weight_exp, &est_far, &r_far, &ok);
     CHECK(ok);
     CHECK_EQ_INT(r_far.outcome, TRACK_OK);
     pose_error(&est, &est_far, &dt, &da);
@@ -381,6 +382,50 @@ BF_TEST(icp_recovers_2cm_2deg_noisy_room)
     /* Kinect v1 noise at 1-4 m is 2-25 mm per pixel; averaged over ~5e4
      * inliers the pose error stays at a few mm. */
     check_room(SYNTH_NOISE_KINECT1, 0.004, 0.25);
+}
+
+BF_TEST(noise_weight_exponent_reaches_the_icp_and_is_validated)
+{
+    /* Each exponent of the noise weight (track_config.noise_weight_exp,
+     * docs/real_frames.md) tracks the noisy room within the default's
+     * bounds; a different exponent weighs the residuals differently, so the
+     * estimates differ (identical ones: the exponent never reached the
+     * kernel). */
+    bf_se3 I = bf_se3_identity(), truth = small_motion(), est[3];
+    const float exps[3] = {2.0f, 1.0f, 0.5f};
+    for (int k = 0; k < 3; k++) {
+        track_result r;
+        bool ok;
+        track_room_pair(SYNTH_NOISE_KINECT1, &K_MID, &I, exps[k], &est[k], &r, &ok);
+        CHECK(ok);
+        CHECK_EQ_INT(r.outcome, TRACK_OK);
+        double dt, da;
+        pose_error(&truth, &est[k], &dt, &da);
+        fprintf(stderr, "  exponent %.1f: error %.3f mm %.4f deg\n", exps[k], 1e3 * dt, da);
+        CHECK_LE(dt, 0.004);
+        CHECK_LE(da, 0.25);
+        if (k > 0) {
+            pose_error(&est[0], &est[k], &dt, &da);
+            fprintf(stderr, "    differs from exponent 2 by %.4f mm %.5f deg\n", 1e3 * dt, da);
+            CHECK(dt > 1e-5);
+        }
+    }
+    /* Out of (0, 4] with the weights on: refused; with them off: unused. */
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    const float bad[3] = {0.0f, 4.5f, NAN};
+    for (int k = 0; k < 3; k++) {
+        track_config c = test_config(&K_SMALL);
+        c.noise_weight_exp = bad[k];
+        track_tracker *t = NULL;
+        CHECK_STATUS(track_create(ctx, &c, &K_SMALL, &t), BF_INVALID_ARG);
+        CHECK(t == NULL);
+        c.weight_noise = false;
+        CHECK_OK(track_create(ctx, &c, &K_SMALL, &t));
+        track_destroy(t);
+    }
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
 }
 
 /* A reference rendered at K_MID's level 1 from the room's viewpoint T0 and
