@@ -150,9 +150,9 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
 {
     cJSON *o = app_json_object(parent, name);
     /* The loop hands its sensor to fusion and tracking: echo what they use. */
-    fusion_config fc = c->fusion;
+    fusion_config fc = recon_fusion_config(c);
     track_config tc = c->track;
-    fc.sensor = tc.sensor = c->sensor;
+    tc.sensor = c->sensor;
     json_sensor(o, "sensor", &c->sensor);
     app_json_fusion_config(o, "fusion", &fc);
     json_track_config(o, "track", &tc);

@@ -41,6 +41,14 @@ recon_config recon_config_default(void)
     return c;
 }
 
+fusion_config recon_fusion_config(const recon_config *cfg)
+{
+    /* One noise model and range for the whole loop. */
+    fusion_config fc = cfg->fusion;
+    fc.sensor = cfg->sensor;
+    return fc;
+}
+
 const char *recon_state_name(recon_frame_state s)
 {
     switch (s) {
@@ -64,8 +72,8 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
     r->V = bf_se3_identity();
-    /* One noise model and range for the whole loop. */
-    r->cfg.fusion.sensor = r->cfg.track.sensor = r->cfg.sensor;
+    r->cfg.fusion = recon_fusion_config(cfg);
+    r->cfg.track.sensor = r->cfg.sensor;
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
     /* The reference at track.ref_level (half resolution by default): the
      * ray-cast, the loop's largest cost, then has a quarter of the rays.

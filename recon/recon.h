@@ -44,6 +44,9 @@ typedef struct recon_config {
 } recon_config;
 
 recon_config recon_config_default(void);
+/* The fusion config the loop uses: cfg->fusion with the loop's sensor (also
+ * for fusing at known poses without the loop). */
+fusion_config recon_fusion_config(const recon_config *cfg);
 
 /* What happened to one frame. */
 typedef enum recon_frame_state {

@@ -69,7 +69,10 @@ static bf_status fuse_known(gpu_context *ctx, rgbd_source *src, const recon_run_
     fr->state = run->map ? RECON_TRACKED : RECON_FIRST;
     fr->T_wc = *T_wc;
     bf_status s = BF_OK;
-    if (!run->map) s = fusion_create(ctx, &cfg->loop.fusion, rgbd_source_intrinsics(src), T_wc->t, &run->map);
+    if (!run->map) {
+        fusion_config fc = recon_fusion_config(&cfg->loop);
+        s = fusion_create(ctx, &fc, rgbd_source_intrinsics(src), T_wc->t, &run->map);
+    }
     if (s == BF_OK) s = fusion_add_frame(run->map, f, T_wc);
     if (run->map) fr->fuse = fusion_last_stage_ms(run->map);
     fr->fuse_status = s;
