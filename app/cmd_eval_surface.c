@@ -2,11 +2,14 @@
  * against a reference mesh (docs/eval.md). */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "app.h"
+#include "core/core.h"
 #include "eval/eval.h"
 #include "mesh/mesh.h"
+#include "replay/replay.h"
 
 static const char usage_text[] =
     "usage: bitfuse eval-surface --reference MESH --reconstruction PLY [options]\n"
@@ -14,7 +17,83 @@ static const char usage_text[] =
     "Accuracy: distance from each reconstruction point (its vertices, plus area\n"
     "samples of its triangles if it is a mesh) to the reference surface.\n"
     "Completeness: share of reference surface samples (area-uniform) within the\n"
-    "threshold of the reconstruction, and their distances.\n";
+    "threshold of the reconstruction, and their distances.\n"
+    "\n"
+    "With --depth SEQUENCE instead of --reconstruction, the points are the sensor's own\n"
+    "depth samples (every K-th frame, every S-th pixel) back-projected at the frames' poses:\n"
+    "accuracy is then how far the measured depth lies from the reference mesh (a\n"
+    "reconstruction of real frames, which have no true surface), 'within' the share of\n"
+    "depth samples the mesh explains, and completeness the share of the mesh that some\n"
+    "depth sample supports.\n";
+
+/* What --depth reads. */
+typedef struct depth_points_args {
+    const char *seq, *poses; /* poses: "groundtruth" or a TUM trajectory file */
+    uint32_t every, pixel_step;
+    double max_depth_m;
+    replay_options ropt;
+} depth_points_args;
+
+/* Back-projects the valid depth of every a->every-th frame, every
+ * a->pixel_step-th pixel in x and y, at the frame's pose into pts (a point
+ * set: no triangles). Frames without a pose are skipped and counted. */
+static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32_t *n_frames)
+{
+    rgbd_source *src = NULL;
+    bf_traj traj = {0};
+    bool use_traj = strcmp(a->poses, "groundtruth") != 0;
+    bf_status s = use_traj ? replay_traj_read_tum(a->poses, &traj) : BF_OK;
+    if (s == BF_OK) s = replay_open(a->seq, &a->ropt, &src);
+    if (s == BF_OK && !use_traj && !src->has_groundtruth)
+        s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a->seq);
+    size_t cap = 0, n = 0;
+    float *xyz = NULL;
+    uint32_t used = 0, no_pose = 0;
+    bf_frame f;
+    while (s == BF_OK && (s = rgbd_source_next(src, &f)) == BF_OK) {
+        if (f.index % a->every) continue;
+        bf_se3 T;
+        if (use_traj ? !bf_traj_interpolate(&traj, f.t_depth_s, &T) : !f.has_pose) {
+            no_pose++;
+            continue;
+        }
+        if (!use_traj) T = f.T_wc;
+        const bf_intrinsics *K = &src->intrinsics;
+        size_t need = n + ((size_t)f.width / a->pixel_step + 1) * ((size_t)f.height / a->pixel_step + 1);
+        if (need > cap) {
+            cap = need * 2;
+            float *g = bf_realloc(xyz, cap * 3 * sizeof *xyz);
+            if (!g) {
+                s = bf_fail(BF_NO_MEMORY, "eval-surface: %zu depth points", cap);
+                break;
+            }
+            xyz = g;
+        }
+        for (uint32_t y = 0; y < f.height; y += a->pixel_step)
+            for (uint32_t x = 0; x < f.width; x += a->pixel_step) {
+                double z = f.depth[(size_t)y * f.width + x] / K->depth_scale;
+                if (!(z > 0) || z > a->max_depth_m) continue;
+                bf_vec3 p = bf_v3((x - K->cx_px) * z / K->fx_px, (y - K->cy_px) * z / K->fy_px, z);
+                p = bf_se3_apply(&T, p);
+                xyz[3 * n] = (float)p.x, xyz[3 * n + 1] = (float)p.y, xyz[3 * n + 2] = (float)p.z;
+                n++;
+            }
+        used++;
+    }
+    if (s == BF_END) s = BF_OK;
+    if (src) rgbd_source_close(src);
+    bf_traj_free(&traj);
+    if (s == BF_OK && n == 0) s = bf_fail(BF_FORMAT, "%s: no depth sample with a pose", a->seq);
+    if (s != BF_OK) {
+        free(xyz);
+        return s;
+    }
+    if (no_pose) bf_warn("eval-surface: %u frames without a pose left out", no_pose);
+    bf_info("eval-surface: %zu depth samples from %u frames of %s", n, used, a->seq);
+    *pts = (mesh_data){.n_verts = (uint32_t)n, .xyz = xyz};
+    *n_frames = used;
+    return BF_OK;
+}
 
 static void json_dist(cJSON *o, const eval_dist_stats *d)
 {
@@ -39,10 +118,20 @@ int cmd_eval_surface(int argc, char **argv)
     const char *cmd = "eval-surface", *ref_path = NULL, *rec_path = NULL, *vis_path = NULL;
     bool json = false;
     eval_surface_config cfg = eval_surface_config_default();
+    depth_points_args dp = {.poses = "groundtruth", .every = 10, .pixel_step = 4, .max_depth_m = 4.5};
     const app_option own[] = {
         APP_OPT("--reference", APP_OPT_STRING, &ref_path, "MESH", "the reference mesh (PLY)", .required = true),
-        APP_OPT("--reconstruction", APP_OPT_STRING, &rec_path, "PLY", "the reconstruction: points or a mesh",
-                .required = true),
+        APP_OPT("--reconstruction", APP_OPT_STRING, &rec_path, "PLY",
+                "the reconstruction: points or a mesh (or --depth)", .no_default = true),
+        APP_OPT("--depth", APP_OPT_STRING, &dp.seq, "SEQUENCE",
+                "the reconstruction is SEQUENCE's depth, back-projected at --poses (see above)", .no_default = true),
+        APP_OPT("--poses", APP_OPT_STRING, &dp.poses, "P",
+                "with --depth: 'groundtruth' (the sequence's own) or a TUM trajectory file"),
+        APP_OPT("--every", APP_OPT_U32, &dp.every, "K", "with --depth: every K-th frame", .min = 1),
+        APP_OPT("--pixel-step", APP_OPT_U32, &dp.pixel_step, "S", "with --depth: every S-th pixel in x and y",
+                .min = 1, .max = 64),
+        APP_OPT("--max-depth", APP_OPT_DOUBLE, &dp.max_depth_m, "M",
+                "with --depth: samples beyond M metres are left out (the loop's sensor range)", .min_open = true),
         APP_OPT("--visible", APP_OPT_STRING, &vis_path, "SEEN.ply",
                 "completeness over these observed reference points instead of samples of the whole reference"),
         APP_OPT("--threshold", APP_OPT_DOUBLE, &cfg.threshold_m, "M", "completeness / precision threshold, metres",
@@ -57,15 +146,20 @@ int cmd_eval_surface(int argc, char **argv)
         APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "machine-readable output on stdout (docs/eval.md)"),
         APP_OPT_END,
     };
-    const app_option *tables[] = {own, NULL};
+    app_option seq[APP_SEQUENCE_ROWS];
+    app_sequence_options(seq, &dp.ropt);
+    const app_option *tables[] = {own, seq, NULL};
     app_command_spec spec = {.name = cmd, .usage = usage_text, .tables = tables};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (!rec_path == !dp.seq) return app_usage_error(cmd, "give exactly one of --reconstruction and --depth");
+    if (dp.seq) rec_path = dp.seq;
 
     mesh_data ref = {0}, rec = {0}, vis = {0};
     eval_surface_result r;
+    uint32_t depth_frames = 0;
     bf_status s = mesh_read_ply(ref_path, &ref);
-    if (!s) s = mesh_read_ply(rec_path, &rec);
+    if (!s) s = dp.seq ? depth_points(&dp, &rec, &depth_frames) : mesh_read_ply(rec_path, &rec);
     if (!s && vis_path) s = mesh_read_ply(vis_path, &vis);
     if (!s && ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", ref_path);
     if (!s && rec.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reconstruction has no vertices", rec_path);
@@ -87,6 +181,14 @@ int cmd_eval_surface(int argc, char **argv)
         cJSON *o = cJSON_CreateObject();
         cJSON_AddStringToObject(o, "reference", ref_path);
         cJSON_AddStringToObject(o, "reconstruction", rec_path);
+        if (dp.seq) {
+            cJSON *d = app_json_object(o, "depth");
+            cJSON_AddStringToObject(d, "poses", dp.poses);
+            cJSON_AddNumberToObject(d, "frames", depth_frames);
+            cJSON_AddNumberToObject(d, "every", dp.every);
+            cJSON_AddNumberToObject(d, "pixel_step", dp.pixel_step);
+            cJSON_AddNumberToObject(d, "max_depth_m", dp.max_depth_m);
+        }
         if (vis_path) cJSON_AddStringToObject(o, "visible", vis_path);
         else cJSON_AddNullToObject(o, "visible");
         cJSON_AddNumberToObject(o, "reference_vertices", ref_v);
@@ -112,7 +214,10 @@ int cmd_eval_surface(int argc, char **argv)
         return (s = app_json_print(o)) == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
     }
     printf("reference %s: %u vertices, %u triangles\n", ref_path, ref_v, ref_t);
-    printf("reconstruction %s: %u vertices, %u triangles\n", rec_path, rec_v, rec_t);
+    if (dp.seq)
+        printf("reconstruction: the depth of %s, %u frames (every %u-th, every %u-th pixel) at %s poses: %u samples\n",
+               dp.seq, depth_frames, dp.every, dp.pixel_step, dp.poses, rec_v);
+    else printf("reconstruction %s: %u vertices, %u triangles\n", rec_path, rec_v, rec_t);
     printf("accuracy: %zu reconstruction points (%zu vertices + %zu area samples) to the reference\n",
            r.n_rec_vertices + r.n_rec_samples, r.n_rec_vertices, r.n_rec_samples);
     print_dist_text(&r.accuracy);

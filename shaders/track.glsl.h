@@ -63,7 +63,8 @@
 #define TRACK_SUM_INLIERS 28u  /* inliers (a count, exact in float below 2^24 per group) */
 #define TRACK_SUM_VALID 29u    /* frame samples with vertex and normal */
 #define TRACK_SUM_Z 30u        /* sum of the inliers' depth in the reference camera */
-#define TRACK_SUMS 31u         /* words summed */
+#define TRACK_SUM_RN 31u       /* sum (r / sigma_z)^2 of the inliers: their residuals in the sensor model's units */
+#define TRACK_SUMS 32u         /* words summed */
 #define TRACK_PARTIAL_WORDS 32u
 #define TRACK_ICP_LOCAL_MAX 64u /* invocations per workgroup at most (shared arrays) */
 

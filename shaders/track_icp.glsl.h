@@ -57,7 +57,7 @@ ref_geom ref_geometry()
 }
 
 /* The sums in eight vec4 registers, words 4q .. 4q + 3 of the TRACK_SUM_*
- * layout in s[q] (the 32nd word stays 0). Plain variables, no arrays:
+ * layout in s[q]. Plain variables, no arrays:
  * llvmpipe keeps a private array it cannot fully resolve in memory and
  * reads and writes it lane by lane, which made this kernel 5x slower. */
 #define TRACK_ICP_ZERO4 vec4(0.0)
@@ -107,13 +107,13 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
      * surfaces the map has not seen yet) without a hard gate that could
      * reject everything while the motion is still large. */
     float wgt = 1.0;
+    float sig = bf_sensor_sigma(max(p.z, zq), pc.sigma_a, pc.sigma_b, pc.sigma_c);
+    float e = abs(r) / sig;
     if (pc.noise_exp > 0.0 || pc.huber_k > 0.0) { /* uniform: plain iterations skip it */
-        float sig = bf_sensor_sigma(max(p.z, zq), pc.sigma_a, pc.sigma_b, pc.sigma_c);
         if (pc.noise_exp > 0.0) {
             float sw = bf_sensor_sigma(1.0, pc.sigma_a, pc.sigma_b, pc.sigma_c) / sig;
             wgt = pc.noise_exp == 2.0 ? sw * sw : pow(sw, pc.noise_exp);
         }
-        float e = abs(r) / sig;
         if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;
     }
     vec3 nq = wgt * n;
@@ -128,7 +128,7 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     A.s4 += vec4(cw.x * c.y, cw.x * c.z, cw.y * c.y, cw.y * c.z);
     A.s5 += vec4(cw.z * c.z, rw * n);
     A.s6 += vec4(rw * c, r * r);
-    A.s7 += vec4(1.0, 0.0, p.z, 0.0);
+    A.s7 += vec4(1.0, 0.0, p.z, e * e);
 }
 
 void main()

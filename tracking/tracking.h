@@ -71,6 +71,11 @@ typedef struct track_config {
                                 default true */
     float noise_weight_exp;  /* 2: the inverse noise variance; smaller bounds how much less far samples count
                                 (docs/real_frames.md, the noise weight's range); default 2 */
+    bool huber_scaled;       /* the Huber threshold is huber_k times the inliers' RMS of r / sigma_z of the
+                                level's previous iteration when that is above 1: real depth departs from the
+                                Gaussian model (docs/real_frames.md), default true */
+    uint32_t robust_levels;  /* the finest levels whose iterations after the first are weighted, 1..levels,
+                                default 1 (docs/real_frames.md, where the weights start) */
     /* Kernel shapes and diagnostics (docs/tracking.md): tuning for benchmarks and tests; every
        choice tracks to the same pose within float rounding. */
     uint32_t icp_local;         /* ICP invocations per workgroup, a power of two up to 64, default 64
@@ -104,6 +109,8 @@ typedef struct track_result {
     uint32_t n_inliers;  /* associations that passed the gates, last iteration of the finest level */
     double inlier_frac;  /* n_inliers / n_valid */
     double residual_m;   /* RMS point-to-plane residual of the inliers */
+    double residual_sigma; /* RMS of the inliers' residual / sigma_z(z): about 1 where the depth fits the
+                              sensor model; the Huber unit when above 1 (track_config.huber_scaled) */
     double eig_min, eig_max; /* of the last system (rotation columns scaled by the scene depth) */
     uint32_t iterations; /* run in all levels */
     double ms_gpu;       /* GPU time of the tracking (pyramids + ICP), ms */
