@@ -57,7 +57,7 @@ typedef struct replay_args {
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
-#define LOOP_ROWS 18
+#define LOOP_ROWS 19
 #define LIVE_ROWS 5
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
@@ -78,6 +78,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--noise-exp", APP_OPT_FLOAT, &tc->noise_weight_exp, "E",
                 "exponent of the ICP noise weight: 2 the inverse variance, smaller lets far samples count more",
                 .min_open = true, .max = 4),
+        APP_OPT("--icp-sample-step", APP_OPT_U32, &tc->finest_sample_step, "S",
+                "ICP samples at the finest level: 1 every pixel, 2 every second one (a checkerboard, half the cost)",
+                .min = 1, .max = 2),
         APP_OPT("--huber-scale", APP_OPT_CHOICE, &tc->huber_scaled, "residuals|sensor",
                 "the Huber threshold's unit: sigma_z(z) times the last iteration's RMS of r / sigma_z when above 1, "
                 "or sigma_z(z) alone"),
