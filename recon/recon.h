@@ -39,11 +39,12 @@ typedef struct recon_reloc_config {
                                   from there against the reference at that pose, with the per-frame gate */
     uint32_t max_candidates;   /* candidate poses tried per frame (a ray-cast and an ICP each), default 4 */
     float max_gate_intervals;  /* the motion gate grows with the frame intervals since the last good frame,
-                                  up to this many times the per-frame gate, default 4 */
+                                  up to this many times the per-frame gate, default 4; after a longer gap
+                                  the frame is searched for as if lost */
     float keyframe_m;          /* a good frame this far from every keyframe becomes one, default 0.1 */
     float keyframe_deg;        /* or turned this far, default 10 */
     uint32_t max_keyframes;    /* kept, the oldest replaced beyond, default 64 */
-    float min_inlier_frac;     /* a candidate is taken only with this inlier fraction, default 0.5 */
+    float min_inlier_frac;     /* a candidate is taken only with this inlier fraction, default 0.35 */
     float max_residual_m;      /* and at most this residual, default 0.018 */
 } recon_reloc_config;
 

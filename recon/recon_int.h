@@ -45,7 +45,7 @@ bf_status recon__set_gate(recon *r, double n);
 void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool may_keyframe);
 /* Searches for frame f (its raw depth at slot) from at most
  * reloc.max_candidates candidate poses, n intervals after the last good
- * frame; skip names a candidate already tried from the reference at
+ * frame, each with the per-frame motion gate; skip names a candidate already tried from the reference at
  * T_last (RECON_RELOC_NONE: none). Leaves the tracker's reference at the
  * last candidate tried. *found says whether one was taken: then
  * out->track.T_wc is the pose and out->reloc its candidate; else
