@@ -18,10 +18,11 @@ static const char replay_usage[] =
     "Runs the full loop on every frame of SEQUENCE (DESIGN.md section 1): ICP against the\n"
     "ROF-smoothed ray-cast of the map, fusion at the pose found, ray-cast at that pose.\n"
     "Frames without depth are skipped; frames tracked badly are not fused and keep the\n"
-    "last good pose. Writes into DIR:\n"
+    "last good pose while candidate poses are tried (--reloc). Writes into DIR:\n"
     "  trajectory.txt  TUM format, one line per input frame at its depth timestamp\n"
     "                  (camera to world, like groundtruth.txt)\n"
-    "  frames.csv      per frame: state, ICP outcome, inliers, residual, times\n"
+    "  frames.csv      per frame: state, ICP outcome, inliers, residual, times, the\n"
+    "                  relocalising search's candidates tried and the one taken\n"
     "  mesh.ply        triangle mesh of the confident surface (binary PLY)\n"
     "  points.ply      surface voxel centres with normals\n"
     "  stats.json      the whole config, time per frame and per stage, tracking counts,\n"
@@ -57,7 +58,7 @@ typedef struct replay_args {
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
-#define LOOP_ROWS 19
+#define LOOP_ROWS 20
 #define LIVE_ROWS 5
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
@@ -91,6 +92,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "resolution of the tracking reference's ray-cast: 0 full, 1 half", .max = 1),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
                 "the tracker's first guess: the last pose times the last motion, or the last pose"),
+        APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",
+                "look for a lost camera from candidate poses (last pose, continued motion, turns, keyframes) and "
+                "widen the motion gate with the frames since the last good one; off: keep the last pose"),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),
@@ -179,6 +183,8 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r)
     cJSON *tr = app_json_object(o, "tracking");
     cJSON_AddNumberToObject(tr, "tracked", c->tracked);
     cJSON_AddNumberToObject(tr, "lost", c->lost);
+    cJSON_AddNumberToObject(tr, "relocalised", c->relocalised);
+    cJSON_AddNumberToObject(tr, "keyframes", c->keyframes);
     cJSON_AddNumberToObject(tr, "no_depth", c->no_depth);
     cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
     cJSON_AddNumberToObject(tr, "pool_full", c->pool_full);
@@ -234,13 +240,14 @@ static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, cons
 
 static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr)
 {
-    bool ran = fr->state == RECON_TRACKED || fr->state == RECON_LOST;
-    fprintf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f\n", f->index, f->t_depth_s,
+    bool ran = recon_state_ran_icp(fr->state);
+    fprintf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s\n", f->index, f->t_depth_s,
             recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
             ran ? fr->track.eig_min / (fr->track.eig_max > 0 ? fr->track.eig_max : 1) : 0.0, fr->ms_frame,
-            fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window);
+            fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window, fr->reloc_tried,
+            recon_reloc_kind_name(fr->reloc));
 }
 
 /* What the replay writes per frame beside the runner's own records. */
@@ -267,8 +274,9 @@ static void print_summary(const replay_args *a, const replay_result *r)
 {
     const recon_counts *c = &r->run.counts;
     const recon_run_series *t = &r->run.series;
-    printf("bitfuse %s: %u frames on %s: %u tracked, %u lost, %u without depth (%u degenerate)\n",
-           a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->lost, c->no_depth, c->degenerate);
+    printf("bitfuse %s: %u frames on %s: %u tracked (%u relocalised), %u lost, %u without depth (%u degenerate)\n",
+           a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->relocalised, c->lost, c->no_depth,
+           c->degenerate);
     if (r->has_capture)
         printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
@@ -324,7 +332,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = bf_fail(BF_IO, "%s: cannot create", path);
     if (csv)
         fprintf(csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
-                     "frame_ms,track_ms,raycast_ms,fuse_ms\n");
+                     "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from\n");
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));

@@ -163,6 +163,15 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
     cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
+    cJSON *rl = app_json_object(l, "reloc");
+    cJSON_AddBoolToObject(rl, "enabled", c->reloc.enabled);
+    cJSON_AddNumberToObject(rl, "max_candidates", c->reloc.max_candidates);
+    add_float(rl, "max_gate_intervals", c->reloc.max_gate_intervals);
+    add_float(rl, "keyframe_m", c->reloc.keyframe_m);
+    add_float(rl, "keyframe_deg", c->reloc.keyframe_deg);
+    cJSON_AddNumberToObject(rl, "max_keyframes", c->reloc.max_keyframes);
+    add_float(rl, "min_inlier_frac", c->reloc.min_inlier_frac);
+    add_float(rl, "max_residual_m", c->reloc.max_residual_m);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);
     cJSON_AddBoolToObject(r, "refine", c->raycast.refine);

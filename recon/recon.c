@@ -1,24 +1,9 @@
 /* The reconstruction loop: track, fuse, ray-cast, smooth (recon.h). */
-#include "recon.h"
-
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-struct recon {
-    gpu_context *ctx;
-    recon_config cfg;
-    bf_intrinsics K;
-    bf_se3 T_first;      /* pose of the first frame with depth */
-    bf_se3 T_last;       /* last good pose */
-    bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
-    fusion_map *map;     /* created at the first frame with depth */
-    bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
-    render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
-    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at the first view */
-    track_tracker *tracker;
-    recon_counts counts;
-};
+#include "recon_int.h"
 
 recon_config recon_config_default(void)
 {
@@ -31,6 +16,20 @@ recon_config recon_config_default(void)
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
         .start_at_frame = true,
+        /* Four candidates a lost frame: the last pose, the continued motion
+         * and two from the round robin; each costs a reference ray-cast and
+         * an ICP (docs/tracking.md, relocalisation). The margins: a right
+         * pose keeps 68-92% inliers at a 7-16 mm residual on the real
+         * frames (docs/real_frames.md), 75-98% at 15 mm on the noisy
+         * synthetic room; a wrong one a few percent at 3-5 cm
+         * (track_config_default), at most 11% in tests/recon/test_reloc.c.
+         * The inliers carry the margin: 35% against the tracker's 25%, not
+         * more, because the fraction counts the frame's samples where the
+         * map has nothing: a camera that turned 21 degrees while covered
+         * keeps 27-46% at the right pose (the same test). The residual's
+         * margin is thin, 18 mm against 20. */
+        .reloc = {.enabled = true, .max_candidates = 4, .max_gate_intervals = 4, .keyframe_m = 0.1f,
+                  .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f},
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
      * and more accurate than fusion's own default of 1
@@ -56,6 +55,24 @@ const char *recon_state_name(recon_frame_state s)
     case RECON_TRACKED: return "tracked";
     case RECON_NO_DEPTH: return "no-depth";
     case RECON_LOST: return "lost";
+    case RECON_RELOCALISED: return "relocalised";
+    }
+    return "?";
+}
+
+bool recon_state_ran_icp(recon_frame_state s)
+{
+    return s == RECON_TRACKED || s == RECON_LOST || s == RECON_RELOCALISED;
+}
+
+const char *recon_reloc_kind_name(recon_reloc_kind k)
+{
+    switch (k) {
+    case RECON_RELOC_NONE: return "";
+    case RECON_RELOC_LAST: return "last";
+    case RECON_RELOC_VELOCITY: return "velocity";
+    case RECON_RELOC_TURNED: return "turned";
+    case RECON_RELOC_KEYFRAME: return "keyframe";
     }
     return "?";
 }
@@ -79,7 +96,8 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
      * ray-cast, the loop's largest cost, then has a quarter of the rays.
      * track_create checks the level. */
     uint32_t l = r->cfg.track.ref_level;
-    bf_status s = track_create(ctx, &r->cfg.track, K, &r->tracker);
+    bf_status s = recon__reloc_create(r);
+    if (s == BF_OK) s = track_create(ctx, &r->cfg.track, K, &r->tracker);
     if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
     if (s == BF_OK) s = render_create(ctx, &r->cfg.caster, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
@@ -98,6 +116,7 @@ void recon_destroy(recon *r)
     if (r->caster != r->ref_caster) render_destroy(r->caster);
     render_destroy(r->ref_caster);
     fusion_destroy(r->map);
+    recon__reloc_destroy(r);
     free(r);
 }
 
@@ -167,6 +186,83 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     return track_finish_reference(r->tracker);
 }
 
+static bf_status no_depth(recon *r, recon_frame_result *out)
+{
+    out->state = RECON_NO_DEPTH;
+    r->counts.no_depth++;
+    return BF_OK;
+}
+
+/* A good frame (tracked or relocalised): fused at its pose, or at *known
+ * (recon_add_frame_known), which becomes the last pose. */
+static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_state state,
+                        recon_frame_result *out)
+{
+    out->state = state;
+    out->T_wc = out->track.T_wc;
+    const bf_se3 *T_new = known ? known : &out->track.T_wc;
+    recon__good_frame(r, f, T_new, !out->track.degenerate);
+    r->counts.tracked++;
+    if (state == RECON_RELOCALISED) r->counts.relocalised++;
+    return fuse_and_reference(r, f, T_new, true, out);
+}
+
+/* A failed frame: not fused (with known poses: fused there), the last good
+ * pose kept. */
+static bf_status lose(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_result *out)
+{
+    out->state = RECON_LOST;
+    r->counts.lost++;
+    r->is_lost = true;
+    r->V = bf_se3_identity(); /* the motion is unknown now */
+    if (!known) return BF_OK;
+    r->T_last = *known;
+    return fuse_and_reference(r, f, known, false, out);
+}
+
+/* A frame once the map exists. The frame goes up once, into fusion's
+ * incoming slot: the tracker reads it there, fusing copies it into the
+ * ring. The guess is the last pose (DESIGN.md section 6: no motion model),
+ * or with constant_velocity the last motion repeated, which catches steps
+ * beyond max_motion_m from the last pose; on the real frames it moved
+ * nothing (docs/real_frames.md), so it is off by default. With reloc, the
+ * motion gate grows with the frames elapsed since the last good one, and a
+ * frame that fails from its guess, comes while the camera is lost or after
+ * a gap longer than the gate's cap is searched for from candidate poses
+ * (reloc.c). */
+static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_result *out)
+{
+    fusion_frame_slot slot;
+    bool reloc = r->cfg.reloc.enabled && !known;
+    /* Beyond the gate's cap the camera may be anywhere the gate no longer
+     * bounds (a covered lens): the frame is searched for like a lost one. */
+    double n = reloc ? recon__intervals(r, f) : 1.0;
+    bool search_first = reloc && (r->is_lost || n > r->cfg.reloc.max_gate_intervals);
+    bf_status s = fusion_upload_frame(r->map, f, &slot);
+    if (s == BF_OK && reloc) s = recon__set_gate(r, n);
+    if (s != BF_OK) return s;
+    if (!search_first) {
+        /* The reference is the ray-cast at the last good pose. */
+        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
+        s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &guess, &out->track);
+        if (s != BF_OK) return s;
+        out->ms_track = out->track.ms_gpu;
+        bool ok = out->track.outcome == TRACK_OK;
+        if (ok && out->track.degenerate) r->counts.degenerate++;
+        /* Valid raw samples, but none the tracker can use (all beyond range). */
+        if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
+        if (ok && (r->cfg.fuse_degenerate || !out->track.degenerate)) return accept(r, f, known, RECON_TRACKED, out);
+        if (!reloc) return lose(r, f, known, out);
+    }
+    /* The guess from the last pose was just tried against its reference. */
+    recon_reloc_kind skip = !search_first && !r->cfg.constant_velocity ? RECON_RELOC_LAST : RECON_RELOC_NONE;
+    bool found;
+    if ((s = recon__search(r, f, &slot, n, skip, out, &found)) != BF_OK) return s;
+    if (found) return accept(r, f, NULL, RECON_RELOCALISED, out);
+    if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
+    return lose(r, f, known, out);
+}
+
 /* known: NULL for the loop; else the frame is tracked as usual but fused
  * at *known, which becomes the last pose (recon_add_frame_known). */
 static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_result *out)
@@ -183,54 +279,20 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     r->counts.frames++;
     bf_status s = BF_OK;
     if (out->n_valid < r->cfg.min_valid_pixels) {
-        out->state = RECON_NO_DEPTH;
-        r->counts.no_depth++;
+        s = no_depth(r, out);
     } else if (!r->map) {
         out->state = RECON_FIRST;
         if (known) r->T_first = r->T_last = *known;
         s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
         if (s == BF_OK) s = fusion_upload_frame(r->map, f, NULL);
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
-        if (s == BF_OK) r->counts.tracked++;
+        if (s == BF_OK) {
+            recon__good_frame(r, f, &r->T_first, true);
+            r->counts.tracked++;
+        }
         out->T_wc = r->T_first;
     } else {
-        /* The frame goes up once, into fusion's incoming slot: the tracker
-         * reads it there, fusing copies it into the ring. The guess is the
-         * last pose (DESIGN.md section 6: no motion model), or with
-         * constant_velocity the last motion repeated, which catches steps
-         * beyond max_motion_m from the last pose; on the real frames it
-         * moved nothing (docs/real_frames.md), so it is off by default. */
-        fusion_frame_slot slot;
-        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
-        s = fusion_upload_frame(r->map, f, &slot);
-        if (s == BF_OK) s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &guess, &out->track);
-        if (s == BF_OK) {
-            out->ms_track = out->track.ms_gpu;
-            bool good = out->track.outcome == TRACK_OK && (r->cfg.fuse_degenerate || !out->track.degenerate);
-            if (out->track.outcome == TRACK_OK && out->track.degenerate) r->counts.degenerate++;
-            if (out->track.outcome == TRACK_NO_DEPTH) {
-                /* Valid raw samples, but none the tracker can use (all beyond range). */
-                out->state = RECON_NO_DEPTH;
-                r->counts.no_depth++;
-            } else if (good) {
-                out->state = RECON_TRACKED;
-                out->T_wc = out->track.T_wc;
-                const bf_se3 *T_new = known ? known : &out->track.T_wc;
-                bf_se3 Li = bf_se3_inverse(&r->T_last);
-                r->V = bf_se3_mul(&Li, T_new);
-                r->T_last = *T_new;
-                r->counts.tracked++;
-                s = fuse_and_reference(r, f, T_new, true, out);
-            } else {
-                out->state = RECON_LOST;
-                r->counts.lost++;
-                r->V = bf_se3_identity(); /* the motion is unknown now */
-                if (known) {
-                    r->T_last = *known;
-                    s = fuse_and_reference(r, f, known, false, out);
-                }
-            }
-        }
+        s = track_and_fuse(r, f, known, out);
     }
     out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
     out->ms_frame = 1e3 * (bf_time_s() - t0);

@@ -13,7 +13,10 @@
  *
  * Frames tracked badly are not fused (the map stays as it was) and the
  * camera keeps its last good pose; frames without depth are skipped. Both
- * are reported per frame and counted.
+ * are reported per frame and counted. A lost camera (or one coming back
+ * from a gap without depth) is looked for from a few candidate poses per
+ * frame and found again (RECON_RELOCALISED) when one fits clearly
+ * (recon_reloc_config).
  */
 #ifndef BF_RECON_H
 #define BF_RECON_H
@@ -29,6 +32,22 @@
 
 typedef struct recon recon; /* opaque */
 
+/* Relocalisation (recon/reloc.c, DESIGN.md section 6): finding the map
+ * again after tracking failed or the depth went away for a while. */
+typedef struct recon_reloc_config {
+    bool enabled;              /* default true; false: a lost camera keeps the last good pose and is tracked
+                                  from there against the reference at that pose, with the per-frame gate */
+    uint32_t max_candidates;   /* candidate poses tried per frame (a ray-cast and an ICP each), default 4 */
+    float max_gate_intervals;  /* the motion gate grows with the frame intervals since the last good frame,
+                                  up to this many times the per-frame gate, default 4; after a longer gap
+                                  the frame is searched for as if lost */
+    float keyframe_m;          /* a good frame this far from every keyframe becomes one, default 0.1 */
+    float keyframe_deg;        /* or turned this far, default 10 */
+    uint32_t max_keyframes;    /* kept, the oldest replaced beyond, default 64 */
+    float min_inlier_frac;     /* a candidate is taken only with this inlier fraction, default 0.35 */
+    float max_residual_m;      /* and at most this residual, default 0.018 */
+} recon_reloc_config;
+
 typedef struct recon_config {
     bf_sensor sensor;         /* the depth sensor, default Kinect v1: recon_create hands it to fusion and
                                  tracking (the sensor fields of .fusion and .track are not read) */
@@ -41,6 +60,7 @@ typedef struct recon_config {
     bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
                                  last pose (docs/real_frames.md, the guess); default false */
     bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
+    recon_reloc_config reloc;
 } recon_config;
 
 recon_config recon_config_default(void);
@@ -54,15 +74,31 @@ typedef enum recon_frame_state {
     RECON_TRACKED,    /* tracked and fused */
     RECON_NO_DEPTH,   /* too few valid depth samples: skipped */
     RECON_LOST,       /* tracking failed (result.track.outcome says why): not fused */
+    RECON_RELOCALISED, /* lost (or after a gap), found again from a candidate pose: fused */
 } recon_frame_state;
 
 const char *recon_state_name(recon_frame_state s);
+/* True for the states where ICP ran (tracked, lost, relocalised). */
+bool recon_state_ran_icp(recon_frame_state s);
+
+/* Where a relocalising search started ICP from. */
+typedef enum recon_reloc_kind {
+    RECON_RELOC_NONE = 0, /* no candidate was taken */
+    RECON_RELOC_LAST,     /* the last good pose */
+    RECON_RELOC_VELOCITY, /* the last tracked motion continued over the frames elapsed */
+    RECON_RELOC_TURNED,   /* one of those two turned by 10 or 20 degrees (yaw or pitch) */
+    RECON_RELOC_KEYFRAME, /* a keyframe's pose */
+} recon_reloc_kind;
+
+const char *recon_reloc_kind_name(recon_reloc_kind k); /* "", "last", "velocity", "turned", "keyframe" */
 
 typedef struct recon_frame_result {
     uint32_t index;          /* the frame's index */
     recon_frame_state state;
     bf_se3 T_wc;             /* the frame's pose: tracked, or the last good one */
-    track_result track;      /* valid for RECON_TRACKED and RECON_LOST */
+    track_result track;      /* valid where recon_state_ran_icp: a search's best candidate */
+    uint32_t reloc_tried;    /* candidate poses tried by a relocalising search this frame */
+    recon_reloc_kind reloc;  /* RECON_RELOCALISED: the candidate the pose was found from */
     bool fused;
     bf_status fuse_status;   /* BF_POOL_FULL is reported here and the loop goes on */
     uint32_t n_valid;        /* valid depth samples */
@@ -103,6 +139,8 @@ bf_status recon_render_view(recon *r, const bf_se3 *T_wc);
 /* Running counts. */
 typedef struct recon_counts {
     uint32_t frames, tracked, lost, no_depth, degenerate, pool_full;
+    uint32_t relocalised; /* frames found again by a search (also counted in tracked) */
+    uint32_t keyframes;   /* keyframes held now */
 } recon_counts;
 recon_counts recon_get_counts(const recon *r);
 

@@ -36,7 +36,7 @@ static bf_status push_fuse_times(recon_run_series *t, const fusion_stage_ms *ms)
 static bf_status push_series(recon_run_series *t, const recon_frame_result *fr, bool has_loop)
 {
     bf_status s = bf_stats_push(&t->frame_ms, fr->ms_frame);
-    if (has_loop && (fr->state == RECON_TRACKED || fr->state == RECON_LOST)) {
+    if (has_loop && recon_state_ran_icp(fr->state)) {
         if (s == BF_OK) s = bf_stats_push(&t->track_ms, fr->ms_track);
         if (s == BF_OK) s = bf_stats_push(&t->inlier_frac, fr->track.inlier_frac);
         if (s == BF_OK && fr->track.outcome == TRACK_OK) s = bf_stats_push(&t->residual_mm, 1e3 * fr->track.residual_m);
@@ -104,13 +104,20 @@ static bf_status track_frame_in_loop(gpu_context *ctx, rgbd_source *src, const r
     if (s != BF_OK) return s;
     run->map = recon_map(run->loop);
     run->counts = recon_get_counts(run->loop);
-    if (fr->state == RECON_LOST)
-        bf_warn("%s: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm): not fused", cfg->label,
+    if (fr->state == RECON_LOST) {
+        char tried[48] = "";
+        if (fr->reloc_tried) snprintf(tried, sizeof tried, "; %u candidate poses tried", fr->reloc_tried);
+        bf_warn("%s: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm%s): not fused", cfg->label,
                 f->index, f->t_depth_s, track_outcome_name(fr->track.outcome), 100 * fr->track.inlier_frac,
-                1e3 * fr->track.residual_m);
-    else if (fr->state == RECON_NO_DEPTH)
+                1e3 * fr->track.residual_m, tried);
+    } else if (fr->state == RECON_RELOCALISED) {
+        bf_info("%s: frame %u (t = %.6f): found again from the %s candidate (%u tried; inliers %.0f%%, residual %.1f mm)",
+                cfg->label, f->index, f->t_depth_s, recon_reloc_kind_name(fr->reloc), fr->reloc_tried,
+                100 * fr->track.inlier_frac, 1e3 * fr->track.residual_m);
+    } else if (fr->state == RECON_NO_DEPTH) {
         bf_warn("%s: frame %u (t = %.6f): %u valid depth samples: skipped", cfg->label, f->index, f->t_depth_s,
                 fr->n_valid);
+    }
     return BF_OK;
 }
 

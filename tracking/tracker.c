@@ -157,6 +157,7 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     t->ctx = ctx;
     t->cfg = *cfg;
     t->K = *K;
+    t->motion_scale = 1.0;
     /* Every pyramid has all TRACK_LEVELS levels, whatever cfg.levels uses. */
     uint32_t off = 0;
     for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
@@ -425,6 +426,14 @@ bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, 
                        index, gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth),
                        (unsigned long long)words, (unsigned long long)offset);
     return frame_from(t, depth, (uint32_t)(offset / 4), index, guess_wc, out);
+}
+
+bf_status track_set_motion_scale(track_tracker *t, double scale)
+{
+    if (!t) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    if (!(scale >= 1) || !isfinite(scale)) return bf_fail(BF_INVALID_ARG, "tracking: motion scale %g (>= 1)", scale);
+    t->motion_scale = scale;
+    return BF_OK;
 }
 
 bf_status track_frame_depth_gpu(track_tracker *t, uint32_t level, gpu_buffer **buf, uint64_t *offset)

@@ -161,6 +161,14 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
 bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
                           const bf_se3 *guess_wc, track_result *out);
 
+/* Scales the motion gate of the frames tracked from now on: a result
+ * further than scale * max_motion_m or scale * max_motion_deg from its
+ * guess is TRACK_LARGE_MOTION. recon/ passes the frame intervals elapsed
+ * since its last good frame (capped), so a camera found again after a gap
+ * may have moved as far as that time allows; 1 restores the config's gate.
+ * BF_INVALID_ARG unless scale is finite and >= 1. */
+bf_status track_set_motion_scale(track_tracker *t, double scale);
+
 /* The depth pyramid of the last frame track_frame saw, on the GPU: level l
  * is (width >> l) x (height >> l) floats (metres, 0 = none) from pixel
  * *offset of *buf (recon/ starts the reference's ray-cast there). Valid

@@ -56,6 +56,7 @@ struct track_tracker {
     uint32_t ref_valid;        /* valid depth pixels at the reference's finest level */
     bool has_frame;            /* frame_depth holds a frame (track_frame_depth_gpu) */
     uint32_t ref_first;        /* that level: cfg.ref_level for a reference from the GPU, 0 for a frame */
+    double motion_scale;       /* the motion gate is cfg.max_motion_* times this (track_set_motion_scale) */
     double ms_rof;             /* GPU time of the last smoothing */
     double ms_ref;             /* GPU time of the last reference preparation (smoothing included) */
 };

@@ -263,7 +263,9 @@ BF_TEST(constant_velocity_guess_follows_an_accelerating_slide)
      * to 17.5 cm: from the last pose the later steps are beyond
      * track_config.max_motion_m (15 cm from the guess) and lost; with the
      * last motion repeated as the guess (recon_config.constant_velocity)
-     * each is 2.5 cm from the guess and tracked. */
+     * each is 2.5 cm from the guess and tracked. Relocalisation (on by
+     * default) finds the frames the last-pose guess loses from its
+     * continued-motion candidate; the first two runs are without it. */
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
@@ -276,22 +278,30 @@ BF_TEST(constant_velocity_guess_follows_an_accelerating_slide)
         truth[k] = bf_se3_mul(&T0, &slide);
     }
     bf_se3 I = bf_se3_identity();
-    uint32_t lost[2];
-    for (int cv = 0; cv < 2; cv++) {
+    static const char *name[3] = {"last pose", "constant velocity", "last pose, reloc"};
+    uint32_t lost[3], reloc[3];
+    for (int v = 0; v < 3; v++) {
         static run_out o;
         memset(&o, 0, sizeof o);
         recon_run_config cfg = fixture_run_config();
-        cfg.loop.constant_velocity = cv == 1;
+        cfg.loop.constant_velocity = v == 1;
+        cfg.loop.reloc.enabled = v == 2;
         CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N, &I, NULL, &o));
-        lost[cv] = o.counts.lost;
-        fprintf(stderr, "  %s: %u lost, last frame off by %.2f mm\n", cv ? "constant velocity" : "last pose",
-                o.counts.lost, 1e3 * trans_dist(&o.est[N - 1], &truth[N - 1]));
-        if (cv)
+        lost[v] = o.counts.lost;
+        reloc[v] = o.counts.relocalised;
+        fprintf(stderr, "  %s: %u lost, %u relocalised, last frame off by %.2f mm\n", name[v], o.counts.lost,
+                o.counts.relocalised, 1e3 * trans_dist(&o.est[N - 1], &truth[N - 1]));
+        if (v)
             for (uint32_t k = 1; k < N; k++) CHECK_LE(trans_dist(&o.est[k], &truth[k]), 0.01);
+        for (uint32_t k = 1; k < N && v == 2; k++)
+            if (o.fr[k].state == RECON_RELOCALISED) CHECK_EQ_INT(o.fr[k].reloc, RECON_RELOC_VELOCITY);
         mesh_free(&o.points);
     }
     CHECK(lost[0] > 0);
     CHECK_EQ_INT(lost[1], 0);
+    CHECK_EQ_INT(reloc[1], 0);
+    CHECK_EQ_INT(lost[2], 0);
+    CHECK(reloc[2] > 0);
     synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);

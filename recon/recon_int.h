@@ -1,0 +1,56 @@
+/* Declarations shared by recon/'s files (SQLite's btreeInt.h idea). */
+#ifndef BF_RECON_INT_H
+#define BF_RECON_INT_H
+
+#include "recon.h"
+
+struct recon {
+    gpu_context *ctx;
+    recon_config cfg;
+    bf_intrinsics K;
+    bf_se3 T_first;      /* pose of the first frame with depth */
+    bf_se3 T_last;       /* last good pose */
+    bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
+    fusion_map *map;     /* created at the first frame with depth */
+    bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
+    render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
+    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at the first view */
+    track_tracker *tracker;
+    recon_counts counts;
+
+    /* Relocalisation (reloc.c). */
+    bool is_lost;        /* the last frame with depth failed: the next one searches */
+    uint32_t good_index; /* the last good frame's index and depth time */
+    double good_t_s;
+    double dt_s;         /* the frame interval: the last step between two consecutive good frames; 0 unknown */
+    bf_se3 V_step;       /* the motion per frame interval over the last good step (kept while lost) */
+    bool has_velocity;   /* V_step was measured */
+    bf_se3 *keyframes;   /* reloc.max_keyframes poses, allocated at create */
+    uint32_t n_keyframes, keyframe_next; /* held; the slot the next one replaces once all are held */
+    uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
+};
+
+/* reloc.c */
+bf_status recon__reloc_create(recon *r);  /* the keyframe store; checks cfg.reloc */
+void recon__reloc_destroy(recon *r);
+/* Frame intervals from the last good frame to f: by the depth timestamps
+ * when the interval is known, else by frame indices; at least 1. */
+double recon__intervals(const recon *r, const bf_frame *f);
+/* The tracker's motion gate for a frame n intervals after the last good
+ * one: n times the per-frame gate, capped by reloc.max_gate_intervals. */
+bf_status recon__set_gate(recon *r, double n);
+/* A good frame at T_new (tracked, first, relocalised): the interval and
+ * velocity estimates, and a keyframe when it is far from every keyframe
+ * (may_keyframe false: a degenerate pose is not one). */
+void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool may_keyframe);
+/* Searches for frame f (its raw depth at slot) from at most
+ * reloc.max_candidates candidate poses, n intervals after the last good
+ * frame, each with the per-frame motion gate; skip names a candidate already tried from the reference at
+ * T_last (RECON_RELOC_NONE: none). Leaves the tracker's reference at the
+ * last candidate tried. *found says whether one was taken: then
+ * out->track.T_wc is the pose and out->reloc its candidate; else
+ * out->track is the best candidate's result (or untouched when none ran). */
+bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n, recon_reloc_kind skip,
+                        recon_frame_result *out, bool *found);
+
+#endif

@@ -1,0 +1,265 @@
+/* Relocalisation: finding the map again after tracking failed or the
+ * depth went away for a while (recon_int.h, DESIGN.md section 6).
+ *
+ * A frame that cannot be tracked from its guess is tried from a few
+ * candidate poses: the last good pose, the last tracked motion continued
+ * over the frames elapsed, both turned by 10 or 20 degrees, and keyframes
+ * (poses kept while tracking, one per 0.1 m or 10 degrees of the path).
+ * Each candidate costs a ray-cast of the map at its pose (the tracking
+ * reference, not fused) and an ICP from it; the best one is taken only when
+ * it passes the tracker's gates with a margin and no other candidate found
+ * a different pose. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "recon_int.h"
+
+/* Two candidates that pass but end this far apart found two different
+ * minima (a repetitive scene): tracking's own error from two starts on the
+ * same frame is millimetres, so neither is trusted. */
+#define RELOC_AMBIGUOUS_M 0.05
+#define RELOC_AMBIGUOUS_DEG 5.0
+
+/* The turns tried around the last pose and the continued motion: yaw
+ * (about the camera's y axis) and pitch (x), 10 degrees first. Hand-held
+ * cameras turn faster than they move: a 30-frame gap turned the real
+ * camera 20 degrees while it moved 13 cm (docs/tracking.md). */
+static const double turn_axis_deg[8][2] = {{1, 10}, {1, -10}, {0, 10}, {0, -10},
+                                           {1, 20}, {1, -20}, {0, 20}, {0, -20}};
+#define N_TURNS 8u
+
+bf_status recon__reloc_create(recon *r)
+{
+    const recon_reloc_config *c = &r->cfg.reloc;
+    r->V_step = bf_se3_identity();
+    if (!c->enabled) return BF_OK;
+    if (c->max_candidates < 1 || c->max_keyframes < 1 || !(c->max_gate_intervals >= 1) ||
+        !(c->keyframe_m > 0) || !(c->keyframe_deg > 0) || !(c->min_inlier_frac > 0 && c->min_inlier_frac <= 1) ||
+        !(c->max_residual_m > 0))
+        return bf_fail(BF_INVALID_ARG,
+                       "recon: reloc needs candidates %u >= 1, keyframes %u >= 1, gate intervals %g >= 1, keyframe "
+                       "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0",
+                       c->max_candidates, c->max_keyframes, c->max_gate_intervals, c->keyframe_m, c->keyframe_deg,
+                       c->min_inlier_frac, c->max_residual_m);
+    r->keyframes = calloc(c->max_keyframes, sizeof *r->keyframes);
+    if (!r->keyframes) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);
+    return BF_OK;
+}
+
+void recon__reloc_destroy(recon *r)
+{
+    free(r->keyframes);
+    r->keyframes = NULL;
+}
+
+double recon__intervals(const recon *r, const bf_frame *f)
+{
+    double n = f->index > r->good_index ? (double)(f->index - r->good_index) : 1.0;
+    /* Timestamps jitter by a few milliseconds at 33: rounded, one frame
+     * later is one interval, a frame the capture dropped is two. */
+    if (r->dt_s > 0 && f->t_depth_s > r->good_t_s) n = floor((f->t_depth_s - r->good_t_s) / r->dt_s + 0.5);
+    return n < 1 ? 1.0 : n;
+}
+
+bf_status recon__set_gate(recon *r, double n)
+{
+    double cap = r->cfg.reloc.max_gate_intervals;
+    return track_set_motion_scale(r->tracker, n < cap ? n : cap);
+}
+
+static double angle_deg(const bf_se3 *A, const bf_se3 *B)
+{
+    bf_se3 Ai = bf_se3_inverse(A), D = bf_se3_mul(&Ai, B);
+    return bf_se3_angle(&D) * 180.0 / M_PI;
+}
+
+static double dist_m(const bf_se3 *A, const bf_se3 *B) { return bf_v3_norm(bf_v3_sub(A->t, B->t)); }
+
+/* Within a keyframe spacing of T: close enough that ICP from one reaches the other. */
+static bool is_near(const recon *r, const bf_se3 *A, const bf_se3 *B)
+{
+    return dist_m(A, B) <= r->cfg.reloc.keyframe_m && angle_deg(A, B) <= r->cfg.reloc.keyframe_deg;
+}
+
+static void add_keyframe(recon *r, const bf_se3 *T)
+{
+    for (uint32_t i = 0; i < r->n_keyframes; i++)
+        if (is_near(r, &r->keyframes[i], T)) return;
+    /* Bounded: once all are held the oldest is replaced, so the store
+     * follows the camera (a long scan forgets where it began). */
+    r->keyframes[r->keyframe_next] = *T;
+    r->keyframe_next = (r->keyframe_next + 1) % r->cfg.reloc.max_keyframes;
+    if (r->n_keyframes < r->cfg.reloc.max_keyframes) r->n_keyframes++;
+    r->counts.keyframes = r->n_keyframes;
+}
+
+/* The motion of D spread evenly over n intervals: D^(1/n) (the twist divided). */
+static bf_se3 per_interval(const bf_se3 *D, double n)
+{
+    double xi[6];
+    bf_se3_log(D, xi);
+    for (int i = 0; i < 6; i++) xi[i] /= n;
+    return bf_se3_exp(xi);
+}
+
+void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool may_keyframe)
+{
+    if (r->counts.tracked > 0) {
+        /* Not the first good frame: the step from the last one. */
+        double n = recon__intervals(r, f);
+        bf_se3 Li = bf_se3_inverse(&r->T_last), D = bf_se3_mul(&Li, T_new);
+        r->V = D;
+        r->V_step = per_interval(&D, n);
+        r->has_velocity = true;
+        if (f->index == r->good_index + 1 && f->t_depth_s > r->good_t_s) {
+            /* An average over a few steps: one step's jitter is a few ms. */
+            double dt = f->t_depth_s - r->good_t_s;
+            r->dt_s = r->dt_s > 0 ? 0.8 * r->dt_s + 0.2 * dt : dt;
+        }
+    }
+    r->T_last = *T_new;
+    r->good_index = f->index;
+    r->good_t_s = f->t_depth_s;
+    r->is_lost = false;
+    if (r->keyframes && may_keyframe) add_keyframe(r, T_new);
+}
+
+/* The primary candidates, tried on every searching frame: 0 the last good
+ * pose, 1 the motion continued over n intervals (with a velocity). */
+static uint32_t n_primary(const recon *r) { return r->has_velocity ? 2u : 1u; }
+
+static bf_se3 velocity_pose(const recon *r, double n)
+{
+    double xi[6];
+    bf_se3_log(&r->V_step, xi);
+    for (int i = 0; i < 6; i++) xi[i] *= n;
+    bf_se3 M = bf_se3_exp(xi);
+    return bf_se3_mul(&r->T_last, &M);
+}
+
+/* Entry i of the round robin: the turns of each primary, then the
+ * keyframes. */
+static uint32_t n_round(const recon *r) { return n_primary(r) * N_TURNS + r->n_keyframes; }
+
+static recon_reloc_kind round_entry(const recon *r, uint32_t i, double n, bf_se3 *T)
+{
+    if (i >= n_primary(r) * N_TURNS) {
+        *T = r->keyframes[i - n_primary(r) * N_TURNS];
+        return RECON_RELOC_KEYFRAME;
+    }
+    bf_se3 base = i < N_TURNS ? r->T_last : velocity_pose(r, n);
+    const double *ta = turn_axis_deg[i % N_TURNS];
+    bf_vec3 axis = ta[0] == 1 ? bf_v3(0, 1, 0) : bf_v3(1, 0, 0);
+    bf_se3 turn = bf_se3_from_qt(bf_quat_from_axis_angle(axis, ta[1] * M_PI / 180.0), bf_v3(0, 0, 0));
+    *T = bf_se3_mul(&base, &turn); /* turned about the camera's own centre */
+    return RECON_RELOC_TURNED;
+}
+
+/* The map ray-cast at T_wc as the tracking reference, in a submission of
+ * its own (nothing is fused). */
+static bf_status cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result *out)
+{
+    render_options ro = r->cfg.raycast;
+    ro.no_shade = true;
+    bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
+    if (s != BF_OK) return s;
+    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
+    s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T_wc, &ro);
+    if (s == BF_OK) s = track_cmd_reference(r->tracker, T_wc);
+    /* The reference's count of valid pixels -> the host. */
+    gpu_cmd_barrier(r->ctx, GPU_BARRIER_HOST);
+    bf_status sw = gpu_submit_wait(r->ctx);
+    if (s == BF_OK) s = sw;
+    if (s != BF_OK) return s;
+    render_finish_raycast(r->ref_caster);
+    out->ms_raycast += render_last_ms(r->ref_caster);
+    return track_finish_reference(r->tracker);
+}
+
+static bool passes(const recon *r, const track_result *t)
+{
+    /* Degenerate systems fit anywhere along their weak directions. */
+    return t->outcome == TRACK_OK && !t->degenerate && t->inlier_frac >= r->cfg.reloc.min_inlier_frac &&
+           t->residual_m <= r->cfg.reloc.max_residual_m;
+}
+
+/* What a search has seen so far. */
+typedef struct search_state {
+    bool has_best, is_ambiguous;
+    track_result best;       /* the passing candidate with most inliers */
+    recon_reloc_kind best_kind;
+    bool has_any;
+    track_result any;        /* the candidate with most inliers (reported when none passes) */
+    bool is_no_depth;        /* the frame has no depth the tracker can use: no candidate will do */
+} search_state;
+
+static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_slot *slot, const bf_se3 *T_c,
+                               recon_reloc_kind kind, search_state *st, recon_frame_result *out)
+{
+    track_result t;
+    bf_status s = cast_reference(r, T_c, out);
+    if (s == BF_OK) s = track_frame_gpu(r->tracker, slot->depth, slot->offset, f->index, T_c, &t);
+    if (s != BF_OK) return s;
+    out->reloc_tried++;
+    out->ms_track += t.ms_gpu;
+    st->is_no_depth = t.outcome == TRACK_NO_DEPTH;
+    bf_debug("recon: frame %u: candidate %s: %s, inliers %.1f%%, residual %.1f mm", f->index,
+             recon_reloc_kind_name(kind), track_outcome_name(t.outcome), 100 * t.inlier_frac, 1e3 * t.residual_m);
+    if (!st->has_any || t.inlier_frac > st->any.inlier_frac) st->any = t;
+    st->has_any = true;
+    if (!passes(r, &t)) return BF_OK;
+    if (st->has_best && (dist_m(&st->best.T_wc, &t.T_wc) > RELOC_AMBIGUOUS_M ||
+                         angle_deg(&st->best.T_wc, &t.T_wc) > RELOC_AMBIGUOUS_DEG))
+        st->is_ambiguous = true;
+    if (!st->has_best || t.inlier_frac > st->best.inlier_frac) {
+        st->best = t;
+        st->best_kind = kind;
+    }
+    st->has_best = true;
+    return BF_OK;
+}
+
+bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n, recon_reloc_kind skip,
+                        recon_frame_result *out, bool *found)
+{
+    search_state st = {0};
+    uint32_t budget = r->cfg.reloc.max_candidates;
+    *found = false;
+    /* From a candidate, ICP may move what it may from a frame's guess: the
+     * candidates are spaced to leave one within a frame's motion of the
+     * camera, and a pose ICP reaches further away slid there along weakly
+     * constrained directions (tests/recon/test_reloc.c: 30 cm along a
+     * partly mapped wall, 45% inliers at 14 mm, every candidate agreeing). */
+    bf_status s = track_set_motion_scale(r->tracker, 1.0);
+    /* The primaries every time (the likeliest places), then the round
+     * robin where the last frame's search stopped: at most max_candidates
+     * ray-casts and ICPs per frame, and every entry is reached within
+     * n_round / (max_candidates - 2) frames. */
+    for (uint32_t i = 0; i < n_primary(r) && budget > 0 && s == BF_OK && !st.is_no_depth; i++) {
+        recon_reloc_kind kind = i == 0 ? RECON_RELOC_LAST : RECON_RELOC_VELOCITY;
+        if (kind == skip) continue;
+        bf_se3 T = i == 0 ? r->T_last : velocity_pose(r, n);
+        s = try_candidate(r, f, slot, &T, kind, &st, out);
+        budget--;
+    }
+    uint32_t len = n_round(r);
+    for (uint32_t k = 0; k < len && budget > 0 && s == BF_OK && !st.is_no_depth; k++) {
+        bf_se3 T;
+        uint32_t i = r->reloc_cursor % len;
+        r->reloc_cursor = (i + 1) % len;
+        recon_reloc_kind kind = round_entry(r, i, n, &T);
+        /* A keyframe where the last pose is: that one was just tried. */
+        if (kind == RECON_RELOC_KEYFRAME && is_near(r, &T, &r->T_last)) continue;
+        s = try_candidate(r, f, slot, &T, kind, &st, out);
+        budget--;
+    }
+    if (s != BF_OK) return s;
+    if (st.has_best && !st.is_ambiguous) {
+        out->track = st.best;
+        out->reloc = st.best_kind;
+        *found = true;
+    } else if (st.has_any) {
+        out->track = st.any;
+    }
+    return BF_OK;
+}

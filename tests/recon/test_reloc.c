@@ -1,0 +1,228 @@
+/* Relocalisation in the loop (recon/reloc.c): a covered lens while the
+ * camera moves on, a jump away and back to where the map was made, and a
+ * jump to a place the map has never seen, which must stay lost. Synthetic
+ * frames of the noisy room at 320x240 (recon_fixture.h); validation is on. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gpu_fixture.h"
+#include "recon_fixture.h"
+#include "recon/recon.h"
+
+/* The camera slid x_m along its own x axis and turned yaw_deg about its
+ * own y axis (vertical in the image), from the room's first view. */
+static bf_se3 view_pose(const synth_scene *sc, double x_m, double yaw_deg)
+{
+    bf_se3 M = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), yaw_deg * M_PI / 180), bf_v3(x_m, 0, 0));
+    return bf_se3_mul(&sc->T_wc_view, &M);
+}
+
+static bool is_good(const recon_frame_result *fr)
+{
+    return fr->state == RECON_TRACKED || fr->state == RECON_RELOCALISED || fr->state == RECON_FIRST;
+}
+
+/* Tracking's own accuracy on these frames, the bound every pose the loop
+ * fuses must keep: the 40-frame room run stays within 15 mm RMS
+ * (test_recon_room) and a frame after three frames without depth within
+ * 2 cm (test_recon); a relocalised pose is ICP's minimum against the same
+ * map, so it has the same bound. A wrong minimum is off by the candidate's
+ * own distance from the truth (5-40 cm here). */
+#define POSE_TOL_M 0.02
+#define POSE_TOL_DEG 1.0
+
+/* A lost frame is reported at the last good pose and leaves the map alone. */
+static void check_lost_frame(const run_out *o, uint32_t k, uint32_t last_good)
+{
+    CHECK_EQ_INT(o->fr[k].state, RECON_LOST);
+    CHECK(!o->fr[k].fused);
+    CHECK_NEAR(trans_dist(&o->est[k], &o->est[last_good]), 0, 1e-12);
+}
+
+/* Covered lens: 24 frames without depth while the camera keeps turning
+ * and sliding, slowing down to half its speed meanwhile (134 mm and 20
+ * degrees in the gap): the continued motion overshoots by 44 mm and 6.6
+ * degrees, the last pose is 134 mm and 20 degrees off. */
+enum { COV_BEFORE = 10, COV_GAP = 24, COV_AFTER = 8, COV_N = COV_BEFORE + COV_GAP + COV_AFTER };
+
+static void cover_lens(uint32_t k, uint16_t *depth)
+{
+    if (k >= COV_BEFORE && k < COV_BEFORE + COV_GAP) memset(depth, 0, (size_t)W * H * sizeof *depth);
+}
+
+static void covered_truth(const synth_scene *sc, bf_se3 truth[COV_N])
+{
+    /* Per frame before the gap: sliding right while turning left keeps
+     * the table in view, as a hand-held camera looking at it does. */
+    const double v_m = 0.0074, v_deg = -1.1;
+    double x = 0, yaw = 0;
+    for (uint32_t k = 0; k < COV_N; k++) {
+        truth[k] = view_pose(sc, x, yaw);
+        double slow = 1.0;
+        if (k >= COV_BEFORE) slow = k < COV_BEFORE + COV_GAP ? 1 - 0.5 * (k - COV_BEFORE) / COV_GAP : 0.5;
+        x += v_m * slow;
+        yaw += v_deg * slow;
+    }
+}
+
+BF_TEST(covered_lens_while_moving_is_found_again_after_the_gap)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
+    bf_se3 truth[COV_N];
+    covered_truth(&sc, truth);
+    const uint32_t back = COV_BEFORE + COV_GAP; /* the first frame with depth again */
+    fprintf(stderr, "  in the gap: %.0f mm, %.1f deg\n", 1e3 * trans_dist(&truth[COV_BEFORE - 1], &truth[back]),
+            rot_dist_deg(&truth[COV_BEFORE - 1], &truth[back]));
+    bf_se3 I = bf_se3_identity();
+    static run_out o;
+    for (int with = 0; with < 2; with++) {
+        memset(&o, 0, sizeof o);
+        recon_run_config cfg = fixture_run_config();
+        cfg.loop.reloc.enabled = with == 1;
+        CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, COV_N, &I, cover_lens, &o));
+        fprintf(stderr, "  reloc %s: %u tracked, %u relocalised, %u lost;", with ? "on" : "off", o.counts.tracked,
+                o.counts.relocalised, o.counts.lost);
+        for (uint32_t k = back; k < COV_N; k++)
+            fprintf(stderr, " %u:%s%s%s (%.0f mm)", k, recon_state_name(o.fr[k].state), o.fr[k].reloc ? "/" : "",
+                    recon_reloc_kind_name(o.fr[k].reloc), 1e3 * trans_dist(&o.est[k], &truth[k]));
+        fprintf(stderr, "\n");
+        for (uint32_t k = COV_BEFORE; k < back; k++) CHECK_EQ_INT(o.fr[k].state, RECON_NO_DEPTH);
+        if (!with) {
+            /* The scenario is beyond plain tracking: from the last pose
+             * with the per-frame gate, the frame after the gap is lost. */
+            CHECK_EQ_INT(o.fr[back].state, RECON_LOST);
+            mesh_free(&o.points);
+            continue;
+        }
+        /* Found within two frames (the continued motion is a primary
+         * candidate), then tracked on. */
+        uint32_t found = back;
+        while (found < COV_N && !is_good(&o.fr[found])) check_lost_frame(&o, found++, COV_BEFORE - 1);
+        CHECK_LE(found, back + 1);
+        CHECK_EQ_INT(o.fr[found].state, RECON_RELOCALISED);
+        for (uint32_t k = found; k < COV_N; k++) {
+            CHECK(is_good(&o.fr[k]));
+            CHECK(o.fr[k].fused);
+            CHECK_LE(trans_dist(&o.est[k], &truth[k]), POSE_TOL_M);
+            CHECK_LE(rot_dist_deg(&o.est[k], &truth[k]), POSE_TOL_DEG);
+        }
+        fprintf(stderr, "  after the gap: frame %u off by %.1f mm, %.2f deg; last by %.1f mm\n", found,
+                1e3 * trans_dist(&o.est[found], &truth[found]), rot_dist_deg(&o.est[found], &truth[found]),
+                1e3 * trans_dist(&o.est[COV_N - 1], &truth[COV_N - 1]));
+        CHECK_LE(surface_p90(&sc, &o.points), 0.02);
+        mesh_free(&o.points);
+    }
+    synth_scene_free(&sc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* Away and back: the camera slides 38 cm and turns 28.5 degrees over 20
+ * frames (keyframes every 10 cm or 10 degrees), turns round to the unmapped
+ * back of the room for 6 frames, then comes back near its second frame:
+ * 35 cm and 27 degrees from the last good pose, beyond where ICP from it
+ * or its turns converges, 2 cm from the first keyframe. */
+enum { AB_OUT = 20, AB_AWAY = 6, AB_BACK = 8, AB_N = AB_OUT + AB_AWAY + AB_BACK };
+
+static void away_and_back_truth(const synth_scene *sc, bf_se3 truth[AB_N])
+{
+    for (uint32_t k = 0; k < AB_N; k++) {
+        if (k < AB_OUT) truth[k] = view_pose(sc, 0.02 * k, 1.5 * k);
+        else if (k < AB_OUT + AB_AWAY) truth[k] = view_pose(sc, 0.38, 180 + 3.0 * (k - AB_OUT));
+        else truth[k] = view_pose(sc, 0.02 + 0.003 * (k - AB_OUT - AB_AWAY), 1.5 + 0.2 * (k - AB_OUT - AB_AWAY));
+    }
+}
+
+BF_TEST(a_camera_back_from_elsewhere_is_found_at_a_keyframe)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
+    bf_se3 truth[AB_N];
+    away_and_back_truth(&sc, truth);
+    const uint32_t back = AB_OUT + AB_AWAY;
+    fprintf(stderr, "  the return from the last good pose: %.0f mm, %.1f deg\n",
+            1e3 * trans_dist(&truth[AB_OUT - 1], &truth[back]), rot_dist_deg(&truth[AB_OUT - 1], &truth[back]));
+    static run_out o;
+    memset(&o, 0, sizeof o);
+    bf_se3 I = bf_se3_identity();
+    recon_run_config cfg = fixture_run_config();
+    CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, AB_N, &I, NULL, &o));
+    fprintf(stderr, "  %u tracked, %u relocalised, %u lost, %u keyframes;", o.counts.tracked, o.counts.relocalised,
+            o.counts.lost, o.counts.keyframes);
+    for (uint32_t k = AB_OUT; k < AB_N; k++)
+        fprintf(stderr, " %u:%s%s%s", k, recon_state_name(o.fr[k].state), o.fr[k].reloc ? "/" : "",
+                recon_reloc_kind_name(o.fr[k].reloc));
+    fprintf(stderr, "\n");
+    for (uint32_t k = 0; k < AB_OUT; k++) CHECK(is_good(&o.fr[k]));
+    CHECK(o.counts.keyframes >= 4); /* 38 cm and 28.5 degrees of path */
+    for (uint32_t k = AB_OUT; k < back; k++) check_lost_frame(&o, k, AB_OUT - 1);
+    /* Found from a keyframe within the frames the round robin needs to
+     * reach the keyframes: 16 turns and the keyframes at two a frame. */
+    uint32_t found = back, reach = (16 + o.counts.keyframes + 1) / 2;
+    while (found < AB_N && !is_good(&o.fr[found])) check_lost_frame(&o, found++, AB_OUT - 1);
+    CHECK_LE(found, back + reach);
+    CHECK(found < AB_N);
+    if (found < AB_N) {
+        CHECK_EQ_INT(o.fr[found].state, RECON_RELOCALISED);
+        CHECK_EQ_INT(o.fr[found].reloc, RECON_RELOC_KEYFRAME);
+        fprintf(stderr, "  found at frame %u (%u after the return) off by %.1f mm, %.2f deg\n", found, found - back,
+                1e3 * trans_dist(&o.est[found], &truth[found]), rot_dist_deg(&o.est[found], &truth[found]));
+    }
+    for (uint32_t k = found; k < AB_N; k++) {
+        CHECK(is_good(&o.fr[k]));
+        CHECK_LE(trans_dist(&o.est[k], &truth[k]), POSE_TOL_M);
+        CHECK_LE(rot_dist_deg(&o.est[k], &truth[k]), POSE_TOL_DEG);
+    }
+    CHECK_LE(surface_p90(&sc, &o.points), 0.02);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* A new place: after 12 frames of the sweep the camera turns round to the
+ * back of the room, which the map has never seen, and looks about there.
+ * Every frame after the jump is lost, says so, and is not fused; the map
+ * holds no ghost of the back wall. */
+BF_TEST(a_camera_in_an_unmapped_place_stays_lost)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
+    enum { JUMP = 12, N = 24 };
+    bf_se3 truth[N];
+    for (uint32_t k = 0; k < N; k++)
+        truth[k] = k < JUMP ? view_pose(&sc, 0.01 * k, 0.5 * k) : view_pose(&sc, 0.12, 170 + 2.0 * (k - JUMP));
+    static run_out o;
+    memset(&o, 0, sizeof o);
+    bf_se3 I = bf_se3_identity();
+    recon_run_config cfg = fixture_run_config();
+    CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N, &I, NULL, &o));
+    uint32_t tried = 0;
+    double best_inliers = 0;
+    for (uint32_t k = JUMP; k < N; k++) {
+        check_lost_frame(&o, k, JUMP - 1);
+        CHECK_EQ_INT(o.fr[k].reloc, RECON_RELOC_NONE);
+        tried += o.fr[k].reloc_tried;
+        if (o.fr[k].track.inlier_frac > best_inliers) best_inliers = o.fr[k].track.inlier_frac;
+    }
+    fprintf(stderr, "  %u lost, %u relocalised, %u candidates tried, best inliers %.1f%%\n", o.counts.lost,
+            o.counts.relocalised, tried, 100 * best_inliers);
+    CHECK_EQ_INT(o.counts.relocalised, 0);
+    CHECK_EQ_INT(o.counts.lost, N - JUMP);
+    /* Each lost frame searched with its whole budget. */
+    CHECK_EQ_INT(tried, (N - JUMP) * cfg.loop.reloc.max_candidates);
+    CHECK_LE(surface_p90(&sc, &o.points), 0.02);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
