@@ -58,7 +58,7 @@ typedef struct replay_args {
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
-#define LOOP_ROWS 20
+#define LOOP_ROWS 22
 #define LIVE_ROWS 5
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
@@ -79,6 +79,10 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--noise-exp", APP_OPT_FLOAT, &tc->noise_weight_exp, "E",
                 "exponent of the ICP noise weight: 2 the inverse variance, smaller lets far samples count more",
                 .min_open = true, .max = 4),
+        APP_OPT("--icp-stop-m", APP_OPT_FLOAT, &tc->converged_m, "M",
+                "a pyramid level stops iterating when an ICP update moves less than M metres and turns less "
+                "than --icp-stop-deg (0 and 0: always every iteration)"),
+        APP_OPT("--icp-stop-deg", APP_OPT_FLOAT, &tc->converged_deg, "DEG", "see --icp-stop-m"),
         APP_OPT("--icp-sample-step", APP_OPT_U32, &tc->finest_sample_step, "S",
                 "ICP samples at the finest level: 1 every pixel, 2 every second one (a checkerboard, half the cost)",
                 .min = 1, .max = 2),
@@ -241,13 +245,13 @@ static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, cons
 static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr)
 {
     bool ran = recon_state_ran_icp(fr->state);
-    fprintf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s\n", f->index, f->t_depth_s,
+    fprintf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f\n", f->index, f->t_depth_s,
             recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
             ran ? fr->track.eig_min / (fr->track.eig_max > 0 ? fr->track.eig_max : 1) : 0.0, fr->ms_frame,
             fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window, fr->reloc_tried,
-            recon_reloc_kind_name(fr->reloc));
+            recon_reloc_kind_name(fr->reloc), ran ? fr->track.iterations : 0, ran ? fr->track.residual_sigma : 0.0);
 }
 
 /* What the replay writes per frame beside the runner's own records. */
@@ -332,7 +336,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = bf_fail(BF_IO, "%s: cannot create", path);
     if (csv)
         fprintf(csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
-                     "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from\n");
+                     "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma\n");
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
