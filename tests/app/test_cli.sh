@@ -56,6 +56,21 @@ is_json "$T/out"
 expect 0 "$B" eval-surface --reference "$T/seq/scene.ply" --reconstruction "$T/seq/seen.ply" --max-samples 2000 --json
 is_json "$T/out"
 
+# eval-surface --depth: noiseless depth at its true poses lies on the scene (within the 0.2 mm
+# depth unit and the scene's triangles); the same depth at poses shifted 3 cm along each axis
+# (off every wall of the room) does not.
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 3 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+    --noise none --data "$T/nodata" --out "$T/clean"
+expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --every 1 --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); a=d['accuracy']; assert d['depth']['frames'] == 3 and a['median_m'] < 1e-3 and a['within_threshold'] > 0.99, a" \
+    "$T/out" || fail "eval-surface --depth: noiseless depth at true poses is off the scene: $(head -c 400 "$T/out")"
+awk '!/^#/ {$2 += 0.03; $3 += 0.03; $4 += 0.03} {print}' "$T/clean/groundtruth.txt" > "$T/shifted.txt"
+expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --every 1 --poses "$T/shifted.txt" --json
+python3 -c "import json,sys; a=json.load(open(sys.argv[1]))['accuracy']; assert a['median_m'] > 1e-2 and a['within_threshold'] < 0.5, a" \
+    "$T/out" || fail "eval-surface --depth: poses 3 cm off still fit: $(head -c 400 "$T/out")"
+expect 2 "$B" eval-surface --reference "$T/clean/scene.ply"
+mentions "exactly one of --reconstruction and --depth"
+
 # Bad command lines: exit 2, naming the culprit.
 expect 2 "$B" info
 expect 2 "$B" eval-surface rec.ply
