@@ -12,13 +12,23 @@ struct recon {
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
     bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
-    fusion_map *map;     /* created at the first frame with depth */
+    fusion_map *map;     /* made at create, at T_first's origin */
+    bool has_first;      /* the first frame with depth has been fused */
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
-    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at the first view */
+    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at create (has_views)
+                                  or at the first view */
     track_tracker *tracker;
     recon_counts counts;
 };
+
+/* The caster at the camera's size, when the reference is cast at a coarser
+ * level: made at create with has_views, else at the first view. */
+static bf_status view_caster(recon *r)
+{
+    if (r->caster) return BF_OK;
+    return render_create(r->ctx, &r->cfg.caster, r->K.width, r->K.height, &r->caster);
+}
 
 recon_config recon_config_default(void)
 {
@@ -83,6 +93,11 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
     if (s == BF_OK) s = render_create(ctx, &r->cfg.caster, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
+    /* The map and the views' caster now, not at their first use: compiling
+     * their pipelines takes seconds on lavapipe, and a camera started after
+     * this returns must not wait for it (docs/tracking.md, start-up). */
+    if (s == BF_OK) s = fusion_create(ctx, &r->cfg.fusion, K, r->T_first.t, &r->map);
+    if (s == BF_OK && r->cfg.has_views) s = view_caster(r);
     if (s != BF_OK) {
         recon_destroy(r);
         return s;
@@ -102,14 +117,6 @@ void recon_destroy(recon *r)
 }
 
 fusion_map *recon_map(recon *r) { return r->map; }
-
-/* The caster at the camera's size, made at the first view when the
- * reference is cast at a coarser level. */
-static bf_status view_caster(recon *r)
-{
-    if (r->caster) return BF_OK;
-    return render_create(r->ctx, &r->cfg.caster, r->K.width, r->K.height, &r->caster);
-}
 
 render_caster *recon_caster(recon *r) { return view_caster(r) == BF_OK ? r->caster : NULL; }
 recon_counts recon_get_counts(const recon *r) { return r->counts; }
@@ -185,13 +192,15 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     if (out->n_valid < r->cfg.min_valid_pixels) {
         out->state = RECON_NO_DEPTH;
         r->counts.no_depth++;
-    } else if (!r->map) {
+    } else if (!r->has_first) {
         out->state = RECON_FIRST;
-        if (known) r->T_first = r->T_last = *known;
-        s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
+        if (known) s = recon_set_first_pose(r, known);
         if (s == BF_OK) s = fusion_upload_frame(r->map, f, NULL);
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
-        if (s == BF_OK) r->counts.tracked++;
+        if (s == BF_OK) {
+            r->has_first = true;
+            r->counts.tracked++;
+        }
         out->T_wc = r->T_first;
     } else {
         /* The frame goes up once, into fusion's incoming slot: the tracker
@@ -248,17 +257,25 @@ bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_kno
     return add_frame(r, f, T_known, out);
 }
 
-bf_status recon_flush(recon *r)
+bf_status recon_flush(recon *r) { return fusion_flush(r->map); }
+
+bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
 {
-    if (!r->map) return BF_OK;
-    return fusion_flush(r->map);
+    if (!T_wc0 || !bf_se3_is_finite(T_wc0)) return bf_fail(BF_INVALID_ARG, "recon_set_first_pose: no pose");
+    if (r->has_first) return bf_fail(BF_INVALID_ARG, "recon: the first frame has been fused already");
+    bf_status s = fusion_set_origin(r->map, T_wc0->t);
+    if (s != BF_OK) return s;
+    r->T_first = r->T_last = *T_wc0;
+    return BF_OK;
 }
 
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc)
 {
-    if (!r->map) return bf_fail(BF_INVALID_ARG, "recon: no map yet (no frame with depth)");
     bf_status s = view_caster(r);
     if (s != BF_OK) return s;
+    /* Until the first window is integrated nothing is confident and a
+     * confident-only view is black: show the sub-cache's quick signs. */
     render_options opt = render_options_display();
+    opt.confident_only = fusion_windows_done(r->map) > 0;
     return render_raycast(r->caster, r->map, &r->K, T_wc, &opt);
 }
