@@ -151,11 +151,27 @@ typedef struct replay_result {
     eval_ate_result ate;
     uint32_t n_views;
     double seconds;
+    double t_start_s;          /* bf_time_s() at the command's start */
+    size_t cache_loaded_bytes; /* of the pipeline cache file */
     char device[256];
     bool has_capture;          /* live: the capture thread's counts */
     capture_thread_stats cap;
     uint32_t n_recorded;
 } replay_result;
+
+/* Start-up (docs/tracking.md, start-up): seconds from the command's start
+ * to the loop being ready (device open, every pipeline compiled, pools
+ * allocated; a camera starts after it) and to the first frame done. */
+static void json_startup(cJSON *o, const replay_result *r)
+{
+    cJSON *st = app_json_object(o, "startup");
+    double ready = r->run.t_ready_s ? r->run.t_ready_s - r->t_start_s : NAN;
+    double first = r->run.t_first_done_s ? r->run.t_first_done_s - r->t_start_s : NAN;
+    cJSON_AddNumberToObject(st, "ready_s", ready);
+    cJSON_AddNumberToObject(st, "first_frame_done_s", first);
+    cJSON_AddNumberToObject(st, "first_frame_ms", r->run.t_first_done_s ? r->run.first_frame_ms : NAN);
+    cJSON_AddNumberToObject(st, "pipeline_cache_loaded_bytes", (double)r->cache_loaded_bytes);
+}
 
 static cJSON *stats_json(const replay_args *a, const replay_result *r)
 {
@@ -204,6 +220,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r)
     }
     app_json_map(o, &r->out, a->rcfg.fusion.max_level);
     cJSON_AddNumberToObject(o, "views", r->n_views);
+    json_startup(o, r);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
     return o;
 }
@@ -248,7 +265,7 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     bf_status s = BF_OK;
     csv_frame(k->csv, f, fr);
     if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
-    if (s == BF_OK && k->a->view_every && run->map && f->index % k->a->view_every == 0 &&
+    if (s == BF_OK && k->a->view_every && f->index % k->a->view_every == 0 &&
         (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
         k->r->n_views++;
     return s;
@@ -288,6 +305,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     double t_start = bf_time_s();
     replay_result r;
     memset(&r, 0, sizeof r);
+    r.t_start_s = t_start;
+    a.rcfg.has_views = a.view_every != 0;
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
     replay_log_writer *log = NULL;
@@ -318,7 +337,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
                      "frame_ms,track_ms,raycast_ms,fuse_ms\n");
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
-    if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+    if (s == BF_OK) {
+        snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+        r.cache_loaded_bytes = gpu_pipeline_cache_loaded_bytes(ctx);
+    }
     if (s == BF_OK) {
         recon_run_config rcfg = {
             .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,

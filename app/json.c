@@ -161,6 +161,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
     cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
+    cJSON_AddBoolToObject(l, "has_views", c->has_views);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);
     cJSON_AddBoolToObject(r, "refine", c->raycast.refine);
