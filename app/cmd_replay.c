@@ -90,7 +90,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 .min_open = true),
         APP_OPT("--degenerate-ratio", APP_OPT_DOUBLE, &tc->degenerate_ratio, "R",
                 "eigenvalue ratio below which the ICP system counts as degenerate", .max = 1),
-        APP_OPT("--view-every", APP_OPT_U32, &a->view_every, "K", "write a shaded view every K frames", .min = 1,
+        APP_OPT("--view-every", APP_OPT_U32, &a->view_every, "K", "write a shaded view every K frames the loop handled", .min = 1,
                 .no_default = true),
         APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
         APP_OPT_END,
@@ -265,7 +265,9 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     bf_status s = BF_OK;
     csv_frame(k->csv, f, fr);
     if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
-    if (s == BF_OK && k->a->view_every && f->index % k->a->view_every == 0 &&
+    /* Every K frames handled, not K indices: a live queue drops frames, and
+     * indices that skip would miss most multiples of K. */
+    if (s == BF_OK && k->a->view_every && (run->est.n - 1) % k->a->view_every == 0 &&
         (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
         k->r->n_views++;
     return s;
