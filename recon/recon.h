@@ -77,9 +77,9 @@ typedef struct recon_frame_result {
 /* T_wc0 is the first frame's pose (the map's origin goes there). Makes
  * everything the loop will use: the map with its pools, the tracker, the
  * reference's caster (and the views' with cfg->has_views), each with its
- * pipelines compiled and run once (gpu_pipeline_warm_up), so the first
- * frame costs what any frame costs and a camera can start after this
- * returns (DESIGN.md section 1). ctx is borrowed and must outlive the loop. */
+ * pipelines compiled and run once (gpu_pipeline_warm_up), so no frame
+ * waits for a compiler and a camera can start after this returns (DESIGN.md
+ * section 1). ctx is borrowed and must outlive the loop. */
 bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intrinsics *K, const bf_se3 *T_wc0,
                        recon **out);
 void recon_destroy(recon *r); /* NULL is a no-op */
