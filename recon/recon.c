@@ -132,15 +132,21 @@ static uint32_t count_valid(const bf_frame *f)
 /* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
  * next reference, in one submission: fusion, the ray-cast (written straight
  * into the tracker's reference) and the reference's preparation share it,
- * so the frame costs one host wait besides its ICP iterations. */
+ * so the frame costs one host wait besides its ICP iterations. first: the
+ * uploaded frame (not tracked, so not preprocessed) is the first one; its
+ * preprocessing goes into the submission too, so its rays start at its depth
+ * as a tracked frame's do (from the near plane the first ray-cast cost about
+ * two frames' ray-casts: docs/tracking.md, start-up). */
 static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, bool tracked,
-                                    recon_frame_result *out)
+                                    const fusion_frame_slot *first, recon_frame_result *out)
 {
     render_options ro = r->cfg.raycast;
     ro.no_shade = true; /* tracking takes its normals from the depth */
     bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
     if (s != BF_OK) return s;
-    if (r->cfg.start_at_frame && tracked &&
+    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
+    if (r->cfg.start_at_frame && first) s = track_cmd_frame(r->tracker, first->depth, first->offset, f->index);
+    if (s == BF_OK && r->cfg.start_at_frame && (tracked || first) &&
         track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
         /* The rays start a margin in front of the depth this frame saw
          * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
@@ -149,8 +155,7 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
         ro.start_margin_m = 0.02f + 3.0f * r->cfg.sensor.sigma_a;
         ro.start_margin_z2 = 3.0f * r->cfg.sensor.sigma_b;
     }
-    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
-    s = fusion_cmd_fuse(r->map, T);
+    if (s == BF_OK) s = fusion_cmd_fuse(r->map, T);
     if (s == BF_OK) s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro);
     if (s == BF_OK) s = track_cmd_reference(r->tracker, T);
     /* The counters fusion copied and the reference's count -> the host. */
@@ -194,9 +199,10 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         r->counts.no_depth++;
     } else if (!r->has_first) {
         out->state = RECON_FIRST;
+        fusion_frame_slot slot;
         if (known) s = recon_set_first_pose(r, known);
-        if (s == BF_OK) s = fusion_upload_frame(r->map, f, NULL);
-        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
+        if (s == BF_OK) s = fusion_upload_frame(r->map, f, &slot);
+        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, &slot, out);
         if (s == BF_OK) {
             r->has_first = true;
             r->counts.tracked++;
@@ -229,14 +235,14 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
                 r->V = bf_se3_mul(&Li, T_new);
                 r->T_last = *T_new;
                 r->counts.tracked++;
-                s = fuse_and_reference(r, f, T_new, true, out);
+                s = fuse_and_reference(r, f, T_new, true, NULL, out);
             } else {
                 out->state = RECON_LOST;
                 r->counts.lost++;
                 r->V = bf_se3_identity(); /* the motion is unknown now */
                 if (known) {
                     r->T_last = *known;
-                    s = fuse_and_reference(r, f, known, false, out);
+                    s = fuse_and_reference(r, f, known, false, NULL, out);
                 }
             }
         }

@@ -40,7 +40,8 @@ typedef struct recon_config {
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
     bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
                                  last pose (docs/real_frames.md, the guess); default false */
-    bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
+    bool start_at_frame;      /* the reference's rays start just in front of the frame's depth (the first frame's
+                                 too: track_cmd_frame), default true */
     bool has_views;           /* views at the camera's size will be asked for (recon_render_view): their caster is
                                  made by recon_create with the rest, not at the first view; default false */
 } recon_config;
