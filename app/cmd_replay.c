@@ -107,7 +107,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 .min_open = true),
         APP_OPT("--degenerate-ratio", APP_OPT_DOUBLE, &tc->degenerate_ratio, "R",
                 "eigenvalue ratio below which the ICP system counts as degenerate", .max = 1),
-        APP_OPT("--view-every", APP_OPT_U32, &a->view_every, "K", "write a shaded view every K frames", .min = 1,
+        APP_OPT("--view-every", APP_OPT_U32, &a->view_every, "K", "write a shaded view every K frames the loop handled", .min = 1,
                 .no_default = true),
         APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
         APP_OPT_END,
@@ -168,11 +168,27 @@ typedef struct replay_result {
     eval_ate_result ate;
     uint32_t n_views;
     double seconds;
+    double t_start_s;          /* bf_time_s() at the command's start */
+    size_t cache_loaded_bytes; /* of the pipeline cache file */
     char device[256];
     bool has_capture;          /* live: the capture thread's counts */
     capture_thread_stats cap;
     uint32_t n_recorded;
 } replay_result;
+
+/* Start-up (docs/tracking.md, start-up): seconds from the command's start
+ * to the loop being ready (device open, every pipeline compiled, pools
+ * allocated; a camera starts after it) and to the first frame done. */
+static void json_startup(cJSON *o, const replay_result *r)
+{
+    cJSON *st = app_json_object(o, "startup");
+    double ready = r->run.t_ready_s ? r->run.t_ready_s - r->t_start_s : NAN;
+    double first = r->run.t_first_done_s ? r->run.t_first_done_s - r->t_start_s : NAN;
+    cJSON_AddNumberToObject(st, "ready_s", ready);
+    cJSON_AddNumberToObject(st, "first_frame_done_s", first);
+    cJSON_AddNumberToObject(st, "first_frame_ms", r->run.t_first_done_s ? r->run.first_frame_ms : NAN);
+    cJSON_AddNumberToObject(st, "pipeline_cache_loaded_bytes", (double)r->cache_loaded_bytes);
+}
 
 static cJSON *stats_json(const replay_args *a, const replay_result *r)
 {
@@ -223,6 +239,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r)
     }
     app_json_map(o, &r->out, a->rcfg.fusion.max_level);
     cJSON_AddNumberToObject(o, "views", r->n_views);
+    json_startup(o, r);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
     return o;
 }
@@ -268,7 +285,9 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     bf_status s = BF_OK;
     csv_frame(k->csv, f, fr);
     if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
-    if (s == BF_OK && k->a->view_every && run->map && f->index % k->a->view_every == 0 &&
+    /* Every K frames handled, not K indices: a live queue drops frames, and
+     * indices that skip would miss most multiples of K. */
+    if (s == BF_OK && k->a->view_every && (run->est.n - 1) % k->a->view_every == 0 &&
         (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
         k->r->n_views++;
     return s;
@@ -309,6 +328,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     double t_start = bf_time_s();
     replay_result r;
     memset(&r, 0, sizeof r);
+    r.t_start_s = t_start;
+    a.rcfg.has_views = a.view_every != 0;
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
     replay_log_writer *log = NULL;
@@ -339,7 +360,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma\n");
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
-    if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+    if (s == BF_OK) {
+        snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+        r.cache_loaded_bytes = gpu_pipeline_cache_loaded_bytes(ctx);
+    }
     if (s == BF_OK) {
         recon_run_config rcfg = {
             .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,

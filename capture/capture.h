@@ -57,7 +57,10 @@ bf_status capture_source_from_fn(const bf_intrinsics *K, uint32_t n_frames, bool
  * the one the consumer holds, the one the thread fills) is allocated at
  * create, sized from the source's intrinsics: nothing is allocated per frame.
  * When the consumer falls behind, the oldest queued frame is dropped and
- * counted: the device is never blocked and the queue never grows. */
+ * counted: the device is never blocked and the queue never grows. The
+ * thread starts at the consumer's first next(), so a consumer that gets
+ * ready after opening the source (recon/ compiles its pipelines first)
+ * loses no frame to its start-up. */
 
 typedef struct capture_thread_stats {
     uint64_t captured;  /* frames the thread took from the source */
@@ -80,6 +83,11 @@ bf_status capture_threaded(rgbd_source *src, uint32_t capacity, rgbd_source **ou
  * of dropping: for file sources, where waiting costs nothing and a dropped
  * frame would be lost for good. */
 bf_status capture_threaded_lossless(rgbd_source *src, uint32_t capacity, rgbd_source **out);
+/* Starts the thread now, before the first next() would (tests that fill
+ * the queue first). No-op for a started thread, other sources and NULL.
+ * Call it from the consumer's thread. BF_NO_MEMORY when no thread can be
+ * made. */
+bf_status capture_threaded_start(rgbd_source *src);
 /* Counters so far (zeros for a source not made by capture_threaded*). Safe
  * from any thread. */
 capture_thread_stats capture_threaded_stats(const rgbd_source *src);

@@ -13,6 +13,9 @@
  * thread either recycles the oldest queued slot (drop, counted) or waits
  * for the consumer (lossless mode, for files).
  *
+ * Starting: the thread is made at the consumer's first next(), so frames
+ * flow only once the consumer is ready (capture.h).
+ *
  * Stopping: capture_threaded_stop() only stores an atomic flag (async-
  * signal-safe). The thread checks it before each frame; the consumer waits
  * with a timeout so it notices the flag even though a signal handler cannot
@@ -157,9 +160,24 @@ static void *capture_main(void *arg)
     return NULL;
 }
 
+/* The thread starts at the consumer's first next(), not at create: a
+ * camera or paced recording opened before the consumer is ready (its
+ * pipelines compiled) then fills the queue only once frames are taken, so
+ * start-up drops nothing. Only the consumer's thread calls this. */
+static bf_status start_thread(capture_thread *ct)
+{
+    if (ct->is_started) return BF_OK;
+    int rc = pthread_create(&ct->thread, NULL, capture_main, ct);
+    if (rc != 0) return bf_fail(BF_NO_MEMORY, "capture thread: cannot start a thread: %s", strerror(rc));
+    ct->is_started = true;
+    return BF_OK;
+}
+
 static bf_status capture_next(rgbd_source *base, bf_frame *out)
 {
     capture_thread *ct = (capture_thread *)base;
+    bf_status st = start_thread(ct);
+    if (st != BF_OK) return st;
     pthread_mutex_lock(&ct->lock);
     if (ct->held != UINT32_MAX) {
         slot_release(ct, ct->held);
@@ -285,16 +303,6 @@ static bf_status capture_create(rgbd_source *src, uint32_t capacity, bool drop_w
     ct->base.intrinsics = src->intrinsics;
     ct->base.n_frames = src->n_frames;
     ct->base.has_groundtruth = src->has_groundtruth;
-    int rc = pthread_create(&ct->thread, NULL, capture_main, ct);
-    if (rc != 0) {
-        pthread_cond_destroy(&ct->cond_frame);
-        pthread_cond_destroy(&ct->cond_space);
-        pthread_mutex_destroy(&ct->lock);
-        capture_free_buffers(ct);
-        free(ct);
-        return bf_fail(BF_NO_MEMORY, "capture thread: cannot start a thread: %s", strerror(rc));
-    }
-    ct->is_started = true;
     *out = &ct->base;
     return BF_OK;
 oom:
@@ -326,6 +334,12 @@ capture_thread_stats capture_threaded_stats(const rgbd_source *src)
     pthread_mutex_unlock(&ct->lock);
     st.captured = atomic_load(&ct->n_captured);
     return st;
+}
+
+bf_status capture_threaded_start(rgbd_source *src)
+{
+    if (!src || src->ops != &capture_thread_ops) return BF_OK;
+    return start_thread((capture_thread *)src);
 }
 
 void capture_threaded_stop(rgbd_source *src)

@@ -146,7 +146,10 @@ static void cmd_window_slice(fusion_map *m)
          * pass writing the list header and its integration. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
     }
-    if (++m->window_slices_done >= half) m->window_pending = false;
+    if (++m->window_slices_done >= half) {
+        m->window_pending = false;
+        m->n_windows_done++;
+    }
 }
 
 static void read_stage_times(fusion_map *m)

@@ -163,6 +163,16 @@ bf_se3 fusion_camera_to_map(const fusion_map *map, const bf_se3 *T_wc);
 const fusion_config *fusion_get_config(const fusion_map *map);
 /* Frames added so far. */
 uint32_t fusion_frame_count(const fusion_map *map);
+/* Windows whose integration has been done (recorded by a finished
+ * fusion_cmd_fuse or fusion_flush). Until the first one, no voxel is
+ * confident: only the sub-cache's quick, non-confident signs exist. */
+uint32_t fusion_windows_done(const fusion_map *map);
+/* Moves the GPU's origin (fusion_create's origin_w) while the map is still
+ * empty: a map made before its first pose is known (recon/ makes everything
+ * before the camera starts) then gets the origin it would have been made
+ * with. BF_INVALID_ARG once a frame was uploaded or for a point that is not
+ * finite; the map is then unchanged. */
+bf_status fusion_set_origin(fusion_map *map, bf_vec3 origin_w);
 
 /* ------------------------------------------------------------ host copies */
 

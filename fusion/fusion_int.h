@@ -46,6 +46,7 @@ struct fusion_map {
     uint32_t window_count;    /* bricks in its list (read back when it closed) */
     uint32_t window_slices_done;
     bool window_pending;
+    uint32_t n_windows_done;  /* windows whose last slice has been recorded */
     uint32_t fails_seen;      /* pool-full drops already reported */
     bool has_incoming;        /* the incoming slot holds a frame's depth (fusion_upload_frame) */
     uint32_t incoming_index;  /* its bf_frame index, for messages */

@@ -418,3 +418,16 @@ fusion_gpu_view fusion_gpu_view_get(const fusion_map *m)
 const fusion_config *fusion_get_config(const fusion_map *m) { return &m->cfg; }
 
 uint32_t fusion_frame_count(const fusion_map *m) { return m->n_frames; }
+uint32_t fusion_windows_done(const fusion_map *m) { return m->n_windows_done; }
+
+bf_status fusion_set_origin(fusion_map *m, bf_vec3 origin_w)
+{
+    if (!isfinite(origin_w.x) || !isfinite(origin_w.y) || !isfinite(origin_w.z))
+        return bf_fail(BF_INVALID_ARG, "fusion: map origin is not finite");
+    /* Every GPU coordinate is relative to the origin: it may move only
+     * while nothing has been placed. */
+    if (m->n_frames > 0 || m->has_incoming)
+        return bf_fail(BF_INVALID_ARG, "fusion: the origin of a map with frames cannot move");
+    m->origin_w = origin_w;
+    return BF_OK;
+}

@@ -5,6 +5,14 @@
 
 #include "recon_int.h"
 
+/* The caster at the camera's size, when the reference is cast at a coarser
+ * level: made at create with has_views, else at the first view. */
+static bf_status view_caster(recon *r)
+{
+    if (r->caster) return BF_OK;
+    return render_create(r->ctx, &r->cfg.caster, r->K.width, r->K.height, &r->caster);
+}
+
 recon_config recon_config_default(void)
 {
     recon_config c = {
@@ -101,6 +109,11 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
     if (s == BF_OK) s = render_create(ctx, &r->cfg.caster, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
+    /* The map and the views' caster now, not at their first use: compiling
+     * their pipelines takes seconds on lavapipe, and a camera started after
+     * this returns must not wait for it (docs/tracking.md, start-up). */
+    if (s == BF_OK) s = fusion_create(ctx, &r->cfg.fusion, K, r->T_first.t, &r->map);
+    if (s == BF_OK && r->cfg.has_views) s = view_caster(r);
     if (s != BF_OK) {
         recon_destroy(r);
         return s;
@@ -122,14 +135,6 @@ void recon_destroy(recon *r)
 
 fusion_map *recon_map(recon *r) { return r->map; }
 
-/* The caster at the camera's size, made at the first view when the
- * reference is cast at a coarser level. */
-static bf_status view_caster(recon *r)
-{
-    if (r->caster) return BF_OK;
-    return render_create(r->ctx, &r->cfg.caster, r->K.width, r->K.height, &r->caster);
-}
-
 render_caster *recon_caster(recon *r) { return view_caster(r) == BF_OK ? r->caster : NULL; }
 recon_counts recon_get_counts(const recon *r) { return r->counts; }
 
@@ -144,15 +149,21 @@ static uint32_t count_valid(const bf_frame *f)
 /* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
  * next reference, in one submission: fusion, the ray-cast (written straight
  * into the tracker's reference) and the reference's preparation share it,
- * so the frame costs one host wait besides its ICP iterations. */
+ * so the frame costs one host wait besides its ICP iterations. first: the
+ * uploaded frame (not tracked, so not preprocessed) is the first one; its
+ * preprocessing goes into the submission too, so its rays start at its depth
+ * as a tracked frame's do (from the near plane the first ray-cast cost about
+ * two frames' ray-casts: docs/tracking.md, start-up). */
 static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, bool tracked,
-                                    recon_frame_result *out)
+                                    const fusion_frame_slot *first, recon_frame_result *out)
 {
     render_options ro = r->cfg.raycast;
     ro.no_shade = true; /* tracking takes its normals from the depth */
     bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
     if (s != BF_OK) return s;
-    if (r->cfg.start_at_frame && tracked &&
+    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
+    if (r->cfg.start_at_frame && first) s = track_cmd_frame(r->tracker, first->depth, first->offset, f->index);
+    if (s == BF_OK && r->cfg.start_at_frame && (tracked || first) &&
         track_frame_depth_gpu(r->tracker, r->cfg.track.ref_level, &ro.start_depth, &ro.start_offset) == BF_OK) {
         /* The rays start a margin in front of the depth this frame saw
          * (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
@@ -161,8 +172,7 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
         ro.start_margin_m = 0.02f + 3.0f * r->cfg.sensor.sigma_a;
         ro.start_margin_z2 = 3.0f * r->cfg.sensor.sigma_b;
     }
-    if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
-    s = fusion_cmd_fuse(r->map, T);
+    if (s == BF_OK) s = fusion_cmd_fuse(r->map, T);
     if (s == BF_OK) s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro);
     if (s == BF_OK) s = track_cmd_reference(r->tracker, T);
     /* The counters fusion copied and the reference's count -> the host. */
@@ -204,7 +214,7 @@ static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_
     recon__good_frame(r, f, T_new, !out->track.degenerate);
     r->counts.tracked++;
     if (state == RECON_RELOCALISED) r->counts.relocalised++;
-    return fuse_and_reference(r, f, T_new, true, out);
+    return fuse_and_reference(r, f, T_new, true, NULL, out);
 }
 
 /* A failed frame: not fused (with known poses: fused there), the last good
@@ -217,7 +227,7 @@ static bf_status lose(recon *r, const bf_frame *f, const bf_se3 *known, recon_fr
     r->V = bf_se3_identity(); /* the motion is unknown now */
     if (!known) return BF_OK;
     r->T_last = *known;
-    return fuse_and_reference(r, f, known, false, out);
+    return fuse_and_reference(r, f, known, false, NULL, out);
 }
 
 /* A frame once the map exists. The frame goes up once, into fusion's
@@ -280,13 +290,14 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     bf_status s = BF_OK;
     if (out->n_valid < r->cfg.min_valid_pixels) {
         s = no_depth(r, out);
-    } else if (!r->map) {
+    } else if (!r->has_first) {
         out->state = RECON_FIRST;
-        if (known) r->T_first = r->T_last = *known;
-        s = fusion_create(r->ctx, &r->cfg.fusion, &r->K, r->T_first.t, &r->map);
-        if (s == BF_OK) s = fusion_upload_frame(r->map, f, NULL);
-        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, out);
+        fusion_frame_slot slot;
+        if (known) s = recon_set_first_pose(r, known);
+        if (s == BF_OK) s = fusion_upload_frame(r->map, f, &slot);
+        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, &slot, out);
         if (s == BF_OK) {
+            r->has_first = true;
             recon__good_frame(r, f, &r->T_first, true);
             r->counts.tracked++;
         }
@@ -310,17 +321,25 @@ bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_kno
     return add_frame(r, f, T_known, out);
 }
 
-bf_status recon_flush(recon *r)
+bf_status recon_flush(recon *r) { return fusion_flush(r->map); }
+
+bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
 {
-    if (!r->map) return BF_OK;
-    return fusion_flush(r->map);
+    if (!T_wc0 || !bf_se3_is_finite(T_wc0)) return bf_fail(BF_INVALID_ARG, "recon_set_first_pose: no pose");
+    if (r->has_first) return bf_fail(BF_INVALID_ARG, "recon: the first frame has been fused already");
+    bf_status s = fusion_set_origin(r->map, T_wc0->t);
+    if (s != BF_OK) return s;
+    r->T_first = r->T_last = *T_wc0;
+    return BF_OK;
 }
 
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc)
 {
-    if (!r->map) return bf_fail(BF_INVALID_ARG, "recon: no map yet (no frame with depth)");
     bf_status s = view_caster(r);
     if (s != BF_OK) return s;
+    /* Until the first window is integrated nothing is confident and a
+     * confident-only view is black: show the sub-cache's quick signs. */
     render_options opt = render_options_display();
+    opt.confident_only = fusion_windows_done(r->map) > 0;
     return render_raycast(r->caster, r->map, &r->K, T_wc, &opt);
 }

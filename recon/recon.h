@@ -59,8 +59,11 @@ typedef struct recon_config {
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
     bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
                                  last pose (docs/real_frames.md, the guess); default false */
-    bool start_at_frame;      /* the reference's rays start just in front of the tracked frame's depth, default true */
     recon_reloc_config reloc;
+    bool start_at_frame;      /* the reference's rays start just in front of the frame's depth (the first frame's
+                                 too: track_cmd_frame), default true */
+    bool has_views;           /* views at the camera's size will be asked for (recon_render_view): their caster is
+                                 made by recon_create with the rest, not at the first view; default false */
 } recon_config;
 
 recon_config recon_config_default(void);
@@ -108,8 +111,12 @@ typedef struct recon_frame_result {
     fusion_stage_ms fuse;
 } recon_frame_result;
 
-/* T_wc0 is the first frame's pose (the map's origin goes there). ctx is
- * borrowed and must outlive the loop. */
+/* T_wc0 is the first frame's pose (the map's origin goes there). Makes
+ * everything the loop will use: the map with its pools, the tracker, the
+ * reference's caster (and the views' with cfg->has_views), each with its
+ * pipelines compiled and run once (gpu_pipeline_warm_up), so no frame
+ * waits for a compiler and a camera can start after this returns (DESIGN.md
+ * section 1). ctx is borrowed and must outlive the loop. */
 bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intrinsics *K, const bf_se3 *T_wc0,
                        recon **out);
 void recon_destroy(recon *r); /* NULL is a no-op */
@@ -126,14 +133,21 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out);
 bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_known, recon_frame_result *out);
 /* Integrates what the fusion schedule still owes (end of sequence). */
 bf_status recon_flush(recon *r);
+/* Sets the first frame's pose when it becomes known after recon_create (the
+ * runner makes the loop before the source delivers, then reads the pose
+ * from the first frame): T_wc0 of recon_create, and the map's origin.
+ * BF_INVALID_ARG once a frame with depth was added; nothing changes then. */
+bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0);
 
-/* The map (NULL before the first frame with depth) and the caster at the
- * camera's size, for export, statistics and views (NULL when it cannot be
- * made; bf_last_error says why). */
+/* The map (made by recon_create; empty before the first frame with depth)
+ * and the caster at the camera's size, for export, statistics and views
+ * (NULL when it cannot be made; bf_last_error says why). */
 fusion_map *recon_map(recon *r);
 render_caster *recon_caster(recon *r);
-/* Ray-casts the map for display (confident voxels) at T_wc into the
- * caster's images; render_download gets them. */
+/* Ray-casts the map for display at T_wc into the caster's images;
+ * render_download gets them. Confident voxels only once the map has some
+ * (its first window integrated, fusion_windows_done); before that every
+ * sign bit, so a view shows the map from the first frame. */
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc);
 
 /* Running counts. */
@@ -191,7 +205,7 @@ typedef struct recon_run_series {
  * releases it either way. */
 typedef struct recon_run {
     recon *loop;         /* the loop; NULL with RECON_POSES_KNOWN */
-    fusion_map *map;     /* the map: the loop's, or the run's own with known poses; NULL until a frame is fused */
+    fusion_map *map;     /* the map: the loop's, or the run's own with known poses; made before the first frame */
     recon_counts counts; /* the loop's counts; with known poses frames and pool_full only */
     uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
     bf_traj est;         /* one pose per frame handled: tracked, the last good one, or the known one */
@@ -200,6 +214,11 @@ typedef struct recon_run {
     bool is_interrupted; /* the stop flag ended the run */
     bf_status source_status; /* keep_on_source_error: the failure that ended the run early, else BF_OK */
     char source_error[1024]; /* its message */
+    /* Start-up: bf_time_s() when the loop was ready (every pipeline compiled, the pools allocated; the
+       source's first frame is asked for after it) and when the first frame was done (0: none), and the
+       loop's wall time of that frame [ms]. */
+    double t_ready_s, t_first_done_s;
+    double first_frame_ms;
 } recon_run;
 
 /* Called after every frame the run handles (frames skipped for want of a
@@ -209,7 +228,9 @@ typedef struct recon_run {
 typedef bf_status (*recon_frame_fn)(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr);
 
 /* Runs every frame of src (borrowed) through the loop and flushes the map.
- * ctx is borrowed and must outlive *out. on_frame may be NULL. Fails with
+ * The loop (or the map) is made before the first frame is asked for, at
+ * the identity; the first pose policy above then moves it. ctx is borrowed
+ * and must outlive *out. on_frame may be NULL. Fails with
  * the source's or the loop's status, BF_FORMAT when no frame had depth (or
  * a pose), or no ground truth for RECON_POSES_TRACK_FUSE_GT. */
 bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, recon_frame_fn on_frame,

@@ -11,10 +11,12 @@ struct recon {
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
     bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
-    fusion_map *map;     /* created at the first frame with depth */
+    fusion_map *map;     /* made at create, at T_first's origin */
+    bool has_first;      /* the first frame with depth has been fused */
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
-    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at the first view */
+    render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at create (has_views)
+                                  or at the first view */
     track_tracker *tracker;
     recon_counts counts;
 

@@ -59,22 +59,22 @@ static bool known_pose(const recon_run_config *cfg, const bf_frame *f, bf_se3 *T
     return true;
 }
 
-/* Fusion alone at a known pose: the map is made at the first posed frame. */
-static bf_status fuse_known(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, const bf_frame *f,
-                            const bf_se3 *T_wc, recon_run *run, recon_frame_result *fr)
+/* A frame fused (or tracked) so far: the run has a map worth keeping. */
+static bool has_fused(const recon_run *run) { return run->loop ? run->counts.tracked > 0 : run->n_fused > 0; }
+
+/* Fusion alone at a known pose: the map, made before the first frame, gets
+ * its origin at the first posed frame. */
+static bf_status fuse_known(const bf_frame *f, const bf_se3 *T_wc, recon_run *run, recon_frame_result *fr)
 {
     double t0 = bf_time_s();
     memset(fr, 0, sizeof *fr);
     fr->index = f->index;
-    fr->state = run->map ? RECON_TRACKED : RECON_FIRST;
+    fr->state = run->n_fused ? RECON_TRACKED : RECON_FIRST;
     fr->T_wc = *T_wc;
     bf_status s = BF_OK;
-    if (!run->map) {
-        fusion_config fc = recon_fusion_config(&cfg->loop);
-        s = fusion_create(ctx, &fc, rgbd_source_intrinsics(src), T_wc->t, &run->map);
-    }
+    if (!run->n_fused) s = fusion_set_origin(run->map, T_wc->t);
     if (s == BF_OK) s = fusion_add_frame(run->map, f, T_wc);
-    if (run->map) fr->fuse = fusion_last_stage_ms(run->map);
+    fr->fuse = fusion_last_stage_ms(run->map);
     fr->fuse_status = s;
     if (s == BF_POOL_FULL) run->counts.pool_full++;
     if (s != BF_OK) return s;
@@ -84,15 +84,15 @@ static bf_status fuse_known(gpu_context *ctx, rgbd_source *src, const recon_run_
     return BF_OK;
 }
 
-/* One frame through the loop; the loop is made at the first frame. */
-static bf_status track_frame_in_loop(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg,
-                                     const bf_frame *f, recon_run *run, recon_frame_result *fr)
+/* One frame through the loop (made before the first frame, at the
+ * identity): the first frame's ground truth becomes the first pose. */
+static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame *f, recon_run *run,
+                                     recon_frame_result *fr)
 {
     bf_status s;
-    if (!run->loop) {
-        bf_se3 T0 = (!cfg->init_identity && f->has_pose) ? f->T_wc : bf_se3_identity();
-        if ((s = recon_create(ctx, &cfg->loop, rgbd_source_intrinsics(src), &T0, &run->loop)) != BF_OK) return s;
-    }
+    if (run->counts.frames == 0 && !cfg->init_identity && f->has_pose &&
+        (s = recon_set_first_pose(run->loop, &f->T_wc)) != BF_OK)
+        return s;
     if (cfg->poses == RECON_POSES_TRACK_FUSE_GT) {
         if (!f->has_pose)
             return bf_fail(BF_FORMAT, "%s: frame %u (t = %.6f) has no ground-truth pose (--fuse-at-groundtruth)",
@@ -123,8 +123,8 @@ static bf_status track_frame_in_loop(gpu_context *ctx, rgbd_source *src, const r
 
 /* One frame: loop or known pose, then the series, trajectories and the
  * caller's callback. */
-static bf_status run_frame(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, const bf_frame *f,
-                           recon_frame_fn on_frame, void *user, recon_run *run)
+static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, recon_frame_fn on_frame, void *user,
+                           recon_run *run)
 {
     recon_frame_result fr;
     bf_status s;
@@ -136,9 +136,13 @@ static bf_status run_frame(gpu_context *ctx, rgbd_source *src, const recon_run_c
             bf_warn("%s: frame %u (t = %.6f): no pose, skipped", cfg->label, f->index, f->t_depth_s);
             return BF_OK;
         }
-        s = fuse_known(ctx, src, cfg, f, &T_wc, run, &fr);
+        s = fuse_known(f, &T_wc, run, &fr);
     } else {
-        s = track_frame_in_loop(ctx, src, cfg, f, run, &fr);
+        s = track_frame_in_loop(cfg, f, run, &fr);
+    }
+    if (s == BF_OK && !run->t_first_done_s) {
+        run->t_first_done_s = bf_time_s();
+        run->first_frame_ms = fr.ms_frame;
     }
     if (s == BF_OK) s = push_series(&run->series, &fr, run->loop != NULL);
     if (s == BF_OK) s = bf_traj_push(&run->est, f->t_depth_s, &fr.T_wc);
@@ -150,7 +154,7 @@ static bf_status run_frame(gpu_context *ctx, rgbd_source *src, const recon_run_c
 /* The end of the frames: BF_END, a stop, or a source failure the run keeps. */
 static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run)
 {
-    if (s != BF_END && cfg->keep_on_source_error && run->map && s != BF_VULKAN && s != BF_NO_MEMORY) {
+    if (s != BF_END && cfg->keep_on_source_error && has_fused(run) && s != BF_VULKAN && s != BF_NO_MEMORY) {
         run->source_status = s;
         snprintf(run->source_error, sizeof run->source_error, "%s", bf_last_error());
         bf_warn("%s: %s: the source failed (%s); keeping what was reconstructed", cfg->label, cfg->name,
@@ -158,10 +162,27 @@ static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run
         s = BF_END;
     }
     if (s != BF_END) return s;
-    if (!run->map)
+    if (!has_fused(run))
         return bf_fail(BF_FORMAT, "%s: no frame with %s", cfg->name,
                        cfg->poses == RECON_POSES_KNOWN ? "a pose" : "depth");
     return run->loop ? recon_flush(run->loop) : fusion_flush(run->map);
+}
+
+/* The loop (or, with known poses, the map) for src's camera, at the
+ * identity until the first frame says otherwise. */
+static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg, recon_run *run)
+{
+    bf_status s;
+    if (cfg->poses == RECON_POSES_KNOWN) {
+        fusion_config fc = recon_fusion_config(&cfg->loop);
+        s = fusion_create(ctx, &fc, rgbd_source_intrinsics(src), bf_v3(0, 0, 0), &run->map);
+    } else {
+        bf_se3 I = bf_se3_identity();
+        s = recon_create(ctx, &cfg->loop, rgbd_source_intrinsics(src), &I, &run->loop);
+        if (s == BF_OK) run->map = recon_map(run->loop);
+    }
+    run->t_ready_s = bf_time_s();
+    return s;
 }
 
 bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg_in,
@@ -172,14 +193,18 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
     recon_run_config cfg = *cfg_in;
     if (!cfg.name) cfg.name = "sequence";
     if (!cfg.label) cfg.label = "recon";
+    /* Everything that compiles pipelines or allocates pools, before the
+     * first frame is asked for: a capture thread starts at that request
+     * (capture.h), so a camera never waits for the start-up. */
+    bf_status s = prepare(ctx, src, &cfg, out);
+    if (s != BF_OK) return s;
     bf_progress prog;
     bf_progress_begin(&prog, cfg.label, src->n_frames);
     bf_frame f;
-    bf_status s = BF_END;
     uint32_t seen = 0;
     while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
-        bf_status sf = run_frame(ctx, src, &cfg, &f, on_frame, user, out);
+        bf_status sf = run_frame(&cfg, &f, on_frame, user, out);
         if (sf != BF_OK) {
             bf_progress_end(&prog, seen);
             return sf;

@@ -416,15 +416,23 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
     return frame_from(t, t->upload, 0, f->index, guess_wc, out);
 }
 
-bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
-                          const bf_se3 *guess_wc, track_result *out)
+/* A frame's raw depth on the GPU must fit its buffer from a word offset. */
+static bf_status check_gpu_frame(const track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index)
 {
-    if (!t || !depth || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
     uint64_t words = ((uint64_t)t->K.width * t->K.height + 1) / 2;
     if (offset % 4 || offset / 4 > UINT32_MAX || gpu_buffer_size(depth) < offset + words * 4)
         return bf_fail(BF_INVALID_ARG, "tracking: frame %u: %s holds %llu bytes, %llu words of depth from byte %llu",
                        index, gpu_buffer_name(depth), (unsigned long long)gpu_buffer_size(depth),
                        (unsigned long long)words, (unsigned long long)offset);
+    return BF_OK;
+}
+
+bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
+                          const bf_se3 *guess_wc, track_result *out)
+{
+    if (!t || !depth || !guess_wc || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_gpu_frame(t, depth, offset, index);
+    if (s != BF_OK) return s;
     return frame_from(t, depth, (uint32_t)(offset / 4), index, guess_wc, out);
 }
 
@@ -433,6 +441,20 @@ bf_status track_set_motion_scale(track_tracker *t, double scale)
     if (!t) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
     if (!(scale >= 1) || !isfinite(scale)) return bf_fail(BF_INVALID_ARG, "tracking: motion scale %g (>= 1)", scale);
     t->motion_scale = scale;
+    return BF_OK;
+}
+
+bf_status track_cmd_frame(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index)
+{
+    if (!t || !depth) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    bf_status s = check_gpu_frame(t, depth, offset, index);
+    /* Bound before the recording uses it (a host-side descriptor write). */
+    if (s == BF_OK) s = gpu_bindings_set(t->b_frame, 0, depth, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0);
+    if (s != BF_OK) return s;
+    t->frame_raw_off = (uint32_t)(offset / 4);
+    track__cmd_frame_pyramid(t);
+    t->has_frame = true;
     return BF_OK;
 }
 

@@ -168,6 +168,14 @@ bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, 
  * may have moved as far as that time allows; 1 restores the config's gate.
  * BF_INVALID_ARG unless scale is finite and >= 1. */
 bf_status track_set_motion_scale(track_tracker *t, double scale);
+/* Records, into the context's open command buffer (gpu_begin), the
+ * preprocessing of a frame whose raw depth is on the GPU (as for
+ * track_frame_gpu) without tracking it: its depth in metres and pyramids,
+ * ending with a barrier, so commands recorded after it may read
+ * track_frame_depth_gpu's images (recon/: the first frame's reference
+ * ray-cast starts at its depth, as every tracked frame's does). The caller
+ * submits; the image must stay there until then. */
+bf_status track_cmd_frame(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index);
 
 /* The depth pyramid of the last frame track_frame saw, on the GPU: level l
  * is (width >> l) x (height >> l) floats (metres, 0 = none) from pixel

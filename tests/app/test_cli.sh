@@ -266,6 +266,8 @@ expect 0 "$B" live --device "$T/seq" --out "$T/live" --record "$T/live.bflog"
 is_json "$T/live/stats.json"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['command'] == 'live' and d['capture']['captured'] == 3 and d['capture']['recorded'] == 3, d" \
     "$T/live/stats.json" || fail "live stats.json: capture counts"
+python3 -c "import json,sys; s=json.load(open(sys.argv[1]))['startup']; assert 0 < s['ready_s'] <= s['first_frame_done_s'] and s['first_frame_ms'] > 0, s" \
+    "$T/live/stats.json" || fail "live stats.json: start-up times"
 [ "$(grep -vc '^#' "$T/live/trajectory.txt")" = 3 ] || fail "live: trajectory.txt has not 3 poses"
 expect 0 "$B" info "$T/live.bflog"
 expect 2 "$B" live --out "$T/live2"

@@ -91,6 +91,7 @@ BF_TEST(full_queue_drops_the_oldest_and_keeps_the_newest)
     CHECK(fs);
     rgbd_source *src;
     CHECK_OK(capture_threaded(&fs->base, 4, &src));
+    CHECK_OK(capture_threaded_start(src));
     capture_thread_stats st;
     WAIT_UNTIL((st = capture_threaded_stats(src)).is_ended);
     CHECK_EQ_INT(st.captured, 50);
@@ -112,6 +113,31 @@ BF_TEST(full_queue_drops_the_oldest_and_keeps_the_newest)
     /* The wrapper passes the source's description on. */
     CHECK(src->intrinsics.width == FW && src->intrinsics.fx_px == 30 && !strcmp(src->kind, "fake"));
     rgbd_source_close(src);
+}
+
+BF_TEST(the_thread_takes_no_frame_before_the_first_next)
+{
+    /* A consumer that gets ready after opening the camera (recon/ compiles
+     * its pipelines) must find the first frame, not a queue of late ones. */
+    for (int lossless = 0; lossless < 2; lossless++) {
+        fake_source *fs = fake_create(50);
+        CHECK(fs);
+        rgbd_source *src;
+        CHECK_OK(lossless ? capture_threaded_lossless(&fs->base, 4, &src) : capture_threaded(&fs->base, 4, &src));
+        sleep_us(20000);
+        capture_thread_stats st = capture_threaded_stats(src);
+        CHECK_EQ_INT(st.captured, 0);
+        CHECK(!st.is_ended);
+        bf_frame f;
+        CHECK_OK(rgbd_source_next(src, &f));
+        CHECK(frame_is_intact(&f));
+        /* Without drops the first frame is frame 0 (a dropping queue may
+         * have moved on while this thread woke up). */
+        if (lossless) CHECK_EQ_INT(f.index, 0);
+        CHECK_OK(capture_threaded_start(src)); /* started already: nothing happens */
+        rgbd_source_close(src);
+    }
+    CHECK_OK(capture_threaded_start(NULL));
 }
 
 BF_TEST(slow_consumer_gets_increasing_intact_frames_and_counts_add_up)
@@ -258,7 +284,12 @@ BF_TEST(close_while_the_thread_waits_for_space_does_not_hang)
     CHECK_OK(rgbd_source_next(src, &f)); /* the thread now fills the queue and waits */
     WAIT_UNTIL(capture_threaded_stats(src).queued == 1);
     rgbd_source_close(src);
-    /* And closing a fresh, unread one. */
+    /* And closing a fresh, unread one, running and never started. */
+    fs = fake_create(UINT32_MAX);
+    CHECK(fs);
+    CHECK_OK(capture_threaded(&fs->base, 2, &src));
+    CHECK_OK(capture_threaded_start(src));
+    rgbd_source_close(src);
     fs = fake_create(UINT32_MAX);
     CHECK(fs);
     CHECK_OK(capture_threaded(&fs->base, 2, &src));
