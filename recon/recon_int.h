@@ -28,6 +28,7 @@ struct recon {
     bf_se3 *keyframes;   /* reloc.max_keyframes poses, allocated at create */
     uint32_t n_keyframes, keyframe_next; /* held; the slot the next one replaces once all are held */
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
+    float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */
 };
 
 /* reloc.c */
