@@ -43,7 +43,7 @@ typedef struct recon_reloc_config {
                                   the frame is searched for as if lost */
     float keyframe_m;          /* a good frame this far from every keyframe becomes one, default 0.1 */
     float keyframe_deg;        /* or turned this far, default 10 */
-    uint32_t max_keyframes;    /* kept, the oldest replaced beyond, default 64 */
+    uint32_t max_keyframes;    /* kept, default 64; beyond, the one nearest to two others is replaced */
     float min_inlier_frac;     /* a candidate is taken only with this inlier fraction, default 0.35 */
     float max_residual_m;      /* and at most this residual, default 0.018 */
     /* The agreement check of a candidate that passed the above (reloc.c): the frame's samples that land

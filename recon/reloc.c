@@ -89,15 +89,45 @@ static bool is_near(const recon *r, const bf_se3 *A, const bf_se3 *B)
     return dist_m(A, B) <= r->cfg.reloc.keyframe_m && angle_deg(A, B) <= r->cfg.reloc.keyframe_deg;
 }
 
-static void add_keyframe(recon *r, const bf_se3 *T)
+/* How far apart two poses are in keyframe spacings: the larger of the
+ * distance over keyframe_m and the angle over keyframe_deg (is_near: <= 1). */
+static double spacing_of(const recon *r, const bf_se3 *A, const bf_se3 *B)
+{
+    double d = dist_m(A, B) / r->cfg.reloc.keyframe_m, a = angle_deg(A, B) / r->cfg.reloc.keyframe_deg;
+    return d > a ? d : a;
+}
+
+/* The keyframe that the store misses least, with T about to join it: the
+ * one whose two nearest others (T among them) are nearest together. The
+ * nearest alone ties along an evenly spaced path, and the ends then went
+ * first; with the second nearest an end (one neighbour) outlasts the
+ * keyframes between, so a long scan keeps where it began. */
+static uint32_t most_redundant(const recon *r, const bf_se3 *T)
+{
+    uint32_t best = 0;
+    double best_score = INFINITY;
+    for (uint32_t i = 0; i < r->n_keyframes; i++) {
+        double d1 = spacing_of(r, &r->keyframes[i], T), d2 = INFINITY;
+        for (uint32_t j = 0; j < r->n_keyframes; j++) {
+            if (j == i) continue;
+            double d = spacing_of(r, &r->keyframes[i], &r->keyframes[j]);
+            if (d < d1) d2 = d1, d1 = d;
+            else if (d < d2) d2 = d;
+        }
+        if (d1 + d2 < best_score) best_score = d1 + d2, best = i;
+    }
+    return best;
+}
+
+void recon__add_keyframe(recon *r, const bf_se3 *T)
 {
     for (uint32_t i = 0; i < r->n_keyframes; i++)
         if (is_near(r, &r->keyframes[i], T)) return;
-    /* Bounded: once all are held the oldest is replaced, so the store
-     * follows the camera (a long scan forgets where it began). */
-    r->keyframes[r->keyframe_next] = *T;
-    r->keyframe_next = (r->keyframe_next + 1) % r->cfg.reloc.max_keyframes;
-    if (r->n_keyframes < r->cfg.reloc.max_keyframes) r->n_keyframes++;
+    /* Bounded: once all are held the most redundant one is replaced, so the
+     * store keeps its spread over the scan (a search over 64 poses, only
+     * when a new one comes). */
+    if (r->n_keyframes < r->cfg.reloc.max_keyframes) r->keyframes[r->n_keyframes++] = *T;
+    else r->keyframes[most_redundant(r, T)] = *T;
     r->counts.keyframes = r->n_keyframes;
 }
 
@@ -129,7 +159,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
     r->good_index = f->index;
     r->good_t_s = f->t_depth_s;
     r->is_lost = false;
-    if (r->keyframes && may_keyframe) add_keyframe(r, T_new);
+    if (r->keyframes && may_keyframe) recon__add_keyframe(r, T_new);
 }
 
 /* The primary candidates, tried on every searching frame: 0 the last good
