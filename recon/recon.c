@@ -27,7 +27,10 @@ recon_config recon_config_default(void)
          * more, because the fraction counts the frame's samples where the
          * map has nothing: a camera that turned 21 degrees while covered
          * keeps 27-46% at the right pose (the same test). The residual's
-         * margin is thin, 18 mm against 20. */
+         * margin is thin, 18 mm against 20. What separates a wrong pose
+         * that slid along a partly mapped wall is the frame's samples in
+         * front of the map's predicted surface: at most 1.5% at right poses,
+         * 5.4% at that wrong one (max_front_frac, docs/tracking.md). */
         .reloc = {.enabled = true, .max_candidates = 4, .max_gate_intervals = 4, .keyframe_m = 0.1f,
                   .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f,
                   .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f},

@@ -7,8 +7,9 @@
  * (poses kept while tracking, one per 0.1 m or 10 degrees of the path).
  * Each candidate costs a ray-cast of the map at its pose (the tracking
  * reference, not fused) and an ICP from it; the best one is taken only when
- * it passes the tracker's gates with a margin and no other candidate found
- * a different pose. */
+ * it passes the tracker's gates with a margin, agrees with the map where the
+ * map predicts a surface (agreement_of), and no other candidate found a
+ * different pose. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -216,7 +217,12 @@ static bf_status cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result
 
 /* How a candidate's pose agrees with the map where the map predicts a
  * surface: the frame's samples moved into the reference camera (cast at
- * T_ref) and compared with the reference depth at the pixel they land on. */
+ * T_ref) and compared with the reference depth at the pixel they land on.
+ * Inliers and residual count samples where the map has nothing; a pose that
+ * slid along a partly mapped wall fits the wall as well as the right pose
+ * fits its view, but puts some of the frame where the map saw free space
+ * (docs/tracking.md, the agreement check). On the host, for the candidates
+ * that pass the tracker's gates only: the per-frame ICP is unchanged. */
 typedef struct agreement {
     uint32_t n_samples; /* frame samples with depth in range */
     uint32_t n_covered; /* of those, landing on a reference pixel with depth */
@@ -246,7 +252,8 @@ static bf_status agreement_of(recon *r, const bf_frame *f, const bf_se3 *T_ref, 
             if (!(zq > 0)) continue;
             a->n_covered++;
             double zm = p.z > zq ? p.z : zq;
-            double band = r->cfg.reloc.check_band_m + 3.0 * bf_sensor_sigma((float)zm, sn->sigma_a, sn->sigma_b, sn->sigma_c);
+            double sigma = bf_sensor_sigma((float)zm, sn->sigma_a, sn->sigma_b, sn->sigma_c);
+            double band = r->cfg.reloc.check_band_m + 3.0 * sigma;
             if (p.z < zq - band) a->n_front++;
             else if (p.z > zq + band) a->n_behind++;
             else a->n_agree++;
@@ -292,7 +299,8 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
     double t0 = bf_time_s();
     if ((s = agreement_of(r, f, T_c, &t.T_wc, &a)) != BF_OK) return s;
     double ms_check = 1e3 * (bf_time_s() - t0);
-    double agree = a.n_covered ? (double)a.n_agree / a.n_covered : 0, front = a.n_covered ? (double)a.n_front / a.n_covered : 1;
+    double agree = a.n_covered ? (double)a.n_agree / a.n_covered : 0;
+    double front = a.n_covered ? (double)a.n_front / a.n_covered : 1;
     /* Only the samples in front decide: right poses leave up to 15% behind
      * the predicted surface on real frames (holes and edges of the map's
      * ray-cast, docs/tracking.md), but next to none in front of it. */

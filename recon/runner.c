@@ -113,7 +113,8 @@ static bf_status track_frame_in_loop(gpu_context *ctx, rgbd_source *src, const r
                 f->index, f->t_depth_s, track_outcome_name(fr->track.outcome), 100 * fr->track.inlier_frac,
                 1e3 * fr->track.residual_m, tried);
     } else if (fr->state == RECON_RELOCALISED) {
-        bf_info("%s: frame %u (t = %.6f): found again from the %s candidate (%u tried; inliers %.0f%%, residual %.1f mm)",
+        bf_info("%s: frame %u (t = %.6f): found again from the %s candidate (%u tried; inliers %.0f%%, "
+                "residual %.1f mm)",
                 cfg->label, f->index, f->t_depth_s, recon_reloc_kind_name(fr->reloc), fr->reloc_tried,
                 100 * fr->track.inlier_frac, 1e3 * fr->track.residual_m);
     } else if (fr->state == RECON_NO_DEPTH) {
