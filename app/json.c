@@ -172,6 +172,9 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddNumberToObject(rl, "max_keyframes", c->reloc.max_keyframes);
     add_float(rl, "min_inlier_frac", c->reloc.min_inlier_frac);
     add_float(rl, "max_residual_m", c->reloc.max_residual_m);
+    cJSON_AddNumberToObject(rl, "check_step", c->reloc.check_step);
+    add_float(rl, "check_band_m", c->reloc.check_band_m);
+    add_float(rl, "max_front_frac", c->reloc.max_front_frac);
     cJSON_AddBoolToObject(l, "has_views", c->has_views);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);

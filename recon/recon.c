@@ -35,9 +35,13 @@ recon_config recon_config_default(void)
          * more, because the fraction counts the frame's samples where the
          * map has nothing: a camera that turned 21 degrees while covered
          * keeps 27-46% at the right pose (the same test). The residual's
-         * margin is thin, 18 mm against 20. */
+         * margin is thin, 18 mm against 20. What separates a wrong pose
+         * that slid along a partly mapped wall is the frame's samples in
+         * front of the map's predicted surface: at most 1.5% at right poses,
+         * 5.4% at that wrong one (max_front_frac, docs/tracking.md). */
         .reloc = {.enabled = true, .max_candidates = 4, .max_gate_intervals = 4, .keyframe_m = 0.1f,
-                  .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f},
+                  .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f,
+                  .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f},
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
      * and more accurate than fusion's own default of 1
@@ -104,9 +108,9 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
      * ray-cast, the loop's largest cost, then has a quarter of the rays.
      * track_create checks the level. */
     uint32_t l = r->cfg.track.ref_level;
+    r->K_ref = bf_intrinsics_level(K, l);
     bf_status s = recon__reloc_create(r);
     if (s == BF_OK) s = track_create(ctx, &r->cfg.track, K, &r->tracker);
-    if (s == BF_OK) r->K_ref = bf_intrinsics_level(K, l);
     if (s == BF_OK) s = render_create(ctx, &r->cfg.caster, r->K_ref.width, r->K_ref.height, &r->ref_caster);
     if (s == BF_OK && l == 0) r->caster = r->ref_caster;
     /* The map and the views' caster now, not at their first use: compiling

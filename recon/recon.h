@@ -43,9 +43,15 @@ typedef struct recon_reloc_config {
                                   the frame is searched for as if lost */
     float keyframe_m;          /* a good frame this far from every keyframe becomes one, default 0.1 */
     float keyframe_deg;        /* or turned this far, default 10 */
-    uint32_t max_keyframes;    /* kept, the oldest replaced beyond, default 64 */
+    uint32_t max_keyframes;    /* kept, default 64; beyond, the one nearest to two others is replaced */
     float min_inlier_frac;     /* a candidate is taken only with this inlier fraction, default 0.35 */
     float max_residual_m;      /* and at most this residual, default 0.018 */
+    /* The agreement check of a candidate that passed the above (reloc.c): the frame's samples that land
+       on reference pixels with depth (covered), compared with that depth. */
+    uint32_t check_step;       /* every check_step-th pixel of every check_step-th row, default 2 */
+    float check_band_m;        /* a sample within this plus 3 sigma_z of the predicted depth agrees, default 0.02 */
+    float max_front_frac;      /* the candidate is taken only when at most this fraction of the covered lies in
+                                  front of the predicted surface (where the map holds free space), default 0.03 */
 } recon_reloc_config;
 
 typedef struct recon_config {
@@ -102,6 +108,7 @@ typedef struct recon_frame_result {
     track_result track;      /* valid where recon_state_ran_icp: a search's best candidate */
     uint32_t reloc_tried;    /* candidate poses tried by a relocalising search this frame */
     recon_reloc_kind reloc;  /* RECON_RELOCALISED: the candidate the pose was found from */
+    uint32_t reloc_rejected; /* candidates that passed the tracker's gates but disagreed with the map */
     bool fused;
     bf_status fuse_status;   /* BF_POOL_FULL is reported here and the loop goes on */
     uint32_t n_valid;        /* valid depth samples */

@@ -28,8 +28,9 @@ struct recon {
     bf_se3 V_step;       /* the motion per frame interval over the last good step (kept while lost) */
     bool has_velocity;   /* V_step was measured */
     bf_se3 *keyframes;   /* reloc.max_keyframes poses, allocated at create */
-    uint32_t n_keyframes, keyframe_next; /* held; the slot the next one replaces once all are held */
+    uint32_t n_keyframes; /* held */
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
+    float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */
 };
 
 /* reloc.c */
@@ -45,6 +46,10 @@ bf_status recon__set_gate(recon *r, double n);
  * velocity estimates, and a keyframe when it is far from every keyframe
  * (may_keyframe false: a degenerate pose is not one). */
 void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool may_keyframe);
+/* T becomes a keyframe unless it is within a keyframe spacing of one; once
+ * reloc.max_keyframes are held it replaces the one the store misses least
+ * (whose two nearest others are nearest together). */
+void recon__add_keyframe(recon *r, const bf_se3 *T);
 /* Searches for frame f (its raw depth at slot) from at most
  * reloc.max_candidates candidate poses, n intervals after the last good
  * frame, each with the per-frame motion gate; skip names a candidate already tried from the reference at

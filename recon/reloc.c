@@ -7,12 +7,15 @@
  * (poses kept while tracking, one per 0.1 m or 10 degrees of the path).
  * Each candidate costs a ray-cast of the map at its pose (the tracking
  * reference, not fused) and an ICP from it; the best one is taken only when
- * it passes the tracker's gates with a margin and no other candidate found
- * a different pose. */
+ * it passes the tracker's gates with a margin, agrees with the map where the
+ * map predicts a surface (agreement_of), and no other candidate found a
+ * different pose. */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "recon_int.h"
+#include "shaders/bf_common.glsl.h"
 
 /* Two candidates that pass but end this far apart found two different
  * minima (a repetitive scene): tracking's own error from two starts on the
@@ -35,21 +38,27 @@ bf_status recon__reloc_create(recon *r)
     if (!c->enabled) return BF_OK;
     if (c->max_candidates < 1 || c->max_keyframes < 1 || !(c->max_gate_intervals >= 1) ||
         !(c->keyframe_m > 0) || !(c->keyframe_deg > 0) || !(c->min_inlier_frac > 0 && c->min_inlier_frac <= 1) ||
-        !(c->max_residual_m > 0))
+        !(c->max_residual_m > 0) || c->check_step < 1 || !(c->check_band_m >= 0) ||
+        !(c->max_front_frac >= 0 && c->max_front_frac <= 1))
         return bf_fail(BF_INVALID_ARG,
                        "recon: reloc needs candidates %u >= 1, keyframes %u >= 1, gate intervals %g >= 1, keyframe "
-                       "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0",
+                       "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0, check step %u >= 1, "
+                       "band %g m >= 0, in front %g in [0, 1]",
                        c->max_candidates, c->max_keyframes, c->max_gate_intervals, c->keyframe_m, c->keyframe_deg,
-                       c->min_inlier_frac, c->max_residual_m);
+                       c->min_inlier_frac, c->max_residual_m, c->check_step, c->check_band_m, c->max_front_frac);
     r->keyframes = calloc(c->max_keyframes, sizeof *r->keyframes);
     if (!r->keyframes) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);
+    r->ref_host = malloc((size_t)r->K_ref.width * r->K_ref.height * sizeof *r->ref_host);
+    if (!r->ref_host) return bf_fail(BF_NO_MEMORY, "recon: the reference's depth on the host");
     return BF_OK;
 }
 
 void recon__reloc_destroy(recon *r)
 {
     free(r->keyframes);
+    free(r->ref_host);
     r->keyframes = NULL;
+    r->ref_host = NULL;
 }
 
 double recon__intervals(const recon *r, const bf_frame *f)
@@ -81,15 +90,45 @@ static bool is_near(const recon *r, const bf_se3 *A, const bf_se3 *B)
     return dist_m(A, B) <= r->cfg.reloc.keyframe_m && angle_deg(A, B) <= r->cfg.reloc.keyframe_deg;
 }
 
-static void add_keyframe(recon *r, const bf_se3 *T)
+/* How far apart two poses are in keyframe spacings: the larger of the
+ * distance over keyframe_m and the angle over keyframe_deg (is_near: <= 1). */
+static double spacing_of(const recon *r, const bf_se3 *A, const bf_se3 *B)
+{
+    double d = dist_m(A, B) / r->cfg.reloc.keyframe_m, a = angle_deg(A, B) / r->cfg.reloc.keyframe_deg;
+    return d > a ? d : a;
+}
+
+/* The keyframe that the store misses least, with T about to join it: the
+ * one whose two nearest others (T among them) are nearest together. The
+ * nearest alone ties along an evenly spaced path, and the ends then went
+ * first; with the second nearest an end (one neighbour) outlasts the
+ * keyframes between, so a long scan keeps where it began. */
+static uint32_t most_redundant(const recon *r, const bf_se3 *T)
+{
+    uint32_t best = 0;
+    double best_score = INFINITY;
+    for (uint32_t i = 0; i < r->n_keyframes; i++) {
+        double d1 = spacing_of(r, &r->keyframes[i], T), d2 = INFINITY;
+        for (uint32_t j = 0; j < r->n_keyframes; j++) {
+            if (j == i) continue;
+            double d = spacing_of(r, &r->keyframes[i], &r->keyframes[j]);
+            if (d < d1) d2 = d1, d1 = d;
+            else if (d < d2) d2 = d;
+        }
+        if (d1 + d2 < best_score) best_score = d1 + d2, best = i;
+    }
+    return best;
+}
+
+void recon__add_keyframe(recon *r, const bf_se3 *T)
 {
     for (uint32_t i = 0; i < r->n_keyframes; i++)
         if (is_near(r, &r->keyframes[i], T)) return;
-    /* Bounded: once all are held the oldest is replaced, so the store
-     * follows the camera (a long scan forgets where it began). */
-    r->keyframes[r->keyframe_next] = *T;
-    r->keyframe_next = (r->keyframe_next + 1) % r->cfg.reloc.max_keyframes;
-    if (r->n_keyframes < r->cfg.reloc.max_keyframes) r->n_keyframes++;
+    /* Bounded: once all are held the most redundant one is replaced, so the
+     * store keeps its spread over the scan (a search over 64 poses, only
+     * when a new one comes). */
+    if (r->n_keyframes < r->cfg.reloc.max_keyframes) r->keyframes[r->n_keyframes++] = *T;
+    else r->keyframes[most_redundant(r, T)] = *T;
     r->counts.keyframes = r->n_keyframes;
 }
 
@@ -121,7 +160,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
     r->good_index = f->index;
     r->good_t_s = f->t_depth_s;
     r->is_lost = false;
-    if (r->keyframes && may_keyframe) add_keyframe(r, T_new);
+    if (r->keyframes && may_keyframe) recon__add_keyframe(r, T_new);
 }
 
 /* The primary candidates, tried on every searching frame: 0 the last good
@@ -176,6 +215,52 @@ static bf_status cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result
     return track_finish_reference(r->tracker);
 }
 
+/* How a candidate's pose agrees with the map where the map predicts a
+ * surface: the frame's samples moved into the reference camera (cast at
+ * T_ref) and compared with the reference depth at the pixel they land on.
+ * Inliers and residual count samples where the map has nothing; a pose that
+ * slid along a partly mapped wall fits the wall as well as the right pose
+ * fits its view, but puts some of the frame where the map saw free space
+ * (docs/tracking.md, the agreement check). On the host, for the candidates
+ * that pass the tracker's gates only: the per-frame ICP is unchanged. */
+typedef struct agreement {
+    uint32_t n_samples; /* frame samples with depth in range */
+    uint32_t n_covered; /* of those, landing on a reference pixel with depth */
+    uint32_t n_agree;   /* covered, within the band of the predicted depth */
+    uint32_t n_front;   /* covered, in front of it: something where the map saw free space */
+    uint32_t n_behind;  /* covered, behind it: seen through a surface the map holds */
+} agreement;
+
+static bf_status agreement_of(recon *r, const bf_frame *f, const bf_se3 *T_ref, const bf_se3 *T_wc, agreement *a)
+{
+    bf_status s = track_download_reference(r->tracker, r->ref_host);
+    if (s != BF_OK) return s;
+    memset(a, 0, sizeof *a);
+    bf_se3 Ri = bf_se3_inverse(T_ref), T_rc = bf_se3_mul(&Ri, T_wc);
+    const bf_sensor *sn = &r->cfg.sensor;
+    uint32_t step = r->cfg.reloc.check_step;
+    for (uint32_t v = 0; v < f->height; v += step)
+        for (uint32_t u = 0; u < f->width; u += step) {
+            double z = f->depth[(size_t)v * f->width + u] / r->K.depth_scale;
+            if (!(z > 0) || z > sn->max_depth_m) continue;
+            a->n_samples++;
+            bf_vec3 p = bf_se3_apply(&T_rc, bf_intrinsics_unproject(&r->K, u, v, z));
+            double x, y;
+            if (!bf_intrinsics_project(&r->K_ref, p, &x, &y)) continue;
+            if (!(x > -0.5 && y > -0.5 && x < r->K_ref.width - 0.5 && y < r->K_ref.height - 0.5)) continue;
+            float zq = r->ref_host[(size_t)(uint32_t)(y + 0.5) * r->K_ref.width + (uint32_t)(x + 0.5)];
+            if (!(zq > 0)) continue;
+            a->n_covered++;
+            double zm = p.z > zq ? p.z : zq;
+            double sigma = bf_sensor_sigma((float)zm, sn->sigma_a, sn->sigma_b, sn->sigma_c);
+            double band = r->cfg.reloc.check_band_m + 3.0 * sigma;
+            if (p.z < zq - band) a->n_front++;
+            else if (p.z > zq + band) a->n_behind++;
+            else a->n_agree++;
+        }
+    return BF_OK;
+}
+
 static bool passes(const recon *r, const track_result *t)
 {
     /* Degenerate systems fit anywhere along their weak directions. */
@@ -208,6 +293,26 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
     if (!st->has_any || t.inlier_frac > st->any.inlier_frac) st->any = t;
     st->has_any = true;
     if (!passes(r, &t)) return BF_OK;
+    /* The tracker's gates passed: the candidate is checked against the
+     * map's prediction before it may count. */
+    agreement a;
+    double t0 = bf_time_s();
+    if ((s = agreement_of(r, f, T_c, &t.T_wc, &a)) != BF_OK) return s;
+    double ms_check = 1e3 * (bf_time_s() - t0);
+    double agree = a.n_covered ? (double)a.n_agree / a.n_covered : 0;
+    double front = a.n_covered ? (double)a.n_front / a.n_covered : 1;
+    /* Only the samples in front decide: right poses leave up to 15% behind
+     * the predicted surface on real frames (holes and edges of the map's
+     * ray-cast, docs/tracking.md), but next to none in front of it. */
+    bool is_agreeing = front <= r->cfg.reloc.max_front_frac;
+    bf_debug("recon: frame %u: candidate %s: %u of %u samples covered, %.1f%% agree, %.1f%% in front, %.1f%% behind "
+             "(%.1f ms): %s",
+             f->index, recon_reloc_kind_name(kind), a.n_covered, a.n_samples, 100 * agree, 100 * front,
+             a.n_covered ? 100.0 * a.n_behind / a.n_covered : 0.0, ms_check, is_agreeing ? "agrees" : "rejected");
+    if (!is_agreeing) {
+        out->reloc_rejected++;
+        return BF_OK;
+    }
     if (st->has_best && (dist_m(&st->best.T_wc, &t.T_wc) > RELOC_AMBIGUOUS_M ||
                          angle_deg(&st->best.T_wc, &t.T_wc) > RELOC_AMBIGUOUS_DEG))
         st->is_ambiguous = true;

@@ -105,13 +105,16 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
     run->map = recon_map(run->loop);
     run->counts = recon_get_counts(run->loop);
     if (fr->state == RECON_LOST) {
-        char tried[48] = "";
-        if (fr->reloc_tried) snprintf(tried, sizeof tried, "; %u candidate poses tried", fr->reloc_tried);
+        char tried[96] = "";
+        if (fr->reloc_tried)
+            snprintf(tried, sizeof tried, "; %u candidate poses tried, %u of them disagreeing with the map",
+                     fr->reloc_tried, fr->reloc_rejected);
         bf_warn("%s: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm%s): not fused", cfg->label,
                 f->index, f->t_depth_s, track_outcome_name(fr->track.outcome), 100 * fr->track.inlier_frac,
                 1e3 * fr->track.residual_m, tried);
     } else if (fr->state == RECON_RELOCALISED) {
-        bf_info("%s: frame %u (t = %.6f): found again from the %s candidate (%u tried; inliers %.0f%%, residual %.1f mm)",
+        bf_info("%s: frame %u (t = %.6f): found again from the %s candidate (%u tried; inliers %.0f%%, "
+                "residual %.1f mm)",
                 cfg->label, f->index, f->t_depth_s, recon_reloc_kind_name(fr->reloc), fr->reloc_tried,
                 100 * fr->track.inlier_frac, 1e3 * fr->track.residual_m);
     } else if (fr->state == RECON_NO_DEPTH) {

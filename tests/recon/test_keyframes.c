@@ -1,0 +1,90 @@
+/* The relocalisation keyframe store (recon/reloc.c) on the host: what it
+ * keeps once it is full. No GPU: the store is poses only. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "test.h"
+#include "recon/recon_int.h"
+
+/* A loop whose store holds at most n keyframes, spaced 0.1 m or 10 degrees. */
+static recon *store_open(uint32_t n)
+{
+    recon *r = calloc(1, sizeof *r);
+    if (!r) return NULL;
+    r->cfg = recon_config_default();
+    r->cfg.reloc.max_keyframes = n;
+    r->K_ref = (bf_intrinsics){.width = 1, .height = 1, .fx_px = 1, .fy_px = 1, .depth_scale = 1000};
+    if (recon__reloc_create(r) != BF_OK) {
+        free(r);
+        return NULL;
+    }
+    return r;
+}
+
+static void store_close(recon *r)
+{
+    recon__reloc_destroy(r);
+    free(r);
+}
+
+static bf_se3 at_x(double x) { return bf_se3_from_qt(bf_quat_identity(), bf_v3(x, 0, 0)); }
+
+/* Held: a keyframe within 1 mm of x. */
+static bool holds_x(const recon *r, double x)
+{
+    for (uint32_t i = 0; i < r->n_keyframes; i++)
+        if (fabs(r->keyframes[i].t.x - x) < 1e-3 && fabs(r->keyframes[i].t.y) < 1e-9) return true;
+    return false;
+}
+
+/* A straight scan of 2 m with a keyframe every 0.11 m (19) into a store of
+ * 6: the start and the newest stay, and the ones kept cover the path
+ * evenly: no gap wider than twice the even spacing (2 m / 5). */
+BF_TEST(a_full_store_keeps_where_a_long_scan_began)
+{
+    recon *r = store_open(6);
+    CHECK(r != NULL);
+    if (!r) return;
+    const uint32_t n = 19;
+    for (uint32_t k = 0; k < n; k++) {
+        bf_se3 T = at_x(0.11 * k);
+        recon__add_keyframe(r, &T);
+    }
+    CHECK_EQ_INT(r->n_keyframes, 6);
+    CHECK_EQ_INT(r->counts.keyframes, 6);
+    CHECK(holds_x(r, 0.0));
+    CHECK(holds_x(r, 0.11 * (n - 1)));
+    double xs[6];
+    for (uint32_t i = 0; i < 6; i++) xs[i] = r->keyframes[i].t.x;
+    for (uint32_t i = 0; i < 6; i++)
+        for (uint32_t j = i + 1; j < 6; j++)
+            if (xs[j] < xs[i]) {
+                double t = xs[i];
+                xs[i] = xs[j], xs[j] = t;
+            }
+    double widest = 0;
+    for (uint32_t i = 1; i < 6; i++) widest = fmax(widest, xs[i] - xs[i - 1]);
+    fprintf(stderr, "  kept x: %.2f %.2f %.2f %.2f %.2f %.2f, widest gap %.2f m\n", xs[0], xs[1], xs[2], xs[3], xs[4],
+            xs[5], widest);
+    CHECK_LE(widest, 2 * 0.11 * (n - 1) / 5);
+    store_close(r);
+}
+
+/* Near an existing keyframe (within a spacing): no new one, none replaced. */
+BF_TEST(a_pose_near_a_keyframe_adds_nothing)
+{
+    recon *r = store_open(2);
+    CHECK(r != NULL);
+    if (!r) return;
+    bf_se3 a = at_x(0), b = at_x(0.5), c = at_x(0.05), d = at_x(1.0);
+    recon__add_keyframe(r, &a);
+    recon__add_keyframe(r, &b);
+    recon__add_keyframe(r, &c);
+    CHECK_EQ_INT(r->n_keyframes, 2);
+    CHECK(holds_x(r, 0.0) && holds_x(r, 0.5));
+    /* Full, a far pose: the one nearest to the others and the newcomer
+     * (0.5, between 0 and 1) makes way. */
+    recon__add_keyframe(r, &d);
+    CHECK(holds_x(r, 0.0) && holds_x(r, 1.0));
+    store_close(r);
+}
