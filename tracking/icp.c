@@ -259,7 +259,8 @@ static void apply(bf_se3 *T_rc, const double xi[6])
 }
 
 /* The unit of the next iteration's Huber threshold in sigma_z(z): the
- * inliers' RMS of r / sigma_z when it is above 1. Real Kinect v1 depth
+ * inliers' RMS of r / sigma_z over huber_knee (what a frame that fits the
+ * model leaves against the map) when that is above 1. Real Kinect v1 depth
  * against the map leaves residuals 2-4 times the Gaussian model's (its
  * disparity quantisation and lens distortion; docs/real_frames.md): with the
  * model's unit Huber's weight then bends nearly every sample, the finest
@@ -270,7 +271,7 @@ static double huber_unit_of(const track_config *c, const icp_sums *s)
 {
     double n = s->s[TRACK_SUM_INLIERS], rn = s->s[TRACK_SUM_RN];
     if (!c->huber_scaled || !(n > 0) || !isfinite(rn)) return 1.0;
-    double u = sqrt(rn / n);
+    double u = sqrt(rn / n) / c->huber_knee;
     return u > 1.0 ? u : 1.0;
 }
 

@@ -69,6 +69,7 @@ track_config track_config_default(void)
         .weight_noise = true,
         .noise_weight_exp = 2.0f,
         .huber_scaled = true,
+        .huber_knee = 1.3f,
         .robust_levels = 1,
         /* bench/bench_tracking.c measured the ICP shapes on lavapipe (docs/tracking.md). */
         .icp_local = 64,
@@ -124,6 +125,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (c->icp_px_per_thread < 1 || c->icp_px_per_thread > 4096)
         return bf_fail(BF_INVALID_ARG, "tracking: icp_px_per_thread %u (1..4096)", c->icp_px_per_thread);
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
+    if (!(c->huber_knee >= 1) || !isfinite(c->huber_knee))
+        return bf_fail(BF_INVALID_ARG, "tracking: huber_knee %g must be >= 1", c->huber_knee);
     if (c->robust_levels < 1 || c->robust_levels > c->levels)
         return bf_fail(BF_INVALID_ARG, "tracking: robust_levels %u not in [1, levels %u]", c->robust_levels, c->levels);
     if (!(c->huber_k >= 0) || !isfinite(c->huber_k))

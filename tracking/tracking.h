@@ -72,8 +72,10 @@ typedef struct track_config {
     float noise_weight_exp;  /* 2: the inverse noise variance; smaller bounds how much less far samples count
                                 (docs/real_frames.md, the noise weight's range); default 2 */
     bool huber_scaled;       /* the Huber threshold is huber_k times the inliers' RMS of r / sigma_z of the
-                                level's previous iteration when that is above 1: real depth departs from the
-                                Gaussian model (docs/real_frames.md), default true */
+                                level's previous iteration over huber_knee, when that is above 1: real depth
+                                departs from the Gaussian model (docs/real_frames.md), default true */
+    float huber_knee;        /* the RMS of r / sigma_z a frame that fits the model leaves against the map, >= 1,
+                                default 1.3 (the synthetic room: median 1.0, 90th percentile 1.26) */
     uint32_t robust_levels;  /* the finest levels whose iterations after the first are weighted, 1..levels,
                                 default 1 (docs/real_frames.md, where the weights start) */
     /* Kernel shapes and diagnostics (docs/tracking.md): tuning for benchmarks and tests; every
