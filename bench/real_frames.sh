@@ -5,7 +5,8 @@
 #   plain   the full loop, started at the first true pose
 #   fgt     --fuse-at-groundtruth: every frame tracked against a map fused at the true poses, so
 #           each estimate's error is one tracking step's
-#   probes  single replays with one existing option changed (PROBES)
+#   probes  replays with options changed (PROBES; the default set: the previous defaults, and
+#           today's with one of the 2026-12-02 changes undone)
 # at most two at a time, evaluates each trajectory with `bitfuse eval-traj` over frames 0-499 and
 # 0-420 (the ground truth jumps 27 mm between 420 and 421), and writes the generated tables of
 # docs/real_frames.md (between <!-- gen:... --> markers; the analysis around them is kept) and
@@ -25,7 +26,7 @@ BIN=${BIN:-/work/bench-data/bitfuse-base}
 DATA=${DATA:-/work/bench-data/7scenes-dev}
 # name|options; empty options: the plain loop again (run-to-run spread: lavapipe's reductions are
 # not bit-reproducible across runs)
-PROBES=${PROBES-"huber0|--huber 0;huber0b|--huber 0;nwoff|--noise-weights off;ratio1|--ratio 1;w20|--window 20;w20b|--window 20;rof0|--rof-iters 0;repeat|"}
+PROBES=${PROBES-"prev|--icp-iters 5,5,4 --icp-sample-step 1 --rof-iters 10 --noise-exp 2;e2|--noise-exp 2;rof10|--rof-iters 10;repeat|"}
 REUSE=${REUSE:-0}
 JOBS=${JOBS:-2}
 PY=python3

@@ -12,12 +12,13 @@ track_config track_config_default(void)
 {
     track_config c = {
         .levels = 3,
-        /* KinectFusion has 10 at the finest level, 5 and 4 above (Newcombe et
-         * al. 2011, sec. 3.5). 5 at the finest costs about half the ICP time
-         * for nearly the same error in the full loop (docs/tracking.md has
-         * the sweep). With the convergence test below a level may stop
-         * earlier. */
-        .iterations = {5, 5, 4},
+        /* KinectFusion's 10, 5 and 4 (Newcombe et al. 2011, sec. 3.5), the
+         * finest level on a checkerboard of its pixels (finest_sample_step):
+         * the weighted iterations there move the pose by millimetres each on
+         * real frames, and 5 of them stopped short along the weak directions
+         * (real dev frames 69 -> 37 mm ATE at 10; docs/real_frames.md). With
+         * the convergence test below a level may stop earlier. */
+        .iterations = {10, 5, 4},
         .dist_m = 0.1f,
         /* KinectFusion uses 20; Kinect v1 depth is quantised in disparity,
          * so even smoothed normals of real frames disagree by more than 20
@@ -51,7 +52,11 @@ track_config track_config_default(void)
          * constrained ones. 5e-3 drops all three weak ones; the margin to
          * the desk is thin (docs/tracking.md). */
         .degenerate_ratio = 5e-3,
-        .rof_iterations = 10,
+        /* Off: with the finest level converged, the ray-cast reference is
+         * better unsmoothed, on real frames (ATE 37 -> 34 mm) and on the
+         * synthetic room (2.9 -> 2.3 mm), and the loop saves ROF's 10-15 ms
+         * (docs/real_frames.md); 10 iterations is the smoothing's design. */
+        .rof_iterations = 0,
         .rof_lambda0 = 100.0f,
         /* Half resolution: a quarter of the cost for the same tracking
          * error (bench_tracking, docs/tracking.md); the normals come from
@@ -61,14 +66,22 @@ track_config track_config_default(void)
         .min_valid_frac = 0.01f,
         .converged_m = 1e-5f,
         .converged_deg = 1e-3f,
-        .finest_sample_step = 1,
+        /* Every second pixel (a checkerboard): 10 iterations for the ICP
+         * time of 5 on every pixel, the same error (docs/real_frames.md). */
+        .finest_sample_step = 2,
         /* At the finest level: together they halve the loop's error on the
          * synthetic room (docs/tracking.md). k = 2 keeps 95% of Gaussian
          * residuals at full weight. */
         .huber_k = 2.0f,
         .weight_noise = true,
-        .noise_weight_exp = 2.0f,
-        .huber_scaled = true,
+        /* Real frames: 2 -> 37 mm ATE, 3 -> 25 mm; the synthetic room 2.3 ->
+         * 2.0 mm (docs/real_frames.md: the near surfaces are the less
+         * distorted ones). */
+        .noise_weight_exp = 3.0f,
+        /* With 10 finest iterations the scaled unit changes nothing on real
+         * frames (37.1 against 37.3 mm) and costs the synthetic room 0.3 mm;
+         * at 5 it is what converges (69 -> 43 mm). */
+        .huber_scaled = false,
         .huber_knee = 1.3f,
         .robust_levels = 1,
         /* bench/bench_tracking.c measured the ICP shapes on lavapipe (docs/tracking.md). */

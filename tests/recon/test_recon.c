@@ -248,7 +248,11 @@ BF_TEST(a_static_camera_stays_put)
                 track_outcome_name(o.fr[k].track.outcome), 1e3 * o.fr[k].track.residual_m,
                 100 * o.fr[k].track.inlier_frac, 1e3 * d, a);
         CHECK_EQ_INT(o.fr[k].state, RECON_TRACKED);
-        CHECK_LE(d, 0.002);
+        /* A staircase pull is about a voxel: 15 mm at 2 m here (320x240,
+         * ratio 2). The noise of these frames leaves 1.7-2.1 mm with the
+         * 2026-12-02 tracker (the near samples weigh more: fewer effective
+         * samples), 3 mm keeps 5x from a pull. */
+        CHECK_LE(d, 0.003);
         CHECK_LE(a, 0.1);
     }
     mesh_free(&o.points);

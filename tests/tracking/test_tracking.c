@@ -130,6 +130,7 @@ BF_TEST(rof_gpu_matches_cpu_oracle)
     uint32_t w = K_SMALL.width, h = K_SMALL.height, n = w * h;
     float *f = rof_image(0.01, NULL);
     track_config cfg = track_config_default();
+    cfg.rof_iterations = 10; /* the smoothing's design (off in the loop by default) */
     cfg.rof_level = 0; /* the filter itself, at full resolution */
     cfg.ref_level = 0;
     track_tracker *t;
@@ -222,6 +223,7 @@ BF_TEST(rof_smooths_noise_keeps_the_step_and_the_mask_edge)
     float *clean = malloc((size_t)n * 4);
     float *f = rof_image(0.006, clean), *u = malloc((size_t)n * 4);
     track_config cfg = track_config_default();
+    cfg.rof_iterations = 10; /* the smoothing's design (off in the loop by default) */
     cfg.rof_level = 0; /* the filter itself, at full resolution */
     cfg.ref_level = 0;
     track_tracker *t;
@@ -285,6 +287,7 @@ BF_TEST(rof_smooths_near_more_than_far)
         f[i] = (float)(clean[i] + 0.005 * rng_gauss());
     }
     track_config cfg = track_config_default();
+    cfg.rof_iterations = 10; /* the smoothing's design (off in the loop by default) */
     cfg.rof_level = 0; /* the filter itself, at full resolution */
     cfg.ref_level = 0;
     track_tracker *t;
