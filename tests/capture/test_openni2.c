@@ -198,8 +198,12 @@ static void oni_play_child(int fd, const char *path)
         _exit(1);
     }
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    /* The recorder keeps what the Dummy's 30 Hz stream delivers until it is
+     * stopped: the 10 frames read, plus what arrives before the stop, which
+     * under load (ASan beside other jobs: 13 seen) can be more; 2 s of it
+     * bounds a recording that did not run away. */
     if (strcmp(src->kind, "openni2 (.oni file)") || K->width != 320 || K->height != 240 ||
-        K->depth_scale != 1000.0 || src->n_frames < 1 || src->n_frames > 12) {
+        K->depth_scale != 1000.0 || src->n_frames < 1 || src->n_frames > 70) {
         report(fd, "kind '%s', %ux%u, scale %g, %u frames", src->kind, K->width, K->height, K->depth_scale,
                src->n_frames);
         _exit(1);
