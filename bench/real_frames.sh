@@ -68,7 +68,7 @@ $PY bench/real_frames.py "$DATA" "$OUT" docs/real_frames.md docs/real_frames.png
 while IFS=$'\t' read -r name label opts; do
   [ -f "$OUT/$name/stats.json" ] || continue
   "$BIN" eval-traj "$OUT/groundtruth.txt" "$OUT/$name/trajectory.txt" --json > "$OUT/eval/$name.all.json"
-  grep -v "^#" "$OUT/$name/trajectory.txt" | head -n 421 > "$OUT/eval/$name.cut.txt"
+  awk '!/^#/ && n++ < 421' "$OUT/$name/trajectory.txt" > "$OUT/eval/$name.cut.txt"  # not grep | head: SIGPIPE under pipefail
   "$BIN" eval-traj "$OUT/groundtruth.cut.txt" "$OUT/eval/$name.cut.txt" --json > "$OUT/eval/$name.cut.json"
 done < "$OUT/runs.tsv"
 
