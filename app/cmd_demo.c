@@ -350,7 +350,7 @@ int cmd_demo(int argc, char **argv)
     if (r.fused) {
         printf("  tracked                %u of %u frames (%u lost); ATE RMSE %.1f mm against the truth\n",
                r.counts.tracked, r.counts.frames, r.counts.lost, 1e3 * r.track_ate.trans.rmse);
-        printf("  time per frame         %.0f ms median, %.0f p95 (track + fuse + ray-cast + smooth)\n",
+        printf("  time per frame         %.0f ms median, %.0f p95 (track + fuse + ray-cast of the reference)\n",
                r.fuse_ms_median, r.fuse_ms_p95);
         printf("  map                    %.2f MiB, %u bricks\n", r.map.bytes_total / 1048576.0, r.map.n_bricks);
         printf("  fused surface voxels   median %.1f mm, p90 %.1f mm from the surface; %.1f%% of it within 1 cm\n",
