@@ -38,7 +38,7 @@ typedef struct track_tracker track_tracker; /* opaque */
 
 typedef struct track_config {
     uint32_t levels;                       /* pyramid levels, 1..3, default 3 */
-    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 5, 5, 4 (KinectFusion: 10, 5, 4) */
+    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 10, 5, 4 (KinectFusion's) */
     float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 45 (DESIGN.md: 20; docs/tracking.md) */
     bf_sensor sensor;                      /* noise model and range, default Kinect v1 (recon/ sets its own) */
@@ -48,7 +48,7 @@ typedef struct track_config {
     float max_motion_m;      /* estimated motion from the guess beyond these: failure */
     float max_motion_deg;
     double degenerate_ratio; /* smallest / largest eigenvalue of the scaled system below this: degenerate */
-    /* ROF smoothing of the reference (0 iterations: off). */
+    /* ROF smoothing of the reference (0 iterations: off, the default; 10 is the smoothing's design). */
     uint32_t rof_iterations;
     float rof_lambda0;       /* data weight at 1 m; lambda(z) per the dissertation */
     uint32_t rof_level;      /* pyramid level the ROF runs on: 0 full resolution, 1 half (default; the
@@ -64,16 +64,16 @@ typedef struct track_config {
     float converged_m;       /* a level stops iterating when the update moves less than this */
     float converged_deg;     /* and turns less than this; 0 and 0: always run all iterations */
     uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one
-                                    (a checkerboard), half the cost (docs/tracking.md: speed against error) */
+                                    (a checkerboard, the default), half the cost (docs/tracking.md: speed against error) */
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
     float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 2; 0: off */
     bool weight_noise;       /* weight residuals by the sensor's noise (sigma_z(1 m) / sigma_z(z))^noise_weight_exp,
                                 default true */
     float noise_weight_exp;  /* 2: the inverse noise variance; smaller bounds how much less far samples count
-                                (docs/real_frames.md, the noise weight's range); default 2 */
+                                (docs/real_frames.md, the noise weight's range); default 3 */
     bool huber_scaled;       /* the Huber threshold is huber_k times the inliers' RMS of r / sigma_z of the
                                 level's previous iteration over huber_knee, when that is above 1: real depth
-                                departs from the Gaussian model (docs/real_frames.md), default true */
+                                departs from the Gaussian model (docs/real_frames.md), default false */
     float huber_knee;        /* the RMS of r / sigma_z a frame that fits the model leaves against the map, >= 1,
                                 default 1.3 (the synthetic room: median 1.0, 90th percentile 1.26) */
     uint32_t robust_levels;  /* the finest levels whose iterations after the first are weighted, 1..levels,
