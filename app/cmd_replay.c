@@ -58,7 +58,7 @@ typedef struct replay_args {
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
 } replay_args;
 
-#define LOOP_ROWS 23
+#define LOOP_ROWS 22
 #define LIVE_ROWS 5
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
@@ -91,9 +91,6 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "or sigma_z(z) alone"),
         APP_OPT("--huber-knee", APP_OPT_FLOAT, &tc->huber_knee, "R",
                 "with --huber-scale residuals: the RMS of r / sigma_z below which the unit stays sigma_z", .min = 1),
-        APP_OPT("--robust-levels", APP_OPT_U32, &tc->robust_levels, "N",
-                "pyramid levels, finest first, whose ICP iterations after the first use the robust weights",
-                .min = 1, .max = TRACK_MAX_LEVELS),
         APP_OPT("--ref-level", APP_OPT_U32, &tc->ref_level, "L",
                 "resolution of the tracking reference's ray-cast: 0 full, 1 half", .max = 1),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",

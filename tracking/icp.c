@@ -295,7 +295,7 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
              * 131 mm and 3.3, docs/tracking.md); the first, plain iteration
              * gives the constrained directions (icp_subspace) that the
              * weighted ones keep. */
-            bool weighted = robust && (uint32_t)l < c->robust_levels && it > 0 && S.k > 0;
+            bool weighted = robust && l == 0 && it > 0 && S.k > 0;
             bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, weighted, huber_unit, &sums, res);
             if (s != BF_OK) return s;
             if (first) {

@@ -83,7 +83,6 @@ track_config track_config_default(void)
          * at 5 it is what converges (69 -> 43 mm). */
         .huber_scaled = false,
         .huber_knee = 1.3f,
-        .robust_levels = 1,
         /* bench/bench_tracking.c measured the ICP shapes on lavapipe (docs/tracking.md). */
         .icp_local = 64,
         .icp_px_per_thread = 16,
@@ -140,8 +139,6 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (c->iterations[0] < 1) return bf_fail(BF_INVALID_ARG, "tracking: the finest level needs an iteration");
     if (!(c->huber_knee >= 1) || !isfinite(c->huber_knee))
         return bf_fail(BF_INVALID_ARG, "tracking: huber_knee %g must be >= 1", c->huber_knee);
-    if (c->robust_levels < 1 || c->robust_levels > c->levels)
-        return bf_fail(BF_INVALID_ARG, "tracking: robust_levels %u not in [1, levels %u]", c->robust_levels, c->levels);
     if (!(c->huber_k >= 0) || !isfinite(c->huber_k))
         return bf_fail(BF_INVALID_ARG, "tracking: huber_k %g must be >= 0 (0: off)", c->huber_k);
     if (c->weight_noise && !(c->noise_weight_exp > 0 && c->noise_weight_exp <= 4))

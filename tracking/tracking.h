@@ -76,8 +76,6 @@ typedef struct track_config {
                                 departs from the Gaussian model (docs/real_frames.md), default false */
     float huber_knee;        /* the RMS of r / sigma_z a frame that fits the model leaves against the map, >= 1,
                                 default 1.3 (the synthetic room: median 1.0, 90th percentile 1.26) */
-    uint32_t robust_levels;  /* the finest levels whose iterations after the first are weighted, 1..levels,
-                                default 1 (docs/real_frames.md, where the weights start) */
     /* Kernel shapes and diagnostics (docs/tracking.md): tuning for benchmarks and tests; every
        choice tracks to the same pose within float rounding. */
     uint32_t icp_local;         /* ICP invocations per workgroup, a power of two up to 64, default 64
