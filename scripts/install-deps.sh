@@ -7,7 +7,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake pkg-config
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers vulkan-tools glslc
-  libpng-dev libjpeg-dev libzstd-dev libcjson-dev
+  libpng-dev libjpeg-dev libzstd-dev libcjson-dev libxxhash-dev
   # Live capture backends (docs/devices.md); libfreenect-bin brings fakenect,
   # which the capture tests replay Kinect dumps through.
   libfreenect-dev libfreenect-bin libopenni2-dev

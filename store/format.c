@@ -1,0 +1,146 @@
+/* The store's layout shared by the reader and the writer: the canonical
+ * brick order, chunk records, names, hashes and atomic writes. */
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#define XXH_INLINE_ALL
+#include <xxhash.h>
+
+#include "store_int.h"
+
+_Static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the store's files are little-endian");
+
+uint64_t store__hash(const void *p, size_t n) { return XXH3_64bits(p, n); }
+
+static int cmp_i32(int32_t a, int32_t b) { return (a > b) - (a < b); }
+static int cmp_u32(uint32_t a, uint32_t b) { return (a > b) - (a < b); }
+
+static int brick_cmp(const void *pa, const void *pb)
+{
+    const hostmap_brick *a = pa, *b = pb;
+    int c = 0;
+    for (int i = 0; i < 3 && !c; i++) c = cmp_i32(a->key[i], b->key[i]);
+    if (!c) c = cmp_u32(a->level, b->level);
+    for (int i = 2; i >= 0 && !c; i--) c = cmp_u32(a->cell[i], b->cell[i]);
+    return c;
+}
+
+void store__sort(hostmap *m)
+{
+    if (m->n_bricks > 1) qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
+}
+
+void store__pack(const hostmap *m, uint32_t first, uint32_t n, uint8_t *buf)
+{
+    for (uint32_t i = 0; i < n; i++) {
+        const hostmap_brick *b = &m->bricks[first + i];
+        uint8_t *r = buf + (size_t)i * STORE_RECORD_BYTES;
+        r[0] = (uint8_t)b->level;
+        for (int k = 0; k < 3; k++) r[1 + k] = (uint8_t)b->cell[k];
+        memcpy(r + 4, &b->error, 4);
+        memcpy(r + 8, b->sign, 64);
+        memcpy(r + 72, b->conf, 64);
+    }
+}
+
+static bool same_key(const int32_t a[3], const int32_t b[3]) { return a[0] == b[0] && a[1] == b[1] && a[2] == b[2]; }
+
+bf_status store__groups(const hostmap *m, store_group **out, uint32_t *n_out)
+{
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m->n_bricks; i++) n += i == 0 || !same_key(m->bricks[i].key, m->bricks[i - 1].key);
+    store_group *g = n ? bf_calloc(n, sizeof *g) : NULL;
+    uint8_t *buf = NULL;
+    uint32_t largest = 0, k = 0;
+    if (n && !g) return bf_fail(BF_NO_MEMORY, "store: %u chunks", n);
+    for (uint32_t i = 0; i < m->n_bricks; i++) {
+        if (i == 0 || !same_key(m->bricks[i].key, m->bricks[i - 1].key)) {
+            memcpy(g[k].key, m->bricks[i].key, sizeof g[k].key);
+            g[k].first = i;
+            k++;
+        }
+        g[k - 1].n++;
+        if (g[k - 1].n > largest) largest = g[k - 1].n;
+    }
+    if (n && !(buf = bf_malloc((size_t)largest * STORE_RECORD_BYTES))) {
+        free(g);
+        return bf_fail(BF_NO_MEMORY, "store: records of %u bricks", largest);
+    }
+    for (uint32_t c = 0; c < n; c++) {
+        store__pack(m, g[c].first, g[c].n, buf);
+        g[c].digest = store__hash(buf, (size_t)g[c].n * STORE_RECORD_BYTES);
+    }
+    free(buf);
+    *out = g;
+    *n_out = n;
+    return BF_OK;
+}
+
+bf_status store_map_digest(const hostmap *map, uint64_t *out)
+{
+    if (!map || !out) return bf_fail(BF_INVALID_ARG, "store_map_digest: NULL argument");
+    hostmap copy = *map;
+    copy.bricks = map->n_bricks ? bf_malloc((size_t)map->n_bricks * sizeof *copy.bricks) : NULL;
+    if (map->n_bricks && !copy.bricks) return bf_fail(BF_NO_MEMORY, "store: digest of %u bricks", map->n_bricks);
+    if (map->n_bricks) memcpy(copy.bricks, map->bricks, (size_t)map->n_bricks * sizeof *copy.bricks);
+    store__sort(&copy);
+    XXH3_state_t st;
+    XXH3_64bits_reset(&st);
+    uint8_t rec[STORE_RECORD_BYTES];
+    for (uint32_t i = 0; i < copy.n_bricks; i++) {
+        XXH3_64bits_update(&st, copy.bricks[i].key, sizeof copy.bricks[i].key);
+        store__pack(&copy, i, 1, rec);
+        XXH3_64bits_update(&st, rec, sizeof rec);
+    }
+    free(copy.bricks);
+    *out = XXH3_64bits_digest(&st);
+    return BF_OK;
+}
+
+void store__chunk_name(char *out, size_t cap, const int32_t key[3])
+{
+    snprintf(out, cap, "c_%d_%d_%d.bfc", key[0], key[1], key[2]);
+}
+
+static bf_status write_all(int fd, const char *path, const void *p, size_t n)
+{
+    const uint8_t *c = p;
+    while (n) {
+        ssize_t k = bf_fault_now() ? (errno = ENOSPC, -1) : write(fd, c, n);
+        if (k < 0 && errno == EINTR) continue;
+        if (k < 0) return bf_fail(BF_IO, "%s: write failed: %s", path, strerror(errno));
+        c += k;
+        n -= (size_t)k;
+    }
+    return BF_OK;
+}
+
+bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb)
+{
+    char tmp[4200];
+    if ((size_t)snprintf(tmp, sizeof tmp, "%s.tmp", path) >= sizeof tmp)
+        return bf_fail(BF_INVALID_ARG, "%s: path too long", path);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return bf_fail(BF_IO, "%s: cannot create: %s", tmp, strerror(errno));
+    bf_status s = write_all(fd, tmp, a, na);
+    if (s == BF_OK && nb) s = write_all(fd, tmp, b, nb);
+    if (s == BF_OK && (bf_fault_now() ? (errno = ENOSPC, 1) : fsync(fd) != 0))
+        s = bf_fail(BF_IO, "%s: fsync failed: %s", tmp, strerror(errno));
+    if (close(fd) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s: close failed: %s", tmp, strerror(errno));
+    if (s == BF_OK && rename(tmp, path) != 0) s = bf_fail(BF_IO, "%s: rename failed: %s", path, strerror(errno));
+    if (s != BF_OK) unlink(tmp); /* the earlier version of path, if any, stays whole */
+    return s;
+}
+
+bf_status store__sync_dir(const char *dir)
+{
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0) return bf_fail(BF_IO, "%s: cannot open the folder: %s", dir, strerror(errno));
+    bf_status s = fsync(fd) == 0 ? BF_OK : bf_fail(BF_IO, "%s: fsync of the folder failed: %s", dir, strerror(errno));
+    close(fd);
+    return s;
+}

@@ -1,0 +1,110 @@
+/* store: the scene store, a map on disk (DESIGN.md sections 1 and 7;
+ * the format: docs/formats.md, "Scene store").
+ *
+ * A store is a folder: one zstd-compressed file per world chunk
+ * (chunks/c_X_Y_Z.bfc, a versioned header with xxHash checksums of itself
+ * and of its payload), the scan's trajectory (trajectory.bin, checksummed)
+ * and an index (store.json: the map's geometry, the last pose, the chunks
+ * with their content digests). Every file is written atomically: a temp
+ * file, fsync, rename, then an fsync of the folder, so a file on disk is
+ * always a whole one, from this write or from an earlier one.
+ *
+ * The chunk files are the truth: a reader loads every valid chunk file it
+ * finds, reports the ones it must skip (corrupt, truncated, unreadable) by
+ * name and loads the rest; the index and the trajectory add the pose and
+ * the history, and a store whose index is lost still opens (from the chunk
+ * headers and the trajectory).
+ *
+ * Writing goes through a writer with a thread of its own: the loop hands it
+ * a host copy of the map (hostmap) and goes on; the writer rewrites only the
+ * chunks whose content changed since its last write. Depends on core,
+ * hostmap, zstd, xxHash and cJSON; no Vulkan, so the store can be read,
+ * checked and fuzzed without a device.
+ */
+#ifndef BF_STORE_H
+#define BF_STORE_H
+
+#include "core/core.h"
+#include "hostmap/hostmap.h"
+
+#define STORE_VERSION 1u
+
+/* The map's geometry and where the scan stands. */
+typedef struct store_meta {
+    float chunk_m;          /* chunk edge [m] */
+    uint32_t max_level;     /* finest octree level the map may hold */
+    bf_vec3 origin_w;       /* world point of chunk (0,0,0)'s corner */
+    uint32_t frames;        /* frames the scan has handled (the trajectory's poses) */
+    bool has_pose;          /* last_pose is known */
+    bf_se3 last_pose;       /* the last good pose (camera to world): where a resumed scan starts */
+    double last_t_s;        /* the depth timestamp of the last frame handled */
+} store_meta;
+
+/* What a read found. Chunks it skipped were warned about by name. */
+typedef struct store_report {
+    uint32_t n_chunks;      /* chunk files loaded */
+    uint32_t n_bricks;
+    uint32_t n_bad;         /* chunk files skipped: corrupt, truncated, unreadable, inconsistent */
+    uint32_t n_missing;     /* chunks the index lists with no valid file (n_bad counts those with a bad one) */
+    uint32_t n_unindexed;   /* valid chunk files the index does not list (written after it) */
+    bool index_ok;          /* store.json read and consistent */
+    bool trajectory_ok;     /* trajectory.bin read and its checksum right */
+    uint64_t bytes_files;   /* bytes of the chunk files loaded */
+    uint64_t bytes_raw;     /* their payloads uncompressed */
+    uint32_t flush;         /* the index's write count (0 without one) */
+    char first_bad[512];    /* the first skipped file's message, "" if none */
+} store_report;
+
+/* True when dir holds a store (its index or its chunks folder). */
+bool store_exists(const char *dir);
+
+/* Reads the store in dir: every valid chunk into *map (bricks in the
+ * store's canonical order: chunk key, then level, then cell z, y, x), the
+ * geometry and last pose into *meta, the trajectory into *traj (may be
+ * NULL). A bad chunk file is skipped with a warning naming it; BF_IO when
+ * dir is not a readable store, BF_FORMAT when nothing in it is usable
+ * (no index, no trajectory and no valid chunk), BF_UNSUPPORTED for a newer
+ * version. Outputs are written only on success. */
+bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *traj, store_report *rep);
+
+/* xxHash (XXH3, 64 bits) of a map's contents in the canonical order above:
+ * equal for equal maps whatever the order of their bricks (stats.json's
+ * map_digest). */
+bf_status store_map_digest(const hostmap *map, uint64_t *out);
+
+/* ------------------------------------------------------------ writing */
+
+typedef struct store_writer store_writer; /* opaque */
+
+typedef struct store_write_stats {
+    uint32_t writes;          /* maps written (flushes done) */
+    uint32_t chunks;          /* chunks in the store after the last write */
+    uint64_t bricks;          /* bricks in it */
+    uint64_t chunks_written;  /* chunk files rewritten, over all writes */
+    uint64_t chunks_removed;  /* chunk files removed (chunks that became empty) */
+    uint64_t bytes_written;   /* bytes of every file written */
+    uint64_t bytes_on_disk;   /* chunk file bytes after the last write */
+    double ms_last, ms_max, ms_total; /* wall time of the writes (the writer's thread) */
+} store_write_stats;
+
+/* Opens dir for writing (created if missing). resume false: dir must not
+ * hold a store yet (BF_INVALID_ARG: the message says to resume or choose
+ * another folder). resume true: it must (BF_IO otherwise); the writer then
+ * knows the stored chunks' digests and rewrites only what changes. */
+bf_status store_writer_open(const char *dir, bool resume, store_writer **out);
+/* Hands the writer a map to write (taken: *map is emptied) with its meta
+ * and trajectory (copied). Waits first while an earlier write is running.
+ * Returns at once, the write runs on the writer's thread; an error of an
+ * earlier write comes back here (and from store_writer_finish), and then
+ * nothing more is written. */
+bf_status store_writer_submit(store_writer *w, hostmap *map, const store_meta *meta, const bf_traj *traj);
+/* True while a write is running: a caller that flushes periodically skips
+ * a flush rather than wait. */
+bool store_writer_busy(store_writer *w);
+/* Waits for the running write and returns the first error of any write. */
+bf_status store_writer_finish(store_writer *w);
+store_write_stats store_writer_stats(store_writer *w);
+/* Waits for the running write and frees the writer. NULL is a no-op. */
+void store_writer_close(store_writer *w);
+
+#endif

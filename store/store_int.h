@@ -1,0 +1,78 @@
+/* Declarations shared by store/'s files: the on-disk layout
+ * (docs/formats.md, "Scene store"). Little-endian throughout. */
+#ifndef BF_STORE_INT_H
+#define BF_STORE_INT_H
+
+#include "store.h"
+
+#define STORE_INDEX_NAME "store.json"
+#define STORE_TRAJ_NAME "trajectory.bin"
+#define STORE_CHUNK_DIR "chunks"
+#define STORE_FORMAT_NAME "bitfuse-store"
+
+/* Chunk file: a 96-byte header, then the zstd-compressed records. */
+#define STORE_CHUNK_MAGIC "BFCHUNK"  /* 8 bytes with its NUL */
+#define STORE_CHUNK_HEADER 96u
+#define STORE_RECORD_BYTES 136u      /* level, x, y, z (u8 each), error (f32), sign[16], conf[16] (u32) */
+#define STORE_ZSTD_LEVEL 3
+
+typedef struct store_chunk_header {
+    char magic[8];
+    uint32_t version;
+    uint32_t header_bytes;
+    int32_t key[3];
+    uint32_t n_bricks;
+    float chunk_m;
+    uint32_t record_bytes;
+    double origin_w[3];
+    uint64_t raw_bytes;      /* n_bricks * record_bytes */
+    uint64_t payload_bytes;  /* compressed */
+    uint64_t payload_hash;   /* XXH3-64 of the compressed payload */
+    uint64_t header_hash;    /* XXH3-64 of the 88 bytes before it */
+} store_chunk_header;
+_Static_assert(sizeof(store_chunk_header) == STORE_CHUNK_HEADER, "chunk header layout");
+
+/* Trajectory file: magic, version, count, then per pose 13 doubles
+ * (t, R row-major, t_w), then the XXH3-64 of everything before it. */
+#define STORE_TRAJ_MAGIC "BFTRAJ1" /* 8 bytes with its NUL */
+#define STORE_TRAJ_HEADER 16u
+#define STORE_TRAJ_POSE_DOUBLES 13u
+
+/* One chunk's bricks inside a sorted hostmap: [first, first + n). */
+typedef struct store_group {
+    int32_t key[3];
+    uint32_t first, n;
+    uint64_t digest;        /* XXH3-64 of its records */
+} store_group;
+
+/* Sorts the bricks canonically (key, level, z, y, x). */
+void store__sort(hostmap *m);
+/* The groups of a sorted map; *out malloc'd (NULL when empty). */
+bf_status store__groups(const hostmap *m, store_group **out, uint32_t *n);
+/* Writes the records of bricks [first, first + n) into buf (n * STORE_RECORD_BYTES). */
+void store__pack(const hostmap *m, uint32_t first, uint32_t n, uint8_t *buf);
+/* The chunk file's name for key: "c_X_Y_Z.bfc". */
+void store__chunk_name(char *out, size_t cap, const int32_t key[3]);
+/* XXH3-64. */
+uint64_t store__hash(const void *p, size_t n);
+/* Writes path atomically: path.tmp, fsync, rename (the folder's fsync is
+ * the caller's). An injected fault (bf_fault_now) fails as ENOSPC. */
+bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb);
+/* fsync of a folder. */
+bf_status store__sync_dir(const char *dir);
+
+/* A chunk the index lists. */
+typedef struct store_entry {
+    int32_t key[3];
+    uint32_t n_bricks;
+    uint64_t digest;        /* XXH3-64 of its records */
+    uint64_t file_bytes;
+} store_entry;
+/* Reads dir/store.json: the meta (frames and pose from the index), its
+ * chunks sorted by key (*e malloc'd) and its write count. BF_IO when it is
+ * missing, BF_FORMAT when it is malformed, BF_UNSUPPORTED for a newer version. */
+bf_status store__index_read(const char *dir, store_meta *meta, store_entry **e, uint32_t *n, uint32_t *flush);
+/* Orders entries by key (bsearch / qsort). */
+int store__entry_cmp(const void *a, const void *b);
+
+#endif

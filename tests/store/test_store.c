@@ -1,0 +1,375 @@
+/* The scene store: exact round trips, rewriting only what changed, and a
+ * store that always reopens after a corrupt file, a lost index or a write
+ * that failed at any point (injected ENOSPC). */
+#include <dirent.h>
+#include <stdio.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "store/store.h"
+#include "test.h"
+
+static uint32_t rng_state = 12345u;
+static uint32_t rnd(void)
+{
+    rng_state = rng_state * 1664525u + 1013904223u;
+    return rng_state >> 8;
+}
+
+/* A map of n_chunks chunks (negative keys too), bricks at levels 3-8 with
+ * random bits, in a scrambled order. */
+static bf_status make_map(hostmap *m, uint32_t n_chunks, uint32_t per_chunk)
+{
+    memset(m, 0, sizeof *m);
+    m->chunk_m = 2.0f;
+    m->origin_w = (bf_vec3){1.25, -3.5, 1000.125};
+    m->n_bricks = n_chunks * per_chunk;
+    m->bricks = calloc(m->n_bricks, sizeof *m->bricks);
+    if (!m->bricks) return BF_NO_MEMORY;
+    for (uint32_t c = 0; c < n_chunks; c++)
+        for (uint32_t i = 0; i < per_chunk; i++) {
+            hostmap_brick *b = &m->bricks[c * per_chunk + i];
+            b->key[0] = (int32_t)c - 2, b->key[1] = -(int32_t)(c % 3), b->key[2] = (int32_t)(c * 5);
+            b->level = 3 + i % 6;
+            /* distinct cells per level: i / 6 enumerates them */
+            uint32_t k = i / 6;
+            b->cell[0] = k % 8, b->cell[1] = (k / 8) % 8, b->cell[2] = (k / 64) % 8;
+            b->error = 0.001f * (float)(rnd() % 1000);
+            for (int w = 0; w < 16; w++) b->sign[w] = rnd() ^ (rnd() << 16), b->conf[w] = rnd() ^ (rnd() << 16);
+        }
+    for (uint32_t i = m->n_bricks; i > 1; i--) { /* scrambled, as a GPU's slots are */
+        uint32_t j = rnd() % i;
+        hostmap_brick t = m->bricks[i - 1];
+        m->bricks[i - 1] = m->bricks[j];
+        m->bricks[j] = t;
+    }
+    return BF_OK;
+}
+
+static bf_status copy_map(const hostmap *a, hostmap *b)
+{
+    *b = *a;
+    b->bricks = malloc((size_t)a->n_bricks * sizeof *b->bricks + 1);
+    if (!b->bricks) return BF_NO_MEMORY;
+    memcpy(b->bricks, a->bricks, (size_t)a->n_bricks * sizeof *b->bricks);
+    return BF_OK;
+}
+
+static store_meta meta_of(const hostmap *m, uint32_t frames)
+{
+    store_meta meta = {.chunk_m = m->chunk_m, .max_level = 8, .origin_w = m->origin_w, .frames = frames};
+    meta.has_pose = true;
+    meta.last_pose = bf_se3_from_qt(bf_quat_from_axis_angle((bf_vec3){0.1, 0.7, -0.2}, 0.3), (bf_vec3){0.5, -1.0 / 3.0, 2.0});
+    meta.last_t_s = 1305031102.175304;
+    return meta;
+}
+
+static bf_status make_traj(bf_traj *t, uint32_t n)
+{
+    memset(t, 0, sizeof *t);
+    for (uint32_t i = 0; i < n; i++) {
+        bf_se3 T = bf_se3_from_qt(bf_quat_from_axis_angle((bf_vec3){0, 1, 0}, 0.01 * i), (bf_vec3){0.001 * i, 1.0 / 3.0, -0.5});
+        bf_status s = bf_traj_push(t, 1305031102.0 + i / 30.0, &T);
+        if (s != BF_OK) return s;
+    }
+    return BF_OK;
+}
+
+static const char *fresh_dir(const char *name)
+{
+    static char path[512];
+    snprintf(path, sizeof path, "%s/%s", bf_test_tmpdir(), name);
+    return path;
+}
+
+/* Writes m (a copy) with meta and traj into dir through a new writer. */
+static bf_status write_store(const char *dir, bool resume, const hostmap *m, const store_meta *meta, const bf_traj *t,
+                             store_write_stats *st)
+{
+    store_writer *w = NULL;
+    hostmap c;
+    bf_status s = store_writer_open(dir, resume, &w);
+    if (s != BF_OK) return s;
+    if ((s = copy_map(m, &c)) == BF_OK) s = store_writer_submit(w, &c, meta, t);
+    hostmap_free(&c);
+    bf_status f = store_writer_finish(w);
+    if (s == BF_OK) s = f;
+    if (st) *st = store_writer_stats(w);
+    store_writer_close(w);
+    return s;
+}
+
+/* Same bricks in the same order, every field. */
+static bool maps_equal(const hostmap *a, const hostmap *b)
+{
+    return a->n_bricks == b->n_bricks && a->chunk_m == b->chunk_m && a->origin_w.x == b->origin_w.x &&
+           a->origin_w.y == b->origin_w.y && a->origin_w.z == b->origin_w.z &&
+           (a->n_bricks == 0 || memcmp(a->bricks, b->bricks, (size_t)a->n_bricks * sizeof *a->bricks) == 0);
+}
+
+/* The canonical order of a: the reader's own (digest-equal maps read back in it). */
+static bf_status sorted_copy(const hostmap *a, const char *dir, hostmap *out)
+{
+    store_meta meta = meta_of(a, 1);
+    bf_status s = write_store(dir, false, a, &meta, NULL, NULL);
+    store_meta m2;
+    if (s == BF_OK) s = store_read(dir, out, &m2, NULL, NULL);
+    return s;
+}
+
+BF_TEST(store_round_trip_is_exact)
+{
+    hostmap m, back = {0};
+    bf_traj t, t2 = {0};
+    CHECK_OK(make_map(&m, 7, 50));
+    CHECK_OK(make_traj(&t, 40));
+    store_meta meta = meta_of(&m, 40), meta2;
+    const char *dir = fresh_dir("round");
+    store_write_stats st;
+    CHECK_OK(write_store(dir, false, &m, &meta, &t, &st));
+    CHECK_EQ_INT(st.chunks, 7);
+    CHECK_EQ_INT(st.chunks_written, 7);
+    CHECK_EQ_INT(st.bricks, 350);
+    store_report rep;
+    CHECK_OK(store_read(dir, &back, &meta2, &t2, &rep));
+    CHECK(rep.index_ok && rep.trajectory_ok);
+    CHECK_EQ_INT(rep.n_chunks, 7);
+    CHECK_EQ_INT(rep.n_bad + rep.n_missing + rep.n_unindexed, 0);
+    CHECK_EQ_INT(back.n_bricks, 350);
+    uint64_t d1, d2;
+    CHECK_OK(store_map_digest(&m, &d1));
+    CHECK_OK(store_map_digest(&back, &d2));
+    CHECK(d1 == d2);
+    CHECK(memcmp(&meta, &meta2, sizeof meta) == 0 || (meta2.frames == 40 && meta2.has_pose &&
+                                                      memcmp(&meta.last_pose, &meta2.last_pose, sizeof meta.last_pose) == 0 &&
+                                                      meta.last_t_s == meta2.last_t_s));
+    CHECK(meta2.chunk_m == 2.0f && meta2.max_level == 8 && meta2.origin_w.z == 1000.125);
+    CHECK_EQ_INT(t2.n, 40);
+    CHECK(memcmp(t.t_s, t2.t_s, 40 * sizeof(double)) == 0);
+    CHECK(memcmp(t.T_wc, t2.T_wc, 40 * sizeof(bf_se3)) == 0);
+    /* Every brick of m is in back, bit for bit: back is m sorted. */
+    hostmap sorted = {0};
+    CHECK_OK(sorted_copy(&back, fresh_dir("round2"), &sorted));
+    CHECK(maps_equal(&back, &sorted));
+    /* A digest sees one flipped bit. */
+    back.bricks[123].conf[5] ^= 1u << 17;
+    CHECK_OK(store_map_digest(&back, &d2));
+    CHECK(d1 != d2);
+    hostmap_free(&m);
+    hostmap_free(&back);
+    hostmap_free(&sorted);
+    bf_traj_free(&t);
+    bf_traj_free(&t2);
+}
+
+static uint32_t count_files(const char *dir, const char *suffix)
+{
+    DIR *d = opendir(dir);
+    uint32_t n = 0;
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+        size_t l = strlen(e->d_name), k = strlen(suffix);
+        n += l >= k && strcmp(e->d_name + l - k, suffix) == 0;
+    }
+    if (d) closedir(d);
+    return n;
+}
+
+BF_TEST(store_rewrites_only_changed_chunks)
+{
+    hostmap m, back = {0};
+    CHECK_OK(make_map(&m, 6, 30));
+    store_meta meta = meta_of(&m, 10), meta2;
+    const char *dir = fresh_dir("incremental");
+    store_writer *w = NULL;
+    CHECK_OK(store_writer_open(dir, false, &w));
+    hostmap c;
+    CHECK_OK(copy_map(&m, &c));
+    CHECK_OK(store_writer_submit(w, &c, &meta, NULL));
+    CHECK(c.bricks == NULL); /* taken */
+    /* One brick of one chunk changes; every brick of another goes away. */
+    m.bricks[17].sign[3] ^= 0xF0F0u;
+    int32_t gone[3];
+    memcpy(gone, m.bricks[40].key, sizeof gone);
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < m.n_bricks; i++)
+        if (memcmp(m.bricks[i].key, gone, sizeof gone) != 0 ||
+            memcmp(m.bricks[17].key, gone, sizeof gone) == 0) /* (never the changed one's chunk) */
+            m.bricks[k++] = m.bricks[i];
+    m.n_bricks = k;
+    CHECK_OK(copy_map(&m, &c));
+    CHECK_OK(store_writer_submit(w, &c, &meta, NULL));
+    CHECK_OK(store_writer_finish(w));
+    store_write_stats st = store_writer_stats(w);
+    store_writer_close(w);
+    CHECK_EQ_INT(st.writes, 2);
+    CHECK_EQ_INT(st.chunks_written, 6 + 1);
+    CHECK_EQ_INT(st.chunks_removed, 1);
+    CHECK_EQ_INT(st.chunks, 5);
+    char cd[600];
+    snprintf(cd, sizeof cd, "%s/chunks", dir);
+    CHECK_EQ_INT(count_files(cd, ".bfc"), 5);
+    CHECK_EQ_INT(count_files(cd, ".tmp"), 0);
+    CHECK_OK(store_read(dir, &back, &meta2, NULL, NULL));
+    uint64_t d1, d2;
+    CHECK_OK(store_map_digest(&m, &d1));
+    CHECK_OK(store_map_digest(&back, &d2));
+    CHECK(d1 == d2);
+    /* A resumed writer knows the digests: the same map rewrites nothing. */
+    CHECK_OK(write_store(dir, true, &m, &meta, NULL, &st));
+    CHECK_EQ_INT(st.chunks_written, 0);
+    /* Neither a new store over an old one nor a resume of nothing. */
+    CHECK_STATUS(store_writer_open(dir, false, &w), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("--resume");
+    CHECK_STATUS(store_writer_open(fresh_dir("nothing-here"), true, &w), BF_IO);
+    hostmap_free(&m);
+    hostmap_free(&back);
+}
+
+static bf_status flip_byte(const char *path, long at)
+{
+    FILE *f = fopen(path, "r+b");
+    if (!f) return BF_IO;
+    fseek(f, at, at < 0 ? SEEK_END : SEEK_SET);
+    int c = fgetc(f);
+    fseek(f, -1, SEEK_CUR);
+    fputc(c ^ 0x5A, f);
+    fclose(f);
+    return BF_OK;
+}
+
+BF_TEST(store_skips_a_bad_chunk_by_name_and_loads_the_rest)
+{
+    hostmap m, back = {0};
+    CHECK_OK(make_map(&m, 5, 20));
+    store_meta meta = meta_of(&m, 3), meta2;
+    const char *dir = fresh_dir("corrupt");
+    CHECK_OK(write_store(dir, false, &m, &meta, NULL, NULL));
+    char bad[600], cut[600], tmp[600];
+    snprintf(bad, sizeof bad, "%s/chunks/c_-2_0_0.bfc", dir);
+    snprintf(cut, sizeof cut, "%s/chunks/c_0_-2_10.bfc", dir);
+    CHECK_OK(flip_byte(bad, -3)); /* in the payload */
+    struct stat sb;
+    CHECK(stat(cut, &sb) == 0);
+    CHECK(truncate(cut, sb.st_size - 10) == 0); /* a partly written file */
+    snprintf(tmp, sizeof tmp, "%s/chunks/c_1_1_1.bfc.tmp", dir); /* a write that never finished */
+    FILE *f = fopen(tmp, "wb");
+    CHECK(f != NULL);
+    fputs("BFCHUNK", f);
+    fclose(f);
+    store_report rep;
+    CHECK_OK(store_read(dir, &back, &meta2, NULL, &rep));
+    CHECK_EQ_INT(rep.n_bad, 2);
+    CHECK_EQ_INT(rep.n_missing, 2);
+    CHECK_EQ_INT(rep.n_chunks, 3);
+    CHECK_EQ_INT(back.n_bricks, 60);
+    CHECK(strstr(rep.first_bad, "c_") != NULL);
+    CHECK(strstr(rep.first_bad, "checksum") != NULL || strstr(rep.first_bad, "truncated") != NULL);
+    /* Every loaded brick is one of m's, unchanged. */
+    for (uint32_t i = 0; i < back.n_bricks; i++) {
+        bool found = false;
+        for (uint32_t j = 0; j < m.n_bricks && !found; j++)
+            found = memcmp(&back.bricks[i], &m.bricks[j], sizeof m.bricks[j]) == 0;
+        CHECK(found);
+    }
+    /* A header flipped: named as corrupt too. */
+    CHECK_OK(flip_byte(bad, 20));
+    CHECK_OK(store_read(dir, &back, &meta2, NULL, &rep));
+    CHECK_EQ_INT(rep.n_bad, 2);
+    hostmap_free(&m);
+    hostmap_free(&back);
+}
+
+BF_TEST(store_opens_without_its_index)
+{
+    hostmap m, back = {0};
+    bf_traj t, t2 = {0};
+    CHECK_OK(make_map(&m, 3, 10));
+    CHECK_OK(make_traj(&t, 12));
+    store_meta meta = meta_of(&m, 12), meta2;
+    const char *dir = fresh_dir("noindex");
+    CHECK_OK(write_store(dir, false, &m, &meta, &t, NULL));
+    char p[600];
+    snprintf(p, sizeof p, "%s/store.json", dir);
+    FILE *f = fopen(p, "w");
+    CHECK(f != NULL);
+    fputs("{\"format\": \"bitfuse-st", f); /* cut short */
+    fclose(f);
+    store_report rep;
+    CHECK_OK(store_read(dir, &back, &meta2, &t2, &rep));
+    CHECK(!rep.index_ok && rep.trajectory_ok);
+    CHECK_EQ_INT(back.n_bricks, 30);
+    CHECK(meta2.has_pose && meta2.frames == 12);
+    CHECK(memcmp(&meta2.last_pose, &t.T_wc[11], sizeof(bf_se3)) == 0);
+    CHECK(meta2.origin_w.z == 1000.125 && meta2.chunk_m == 2.0f);
+    /* A newer version is refused, not misread. */
+    f = fopen(p, "w");
+    fputs("{\"format\": \"bitfuse-store\", \"version\": 99}", f);
+    fclose(f);
+    CHECK_STATUS(store_read(dir, &back, &meta2, NULL, &rep), BF_UNSUPPORTED);
+    CHECK_ERROR_MENTIONS("version 99");
+    CHECK_STATUS(store_read(fresh_dir("absent"), &back, &meta2, NULL, &rep), BF_IO);
+    hostmap_free(&m);
+    hostmap_free(&back);
+    bf_traj_free(&t);
+    bf_traj_free(&t2);
+}
+
+/* A write that fails at any of its points (every write, fsync and
+ * allocation in turn, ENOSPC for the file ones) is reported, leaves no
+ * temp file, and the store still reads: each chunk whole, from the old or
+ * the new map, and the trajectory from one of the two. */
+BF_TEST(store_survives_a_failed_write_at_every_point)
+{
+    hostmap a, b, back = {0};
+    CHECK_OK(make_map(&a, 4, 12));
+    CHECK_OK(copy_map(&a, &b));
+    for (uint32_t i = 0; i < b.n_bricks; i++) b.bricks[i].sign[0] ^= 1u; /* every chunk changes */
+    bf_traj ta, tb, t2 = {0};
+    CHECK_OK(make_traj(&ta, 5));
+    CHECK_OK(make_traj(&tb, 9));
+    store_meta ma = meta_of(&a, 5), mb = meta_of(&b, 9), m2;
+    char cd[600];
+    uint32_t points = 0;
+    for (uint32_t k = 1; k < 200; k++) {
+        char name[64];
+        snprintf(name, sizeof name, "enospc-%u", k);
+        const char *dir = fresh_dir(name);
+        snprintf(cd, sizeof cd, "%s/chunks", dir);
+        CHECK_OK(write_store(dir, false, &a, &ma, &ta, NULL));
+        bf_fault_arm(k);
+        bf_status s = write_store(dir, true, &b, &mb, &tb, NULL);
+        bool fired = bf_fault_arm(0) == 0;
+        if (!fired) {
+            CHECK_OK(s);
+            points = k - 1;
+            break;
+        }
+        /* A fault the writer recovers from (an unreadable index at resume: it rewrites every chunk) ends well. */
+        if (s != BF_OK && s != BF_IO && s != BF_NO_MEMORY) {
+            fprintf(stderr, "  fault %u: %s: %s\n", k, bf_status_name(s), bf_last_error());
+            CHECK(false);
+        }
+        CHECK_EQ_INT(count_files(cd, ".tmp"), 0);
+        store_report rep;
+        CHECK_OK(store_read(dir, &back, &m2, &t2, &rep));
+        CHECK_EQ_INT(rep.n_bad, 0);
+        CHECK_EQ_INT(back.n_bricks, a.n_bricks);
+        CHECK(t2.n == 5 || t2.n == 9);
+        for (uint32_t i = 0; i < back.n_bricks; i++) {
+            bool found = false;
+            for (uint32_t j = 0; j < a.n_bricks && !found; j++)
+                found = !memcmp(&back.bricks[i], &a.bricks[j], sizeof a.bricks[j]) ||
+                        !memcmp(&back.bricks[i], &b.bricks[j], sizeof b.bricks[j]);
+            CHECK(found);
+        }
+        hostmap_free(&back);
+        bf_traj_free(&t2);
+    }
+    /* 4 chunks (write and fsync each), the trajectory and the index, the allocations. */
+    CHECK_LE(12, points);
+    hostmap_free(&a);
+    hostmap_free(&b);
+    bf_traj_free(&ta);
+    bf_traj_free(&tb);
+}
