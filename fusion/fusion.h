@@ -179,6 +179,15 @@ bf_status fusion_set_origin(fusion_map *map, bf_vec3 origin_w);
 /* Downloads every live brick into a host copy (hostmap/hostmap.h). */
 bf_status fusion_snapshot_take(fusion_map *map, hostmap *out);
 
+/* Loads a host copy of a map (a reopened scene store, store/) into this
+ * map, which must be empty (no frame uploaded, nothing loaded): every
+ * brick with its bits and error, in slots [0, n); the map's origin becomes
+ * in->origin_w. Loaded bricks belong to no window until a frame touches
+ * them. BF_INVALID_ARG for another chunk edge, a level above max_level or a
+ * brick given twice; BF_POOL_FULL when the pools cannot hold it. On failure
+ * the map is empty again. */
+bf_status fusion_load(fusion_map *map, const hostmap *in);
+
 /* Integrity check (SQLite's integrity_check): every hash entry, node and
  * brick is reachable exactly once, brick records agree with the nodes that
  * own them, counters agree with what is live. BF_NUMERIC with a message on

@@ -52,6 +52,7 @@ struct fusion_map {
     uint32_t incoming_index;  /* its bf_frame index, for messages */
     bool fuse_pending;        /* fusion_cmd_fuse recorded, fusion_finish_frame not yet run */
     bool pending_closes;      /* that frame closes a window: its count comes back in readback */
+    uint32_t n_loaded;        /* bricks loaded from a host copy (fusion_load) */
 
     double ms_upload, ms_alloc, ms_subcache, ms_window;
 };
@@ -64,6 +65,16 @@ typedef struct fusion_host_map {
 } fusion_host_map;
 bf_status fusion__host_map_load(fusion_map *map, fusion_host_map *h);
 void fusion__host_map_free(fusion_host_map *h);
+/* map.c: fills every buffer with the empty map's state (fusion_create). */
+bf_status fusion__reset(fusion_map *map);
+/* load.c: inserts a brick into the host copy h as the allocation kernel
+ * would (its chunk and nodes created as needed) and says its slot; a brick
+ * already there keeps its slot. BF_POOL_FULL when a pool ran out. */
+bf_status fusion__host_insert(const fusion_map *map, fusion_host_map *h, const int32_t key[3], uint32_t level,
+                              const uint32_t cell[3], uint32_t *slot);
+/* load.c: uploads the host copy's index structures (hash, nodes, brick
+ * records, counters, free stack). */
+bf_status fusion__host_map_store(fusion_map *map, const fusion_host_map *h);
 /* map.c: a binding set named name with bufs[i], whole, at binding i. */
 bf_status fusion__bindings_create(fusion_map *map, const char *name, gpu_buffer *const *bufs, uint32_t n,
                                   gpu_bindings **out);

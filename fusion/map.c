@@ -106,7 +106,7 @@ static bf_status create_buffers(fusion_map *m)
 
 /* Fills the pools with their empty state: no chunk, no node, every brick slot
  * on the free stack (slot 0 on top), empty frame slots. */
-static bf_status init_buffers(fusion_map *m)
+bf_status fusion__reset(fusion_map *m)
 {
     const fusion_config *c = &m->cfg;
     bf_status s;
@@ -165,7 +165,7 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     m->ring_slots = 2 * c.window;
     m->n_entries = c.hash_buckets * FUSION_BUCKET_SLOTS + c.hash_overflow;
     if ((s = create_buffers(m)) != BF_OK) goto fail;
-    if ((s = init_buffers(m)) != BF_OK) goto fail;
+    if ((s = fusion__reset(m)) != BF_OK) goto fail;
     if ((s = fusion__alloc_create(m)) != BF_OK) goto fail;
     if ((s = fusion__integrate_create(m)) != BF_OK) goto fail;
     if ((s = fusion__schedule_create(m)) != BF_OK) goto fail;
@@ -426,7 +426,7 @@ bf_status fusion_set_origin(fusion_map *m, bf_vec3 origin_w)
         return bf_fail(BF_INVALID_ARG, "fusion: map origin is not finite");
     /* Every GPU coordinate is relative to the origin: it may move only
      * while nothing has been placed. */
-    if (m->n_frames > 0 || m->has_incoming)
+    if (m->n_frames > 0 || m->has_incoming || m->n_loaded)
         return bf_fail(BF_INVALID_ARG, "fusion: the origin of a map with frames cannot move");
     m->origin_w = origin_w;
     return BF_OK;

@@ -7,6 +7,7 @@
 #include "fusion/fusion.h"
 #include "gpu_fixture.h"
 #include "shaders/fusion.glsl.h"
+#include "store/store.h"
 
 static const bf_intrinsics K_TEST = {160, 120, 130.0, 130.0, 79.5, 59.5, 5000};
 
@@ -299,6 +300,98 @@ BF_TEST(repeated_frames_allocate_nothing_new_and_stay_consistent)
     CHECK_EQ_INT(st2.n_nodes, st1.n_nodes);
     CHECK_EQ_INT(st2.n_frames, 9);
     free(depth);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* A host copy loaded into a new map (a reopened scene store) is the same
+ * map: the same bricks bit for bit at the same world places, reachable by
+ * the GPU's lookups (the same frame allocates nothing new there), and a
+ * load that does not fit leaves the map empty. */
+BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map, *map2, *tiny;
+    bf_vec3 origin = bf_v3(10.5, -3.0, 2000.25);
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, origin, &map));
+    uint16_t *depth = plane_depth(&K_TEST, 1.2);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    /* Two poses whose planes cross chunk boundaries (the origin is 0.5 m
+     * from one in x). */
+    bf_se3 T0 = bf_se3_identity(), T1 = bf_se3_identity();
+    T0.t = origin;
+    T1.t = bf_v3(origin.x + 0.7, origin.y + 0.2, origin.z - 0.1);
+    for (uint32_t i = 0; i < 6; i++) {
+        f.index = i;
+        CHECK_OK(fusion_add_frame(map, &f, i % 2 ? &T1 : &T0));
+    }
+    CHECK_OK(fusion_flush(map));
+    hostmap a = {0}, b = {0};
+    CHECK_OK(fusion_snapshot_take(map, &a));
+    fusion_stats sa, sb, sc;
+    CHECK_OK(fusion_get_stats(map, &sa));
+    CHECK(sa.n_chunks >= 2 && sa.n_confident_voxels > 0);
+
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map2));
+    CHECK_OK(fusion_load(map2, &a));
+    CHECK_OK(fusion_check(map2));
+    CHECK_OK(fusion_snapshot_take(map2, &b));
+    CHECK(b.origin_w.x == origin.x && b.origin_w.z == origin.z);
+    uint64_t da, db;
+    CHECK_OK(store_map_digest(&a, &da));
+    CHECK_OK(store_map_digest(&b, &db));
+    CHECK(da == db);
+    CHECK_OK(fusion_get_stats(map2, &sb));
+    CHECK_EQ_INT(sb.n_bricks, sa.n_bricks);
+    CHECK_EQ_INT(sb.n_chunks, sa.n_chunks);
+    CHECK_EQ_INT(sb.n_confident_voxels, sa.n_confident_voxels);
+    /* Neither a second load nor a new origin once loaded. */
+    CHECK_STATUS(fusion_load(map2, &a), BF_INVALID_ARG);
+    CHECK_STATUS(fusion_set_origin(map2, bf_v3(0, 0, 0)), BF_INVALID_ARG);
+    /* The loaded octree is the one the GPU finds: the same frame added to
+     * both maps gives bricks at the same places (their bits differ: the
+     * original's ring still holds its frames). */
+    f.index = 0;
+    CHECK_OK(fusion_add_frame(map2, &f, &T0));
+    f.index = 6;
+    CHECK_OK(fusion_add_frame(map, &f, &T0));
+    CHECK_OK(fusion_check(map2));
+    hostmap pa = {0}, pb = {0};
+    CHECK_OK(fusion_snapshot_take(map, &pa));
+    CHECK_OK(fusion_snapshot_take(map2, &pb));
+    CHECK_EQ_INT(pb.n_bricks, pa.n_bricks);
+    CHECK(pb.n_bricks > a.n_bricks);
+    for (uint32_t i = 0; i < pa.n_bricks; i++) {
+        memset(pa.bricks[i].sign, 0, sizeof pa.bricks[i].sign), memset(pa.bricks[i].conf, 0, sizeof pa.bricks[i].conf);
+        memset(pb.bricks[i].sign, 0, sizeof pb.bricks[i].sign), memset(pb.bricks[i].conf, 0, sizeof pb.bricks[i].conf);
+        pa.bricks[i].error = pb.bricks[i].error = 0;
+    }
+    CHECK_OK(store_map_digest(&pa, &da));
+    CHECK_OK(store_map_digest(&pb, &db));
+    CHECK(da == db);
+    hostmap_free(&pa);
+    hostmap_free(&pb);
+
+    /* Too small a pool: refused, and the map stays empty and whole. */
+    fusion_config ct = c;
+    ct.brick_cap = a.n_bricks / 2;
+    CHECK_OK(fusion_create(ctx, &ct, &K_TEST, bf_v3(0, 0, 0), &tiny));
+    CHECK_STATUS(fusion_load(tiny, &a), BF_POOL_FULL);
+    hostmap odd = a;
+    odd.chunk_m = 1.0f;
+    CHECK_STATUS(fusion_load(tiny, &odd), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("chunks");
+    CHECK_OK(fusion_check(tiny));
+    CHECK_OK(fusion_get_stats(tiny, &sc));
+    CHECK_EQ_INT(sc.n_bricks, 0);
+    hostmap_free(&a);
+    hostmap_free(&b);
+    free(depth);
+    fusion_destroy(tiny);
+    fusion_destroy(map2);
     fusion_destroy(map);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
