@@ -12,6 +12,7 @@
 #include "core/core.h"
 #include "fusion/fusion.h"
 #include "export/export.h"
+#include "store/store.h"
 
 /* Exit codes scripts can rely on (docs/cli.md). */
 enum {
@@ -112,6 +113,34 @@ bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, a
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
 /* The map's lines of the printed summary. */
 void app_print_map(const app_map_report *r, uint32_t max_level);
+
+/* store_io.c: the scene store in replay and live (--store, --resume). */
+struct recon_run;
+struct recon_resume_state;
+struct recon_config;
+typedef struct app_store {
+    const char *dir;
+    double every_s, last_s;     /* flush period (0: only at the end) and the last flush's time */
+    store_writer *writer;
+    bool is_resumed;            /* the scan goes on from the store's map, pose and trajectory */
+    hostmap map;                /* resumed: the map, meta, trajectory and report read */
+    store_meta meta;
+    bf_traj traj;
+    store_report report;
+    uint32_t flushes, skipped;  /* flushes handed to the writer; periods skipped while it was busy */
+    double ms_flush_max, ms_submit_max; /* the loop's cost of a flush (snapshot and hand-over) */
+    store_write_stats stats;    /* the writer's, at the end */
+} app_store;
+/* Opens dir for the scan; resume: reads it first (BF_FORMAT when it keeps no pose). */
+bf_status app_store_open(app_store *st, const char *dir, bool resume, double every_s);
+/* The runner's resume state from the store read; the loop takes the stored map's geometry. */
+void app_store_resume_config(app_store *st, struct recon_resume_state *rs, struct recon_config *loop);
+/* After each frame: a flush when the period has passed and the writer is free. */
+bf_status app_store_frame(app_store *st, struct recon_run *run, const bf_frame *f);
+/* The end of the scan (also after Ctrl-C): the final map, then waits for the writer. */
+bf_status app_store_finish(app_store *st, struct recon_run *run);
+void app_store_json(cJSON *parent, const app_store *st);
+void app_store_close(app_store *st);
 
 /* json.c: JSON through cJSON. Objects are built with cJSON's own calls;
  * NaN and infinities come out as null. */

@@ -56,10 +56,32 @@ typedef struct replay_args {
     uint32_t view_every;
     bool no_mesh;
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
+    const char *store;       /* keep the map in this scene store as the scan goes */
+    bool resume;             /* continue the scan kept in --store */
+    double store_every_s;    /* seconds between the store's flushes (0: only at the end) */
 } replay_args;
 
 #define LOOP_ROWS 22
 #define LIVE_ROWS 5
+#define STORE_ROWS 4
+
+/* The scene store (docs/formats.md, "Scene store"; docs/cli.md). */
+static void store_options(app_option rows[STORE_ROWS], replay_args *a)
+{
+    const app_option r[STORE_ROWS] = {
+        APP_OPT("--store", APP_OPT_STRING, &a->store, "STORE",
+                "keep the map in this scene store (a folder) as the scan goes: flushed every --store-every "
+                "seconds and at the end or at Ctrl-C", .no_default = true),
+        APP_OPT("--resume", APP_OPT_FLAG, &a->resume, NULL,
+                "reopen --store and continue its scan from its last pose and trajectory (frames of SEQUENCE up to "
+                "its last time are skipped)"),
+        APP_OPT("--store-every", APP_OPT_DOUBLE, &a->store_every_s, "S",
+                "seconds between flushes of the map into --store (0: only at the end); a kill loses at most the "
+                "work since the last one", .max = 3600),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
 static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
@@ -136,8 +158,9 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     memset(a, 0, sizeof *a);
     a->is_live_cmd = is_live_cmd;
     a->queue = 8;
+    a->store_every_s = 1.0;
     a->rcfg = recon_config_default();
-    app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS];
+    app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS];
     const app_option fuse_gt[] = {
         APP_OPT("--fuse-at-groundtruth", APP_OPT_FLAG, &a->fuse_at_gt, NULL,
                 "track every frame but fuse it at its true pose: the map is the one the sensor gives and the "
@@ -148,8 +171,9 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     live_options(dev, a);
     app_map_options(map, &a->rcfg.fusion);
     app_sequence_options(seq, &a->ropt);
-    const app_option *replay_tables[] = {own, fuse_gt, map, seq, NULL};
-    const app_option *live_tables[] = {dev, own, map, seq, NULL};
+    store_options(sto, a);
+    const app_option *replay_tables[] = {own, fuse_gt, sto, map, seq, NULL};
+    const app_option *live_tables[] = {dev, own, sto, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
         .tables = is_live_cmd ? live_tables : replay_tables, .positional = &a->seq,
@@ -157,6 +181,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         .positional_missing = "no sequence given", .epilog = is_live_cmd ? live_epilog : replay_epilog,
     };
     int rc = app_options_parse(&spec, argc, argv);
+    if (!rc && a->resume && !a->store) return app_usage_error(cmd, "--resume needs --store STORE");
+    if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
     return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
 }
 
@@ -170,6 +196,7 @@ typedef struct replay_result {
     double t_start_s;          /* bf_time_s() at the command's start */
     size_t cache_loaded_bytes; /* of the pipeline cache file */
     char device[256];
+    app_store store;           /* --store */
     bool has_capture;          /* live: the capture thread's counts */
     capture_thread_stats cap;
     uint32_t n_recorded;
@@ -237,6 +264,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r)
         cJSON_AddNumberToObject(cap, "recorded", r->n_recorded);
     }
     app_json_map(o, &r->out, a->rcfg.fusion.max_level);
+    app_store_json(o, &r->store);
     cJSON_AddNumberToObject(o, "views", r->n_views);
     json_startup(o, r);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
@@ -289,6 +317,7 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     if (s == BF_OK && k->a->view_every && (run->est.n - 1) % k->a->view_every == 0 &&
         (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
         k->r->n_views++;
+    if (s == BF_OK) s = app_store_frame(&k->r->store, run, f);
     return s;
 }
 
@@ -346,6 +375,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     } else {
         s = replay_open(a.seq, &a.ropt, &src);
     }
+    /* The store is read (to resume) or claimed before anything is made. */
+    if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
@@ -369,6 +400,11 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             .init_identity = a.init == 1, .keep_on_source_error = is_live_cmd, .name = a.seq,
             .label = cmd, .stop = stop,
         };
+        recon_resume_state rs;
+        if (r.store.is_resumed) {
+            app_store_resume_config(&r.store, &rs, &rcfg.loop);
+            rcfg.resume = &rs;
+        }
         replay_sink sink = {&a, csv, log, &r};
         s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
     }
@@ -383,6 +419,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
         s = replay_traj_write_tum(path, &r.run.est);
+    /* Then the store: the whole map at the end (or at Ctrl-C). */
+    if (s == BF_OK && a.store) s = app_store_finish(&r.store, &r.run);
     if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
     if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
     r.seconds = bf_time_s() - t_start;
@@ -392,6 +430,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
+    app_store_close(&r.store);
     recon_run_free(&r.run);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);

@@ -337,6 +337,22 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
     return BF_OK;
 }
 
+bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj)
+{
+    if (!r || !map || !T_last || !bf_se3_is_finite(T_last))
+        return bf_fail(BF_INVALID_ARG, "recon_resume: no map or no pose");
+    if (r->has_first || r->counts.frames) return bf_fail(BF_INVALID_ARG, "recon: a scan is resumed before its first frame");
+    bf_status s = fusion_load(r->map, map);
+    if (s != BF_OK) return s;
+    r->T_first = r->T_last = *T_last;
+    r->has_first = true;
+    r->good_index = last_index;
+    for (size_t i = 0; traj && r->keyframes && i < traj->n; i++) recon__add_keyframe(r, &traj->T_wc[i]);
+    recon_frame_result tmp;
+    memset(&tmp, 0, sizeof tmp);
+    return recon__cast_reference(r, T_last, &tmp);
+}
+
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc)
 {
     bf_status s = view_caster(r);

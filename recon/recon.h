@@ -146,6 +146,15 @@ bf_status recon_flush(recon *r);
  * BF_INVALID_ARG once a frame with depth was added; nothing changes then. */
 bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0);
 
+/* Continues a stored scan (a reopened scene store, store/): loads its map
+ * into the loop's empty map (fusion_load; the map's origin becomes the
+ * stored one), makes T_last the last good pose, the poses of traj (may be
+ * NULL) keyframes, and the ray-cast of the map at T_last the tracking
+ * reference, so that the next frame is tracked against the stored map
+ * rather than fused as a first frame. last_index is the stored scan's last
+ * frame index (the motion gate counts frame intervals from it). Before any
+ * frame: BF_INVALID_ARG after one; fusion_load's errors. */
+bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj);
 /* The map (made by recon_create; empty before the first frame with depth)
  * and the caster at the camera's size, for export, statistics and views
  * (NULL when it cannot be made; bf_last_error says why). */
@@ -185,6 +194,14 @@ typedef enum recon_pose_source {
                                  pool fails the run (the loop drops and counts instead) */
 } recon_pose_source;
 
+/* A stored scan to continue (recon_resume): borrowed for the run. */
+typedef struct recon_resume_state {
+    const hostmap *map;
+    bf_se3 T_last;             /* its last good pose */
+    double t_last_s;           /* the depth time of its last frame: the source's frames up to it are skipped */
+    const bf_traj *traj;       /* its poses so far: the run's estimates start with them; may be NULL */
+} recon_resume_state;
+
 typedef struct recon_run_config {
     recon_config loop;
     recon_pose_source poses;
@@ -195,6 +212,9 @@ typedef struct recon_run_config {
     const char *name;          /* the source in messages (its path or URI), default "sequence" */
     const char *label;         /* the progress line's and warnings' prefix, default "recon" */
     const volatile sig_atomic_t *stop; /* non-zero ends the run before the next frame; may be NULL */
+    const recon_resume_state *resume; /* continue a stored scan: frames of the source with a depth time up to
+                                         resume->t_last_s are skipped (their ground truth still counts); NULL:
+                                         a new scan. Not with RECON_POSES_KNOWN. */
 } recon_run_config;
 
 /* recon_config_default(), tracking, first pose from ground truth. */
@@ -215,6 +235,8 @@ typedef struct recon_run {
     fusion_map *map;     /* the map: the loop's, or the run's own with known poses; made before the first frame */
     recon_counts counts; /* the loop's counts; with known poses frames and pool_full only */
     uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
+    uint32_t n_resume_skipped; /* frames of the source the resumed scan had handled already */
+    bool is_resumed;     /* the run continues a stored scan (recon_run_config.resume) */
     bf_traj est;         /* one pose per frame handled: tracked, the last good one, or the known one */
     bf_traj gt;          /* the frames' ground truth, where they have it */
     recon_run_series series;

@@ -196,7 +196,7 @@ static recon_reloc_kind round_entry(const recon *r, uint32_t i, double n, bf_se3
 
 /* The map ray-cast at T_wc as the tracking reference, in a submission of
  * its own (nothing is fused). */
-static bf_status cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result *out)
+bf_status recon__cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result *out)
 {
     render_options ro = r->cfg.raycast;
     ro.no_shade = true;
@@ -282,7 +282,7 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
                                recon_reloc_kind kind, search_state *st, recon_frame_result *out)
 {
     track_result t;
-    bf_status s = cast_reference(r, T_c, out);
+    bf_status s = recon__cast_reference(r, T_c, out);
     if (s == BF_OK) s = track_frame_gpu(r->tracker, slot->depth, slot->offset, f->index, T_c, &t);
     if (s != BF_OK) return s;
     out->reloc_tried++;

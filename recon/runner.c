@@ -60,7 +60,10 @@ static bool known_pose(const recon_run_config *cfg, const bf_frame *f, bf_se3 *T
 }
 
 /* A frame fused (or tracked) so far: the run has a map worth keeping. */
-static bool has_fused(const recon_run *run) { return run->loop ? run->counts.tracked > 0 : run->n_fused > 0; }
+static bool has_fused(const recon_run *run)
+{
+    return run->is_resumed || (run->loop ? run->counts.tracked > 0 : run->n_fused > 0);
+}
 
 /* Fusion alone at a known pose: the map, made before the first frame, gets
  * its origin at the first posed frame. */
@@ -90,7 +93,7 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
                                      recon_frame_result *fr)
 {
     bf_status s;
-    if (run->counts.frames == 0 && !cfg->init_identity && f->has_pose &&
+    if (run->counts.frames == 0 && !cfg->init_identity && !cfg->resume && f->has_pose &&
         (s = recon_set_first_pose(run->loop, &f->T_wc)) != BF_OK)
         return s;
     if (cfg->poses == RECON_POSES_TRACK_FUSE_GT) {
@@ -184,6 +187,16 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
         s = recon_create(ctx, &cfg->loop, rgbd_source_intrinsics(src), &I, &run->loop);
         if (s == BF_OK) run->map = recon_map(run->loop);
     }
+    const recon_resume_state *rs = cfg->resume;
+    if (s == BF_OK && rs) {
+        if (cfg->poses == RECON_POSES_KNOWN)
+            return bf_fail(BF_INVALID_ARG, "%s: resuming a scan needs the loop (not fusion at known poses)", cfg->name);
+        uint32_t last = rs->traj && rs->traj->n ? (uint32_t)rs->traj->n - 1 : 0;
+        s = recon_resume(run->loop, rs->map, &rs->T_last, last, rs->traj);
+        run->is_resumed = s == BF_OK;
+        for (size_t i = 0; s == BF_OK && rs->traj && i < rs->traj->n; i++)
+            s = bf_traj_push(&run->est, rs->traj->t_s[i], &rs->traj->T_wc[i]);
+    }
     run->t_ready_s = bf_time_s();
     return s;
 }
@@ -207,7 +220,14 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
     uint32_t seen = 0;
     while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
-        bf_status sf = run_frame(&cfg, &f, on_frame, user, out);
+        bf_status sf;
+        if (cfg.resume && f.t_depth_s <= cfg.resume->t_last_s) {
+            /* The stored scan handled it: its pose is in the estimates already. */
+            out->n_resume_skipped++;
+            sf = f.has_pose ? bf_traj_push(&out->gt, f.t_depth_s, &f.T_wc) : BF_OK;
+        } else {
+            sf = run_frame(&cfg, &f, on_frame, user, out);
+        }
         if (sf != BF_OK) {
             bf_progress_end(&prog, seen);
             return sf;

@@ -1,0 +1,127 @@
+/* The scene store in the loop's commands (replay, live): reopening a
+ * stored scan to resume it, flushing the map into the store as the scan
+ * goes (every --store-every seconds, on the store's writer thread) and at
+ * the end, and the store's part of stats.json. */
+#include <math.h>
+#include <string.h>
+
+#include "app.h"
+#include "recon/recon.h"
+
+bf_status app_store_open(app_store *st, const char *dir, bool resume, double every_s)
+{
+    memset(st, 0, sizeof *st);
+    st->dir = dir;
+    st->every_s = every_s;
+    st->last_s = bf_time_s();
+    bf_status s = BF_OK;
+    if (resume) {
+        s = store_read(dir, &st->map, &st->meta, &st->traj, &st->report);
+        if (s == BF_OK && !st->meta.has_pose)
+            s = bf_fail(BF_FORMAT, "%s: the store keeps no last pose (no index and no trajectory): it can be exported, "
+                                   "not resumed", dir);
+        if (s == BF_OK) st->is_resumed = true;
+    }
+    if (s == BF_OK) s = store_writer_open(dir, resume, &st->writer);
+    if (s != BF_OK) app_store_close(st);
+    return s;
+}
+
+void app_store_resume_config(app_store *st, recon_resume_state *rs, recon_config *loop)
+{
+    rs->map = &st->map;
+    rs->T_last = st->meta.last_pose;
+    rs->t_last_s = st->meta.last_t_s;
+    rs->traj = &st->traj;
+    /* The stored map's geometry decides: a chunk edge or a finest level
+     * other than the one it was built with cannot hold its bricks. */
+    if (loop->fusion.chunk_m != st->meta.chunk_m || loop->fusion.max_level != st->meta.max_level)
+        bf_info("store: %s: resuming with its chunk edge %g m and finest level %u", st->dir, st->meta.chunk_m,
+                st->meta.max_level);
+    loop->fusion.chunk_m = st->meta.chunk_m;
+    loop->fusion.max_level = st->meta.max_level;
+}
+
+/* A snapshot of the run's map and where the scan stands, to the writer. */
+static bf_status flush(app_store *st, recon_run *run, double t_last_s)
+{
+    hostmap snap = {0};
+    bf_status s = fusion_snapshot_take(run->map, &snap);
+    if (s != BF_OK) return s;
+    const fusion_config *fc = fusion_get_config(run->map);
+    store_meta meta = {.chunk_m = fc->chunk_m, .max_level = fc->max_level, .origin_w = snap.origin_w,
+                       .frames = (uint32_t)run->est.n, .last_t_s = t_last_s};
+    /* The last estimate is the last good pose (a lost frame reports it). */
+    if (run->est.n) {
+        meta.has_pose = true;
+        meta.last_pose = run->est.T_wc[run->est.n - 1];
+    }
+    double t0 = bf_time_s();
+    s = store_writer_submit(st->writer, &snap, &meta, &run->est);
+    hostmap_free(&snap);
+    st->ms_submit_max = fmax(st->ms_submit_max, 1e3 * (bf_time_s() - t0));
+    st->flushes++;
+    st->last_s = bf_time_s();
+    return s;
+}
+
+bf_status app_store_frame(app_store *st, recon_run *run, const bf_frame *f)
+{
+    if (!st->writer || st->every_s <= 0 || bf_time_s() - st->last_s < st->every_s) return BF_OK;
+    if (store_writer_busy(st->writer)) {
+        st->skipped++; /* the last write is still going: the next frame tries again */
+        return BF_OK;
+    }
+    double t0 = bf_time_s();
+    bf_status s = flush(st, run, f->t_depth_s);
+    st->ms_flush_max = fmax(st->ms_flush_max, 1e3 * (bf_time_s() - t0));
+    return s;
+}
+
+bf_status app_store_finish(app_store *st, recon_run *run)
+{
+    if (!st->writer) return BF_OK;
+    double t_last = run->est.n ? run->est.t_s[run->est.n - 1] : 0;
+    bf_status s = run->map ? flush(st, run, t_last) : BF_OK;
+    bf_status f = store_writer_finish(st->writer);
+    st->stats = store_writer_stats(st->writer);
+    return s == BF_OK ? f : s;
+}
+
+void app_store_json(cJSON *parent, const app_store *st)
+{
+    if (!st->writer) {
+        cJSON_AddNullToObject(parent, "store");
+        return;
+    }
+    cJSON *o = app_json_object(parent, "store");
+    cJSON_AddStringToObject(o, "path", st->dir);
+    cJSON_AddBoolToObject(o, "resumed", st->is_resumed);
+    cJSON_AddNumberToObject(o, "flush_every_s", st->every_s);
+    cJSON_AddNumberToObject(o, "writes", st->stats.writes);
+    cJSON_AddNumberToObject(o, "writes_skipped_busy", st->skipped);
+    cJSON_AddNumberToObject(o, "chunks", st->stats.chunks);
+    cJSON_AddNumberToObject(o, "bricks", (double)st->stats.bricks);
+    cJSON_AddNumberToObject(o, "chunk_files_written", (double)st->stats.chunks_written);
+    cJSON_AddNumberToObject(o, "chunk_files_removed", (double)st->stats.chunks_removed);
+    cJSON_AddNumberToObject(o, "bytes_written", (double)st->stats.bytes_written);
+    cJSON_AddNumberToObject(o, "bytes_on_disk", (double)st->stats.bytes_on_disk);
+    cJSON_AddNumberToObject(o, "write_ms_max", st->stats.ms_max);
+    cJSON_AddNumberToObject(o, "write_ms_mean", st->stats.writes ? st->stats.ms_total / st->stats.writes : NAN);
+    cJSON_AddNumberToObject(o, "loop_flush_ms_max", st->ms_flush_max);
+    if (st->is_resumed) {
+        cJSON *r = app_json_object(o, "reopened");
+        cJSON_AddNumberToObject(r, "frames", st->meta.frames);
+        cJSON_AddNumberToObject(r, "chunks", st->report.n_chunks);
+        cJSON_AddNumberToObject(r, "bricks", st->report.n_bricks);
+        cJSON_AddNumberToObject(r, "bad_chunk_files", st->report.n_bad);
+    }
+}
+
+void app_store_close(app_store *st)
+{
+    store_writer_close(st->writer);
+    hostmap_free(&st->map);
+    bf_traj_free(&st->traj);
+    st->writer = NULL;
+}
