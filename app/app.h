@@ -107,6 +107,8 @@ typedef struct app_map_report {
     fusion_stats map;
     export_stats mesh, points;
 } app_map_report;
+/* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
+uint32_t app_mesh_level(const hostmap *snap);
 /* Fills r->map, writes out_dir/points.ply and, with_mesh, out_dir/mesh.ply. */
 bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r);
 /* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
@@ -194,6 +196,9 @@ int cmd_replay(int argc, char **argv);
 int cmd_eval_traj(int argc, char **argv);
 int cmd_eval_surface(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
+int cmd_export(int argc, char **argv);
+/* cmd_export.c: bitfuse info on a scene store. */
+int app_info_store(const char *dir, bool json);
 int cmd_info(int argc, char **argv);
 int cmd_record(int argc, char **argv);
 int cmd_convert(int argc, char **argv);

@@ -9,10 +9,12 @@
 #include "replay/replay.h"
 
 static const char info_usage[] =
-    "usage: bitfuse info SEQUENCE [options] [--json]\n\n"
+    "usage: bitfuse info SEQUENCE|STORE [options] [--json]\n\n"
     "Reads every frame of a TUM RGB-D, ICL-NUIM or pose-per-frame folder and prints\n"
     "its kind, intrinsics, frame count, time span, share of pixels with depth,\n"
-    "depth range (min/median/max, metres), ground truth and skipped frames.\n";
+    "depth range (min/median/max, metres), ground truth and skipped frames.\n"
+    "Of a scene store (replay|live --store): chunks, bricks per level, bytes on disk,\n"
+    "extent, frames, the last pose and any damage found (bad or missing chunk files).\n";
 
 /* What one pass over the sequence gathers. The depth histogram has one bin
  * per raw value, so the median is exact without keeping any frame. */
@@ -76,6 +78,7 @@ int cmd_info(int argc, char **argv)
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (store_exists(path)) return app_info_store(path, is_json);
 
     rgbd_source *src = NULL;
     info_stats st = {0};

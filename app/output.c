@@ -13,7 +13,7 @@
  * the bricks. A handful of bricks at a finer level (a sample that came very
  * close) must not put the whole room on their lattice, which would multiply
  * the triangles by 4 per level; their detail is averaged onto this one. */
-static uint32_t mesh_level(const hostmap *snap)
+uint32_t app_mesh_level(const hostmap *snap)
 {
     uint32_t per_level[32] = {0};
     for (uint32_t i = 0; i < snap->n_bricks; i++) per_level[snap->bricks[i].level & 31]++;
@@ -35,7 +35,7 @@ bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, a
     mesh_data mesh = {0}, pts = {0};
     if (with_mesh) {
         export_mesh_config mcfg = export_mesh_config_default();
-        mcfg.max_level = mesh_level(&snap);
+        mcfg.max_level = app_mesh_level(&snap);
         s = export_mesh(&snap, &mcfg, &mesh, &r->mesh);
         if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "mesh.ply")) == BF_OK)
             s = mesh_write_ply(path, &mesh);

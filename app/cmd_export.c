@@ -1,0 +1,166 @@
+/* bitfuse export: the mesh or the surface points of a scene store, without
+ * the loop (and without a GPU: the store is read into a host copy); and
+ * bitfuse info on a store. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "app.h"
+#include "mesh/mesh.h"
+
+static const char export_usage[] =
+    "usage: bitfuse export STORE --out FILE [--points] [--mesh-level L] [--json]\n\n"
+    "Reads the scene store STORE (bitfuse replay|live --store) and writes the triangle\n"
+    "mesh of its confident surface (marching cubes, as replay's mesh.ply) or, with\n"
+    "--points, its surface voxel centres with normals (as points.ply), as binary PLY.\n"
+    "A corrupt chunk file is reported by name and left out; the rest is exported.\n";
+
+static const char export_epilog[] =
+    "exit codes: 0 ok (also with chunk files left out: they are warned about), 1 failure,\n"
+    "2 usage, 3 no readable store\n";
+
+/* Reads a store, warning about what it left out. */
+static bf_status read_store(const char *dir, hostmap *m, store_meta *meta, bf_traj *traj, store_report *rep)
+{
+    bf_status s = store_read(dir, m, meta, traj, rep);
+    if (s == BF_IO && !store_exists(dir)) s = BF_FORMAT; /* not a store: bad input, not an I/O failure */
+    if (s == BF_OK && rep->n_bad)
+        bf_warn("export: %s: %u chunk file(s) left out, the first: %s", dir, rep->n_bad, rep->first_bad);
+    return s;
+}
+
+int cmd_export(int argc, char **argv)
+{
+    const char *cmd = "export", *dir = NULL, *out = NULL;
+    bool points = false, json = false;
+    uint32_t level = UINT32_MAX;
+    const app_option own[] = {
+        APP_OPT("--out", APP_OPT_STRING, &out, "FILE", "the PLY file to write", .required = true),
+        APP_OPT("--points", APP_OPT_FLAG, &points, NULL, "write the surface points instead of the mesh"),
+        APP_OPT("--mesh-level", APP_OPT_U32, &level, "L",
+                "the mesh lattice's octree level (default: the finest level holding a tenth of the bricks)", .max = 8,
+                .no_default = true),
+        APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "print what was written as JSON"),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {
+        .name = cmd, .usage = export_usage, .tables = tables, .positional = &dir, .min_positional = 1,
+        .max_positional = 1, .positional_missing = "no store given", .epilog = export_epilog,
+    };
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    double t0 = bf_time_s();
+    hostmap m = {0};
+    store_meta meta;
+    store_report rep;
+    mesh_data data = {0};
+    export_stats st = {0};
+    bf_status s = read_store(dir, &m, &meta, NULL, &rep);
+    if (s == BF_OK && points) {
+        s = export_points(&m, &data, &st);
+    } else if (s == BF_OK) {
+        export_mesh_config mc = export_mesh_config_default();
+        mc.max_level = level != UINT32_MAX ? level : app_mesh_level(&m);
+        s = export_mesh(&m, &mc, &data, &st);
+    }
+    if (s == BF_OK) s = mesh_write_ply(out, &data);
+    double secs = bf_time_s() - t0;
+    if (s == BF_OK && json) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "store", dir);
+        cJSON_AddStringToObject(o, "out", out);
+        cJSON_AddStringToObject(o, "what", points ? "points" : "mesh");
+        cJSON_AddNumberToObject(o, "chunks", rep.n_chunks);
+        cJSON_AddNumberToObject(o, "bricks", rep.n_bricks);
+        cJSON_AddNumberToObject(o, "chunk_files_left_out", rep.n_bad);
+        cJSON_AddNumberToObject(o, "vertices", (double)data.n_verts);
+        cJSON_AddNumberToObject(o, "triangles", (double)data.n_tris);
+        cJSON_AddNumberToObject(o, "seconds", secs);
+        s = app_json_print(o);
+    } else if (s == BF_OK) {
+        printf("bitfuse export: %s (%u chunks, %u bricks%s) -> %s: %llu %s in %.1f s\n", dir, rep.n_chunks, rep.n_bricks,
+               rep.n_bad ? ", some chunk files left out" : "", out,
+               (unsigned long long)(points ? data.n_verts : data.n_tris), points ? "points" : "triangles", secs);
+    }
+    mesh_free(&data);
+    hostmap_free(&m);
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
+}
+
+/* ------------------------------------------------------------ info */
+
+int app_info_store(const char *dir, bool json)
+{
+    hostmap m = {0};
+    store_meta meta;
+    store_report rep;
+    bf_traj traj = {0};
+    bf_status s = read_store(dir, &m, &meta, &traj, &rep);
+    if (s != BF_OK) return app_fail("info", s);
+    uint32_t per_level[9] = {0};
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = 0; i < m.n_bricks; i++) {
+        const hostmap_brick *b = &m.bricks[i];
+        per_level[b->level < 9 ? b->level : 8]++;
+        double edge = hostmap_level_voxel_m(m.chunk_m, b->level) * 8;
+        double c[3] = {m.origin_w.x + b->key[0] * (double)m.chunk_m + b->cell[0] * edge,
+                       m.origin_w.y + b->key[1] * (double)m.chunk_m + b->cell[1] * edge,
+                       m.origin_w.z + b->key[2] * (double)m.chunk_m + b->cell[2] * edge};
+        for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], c[k]), hi[k] = fmax(hi[k], c[k] + edge);
+    }
+    double raw = (double)m.n_bricks * 2 * 64;
+    if (json) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "kind", "bitfuse-store");
+        cJSON_AddStringToObject(o, "path", dir);
+        cJSON_AddNumberToObject(o, "version", STORE_VERSION);
+        cJSON_AddNumberToObject(o, "chunks", rep.n_chunks);
+        cJSON_AddNumberToObject(o, "bricks", rep.n_bricks);
+        cJSON *pl = cJSON_AddArrayToObject(o, "bricks_per_level");
+        for (uint32_t l = 0; l <= meta.max_level && l < 9; l++) cJSON_AddItemToArray(pl, cJSON_CreateNumber(per_level[l]));
+        cJSON_AddNumberToObject(o, "bytes_on_disk", (double)rep.bytes_files);
+        cJSON_AddNumberToObject(o, "bytes_bit_planes", raw);
+        cJSON_AddNumberToObject(o, "chunk_m", meta.chunk_m);
+        cJSON_AddNumberToObject(o, "max_level", meta.max_level);
+        if (m.n_bricks) {
+            app_json_numbers(o, "extent_min_m", lo, 3);
+            app_json_numbers(o, "extent_max_m", hi, 3);
+        }
+        cJSON_AddNumberToObject(o, "frames", meta.frames);
+        if (meta.has_pose) {
+            bf_quat q = bf_quat_from_mat(meta.last_pose.R);
+            double p[8] = {meta.last_t_s, meta.last_pose.t.x, meta.last_pose.t.y, meta.last_pose.t.z, q.x, q.y, q.z, q.w};
+            app_json_numbers(o, "last_pose_tum", p, 8);
+        }
+        cJSON_AddNumberToObject(o, "flush", rep.flush);
+        cJSON_AddBoolToObject(o, "index_ok", rep.index_ok);
+        cJSON_AddBoolToObject(o, "trajectory_ok", rep.trajectory_ok);
+        cJSON_AddNumberToObject(o, "bad_chunk_files", rep.n_bad);
+        cJSON_AddNumberToObject(o, "missing_chunks", rep.n_missing);
+        cJSON_AddNumberToObject(o, "unindexed_chunks", rep.n_unindexed);
+        s = app_json_print(o);
+    } else {
+        printf("%s: bitfuse scene store, version %u, %u writes\n", dir, STORE_VERSION, rep.flush);
+        printf("  chunks           %u (%g m), %u bricks:", rep.n_chunks, meta.chunk_m, rep.n_bricks);
+        for (uint32_t l = 0; l < 9; l++)
+            if (per_level[l]) printf("  L%u:%u", l, per_level[l]);
+        printf("\n  bytes            %.2f MiB on disk (bit planes %.2f MiB, %.1fx)\n", rep.bytes_files / 1048576.0,
+               raw / 1048576.0, rep.bytes_files ? raw / rep.bytes_files : 0.0);
+        if (m.n_bricks)
+            printf("  extent           (%.2f, %.2f, %.2f) to (%.2f, %.2f, %.2f) m, %.1f x %.1f x %.1f m\n", lo[0], lo[1],
+                   lo[2], hi[0], hi[1], hi[2], hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+        printf("  frames           %u\n", meta.frames);
+        if (meta.has_pose) {
+            bf_quat q = bf_quat_from_mat(meta.last_pose.R);
+            printf("  last pose        %.6f %.4f %.4f %.4f %.4f %.4f %.4f %.4f (TUM)\n", meta.last_t_s, meta.last_pose.t.x,
+                   meta.last_pose.t.y, meta.last_pose.t.z, q.x, q.y, q.z, q.w);
+        }
+        if (!rep.index_ok || !rep.trajectory_ok || rep.n_bad || rep.n_missing)
+            printf("  damage           index %s, trajectory %s, %u bad chunk files, %u chunks missing\n",
+                   rep.index_ok ? "ok" : "unreadable", rep.trajectory_ok ? "ok" : "unreadable", rep.n_bad, rep.n_missing);
+    }
+    hostmap_free(&m);
+    bf_traj_free(&traj);
+    return s == BF_OK ? APP_EXIT_OK : app_fail("info", s);
+}
