@@ -464,8 +464,11 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
     free(names);
     free(seen);
     free(idx);
-    if (s == BF_OK && !rep.index_ok && !rep.trajectory_ok && rep.n_chunks == 0)
-        s = bf_fail(BF_FORMAT, "%s: nothing readable: no index, no trajectory, no valid chunk file", dir);
+    /* A store whose writer never finished a write (killed at once) is an
+     * empty store; one whose every file is bad is not a store any more. */
+    if (s == BF_OK && !rep.index_ok && !rep.trajectory_ok && rep.n_chunks == 0 && rep.n_bad > 0)
+        s = bf_fail(BF_FORMAT, "%s: nothing readable: no index, no trajectory, and every chunk file is bad (%s)", dir,
+                    rep.first_bad);
     if (s == BF_OK && !rep.index_ok) {
         m.chunk_m = geo.known ? geo.chunk_m : 2.0f;
         m.origin_w = (bf_vec3){geo.origin[0], geo.origin[1], geo.origin[2]};

@@ -63,8 +63,10 @@ bool store_exists(const char *dir);
  * geometry and last pose into *meta, the trajectory into *traj (may be
  * NULL). A bad chunk file is skipped with a warning naming it; BF_IO when
  * dir is not a readable store, BF_FORMAT when nothing in it is usable
- * (no index, no trajectory and no valid chunk), BF_UNSUPPORTED for a newer
- * version. Outputs are written only on success. */
+ * (no index, no trajectory and only bad chunk files), BF_UNSUPPORTED for a
+ * newer version. A store whose writer was killed before its first write is
+ * empty (no bricks, meta.has_pose false). Outputs are written only on
+ * success. */
 bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *traj, store_report *rep);
 
 /* xxHash (XXH3, 64 bits) of a map's contents in the canonical order above:

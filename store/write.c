@@ -1,5 +1,6 @@
 /* The store's writer: a thread that writes host copies of the map, one
  * chunk file per changed chunk, then the trajectory and the index. */
+#include <dirent.h>
 #include <errno.h>
 #include <math.h>
 #include <pthread.h>
@@ -287,6 +288,24 @@ static bf_status error_of(store_writer *w)
 
 /* ------------------------------------------------------------ public */
 
+/* Temp files a killed writer left (never read: the reader takes *.bfc only). */
+static void remove_temp_files(store_writer *w)
+{
+    const char *dirs[2] = {w->dir, w->chunk_dir};
+    char path[4600];
+    for (int k = 0; k < 2; k++) {
+        DIR *d = opendir(dirs[k]);
+        struct dirent *e;
+        while (d && (e = readdir(d))) {
+            size_t n = strlen(e->d_name);
+            if (n < 5 || strcmp(e->d_name + n - 4, ".tmp") != 0) continue;
+            snprintf(path, sizeof path, "%s/%s", dirs[k], e->d_name);
+            unlink(path);
+        }
+        if (d) closedir(d);
+    }
+}
+
 bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
 {
     if (!dir || !out) return bf_fail(BF_INVALID_ARG, "store_writer_open: NULL argument");
@@ -304,6 +323,7 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
     snprintf(w->chunk_dir, sizeof w->chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
     bf_status s = bf_mkdir_p(w->chunk_dir);
     if (s == BF_OK) s = store__sync_dir(dir);
+    if (s == BF_OK && resume) remove_temp_files(w);
     if (s == BF_OK && resume) {
         /* Only the digests matter here: a missing or stale index makes the
          * first write rewrite every chunk, which is always right. */

@@ -1,0 +1,143 @@
+#!/usr/bin/env bash
+# The scene store as a user meets it: replay --store, info, export, a
+# corrupt chunk file, resuming in two halves, kill -9 at 20 random moments
+# (the store reopens, exports and resumes every time), and a full disk.
+# Usage: test_store.sh path/to/bitfuse
+set -u
+B=$1
+T=$(mktemp -d)
+trap 'umount "$T/tiny" 2>/dev/null; rm -rf "$T"' EXIT
+fails=0
+fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
+expect() {
+    local want=$1
+    shift
+    "$@" >"$T/out" 2>"$T/err"
+    local rc=$?
+    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
+}
+mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
+json_get() { python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
+command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+export BITFUSE_PROGRESS=0
+
+# A 60-frame synthetic sequence, 2 s at 30 Hz: a slow sideways move and turn.
+python3 - "$T/traj.txt" <<'PY'
+import sys, math
+with open(sys.argv[1], "w") as f:
+    for i in range(70):
+        a = 0.003 * i
+        f.write("%.6f %.6f 0 0 0 %.6f 0 %.6f\n" % (1305031098.6659 + i / 30.0, 0.004 * i, math.sin(a / 2), math.cos(a / 2)))
+PY
+mkdir "$T/nodata"
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 60 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+    --data "$T/nodata" --noise none --out "$T/seq"
+SEQ="$T/seq"
+
+# One uninterrupted scan into a store.
+expect 0 "$B" replay "$SEQ" --out "$T/full" --no-mesh --store "$T/S"
+[ -f "$T/S/store.json" ] && [ -f "$T/S/trajectory.bin" ] || fail "the store has no index or trajectory"
+writes=$(json_get "$T/full/stats.json" "d['store']['writes']")
+[ "${writes:-0}" -ge 1 ] || fail "stats.json store.writes is '$writes'"
+expect 0 "$B" info "$T/S" --json
+json_get "$T/out" "d['frames']" | grep -qx 60 || fail "info: frames is not 60: $(head -c 300 "$T/out")"
+chunks=$(json_get "$T/out" "d['chunks']")
+bricks=$(json_get "$T/out" "d['bricks']")
+mapb=$(json_get "$T/full/stats.json" "d['bricks']")
+[ "$bricks" = "$mapb" ] || fail "the store holds $bricks bricks, the scan's map $mapb"
+expect 0 "$B" info "$T/S"
+grep -q "last pose" "$T/out" || fail "info does not print the last pose"
+
+# export: a mesh and the points, without the loop.
+expect 0 "$B" export "$T/S" --out "$T/m.ply"
+head -c 400 "$T/m.ply" | grep -aq "element face [1-9]" || fail "export wrote no mesh"
+expect 0 "$B" export "$T/S" --out "$T/p.ply" --points --json
+pts=$(json_get "$T/out" "d['vertices']")
+ref=$(head -c 300 "$T/full/points.ply" | awk '/element vertex/ {print $3}')
+[ "$pts" = "$ref" ] || fail "export --points wrote $pts points, replay's points.ply $ref"
+
+# Usage: a second scan into a used store, --resume without --store, no store at all.
+expect 2 "$B" replay "$SEQ" --out "$T/x" --store "$T/S"
+mentions "--resume"
+expect 2 "$B" replay "$SEQ" --out "$T/x" --resume
+expect 3 "$B" export "$T/nothing" --out "$T/x.ply"
+expect 2 "$B" export "$T/S"
+
+# A corrupt chunk file is named, left out, and the rest still exports.
+cp -r "$T/S" "$T/C"
+f=$(ls "$T/C/chunks" | head -n 1)
+printf 'XXXX' | dd of="$T/C/chunks/$f" bs=1 seek=120 conv=notrunc 2>/dev/null
+expect 0 "$B" info "$T/C" --json
+mentions "$f"
+[ "$(json_get "$T/out" "d['bad_chunk_files']")" = 1 ] || fail "info: bad_chunk_files is not 1"
+[ "$(json_get "$T/out" "d['chunks']")" = $((chunks - 1)) ] || fail "info: the other chunks were not loaded"
+expect 0 "$B" export "$T/C" --out "$T/c.ply" --points
+mentions "$f"
+
+# Resume: the scan in two halves ends within tracking tolerance of the
+# uninterrupted one (both start at the true pose; noise-free frames).
+expect 0 "$B" replay "$SEQ" --out "$T/h1" --no-mesh --frames 30 --store "$T/H"
+expect 0 "$B" replay "$SEQ" --out "$T/h2" --no-mesh --store "$T/H" --resume
+[ "$(grep -vc '^#' "$T/h2/trajectory.txt")" = 60 ] || fail "the resumed scan's trajectory has not 60 poses"
+[ "$(json_get "$T/h2/stats.json" "d['frames']")" = 30 ] || fail "the resumed scan did not skip the 30 stored frames"
+python3 - "$T/full/stats.json" "$T/h2/stats.json" <<'PY' || fail "resumed ATE too far from the uninterrupted one"
+import json, sys
+a = json.load(open(sys.argv[1]))["ate_m"]["rmse"]
+b = json.load(open(sys.argv[2]))["ate_m"]["rmse"]
+# Tracking tolerance: the loop's own error on these frames is a few mm; a
+# resume that lost the map would be centimetres off.
+ok = b <= max(2 * a, a + 0.003)
+print("ATE uninterrupted %.4f m, two halves %.4f m" % (a, b))
+sys.exit(0 if ok else 1)
+PY
+
+# kill -9 at random moments of a scan with --store: every time the store
+# reopens (info), exports, and the next run resumes it; at the end one run
+# finishes the scan.
+K="$T/K"
+kills=0
+for i in $(seq 1 60); do
+    [ "$kills" -ge 22 ] && break
+    extra=""
+    [ -d "$K" ] && extra="--resume"
+    "$B" replay "$SEQ" --out "$T/k$i" --no-mesh --store "$K" --store-every 0.1 $extra >"$T/k.log" 2>&1 &
+    pid=$!
+    sleep "$(python3 -c "import random; print(round(random.uniform(0.2, 2.0), 2))")"
+    if kill -9 "$pid" 2>/dev/null; then
+        kills=$((kills + 1))
+        wait "$pid" 2>/dev/null
+    else
+        wait "$pid" || fail "run $i of the kill test failed: $(tail -c 300 "$T/k.log")"
+        rm -rf "$K" # it finished: the next runs start a new scan to kill
+        continue
+    fi
+    [ -d "$K" ] || continue # killed before the store was made
+    expect 0 "$B" info "$K" --json || true
+    if [ -f "$T/out" ] && ! json_get "$T/out" "d['bad_chunk_files']" | grep -qx 0; then
+        fail "kill $i: the store has bad chunk files"
+    fi
+    expect 0 "$B" export "$K" --out "$T/k.ply" --points
+done
+[ "$kills" -ge 20 ] || fail "only $kills of the runs were killed mid-scan (the scan is too short?)"
+expect 0 "$B" replay "$SEQ" --out "$T/kend" --no-mesh --store "$K" --resume
+[ "$(grep -vc '^#' "$T/kend/trajectory.txt")" = 60 ] || fail "after the kills the scan does not end with 60 poses"
+echo "kill -9: $kills kills, the store reopened and exported after each"
+
+# A full disk: a tiny tmpfs (root only) ends the scan with an error naming
+# the store's file, and what the store holds still reads.
+mkdir "$T/tiny"
+if mount -t tmpfs -o size=48k tmpfs "$T/tiny" 2>/dev/null; then
+    expect 3 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S"
+    mentions "No space left on device"
+    mentions "$T/tiny/S"
+    expect 0 "$B" info "$T/tiny/S"
+    umount "$T/tiny"
+else
+    echo "full disk: skipped (no tmpfs mount here; the injected ENOSPC of test_store covers it)"
+fi
+
+if [ "$fails" -gt 0 ]; then
+    echo "$fails failure(s)"
+    exit 1
+fi
+echo "test_store.sh: all passed"
