@@ -188,6 +188,27 @@ bf_status fusion_snapshot_take(fusion_map *map, hostmap *out);
  * the map is empty again. */
 bf_status fusion_load(fusion_map *map, const hostmap *in);
 
+/* ------------------------------------------------------------ streaming
+ * Chunks out of the pools and back (stream/ decides which; DESIGN.md
+ * section 1). Both run between frames, on the host, through a full host
+ * copy of the index structures that is rebuilt compactly, so they cost tens
+ * of milliseconds: for a few calls per window, not per frame. */
+
+/* The keys of the chunks resident in the pools (*keys malloc'd). */
+bf_status fusion_chunk_keys(fusion_map *map, int32_t (**keys)[3], uint32_t *n);
+/* Moves the chunks keys[0..n) out of the pools into *out (bricks with
+ * their bits and error; *out is replaced, the caller frees it) and gives
+ * their bricks, nodes and hash entries back. A chunk with a brick a window
+ * still has to integrate (stamped by the pending window or later) stays, as
+ * does a key that is not resident; *n_evicted counts the chunks moved. */
+bf_status fusion_evict_chunks(fusion_map *map, const int32_t (*keys)[3], uint32_t n, hostmap *out,
+                              uint32_t *n_evicted);
+/* Puts bricks (evicted earlier, same chunk edge and origin) back into the
+ * pools. A brick the map made anew meanwhile keeps its confident voxels;
+ * the stored ones fill in where it has none. BF_POOL_FULL (nothing
+ * inserted) when the free slots do not suffice. */
+bf_status fusion_insert_bricks(fusion_map *map, const hostmap *in);
+
 /* Integrity check (SQLite's integrity_check): every hash entry, node and
  * brick is reachable exactly once, brick records agree with the nodes that
  * own them, counters agree with what is live. BF_NUMERIC with a message on

@@ -72,6 +72,8 @@ bf_status fusion__reset(fusion_map *map);
  * already there keeps its slot. BF_POOL_FULL when a pool ran out. */
 bf_status fusion__host_insert(const fusion_map *map, fusion_host_map *h, const int32_t key[3], uint32_t level,
                               const uint32_t cell[3], uint32_t *slot);
+/* load.c: a new chunk's hash entry and root node in h. */
+bf_status fusion__host_insert_chunk(const fusion_map *map, fusion_host_map *h, const int32_t key[3], uint32_t *entry);
 /* load.c: uploads the host copy's index structures (hash, nodes, brick
  * records, counters, free stack). */
 bf_status fusion__host_map_store(fusion_map *map, const fusion_host_map *h);

@@ -18,7 +18,7 @@ static bf_status host_alloc_nodes(const fusion_map *m, fusion_host_map *h, uint3
 
 /* A new chunk's hash entry (Niessner et al. 2013's buckets and overflow
  * list, as the allocation kernel inserts) and its root node. */
-static bf_status host_insert_chunk(const fusion_map *m, fusion_host_map *h, const int32_t key[3], uint32_t *entry)
+bf_status fusion__host_insert_chunk(const fusion_map *m, fusion_host_map *h, const int32_t key[3], uint32_t *entry)
 {
     uint32_t bucket = fusion_hash(key[0], key[1], key[2], m->cfg.hash_buckets), e = FUSION_NONE;
     for (uint32_t k = 0; k < FUSION_BUCKET_SLOTS && e == FUSION_NONE; k++)
@@ -53,7 +53,7 @@ bf_status fusion__host_insert(const fusion_map *m, fusion_host_map *h, const int
         return bf_fail(BF_INVALID_ARG, "fusion: cell (%u,%u,%u) outside level %u (max %u)", cell[0], cell[1], cell[2],
                        level, m->cfg.max_level);
     uint32_t entry = fusion_find_chunk(h->hash, key[0], key[1], key[2], m->cfg.hash_buckets, m->cfg.hash_overflow);
-    bf_status s = entry == FUSION_NONE ? host_insert_chunk(m, h, key, &entry) : BF_OK;
+    bf_status s = entry == FUSION_NONE ? fusion__host_insert_chunk(m, h, key, &entry) : BF_OK;
     uint32_t node = s == BF_OK ? h->hash[(size_t)entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT] : 0;
     for (uint32_t l = 1; s == BF_OK && l <= level; l++) {
         uint32_t sh = level - l;

@@ -396,3 +396,85 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
+
+/* Streaming's two moves: chunks evicted into a host copy leave a smaller,
+ * consistent map (nodes and hash entries given back), chunks a window
+ * still needs stay, and the evicted bricks inserted back give the map it
+ * was, bit for bit. */
+BF_TEST(evicted_chunks_come_back_bit_for_bit)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
+    uint16_t *depth = plane_depth(&K_TEST, 1.2);
+    bf_frame f = make_frame(&K_TEST, depth, 0);
+    bf_se3 A = bf_se3_identity(), Bp = bf_se3_identity();
+    Bp.t = bf_v3(10.0, 0.3, 0.0); /* chunks 5 away in x */
+    for (uint32_t i = 0; i < 12; i++) {
+        f.index = i;
+        CHECK_OK(fusion_add_frame(map, &f, i < 4 ? &A : &Bp));
+    }
+    CHECK_OK(fusion_flush(map));
+    hostmap s0 = {0}, s1 = {0}, s2 = {0}, ev = {0}, none = {0};
+    fusion_stats st0, st1;
+    CHECK_OK(fusion_snapshot_take(map, &s0));
+    CHECK_OK(fusion_get_stats(map, &st0));
+    int32_t(*keys)[3] = NULL;
+    uint32_t nk = 0, n_near = 0, n_far = 0, n_ev = 0;
+    CHECK_OK(fusion_chunk_keys(map, &keys, &nk));
+    CHECK_EQ_INT(nk, st0.n_chunks);
+    int32_t near[16][3], far[16][3];
+    for (uint32_t i = 0; i < nk && i < 16; i++) {
+        if (keys[i][0] < 3) memcpy(near[n_near++], keys[i], sizeof near[0]);
+        else memcpy(far[n_far++], keys[i], sizeof far[0]);
+    }
+    free(keys);
+    CHECK(n_near >= 1 && n_far >= 1);
+    /* The chunks of the last frames are in the last window: they stay. */
+    CHECK_OK(fusion_evict_chunks(map, (const int32_t(*)[3])far, n_far, &none, &n_ev));
+    CHECK_EQ_INT(n_ev, 0);
+    CHECK_EQ_INT(none.n_bricks, 0);
+    hostmap_free(&none);
+    /* The first frames' chunks go. */
+    CHECK_OK(fusion_evict_chunks(map, (const int32_t(*)[3])near, n_near, &ev, &n_ev));
+    CHECK_EQ_INT(n_ev, n_near);
+    CHECK(ev.n_bricks > 0);
+    CHECK_OK(fusion_check(map));
+    CHECK_OK(fusion_get_stats(map, &st1));
+    CHECK_EQ_INT(st1.n_chunks, st0.n_chunks - n_near);
+    CHECK_EQ_INT(st1.n_bricks + ev.n_bricks, st0.n_bricks);
+    CHECK(st1.n_nodes < st0.n_nodes);
+    /* What stayed plus what left is what was. */
+    CHECK_OK(fusion_snapshot_take(map, &s1));
+    hostmap both = s1;
+    both.n_bricks = s1.n_bricks + ev.n_bricks;
+    both.bricks = malloc(both.n_bricks * sizeof *both.bricks);
+    CHECK(both.bricks != NULL);
+    memcpy(both.bricks, s1.bricks, s1.n_bricks * sizeof *both.bricks);
+    memcpy(both.bricks + s1.n_bricks, ev.bricks, ev.n_bricks * sizeof *both.bricks);
+    uint64_t d0, d1, d2;
+    CHECK_OK(store_map_digest(&s0, &d0));
+    CHECK_OK(store_map_digest(&both, &d1));
+    CHECK(d0 == d1);
+    /* Back in, the map is the one it was. */
+    CHECK_OK(fusion_insert_bricks(map, &ev));
+    CHECK_OK(fusion_check(map));
+    CHECK_OK(fusion_snapshot_take(map, &s2));
+    CHECK_OK(store_map_digest(&s2, &d2));
+    CHECK(d0 == d2);
+    /* And it goes on fusing. */
+    f.index = 12;
+    CHECK_OK(fusion_add_frame(map, &f, &A));
+    CHECK_OK(fusion_check(map));
+    hostmap_free(&s0);
+    hostmap_free(&s1);
+    hostmap_free(&s2);
+    hostmap_free(&ev);
+    hostmap_free(&both);
+    free(depth);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
