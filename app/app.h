@@ -109,8 +109,10 @@ typedef struct app_map_report {
 } app_map_report;
 /* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
 uint32_t app_mesh_level(const hostmap *snap);
-/* Fills r->map, writes out_dir/points.ply and, with_mesh, out_dir/mesh.ply. */
-bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r);
+/* Fills r->map (the pools' statistics), writes out_dir/points.ply and,
+ * with_mesh, out_dir/mesh.ply of whole (taken; a streamed map's every
+ * chunk: recon_snapshot) or, when whole is NULL, of the pools' snapshot. */
+bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, bool with_mesh, app_map_report *r);
 /* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
 /* The map's lines of the printed summary. */

@@ -115,7 +115,7 @@ int cmd_fuse(int argc, char **argv)
         rcfg.label = cmd;
         s = recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run);
     }
-    if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
+    if (s == BF_OK) s = app_export_map(r.run.map, NULL, a.out, !a.no_mesh, &r.out);
     r.seconds = bf_time_s() - t_start;
     if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
     if (s == BF_OK) {

@@ -59,11 +59,39 @@ typedef struct replay_args {
     const char *store;       /* keep the map in this scene store as the scan goes */
     bool resume;             /* continue the scan kept in --store */
     double store_every_s;    /* seconds between the store's flushes (0: only at the end) */
+    double gpu_budget_mib;   /* the pools' bytes (0: --bricks decides) */
+    double cache_budget_mib; /* the streaming cache's bytes */
 } replay_args;
 
 #define LOOP_ROWS 22
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
+#define STREAM_ROWS 5
+
+/* Bytes of the pools per brick: sign and confidence planes, its record,
+ * stamp and free-stack entry, and three octree nodes (a scan holds 2.2-2.4
+ * nodes a brick: docs/streaming.md). */
+#define NODES_PER_BRICK 3
+#define BYTES_PER_BRICK (2 * 64 + 16 + 4 + 4 + NODES_PER_BRICK * 8)
+
+/* Chunk streaming (stream/stream.h, DESIGN.md section 1). */
+static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
+{
+    stream_config *sc = &a->rcfg.stream;
+    const app_option r[STREAM_ROWS] = {
+        APP_OPT("--gpu-budget", APP_OPT_DOUBLE, &a->gpu_budget_mib, "MIB",
+                "bytes of the GPU map pools in MiB (bricks, nodes, records; 176 bytes a brick); chunks beyond it "
+                "stream out (default: --bricks)", .min = 0.1, .no_default = true),
+        APP_OPT("--cache-budget", APP_OPT_DOUBLE, &a->cache_budget_mib, "MIB",
+                "bytes of the CPU cache of chunks streamed out of the GPU, in MiB; beyond it they go to disk", .min = 1),
+        APP_OPT("--stream", APP_OPT_CHOICE, &sc->enabled, "on|off",
+                "stream chunks out of the GPU pools beyond --stream-radius (or when the pools fill) and back"),
+        APP_OPT("--stream-radius", APP_OPT_FLOAT, &sc->radius_m, "M",
+                "chunks within M metres of the camera stay in the pools or come back", .min_open = true),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
 
 /* The scene store (docs/formats.md, "Scene store"; docs/cli.md). */
 static void store_options(app_option rows[STORE_ROWS], replay_args *a)
@@ -159,8 +187,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     a->is_live_cmd = is_live_cmd;
     a->queue = 8;
     a->store_every_s = 1.0;
+    a->cache_budget_mib = 256;
     a->rcfg = recon_config_default();
-    app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS];
+    app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS],
+        stm[STREAM_ROWS];
     const app_option fuse_gt[] = {
         APP_OPT("--fuse-at-groundtruth", APP_OPT_FLAG, &a->fuse_at_gt, NULL,
                 "track every frame but fuse it at its true pose: the map is the one the sensor gives and the "
@@ -172,8 +202,9 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     app_map_options(map, &a->rcfg.fusion);
     app_sequence_options(seq, &a->ropt);
     store_options(sto, a);
-    const app_option *replay_tables[] = {own, fuse_gt, sto, map, seq, NULL};
-    const app_option *live_tables[] = {dev, own, sto, map, seq, NULL};
+    stream_options(stm, a);
+    const app_option *replay_tables[] = {own, fuse_gt, sto, stm, map, seq, NULL};
+    const app_option *live_tables[] = {dev, own, sto, stm, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
         .tables = is_live_cmd ? live_tables : replay_tables, .positional = &a->seq,
@@ -182,6 +213,13 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->resume && !a->store) return app_usage_error(cmd, "--resume needs --store STORE");
+    if (!rc && a->gpu_budget_mib > 0) {
+        double bricks = floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK);
+        if (bricks < 1024) return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
+        a->rcfg.fusion.brick_cap = bricks > (1u << 26) ? (1u << 26) : (uint32_t)bricks;
+        a->rcfg.fusion.node_cap = NODES_PER_BRICK * a->rcfg.fusion.brick_cap;
+    }
+    a->rcfg.stream.cache_bytes = (uint64_t)(a->cache_budget_mib * 1048576.0);
     if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
     return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
 }
@@ -214,6 +252,36 @@ static void json_startup(cJSON *o, const replay_result *r)
     cJSON_AddNumberToObject(st, "first_frame_done_s", first);
     cJSON_AddNumberToObject(st, "first_frame_ms", r->run.t_first_done_s ? r->run.first_frame_ms : NAN);
     cJSON_AddNumberToObject(st, "pipeline_cache_loaded_bytes", (double)r->cache_loaded_bytes);
+}
+
+/* Chunk streaming (stream/): what moved, the memory of each tier. */
+static void json_stream(cJSON *o, const replay_args *a, const replay_result *r)
+{
+    if (!a->rcfg.stream.enabled || !r->run.loop) {
+        cJSON_AddNullToObject(o, "stream");
+        return;
+    }
+    stream_stats st = recon_stream_stats(r->run.loop);
+    cJSON *s = app_json_object(o, "stream");
+    cJSON_AddNumberToObject(s, "pool_bricks", a->rcfg.fusion.brick_cap);
+    cJSON_AddNumberToObject(s, "pool_bytes", (double)a->rcfg.fusion.brick_cap * BYTES_PER_BRICK);
+    cJSON_AddNumberToObject(s, "checks", st.checks);
+    cJSON_AddNumberToObject(s, "pressure_checks", st.pressure_checks);
+    cJSON_AddNumberToObject(s, "compactions", st.compactions);
+    cJSON_AddNumberToObject(s, "loads_deferred", st.loads_deferred);
+    cJSON_AddNumberToObject(s, "chunks_resident", st.resident);
+    cJSON_AddNumberToObject(s, "chunks_cached", st.cached);
+    cJSON_AddNumberToObject(s, "chunks_on_disk", st.on_disk);
+    cJSON_AddNumberToObject(s, "chunks_out", (double)st.chunks_out);
+    cJSON_AddNumberToObject(s, "chunks_in", (double)st.chunks_in);
+    cJSON_AddNumberToObject(s, "bricks_out", (double)st.bricks_out);
+    cJSON_AddNumberToObject(s, "bricks_in", (double)st.bricks_in);
+    cJSON_AddNumberToObject(s, "chunks_to_disk", (double)st.to_disk);
+    cJSON_AddNumberToObject(s, "chunks_from_disk", (double)st.from_disk);
+    cJSON_AddNumberToObject(s, "cache_bytes_max", (double)st.cache_bytes_max);
+    cJSON_AddNumberToObject(s, "disk_bytes", (double)st.disk_bytes);
+    cJSON_AddNumberToObject(s, "move_ms_max", st.ms_max);
+    cJSON_AddNumberToObject(s, "move_ms_total", st.ms_total);
 }
 
 static cJSON *stats_json(const replay_args *a, const replay_result *r)
@@ -265,6 +333,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r)
     }
     app_json_map(o, &r->out, a->rcfg.fusion.max_level);
     app_store_json(o, &r->store);
+    json_stream(o, a, r);
     cJSON_AddNumberToObject(o, "views", r->n_views);
     json_startup(o, r);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
@@ -422,7 +491,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* Then the store: the whole map at the end (or at Ctrl-C). */
     if (s == BF_OK && a.store) s = app_store_finish(&r.store, &r.run);
     if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
-    if (s == BF_OK) s = app_export_map(r.run.map, a.out, !a.no_mesh, &r.out);
+    hostmap whole = {0};
+    if (s == BF_OK && r.run.loop) s = recon_snapshot(r.run.loop, &whole);
+    if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, !a.no_mesh, &r.out);
+    hostmap_free(&whole);
     r.seconds = bf_time_s() - t_start;
     if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);

@@ -52,7 +52,8 @@ int cmd_synth(int argc, char **argv)
     const char *data_dir = NULL, *camera = NULL, *size = NULL;
     int noise = SYNTH_NOISE_KINECT1;
     const app_option own[] = {
-        APP_OPT("--scene", APP_OPT_STRING, &cfg.scene, "room|MESH.ply", "procedural room or one mesh"),
+        APP_OPT("--scene", APP_OPT_STRING, &cfg.scene, "room|rooms:N|MESH.ply",
+                "procedural room, a row of N procedural rooms joined by doorways (4 m each along x), or one mesh"),
         APP_OPT("--trajectory", APP_OPT_STRING, &cfg.traj_path, "FILE",
                 "TUM trajectory the camera follows; it is moved rigidly so its first pose looks at the scene",
                 .required = true),

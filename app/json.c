@@ -176,6 +176,14 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     add_float(rl, "check_band_m", c->reloc.check_band_m);
     add_float(rl, "max_front_frac", c->reloc.max_front_frac);
     cJSON_AddBoolToObject(l, "has_views", c->has_views);
+    cJSON *sm = app_json_object(l, "stream");
+    cJSON_AddBoolToObject(sm, "enabled", c->stream.enabled);
+    add_float(sm, "radius_m", c->stream.radius_m);
+    add_float(sm, "hysteresis_m", c->stream.hysteresis_m);
+    cJSON_AddNumberToObject(sm, "every_frames", c->stream.every_frames);
+    cJSON_AddNumberToObject(sm, "max_chunks", c->stream.max_chunks);
+    add_float(sm, "high_water", c->stream.high_water);
+    cJSON_AddNumberToObject(sm, "cache_bytes", (double)c->stream.cache_bytes);
     cJSON *r = app_json_object(l, "raycast");
     cJSON_AddBoolToObject(r, "confident_only", c->raycast.confident_only);
     cJSON_AddBoolToObject(r, "refine", c->raycast.refine);

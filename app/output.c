@@ -25,12 +25,13 @@ uint32_t app_mesh_level(const hostmap *snap)
     return 0;
 }
 
-bf_status app_export_map(fusion_map *map, const char *out_dir, bool with_mesh, app_map_report *r)
+bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, bool with_mesh, app_map_report *r)
 {
     char path[4096];
-    hostmap snap;
+    hostmap snap = {0};
     bf_status s = fusion_get_stats(map, &r->map);
-    if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
+    if (s == BF_OK && whole) snap = *whole, memset(whole, 0, sizeof *whole);
+    else if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
     if (s != BF_OK) return s;
     mesh_data mesh = {0}, pts = {0};
     if (with_mesh) {

@@ -49,7 +49,7 @@ void app_store_resume_config(app_store *st, recon_resume_state *rs, recon_config
 static bf_status flush(app_store *st, recon_run *run, double t_last_s)
 {
     hostmap snap = {0};
-    bf_status s = fusion_snapshot_take(run->map, &snap);
+    bf_status s = run->loop ? recon_snapshot(run->loop, &snap) : fusion_snapshot_take(run->map, &snap);
     if (s != BF_OK) return s;
     const fusion_config *fc = fusion_get_config(run->map);
     store_meta meta = {.chunk_m = fc->chunk_m, .max_level = fc->max_level, .origin_w = snap.origin_w,

@@ -59,11 +59,23 @@ static bf_status host_all_load(fusion_map *m, host_all *a, uint32_t extra)
  * highest slot now live). */
 static bf_status host_all_store(fusion_map *m, const host_all *a, uint32_t high)
 {
+    m->use.bricks = a->h.counters[FUSION_CNT_BRICKS];
+    m->use.nodes = a->h.counters[FUSION_CNT_NODES];
+    m->use.overflow = a->h.counters[FUSION_CNT_OVERFLOW];
     bf_status s = fusion__host_map_store(m, &a->h);
     if (s == BF_OK) s = gpu_buffer_upload(m->stamp, 0, a->stamp, (uint64_t)m->cfg.brick_cap * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->sign, 0, a->sign, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, a->conf, (uint64_t)high * BRICK_WORDS * 4);
     return s;
+}
+
+fusion_pool_use fusion_pool_usage(const fusion_map *m)
+{
+    fusion_pool_use u = m->use;
+    u.brick_cap = m->cfg.brick_cap;
+    u.node_cap = m->cfg.node_cap;
+    u.overflow_cap = m->cfg.hash_overflow;
+    return u;
 }
 
 bf_status fusion_chunk_keys(fusion_map *m, int32_t (**keys)[3], uint32_t *n)
@@ -243,6 +255,23 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
     out->bricks = bricks;
     *n_evicted = n_chunks;
     return BF_OK;
+}
+
+bf_status fusion_compact(fusion_map *m)
+{
+    if (!m) return bf_fail(BF_INVALID_ARG, "fusion_compact: NULL map");
+    if (m->fuse_pending) return bf_fail(BF_INVALID_ARG, "fusion: compaction while a frame's fusion is pending");
+    host_all a;
+    bf_status s = host_all_load(m, &a, 0);
+    if (s != BF_OK) return s;
+    bool *keep = bf_malloc(m->n_entries);
+    if (!keep) s = bf_fail(BF_NO_MEMORY, "fusion: compaction");
+    if (s == BF_OK) memset(keep, 1, m->n_entries);
+    if (s == BF_OK) s = rebuild(m, &a, keep);
+    if (s == BF_OK) s = host_all_store(m, &a, a.high);
+    free(keep);
+    host_all_free(&a);
+    return s;
 }
 
 bf_status fusion_insert_bricks(fusion_map *m, const hostmap *in)

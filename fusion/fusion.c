@@ -263,6 +263,9 @@ bf_status fusion_finish_frame(fusion_map *m)
     const uint32_t *rb = gpu_buffer_map(m->readback);
     if (!rb) return bf_fail(BF_VULKAN, "fusion: readback buffer is not mapped");
     if (m->pending_closes) m->window_count = rb[FUSION_CNT_WORDS];
+    m->use.bricks = rb[FUSION_CNT_BRICKS];
+    m->use.nodes = rb[FUSION_CNT_NODES];
+    m->use.overflow = rb[FUSION_CNT_OVERFLOW];
     uint32_t index = m->n_frames++;
     return check_pools(m, rb, index);
 }

@@ -194,6 +194,14 @@ bf_status fusion_load(fusion_map *map, const hostmap *in);
  * copy of the index structures that is rebuilt compactly, so they cost tens
  * of milliseconds: for a few calls per window, not per frame. */
 
+/* How full the pools are, as of the last finished frame, load or
+ * streaming move (read back with the frame: no download). */
+typedef struct fusion_pool_use {
+    uint32_t bricks, brick_cap;
+    uint32_t nodes, node_cap;     /* the node pool is a bump allocator: only a rebuild (eviction) compacts it */
+    uint32_t overflow, overflow_cap;
+} fusion_pool_use;
+fusion_pool_use fusion_pool_usage(const fusion_map *map);
 /* The keys of the chunks resident in the pools (*keys malloc'd). */
 bf_status fusion_chunk_keys(fusion_map *map, int32_t (**keys)[3], uint32_t *n);
 /* Moves the chunks keys[0..n) out of the pools into *out (bricks with
@@ -203,6 +211,10 @@ bf_status fusion_chunk_keys(fusion_map *map, int32_t (**keys)[3], uint32_t *n);
  * does a key that is not resident; *n_evicted counts the chunks moved. */
 bf_status fusion_evict_chunks(fusion_map *map, const int32_t (*keys)[3], uint32_t n, hostmap *out,
                               uint32_t *n_evicted);
+/* Rebuilds the index of the resident chunks compactly: the node pool is a
+ * bump allocator and bricks removed as empty leave their nodes behind, so
+ * a long scan in small pools runs out of nodes before bricks. */
+bf_status fusion_compact(fusion_map *map);
 /* Puts bricks (evicted earlier, same chunk edge and origin) back into the
  * pools. A brick the map made anew meanwhile keeps its confident voxels;
  * the stored ones fill in where it has none. BF_POOL_FULL (nothing

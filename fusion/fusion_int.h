@@ -53,6 +53,7 @@ struct fusion_map {
     bool fuse_pending;        /* fusion_cmd_fuse recorded, fusion_finish_frame not yet run */
     bool pending_closes;      /* that frame closes a window: its count comes back in readback */
     uint32_t n_loaded;        /* bricks loaded from a host copy (fusion_load) */
+    fusion_pool_use use;      /* as of the last finished frame or streaming move */
 
     double ms_upload, ms_alloc, ms_subcache, ms_window;
 };

@@ -134,7 +134,12 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     if (s == BF_OK) s = fusion__host_map_store(m, &h);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->sign, 0, sign, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, conf, (uint64_t)high * BRICK_WORDS * 4);
-    if (s == BF_OK) m->n_loaded = (uint32_t)n;
+    if (s == BF_OK) {
+        m->n_loaded = (uint32_t)n;
+        m->use.bricks = h.counters[FUSION_CNT_BRICKS];
+        m->use.nodes = h.counters[FUSION_CNT_NODES];
+        m->use.overflow = h.counters[FUSION_CNT_OVERFLOW];
+    }
     free(sign);
     free(conf);
     fusion__host_map_free(&h);

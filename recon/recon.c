@@ -24,6 +24,7 @@ recon_config recon_config_default(void)
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
         .start_at_frame = true,
+        .stream = stream_config_default(),
         /* Four candidates a lost frame: the last pose, the continued motion
          * and two from the round robin; each costs a reference ray-cast and
          * an ICP (docs/tracking.md, relocalisation). The margins: a right
@@ -118,6 +119,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
      * this returns must not wait for it (docs/tracking.md, start-up). */
     if (s == BF_OK) s = fusion_create(ctx, &r->cfg.fusion, K, r->T_first.t, &r->map);
     if (s == BF_OK && r->cfg.has_views) s = view_caster(r);
+    if (s == BF_OK && r->cfg.stream.enabled) s = stream_create(&r->cfg.stream, r->map, NULL, &r->stream);
     if (s != BF_OK) {
         recon_destroy(r);
         return s;
@@ -130,6 +132,7 @@ void recon_destroy(recon *r)
 {
     if (!r) return;
     track_destroy(r->tracker);
+    stream_destroy(r->stream);
     if (r->caster != r->ref_caster) render_destroy(r->caster);
     render_destroy(r->ref_caster);
     fusion_destroy(r->map);
@@ -310,6 +313,12 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         s = track_and_fuse(r, f, known, out);
     }
     out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
+    /* Far chunks out, near ones in, between frames (stream.h). */
+    if (s == BF_OK && out->fused && r->stream) {
+        double ts = bf_time_s();
+        s = stream_update(r->stream, &r->T_last, f->index, false);
+        out->ms_stream = 1e3 * (bf_time_s() - ts);
+    }
     out->ms_frame = 1e3 * (bf_time_s() - t0);
     return s;
 }
@@ -342,7 +351,21 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
     if (!r || !map || !T_last || !bf_se3_is_finite(T_last))
         return bf_fail(BF_INVALID_ARG, "recon_resume: no map or no pose");
     if (r->has_first || r->counts.frames) return bf_fail(BF_INVALID_ARG, "recon: a scan is resumed before its first frame");
-    bf_status s = fusion_load(r->map, map);
+    bf_status s;
+    if (r->stream) {
+        /* The stored map may exceed the pools: it goes to the stream's
+         * cache, and the chunks near the last pose come in at once. */
+        hostmap copy = *map;
+        copy.bricks = map->n_bricks ? bf_malloc((size_t)map->n_bricks * sizeof *copy.bricks) : NULL;
+        if (map->n_bricks && !copy.bricks) return bf_fail(BF_NO_MEMORY, "recon: resuming %u bricks", map->n_bricks);
+        if (map->n_bricks) memcpy(copy.bricks, map->bricks, (size_t)map->n_bricks * sizeof *copy.bricks);
+        s = fusion_set_origin(r->map, map->origin_w);
+        if (s == BF_OK) s = stream_adopt(r->stream, &copy);
+        hostmap_free(&copy);
+        if (s == BF_OK) s = stream_update(r->stream, T_last, last_index, true);
+    } else {
+        s = fusion_load(r->map, map);
+    }
     if (s != BF_OK) return s;
     r->T_first = r->T_last = *T_last;
     r->has_first = true;
@@ -351,6 +374,18 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
     recon_frame_result tmp;
     memset(&tmp, 0, sizeof tmp);
     return recon__cast_reference(r, T_last, &tmp);
+}
+
+bf_status recon_snapshot(recon *r, hostmap *out)
+{
+    return r->stream ? stream_gather(r->stream, out) : fusion_snapshot_take(r->map, out);
+}
+
+stream_stats recon_stream_stats(const recon *r)
+{
+    stream_stats z;
+    memset(&z, 0, sizeof z);
+    return r->stream ? stream_get_stats(r->stream) : z;
 }
 
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc)

@@ -28,6 +28,7 @@
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
 #include "render/render.h"
+#include "stream/stream.h"
 #include "tracking/tracking.h"
 
 typedef struct recon recon; /* opaque */
@@ -66,6 +67,8 @@ typedef struct recon_config {
     bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
                                  last pose (docs/real_frames.md, the guess); default false */
     recon_reloc_config reloc;
+    stream_config stream;     /* chunks out of the GPU pools and back (stream.h): on by default; far chunks leave
+                                 only beyond its radius or when the pools fill */
     bool start_at_frame;      /* the reference's rays start just in front of the frame's depth (the first frame's
                                  too: track_cmd_frame), default true */
     bool has_views;           /* views at the camera's size will be asked for (recon_render_view): their caster is
@@ -115,6 +118,7 @@ typedef struct recon_frame_result {
     /* Times [ms]: wall clock of the whole frame and GPU time per stage. */
     double ms_frame;
     double ms_track, ms_rof, ms_raycast;
+    double ms_stream;        /* the streaming check after the frame (wall clock; 0 when not due) */
     fusion_stage_ms fuse;
 } recon_frame_result;
 
@@ -155,6 +159,11 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0);
  * frame index (the motion gate counts frame intervals from it). Before any
  * frame: BF_INVALID_ARG after one; fusion_load's errors. */
 bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj);
+/* The whole map as a host copy (for export and the scene store): the
+ * pools' bricks and those streamed out of them. */
+bf_status recon_snapshot(recon *r, hostmap *out);
+/* The streaming counts (zero when streaming is off). */
+stream_stats recon_stream_stats(const recon *r);
 /* The map (made by recon_create; empty before the first frame with depth)
  * and the caster at the camera's size, for export, statistics and views
  * (NULL when it cannot be made; bf_last_error says why). */

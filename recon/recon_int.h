@@ -18,6 +18,7 @@ struct recon {
     render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at create (has_views)
                                   or at the first view */
     track_tracker *tracker;
+    stream *stream;      /* cfg.stream.enabled: the map's chunks in and out of the pools */
     recon_counts counts;
 
     /* Relocalisation (reloc.c). */

@@ -352,6 +352,28 @@ static bf_status read_chunk(const char *path, const int32_t key[3], geometry *ge
     return s;
 }
 
+bf_status store_get_chunk(const char *dir, const int32_t key[3], const store_meta *meta, hostmap *out, uint64_t *bytes)
+{
+    if (!dir || !key || !meta || !out) return bf_fail(BF_INVALID_ARG, "store_get_chunk: NULL argument");
+    char name[96], path[4400];
+    store__chunk_name(name, sizeof name, key);
+    snprintf(path, sizeof path, "%s/%s/%s", dir, STORE_CHUNK_DIR, name);
+    geometry geo = {true, meta->chunk_m, {meta->origin_w.x, meta->origin_w.y, meta->origin_w.z}, meta->max_level};
+    brick_list l = {0};
+    uint64_t b = 0, raw = 0;
+    bf_status s = read_chunk(path, key, &geo, &l, &b, &raw);
+    if (s != BF_OK) {
+        free(l.b);
+        return s;
+    }
+    out->chunk_m = meta->chunk_m;
+    out->origin_w = meta->origin_w;
+    out->n_bricks = l.n;
+    out->bricks = l.b;
+    if (bytes) *bytes = b;
+    return BF_OK;
+}
+
 static int name_cmp(const void *a, const void *b) { return strcmp(*(char *const *)a, *(char *const *)b); }
 
 /* The chunk files' names in dir/chunks, sorted (*names malloc'd). */

@@ -69,6 +69,15 @@ bool store_exists(const char *dir);
  * success. */
 bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *traj, store_report *rep);
 
+/* Single chunk files in dir/chunks, without index or trajectory: a
+ * streaming tier on disk (stream/). store_put_chunks writes one file per
+ * chunk of m (sorted in place), each atomically (no folder fsync: a spill
+ * is not kept across runs), and adds their bytes to *bytes (may be NULL).
+ * store_get_chunk reads chunk key's file (checked as store_read checks it)
+ * into *out (replaced); BF_IO when it is absent. */
+bf_status store_put_chunks(const char *dir, hostmap *m, const store_meta *meta, uint64_t *bytes);
+bf_status store_get_chunk(const char *dir, const int32_t key[3], const store_meta *meta, hostmap *out, uint64_t *bytes);
+
 /* xxHash (XXH3, 64 bits) of a map's contents in the canonical order above:
  * equal for equal maps whatever the order of their bricks (stats.json's
  * map_digest). */

@@ -42,7 +42,7 @@ struct store_writer {
 
 /* ------------------------------------------------------------ one write */
 
-static bf_status write_chunk(store_writer *w, const hostmap *m, const store_group *g, const store_meta *meta,
+static bf_status write_chunk(const char *chunk_dir, const hostmap *m, const store_group *g, const store_meta *meta,
                              uint64_t *file_bytes)
 {
     size_t raw = (size_t)g->n * STORE_RECORD_BYTES, cap = ZSTD_compressBound(raw);
@@ -56,7 +56,7 @@ static bf_status write_chunk(store_writer *w, const hostmap *m, const store_grou
     }
     char name[96], path[4400];
     store__chunk_name(name, sizeof name, g->key);
-    snprintf(path, sizeof path, "%s/%s", w->chunk_dir, name);
+    snprintf(path, sizeof path, "%s/%s", chunk_dir, name);
     if (s == BF_OK) {
         store_chunk_header h;
         memset(&h, 0, sizeof h);
@@ -199,7 +199,7 @@ static bf_status write_map(store_writer *w, store_job *job)
             e[i].file_bytes = old->file_bytes;
             continue;
         }
-        s = write_chunk(w, &job->map, &g[i], &job->meta, &e[i].file_bytes);
+        s = write_chunk(w->chunk_dir, &job->map, &g[i], &job->meta, &e[i].file_bytes);
         if (s == BF_OK) written++, w->work.bytes_written += e[i].file_bytes;
     }
     if (s == BF_OK && written) s = store__sync_dir(w->chunk_dir);
@@ -243,6 +243,27 @@ static void job_free(store_job *j)
     hostmap_free(&j->map);
     bf_traj_free(&j->traj);
     memset(j, 0, sizeof *j);
+}
+
+bf_status store_put_chunks(const char *dir, hostmap *m, const store_meta *meta, uint64_t *bytes)
+{
+    if (!dir || !m || !meta) return bf_fail(BF_INVALID_ARG, "store_put_chunks: NULL argument");
+    char chunk_dir[4200];
+    snprintf(chunk_dir, sizeof chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
+    bf_status s = bf_mkdir_p(chunk_dir);
+    store__sort(m);
+    store_group *g = NULL;
+    uint32_t n = 0;
+    uint64_t total = 0;
+    if (s == BF_OK) s = store__groups(m, &g, &n);
+    for (uint32_t i = 0; s == BF_OK && i < n; i++) {
+        uint64_t b = 0;
+        s = write_chunk(chunk_dir, m, &g[i], meta, &b);
+        total += b;
+    }
+    free(g);
+    if (s == BF_OK && bytes) *bytes = total;
+    return s;
 }
 
 /* ------------------------------------------------------------ the thread */

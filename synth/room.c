@@ -408,6 +408,73 @@ bf_status synth_scene_room(const char *data_dir, synth_scene *out)
     return s;
 }
 
+/* A number in [0, 1) from (room, item): the rooms' furniture varies, the
+ * same every time. */
+static double room_rand(int room, int item) { return hash01(room, item, 7, 0x524f4f4d53ull); }
+
+bf_status synth_scene_rooms(uint32_t n, synth_scene *out)
+{
+    if (n < 1 || n > 64) return bf_fail(BF_INVALID_ARG, "synth: rooms:%u: 1 to 64 rooms", n);
+    builder b = {0};
+    const double L = 4.0, W = 3.5, H = 2.5, door_w = 1.6, door_h = 2.3, wall = 0.1;
+    /* One long box, then a partition with a doorway between neighbours. */
+    add_box(&b, bf_v3(-2, -W / 2, 0), bf_v3(-2 + n * L, W / 2, H), SYNTH_MAT_WALL, 0, true, false);
+    for (uint32_t r = 0; r < n; r++) {
+        double x0 = -2 + r * L;
+        if (r > 0) {
+            /* Doorways alternate to either side of the middle line, which
+             * passes through all of them while no view runs down the row. */
+            double dy = r % 2 ? 0.6 : -0.6;
+            add_box(&b, bf_v3(x0 - wall / 2, -W / 2, 0), bf_v3(x0 + wall / 2, dy - door_w / 2, H), SYNTH_MAT_WALL,
+                    (uint8_t)(r % 4), false, true);
+            add_box(&b, bf_v3(x0 - wall / 2, dy + door_w / 2, 0), bf_v3(x0 + wall / 2, W / 2, H), SYNTH_MAT_WALL,
+                    (uint8_t)(r % 4), false, true);
+            add_box(&b, bf_v3(x0 - wall / 2, dy - door_w / 2, door_h), bf_v3(x0 + wall / 2, dy + door_w / 2, H),
+                    SYNTH_MAT_WALL, (uint8_t)(r % 4), false, true);
+        }
+        /* A table against one side wall and boxes along both, away from the
+         * middle of the room so a walk through the doorways stays clear. */
+        double side = room_rand(r, 1) < 0.5 ? -1 : 1;
+        double tx = x0 + 1.0 + 1.6 * room_rand(r, 2), ty = side * (W / 2 - 0.5);
+        add_box(&b, bf_v3(tx - 0.6, ty - 0.35, TABLE_TOP_Z - 0.04), bf_v3(tx + 0.6, ty + 0.35, TABLE_TOP_Z),
+                SYNTH_MAT_TABLE, 0, false, false);
+        for (int k = 0; k < 4; k++) {
+            double lx = k & 1 ? tx + 0.5 : tx - 0.55, ly = k & 2 ? ty + 0.25 : ty - 0.3;
+            add_box(&b, bf_v3(lx, ly, 0), bf_v3(lx + 0.05, ly + 0.05, TABLE_TOP_Z - 0.04), SYNTH_MAT_TABLE, 0, false,
+                    true);
+        }
+        for (int k = 0; k < 4; k++) {
+            double bx = x0 + 0.4 + 3.0 * room_rand(r, 10 + k), by = (k & 1 ? 1 : -1) * (W / 2 - 0.3);
+            double sx = 0.2 + 0.3 * room_rand(r, 20 + k), sz = 0.2 + 0.8 * room_rand(r, 30 + k);
+            add_box(&b, bf_v3(bx - sx / 2, by - 0.2, 0), bf_v3(bx + sx / 2, by + 0.2, sz), SYNTH_MAT_BOX,
+                    (uint8_t)((r + k) % 4), false, true);
+        }
+        /* Shelves on both side walls at eye height and a pillar by the
+         * doorway: structure across the walk, which the walls alone leave
+         * unconstrained sideways. */
+        for (int k = 0; k < 2; k++) {
+            double sx = x0 + 0.5 + 2.5 * room_rand(r, 50 + k), sy = (k ? 1 : -1) * (W / 2 - 0.15);
+            double z0 = 1.0 + 0.4 * room_rand(r, 60 + k);
+            add_box(&b, bf_v3(sx, sy - 0.15, z0), bf_v3(sx + 0.7, sy + 0.15, z0 + 0.5 + 0.4 * room_rand(r, 70 + k)),
+                    SYNTH_MAT_BOX, (uint8_t)((r + k + 1) % 4), false, false);
+        }
+        if (r + 1 < n) {
+            double px = x0 + L - 0.45, py = (room_rand(r, 80) < 0.5 ? -1 : 1) * (door_w / 2 + 0.15);
+            add_box(&b, bf_v3(px - 0.12, py - 0.12, 0), bf_v3(px + 0.12, py + 0.12, H), SYNTH_MAT_BOX, 2, false, true);
+        }
+        double ox = x0 + 1.0 + 2.0 * room_rand(r, 40);
+        add_box(&b, bf_v3(ox - 0.1, ty - 0.1, TABLE_TOP_Z), bf_v3(ox + 0.1, ty + 0.1, TABLE_TOP_Z + 0.25), SYNTH_MAT_BOX,
+                (uint8_t)(r % 4), false, true);
+    }
+    /* The first camera stands in the first room looking down the row. */
+    bf_se3 T_view = synth_look_at(bf_v3(-1.5, 0, 1.4), bf_v3(0, 0, 1.4), bf_v3(0, 0, 1));
+    bf_status s = scene_take(&b, &T_view, bf_v3(-2 + n * L / 2, 0, 2.3), out);
+    if (s == BF_OK)
+        snprintf(out->desc, sizeof out->desc, "%u rooms of 4 x 3.5 x 2.5 m in a row along x (%.0f m), doorways, "
+                 "tables and boxes", n, n * L);
+    return s;
+}
+
 bf_status synth_scene_from_mesh(mesh_data *mesh, const bf_se3 *T_wc_view, synth_scene *out)
 {
     builder b = {0};

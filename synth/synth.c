@@ -347,8 +347,12 @@ bf_status synth_run(const synth_config *cfg, synth_result *out)
         bf_warn("synth: %s spans %.3f s: only %u of %u frames at %g Hz fit, stopping there", cfg->traj_path,
                 t_end - t0, n_frames, cfg->n_frames, rate);
 
+    unsigned n_rooms = 0;
+    int used = 0;
     if (!strcmp(cfg->scene, "room"))
         s = synth_scene_room(cfg->data_dir, &scene);
+    else if (sscanf(cfg->scene, "rooms:%u%n", &n_rooms, &used) == 1 && cfg->scene[used] == 0)
+        s = synth_scene_rooms(n_rooms, &scene);
     else
         s = synth_scene_from_ply(cfg->scene, cfg->mesh_scale > 0 ? cfg->mesh_scale : 1.0, &scene);
     if (s != BF_OK) goto done;

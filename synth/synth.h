@@ -44,6 +44,11 @@ typedef struct synth_scene {
  * dragon scaled to 15-25 cm standing on the table. data_dir may be NULL or
  * lack the meshes: the room is built without them (logged). */
 bf_status synth_scene_room(const char *data_dir, synth_scene *out);
+/* A row of n rooms (each 4 x 3.5 x 2.5 m, along +x from x = -2) joined by
+ * doorways, with tables and boxes placed differently in each: a scene tens
+ * of metres long for streaming. The view stands in the first room looking
+ * along +x. BF_INVALID_ARG unless 1 <= n <= 64. */
+bf_status synth_scene_rooms(uint32_t n, synth_scene *out);
 /* A scene of one PLY mesh, vertices multiplied by scale (metres after
  * scaling). The view looks at the mesh's box centre along -z from where its
  * bounding sphere fills the image (fx = 525, 480 rows), y up. */
@@ -108,7 +113,7 @@ bool synth_render_clean_point(const synth_renderer *r, uint32_t u, uint32_t v, b
 
 /* A whole sequence (synth.c): what `bitfuse synth` runs. */
 typedef struct synth_config {
-    const char *scene;      /* "room" or a PLY path */
+    const char *scene;      /* "room", "rooms:N" (a row of N rooms) or a PLY path */
     const char *data_dir;   /* shared data for the room's meshes; NULL = none */
     double mesh_scale;      /* for a PLY scene; 0 = 1 */
     const char *traj_path;  /* TUM trajectory the camera follows */
