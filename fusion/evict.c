@@ -19,6 +19,7 @@ typedef struct host_all {
     uint32_t *stamp;
     uint32_t *sign, *conf; /* slots [0, cap) allocated, [0, high) downloaded */
     uint32_t high;         /* one past the highest live slot at load */
+    uint32_t planes;       /* slots of sign and conf held: high, or more for an insertion */
 } host_all;
 
 static void host_all_free(host_all *a)
@@ -30,9 +31,8 @@ static void host_all_free(host_all *a)
     memset(a, 0, sizeof *a);
 }
 
-/* extra: bricks about to be inserted. The free stack hands out freed
- * slots (below high) and then fresh ones upward from high, so the bit
- * planes of slots [0, high + extra) cover every slot the insertion takes. */
+/* extra: bricks about to be inserted. They take the free stack's top
+ * `extra` slots, so the bit planes cover those as well as the live ones. */
 static bf_status host_all_load(fusion_map *m, host_all *a, uint32_t extra)
 {
     memset(a, 0, sizeof *a);
@@ -43,7 +43,12 @@ static bf_status host_all_load(fusion_map *m, host_all *a, uint32_t extra)
     if (s == BF_OK) s = gpu_buffer_download(m->stamp, 0, a->stamp, (uint64_t)cap * 4);
     for (uint32_t b = 0; s == BF_OK && b < cap; b++)
         if (a->h.info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] < m->n_entries) a->high = b + 1;
-    size_t planes = (size_t)a->high + extra < cap ? (size_t)a->high + extra : cap;
+    size_t planes = a->high;
+    uint32_t top = s == BF_OK ? a->h.counters[FUSION_CNT_FREE_TOP] : 0;
+    for (uint32_t i = 0; s == BF_OK && i < extra && i < top; i++)
+        if ((size_t)a->h.free_stack[top - 1 - i] + 1 > planes) planes = (size_t)a->h.free_stack[top - 1 - i] + 1;
+    if (planes > cap) planes = cap;
+    a->planes = (uint32_t)planes;
     if (s == BF_OK) {
         a->sign = bf_calloc(planes ? planes : 1, BRICK_WORDS * 4);
         a->conf = bf_calloc(planes ? planes : 1, BRICK_WORDS * 4);
@@ -293,8 +298,8 @@ bf_status fusion_insert_bricks(fusion_map *m, const hostmap *in)
         const hostmap_brick *b = &in->bricks[i];
         uint32_t slot = 0, before = a.h.counters[FUSION_CNT_BRICKS];
         s = fusion__host_insert(m, &a.h, b->key, b->level, b->cell, &slot);
-        if (s == BF_OK && slot >= a.high + in->n_bricks)
-            s = bf_fail(BF_NUMERIC, "fusion: inserted brick took slot %u beyond %u", slot, a.high + in->n_bricks);
+        if (s == BF_OK && slot >= a.planes)
+            s = bf_fail(BF_NUMERIC, "fusion: inserted brick took slot %u beyond %u", slot, a.planes);
         if (s != BF_OK) break;
         uint32_t *sign = a.sign + (size_t)slot * BRICK_WORDS, *conf = a.conf + (size_t)slot * BRICK_WORDS;
         if (a.h.counters[FUSION_CNT_BRICKS] == before) {

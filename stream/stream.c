@@ -236,7 +236,7 @@ static bool above_high_water(const stream *s)
 /* Resident chunks beyond radius + hysteresis leave, farthest first; above
  * high water the farthest leave whatever their distance (not the camera's
  * own chunk and its neighbours within one chunk edge). */
-static bf_status move_out(stream *s, bf_vec3 p, bool pressure)
+static bf_status move_out(stream *s, bf_vec3 p, bool pressure, bool make_room)
 {
     int32_t(*keys)[3] = NULL;
     uint32_t n = 0;
@@ -246,7 +246,8 @@ static bf_status move_out(stream *s, bf_vec3 p, bool pressure)
     cand *c = n ? bf_malloc(n * sizeof *c) : NULL;
     if (n && !c) st = bf_fail(BF_NO_MEMORY, "stream: %u chunks", n);
     uint32_t k = 0;
-    double far = s->cfg.radius_m + s->cfg.hysteresis_m, near = fusion_get_config(s->map)->chunk_m;
+    /* Chunks waiting to come back need room: then the hysteresis band goes too. */
+    double far = s->cfg.radius_m + (make_room ? 0 : s->cfg.hysteresis_m), near = fusion_get_config(s->map)->chunk_m;
     for (uint32_t i = 0; st == BF_OK && i < n; i++) {
         double d = chunk_distance(s->map, keys[i], p);
         if (d > far || (pressure && d > near)) c[k++] = (cand){d, i};
@@ -299,7 +300,11 @@ static bf_status move_in(stream *s, bf_vec3 p)
     double room = s->cfg.high_water * u.brick_cap - u.bricks, take = 0;
     uint32_t fit = 0;
     while (fit < k && take + s->chunks[c[fit].i].n_bricks <= room) take += s->chunks[c[fit++].i].n_bricks;
-    if (fit < k) s->st.loads_deferred++;
+    if (fit < k) {
+        s->st.loads_deferred++;
+        bf_log(BF_LOG_DEBUG, "stream: %u of %u chunks due back wait: %u bricks in use of %u (room %.0f, the next needs %u)",
+               k - fit, k, u.bricks, u.brick_cap, room - take, s->chunks[c[fit].i].n_bricks);
+    }
     k = fit;
     /* Pop from the highest index down: cache_pop moves the last entry into
      * the popped one's place. */
@@ -359,7 +364,13 @@ bf_status stream_update(stream *s, const bf_se3 *T_wc, uint32_t frame_index, boo
     s->st.checks++;
     double t0 = bf_time_s();
     uint64_t before = s->st.chunks_out + s->st.chunks_in;
-    bf_status st = move_out(s, T_wc->t, pressure);
+    /* The bricks of the chunks due back, against the room below high water. */
+    double need = 0;
+    for (uint32_t i = 0; i < s->n_chunks; i++)
+        if (chunk_distance(s->map, s->chunks[i].key, T_wc->t) < s->cfg.radius_m) need += s->chunks[i].n_bricks;
+    fusion_pool_use u = fusion_pool_usage(s->map);
+    bool make_room = need > s->cfg.high_water * u.brick_cap - u.bricks;
+    bf_status st = move_out(s, T_wc->t, pressure, make_room);
     if (st == BF_OK && s->n_chunks) st = move_in(s, T_wc->t);
     if (s->st.chunks_out + s->st.chunks_in != before) {
         s->st.ms_last = 1e3 * (bf_time_s() - t0);
