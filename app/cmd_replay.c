@@ -63,7 +63,7 @@ typedef struct replay_args {
     double cache_budget_mib; /* the streaming cache's bytes */
 } replay_args;
 
-#define LOOP_ROWS 22
+#define LOOP_ROWS 23
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -152,6 +152,8 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),
         APP_OPT("--rof-lambda", APP_OPT_FLOAT, &tc->rof_lambda0, "L", "ROF data weight at 1 m", .min_open = true),
+        APP_OPT("--fine-angle-gate", APP_OPT_FLOAT, &tc->fine_angle_deg, "DEG",
+                "the normal-angle gate of the finest level's weighted iterations (0: --angle-gate)", .max = 90),
         APP_OPT("--angle-gate", APP_OPT_FLOAT, &tc->angle_deg, "DEG", "ICP normal-angle gate in degrees", .max = 90,
                 .min_open = true),
         APP_OPT("--degenerate-ratio", APP_OPT_DOUBLE, &tc->degenerate_ratio, "R",

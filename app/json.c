@@ -122,6 +122,7 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
         cJSON_AddItemToArray(it, cJSON_CreateNumber(c->iterations[l]));
     add_float(o, "dist_m", c->dist_m);
     add_float(o, "angle_deg", c->angle_deg);
+    add_float(o, "fine_angle_deg", c->fine_angle_deg);
     json_sensor(o, "sensor", &c->sensor);
     add_float(o, "min_inlier_frac", c->min_inlier_frac);
     add_float(o, "max_residual_m", c->max_residual_m);

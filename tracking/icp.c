@@ -93,7 +93,10 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
          * part of the motion, and their pixels are 2^l times wider. Whatever
          * ICP then finds beyond max_motion is reported as a failure. */
         .dist_m = t->cfg.dist_m * (float)(1u << l),
-        .cos_angle = (float)cos(t->cfg.angle_deg * M_PI / 180.0),
+        /* The weighted iterations refine within the basin the wide gate
+         * found: there the narrower fine gate (track_config.fine_angle_deg). */
+        .cos_angle = (float)cos((weighted && t->cfg.fine_angle_deg > 0 ? t->cfg.fine_angle_deg : t->cfg.angle_deg) *
+                                M_PI / 180.0),
         .sub = sub,
         .huber_k = weighted ? (float)(t->cfg.huber_k * huber_unit) : 0.0f,
         .noise_exp = weighted && t->cfg.weight_noise ? t->cfg.noise_weight_exp : 0.0f,

@@ -41,6 +41,8 @@ typedef struct track_config {
     uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 10, 5, 4 (KinectFusion's) */
     float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 45 (DESIGN.md: 20; docs/tracking.md) */
+    float fine_angle_deg;                  /* the gate of the finest level's weighted iterations, default 30;
+                                              0: angle_deg */
     bf_sensor sensor;                      /* noise model and range, default Kinect v1 (recon/ sets its own) */
     /* Failure and degeneracy (checked at the end of the finest level). */
     float min_inlier_frac;   /* inliers / valid samples of the frame below this: failure */
@@ -66,7 +68,7 @@ typedef struct track_config {
     uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one
                                     (a checkerboard, the default), half the cost (docs/tracking.md: speed against error) */
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
-    float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 2; 0: off */
+    float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 3; 0: off */
     bool weight_noise;       /* weight residuals by the sensor's noise (sigma_z(1 m) / sigma_z(z))^noise_weight_exp,
                                 default true */
     float noise_weight_exp;  /* 2: the inverse noise variance; smaller bounds how much less far samples count
