@@ -73,6 +73,7 @@ typedef struct replay_args {
  * nodes a brick: docs/streaming.md). */
 #define NODES_PER_BRICK 3
 #define BYTES_PER_BRICK (2 * 64 + 16 + 4 + 4 + NODES_PER_BRICK * 8)
+#define DEFAULT_GPU_BUDGET_MIB 64.0
 
 /* Chunk streaming (stream/stream.h, DESIGN.md section 1). */
 static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
@@ -81,7 +82,7 @@ static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
     const app_option r[STREAM_ROWS] = {
         APP_OPT("--gpu-budget", APP_OPT_DOUBLE, &a->gpu_budget_mib, "MIB",
                 "bytes of the GPU map pools in MiB (bricks, nodes, records; 176 bytes a brick); chunks beyond it "
-                "stream out (default: --bricks)", .min = 0.1, .no_default = true),
+                "stream out (default: 64, or --bricks when given)", .min = 0.1, .no_default = true),
         APP_OPT("--cache-budget", APP_OPT_DOUBLE, &a->cache_budget_mib, "MIB",
                 "bytes of the CPU cache of chunks streamed out of the GPU, in MiB; beyond it they go to disk", .min = 1),
         APP_OPT("--stream", APP_OPT_CHOICE, &sc->enabled, "on|off",
@@ -215,6 +216,12 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->resume && !a->store) return app_usage_error(cmd, "--resume needs --store STORE");
+    /* Without --gpu-budget or --bricks: 64 MiB of pools (381,300 bricks),
+     * 14 times what 500 real frames of a room need (26,700 bricks); the
+     * stream makes room beyond that. With 1 M bricks the pools were 176 MiB
+     * of the 477 MiB the real run held resident (docs/streaming.md). */
+    if (!rc && a->gpu_budget_mib <= 0 && a->rcfg.fusion.brick_cap == fusion_config_default().brick_cap)
+        a->gpu_budget_mib = DEFAULT_GPU_BUDGET_MIB;
     if (!rc && a->gpu_budget_mib > 0) {
         double bricks = floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK);
         if (bricks < 1024) return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
