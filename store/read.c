@@ -160,8 +160,9 @@ static bf_status parse_index(const char *path, const cJSON *root, store_meta *me
     if (n) qsort(e, (size_t)n, sizeof *e, store__entry_cmp);
     for (int i = 1; i < n; i++)
         if (!store__entry_cmp(&e[i - 1], &e[i])) {
+            int32_t k[3] = {e[i].key[0], e[i].key[1], e[i].key[2]};
             free(e);
-            return bf_fail(BF_FORMAT, "%s: chunk (%d,%d,%d) listed twice", path, e[i].key[0], e[i].key[1], e[i].key[2]);
+            return bf_fail(BF_FORMAT, "%s: chunk (%d,%d,%d) listed twice", path, k[0], k[1], k[2]);
         }
     *meta = m;
     *e_out = e;
