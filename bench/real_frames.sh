@@ -5,8 +5,9 @@
 #   plain   the full loop, started at the first true pose
 #   fgt     --fuse-at-groundtruth: every frame tracked against a map fused at the true poses, so
 #           each estimate's error is one tracking step's
-#   probes  replays with options changed (PROBES; the default set: the previous defaults, and
-#           today's with one of the 2026-12-02 changes undone)
+#   probes  replays with options changed (PROBES; the default set: the defaults of 2026-12-02's
+#           start (first) and of its third session's start (morning), and today's with one of
+#           the third session's two changes undone)
 # at most two at a time, evaluates each trajectory with `bitfuse eval-traj` over frames 0-499 and
 # 0-420 (the ground truth jumps 27 mm between 420 and 421), and writes the generated tables of
 # docs/real_frames.md (between <!-- gen:... --> markers; the analysis around them is kept) and
@@ -26,7 +27,7 @@ BIN=${BIN:-/work/bench-data/bitfuse-base}
 DATA=${DATA:-/work/bench-data/7scenes-dev}
 # name|options; empty options: the plain loop again (run-to-run spread: lavapipe's reductions are
 # not bit-reproducible across runs)
-PROBES=${PROBES-"prev|--icp-iters 5,5,4 --icp-sample-step 1 --rof-iters 10 --noise-exp 2;e2|--noise-exp 2;rof10|--rof-iters 10;repeat|"}
+PROBES=${PROBES-"first|--icp-iters 5,5,4 --icp-sample-step 1 --rof-iters 10 --noise-exp 2 --fine-angle-gate 0 --huber 2;morning|--fine-angle-gate 0 --huber 2;gate45|--fine-angle-gate 0;h2|--huber 2;repeat|"}
 REUSE=${REUSE:-0}
 JOBS=${JOBS:-2}
 PY=python3
