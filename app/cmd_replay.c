@@ -61,6 +61,7 @@ typedef struct replay_args {
     double store_every_s;    /* seconds between the store's flushes (0: only at the end) */
     double gpu_budget_mib;   /* the pools' bytes (0: --bricks decides) */
     double cache_budget_mib; /* the streaming cache's bytes */
+    bool auto_budget;        /* neither --gpu-budget nor --bricks: the device decides */
 } replay_args;
 
 #define LOOP_ROWS 23
@@ -82,7 +83,8 @@ static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
     const app_option r[STREAM_ROWS] = {
         APP_OPT("--gpu-budget", APP_OPT_DOUBLE, &a->gpu_budget_mib, "MIB",
                 "bytes of the GPU map pools in MiB (bricks, nodes, records; 176 bytes a brick); chunks beyond it "
-                "stream out (default: 64, or --bricks when given)", .min = 0.1, .no_default = true),
+                "stream out (default: --bricks when given, else from the device: 64 on a CPU device, a quarter of a "
+                "GPU's memory up to 2048)", .min = 0.1, .no_default = true),
         APP_OPT("--cache-budget", APP_OPT_DOUBLE, &a->cache_budget_mib, "MIB",
                 "bytes of the CPU cache of chunks streamed out of the GPU, in MiB; beyond it they go to disk", .min = 1),
         APP_OPT("--stream", APP_OPT_CHOICE, &sc->enabled, "on|off",
@@ -184,6 +186,35 @@ static void live_options(app_option rows[LIVE_ROWS], replay_args *a)
     memcpy(rows, r, sizeof r);
 }
 
+/* The pools' sizes from a byte budget. */
+static void set_budget(replay_args *a, double mib)
+{
+    double bricks = floor(mib * 1048576.0 / BYTES_PER_BRICK);
+    a->gpu_budget_mib = mib;
+    a->rcfg.fusion.brick_cap = bricks > (1u << 26) ? (1u << 26) : (uint32_t)bricks;
+    a->rcfg.fusion.node_cap = NODES_PER_BRICK * a->rcfg.fusion.brick_cap;
+}
+
+/* Without --gpu-budget or --bricks the budget comes from the device: on a
+ * CPU device (lavapipe: the pools are the process's memory) 64 MiB, 381,300
+ * bricks, 14 times what 500 real frames of a room need (26,700 bricks; with
+ * 1 M bricks the pools were 176 MiB of the 466 MiB the real run held
+ * resident, docs/streaming.md); on a GPU a quarter of its largest
+ * device-local heap, at least 64 MiB and at most 2 GiB. The stream makes
+ * room beyond that. */
+static void auto_budget(replay_args *a, const gpu_context *ctx)
+{
+    double mib = DEFAULT_GPU_BUDGET_MIB;
+    if (gpu_device_type(ctx) != VK_PHYSICAL_DEVICE_TYPE_CPU) {
+        const gpu_limits *l = gpu_device_limits(ctx);
+        uint64_t heap = 0;
+        for (uint32_t i = 0; i < l->n_heaps; i++)
+            if (l->heaps[i].is_device_local && l->heaps[i].size_bytes > heap) heap = l->heaps[i].size_bytes;
+        mib = fmin(fmax(heap / 4.0 / 1048576.0, DEFAULT_GPU_BUDGET_MIB), 2048.0);
+    }
+    set_budget(a, mib);
+}
+
 static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, replay_args *a)
 {
     memset(a, 0, sizeof *a);
@@ -216,18 +247,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->resume && !a->store) return app_usage_error(cmd, "--resume needs --store STORE");
-    /* Without --gpu-budget or --bricks: 64 MiB of pools (381,300 bricks),
-     * 14 times what 500 real frames of a room need (26,700 bricks); the
-     * stream makes room beyond that. With 1 M bricks the pools were 176 MiB
-     * of the 477 MiB the real run held resident (docs/streaming.md). */
-    if (!rc && a->gpu_budget_mib <= 0 && a->rcfg.fusion.brick_cap == fusion_config_default().brick_cap)
-        a->gpu_budget_mib = DEFAULT_GPU_BUDGET_MIB;
-    if (!rc && a->gpu_budget_mib > 0) {
-        double bricks = floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK);
-        if (bricks < 1024) return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
-        a->rcfg.fusion.brick_cap = bricks > (1u << 26) ? (1u << 26) : (uint32_t)bricks;
-        a->rcfg.fusion.node_cap = NODES_PER_BRICK * a->rcfg.fusion.brick_cap;
-    }
+    a->auto_budget = !rc && a->gpu_budget_mib <= 0 && a->rcfg.fusion.brick_cap == fusion_config_default().brick_cap;
+    if (!rc && a->gpu_budget_mib > 0 && floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK) < 1024)
+        return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
+    if (!rc && a->gpu_budget_mib > 0) set_budget(a, a->gpu_budget_mib);
     a->rcfg.stream.cache_bytes = (uint64_t)(a->cache_budget_mib * 1048576.0);
     if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
     return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
@@ -469,6 +492,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms\n");
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
+    if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);
     if (s == BF_OK) {
         snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
         r.cache_loaded_bytes = gpu_pipeline_cache_loaded_bytes(ctx);

@@ -659,6 +659,8 @@ void gpu_context_destroy(gpu_context *ctx)
 
 const gpu_device_info *gpu_device(const gpu_context *ctx) { return &ctx->info; }
 const gpu_limits *gpu_device_limits(const gpu_context *ctx) { return &ctx->info.limits; }
+VkPhysicalDeviceType gpu_device_type(const gpu_context *ctx) { return ctx->info.type; }
+
 const char *gpu_device_name(const gpu_context *ctx) { return ctx->info.name; }
 bool gpu_validation_enabled(const gpu_context *ctx) { return ctx->inst.has_validation; }
 uint32_t gpu_validation_message_count(const gpu_context *ctx) { return atomic_load(&ctx->n_messages); }

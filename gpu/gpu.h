@@ -144,6 +144,7 @@ void gpu_context_destroy(gpu_context *ctx);
 const gpu_device_info *gpu_device(const gpu_context *ctx);
 const gpu_limits *gpu_device_limits(const gpu_context *ctx);
 const char *gpu_device_name(const gpu_context *ctx);
+VkPhysicalDeviceType gpu_device_type(const gpu_context *ctx);
 
 bool gpu_validation_enabled(const gpu_context *ctx);
 /* Validation warnings and errors reported for this context so far (each is
