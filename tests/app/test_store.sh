@@ -17,12 +17,15 @@ expect() {
     [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
 }
 mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
-json_get() { python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
+json_get() { py -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+# python3 without the sanitizer build's preload: LeakSanitizer would end it
+# before it flushes its output.
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS python3 "$@"; }
 export BITFUSE_PROGRESS=0
 
 # A 60-frame synthetic sequence, 2 s at 30 Hz: a slow sideways move and turn.
-python3 - "$T/traj.txt" <<'PY'
+py - "$T/traj.txt" <<'PY'
 import sys, math
 with open(sys.argv[1], "w") as f:
     for i in range(70):
@@ -80,7 +83,7 @@ expect 0 "$B" replay "$SEQ" --out "$T/h1" --no-mesh --frames 30 --store "$T/H"
 expect 0 "$B" replay "$SEQ" --out "$T/h2" --no-mesh --store "$T/H" --resume
 [ "$(grep -vc '^#' "$T/h2/trajectory.txt")" = 60 ] || fail "the resumed scan's trajectory has not 60 poses"
 [ "$(json_get "$T/h2/stats.json" "d['frames']")" = 30 ] || fail "the resumed scan did not skip the 30 stored frames"
-python3 - "$T/full/stats.json" "$T/h2/stats.json" <<'PY' || fail "resumed ATE too far from the uninterrupted one"
+py - "$T/full/stats.json" "$T/h2/stats.json" <<'PY' || fail "resumed ATE too far from the uninterrupted one"
 import json, sys
 a = json.load(open(sys.argv[1]))["ate_m"]["rmse"]
 b = json.load(open(sys.argv[2]))["ate_m"]["rmse"]
@@ -104,7 +107,7 @@ for i in $(seq 1 40); do
     if [ $((i % 2)) = 0 ] && [ -d "$K" ]; then extra="--resume"; else rm -rf "$K"; fi
     "$B" replay "$SEQ" --out "$T/k$i" --no-mesh --store "$K" --store-every 0.1 $extra >"$T/k.log" 2>&1 &
     pid=$!
-    sleep "$(python3 -c "import random; print(round(random.uniform(0.2, 2.0), 2))")"
+    sleep "$(py -c "import random; print(round(random.uniform(0.2, 2.0), 2))")"
     if kill -9 "$pid" 2>/dev/null; then
         kills=$((kills + 1))
         wait "$pid" 2>/dev/null
