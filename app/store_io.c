@@ -17,13 +17,17 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
     bf_status s = BF_OK;
     if (resume) {
         s = store_read(dir, &st->map, &st->meta, &st->traj, &st->report);
-        /* A store killed before its first write holds nothing to go on
-         * from: the scan starts anew into it. */
-        if (s == BF_OK && !st->meta.has_pose && st->map.n_bricks)
-            s = bf_fail(BF_FORMAT, "%s: the store keeps no last pose (no index and no trajectory): it can be exported, "
-                                   "not resumed", dir);
+        /* A store killed before its first write finished holds no pose to
+         * go on from (at most some chunk files of that write): the scan
+         * starts anew into it, as if it had never been saved. */
         if (s == BF_OK && st->meta.has_pose) st->is_resumed = true;
-        if (s == BF_OK && !st->is_resumed) bf_info("store: %s is empty: the scan starts anew into it", dir);
+        if (s == BF_OK && !st->is_resumed) {
+            bf_warn("store: %s keeps no last pose (its first write never finished): the scan starts anew into it",
+                    dir);
+            hostmap_free(&st->map);
+            bf_traj_free(&st->traj);
+            s = store_clear(dir);
+        }
     }
     if (s == BF_OK) s = store_writer_open(dir, resume, &st->writer);
     if (s != BF_OK) app_store_close(st);

@@ -103,6 +103,10 @@ typedef struct store_write_stats {
  * another folder). resume true: it must (BF_IO otherwise); the writer then
  * knows the stored chunks' digests and rewrites only what changes. */
 bf_status store_writer_open(const char *dir, bool resume, store_writer **out);
+/* Removes a store's files (chunk files, temp files, trajectory, index) and
+ * keeps the folder: for a store whose first write never finished (chunk
+ * files but no pose), which a resumed scan starts anew. */
+bf_status store_clear(const char *dir);
 /* Hands the writer a map to write (taken: *map is emptied) with its meta
  * and trajectory (copied). Waits first while an earlier write is running.
  * Returns at once, the write runs on the writer's thread; an error of an

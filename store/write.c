@@ -309,6 +309,32 @@ static bf_status error_of(store_writer *w)
 
 /* ------------------------------------------------------------ public */
 
+bf_status store_clear(const char *dir)
+{
+    if (!dir) return bf_fail(BF_INVALID_ARG, "store_clear: NULL folder");
+    char chunk_dir[4200], path[4600];
+    snprintf(chunk_dir, sizeof chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
+    DIR *d = opendir(chunk_dir);
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+        size_t n = strlen(e->d_name);
+        bool ours = (n > 4 && !strcmp(e->d_name + n - 4, ".bfc")) || (n > 4 && !strcmp(e->d_name + n - 4, ".tmp"));
+        if (!ours) continue;
+        snprintf(path, sizeof path, "%s/%s", chunk_dir, e->d_name);
+        if (unlink(path) != 0) {
+            closedir(d);
+            return bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
+        }
+    }
+    if (d) closedir(d);
+    const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME};
+    for (int i = 0; i < 2; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, files[i]);
+        if (unlink(path) != 0 && errno != ENOENT) return bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
+    }
+    return store__sync_dir(dir);
+}
+
 /* Temp files a killed writer left (never read: the reader takes *.bfc only). */
 static void remove_temp_files(store_writer *w)
 {

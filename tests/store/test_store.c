@@ -274,6 +274,7 @@ BF_TEST(store_skips_a_bad_chunk_by_name_and_loads_the_rest)
     }
     /* A header flipped: named as corrupt too. */
     CHECK_OK(flip_byte(bad, 20));
+    hostmap_free(&back);
     CHECK_OK(store_read(dir, &back, &meta2, NULL, &rep));
     CHECK_EQ_INT(rep.n_bad, 2);
     hostmap_free(&m);
