@@ -152,13 +152,7 @@ static bf_status rebuild(fusion_map *m, host_all *a, const bool *keep)
         free(nodes);
         return bf_fail(BF_NO_MEMORY, "fusion: rebuilding the index");
     }
-    for (uint32_t e = 0; e < m->n_entries; e++) {
-        uint32_t *w = hash + (size_t)e * FUSION_ENTRY_WORDS;
-        memset(w, 0, FUSION_ENTRY_WORDS * 4);
-        w[FUSION_ENTRY_ROOT] = FUSION_NONE;
-        w[FUSION_ENTRY_NEXT] = FUSION_NONE;
-        w[FUSION_ENTRY_STATE] = FUSION_ENTRY_FREE;
-    }
+    fusion__hash_empty(hash, m->n_entries);
     for (size_t i = 0; i < nw; i++) nodes[i] = FUSION_NONE;
     a->h.hash = hash;
     a->h.nodes = nodes;
@@ -180,7 +174,7 @@ static bf_status rebuild(fusion_map *m, host_all *a, const bool *keep)
 }
 
 /* Frees brick slot b in a: its record, stamp and bits cleared, pushed on the free stack. */
-static void free_slot(const fusion_map *m, host_all *a, uint32_t b)
+static void free_slot(host_all *a, uint32_t b)
 {
     uint32_t *info = a->h.info + (size_t)b * FUSION_BRICK_INFO_WORDS;
     for (uint32_t k = 0; k < FUSION_BRICK_INFO_WORDS; k++) info[k] = FUSION_NONE;
@@ -189,7 +183,6 @@ static void free_slot(const fusion_map *m, host_all *a, uint32_t b)
     memset(a->conf + (size_t)b * BRICK_WORDS, 0, BRICK_WORDS * 4);
     a->h.free_stack[a->h.counters[FUSION_CNT_FREE_TOP]++] = b;
     a->h.counters[FUSION_CNT_BRICKS]--;
-    (void)m;
 }
 
 /* The first frame whose bricks a window still has to integrate: a brick
@@ -242,7 +235,7 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
         memcpy(&o->error, &info[FUSION_INFO_ERROR], 4);
         memcpy(o->sign, a.sign + (size_t)b * BRICK_WORDS, sizeof o->sign);
         memcpy(o->conf, a.conf + (size_t)b * BRICK_WORDS, sizeof o->conf);
-        free_slot(m, &a, b);
+        free_slot(&a, b);
     }
     uint32_t n_chunks = 0;
     for (uint32_t e = 0; s == BF_OK && e < m->n_entries; e++)

@@ -66,6 +66,8 @@ typedef struct fusion_host_map {
 } fusion_host_map;
 bf_status fusion__host_map_load(fusion_map *map, fusion_host_map *h);
 void fusion__host_map_free(fusion_host_map *h);
+/* map.c: n_entries free hash entries (no root, no next) into words. */
+void fusion__hash_empty(uint32_t *words, uint32_t n_entries);
 /* map.c: fills every buffer with the empty map's state (fusion_create). */
 bf_status fusion__reset(fusion_map *map);
 /* load.c: inserts a brick into the host copy h as the allocation kernel

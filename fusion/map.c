@@ -106,6 +106,17 @@ static bf_status create_buffers(fusion_map *m)
 
 /* Fills the pools with their empty state: no chunk, no node, every brick slot
  * on the free stack (slot 0 on top), empty frame slots. */
+void fusion__hash_empty(uint32_t *words, uint32_t n_entries)
+{
+    for (uint32_t e = 0; e < n_entries; e++) {
+        uint32_t *w = words + (size_t)e * FUSION_ENTRY_WORDS;
+        memset(w, 0, FUSION_ENTRY_WORDS * 4);
+        w[FUSION_ENTRY_ROOT] = FUSION_NONE;
+        w[FUSION_ENTRY_NEXT] = FUSION_NONE;
+        w[FUSION_ENTRY_STATE] = FUSION_ENTRY_FREE;
+    }
+}
+
 bf_status fusion__reset(fusion_map *m)
 {
     const fusion_config *c = &m->cfg;
@@ -113,13 +124,7 @@ bf_status fusion__reset(fusion_map *m)
     uint32_t *tmp = malloc((size_t)(m->n_entries > c->brick_cap ? m->n_entries : c->brick_cap) *
                            FUSION_ENTRY_WORDS * 4);
     if (!tmp) return bf_fail(BF_NO_MEMORY, "fusion: host staging for map init");
-    for (uint32_t e = 0; e < m->n_entries; e++) {
-        uint32_t *w = tmp + (size_t)e * FUSION_ENTRY_WORDS;
-        memset(w, 0, FUSION_ENTRY_WORDS * 4);
-        w[FUSION_ENTRY_ROOT] = FUSION_NONE;
-        w[FUSION_ENTRY_NEXT] = FUSION_NONE;
-        w[FUSION_ENTRY_STATE] = FUSION_ENTRY_FREE;
-    }
+    fusion__hash_empty(tmp, m->n_entries);
     s = gpu_buffer_upload(m->hash, 0, tmp, (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
     for (uint32_t i = 0; s == BF_OK && i < c->brick_cap; i++) tmp[i] = c->brick_cap - 1 - i;
     if (s == BF_OK) s = gpu_buffer_upload(m->free_stack, 0, tmp, (uint64_t)c->brick_cap * 4);

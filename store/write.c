@@ -309,48 +309,37 @@ static bf_status error_of(store_writer *w)
 
 /* ------------------------------------------------------------ public */
 
+/* Removes the files of dir whose names end in suffix (one level). */
+static bf_status unlink_suffix(const char *dir, const char *suffix)
+{
+    char path[4600];
+    size_t k = strlen(suffix);
+    bf_status s = BF_OK;
+    DIR *d = opendir(dir);
+    struct dirent *e;
+    while (s == BF_OK && d && (e = readdir(d))) {
+        size_t n = strlen(e->d_name);
+        if (n <= k || strcmp(e->d_name + n - k, suffix) != 0) continue;
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        if (unlink(path) != 0) s = bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
+    }
+    if (d) closedir(d);
+    return s;
+}
+
 bf_status store_clear(const char *dir)
 {
     if (!dir) return bf_fail(BF_INVALID_ARG, "store_clear: NULL folder");
     char chunk_dir[4200], path[4600];
     snprintf(chunk_dir, sizeof chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
-    DIR *d = opendir(chunk_dir);
-    struct dirent *e;
-    while (d && (e = readdir(d))) {
-        size_t n = strlen(e->d_name);
-        bool ours = (n > 4 && !strcmp(e->d_name + n - 4, ".bfc")) || (n > 4 && !strcmp(e->d_name + n - 4, ".tmp"));
-        if (!ours) continue;
-        snprintf(path, sizeof path, "%s/%s", chunk_dir, e->d_name);
-        if (unlink(path) != 0) {
-            closedir(d);
-            return bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
-        }
-    }
-    if (d) closedir(d);
+    bf_status s = unlink_suffix(chunk_dir, ".bfc");
+    if (s == BF_OK) s = unlink_suffix(chunk_dir, ".tmp");
     const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME};
-    for (int i = 0; i < 2; i++) {
+    for (int i = 0; s == BF_OK && i < 2; i++) {
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
-        if (unlink(path) != 0 && errno != ENOENT) return bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
+        if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
     }
-    return store__sync_dir(dir);
-}
-
-/* Temp files a killed writer left (never read: the reader takes *.bfc only). */
-static void remove_temp_files(store_writer *w)
-{
-    const char *dirs[2] = {w->dir, w->chunk_dir};
-    char path[4600];
-    for (int k = 0; k < 2; k++) {
-        DIR *d = opendir(dirs[k]);
-        struct dirent *e;
-        while (d && (e = readdir(d))) {
-            size_t n = strlen(e->d_name);
-            if (n < 5 || strcmp(e->d_name + n - 4, ".tmp") != 0) continue;
-            snprintf(path, sizeof path, "%s/%s", dirs[k], e->d_name);
-            unlink(path);
-        }
-        if (d) closedir(d);
-    }
+    return s == BF_OK ? store__sync_dir(dir) : s;
 }
 
 bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
@@ -370,7 +359,9 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
     snprintf(w->chunk_dir, sizeof w->chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
     bf_status s = bf_mkdir_p(w->chunk_dir);
     if (s == BF_OK) s = store__sync_dir(dir);
-    if (s == BF_OK && resume) remove_temp_files(w);
+    /* Temp files a killed writer left (never read: the reader takes *.bfc only). */
+    if (s == BF_OK && resume) s = unlink_suffix(w->dir, ".tmp");
+    if (s == BF_OK && resume) s = unlink_suffix(w->chunk_dir, ".tmp");
     if (s == BF_OK && resume) {
         /* Only the digests matter here: a missing or stale index makes the
          * first write rewrite every chunk, which is always right. */
