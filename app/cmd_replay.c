@@ -74,6 +74,11 @@ typedef struct replay_args {
  * nodes a brick: docs/streaming.md). */
 #define NODES_PER_BRICK 3
 #define BYTES_PER_BRICK (2 * 64 + 16 + 4 + 4 + NODES_PER_BRICK * 8)
+/* With colour: the brick's colour index (16 words) and COLOUR_BLOCKS_PER_BRICK
+ * colour blocks of 64 bytes with their free-stack entries (a scan uses 7-8
+ * blocks a brick of the surface: docs/colour.md). */
+#define COLOUR_BLOCKS_PER_BRICK 4
+#define COLOUR_BYTES_PER_BRICK (64 + COLOUR_BLOCKS_PER_BRICK * (64 + 4))
 #define DEFAULT_GPU_BUDGET_MIB 64.0
 
 /* Chunk streaming (stream/stream.h, DESIGN.md section 1). */
@@ -82,7 +87,8 @@ static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
     stream_config *sc = &a->rcfg.stream;
     const app_option r[STREAM_ROWS] = {
         APP_OPT("--gpu-budget", APP_OPT_DOUBLE, &a->gpu_budget_mib, "MIB",
-                "bytes of the GPU map pools in MiB (bricks, nodes, records; 176 bytes a brick); chunks beyond it "
+                "bytes of the GPU map pools in MiB (bricks, nodes, records, colour; 176 bytes a brick, 512 with "
+                "colour); chunks beyond it "
                 "stream out (default: --bricks when given, else from the device: 64 on a CPU device, a quarter of a "
                 "GPU's memory up to 2048)", .min = 0.1, .no_default = true),
         APP_OPT("--cache-budget", APP_OPT_DOUBLE, &a->cache_budget_mib, "MIB",
@@ -189,10 +195,12 @@ static void live_options(app_option rows[LIVE_ROWS], replay_args *a)
 /* The pools' sizes from a byte budget. */
 static void set_budget(replay_args *a, double mib)
 {
-    double bricks = floor(mib * 1048576.0 / BYTES_PER_BRICK);
+    bool colour = a->rcfg.fusion.keep_colour;
+    double bricks = floor(mib * 1048576.0 / (BYTES_PER_BRICK + (colour ? COLOUR_BYTES_PER_BRICK : 0)));
     a->gpu_budget_mib = mib;
     a->rcfg.fusion.brick_cap = bricks > (1u << 26) ? (1u << 26) : (uint32_t)bricks;
     a->rcfg.fusion.node_cap = NODES_PER_BRICK * a->rcfg.fusion.brick_cap;
+    a->rcfg.fusion.colour_block_cap = colour ? COLOUR_BLOCKS_PER_BRICK * a->rcfg.fusion.brick_cap : 0;
 }
 
 /* Without --gpu-budget or --bricks the budget comes from the device: on a
@@ -296,7 +304,8 @@ static void json_stream(cJSON *o, const replay_args *a, const replay_result *r)
     stream_stats st = recon_stream_stats(r->run.loop);
     cJSON *s = app_json_object(o, "stream");
     cJSON_AddNumberToObject(s, "pool_bricks", a->rcfg.fusion.brick_cap);
-    cJSON_AddNumberToObject(s, "pool_bytes", (double)a->rcfg.fusion.brick_cap * BYTES_PER_BRICK);
+    cJSON_AddNumberToObject(s, "pool_bytes", (double)a->rcfg.fusion.brick_cap *
+                                                 (BYTES_PER_BRICK + (a->rcfg.fusion.keep_colour ? COLOUR_BYTES_PER_BRICK : 0)));
     cJSON_AddNumberToObject(s, "checks", st.checks);
     cJSON_AddNumberToObject(s, "pressure_checks", st.pressure_checks);
     cJSON_AddNumberToObject(s, "compactions", st.compactions);

@@ -111,6 +111,9 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     add_float(o, "band_sigmas", c->band_sigmas);
     cJSON_AddNumberToObject(o, "integrate_vpt", c->integrate_vpt);
     cJSON_AddNumberToObject(o, "integrate_bpg", c->integrate_bpg);
+    cJSON_AddBoolToObject(o, "keep_colour", c->keep_colour);
+    cJSON_AddNumberToObject(o, "colour_frames", c->colour_frames);
+    cJSON_AddNumberToObject(o, "colour_block_cap", c->colour_block_cap);
 }
 
 static void json_track_config(cJSON *parent, const char *name, const track_config *c)

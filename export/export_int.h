@@ -97,6 +97,10 @@ static inline int64_t export__centre_q(const export__grid *g, uint32_t level, in
     return v * ((int64_t)2 << d) + ((int64_t)1 << d);
 }
 
+/* colour.c: per-vertex colour (m->rgb) of the points or mesh m, from the
+ * snapshot's colour; nothing when the snapshot has none. */
+bf_status export__colourise(const export__grid *g, mesh_data *m);
+
 static inline uint32_t export__level_slot(uint32_t level) { return level < 16 ? level : 15; }
 
 #endif

@@ -680,6 +680,7 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
     free(acc);
     free(pos);
     pos = NULL;
+    if ((rc = export__colourise(&g, &m)) != BF_OK) goto fail;
 done:
     sx.n_triangles = m.n_tris;
     sx.n_vertices = m.n_verts;

@@ -164,6 +164,7 @@ bf_status export_points(const hostmap *s, mesh_data *out, export_stats *st)
             }
         }
     }
+    if ((rc = export__colourise(&g, &m)) != BF_OK) goto fail;
     sx.n_points = m.n_verts;
     sx.n_vertices = m.n_verts;
     if (po)

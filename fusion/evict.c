@@ -18,6 +18,8 @@ typedef struct host_all {
     fusion_host_map h;
     uint32_t *stamp;
     uint32_t *sign, *conf; /* slots [0, cap) allocated, [0, high) downloaded */
+    uint32_t *cidx;        /* colour index of slots [0, planes) (NULL without colour) */
+    uint32_t *cfree;       /* the colour free stack, whole */
     uint32_t high;         /* one past the highest live slot at load */
     uint32_t planes;       /* slots of sign and conf held: high, or more for an insertion */
 } host_all;
@@ -28,6 +30,8 @@ static void host_all_free(host_all *a)
     free(a->stamp);
     free(a->sign);
     free(a->conf);
+    free(a->cidx);
+    free(a->cfree);
     memset(a, 0, sizeof *a);
 }
 
@@ -56,6 +60,16 @@ static bf_status host_all_load(fusion_map *m, host_all *a, uint32_t extra)
     }
     if (s == BF_OK && a->high) s = gpu_buffer_download(m->sign, 0, a->sign, (uint64_t)a->high * BRICK_WORDS * 4);
     if (s == BF_OK && a->high) s = gpu_buffer_download(m->conf, 0, a->conf, (uint64_t)a->high * BRICK_WORDS * 4);
+    if (s == BF_OK && m->cfg.keep_colour) {
+        /* A slot that leaves gives its colour blocks back; slots above high
+         * have none (FUSION_NONE), as every free slot. */
+        a->cidx = bf_malloc((planes ? planes : 1) * BRICK_WORDS * 4);
+        a->cfree = bf_malloc((size_t)m->cfg.colour_block_cap * 4);
+        if (!a->cidx || !a->cfree) s = bf_fail(BF_NO_MEMORY, "fusion: host copy of the colour index");
+        for (size_t i = 0; s == BF_OK && i < planes * BRICK_WORDS; i++) a->cidx[i] = FUSION_NONE;
+        if (s == BF_OK && a->high) s = gpu_buffer_download(m->cidx, 0, a->cidx, (uint64_t)a->high * BRICK_WORDS * 4);
+        if (s == BF_OK) s = gpu_buffer_download(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_block_cap * 4);
+    }
     if (s != BF_OK) host_all_free(a);
     return s;
 }
@@ -71,6 +85,8 @@ static bf_status host_all_store(fusion_map *m, const host_all *a, uint32_t high)
     if (s == BF_OK) s = gpu_buffer_upload(m->stamp, 0, a->stamp, (uint64_t)m->cfg.brick_cap * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->sign, 0, a->sign, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, a->conf, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && a->cidx && high) s = gpu_buffer_upload(m->cidx, 0, a->cidx, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && a->cfree) s = gpu_buffer_upload(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_block_cap * 4);
     return s;
 }
 
@@ -181,6 +197,12 @@ static void free_slot(host_all *a, uint32_t b)
     a->stamp[b] = FUSION_NONE;
     memset(a->sign + (size_t)b * BRICK_WORDS, 0, BRICK_WORDS * 4);
     memset(a->conf + (size_t)b * BRICK_WORDS, 0, BRICK_WORDS * 4);
+    for (uint32_t k = 0; a->cidx && k < BRICK_WORDS; k++) {
+        uint32_t *c = &a->cidx[(size_t)b * BRICK_WORDS + k];
+        if (*c == FUSION_NONE) continue;
+        a->cfree[a->h.counters[FUSION_CNT_COLOUR_TOP]++] = *c;
+        *c = FUSION_NONE;
+    }
     a->h.free_stack[a->h.counters[FUSION_CNT_FREE_TOP]++] = b;
     a->h.counters[FUSION_CNT_BRICKS]--;
 }

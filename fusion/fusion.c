@@ -38,13 +38,14 @@ static bf_status remove_create(fusion_map *m)
         .name = "fusion.remove",
         .spirv = bf_spv_fusion_remove,
         .spirv_bytes = bf_spv_fusion_remove_size,
-        .n_buffers = 8,
+        .n_buffers = 10,
         .push_bytes = sizeof(fusion_remove_push),
         .local_size = {64, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_remove);
-    gpu_buffer *bufs[8] = {m->window_list, m->info, m->nodes, m->sign, m->conf, m->stamp, m->counters, m->free_stack};
-    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.remove", bufs, 8, &m->b_remove);
+    gpu_buffer *bufs[10] = {m->window_list, m->info,     m->nodes,      m->sign, m->conf,
+                            m->stamp,       m->counters, m->free_stack, m->cidx, m->cfree};
+    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.remove", bufs, 10, &m->b_remove);
     return s;
 }
 
@@ -93,6 +94,7 @@ static void frame_record(const fusion_map *m, const bf_se3 *T_wc, uint32_t index
     r->depth_unit_m = (float)(1.0 / m->K.depth_scale);
     r->width = m->K.width, r->height = m->K.height;
     r->index = index;
+    r->has_colour = m->has_colour_frame ? 1u : 0u;
 }
 
 static uint64_t depth_bytes(const fusion_map *m) { return ((uint64_t)m->K.width * m->K.height + 1) / 2 * 4; }
@@ -107,6 +109,8 @@ bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slo
     uint64_t pixels = (uint64_t)m->K.width * m->K.height;
     memcpy(up + FUSION_FRAME_WORDS * 4, f->depth, pixels * 2);
     if (pixels % 2) memset(up + FUSION_FRAME_WORDS * 4 + pixels * 2, 0, 2);
+    m->has_colour_frame = m->cfg.keep_colour && f->rgb;
+    if (m->has_colour_frame) fusion__rgb_to_565(f->rgb, pixels, (uint32_t *)(up + FUSION_FRAME_WORDS * 4 + depth_bytes(m)));
     bf_status s = gpu_buffer_flush(m->upload);
     if (s != BF_OK) return s;
     m->has_incoming = true;
@@ -126,6 +130,9 @@ static bf_status cmd_upload(fusion_map *m, const fusion_frame *rec, uint32_t slo
     if (s != BF_OK) return s;
     gpu_cmd_copy(m->ctx, m->upload, 0, m->frames, (uint64_t)slot * sizeof *rec, sizeof *rec);
     gpu_cmd_copy(m->ctx, m->upload, sizeof *rec, m->depth_ring, (uint64_t)slot * depth_bytes(m), depth_bytes(m));
+    if (rec->has_colour)
+        gpu_cmd_copy(m->ctx, m->upload, sizeof *rec + depth_bytes(m), m->colour_ring, (uint64_t)slot * depth_bytes(m),
+                     depth_bytes(m));
     return BF_OK;
 }
 
@@ -140,11 +147,17 @@ static void cmd_window_slice(fusion_map *m)
         fusion__cmd_integrate(m, m->b_integrate_window, first, per, m->window_first, n_frames, true);
         /* The slice's new bit planes -> the removal pass reading them. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
-        fusion_remove_push pc = {first, per, m->window_end - 1, 0};
+        fusion_remove_push pc = {first, per, m->window_end - 1, m->cfg.keep_colour ? 1u : 0u};
         gpu_cmd_dispatch(m->ctx, m->p_remove, m->b_remove, &pc, gpu_groups(per, 64), 1, 1);
         /* Removal's reads of the list and the pools -> the next slice's args
-         * pass writing the list header and its integration. */
+         * pass writing the list header and its integration; its pushes of
+         * colour blocks -> the colour pass's pops. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        if (m->p_colour) {
+            fusion__cmd_colour(m, first, per);
+            /* The colours and the colour index -> readers and the next slice. */
+            gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        }
     }
     if (++m->window_slices_done >= half) {
         m->window_pending = false;
@@ -344,11 +357,18 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
     st.fail_nodes = cnt[FUSION_CNT_FAIL_NODES];
     st.fail_bricks = cnt[FUSION_CNT_FAIL_BRICKS];
     st.fail_hash = cnt[FUSION_CNT_FAIL_HASH];
+    st.fail_colour = cnt[FUSION_CNT_FAIL_COLOUR];
+    if (m->cfg.keep_colour)
+        st.n_colour_blocks = m->cfg.colour_block_cap - (cnt[FUSION_CNT_COLOUR_TOP] < m->cfg.colour_block_cap
+                                                            ? cnt[FUSION_CNT_COLOUR_TOP]
+                                                            : m->cfg.colour_block_cap);
     for (uint32_t i = 0; i < snap.n_bricks; i++) {
         const hostmap_brick *b = &snap.bricks[i];
         st.bricks_per_level[b->level]++;
         for (uint32_t w = 0; w < BRICK_WORDS; w++) st.n_confident_voxels += (uint64_t)__builtin_popcount(b->conf[w]);
         st.n_surface_voxels += fusion__brick_surface_voxels(b->sign, b->conf);
+        for (uint32_t v = 0; snap.rgb565 && v < BRICK_VOXELS; v++)
+            st.n_coloured_voxels += snap.rgb565[(size_t)i * BRICK_VOXELS + v] != 0;
     }
     hostmap_free(&snap);
     /* Chunks: live hash entries. */
@@ -366,10 +386,14 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
     st.bytes_info = (uint64_t)st.n_bricks * (FUSION_BRICK_INFO_WORDS + 1) * 4; /* record + stamp */
     st.bytes_nodes = (uint64_t)st.n_nodes * FUSION_NODE_WORDS * 4;
     st.bytes_hash = (uint64_t)st.n_chunks * FUSION_ENTRY_WORDS * 4;
+    st.bytes_colour = m->cfg.keep_colour ? (uint64_t)st.n_bricks * BRICK_WORDS * 4 +
+                                               (uint64_t)st.n_colour_blocks * FUSION_COLOUR_BLOCK_WORDS * 4
+                                         : 0;
     st.bytes_total = st.bytes_sign + st.bytes_conf + st.bytes_info + st.bytes_nodes + st.bytes_hash;
     st.bytes_reserved = gpu_buffer_size(m->hash) + gpu_buffer_size(m->nodes) + gpu_buffer_size(m->info) +
                         gpu_buffer_size(m->sign) + gpu_buffer_size(m->conf) + gpu_buffer_size(m->free_stack) +
-                        gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks);
+                        gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks) + gpu_buffer_size(m->cidx) +
+                        gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
     st.ms_upload = m->ms_upload, st.ms_alloc = m->ms_alloc;
     st.ms_subcache = m->ms_subcache, st.ms_window = m->ms_window;
     *out = st;

@@ -45,6 +45,12 @@ typedef struct fusion_config {
        tests; every choice gives the same bits. 0: chosen by device type (the default). */
     uint32_t integrate_vpt; /* voxels per invocation, a power of two up to 64 */
     uint32_t integrate_bpg; /* list entries (bricks) per workgroup, 1..1024 */
+    /* Colour (DESIGN.md section 3): RGB565 of the confident voxels near the
+       surface, in blocks of 32 per sub-brick. */
+    bool keep_colour;       /* default true */
+    uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 8 */
+    uint32_t colour_block_cap; /* colour blocks (64 bytes each) allocated at create, default 4 * brick_cap
+                                  (as many as one storage binding holds) */
 } fusion_config;
 
 /* The defaults above. */
@@ -59,6 +65,14 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
                         fusion_map **out);
 /* Waits for the map's GPU work and frees it. NULL is a no-op. */
 void fusion_destroy(fusion_map *map);
+
+/* The colour camera, when colour pixels do not show what the depth pixel
+ * at the same place measured: its intrinsics (the image has the depth
+ * image's size) and T_colour_depth, which takes depth-camera points to
+ * colour-camera points. NULL for either: registered (the default; TUM,
+ * registered Kinect and OpenNI2 modes). BF_INVALID_ARG for values that are
+ * not finite or a zero focal length. */
+bf_status fusion_set_colour_camera(fusion_map *map, const bf_intrinsics *Kc, const bf_se3 *T_colour_depth);
 
 /* Adds one frame seen from T_wc (camera to world): uploads it to the frame
  * ring, allocates bricks, integrates (sub-cache and the current window
@@ -117,8 +131,13 @@ typedef struct fusion_stats {
     uint64_t n_confident_voxels;
     uint64_t n_surface_voxels;       /* confident voxels with a confident neighbour of the other sign */
     uint32_t fail_nodes, fail_bricks, fail_hash; /* requests dropped for a full pool */
+    uint32_t fail_colour;            /* sub-bricks left uncoloured: colour pool full */
+    uint32_t n_colour_blocks;        /* colour blocks in use (32 colours each) */
+    uint64_t n_coloured_voxels;
     /* Bytes of map data in use (what the scene needs), by part. */
     uint64_t bytes_sign, bytes_conf, bytes_info, bytes_nodes, bytes_hash, bytes_total;
+    uint64_t bytes_colour;           /* colour index of the live bricks and the blocks in use (not in bytes_total,
+                                        which is the geometry) */
     uint64_t bytes_reserved;         /* allocated at create */
     /* GPU time of the last frame by stage, ms. */
     double ms_upload, ms_alloc, ms_subcache, ms_window;

@@ -20,10 +20,15 @@ struct fusion_map {
     gpu_buffer *hash, *locks, *nodes, *info, *sign, *conf, *counters;
     gpu_buffer *free_stack;   /* brick slots not in use, FUSION_CNT_FREE_TOP of them */
     gpu_buffer *stamp;        /* per brick: index of the last frame that touched it */
+    /* Colour (shaders/fusion.glsl.h "colour"; NULL without colour). */
+    gpu_buffer *cidx;         /* BRICK_WORDS per brick slot: colour block of each sub-brick or FUSION_NONE */
+    gpu_buffer *cpool;        /* colour_block_cap blocks of FUSION_COLOUR_BLOCK_WORDS */
+    gpu_buffer *cfree;        /* colour blocks not in use, FUSION_CNT_COLOUR_TOP of them */
     /* The frame ring. */
     gpu_buffer *frames;       /* ring_slots fusion_frame records */
     gpu_buffer *depth_ring;   /* ring_slots depth images, 2 pixels per word */
-    gpu_buffer *upload;       /* the incoming slot, host-visible: record + depth of the next frame */
+    gpu_buffer *colour_ring;  /* ring_slots colour images, RGB565, 2 pixels per word (with colour) */
+    gpu_buffer *upload;       /* the incoming slot, host-visible: record, depth (and colour) of the next frame */
     gpu_buffer *readback;     /* host-visible: the counters and a new window's brick count, per frame */
     /* Work lists. */
     gpu_buffer *samples;      /* retry queue of the allocation passes */
@@ -38,6 +43,13 @@ struct fusion_map {
     uint32_t integrate_bpg;   /* list entries per workgroup of the integration kernel */
     gpu_pipeline *p_remove;
     gpu_bindings *b_remove;
+    gpu_pipeline *p_colour;
+    gpu_bindings *b_colour;
+    uint32_t colour_bpg;      /* list entries per workgroup of the colour pass */
+    bool colour_registered;   /* colour pixel i shows depth pixel i */
+    bf_intrinsics Kc;         /* colour camera (when not registered) */
+    bf_se3 T_colour_depth;
+    bool has_colour_frame;    /* the incoming slot holds colour */
 
     /* Schedule (host side). */
     uint32_t n_frames;        /* frames added */
@@ -109,6 +121,15 @@ void fusion__integrate_destroy(fusion_map *map);
  * (the sub-cache's quick pass); with true the window rule applies. */
 void fusion__cmd_integrate(fusion_map *map, gpu_bindings *b, uint32_t first, uint32_t max_count,
                            uint32_t frame_first, uint32_t n_frames, bool set_confidence);
+
+/* colour.c: the colour pass (shaders/fusion_colour.comp). */
+bf_status fusion__colour_create(fusion_map *map);
+void fusion__colour_destroy(fusion_map *map);
+/* Records the colour pass over entries [first, first + max_count) of the
+ * window list, reading up to cfg.colour_frames frames of the window. */
+void fusion__cmd_colour(fusion_map *map, uint32_t first, uint32_t max_count);
+/* Converts an RGB8 image to RGB565 pairs (words of 2 pixels, low first). */
+void fusion__rgb_to_565(const uint8_t *rgb, uint64_t n_pixels, uint32_t *words);
 
 /* ------------------------------------------------------------ integration
  * (integrate.c; the rule is in shaders/fusion.glsl.h and

@@ -21,6 +21,8 @@ fusion_config fusion_config_default(void)
         .sensor = bf_sensor_kinect1(),
         .conf_weight = 4.0f,
         .band_sigmas = 3.0f,
+        .keep_colour = true,
+        .colour_frames = 8,
     };
     return c;
 }
@@ -46,6 +48,9 @@ static bf_status config_check(const fusion_config *c, const bf_intrinsics *K)
         return bf_fail(BF_INVALID_ARG, "fusion: integrate_vpt %u (0, or a power of two up to 64)", c->integrate_vpt);
     if (c->integrate_bpg > 1024)
         return bf_fail(BF_INVALID_ARG, "fusion: integrate_bpg %u (0, or 1..1024)", c->integrate_bpg);
+    if (c->keep_colour && (c->colour_frames < 1 || c->colour_frames > FUSION_COLOUR_MAX_FRAMES))
+        return bf_fail(BF_INVALID_ARG, "fusion: colour_frames %u outside 1..%u", c->colour_frames,
+                       FUSION_COLOUR_MAX_FRAMES);
     if (K->width < 2 || K->height < 2 || K->width > 8192 || K->height > 8192 || !(K->depth_scale > 0) ||
         !isfinite(K->fx_px) || !isfinite(K->fy_px) || K->fx_px == 0 || K->fy_px == 0)
         return bf_fail(BF_INVALID_ARG, "fusion: bad intrinsics (%ux%u, fx %g, fy %g, depth scale %g)", K->width,
@@ -79,7 +84,8 @@ static bf_status create_buffers(fusion_map *m)
         {&m->counters, "fusion.counters", FUSION_CNT_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
         {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
         {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
-        {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4, GPU_MEMORY_UPLOAD, st},
+        {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4 * (c->keep_colour ? 2 : 1),
+         GPU_MEMORY_UPLOAD, st},
         {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + 1) * 4, GPU_MEMORY_READBACK, st},
         /* Up to 3 band points per pixel wait for a retry pass. */
         {&m->samples, "fusion.retry", (FUSION_QUEUE_ENTRIES + 2 * 3 * pixels) * 4, GPU_MEMORY_DEVICE,
@@ -99,6 +105,26 @@ static bf_status create_buffers(fusion_map *m)
         gpu_buffer_desc d = {.name = plan[i].name, .size_bytes = plan[i].bytes, .memory = plan[i].memory,
                              .usage = plan[i].usage};
         bf_status s = gpu_buffer_create(m->ctx, &d, plan[i].dst);
+        if (s != BF_OK) return s;
+    }
+    /* Without colour the colour buffers are one word each: the removal
+     * pass binds them whether or not the map keeps colour. */
+    uint64_t on = c->keep_colour ? 1 : 0;
+    buf_plan colour[] = {
+        {&m->colour_ring, "fusion.colour_ring", on ? (uint64_t)m->ring_slots * depth_words * 4 : 4, GPU_MEMORY_DEVICE,
+         st},
+        {&m->cidx, "fusion.colour_index", on ? (uint64_t)c->brick_cap * BRICK_WORDS * 4 : 4, GPU_MEMORY_DEVICE, st},
+        {&m->cpool, "fusion.colour_pool", on ? (uint64_t)c->colour_block_cap * FUSION_COLOUR_BLOCK_WORDS * 4 : 4,
+         GPU_MEMORY_DEVICE, st},
+        {&m->cfree, "fusion.colour_free", on ? (uint64_t)c->colour_block_cap * 4 : 4, GPU_MEMORY_DEVICE, st},
+    };
+    for (size_t i = 0; i < sizeof colour / sizeof colour[0]; i++) {
+        if (colour[i].bytes > max_binding)
+            return bf_fail(BF_INVALID_ARG, "fusion: %s needs %llu bytes, above this device's %llu-byte storage binding",
+                           colour[i].name, (unsigned long long)colour[i].bytes, (unsigned long long)max_binding);
+        gpu_buffer_desc d = {.name = colour[i].name, .size_bytes = colour[i].bytes, .memory = colour[i].memory,
+                             .usage = colour[i].usage};
+        bf_status s = gpu_buffer_create(m->ctx, &d, colour[i].dst);
         if (s != BF_OK) return s;
     }
     return BF_OK;
@@ -121,13 +147,21 @@ bf_status fusion__reset(fusion_map *m)
 {
     const fusion_config *c = &m->cfg;
     bf_status s;
-    uint32_t *tmp = malloc((size_t)(m->n_entries > c->brick_cap ? m->n_entries : c->brick_cap) *
-                           FUSION_ENTRY_WORDS * 4);
+    size_t tmp_words = (size_t)(m->n_entries > c->brick_cap ? m->n_entries : c->brick_cap) * FUSION_ENTRY_WORDS;
+    if (c->keep_colour && tmp_words < c->colour_block_cap) tmp_words = c->colour_block_cap;
+    uint32_t *tmp = malloc(tmp_words * 4);
     if (!tmp) return bf_fail(BF_NO_MEMORY, "fusion: host staging for map init");
     fusion__hash_empty(tmp, m->n_entries);
     s = gpu_buffer_upload(m->hash, 0, tmp, (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
     for (uint32_t i = 0; s == BF_OK && i < c->brick_cap; i++) tmp[i] = c->brick_cap - 1 - i;
     if (s == BF_OK) s = gpu_buffer_upload(m->free_stack, 0, tmp, (uint64_t)c->brick_cap * 4);
+    if (c->keep_colour) {
+        for (uint32_t i = 0; s == BF_OK && i < c->colour_block_cap; i++) tmp[i] = c->colour_block_cap - 1 - i;
+        if (s == BF_OK) s = gpu_buffer_upload(m->cfree, 0, tmp, (uint64_t)c->colour_block_cap * 4);
+        if (s == BF_OK) s = gpu_buffer_fill(m->cidx, 0, gpu_buffer_size(m->cidx), FUSION_NONE);
+        if (s == BF_OK) s = gpu_buffer_zero(m->cpool);
+        if (s == BF_OK) s = gpu_buffer_zero(m->colour_ring);
+    }
     free(tmp);
     if (s == BF_OK) s = gpu_buffer_zero(m->locks);
     if (s == BF_OK) s = gpu_buffer_fill(m->nodes, 0, gpu_buffer_size(m->nodes), FUSION_NONE);
@@ -143,6 +177,7 @@ bf_status fusion__reset(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_zero(m->readback);
     uint32_t cnt[FUSION_CNT_WORDS] = {0};
     cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
+    cnt[FUSION_CNT_COLOUR_TOP] = c->keep_colour ? c->colour_block_cap : 0;
     if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
     return s;
 }
@@ -152,6 +187,11 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
 {
     fusion_config c = cfg ? *cfg : fusion_config_default();
     if (c.node_cap == 0) c.node_cap = 2 * c.brick_cap + 64;
+    if (c.colour_block_cap == 0) { /* 4 blocks a brick (a scan uses 7-8 per surface brick), as one binding holds */
+        uint64_t fit = gpu_device_limits(ctx)->max_storage_buffer_range / (FUSION_COLOUR_BLOCK_WORDS * 4);
+        uint64_t want = 4ull * c.brick_cap;
+        c.colour_block_cap = (uint32_t)(want < fit ? want : fit);
+    }
     bf_status s = config_check(&c, K);
     if (s != BF_OK) return s;
     if (!isfinite(origin_w.x) || !isfinite(origin_w.y) || !isfinite(origin_w.z))
@@ -169,11 +209,15 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     m->origin_w = origin_w;
     m->ring_slots = 2 * c.window;
     m->n_entries = c.hash_buckets * FUSION_BUCKET_SLOTS + c.hash_overflow;
+    m->colour_registered = true;
+    m->Kc = *K;
+    m->T_colour_depth = bf_se3_identity();
     if ((s = create_buffers(m)) != BF_OK) goto fail;
     if ((s = fusion__reset(m)) != BF_OK) goto fail;
     if ((s = fusion__alloc_create(m)) != BF_OK) goto fail;
     if ((s = fusion__integrate_create(m)) != BF_OK) goto fail;
     if ((s = fusion__schedule_create(m)) != BF_OK) goto fail;
+    if ((s = fusion__colour_create(m)) != BF_OK) goto fail;
     *out = m;
     return BF_OK;
 fail:
@@ -184,12 +228,13 @@ fail:
 void fusion_destroy(fusion_map *m)
 {
     if (!m) return;
+    fusion__colour_destroy(m);
     fusion__schedule_destroy(m);
     fusion__integrate_destroy(m);
     fusion__alloc_destroy(m);
     gpu_buffer *bufs[] = {m->readback, m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
-                          m->locks, m->hash};
+                          m->locks, m->hash, m->colour_ring, m->cidx, m->cpool, m->cfree};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     free(m);
 }
@@ -255,6 +300,47 @@ static uint32_t host_find_chunk(const fusion_map *m, const fusion_host_map *h, c
 
 /* ------------------------------------------------------------ snapshot */
 
+/* The colours of the live bricks of slots [0, high) (info: their records),
+ * in snapshot order, expanded to 512 per brick (hostmap.rgb565). Only the
+ * blocks up to the highest one referenced are downloaded: the free stack
+ * hands out low blocks first. */
+static bf_status snapshot_colour(fusion_map *m, const uint32_t *info, uint32_t high, uint32_t n_live, uint16_t **out)
+{
+    uint32_t *cidx = malloc((size_t)high * BRICK_WORDS * 4 + 4), *pool = NULL;
+    uint16_t *rgb = calloc((size_t)n_live * BRICK_VOXELS + 1, 2);
+    bf_status s = cidx && rgb ? BF_OK : bf_fail(BF_NO_MEMORY, "fusion: colour snapshot of %u bricks", n_live);
+    if (s == BF_OK && high) s = gpu_buffer_download(m->cidx, 0, cidx, (uint64_t)high * BRICK_WORDS * 4);
+    uint64_t n_blocks = 0;
+    for (uint64_t i = 0; s == BF_OK && i < (uint64_t)high * BRICK_WORDS; i++)
+        if (cidx[i] != FUSION_NONE && cidx[i] < m->cfg.colour_block_cap && cidx[i] + 1ull > n_blocks)
+            n_blocks = cidx[i] + 1ull;
+    if (s == BF_OK && n_blocks) {
+        pool = malloc(n_blocks * FUSION_COLOUR_BLOCK_WORDS * 4);
+        s = pool ? gpu_buffer_download(m->cpool, 0, pool, n_blocks * FUSION_COLOUR_BLOCK_WORDS * 4)
+                 : bf_fail(BF_NO_MEMORY, "fusion: colour snapshot of %llu blocks", (unsigned long long)n_blocks);
+    }
+    uint32_t k = 0;
+    for (uint32_t b = 0; s == BF_OK && b < high; b++) {
+        if (info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] >= m->n_entries) continue;
+        uint16_t *o = rgb + (size_t)k++ * BRICK_VOXELS;
+        for (uint32_t v = 0; v < BRICK_VOXELS; v++) {
+            uint32_t x = v & 7, y = (v >> 3) & 7, z = v >> 6, w = brick_word(x, y, z), bit = brick_bit(x, y, z);
+            uint32_t blk = cidx[(size_t)b * BRICK_WORDS + w];
+            if (blk == FUSION_NONE || blk >= n_blocks) continue;
+            uint32_t word = pool[(size_t)blk * FUSION_COLOUR_BLOCK_WORDS + bit / 2];
+            o[v] = (uint16_t)(bit & 1 ? word >> 16 : word & 0xFFFFu);
+        }
+    }
+    free(cidx);
+    free(pool);
+    if (s != BF_OK) {
+        free(rgb);
+        return s;
+    }
+    *out = rgb;
+    return BF_OK;
+}
+
 bf_status fusion_snapshot_take(fusion_map *m, hostmap *out)
 {
     uint32_t cap = m->cfg.brick_cap;
@@ -291,6 +377,8 @@ bf_status fusion_snapshot_take(fusion_map *m, hostmap *out)
         memcpy(o->sign, sign + (size_t)b * BRICK_WORDS, sizeof o->sign);
         memcpy(o->conf, conf + (size_t)b * BRICK_WORDS, sizeof o->conf);
     }
+    uint16_t *rgb = NULL;
+    if (s == BF_OK && m->cfg.keep_colour) s = snapshot_colour(m, info, high, n_live, &rgb);
     free(info);
     free(hash);
     free(sign);
@@ -303,6 +391,7 @@ bf_status fusion_snapshot_take(fusion_map *m, hostmap *out)
     out->origin_w = m->origin_w;
     out->n_bricks = n_live;
     out->bricks = bricks;
+    out->rgb565 = rgb;
     return BF_OK;
 }
 

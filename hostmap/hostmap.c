@@ -11,7 +11,9 @@ void hostmap_free(hostmap *m)
 {
     if (!m) return;
     free(m->bricks);
+    free(m->rgb565);
     m->bricks = NULL;
+    m->rgb565 = NULL;
     m->n_bricks = 0;
 }
 

@@ -26,6 +26,10 @@ typedef struct hostmap {
     bf_vec3 origin_w;      /* world point of the map's origin (chunk (0,0,0)'s corner) */
     uint32_t n_bricks;
     hostmap_brick *bricks; /* malloc'd */
+    /* Colour of brick i's voxel (x, y, z) at rgb565[i * 512 + x + 8 y + 64 z]:
+       RGB565, 0 = none (black is 0x0001). NULL: the map has no colour.
+       malloc'd, freed by hostmap_free. */
+    uint16_t *rgb565;
 } hostmap;
 
 /* Frees the bricks and leaves an empty map. NULL is a no-op. */

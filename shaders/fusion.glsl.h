@@ -112,7 +112,8 @@ struct fusion_frame {
     bf_f32 depth_unit_m;    /* metres per raw depth unit */
     bf_u32 width, height;
     bf_u32 index;           /* sequence index of the frame in the slot, FUSION_NONE if empty */
-    bf_u32 pad[4];
+    bf_u32 has_colour;      /* 1: the colour ring's slot holds its colour image */
+    bf_u32 pad[3];
 };
 #define FUSION_FRAME_WORDS 24u
 #ifndef BF_GLSL
@@ -181,7 +182,7 @@ _Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push m
 struct fusion_remove_push {
     bf_u32 first, max_count; /* the window slice just integrated */
     bf_u32 last_frame;       /* last frame of its window */
-    bf_u32 pad;
+    bf_u32 has_colour;       /* 1: give a removed brick's colour blocks back */
 };
 #ifndef BF_GLSL
 typedef struct fusion_remove_push fusion_remove_push;
@@ -201,7 +202,9 @@ _Static_assert(sizeof(fusion_remove_push) == 16, "fusion_remove_push must match 
 #define FUSION_CNT_FAIL_HASH 8u    /* requests refused: hash overflow full */
 #define FUSION_CNT_LIST 9u         /* entries in the work list being built */
 #define FUSION_CNT_REMOVED 10u     /* bricks removed as empty, in all */
+#define FUSION_CNT_COLOUR_TOP 11u  /* colour blocks on their free stack */
 #define FUSION_CNT_DISPATCH 12u    /* 3 words: indirect group counts */
+#define FUSION_CNT_FAIL_COLOUR 15u /* sub-bricks left without colour: colour pool full */
 #define FUSION_CNT_WORDS 16u
 
 /* ============================================================ integration
@@ -593,6 +596,81 @@ BF_FN bf_u32 fusion_box_culled(fusion_frame f, bf_f32 lo_x, bf_f32 lo_y, bf_f32 
         outside &= o;
     }
     return outside != 0u ? 1u : 0u;
+}
+
+/* ============================================================ colour
+ * Colour of the confident voxels near the surface (DESIGN.md section 3;
+ * Reichl's dissertation, ch. 8): per 32-bit sub-brick (a word of the bit
+ * planes) one word in the colour index, FUSION_NONE or the block of the
+ * colour pool that holds its 32 colours: RGB565, two per word, voxel bit i
+ * in word i / 2, the low half for even i. One index word per 32 voxels is
+ * the method's one bit per voxel; blocks exist only for sub-bricks with a
+ * coloured voxel. RGB565 0 means "no colour"; black is stored as 0x0001.
+ *
+ * Blocks come off a free stack (FUSION_CNT_COLOUR_TOP): the colour pass
+ * pops, the removal pass pushes, never in the same dispatch, so neither
+ * spins (the dissertation's page allocation spins on lockstep warps, which
+ * Vulkan does not promise). */
+#define FUSION_COLOUR_BLOCK_WORDS 16u
+#define FUSION_COLOUR_NONE 0u
+/* Frames of a window the colour pass reads at most. */
+#define FUSION_COLOUR_MAX_FRAMES 32u
+/* Half-thickness of the coloured shell around the surface, in voxels:
+ * the mean of D over the colour samples (weighted as they are) must be
+ * below it. 0.75 keeps one to two voxels across a surface at any slant. */
+#define FUSION_COLOUR_SHELL 0.75f
+/* Workgroup of the colour pass: 64 invocations, 8 voxels each. */
+#define FUSION_COLOUR_LOCAL 64u
+
+/* RGB565 of a colour in [0, 255] per channel (rounded; black -> 0x0001). */
+BF_FN bf_u32 fusion_rgb565(bf_f32 r, bf_f32 g, bf_f32 b)
+{
+    BF_PRECISE bf_f32 rr = r * (31.0f / 255.0f) + 0.5f;
+    BF_PRECISE bf_f32 gg = g * (63.0f / 255.0f) + 0.5f;
+    BF_PRECISE bf_f32 bb = b * (31.0f / 255.0f) + 0.5f;
+    bf_u32 ri = rr < 31.0f ? (rr > 0.0f ? BF_U32(rr) : 0u) : 31u;
+    bf_u32 gi = gg < 63.0f ? (gg > 0.0f ? BF_U32(gg) : 0u) : 63u;
+    bf_u32 bi = bb < 31.0f ? (bb > 0.0f ? BF_U32(bb) : 0u) : 31u;
+    bf_u32 c = (ri << 11) | (gi << 5) | bi;
+    return c != 0u ? c : 1u;
+}
+/* Channels of an RGB565 colour in [0, 255] (bit replication). */
+BF_FN bf_u32 fusion_565_r(bf_u32 c) { return (((c >> 11) & 31u) << 3) | (((c >> 11) & 31u) >> 2); }
+BF_FN bf_u32 fusion_565_g(bf_u32 c) { return (((c >> 5) & 63u) << 2) | (((c >> 5) & 63u) >> 4); }
+BF_FN bf_u32 fusion_565_b(bf_u32 c) { return ((c & 31u) << 3) | ((c & 31u) >> 2); }
+
+/* Push constants of fusion_colour.comp. The colour camera: intrinsics and
+ * T_colour_depth (R row-major, t), or registered != 0 when colour pixel i
+ * shows what depth pixel i measured (TUM, registered Kinect modes). */
+struct fusion_colour_push {
+    bf_u32 first, max_count;  /* the window slice's list entries */
+    bf_u32 frame_first;       /* first frame the pass reads */
+    bf_u32 n_frames;          /* frames it reads, <= FUSION_COLOUR_MAX_FRAMES */
+    bf_u32 frame_stride;      /* frames frame_first + k * stride */
+    bf_u32 ring_slots;
+    bf_u32 depth_words;       /* words per image in the depth and colour rings */
+    bf_u32 registered;
+    bf_f32 chunk_m;
+    bf_f32 sigma_a, sigma_b, sigma_c;
+    bf_f32 cfx, cfy, ccx, ccy;
+    bf_f32 R[9];
+    bf_f32 t[3];
+    bf_u32 bricks_per_group;  /* consecutive list entries one workgroup colours */
+    bf_u32 pad[3];
+};
+#ifndef BF_GLSL
+typedef struct fusion_colour_push fusion_colour_push;
+_Static_assert(sizeof(fusion_colour_push) == 128, "fusion_colour_push must match std430");
+#endif
+
+/* Weight of one frame's colour sample of a voxel: the cosine between the
+ * viewing ray and the surface normal (from the depth image) over the
+ * squared depth (grazing views smear texture, far ones blur it);
+ * InfiniTAM and ElasticFusion weigh colour by the same two factors. */
+BF_FN bf_f32 fusion_colour_weight(bf_f32 cos_view, bf_f32 depth_m)
+{
+    BF_PRECISE bf_f32 w = cos_view / (depth_m * depth_m);
+    return w;
 }
 
 #endif

@@ -19,6 +19,8 @@ layout(std430, binding = 4) buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 5) readonly buffer Stamp { uint w[]; } stamp;
 layout(std430, binding = 6) buffer Counters { uint w[]; } cnt;
 layout(std430, binding = 7) buffer FreeStack { uint w[]; } free_stack;
+layout(std430, binding = 8) buffer ColourIndex { uint w[]; } cidx;
+layout(std430, binding = 9) buffer ColourFree { uint w[]; } cfree;
 
 layout(push_constant) uniform Push { fusion_remove_push pc; };
 
@@ -36,6 +38,16 @@ void main()
     nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_BRICK] = FUSION_NONE;
     for (uint k = 0u; k < BRICK_WORDS; k++) sign_pool.w[b * BRICK_WORDS + k] = 0u;
     for (uint k = 0u; k < FUSION_BRICK_INFO_WORDS; k++) info.w[b * FUSION_BRICK_INFO_WORDS + k] = FUSION_NONE;
+    if (pc.has_colour != 0u) {
+        /* Its colour blocks go back too (the colour pass, which pops, runs
+         * in another dispatch). */
+        for (uint k = 0u; k < BRICK_WORDS; k++) {
+            uint blk = cidx.w[b * BRICK_WORDS + k];
+            if (blk == FUSION_NONE) continue;
+            cidx.w[b * BRICK_WORDS + k] = FUSION_NONE;
+            cfree.w[atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 1u)] = blk;
+        }
+    }
     atomicAdd(cnt.w[FUSION_CNT_BRICKS], 0xFFFFFFFFu);
     uint top = atomicAdd(cnt.w[FUSION_CNT_FREE_TOP], 1u);
     free_stack.w[top] = b;

@@ -18,6 +18,32 @@
 
 #include "synth_int.h"
 
+void synth_scene_shade(const synth_scene *sc, uint32_t tri, double u, double v, bf_vec3 p_w, bf_vec3 view_dir,
+                       double rgb[3])
+{
+    const mesh_data *m = &sc->mesh;
+    const uint32_t *tv = m->tri + 3 * (size_t)tri;
+    bf_vec3 a = bf_v3(m->xyz[3 * tv[0]], m->xyz[3 * tv[0] + 1], m->xyz[3 * tv[0] + 2]);
+    bf_vec3 b = bf_v3(m->xyz[3 * tv[1]], m->xyz[3 * tv[1] + 1], m->xyz[3 * tv[1] + 2]);
+    bf_vec3 c = bf_v3(m->xyz[3 * tv[2]], m->xyz[3 * tv[2] + 1], m->xyz[3 * tv[2] + 2]);
+    bf_vec3 ns = bf_v3_normalize(bf_v3_cross(bf_v3_sub(b, a), bf_v3_sub(c, a)));
+    /* Shading normal: interpolated vertex normals, facing the viewer. */
+    if (m->normal) {
+        double w[3] = {1 - u - v, u, v};
+        bf_vec3 acc = bf_v3(0, 0, 0);
+        for (int k = 0; k < 3; k++) {
+            const float *nn = m->normal + 3 * (size_t)tv[k];
+            acc = bf_v3_add(acc, bf_v3_scale(bf_v3(nn[0], nn[1], nn[2]), w[k]));
+        }
+        if (bf_v3_norm(acc) > 0) ns = bf_v3_normalize(acc);
+    }
+    if (bf_v3_dot(ns, view_dir) > 0) ns = bf_v3_scale(ns, -1);
+    bf_vec3 l = bf_v3_normalize(bf_v3_sub(sc->light_w, p_w));
+    double lambert = fmax(0.0, bf_v3_dot(ns, l));
+    synth__albedo(sc->tri_material[tri], sc->tri_variant[tri], p_w, rgb);
+    for (int k = 0; k < 3; k++) rgb[k] *= 0.35 + 0.65 * lambert;
+}
+
 /* Depth jump, in disparity pixels, that marks a depth edge; and the chance
  * that a pixel on an edge reads nothing (the Kinect's ragged edge band). */
 #define SYNTH_EDGE_DISPARITY_PX 1.0
@@ -142,23 +168,7 @@ static void trace_row(void *ctx, size_t row)
                 bf_vec3 to_proj = bf_v3_sub(job->projector_w, p);
                 r->is_shadowed[i] = mesh_bvh_raycast(r->bvh, p, to_proj, 1e-5, 1.0 - 1e-5, NULL);
             }
-            /* Shading normal: interpolated vertex normals, facing the camera. */
-            bf_vec3 ns = ng;
-            if (m->normal) {
-                const uint32_t *tv = m->tri + 3 * (size_t)hit.tri;
-                double w0 = 1 - hit.u - hit.v, w[3] = {w0, hit.u, hit.v};
-                bf_vec3 acc = bf_v3(0, 0, 0);
-                for (int k = 0; k < 3; k++) {
-                    const float *nn = m->normal + 3 * (size_t)tv[k];
-                    acc = bf_v3_add(acc, bf_v3_scale(bf_v3(nn[0], nn[1], nn[2]), w[k]));
-                }
-                if (bf_v3_norm(acc) > 0) ns = bf_v3_normalize(acc);
-            }
-            if (bf_v3_dot(ns, d) > 0) ns = bf_v3_scale(ns, -1);
-            bf_vec3 l = bf_v3_normalize(bf_v3_sub(sc->light_w, p));
-            double lambert = fmax(0.0, bf_v3_dot(ns, l));
-            synth__albedo(sc->tri_material[hit.tri], sc->tri_variant[hit.tri], p, rgb);
-            for (int k = 0; k < 3; k++) rgb[k] *= 0.35 + 0.65 * lambert;
+            synth_scene_shade(sc, hit.tri, hit.u, hit.v, p, d, rgb);
         }
         if (job->rgb) {
             uint8_t *o = job->rgb + 3 * i;

@@ -57,6 +57,13 @@ bf_status synth_scene_from_ply(const char *path, double scale, synth_scene *out)
  * the given view; for tests and custom scenes. Computes vertex normals. */
 bf_status synth_scene_from_mesh(mesh_data *mesh, const bf_se3 *T_wc_view, synth_scene *out);
 void synth_scene_free(synth_scene *s); /* NULL is a no-op */
+/* The colour the renderer gives point p_w of triangle tri (barycentrics u,
+ * v of its vertices 1 and 2) seen along view_dir: procedural albedo times
+ * ambient + Lambert from the scene's light, channels in [0, 1] before the
+ * sensor's noise. View-independent but for the side: the normal faces the
+ * viewer. What the colour checks compare a fused map's colour with. */
+void synth_scene_shade(const synth_scene *sc, uint32_t tri, double u, double v, bf_vec3 p_w, bf_vec3 view_dir,
+                       double rgb[3]);
 /* Camera-to-world pose of a camera at eye looking at target (camera x
  * right, y down, z forward; up_w is the world's up). */
 bf_se3 synth_look_at(bf_vec3 eye_w, bf_vec3 target_w, bf_vec3 up_w);

@@ -1,0 +1,222 @@
+#version 450
+/* Colour of a window slice's bricks (DESIGN.md section 3): after the
+ * slice's integration, every confident voxel within the depth noise of a
+ * frame's measured surface takes that frame's colour, weighted by the
+ * viewing angle and the distance (fusion_colour_weight), averaged over a
+ * subset of the window's frames (push: frame_first + k * frame_stride),
+ * then blended half and half with the colour it had. Sub-bricks that get
+ * their first coloured voxel take a block off the colour free stack.
+ *
+ * One workgroup per brick of the list, FUSION_COLOUR_LOCAL invocations of
+ * 8 voxels each (voxel v = tid + k * 64: neighbouring lanes, neighbouring
+ * x). The frames' stepping is that of the integration (fusion_step), so a
+ * voxel lands on the pixel the integration read. */
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
+#include "fusion.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) readonly buffer Hash { uint w[]; } hash;
+layout(std430, binding = 1) readonly buffer Info { uint w[]; } info;
+layout(std430, binding = 2) readonly buffer Conf { uint w[]; } conf_pool;
+layout(std430, binding = 3) readonly buffer Frames { fusion_frame f[]; } frames;
+layout(std430, binding = 4) readonly buffer Depth { uint w[]; } depth;
+layout(std430, binding = 5) readonly buffer ColourRing { uint w[]; } colour_ring;
+layout(std430, binding = 6) readonly buffer List { uint w[]; } list;
+layout(std430, binding = 7) buffer ColourIndex { uint w[]; } cidx;
+layout(std430, binding = 8) buffer ColourPool { uint w[]; } cpool;
+layout(std430, binding = 9) buffer Counters { uint w[]; } cnt;
+layout(std430, binding = 10) readonly buffer ColourFree { uint w[]; } cfree;
+
+layout(push_constant) uniform Push { fusion_colour_push pc; };
+
+#define VPT 8u
+shared uint s_conf[BRICK_WORDS], s_cidx[BRICK_WORDS], s_new[BRICK_WORDS];
+shared uint s_col[BRICK_WORDS * FUSION_COLOUR_BLOCK_WORDS];
+shared uint s_visible, s_n_visible;
+shared uint s_order[FUSION_COLOUR_MAX_FRAMES];
+shared vec4 s_step[FUSION_COLOUR_MAX_FRAMES * 4u];
+
+/* Takes a colour block off the free stack; FUSION_NONE when it is empty. */
+uint pop_block()
+{
+    int old = int(atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 0xFFFFFFFFu));
+    if (old <= 0) {
+        atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 1u);
+        return FUSION_NONE;
+    }
+    return cfree.w[old - 1];
+}
+
+/* The colour ring's RGB565 at pixel i of ring image `base`. */
+uint ring_colour(uint base, uint pixel)
+{
+    uint word = colour_ring.w[base + (pixel >> 1)];
+    return (pixel & 1u) != 0u ? word >> 16 : word & 0xFFFFu;
+}
+
+/* Camera point of pixel (u, v) (centres at integers) at depth z. */
+vec3 unproject(fusion_frame f, float u, float v, float z) { return vec3((u - f.cx) / f.fx * z, (v - f.cy) / f.fy * z, z); }
+
+void colour_brick(uint slot, uint tid)
+{
+    uint chunk = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
+    if (chunk == FUSION_NONE) return; /* uniform */
+    uint pos = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS];
+    int key_x = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_X]);
+    int key_y = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Y]);
+    int key_z = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Z]);
+    uint cell_x = fusion_pos_x(pos), cell_y = fusion_pos_y(pos), cell_z = fusion_pos_z(pos);
+    float voxel_m = fusion_voxel_m(pc.chunk_m, fusion_pos_level(pos));
+    if (tid < BRICK_WORDS) {
+        s_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
+        s_cidx[tid] = cidx.w[slot * BRICK_WORDS + tid];
+        s_new[tid] = 0u;
+    }
+    if (tid == 0u) s_visible = 0u;
+    barrier();
+    uint any_conf = 0u;
+    [[unroll]] for (uint w = 0u; w < BRICK_WORDS; w++) any_conf |= s_conf[w];
+    if (any_conf == 0u) return; /* uniform: nothing to colour */
+    /* The old colours (0 where the sub-brick has no block). */
+    for (uint i = tid; i < BRICK_WORDS * FUSION_COLOUR_BLOCK_WORDS; i += FUSION_COLOUR_LOCAL) {
+        uint blk = s_cidx[i / FUSION_COLOUR_BLOCK_WORDS];
+        s_col[i] = blk != FUSION_NONE ? cpool.w[blk * FUSION_COLOUR_BLOCK_WORDS + i % FUSION_COLOUR_BLOCK_WORDS] : 0u;
+    }
+
+    float lo_x = fusion_voxel_centre(key_x, cell_x, 0u, pc.chunk_m, voxel_m);
+    float lo_y = fusion_voxel_centre(key_y, cell_y, 0u, pc.chunk_m, voxel_m);
+    float lo_z = fusion_voxel_centre(key_z, cell_z, 0u, pc.chunk_m, voxel_m);
+    float hi_x = fusion_voxel_centre(key_x, cell_x, 7u, pc.chunk_m, voxel_m);
+    float hi_y = fusion_voxel_centre(key_y, cell_y, 7u, pc.chunk_m, voxel_m);
+    float hi_z = fusion_voxel_centre(key_z, cell_z, 7u, pc.chunk_m, voxel_m);
+    uint n_frames = min(pc.n_frames, FUSION_COLOUR_MAX_FRAMES);
+    if (tid < n_frames) {
+        uint index = pc.frame_first + tid * pc.frame_stride, ring = index % pc.ring_slots;
+        fusion_frame f = frames.f[ring];
+        if (f.index == index && f.has_colour != 0u && fusion_box_culled(f, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) == 0u) {
+            atomicOr(s_visible, 1u << tid);
+            fusion_step st = fusion_step_make(f, lo_x, lo_y, lo_z, voxel_m);
+            s_step[4u * tid + 0u] = vec4(st.h0.x, st.h0.y, st.h0.z, f.depth_unit_m);
+            s_step[4u * tid + 1u] = vec4(st.sx.x, st.sx.y, st.sx.z, uintBitsToFloat(ring));
+            s_step[4u * tid + 2u] = vec4(st.sy.x, st.sy.y, st.sy.z, uintBitsToFloat(f.width));
+            s_step[4u * tid + 3u] = vec4(st.sz.x, st.sz.y, st.sz.z, uintBitsToFloat(f.height));
+        }
+    }
+    barrier();
+    uint vis = s_visible;
+    uint n_visible = uint(bitCount(vis));
+    if (n_visible == 0u) return; /* uniform */
+    if (tid < n_frames && ((vis >> tid) & 1u) != 0u) s_order[uint(bitCount(vis & ((1u << tid) - 1u)))] = tid;
+    barrier();
+
+    vec4 acc[VPT];
+    float acc_d[VPT];
+    [[unroll]] for (uint k = 0u; k < VPT; k++) acc[k] = vec4(0.0), acc_d[k] = 0.0;
+    uint r = 0u;
+    do {
+        uint j = s_order[r];
+        vec4 a = s_step[4u * j + 0u], b = s_step[4u * j + 1u], c = s_step[4u * j + 2u], d = s_step[4u * j + 3u];
+        fusion_step st;
+        st.h0.x = a.x, st.h0.y = a.y, st.h0.z = a.z;
+        st.sx.x = b.x, st.sx.y = b.y, st.sx.z = b.z;
+        st.sy.x = c.x, st.sy.y = c.y, st.sy.z = c.z;
+        st.sz.x = d.x, st.sz.y = d.y, st.sz.z = d.z;
+        uint ring = floatBitsToUint(b.w), width = floatBitsToUint(c.w), height = floatBitsToUint(d.w);
+        fusion_frame f = frames.f[ring];
+        uint base = ring * pc.depth_words;
+        [[unroll]] for (uint k = 0u; k < VPT; k++) {
+            uint v = tid + k * FUSION_COLOUR_LOCAL;
+            uint x = v & 7u, y = (v >> 3) & 7u, z = v >> 6;
+            uint is_conf = (s_conf[brick_word(x, y, z)] >> brick_bit(x, y, z)) & 1u;
+            fusion_point h = fusion_step_point(st, x, y, z);
+            uint pixel = fusion_project_step(h, width, height);
+            uint p0 = pixel != FUSION_NONE ? pixel : 0u;
+            uint pu = p0 % width, pv = p0 / width;
+            /* The pixel and its right and lower neighbours (clamped), for the normal. */
+            uint p1 = pu + 1u < width ? p0 + 1u : p0 - 1u, p2 = pv + 1u < height ? p0 + width : p0 - width;
+            float d0 = float(fusion_depth_raw(depth.w[base + (p0 >> 1)], p0)) * a.w;
+            float d1 = float(fusion_depth_raw(depth.w[base + (p1 >> 1)], p1)) * a.w;
+            float d2 = float(fusion_depth_raw(depth.w[base + (p2 >> 1)], p2)) * a.w;
+            float sigma = bf_sensor_sigma(d0, pc.sigma_a, pc.sigma_b, pc.sigma_c);
+            float band = max(sigma, voxel_m);
+            bool near = pixel != FUSION_NONE && is_conf != 0u && d0 > 0.0 && abs(d0 - h.z) < band;
+            /* Normal from the depth image; a neighbour across an edge or
+             * without depth leaves the sample at a fixed, low weight. */
+            vec3 q0 = unproject(f, float(pu), float(pv), d0);
+            vec3 q1 = unproject(f, float(p1 % width), float(p1 / width), d1);
+            vec3 q2 = unproject(f, float(p2 % width), float(p2 / width), d2);
+            vec3 n = cross(q1 - q0, q2 - q0);
+            bool smooth_nb = d1 > 0.0 && d2 > 0.0 && abs(d1 - d0) < 4.0 * band && abs(d2 - d0) < 4.0 * band && dot(n, n) > 0.0;
+            float cos_view = smooth_nb ? abs(dot(normalize(n), normalize(q0))) : 0.25;
+            /* The colour pixel: the same one when registered, else the
+             * voxel's camera point through T_colour_depth and the colour
+             * intrinsics. */
+            uint cpix = p0;
+            if (pc.registered == 0u) {
+                vec3 pcam = vec3((h.x / h.z - 0.5 - f.cx) / f.fx * h.z, (h.y / h.z - 0.5 - f.cy) / f.fy * h.z, h.z);
+                vec3 pcol = vec3(pc.R[0] * pcam.x + pc.R[1] * pcam.y + pc.R[2] * pcam.z + pc.t[0],
+                                 pc.R[3] * pcam.x + pc.R[4] * pcam.y + pc.R[5] * pcam.z + pc.t[1],
+                                 pc.R[6] * pcam.x + pc.R[7] * pcam.y + pc.R[8] * pcam.z + pc.t[2]);
+                float cu = pc.cfx * pcol.x / pcol.z + pc.ccx + 0.5, cv = pc.cfy * pcol.y / pcol.z + pc.ccy + 0.5;
+                bool inside = pcol.z > 0.0 && cu >= 0.0 && cv >= 0.0 && cu < float(width) && cv < float(height);
+                near = near && inside;
+                cpix = inside ? uint(cv) * width + uint(cu) : 0u;
+            }
+            uint c = ring_colour(base, cpix);
+            float wgt = near ? fusion_colour_weight(cos_view, d0) : 0.0;
+            acc[k] += wgt * vec4(float(fusion_565_r(c)), float(fusion_565_g(c)), float(fusion_565_b(c)), 1.0);
+            acc_d[k] += wgt * (d0 - h.z);
+        }
+    } while (++r < n_visible);
+
+    /* New colours, blended with the old ones. */
+    [[unroll]] for (uint k = 0u; k < VPT; k++) {
+        uint v = tid + k * FUSION_COLOUR_LOCAL;
+        uint x = v & 7u, y = (v >> 3) & 7u, z = v >> 6;
+        uint w = brick_word(x, y, z), bit = brick_bit(x, y, z);
+        /* Only the shell next to the surface: the voxels whose centre lies
+         * within FUSION_COLOUR_SHELL voxels of the measured surface on
+         * average (the band alone colours 2-4 voxels across it). */
+        if (!(acc[k].w > 0.0) || !(abs(acc_d[k] / acc[k].w) < FUSION_COLOUR_SHELL * voxel_m)) continue;
+        vec3 col = acc[k].rgb / acc[k].w;
+        uint si = w * FUSION_COLOUR_BLOCK_WORDS + (bit >> 1), sh = (bit & 1u) * 16u;
+        uint old = (s_col[si] >> sh) & 0xFFFFu;
+        if (old != FUSION_COLOUR_NONE)
+            col = 0.5 * (col + vec3(float(fusion_565_r(old)), float(fusion_565_g(old)), float(fusion_565_b(old))));
+        uint c = fusion_rgb565(col.r, col.g, col.b);
+        /* Two voxels share a word: clear this half, then set it. */
+        atomicAnd(s_col[si], ~(0xFFFFu << sh));
+        atomicOr(s_col[si], c << sh);
+        atomicOr(s_new[w], 1u << bit);
+    }
+    barrier();
+    /* A block for every sub-brick that got its first colour. */
+    if (tid < BRICK_WORDS && s_new[tid] != 0u && s_cidx[tid] == FUSION_NONE) {
+        uint blk = pop_block();
+        if (blk != FUSION_NONE) cidx.w[slot * BRICK_WORDS + tid] = blk;
+        else atomicAdd(cnt.w[FUSION_CNT_FAIL_COLOUR], 1u);
+        s_cidx[tid] = blk;
+    }
+    barrier();
+    for (uint i = tid; i < BRICK_WORDS * FUSION_COLOUR_BLOCK_WORDS; i += FUSION_COLOUR_LOCAL) {
+        uint w = i / FUSION_COLOUR_BLOCK_WORDS, blk = s_cidx[w];
+        if (blk != FUSION_NONE && s_new[w] != 0u) cpool.w[blk * FUSION_COLOUR_BLOCK_WORDS + i % FUSION_COLOUR_BLOCK_WORDS] = s_col[i];
+    }
+}
+
+void main()
+{
+    uint n_list = list.w[FUSION_LIST_COUNT];
+    uint count = n_list > pc.first ? min(n_list - pc.first, pc.max_count) : 0u;
+    uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    /* bricks_per_group consecutive entries: llvmpipe pays about 10 us to
+     * start a workgroup (as for the integration). */
+    for (uint b = 0u; b < pc.bricks_per_group; b++) {
+        uint idx = group * pc.bricks_per_group + b;
+        if (idx >= count) return; /* uniform */
+        barrier(); /* the previous brick's reads of shared memory -> this brick's writes */
+        colour_brick(list.w[FUSION_LIST_HEADER + pc.first + idx], gl_LocalInvocationID.x);
+    }
+}
