@@ -165,6 +165,8 @@ typedef struct fusion_gpu_view {
     gpu_buffer *nodes;      /* FUSION_NODE_WORDS per node */
     gpu_buffer *info;       /* FUSION_BRICK_INFO_WORDS per brick slot */
     gpu_buffer *sign, *conf; /* BRICK_WORDS per brick slot */
+    gpu_buffer *cidx, *cpool; /* colour index and blocks (one word each when the map keeps no colour) */
+    bool has_colour;
     uint32_t n_buckets;     /* hash buckets (fusion_hash's modulus) */
     uint32_t n_entries;     /* buckets * FUSION_BUCKET_SLOTS + overflow */
     uint32_t max_level;

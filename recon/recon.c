@@ -356,6 +356,7 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
         /* The stored map may exceed the pools: it goes to the stream's
          * cache, and the chunks near the last pose come in at once. */
         hostmap copy = *map;
+        copy.rgb565 = NULL; /* stored maps carry no colour yet */
         copy.bricks = map->n_bricks ? bf_malloc((size_t)map->n_bricks * sizeof *copy.bricks) : NULL;
         if (map->n_bricks && !copy.bricks) return bf_fail(BF_NO_MEMORY, "recon: resuming %u bricks", map->n_bricks);
         if (map->n_bricks) memcpy(copy.bricks, map->bricks, (size_t)map->n_bricks * sizeof *copy.bricks);

@@ -17,7 +17,7 @@ struct render_caster {
     gpu_pipeline *p_raycast, *p_shade;
     gpu_bindings *b_raycast, *b_shade;
     /* The map buffers bound to b_raycast (rebound when another map comes). */
-    gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf;
+    gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf, *bound_cidx, *bound_cpool;
     gpu_buffer *bound_start; /* binding 6: the start depths, or the dummy */
     gpu_buffer *bound_depth; /* binding 4: the depth destination, targets.depth or render_options.depth_out */
     gpu_buffer *dummy;       /* 16 bytes bound when there are no start depths */
@@ -67,11 +67,12 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
     if (s == BF_OK) s = target_create(ctx, "render.normal", 16 * n, &rc->targets.normal);
     if (s == BF_OK) s = target_create(ctx, "render.level", 4 * n, &rc->targets.level);
     if (s == BF_OK) s = target_create(ctx, "render.colour", 4 * n, &rc->targets.colour);
+    if (s == BF_OK) s = target_create(ctx, "render.surface_rgb", 4 * n, &rc->targets.surface_rgb);
     gpu_pipeline_desc pr = {
         .name = "render.raycast",
         .spirv = bf_spv_render_raycast,
         .spirv_bytes = bf_spv_render_raycast_size,
-        .n_buffers = 7,
+        .n_buffers = 10,
         .push_bytes = sizeof(render_push),
         .local_size = {rc->local_x, rc->local_y, 1},
     };
@@ -79,7 +80,7 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
         .name = "render.shade",
         .spirv = bf_spv_render_shade,
         .spirv_bytes = bf_spv_render_shade_size,
-        .n_buffers = 4,
+        .n_buffers = 5,
         .push_bytes = sizeof(render_push),
         .local_size = {rc->local_x, rc->local_y, 1},
     };
@@ -87,15 +88,17 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &ps, &rc->p_shade);
     if (s == BF_OK) s = target_create(ctx, "render.no_start", 16, &rc->dummy);
     if (s == BF_OK) s = gpu_buffer_zero(rc->dummy);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 7, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 10, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 9, rc->targets.surface_rgb, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 6, rc->dummy, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) rc->bound_start = rc->dummy;
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 4, "render.shade", &rc->b_shade);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 5, "render.shade", &rc->b_shade);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 4, rc->targets.depth, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) rc->bound_depth = rc->targets.depth;
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 5, rc->targets.level, 0, GPU_WHOLE_SIZE);
-    gpu_buffer *shade[4] = {rc->targets.depth, rc->targets.level, rc->targets.normal, rc->targets.colour};
-    for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_shade, i, shade[i], 0, GPU_WHOLE_SIZE);
+    gpu_buffer *shade[5] = {rc->targets.depth, rc->targets.level, rc->targets.normal, rc->targets.colour,
+                            rc->targets.surface_rgb};
+    for (uint32_t i = 0; i < 5 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_shade, i, shade[i], 0, GPU_WHOLE_SIZE);
     /* Compile now (llvmpipe compiles on first use), not in the first frame. */
     if (s == BF_OK) s = gpu_pipeline_warm_up(ctx, (gpu_pipeline *[]){rc->p_raycast, rc->p_shade}, 2);
     if (s != BF_OK) {
@@ -115,6 +118,7 @@ void render_destroy(render_caster *rc)
     gpu_pipeline_destroy(rc->p_raycast);
     gpu_buffer_destroy(rc->dummy);
     gpu_buffer_destroy(rc->targets.colour);
+    gpu_buffer_destroy(rc->targets.surface_rgb);
     gpu_buffer_destroy(rc->targets.level);
     gpu_buffer_destroy(rc->targets.normal);
     gpu_buffer_destroy(rc->targets.depth);
@@ -126,14 +130,16 @@ void render_destroy(render_caster *rc)
 static bf_status bind_map(render_caster *rc, const fusion_gpu_view *v)
 {
     if (rc->bound_hash == v->hash && rc->bound_nodes == v->nodes && rc->bound_sign == v->sign &&
-        rc->bound_conf == v->conf)
+        rc->bound_conf == v->conf && rc->bound_cidx == v->cidx && rc->bound_cpool == v->cpool)
         return BF_OK;
-    gpu_buffer *bufs[4] = {v->hash, v->nodes, v->sign, v->conf};
-    rc->bound_hash = rc->bound_nodes = rc->bound_sign = rc->bound_conf = NULL;
+    gpu_buffer *bufs[6] = {v->hash, v->nodes, v->sign, v->conf, v->cidx, v->cpool};
+    uint32_t at[6] = {0, 1, 2, 3, 7, 8};
+    rc->bound_hash = rc->bound_nodes = rc->bound_sign = rc->bound_conf = rc->bound_cidx = rc->bound_cpool = NULL;
     bf_status s = BF_OK;
-    for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, i, bufs[i], 0, GPU_WHOLE_SIZE);
+    for (uint32_t i = 0; i < 6 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, at[i], bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
     rc->bound_hash = v->hash, rc->bound_nodes = v->nodes, rc->bound_sign = v->sign, rc->bound_conf = v->conf;
+    rc->bound_cidx = v->cidx, rc->bound_cpool = v->cpool;
     return BF_OK;
 }
 
@@ -196,7 +202,7 @@ bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrin
         .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
         .max_level = v.max_level,
         .flags = (opt->confident_only ? RENDER_FLAG_CONFIDENT_ONLY : 0u) | (opt->refine ? RENDER_FLAG_REFINE : 0u) |
-                 (opt->start_depth ? RENDER_FLAG_START : 0u),
+                 (opt->start_depth ? RENDER_FLAG_START : 0u) | (!opt->no_shade && v.has_colour ? RENDER_FLAG_COLOUR : 0u),
         .start_margin_m = opt->start_margin_m,
         .start_margin_z2 = opt->start_margin_z2,
         .start_off = (uint32_t)opt->start_offset,

@@ -66,6 +66,7 @@ typedef struct render_targets {
     gpu_buffer *normal; /* 4 floats per pixel: unit normal in camera coordinates, w = 0; all 0 = no hit */
     gpu_buffer *level;  /* uint per pixel: octree level of the brick hit; FUSION_NONE = no hit */
     gpu_buffer *colour; /* uint per pixel: shaded RGBA8 (R in the low byte); 0 = no hit */
+    gpu_buffer *surface_rgb; /* uint per pixel: the map's RGB565 at the hit (shaded casts of a map with colour), 0 = none */
 } render_targets;
 
 /* Creates a caster for images of width x height. cfg NULL: the defaults.

@@ -14,6 +14,7 @@
 #define BF_RENDER_GLSL_H
 
 #include "bf_common.glsl.h"
+#include "fusion.glsl.h"
 
 /* Workgroup of both passes: 8x8 pixels, so the 8 lanes of a lavapipe
  * subgroup are 8 neighbouring pixels of one row (coherent rays). */
@@ -24,6 +25,7 @@
 #define RENDER_FLAG_CONFIDENT_ONLY 1u /* non-confident voxels are unknown */
 #define RENDER_FLAG_REFINE 2u         /* hit between the two voxel centres */
 #define RENDER_FLAG_START 4u          /* rays start at the start image's depth minus a margin */
+#define RENDER_FLAG_COLOUR 8u         /* look up the map's colour at the hit (bindings 7-9) */
 
 /* Octree cells are addressed by integer coordinates on the finest grid
  * (2^FUSION_MAX_LEVEL = 256 cells per chunk edge); a cell at level L is
@@ -95,6 +97,18 @@ BF_FN bf_f32 render_refine_depth(bf_f32 front_depth, bf_f32 behind_depth)
  * camera, so the cosine is that of the normal with the reversed ray), a
  * little ambient, tinted by the octree level so the level rule shows.
  * cos_theta in [0, 1]. RGBA8, R in the low byte, alpha 255. */
+/* The map's colour (RGB565) of a hit, lit the same way but half as
+ * strongly: the colour carries the scene, the light only the shape. */
+BF_FN bf_u32 render_shade_colour(bf_f32 cos_theta, bf_u32 rgb565)
+{
+    bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
+    bf_f32 i = 0.55f + 0.45f * c;
+    bf_u32 r = BF_U32(BF_F32(fusion_565_r(rgb565)) * i + 0.5f);
+    bf_u32 g = BF_U32(BF_F32(fusion_565_g(rgb565)) * i + 0.5f);
+    bf_u32 b = BF_U32(BF_F32(fusion_565_b(rgb565)) * i + 0.5f);
+    return r | (g << 8) | (b << 16) | (255u << 24);
+}
+
 BF_FN bf_u32 render_shade(bf_f32 cos_theta, bf_u32 level)
 {
     /* One tint per level, cycling every 4: warm for coarse, cool for fine. */

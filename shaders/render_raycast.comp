@@ -35,6 +35,9 @@ layout(std430, binding = 3) readonly buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 4) writeonly buffer Depth { float v[]; } depth_out;
 layout(std430, binding = 5) writeonly buffer Level { uint v[]; } level_out;
 layout(std430, binding = 6) readonly buffer Start { float v[]; } start_in;
+layout(std430, binding = 7) readonly buffer ColourIndex { uint w[]; } cidx;
+layout(std430, binding = 8) readonly buffer ColourPool { uint w[]; } cpool;
+layout(std430, binding = 9) writeonly buffer SurfaceColour { uint v[]; } rgb_out;
 
 layout(push_constant) uniform Push { render_push pc; };
 
@@ -144,6 +147,34 @@ void gather_block(ivec3 B, uint level, uint hit_slot, ivec3 hit_brick, bool conf
 /* Depth of the zero of the smoothed sign field on the ray, from the
  * midpoint depth s0 of the two voxel centres of a hit in brick (slot,
  * brick) at level. */
+/* RGB565 of the voxel of brick `slot` (brick coordinates `brick` on its
+ * level's grid) that holds map point p; 0 outside the brick or without
+ * colour. */
+uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
+{
+    float v = fusion_voxel_m(pc.chunk_m, level);
+    ivec3 g = ivec3(floor(p / v)) - brick * 8;
+    if (any(lessThan(g, ivec3(0))) || any(greaterThan(g, ivec3(7)))) return 0u;
+    uint w = brick_word(uint(g.x), uint(g.y), uint(g.z)), bit = brick_bit(uint(g.x), uint(g.y), uint(g.z));
+    uint blk = cidx.w[slot * BRICK_WORDS + w];
+    if (blk == FUSION_NONE) return 0u;
+    uint word = cpool.w[blk * FUSION_COLOUR_BLOCK_WORDS + (bit >> 1)];
+    return (bit & 1u) != 0u ? word >> 16 : word & 0xFFFFu;
+}
+
+/* The colour at a hit: the voxel holding it, else the ones half a voxel in
+ * front of and behind it along the ray (colour lives in a shell one or two
+ * voxels thick around the surface). */
+uint hit_colour(render_ray ray, render_trace tr)
+{
+    vec3 p = ray.o + tr.hit_depth * ray.dir;
+    vec3 step = (0.6 * fusion_voxel_m(pc.chunk_m, tr.hit_level)) * normalize(ray.dir);
+    uint c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p);
+    if (c == 0u) c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p - step);
+    if (c == 0u) c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p + step);
+    return c;
+}
+
 float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s0, bool confident_only)
 {
     float v = fusion_voxel_m(pc.chunk_m, level), inv_v = 1.0 / v;
@@ -303,4 +334,5 @@ void main()
                                       (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u);
     depth_out.v[pc.depth_off + pixel] = hit ? tr.hit_depth : 0.0;
     level_out.v[pixel] = hit ? tr.hit_level : FUSION_NONE;
+    if ((pc.flags & RENDER_FLAG_COLOUR) != 0u) rgb_out.v[pixel] = hit ? hit_colour(ray, tr) : 0u;
 }

@@ -29,6 +29,7 @@ layout(std430, binding = 0) readonly buffer Depth { float v[]; } depth_in;
 layout(std430, binding = 1) readonly buffer Level { uint v[]; } level_in;
 layout(std430, binding = 2) writeonly buffer Normal { vec4 v[]; } normal_out;
 layout(std430, binding = 3) writeonly buffer Colour { uint v[]; } colour_out;
+layout(std430, binding = 4) readonly buffer SurfaceColour { uint v[]; } rgb_in;
 
 layout(push_constant) uniform Push { render_push pc; };
 
@@ -91,5 +92,6 @@ void main()
         n = -view;
     }
     normal_out.v[pixel] = vec4(n, 0.0);
-    colour_out.v[pixel] = render_shade(-dot(n, view), level);
+    uint c = (pc.flags & RENDER_FLAG_COLOUR) != 0u ? rgb_in.v[pixel] : 0u;
+    colour_out.v[pixel] = c != 0u ? render_shade_colour(-dot(n, view), c) : render_shade(-dot(n, view), level);
 }

@@ -31,6 +31,10 @@ static int brick_cmp(const void *pa, const void *pb)
 
 void store__sort(hostmap *m)
 {
+    /* Format version 1 holds no colour (docs/colour.md): a map sorted for
+     * the store drops it rather than keep it in the old order. */
+    free(m->rgb565);
+    m->rgb565 = NULL;
     if (m->n_bricks > 1) qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
 }
 
@@ -84,6 +88,7 @@ bf_status store_map_digest(const hostmap *map, uint64_t *out)
 {
     if (!map || !out) return bf_fail(BF_INVALID_ARG, "store_map_digest: NULL argument");
     hostmap copy = *map;
+    copy.rgb565 = NULL; /* map owns it; the digest covers the geometry */
     copy.bricks = map->n_bricks ? bf_malloc((size_t)map->n_bricks * sizeof *copy.bricks) : NULL;
     if (map->n_bricks && !copy.bricks) return bf_fail(BF_NO_MEMORY, "store: digest of %u bricks", map->n_bricks);
     if (map->n_bricks) memcpy(copy.bricks, map->bricks, (size_t)map->n_bricks * sizeof *copy.bricks);

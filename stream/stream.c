@@ -424,9 +424,11 @@ static bf_status dedupe(hostmap *m)
     if (m->n_bricks < 2) return BF_OK;
     ranked *r = bf_malloc((size_t)m->n_bricks * sizeof *r);
     hostmap_brick *o = bf_malloc((size_t)m->n_bricks * sizeof *o);
-    if (!r || !o) {
+    uint16_t *oc = m->rgb565 ? bf_calloc((size_t)m->n_bricks * 512, 2) : NULL; /* colour follows its brick */
+    if (!r || !o || (m->rgb565 && !oc)) {
         free(r);
         free(o);
+        free(oc);
         return bf_fail(BF_NO_MEMORY, "stream: merging %u bricks", m->n_bricks);
     }
     for (uint32_t i = 0; i < m->n_bricks; i++) r[i] = (ranked){&m->bricks[i], i};
@@ -436,6 +438,7 @@ static bf_status dedupe(hostmap *m)
         bool same = k && !memcmp(o[k - 1].key, r[i].b->key, 12) && o[k - 1].level == r[i].b->level &&
                     !memcmp(o[k - 1].cell, r[i].b->cell, 12);
         if (!same) {
+            if (oc) memcpy(oc + (size_t)k * 512, m->rgb565 + (size_t)r[i].order * 512, 512 * 2);
             o[k++] = *r[i].b;
             continue;
         }
@@ -448,7 +451,9 @@ static bf_status dedupe(hostmap *m)
     }
     free(r);
     free(m->bricks);
+    free(m->rgb565);
     m->bricks = o;
+    m->rgb565 = oc;
     m->n_bricks = k;
     return BF_OK;
 }
@@ -468,6 +473,14 @@ bf_status stream_gather(stream *s, hostmap *out)
     }
     hostmap_brick *b = st == BF_OK ? bf_realloc(snap.bricks, (n + 1) * sizeof *b) : NULL;
     if (st == BF_OK && !b) st = bf_fail(BF_NO_MEMORY, "stream: gather of %zu bricks", n);
+    if (b) snap.bricks = b;
+    /* Colour of the cached chunks is not kept yet (docs/colour.md): none. */
+    uint16_t *c = st == BF_OK && snap.rgb565 ? bf_realloc(snap.rgb565, (n + 1) * 512 * 2) : NULL;
+    if (st == BF_OK && snap.rgb565 && !c) st = bf_fail(BF_NO_MEMORY, "stream: colour of %zu bricks", n);
+    if (c) {
+        memset(c + (size_t)snap.n_bricks * 512, 0, (n + 1 - snap.n_bricks) * 512 * 2);
+        snap.rgb565 = c;
+    }
     if (st == BF_OK) {
         snap.bricks = b;
         for (uint32_t i = 0; i < s->n_chunks; i++) {

@@ -449,6 +449,7 @@ BF_TEST(evicted_chunks_come_back_bit_for_bit)
     /* What stayed plus what left is what was. */
     CHECK_OK(fusion_snapshot_take(map, &s1));
     hostmap both = s1;
+    both.rgb565 = NULL; /* s1 owns it (and holds s1's bricks' colour only) */
     both.n_bricks = s1.n_bricks + ev.n_bricks;
     both.bricks = malloc(both.n_bricks * sizeof *both.bricks);
     CHECK(both.bricks != NULL);
