@@ -670,12 +670,16 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
             o[0] += n.x, o[1] += n.y, o[2] += n.z;
         }
     }
+    /* In double up to here; the floats hold positions relative to the
+     * local origin (export.h). */
+    m.origin = export_local_origin(s);
+    bf_vec3 shift = bf_v3_sub(s->origin_w, m.origin);
     for (uint32_t v = 0; v < m.n_verts; v++) {
         bf_vec3 n = bf_v3_normalize(bf_v3(acc[3 * v], acc[3 * v + 1], acc[3 * v + 2]));
         m.normal[3 * v] = (float)n.x, m.normal[3 * v + 1] = (float)n.y, m.normal[3 * v + 2] = (float)n.z;
-        m.xyz[3 * v] = (float)(s->origin_w.x + pos[3 * v]);
-        m.xyz[3 * v + 1] = (float)(s->origin_w.y + pos[3 * v + 1]);
-        m.xyz[3 * v + 2] = (float)(s->origin_w.z + pos[3 * v + 2]);
+        m.xyz[3 * v] = (float)(shift.x + pos[3 * v]);
+        m.xyz[3 * v + 1] = (float)(shift.y + pos[3 * v + 1]);
+        m.xyz[3 * v + 2] = (float)(shift.z + pos[3 * v + 2]);
     }
     free(acc);
     free(pos);
