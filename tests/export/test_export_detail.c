@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "fixture.h"
+#include "shaders/bf_common.glsl.h"
 #include "test.h"
 
 /* The map of test_export_mesh: chunk keys -1 and 0 around its origin. */
@@ -165,5 +166,62 @@ BF_TEST(export_simplified_to_a_cap_stays_near_the_full_mesh)
     CHECK_LE(m.n_tris, full.n_tris / 4);
     mesh_free(&m);
     mesh_free(&full);
+    fx_free(&s);
+}
+
+static int cmp_xyz(const void *a, const void *b)
+{
+    const float *x = a, *y = b;
+    for (int k = 0; k < 3; k++)
+        if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
+    return 0;
+}
+
+/* Vertices are welded by lattice edge whatever the weld table's size.
+ * Isolated inside voxels in free space (at odd coordinates, so no cell
+ * holds two) each give 8 triangles around 6 vertices, more vertices per
+ * triangle than a surface has (1 per 2): 1575 of them make the table (first
+ * size: the smallest power of two >= corners / 3) pass half full and grow.
+ * Without smoothing a vertex's position is a function of its lattice edge,
+ * so two vertices at one place would be a missed weld. */
+BF_TEST(weld_table_grows_and_still_welds_every_edge_once)
+{
+    hostmap s;
+    memset(&s, 0, sizeof s);
+    s.chunk_m = 2.0f;
+    s.n_bricks = 32; /* 4 x 4 x 2 bricks of level 4: 32 x 32 x 16 voxels */
+    s.bricks = calloc(s.n_bricks, sizeof *s.bricks);
+    BF_ASSERT(s.bricks);
+    for (uint32_t i = 0; i < s.n_bricks; i++) {
+        hostmap_brick *b = &s.bricks[i];
+        b->level = 4;
+        b->cell[0] = i & 3, b->cell[1] = (i >> 2) & 3, b->cell[2] = i >> 4;
+        for (uint32_t z = 0; z < 8; z++)
+            for (uint32_t y = 0; y < 8; y++)
+                for (uint32_t x = 0; x < 8; x++) {
+                    uint32_t g[3] = {b->cell[0] * 8 + x, b->cell[1] * 8 + y, b->cell[2] * 8 + z};
+                    bool is_inside = g[0] % 2 && g[1] % 2 && g[2] % 2 && g[0] < 31 && g[1] < 31 && g[2] < 15;
+                    uint32_t w = brick_word(x, y, z), bit = 1u << brick_bit(x, y, z);
+                    if (!is_inside) b->sign[w] |= bit;
+                    b->conf[w] |= bit;
+                }
+    }
+    export_mesh_config cfg = export_mesh_config_default();
+    cfg.taubin_iterations = 0;
+    mesh_data m;
+    CHECK_OK(export_mesh(&s, &cfg, &m, NULL));
+    uint64_t cap0 = 16;
+    uint64_t n_corners = 3ull * m.n_tris;
+    while (cap0 < n_corners / 3) cap0 <<= 1;
+    printf("  isolated voxels: %u triangles, %u vertices (first table %llu slots)\n", m.n_tris, m.n_verts,
+           (unsigned long long)cap0);
+    CHECK(2ull * m.n_verts > cap0); /* the table grew */
+    /* No two vertices at one place: sort positions and compare neighbours. */
+    float (*p)[3] = malloc(sizeof *p * m.n_verts);
+    memcpy(p, m.xyz, sizeof *p * m.n_verts);
+    qsort(p, m.n_verts, sizeof *p, cmp_xyz);
+    for (uint32_t i = 1; i < m.n_verts; i++) CHECK(memcmp(p[i], p[i - 1], sizeof *p) != 0);
+    free(p);
+    mesh_free(&m);
     fx_free(&s);
 }
