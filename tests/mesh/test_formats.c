@@ -516,3 +516,27 @@ BF_TEST(simplify_to_an_error_bound_stays_within_it)
     CHECK_STATUS(mesh_simplify(&m, &cfg, &st), BF_INVALID_ARG);
     mesh_free(&m);
 }
+
+/* One simplification for the fault walk: on failure the mesh must be as it
+ * was (all or nothing); a changed mesh is reported as BF_NUMERIC, which
+ * the walk refuses. */
+static bf_status simplify_once(void *arg)
+{
+    (void)arg;
+    mesh_data m;
+    fx_uv_sphere(&m, 1.0, bf_v3(0, 0, 0), 20, 40);
+    uint32_t n_tris = m.n_tris, n_verts = m.n_verts;
+    float *xyz = m.xyz;
+    mesh_simplify_config cfg = {.max_triangles = 300, .max_error_m = 1e-3};
+    bf_status s = mesh_simplify(&m, &cfg, NULL);
+    if (s != BF_OK && (m.n_tris != n_tris || m.n_verts != n_verts || m.xyz != xyz)) s = BF_NUMERIC;
+    mesh_free(&m);
+    return s;
+}
+
+BF_TEST(simplify_fails_cleanly_at_every_allocation)
+{
+    int n = bf_test_fault_walk(simplify_once, NULL);
+    CHECK(n >= 3);
+    printf("  simplify: %d allocations failed in turn\n", n);
+}
