@@ -12,6 +12,7 @@
 #include "core/core.h"
 #include "fusion/fusion.h"
 #include "export/export.h"
+#include "mesh/mesh.h"
 #include "store/store.h"
 
 /* Exit codes scripts can rely on (docs/cli.md). */
@@ -102,17 +103,46 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc);
  * 0 or the usage exit code, the message printed. */
 int app_check_map_options(const char *cmd, const fusion_config *fc);
 
+/* output.c: how a command writes a mesh (export, fuse, replay, live): the
+ * file's format and the mesh's detail (docs/export.md). */
+typedef struct app_mesh_out {
+    int format;             /* a mesh_format; -1: from the file's extension (export) */
+    uint32_t max_triangles; /* 0: the full mesh */
+    double max_error_m;     /* 0: no bound */
+} app_mesh_out;
+#define APP_MESH_ROWS 4
+/* The rows --format (export) or --mesh-format (the commands writing
+ * DIR/mesh.*), --max-triangles, --max-error; o starts as the defaults:
+ * for export format -1, else MESH_FORMAT_PLY. */
+void app_mesh_options(app_option rows[APP_MESH_ROWS], app_mesh_out *o, bool is_export);
+/* Simplifies mesh as o asks (st: what it did) and writes it to path in
+ * format f. */
+bf_status app_mesh_write(const char *path, mesh_format f, const app_mesh_out *o, mesh_data *mesh,
+                         mesh_simplify_stats *st);
+/* JSON of one mesh written: "format", "file", "vertices", "triangles" (in
+ * the file), "triangles_full" (marching cubes), "origin_w" when not zero,
+ * and "simplify" {"max_triangles", "max_error_m", "error_estimate_m",
+ * "used_sloppy", "seconds"} when asked for. */
+void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mesh_out *mo, const mesh_data *m,
+                        const mesh_simplify_stats *st);
+
 /* output.c: what the commands that build a map report about it. */
 typedef struct app_map_report {
     fusion_stats map;
     export_stats mesh, points;
+    app_mesh_out mesh_out;        /* as asked */
+    mesh_simplify_stats simplify; /* of the mesh written */
+    char mesh_file[16];           /* "mesh.ply", "mesh.obj" or "mesh.glb"; "" without a mesh */
+    bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
 } app_map_report;
 /* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
 uint32_t app_mesh_level(const hostmap *snap);
 /* Fills r->map (the pools' statistics), writes out_dir/points.ply and,
- * with_mesh, out_dir/mesh.ply of whole (taken; a streamed map's every
- * chunk: recon_snapshot) or, when whole is NULL, of the pools' snapshot. */
-bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, bool with_mesh, app_map_report *r);
+ * when mo is not NULL, out_dir/mesh.EXT (EXT from mo's format, simplified
+ * as mo asks) of whole (taken; a streamed map's every chunk:
+ * recon_snapshot) or, when whole is NULL, of the pools' snapshot. */
+bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, const app_mesh_out *mo,
+                         app_map_report *r);
 /* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
 /* The map's lines of the printed summary. */

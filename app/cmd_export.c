@@ -9,15 +9,20 @@
 #include "mesh/mesh.h"
 
 static const char export_usage[] =
-    "usage: bitfuse export STORE --out FILE [--points] [--mesh-level L] [--json]\n\n"
+    "usage: bitfuse export STORE --out FILE [--format ply|obj|glb] [--max-triangles N]\n"
+    "                      [--max-error M] [--points] [--mesh-level L] [--json]\n\n"
     "Reads the scene store STORE (bitfuse replay|live --store) and writes the triangle\n"
     "mesh of its confident surface (marching cubes, as replay's mesh.ply) or, with\n"
-    "--points, its surface voxel centres with normals (as points.ply), as binary PLY.\n"
-    "A corrupt chunk file is reported by name and left out; the rest is exported.\n";
+    "--points, its surface voxel centres with normals (as points.ply). The format comes\n"
+    "from FILE's extension or --format: binary PLY, Wavefront OBJ (+ FILE's .mtl) or glTF\n"
+    "binary (.glb). --max-triangles and --max-error simplify the mesh (meshoptimizer).\n"
+    "A map beyond 1 km from the world origin is written relative to a local origin, which\n"
+    "the file records (docs/export.md). A corrupt chunk file is reported by name and left\n"
+    "out; the rest is exported.\n";
 
 static const char export_epilog[] =
-    "exit codes: 0 ok (also with chunk files left out: they are warned about), 1 failure,\n"
-    "2 usage, 3 no readable store\n";
+    "exit codes: 0 ok (also with chunk files left out: they are warned about), 1 failure\n"
+    "(also FILE not writable: nothing is left behind), 2 usage, 3 no readable store\n";
 
 /* Reads a store, warning about what it left out. */
 static bf_status read_store(const char *dir, hostmap *m, store_meta *meta, bf_traj *traj, store_report *rep)
@@ -34,8 +39,11 @@ int cmd_export(int argc, char **argv)
     const char *cmd = "export", *dir = NULL, *out = NULL;
     bool points = false, json = false;
     uint32_t level = UINT32_MAX;
+    app_mesh_out mo;
+    app_option msh[APP_MESH_ROWS];
+    app_mesh_options(msh, &mo, true);
     const app_option own[] = {
-        APP_OPT("--out", APP_OPT_STRING, &out, "FILE", "the PLY file to write", .required = true),
+        APP_OPT("--out", APP_OPT_STRING, &out, "FILE", "the file to write (.ply, .obj or .glb)", .required = true),
         APP_OPT("--points", APP_OPT_FLAG, &points, NULL, "write the surface points instead of the mesh"),
         APP_OPT("--mesh-level", APP_OPT_U32, &level, "L",
                 "the mesh lattice's octree level (default: the finest level holding a tenth of the bricks)", .max = 8,
@@ -43,19 +51,28 @@ int cmd_export(int argc, char **argv)
         APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "print what was written as JSON"),
         APP_OPT_END,
     };
-    const app_option *tables[] = {own, NULL};
+    const app_option *tables[] = {own, msh, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = export_usage, .tables = tables, .positional = &dir, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no store given", .epilog = export_epilog,
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    /* The format before anything is read: a name it cannot come from is a
+     * usage error, and nothing is written. */
+    mesh_format fmt = (mesh_format)mo.format;
+    if (mo.format < 0 && mesh_format_of_path(out, &fmt) != BF_OK)
+        return app_usage_error(cmd, "--out %s: the format comes from the extension (.ply, .obj, .glb) or --format",
+                               out);
+    if (points && (mo.max_triangles || mo.max_error_m > 0))
+        return app_usage_error(cmd, "--max-triangles and --max-error simplify a mesh, not --points");
     double t0 = bf_time_s();
     hostmap m = {0};
     store_meta meta;
     store_report rep;
     mesh_data data = {0};
     export_stats st = {0};
+    mesh_simplify_stats ss = {0};
     bf_status s = read_store(dir, &m, &meta, NULL, &rep);
     if (s == BF_OK && points) {
         s = export_points(&m, &data, &st);
@@ -64,7 +81,13 @@ int cmd_export(int argc, char **argv)
         mc.max_level = level != UINT32_MAX ? level : app_mesh_level(&m);
         s = export_mesh(&m, &mc, &data, &st);
     }
-    if (s == BF_OK) s = mesh_write_ply(out, &data);
+    /* Writing is the work, not the input: its failure exits 1. */
+    bool is_write_failure = false;
+    double t_write = bf_time_s();
+    if (s == BF_OK) {
+        s = app_mesh_write(out, fmt, &mo, &data, &ss);
+        is_write_failure = s != BF_OK;
+    }
     double secs = bf_time_s() - t0;
     if (s == BF_OK && json) {
         cJSON *o = cJSON_CreateObject();
@@ -74,18 +97,28 @@ int cmd_export(int argc, char **argv)
         cJSON_AddNumberToObject(o, "chunks", rep.n_chunks);
         cJSON_AddNumberToObject(o, "bricks", rep.n_bricks);
         cJSON_AddNumberToObject(o, "chunk_files_left_out", rep.n_bad);
-        cJSON_AddNumberToObject(o, "vertices", (double)data.n_verts);
-        cJSON_AddNumberToObject(o, "triangles", (double)data.n_tris);
+        app_json_mesh_file(o, out, fmt, &mo, &data, &ss);
+        cJSON_AddNumberToObject(o, "export_seconds", st.seconds);
+        cJSON_AddNumberToObject(o, "write_seconds", bf_time_s() - t_write - ss.seconds);
         cJSON_AddNumberToObject(o, "seconds", secs);
         s = app_json_print(o);
     } else if (s == BF_OK) {
-        printf("bitfuse export: %s (%u chunks, %u bricks%s) -> %s: %llu %s in %.1f s\n", dir, rep.n_chunks, rep.n_bricks,
-               rep.n_bad ? ", some chunk files left out" : "", out,
+        printf("bitfuse export: %s (%u chunks, %u bricks%s) -> %s (%s): %llu %s in %.1f s\n", dir, rep.n_chunks,
+               rep.n_bricks, rep.n_bad ? ", some chunk files left out" : "", out, mesh_format_name(fmt),
                (unsigned long long)(points ? data.n_verts : data.n_tris), points ? "points" : "triangles", secs);
+        if (ss.tris_after != ss.tris_before)
+            printf("  simplified from %llu triangles in %.1f s (meshoptimizer's error estimate %.2f mm%s)\n",
+                   (unsigned long long)ss.tris_before, ss.seconds, 1e3 * ss.error_m,
+                   ss.used_sloppy ? "; the cap needed vertex clustering" : "");
+        if (data.origin.x != 0 || data.origin.y != 0 || data.origin.z != 0)
+            printf("  vertices relative to the local origin (%.3f, %.3f, %.3f) m, recorded in the file\n",
+                   data.origin.x, data.origin.y, data.origin.z);
     }
     mesh_free(&data);
     hostmap_free(&m);
-    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
+    if (s == BF_OK) return APP_EXIT_OK;
+    int code = app_fail(cmd, s);
+    return is_write_failure && code == APP_EXIT_INPUT ? APP_EXIT_FAILURE : code;
 }
 
 /* ------------------------------------------------------------ info */

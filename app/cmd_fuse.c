@@ -18,7 +18,8 @@ static const char fuse_usage[] =
     "\n"
     "Fuses every frame of SEQUENCE into the sign-bit map (DESIGN.md sections 3-4) with the\n"
     "given camera poses, then writes into DIR:\n"
-    "  mesh.ply     triangle mesh of the confident surface (binary PLY, normals)\n"
+    "  mesh.ply     triangle mesh of the confident surface (binary PLY, normals; --mesh-format\n"
+    "               obj|glb for mesh.obj + mesh.mtl or mesh.glb, --max-triangles N)\n"
     "  points.ply   surface voxel centres with normals (binary PLY)\n"
     "  stats.json   the map's config, frames, time per frame (median, p95), GPU time per\n"
     "               stage, map bytes by part, bricks per level, surface voxels, bits per voxel\n";
@@ -28,6 +29,7 @@ typedef struct fuse_args {
     replay_options ropt;
     fusion_config fcfg;
     bool no_mesh;
+    app_mesh_out mesh_out;
 } fuse_args;
 
 static int parse_args(int argc, char **argv, fuse_args *a)
@@ -43,10 +45,11 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
         APP_OPT_END,
     };
-    app_option map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS];
+    app_option map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], msh[APP_MESH_ROWS];
+    app_mesh_options(msh, &a->mesh_out, false);
     app_map_options(map, &a->fcfg);
     app_sequence_options(seq, &a->ropt);
-    const app_option *tables[] = {own, map, seq, NULL};
+    const app_option *tables[] = {own, msh, map, seq, NULL};
     app_command_spec spec = {
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
@@ -115,7 +118,7 @@ int cmd_fuse(int argc, char **argv)
         rcfg.label = cmd;
         s = recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run);
     }
-    if (s == BF_OK) s = app_export_map(r.run.map, NULL, a.out, !a.no_mesh, &r.out);
+    if (s == BF_OK) s = app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
     r.seconds = bf_time_s() - t_start;
     if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
     if (s == BF_OK) {
@@ -123,8 +126,8 @@ int cmd_fuse(int argc, char **argv)
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);
-        printf("  wrote            %s/{%spoints.ply,stats.json} in %.1f s\n", a.out, a.no_mesh ? "" : "mesh.ply,",
-               r.seconds);
+        printf("  wrote            %s/{%s%spoints.ply,stats.json} in %.1f s\n", a.out, r.out.mesh_file,
+               r.out.mesh_file[0] ? "," : "", r.seconds);
     }
     recon_run_free(&r.run);
     gpu_context_destroy(ctx);

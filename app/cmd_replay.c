@@ -23,7 +23,8 @@ static const char replay_usage[] =
     "                  (camera to world, like groundtruth.txt)\n"
     "  frames.csv      per frame: state, ICP outcome, inliers, residual, times, the\n"
     "                  relocalising search's candidates tried and the one taken\n"
-    "  mesh.ply        triangle mesh of the confident surface (binary PLY)\n"
+    "  mesh.ply        triangle mesh of the confident surface (binary PLY; --mesh-format\n"
+    "                  obj|glb for mesh.obj + mesh.mtl or mesh.glb, --max-triangles N)\n"
     "  points.ply      surface voxel centres with normals\n"
     "  stats.json      the whole config, time per frame and per stage, tracking counts,\n"
     "                  ATE when the sequence has ground truth, map memory\n"
@@ -55,6 +56,7 @@ typedef struct replay_args {
     recon_config rcfg;
     uint32_t view_every;
     bool no_mesh;
+    app_mesh_out mesh_out;   /* the mesh file's format and detail */
     bool fuse_at_gt;         /* fuse at the frames' true poses: the tracker's one-step error */
     const char *store;       /* keep the map in this scene store as the scan goes */
     bool resume;             /* continue the scan kept in --store */
@@ -232,7 +234,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     a->cache_budget_mib = 256;
     a->rcfg = recon_config_default();
     app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS],
-        stm[STREAM_ROWS];
+        stm[STREAM_ROWS], msh[APP_MESH_ROWS];
     const app_option fuse_gt[] = {
         APP_OPT("--fuse-at-groundtruth", APP_OPT_FLAG, &a->fuse_at_gt, NULL,
                 "track every frame but fuse it at its true pose: the map is the one the sensor gives and the "
@@ -245,8 +247,9 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     app_sequence_options(seq, &a->ropt);
     store_options(sto, a);
     stream_options(stm, a);
-    const app_option *replay_tables[] = {own, fuse_gt, sto, stm, map, seq, NULL};
-    const app_option *live_tables[] = {dev, own, sto, stm, map, seq, NULL};
+    app_mesh_options(msh, &a->mesh_out, false);
+    const app_option *replay_tables[] = {own, msh, fuse_gt, sto, stm, map, seq, NULL};
+    const app_option *live_tables[] = {dev, own, msh, sto, stm, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
         .tables = is_live_cmd ? live_tables : replay_tables, .positional = &a->seq,
@@ -455,8 +458,8 @@ static void print_summary(const replay_args *a, const replay_result *r)
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
     app_print_map(&r->out, a->rcfg.fusion.max_level);
-    printf("  wrote            %s/{trajectory.txt,frames.csv,%spoints.ply,stats.json} in %.1f s\n", a->out,
-           a->no_mesh ? "" : "mesh.ply,", r->seconds);
+    printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
+           r->out.mesh_file[0] ? r->out.mesh_file : "", r->out.mesh_file[0] ? "," : "", r->seconds);
 }
 
 int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
@@ -536,7 +539,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
     hostmap whole = {0};
     if (s == BF_OK && r.run.loop) s = recon_snapshot(r.run.loop, &whole);
-    if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, !a.no_mesh, &r.out);
+    if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
     hostmap_free(&whole);
     r.seconds = bf_time_s() - t_start;
     if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));

@@ -25,7 +25,65 @@ uint32_t app_mesh_level(const hostmap *snap)
     return 0;
 }
 
-bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, bool with_mesh, app_map_report *r)
+void app_mesh_options(app_option rows[APP_MESH_ROWS], app_mesh_out *o, bool is_export)
+{
+    o->format = is_export ? -1 : MESH_FORMAT_PLY;
+    o->max_triangles = 0;
+    o->max_error_m = 0;
+    const app_option format[2] = {
+        APP_OPT("--mesh-format", APP_OPT_ENUM, &o->format, "ply|obj|glb",
+                "the mesh file's format: DIR/mesh.ply, mesh.obj (+ mesh.mtl) or mesh.glb"),
+        APP_OPT("--format", APP_OPT_ENUM, &o->format, "ply|obj|glb",
+                "the file's format: binary PLY, Wavefront OBJ (+ .mtl beside it) or glTF binary (default: from "
+                "--out's extension)",
+                .no_default = true),
+    };
+    const app_option r[APP_MESH_ROWS] = {
+        format[is_export],
+        APP_OPT("--max-triangles", APP_OPT_U32, &o->max_triangles, "N",
+                "simplify the mesh to at most N triangles (meshoptimizer; default: the full mesh)", .min = 1,
+                .no_default = true),
+        APP_OPT("--max-error", APP_OPT_DOUBLE, &o->max_error_m, "M",
+                "simplify the mesh as far as the surface moves at most M metres (with --max-triangles the cap "
+                "still holds)",
+                .min_open = true, .no_default = true),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
+
+bf_status app_mesh_write(const char *path, mesh_format f, const app_mesh_out *o, mesh_data *mesh,
+                         mesh_simplify_stats *st)
+{
+    mesh_simplify_config sc = {.max_triangles = o->max_triangles, .max_error_m = o->max_error_m};
+    bf_status s = mesh_simplify(mesh, &sc, st);
+    return s == BF_OK ? mesh_write(path, f, mesh) : s;
+}
+
+void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mesh_out *mo, const mesh_data *m,
+                        const mesh_simplify_stats *st)
+{
+    cJSON_AddStringToObject(o, "format", mesh_format_name(f));
+    cJSON_AddStringToObject(o, "file", file);
+    cJSON_AddNumberToObject(o, "vertices", (double)m->n_verts);
+    cJSON_AddNumberToObject(o, "triangles", (double)m->n_tris);
+    cJSON_AddNumberToObject(o, "triangles_full", (double)st->tris_before);
+    if (m->origin.x != 0 || m->origin.y != 0 || m->origin.z != 0) {
+        double origin[3] = {m->origin.x, m->origin.y, m->origin.z};
+        app_json_numbers(o, "origin_w", origin, 3);
+    }
+    if (mo->max_triangles || mo->max_error_m > 0) {
+        cJSON *s = app_json_object(o, "simplify");
+        cJSON_AddNumberToObject(s, "max_triangles", mo->max_triangles);
+        cJSON_AddNumberToObject(s, "max_error_m", mo->max_error_m);
+        cJSON_AddNumberToObject(s, "error_estimate_m", st->error_m);
+        cJSON_AddBoolToObject(s, "used_sloppy", st->used_sloppy);
+        cJSON_AddNumberToObject(s, "seconds", st->seconds);
+    }
+}
+
+bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, const app_mesh_out *mo,
+                         app_map_report *r)
 {
     char path[4096];
     hostmap snap = {0};
@@ -34,12 +92,15 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, b
     else if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
     if (s != BF_OK) return s;
     mesh_data mesh = {0}, pts = {0};
-    if (with_mesh) {
+    if (mo) {
+        r->mesh_out = *mo;
+        snprintf(r->mesh_file, sizeof r->mesh_file, "mesh.%s", mesh_format_name((mesh_format)mo->format));
         export_mesh_config mcfg = export_mesh_config_default();
         mcfg.max_level = app_mesh_level(&snap);
         s = export_mesh(&snap, &mcfg, &mesh, &r->mesh);
-        if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "mesh.ply")) == BF_OK)
-            s = mesh_write_ply(path, &mesh);
+        if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, r->mesh_file)) == BF_OK)
+            s = app_mesh_write(path, (mesh_format)mo->format, mo, &mesh, &r->simplify);
+        r->mesh_origin = mesh.origin;
     }
     if (s == BF_OK) s = export_points(&snap, &pts, &r->points);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
@@ -87,8 +148,15 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
     cJSON_AddNumberToObject(drops, "bricks", m->fail_bricks);
     cJSON_AddNumberToObject(drops, "chunks", m->fail_hash);
     cJSON *mesh = app_json_object(o, "mesh");
-    cJSON_AddNumberToObject(mesh, "vertices", (double)r->mesh.n_vertices);
-    cJSON_AddNumberToObject(mesh, "triangles", (double)r->mesh.n_triangles);
+    if (r->mesh_file[0]) {
+        /* What the file holds; the marching-cubes mesh's own size beside. */
+        mesh_data shape = {.n_verts = (uint32_t)r->simplify.verts_after, .n_tris = (uint32_t)r->simplify.tris_after,
+                           .origin = r->mesh_origin};
+        app_json_mesh_file(mesh, r->mesh_file, (mesh_format)r->mesh_out.format, &r->mesh_out, &shape, &r->simplify);
+    } else {
+        cJSON_AddNumberToObject(mesh, "vertices", (double)r->mesh.n_vertices);
+        cJSON_AddNumberToObject(mesh, "triangles", (double)r->mesh.n_triangles);
+    }
     cJSON_AddNumberToObject(mesh, "seconds", r->mesh.seconds);
 }
 
@@ -105,6 +173,10 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
     printf("  bricks per level");
     for (uint32_t l = 0; l <= max_level && l < 16; l++)
         if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);
-    printf("\n  surface          %llu voxels, mesh %llu triangles\n", (unsigned long long)r->points.n_points,
+    printf("\n  surface          %llu voxels, mesh %llu triangles", (unsigned long long)r->points.n_points,
            (unsigned long long)r->mesh.n_triangles);
+    if (r->mesh_file[0] && r->simplify.tris_after != r->simplify.tris_before)
+        printf(", %s simplified to %llu (meshoptimizer's error estimate %.2f mm)", r->mesh_file,
+               (unsigned long long)r->simplify.tris_after, 1e3 * r->simplify.error_m);
+    printf("\n");
 }

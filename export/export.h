@@ -13,6 +13,11 @@
  *    snapshot, nor on the thread count.
  *  - An empty snapshot gives an empty mesh (BF_OK). On failure *out is
  *    untouched.
+ *  - Far from the world origin a float cannot hold a voxel's position (its
+ *    step is 1 mm at 10 km), so positions are computed in double and stored
+ *    relative to out->origin = export_local_origin(s): (0, 0, 0) (world
+ *    coordinates) for a map within EXPORT_WORLD_FLOAT_M of the world
+ *    origin, else the centre of the map's bounding box in whole metres.
  */
 #ifndef BF_EXPORT_H
 #define BF_EXPORT_H
@@ -20,6 +25,14 @@
 #include "core/core.h"
 #include "mesh/mesh.h"
 #include "hostmap/hostmap.h"
+
+/* Beyond this distance from the world origin [m] an export stores its
+ * vertices relative to a local origin: within it a float's rounding stays
+ * below 31 micrometres (half its step of 2^-14 m below 1024 m). */
+#define EXPORT_WORLD_FLOAT_M 1000.0
+
+/* The local origin of s's exports (the rule above). */
+bf_vec3 export_local_origin(const hostmap *s);
 
 /* Counters of one export. Levels beyond 15 are counted in index 15. */
 typedef struct export_stats {
@@ -55,7 +68,7 @@ export_mesh_config export_mesh_config_default(void);
  * of the finest confident voxel containing them, vertices placed at the
  * zero crossing of a smoothed sign field, then Taubin smoothing.
  * Indexed (welded) mesh, triangles wound so their normals point to the free
- * side (sign 1), per-vertex normals, world coordinates. Closed wherever the
+ * side (sign 1), per-vertex normals, world coordinates (less out->origin). Closed wherever the
  * surface runs through known (confident) space, also across bricks, chunks
  * and level transitions. cfg NULL = defaults; st may be NULL.
  * BF_INVALID_ARG for a malformed snapshot (level > 20, cell outside its
@@ -69,7 +82,8 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
  * overridden by finer confident data, with a 6-neighbour of the other sign
  * (the neighbour's centre sampled from the finest confident data, so across
  * bricks, chunks and levels). Normals: gradient of the smoothed sign field,
- * pointing to the free side. World coordinates. Failures as for the mesh. */
+ * pointing to the free side. World coordinates (less out->origin). Failures
+ * as for the mesh. */
 bf_status export_points(const hostmap *s, mesh_data *out, export_stats *st);
 
 #endif

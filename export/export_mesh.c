@@ -457,6 +457,33 @@ typedef struct weld_slot {
     uint32_t idx; /* UINT32_MAX = empty */
 } weld_slot;
 
+static uint64_t weld_hash(uint64_t k0, uint64_t k1)
+{
+    uint64_t h = (k0 * 0x9E3779B97F4A7C15ull) ^ (k1 * 0xC2B2AE3D27D4EB4Full);
+    return h ^ (h >> 29);
+}
+
+/* Doubles the weld table, re-inserting its entries; false without memory
+ * (the old table is then kept for the caller to free). */
+static bool weld_grow(weld_slot **ws, uint64_t *cap)
+{
+    uint64_t nc = *cap * 2;
+    weld_slot *n = bf_malloc(nc * sizeof *n);
+    if (!n) return false;
+    for (uint64_t k = 0; k < nc; k++) n[k].idx = UINT32_MAX;
+    for (uint64_t k = 0; k < *cap; k++) {
+        const weld_slot *o = &(*ws)[k];
+        if (o->idx == UINT32_MAX) continue;
+        uint64_t sl = weld_hash(o->k0, o->k1) & (nc - 1);
+        while (n[sl].idx != UINT32_MAX) sl = (sl + 1) & (nc - 1);
+        n[sl] = *o;
+    }
+    free(*ws);
+    *ws = n;
+    *cap = nc;
+    return true;
+}
+
 typedef struct smooth_job {
     const uint32_t *nb_start, *nb;
     const double *src;
@@ -605,11 +632,12 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
     m.n_tris = (uint32_t)(n_tv / 3);
     if (m.n_tris == 0) goto done;
 
-    /* Weld: one vertex per lattice edge, numbered in order of first use. */
-    /* More slots than triangle corners, so an empty slot always exists; a
-     * closed mesh has about one vertex per 6 corners, so the load is low. */
+    /* Weld: one vertex per lattice edge, numbered in order of first use.
+     * A closed mesh has about one vertex per 6 corners (rims more), so the
+     * table starts at twice that and doubles when half full: sized by the
+     * corners it was the largest block of a big export (24 bytes a corner). */
     uint64_t cap = 16;
-    while (cap <= n_tv) cap <<= 1;
+    while (cap < n_tv / 3) cap <<= 1;
     size_t pos_cap = n_tv / 4 + 16; /* grown below if the mesh has many rim vertices */
     ws = bf_malloc(cap * sizeof *ws);
     m.tri = bf_malloc(n_tv * sizeof *m.tri);
@@ -621,10 +649,14 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
     for (uint32_t k = 0; k < g.n; k++) {
         for (size_t v = 0; v < bo[k].n; v++) {
             const tri_vert *tv = &bo[k].v[v];
-            uint64_t h = (tv->k0 * 0x9E3779B97F4A7C15ull) ^ (tv->k1 * 0xC2B2AE3D27D4EB4Full);
-            h ^= h >> 29;
+            uint64_t h = weld_hash(tv->k0, tv->k1);
             uint64_t sl = h & (cap - 1);
             while (ws[sl].idx != UINT32_MAX && (ws[sl].k0 != tv->k0 || ws[sl].k1 != tv->k1)) sl = (sl + 1) & (cap - 1);
+            if (ws[sl].idx == UINT32_MAX && 2 * ((uint64_t)m.n_verts + 1) > cap) {
+                if (!weld_grow(&ws, &cap)) goto fail_mem;
+                sl = h & (cap - 1);
+                while (ws[sl].idx != UINT32_MAX) sl = (sl + 1) & (cap - 1);
+            }
             if (ws[sl].idx == UINT32_MAX) {
                 if (m.n_verts == pos_cap) {
                     double *p = bf_realloc(pos, pos_cap * 2 * 3 * sizeof *pos);
@@ -670,12 +702,16 @@ bf_status export_mesh(const hostmap *s, const export_mesh_config *cfg, mesh_data
             o[0] += n.x, o[1] += n.y, o[2] += n.z;
         }
     }
+    /* In double up to here; the floats hold positions relative to the
+     * local origin (export.h). */
+    m.origin = export_local_origin(s);
+    bf_vec3 shift = bf_v3_sub(s->origin_w, m.origin);
     for (uint32_t v = 0; v < m.n_verts; v++) {
         bf_vec3 n = bf_v3_normalize(bf_v3(acc[3 * v], acc[3 * v + 1], acc[3 * v + 2]));
         m.normal[3 * v] = (float)n.x, m.normal[3 * v + 1] = (float)n.y, m.normal[3 * v + 2] = (float)n.z;
-        m.xyz[3 * v] = (float)(s->origin_w.x + pos[3 * v]);
-        m.xyz[3 * v + 1] = (float)(s->origin_w.y + pos[3 * v + 1]);
-        m.xyz[3 * v + 2] = (float)(s->origin_w.z + pos[3 * v + 2]);
+        m.xyz[3 * v] = (float)(shift.x + pos[3 * v]);
+        m.xyz[3 * v + 1] = (float)(shift.y + pos[3 * v + 1]);
+        m.xyz[3 * v + 2] = (float)(shift.z + pos[3 * v + 2]);
     }
     free(acc);
     free(pos);

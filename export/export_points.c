@@ -18,6 +18,7 @@ typedef struct point_out {
 typedef struct point_job {
     const export__grid *g;
     point_out *out;
+    double shift[3]; /* the map's origin_w less the local origin */
 } point_job;
 
 /* Field of the level-L voxel at v + (dx, dy, dz), NAN if it has none. */
@@ -104,9 +105,7 @@ static void points_brick(void *ctx, size_t k)
                 grad = bf_v3_normalize(bf_v3(gc[0], gc[1], gc[2]));
                 if (bf_v3_norm(grad) == 0) grad = bf_v3_normalize(toward_free);
                 for (int a = 0; a < 3; a++)
-                    xyz[3 * n + (size_t)a] = (float)((double)q[a] * g->half_m + (a == 0   ? g->s->origin_w.x
-                                                                                 : a == 1 ? g->s->origin_w.y
-                                                                                          : g->s->origin_w.z));
+                    xyz[3 * n + (size_t)a] = (float)(j->shift[a] + (double)q[a] * g->half_m);
                 nrm[3 * n] = (float)grad.x, nrm[3 * n + 1] = (float)grad.y, nrm[3 * n + 2] = (float)grad.z;
                 n++;
             }
@@ -140,7 +139,8 @@ bf_status export_points(const hostmap *s, mesh_data *out, export_stats *st)
     if (g.n) {
         po = bf_calloc(g.n, sizeof *po);
         if (!po) goto fail_mem;
-        point_job job = {&g, po};
+        m.origin = export_local_origin(s);
+        point_job job = {&g, po, {s->origin_w.x - m.origin.x, s->origin_w.y - m.origin.y, s->origin_w.z - m.origin.z}};
         bf_parallel_for(g.n, points_brick, &job);
         size_t n = 0;
         for (uint32_t k = 0; k < g.n; k++) {

@@ -10,25 +10,107 @@
 
 /* ------------------------------------------------------------ meshes */
 
-/* A triangle mesh or point cloud (n_tris == 0), flat arrays. */
+/* A triangle mesh or point cloud (n_tris == 0), flat arrays. Vertex i lies
+ * at world point origin + xyz[i]: floats keep about 7 digits, so a mesh far
+ * from the world origin (10 km: 1 mm steps) keeps its vertices relative to
+ * a local origin held in double. (0, 0, 0) for a mesh in world coordinates;
+ * the writers record a non-zero origin (docs/export.md, "Far from the
+ * origin") and mesh_read_ply reads it back. */
 typedef struct mesh_data {
     uint32_t n_verts, n_tris;
-    float *xyz;      /* 3 * n_verts */
+    float *xyz;      /* 3 * n_verts, relative to origin */
     float *normal;   /* 3 * n_verts or NULL */
-    uint8_t *rgb;    /* 3 * n_verts or NULL */
+    uint8_t *rgb;    /* 3 * n_verts or NULL (sRGB, as the camera gives it) */
     uint32_t *tri;   /* 3 * n_tris vertex indices */
+    bf_vec3 origin;  /* world position of the local origin [m] */
 } mesh_data;
 
 /* Reads a PLY (ascii, binary little- or big-endian) with vertex x y z
  * (float or double), optional nx ny nz, red green blue (uchar), and faces
  * as lists of int/uint indices (polygons are fanned into triangles). Other
- * properties are skipped. Index out of range, truncation, NaN: BF_FORMAT. */
+ * properties are skipped; a header comment "origin_w X Y Z" (as
+ * mesh_write_ply writes it) sets out->origin. Index out of range,
+ * truncation, NaN: BF_FORMAT. */
 bf_status mesh_read_ply(const char *path, mesh_data *out);
-/* Writes binary little-endian PLY (with normals / colour when present). */
-bf_status mesh_write_ply(const char *path, const mesh_data *m);
 void mesh_free(mesh_data *m);
-/* Appends a copy of src transformed by T (vertices and normals). */
+/* Appends a copy of src transformed by T (vertices and normals), in dst's
+ * local frame: src's world points T * (src.origin + xyz) minus dst.origin
+ * (an empty dst takes src's origin). */
 bf_status mesh_append(mesh_data *dst, const mesh_data *src, const bf_se3 *T);
+
+/* ------------------------------------------------------------ writing (mesh/ply.c, obj.c, gltf.c) */
+
+/* Every writer writes a temporary file beside path and renames it into
+ * place once complete (fsync first), so path holds either its old content
+ * or the whole new file, never a part; on failure the temporary file is
+ * removed. A non-zero m->origin is recorded (PLY: header comment "origin_w
+ * X Y Z"; OBJ: comment; glTF: the node's translation). An empty mesh gives
+ * a valid empty file. BF_IO names the file, BF_INVALID_ARG a malformed mesh
+ * (an index out of range). */
+typedef enum mesh_format {
+    MESH_FORMAT_PLY, /* binary little-endian PLY: positions, normals, colour (uchar) */
+    MESH_FORMAT_OBJ, /* Wavefront OBJ + MTL: "v x y z r g b", "vn", "f a//a b//b c//c" */
+    MESH_FORMAT_GLB, /* glTF 2.0 binary: POSITION, NORMAL, COLOR_0, uint32 indices */
+} mesh_format;
+
+/* "ply", "obj", "glb". */
+const char *mesh_format_name(mesh_format f);
+/* The format of a name ("ply", "obj", "glb", any case): false for another. */
+bool mesh_format_parse(const char *name, mesh_format *out);
+/* The format of path's extension (.ply, .obj, .glb, any case); BF_INVALID_ARG
+ * naming the path for another or none. */
+bf_status mesh_format_of_path(const char *path, mesh_format *out);
+/* Writes m to path in format f (one of the writers below). */
+bf_status mesh_write(const char *path, mesh_format f, const mesh_data *m);
+/* Binary little-endian PLY (with normals / colour when present). */
+bf_status mesh_write_ply(const char *path, const mesh_data *m);
+/* Wavefront OBJ with a material file beside it (path with .mtl for its
+ * extension, named by "mtllib"): vertex colours as the common
+ * "v x y z r g b" extension (r, g, b in [0, 1]; MeshLab, Blender, Open3D
+ * read it), normals as "vn", faces "f a//a b//b c//c"; a point cloud has
+ * only "v" lines. Both files are written atomically, the material first. */
+bf_status mesh_write_obj(const char *path, const mesh_data *m);
+/* glTF 2.0 binary (.glb; Khronos glTF 2.0 specification): one node (its
+ * translation = m->origin when non-zero) with one mesh of one primitive:
+ * POSITION (float VEC3, with min/max), NORMAL (unit float VEC3) and COLOR_0
+ * (float VEC3, linear: the sRGB colours converted) when present, uint32
+ * indices for triangles (mode 4) or none for a point cloud (mode 0, POINTS);
+ * a matte, double-sided material (open scans are seen from both sides).
+ * BF_UNSUPPORTED when the file would pass the format's 4 GiB. */
+bf_status mesh_write_glb(const char *path, const mesh_data *m);
+
+/* ------------------------------------------------------------ simplification (mesh/simplify.c) */
+
+/* Edge-collapse simplification by meshoptimizer's meshopt_simplify (Garland
+ * & Heckbert 1997 quadric error metrics, vertices kept in place: the result
+ * uses a subset of the input's vertices, so normals and colours stay those
+ * of the full mesh). */
+typedef struct mesh_simplify_config {
+    /* Hard cap on triangles (0: none). When the topology-preserving
+     * collapses cannot get there (the error bound stops them, or they run
+     * out of legal collapses), the rest is cut by meshopt_simplifySloppy
+     * (vertex clustering), counted in used_sloppy. */
+    uint64_t max_triangles;
+    /* Stop collapsing where the next collapse would move the surface more
+     * than this [m] (meshoptimizer's quadric estimate; 0: no bound). With a
+     * cap, the cap wins when both cannot hold. */
+    double max_error_m;
+} mesh_simplify_config;
+
+typedef struct mesh_simplify_stats {
+    uint64_t tris_before, tris_after, verts_before, verts_after;
+    /* meshoptimizer's estimate of the distance the collapses moved the
+     * surface [m] (a sum over the passes run: a bound, not a measurement). */
+    double error_m;
+    bool used_sloppy;
+    double seconds;
+} mesh_simplify_stats;
+
+/* Simplifies m in place: *m is replaced by the simplified mesh (vertices
+ * compacted in order of first use, attributes carried along) only on
+ * success. A point cloud or a mesh already within the cap and without an
+ * error bound is left as is. st may be NULL. BF_NO_MEMORY. */
+bf_status mesh_simplify(mesh_data *m, const mesh_simplify_config *cfg, mesh_simplify_stats *st);
 
 /* ------------------------------------------------------------ BVH */
 

@@ -5,7 +5,7 @@
  * tools, CGAL, Open3D and MeshLab. The reader loads the whole file and checks
  * every count against the bytes that are left before allocating, so a header
  * that claims 10^12 vertices fails as BF_FORMAT instead of exhausting memory. */
-#include "mesh/mesh.h"
+#include "mesh_int.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -397,7 +397,8 @@ static bf_status ply_skip_element(ply_reader *rd, const ply_element *el)
 
 /* Parses the header into elements; on success *body points past end_header. */
 static bf_status ply_parse_header(const char *path, const uint8_t *data, size_t size, ply_format *fmt,
-                                  ply_element *els, int *n_els, const uint8_t **body, size_t *body_line)
+                                  ply_element *els, int *n_els, const uint8_t **body, size_t *body_line,
+                                  bf_vec3 *origin)
 {
     const uint8_t *p = data, *end = data + size;
     char line[512];
@@ -412,6 +413,15 @@ static bf_status ply_parse_header(const char *path, const uint8_t *data, size_t 
             return bf_fail(BF_FORMAT, "%s: header has no end_header", path);
         char w0[64] = "", w1[64] = "", w2[64] = "", w3[64] = "", w4[64] = "";
         int nw = sscanf(line, "%63s %63s %63s %63s %63s", w0, w1, w2, w3, w4);
+        /* The local origin of a mesh far from the world origin, as
+         * mesh_write_ply records it; other comments are skipped. */
+        double o[3];
+        if (nw >= 5 && !strcmp(w0, "comment") && !strcmp(w1, "origin_w")) {
+            if (!bf_parse_double(w2, &o[0]) || !bf_parse_double(w3, &o[1]) || !bf_parse_double(w4, &o[2]))
+                return bf_fail(BF_FORMAT, "%s: line %zu: bad origin comment '%s'", path, ln, line);
+            *origin = bf_v3(o[0], o[1], o[2]);
+            continue;
+        }
         if (nw <= 0 || !strcmp(w0, "comment") || !strcmp(w0, "obj_info")) continue;
         if (!strcmp(w0, "end_header")) break;
         if (!strcmp(w0, "format")) {
@@ -505,7 +515,7 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
     int n_els = 0;
     const uint8_t *body;
     size_t body_line;
-    s = ply_parse_header(path, (const uint8_t *)data, size, &fmt, els, &n_els, &body, &body_line);
+    s = ply_parse_header(path, (const uint8_t *)data, size, &fmt, els, &n_els, &body, &body_line, &m.origin);
     if (s != BF_OK) goto fail;
 
     /* Check the header before touching the body. */
@@ -618,56 +628,40 @@ fail:
 
 /* ------------------------------------------------------------ writing */
 
-static void ply_put_f32(uint8_t **p, float f)
-{
-    uint32_t b;
-    memcpy(&b, &f, 4);
-    for (int i = 0; i < 4; i++) *(*p)++ = (uint8_t)(b >> (8 * i));
-}
-
-static void ply_put_u32(uint8_t **p, uint32_t b)
-{
-    for (int i = 0; i < 4; i++) *(*p)++ = (uint8_t)(b >> (8 * i));
-}
-
 bf_status mesh_write_ply(const char *path, const mesh_data *m)
 {
-    if (m->n_verts > 0 && !m->xyz) return bf_fail(BF_INVALID_ARG, "%s: mesh has no vertex array", path);
-    for (size_t i = 0; i < 3 * (size_t)m->n_tris; i++)
-        if (m->tri[i] >= m->n_verts)
-            return bf_fail(BF_INVALID_ARG, "%s: triangle %zu uses vertex %u of %u", path, i / 3,
-                           m->tri[i], m->n_verts);
-    char header[512];
-    int hl = snprintf(header, sizeof header,
-                      "ply\nformat binary_little_endian 1.0\ncomment written by bitfuse\n"
-                      "element vertex %u\nproperty float x\nproperty float y\nproperty float z\n%s%s"
-                      "element face %u\nproperty list uchar int vertex_indices\nend_header\n",
-                      m->n_verts,
-                      m->normal ? "property float nx\nproperty float ny\nproperty float nz\n" : "",
-                      m->rgb ? "property uchar red\nproperty uchar green\nproperty uchar blue\n" : "",
-                      m->n_tris);
-    size_t vsize = 12 + (m->normal ? 12 : 0) + (m->rgb ? 3 : 0);
-    size_t size = (size_t)hl + (size_t)m->n_verts * vsize + (size_t)m->n_tris * 13;
-    uint8_t *buf = bf_malloc(size);
-    if (!buf) return bf_fail(BF_NO_MEMORY, "%s: out of memory for %zu bytes", path, size);
-    uint8_t *p = buf;
-    memcpy(p, header, (size_t)hl);
-    p += hl;
+    bf_status s = mesh__check(path, m);
+    if (s != BF_OK) return s;
+    /* %.17g: a double survives the round trip through text. */
+    char origin[160] = "";
+    if (mesh__has_origin(m))
+        snprintf(origin, sizeof origin, "comment origin_w %.17g %.17g %.17g\n", m->origin.x, m->origin.y, m->origin.z);
+    mesh__out o;
+    if ((s = mesh__out_open(&o, path)) != BF_OK) return s;
+    mesh__out_printf(&o,
+                     "ply\nformat binary_little_endian 1.0\ncomment written by bitfuse\n%s"
+                     "element vertex %u\nproperty float x\nproperty float y\nproperty float z\n%s%s"
+                     "element face %u\nproperty list uchar int vertex_indices\nend_header\n",
+                     origin, m->n_verts,
+                     m->normal ? "property float nx\nproperty float ny\nproperty float nz\n" : "",
+                     m->rgb ? "property uchar red\nproperty uchar green\nproperty uchar blue\n" : "", m->n_tris);
+    uint8_t rec[32];
     for (size_t i = 0; i < m->n_verts; i++) {
-        for (int k = 0; k < 3; k++) ply_put_f32(&p, m->xyz[3 * i + k]);
+        uint8_t *p = rec;
+        for (int k = 0; k < 3; k++) p = mesh__put_f32(p, m->xyz[3 * i + k]);
         if (m->normal)
-            for (int k = 0; k < 3; k++) ply_put_f32(&p, m->normal[3 * i + k]);
+            for (int k = 0; k < 3; k++) p = mesh__put_f32(p, m->normal[3 * i + k]);
         if (m->rgb)
             for (int k = 0; k < 3; k++) *p++ = m->rgb[3 * i + k];
+        mesh__out_write(&o, rec, (size_t)(p - rec));
     }
     for (size_t i = 0; i < m->n_tris; i++) {
+        uint8_t *p = rec;
         *p++ = 3;
-        for (int k = 0; k < 3; k++) ply_put_u32(&p, m->tri[3 * i + k]);
+        for (int k = 0; k < 3; k++) p = mesh__put_u32(p, m->tri[3 * i + k]);
+        mesh__out_write(&o, rec, (size_t)(p - rec));
     }
-    BF_ASSERT((size_t)(p - buf) == size);
-    bf_status s = bf_write_file_atomic(path, buf, size);
-    free(buf);
-    return s;
+    return mesh__out_commit(&o);
 }
 
 void mesh_free(mesh_data *m)
@@ -723,8 +717,13 @@ bf_status mesh_append(mesh_data *dst, const mesh_data *src, const bf_se3 *T)
     }
     bf_se3 I = bf_se3_identity();
     if (!T) T = &I;
+    /* In double: world point T * (src.origin + xyz), less dst's origin. An
+     * empty dst takes T * src.origin, so a far mesh stays local. */
+    bf_vec3 origin = is_empty ? bf_se3_apply(T, src->origin) : dst->origin;
     for (size_t i = 0; i < src->n_verts; i++) {
-        bf_vec3 p = bf_se3_apply(T, bf_v3(src->xyz[3 * i], src->xyz[3 * i + 1], src->xyz[3 * i + 2]));
+        bf_vec3 p = bf_se3_apply(T, bf_v3(src->origin.x + src->xyz[3 * i], src->origin.y + src->xyz[3 * i + 1],
+                                          src->origin.z + src->xyz[3 * i + 2]));
+        p = bf_v3(p.x - origin.x, p.y - origin.y, p.z - origin.z);
         float *o = &xyz[3 * (n0 + i)];
         o[0] = (float)p.x;
         o[1] = (float)p.y;
@@ -757,5 +756,6 @@ bf_status mesh_append(mesh_data *dst, const mesh_data *src, const bf_se3 *T)
     dst->normal = normal;
     dst->rgb = rgb;
     dst->tri = tri;
+    dst->origin = origin;
     return BF_OK;
 }

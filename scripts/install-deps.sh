@@ -8,6 +8,8 @@ PACKAGES=(
   build-essential cmake pkg-config
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers vulkan-tools glslc
   libpng-dev libjpeg-dev libzstd-dev libcjson-dev libxxhash-dev
+  # Mesh simplification for export (mesh/simplify.c).
+  libmeshoptimizer-dev
   # Live capture backends (docs/devices.md); libfreenect-bin brings fakenect,
   # which the capture tests replay Kinect dumps through.
   libfreenect-dev libfreenect-bin libopenni2-dev
@@ -18,8 +20,18 @@ missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
+# The Khronos glTF validator for test_glb_validator (skipped without it),
+# from the npm registry when node's package manager is there.
+optional_npm() {
+  if command -v npm >/dev/null && ! [ -d "$(npm root -g 2>/dev/null)/gltf-validator" ]; then
+    echo "install-deps: npm install -g gltf-validator (optional, for test_glb_validator)"
+    npm install -g gltf-validator >/dev/null 2>&1 || echo "install-deps: gltf-validator not installed (its test will skip)"
+  fi
+}
+
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages present"
+  optional_npm
   exit 0
 fi
 
@@ -29,3 +41,4 @@ echo "install-deps: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -q
 $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+optional_npm

@@ -1,0 +1,116 @@
+#!/usr/bin/env bash
+# Export as a user meets it: a scene store written by replay, exported in
+# each format (the format from the name or --format), simplified to a cap
+# and to an error bound, the same options on replay's own mesh, and the
+# refusals: an unknown format, an unwritable file (exit 1, nothing left
+# behind), --points with a cap. glb files go through the Khronos validator
+# when node has it (tests/mesh/validate_glb.js).
+# Usage: test_export.sh path/to/bitfuse path/to/validate_glb.js
+set -u
+B=$1
+VALIDATE=$2
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+fails=0
+fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
+expect() {
+    local want=$1
+    shift
+    "$@" >"$T/out" 2>"$T/err"
+    local rc=$?
+    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
+}
+mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
+command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+# python3 without the sanitizer build's preload (LeakSanitizer would end it).
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS python3 "$@"; }
+json_get() { py -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
+validate() {
+    command -v node >/dev/null || return 0
+    env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS node "$VALIDATE" "$@" >"$T/val" 2>&1
+    local rc=$?
+    [ "$rc" = 0 ] || [ "$rc" = 77 ] || fail "glTF validator: $(head -c 600 "$T/val")"
+}
+export BITFUSE_PROGRESS=0
+
+# 30 frames of the synthetic room, small images, into a store (as test_store.sh).
+py - "$T/traj.txt" <<'PY'
+import sys, math
+with open(sys.argv[1], "w") as f:
+    for i in range(40):
+        a = 0.004 * i
+        f.write("%.6f %.6f 0 0 0 %.6f 0 %.6f\n" % (1305031098.6659 + i / 30.0, 0.005 * i, math.sin(a / 2), math.cos(a / 2)))
+PY
+mkdir "$T/nodata"
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 30 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+    --data "$T/nodata" --noise none --out "$T/seq"
+# replay's own mesh: glb, capped.
+expect 0 "$B" replay "$T/seq" --out "$T/run" --store "$T/S" --mesh-format glb --max-triangles 3000
+[ -f "$T/run/mesh.glb" ] && [ ! -f "$T/run/mesh.ply" ] || fail "replay --mesh-format glb did not write mesh.glb alone"
+n=$(json_get "$T/run/stats.json" "d['mesh']['triangles']")
+full=$(json_get "$T/run/stats.json" "d['mesh']['triangles_full']")
+[ "${n:-x}" -le 3000 ] 2>/dev/null && [ "$full" -gt 3000 ] || fail "replay mesh: $n of $full triangles, cap 3000"
+json_get "$T/run/stats.json" "d['mesh']['file'], d['mesh']['simplify']['max_triangles']" | grep -qx "('mesh.glb', 3000)" ||
+    fail "stats.json mesh: $(json_get "$T/run/stats.json" "d['mesh']")"
+grep -q "simplified to" "$T/out" || fail "replay does not print the simplification: $(cat "$T/out")"
+validate "$T/run/mesh.glb"
+
+# export: the full mesh as PLY, then each format.
+expect 0 "$B" export "$T/S" --out "$T/full.ply" --json
+nfull=$(json_get "$T/out" "d['triangles']")
+[ "$nfull" -gt 3000 ] || fail "the full mesh has $nfull triangles"
+expect 0 "$B" export "$T/S" --out "$T/m.obj" --json
+[ -f "$T/m.mtl" ] || fail "no m.mtl beside m.obj"
+grep -q "^mtllib m.mtl$" "$T/m.obj" || fail "m.obj does not name m.mtl"
+nv=$(json_get "$T/out" "d['vertices']")
+[ "$(grep -c '^v ' "$T/m.obj")" = "$nv" ] || fail "m.obj: $(grep -c '^v ' "$T/m.obj") v lines, JSON says $nv"
+[ "$(grep -c '^f ' "$T/m.obj")" = "$nfull" ] || fail "m.obj: $(grep -c '^f ' "$T/m.obj") faces, the PLY $nfull"
+expect 0 "$B" export "$T/S" --out "$T/m.glb"
+head -c 4 "$T/m.glb" | grep -q "glTF" || fail "m.glb has no glTF magic"
+validate "$T/m.glb"
+# --format wins over the name.
+expect 0 "$B" export "$T/S" --out "$T/m.bin" --format glb
+cmp -s "$T/m.bin" "$T/m.glb" || fail "--format glb --out m.bin differs from m.glb"
+
+# Detail: a cap, an error bound.
+expect 0 "$B" export "$T/S" --out "$T/c.glb" --max-triangles 2000 --json
+n=$(json_get "$T/out" "d['triangles']")
+[ "$n" -le 2000 ] && [ "$n" -ge 1500 ] || fail "--max-triangles 2000 wrote $n triangles"
+[ "$(json_get "$T/out" "d['triangles_full']")" = "$nfull" ] || fail "triangles_full is not the full mesh's"
+validate "$T/c.glb"
+expect 0 "$B" export "$T/S" --out "$T/e.ply" --max-error 0.002 --json
+n=$(json_get "$T/out" "d['triangles']")
+est=$(json_get "$T/out" "d['simplify']['error_estimate_m']")
+[ "$n" -lt "$nfull" ] || fail "--max-error 0.002 kept all $n triangles"
+py -c "import sys; sys.exit(0 if float(sys.argv[1]) <= 0.002 else 1)" "$est" || fail "error estimate $est above 0.002"
+# Measured: the simplified mesh against the full one.
+expect 0 "$B" eval-surface --reference "$T/full.ply" --reconstruction "$T/e.ply" --json
+med=$(json_get "$T/out" "d['accuracy']['median_m']" 2>/dev/null || echo nan)
+py -c "import sys; sys.exit(0 if float(sys.argv[1]) <= 0.002 else 1)" "$med" || fail "median distance to the full mesh $med m"
+# Points in every format.
+expect 0 "$B" export "$T/S" --out "$T/p.glb" --points
+validate "$T/p.glb"
+expect 0 "$B" export "$T/S" --out "$T/p.obj" --points
+grep -q "^f " "$T/p.obj" && fail "a point cloud OBJ has faces"
+
+# Refusals: nothing written, the message says why.
+expect 2 "$B" export "$T/S" --out "$T/x.stl"
+mentions ".ply, .obj, .glb"
+[ -e "$T/x.stl" ] && fail "x.stl written"
+expect 2 "$B" export "$T/S" --out "$T/x.ply" --format fbx
+mentions "--format"
+expect 2 "$B" export "$T/S" --out "$T/x.ply" --points --max-triangles 100
+expect 2 "$B" replay "$T/seq" --out "$T/r2" --mesh-format stl
+[ -e "$T/r2" ] && fail "a refused replay made its folder"
+expect 1 "$B" export "$T/S" --out "$T/no/such/dir/x.glb"
+mentions "$T/no/such/dir/x.glb"
+mkdir "$T/ro" && echo old >"$T/ro/x.obj" && chmod 555 "$T/ro"
+if ! touch "$T/ro/probe" 2>/dev/null; then # root writes anyway: then this case says nothing
+    expect 1 "$B" export "$T/S" --out "$T/ro/x.obj"
+    [ "$(cat "$T/ro/x.obj")" = old ] || fail "a failed export changed the old file"
+fi
+rm -f "$T/ro/probe"
+ls "$T" "$T/run" | grep -q "\.tmp\." && fail "temporary files left behind: $(ls "$T" | grep '\.tmp\.')"
+
+echo "nfull=$nfull"; [ "$fails" = 0 ] && echo "test_export.sh: all passed" || echo "test_export.sh: $fails failed"
+[ "$fails" = 0 ]
