@@ -28,9 +28,11 @@ static void colour_one(void *ctx, size_t i)
     const colour_job *j = ctx;
     const export__grid *g = j->g;
     const float *p = j->m->xyz + 3 * i;
-    int64_t q[3] = {(int64_t)floor(((double)p[0] - g->s->origin_w.x) / g->half_m),
-                    (int64_t)floor(((double)p[1] - g->s->origin_w.y) / g->half_m),
-                    (int64_t)floor(((double)p[2] - g->s->origin_w.z) / g->half_m)};
+    /* Vertices are relative to the mesh's local origin (mesh_data.origin). */
+    bf_vec3 shift = bf_v3_sub(j->m->origin, g->s->origin_w);
+    int64_t q[3] = {(int64_t)floor(((double)p[0] + shift.x) / g->half_m),
+                    (int64_t)floor(((double)p[1] + shift.y) / g->half_m),
+                    (int64_t)floor(((double)p[2] + shift.z) / g->half_m)};
     uint8_t *o = j->m->rgb + 3 * i;
     export__voxel vx;
     uint32_t c = 0;
