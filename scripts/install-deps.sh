@@ -8,6 +8,9 @@ PACKAGES=(
   build-essential cmake pkg-config
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers vulkan-tools glslc
   libpng-dev libjpeg-dev libzstd-dev libcjson-dev libxxhash-dev
+  # bitfuse calibrate (calib/): OpenCV's calib3d and what it needs, without
+  # libopencv-dev, which brings every OpenCV module, VTK and Qt.
+  libopencv-core-dev libopencv-imgproc-dev libopencv-calib3d-dev
   # Live capture backends (docs/devices.md); libfreenect-bin brings fakenect,
   # which the capture tests replay Kinect dumps through.
   libfreenect-dev libfreenect-bin libopenni2-dev
