@@ -113,6 +113,7 @@ typedef struct board_job {
     bf_se3 T_bc;        /* camera to board */
     uint32_t ss, stream;
     uint8_t *grey;
+    volatile bool has_failed; /* a row's corner buffer could not be allocated */
 } board_job;
 
 /* The board-plane point (x, y) seen along pixel (u, v); false when the ray
@@ -147,23 +148,45 @@ static double board_grey(const synth_board_config *cfg, double x, double y, doub
     return background_grey(u, v);
 }
 
-/* One pixel: the pattern's cell at its four corners decides whether an edge
- * may cross it (the footprint of a pixel on the board is nearly a
- * parallelogram, so its cells lie between the corners'); only then is it
- * sampled ss x ss times. */
-static double pixel_grey(const board_job *j, uint32_t u, uint32_t v)
+/* The pattern's cell of board point (x, y): (a, b) as board_grey numbers
+ * squares, and one cell for everything beyond the margin (-1 when the ray
+ * missed the plane): a pixel whose corners share a cell shows no edge. */
+static int64_t board_cell(const synth_board_config *cfg, bool is_hit, double x, double y)
+{
+    if (!is_hit) return -1;
+    double s = cfg->board.square_m;
+    double a = floor(x / s) + 1, b = floor(y / s) + 1;
+    if (!(a >= -1 && b >= -1 && a <= cfg->board.cols + 1 && b <= cfg->board.rows + 1)) return -2;
+    return (int64_t)(b + 1) * 1024 + (int64_t)(a + 1);
+}
+
+/* The board points and cells of the pixel corners along image row edge
+ * v - 1/2 (u = -1/2 .. w - 1/2). */
+typedef struct corner_row {
+    double *x, *y;
+    int64_t *cell;
+} corner_row;
+
+static void corner_row_fill(const board_job *j, double v, corner_row *r)
+{
+    for (uint32_t i = 0; i <= j->c->width; i++) {
+        bool is_hit = board_point(j, i - 0.5, v, &r->x[i], &r->y[i]);
+        r->cell[i] = board_cell(j->cfg, is_hit, r->x[i], r->y[i]);
+    }
+}
+
+/* One pixel: where its four corners share a cell (the footprint of a pixel
+ * on the board is nearly a parallelogram, so no edge passes between them)
+ * the cell's grey at its centre; else the mean of ss x ss samples. */
+static double pixel_grey(const board_job *j, uint32_t u, uint32_t v, const corner_row *top, const corner_row *bottom)
 {
     const synth_board_config *cfg = j->cfg;
-    double s = cfg->board.square_m;
-    double cx[4], cy[4];
-    bool is_hit = true;
-    for (int i = 0; i < 4 && is_hit; i++)
-        is_hit = board_point(j, u - 0.5 + (i & 1), v - 0.5 + (i >> 1), &cx[i], &cy[i]);
-    if (is_hit) {
-        double x0 = fmin(fmin(cx[0], cx[1]), fmin(cx[2], cx[3])), x1 = fmax(fmax(cx[0], cx[1]), fmax(cx[2], cx[3]));
-        double y0 = fmin(fmin(cy[0], cy[1]), fmin(cy[2], cy[3])), y1 = fmax(fmax(cy[0], cy[1]), fmax(cy[2], cy[3]));
-        bool is_uniform = floor(x0 / s) == floor(x1 / s) && floor(y0 / s) == floor(y1 / s);
-        if (is_uniform) return board_grey(cfg, 0.5 * (x0 + x1), 0.5 * (y0 + y1), u, v);
+    int64_t cell = top->cell[u];
+    if (cell == top->cell[u + 1] && cell == bottom->cell[u] && cell == bottom->cell[u + 1]) {
+        if (cell < 0) return background_grey(u, v);
+        double x = 0.25 * (top->x[u] + top->x[u + 1] + bottom->x[u] + bottom->x[u + 1]);
+        double y = 0.25 * (top->y[u] + top->y[u + 1] + bottom->y[u] + bottom->y[u + 1]);
+        return board_grey(cfg, x, y, u, v);
     }
     double sum = 0;
     for (uint32_t sy = 0; sy < j->ss; sy++)
@@ -178,8 +201,20 @@ static void render_row(void *ctx, size_t row)
 {
     board_job *j = ctx;
     uint32_t w = j->c->width, v = (uint32_t)row;
+    size_t n = (size_t)w + 1;
+    /* One allocation for the two corner rows (per row, not per image: rows
+     * render on several threads). */
+    double *buf = malloc(n * 2 * (2 * sizeof(double) + sizeof(int64_t)));
+    if (!buf) {
+        j->has_failed = true;
+        return;
+    }
+    corner_row top = {buf, buf + n, (int64_t *)(buf + 2 * n)};
+    corner_row bottom = {buf + 3 * n, buf + 4 * n, (int64_t *)(buf + 5 * n)};
+    corner_row_fill(j, v - 0.5, &top);
+    corner_row_fill(j, v + 0.5, &bottom);
     for (uint32_t u = 0; u < w; u++) {
-        double g = 255.0 * pixel_grey(j, u, v);
+        double g = 255.0 * pixel_grey(j, u, v, &top, &bottom);
         if (j->cfg->noise_levels > 0) {
             double n0, n1;
             synth__gauss2(synth__rng_key(j->cfg->seed, j->stream, v * w + u, SYNTH_RNG_COLOUR), &n0, &n1);
@@ -187,6 +222,7 @@ static void render_row(void *ctx, size_t row)
         }
         j->grey[(size_t)v * w + u] = (uint8_t)fmin(255.0, fmax(0.0, floor(g + 0.5)));
     }
+    free(buf);
 }
 
 bf_status synth_board_render(const synth_board_config *cfg, const calib_camera *c, const bf_se3 *T_cb,
@@ -195,7 +231,7 @@ bf_status synth_board_render(const synth_board_config *cfg, const calib_camera *
     board_job j = {.cfg = cfg, .c = c, .T_bc = bf_se3_inverse(T_cb), .ss = cfg->supersample ? cfg->supersample : 8,
                    .stream = stream, .grey = grey};
     bf_parallel_for(c->height, render_row, &j);
-    return BF_OK;
+    return j.has_failed ? bf_fail(BF_NO_MEMORY, "synth: board image rows") : BF_OK;
 }
 
 /* ------------------------------------------------------------ the folder */
