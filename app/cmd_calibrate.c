@@ -129,7 +129,8 @@ static bf_status print_json(const calib_result *r, const camera_images *cams, in
     bf_status s = calib_to_text(r, &text);
     if (s != BF_OK) return s;
     cJSON *root = cJSON_CreateObject();
-    cJSON_AddItemToObject(root, "calibration", cJSON_Parse(text));
+    /* Raw: cJSON would print the numbers again with 15 digits. */
+    cJSON_AddItemToObject(root, "calibration", cJSON_CreateRaw(text));
     free(text);
     cJSON_AddStringToObject(root, "out", out);
     cJSON *images = cJSON_AddArrayToObject(root, "images");

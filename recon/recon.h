@@ -23,6 +23,7 @@
 
 #include <signal.h>
 
+#include "calib/calib.h"
 #include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
@@ -73,6 +74,9 @@ typedef struct recon_config {
                                  too: track_cmd_frame), default true */
     bool has_views;           /* views at the camera's size will be asked for (recon_render_view): their caster is
                                  made by recon_create with the rest, not at the first view; default false */
+    bool has_calibration;     /* calibration holds a calib.json (--calibration); default false */
+    calib_result calibration; /* the colour camera and T_colour_depth for registering colour to depth (the
+                                 depth camera's pinhole, when the file has it, is already the source's) */
 } recon_config;
 
 recon_config recon_config_default(void);

@@ -91,5 +91,59 @@ mentions "no colour images"
 expect 0 "$B" calibrate --help
 grep -qF -- "--depth IMAGES..." "$T/out" || fail "calibrate --help does not show --depth"
 
+# replay --calibration: a malformed file is refused by name and field
+# before the sequence opens or the output folder is made (exit 3).
+bad() { printf '%s' "$2" >"$T/$1.json"; }
+bad nofx '{"colour": {"width": 640, "height": 480, "fy": 525, "cx": 319.5, "cy": 239.5}}'
+bad negfx '{"colour": {"width": 640, "height": 480, "fx": -1, "fy": 525, "cx": 319.5, "cy": 239.5}}'
+bad inf '{"colour": {"width": 640, "height": 480, "fx": 525, "fy": 1e999, "cx": 319.5, "cy": 239.5}}'
+bad notjson '{"colour": '
+python3 -c "
+import json, sys
+d = json.load(open(sys.argv[1])); del d['T_colour_depth']
+json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/noT.json"
+for f in nofx:colour.fx negfx:colour.fx inf:colour.fy notjson:"not JSON" noT:T_colour_depth; do
+    name=${f%%:*}
+    field=${f#*:}
+    expect 3 "$B" replay "$T/no-such-seq" --out "$T/rp_$name" --calibration "$T/$name.json"
+    mentions "$T/$name.json"
+    mentions "$field"
+    [ ! -e "$T/rp_$name" ] || fail "replay --calibration $name.json made the output folder"
+done
+expect 3 "$B" live --device "$T/no-such-seq" --out "$T/lv" --calibration "$T/nofx.json"
+mentions "colour.fx: missing"
+[ ! -e "$T/lv" ] || fail "live --calibration nofx.json made the output folder"
+expect 3 "$B" replay "$T/no-such-seq" --out "$T/rp_x" --calibration "$T/absent.json"
+mentions "absent.json"
+expect 2 "$B" replay "$T/no-such-seq" --out "$T/rp_x" --calibration "$T/calib.json" --camera fr1
+mentions "both give the depth camera"
+
+# A sequence of 160x120 frames: a 640x480 depth camera does not fit it
+# (exit 3, no output); one of its size replaces its pinhole, and
+# stats.json's config echoes the file.
+printf '0 0 0 0 0 0 0 1\n1 0.002 0 0 0 0 0 1\n' >"$T/traj.txt"
+mkdir "$T/nodata"
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 2 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+    --data "$T/nodata" --out "$T/seq"
+expect 3 "$B" replay "$T/seq" --out "$T/rp_size" --calibration "$T/calib.json"
+mentions "the depth camera is 640x480, the depth images of $T/seq are 160x120"
+[ ! -e "$T/rp_size" ] || fail "replay with a calibration of another size made the output folder"
+python3 -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+for cam in ('colour', 'depth'):
+    c = d[cam]
+    c.update(width=160, height=120, fx=c['fx'] / 4, fy=c['fy'] / 4, cx=(c['cx'] + 0.5) / 4 - 0.5, cy=(c['cy'] + 0.5) / 4 - 0.5)
+json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/small.json"
+expect 0 "$B" replay "$T/seq" --out "$T/rp" --calibration "$T/small.json" --no-mesh
+python3 -c "
+import json, sys
+c = json.load(open(sys.argv[1]))['config']['calibration']
+f = json.load(open(sys.argv[2]))
+assert c['depth']['fx'] == f['depth']['fx'] and c['T_colour_depth'] == f['T_colour_depth'], c
+" "$T/rp/stats.json" "$T/small.json" || fail "stats.json does not echo --calibration: $(head -c 400 "$T/rp/stats.json")"
+expect 0 "$B" replay --help
+grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
+
 echo "$fails failed"
 [ "$fails" = 0 ]
