@@ -23,6 +23,9 @@ expect() {
 }
 mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 400 "$T/err")"; }
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+# The interpreter itself, not a version manager's shim script: under the
+# sanitizer build every shell the shim starts loads the sanitizer runtime.
+PY=$(python3 -c 'import sys; print(sys.executable)')
 
 # 12 views of a 9x6 board; the colour lens has radial distortion.
 expect 0 "$B" synth --board 9x6 --square 0.04 --views 12 --distortion 0.1,-0.2 --seed 7 --out "$T/b"
@@ -33,11 +36,11 @@ expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --depth "$
 mentions "colour 12/12"
 mentions "board found"
 grep -qF "T_colour_depth" "$T/out" || fail "the summary has no T_colour_depth: $(head -c 400 "$T/out")"
-python3 "$CMP" "$T/calib.json" "$T/b/truth.json" --check >"$T/cmp" 2>&1 || fail "calibration off the truth: $(cat "$T/cmp")"
+"$PY" "$CMP" "$T/calib.json" "$T/b/truth.json" --check >"$T/cmp" 2>&1 || fail "calibration off the truth: $(cat "$T/cmp")"
 
 # --depth first and the colour images after '--'; --json: the calibration and every image.
 expect 0 "$B" calibrate --board 9x6 --square 0.04 --depth "$T"/b/ir/*.png -- "$T"/b/colour/*.png --out "$T/c2.json" --json
-python3 -c "
+"$PY" -c "
 import json, sys
 d = json.load(open(sys.argv[1]))
 assert d['calibration']['views'] == 12 and 'T_colour_depth' in d['calibration'], d['calibration']
@@ -47,11 +50,11 @@ cmp -s "$T/calib.json" "$T/c2.json" || fail "the same views in another argument 
 
 # Colour alone: no depth camera, no transform in the file.
 expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --out "$T/colour.json"
-python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert 'depth' not in d and 'T_colour_depth' not in d" \
+"$PY" -c "import json,sys; d=json.load(open(sys.argv[1])); assert 'depth' not in d and 'T_colour_depth' not in d" \
     "$T/colour.json" || fail "a colour-only calibration has a depth camera"
 
 # Images without a board: exit 3, naming them; nothing written.
-python3 - "$T" <<'PY'
+"$PY" - "$T" <<'PY'
 import struct, sys, zlib
 def png(path, w, h, value):
     raw = b"".join(b"\0" + bytes([value]) * w for _ in range(h))
@@ -98,7 +101,7 @@ bad nofx '{"colour": {"width": 640, "height": 480, "fy": 525, "cx": 319.5, "cy":
 bad negfx '{"colour": {"width": 640, "height": 480, "fx": -1, "fy": 525, "cx": 319.5, "cy": 239.5}}'
 bad inf '{"colour": {"width": 640, "height": 480, "fx": 525, "fy": 1e999, "cx": 319.5, "cy": 239.5}}'
 bad notjson '{"colour": '
-python3 -c "
+"$PY" -c "
 import json, sys
 d = json.load(open(sys.argv[1])); del d['T_colour_depth']
 json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/noT.json"
@@ -128,7 +131,7 @@ expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 2 --size 160x120 --camer
 expect 3 "$B" replay "$T/seq" --out "$T/rp_size" --calibration "$T/calib.json"
 mentions "the depth camera is 640x480, the depth images of $T/seq are 160x120"
 [ ! -e "$T/rp_size" ] || fail "replay with a calibration of another size made the output folder"
-python3 -c "
+"$PY" -c "
 import json, sys
 d = json.load(open(sys.argv[1]))
 for cam in ('colour', 'depth'):
@@ -136,7 +139,7 @@ for cam in ('colour', 'depth'):
     c.update(width=160, height=120, fx=c['fx'] / 4, fy=c['fy'] / 4, cx=(c['cx'] + 0.5) / 4 - 0.5, cy=(c['cy'] + 0.5) / 4 - 0.5)
 json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/small.json"
 expect 0 "$B" replay "$T/seq" --out "$T/rp" --calibration "$T/small.json" --no-mesh
-python3 -c "
+"$PY" -c "
 import json, sys
 c = json.load(open(sys.argv[1]))['config']['calibration']
 f = json.load(open(sys.argv[2]))
