@@ -228,6 +228,7 @@ int cmd_replay(int argc, char **argv);
 int cmd_eval_traj(int argc, char **argv);
 int cmd_eval_surface(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
+int cmd_calibrate(int argc, char **argv);
 int cmd_export(int argc, char **argv);
 /* cmd_export.c: bitfuse info on a scene store. */
 int app_info_store(const char *dir, bool json);

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "app.h"
+#include "calib/calib.h"
 #include "eval/eval.h"
 #include "recon/recon.h"
 #include "replay/replay.h"
@@ -64,6 +65,7 @@ typedef struct replay_args {
     double gpu_budget_mib;   /* the pools' bytes (0: --bricks decides) */
     double cache_budget_mib; /* the streaming cache's bytes */
     bool auto_budget;        /* neither --gpu-budget nor --bricks: the device decides */
+    const char *calibration; /* calib.json: read into rcfg.calibration by parse_args */
 } replay_args;
 
 #define LOOP_ROWS 23
@@ -248,8 +250,15 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     store_options(sto, a);
     stream_options(stm, a);
     app_mesh_options(msh, &a->mesh_out, false);
-    const app_option *replay_tables[] = {own, msh, fuse_gt, sto, stm, map, seq, NULL};
-    const app_option *live_tables[] = {dev, own, msh, sto, stm, map, seq, NULL};
+    const app_option cal[] = {
+        APP_OPT("--calibration", APP_OPT_STRING, &a->calibration, "FILE",
+                "calib.json of bitfuse calibrate: the colour camera and T_colour_depth for registering colour to "
+                "depth; when it has the depth camera, its fx, fy, cx, cy replace the sequence's (camera.txt, the "
+                "format's or the device's; its distortion is not applied)", .no_default = true),
+        APP_OPT_END,
+    };
+    const app_option *replay_tables[] = {own, msh, fuse_gt, cal, sto, stm, map, seq, NULL};
+    const app_option *live_tables[] = {dev, own, msh, cal, sto, stm, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
         .tables = is_live_cmd ? live_tables : replay_tables, .positional = &a->seq,
@@ -264,7 +273,37 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (!rc && a->gpu_budget_mib > 0) set_budget(a, a->gpu_budget_mib);
     a->rcfg.stream.cache_bytes = (uint64_t)(a->cache_budget_mib * 1048576.0);
     if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
+    if (!rc && a->calibration) {
+        /* Read and checked here, before any device opens or output is made. */
+        bf_status s = calib_read(a->calibration, &a->rcfg.calibration);
+        if (s != BF_OK) return app_fail(cmd, s);
+        a->rcfg.has_calibration = true;
+        if (a->rcfg.calibration.has_depth && a->ropt.camera)
+            return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
+                                   a->calibration);
+    }
     return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
+}
+
+/* --calibration's depth camera replaces the source's pinhole (the sizes
+ * must agree); its distortion is not applied: the loop's camera is a
+ * pinhole, so the file's depth distortion is reported. */
+static bf_status apply_calibration(const replay_args *a, rgbd_source *src)
+{
+    const calib_result *c = &a->rcfg.calibration;
+    if (!a->rcfg.has_calibration || !c->has_depth) return BF_OK;
+    bf_intrinsics *K = &src->intrinsics;
+    if (c->depth.width != K->width || c->depth.height != K->height)
+        return bf_fail(BF_FORMAT, "%s: the depth camera is %ux%u, the depth images of %s are %ux%u", a->calibration,
+                       c->depth.width, c->depth.height, a->seq, K->width, K->height);
+    K->fx_px = c->depth.fx_px, K->fy_px = c->depth.fy_px, K->cx_px = c->depth.cx_px, K->cy_px = c->depth.cy_px;
+    for (int i = 0; i < CALIB_DIST_N; i++)
+        if (c->depth.dist[i] != 0) {
+            bf_warn("%s: the depth camera's distortion is not applied (the loop's camera is a pinhole)",
+                    a->calibration);
+            break;
+        }
+    return BF_OK;
 }
 
 typedef struct replay_result {
@@ -489,6 +528,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     } else {
         s = replay_open(a.seq, &a.ropt, &src);
     }
+    if (s == BF_OK) s = apply_calibration(&a, src);
     /* The store is read (to resume) or claimed before anything is made. */
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
     if (s == BF_OK) s = bf_mkdir_p(a.out);

@@ -13,8 +13,20 @@ static const char synth_usage[] =
     "Renders depth and colour along a trajectory with a CPU ray tracer and writes a TUM\n"
     "RGB-D folder: rgb/, depth/ (16-bit, 5000 per metre), rgb.txt, depth.txt,\n"
     "groundtruth.txt (the poses rendered), camera.txt, scene.ply (reference mesh, world\n"
-    "frame), seen.ply (surface points the camera saw with valid depth), stats.json.\n";
+    "frame), seen.ply (surface points the camera saw with valid depth), stats.json.\n"
+    "\n"
+    "bitfuse synth --board COLSxROWS --out DIR [options] renders checkerboard views for\n"
+    "bitfuse calibrate instead (bitfuse synth --board 9x6 --help).\n";
 
+static const char board_usage[] =
+    "usage: bitfuse synth --board COLSxROWS --out DIR [options]\n"
+    "\n"
+    "Renders views of a planar checkerboard (COLSxROWS inner corners) from varied poses, as\n"
+    "the colour camera and the depth (IR) camera beside it see it, with known intrinsics,\n"
+    "distortion and transform between them: the ground truth of bitfuse calibrate. Pixels\n"
+    "an edge crosses are averaged over a grid of samples. Writes into DIR: colour/NNN.png,\n"
+    "ir/NNN.png (8-bit grey), truth.json (the calibration that made them, calib.json's\n"
+    "format) and board_poses.txt (TUM: view index, colour camera to board).\n";
 /* --camera: a preset or fx,fy,cx,cy, with positive focal lengths. */
 static const char *check_camera(const char *name, const char *v)
 {
@@ -44,6 +56,100 @@ static const char *check_size(const char *name, const char *v)
 
 static const int noise_codes[] = {SYNTH_NOISE_KINECT1, SYNTH_NOISE_NONE};
 
+/* --distortion: k1,k2,p1,p2,k3, each finite (fewer: the rest 0). */
+static bool parse_dist(const char *v, double dist[CALIB_DIST_N])
+{
+    char buf[256];
+    int n = 0;
+    snprintf(buf, sizeof buf, "%s", v);
+    if (!buf[0] || buf[strlen(buf) - 1] == ',') return false;
+    char *save = NULL;
+    double d[CALIB_DIST_N] = {0};
+    for (char *tok = strtok_r(buf, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+        if (n == CALIB_DIST_N || !bf_parse_double(tok, &d[n])) return false;
+        n++;
+    }
+    memcpy(dist, d, sizeof d);
+    return n > 0;
+}
+
+static const char *check_dist(const char *name, const char *v)
+{
+    static char msg[512];
+    double d[CALIB_DIST_N];
+    if (parse_dist(v, d)) return NULL;
+    snprintf(msg, sizeof msg, "%s wants k1[,k2[,p1,p2[,k3]]] (numbers), not '%.400s'", name, v);
+    return msg;
+}
+
+static const char *check_board(const char *name, const char *v)
+{
+    static char msg[512];
+    calib_board b;
+    if (calib_parse_board(v, &b) == BF_OK) return NULL;
+    snprintf(msg, sizeof msg, "%s: %s", name, bf_last_error());
+    return msg;
+}
+
+/* Sets camera c from the --camera, --size and --distortion texts (checked). */
+static void board_camera(calib_camera *c, const char *camera, const char *size, const char *dist)
+{
+    bf_intrinsics K = {0};
+    unsigned w, h;
+    if (camera && replay_parse_camera(camera, &K) == BF_OK)
+        c->fx_px = K.fx_px, c->fy_px = K.fy_px, c->cx_px = K.cx_px, c->cy_px = K.cy_px;
+    if (size && parse_size(size, &w, &h)) c->width = w, c->height = h;
+    if (dist) parse_dist(dist, c->dist);
+}
+
+static int cmd_synth_board(int argc, char **argv)
+{
+    const char *cmd = "synth";
+    synth_board_config cfg = synth_board_config_default();
+    const char *board = NULL, *camera = NULL, *size = NULL, *dist = NULL, *dcamera = NULL, *dsize = NULL,
+               *ddist = NULL;
+    const app_option own[] = {
+        APP_OPT("--board", APP_OPT_STRING, &board, "COLSxROWS", "inner corners of the checkerboard (e.g. 9x6)",
+                .required = true, .check = check_board),
+        APP_OPT("--square", APP_OPT_DOUBLE, &cfg.board.square_m, "M", "edge of a square in metres", .min_open = true,
+                .max = 1),
+        APP_OPT("--views", APP_OPT_U32, &cfg.n_views, "N", "views to render", .min = 1, .max = 1000),
+        APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
+        APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
+                "colour intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5", .check = check_camera),
+        APP_OPT("--size", APP_OPT_STRING, &size, "WxH", "colour image size, default 640x480", .check = check_size),
+        APP_OPT("--distortion", APP_OPT_STRING, &dist, "K1,K2,P1,P2,K3",
+                "colour lens distortion (OpenCV's model; missing ones 0), default none", .check = check_dist),
+        APP_OPT("--depth-camera", APP_OPT_STRING, &dcamera, "C", "IR intrinsics, default 580,580,314.5,242.5",
+                .check = check_camera),
+        APP_OPT("--depth-size", APP_OPT_STRING, &dsize, "WxH", "IR image size, default 640x480", .check = check_size),
+        APP_OPT("--depth-distortion", APP_OPT_STRING, &ddist, "K1,K2,P1,P2,K3", "IR lens distortion, default none",
+                .check = check_dist),
+        APP_OPT("--supersample", APP_OPT_U32, &cfg.supersample, "N",
+                "samples per pixel side where an edge crosses a pixel", .min = 1, .max = 32),
+        APP_OPT("--image-noise", APP_OPT_DOUBLE, &cfg.noise_levels, "L",
+                "sensor noise, standard deviation in grey levels", .max = 64),
+        APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "S", "seed of the poses and the noise"),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {own, NULL};
+    app_command_spec spec = {.name = cmd, .usage = board_usage, .tables = tables,
+                             .epilog = "The colour camera sits 25 mm to the IR camera's right, turned 0.5 degrees "
+                                       "(truth.json has it exactly).\nSee docs/calibration.md.\n"};
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    calib_parse_board(board, &cfg.board); /* checked above */
+    board_camera(&cfg.colour, camera, size, dist);
+    board_camera(&cfg.depth, dcamera, dsize, ddist);
+    synth_board_result res;
+    bf_status s = synth_board_run(&cfg, &res);
+    if (s) return app_fail(cmd, s);
+    printf("synth: %u views of a %ux%u board (%g m squares) -> %s/{colour,ir}/ in %.1f s\n", res.n_views,
+           cfg.board.cols, cfg.board.rows, cfg.board.square_m, cfg.out_dir, res.seconds);
+    printf("  truth        %s/truth.json\n", cfg.out_dir);
+    return APP_EXIT_OK;
+}
+
 int cmd_synth(int argc, char **argv)
 {
     const char *cmd = "synth";
@@ -51,6 +157,8 @@ int cmd_synth(int argc, char **argv)
                         .mesh_scale = 1};
     const char *data_dir = NULL, *camera = NULL, *size = NULL;
     int noise = SYNTH_NOISE_KINECT1;
+    for (int i = 1; i < argc; i++)
+        if (!strcmp(argv[i], "--board") || !strncmp(argv[i], "--board=", 8)) return cmd_synth_board(argc, argv);
     const app_option own[] = {
         APP_OPT("--scene", APP_OPT_STRING, &cfg.scene, "room|rooms:N|MESH.ply",
                 "procedural room, a row of N procedural rooms joined by doorways (4 m each along x), or one mesh"),

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "app.h"
+#include "calib/calib.h"
 #include "recon/recon.h"
 
 cJSON *app_json_object(cJSON *parent, const char *name)
@@ -152,6 +153,17 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     cJSON_AddBoolToObject(o, "profile", c->profile);
 }
 
+/* --calibration's file as read (calib.json's own layout, raw: cJSON would
+ * print its numbers again with 15 digits), or null. */
+static void json_calibration(cJSON *o, const recon_config *c)
+{
+    char *text = NULL;
+    cJSON *cal = c->has_calibration && calib_to_text(&c->calibration, &text) == BF_OK ? cJSON_CreateRaw(text) : NULL;
+    free(text);
+    if (cal) cJSON_AddItemToObject(o, "calibration", cal);
+    else cJSON_AddNullToObject(o, "calibration");
+}
+
 void app_json_recon_config(cJSON *parent, const char *name, const recon_config *c)
 {
     cJSON *o = app_json_object(parent, name);
@@ -180,6 +192,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     add_float(rl, "check_band_m", c->reloc.check_band_m);
     add_float(rl, "max_front_frac", c->reloc.max_front_frac);
     cJSON_AddBoolToObject(l, "has_views", c->has_views);
+    json_calibration(o, c);
     cJSON *sm = app_json_object(l, "stream");
     cJSON_AddBoolToObject(sm, "enabled", c->stream.enabled);
     add_float(sm, "radius_m", c->stream.radius_m);

@@ -118,6 +118,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
      * their pipelines takes seconds on lavapipe, and a camera started after
      * this returns must not wait for it (docs/tracking.md, start-up). */
     if (s == BF_OK) s = fusion_create(ctx, &r->cfg.fusion, K, r->T_first.t, &r->map);
+    if (s == BF_OK) s = recon_set_colour_camera(r->map, &r->cfg);
     if (s == BF_OK && r->cfg.has_views) s = view_caster(r);
     if (s == BF_OK && r->cfg.stream.enabled) s = stream_create(&r->cfg.stream, r->map, NULL, &r->stream);
     if (s != BF_OK) {
@@ -344,6 +345,18 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
     if (s != BF_OK) return s;
     r->T_first = r->T_last = *T_wc0;
     return BF_OK;
+}
+
+bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg)
+{
+    if (!cfg->has_calibration) return BF_OK; /* registered: the format's or the device's */
+    const calib_camera *c = &cfg->calibration.colour;
+    bf_intrinsics Kc = {.width = c->width, .height = c->height, .fx_px = c->fx_px, .fy_px = c->fy_px,
+                        .cx_px = c->cx_px, .cy_px = c->cy_px, .depth_scale = 1};
+    /* Without the depth camera the file gives no transform: the colour
+     * camera's own intrinsics at the depth camera's place. */
+    bf_se3 T = cfg->calibration.has_depth ? cfg->calibration.T_colour_depth : bf_se3_identity();
+    return fusion_set_colour_camera(map, &Kc, &T);
 }
 
 bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj)

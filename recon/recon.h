@@ -23,6 +23,7 @@
 
 #include <signal.h>
 
+#include "calib/calib.h"
 #include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
@@ -73,9 +74,16 @@ typedef struct recon_config {
                                  too: track_cmd_frame), default true */
     bool has_views;           /* views at the camera's size will be asked for (recon_render_view): their caster is
                                  made by recon_create with the rest, not at the first view; default false */
+    bool has_calibration;     /* calibration holds a calib.json (--calibration); default false */
+    calib_result calibration; /* the colour camera and T_colour_depth for registering colour to depth (the
+                                 depth camera's pinhole, when the file has it, is already the source's) */
 } recon_config;
 
 recon_config recon_config_default(void);
+/* Registers colour to depth in map through cfg's calibration (colour
+ * intrinsics, T_colour_depth; the colour camera's distortion is not
+ * applied); without one colour stays registered (fusion_set_colour_camera). */
+bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg);
 /* The fusion config the loop uses: cfg->fusion with the loop's sensor (also
  * for fusing at known poses without the loop). */
 fusion_config recon_fusion_config(const recon_config *cfg);

@@ -182,6 +182,7 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
     if (cfg->poses == RECON_POSES_KNOWN) {
         fusion_config fc = recon_fusion_config(&cfg->loop);
         s = fusion_create(ctx, &fc, rgbd_source_intrinsics(src), bf_v3(0, 0, 0), &run->map);
+        if (s == BF_OK) s = recon_set_colour_camera(run->map, &cfg->loop);
     } else {
         bf_se3 I = bf_se3_identity();
         s = recon_create(ctx, &cfg->loop, rgbd_source_intrinsics(src), &I, &run->loop);

@@ -2,11 +2,13 @@
  * CPU ray tracer renders depth and colour of a scene along a trajectory,
  * with a Kinect v1 noise model, into a TUM folder. Scenes (room.c), sensor
  * model (noise.c), renderer (raytrace.c), sequences (synth.c). Depends on
- * core, mesh and replay (the TUM-folder writer and trajectory files).
+ * core, mesh, replay (the TUM-folder writer and trajectory files) and calib
+ * (the camera model of the checkerboard views, board.c).
  * See docs/synth.md. */
 #ifndef BF_SYNTH_H
 #define BF_SYNTH_H
 
+#include "calib/calib.h"
 #include "core/core.h"
 #include "mesh/mesh.h"
 
@@ -151,5 +153,55 @@ typedef struct synth_result {
  * camera.txt, scene.ply, seen.ply, stats.json. A trajectory shorter than
  * requested stops early with a warning; no frame at all is BF_INVALID_ARG. */
 bf_status synth_run(const synth_config *cfg, synth_result *out);
+
+/* ------------------------------------------------------------ checkerboards (board.c)
+ * Views of a planar checkerboard for `bitfuse calibrate`, seen by a colour
+ * camera and by the depth (IR) camera beside it, at known intrinsics,
+ * distortion and T_colour_depth: the calibration's ground truth. */
+
+typedef struct synth_board_config {
+    calib_board board;        /* inner corners and square size */
+    uint32_t n_views;
+    calib_camera colour;      /* size, pinhole and distortion of the colour camera */
+    calib_camera depth;       /* the same of the IR camera */
+    bf_se3 T_colour_depth;    /* p_colour = T_colour_depth * p_depth */
+    uint32_t supersample;     /* samples per pixel side at the board's edges (box filter); 0 = 8 */
+    double noise_levels;      /* sensor noise, standard deviation in 8-bit grey levels */
+    uint64_t seed;            /* keys the poses and the noise */
+    const char *out_dir;
+} synth_board_config;
+
+/* 9 x 6 corners of 4 cm, 15 views; colour 640x480 at 525 px without
+ * distortion, IR 640x480 at 580 px; T_colour_depth 25 mm along -x (the
+ * colour camera sits to the IR camera's right) turned 0.5 degrees; 8 x 8
+ * samples at edges, noise 1 level, seed 1. out_dir is left NULL. */
+synth_board_config synth_board_config_default(void);
+
+typedef struct synth_board_result {
+    uint32_t n_views;
+    double seconds;
+} synth_board_result;
+
+/* Board-to-camera pose of view k of n (colour camera): the board's centre
+ * 0.55-1.1 m ahead, tilted 15-45 degrees about an axis that turns with k
+ * (Zhang's method needs planes in different orientations), turned up to
+ * 20 degrees in its plane, placed so that it and a one-square white margin
+ * lie inside both cameras' images. Draws keyed by seed and k;
+ * BF_INVALID_ARG when 200 draws do not fit (a board too large for the
+ * cameras). */
+bf_status synth_board_pose(const synth_board_config *cfg, uint32_t k, bf_se3 *T_colour_board);
+/* Renders the board seen by camera c at T_cb (board to camera) into grey
+ * (c->width * c->height, 8-bit): black and white squares (square (0, 0),
+ * diagonally outside corner (0, 0), is black), a white margin of one square
+ * around them, a smooth grey background; pixels that an edge crosses are
+ * the mean of supersample^2 samples, so the image is the box-filtered
+ * scene and corners are found to a small fraction of a pixel. Noise is
+ * keyed by (seed, stream, pixel). */
+bf_status synth_board_render(const synth_board_config *cfg, const calib_camera *c, const bf_se3 *T_cb,
+                             uint32_t stream, uint8_t *grey);
+/* Writes out_dir/colour/NNN.png and out_dir/ir/NNN.png (8-bit, grey in
+ * RGB), truth.json (the calibration that made them, calib.json's format)
+ * and board_poses.txt (TUM: index, colour camera to board). */
+bf_status synth_board_run(const synth_board_config *cfg, synth_board_result *out);
 
 #endif

@@ -22,6 +22,7 @@ enum {
     SYNTH_RNG_DISP_OFFSET,  /* per-pixel (frame-independent) disparity grid offset */
     SYNTH_RNG_EDGE,         /* dropping a pixel on a depth edge */
     SYNTH_RNG_COLOUR,       /* colour sensor noise */
+    SYNTH_RNG_BOARD,        /* the checkerboard's poses (board.c) */
 };
 
 static inline uint64_t synth__mix64(uint64_t z)

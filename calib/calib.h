@@ -1,0 +1,126 @@
+/* calib: camera calibration from views of a planar checkerboard (`bitfuse
+ * calibrate`): the intrinsics and lens distortion of the colour camera and,
+ * given views of the same board from the depth (IR) camera, its intrinsics
+ * and the rigid transform between the two (Zhang 2000, "A flexible new
+ * technique for camera calibration", through OpenCV's calib3d:
+ * findChessboardCorners, cornerSubPix, calibrateCamera, stereoCalibrate).
+ * The calibration file (calib.json, docs/formats.md) is read and written
+ * here in C; only calib_cv.cpp is C++, behind calib_int.h, and no C++
+ * exception crosses into C. Depends on core (and, privately, OpenCV and
+ * cJSON). See docs/calibration.md. */
+#ifndef BF_CALIB_H
+#define BF_CALIB_H
+
+#include "core/core.h"
+
+/* k1 k2 p1 p2 k3: radial (k) and tangential (p) coefficients of the
+ * Brown-Conrady model in OpenCV's order. */
+#define CALIB_DIST_N 5
+
+/* One camera: pinhole intrinsics (pixel centres at integers, as
+ * bf_intrinsics and OpenCV have them) and distortion of the normalised
+ * image point. */
+typedef struct calib_camera {
+    uint32_t width, height;   /* pixels */
+    double fx_px, fy_px, cx_px, cy_px;
+    double dist[CALIB_DIST_N];
+    double rms_px;            /* reprojection RMS of its own calibration (0: not measured) */
+} calib_camera;
+
+/* What a calibration file holds. T_colour_depth takes points of the depth
+ * camera's frame to the colour camera's: p_colour = T_colour_depth * p_depth. */
+typedef struct calib_result {
+    calib_camera colour;
+    bool has_depth;           /* depth (and T_colour_depth) are set */
+    calib_camera depth;
+    bf_se3 T_colour_depth;
+    double rms_px;            /* the stereo reprojection RMS with depth, else the colour camera's */
+    uint32_t n_views;         /* views used: with depth, those whose board both cameras found */
+} calib_result;
+
+/* A checkerboard: cols x rows inner corners (where four squares meet),
+ * squares square_m metres wide. Corner (i, j), i < cols, j < rows, lies at
+ * (i, j) * square_m on the board's plane z = 0. Boards whose cols + rows is
+ * odd (9 x 6) look different turned by 180 degrees, so the corners of two
+ * cameras' views pair up without doubt (calib_find_corners). */
+typedef struct calib_board {
+    uint32_t cols, rows;
+    double square_m;
+} calib_board;
+
+#define CALIB_MIN_VIEWS 3     /* Zhang's method needs three views of the plane for five intrinsics */
+#define CALIB_MAX_CORNERS 4096
+
+/* Parses "COLSxROWS" (each 2..64); BF_INVALID_ARG with the reason otherwise. */
+bf_status calib_parse_board(const char *text, calib_board *out);
+
+/* Finds the board's inner corners in one 8-bit grey image (w*h, borrowed):
+ * findChessboardCorners, then cornerSubPix in an 11 x 11 window (OpenCV).
+ * *is_found false (BF_OK) when the board is not in the image. Found corners
+ * go to corners_px (cols*rows (x, y) pairs, row j after row j-1), ordered
+ * so that the square outside corner (0, 0) is the darker one: then two
+ * cameras' lists of one view name the same corners. BF_NUMERIC for an
+ * OpenCV error, with its message. */
+bf_status calib_find_corners(const calib_board *b, const uint8_t *grey, uint32_t w, uint32_t h, bool *is_found,
+                             double *corners_px);
+
+/* The corners of one camera's views: n_views lists of calib_find_corners,
+ * one after another (borrowed), is_found[k] false where view k's board was
+ * not found (its list is not read). */
+typedef struct calib_views {
+    uint32_t n_views;
+    uint32_t width, height;   /* the camera's image size */
+    const double *corners_px; /* n_views * cols * rows * 2 */
+    const bool *is_found;
+} calib_views;
+
+/* Calibrates the colour camera from its views (calibrateCamera, all five
+ * distortion coefficients) and, when depth is not NULL, the depth camera
+ * from its views and the pair from the views both found (stereoCalibrate
+ * with the two cameras' intrinsics fixed: each camera is best measured
+ * alone, and the pair's views then only carry the six unknowns of the
+ * transform). depth's views pair with colour's by index. Fewer than
+ * CALIB_MIN_VIEWS usable views is BF_FORMAT; OpenCV's failure BF_NUMERIC.
+ * *out is written only on success. */
+bf_status calib_estimate(const calib_board *b, const calib_views *colour, const calib_views *depth,
+                         calib_result *out);
+
+/* ------------------------------------------------------------ calib.json */
+
+/* Writes r to path atomically (temporary file, rename); numbers with 17
+ * significant digits, so a file read back gives the same doubles. */
+bf_status calib_write(const char *path, const calib_result *r);
+/* The same JSON as a malloc'd NUL-terminated text (for --json and
+ * stats.json); free() it. */
+bf_status calib_to_text(const calib_result *r, char **text);
+/* Reads and checks a calibration file: BF_IO when unreadable, BF_FORMAT
+ * naming the file and the field for anything missing or wrong (not JSON,
+ * a missing number, a non-finite one, a focal length <= 0, a principal
+ * point outside the image, a rotation that is not one). Fields it does not
+ * know are ignored. *out is written only on success. */
+bf_status calib_read(const char *path, calib_result *out);
+/* The same checks on a text already read; path names it in messages. */
+bf_status calib_parse(const char *path, const char *text, size_t len, calib_result *out);
+
+/* ------------------------------------------------------------ the model (model.c) */
+
+/* Brown-Conrady distortion of a normalised image point (x, y) = (X/Z, Y/Z),
+ * as OpenCV's projectPoints applies it (Brown 1966; OpenCV's calib3d docs):
+ * r2 = x^2 + y^2, radial 1 + k1 r2 + k2 r2^2 + k3 r2^3, tangential
+ * 2 p1 x y + p2 (r2 + 2 x^2) and p1 (r2 + 2 y^2) + 2 p2 x y. */
+void calib_distort(const double dist[CALIB_DIST_N], double x, double y, double *xd, double *yd);
+/* Its inverse by Newton's method on the 2 x 2 system, to 1e-12 in the
+ * normalised plane for the mild lenses of RGB-D cameras; false when it does
+ * not converge (a point far outside the image of a strong lens). */
+bool calib_undistort(const double dist[CALIB_DIST_N], double xd, double yd, double *x, double *y);
+/* Projects camera point p_c to pixels through c's distortion; false when
+ * p_c.z <= 0. */
+bool calib_project(const calib_camera *c, bf_vec3 p_c, double *u_px, double *v_px);
+/* The ray (z = 1) through pixel (u, v); false as calib_undistort. */
+bool calib_unproject(const calib_camera *c, double u_px, double v_px, bf_vec3 *ray_c);
+
+/* A camera's pinhole part as core's intrinsics (distortion dropped;
+ * depth_scale left 0 for the caller). */
+bf_intrinsics calib_camera_intrinsics(const calib_camera *c);
+
+#endif

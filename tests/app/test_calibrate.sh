@@ -1,0 +1,152 @@
+#!/usr/bin/env bash
+# bitfuse calibrate as a user runs it: checkerboard views rendered by
+# synth --board at known intrinsics, distortion and T_colour_depth are
+# calibrated and compared with the truth (calib_compare.py --check: focal
+# lengths within 0.5%, principal points within 2 px, the transform within
+# 2 mm and 0.2 degrees); images without a board, a wrong command line and
+# malformed calibration files are refused with the right exit code and
+# the file named, before any output is made.
+# Usage: test_calibrate.sh path/to/bitfuse path/to/calib_compare.py
+set -u
+B=$1
+CMP=$2
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+fails=0
+fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
+expect() {
+    local want=$1
+    shift
+    "$@" >"$T/out" 2>"$T/err"
+    local rc=$?
+    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
+}
+mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 400 "$T/err")"; }
+command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+# The interpreter itself, not a version manager's shim script: under the
+# sanitizer build every shell the shim starts loads the sanitizer runtime.
+PY=$(python3 -c 'import sys; print(sys.executable)')
+
+# 12 views of a 9x6 board; the colour lens has radial distortion.
+expect 0 "$B" synth --board 9x6 --square 0.04 --views 12 --distortion 0.1,-0.2 --seed 7 --out "$T/b"
+[ -f "$T/b/truth.json" ] && [ -f "$T/b/ir/011.png" ] || fail "synth --board did not write truth.json and ir/011.png"
+
+# Colour and depth: every board found, the truth recovered.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --depth "$T"/b/ir/*.png --out "$T/calib.json"
+mentions "colour 12/12"
+mentions "board found"
+grep -qF "T_colour_depth" "$T/out" || fail "the summary has no T_colour_depth: $(head -c 400 "$T/out")"
+"$PY" "$CMP" "$T/calib.json" "$T/b/truth.json" --check >"$T/cmp" 2>&1 || fail "calibration off the truth: $(cat "$T/cmp")"
+
+# --depth first and the colour images after '--'; --json: the calibration and every image.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 --depth "$T"/b/ir/*.png -- "$T"/b/colour/*.png --out "$T/c2.json" --json
+"$PY" -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert d['calibration']['views'] == 12 and 'T_colour_depth' in d['calibration'], d['calibration']
+assert len(d['images']) == 24 and all(i['found'] for i in d['images']), d['images']
+" "$T/out" || fail "calibrate --json: $(head -c 400 "$T/out")"
+cmp -s "$T/calib.json" "$T/c2.json" || fail "the same views in another argument order gave another calibration"
+
+# Colour alone: no depth camera, no transform in the file.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --out "$T/colour.json"
+"$PY" -c "import json,sys; d=json.load(open(sys.argv[1])); assert 'depth' not in d and 'T_colour_depth' not in d" \
+    "$T/colour.json" || fail "a colour-only calibration has a depth camera"
+
+# Images without a board: exit 3, naming them; nothing written.
+"$PY" - "$T" <<'PY'
+import struct, sys, zlib
+def png(path, w, h, value):
+    raw = b"".join(b"\0" + bytes([value]) * w for _ in range(h))
+    chunk = lambda t, d: struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+                + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+for i in range(3):
+    png("%s/blank%d.png" % (sys.argv[1], i), 640, 480, 40 + 60 * i)
+png("%s/small.png" % sys.argv[1], 32, 24, 128)
+PY
+expect 3 "$B" calibrate --board 9x6 --square 0.04 "$T"/blank*.png --out "$T/none.json"
+mentions "found in 0 of 3 colour images"
+mentions "blank0.png"
+mentions "blank2.png"
+[ ! -e "$T/none.json" ] || fail "a failed calibration wrote its --out"
+# Two views with the board and one without: still too few.
+expect 3 "$B" calibrate --board 9x6 --square 0.04 "$T/b/colour/000.png" "$T/b/colour/001.png" "$T/blank0.png" \
+    --out "$T/none.json"
+mentions "found in 2 of 3"
+mentions "not in: $T/blank0.png"
+# Images of different sizes, an unreadable one.
+expect 3 "$B" calibrate --board 9x6 --square 0.04 "$T/blank0.png" "$T/small.png" "$T/blank1.png" --out "$T/none.json"
+mentions "small.png: 32x24"
+expect 3 "$B" calibrate --board 9x6 --square 0.04 "$T/missing.png" --out "$T/none.json"
+mentions "missing.png"
+
+# Bad command lines: exit 2.
+expect 2 "$B" calibrate --board 9 --square 0.04 "$T/blank0.png" --out "$T/none.json"
+mentions "COLSxROWS"
+expect 2 "$B" calibrate --board 9x6 "$T/blank0.png" --out "$T/none.json"
+mentions "--square is required"
+expect 2 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/00*.png --depth "$T/b/ir/000.png" --out "$T/none.json"
+mentions "1 depth images for 10 colour images"
+expect 2 "$B" calibrate --board 9x6 --square 0.04 --depth "$T"/b/ir/*.png --out "$T/none.json"
+mentions "no colour images"
+expect 0 "$B" calibrate --help
+grep -qF -- "--depth IMAGES..." "$T/out" || fail "calibrate --help does not show --depth"
+
+# replay --calibration: a malformed file is refused by name and field
+# before the sequence opens or the output folder is made (exit 3).
+bad() { printf '%s' "$2" >"$T/$1.json"; }
+bad nofx '{"colour": {"width": 640, "height": 480, "fy": 525, "cx": 319.5, "cy": 239.5}}'
+bad negfx '{"colour": {"width": 640, "height": 480, "fx": -1, "fy": 525, "cx": 319.5, "cy": 239.5}}'
+bad inf '{"colour": {"width": 640, "height": 480, "fx": 525, "fy": 1e999, "cx": 319.5, "cy": 239.5}}'
+bad notjson '{"colour": '
+"$PY" -c "
+import json, sys
+d = json.load(open(sys.argv[1])); del d['T_colour_depth']
+json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/noT.json"
+for f in nofx:colour.fx negfx:colour.fx inf:colour.fy notjson:"not JSON" noT:T_colour_depth; do
+    name=${f%%:*}
+    field=${f#*:}
+    expect 3 "$B" replay "$T/no-such-seq" --out "$T/rp_$name" --calibration "$T/$name.json"
+    mentions "$T/$name.json"
+    mentions "$field"
+    [ ! -e "$T/rp_$name" ] || fail "replay --calibration $name.json made the output folder"
+done
+expect 3 "$B" live --device "$T/no-such-seq" --out "$T/lv" --calibration "$T/nofx.json"
+mentions "colour.fx: missing"
+[ ! -e "$T/lv" ] || fail "live --calibration nofx.json made the output folder"
+expect 3 "$B" replay "$T/no-such-seq" --out "$T/rp_x" --calibration "$T/absent.json"
+mentions "absent.json"
+expect 2 "$B" replay "$T/no-such-seq" --out "$T/rp_x" --calibration "$T/calib.json" --camera fr1
+mentions "both give the depth camera"
+
+# A sequence of 160x120 frames: a 640x480 depth camera does not fit it
+# (exit 3, no output); one of its size replaces its pinhole, and
+# stats.json's config echoes the file.
+printf '0 0 0 0 0 0 0 1\n1 0.002 0 0 0 0 0 1\n' >"$T/traj.txt"
+mkdir "$T/nodata"
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 2 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+    --data "$T/nodata" --out "$T/seq"
+expect 3 "$B" replay "$T/seq" --out "$T/rp_size" --calibration "$T/calib.json"
+mentions "the depth camera is 640x480, the depth images of $T/seq are 160x120"
+[ ! -e "$T/rp_size" ] || fail "replay with a calibration of another size made the output folder"
+"$PY" -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+for cam in ('colour', 'depth'):
+    c = d[cam]
+    c.update(width=160, height=120, fx=c['fx'] / 4, fy=c['fy'] / 4, cx=(c['cx'] + 0.5) / 4 - 0.5, cy=(c['cy'] + 0.5) / 4 - 0.5)
+json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/small.json"
+expect 0 "$B" replay "$T/seq" --out "$T/rp" --calibration "$T/small.json" --no-mesh
+"$PY" -c "
+import json, sys
+c = json.load(open(sys.argv[1]))['config']['calibration']
+f = json.load(open(sys.argv[2]))
+assert c['depth']['fx'] == f['depth']['fx'] and c['T_colour_depth'] == f['T_colour_depth'], c
+" "$T/rp/stats.json" "$T/small.json" || fail "stats.json does not echo --calibration: $(head -c 400 "$T/rp/stats.json")"
+expect 0 "$B" replay --help
+grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
+
+echo "$fails failed"
+[ "$fails" = 0 ]
