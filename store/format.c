@@ -29,20 +29,54 @@ static int brick_cmp(const void *pa, const void *pb)
     return c;
 }
 
-void store__sort(hostmap *m)
+/* Sorting carries each brick's colour along: an index sort (glibc's
+ * qsort_r: the writer thread and the caller's may sort at once), then both
+ * arrays in that order. */
+static int index_cmp(const void *pa, const void *pb, void *ctx)
 {
-    /* Format version 1 holds no colour (docs/colour.md): a map sorted for
-     * the store drops it rather than keep it in the old order. */
-    free(m->rgb565);
-    m->rgb565 = NULL;
-    if (m->n_bricks > 1) qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
+    const hostmap_brick *base = ctx;
+    uint32_t a = *(const uint32_t *)pa, b = *(const uint32_t *)pb;
+    int c = brick_cmp(&base[a], &base[b]);
+    return c ? c : (a > b) - (a < b);
 }
 
-void store__pack(const hostmap *m, uint32_t first, uint32_t n, uint8_t *buf)
+void store__sort(hostmap *m)
 {
+    if (m->n_bricks < 2) return;
+    if (!m->rgb565) {
+        qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
+        return;
+    }
+    uint32_t *idx = bf_malloc((size_t)m->n_bricks * sizeof *idx);
+    hostmap_brick *b = bf_malloc((size_t)m->n_bricks * sizeof *b);
+    uint16_t *c = bf_malloc((size_t)m->n_bricks * 1024);
+    if (!idx || !b || !c) { /* no memory to carry colour: keep the geometry in order */
+        free(idx), free(b), free(c);
+        free(m->rgb565);
+        m->rgb565 = NULL;
+        qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
+        return;
+    }
+    for (uint32_t i = 0; i < m->n_bricks; i++) idx[i] = i;
+    qsort_r(idx, m->n_bricks, sizeof *idx, index_cmp, m->bricks);
+    for (uint32_t i = 0; i < m->n_bricks; i++) {
+        b[i] = m->bricks[idx[i]];
+        memcpy(c + (size_t)i * 512, m->rgb565 + (size_t)idx[i] * 512, 1024);
+    }
+    free(idx);
+    free(m->bricks);
+    free(m->rgb565);
+    m->bricks = b;
+    m->rgb565 = c;
+}
+
+void store__pack(const hostmap *m, uint32_t first, uint32_t n, bool with_colour, uint8_t *buf)
+{
+    size_t rb = store__record_bytes(with_colour);
     for (uint32_t i = 0; i < n; i++) {
         const hostmap_brick *b = &m->bricks[first + i];
-        uint8_t *r = buf + (size_t)i * STORE_RECORD_BYTES;
+        uint8_t *r = buf + (size_t)i * rb;
+        if (with_colour) memcpy(r + STORE_RECORD_BYTES, m->rgb565 + (size_t)(first + i) * 512, 1024);
         r[0] = (uint8_t)b->level;
         for (int k = 0; k < 3; k++) r[1 + k] = (uint8_t)b->cell[k];
         memcpy(r + 4, &b->error, 4);
@@ -70,13 +104,15 @@ bf_status store__groups(const hostmap *m, store_group **out, uint32_t *n_out)
         g[k - 1].n++;
         if (g[k - 1].n > largest) largest = g[k - 1].n;
     }
-    if (n && !(buf = bf_malloc((size_t)largest * STORE_RECORD_BYTES))) {
+    if (n && !(buf = bf_malloc((size_t)largest * STORE_COLOUR_RECORD_BYTES))) {
         free(g);
         return bf_fail(BF_NO_MEMORY, "store: records of %u bricks", largest);
     }
     for (uint32_t c = 0; c < n; c++) {
-        store__pack(m, g[c].first, g[c].n, buf);
-        g[c].digest = store__hash(buf, (size_t)g[c].n * STORE_RECORD_BYTES);
+        for (size_t v = 0; m->rgb565 && !g[c].has_colour && v < (size_t)g[c].n * 512; v++)
+            g[c].has_colour = m->rgb565[(size_t)g[c].first * 512 + v] != 0;
+        store__pack(m, g[c].first, g[c].n, g[c].has_colour, buf);
+        g[c].digest = store__hash(buf, (size_t)g[c].n * store__record_bytes(g[c].has_colour));
     }
     free(buf);
     *out = g;
@@ -98,7 +134,7 @@ bf_status store_map_digest(const hostmap *map, uint64_t *out)
     uint8_t rec[STORE_RECORD_BYTES];
     for (uint32_t i = 0; i < copy.n_bricks; i++) {
         XXH3_64bits_update(&st, copy.bricks[i].key, sizeof copy.bricks[i].key);
-        store__pack(&copy, i, 1, rec);
+        store__pack(&copy, i, 1, false, rec);
         XXH3_64bits_update(&st, rec, sizeof rec);
     }
     free(copy.bricks);

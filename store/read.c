@@ -250,8 +250,17 @@ static bool parse_chunk_name(const char *name, int32_t key[3])
 /* The bricks read so far. */
 typedef struct brick_list {
     hostmap_brick *b;
+    uint16_t *rgb;  /* cap * 512 colours once a chunk had colour, else NULL */
     uint32_t n, cap;
 } brick_list;
+
+/* Colour for the list's bricks from now on (earlier ones have none). */
+static bf_status list_colour(brick_list *l)
+{
+    if (l->rgb) return BF_OK;
+    l->rgb = bf_calloc((size_t)(l->cap ? l->cap : 1) * 512, 2);
+    return l->rgb ? BF_OK : bf_fail(BF_NO_MEMORY, "store: colour of %u bricks", l->cap);
+}
 
 static bf_status list_grow(brick_list *l, uint32_t more)
 {
@@ -262,6 +271,12 @@ static bf_status list_grow(brick_list *l, uint32_t more)
     hostmap_brick *b = bf_realloc(l->b, (size_t)cap * sizeof *b);
     if (!b) return bf_fail(BF_NO_MEMORY, "store: %u bricks", cap);
     l->b = b;
+    if (l->rgb) {
+        uint16_t *c = bf_realloc(l->rgb, (size_t)cap * 1024);
+        if (!c) return bf_fail(BF_NO_MEMORY, "store: colour of %u bricks", cap);
+        memset(c + (size_t)l->cap * 512, 0, (size_t)(cap - l->cap) * 1024);
+        l->rgb = c;
+    }
     l->cap = cap;
     return BF_OK;
 }
@@ -281,7 +296,9 @@ static bf_status read_chunk(const char *path, const int32_t key[3], geometry *ge
 {
     uint8_t *p = NULL, *rec = NULL;
     size_t len = 0;
-    bf_status s = read_file(path, (size_t)STORE_CHUNK_HEADER + ZSTD_compressBound((size_t)STORE_MAX_CHUNK_BRICKS * 136),
+    bf_status s = read_file(path,
+                            (size_t)STORE_CHUNK_HEADER +
+                                ZSTD_compressBound((size_t)STORE_MAX_CHUNK_BRICKS * STORE_COLOUR_RECORD_BYTES),
                             &p, &len);
     if (s != BF_OK) return s;
     store_chunk_header h;
@@ -291,13 +308,15 @@ static bf_status read_chunk(const char *path, const int32_t key[3], geometry *ge
         s = bf_fail(BF_FORMAT, "%s: not a bitfuse chunk file (%zu bytes)", path, len);
     else if (h.header_hash != store__hash(&h, offsetof(store_chunk_header, header_hash)))
         s = bf_fail(BF_FORMAT, "%s: header checksum mismatch (corrupt)", path);
-    else if (h.version > STORE_VERSION || h.header_bytes != STORE_CHUNK_HEADER || h.record_bytes != STORE_RECORD_BYTES)
+    else if (h.version > STORE_CHUNK_VERSION_COLOUR || h.header_bytes != STORE_CHUNK_HEADER ||
+             !(h.record_bytes == STORE_RECORD_BYTES ||
+               (h.version == STORE_CHUNK_VERSION_COLOUR && h.record_bytes == STORE_COLOUR_RECORD_BYTES)))
         s = bf_fail(BF_UNSUPPORTED, "%s: chunk version %u (header %u, record %u bytes); this bitfuse reads version %u",
-                    path, h.version, h.header_bytes, h.record_bytes, STORE_VERSION);
+                    path, h.version, h.header_bytes, h.record_bytes, STORE_CHUNK_VERSION_COLOUR);
     else if (h.key[0] != key[0] || h.key[1] != key[1] || h.key[2] != key[2])
         s = bf_fail(BF_FORMAT, "%s: holds chunk (%d,%d,%d)", path, h.key[0], h.key[1], h.key[2]);
     else if (h.n_bricks == 0 || h.n_bricks > STORE_MAX_CHUNK_BRICKS ||
-             h.raw_bytes != (uint64_t)h.n_bricks * STORE_RECORD_BYTES)
+             h.raw_bytes != (uint64_t)h.n_bricks * h.record_bytes)
         s = bf_fail(BF_FORMAT, "%s: %u bricks in %llu bytes", path, h.n_bricks, (unsigned long long)h.raw_bytes);
     else if (h.payload_bytes != len - sizeof h)
         s = bf_fail(BF_FORMAT, "%s: payload is %zu bytes, the header says %llu (truncated)", path, len - sizeof h,
@@ -318,17 +337,21 @@ static bf_status read_chunk(const char *path, const int32_t key[3], geometry *ge
                         (unsigned long long)h.raw_bytes, ZSTD_isError(got) ? ZSTD_getErrorName(got) : "size");
     }
     uint32_t max_level = geo->known ? geo->max_level : 8;
+    size_t rb = h.record_bytes;
+    bool colour = rb == STORE_COLOUR_RECORD_BYTES;
     for (uint32_t i = 0; s == BF_OK && i < h.n_bricks; i++) {
-        const uint8_t *r = rec + (size_t)i * STORE_RECORD_BYTES;
+        const uint8_t *r = rec + (size_t)i * rb;
         if (r[0] > max_level || r[1] >> r[0] || r[2] >> r[0] || r[3] >> r[0])
             s = bf_fail(BF_FORMAT, "%s: brick %u: cell (%u,%u,%u) outside level %u (max %u)", path, i, r[1], r[2], r[3],
                         r[0], max_level);
-        else if (i && memcmp(r - STORE_RECORD_BYTES, r, 4) == 0)
+        else if (i && memcmp(r - rb, r, 4) == 0)
             s = bf_fail(BF_FORMAT, "%s: brick %u repeats a cell", path, i);
     }
     if (s == BF_OK) s = list_grow(l, h.n_bricks);
+    if (s == BF_OK && colour) s = list_colour(l);
     for (uint32_t i = 0; s == BF_OK && i < h.n_bricks; i++) {
-        const uint8_t *r = rec + (size_t)i * STORE_RECORD_BYTES;
+        const uint8_t *r = rec + (size_t)i * rb;
+        if (colour) memcpy(l->rgb + (size_t)(l->n + i) * 512, r + STORE_RECORD_BYTES, 1024);
         hostmap_brick *b = &l->b[l->n + i];
         memcpy(b->key, key, sizeof b->key);
         b->level = r[0];
@@ -365,12 +388,14 @@ bf_status store_get_chunk(const char *dir, const int32_t key[3], const store_met
     bf_status s = read_chunk(path, key, &geo, &l, &b, &raw);
     if (s != BF_OK) {
         free(l.b);
+        free(l.rgb);
         return s;
     }
     out->chunk_m = meta->chunk_m;
     out->origin_w = meta->origin_w;
     out->n_bricks = l.n;
     out->bricks = l.b;
+    out->rgb565 = l.rgb;
     if (bytes) *bytes = b;
     return BF_OK;
 }
@@ -498,6 +523,7 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
     }
     if (s != BF_OK) {
         free(l.b);
+        free(l.rgb);
         bf_traj_free(&t);
         return s;
     }
@@ -505,6 +531,7 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
     map->origin_w = m.origin_w;
     map->n_bricks = l.n;
     map->bricks = l.b;
+    map->rgb565 = l.rgb;
     store__sort(map);
     rep.n_bricks = l.n;
     *meta = m;

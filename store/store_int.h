@@ -14,6 +14,11 @@
 #define STORE_CHUNK_MAGIC "BFCHUNK"  /* 8 bytes with its NUL */
 #define STORE_CHUNK_HEADER 96u
 #define STORE_RECORD_BYTES 136u      /* level, x, y, z (u8 each), error (f32), sign[16], conf[16] (u32) */
+/* A chunk with colour: version 2, each record followed by its 512 voxels'
+ * RGB565 (u16, voxel x + 8 y + 64 z, 0 = none; hostmap.rgb565). Chunks
+ * without a coloured voxel stay version 1, byte for byte. */
+#define STORE_CHUNK_VERSION_COLOUR 2u
+#define STORE_COLOUR_RECORD_BYTES (STORE_RECORD_BYTES + 1024u)
 #define STORE_ZSTD_LEVEL 3
 
 typedef struct store_chunk_header {
@@ -43,14 +48,20 @@ typedef struct store_group {
     int32_t key[3];
     uint32_t first, n;
     uint64_t digest;        /* XXH3-64 of its records */
+    bool has_colour;        /* a brick of it has a coloured voxel: colour records */
 } store_group;
 
 /* Sorts the bricks canonically (key, level, z, y, x). */
 void store__sort(hostmap *m);
 /* The groups of a sorted map; *out malloc'd (NULL when empty). */
 bf_status store__groups(const hostmap *m, store_group **out, uint32_t *n);
-/* Writes the records of bricks [first, first + n) into buf (n * STORE_RECORD_BYTES). */
-void store__pack(const hostmap *m, uint32_t first, uint32_t n, uint8_t *buf);
+/* Writes the records of bricks [first, first + n) into buf (n records of
+ * STORE_RECORD_BYTES, or STORE_COLOUR_RECORD_BYTES with_colour). */
+void store__pack(const hostmap *m, uint32_t first, uint32_t n, bool with_colour, uint8_t *buf);
+static inline size_t store__record_bytes(bool with_colour)
+{
+    return with_colour ? STORE_COLOUR_RECORD_BYTES : STORE_RECORD_BYTES;
+}
 /* The chunk file's name for key: "c_X_Y_Z.bfc". */
 void store__chunk_name(char *out, size_t cap, const int32_t key[3]);
 /* XXH3-64. */

@@ -45,12 +45,12 @@ struct store_writer {
 static bf_status write_chunk(const char *chunk_dir, const hostmap *m, const store_group *g, const store_meta *meta,
                              uint64_t *file_bytes)
 {
-    size_t raw = (size_t)g->n * STORE_RECORD_BYTES, cap = ZSTD_compressBound(raw);
+    size_t raw = (size_t)g->n * store__record_bytes(g->has_colour), cap = ZSTD_compressBound(raw);
     uint8_t *rec = bf_malloc(raw), *z = bf_malloc(cap);
     bf_status s = rec && z ? BF_OK : bf_fail(BF_NO_MEMORY, "store: chunk of %u bricks", g->n);
     size_t nz = 0;
     if (s == BF_OK) {
-        store__pack(m, g->first, g->n, rec);
+        store__pack(m, g->first, g->n, g->has_colour, rec);
         nz = ZSTD_compress(z, cap, rec, raw, STORE_ZSTD_LEVEL);
         if (ZSTD_isError(nz)) s = bf_fail(BF_IO, "store: zstd: %s", ZSTD_getErrorName(nz));
     }
@@ -61,12 +61,12 @@ static bf_status write_chunk(const char *chunk_dir, const hostmap *m, const stor
         store_chunk_header h;
         memset(&h, 0, sizeof h);
         memcpy(h.magic, STORE_CHUNK_MAGIC, sizeof h.magic);
-        h.version = STORE_VERSION;
+        h.version = g->has_colour ? STORE_CHUNK_VERSION_COLOUR : STORE_VERSION;
         h.header_bytes = STORE_CHUNK_HEADER;
         memcpy(h.key, g->key, sizeof h.key);
         h.n_bricks = g->n;
         h.chunk_m = meta->chunk_m;
-        h.record_bytes = STORE_RECORD_BYTES;
+        h.record_bytes = (uint32_t)store__record_bytes(g->has_colour);
         h.origin_w[0] = meta->origin_w.x, h.origin_w[1] = meta->origin_w.y, h.origin_w[2] = meta->origin_w.z;
         h.raw_bytes = raw;
         h.payload_bytes = nz;
