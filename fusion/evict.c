@@ -20,6 +20,8 @@ typedef struct host_all {
     uint32_t *sign, *conf; /* slots [0, cap) allocated, [0, high) downloaded */
     uint32_t *cidx;        /* colour index of slots [0, planes) (NULL without colour) */
     uint32_t *cfree;       /* the colour free stack, whole */
+    uint32_t *pool;        /* colour blocks [0, pool_blocks) (pool_ensure), edited and uploaded back */
+    uint32_t pool_blocks;
     uint32_t high;         /* one past the highest live slot at load */
     uint32_t planes;       /* slots of sign and conf held: high, or more for an insertion */
 } host_all;
@@ -32,6 +34,7 @@ static void host_all_free(host_all *a)
     free(a->conf);
     free(a->cidx);
     free(a->cfree);
+    free(a->pool);
     memset(a, 0, sizeof *a);
 }
 
@@ -74,6 +77,66 @@ static bf_status host_all_load(fusion_map *m, host_all *a, uint32_t extra)
     return s;
 }
 
+/* Holds the colour blocks [0, n) on the host (downloaded once; a larger n
+ * downloads the rest). */
+static bf_status pool_ensure(fusion_map *m, host_all *a, uint32_t n)
+{
+    if (n <= a->pool_blocks) return BF_OK;
+    uint32_t *p = bf_realloc(a->pool, (size_t)n * FUSION_COLOUR_BLOCK_WORDS * 4);
+    if (!p) return bf_fail(BF_NO_MEMORY, "fusion: host copy of %u colour blocks", n);
+    a->pool = p;
+    bf_status s = gpu_buffer_download(m->cpool, (uint64_t)a->pool_blocks * FUSION_COLOUR_BLOCK_WORDS * 4,
+                                      p + (size_t)a->pool_blocks * FUSION_COLOUR_BLOCK_WORDS,
+                                      (uint64_t)(n - a->pool_blocks) * FUSION_COLOUR_BLOCK_WORDS * 4);
+    if (s == BF_OK) a->pool_blocks = n;
+    return s;
+}
+
+/* Brick slot b's colours, expanded (hostmap.rgb565 order) into out[512]. */
+static void slot_colour(const host_all *a, uint32_t b, uint16_t *out)
+{
+    for (uint32_t v = 0; v < BRICK_VOXELS; v++) {
+        uint32_t x = v & 7, y = (v >> 3) & 7, z = v >> 6, w = brick_word(x, y, z), bit = brick_bit(x, y, z);
+        uint32_t blk = a->cidx[(size_t)b * BRICK_WORDS + w];
+        out[v] = 0;
+        if (blk == FUSION_NONE || blk >= a->pool_blocks) continue;
+        uint32_t word = a->pool[(size_t)blk * FUSION_COLOUR_BLOCK_WORDS + bit / 2];
+        out[v] = (uint16_t)(bit & 1 ? word >> 16 : word & 0xFFFFu);
+    }
+}
+
+/* Writes colours c[512] into slot b where the slot has none (a brick the
+ * map made anew keeps its own), taking blocks off the colour free stack;
+ * a sub-brick that finds the stack empty stays uncoloured (counted). */
+static bf_status slot_colour_fill(fusion_map *m, host_all *a, uint32_t b, const uint16_t *c)
+{
+    for (uint32_t w = 0; w < BRICK_WORDS; w++) {
+        uint32_t *ci = &a->cidx[(size_t)b * BRICK_WORDS + w];
+        for (uint32_t bit = 0; bit < 32; bit++) {
+            uint32_t x = (w & 1) * 4 + (bit & 3), y = ((w >> 1) & 1) * 4 + ((bit >> 2) & 3), z = (w >> 2) * 2 + (bit >> 4);
+            uint16_t col = c[x + 8 * y + 64 * z];
+            if (!col) continue;
+            if (*ci == FUSION_NONE) {
+                uint32_t top = a->h.counters[FUSION_CNT_COLOUR_TOP];
+                if (top == 0) {
+                    a->h.counters[FUSION_CNT_FAIL_COLOUR]++;
+                    break;
+                }
+                uint32_t blk = a->cfree[top - 1];
+                bf_status s = pool_ensure(m, a, blk + 1);
+                if (s != BF_OK) return s;
+                a->h.counters[FUSION_CNT_COLOUR_TOP] = top - 1;
+                memset(a->pool + (size_t)blk * FUSION_COLOUR_BLOCK_WORDS, 0, FUSION_COLOUR_BLOCK_WORDS * 4);
+                *ci = blk;
+            }
+            uint32_t *word = &a->pool[(size_t)*ci * FUSION_COLOUR_BLOCK_WORDS + bit / 2];
+            uint32_t sh = (bit & 1) * 16, old = (*word >> sh) & 0xFFFFu;
+            if (!old) *word |= (uint32_t)col << sh;
+        }
+    }
+    return BF_OK;
+}
+
 /* Uploads what host_all_load read, the bit planes up to max(high, the
  * highest slot now live). */
 static bf_status host_all_store(fusion_map *m, const host_all *a, uint32_t high)
@@ -87,6 +150,8 @@ static bf_status host_all_store(fusion_map *m, const host_all *a, uint32_t high)
     if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, a->conf, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && a->cidx && high) s = gpu_buffer_upload(m->cidx, 0, a->cidx, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && a->cfree) s = gpu_buffer_upload(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_block_cap * 4);
+    if (s == BF_OK && a->pool_blocks)
+        s = gpu_buffer_upload(m->cpool, 0, a->pool, (uint64_t)a->pool_blocks * FUSION_COLOUR_BLOCK_WORDS * 4);
     return s;
 }
 
@@ -243,6 +308,21 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
     }
     hostmap_brick *bricks = s == BF_OK ? bf_malloc((size_t)(n_out ? n_out : 1) * sizeof *bricks) : NULL;
     if (s == BF_OK && !bricks) s = bf_fail(BF_NO_MEMORY, "fusion: evicting %u bricks", n_out);
+    /* Their colour leaves with them: the blocks they reference, on the host. */
+    uint16_t *rgb = NULL;
+    if (s == BF_OK && a.cidx) {
+        uint32_t need = 0;
+        for (uint32_t b = 0; b < a.high; b++) {
+            uint32_t e = a.h.info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
+            for (uint32_t w = 0; e < m->n_entries && evict[e] && w < BRICK_WORDS; w++) {
+                uint32_t blk = a.cidx[(size_t)b * BRICK_WORDS + w];
+                if (blk != FUSION_NONE && blk < m->cfg.colour_block_cap && blk + 1 > need) need = blk + 1;
+            }
+        }
+        s = pool_ensure(m, &a, need);
+        if (s == BF_OK && !(rgb = bf_malloc((size_t)(n_out ? n_out : 1) * 1024)))
+            s = bf_fail(BF_NO_MEMORY, "fusion: colour of %u evicted bricks", n_out);
+    }
     uint32_t k = 0;
     for (uint32_t b = 0; s == BF_OK && b < a.high; b++) {
         const uint32_t *info = a.h.info + (size_t)b * FUSION_BRICK_INFO_WORDS;
@@ -257,6 +337,7 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
         memcpy(&o->error, &info[FUSION_INFO_ERROR], 4);
         memcpy(o->sign, a.sign + (size_t)b * BRICK_WORDS, sizeof o->sign);
         memcpy(o->conf, a.conf + (size_t)b * BRICK_WORDS, sizeof o->conf);
+        if (rgb) slot_colour(&a, b, rgb + (size_t)(k - 1) * 512);
         free_slot(&a, b);
     }
     uint32_t n_chunks = 0;
@@ -269,10 +350,12 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
     host_all_free(&a);
     if (s != BF_OK) {
         free(bricks);
+        free(rgb);
         return s;
     }
     out->n_bricks = k;
     out->bricks = bricks;
+    out->rgb565 = rgb;
     *n_evicted = n_chunks;
     return BF_OK;
 }
@@ -332,8 +415,22 @@ bf_status fusion_insert_bricks(fusion_map *m, const hostmap *in)
             memcpy(&a.h.info[(size_t)slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR], &b->error, 4);
             a.stamp[slot] = FUSION_NONE;
         }
+        if (s == BF_OK && in->rgb565 && a.cidx) s = slot_colour_fill(m, &a, slot, in->rgb565 + (size_t)i * 512);
         if (slot + 1 > high) high = slot + 1;
     }
+    if (s == BF_OK) s = host_all_store(m, &a, high);
+    host_all_free(&a);
+    return s;
+}
+
+bf_status fusion__colour_load(fusion_map *m, const hostmap *in, const uint32_t *slots)
+{
+    host_all a;
+    bf_status s = host_all_load(m, &a, 0);
+    if (s != BF_OK) return s;
+    uint32_t high = a.high;
+    for (uint32_t i = 0; s == BF_OK && a.cidx && i < in->n_bricks; i++)
+        s = slot_colour_fill(m, &a, slots[i], in->rgb565 + (size_t)i * 512);
     if (s == BF_OK) s = host_all_store(m, &a, high);
     host_all_free(&a);
     return s;

@@ -122,6 +122,9 @@ void fusion__integrate_destroy(fusion_map *map);
 void fusion__cmd_integrate(fusion_map *map, gpu_bindings *b, uint32_t first, uint32_t max_count,
                            uint32_t frame_first, uint32_t n_frames, bool set_confidence);
 
+/* evict.c: the colours of in's bricks (in->rgb565) into the slots fusion_load
+ * gave them (slots[i] for brick i), blocks off the colour free stack. */
+bf_status fusion__colour_load(fusion_map *map, const hostmap *in, const uint32_t *slots);
 /* colour.c: the colour pass (shaders/fusion_colour.comp). */
 bf_status fusion__colour_create(fusion_map *map);
 void fusion__colour_destroy(fusion_map *map);

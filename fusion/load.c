@@ -113,7 +113,10 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     /* The free stack hands out slot 0 first: n bricks fill slots [0, n). */
     size_t n = in->n_bricks;
     uint32_t *sign = bf_calloc(n ? n : 1, BRICK_WORDS * 4), *conf = bf_calloc(n ? n : 1, BRICK_WORDS * 4);
-    if (!sign || !conf) s = bf_fail(BF_NO_MEMORY, "fusion: loading %zu bricks", n);
+    /* With colour: each brick's slot, for its colour after the geometry. */
+    uint32_t *slots = in->rgb565 && m->cfg.keep_colour ? bf_malloc((n ? n : 1) * 4) : NULL;
+    if (!sign || !conf || (in->rgb565 && m->cfg.keep_colour && !slots))
+        s = bf_fail(BF_NO_MEMORY, "fusion: loading %zu bricks", n);
     uint32_t high = 0;
     for (size_t i = 0; s == BF_OK && i < n; i++) {
         const hostmap_brick *b = &in->bricks[i];
@@ -127,6 +130,7 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
         memcpy(sign + (size_t)slot * BRICK_WORDS, b->sign, sizeof b->sign);
         memcpy(conf + (size_t)slot * BRICK_WORDS, b->conf, sizeof b->conf);
         memcpy(&h.info[(size_t)slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR], &b->error, 4);
+        if (slots) slots[i] = slot;
         if (slot + 1 > high) high = slot + 1;
     }
     /* Loaded bricks keep no stamp (FUSION_NONE): no window holds them until
@@ -134,6 +138,7 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     if (s == BF_OK) s = fusion__host_map_store(m, &h);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->sign, 0, sign, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, conf, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && slots) s = fusion__colour_load(m, in, slots);
     if (s == BF_OK) {
         m->n_loaded = (uint32_t)n;
         m->use.bricks = h.counters[FUSION_CNT_BRICKS];
@@ -142,6 +147,7 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     }
     free(sign);
     free(conf);
+    free(slots);
     fusion__host_map_free(&h);
     if (s != BF_OK) {
         /* Back to the empty map it was: nothing half-loaded is left. */

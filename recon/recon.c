@@ -369,10 +369,14 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
         /* The stored map may exceed the pools: it goes to the stream's
          * cache, and the chunks near the last pose come in at once. */
         hostmap copy = *map;
-        copy.rgb565 = NULL; /* stored maps carry no colour yet */
         copy.bricks = map->n_bricks ? bf_malloc((size_t)map->n_bricks * sizeof *copy.bricks) : NULL;
-        if (map->n_bricks && !copy.bricks) return bf_fail(BF_NO_MEMORY, "recon: resuming %u bricks", map->n_bricks);
+        copy.rgb565 = map->rgb565 && map->n_bricks ? bf_malloc((size_t)map->n_bricks * 1024) : NULL;
+        if (map->n_bricks && (!copy.bricks || (map->rgb565 && !copy.rgb565))) {
+            hostmap_free(&copy);
+            return bf_fail(BF_NO_MEMORY, "recon: resuming %u bricks", map->n_bricks);
+        }
         if (map->n_bricks) memcpy(copy.bricks, map->bricks, (size_t)map->n_bricks * sizeof *copy.bricks);
+        if (copy.rgb565) memcpy(copy.rgb565, map->rgb565, (size_t)map->n_bricks * 1024);
         s = fusion_set_origin(r->map, map->origin_w);
         if (s == BF_OK) s = stream_adopt(r->stream, &copy);
         hostmap_free(&copy);

@@ -38,7 +38,10 @@ stream_config stream_config_default(void)
                            .max_chunks = 16, .high_water = 0.85f, .cache_bytes = 256ull << 20};
 }
 
-static uint64_t chunk_bytes(const stream_chunk *c) { return (uint64_t)c->bricks.n_bricks * sizeof(hostmap_brick); }
+static uint64_t chunk_bytes(const stream_chunk *c)
+{
+    return (uint64_t)c->bricks.n_bricks * (sizeof(hostmap_brick) + (c->bricks.rgb565 ? 1024 : 0));
+}
 
 bf_status stream_create(const stream_config *cfg_in, fusion_map *map, const char *spill_dir, stream **out)
 {
@@ -150,14 +153,19 @@ static bf_status cache_take(stream *s, hostmap *ev)
         for (uint32_t j = i; j < ev->n_bricks; j++) n += !done[j] && !memcmp(ev->bricks[j].key, key, 12);
         hostmap h = {.chunk_m = ev->chunk_m, .origin_w = ev->origin_w, .n_bricks = n};
         h.bricks = bf_malloc((size_t)n * sizeof *h.bricks);
-        if (!h.bricks) {
+        if (ev->rgb565) h.rgb565 = bf_malloc((size_t)n * 1024);
+        if (!h.bricks || (ev->rgb565 && !h.rgb565)) {
+            hostmap_free(&h);
             st = bf_fail(BF_NO_MEMORY, "stream: chunk of %u bricks", n);
             break;
         }
         int32_t k[3] = {key[0], key[1], key[2]};
         uint32_t m = 0;
         for (uint32_t j = i; j < ev->n_bricks; j++)
-            if (!done[j] && !memcmp(ev->bricks[j].key, k, 12)) h.bricks[m++] = ev->bricks[j], done[j] = true;
+            if (!done[j] && !memcmp(ev->bricks[j].key, k, 12)) {
+                if (h.rgb565) memcpy(h.rgb565 + (size_t)m * 512, ev->rgb565 + (size_t)j * 512, 1024); /* colour with its brick */
+                h.bricks[m++] = ev->bricks[j], done[j] = true;
+            }
         st = cache_push(s, k, &h);
         hostmap_free(&h);
     }
@@ -326,12 +334,22 @@ static bf_status move_in(stream *s, bf_vec3 p)
         st = cache_pop(s, idx[i], &one);
         if (st != BF_OK) break;
         hostmap_brick *b = bf_realloc(all.bricks, ((size_t)all.n_bricks + one.n_bricks + 1) * sizeof *b);
-        if (!b) {
+        if (b) all.bricks = b;
+        /* Colour with its brick: the merged list has colour once a chunk has (zeros for those without). */
+        uint16_t *c = b && (one.rgb565 || all.rgb565)
+                          ? bf_realloc(all.rgb565, ((size_t)all.n_bricks + one.n_bricks + 1) * 1024)
+                          : NULL;
+        if (!b || ((one.rgb565 || all.rgb565) && !c)) {
             st = bf_fail(BF_NO_MEMORY, "stream: %u bricks", all.n_bricks + one.n_bricks);
             hostmap_free(&one);
             break;
         }
-        all.bricks = b;
+        if (c) {
+            if (!all.rgb565) memset(c, 0, (size_t)all.n_bricks * 1024);
+            all.rgb565 = c;
+            if (one.rgb565) memcpy(c + (size_t)all.n_bricks * 512, one.rgb565, (size_t)one.n_bricks * 1024);
+            else memset(c + (size_t)all.n_bricks * 512, 0, (size_t)one.n_bricks * 1024);
+        }
         memcpy(all.bricks + all.n_bricks, one.bricks, (size_t)one.n_bricks * sizeof *b);
         all.n_bricks += one.n_bricks;
         hostmap_free(&one);
@@ -474,7 +492,7 @@ bf_status stream_gather(stream *s, hostmap *out)
     hostmap_brick *b = st == BF_OK ? bf_realloc(snap.bricks, (n + 1) * sizeof *b) : NULL;
     if (st == BF_OK && !b) st = bf_fail(BF_NO_MEMORY, "stream: gather of %zu bricks", n);
     if (b) snap.bricks = b;
-    /* Colour of the cached chunks is not kept yet (docs/colour.md): none. */
+    /* Colour of the cached chunks comes along (zeros where a chunk has none). */
     uint16_t *c = st == BF_OK && snap.rgb565 ? bf_realloc(snap.rgb565, (n + 1) * 512 * 2) : NULL;
     if (st == BF_OK && snap.rgb565 && !c) st = bf_fail(BF_NO_MEMORY, "stream: colour of %zu bricks", n);
     if (c) {
@@ -485,6 +503,8 @@ bf_status stream_gather(stream *s, hostmap *out)
         snap.bricks = b;
         for (uint32_t i = 0; i < s->n_chunks; i++) {
             const hostmap *h = s->chunks[i].on_disk ? &disk[i] : &s->chunks[i].bricks;
+            if (snap.rgb565 && h->rgb565)
+                memcpy(snap.rgb565 + (size_t)snap.n_bricks * 512, h->rgb565, (size_t)h->n_bricks * 1024);
             memcpy(snap.bricks + snap.n_bricks, h->bricks, (size_t)h->n_bricks * sizeof *b);
             snap.n_bricks += h->n_bricks;
         }

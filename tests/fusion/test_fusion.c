@@ -410,6 +410,12 @@ BF_TEST(evicted_chunks_come_back_bit_for_bit)
     CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
     uint16_t *depth = plane_depth(&K_TEST, 1.2);
     bf_frame f = make_frame(&K_TEST, depth, 0);
+    /* A colour gradient, so the map keeps colour and the eviction carries it. */
+    uint8_t *rgb = malloc((size_t)K_TEST.width * K_TEST.height * 3);
+    CHECK(rgb != NULL);
+    for (uint32_t i = 0; i < K_TEST.width * K_TEST.height; i++)
+        rgb[3 * i] = (uint8_t)(i % K_TEST.width), rgb[3 * i + 1] = (uint8_t)(i / K_TEST.width), rgb[3 * i + 2] = 90;
+    f.rgb = rgb;
     bf_se3 A = bf_se3_identity(), Bp = bf_se3_identity();
     Bp.t = bf_v3(10.0, 0.3, 0.0); /* chunks 5 away in x */
     for (uint32_t i = 0; i < 12; i++) {
@@ -465,6 +471,24 @@ BF_TEST(evicted_chunks_come_back_bit_for_bit)
     CHECK_OK(fusion_snapshot_take(map, &s2));
     CHECK_OK(store_map_digest(&s2, &d2));
     CHECK(d0 == d2);
+    /* Colour left and came back with its bricks: every brick of s0 has the
+     * same 512 colours in s2 (found by place). */
+    CHECK(s0.rgb565 != NULL && s2.rgb565 != NULL && ev.rgb565 != NULL);
+    uint64_t n_col = 0, n_diff = 0;
+    for (uint32_t i = 0; i < s0.n_bricks; i++) {
+        const hostmap_brick *a = &s0.bricks[i];
+        uint32_t j = 0;
+        while (j < s2.n_bricks && !(memcmp(s2.bricks[j].key, a->key, 12) == 0 && s2.bricks[j].level == a->level &&
+                                    memcmp(s2.bricks[j].cell, a->cell, 12) == 0))
+            j++;
+        CHECK(j < s2.n_bricks);
+        for (uint32_t v = 0; j < s2.n_bricks && v < 512; v++) {
+            n_col += s0.rgb565[(size_t)i * 512 + v] != 0;
+            n_diff += s0.rgb565[(size_t)i * 512 + v] != s2.rgb565[(size_t)j * 512 + v];
+        }
+    }
+    CHECK(n_col > 0);
+    CHECK_EQ_INT(n_diff, 0);
     /* And it goes on fusing. */
     f.index = 12;
     CHECK_OK(fusion_add_frame(map, &f, &A));
@@ -475,6 +499,7 @@ BF_TEST(evicted_chunks_come_back_bit_for_bit)
     hostmap_free(&ev);
     hostmap_free(&both);
     free(depth);
+    free(rgb);
     fusion_destroy(map);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
