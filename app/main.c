@@ -22,6 +22,7 @@ static const app_command commands[] = {
     {"live", cmd_live, "track and fuse a live camera (the full loop); Ctrl-C ends the scan"},
     {"eval-traj", cmd_eval_traj, "trajectory error: ATE and RPE (TUM benchmark rules)"},
     {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},
+    {"eval-colour", cmd_eval_colour, "colour error: a coloured mesh re-rendered at the frames' poses (PSNR)"},
     {"calibrate", cmd_calibrate, "calibrate the colour and depth cameras from checkerboard images (calib.json)"},
     {"devices", cmd_devices, "list Vulkan devices and say which one bitfuse uses"},
 };

@@ -124,4 +124,22 @@ bf_status eval_surface(const mesh_data *ref, const mesh_data *rec, const mesh_da
 bf_status eval_mesh_sample_area(const mesh_data *m, double samples_per_m2, uint64_t max_samples,
                                 uint64_t seed, float **xyz, uint32_t **tri, size_t *n);
 
+/* ------------------------------------------------------------ colour */
+
+/* Renders the coloured mesh m (bvh built over it; vertices relative to
+ * m->origin) seen by camera K from T_wc (world): per pixel the colour
+ * interpolated at the nearest hit (rgb_out, w*h*3) and whether there is one
+ * (hit_out, w*h). BF_INVALID_ARG without vertex colour. */
+bf_status eval_colour_render(const mesh_data *m, const mesh_bvh *bvh, const bf_intrinsics *K, const bf_se3 *T_wc,
+                             uint8_t *rgb_out, uint8_t *hit_out);
+/* Squared 8-bit errors summed over channels and pixels. */
+typedef struct eval_colour_sums {
+    double sse;
+    uint64_t n;     /* channel samples */
+} eval_colour_sums;
+/* Adds the differences of images a and b (w*h*3) at the pixels mask marks. */
+void eval_colour_compare(const uint8_t *a, const uint8_t *b, const uint8_t *mask, size_t n_px, eval_colour_sums *acc);
+/* 10 log10(255^2 / MSE) [dB]; NAN without samples. */
+double eval_colour_psnr(const eval_colour_sums *s);
+
 #endif
