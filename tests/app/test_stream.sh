@@ -27,8 +27,8 @@ run() { "$@" >"$T/out" 2>"$T/err" || fail "exit $?: $* ($(tail -c 400 "$T/err"))
 run py "$WALK" "$T/walk.txt" 7 0.12 30 0
 run "$B" synth --scene rooms:7 --trajectory "$T/walk.txt" --frames 1000 --size 320x240 \
     --camera 262.5,262.5,159.5,119.5 --noise none --out "$T/seq"
-# --colour off: the stream's cache keeps no colour yet (docs/colour.md), and 2.5 MiB are the
-# geometry's pools (with colour they would hold a third as many bricks).
+# --colour off: 2.5 MiB are the geometry's pools (with colour they would hold a third as many
+# bricks); colour's way through eviction and insertion is test_fusion's.
 run "$B" replay "$T/seq" --out "$T/big" --no-mesh --fuse-at-groundtruth --stream off --colour off
 run "$B" replay "$T/seq" --out "$T/small" --no-mesh --fuse-at-groundtruth --gpu-budget 2.5 --stream-radius 2.5 \
     --colour off
