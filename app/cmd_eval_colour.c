@@ -14,6 +14,7 @@
 
 static const char usage_text[] =
     "usage: bitfuse eval-colour MESH SEQ --trajectory TRAJ [--every N] [--calibration calib.json] [--json]\n"
+    "                           [--save DIR]\n"
     "\n"
     "Renders the coloured mesh MESH (replay's mesh.ply) at the pose TRAJ gives each\n"
     "N-th frame of the sequence SEQ (a TUM file matched by timestamp within 0.02 s; the\n"
@@ -34,9 +35,27 @@ static bool pose_at(const bf_traj *tr, double t, bf_se3 *out)
     return true;
 }
 
+/* The rendering (left) and the input (right) of frame i as one PNG. */
+static bf_status save_pair(const char *dir, uint32_t i, const bf_intrinsics *K, const uint8_t *a, const uint8_t *b)
+{
+    bf_status s = bf_mkdir_p(dir);
+    uint8_t *p = s == BF_OK ? malloc((size_t)K->width * 2 * K->height * 3) : NULL;
+    if (s == BF_OK && !p) s = bf_fail(BF_NO_MEMORY, "eval-colour: image");
+    if (s != BF_OK) return s;
+    for (uint32_t v = 0; v < K->height; v++) {
+        memcpy(p + ((size_t)v * K->width * 2) * 3, a + (size_t)v * K->width * 3, (size_t)K->width * 3);
+        memcpy(p + ((size_t)v * K->width * 2 + K->width) * 3, b + (size_t)v * K->width * 3, (size_t)K->width * 3);
+    }
+    char path[4200];
+    snprintf(path, sizeof path, "%s/colour_%06u.png", dir, i);
+    s = replay_png_write_rgb8(path, p, K->width * 2, K->height);
+    free(p);
+    return s;
+}
+
 int cmd_eval_colour(int argc, char **argv)
 {
-    const char *cmd = "eval-colour", *paths[2] = {NULL, NULL}, *traj_path = NULL, *calib_path = NULL;
+    const char *cmd = "eval-colour", *paths[2] = {NULL, NULL}, *traj_path = NULL, *calib_path = NULL, *save = NULL;
     uint32_t every = 25;
     bool json = false;
     const app_option own[] = {
@@ -46,6 +65,8 @@ int cmd_eval_colour(int argc, char **argv)
         APP_OPT("--calibration", APP_OPT_STRING, &calib_path, "FILE",
                 "calib.json: render from the colour camera (its intrinsics, T_colour_depth)", .no_default = true),
         APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "machine-readable output on stdout"),
+        APP_OPT("--save", APP_OPT_STRING, &save, "DIR",
+                "write each compared frame's rendering and input side by side (DIR/colour_N.png)", .no_default = true),
         APP_OPT_END,
     };
     const app_option *tables[] = {own, NULL};
@@ -97,6 +118,7 @@ int cmd_eval_colour(int argc, char **argv)
         if ((s = eval_colour_render(&m, bvh, &K, &T_wcol, img, hit)) != BF_OK) break;
         eval_colour_sums one = {0};
         eval_colour_compare(img, f.rgb, hit, n_px, &one);
+        if (save && (s = save_pair(save, f.index, &K, img, f.rgb)) != BF_OK) break;
         all.sse += one.sse, all.n += one.n;
         n_frames++;
         double cover = (double)one.n / 3.0 / (double)n_px;
