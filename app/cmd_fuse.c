@@ -82,6 +82,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r)
     cJSON_AddNumberToObject(g, "alloc", bf_stats_percentile(&t->alloc_ms, 50));
     cJSON_AddNumberToObject(g, "subcache", bf_stats_percentile(&t->subcache_ms, 50));
     cJSON_AddNumberToObject(g, "window", bf_stats_percentile(&t->window_ms, 50));
+    cJSON_AddNumberToObject(g, "colour", bf_stats_percentile(&t->colour_ms, 50));
     app_json_map(o, &r->out, a->fcfg.max_level);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
     return o;

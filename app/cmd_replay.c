@@ -406,6 +406,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r)
     app_json_series(g, "alloc", &t->alloc_ms);
     app_json_series(g, "subcache", &t->subcache_ms);
     app_json_series(g, "window", &t->window_ms);
+    app_json_series(g, "colour", &t->colour_ms);
     if (r->has_capture) {
         cJSON *cap = app_json_object(o, "capture");
         cJSON_AddNumberToObject(cap, "captured", (double)r->cap.captured);
@@ -446,7 +447,7 @@ static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
             ran ? fr->track.eig_min / (fr->track.eig_max > 0 ? fr->track.eig_max : 1) : 0.0, fr->ms_frame,
-            fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window, fr->reloc_tried,
+            fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window + fr->fuse.colour, fr->reloc_tried,
             recon_reloc_kind_name(fr->reloc), ran ? fr->track.iterations : 0, ran ? fr->track.residual_sigma : 0.0,
             fr->ms_stream);
 }
@@ -486,11 +487,12 @@ static void print_summary(const replay_args *a, const replay_result *r)
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
                r->run.is_interrupted ? " (stopped by a signal)" : "");
     printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
-           "                   alloc %.1f, sub-cache %.1f, window %.1f ms)\n",
+           "                   alloc %.1f, sub-cache %.1f, window %.1f, colour %.1f ms)\n",
            bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
            bf_stats_percentile(&t->track_ms, 50), bf_stats_percentile(&t->rof_ms, 50),
            bf_stats_percentile(&t->raycast_ms, 50), bf_stats_percentile(&t->alloc_ms, 50),
-           bf_stats_percentile(&t->subcache_ms, 50), bf_stats_percentile(&t->window_ms, 50));
+           bf_stats_percentile(&t->subcache_ms, 50), bf_stats_percentile(&t->window_ms, 50),
+           bf_stats_percentile(&t->colour_ms, 50));
     if (r->has_ate)
         printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu poses\n", r->ate.trans.rmse,
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);

@@ -136,8 +136,10 @@ static bf_status cmd_upload(fusion_map *m, const fusion_frame *rec, uint32_t slo
     return BF_OK;
 }
 
-/* Records this frame's slice of the window being integrated. */
-static void cmd_window_slice(fusion_map *m)
+/* Records this frame's slice of the window being integrated. Its colour
+ * pass follows at once with colour_now, else it is left for the frame's
+ * own "fusion.colour" stage (m->colour_first, colour_count). */
+static void cmd_window_slice(fusion_map *m, bool colour_now)
 {
     uint32_t half = half_window(m);
     uint32_t per = (m->window_count + half - 1) / half;
@@ -153,10 +155,12 @@ static void cmd_window_slice(fusion_map *m)
          * pass writing the list header and its integration; its pushes of
          * colour blocks -> the colour pass's pops. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
-        if (m->p_colour) {
+        if (m->p_colour && colour_now) {
             fusion__cmd_colour(m, first, per);
             /* The colours and the colour index -> readers and the next slice. */
             gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        } else if (m->p_colour) {
+            m->colour_first = first, m->colour_count = per;
         }
     }
     if (++m->window_slices_done >= half) {
@@ -171,6 +175,7 @@ static void read_stage_times(fusion_map *m)
     m->ms_alloc = gpu_stage_ms(m->ctx, "fusion.alloc");
     m->ms_subcache = gpu_stage_ms(m->ctx, "fusion.subcache");
     m->ms_window = gpu_stage_ms(m->ctx, "fusion.window");
+    m->ms_colour = m->p_colour ? gpu_stage_ms(m->ctx, "fusion.colour") : 0;
 }
 
 /* Reads the count of the window list gathered in the last submission
@@ -240,14 +245,21 @@ bf_status fusion_cmd_fuse(fusion_map *m, const bf_se3 *T_wc)
         /* Sub-cache writes -> the window slice reading the same bricks. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         gpu_cmd_stage_begin(m->ctx, "fusion.window");
-        cmd_window_slice(m);
+        m->colour_count = 0;
+        cmd_window_slice(m, false);
         gpu_cmd_stage_end(m->ctx);
+        if (m->colour_count) { /* its own stage, so its cost shows (docs/colour.md) */
+            gpu_cmd_stage_begin(m->ctx, "fusion.colour");
+            fusion__cmd_colour(m, m->colour_first, m->colour_count);
+            gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+            gpu_cmd_stage_end(m->ctx);
+        }
     }
     if (closes) {
         /* Stamps of this frame's allocation -> the gathering pass. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         if (m->window_pending) { /* a slice left over (n/2 of them per window): finish it now */
-            while (m->window_pending) cmd_window_slice(m);
+            while (m->window_pending) cmd_window_slice(m, true);
             gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         }
         start_window(m, index);
@@ -306,7 +318,7 @@ bf_status fusion_flush(fusion_map *m)
     bf_status s = gpu_begin(m->ctx);
     if (s != BF_OK) return s;
     gpu_cmd_stage_begin(m->ctx, "fusion.window");
-    while (m->window_pending) cmd_window_slice(m);
+    while (m->window_pending) cmd_window_slice(m, true);
     gpu_cmd_stage_end(m->ctx);
     /* The frames after the last closed window have not been in a full
      * window yet: integrate the last n frames as one more window. */
@@ -321,7 +333,7 @@ bf_status fusion_flush(fusion_map *m)
     if ((s = read_window_count(m)) != BF_OK) return s;
     if ((s = gpu_begin(m->ctx)) != BF_OK) return s;
     gpu_cmd_stage_begin(m->ctx, "fusion.window");
-    while (m->window_pending) cmd_window_slice(m);
+    while (m->window_pending) cmd_window_slice(m, true);
     gpu_cmd_stage_end(m->ctx);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
     return gpu_submit_wait(m->ctx);
@@ -338,7 +350,7 @@ bf_se3 fusion_camera_to_map(const fusion_map *m, const bf_se3 *T_wc)
 
 fusion_stage_ms fusion_last_stage_ms(const fusion_map *m)
 {
-    fusion_stage_ms t = {m->ms_upload, m->ms_alloc, m->ms_subcache, m->ms_window};
+    fusion_stage_ms t = {m->ms_upload, m->ms_alloc, m->ms_subcache, m->ms_window, m->ms_colour};
     return t;
 }
 
@@ -395,7 +407,7 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
                         gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks) + gpu_buffer_size(m->cidx) +
                         gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
     st.ms_upload = m->ms_upload, st.ms_alloc = m->ms_alloc;
-    st.ms_subcache = m->ms_subcache, st.ms_window = m->ms_window;
+    st.ms_subcache = m->ms_subcache, st.ms_window = m->ms_window, st.ms_colour = m->ms_colour;
     *out = st;
     return BF_OK;
 }

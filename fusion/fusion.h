@@ -140,12 +140,12 @@ typedef struct fusion_stats {
                                         which is the geometry) */
     uint64_t bytes_reserved;         /* allocated at create */
     /* GPU time of the last frame by stage, ms. */
-    double ms_upload, ms_alloc, ms_subcache, ms_window;
+    double ms_upload, ms_alloc, ms_subcache, ms_window, ms_colour;
 } fusion_stats;
 
 /* GPU time of the last added frame by stage [ms], from Vulkan timestamps. */
 typedef struct fusion_stage_ms {
-    double upload, alloc, subcache, window;
+    double upload, alloc, subcache, window, colour;
 } fusion_stage_ms;
 fusion_stage_ms fusion_last_stage_ms(const fusion_map *map);
 

@@ -67,7 +67,8 @@ struct fusion_map {
     uint32_t n_loaded;        /* bricks loaded from a host copy (fusion_load) */
     fusion_pool_use use;      /* as of the last finished frame or streaming move */
 
-    double ms_upload, ms_alloc, ms_subcache, ms_window;
+    double ms_upload, ms_alloc, ms_subcache, ms_window, ms_colour;
+    uint32_t colour_first, colour_count; /* the slice the frame's colour pass owes (fusion_cmd_fuse) */
 };
 
 /* map.c: a full host copy of the map's index structures (fusion_check;

@@ -242,7 +242,7 @@ typedef struct recon_run_series {
     bf_stats frame_ms;                      /* wall clock of the whole frame */
     bf_stats track_ms, inlier_frac, residual_mm; /* tracked or lost frames; residual of tracked ones only */
     bf_stats rof_ms, raycast_ms;            /* fused frames with a loop */
-    bf_stats upload_ms, alloc_ms, subcache_ms, window_ms; /* fused frames */
+    bf_stats upload_ms, alloc_ms, subcache_ms, window_ms, colour_ms; /* fused frames */
 } recon_run_series;
 
 /* What a run made. Filled also when the run fails; recon_run_free

@@ -19,7 +19,8 @@ void recon_run_free(recon_run *run)
     bf_traj_free(&run->gt);
     recon_run_series *t = &run->series;
     bf_stats *all[] = {&t->frame_ms,  &t->track_ms, &t->inlier_frac, &t->residual_mm, &t->rof_ms,
-                       &t->raycast_ms, &t->upload_ms, &t->alloc_ms,   &t->subcache_ms, &t->window_ms};
+                       &t->raycast_ms, &t->upload_ms, &t->alloc_ms,   &t->subcache_ms, &t->window_ms,
+                       &t->colour_ms};
     for (size_t i = 0; i < sizeof all / sizeof all[0]; i++) bf_stats_free(all[i]);
     memset(run, 0, sizeof *run);
 }
@@ -30,6 +31,7 @@ static bf_status push_fuse_times(recon_run_series *t, const fusion_stage_ms *ms)
     if (s == BF_OK) s = bf_stats_push(&t->alloc_ms, ms->alloc);
     if (s == BF_OK) s = bf_stats_push(&t->subcache_ms, ms->subcache);
     if (s == BF_OK) s = bf_stats_push(&t->window_ms, ms->window);
+    if (s == BF_OK) s = bf_stats_push(&t->colour_ms, ms->colour);
     return s;
 }
 
