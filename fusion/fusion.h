@@ -48,7 +48,7 @@ typedef struct fusion_config {
     /* Colour (DESIGN.md section 3): RGB565 of the confident voxels near the
        surface, in blocks of 32 per sub-brick. */
     bool keep_colour;       /* default true */
-    uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 8 */
+    uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 4 */
     uint32_t colour_block_cap; /* colour blocks (64 bytes each) allocated at create, default 4 * brick_cap
                                   (as many as one storage binding holds) */
 } fusion_config;
