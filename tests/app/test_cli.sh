@@ -19,6 +19,10 @@ expect() {
 mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
 is_json() { python3 -m json.tool "$1" >/dev/null 2>&1 || fail "$1 is not valid JSON: $(head -c 300 "$1")"; }
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+# python3 as the interpreter itself (not a version manager's shim script) and without the
+# sanitizer build's preload: every shell a shim starts would load the sanitizer runtime.
+PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)')
+python3() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
 
 # A trajectory of 1.5 s at 30 Hz: a slow sideways move. A copy sits in a
 # folder whose name needs escaping in JSON (stats.json names the file).

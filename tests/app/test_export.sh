@@ -23,7 +23,8 @@ expect() {
 mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
 # python3 without the sanitizer build's preload (LeakSanitizer would end it).
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS python3 "$@"; }
+PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
 json_get() { py -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
 validate() {
     command -v node >/dev/null || return 0

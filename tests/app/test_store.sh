@@ -21,7 +21,8 @@ json_get() { py -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
 # python3 without the sanitizer build's preload: LeakSanitizer would end it
 # before it flushes its output.
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS python3 "$@"; }
+PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
 export BITFUSE_PROGRESS=0
 
 # A 60-frame synthetic sequence, 2 s at 30 Hz: a slow sideways move and turn.

@@ -18,7 +18,8 @@ trap 'rm -rf "$T"' EXIT
 command -v python3 >/dev/null || { echo "no python3"; exit 77; }
 # python3 without the sanitizer build's preload: LeakSanitizer would end it
 # before it flushes its output.
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS python3 "$@"; }
+PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
 export BITFUSE_PROGRESS=0
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
