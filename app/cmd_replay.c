@@ -78,11 +78,11 @@ typedef struct replay_args {
  * nodes a brick: docs/streaming.md). */
 #define NODES_PER_BRICK 3
 #define BYTES_PER_BRICK (2 * 64 + 16 + 4 + 4 + NODES_PER_BRICK * 8)
-/* With colour: the brick's colour index (16 words) and COLOUR_BLOCKS_PER_BRICK
- * colour blocks of 64 bytes with their free-stack entries (a scan uses 7-8
- * blocks a brick of the surface: docs/colour.md). */
-#define COLOUR_BLOCKS_PER_BRICK 4
-#define COLOUR_BYTES_PER_BRICK (64 + COLOUR_BLOCKS_PER_BRICK * (64 + 4))
+/* With colour: the brick's colour masks (16 words) and head, and
+ * COLOUR_UNITS_PER_BRICK colour units of 32 bytes with their free-stack
+ * entries (docs/colour.md: a scan uses about 4 a brick). */
+#define COLOUR_UNITS_PER_BRICK 6
+#define COLOUR_BYTES_PER_BRICK (64 + 4 + COLOUR_UNITS_PER_BRICK * (32 + 4))
 #define DEFAULT_GPU_BUDGET_MIB 64.0
 
 /* Chunk streaming (stream/stream.h, DESIGN.md section 1). */
@@ -204,7 +204,7 @@ static void set_budget(replay_args *a, double mib)
     a->gpu_budget_mib = mib;
     a->rcfg.fusion.brick_cap = bricks > (1u << 26) ? (1u << 26) : (uint32_t)bricks;
     a->rcfg.fusion.node_cap = NODES_PER_BRICK * a->rcfg.fusion.brick_cap;
-    a->rcfg.fusion.colour_block_cap = colour ? COLOUR_BLOCKS_PER_BRICK * a->rcfg.fusion.brick_cap : 0;
+    a->rcfg.fusion.colour_unit_cap = colour ? COLOUR_UNITS_PER_BRICK * a->rcfg.fusion.brick_cap : 0;
 }
 
 /* Without --gpu-budget or --bricks the budget comes from the device: on a

@@ -114,7 +114,7 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     cJSON_AddNumberToObject(o, "integrate_bpg", c->integrate_bpg);
     cJSON_AddBoolToObject(o, "keep_colour", c->keep_colour);
     cJSON_AddNumberToObject(o, "colour_frames", c->colour_frames);
-    cJSON_AddNumberToObject(o, "colour_block_cap", c->colour_block_cap);
+    cJSON_AddNumberToObject(o, "colour_unit_cap", c->colour_unit_cap);
 }
 
 static void json_track_config(cJSON *parent, const char *name, const track_config *c)

@@ -125,10 +125,10 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
     cJSON_AddNumberToObject(b, "reserved", (double)m->bytes_reserved);
     cJSON *c = app_json_object(o, "colour");
     cJSON_AddNumberToObject(c, "bytes", (double)m->bytes_colour);
-    cJSON_AddNumberToObject(c, "blocks", m->n_colour_blocks);
+    cJSON_AddNumberToObject(c, "units", m->n_colour_units);
     cJSON_AddNumberToObject(c, "coloured_voxels", (double)m->n_coloured_voxels);
     cJSON_AddNumberToObject(c, "bits_per_allocated_voxel", voxels ? 8.0 * (double)m->bytes_colour / (double)voxels : NAN);
-    cJSON_AddNumberToObject(c, "blocks_dropped_pool_full", m->fail_colour);
+    cJSON_AddNumberToObject(c, "pool_full_events", m->fail_colour);
     cJSON_AddNumberToObject(o, "chunks", m->n_chunks);
     cJSON_AddNumberToObject(o, "nodes", m->n_nodes);
     cJSON_AddNumberToObject(o, "bricks", m->n_bricks);
@@ -167,8 +167,8 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
            m->n_chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
            m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0);
     if (m->bytes_colour)
-        printf("  colour           %llu voxels, %u blocks, %.2f MiB (%.2f bits per allocated voxel)\n",
-               (unsigned long long)m->n_coloured_voxels, m->n_colour_blocks, m->bytes_colour / 1048576.0,
+        printf("  colour           %llu voxels, %u units, %.2f MiB (%.2f bits per allocated voxel)\n",
+               (unsigned long long)m->n_coloured_voxels, m->n_colour_units, m->bytes_colour / 1048576.0,
                m->n_bricks ? 8.0 * m->bytes_colour / (512.0 * m->n_bricks) : 0.0);
     printf("  bricks per level");
     for (uint32_t l = 0; l <= max_level && l < 16; l++)

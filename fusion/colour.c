@@ -3,12 +3,13 @@
  * over the same list entries, reading cfg.colour_frames frames spread over
  * the window. */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "bf_shaders_spv.h"
 #include "fusion_int.h"
 
-enum { COLOUR_BUFFERS = 11 };
+enum { COLOUR_BUFFERS = 12 };
 
 bf_status fusion__colour_create(fusion_map *m)
 {
@@ -22,9 +23,9 @@ bf_status fusion__colour_create(fusion_map *m)
         .local_size = {FUSION_COLOUR_LOCAL, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_colour);
-    gpu_buffer *bufs[COLOUR_BUFFERS] = {m->hash,        m->info,        m->conf,  m->frames,
-                                        m->depth_ring,  m->colour_ring, m->window_list, m->cidx,
-                                        m->cpool,       m->counters,    m->cfree};
+    gpu_buffer *bufs[COLOUR_BUFFERS] = {m->hash,       m->info,        m->conf,        m->frames,
+                                        m->depth_ring, m->colour_ring, m->window_list, m->cmask,
+                                        m->cpool,      m->counters,    m->cfree,       m->chead};
     if (s == BF_OK) s = fusion__bindings_create(m, "fusion.colour", bufs, COLOUR_BUFFERS, &m->b_colour);
     /* As the integration: a CPU device pays per workgroup, a GPU wants one brick each. */
     m->colour_bpg = gpu_device(m->ctx)->type == VK_PHYSICAL_DEVICE_TYPE_CPU ? 16 : 1;
@@ -102,5 +103,129 @@ bf_status fusion_set_colour_camera(fusion_map *m, const bf_intrinsics *Kc, const
     m->Kc = *Kc;
     m->T_colour_depth = *T_colour_depth;
     m->colour_registered = false;
+    return BF_OK;
+}
+
+/* ------------------------------------------------------------ host copies of the units */
+
+void fusion__colour_host_free(fusion__colour_host *h)
+{
+    free(h->units);
+    memset(h, 0, sizeof *h);
+}
+
+/* Holds units [0, n) on the host; grows by half again at least, so a chain
+ * walk downloads a few large ranges, not one unit at a time. */
+static bf_status host_ensure(fusion_map *m, fusion__colour_host *h, uint32_t n)
+{
+    uint32_t cap = m->cfg.colour_unit_cap;
+    if (n <= h->n) return BF_OK;
+    if (n > cap) return bf_fail(BF_NUMERIC, "fusion: colour unit %u beyond the pool's %u", n - 1, cap);
+    uint64_t want = (uint64_t)h->n + h->n / 2 + 4096;
+    if (want < n) want = n;
+    if (want > cap) want = cap;
+    uint32_t *p = bf_realloc(h->units, (size_t)want * FUSION_COLOUR_UNIT_WORDS * 4);
+    if (!p) return bf_fail(BF_NO_MEMORY, "fusion: host copy of %llu colour units", (unsigned long long)want);
+    h->units = p;
+    bf_status s = gpu_buffer_download(m->cpool, (uint64_t)h->n * FUSION_COLOUR_UNIT_WORDS * 4,
+                                      p + (size_t)h->n * FUSION_COLOUR_UNIT_WORDS,
+                                      (want - h->n) * FUSION_COLOUR_UNIT_WORDS * 4);
+    if (s == BF_OK) h->n = (uint32_t)want;
+    return s;
+}
+
+/* The brick's chain from head into list[FUSION_COLOUR_MAX_UNITS]; *n units. */
+static bf_status host_chain(fusion_map *m, fusion__colour_host *h, uint32_t head, uint32_t *list, uint32_t *n)
+{
+    *n = 0;
+    for (uint32_t u = head; u != FUSION_NONE && *n < FUSION_COLOUR_MAX_UNITS;) {
+        bf_status s = host_ensure(m, h, u + 1);
+        if (s != BF_OK) return s;
+        list[(*n)++] = u;
+        u = h->units[(size_t)u * FUSION_COLOUR_UNIT_WORDS];
+    }
+    return BF_OK;
+}
+
+/* Voxel (x + 8y + 64z) of colour rank order position i = sub-brick * 32 + bit. */
+static uint32_t rank_voxel(uint32_t i)
+{
+    uint32_t w = i / 32, bit = i % 32;
+    uint32_t x = (w & 1) * 4 + (bit & 3), y = ((w >> 1) & 1) * 4 + ((bit >> 2) & 3), z = (w >> 2) * 2 + (bit >> 4);
+    return x + 8 * y + 64 * z;
+}
+
+bf_status fusion__colour_expand(fusion_map *m, fusion__colour_host *h, const uint32_t *masks, uint32_t head,
+                                uint16_t *out)
+{
+    uint32_t list[FUSION_COLOUR_MAX_UNITS], n;
+    memset(out, 0, BRICK_VOXELS * sizeof *out);
+    bf_status s = host_chain(m, h, head, list, &n);
+    uint32_t r = 0;
+    for (uint32_t i = 0; s == BF_OK && i < BRICK_VOXELS; i++) {
+        if (!((masks[i / 32] >> (i % 32)) & 1)) continue;
+        uint32_t k = r / FUSION_COLOUR_UNIT_COLOURS, j = r % FUSION_COLOUR_UNIT_COLOURS;
+        if (k >= n) break;
+        uint32_t word = h->units[(size_t)list[k] * FUSION_COLOUR_UNIT_WORDS + 1 + j / 2];
+        out[rank_voxel(i)] = (uint16_t)(word >> ((j & 1) * 16));
+        r++;
+    }
+    return s;
+}
+
+bf_status fusion__colour_fill(fusion_map *m, fusion__colour_host *h, uint32_t *masks, uint32_t *head,
+                              const uint16_t *c, uint32_t *cfree, uint32_t *top, uint32_t *fail)
+{
+    uint16_t have[BRICK_VOXELS];
+    bf_status s = fusion__colour_expand(m, h, masks, *head, have);
+    if (s != BF_OK) return s;
+    uint32_t total = 0, added = 0;
+    for (uint32_t v = 0; v < BRICK_VOXELS; v++) {
+        if (!have[v] && c[v]) have[v] = c[v], added++;
+        total += have[v] != 0;
+    }
+    if (!added) return BF_OK;
+    uint32_t list[FUSION_COLOUR_MAX_UNITS], n;
+    if ((s = host_chain(m, h, *head, list, &n)) != BF_OK) return s;
+    uint32_t need = (total + FUSION_COLOUR_UNIT_COLOURS - 1) / FUSION_COLOUR_UNIT_COLOURS, n_old = n;
+    if (need > n && need - n > *top) {
+        (*fail)++;
+        return BF_OK; /* the brick keeps what it had */
+    }
+    while (n < need) {
+        uint32_t u = cfree[--*top];
+        if ((s = host_ensure(m, h, u + 1)) != BF_OK) return s;
+        list[n++] = u;
+    }
+    for (uint32_t k = n_old; k < n; k++) {
+        if (k == 0) *head = list[0];
+        else h->units[(size_t)list[k - 1] * FUSION_COLOUR_UNIT_WORDS] = list[k];
+        h->units[(size_t)list[k] * FUSION_COLOUR_UNIT_WORDS] = FUSION_NONE;
+    }
+    /* Packed again in rank order. */
+    for (uint32_t k = 0; k < n; k++) memset(&h->units[(size_t)list[k] * FUSION_COLOUR_UNIT_WORDS + 1], 0, 4 * 7);
+    memset(masks, 0, BRICK_WORDS * 4);
+    uint32_t r = 0;
+    for (uint32_t i = 0; i < BRICK_VOXELS; i++) {
+        uint16_t col = have[rank_voxel(i)];
+        if (!col) continue;
+        masks[i / 32] |= 1u << (i % 32);
+        uint32_t j = r % FUSION_COLOUR_UNIT_COLOURS;
+        h->units[(size_t)list[r / FUSION_COLOUR_UNIT_COLOURS] * FUSION_COLOUR_UNIT_WORDS + 1 + j / 2] |=
+            (uint32_t)col << ((j & 1) * 16);
+        r++;
+    }
+    return BF_OK;
+}
+
+bf_status fusion__colour_release(fusion_map *m, fusion__colour_host *h, uint32_t *masks, uint32_t *head,
+                                 uint32_t *cfree, uint32_t *top)
+{
+    uint32_t list[FUSION_COLOUR_MAX_UNITS], n;
+    bf_status s = host_chain(m, h, *head, list, &n);
+    if (s != BF_OK) return s;
+    for (uint32_t k = 0; k < n; k++) cfree[(*top)++] = list[k];
+    *head = FUSION_NONE;
+    memset(masks, 0, BRICK_WORDS * 4);
     return BF_OK;
 }

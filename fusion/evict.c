@@ -18,10 +18,10 @@ typedef struct host_all {
     fusion_host_map h;
     uint32_t *stamp;
     uint32_t *sign, *conf; /* slots [0, cap) allocated, [0, high) downloaded */
-    uint32_t *cidx;        /* colour index of slots [0, planes) (NULL without colour) */
+    uint32_t *cmask;       /* colour masks of slots [0, planes) (NULL without colour) */
+    uint32_t *chead;       /* colour heads of slots [0, planes) */
     uint32_t *cfree;       /* the colour free stack, whole */
-    uint32_t *pool;        /* colour blocks [0, pool_blocks) (pool_ensure), edited and uploaded back */
-    uint32_t pool_blocks;
+    fusion__colour_host units; /* colour units, edited and uploaded back */
     uint32_t high;         /* one past the highest live slot at load */
     uint32_t planes;       /* slots of sign and conf held: high, or more for an insertion */
 } host_all;
@@ -32,9 +32,10 @@ static void host_all_free(host_all *a)
     free(a->stamp);
     free(a->sign);
     free(a->conf);
-    free(a->cidx);
+    free(a->cmask);
+    free(a->chead);
     free(a->cfree);
-    free(a->pool);
+    fusion__colour_host_free(&a->units);
     memset(a, 0, sizeof *a);
 }
 
@@ -64,77 +65,28 @@ static bf_status host_all_load(fusion_map *m, host_all *a, uint32_t extra)
     if (s == BF_OK && a->high) s = gpu_buffer_download(m->sign, 0, a->sign, (uint64_t)a->high * BRICK_WORDS * 4);
     if (s == BF_OK && a->high) s = gpu_buffer_download(m->conf, 0, a->conf, (uint64_t)a->high * BRICK_WORDS * 4);
     if (s == BF_OK && m->cfg.keep_colour) {
-        /* A slot that leaves gives its colour blocks back; slots above high
-         * have none (FUSION_NONE), as every free slot. */
-        a->cidx = bf_malloc((planes ? planes : 1) * BRICK_WORDS * 4);
-        a->cfree = bf_malloc((size_t)m->cfg.colour_block_cap * 4);
-        if (!a->cidx || !a->cfree) s = bf_fail(BF_NO_MEMORY, "fusion: host copy of the colour index");
-        for (size_t i = 0; s == BF_OK && i < planes * BRICK_WORDS; i++) a->cidx[i] = FUSION_NONE;
-        if (s == BF_OK && a->high) s = gpu_buffer_download(m->cidx, 0, a->cidx, (uint64_t)a->high * BRICK_WORDS * 4);
-        if (s == BF_OK) s = gpu_buffer_download(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_block_cap * 4);
+        /* A slot that leaves gives its colour units back; slots above high
+         * have none, as every free slot. */
+        a->cmask = bf_calloc(planes ? planes : 1, BRICK_WORDS * 4);
+        a->chead = bf_malloc((planes ? planes : 1) * 4);
+        a->cfree = bf_malloc((size_t)m->cfg.colour_unit_cap * 4);
+        if (!a->cmask || !a->chead || !a->cfree) s = bf_fail(BF_NO_MEMORY, "fusion: host copy of the colour masks");
+        for (size_t i = 0; s == BF_OK && i < planes; i++) a->chead[i] = FUSION_NONE;
+        if (s == BF_OK && a->high) s = gpu_buffer_download(m->cmask, 0, a->cmask, (uint64_t)a->high * BRICK_WORDS * 4);
+        if (s == BF_OK && a->high) s = gpu_buffer_download(m->chead, 0, a->chead, (uint64_t)a->high * 4);
+        if (s == BF_OK) s = gpu_buffer_download(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_unit_cap * 4);
     }
     if (s != BF_OK) host_all_free(a);
     return s;
 }
 
-/* Holds the colour blocks [0, n) on the host (downloaded once; a larger n
- * downloads the rest). */
-static bf_status pool_ensure(fusion_map *m, host_all *a, uint32_t n)
-{
-    if (n <= a->pool_blocks) return BF_OK;
-    uint32_t *p = bf_realloc(a->pool, (size_t)n * FUSION_COLOUR_BLOCK_WORDS * 4);
-    if (!p) return bf_fail(BF_NO_MEMORY, "fusion: host copy of %u colour blocks", n);
-    a->pool = p;
-    bf_status s = gpu_buffer_download(m->cpool, (uint64_t)a->pool_blocks * FUSION_COLOUR_BLOCK_WORDS * 4,
-                                      p + (size_t)a->pool_blocks * FUSION_COLOUR_BLOCK_WORDS,
-                                      (uint64_t)(n - a->pool_blocks) * FUSION_COLOUR_BLOCK_WORDS * 4);
-    if (s == BF_OK) a->pool_blocks = n;
-    return s;
-}
-
-/* Brick slot b's colours, expanded (hostmap.rgb565 order) into out[512]. */
-static void slot_colour(const host_all *a, uint32_t b, uint16_t *out)
-{
-    for (uint32_t v = 0; v < BRICK_VOXELS; v++) {
-        uint32_t x = v & 7, y = (v >> 3) & 7, z = v >> 6, w = brick_word(x, y, z), bit = brick_bit(x, y, z);
-        uint32_t blk = a->cidx[(size_t)b * BRICK_WORDS + w];
-        out[v] = 0;
-        if (blk == FUSION_NONE || blk >= a->pool_blocks) continue;
-        uint32_t word = a->pool[(size_t)blk * FUSION_COLOUR_BLOCK_WORDS + bit / 2];
-        out[v] = (uint16_t)(bit & 1 ? word >> 16 : word & 0xFFFFu);
-    }
-}
-
 /* Writes colours c[512] into slot b where the slot has none (a brick the
- * map made anew keeps its own), taking blocks off the colour free stack;
- * a sub-brick that finds the stack empty stays uncoloured (counted). */
+ * map made anew keeps its own); a brick that finds the free stack dry
+ * keeps what it had (counted). */
 static bf_status slot_colour_fill(fusion_map *m, host_all *a, uint32_t b, const uint16_t *c)
 {
-    for (uint32_t w = 0; w < BRICK_WORDS; w++) {
-        uint32_t *ci = &a->cidx[(size_t)b * BRICK_WORDS + w];
-        for (uint32_t bit = 0; bit < 32; bit++) {
-            uint32_t x = (w & 1) * 4 + (bit & 3), y = ((w >> 1) & 1) * 4 + ((bit >> 2) & 3), z = (w >> 2) * 2 + (bit >> 4);
-            uint16_t col = c[x + 8 * y + 64 * z];
-            if (!col) continue;
-            if (*ci == FUSION_NONE) {
-                uint32_t top = a->h.counters[FUSION_CNT_COLOUR_TOP];
-                if (top == 0) {
-                    a->h.counters[FUSION_CNT_FAIL_COLOUR]++;
-                    break;
-                }
-                uint32_t blk = a->cfree[top - 1];
-                bf_status s = pool_ensure(m, a, blk + 1);
-                if (s != BF_OK) return s;
-                a->h.counters[FUSION_CNT_COLOUR_TOP] = top - 1;
-                memset(a->pool + (size_t)blk * FUSION_COLOUR_BLOCK_WORDS, 0, FUSION_COLOUR_BLOCK_WORDS * 4);
-                *ci = blk;
-            }
-            uint32_t *word = &a->pool[(size_t)*ci * FUSION_COLOUR_BLOCK_WORDS + bit / 2];
-            uint32_t sh = (bit & 1) * 16, old = (*word >> sh) & 0xFFFFu;
-            if (!old) *word |= (uint32_t)col << sh;
-        }
-    }
-    return BF_OK;
+    return fusion__colour_fill(m, &a->units, a->cmask + (size_t)b * BRICK_WORDS, &a->chead[b], c, a->cfree,
+                               &a->h.counters[FUSION_CNT_COLOUR_TOP], &a->h.counters[FUSION_CNT_FAIL_COLOUR]);
 }
 
 /* Uploads what host_all_load read, the bit planes up to max(high, the
@@ -148,10 +100,11 @@ static bf_status host_all_store(fusion_map *m, const host_all *a, uint32_t high)
     if (s == BF_OK) s = gpu_buffer_upload(m->stamp, 0, a->stamp, (uint64_t)m->cfg.brick_cap * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->sign, 0, a->sign, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, a->conf, (uint64_t)high * BRICK_WORDS * 4);
-    if (s == BF_OK && a->cidx && high) s = gpu_buffer_upload(m->cidx, 0, a->cidx, (uint64_t)high * BRICK_WORDS * 4);
-    if (s == BF_OK && a->cfree) s = gpu_buffer_upload(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_block_cap * 4);
-    if (s == BF_OK && a->pool_blocks)
-        s = gpu_buffer_upload(m->cpool, 0, a->pool, (uint64_t)a->pool_blocks * FUSION_COLOUR_BLOCK_WORDS * 4);
+    if (s == BF_OK && a->cmask && high) s = gpu_buffer_upload(m->cmask, 0, a->cmask, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && a->chead && high) s = gpu_buffer_upload(m->chead, 0, a->chead, (uint64_t)high * 4);
+    if (s == BF_OK && a->cfree) s = gpu_buffer_upload(m->cfree, 0, a->cfree, (uint64_t)m->cfg.colour_unit_cap * 4);
+    if (s == BF_OK && a->units.n)
+        s = gpu_buffer_upload(m->cpool, 0, a->units.units, (uint64_t)a->units.n * FUSION_COLOUR_UNIT_WORDS * 4);
     return s;
 }
 
@@ -254,22 +207,20 @@ static bf_status rebuild(fusion_map *m, host_all *a, const bool *keep)
     return s;
 }
 
-/* Frees brick slot b in a: its record, stamp and bits cleared, pushed on the free stack. */
-static void free_slot(host_all *a, uint32_t b)
+/* Frees brick slot b in a: its record, stamp and bits cleared, pushed on
+ * the free stack, its colour units on theirs. */
+static bf_status free_slot(fusion_map *m, host_all *a, uint32_t b)
 {
     uint32_t *info = a->h.info + (size_t)b * FUSION_BRICK_INFO_WORDS;
     for (uint32_t k = 0; k < FUSION_BRICK_INFO_WORDS; k++) info[k] = FUSION_NONE;
     a->stamp[b] = FUSION_NONE;
     memset(a->sign + (size_t)b * BRICK_WORDS, 0, BRICK_WORDS * 4);
     memset(a->conf + (size_t)b * BRICK_WORDS, 0, BRICK_WORDS * 4);
-    for (uint32_t k = 0; a->cidx && k < BRICK_WORDS; k++) {
-        uint32_t *c = &a->cidx[(size_t)b * BRICK_WORDS + k];
-        if (*c == FUSION_NONE) continue;
-        a->cfree[a->h.counters[FUSION_CNT_COLOUR_TOP]++] = *c;
-        *c = FUSION_NONE;
-    }
     a->h.free_stack[a->h.counters[FUSION_CNT_FREE_TOP]++] = b;
     a->h.counters[FUSION_CNT_BRICKS]--;
+    if (!a->cmask) return BF_OK;
+    return fusion__colour_release(m, &a->units, a->cmask + (size_t)b * BRICK_WORDS, &a->chead[b], a->cfree,
+                                  &a->h.counters[FUSION_CNT_COLOUR_TOP]);
 }
 
 /* The first frame whose bricks a window still has to integrate: a brick
@@ -308,21 +259,10 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
     }
     hostmap_brick *bricks = s == BF_OK ? bf_malloc((size_t)(n_out ? n_out : 1) * sizeof *bricks) : NULL;
     if (s == BF_OK && !bricks) s = bf_fail(BF_NO_MEMORY, "fusion: evicting %u bricks", n_out);
-    /* Their colour leaves with them: the blocks they reference, on the host. */
+    /* Their colour leaves with them. */
     uint16_t *rgb = NULL;
-    if (s == BF_OK && a.cidx) {
-        uint32_t need = 0;
-        for (uint32_t b = 0; b < a.high; b++) {
-            uint32_t e = a.h.info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
-            for (uint32_t w = 0; e < m->n_entries && evict[e] && w < BRICK_WORDS; w++) {
-                uint32_t blk = a.cidx[(size_t)b * BRICK_WORDS + w];
-                if (blk != FUSION_NONE && blk < m->cfg.colour_block_cap && blk + 1 > need) need = blk + 1;
-            }
-        }
-        s = pool_ensure(m, &a, need);
-        if (s == BF_OK && !(rgb = bf_malloc((size_t)(n_out ? n_out : 1) * 1024)))
-            s = bf_fail(BF_NO_MEMORY, "fusion: colour of %u evicted bricks", n_out);
-    }
+    if (s == BF_OK && a.cmask && !(rgb = bf_malloc((size_t)(n_out ? n_out : 1) * 1024)))
+        s = bf_fail(BF_NO_MEMORY, "fusion: colour of %u evicted bricks", n_out);
     uint32_t k = 0;
     for (uint32_t b = 0; s == BF_OK && b < a.high; b++) {
         const uint32_t *info = a.h.info + (size_t)b * FUSION_BRICK_INFO_WORDS;
@@ -337,8 +277,9 @@ bf_status fusion_evict_chunks(fusion_map *m, const int32_t (*keys)[3], uint32_t 
         memcpy(&o->error, &info[FUSION_INFO_ERROR], 4);
         memcpy(o->sign, a.sign + (size_t)b * BRICK_WORDS, sizeof o->sign);
         memcpy(o->conf, a.conf + (size_t)b * BRICK_WORDS, sizeof o->conf);
-        if (rgb) slot_colour(&a, b, rgb + (size_t)(k - 1) * 512);
-        free_slot(&a, b);
+        if (rgb) s = fusion__colour_expand(m, &a.units, a.cmask + (size_t)b * BRICK_WORDS, a.chead[b],
+                                           rgb + (size_t)(k - 1) * 512);
+        if (s == BF_OK) s = free_slot(m, &a, b);
     }
     uint32_t n_chunks = 0;
     for (uint32_t e = 0; s == BF_OK && e < m->n_entries; e++)
@@ -415,7 +356,7 @@ bf_status fusion_insert_bricks(fusion_map *m, const hostmap *in)
             memcpy(&a.h.info[(size_t)slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_ERROR], &b->error, 4);
             a.stamp[slot] = FUSION_NONE;
         }
-        if (s == BF_OK && in->rgb565 && a.cidx) s = slot_colour_fill(m, &a, slot, in->rgb565 + (size_t)i * 512);
+        if (s == BF_OK && in->rgb565 && a.cmask) s = slot_colour_fill(m, &a, slot, in->rgb565 + (size_t)i * 512);
         if (slot + 1 > high) high = slot + 1;
     }
     if (s == BF_OK) s = host_all_store(m, &a, high);
@@ -429,7 +370,7 @@ bf_status fusion__colour_load(fusion_map *m, const hostmap *in, const uint32_t *
     bf_status s = host_all_load(m, &a, 0);
     if (s != BF_OK) return s;
     uint32_t high = a.high;
-    for (uint32_t i = 0; s == BF_OK && a.cidx && i < in->n_bricks; i++)
+    for (uint32_t i = 0; s == BF_OK && a.cmask && i < in->n_bricks; i++)
         s = slot_colour_fill(m, &a, slots[i], in->rgb565 + (size_t)i * 512);
     if (s == BF_OK) s = host_all_store(m, &a, high);
     host_all_free(&a);

@@ -38,14 +38,14 @@ static bf_status remove_create(fusion_map *m)
         .name = "fusion.remove",
         .spirv = bf_spv_fusion_remove,
         .spirv_bytes = bf_spv_fusion_remove_size,
-        .n_buffers = 10,
+        .n_buffers = 12,
         .push_bytes = sizeof(fusion_remove_push),
         .local_size = {64, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_remove);
-    gpu_buffer *bufs[10] = {m->window_list, m->info,     m->nodes,      m->sign, m->conf,
-                            m->stamp,       m->counters, m->free_stack, m->cidx, m->cfree};
-    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.remove", bufs, 10, &m->b_remove);
+    gpu_buffer *bufs[12] = {m->window_list, m->info,     m->nodes,      m->sign,  m->conf,  m->stamp,
+                            m->counters,    m->free_stack, m->cmask,    m->cfree, m->chead, m->cpool};
+    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.remove", bufs, 12, &m->b_remove);
     return s;
 }
 
@@ -371,9 +371,9 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
     st.fail_hash = cnt[FUSION_CNT_FAIL_HASH];
     st.fail_colour = cnt[FUSION_CNT_FAIL_COLOUR];
     if (m->cfg.keep_colour)
-        st.n_colour_blocks = m->cfg.colour_block_cap - (cnt[FUSION_CNT_COLOUR_TOP] < m->cfg.colour_block_cap
-                                                            ? cnt[FUSION_CNT_COLOUR_TOP]
-                                                            : m->cfg.colour_block_cap);
+        st.n_colour_units = m->cfg.colour_unit_cap - (cnt[FUSION_CNT_COLOUR_TOP] < m->cfg.colour_unit_cap
+                                                          ? cnt[FUSION_CNT_COLOUR_TOP]
+                                                          : m->cfg.colour_unit_cap);
     for (uint32_t i = 0; i < snap.n_bricks; i++) {
         const hostmap_brick *b = &snap.bricks[i];
         st.bricks_per_level[b->level]++;
@@ -398,14 +398,14 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
     st.bytes_info = (uint64_t)st.n_bricks * (FUSION_BRICK_INFO_WORDS + 1) * 4; /* record + stamp */
     st.bytes_nodes = (uint64_t)st.n_nodes * FUSION_NODE_WORDS * 4;
     st.bytes_hash = (uint64_t)st.n_chunks * FUSION_ENTRY_WORDS * 4;
-    st.bytes_colour = m->cfg.keep_colour ? (uint64_t)st.n_bricks * BRICK_WORDS * 4 +
-                                               (uint64_t)st.n_colour_blocks * FUSION_COLOUR_BLOCK_WORDS * 4
+    st.bytes_colour = m->cfg.keep_colour ? (uint64_t)st.n_bricks * (BRICK_WORDS + 1) * 4 +
+                                               (uint64_t)st.n_colour_units * FUSION_COLOUR_UNIT_WORDS * 4
                                          : 0;
     st.bytes_total = st.bytes_sign + st.bytes_conf + st.bytes_info + st.bytes_nodes + st.bytes_hash;
     st.bytes_reserved = gpu_buffer_size(m->hash) + gpu_buffer_size(m->nodes) + gpu_buffer_size(m->info) +
                         gpu_buffer_size(m->sign) + gpu_buffer_size(m->conf) + gpu_buffer_size(m->free_stack) +
-                        gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks) + gpu_buffer_size(m->cidx) +
-                        gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
+                        gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks) + gpu_buffer_size(m->cmask) +
+                        gpu_buffer_size(m->chead) + gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
     st.ms_upload = m->ms_upload, st.ms_alloc = m->ms_alloc;
     st.ms_subcache = m->ms_subcache, st.ms_window = m->ms_window, st.ms_colour = m->ms_colour;
     *out = st;

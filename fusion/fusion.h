@@ -49,8 +49,8 @@ typedef struct fusion_config {
        surface, in blocks of 32 per sub-brick. */
     bool keep_colour;       /* default true */
     uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 4 */
-    uint32_t colour_block_cap; /* colour blocks (64 bytes each) allocated at create, default 4 * brick_cap
-                                  (as many as one storage binding holds) */
+    uint32_t colour_unit_cap; /* colour units (32 bytes, 14 colours each) allocated at create, default
+                                 8 * brick_cap (as many as one storage binding holds) */
 } fusion_config;
 
 /* The defaults above. */
@@ -131,12 +131,12 @@ typedef struct fusion_stats {
     uint64_t n_confident_voxels;
     uint64_t n_surface_voxels;       /* confident voxels with a confident neighbour of the other sign */
     uint32_t fail_nodes, fail_bricks, fail_hash; /* requests dropped for a full pool */
-    uint32_t fail_colour;            /* sub-bricks left uncoloured: colour pool full */
-    uint32_t n_colour_blocks;        /* colour blocks in use (32 colours each) */
+    uint32_t fail_colour;            /* times a brick's new colours found the colour pool empty */
+    uint32_t n_colour_units;         /* colour units in use (14 colours each) */
     uint64_t n_coloured_voxels;
     /* Bytes of map data in use (what the scene needs), by part. */
     uint64_t bytes_sign, bytes_conf, bytes_info, bytes_nodes, bytes_hash, bytes_total;
-    uint64_t bytes_colour;           /* colour index of the live bricks and the blocks in use (not in bytes_total,
+    uint64_t bytes_colour;           /* colour masks and heads of the live bricks and the units in use (not in bytes_total,
                                         which is the geometry) */
     uint64_t bytes_reserved;         /* allocated at create */
     /* GPU time of the last frame by stage, ms. */
@@ -165,7 +165,7 @@ typedef struct fusion_gpu_view {
     gpu_buffer *nodes;      /* FUSION_NODE_WORDS per node */
     gpu_buffer *info;       /* FUSION_BRICK_INFO_WORDS per brick slot */
     gpu_buffer *sign, *conf; /* BRICK_WORDS per brick slot */
-    gpu_buffer *cidx, *cpool; /* colour index and blocks (one word each when the map keeps no colour) */
+    gpu_buffer *cmask, *cpool, *chead; /* colour masks, units and heads (one word each when the map keeps no colour) */
     bool has_colour;
     uint32_t n_buckets;     /* hash buckets (fusion_hash's modulus) */
     uint32_t n_entries;     /* buckets * FUSION_BUCKET_SLOTS + overflow */

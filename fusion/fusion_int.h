@@ -21,9 +21,10 @@ struct fusion_map {
     gpu_buffer *free_stack;   /* brick slots not in use, FUSION_CNT_FREE_TOP of them */
     gpu_buffer *stamp;        /* per brick: index of the last frame that touched it */
     /* Colour (shaders/fusion.glsl.h "colour"; NULL without colour). */
-    gpu_buffer *cidx;         /* BRICK_WORDS per brick slot: colour block of each sub-brick or FUSION_NONE */
-    gpu_buffer *cpool;        /* colour_block_cap blocks of FUSION_COLOUR_BLOCK_WORDS */
-    gpu_buffer *cfree;        /* colour blocks not in use, FUSION_CNT_COLOUR_TOP of them */
+    gpu_buffer *cmask;        /* BRICK_WORDS per brick slot: which voxels of each sub-brick have colour */
+    gpu_buffer *chead;        /* per brick slot: its first colour unit or FUSION_NONE */
+    gpu_buffer *cpool;        /* colour_unit_cap units of FUSION_COLOUR_UNIT_WORDS */
+    gpu_buffer *cfree;        /* colour units not in use, FUSION_CNT_COLOUR_TOP of them */
     /* The frame ring. */
     gpu_buffer *frames;       /* ring_slots fusion_frame records */
     gpu_buffer *depth_ring;   /* ring_slots depth images, 2 pixels per word */
@@ -134,6 +135,27 @@ void fusion__colour_destroy(fusion_map *map);
 void fusion__cmd_colour(fusion_map *map, uint32_t first, uint32_t max_count);
 /* Converts an RGB8 image to RGB565 pairs (words of 2 pixels, low first). */
 void fusion__rgb_to_565(const uint8_t *rgb, uint64_t n_pixels, uint32_t *words);
+
+/* Host side of the colour layout (shaders/fusion.glsl.h, "colour"): a host
+ * copy of the colour units [0, n), downloaded as chains reach further
+ * (units are handed out low first) and edited in place; upload [0, n). */
+typedef struct fusion__colour_host {
+    uint32_t *units; /* n units of FUSION_COLOUR_UNIT_WORDS */
+    uint32_t n;
+} fusion__colour_host;
+
+void fusion__colour_host_free(fusion__colour_host *h);
+/* A brick's colours (masks[BRICK_WORDS], head) expanded to out[512], voxel x + 8y + 64z. */
+bf_status fusion__colour_expand(fusion_map *m, fusion__colour_host *h, const uint32_t *masks, uint32_t head,
+                                uint16_t *out);
+/* Gives a brick colours c[512] (0: none) where it has none, growing its
+ * chain off the free stack (cfree, *top); when the stack runs dry the brick
+ * keeps what it had and *fail counts it. */
+bf_status fusion__colour_fill(fusion_map *m, fusion__colour_host *h, uint32_t *masks, uint32_t *head,
+                              const uint16_t *c, uint32_t *cfree, uint32_t *top, uint32_t *fail);
+/* Pushes a brick's units on the free stack and clears its masks and head. */
+bf_status fusion__colour_release(fusion_map *m, fusion__colour_host *h, uint32_t *masks, uint32_t *head,
+                                 uint32_t *cfree, uint32_t *top);
 
 /* ------------------------------------------------------------ integration
  * (integrate.c; the rule is in shaders/fusion.glsl.h and

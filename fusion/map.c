@@ -113,10 +113,11 @@ static bf_status create_buffers(fusion_map *m)
     buf_plan colour[] = {
         {&m->colour_ring, "fusion.colour_ring", on ? (uint64_t)m->ring_slots * depth_words * 4 : 4, GPU_MEMORY_DEVICE,
          st},
-        {&m->cidx, "fusion.colour_index", on ? (uint64_t)c->brick_cap * BRICK_WORDS * 4 : 4, GPU_MEMORY_DEVICE, st},
-        {&m->cpool, "fusion.colour_pool", on ? (uint64_t)c->colour_block_cap * FUSION_COLOUR_BLOCK_WORDS * 4 : 4,
+        {&m->cmask, "fusion.colour_mask", on ? (uint64_t)c->brick_cap * BRICK_WORDS * 4 : 4, GPU_MEMORY_DEVICE, st},
+        {&m->chead, "fusion.colour_head", on ? (uint64_t)c->brick_cap * 4 : 4, GPU_MEMORY_DEVICE, st},
+        {&m->cpool, "fusion.colour_pool", on ? (uint64_t)c->colour_unit_cap * FUSION_COLOUR_UNIT_WORDS * 4 : 4,
          GPU_MEMORY_DEVICE, st},
-        {&m->cfree, "fusion.colour_free", on ? (uint64_t)c->colour_block_cap * 4 : 4, GPU_MEMORY_DEVICE, st},
+        {&m->cfree, "fusion.colour_free", on ? (uint64_t)c->colour_unit_cap * 4 : 4, GPU_MEMORY_DEVICE, st},
     };
     for (size_t i = 0; i < sizeof colour / sizeof colour[0]; i++) {
         if (colour[i].bytes > max_binding)
@@ -148,7 +149,7 @@ bf_status fusion__reset(fusion_map *m)
     const fusion_config *c = &m->cfg;
     bf_status s;
     size_t tmp_words = (size_t)(m->n_entries > c->brick_cap ? m->n_entries : c->brick_cap) * FUSION_ENTRY_WORDS;
-    if (c->keep_colour && tmp_words < c->colour_block_cap) tmp_words = c->colour_block_cap;
+    if (c->keep_colour && tmp_words < c->colour_unit_cap) tmp_words = c->colour_unit_cap;
     uint32_t *tmp = malloc(tmp_words * 4);
     if (!tmp) return bf_fail(BF_NO_MEMORY, "fusion: host staging for map init");
     fusion__hash_empty(tmp, m->n_entries);
@@ -156,9 +157,10 @@ bf_status fusion__reset(fusion_map *m)
     for (uint32_t i = 0; s == BF_OK && i < c->brick_cap; i++) tmp[i] = c->brick_cap - 1 - i;
     if (s == BF_OK) s = gpu_buffer_upload(m->free_stack, 0, tmp, (uint64_t)c->brick_cap * 4);
     if (c->keep_colour) {
-        for (uint32_t i = 0; s == BF_OK && i < c->colour_block_cap; i++) tmp[i] = c->colour_block_cap - 1 - i;
-        if (s == BF_OK) s = gpu_buffer_upload(m->cfree, 0, tmp, (uint64_t)c->colour_block_cap * 4);
-        if (s == BF_OK) s = gpu_buffer_fill(m->cidx, 0, gpu_buffer_size(m->cidx), FUSION_NONE);
+        for (uint32_t i = 0; s == BF_OK && i < c->colour_unit_cap; i++) tmp[i] = c->colour_unit_cap - 1 - i;
+        if (s == BF_OK) s = gpu_buffer_upload(m->cfree, 0, tmp, (uint64_t)c->colour_unit_cap * 4);
+        if (s == BF_OK) s = gpu_buffer_zero(m->cmask);
+        if (s == BF_OK) s = gpu_buffer_fill(m->chead, 0, gpu_buffer_size(m->chead), FUSION_NONE);
         if (s == BF_OK) s = gpu_buffer_zero(m->cpool);
         if (s == BF_OK) s = gpu_buffer_zero(m->colour_ring);
     }
@@ -177,7 +179,7 @@ bf_status fusion__reset(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_zero(m->readback);
     uint32_t cnt[FUSION_CNT_WORDS] = {0};
     cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
-    cnt[FUSION_CNT_COLOUR_TOP] = c->keep_colour ? c->colour_block_cap : 0;
+    cnt[FUSION_CNT_COLOUR_TOP] = c->keep_colour ? c->colour_unit_cap : 0;
     if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
     return s;
 }
@@ -187,10 +189,10 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
 {
     fusion_config c = cfg ? *cfg : fusion_config_default();
     if (c.node_cap == 0) c.node_cap = 2 * c.brick_cap + 64;
-    if (c.colour_block_cap == 0) { /* 4 blocks a brick (a scan uses 7-8 per surface brick), as one binding holds */
-        uint64_t fit = gpu_device_limits(ctx)->max_storage_buffer_range / (FUSION_COLOUR_BLOCK_WORDS * 4);
-        uint64_t want = 4ull * c.brick_cap;
-        c.colour_block_cap = (uint32_t)(want < fit ? want : fit);
+    if (c.colour_unit_cap == 0) { /* 8 units a brick (a real scan uses about 4), as one binding holds */
+        uint64_t fit = gpu_device_limits(ctx)->max_storage_buffer_range / (FUSION_COLOUR_UNIT_WORDS * 4);
+        uint64_t want = 8ull * c.brick_cap;
+        c.colour_unit_cap = (uint32_t)(want < fit ? want : fit);
     }
     bf_status s = config_check(&c, K);
     if (s != BF_OK) return s;
@@ -234,7 +236,7 @@ void fusion_destroy(fusion_map *m)
     fusion__alloc_destroy(m);
     gpu_buffer *bufs[] = {m->readback, m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
-                          m->locks, m->hash, m->colour_ring, m->cidx, m->cpool, m->cfree};
+                          m->locks, m->hash, m->colour_ring, m->cmask, m->chead, m->cpool, m->cfree};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     free(m);
 }
@@ -301,38 +303,25 @@ static uint32_t host_find_chunk(const fusion_map *m, const fusion_host_map *h, c
 /* ------------------------------------------------------------ snapshot */
 
 /* The colours of the live bricks of slots [0, high) (info: their records),
- * in snapshot order, expanded to 512 per brick (hostmap.rgb565). Only the
- * blocks up to the highest one referenced are downloaded: the free stack
- * hands out low blocks first. */
+ * in snapshot order, expanded to 512 per brick (hostmap.rgb565). Units are
+ * downloaded as far as the chains reach (the free stack hands out low
+ * units first). */
 static bf_status snapshot_colour(fusion_map *m, const uint32_t *info, uint32_t high, uint32_t n_live, uint16_t **out)
 {
-    uint32_t *cidx = malloc((size_t)high * BRICK_WORDS * 4 + 4), *pool = NULL;
+    uint32_t *mask = malloc((size_t)high * BRICK_WORDS * 4 + 4), *head = malloc((size_t)high * 4 + 4);
     uint16_t *rgb = calloc((size_t)n_live * BRICK_VOXELS + 1, 2);
-    bf_status s = cidx && rgb ? BF_OK : bf_fail(BF_NO_MEMORY, "fusion: colour snapshot of %u bricks", n_live);
-    if (s == BF_OK && high) s = gpu_buffer_download(m->cidx, 0, cidx, (uint64_t)high * BRICK_WORDS * 4);
-    uint64_t n_blocks = 0;
-    for (uint64_t i = 0; s == BF_OK && i < (uint64_t)high * BRICK_WORDS; i++)
-        if (cidx[i] != FUSION_NONE && cidx[i] < m->cfg.colour_block_cap && cidx[i] + 1ull > n_blocks)
-            n_blocks = cidx[i] + 1ull;
-    if (s == BF_OK && n_blocks) {
-        pool = malloc(n_blocks * FUSION_COLOUR_BLOCK_WORDS * 4);
-        s = pool ? gpu_buffer_download(m->cpool, 0, pool, n_blocks * FUSION_COLOUR_BLOCK_WORDS * 4)
-                 : bf_fail(BF_NO_MEMORY, "fusion: colour snapshot of %llu blocks", (unsigned long long)n_blocks);
-    }
+    fusion__colour_host units = {0};
+    bf_status s = mask && head && rgb ? BF_OK : bf_fail(BF_NO_MEMORY, "fusion: colour snapshot of %u bricks", n_live);
+    if (s == BF_OK && high) s = gpu_buffer_download(m->cmask, 0, mask, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && high) s = gpu_buffer_download(m->chead, 0, head, (uint64_t)high * 4);
     uint32_t k = 0;
     for (uint32_t b = 0; s == BF_OK && b < high; b++) {
         if (info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] >= m->n_entries) continue;
-        uint16_t *o = rgb + (size_t)k++ * BRICK_VOXELS;
-        for (uint32_t v = 0; v < BRICK_VOXELS; v++) {
-            uint32_t x = v & 7, y = (v >> 3) & 7, z = v >> 6, w = brick_word(x, y, z), bit = brick_bit(x, y, z);
-            uint32_t blk = cidx[(size_t)b * BRICK_WORDS + w];
-            if (blk == FUSION_NONE || blk >= n_blocks) continue;
-            uint32_t word = pool[(size_t)blk * FUSION_COLOUR_BLOCK_WORDS + bit / 2];
-            o[v] = (uint16_t)(bit & 1 ? word >> 16 : word & 0xFFFFu);
-        }
+        s = fusion__colour_expand(m, &units, mask + (size_t)b * BRICK_WORDS, head[b], rgb + (size_t)k++ * BRICK_VOXELS);
     }
-    free(cidx);
-    free(pool);
+    free(mask);
+    free(head);
+    fusion__colour_host_free(&units);
     if (s != BF_OK) {
         free(rgb);
         return s;
@@ -500,8 +489,9 @@ fusion_gpu_view fusion_gpu_view_get(const fusion_map *m)
         .info = m->info,
         .sign = m->sign,
         .conf = m->conf,
-        .cidx = m->cidx,
+        .cmask = m->cmask,
         .cpool = m->cpool,
+        .chead = m->chead,
         .has_colour = m->cfg.keep_colour,
         .n_buckets = m->cfg.hash_buckets,
         .n_entries = m->n_entries,

@@ -17,7 +17,7 @@ struct render_caster {
     gpu_pipeline *p_raycast, *p_shade;
     gpu_bindings *b_raycast, *b_shade;
     /* The map buffers bound to b_raycast (rebound when another map comes). */
-    gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf, *bound_cidx, *bound_cpool;
+    gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf, *bound_cmask, *bound_cpool, *bound_chead;
     gpu_buffer *bound_start; /* binding 6: the start depths, or the dummy */
     gpu_buffer *bound_depth; /* binding 4: the depth destination, targets.depth or render_options.depth_out */
     gpu_buffer *dummy;       /* 16 bytes bound when there are no start depths */
@@ -72,7 +72,7 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
         .name = "render.raycast",
         .spirv = bf_spv_render_raycast,
         .spirv_bytes = bf_spv_render_raycast_size,
-        .n_buffers = 10,
+        .n_buffers = 11,
         .push_bytes = sizeof(render_push),
         .local_size = {rc->local_x, rc->local_y, 1},
     };
@@ -88,7 +88,7 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &ps, &rc->p_shade);
     if (s == BF_OK) s = target_create(ctx, "render.no_start", 16, &rc->dummy);
     if (s == BF_OK) s = gpu_buffer_zero(rc->dummy);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 10, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 11, "render.raycast", &rc->b_raycast);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 9, rc->targets.surface_rgb, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 6, rc->dummy, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) rc->bound_start = rc->dummy;
@@ -130,16 +130,18 @@ void render_destroy(render_caster *rc)
 static bf_status bind_map(render_caster *rc, const fusion_gpu_view *v)
 {
     if (rc->bound_hash == v->hash && rc->bound_nodes == v->nodes && rc->bound_sign == v->sign &&
-        rc->bound_conf == v->conf && rc->bound_cidx == v->cidx && rc->bound_cpool == v->cpool)
+        rc->bound_conf == v->conf && rc->bound_cmask == v->cmask && rc->bound_cpool == v->cpool &&
+        rc->bound_chead == v->chead)
         return BF_OK;
-    gpu_buffer *bufs[6] = {v->hash, v->nodes, v->sign, v->conf, v->cidx, v->cpool};
-    uint32_t at[6] = {0, 1, 2, 3, 7, 8};
-    rc->bound_hash = rc->bound_nodes = rc->bound_sign = rc->bound_conf = rc->bound_cidx = rc->bound_cpool = NULL;
+    gpu_buffer *bufs[7] = {v->hash, v->nodes, v->sign, v->conf, v->cmask, v->cpool, v->chead};
+    uint32_t at[7] = {0, 1, 2, 3, 7, 8, 10};
+    rc->bound_hash = rc->bound_nodes = rc->bound_sign = rc->bound_conf = NULL;
+    rc->bound_cmask = rc->bound_cpool = rc->bound_chead = NULL;
     bf_status s = BF_OK;
-    for (uint32_t i = 0; i < 6 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, at[i], bufs[i], 0, GPU_WHOLE_SIZE);
+    for (uint32_t i = 0; i < 7 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, at[i], bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
     rc->bound_hash = v->hash, rc->bound_nodes = v->nodes, rc->bound_sign = v->sign, rc->bound_conf = v->conf;
-    rc->bound_cidx = v->cidx, rc->bound_cpool = v->cpool;
+    rc->bound_cmask = v->cmask, rc->bound_cpool = v->cpool, rc->bound_chead = v->chead;
     return BF_OK;
 }
 

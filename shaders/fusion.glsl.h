@@ -182,7 +182,7 @@ _Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push m
 struct fusion_remove_push {
     bf_u32 first, max_count; /* the window slice just integrated */
     bf_u32 last_frame;       /* last frame of its window */
-    bf_u32 has_colour;       /* 1: give a removed brick's colour blocks back */
+    bf_u32 has_colour;       /* 1: give a removed brick's colour units back */
 };
 #ifndef BF_GLSL
 typedef struct fusion_remove_push fusion_remove_push;
@@ -202,9 +202,9 @@ _Static_assert(sizeof(fusion_remove_push) == 16, "fusion_remove_push must match 
 #define FUSION_CNT_FAIL_HASH 8u    /* requests refused: hash overflow full */
 #define FUSION_CNT_LIST 9u         /* entries in the work list being built */
 #define FUSION_CNT_REMOVED 10u     /* bricks removed as empty, in all */
-#define FUSION_CNT_COLOUR_TOP 11u  /* colour blocks on their free stack */
+#define FUSION_CNT_COLOUR_TOP 11u  /* colour units on their free stack */
 #define FUSION_CNT_DISPATCH 12u    /* 3 words: indirect group counts */
-#define FUSION_CNT_FAIL_COLOUR 15u /* sub-bricks left without colour: colour pool full */
+#define FUSION_CNT_FAIL_COLOUR 15u /* bricks whose new colours found the colour pool empty */
 #define FUSION_CNT_WORDS 16u
 
 /* ============================================================ integration
@@ -599,26 +599,39 @@ BF_FN bf_u32 fusion_box_culled(fusion_frame f, bf_f32 lo_x, bf_f32 lo_y, bf_f32 
 }
 
 /* ============================================================ colour
- * Colour of the confident voxels near the surface (DESIGN.md section 3;
- * Reichl's dissertation, ch. 8): per 32-bit sub-brick (a word of the bit
- * planes) one word in the colour index, FUSION_NONE or the block of the
- * colour pool that holds its 32 colours: RGB565, two per word, voxel bit i
- * in word i / 2, the low half for even i. One index word per 32 voxels is
- * the method's one bit per voxel; blocks exist only for sub-bricks with a
- * coloured voxel. RGB565 0 means "no colour"; black is stored as 0x0001.
+ * Colour of the confident voxels at the surface (DESIGN.md section 3;
+ * Reichl's dissertation, ch. 8), addressed by popcount:
+ * - colour masks: per 32-bit sub-brick (a word of the bit planes) one word,
+ *   bit i set when voxel bit i of the sub-brick has a colour; one word per
+ *   32 voxels, the method's one bit per voxel for the pointer;
+ * - colour head: per brick slot the first unit of its colours, or
+ *   FUSION_NONE;
+ * - colour units: 8 words, word 0 the next unit of the brick (FUSION_NONE
+ *   ends the chain), words 1..7 fourteen RGB565 colours, two per word, the
+ *   low half first. The brick's coloured voxels, in the order (sub-brick,
+ *   bit), take consecutive colours along the chain: colour r of the brick
+ *   is colour r % 14 of its unit r / 14.
+ * So colour costs 16 bits only where a voxel has one (plus an eighth for
+ * the links and half a unit per brick), not a 32-colour block per touched
+ * sub-brick (8.5 bits per allocated voxel before, on the room test).
+ * RGB565 0 means "no colour"; black is stored as 0x0001.
  *
- * Blocks come off a free stack (FUSION_CNT_COLOUR_TOP): the colour pass
- * pops, the removal pass pushes, never in the same dispatch, so neither
- * spins (the dissertation's page allocation spins on lockstep warps, which
- * Vulkan does not promise). */
-#define FUSION_COLOUR_BLOCK_WORDS 16u
+ * Units come off a free stack (FUSION_CNT_COLOUR_TOP): the colour pass
+ * pops, the removal pass and eviction push, never in the same dispatch, so
+ * neither spins (the dissertation's page allocation spins on lockstep
+ * warps, which Vulkan does not promise). A brick's chain only grows while
+ * the brick lives (a unit it no longer needs stays linked for later). */
+#define FUSION_COLOUR_UNIT_WORDS 8u
+#define FUSION_COLOUR_UNIT_COLOURS 14u
+/* Units of a brick whose 512 voxels all have colour: ceil(512 / 14). */
+#define FUSION_COLOUR_MAX_UNITS 37u
 #define FUSION_COLOUR_NONE 0u
 /* Frames of a window the colour pass reads at most. */
 #define FUSION_COLOUR_MAX_FRAMES 32u
 /* Half-thickness of the coloured shell around the surface, in voxels:
  * the mean of D over the colour samples (weighted as they are) must be
- * below it. 0.75 keeps one to two voxels across a surface at any slant. */
-#define FUSION_COLOUR_SHELL 0.75f
+ * below it. 0.5 keeps about one voxel across a surface (docs/colour.md). */
+#define FUSION_COLOUR_SHELL 0.5f
 /* Workgroup of the colour pass: 64 invocations, 8 voxels each. */
 #define FUSION_COLOUR_LOCAL 64u
 

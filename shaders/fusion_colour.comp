@@ -4,8 +4,10 @@
  * frame's measured surface takes that frame's colour, weighted by the
  * viewing angle and the distance (fusion_colour_weight), averaged over a
  * subset of the window's frames (push: frame_first + k * frame_stride),
- * then blended half and half with the colour it had. Sub-bricks that get
- * their first coloured voxel take a block off the colour free stack.
+ * then blended half and half with the colour it had. The brick's colours
+ * are then packed again in popcount order (fusion.glsl.h, "colour"): a
+ * brick whose coloured voxels outgrow its chain takes units off the colour
+ * free stack; a voxel that is no longer confident gives its colour up.
  *
  * One workgroup per brick of the list, FUSION_COLOUR_LOCAL invocations of
  * 8 voxels each (voxel v = tid + k * 64: neighbouring lanes, neighbouring
@@ -24,22 +26,29 @@ layout(std430, binding = 3) readonly buffer Frames { fusion_frame f[]; } frames;
 layout(std430, binding = 4) readonly buffer Depth { uint w[]; } depth;
 layout(std430, binding = 5) readonly buffer ColourRing { uint w[]; } colour_ring;
 layout(std430, binding = 6) readonly buffer List { uint w[]; } list;
-layout(std430, binding = 7) buffer ColourIndex { uint w[]; } cidx;
+layout(std430, binding = 7) buffer ColourMask { uint w[]; } cmask;
 layout(std430, binding = 8) buffer ColourPool { uint w[]; } cpool;
 layout(std430, binding = 9) buffer Counters { uint w[]; } cnt;
 layout(std430, binding = 10) readonly buffer ColourFree { uint w[]; } cfree;
+layout(std430, binding = 11) buffer ColourHead { uint w[]; } chead;
 
 layout(push_constant) uniform Push { fusion_colour_push pc; };
 
 #define VPT 8u
-shared uint s_conf[BRICK_WORDS], s_cidx[BRICK_WORDS], s_new[BRICK_WORDS];
-shared uint s_col[BRICK_WORDS * FUSION_COLOUR_BLOCK_WORDS];
+#define COL_WORDS (BRICK_VOXELS / 2u)
+#define PACK_WORDS (FUSION_COLOUR_MAX_UNITS * (FUSION_COLOUR_UNIT_WORDS - 1u))
+shared uint s_conf[BRICK_WORDS], s_mask[BRICK_WORDS], s_new[BRICK_WORDS];
+shared uint s_pre[BRICK_WORDS + 1u]; /* colours before each sub-brick (old masks, then new) */
+shared uint s_col[COL_WORDS];        /* RGB565 per voxel, dense: voxel bit i of word w at w * 16 + i / 2 */
+shared uint s_pack[PACK_WORDS];      /* the colours packed for the chain */
+shared uint s_unit[FUSION_COLOUR_MAX_UNITS];
+shared uint s_n_units, s_n_old_units, s_keep_old, s_changed;
 shared uint s_visible, s_n_visible;
 shared uint s_order[FUSION_COLOUR_MAX_FRAMES];
 shared vec4 s_step[FUSION_COLOUR_MAX_FRAMES * 4u];
 
-/* Takes a colour block off the free stack; FUSION_NONE when it is empty. */
-uint pop_block()
+/* Takes a colour unit off the free stack; FUSION_NONE when it is empty. */
+uint pop_unit()
 {
     int old = int(atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 0xFFFFFFFFu));
     if (old <= 0) {
@@ -71,18 +80,40 @@ void colour_brick(uint slot, uint tid)
     float voxel_m = fusion_voxel_m(pc.chunk_m, fusion_pos_level(pos));
     if (tid < BRICK_WORDS) {
         s_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
-        s_cidx[tid] = cidx.w[slot * BRICK_WORDS + tid];
+        s_mask[tid] = cmask.w[slot * BRICK_WORDS + tid];
         s_new[tid] = 0u;
     }
-    if (tid == 0u) s_visible = 0u;
+    if (tid == 0u) s_visible = 0u, s_changed = 0u;
     barrier();
     uint any_conf = 0u;
     [[unroll]] for (uint w = 0u; w < BRICK_WORDS; w++) any_conf |= s_conf[w];
     if (any_conf == 0u) return; /* uniform: nothing to colour */
-    /* The old colours (0 where the sub-brick has no block). */
-    for (uint i = tid; i < BRICK_WORDS * FUSION_COLOUR_BLOCK_WORDS; i += FUSION_COLOUR_LOCAL) {
-        uint blk = s_cidx[i / FUSION_COLOUR_BLOCK_WORDS];
-        s_col[i] = blk != FUSION_NONE ? cpool.w[blk * FUSION_COLOUR_BLOCK_WORDS + i % FUSION_COLOUR_BLOCK_WORDS] : 0u;
+    /* The brick's chain and where each sub-brick's colours start on it. */
+    if (tid == 0u) {
+        uint n = 0u, u = chead.w[slot];
+        while (u != FUSION_NONE && n < FUSION_COLOUR_MAX_UNITS) {
+            s_unit[n++] = u;
+            u = cpool.w[u * FUSION_COLOUR_UNIT_WORDS];
+        }
+        s_n_units = n, s_n_old_units = n;
+        uint acc = 0u;
+        for (uint w = 0u; w < BRICK_WORDS; w++) s_pre[w] = acc, acc += uint(bitCount(s_mask[w]));
+        s_pre[BRICK_WORDS] = acc;
+    }
+    barrier();
+    /* The old colours, dense (0 where a voxel has none). */
+    for (uint i = tid; i < COL_WORDS; i += FUSION_COLOUR_LOCAL) {
+        uint w = i / 16u, word = 0u;
+        for (uint h = 0u; h < 2u; h++) {
+            uint bit = (i % 16u) * 2u + h;
+            if (((s_mask[w] >> bit) & 1u) == 0u) continue;
+            uint r = s_pre[w] + uint(bitCount(s_mask[w] & ((1u << bit) - 1u)));
+            uint k = r / FUSION_COLOUR_UNIT_COLOURS, j = r % FUSION_COLOUR_UNIT_COLOURS;
+            if (k >= s_n_units) continue;
+            uint c = cpool.w[s_unit[k] * FUSION_COLOUR_UNIT_WORDS + 1u + j / 2u];
+            word |= ((j & 1u) != 0u ? c >> 16 : c & 0xFFFFu) << (16u * h);
+        }
+        s_col[i] = word;
     }
 
     float lo_x = fusion_voxel_centre(key_x, cell_x, 0u, pc.chunk_m, voxel_m);
@@ -181,7 +212,7 @@ void colour_brick(uint slot, uint tid)
          * average (the band alone colours 2-4 voxels across it). */
         if (!(acc[k].w > 0.0) || !(abs(acc_d[k] / acc[k].w) < FUSION_COLOUR_SHELL * voxel_m)) continue;
         vec3 col = acc[k].rgb / acc[k].w;
-        uint si = w * FUSION_COLOUR_BLOCK_WORDS + (bit >> 1), sh = (bit & 1u) * 16u;
+        uint si = w * 16u + (bit >> 1), sh = (bit & 1u) * 16u;
         uint old = (s_col[si] >> sh) & 0xFFFFu;
         if (old != FUSION_COLOUR_NONE)
             col = 0.5 * (col + vec3(float(fusion_565_r(old)), float(fusion_565_g(old)), float(fusion_565_b(old))));
@@ -192,18 +223,65 @@ void colour_brick(uint slot, uint tid)
         atomicOr(s_new[w], 1u << bit);
     }
     barrier();
-    /* A block for every sub-brick that got its first colour. */
-    if (tid < BRICK_WORDS && s_new[tid] != 0u && s_cidx[tid] == FUSION_NONE) {
-        uint blk = pop_block();
-        if (blk != FUSION_NONE) cidx.w[slot * BRICK_WORDS + tid] = blk;
-        else atomicAdd(cnt.w[FUSION_CNT_FAIL_COLOUR], 1u);
-        s_cidx[tid] = blk;
+    /* The new masks: the voxels coloured before or now, while confident. */
+    if (tid < BRICK_WORDS) {
+        uint m = (s_mask[tid] | s_new[tid]) & s_conf[tid];
+        if (m != s_mask[tid] || s_new[tid] != 0u) atomicOr(s_changed, 1u);
+        s_new[tid] = m;
     }
     barrier();
-    for (uint i = tid; i < BRICK_WORDS * FUSION_COLOUR_BLOCK_WORDS; i += FUSION_COLOUR_LOCAL) {
-        uint w = i / FUSION_COLOUR_BLOCK_WORDS, blk = s_cidx[w];
-        if (blk != FUSION_NONE && s_new[w] != 0u) cpool.w[blk * FUSION_COLOUR_BLOCK_WORDS + i % FUSION_COLOUR_BLOCK_WORDS] = s_col[i];
+    if (s_changed == 0u) return; /* uniform: no colour moved */
+    /* Units for the new count: the chain grows off the free stack; when
+     * the stack runs dry the brick keeps its old masks (counted). */
+    if (tid == 0u) {
+        uint total = 0u;
+        for (uint w = 0u; w < BRICK_WORDS; w++) total += uint(bitCount(s_new[w]));
+        uint need = (total + FUSION_COLOUR_UNIT_COLOURS - 1u) / FUSION_COLOUR_UNIT_COLOURS;
+        uint n = s_n_units;
+        while (n < need) {
+            uint u = pop_unit();
+            if (u == FUSION_NONE) break;
+            s_unit[n++] = u;
+        }
+        s_n_units = n;
+        s_keep_old = n < need ? 1u : 0u;
+        if (n < need) atomicAdd(cnt.w[FUSION_CNT_FAIL_COLOUR], 1u);
     }
+    barrier();
+    if (tid < BRICK_WORDS && s_keep_old != 0u) s_new[tid] = s_mask[tid];
+    barrier();
+    if (tid == 0u) {
+        uint acc = 0u;
+        for (uint w = 0u; w < BRICK_WORDS; w++) s_pre[w] = acc, acc += uint(bitCount(s_new[w]));
+        s_pre[BRICK_WORDS] = acc;
+    }
+    for (uint i = tid; i < PACK_WORDS; i += FUSION_COLOUR_LOCAL) s_pack[i] = 0u;
+    barrier();
+    /* Pack: colour r of the brick to unit r / 14, slot r % 14. */
+    for (uint i = tid; i < BRICK_VOXELS; i += FUSION_COLOUR_LOCAL) {
+        uint w = i / 32u, bit = i % 32u;
+        if (((s_new[w] >> bit) & 1u) == 0u) continue;
+        uint r = s_pre[w] + uint(bitCount(s_new[w] & ((1u << bit) - 1u)));
+        uint c = (s_col[w * 16u + (bit >> 1)] >> ((bit & 1u) * 16u)) & 0xFFFFu;
+        uint k = r / FUSION_COLOUR_UNIT_COLOURS, j = r % FUSION_COLOUR_UNIT_COLOURS;
+        atomicOr(s_pack[k * (FUSION_COLOUR_UNIT_WORDS - 1u) + j / 2u], c << ((j & 1u) * 16u));
+    }
+    barrier();
+    uint used = (s_pre[BRICK_WORDS] + FUSION_COLOUR_UNIT_COLOURS - 1u) / FUSION_COLOUR_UNIT_COLOURS;
+    for (uint i = tid; i < used * (FUSION_COLOUR_UNIT_WORDS - 1u); i += FUSION_COLOUR_LOCAL) {
+        uint k = i / (FUSION_COLOUR_UNIT_WORDS - 1u), j = i % (FUSION_COLOUR_UNIT_WORDS - 1u);
+        cpool.w[s_unit[k] * FUSION_COLOUR_UNIT_WORDS + 1u + j] = s_pack[i];
+    }
+    /* Links of the units just taken. */
+    if (tid == 0u) {
+        uint n_old = s_n_old_units, n = s_n_units;
+        for (uint k = n_old; k < n; k++) {
+            if (k == 0u) chead.w[slot] = s_unit[0];
+            else cpool.w[s_unit[k - 1u] * FUSION_COLOUR_UNIT_WORDS] = s_unit[k];
+            cpool.w[s_unit[k] * FUSION_COLOUR_UNIT_WORDS] = FUSION_NONE;
+        }
+    }
+    if (tid < BRICK_WORDS) cmask.w[slot * BRICK_WORDS + tid] = s_new[tid];
 }
 
 void main()

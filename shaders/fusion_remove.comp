@@ -19,8 +19,10 @@ layout(std430, binding = 4) buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 5) readonly buffer Stamp { uint w[]; } stamp;
 layout(std430, binding = 6) buffer Counters { uint w[]; } cnt;
 layout(std430, binding = 7) buffer FreeStack { uint w[]; } free_stack;
-layout(std430, binding = 8) buffer ColourIndex { uint w[]; } cidx;
+layout(std430, binding = 8) buffer ColourMask { uint w[]; } cmask;
 layout(std430, binding = 9) buffer ColourFree { uint w[]; } cfree;
+layout(std430, binding = 10) buffer ColourHead { uint w[]; } chead;
+layout(std430, binding = 11) readonly buffer ColourPool { uint w[]; } cpool;
 
 layout(push_constant) uniform Push { fusion_remove_push pc; };
 
@@ -39,13 +41,15 @@ void main()
     for (uint k = 0u; k < BRICK_WORDS; k++) sign_pool.w[b * BRICK_WORDS + k] = 0u;
     for (uint k = 0u; k < FUSION_BRICK_INFO_WORDS; k++) info.w[b * FUSION_BRICK_INFO_WORDS + k] = FUSION_NONE;
     if (pc.has_colour != 0u) {
-        /* Its colour blocks go back too (the colour pass, which pops, runs
+        /* Its colour units go back too (the colour pass, which pops, runs
          * in another dispatch). */
-        for (uint k = 0u; k < BRICK_WORDS; k++) {
-            uint blk = cidx.w[b * BRICK_WORDS + k];
-            if (blk == FUSION_NONE) continue;
-            cidx.w[b * BRICK_WORDS + k] = FUSION_NONE;
-            cfree.w[atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 1u)] = blk;
+        for (uint k = 0u; k < BRICK_WORDS; k++) cmask.w[b * BRICK_WORDS + k] = 0u;
+        uint u = chead.w[b];
+        chead.w[b] = FUSION_NONE;
+        for (uint n = 0u; u != FUSION_NONE && n < FUSION_COLOUR_MAX_UNITS; n++) {
+            uint next = cpool.w[u * FUSION_COLOUR_UNIT_WORDS];
+            cfree.w[atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 1u)] = u;
+            u = next;
         }
     }
     atomicAdd(cnt.w[FUSION_CNT_BRICKS], 0xFFFFFFFFu);

@@ -35,9 +35,10 @@ layout(std430, binding = 3) readonly buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 4) writeonly buffer Depth { float v[]; } depth_out;
 layout(std430, binding = 5) writeonly buffer Level { uint v[]; } level_out;
 layout(std430, binding = 6) readonly buffer Start { float v[]; } start_in;
-layout(std430, binding = 7) readonly buffer ColourIndex { uint w[]; } cidx;
+layout(std430, binding = 7) readonly buffer ColourMask { uint w[]; } cmask;
 layout(std430, binding = 8) readonly buffer ColourPool { uint w[]; } cpool;
 layout(std430, binding = 9) writeonly buffer SurfaceColour { uint v[]; } rgb_out;
+layout(std430, binding = 10) readonly buffer ColourHead { uint w[]; } chead;
 
 layout(push_constant) uniform Push { render_push pc; };
 
@@ -144,37 +145,55 @@ void gather_block(ivec3 B, uint level, uint hit_slot, ivec3 hit_brick, bool conf
     }
 }
 
-/* Depth of the zero of the smoothed sign field on the ray, from the
- * midpoint depth s0 of the two voxel centres of a hit in brick (slot,
- * brick) at level. */
-/* RGB565 of the voxel of brick `slot` (brick coordinates `brick` on its
- * level's grid) that holds map point p; 0 outside the brick or without
- * colour. */
+/* RGB565 of the voxel that holds map point p, in brick `slot` (brick
+ * coordinates `brick` on its level's grid) or, outside it, in the brick of
+ * the same level next to it; 0 without colour. */
 uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
 {
     float v = fusion_voxel_m(pc.chunk_m, level);
-    ivec3 g = ivec3(floor(p / v)) - brick * 8;
-    if (any(lessThan(g, ivec3(0))) || any(greaterThan(g, ivec3(7)))) return 0u;
+    ivec3 G = ivec3(floor(p / v)), nb = G >> 3;
+    if (nb != brick) slot = brick_at(nb, level);
+    if (slot == FUSION_NONE) return 0u;
+    ivec3 g = G - nb * 8;
     uint w = brick_word(uint(g.x), uint(g.y), uint(g.z)), bit = brick_bit(uint(g.x), uint(g.y), uint(g.z));
-    uint blk = cidx.w[slot * BRICK_WORDS + w];
-    if (blk == FUSION_NONE) return 0u;
-    uint word = cpool.w[blk * FUSION_COLOUR_BLOCK_WORDS + (bit >> 1)];
-    return (bit & 1u) != 0u ? word >> 16 : word & 0xFFFFu;
+    uint mask = cmask.w[slot * BRICK_WORDS + w];
+    if (((mask >> bit) & 1u) == 0u) return 0u;
+    /* Its rank among the brick's coloured voxels, then along the chain. */
+    uint r = uint(bitCount(mask & ((1u << bit) - 1u)));
+    for (uint k = 0u; k < w; k++) r += uint(bitCount(cmask.w[slot * BRICK_WORDS + k]));
+    uint u = chead.w[slot];
+    for (uint k = r / FUSION_COLOUR_UNIT_COLOURS; k > 0u && u != FUSION_NONE; k--) u = cpool.w[u * FUSION_COLOUR_UNIT_WORDS];
+    if (u == FUSION_NONE) return 0u;
+    uint j = r % FUSION_COLOUR_UNIT_COLOURS;
+    uint word = cpool.w[u * FUSION_COLOUR_UNIT_WORDS + 1u + j / 2u];
+    return (j & 1u) != 0u ? word >> 16 : word & 0xFFFFu;
 }
 
-/* The colour at a hit: the voxel holding it, else the ones half a voxel in
- * front of and behind it along the ray (colour lives in a shell one or two
- * voxels thick around the surface). */
+/* The colour at a hit: the voxel holding it, else the nearest along the
+ * ray within 1.2 voxels either way, else one of its six face neighbours
+ * (colour lives in a shell about a voxel thick around the surface, which a
+ * grazing ray can cross beside the voxel it hits). */
 uint hit_colour(render_ray ray, render_trace tr)
 {
+    float v = fusion_voxel_m(pc.chunk_m, tr.hit_level);
     vec3 p = ray.o + tr.hit_depth * ray.dir;
-    vec3 step = (0.6 * fusion_voxel_m(pc.chunk_m, tr.hit_level)) * normalize(ray.dir);
+    vec3 dir = normalize(ray.dir);
     uint c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p);
-    if (c == 0u) c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p - step);
-    if (c == 0u) c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p + step);
+    for (uint k = 1u; k <= 4u && c == 0u; k++) {
+        float t = 0.6 * float((k + 1u) / 2u) * ((k & 1u) != 0u ? -1.0 : 1.0);
+        c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p + (t * v) * dir);
+    }
+    for (uint k = 0u; k < 6u && c == 0u; k++) {
+        vec3 o = vec3(0.0);
+        o[k / 2u] = (k & 1u) != 0u ? -v : v;
+        c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p + o);
+    }
     return c;
 }
 
+/* Depth of the zero of the smoothed sign field on the ray, from the
+ * midpoint depth s0 of the two voxel centres of a hit in brick (slot,
+ * brick) at level. */
 float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s0, bool confident_only)
 {
     float v = fusion_voxel_m(pc.chunk_m, level), inv_v = 1.0 / v;
