@@ -80,8 +80,8 @@ typedef struct replay_args {
 #define BYTES_PER_BRICK (2 * 64 + 16 + 4 + 4 + NODES_PER_BRICK * 8)
 /* With colour: the brick's colour masks (16 words) and head, and
  * COLOUR_UNITS_PER_BRICK colour units of 32 bytes with their free-stack
- * entries (docs/colour.md: a scan uses about 4 a brick). */
-#define COLOUR_UNITS_PER_BRICK 6
+ * entries (docs/colour.md: 5.5 a brick on the real frames). */
+#define COLOUR_UNITS_PER_BRICK 7
 #define COLOUR_BYTES_PER_BRICK (64 + 4 + COLOUR_UNITS_PER_BRICK * (32 + 4))
 #define DEFAULT_GPU_BUDGET_MIB 64.0
 

@@ -68,9 +68,9 @@ void fusion__cmd_colour(fusion_map *m, uint32_t first, uint32_t max_count)
         .ccy = (float)m->Kc.cy_px,
         .bricks_per_group = m->colour_bpg,
     };
-    for (int i = 0; i < 3; i++) {
-        for (int j = 0; j < 3; j++) pc.R[i * 3 + j] = (float)m->T_colour_depth.R[i][j];
-    }
+    bf_quat q = bf_quat_from_mat(m->T_colour_depth.R);
+    pc.q[0] = (float)q.x, pc.q[1] = (float)q.y, pc.q[2] = (float)q.z, pc.q[3] = (float)q.w;
+    for (int i = 0; i < 5; i++) pc.dist[i] = (float)m->colour_dist[i];
     pc.t[0] = (float)m->T_colour_depth.t.x, pc.t[1] = (float)m->T_colour_depth.t.y;
     pc.t[2] = (float)m->T_colour_depth.t.z;
     uint32_t groups = gpu_groups(max_count, m->colour_bpg);
@@ -90,16 +90,21 @@ void fusion__rgb_to_565(const uint8_t *rgb, uint64_t n_pixels, uint32_t *words)
     }
 }
 
-bf_status fusion_set_colour_camera(fusion_map *m, const bf_intrinsics *Kc, const bf_se3 *T_colour_depth)
+bf_status fusion_set_colour_camera(fusion_map *m, const bf_intrinsics *Kc, const double *dist,
+                                   const bf_se3 *T_colour_depth)
 {
     if (!Kc || !T_colour_depth) {
         m->colour_registered = true;
         return BF_OK;
     }
+    bool dist_ok = true;
+    for (int i = 0; dist && i < 5; i++) dist_ok = dist_ok && isfinite(dist[i]);
     if (!(Kc->fx_px != 0 && Kc->fy_px != 0) || !isfinite(Kc->fx_px) || !isfinite(Kc->fy_px) ||
-        !isfinite(Kc->cx_px) || !isfinite(Kc->cy_px) || !bf_se3_is_finite(T_colour_depth))
-        return bf_fail(BF_INVALID_ARG, "fusion: colour camera (fx %g, fy %g) or T_colour_depth is not usable",
+        !isfinite(Kc->cx_px) || !isfinite(Kc->cy_px) || !bf_se3_is_finite(T_colour_depth) || !dist_ok)
+        return bf_fail(BF_INVALID_ARG,
+                       "fusion: colour camera (fx %g, fy %g), its distortion or T_colour_depth is not usable",
                        Kc->fx_px, Kc->fy_px);
+    for (int i = 0; i < 5; i++) m->colour_dist[i] = dist ? dist[i] : 0.0;
     m->Kc = *Kc;
     m->T_colour_depth = *T_colour_depth;
     m->colour_registered = false;

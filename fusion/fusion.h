@@ -68,11 +68,14 @@ void fusion_destroy(fusion_map *map);
 
 /* The colour camera, when colour pixels do not show what the depth pixel
  * at the same place measured: its intrinsics (the image has the depth
- * image's size) and T_colour_depth, which takes depth-camera points to
- * colour-camera points. NULL for either: registered (the default; TUM,
- * registered Kinect and OpenNI2 modes). BF_INVALID_ARG for values that are
- * not finite or a zero focal length. */
-bf_status fusion_set_colour_camera(fusion_map *map, const bf_intrinsics *Kc, const bf_se3 *T_colour_depth);
+ * image's size), its lens distortion (k1 k2 p1 p2 k3, OpenCV's
+ * Brown-Conrady order; NULL: none) and T_colour_depth, which takes
+ * depth-camera points to colour-camera points. NULL for Kc or the
+ * transform: registered (the default; TUM, registered Kinect and OpenNI2
+ * modes). BF_INVALID_ARG for values that are not finite or a zero focal
+ * length. */
+bf_status fusion_set_colour_camera(fusion_map *map, const bf_intrinsics *Kc, const double *dist,
+                                   const bf_se3 *T_colour_depth);
 
 /* Adds one frame seen from T_wc (camera to world): uploads it to the frame
  * ring, allocates bricks, integrates (sub-cache and the current window

@@ -50,6 +50,7 @@ struct fusion_map {
     bool colour_registered;   /* colour pixel i shows depth pixel i */
     bf_intrinsics Kc;         /* colour camera (when not registered) */
     bf_se3 T_colour_depth;
+    double colour_dist[5];    /* its Brown-Conrady distortion, k1 k2 p1 p2 k3 */
     bool has_colour_frame;    /* the incoming slot holds colour */
 
     /* Schedule (host side). */

@@ -189,7 +189,7 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
 {
     fusion_config c = cfg ? *cfg : fusion_config_default();
     if (c.node_cap == 0) c.node_cap = 2 * c.brick_cap + 64;
-    if (c.colour_unit_cap == 0) { /* 8 units a brick (a real scan uses about 4), as one binding holds */
+    if (c.colour_unit_cap == 0) { /* 8 units a brick (the real frames use 5.5), as one binding holds */
         uint64_t fit = gpu_device_limits(ctx)->max_storage_buffer_range / (FUSION_COLOUR_UNIT_WORDS * 4);
         uint64_t want = 8ull * c.brick_cap;
         c.colour_unit_cap = (uint32_t)(want < fit ? want : fit);

@@ -356,7 +356,7 @@ bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg)
     /* Without the depth camera the file gives no transform: the colour
      * camera's own intrinsics at the depth camera's place. */
     bf_se3 T = cfg->calibration.has_depth ? cfg->calibration.T_colour_depth : bf_se3_identity();
-    return fusion_set_colour_camera(map, &Kc, &T);
+    return fusion_set_colour_camera(map, &Kc, c->dist, &T);
 }
 
 bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj)

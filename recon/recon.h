@@ -81,8 +81,8 @@ typedef struct recon_config {
 
 recon_config recon_config_default(void);
 /* Registers colour to depth in map through cfg's calibration (colour
- * intrinsics, T_colour_depth; the colour camera's distortion is not
- * applied); without one colour stays registered (fusion_set_colour_camera). */
+ * intrinsics and distortion, T_colour_depth); without one colour stays
+ * registered (fusion_set_colour_camera). */
 bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg);
 /* The fusion config the loop uses: cfg->fusion with the loop's sensor (also
  * for fusing at known poses without the loop). */

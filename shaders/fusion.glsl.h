@@ -652,9 +652,10 @@ BF_FN bf_u32 fusion_565_r(bf_u32 c) { return (((c >> 11) & 31u) << 3) | (((c >> 
 BF_FN bf_u32 fusion_565_g(bf_u32 c) { return (((c >> 5) & 63u) << 2) | (((c >> 5) & 63u) >> 4); }
 BF_FN bf_u32 fusion_565_b(bf_u32 c) { return ((c & 31u) << 3) | ((c & 31u) >> 2); }
 
-/* Push constants of fusion_colour.comp. The colour camera: intrinsics and
- * T_colour_depth (R row-major, t), or registered != 0 when colour pixel i
- * shows what depth pixel i measured (TUM, registered Kinect modes). */
+/* Push constants of fusion_colour.comp. The colour camera: intrinsics,
+ * Brown-Conrady distortion and T_colour_depth (rotation as a unit
+ * quaternion, t), or registered != 0 when colour pixel i shows what depth
+ * pixel i measured (TUM, registered Kinect modes). */
 struct fusion_colour_push {
     bf_u32 first, max_count;  /* the window slice's list entries */
     bf_u32 frame_first;       /* first frame the pass reads */
@@ -666,8 +667,9 @@ struct fusion_colour_push {
     bf_f32 chunk_m;
     bf_f32 sigma_a, sigma_b, sigma_c;
     bf_f32 cfx, cfy, ccx, ccy;
-    bf_f32 R[9];
+    bf_f32 q[4];              /* x y z w */
     bf_f32 t[3];
+    bf_f32 dist[5];           /* k1 k2 p1 p2 k3, OpenCV's order */
     bf_u32 bricks_per_group;  /* consecutive list entries one workgroup colours */
     bf_u32 pad[3];
 };
@@ -675,6 +677,21 @@ struct fusion_colour_push {
 typedef struct fusion_colour_push fusion_colour_push;
 _Static_assert(sizeof(fusion_colour_push) == 128, "fusion_colour_push must match std430");
 #endif
+
+/* Brown-Conrady distortion of the normalised image point (x, y) = (X/Z,
+ * Y/Z), as OpenCV's projectPoints and calib/'s calib_distort apply it:
+ * radial 1 + k1 r2 + k2 r2^2 + k3 r2^3, tangential 2 p1 x y + p2 (r2 +
+ * 2 x^2) and p1 (r2 + 2 y^2) + 2 p2 x y. */
+BF_FN bf_f32 fusion_distort_x(bf_f32 x, bf_f32 y, bf_f32 k1, bf_f32 k2, bf_f32 p1, bf_f32 p2, bf_f32 k3)
+{
+    bf_f32 r2 = x * x + y * y;
+    return x * (1.0f + r2 * (k1 + r2 * (k2 + r2 * k3))) + 2.0f * p1 * x * y + p2 * (r2 + 2.0f * x * x);
+}
+BF_FN bf_f32 fusion_distort_y(bf_f32 x, bf_f32 y, bf_f32 k1, bf_f32 k2, bf_f32 p1, bf_f32 p2, bf_f32 k3)
+{
+    bf_f32 r2 = x * x + y * y;
+    return y * (1.0f + r2 * (k1 + r2 * (k2 + r2 * k3))) + p1 * (r2 + 2.0f * y * y) + 2.0f * p2 * x * y;
+}
 
 /* Weight of one frame's colour sample of a voxel: the cosine between the
  * viewing ray and the surface normal (from the depth image) over the

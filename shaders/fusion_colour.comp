@@ -182,15 +182,17 @@ void colour_brick(uint slot, uint tid)
             bool smooth_nb = d1 > 0.0 && d2 > 0.0 && abs(d1 - d0) < 4.0 * band && abs(d2 - d0) < 4.0 * band && dot(n, n) > 0.0;
             float cos_view = smooth_nb ? abs(dot(normalize(n), normalize(q0))) : 0.25;
             /* The colour pixel: the same one when registered, else the
-             * voxel's camera point through T_colour_depth and the colour
-             * intrinsics. */
+             * voxel's camera point through T_colour_depth, the colour
+             * camera's distortion and intrinsics. */
             uint cpix = p0;
             if (pc.registered == 0u) {
                 vec3 pcam = vec3((h.x / h.z - 0.5 - f.cx) / f.fx * h.z, (h.y / h.z - 0.5 - f.cy) / f.fy * h.z, h.z);
-                vec3 pcol = vec3(pc.R[0] * pcam.x + pc.R[1] * pcam.y + pc.R[2] * pcam.z + pc.t[0],
-                                 pc.R[3] * pcam.x + pc.R[4] * pcam.y + pc.R[5] * pcam.z + pc.t[1],
-                                 pc.R[6] * pcam.x + pc.R[7] * pcam.y + pc.R[8] * pcam.z + pc.t[2]);
-                float cu = pc.cfx * pcol.x / pcol.z + pc.ccx + 0.5, cv = pc.cfy * pcol.y / pcol.z + pc.ccy + 0.5;
+                vec3 qv = vec3(pc.q[0], pc.q[1], pc.q[2]);
+                vec3 pcol = pcam + 2.0 * cross(qv, cross(qv, pcam) + pc.q[3] * pcam) + vec3(pc.t[0], pc.t[1], pc.t[2]);
+                float xn = pcol.x / pcol.z, yn = pcol.y / pcol.z;
+                float xd = fusion_distort_x(xn, yn, pc.dist[0], pc.dist[1], pc.dist[2], pc.dist[3], pc.dist[4]);
+                float yd = fusion_distort_y(xn, yn, pc.dist[0], pc.dist[1], pc.dist[2], pc.dist[3], pc.dist[4]);
+                float cu = pc.cfx * xd + pc.ccx + 0.5, cv = pc.cfy * yd + pc.ccy + 0.5;
                 bool inside = pcol.z > 0.0 && cu >= 0.0 && cv >= 0.0 && cu < float(width) && cv < float(height);
                 near = near && inside;
                 cpix = inside ? uint(cv) * width + uint(cu) : 0u;

@@ -5,6 +5,7 @@
 #include <math.h>
 
 #include "calib/calib.h"
+#include "shaders/fusion.glsl.h"
 #include "synth/synth.h"
 #include "test.h"
 
@@ -131,6 +132,27 @@ BF_TEST(calib_undistort_inverts_distort)
             worst = fmax(worst, fmax(fabs(xu - x), fabs(yu - y)));
         }
     CHECK_LE(worst, 1e-11);
+}
+
+/* The colour pass distorts in float with the shared GLSL/C functions of
+ * shaders/fusion.glsl.h: the same model as calib's, to float precision
+ * (1e-6 of a normalised coordinate is 5e-4 px at fx 525). */
+BF_TEST(fusion_colour_distortion_matches_calib)
+{
+    const double dist[CALIB_DIST_N] = {0.12, -0.25, 1e-3, -5e-4, 0.08};
+    double worst = 0;
+    for (double y = -0.5; y <= 0.5; y += 0.05)
+        for (double x = -0.65; x <= 0.65; x += 0.05) {
+            double xd, yd;
+            calib_distort(dist, x, y, &xd, &yd);
+            float k1 = (float)dist[0], k2 = (float)dist[1], p1 = (float)dist[2], p2 = (float)dist[3];
+            float k3 = (float)dist[4];
+            float fx = fusion_distort_x((float)x, (float)y, k1, k2, p1, p2, k3);
+            float fy = fusion_distort_y((float)x, (float)y, k1, k2, p1, p2, k3);
+            worst = fmax(worst, fmax(fabs(fx - xd), fabs(fy - yd)));
+        }
+    CHECK(worst > 0); /* float, not a copy of the double result */
+    CHECK_LE(worst, 1e-6);
 }
 
 BF_TEST(calib_parse_board_takes_cols_by_rows)
