@@ -20,6 +20,8 @@
 #include "core/core.h"
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
+#include "hostmap/hostmap.h"
+#include "mesh/mesh.h"
 
 typedef struct render_caster render_caster; /* opaque */
 
@@ -107,5 +109,35 @@ typedef struct render_images {
 
 bf_status render_download(render_caster *rc, render_images *out);
 void render_images_free(render_images *im);
+
+/* ------------------------------------------------------------ mesh renderer: voxelisation (voxelise.c)
+ * A closed triangle mesh becomes inside/outside sign bits of the map's own
+ * bricks at one level (DESIGN.md section 5: the mesh renderer shares the
+ * ray-casting backend): load the result into a fusion map (fusion_load) and
+ * ray-cast it with the `surface` traverser. Only the bricks the surface
+ * passes through are made; every voxel of them is confident. Inside is
+ * decided by the parity of the surface crossings below a voxel along +z
+ * (Schwarz and Seidel 2010), on the GPU; a mesh with holes leaks along the
+ * columns through them. */
+typedef struct render_voxelise_config {
+    float chunk_m;      /* chunk edge of the map it goes into, default 2 m */
+    uint32_t level;     /* octree level: voxel edge chunk_m / (8 * 2^level), default 7 (1.95 mm) */
+    uint64_t max_pairs; /* refuse meshes needing more (brick, triangle) pairs, default 2^28 */
+} render_voxelise_config;
+
+typedef struct render_voxelise_stats {
+    uint32_t n_bricks;
+    uint64_t n_pairs;          /* (brick, triangle) pairs of the bins */
+    double voxel_m;
+    double seconds, seconds_bin, seconds_gpu; /* all; binning on the host; the GPU pass with its transfers */
+} render_voxelise_stats;
+
+render_voxelise_config render_voxelise_config_default(void);
+/* Voxelises mesh (placed in the world by T_world_mesh, NULL: identity) into
+ * out (its origin_w: the mesh's low corner less a brick). st may be NULL.
+ * BF_INVALID_ARG for a vertex that is not finite, an index out of range, a
+ * level above 12 or a mesh that needs more than max_pairs pairs. */
+bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf_se3 *T_world_mesh,
+                               const render_voxelise_config *cfg, hostmap *out, render_voxelise_stats *st);
 
 #endif

@@ -126,4 +126,45 @@ BF_FN bf_u32 render_shade(bf_f32 cos_theta, bf_u32 level)
     return r | (g << 8) | (b << 16) | (255u << 24);
 }
 
+/* ------------------------------------------------------------ mesh voxelisation
+ * render_voxelise.comp: a closed triangle mesh into inside/outside bits of
+ * the map's bricks (the mesh renderer, issue 14), by the parity of the
+ * surface crossings along +z columns through voxel centres, as Schwarz and
+ * Seidel's solid voxelisation (2010) flips every voxel above a crossing.
+ * Per brick of the list one workgroup, one invocation per column (x, y):
+ * the brick's triangles (CSR list) are tested against the column's centre;
+ * a crossing inside the brick's z range flips the column's voxels above it
+ * and toggles the column's parity. The host adds the parity entering each
+ * brick from below (the XOR of the parities of the bricks beneath it). */
+#define RENDER_VOX_BRICK_WORDS 6u  /* per brick: ix, iy, iz (brick coordinates on the level's grid), tri_begin, tri_end, pad */
+#define RENDER_VOX_OUT_WORDS 18u   /* per brick: 16 flip words (brick bit layout), 2 column parity words (bit x + 8y) */
+struct render_vox_push {
+    bf_u32 n_bricks;
+    bf_f32 voxel_m;      /* voxel edge at the level */
+    bf_u32 pad[2];
+};
+#ifndef BF_GLSL
+typedef struct render_vox_push render_vox_push;
+_Static_assert(sizeof(render_vox_push) == 16, "render_vox_push must match std430");
+#endif
+
+/* Edge function of 2D point (px, py) against edge a -> b, computed the same
+ * way whichever way the edge is walked (the lexicographically smaller end
+ * first, the sign flipped back), so two triangles sharing an edge see the
+ * exact negatives of each other at a column on it. */
+BF_FN bf_f32 render_edge(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by, bf_f32 px, bf_f32 py)
+{
+    bool swap = ax > bx || (ax == bx && ay > by);
+    bf_f32 ux = swap ? bx : ax, uy = swap ? by : ay, vx = swap ? ax : bx, vy = swap ? ay : by;
+    BF_PRECISE bf_f32 e = (vx - ux) * (py - uy) - (vy - uy) * (px - ux);
+    return swap ? -e : e;
+}
+/* Whether a point exactly on edge a -> b of a counter-clockwise triangle
+ * counts (top-left rule): a left edge (going down) or a top edge
+ * (horizontal, going left). One of two triangles sharing it counts it. */
+BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
+{
+    return by < ay || (by == ay && bx < ax);
+}
+
 #endif

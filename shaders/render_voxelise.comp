@@ -1,0 +1,75 @@
+#version 450
+/* Mesh voxelisation (render.glsl.h, "mesh voxelisation"): for each brick
+ * of the list, the crossings of its triangles with the 64 columns of voxel
+ * centres along +z. Each invocation owns one column, so the flips need no
+ * atomics until the columns are merged into the brick's 16 words.
+ * Coordinates are relative to the brick's low corner, in voxels, so float
+ * keeps sub-voxel precision however far the brick is from the origin. */
+#extension GL_GOOGLE_include_directive : require
+#include "render.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) readonly buffer Verts { float v[]; } verts;  /* x y z per vertex, map metres */
+layout(std430, binding = 1) readonly buffer Tris { uint i[]; } tris;     /* 3 vertex indices per triangle */
+layout(std430, binding = 2) readonly buffer Bricks { uint w[]; } bricks; /* RENDER_VOX_BRICK_WORDS per brick */
+layout(std430, binding = 3) readonly buffer TriIds { uint i[]; } tri_ids;
+layout(std430, binding = 4) writeonly buffer Out { uint w[]; } outw;      /* RENDER_VOX_OUT_WORDS per brick */
+
+layout(push_constant) uniform Push { render_vox_push pc; };
+
+shared uint s_flip[BRICK_WORDS];
+shared uint s_par[2];
+
+/* Vertex k in voxel units relative to the brick's low corner lo (metres). */
+vec3 vertex(uint k, vec3 lo) { return (vec3(verts.v[3u * k], verts.v[3u * k + 1u], verts.v[3u * k + 2u]) - lo) / pc.voxel_m; }
+
+void main()
+{
+    uint b = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    if (b >= pc.n_bricks) return; /* uniform */
+    uint t = gl_LocalInvocationID.x, cx = t & 7u, cy = t >> 3;
+    if (t < BRICK_WORDS) s_flip[t] = 0u;
+    if (t < 2u) s_par[t] = 0u;
+    barrier();
+    ivec3 B = ivec3(int(bricks.w[b * RENDER_VOX_BRICK_WORDS]), int(bricks.w[b * RENDER_VOX_BRICK_WORDS + 1u]),
+                    int(bricks.w[b * RENDER_VOX_BRICK_WORDS + 2u]));
+    uint first = bricks.w[b * RENDER_VOX_BRICK_WORDS + 3u], last = bricks.w[b * RENDER_VOX_BRICK_WORDS + 4u];
+    vec3 lo = vec3(B * 8) * pc.voxel_m;
+    float px = float(cx) + 0.5, py = float(cy) + 0.5;
+    uint flip = 0u, parity = 0u;
+    for (uint k = first; k < last; k++) {
+        uint tri = tri_ids.i[k];
+        vec3 a = vertex(tris.i[3u * tri], lo), c1 = vertex(tris.i[3u * tri + 1u], lo), c2 = vertex(tris.i[3u * tri + 2u], lo);
+        /* Counter-clockwise in xy; a triangle seen edge-on crosses nothing. */
+        float area = (c1.x - a.x) * (c2.y - a.y) - (c1.y - a.y) * (c2.x - a.x);
+        if (area == 0.0) continue;
+        if (area < 0.0) {
+            vec3 tmp = c1;
+            c1 = c2;
+            c2 = tmp;
+            area = -area;
+        }
+        float e0 = render_edge(c1.x, c1.y, c2.x, c2.y, px, py);
+        float e1 = render_edge(c2.x, c2.y, a.x, a.y, px, py);
+        float e2 = render_edge(a.x, a.y, c1.x, c1.y, px, py);
+        bool in0 = e0 > 0.0 || (e0 == 0.0 && render_edge_owns(c1.x, c1.y, c2.x, c2.y));
+        bool in1 = e1 > 0.0 || (e1 == 0.0 && render_edge_owns(c2.x, c2.y, a.x, a.y));
+        bool in2 = e2 > 0.0 || (e2 == 0.0 && render_edge_owns(a.x, a.y, c1.x, c1.y));
+        if (!(in0 && in1 && in2)) continue;
+        float z = (e0 * a.z + e1 * c1.z + e2 * c2.z) / area;
+        /* The crossing belongs to the brick whose z range holds it. */
+        if (!(z >= 0.0 && z < 8.0)) continue;
+        /* Voxel centres k + 0.5 above z flip. */
+        int k0 = int(ceil(z - 0.5));
+        if (z - 0.5 == float(k0)) k0++; /* a centre on the surface is outside */
+        flip ^= (0xFFu << uint(clamp(k0, 0, 8))) & 0xFFu;
+        parity ^= 1u;
+    }
+    for (uint z = 0u; z < 8u; z++)
+        if (((flip >> z) & 1u) != 0u) atomicOr(s_flip[brick_word(cx, cy, z)], 1u << brick_bit(cx, cy, z));
+    if (parity != 0u) atomicOr(s_par[t >> 5], 1u << (t & 31u));
+    barrier();
+    if (t < BRICK_WORDS) outw.w[b * RENDER_VOX_OUT_WORDS + t] = s_flip[t];
+    if (t < 2u) outw.w[b * RENDER_VOX_OUT_WORDS + BRICK_WORDS + t] = s_par[t];
+}
