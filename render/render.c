@@ -204,7 +204,8 @@ bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrin
         .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
         .max_level = v.max_level,
         .flags = (opt->confident_only ? RENDER_FLAG_CONFIDENT_ONLY : 0u) | (opt->refine ? RENDER_FLAG_REFINE : 0u) |
-                 (opt->start_depth ? RENDER_FLAG_START : 0u) | (!opt->no_shade && v.has_colour ? RENDER_FLAG_COLOUR : 0u),
+                 (opt->start_depth ? RENDER_FLAG_START : 0u) | (!opt->no_shade && v.has_colour ? RENDER_FLAG_COLOUR : 0u) |
+                 (opt->no_graze ? RENDER_FLAG_NO_GRAZE : 0u),
         .start_margin_m = opt->start_margin_m,
         .start_margin_z2 = opt->start_margin_z2,
         .start_off = (uint32_t)opt->start_offset,

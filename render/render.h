@@ -50,6 +50,10 @@ typedef struct render_options {
     uint64_t start_offset;
     float start_margin_m, start_margin_z2;
     bool no_shade;       /* depth and level only: normals and colour are not computed */
+    /* With refine: pass by a hit whose refined depth leaves the ray still in front of the
+       smoothed surface (a behind voxel's corner grazed at an outline) and go on behind it. The
+       mesh renderer's outlines (docs/render.md); default false. */
+    bool no_graze;
     /* Optional depth destination (NULL: the caster's depth image): the depth is written as
      * width x height floats from pixel depth_offset of depth_out instead, e.g. straight into the
      * tracking reference (track_reference_target), so nothing is copied. Needs no_shade (the

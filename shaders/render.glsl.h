@@ -26,6 +26,7 @@
 #define RENDER_FLAG_REFINE 2u         /* hit between the two voxel centres */
 #define RENDER_FLAG_START 4u          /* rays start at the start image's depth minus a margin */
 #define RENDER_FLAG_COLOUR 8u         /* look up the map's colour at the hit (bindings 7-9) */
+#define RENDER_FLAG_NO_GRAZE 16u      /* with REFINE: a hit whose refined field stays in front is passed by */
 
 /* Octree cells are addressed by integer coordinates on the finest grid
  * (2^FUSION_MAX_LEVEL = 256 cells per chunk edge); a cell at level L is
@@ -49,6 +50,12 @@
  * RENDER_SUBVOXEL_MAX_MOVE steps from the midpoint start (render.md: two
  * steps within a voxel left a noisy map's bias, 4 within 3 remove it). */
 #define RENDER_SUBVOXEL_ITERS 4u
+/* RENDER_FLAG_NO_GRAZE: a hit is passed by when the smoothed sign field at
+ * its refined depth is still above this (in [-1, 1]; 0 on the surface): the
+ * ray crossed a corner of a behind voxel without reaching the surface the
+ * voxels sample. At most RENDER_GRAZE_MAX such hits a ray. */
+#define RENDER_GRAZE_F 0.25f
+#define RENDER_GRAZE_MAX 4u
 #define RENDER_SUBVOXEL_MAX_STEP 1.0f
 #define RENDER_SUBVOXEL_MAX_MOVE 3.0f
 

@@ -194,7 +194,8 @@ uint hit_colour(render_ray ray, render_trace tr)
 /* Depth of the zero of the smoothed sign field on the ray, from the
  * midpoint depth s0 of the two voxel centres of a hit in brick (slot,
  * brick) at level. */
-float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s0, bool confident_only)
+float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s0, bool confident_only, bool want_f,
+                     out float f_end)
 {
     float v = fusion_voxel_m(pc.chunk_m, level), inv_v = 1.0 / v;
     float step_max = RENDER_SUBVOXEL_MAX_STEP * v / length(ray.dir);
@@ -202,7 +203,10 @@ float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s
     float s = s0;
     ivec3 G = ivec3(0x7FFFFFFF);
     float S[8];
-    for (uint it = 0u; it < RENDER_SUBVOXEL_ITERS; it++) {
+    f_end = 1.0;
+    /* With want_f one evaluation more than steps: f_end is the field where s ends. */
+    uint n_eval = want_f ? RENDER_SUBVOXEL_ITERS + 1u : RENDER_SUBVOXEL_ITERS;
+    for (uint it = 0u; it < n_eval; it++) {
         /* Voxel-centre coordinates: centre of voxel i at q = i. */
         vec3 q = (ray.o + s * ray.dir) * inv_v - 0.5;
         ivec3 Gn = ivec3(floor(q));
@@ -230,6 +234,8 @@ float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s
             F += w.x * w.y * w.z * S[c];
             g += sgnd * vec3(w.y * w.z, w.x * w.z, w.x * w.y) * S[c];
         }
+        f_end = F;
+        if (it == RENDER_SUBVOXEL_ITERS) break;
         float dFds = dot(g, ray.dir) * inv_v;
         if (!(dFds < 0.0)) break; /* the field must fall into the surface */
         s = clamp(s - clamp(F / dFds, -step_max, step_max), lo, hi);
@@ -272,7 +278,8 @@ void main()
     uint st_node[RENDER_STACK], st_brick[RENDER_STACK], st_blevel[RENDER_STACK];
     int deep = -1, lo = 0;
     uvec3 g_prev = uvec3(0u);
-    bool hit = false;
+    bool hit = false, refined = false;
+    uint n_graze = 0u;
 
     float s = pc.near_m;
     if ((pc.flags & RENDER_FLAG_START) != 0u) {
@@ -343,14 +350,28 @@ void main()
             vec3 brick_lo = chunk_lo + vec3(g >> (RENDER_GRID_BITS - bl)) * brick_m;
             if (render_traverse(slot, bl, brick_lo, brick_m * 0.125, ray, s, min(s_exit, pc.far_m), pc.flags, tr)) {
                 hit = true;
-                break;
+                if ((pc.flags & RENDER_FLAG_NO_GRAZE) == 0u || (pc.flags & RENDER_FLAG_REFINE) == 0u) break;
+                float f_end;
+                float d = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
+                                         (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u, true, f_end);
+                if (!(f_end > RENDER_GRAZE_F) || ++n_graze > RENDER_GRAZE_MAX) {
+                    tr.hit_depth = d;
+                    refined = true;
+                    break;
+                }
+                /* A corner grazed: go on behind it, as from unknown space. */
+                hit = false;
+                tr.has_front = 0u;
+                s = max(tr.hit_s_exit, sp);
+                continue;
             }
         }
         s = max(s_exit, sp);
     }
-    if (hit && (pc.flags & RENDER_FLAG_REFINE) != 0u)
+    float f_unused;
+    if (hit && !refined && (pc.flags & RENDER_FLAG_REFINE) != 0u)
         tr.hit_depth = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
-                                      (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u);
+                                      (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u, false, f_unused);
     depth_out.v[pc.depth_off + pixel] = hit ? tr.hit_depth : 0.0;
     level_out.v[pixel] = hit ? tr.hit_level : FUSION_NONE;
     if ((pc.flags & RENDER_FLAG_COLOUR) != 0u) rgb_out.v[pixel] = hit ? hit_colour(ray, tr) : 0u;

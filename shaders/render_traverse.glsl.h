@@ -45,6 +45,7 @@ struct render_trace {
     uint hit_level;
     uint hit_slot;     /* brick of the first behind voxel (the sub-voxel refinement starts there) */
     ivec3 hit_brick;   /* its brick coordinate on its level's grid (brick units from the map origin) */
+    float hit_s_exit;  /* ray parameter where the ray leaves that voxel */
 };
 
 /* Nudge into a cell past its entry face before locating the voxel there
@@ -91,6 +92,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                 tr.hit_level = level;
                 tr.hit_slot = slot;
                 tr.hit_brick = ivec3(floor(brick_lo * (0.125 / voxel_m) + 0.5));
+                tr.hit_s_exit = min(s_max.x, min(s_max.y, s_max.z));
                 return true;
             }
         }

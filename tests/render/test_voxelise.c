@@ -52,13 +52,14 @@ typedef struct view_result {
 /* Ray-casts the voxelised mesh at T_wc and compares with the CPU's ray
  * trace of the mesh itself. */
 static void compare_view(gpu_context *ctx, fusion_map *map, const mesh_bvh *bvh, const bf_se3 *T_wc, double voxel_m,
-                         view_result *out)
+                         bool no_graze, view_result *out)
 {
     view_result r = {0};
     render_caster *rc;
     CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
     render_options ro = render_options_display();
     ro.near_m = 0.05f;
+    ro.no_graze = no_graze;
     CHECK_OK(render_raycast(rc, map, &K_VIEW, T_wc, &ro));
     render_images im;
     CHECK_OK(render_download(rc, &im));
@@ -109,23 +110,24 @@ static void check_mesh(gpu_context *ctx, const mesh_data *m, uint32_t level, con
     bf_vec3 centre = bf_v3((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2);
     double size = fmax(hi[0] - lo[0], fmax(hi[1] - lo[1], hi[2] - lo[2]));
     const double views[3][2] = {{0, 0}, {0.7, 0.4}, {-2.2, -0.9}};
-    for (int k = 0; k < 3; k++) {
-        bf_se3 T = look_at(centre, 1.6 * size, views[k][0], views[k][1]);
+    for (int k = 0; k < 6; k++) {
+        bool no_graze = k >= 3;
+        bf_se3 T = look_at(centre, 1.6 * size, views[k % 3][0], views[k % 3][1]);
         view_result r = {0};
-        compare_view(ctx, map, bvh, &T, st.voxel_m, &r);
-        fprintf(stderr, "  %s level %u (%.2f mm, %u bricks, %.3f s), view %d: IoU %.4f (%u pixels hit only by the "
+        compare_view(ctx, map, bvh, &T, st.voxel_m, no_graze, &r);
+        fprintf(stderr, "  %s level %u (%.2f mm, %u bricks, %.3f s), view %d%s: IoU %.4f (%u pixels hit only by the "
                         "cast), |depth error| p50 %.2f, p95 %.2f, p99 %.2f voxels (%u pixels hit)\n",
-                name, level, 1e3 * st.voxel_m, st.n_bricks, st.seconds, k, r.iou, r.n_cast_only, r.depth_p50,
-                r.depth_p95, r.depth_p99, r.n_truth);
+                name, level, 1e3 * st.voxel_m, st.n_bricks, st.seconds, k % 3, no_graze ? ", no_graze" : "", r.iou,
+                r.n_cast_only, r.depth_p50, r.depth_p95, r.depth_p99, r.n_truth);
         CHECK(r.n_truth > K_VIEW.width * K_VIEW.height / 10);
         /* Depths lie within the voxel of the level used (the sub-voxel
-         * refinement puts the median at a tenth of one; the last percent,
-         * grazing rays at the outline, up to 1.9). Silhouettes: a
+         * refinement puts the median at a tenth of one). Silhouettes: a
          * voxel whose centre is inside is drawn as its whole cube, so the
-         * outline grows by up to half a voxel (a sixth of a pixel here):
-         * IoU 0.987-0.992 measured, against the issue's 0.99 (docs/render.md);
-         * bounded at 0.98, and the cast may add pixels but hardly lose any. */
-        CHECK(r.iou >= 0.98);
+         * plain cast's outline grows by up to half a voxel (a sixth of a
+         * pixel here: IoU 0.986-0.992); passing by the hits whose refined
+         * depth stays in front of the smoothed surface (no_graze, what the
+         * mesh renderer casts with) meets the issue's 0.99 (docs/render.md). */
+        CHECK(r.iou >= (no_graze ? 0.99 : 0.98));
         CHECK_LE(r.depth_p50, 0.25);
         CHECK_LE(r.depth_p95, 1.0);
     }
