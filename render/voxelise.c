@@ -32,64 +32,177 @@ static int32_t key_x(uint64_t k) { return (int32_t)((k >> (2 * KEY_BITS)) & ((1u
 static int32_t key_y(uint64_t k) { return (int32_t)((k >> KEY_BITS) & ((1u << KEY_BITS) - 1)) - KEY_OFF; }
 static int32_t key_z(uint64_t k) { return (int32_t)(k & ((1u << KEY_BITS) - 1)) - KEY_OFF; }
 
-/* One (brick, triangle) pair of the bins. */
-typedef struct bin_pair {
-    uint64_t key;
-    uint32_t tri;
-} bin_pair;
+/* Open-addressing hash of brick keys -> their index in order of arrival
+ * (the bins are counted, then filled, in two passes over the triangles:
+ * linear in the pairs, where sorting them cost most of the time). */
+typedef struct brick_hash {
+    uint64_t *keys; /* 0: empty (a real key has the offset bits set) */
+    uint32_t *idx;
+    uint32_t cap, n; /* cap a power of two */
+} brick_hash;
 
-static int pair_cmp(const void *a, const void *b)
+static uint32_t hash_slot(uint64_t k, uint32_t cap)
 {
-    const bin_pair *p = a, *q = b;
-    if (p->key != q->key) return p->key < q->key ? -1 : 1;
-    return p->tri < q->tri ? -1 : p->tri > q->tri;
+    k ^= k >> 33, k *= 0xff51afd7ed558ccdull, k ^= k >> 33; /* MurmurHash3's finaliser */
+    return (uint32_t)k & (cap - 1);
+}
+
+static bf_status hash_grow(brick_hash *h)
+{
+    brick_hash g = {.cap = h->cap ? 2 * h->cap : 4096, .n = h->n};
+    g.keys = bf_calloc(g.cap, 8);
+    g.idx = bf_malloc((size_t)g.cap * 4);
+    if (!g.keys || !g.idx) {
+        free(g.keys);
+        free(g.idx);
+        return bf_fail(BF_NO_MEMORY, "render: brick hash of %u entries", g.cap);
+    }
+    for (uint32_t i = 0; i < h->cap; i++) {
+        if (!h->keys[i]) continue;
+        uint32_t j = hash_slot(h->keys[i], g.cap);
+        while (g.keys[j]) j = (j + 1) & (g.cap - 1);
+        g.keys[j] = h->keys[i], g.idx[j] = h->idx[i];
+    }
+    free(h->keys);
+    free(h->idx);
+    *h = g;
+    return BF_OK;
+}
+
+/* Index of key, inserted (as the next index) when absent and insert is set;
+ * UINT32_MAX when absent and not inserted or out of memory (status in *s). */
+static uint32_t hash_get(brick_hash *h, uint64_t key, bool insert, bf_status *s)
+{
+    if (insert && 2 * (h->n + 1) > h->cap && (*s = hash_grow(h)) != BF_OK) return UINT32_MAX;
+    uint32_t j = hash_slot(key, h->cap);
+    while (h->keys[j] && h->keys[j] != key) j = (j + 1) & (h->cap - 1);
+    if (h->keys[j]) return h->idx[j];
+    if (!insert) return UINT32_MAX;
+    h->keys[j] = key, h->idx[j] = h->n;
+    return h->n++;
+}
+
+/* Brick range of triangle t's bounding box. */
+static uint64_t tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double brick_m, int64_t b0[3],
+                           int64_t b1[3])
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int k = 0; k < 3; k++)
+        for (int a = 0; a < 3; a++) {
+            double c = v[3 * (size_t)mesh->tri[3 * (size_t)t + k] + a];
+            lo[a] = fmin(lo[a], c), hi[a] = fmax(hi[a], c);
+        }
+    for (int a = 0; a < 3; a++) b0[a] = (int64_t)floor(lo[a] / brick_m), b1[a] = (int64_t)floor(hi[a] / brick_m);
+    return (uint64_t)(b1[0] - b0[0] + 1) * (uint64_t)(b1[1] - b0[1] + 1) * (uint64_t)(b1[2] - b0[2] + 1);
+}
+
+static int key_cmp(const void *a, const void *b)
+{
+    uint64_t p = *(const uint64_t *)a, q = *(const uint64_t *)b;
+    return p < q ? -1 : p > q;
+}
+
+/* The bins: keys[n_bricks] sorted (x, y, then z), first[n_bricks + 1]
+ * offsets into tri_ids (each brick's triangles in mesh order). */
+typedef struct bins {
+    uint64_t *keys;
+    uint32_t *first, *tri_ids;
+    uint32_t n_bricks;
+    uint64_t n_pairs;
+} bins;
+
+static void bins_free(bins *b)
+{
+    free(b->keys);
+    free(b->first);
+    free(b->tri_ids);
+    memset(b, 0, sizeof *b);
+}
+
+static bf_status bin_triangles(const float *v, const mesh_data *mesh, double brick_m, uint64_t max_pairs, bins *out)
+{
+    memset(out, 0, sizeof *out);
+    brick_hash h = {0};
+    uint32_t *count = NULL, count_cap = 0;
+    bf_status s = hash_grow(&h);
+    uint64_t n_pairs = 0;
+    /* Pass 1: the bricks and how many triangles each gets. */
+    for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
+        int64_t b0[3], b1[3];
+        uint64_t n = tri_bricks(v, mesh, t, brick_m, b0, b1);
+        if (n_pairs + n > max_pairs) {
+            s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at this level "
+                        "(triangle %u spans %llu bricks): choose a coarser level",
+                        (unsigned long long)max_pairs, t, (unsigned long long)n);
+            break;
+        }
+        n_pairs += n;
+        for (int64_t z = b0[2]; s == BF_OK && z <= b1[2]; z++)
+            for (int64_t y = b0[1]; s == BF_OK && y <= b1[1]; y++)
+                for (int64_t x = b0[0]; s == BF_OK && x <= b1[0]; x++) {
+                    uint32_t i = hash_get(&h, brick_key(x, y, z), true, &s);
+                    if (s != BF_OK) break;
+                    if (i >= count_cap) {
+                        uint32_t cap = count_cap ? 2 * count_cap : 4096;
+                        uint32_t *c = bf_realloc(count, (size_t)cap * 4);
+                        if (!c) {
+                            s = bf_fail(BF_NO_MEMORY, "render: counting %u bricks", cap);
+                            break;
+                        }
+                        memset(c + count_cap, 0, (size_t)(cap - count_cap) * 4);
+                        count = c, count_cap = cap;
+                    }
+                    count[i]++;
+                }
+    }
+    uint32_t nb = h.n;
+    uint32_t *rank = NULL, *fill = NULL;
+    if (s == BF_OK) {
+        out->keys = bf_malloc((size_t)(nb ? nb : 1) * 8);
+        out->first = bf_malloc((size_t)(nb + 1) * 4);
+        out->tri_ids = bf_malloc((size_t)(n_pairs ? n_pairs : 1) * 4);
+        rank = bf_malloc((size_t)(nb ? nb : 1) * 4);
+        fill = bf_malloc((size_t)(nb ? nb : 1) * 4);
+        if (!out->keys || !out->first || !out->tri_ids || !rank || !fill)
+            s = bf_fail(BF_NO_MEMORY, "render: bins of %u bricks", nb);
+    }
+    if (s == BF_OK) {
+        /* Bricks in (x, y, z) order: the host's parity sweep walks the stacks. */
+        uint32_t k = 0;
+        for (uint32_t i = 0; i < h.cap; i++)
+            if (h.keys[i]) out->keys[k++] = h.keys[i];
+        qsort(out->keys, nb, 8, key_cmp);
+        for (uint32_t r = 0; r < nb; r++) rank[hash_get(&h, out->keys[r], false, &s)] = r;
+        out->first[0] = 0;
+        for (uint32_t r = 0; r < nb; r++) {
+            uint32_t i = hash_get(&h, out->keys[r], false, &s);
+            out->first[r + 1] = out->first[r] + count[i];
+            fill[r] = out->first[r];
+        }
+    }
+    /* Pass 2: the triangles into their bins, in mesh order. */
+    for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
+        int64_t b0[3], b1[3];
+        (void)tri_bricks(v, mesh, t, brick_m, b0, b1);
+        for (int64_t z = b0[2]; z <= b1[2]; z++)
+            for (int64_t y = b0[1]; y <= b1[1]; y++)
+                for (int64_t x = b0[0]; x <= b1[0]; x++)
+                    out->tri_ids[fill[rank[hash_get(&h, brick_key(x, y, z), false, &s)]]++] = t;
+    }
+    out->n_bricks = nb;
+    out->n_pairs = n_pairs;
+    free(h.keys);
+    free(h.idx);
+    free(count);
+    free(rank);
+    free(fill);
+    if (s != BF_OK) bins_free(out);
+    return s;
 }
 
 render_voxelise_config render_voxelise_config_default(void)
 {
     return (render_voxelise_config){.chunk_m = 2.0f, .level = 7, .max_pairs = 1ull << 28};
-}
-
-/* The (brick, triangle) pairs of every triangle's bounding box, sorted. */
-static bf_status bin_triangles(const float *v, const mesh_data *mesh, double brick_m, uint64_t max_pairs,
-                               bin_pair **out, uint64_t *n_out)
-{
-    uint64_t n = 0, cap = (uint64_t)mesh->n_tris * 2 + 16;
-    bin_pair *p = bf_malloc(cap * sizeof *p);
-    if (!p) return bf_fail(BF_NO_MEMORY, "render: binning %u triangles", mesh->n_tris);
-    for (uint32_t t = 0; t < mesh->n_tris; t++) {
-        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        for (int k = 0; k < 3; k++)
-            for (int a = 0; a < 3; a++) {
-                double c = v[3 * (size_t)mesh->tri[3 * (size_t)t + k] + a];
-                lo[a] = fmin(lo[a], c), hi[a] = fmax(hi[a], c);
-            }
-        int64_t b0[3], b1[3];
-        for (int a = 0; a < 3; a++) b0[a] = (int64_t)floor(lo[a] / brick_m), b1[a] = (int64_t)floor(hi[a] / brick_m);
-        uint64_t count = (uint64_t)(b1[0] - b0[0] + 1) * (uint64_t)(b1[1] - b0[1] + 1) * (uint64_t)(b1[2] - b0[2] + 1);
-        if (n + count > max_pairs) {
-            free(p);
-            return bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at this level "
-                           "(triangle %u spans %llu bricks): choose a coarser level",
-                           (unsigned long long)max_pairs, t, (unsigned long long)count);
-        }
-        if (n + count > cap) {
-            while (n + count > cap) cap *= 2;
-            bin_pair *q = bf_realloc(p, cap * sizeof *p);
-            if (!q) {
-                free(p);
-                return bf_fail(BF_NO_MEMORY, "render: binning %u triangles", mesh->n_tris);
-            }
-            p = q;
-        }
-        for (int64_t z = b0[2]; z <= b1[2]; z++)
-            for (int64_t y = b0[1]; y <= b1[1]; y++)
-                for (int64_t x = b0[0]; x <= b1[0]; x++) p[n++] = (bin_pair){brick_key(x, y, z), t};
-    }
-    qsort(p, n, sizeof *p, pair_cmp);
-    *out = p;
-    *n_out = n;
-    return BF_OK;
 }
 
 /* The GPU pass over the bricks: out gets RENDER_VOX_OUT_WORDS per brick. */
@@ -217,54 +330,39 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
             return bf_fail(BF_INVALID_ARG, "render: triangle %u names vertex %u of %u", t / 3, mesh->tri[t],
                            mesh->n_verts);
         }
-    bin_pair *pairs = NULL;
-    uint64_t n_pairs = 0;
-    bf_status s = bin_triangles(v, mesh, brick_m, c.max_pairs, &pairs, &n_pairs);
-    uint32_t n_bricks = 0;
-    for (uint64_t i = 0; s == BF_OK && i < n_pairs; i++) n_bricks += i == 0 || pairs[i].key != pairs[i - 1].key;
-    uint64_t *keys = NULL;
-    uint32_t *brick_words = NULL, *tri_ids = NULL, *gpu_out = NULL;
+    bins bn;
+    bf_status s = bin_triangles(v, mesh, brick_m, c.max_pairs, &bn);
+    uint32_t n_bricks = s == BF_OK ? bn.n_bricks : 0;
+    uint32_t *brick_words = NULL, *gpu_out = NULL;
     if (s == BF_OK) {
-        keys = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * 8);
         brick_words = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_BRICK_WORDS * 4);
-        tri_ids = bf_malloc((size_t)(n_pairs ? n_pairs : 1) * 4);
         gpu_out = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_OUT_WORDS * 4);
         out->bricks = bf_calloc(n_bricks ? n_bricks : 1, sizeof *out->bricks);
-        if (!keys || !brick_words || !tri_ids || !gpu_out || !out->bricks)
-            s = bf_fail(BF_NO_MEMORY, "render: voxelising into %u bricks", n_bricks);
+        if (!brick_words || !gpu_out || !out->bricks) s = bf_fail(BF_NO_MEMORY, "render: voxelising into %u bricks", n_bricks);
     }
-    for (uint64_t i = 0, b = 0; s == BF_OK && i < n_pairs; i++) {
-        tri_ids[i] = pairs[i].tri;
-        if (i == 0 || pairs[i].key != pairs[i - 1].key) {
-            if (i) brick_words[(b - 1) * RENDER_VOX_BRICK_WORDS + 4] = (uint32_t)i;
-            keys[b] = pairs[i].key;
-            uint32_t *w = brick_words + b * RENDER_VOX_BRICK_WORDS;
-            w[0] = (uint32_t)key_x(pairs[i].key), w[1] = (uint32_t)key_y(pairs[i].key);
-            w[2] = (uint32_t)key_z(pairs[i].key), w[3] = (uint32_t)i, w[5] = 0;
-            b++;
-        }
-        if (i + 1 == n_pairs) brick_words[(b - 1) * RENDER_VOX_BRICK_WORDS + 4] = (uint32_t)n_pairs;
+    for (uint32_t i = 0; s == BF_OK && i < n_bricks; i++) {
+        uint32_t *w = brick_words + (size_t)i * RENDER_VOX_BRICK_WORDS;
+        w[0] = (uint32_t)key_x(bn.keys[i]), w[1] = (uint32_t)key_y(bn.keys[i]), w[2] = (uint32_t)key_z(bn.keys[i]);
+        w[3] = bn.first[i], w[4] = bn.first[i + 1], w[5] = 0;
     }
-    free(pairs);
     double t1 = bf_time_s();
-    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_bricks, tri_ids, n_pairs, (float)voxel_m, gpu_out);
+    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_bricks, bn.tri_ids, bn.n_pairs, (float)voxel_m, gpu_out);
     double t2 = bf_time_s();
     if (s == BF_OK) {
-        finish_bricks(keys, gpu_out, n_bricks, c.level, out);
+        finish_bricks(bn.keys, gpu_out, n_bricks, c.level, out);
         out->n_bricks = n_bricks;
     }
     if (s == BF_OK && st) {
         st->n_bricks = n_bricks;
-        st->n_pairs = n_pairs;
+        st->n_pairs = bn.n_pairs;
         st->voxel_m = voxel_m;
         st->seconds_bin = t1 - t0;
         st->seconds_gpu = t2 - t1;
         st->seconds = bf_time_s() - t0;
     }
     free(v);
-    free(keys);
+    bins_free(&bn);
     free(brick_words);
-    free(tri_ids);
     free(gpu_out);
     if (s != BF_OK) hostmap_free(out);
     return s;
