@@ -210,7 +210,9 @@ fail:
     return status;
 }
 
-bf_status gpu_submit_wait(gpu_context *ctx)
+bf_status gpu_submit_wait(gpu_context *ctx) { return gpu__submit_wait_signal(ctx, VK_NULL_HANDLE); }
+
+bf_status gpu__submit_wait_signal(gpu_context *ctx, VkSemaphore semaphore)
 {
     BF_ASSERT(ctx->is_recording);
     BF_ASSERT(!ctx->is_stage_open && ctx->label_depth == 0);
@@ -225,6 +227,8 @@ bf_status gpu_submit_wait(gpu_context *ctx)
         .sType = VK_STRUCTURE_TYPE_SUBMIT_INFO,
         .commandBufferCount = 1,
         .pCommandBuffers = &ctx->cmd,
+        .signalSemaphoreCount = semaphore ? 1 : 0,
+        .pSignalSemaphores = &semaphore,
     };
     GPU__CHECK(vk->ResetFences(ctx->device, 1, &ctx->fence), "gpu.fence");
     GPU__CHECK(vk->QueueSubmit(ctx->queue, 1, &si, ctx->fence), "gpu.cmd");

@@ -25,7 +25,8 @@ const char *gpu__vk_result_name(VkResult r)
         R(VK_ERROR_FORMAT_NOT_SUPPORTED) R(VK_ERROR_FRAGMENTED_POOL)
         R(VK_ERROR_OUT_OF_POOL_MEMORY) R(VK_ERROR_INVALID_SHADER_NV)
         R(VK_ERROR_FRAGMENTATION) R(VK_PIPELINE_COMPILE_REQUIRED)
-        R(VK_ERROR_UNKNOWN)
+        R(VK_ERROR_UNKNOWN) R(VK_ERROR_OUT_OF_DATE_KHR) R(VK_ERROR_SURFACE_LOST_KHR)
+        R(VK_SUBOPTIMAL_KHR) R(VK_ERROR_NATIVE_WINDOW_IN_USE_KHR)
 #undef R
     default: return "VK_RESULT_UNKNOWN";
     }
@@ -167,7 +168,7 @@ bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_conte
 
     const char *layers[1];
     uint32_t n_layers = 0;
-    const char *exts[2];
+    const char *exts[2 + GPU__MAX_SURFACE_EXTENSIONS];
     uint32_t n_exts = 0;
     bool has_features = false;
     if (validation) {
@@ -191,6 +192,24 @@ bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_conte
         has_features = has_instance_extension(&inst.vk, validation_layer,
                                               VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME);
         if (has_features) exts[n_exts++] = VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME;
+    }
+
+    /* Presentation only when a window is wanted: headless runs ask for nothing more. */
+    if (cfg && cfg->make_surface) {
+        if (cfg->n_surface_extensions > GPU__MAX_SURFACE_EXTENSIONS) {
+            status = bf_fail(BF_INVALID_ARG, "gpu: %u surface extensions (at most %d)", cfg->n_surface_extensions,
+                             GPU__MAX_SURFACE_EXTENSIONS);
+            goto fail;
+        }
+        for (uint32_t i = 0; i < cfg->n_surface_extensions; i++) {
+            if (!has_instance_extension(&inst.vk, NULL, cfg->surface_extensions[i])) {
+                status = bf_fail(BF_UNSUPPORTED, "the Vulkan instance cannot present to a window: %s is missing",
+                                 cfg->surface_extensions[i]);
+                goto fail;
+            }
+            exts[n_exts++] = cfg->surface_extensions[i];
+        }
+        inst.has_surface = true;
     }
 
     /* Synchronization validation catches a missing or wrong barrier, the
@@ -233,9 +252,16 @@ bf_status gpu__instance_create(const gpu_config *cfg, bool validation, gpu_conte
     if (inst.has_debug_utils) {
         GPU__VK_DEBUG(GPU__LOAD)
     }
+    if (inst.has_surface) {
+        GPU__VK_SURFACE(GPU__LOAD)
+    }
 #undef GPU__LOAD
     if (!inst.vk.GetPhysicalDeviceProperties2 || !inst.vk.CreateDevice || !inst.vk.GetDeviceProcAddr) {
         status = bf_fail(BF_NO_DEVICE, "the Vulkan loader lacks 1.2 instance functions");
+        goto fail;
+    }
+    if (inst.has_surface && (!inst.vk.DestroySurfaceKHR || !inst.vk.GetPhysicalDeviceSurfaceSupportKHR)) {
+        status = bf_fail(BF_UNSUPPORTED, "the Vulkan loader lacks VK_KHR_surface's functions");
         goto fail;
     }
     if (inst.has_debug_utils) {
@@ -482,10 +508,13 @@ static bf_status create_device(gpu_context *ctx)
         .queueCount = 1,
         .pQueuePriorities = &priority,
     };
+    const char *swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
     VkDeviceCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO,
         .queueCreateInfoCount = 1,
         .pQueueCreateInfos = &queue,
+        .enabledExtensionCount = ctx->surface ? 1 : 0,
+        .ppEnabledExtensionNames = &swapchain_ext,
     };
     GPU__CHECK(ctx->inst.vk.CreateDevice(ctx->phys, &info, NULL, &ctx->device), ctx->info.name);
     gpu__vk *vk = &ctx->inst.vk;
@@ -496,6 +525,9 @@ static bf_status create_device(gpu_context *ctx)
         goto fail;                                                               \
     }
     GPU__VK_DEVICE(GPU__LOAD)
+    if (ctx->surface) {
+        GPU__VK_SWAPCHAIN(GPU__LOAD)
+    }
 #undef GPU__LOAD
     vk->GetDeviceQueue(ctx->device, ctx->info.queue_family, 0, &ctx->queue);
     gpu__name(ctx, VK_OBJECT_TYPE_DEVICE, (uint64_t)(uintptr_t)ctx->device, "gpu.device");
@@ -588,6 +620,54 @@ fail:
     return status;
 }
 
+static bool has_device_extension(const gpu_context *ctx, const char *name)
+{
+    VkExtensionProperties props[512];
+    uint32_t n = 512;
+    VkResult r = ctx->inst.vk.EnumerateDeviceExtensionProperties(ctx->phys, NULL, &n, props);
+    if (r != VK_SUCCESS && r != VK_INCOMPLETE) return false;
+    for (uint32_t i = 0; i < n; i++)
+        if (!strcmp(props[i].extensionName, name)) return true;
+    return false;
+}
+
+/* The window's surface (made by the caller's function on our instance),
+ * and a compute queue family of the chosen device that presents to it:
+ * the one device choice picked when it can, else the first that can
+ * (presenting from the compute queue keeps one queue and one fence). */
+static bf_status open_surface(gpu_context *ctx, const gpu_config *cfg)
+{
+    bf_status status = cfg->make_surface(cfg->surface_user, ctx->inst.instance, &ctx->surface);
+    if (status != BF_OK) {
+        ctx->surface = VK_NULL_HANDLE;
+        return status;
+    }
+    gpu__vk *vk = &ctx->inst.vk;
+    if (!has_device_extension(ctx, VK_KHR_SWAPCHAIN_EXTENSION_NAME))
+        return bf_fail(BF_UNSUPPORTED, "%s cannot present to a window: no %s", ctx->info.name,
+                       VK_KHR_SWAPCHAIN_EXTENSION_NAME);
+    VkQueueFamilyProperties fams[32];
+    uint32_t n_fams = 32;
+    vk->GetPhysicalDeviceQueueFamilyProperties(ctx->phys, &n_fams, fams);
+    uint32_t pick = UINT32_MAX;
+    for (uint32_t k = 0; k <= n_fams && pick == UINT32_MAX; k++) {
+        uint32_t i = k == 0 ? ctx->info.queue_family : k - 1;
+        if (i >= n_fams || !(fams[i].queueFlags & VK_QUEUE_COMPUTE_BIT) || fams[i].queueCount == 0) continue;
+        VkBool32 ok = VK_FALSE;
+        VkResult r = vk->GetPhysicalDeviceSurfaceSupportKHR(ctx->phys, i, ctx->surface, &ok);
+        if (r == VK_SUCCESS && ok) pick = i;
+    }
+    if (pick == UINT32_MAX)
+        return bf_fail(BF_UNSUPPORTED, "%s cannot present to the window: no compute queue family presents to "
+                       "its surface", ctx->info.name);
+    if (pick != ctx->info.queue_family) {
+        ctx->info.queue_family = pick;
+        ctx->info.limits.timestamp_valid_bits = fams[pick].timestampValidBits;
+        ctx->info.limits.has_timestamps = fams[pick].timestampValidBits > 0 && ctx->info.limits.timestamp_period_ns > 0;
+    }
+    return BF_OK;
+}
+
 bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
 {
     bf_status status = BF_OK;
@@ -610,6 +690,10 @@ bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
     ctx->phys = phys[pick];
     ctx->info = infos[pick];
     ctx->inst.vk.GetPhysicalDeviceMemoryProperties(ctx->phys, &ctx->mem_props);
+    if (cfg && cfg->make_surface) {
+        status = open_surface(ctx, cfg);
+        if (status != BF_OK) goto fail;
+    }
 
     status = create_device(ctx);
     if (status != BF_OK) goto fail;
@@ -618,10 +702,10 @@ bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
     status = gpu__pipeline_cache_open(ctx, cfg);
     if (status != BF_OK) goto fail;
 
-    bf_info("gpu: %s (%s, Vulkan %u.%u.%u%s%s)", ctx->info.name, gpu_device_type_name(ctx->info.type),
+    bf_info("gpu: %s (%s, Vulkan %u.%u.%u%s%s%s)", ctx->info.name, gpu_device_type_name(ctx->info.type),
             VK_API_VERSION_MAJOR(ctx->info.api_version), VK_API_VERSION_MINOR(ctx->info.api_version),
             VK_API_VERSION_PATCH(ctx->info.api_version), ctx->inst.has_validation ? ", validation on" : "",
-            ctx->staging ? ", staged transfers" : "");
+            ctx->staging ? ", staged transfers" : "", ctx->surface ? ", presenting" : "");
     *out = ctx;
     return BF_OK;
 
@@ -647,8 +731,10 @@ void gpu_context_destroy(gpu_context *ctx)
         if (ctx->fence) vk->DestroyFence(ctx->device, ctx->fence, NULL);
         if (ctx->xfer_fence) vk->DestroyFence(ctx->device, ctx->xfer_fence, NULL);
         if (ctx->command_pool) vk->DestroyCommandPool(ctx->device, ctx->command_pool, NULL);
+        if (ctx->n_swapchains) bf_warn("gpu: %u swapchains still alive at context destroy", ctx->n_swapchains);
         vk->DestroyDevice(ctx->device, NULL);
     }
+    if (ctx->surface) vk->DestroySurfaceKHR(ctx->inst.instance, ctx->surface, NULL);
     free(ctx->stages);
     gpu__instance_destroy(&ctx->inst);
 #ifndef NDEBUG

@@ -75,6 +75,17 @@ typedef struct gpu_config {
      * uploads and downloads go through the staging buffer (tests use it). */
     bool force_staging;
     const char *loader;         /* Vulkan loader library; NULL: "libvulkan.so.1" */
+    /* Presentation to a window (view/), asked for only when one is wanted:
+     * the instance extensions the window system needs (GLFW's
+     * glfwGetRequiredInstanceExtensions; borrowed) and a function that makes
+     * the window's surface on the new instance. The context then owns the
+     * surface, enables VK_KHR_swapchain and uses a compute queue family that
+     * can present to it (BF_UNSUPPORTED when the device has none). NULL
+     * make_surface: headless, nothing of this is requested. */
+    const char *const *surface_extensions;
+    uint32_t n_surface_extensions;
+    bf_status (*make_surface)(void *user, VkInstance instance, VkSurfaceKHR *out);
+    void *surface_user;
 } gpu_config;
 
 typedef struct gpu_heap {
@@ -325,6 +336,53 @@ uint32_t gpu_stage_times(const gpu_context *ctx, const gpu_stage_time **out);
  * there are none. Several modules record into one submission and each
  * reads its own stages this way. */
 double gpu_stage_ms(const gpu_context *ctx, const char *prefix);
+
+/* ------------------------------------------------------------ presentation
+ * A swapchain on the context's surface (gpu_config.make_surface). A frame:
+ *
+ *     gpu_swapchain_acquire(sc, &is_stale);      (stale: gpu_swapchain_resize)
+ *     gpu_begin(ctx);
+ *     ... a dispatch writing the pixels into a buffer ...
+ *     gpu_cmd_barrier(ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
+ *     gpu_cmd_copy_to_swapchain(ctx, sc, pixels, 0, readback);
+ *     gpu_submit_present(ctx, sc, &is_stale);
+ *
+ * The image is acquired with a fence the host waits for, so the submission
+ * needs no wait semaphore; it signals one per image that the presentation
+ * waits on. */
+typedef struct gpu_swapchain gpu_swapchain;
+
+typedef struct gpu_swapchain_info {
+    uint32_t width, height;  /* the images' extent */
+    uint32_t n_images;
+    bool is_bgra;            /* B in the low byte of a pixel (else R) */
+    bool can_read;           /* gpu_cmd_copy_to_swapchain can copy the image back (TRANSFER_SRC) */
+    const char *present_mode; /* "mailbox", "immediate", "fifo" */
+} gpu_swapchain_info;
+
+/* A swapchain of about width x height (the surface's extent when it fixes
+ * one) of 8-bit RGBA or BGRA images. BF_UNSUPPORTED without a surface or
+ * when the surface offers no such format or no transfer destination. */
+bf_status gpu_swapchain_create(gpu_context *ctx, uint32_t width, uint32_t height, gpu_swapchain **out);
+void gpu_swapchain_destroy(gpu_swapchain *sc); /* waits for the device; NULL is a no-op */
+/* Remakes the images at about width x height (a resized window, or a stale
+ * swapchain). */
+bf_status gpu_swapchain_resize(gpu_swapchain *sc, uint32_t width, uint32_t height);
+gpu_swapchain_info gpu_swapchain_get_info(const gpu_swapchain *sc);
+/* Acquires the next image and waits until it may be written. *is_stale:
+ * the swapchain no longer matches the surface and nothing was acquired
+ * (resize it and try again). */
+bf_status gpu_swapchain_acquire(gpu_swapchain *sc, bool *is_stale);
+/* Records the copy of the acquired image's pixels from src at offset
+ * (width * height uint32, rows packed, the image's byte order) into the
+ * image and its move to presentation. With readback (GPU_MEMORY_READBACK,
+ * at least width * height * 4 bytes; needs can_read) the image as it will
+ * be presented is also copied into it: a screenshot of the window. */
+void gpu_cmd_copy_to_swapchain(gpu_context *ctx, gpu_swapchain *sc, const gpu_buffer *src, uint64_t offset,
+                               gpu_buffer *readback);
+/* gpu_submit_wait, then presents the acquired image. *is_stale: the
+ * swapchain went out of date (the image may not have been shown). */
+bf_status gpu_submit_present(gpu_context *ctx, gpu_swapchain *sc, bool *is_stale);
 
 /* Fault injection for tests: every checked Vulkan call is a fault point of
  * core's bf_fault_arm and fails with VK_ERROR_OUT_OF_DEVICE_MEMORY there,

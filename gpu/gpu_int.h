@@ -23,7 +23,24 @@
     X(GetPhysicalDeviceQueueFamilyProperties) \
     X(GetPhysicalDeviceMemoryProperties)     \
     X(CreateDevice)                          \
-    X(GetDeviceProcAddr)
+    X(GetDeviceProcAddr)                     \
+    X(EnumerateDeviceExtensionProperties)
+
+/* From VK_KHR_surface; NULL without presentation (gpu_config.make_surface). */
+#define GPU__VK_SURFACE(X)                   \
+    X(DestroySurfaceKHR)                     \
+    X(GetPhysicalDeviceSurfaceSupportKHR)    \
+    X(GetPhysicalDeviceSurfaceCapabilitiesKHR) \
+    X(GetPhysicalDeviceSurfaceFormatsKHR)    \
+    X(GetPhysicalDeviceSurfacePresentModesKHR)
+
+/* From VK_KHR_swapchain, loaded only with presentation. */
+#define GPU__VK_SWAPCHAIN(X)                 \
+    X(CreateSwapchainKHR)                    \
+    X(DestroySwapchainKHR)                   \
+    X(GetSwapchainImagesKHR)                 \
+    X(AcquireNextImageKHR)                   \
+    X(QueuePresentKHR)
 
 /* From VK_EXT_debug_utils; NULL when it is not enabled. */
 #define GPU__VK_DEBUG(X)                     \
@@ -87,7 +104,11 @@
     X(CreateFence)                           \
     X(DestroyFence)                          \
     X(ResetFences)                           \
-    X(WaitForFences)
+    X(WaitForFences)                         \
+    X(CreateSemaphore)                       \
+    X(DestroySemaphore)                      \
+    X(CmdCopyBufferToImage)                  \
+    X(CmdCopyImageToBuffer)
 
 typedef struct gpu__vk {
     void *lib; /* dlopen handle of the loader */
@@ -97,6 +118,8 @@ typedef struct gpu__vk {
     GPU__VK_INSTANCE(GPU__VK_MEMBER)
     GPU__VK_DEBUG(GPU__VK_MEMBER)
     GPU__VK_DEVICE(GPU__VK_MEMBER)
+    GPU__VK_SURFACE(GPU__VK_MEMBER)
+    GPU__VK_SWAPCHAIN(GPU__VK_MEMBER)
 #undef GPU__VK_MEMBER
 } gpu__vk;
 
@@ -107,7 +130,10 @@ typedef struct gpu__instance {
     VkDebugUtilsMessengerEXT messenger;
     bool has_debug_utils;
     bool has_validation;
+    bool has_surface;                /* the window system's surface extensions are enabled */
 } gpu__instance;
+
+#define GPU__MAX_SURFACE_EXTENSIONS 8
 
 struct gpu_context {
     gpu__instance inst;
@@ -117,6 +143,8 @@ struct gpu_context {
     VkPhysicalDeviceMemoryProperties mem_props;
     VkDevice device;
     VkQueue queue;
+    VkSurfaceKHR surface;            /* presentation only (gpu_config.make_surface), owned */
+    uint32_t n_swapchains;           /* alive, checked at destroy */
     bool force_staging;
 
     VkPipelineCache pipeline_cache;
@@ -221,5 +249,8 @@ void gpu__pipeline_cache_close(gpu_context *ctx);
 /* Runs one recording on the transfer command buffer and waits for it. */
 bf_status gpu__xfer_begin(gpu_context *ctx);
 bf_status gpu__xfer_submit_wait(gpu_context *ctx);
+/* gpu_submit_wait that also signals semaphore (VK_NULL_HANDLE: none), for
+ * a presentation waiting on the submission (present.c). */
+bf_status gpu__submit_wait_signal(gpu_context *ctx, VkSemaphore semaphore);
 
 #endif
