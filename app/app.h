@@ -237,6 +237,7 @@ int cmd_info(int argc, char **argv);
 int cmd_record(int argc, char **argv);
 int cmd_convert(int argc, char **argv);
 int cmd_live(int argc, char **argv);
+int cmd_view(int argc, char **argv);
 /* device.c: opens uri (a live URI, or a recorded sequence replay reads
  * standing in for a camera) behind the capture thread, as
  * capture_open_device does. */
@@ -246,6 +247,10 @@ bf_status app_open_device(const char *uri, const struct replay_options *ropt, bo
 /* Until app_stop_end, Ctrl-C and SIGTERM stop src's capture thread and set
  * the returned flag instead of ending the program; a second one ends it. */
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src);
+/* Stops the scan as Ctrl-C does, from the program (a viewer window
+ * closed): sets flag (the run's stop flag) and stops the capture thread
+ * of app_stop_begin's source, if any. */
+void app_stop_request(volatile sig_atomic_t *flag);
 /* Restores the handlers; true if a signal came. */
 bool app_stop_end(void);
 /* cmd_replay.c: the full loop on a sequence (replay) or a device (live). */

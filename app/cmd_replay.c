@@ -12,6 +12,7 @@
 #include "eval/eval.h"
 #include "recon/recon.h"
 #include "replay/replay.h"
+#include "view/view.h"
 
 static const char replay_usage[] =
     "usage: bitfuse replay SEQUENCE --out DIR [options]\n"
@@ -66,12 +67,42 @@ typedef struct replay_args {
     double cache_budget_mib; /* the streaming cache's bytes */
     bool auto_budget;        /* neither --gpu-budget nor --bricks: the device decides */
     const char *calibration; /* calib.json: read into rcfg.calibration by parse_args */
+    bool view;               /* show the map in a window as the scan goes (view/) */
+    const char *screenshot;  /* with view: the window's last frame, after exit_after frames */
+    uint32_t exit_after;     /* with view: end the scan after this many frames shown (0: never) */
 } replay_args;
 
 #define LOOP_ROWS 23
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
+#define VIEW_ROWS 4
+
+static const char *check_png(const char *name, const char *v)
+{
+    static char msg[256];
+    size_t n = strlen(v);
+    if (n > 4 && strcmp(v + n - 4, ".png") == 0) return NULL;
+    snprintf(msg, sizeof msg, "%s %s: the image is written as PNG (a name ending .png)", name, v);
+    return msg;
+}
+
+/* The window (view/, docs/view.md). */
+static void view_options(app_option rows[VIEW_ROWS], replay_args *a)
+{
+    const app_option r[VIEW_ROWS] = {
+        APP_OPT("--view", APP_OPT_FLAG, &a->view, NULL,
+                "show the map in a window as the scan goes, following the camera (drag: orbit, pan, wheel: zoom, "
+                "F: follow again); closing the window ends the scan as Ctrl-C does, everything kept"),
+        APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
+                "with --view and --exit-after: the window's last frame, read back from the window", .check = check_png),
+        APP_OPT("--exit-after", APP_OPT_U32, &a->exit_after, "N",
+                "with --view: end the scan after N frames shown, as closing the window does (scripts)", .min = 1,
+                .no_default = true),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
 
 /* Bytes of the pools per brick: sign and confidence planes, its record,
  * stamp and free-stack entry, and three octree nodes (a scan holds 2.2-2.4
@@ -236,7 +267,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     a->cache_budget_mib = 256;
     a->rcfg = recon_config_default();
     app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS],
-        stm[STREAM_ROWS], msh[APP_MESH_ROWS];
+        stm[STREAM_ROWS], msh[APP_MESH_ROWS], vw[VIEW_ROWS];
     const app_option fuse_gt[] = {
         APP_OPT("--fuse-at-groundtruth", APP_OPT_FLAG, &a->fuse_at_gt, NULL,
                 "track every frame but fuse it at its true pose: the map is the one the sensor gives and the "
@@ -250,6 +281,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     store_options(sto, a);
     stream_options(stm, a);
     app_mesh_options(msh, &a->mesh_out, false);
+    view_options(vw, a);
     const app_option cal[] = {
         APP_OPT("--calibration", APP_OPT_STRING, &a->calibration, "FILE",
                 "calib.json of bitfuse calibrate: the colour camera and T_colour_depth for registering colour to "
@@ -257,8 +289,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                 "format's or the device's; its distortion is not applied)", .no_default = true),
         APP_OPT_END,
     };
-    const app_option *replay_tables[] = {own, msh, fuse_gt, cal, sto, stm, map, seq, NULL};
-    const app_option *live_tables[] = {dev, own, msh, cal, sto, stm, map, seq, NULL};
+    const app_option *replay_tables[] = {own, vw, msh, fuse_gt, cal, sto, stm, map, seq, NULL};
+    const app_option *live_tables[] = {dev, own, vw, msh, cal, sto, stm, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
         .tables = is_live_cmd ? live_tables : replay_tables, .positional = &a->seq,
@@ -267,6 +299,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->resume && !a->store) return app_usage_error(cmd, "--resume needs --store STORE");
+    if (!rc && (a->screenshot || a->exit_after) && !a->view)
+        return app_usage_error(cmd, "%s needs --view", a->screenshot ? "--screenshot" : "--exit-after");
+    if (!rc && a->screenshot && !a->exit_after)
+        return app_usage_error(cmd, "--screenshot needs --exit-after N (the frame it saves)");
     a->auto_budget = !rc && a->gpu_budget_mib <= 0 && a->rcfg.fusion.brick_cap == fusion_config_default().brick_cap;
     if (!rc && a->gpu_budget_mib > 0 && floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK) < 1024)
         return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
@@ -458,7 +494,51 @@ typedef struct replay_sink {
     FILE *csv;
     replay_log_writer *log; /* live --record, else NULL */
     replay_result *r;
+    view_window *win;       /* --view, else NULL */
+    volatile sig_atomic_t *stop; /* --view: set when the window closes (live: the signal flag) */
+    uint32_t n_shown;
+    double t_stats_s;       /* when the title's map size was last read */
+    uint64_t n_bricks;
 } replay_sink;
+
+/* The window's frame: the map at the window's camera (the frame's pose
+ * while following, so the view just written serves), the state in the
+ * title; a closed window or --exit-after frames shown stop the scan. */
+static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_result *fr, bool has_view)
+{
+    view_window *w = k->win;
+    view_follow(w, &fr->T_wc);
+    if (!view_poll(w)) {
+        app_stop_request(k->stop);
+        return BF_OK;
+    }
+    bf_se3 T = view_pose(w);
+    bf_status s = BF_OK;
+    if (!(has_view && view_is_following(w))) s = recon_render_view(run->loop, &T);
+    /* The map's size costs a download of the pools: read it at most every 2 s. */
+    if (s == BF_OK && (k->t_stats_s == 0 || bf_time_s() - k->t_stats_s > 2.0)) {
+        fusion_stats st;
+        if (fusion_get_stats(run->map, &st) == BF_OK) k->n_bricks = st.n_bricks;
+        k->t_stats_s = bf_time_s();
+    }
+    view_status vs = {.has_frame = true, .frame = run->est.n, .state = recon_state_name(fr->state),
+                      .n_bricks = k->n_bricks};
+    view_set_status(w, &vs);
+    const render_targets *t = render_get_targets(recon_caster(run->loop));
+    bool is_last = k->a->exit_after && k->n_shown + 1 == k->a->exit_after, is_shown = false;
+    uint8_t *rgb = NULL;
+    uint32_t vw = 0, vh = 0;
+    view_size(w, &vw, &vh);
+    if (s == BF_OK && is_last && k->a->screenshot && !(rgb = malloc(3ull * vw * vh)))
+        s = bf_fail(BF_NO_MEMORY, "view: screenshot");
+    if (s == BF_OK) s = view_show(w, t, rgb, &is_shown);
+    if (s == BF_OK && is_shown && ++k->n_shown == k->a->exit_after) {
+        if (rgb) s = replay_png_write_rgb8(k->a->screenshot, rgb, vw, vh);
+        app_stop_request(k->stop);
+    }
+    free(rgb);
+    return s;
+}
 
 static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
 {
@@ -468,9 +548,13 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
     /* Every K frames handled, not K indices: a live queue drops frames, and
      * indices that skip would miss most multiples of K. */
+    bool has_view = false;
     if (s == BF_OK && k->a->view_every && (run->est.n - 1) % k->a->view_every == 0 &&
-        (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK)
+        (s = write_view(run->loop, k->a->out, f->index, &fr->T_wc)) == BF_OK) {
         k->r->n_views++;
+        has_view = true;
+    }
+    if (s == BF_OK && k->win && run->loop) s = show_frame(k, run, fr, has_view);
     if (s == BF_OK) s = app_store_frame(&k->r->store, run, f);
     return s;
 }
@@ -519,6 +603,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     FILE *csv = NULL;
     char path[4096];
     const volatile sig_atomic_t *stop = NULL;
+    static volatile sig_atomic_t view_closed; /* replay --view: the window's stop flag */
+    view_window *win = NULL;
     /* The input first: a missing one leaves no empty output folder. */
     bf_status s;
     if (is_live_cmd) {
@@ -545,7 +631,17 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         fprintf(csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms\n");
     gpu_config gcfg = {0};
+    if (s == BF_OK && a.view) {
+        view_config vc = view_config_default();
+        const bf_intrinsics *K = rgbd_source_intrinsics(src);
+        vc.width = K->width, vc.height = K->height;
+        vc.title = is_live_cmd ? "bitfuse live" : "bitfuse replay";
+        vc.is_following = true;
+        s = view_open(&vc, &gcfg, &win);
+        if (!stop) stop = &view_closed;
+    }
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
+    if (s == BF_OK && win) s = view_attach(win, ctx);
     if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);
     if (s == BF_OK) {
         snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
@@ -562,7 +658,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             app_store_resume_config(&r.store, &rs, &rcfg.loop);
             rcfg.resume = &rs;
         }
-        replay_sink sink = {&a, csv, log, &r};
+        replay_sink sink = {.a = &a, .csv = csv, .log = log, .r = &r, .win = win,
+                            .stop = (volatile sig_atomic_t *)stop};
         s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
     }
     if (r.has_capture) {
@@ -591,8 +688,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
     app_store_close(&r.store);
+    view_detach(win);
     recon_run_free(&r.run);
     gpu_context_destroy(ctx);
+    view_destroy(win);
     rgbd_source_close(src);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);

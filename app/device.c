@@ -40,6 +40,12 @@ const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)
     return &g_stopped;
 }
 
+void app_stop_request(volatile sig_atomic_t *flag)
+{
+    if (flag) *flag = 1;
+    capture_threaded_stop(g_stop_src); /* live: the capture thread ends its frames */
+}
+
 bool app_stop_end(void)
 {
     sigaction(SIGINT, &g_old_int, NULL);

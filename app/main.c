@@ -24,6 +24,7 @@ static const app_command commands[] = {
     {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},
     {"eval-colour", cmd_eval_colour, "colour error: a coloured mesh re-rendered at the frames' poses (PSNR)"},
     {"calibrate", cmd_calibrate, "calibrate the colour and depth cameras from checkerboard images (calib.json)"},
+    {"view", cmd_view, "show a saved map in a window: orbit, pan, zoom; --screenshot for scripts"},
     {"devices", cmd_devices, "list Vulkan devices and say which one bitfuse uses"},
 };
 #define N_COMMANDS (sizeof commands / sizeof commands[0])
@@ -32,7 +33,7 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n\ncommands:\n");
     for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
-    fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error\n"
+    fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error (or no display)\n"
                "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"
                "             BITFUSE_THREADS (CPU threads), BITFUSE_VALIDATION=1 (Vulkan validation)\n");
 }

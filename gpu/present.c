@@ -279,17 +279,18 @@ bf_status gpu_submit_present(gpu_context *ctx, gpu_swapchain *sc, bool *is_stale
 {
     BF_ASSERT(sc->index != UINT32_MAX);
     *is_stale = false;
-    bf_status status = gpu__submit_wait_signal(ctx, sc->done[sc->index]);
+    uint32_t index = sc->index;
+    sc->index = UINT32_MAX;
+    bf_status status = gpu__submit_wait_signal(ctx, sc->done[index]);
     if (status != BF_OK) return status;
     VkPresentInfoKHR pi = {
         .sType = VK_STRUCTURE_TYPE_PRESENT_INFO_KHR,
         .waitSemaphoreCount = 1,
-        .pWaitSemaphores = &sc->done[sc->index],
+        .pWaitSemaphores = &sc->done[index],
         .swapchainCount = 1,
         .pSwapchains = &sc->swapchain,
-        .pImageIndices = &sc->index,
+        .pImageIndices = &index,
     };
-    sc->index = UINT32_MAX;
     VkResult r = GPU__CALL(ctx->inst.vk.QueuePresentKHR(ctx->queue, &pi));
     if (r == VK_ERROR_OUT_OF_DATE_KHR || r == VK_SUBOPTIMAL_KHR) {
         *is_stale = true;

@@ -194,6 +194,12 @@ bool view_poll(view_window *v)
 
 bool view_should_close(const view_window *v) { return glfwWindowShouldClose(v->window); }
 
+void view_wait(view_window *v, double timeout_s)
+{
+    (void)v;
+    glfwWaitEventsTimeout(timeout_s);
+}
+
 void view_set_pose(view_window *v, const bf_se3 *T_wc, double pivot_m)
 {
     v->cam = view__camera_make(T_wc, pivot_m);

@@ -55,6 +55,9 @@ void view_destroy(view_window *v);
  * returns false once the window was asked to close. Never blocks. */
 bool view_poll(view_window *v);
 bool view_should_close(const view_window *v);
+/* Sleeps until an event comes or timeout_s passes (a viewer with nothing
+ * new to draw); view_poll then handles it. */
+void view_wait(view_window *v, double timeout_s);
 
 /* The camera: the free camera's pose is set to T_wc (camera to world, TUM:
  * +z ahead, y down), its pivot pivot_m ahead (> 0), its up the pose's -y. */
