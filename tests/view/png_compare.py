@@ -3,7 +3,8 @@
 library among the test machine's packages).
 Usage: png_compare.py A.png B.png MAX_DIFF MAX_FRACTION
 Passes (exit 0) when the images have the same size and at most
-MAX_FRACTION of the pixels differ by more than MAX_DIFF in any channel, and
+MAX_FRACTION of the pixels differ by more than MAX_DIFF in any channel
+(MAX_DIFF -1: where one image is black and the other not: the hit masks), and
 A is not all black; prints the counts either way."""
 import struct
 import sys
@@ -58,9 +59,12 @@ if (wa, ha) != (wb, hb):
     sys.exit("sizes differ: %dx%d and %dx%d" % (wa, ha, wb, hb))
 n, bad, worst, lit = wa * ha, 0, 0, 0
 for i in range(n):
-    d = max(abs(a[3 * i + k] - b[3 * i + k]) for k in range(3))
+    if max_diff < 0:  # hit masks only: lit (a ray hit) against black (none)
+        d = int((max(a[3 * i:3 * i + 3]) > 0) != (max(b[3 * i:3 * i + 3]) > 0))
+    else:
+        d = max(abs(a[3 * i + k] - b[3 * i + k]) for k in range(3))
     worst = max(worst, d)
-    bad += d > max_diff
+    bad += d > max(max_diff, 0)
     lit += max(a[3 * i:3 * i + 3]) > 0
 print("%d of %d pixels differ by more than %d (max %d); %d lit" % (bad, n, max_diff, worst, lit))
 sys.exit(0 if bad <= max_frac * n and lit > 0 else 1)
