@@ -70,13 +70,14 @@ typedef struct replay_args {
     bool view;               /* show the map in a window as the scan goes (view/) */
     const char *screenshot;  /* with view: the window's last frame, after exit_after frames */
     uint32_t exit_after;     /* with view: end the scan after this many frames shown (0: never) */
+    bool overlay;            /* with view: the status line over the image too */
 } replay_args;
 
 #define LOOP_ROWS 23
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
-#define VIEW_ROWS 4
+#define VIEW_ROWS 5
 
 static const char *check_png(const char *name, const char *v)
 {
@@ -94,6 +95,8 @@ static void view_options(app_option rows[VIEW_ROWS], replay_args *a)
         APP_OPT("--view", APP_OPT_FLAG, &a->view, NULL,
                 "show the map in a window as the scan goes, following the camera (drag: orbit, pan, wheel: zoom, "
                 "F: follow again); closing the window ends the scan as Ctrl-C does, everything kept"),
+        APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
+                "with --view: the frame, tracking state and bricks also over the image's corner (always in the title)"),
         APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
                 "with --view and --exit-after: the window's last frame, read back from the window", .check = check_png),
         APP_OPT("--exit-after", APP_OPT_U32, &a->exit_after, "N",
@@ -264,6 +267,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     a->is_live_cmd = is_live_cmd;
     a->queue = 8;
     a->store_every_s = 1.0;
+    a->overlay = true;
     a->cache_budget_mib = 256;
     a->rcfg = recon_config_default();
     app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS],
@@ -617,6 +621,18 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = replay_open(a.seq, &a.ropt, &src);
     }
     if (s == BF_OK) s = apply_calibration(&a, src);
+    /* The window before any output: no display leaves no folder behind. */
+    gpu_config gcfg = {0};
+    if (s == BF_OK && a.view) {
+        view_config vc = view_config_default();
+        const bf_intrinsics *K = rgbd_source_intrinsics(src);
+        vc.width = K->width, vc.height = K->height;
+        vc.title = is_live_cmd ? "bitfuse live" : "bitfuse replay";
+        vc.is_following = true;
+        vc.overlay = a.overlay;
+        s = view_open(&vc, &gcfg, &win);
+        if (!stop) stop = &view_closed;
+    }
     /* The store is read (to resume) or claimed before anything is made. */
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
@@ -630,16 +646,6 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (csv)
         fprintf(csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms\n");
-    gpu_config gcfg = {0};
-    if (s == BF_OK && a.view) {
-        view_config vc = view_config_default();
-        const bf_intrinsics *K = rgbd_source_intrinsics(src);
-        vc.width = K->width, vc.height = K->height;
-        vc.title = is_live_cmd ? "bitfuse live" : "bitfuse replay";
-        vc.is_following = true;
-        s = view_open(&vc, &gcfg, &win);
-        if (!stop) stop = &view_closed;
-    }
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK && win) s = view_attach(win, ctx);
     if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);

@@ -110,6 +110,7 @@ typedef struct view_args {
     const char *map, *pose, *camera, *size, *screenshot;
     double far_m;
     uint32_t exit_after;
+    bool overlay;
 } view_args;
 
 static int parse_args(int argc, char **argv, view_args *a)
@@ -125,6 +126,8 @@ static int parse_args(int argc, char **argv, view_args *a)
                 "scales them", .no_default = true, .check = check_camera),
         APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "the window's size", .check = check_size),
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
+        APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
+                "the map's size also over the image's corner (always in the title)"),
         APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
                 "with --exit-after: the window's last frame, read back from the window (RGB PNG)", .check = check_png),
         APP_OPT("--exit-after", APP_OPT_U32, &a->exit_after, "N", "close the window after N frames shown (scripts)",
@@ -303,7 +306,7 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 int cmd_view(int argc, char **argv)
 {
     const char *cmd = "view";
-    view_args a = {.size = "640x480", .far_m = 13.1};
+    view_args a = {.size = "640x480", .far_m = 13.1, .overlay = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (a.screenshot && !a.exit_after)
@@ -322,6 +325,7 @@ int cmd_view(int argc, char **argv)
     view_config vc = view_config_default();
     vc.width = W, vc.height = H;
     vc.title = "bitfuse view";
+    vc.overlay = a.overlay;
     gpu_config gcfg = {0};
     view_loop L = {0};
     view_scene sc = {0};

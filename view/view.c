@@ -33,9 +33,11 @@ struct view_window {
     gpu_bindings *binds;
     gpu_buffer *pixels;          /* the swapchain image's pixels before the copy */
     gpu_buffer *readback;        /* screenshots; made on first use */
+    gpu_buffer *glyphs;          /* the overlay's glyphs, one per character (UPLOAD) */
     const gpu_buffer *bound_src; /* the colour buffer binds[0] holds */
     uint32_t width, height;      /* the swapchain's */
     char title[256];
+    char line[VIEW_TEXT_MAX + 1]; /* the overlay's text */
 };
 
 static char g_glfw_error[512];
@@ -48,7 +50,7 @@ static void on_glfw_error(int code, const char *msg)
 view_config view_config_default(void)
 {
     return (view_config){.width = 640, .height = 480, .title = "bitfuse", .orbit_deg_per_px = 0.3,
-                         .zoom_per_notch = 0.1};
+                         .zoom_per_notch = 0.1, .overlay = true};
 }
 
 /* ------------------------------------------------------------ input */
@@ -222,8 +224,22 @@ void view_size(const view_window *v, uint32_t *width, uint32_t *height)
     *height = v->height ? v->height : v->cfg.height;
 }
 
+/* The overlay's line: the title's facts, shorter. */
+static void set_line(view_window *v, const view_status *st)
+{
+    char *t = v->line;
+    size_t cap = sizeof v->line;
+    int n = 0;
+    if (st->has_frame) n += snprintf(t + n, cap - (size_t)n, "frame %u | ", st->frame);
+    if (st->state) n += snprintf(t + n, cap - (size_t)n, "%s | ", st->state);
+    n += snprintf(t + n, cap - (size_t)n, "%llu bricks", (unsigned long long)st->n_bricks);
+    if (st->map_mib > 0) n += snprintf(t + n, cap - (size_t)n, " %.1f mib", st->map_mib);
+    if (st->has_frame) snprintf(t + n, cap - (size_t)n, " | %s", v->is_following ? "follow" : "free (f: follow)");
+}
+
 void view_set_status(view_window *v, const view_status *st)
 {
+    set_line(v, st);
     char t[256];
     int n = snprintf(t, sizeof t, "%s", v->cfg.title);
     if (st->has_frame) n += snprintf(t + n, sizeof t - (size_t)n, " | frame %u", st->frame);
@@ -267,12 +283,15 @@ bf_status view_attach(view_window *v, gpu_context *ctx)
         .name = "view.blit",
         .spirv = bf_spv_view_blit,
         .spirv_bytes = bf_spv_view_blit_size,
-        .n_buffers = 2,
+        .n_buffers = 3,
         .push_bytes = sizeof(struct view_push),
         .local_size = {VIEW_LOCAL_X, VIEW_LOCAL_Y, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &v->blit);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 2, "view.blit", &v->binds);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 3, "view.blit", &v->binds);
+    gpu_buffer_desc gd = {.name = "view.glyphs", .size_bytes = 4 * VIEW_TEXT_MAX, .memory = GPU_MEMORY_UPLOAD};
+    if (s == BF_OK) s = gpu_buffer_create(ctx, &gd, &v->glyphs);
+    if (s == BF_OK) s = gpu_bindings_set(v->binds, 2, v->glyphs, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = make_size_buffers(v);
     if (s == BF_OK) {
         gpu_swapchain_info si = gpu_swapchain_get_info(v->sc);
@@ -289,10 +308,11 @@ void view_detach(view_window *v)
     gpu_swapchain_destroy(v->sc); /* waits for the device */
     gpu_buffer_destroy(v->readback);
     gpu_buffer_destroy(v->pixels);
+    gpu_buffer_destroy(v->glyphs);
     gpu_bindings_destroy(v->binds);
     gpu_pipeline_destroy(v->blit);
     v->sc = NULL;
-    v->readback = v->pixels = NULL;
+    v->readback = v->pixels = v->glyphs = NULL;
     v->binds = NULL;
     v->blit = NULL;
     v->bound_src = NULL;
@@ -331,10 +351,16 @@ bf_status view_show(view_window *v, const render_targets *t, uint8_t *rgb, bool 
         s = gpu_bindings_set(v->binds, 0, t->colour, 0, GPU_WHOLE_SIZE);
         if (s == BF_OK) v->bound_src = t->colour;
     }
+    /* The glyphs: the previous submission has finished with the buffer. */
+    uint32_t n_chars = v->cfg.overlay ? (uint32_t)strlen(v->line) : 0;
+    uint32_t *g = gpu_buffer_map(v->glyphs);
+    for (uint32_t i = 0; i < n_chars; i++) g[i] = view__glyph(v->line[i]);
+    if (s == BF_OK && n_chars) s = gpu_buffer_flush(v->glyphs);
     if (s == BF_OK) s = gpu_begin(v->ctx);
     if (s != BF_OK) return s;
     struct view_push pc = {.src_w = t->width, .src_h = t->height, .dst_w = v->width, .dst_h = v->height,
-                           .is_bgra = si.is_bgra};
+                           .is_bgra = si.is_bgra, .n_chars = n_chars,
+                           .scale = v->width >= 640 ? v->width / 320 : 1};
     gpu_cmd_label_begin(v->ctx, "view.show");
     /* The ray-cast's colour (finished: its submission was waited for) ->
      * the blit; the blit's writes -> the copy into the image. */

@@ -32,6 +32,7 @@ typedef struct view_config {
     double orbit_deg_per_px;  /* turn per pixel dragged, default 0.3 */
     double zoom_per_notch;    /* fraction of the pivot distance one wheel notch moves, default 0.1 */
     bool is_following;        /* start following the scanning camera (view_follow) */
+    bool overlay;             /* the status line also over the image's top left corner, default on */
 } view_config;
 
 view_config view_config_default(void);
@@ -72,7 +73,8 @@ bf_se3 view_pose(const view_window *v);
  * stretched to the window, nearest pixel). */
 void view_size(const view_window *v, uint32_t *width, uint32_t *height);
 
-/* What the window says about the scene (its title bar). */
+/* What the window says about the scene: its title bar, and the overlay
+ * (view_config.overlay) from the next view_show on. */
 typedef struct view_status {
     bool has_frame;
     uint32_t frame;       /* frames handled */

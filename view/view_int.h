@@ -21,4 +21,8 @@ void view__camera_pan(view__camera *c, double dx_px, double dy_px, double f_px);
 /* Moves towards the pivot: notches > 0 closer, by fraction per notch of the distance. */
 void view__camera_zoom(view__camera *c, double notches, double fraction);
 
+/* The 3x5 glyph of ch for the overlay (shaders/view.glsl.h's layout);
+ * unknown characters get a question mark (font.c). */
+uint32_t view__glyph(char ch);
+
 #endif

@@ -46,7 +46,7 @@ mkdir "$T/nodata"
 # 1. replay --view: the window follows the camera; after 5 frames shown the
 # scan stops as a closed window stops it, and writes everything.
 "$B" replay "$T/seq" --out "$T/rep" --store "$T/rep/store" --view-every 1 --no-mesh --view --exit-after 5 \
-    --screenshot "$T/shot_replay.png" >"$T/out" 2>"$T/err"
+    --overlay off --screenshot "$T/shot_replay.png" >"$T/out" 2>"$T/err"
 rc=$?
 if [ $rc = 4 ] && grep -qE "cannot present|no display|cannot make a Vulkan surface" "$T/err"; then
     echo "skip: no presentation: $(grep -m1 error "$T/err")"
@@ -72,17 +72,30 @@ python3 "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the w
 # Required: at most 30% of the pixels differ (measured on this sequence: 21%).
 P=$(grep -v '^#' "$T/rep/trajectory.txt" | tail -1 | cut -d' ' -f2-8)
 "$B" view --map "$T/rep" --pose "$P" --size 160x120 --camera 131.25,131.25,79.5,59.5 --exit-after 2 \
-    --screenshot "$T/shot_view.png" >"$T/out" 2>"$T/err"
+    --overlay off --screenshot "$T/shot_view.png" >"$T/out" 2>"$T/err"
 rc=$?
 [ $rc = 0 ] || fail "view: exit $rc: $(head -c 600 "$T/err")"
 grep -q "vulkan validation" "$T/err" && fail "view: validation messages: $(grep -m1 'vulkan validation' "$T/err")"
 python3 "$CMP" "$T/shot_view.png" "$T/rep/views/000004.png" -1 0.3 || fail "view's screenshot is not the stored map at that pose"
 
-# 3. Refusals: no display (exit 4, said so), --screenshot without --exit-after, a missing map.
+# 3. The overlay (the status line over the top left corner) changes the
+# image there and nowhere else: at 160 px wide it is drawn at scale 1, a
+# band of 2 + 5 + 2 = 9 rows; below them the screenshot is the view's bytes.
+"$B" replay "$T/seq" --out "$T/rep2" --view-every 1 --no-mesh --view --exit-after 2 \
+    --screenshot "$T/shot_overlay.png" >"$T/out" 2>"$T/err"
+[ $? = 0 ] || fail "replay --view with the overlay: $(head -c 600 "$T/err")"
+python3 "$CMP" "$T/shot_overlay.png" "$T/rep2/views/000001.png" 0 0 9 || fail "the overlay changed rows below its band"
+python3 "$CMP" "$T/shot_overlay.png" "$T/rep2/views/000001.png" 0 0 >/dev/null && fail "the overlay changed nothing"
+
+# 4. Refusals: no display (exit 4, said so), --screenshot without --exit-after, a missing map.
 env -u DISPLAY "$B" view --map "$T/rep" --exit-after 1 >"$T/out" 2>"$T/err"
 rc=$?
 [ $rc = 4 ] || fail "view without DISPLAY: exit $rc, expected 4"
 grep -q "no display" "$T/err" || fail "view without DISPLAY: $(head -c 300 "$T/err")"
+env -u DISPLAY "$B" replay "$T/seq" --out "$T/nodisplay" --view >"$T/out" 2>"$T/err"
+rc=$?
+[ $rc = 4 ] || fail "replay --view without DISPLAY: exit $rc, expected 4"
+[ -e "$T/nodisplay" ] && fail "replay --view without DISPLAY made its output folder"
 "$B" view --map "$T/rep" --screenshot "$T/x.png" >"$T/out" 2>"$T/err"
 [ $? = 2 ] || fail "--screenshot without --exit-after: not a usage error"
 "$B" view --map "$T/nothing" --exit-after 1 >"$T/out" 2>"$T/err"
