@@ -4,32 +4,20 @@
 # the headless ray-cast PNG of the same frame (--view-every) byte for byte;
 # --exit-after ends the scan as closing the window does, everything kept;
 # bitfuse view shows the stored map; no display is a clear exit 4.
-# Skips (77) without Xvfb or a device that presents to it.
+# Skips (77) without a display or a device that presents to it; ctest runs
+# it under its own Xvfb (with_xvfb.sh).
 # Usage: test_view.sh path/to/bitfuse path/to/png_compare.py
 set -u
 B=$1
 CMP=$2
 T=$(mktemp -d)
-XPID=
-trap '[ -n "$XPID" ] && kill "$XPID" 2>/dev/null; rm -rf "$T"' EXIT
+trap 'rm -rf "$T"' EXIT
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-command -v Xvfb >/dev/null || { echo "skip: no Xvfb (Debian: xvfb)"; exit 77; }
 command -v python3 >/dev/null || { echo "skip: no python3"; exit 77; }
 export BITFUSE_PROGRESS=0
 
-# Our own X server on a free display number (xvfb-run's -a, without its
-# extra process): the first of :90..:99 whose lock file is free.
-for n in 90 91 92 93 94 95 96 97 98 99; do
-    [ -e /tmp/.X$n-lock ] && continue
-    Xvfb :$n -screen 0 640x480x24 -nolisten tcp >"$T/xvfb.log" 2>&1 &
-    XPID=$!
-    for _ in $(seq 50); do [ -e /tmp/.X11-unix/X$n ] && break; sleep 0.1; done
-    if [ -e /tmp/.X11-unix/X$n ] && kill -0 "$XPID" 2>/dev/null; then export DISPLAY=:$n; break; fi
-    kill "$XPID" 2>/dev/null
-    XPID=
-done
-[ -n "$XPID" ] || { echo "skip: Xvfb did not start: $(head -c 300 "$T/xvfb.log")"; exit 77; }
+[ -n "${DISPLAY:-}" ] || { echo "skip: no display (run under with_xvfb.sh)"; exit 77; }
 
 # A 12-frame synthetic sequence at 160x120 (half a second to make).
 python3 - "$T/traj.txt" <<'PY'
