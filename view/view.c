@@ -254,6 +254,8 @@ void view_set_status(view_window *v, const view_status *st)
     }
 }
 
+void view_set_overlay(view_window *v, bool on) { v->cfg.overlay = on; }
+
 /* ------------------------------------------------------------ GPU side */
 
 static bf_status make_size_buffers(view_window *v)

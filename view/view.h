@@ -83,6 +83,8 @@ typedef struct view_status {
     double map_mib;       /* its memory [MiB], 0: not shown */
 } view_status;
 void view_set_status(view_window *v, const view_status *st);
+/* Turns the overlay on or off (view_config.overlay) from the next view_show. */
+void view_set_overlay(view_window *v, bool on);
 
 /* Shows t->colour (width x height, RGBA8) in the window and presents it.
  * With rgb not NULL (3 * width * height of view_size's size), the swapchain

@@ -113,6 +113,27 @@ BF_TEST(window_shows_the_headless_raycast_byte_for_byte_and_stretches_a_smaller_
     render_images_free(&im);
     render_destroy(rc);
 
+    /* The overlay (on by default; off above): the status line changes the
+     * band's 2 + 5 + 2 = 9 rows (scale 1 below 640 px) and nothing below. */
+    view_set_overlay(w, true);
+    view_status st = {.has_frame = true, .frame = 7, .state = "tracked", .n_bricks = hm.n_bricks};
+    view_set_status(w, &st);
+    CHECK_OK(render_create(ctx, NULL, W, H, &rc));
+    CHECK_OK(show_three(w, rc, map, &K, shot));
+    CHECK_OK(render_download(rc, &im));
+    uint32_t n_band = 0;
+    n_diff = 0;
+    for (uint32_t i = 0; i < W * H; i++) {
+        bool differs = memcmp(im.rgb + 3 * i, shot + 3 * i, 3) != 0;
+        if (i / W < 9) n_band += differs;
+        else n_diff += differs;
+    }
+    CHECK(n_band > 100); /* about 30 characters of up to 15 pixels, and the darkened band */
+    CHECK_EQ_INT(n_diff, 0);
+    render_images_free(&im);
+    render_destroy(rc);
+    view_set_overlay(w, false);
+
     /* Half the size: window pixel (x, y) shows cast pixel (x / 2, y / 2). */
     const bf_intrinsics K2 = {W / 2, H / 2, 85.0, 85.0, 49.75, 37.25, 5000};
     CHECK_OK(render_create(ctx, NULL, W / 2, H / 2, &rc));
