@@ -245,13 +245,34 @@ static bf_intrinsics intrinsics_at(const double k[4], uint32_t W0, uint32_t H0, 
 
 typedef struct view_loop {
     view_window *win;
-    render_caster *caster;
+    render_caster *caster; /* at the window's size */
+    render_caster *coarse; /* at half of it, while the camera moves */
     gpu_context *ctx;
     uint8_t *rgb;
 } view_loop;
 
+/* The casters (and the screenshot's pixels) for a window of w x h. */
+static bf_status resize(view_loop *L, const view_args *a, uint32_t w, uint32_t h)
+{
+    render_destroy(L->caster);
+    render_destroy(L->coarse);
+    L->caster = L->coarse = NULL;
+    free(L->rgb);
+    L->rgb = NULL;
+    bf_status s = render_create(L->ctx, NULL, w, h, &L->caster);
+    if (s == BF_OK) s = render_create(L->ctx, NULL, (w + 1) / 2, (h + 1) / 2, &L->coarse);
+    if (s == BF_OK && a->screenshot && !(L->rgb = malloc(3ull * w * h)))
+        s = bf_fail(BF_NO_MEMORY, "view: screenshot of %ux%u", w, h);
+    return s;
+}
+
 /* Draws until the window closes or --exit-after frames were shown; the
- * screenshot is the last frame read back from the window. */
+ * screenshot is the last frame read back from the window. A moving camera
+ * is ray-cast at half the window's size (a quarter of the rays: the cast
+ * is the frame's cost, about 1 s at 640x480 on lavapipe, docs/view.md) and
+ * stretched; once it rests, at full size. With nothing new the loop sleeps
+ * in view_wait and shows the last image again twice a second (an exposed
+ * window) without casting. --exit-after casts every frame at full size. */
 static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, const double k[4], uint32_t W0, uint32_t H0)
 {
     render_options opt = render_options_display();
@@ -260,35 +281,43 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
     bf_se3 T_last;
     memset(&T_last, 0, sizeof T_last);
     double t_last = 0;
+    bool is_coarse = false;
+    const render_caster *last = NULL;
     bf_status s = BF_OK;
     view_status st = {.n_bricks = sc->n_bricks};
     while (s == BF_OK && view_poll(L->win)) {
         uint32_t w, h;
         view_size(L->win, &w, &h);
         bf_se3 T = view_pose(L->win);
-        /* Nothing moved: wait for input rather than ray-cast the same image
-         * again (the window is redrawn twice a second all the same). */
-        bool same = w == cw && h == ch && !memcmp(&T, &T_last, sizeof T) && bf_time_s() - t_last < 0.5;
-        if (same && !a->exit_after) {
+        bool is_resized = w != cw || h != ch, has_moved = memcmp(&T, &T_last, sizeof T) != 0;
+        bool cast = a->exit_after || is_resized || has_moved || is_coarse;
+        if (!cast && bf_time_s() - t_last < 0.5) {
             view_wait(L->win, 0.1);
             continue;
         }
-        if (w != cw || h != ch) {
-            render_destroy(L->caster);
-            L->caster = NULL;
-            s = render_create(L->ctx, NULL, w, h, &L->caster);
+        if (is_resized) {
+            s = resize(L, a, w, h);
             cw = w, ch = h;
-            free(L->rgb);
-            L->rgb = NULL;
-            if (s == BF_OK && a->screenshot && !(L->rgb = malloc(3ull * w * h)))
-                s = bf_fail(BF_NO_MEMORY, "view: screenshot of %ux%u", w, h);
+            last = NULL;
         }
-        bf_intrinsics K = intrinsics_at(k, W0, H0, w, h);
-        if (s == BF_OK) s = render_raycast(L->caster, sc->map, &K, &T, &opt);
+        double t0 = bf_time_s();
+        if (s == BF_OK && (cast || !last)) {
+            bool coarse = !a->exit_after && has_moved && !is_resized;
+            render_caster *c = coarse ? L->coarse : L->caster;
+            const render_targets *t = render_get_targets(c);
+            bf_intrinsics K = intrinsics_at(k, W0, H0, t->width, t->height);
+            s = render_raycast(c, sc->map, &K, &T, &opt);
+            is_coarse = coarse;
+            last = c;
+        }
+        double t1 = bf_time_s();
         bool is_last = a->exit_after && shown + 1 == a->exit_after, is_shown = false;
         view_set_status(L->win, &st);
-        if (s == BF_OK) s = view_show(L->win, render_get_targets(L->caster), is_last ? L->rgb : NULL, &is_shown);
+        if (s == BF_OK) s = view_show(L->win, render_get_targets(last), is_last ? L->rgb : NULL, &is_shown);
         if (s != BF_OK || !is_shown) continue;
+        bf_debug("view: frame %u: ray-cast %.1f ms (GPU %.1f, %ux%u), shown in %.1f ms", shown + 1, 1e3 * (t1 - t0),
+                 render_last_ms(last), render_get_targets(last)->width, render_get_targets(last)->height,
+                 1e3 * (bf_time_s() - t1));
         T_last = T;
         t_last = bf_time_s();
         if (++shown == a->exit_after) {
@@ -341,6 +370,7 @@ int cmd_view(int argc, char **argv)
     bool is_write_failure = s == BF_IO && sc.map;
     view_detach(L.win);
     render_destroy(L.caster);
+    render_destroy(L.coarse);
     fusion_destroy(sc.map);
     gpu_context_destroy(L.ctx);
     view_destroy(L.win);

@@ -186,11 +186,11 @@ bool view_poll(view_window *v)
     if (v->pan_x || v->pan_y) view__camera_pan(&v->cam, v->pan_x, v->pan_y, 525.0 * w / 640.0);
     if (v->scroll) view__camera_zoom(&v->cam, v->scroll, v->cfg.zoom_per_notch);
     v->orbit_x = v->orbit_y = v->pan_x = v->pan_y = v->scroll = 0;
-    if (v->toggle_follow) {
+    if (v->toggle_follow && v->has_follow_pose) { /* only a scan has a camera to follow */
         v->is_following = !v->is_following;
         if (!v->is_following) v->cam = view__camera_make(&v->T_follow, v->cam.pivot_m);
-        v->toggle_follow = false;
     }
+    v->toggle_follow = false;
     return !glfwWindowShouldClose(v->window);
 }
 
