@@ -21,7 +21,7 @@ static const char view_usage[] =
     "orbits about a point ahead, right or middle drag pans, the wheel zooms, Esc or Q\n"
     "closes. The pose is camera to world as in TUM trajectories (the camera looks along\n"
     "+z, y down); without --pose the store's last camera pose, else a view of the whole\n"
-    "map. The title bar shows the map's size. The window needs a display (X11; for\n"
+    "map. The map's size is in the title bar and over the image's corner. The window needs a display (X11; for\n"
     "scripts xvfb-run) and a Vulkan device that presents to it. docs/view.md.\n";
 
 static const char view_epilog[] =
