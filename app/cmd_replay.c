@@ -71,13 +71,14 @@ typedef struct replay_args {
     const char *screenshot;  /* with view: the window's last frame, after exit_after frames */
     uint32_t exit_after;     /* with view: end the scan after this many frames shown (0: never) */
     bool overlay;            /* with view: the status line over the image too */
+    double view_period_s;    /* with view: seconds between the window's casts of a followed scan */
 } replay_args;
 
 #define LOOP_ROWS 23
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
-#define VIEW_ROWS 5
+#define VIEW_ROWS 6
 
 static const char *check_png(const char *name, const char *v)
 {
@@ -95,6 +96,10 @@ static void view_options(app_option rows[VIEW_ROWS], replay_args *a)
         APP_OPT("--view", APP_OPT_FLAG, &a->view, NULL,
                 "show the map in a window as the scan goes, following the camera (drag: orbit, pan, wheel: zoom, "
                 "F: follow again); closing the window ends the scan as Ctrl-C does, everything kept"),
+        APP_OPT("--view-period", APP_OPT_DOUBLE, &a->view_period_s, "S",
+                "with --view: seconds between the window's ray-casts while it follows the scan, and at most a fifth "
+                "of the loop's time (each is a cast of the map at the frame's size: 0.3-1 s at 640x480 on "
+                "lavapipe); a camera moved by hand is cast every frame", .max = 3600),
         APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
                 "with --view: the frame, tracking state and bricks also over the image's corner (always in the title)"),
         APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
@@ -268,6 +273,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     a->queue = 8;
     a->store_every_s = 1.0;
     a->overlay = true;
+    a->view_period_s = 0.5;
     a->cache_budget_mib = 256;
     a->rcfg = recon_config_default();
     app_option own[LOOP_ROWS], dev[LIVE_ROWS], map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], sto[STORE_ROWS],
@@ -502,6 +508,9 @@ typedef struct replay_sink {
     volatile sig_atomic_t *stop; /* --view: set when the window closes (live: the signal flag) */
     uint32_t n_shown;
     double t_stats_s;       /* when the title's map size was last read */
+    double t_cast_s;        /* when the window's image was last cast (its end) */
+    double cast_s;          /* how long that cast and show took */
+    bf_se3 T_shown;         /* the pose it was cast at */
     uint64_t n_bricks;
 } replay_sink;
 
@@ -518,7 +527,24 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
     }
     bf_se3 T = view_pose(w);
     bf_status s = BF_OK;
-    if (!(has_view && view_is_following(w))) s = recon_render_view(run->loop, &T);
+    /* A cast is the loop's time: while following, one every --view-period
+     * and at most a fifth of the loop's time (the next waits 4 times as
+     * long as the last took; the view PNG just written is free); a camera
+     * moved by hand, every frame; --exit-after, every frame (its screenshot
+     * is that frame). */
+    bool is_free = has_view && view_is_following(w);
+    bool is_moved = !view_is_following(w) && memcmp(&T, &k->T_shown, sizeof T) != 0;
+    bool is_due = k->a->exit_after || is_free || is_moved || k->t_cast_s == 0 ||
+                  bf_time_s() - k->t_cast_s >= fmax(k->a->view_period_s, 4 * k->cast_s);
+    if (!is_due) {
+        view_status vs = {.has_frame = true, .frame = run->est.n, .state = recon_state_name(fr->state),
+                          .n_bricks = k->n_bricks};
+        view_set_status(w, &vs); /* the title keeps counting */
+        return BF_OK;
+    }
+    double t0 = bf_time_s();
+    if (!is_free) s = recon_render_view(run->loop, &T);
+    k->T_shown = T;
     /* The map's size costs a download of the pools: read it at most every 2 s. */
     if (s == BF_OK && (k->t_stats_s == 0 || bf_time_s() - k->t_stats_s > 2.0)) {
         fusion_stats st;
@@ -536,6 +562,8 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
     if (s == BF_OK && is_last && k->a->screenshot && !(rgb = malloc(3ull * vw * vh)))
         s = bf_fail(BF_NO_MEMORY, "view: screenshot");
     if (s == BF_OK) s = view_show(w, t, rgb, &is_shown);
+    k->t_cast_s = bf_time_s();
+    k->cast_s = k->t_cast_s - t0;
     if (s == BF_OK && is_shown && ++k->n_shown == k->a->exit_after) {
         if (rgb) s = replay_png_write_rgb8(k->a->screenshot, rgb, vw, vh);
         app_stop_request(k->stop);
