@@ -91,7 +91,9 @@ void view_set_overlay(view_window *v, bool on);
  * image as presented is read back into it as RGB: a screenshot of the
  * window (BF_UNSUPPORTED when the surface cannot be read). A resized or
  * stale swapchain is remade and the frame skipped (*rgb then untouched,
- * BF_OK; *is_shown false). is_shown may be NULL. */
+ * BF_OK; *is_shown false). is_shown may be NULL. After a failure the
+ * window may hold an image it never presented: detach it (the commands
+ * end). */
 bf_status view_show(view_window *v, const render_targets *t, uint8_t *rgb, bool *is_shown);
 
 #endif
