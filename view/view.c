@@ -11,6 +11,57 @@
 /* After vulkan.h (through gpu.h): GLFW declares its Vulkan calls only then. */
 #include <GLFW/glfw3.h>
 
+#include <dlfcn.h>
+
+/* GLFW is opened at run time, as gpu/ opens the Vulkan loader: a machine
+ * without libglfw3 runs every headless command and view_open says what is
+ * missing. The functions view/ calls, typed from GLFW's own header: */
+#define VIEW__GLFW(X) \
+    X(glfwCreateWindow) \
+    X(glfwCreateWindowSurface) \
+    X(glfwDestroyWindow) \
+    X(glfwGetFramebufferSize) \
+    X(glfwGetMouseButton) \
+    X(glfwGetRequiredInstanceExtensions) \
+    X(glfwGetWindowUserPointer) \
+    X(glfwInit) \
+    X(glfwPollEvents) \
+    X(glfwSetCursorPosCallback) \
+    X(glfwSetErrorCallback) \
+    X(glfwSetKeyCallback) \
+    X(glfwSetScrollCallback) \
+    X(glfwSetWindowShouldClose) \
+    X(glfwSetWindowTitle) \
+    X(glfwSetWindowUserPointer) \
+    X(glfwTerminate) \
+    X(glfwVulkanSupported) \
+    X(glfwWaitEventsTimeout) \
+    X(glfwWindowHint) \
+    X(glfwWindowShouldClose)
+
+static struct {
+    void *lib; /* loaded once, never closed (GLFW may keep X11 state) */
+#define VIEW__MEMBER(fn) __typeof__(&fn) fn;
+    VIEW__GLFW(VIEW__MEMBER)
+#undef VIEW__MEMBER
+} gl;
+
+static bf_status load_glfw(void)
+{
+    if (gl.lib) return BF_OK;
+    void *lib = dlopen("libglfw.so.3", RTLD_NOW | RTLD_LOCAL);
+    if (!lib) return bf_fail(BF_NO_DEVICE, "view: cannot load GLFW for the window: %s (Debian: libglfw3)", dlerror());
+#define VIEW__LOAD(fn)                                                                              \
+    if (!(*(void **)&gl.fn = dlsym(lib, #fn))) {                                                    \
+        dlclose(lib);                                                                               \
+        return bf_fail(BF_NO_DEVICE, "view: libglfw.so.3 has no %s (GLFW 3.3 or newer needed)", #fn); \
+    }
+    VIEW__GLFW(VIEW__LOAD)
+#undef VIEW__LOAD
+    gl.lib = lib;
+    return BF_OK;
+}
+
 struct view_window {
     view_config cfg;
     GLFWwindow *window;
@@ -57,14 +108,14 @@ view_config view_config_default(void)
 
 static void on_cursor(GLFWwindow *w, double x, double y)
 {
-    view_window *v = glfwGetWindowUserPointer(w);
+    view_window *v = gl.glfwGetWindowUserPointer(w);
     if (v->has_cursor) {
         double dx = x - v->cursor_x, dy = y - v->cursor_y;
-        if (glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+        if (gl.glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
             v->orbit_x += dx;
             v->orbit_y += dy;
-        } else if (glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
-                   glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
+        } else if (gl.glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
+                   gl.glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
             v->pan_x += dx;
             v->pan_y += dy;
         }
@@ -77,16 +128,16 @@ static void on_cursor(GLFWwindow *w, double x, double y)
 static void on_scroll(GLFWwindow *w, double dx, double dy)
 {
     (void)dx;
-    view_window *v = glfwGetWindowUserPointer(w);
+    view_window *v = gl.glfwGetWindowUserPointer(w);
     v->scroll += dy;
 }
 
 static void on_key(GLFWwindow *w, int key, int scancode, int action, int mods)
 {
     (void)scancode, (void)mods;
-    view_window *v = glfwGetWindowUserPointer(w);
+    view_window *v = gl.glfwGetWindowUserPointer(w);
     if (action != GLFW_PRESS) return;
-    if (key == GLFW_KEY_ESCAPE || key == GLFW_KEY_Q) glfwSetWindowShouldClose(w, GLFW_TRUE);
+    if (key == GLFW_KEY_ESCAPE || key == GLFW_KEY_Q) gl.glfwSetWindowShouldClose(w, GLFW_TRUE);
     if (key == GLFW_KEY_F) v->toggle_follow = true;
 }
 
@@ -96,7 +147,7 @@ static bf_status make_surface(void *user, VkInstance instance, VkSurfaceKHR *out
 {
     view_window *v = user;
     g_glfw_error[0] = '\0';
-    VkResult r = glfwCreateWindowSurface(instance, v->window, NULL, out);
+    VkResult r = gl.glfwCreateWindowSurface(instance, v->window, NULL, out);
     if (r != VK_SUCCESS)
         return bf_fail(BF_UNSUPPORTED, "view: cannot make a Vulkan surface for the window (VkResult %d%s%s)", (int)r,
                        g_glfw_error[0] ? ": " : "", g_glfw_error);
@@ -114,38 +165,42 @@ bf_status view_open(const view_config *cfg, gpu_config *gcfg, view_window **out)
         free(v);
         return bad;
     }
-    bf_status s = BF_OK;
+    bf_status s = load_glfw();
+    if (s != BF_OK) {
+        free(v);
+        return s;
+    }
     g_glfw_error[0] = '\0';
-    glfwSetErrorCallback(on_glfw_error);
-    if (!glfwInit()) {
+    gl.glfwSetErrorCallback(on_glfw_error);
+    if (!gl.glfwInit()) {
         const char *d = getenv("DISPLAY");
         free(v);
         return bf_fail(BF_NO_DEVICE, "view: no display to open a window on (DISPLAY=%s%s%s; for scripts, xvfb-run)",
                        d ? d : "unset", g_glfw_error[0] ? ": " : "", g_glfw_error);
     }
-    if (!glfwVulkanSupported()) {
+    if (!gl.glfwVulkanSupported()) {
         s = bf_fail(BF_NO_DEVICE, "view: GLFW finds no Vulkan loader for presentation%s%s", g_glfw_error[0] ? ": " : "",
                     g_glfw_error);
         goto fail;
     }
     uint32_t n = 0;
-    v->extensions = glfwGetRequiredInstanceExtensions(&n);
+    v->extensions = gl.glfwGetRequiredInstanceExtensions(&n);
     v->n_extensions = n;
     if (!v->extensions) {
         s = bf_fail(BF_NO_DEVICE, "view: the Vulkan instance cannot present to this display%s%s",
                     g_glfw_error[0] ? ": " : "", g_glfw_error);
         goto fail;
     }
-    glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
-    v->window = glfwCreateWindow((int)v->cfg.width, (int)v->cfg.height, v->cfg.title, NULL, NULL);
+    gl.glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
+    v->window = gl.glfwCreateWindow((int)v->cfg.width, (int)v->cfg.height, v->cfg.title, NULL, NULL);
     if (!v->window) {
         s = bf_fail(BF_NO_DEVICE, "view: cannot open a window%s%s", g_glfw_error[0] ? ": " : "", g_glfw_error);
         goto fail;
     }
-    glfwSetWindowUserPointer(v->window, v);
-    glfwSetCursorPosCallback(v->window, on_cursor);
-    glfwSetScrollCallback(v->window, on_scroll);
-    glfwSetKeyCallback(v->window, on_key);
+    gl.glfwSetWindowUserPointer(v->window, v);
+    gl.glfwSetCursorPosCallback(v->window, on_cursor);
+    gl.glfwSetScrollCallback(v->window, on_scroll);
+    gl.glfwSetKeyCallback(v->window, on_key);
     v->is_following = v->cfg.is_following;
     bf_se3 I = bf_se3_identity();
     v->cam = view__camera_make(&I, 1.0);
@@ -166,14 +221,14 @@ void view_destroy(view_window *v)
 {
     if (!v) return;
     BF_ASSERT(!v->ctx); /* view_detach first, while the context lives */
-    if (v->window) glfwDestroyWindow(v->window);
-    glfwTerminate();
+    if (v->window) gl.glfwDestroyWindow(v->window);
+    gl.glfwTerminate();
     free(v);
 }
 
 bool view_poll(view_window *v)
 {
-    glfwPollEvents();
+    gl.glfwPollEvents();
     const double k = v->cfg.orbit_deg_per_px * M_PI / 180.0;
     bool moved = v->orbit_x || v->orbit_y || v->pan_x || v->pan_y || v->scroll;
     if (moved && v->is_following) {
@@ -191,15 +246,15 @@ bool view_poll(view_window *v)
         if (!v->is_following) v->cam = view__camera_make(&v->T_follow, v->cam.pivot_m);
     }
     v->toggle_follow = false;
-    return !glfwWindowShouldClose(v->window);
+    return !gl.glfwWindowShouldClose(v->window);
 }
 
-bool view_should_close(const view_window *v) { return glfwWindowShouldClose(v->window); }
+bool view_should_close(const view_window *v) { return gl.glfwWindowShouldClose(v->window); }
 
 void view_wait(view_window *v, double timeout_s)
 {
     (void)v;
-    glfwWaitEventsTimeout(timeout_s);
+    gl.glfwWaitEventsTimeout(timeout_s);
 }
 
 void view_set_pose(view_window *v, const bf_se3 *T_wc, double pivot_m)
@@ -250,7 +305,7 @@ void view_set_status(view_window *v, const view_status *st)
                                                                      : "free camera (F: follow)");
     if (strcmp(t, v->title) != 0) {
         snprintf(v->title, sizeof v->title, "%s", t);
-        glfwSetWindowTitle(v->window, v->title);
+        gl.glfwSetWindowTitle(v->window, v->title);
     }
 }
 
@@ -278,7 +333,7 @@ bf_status view_attach(view_window *v, gpu_context *ctx)
     BF_ASSERT(!v->ctx);
     v->ctx = ctx;
     int fw = 0, fh = 0;
-    glfwGetFramebufferSize(v->window, &fw, &fh);
+    gl.glfwGetFramebufferSize(v->window, &fw, &fh);
     bf_status s = gpu_swapchain_create(ctx, fw > 0 ? (uint32_t)fw : v->cfg.width, fh > 0 ? (uint32_t)fh : v->cfg.height,
                                        &v->sc);
     gpu_pipeline_desc pd = {
@@ -324,7 +379,7 @@ void view_detach(view_window *v)
 static bf_status remake(view_window *v)
 {
     int fw = 0, fh = 0;
-    glfwGetFramebufferSize(v->window, &fw, &fh);
+    gl.glfwGetFramebufferSize(v->window, &fw, &fh);
     bf_status s = gpu_swapchain_resize(v->sc, fw > 0 ? (uint32_t)fw : 1, fh > 0 ? (uint32_t)fh : 1);
     if (s == BF_OK) s = make_size_buffers(v);
     return s;
@@ -335,7 +390,7 @@ bf_status view_show(view_window *v, const render_targets *t, uint8_t *rgb, bool 
     BF_ASSERT(v->ctx);
     if (is_shown) *is_shown = false;
     int fw = 0, fh = 0;
-    glfwGetFramebufferSize(v->window, &fw, &fh);
+    gl.glfwGetFramebufferSize(v->window, &fw, &fh);
     if (fw <= 0 || fh <= 0) return BF_OK; /* minimised: nothing to show */
     bf_status s = BF_OK;
     if ((uint32_t)fw != v->width || (uint32_t)fh != v->height) s = remake(v);
