@@ -150,6 +150,10 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
  * ended the run early, what was fused before it kept; null when none). */
 struct recon_run;
 void app_json_input(cJSON *o, const struct recon_run *run, const rgbd_source *src);
+/* A run's status s, but when it failed after every frame src delivered was
+ * skipped as unreadable, the message says so ("no frame could be read (N
+ * skipped)") rather than blaming the frames' content. */
+bf_status app_input_status(bf_status s, const rgbd_source *src, const char *name);
 /* The map's lines of the printed summary. */
 void app_print_map(const app_map_report *r, uint32_t max_level);
 

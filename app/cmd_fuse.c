@@ -123,7 +123,7 @@ int cmd_fuse(int argc, char **argv)
         /* A corrupt frame mid-sequence ends the run, and the frames fused
          * before it are written; the exit code still says the input was bad. */
         rcfg.keep_on_source_error = true;
-        s = recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run);
+        s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
         r.n_unreadable = replay_skipped_frames(src);
     }
     if (s == BF_OK) s = app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);

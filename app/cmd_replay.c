@@ -569,7 +569,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             rcfg.resume = &rs;
         }
         replay_sink sink = {&a, csv, log, &r};
-        s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
+        s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
     }
     if (r.has_capture) {
         r.cap = capture_threaded_stats(src);

@@ -167,6 +167,8 @@ cp -r "$T/seq" "$T/allcut"
 for g in "$T/allcut"/depth/*.png; do head -c 200 "$T/seq/depth/$(basename "$g")" >"$g"; done
 expect 3 "$B" info "$T/allcut" --skip-bad-frames
 mentions "no frame could be read (3 skipped)"
+expect 3 "$B" fuse "$T/allcut" --poses groundtruth --out "$T/fuall" $small --skip-bad-frames
+mentions "no frame could be read (3 skipped)"
 expect 3 "$B" eval-surface --reference "$T/garbage.txt" --reconstruction "$T/seq/seen.ply"
 mentions "$T/garbage.txt"
 
