@@ -33,7 +33,8 @@ static const char replay_usage[] =
 
 static const char replay_epilog[] =
     "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
-    "3 bad input, 4 no Vulkan device\n";
+    "3 bad input (a corrupt frame mid-sequence: what came before it is still written),\n"
+    "4 no Vulkan device\n";
 
 static const char live_usage[] =
     "usage: bitfuse live --device URI --out DIR [options]\n"
