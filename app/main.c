@@ -30,7 +30,8 @@ static const app_command commands[] = {
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n\ncommands:\n");
+    fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n"
+               "       bitfuse --version\n\ncommands:\n");
     for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
     fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error\n"
                "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"
@@ -69,6 +70,15 @@ int main(int argc, char **argv)
     if (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help")) {
         usage(stdout);
         return APP_EXIT_OK;
+    }
+    if (!strcmp(argv[1], "--version") || !strcmp(argv[1], "version")) {
+        printf("bitfuse %s\n", BF_VERSION);
+        return APP_EXIT_OK;
+    }
+    if (argv[1][0] == '-') {
+        fprintf(stderr, "bitfuse: unknown option '%s' (options follow the command)\n", argv[1]);
+        usage(stderr);
+        return APP_EXIT_USAGE;
     }
     for (size_t i = 0; i < N_COMMANDS; i++)
         if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
