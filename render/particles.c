@@ -9,8 +9,11 @@
  * table keyed by the global brick coordinate). A sphere reaches up to the
  * radius beyond its cell, into bricks that may hold no particle; the walk
  * only visits bricks that exist, so every brick the sphere's box touches
- * is allocated too (empty). That costs memory (docs/particles.md counts
- * it) but keeps the traverser's search local. */
+ * is allocated too (empty), and every cell a sphere overlaps gets a reach
+ * bit in the confidence plane: the traverser searches the neighbours only
+ * from the first reached cell on the ray. That costs memory and binning
+ * time (docs/particles.md counts both) but keeps the traverser's search
+ * local and short. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -171,6 +174,36 @@ static bf_status count_nodes(const bin_state *st, uint32_t level, uint64_t *n_no
     return BF_OK;
 }
 
+/* Sets the reach bits of brick hb (global coordinates b) for the cells the
+ * sphere at cc (cell units) of radius reach (cells) overlaps: those whose
+ * box is within reach of the centre. */
+static void bin_reach(hostmap_brick *hb, const int64_t b[3], const double cc[3], double reach)
+{
+    int64_t lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = (int64_t)floor(cc[a] - reach) - b[a] * 8;
+        hi[a] = (int64_t)floor(cc[a] + reach) - b[a] * 8;
+        if (lo[a] < 0) lo[a] = 0;
+        if (hi[a] > 7) hi[a] = 7;
+    }
+    double r2 = reach * reach;
+    for (int64_t z = lo[2]; z <= hi[2]; z++) {
+        double dz = cc[2] - (double)(b[2] * 8 + z);
+        dz = dz < 0 ? -dz : (dz > 1 ? dz - 1 : 0);
+        for (int64_t y = lo[1]; y <= hi[1]; y++) {
+            double dy = cc[1] - (double)(b[1] * 8 + y);
+            dy = dy < 0 ? -dy : (dy > 1 ? dy - 1 : 0);
+            for (int64_t x = lo[0]; x <= hi[0]; x++) {
+                double dx = cc[0] - (double)(b[0] * 8 + x);
+                dx = dx < 0 ? -dx : (dx > 1 ? dx - 1 : 0);
+                if (dx * dx + dy * dy + dz * dz > r2) continue;
+                hb->conf[brick_word((uint32_t)x, (uint32_t)y, (uint32_t)z)] |=
+                    1u << brick_bit((uint32_t)x, (uint32_t)y, (uint32_t)z);
+            }
+        }
+    }
+}
+
 /* Bins the particles into st (bricks with their bits) and the host copy. */
 static bf_status bin_particles(const render_particles_config *c, const float *xyz, uint64_t n, bf_vec3 origin,
                                uint32_t level, bin_state *st, render_particles_stats *ps)
@@ -190,18 +223,22 @@ static bf_status bin_particles(const render_particles_config *c, const float *xy
         hostmap_brick *hb = &st->bricks[bi];
         if (hb->sign[w] & bit) continue; /* the cell is set, its reach done */
         hb->sign[w] |= bit;
-        hb->conf[w] |= bit;
         ps->n_cells++;
-        /* Every brick the sphere's box touches. */
+        /* Every brick the sphere's box touches, and in it the reach bit of
+         * every cell the sphere overlaps. */
+        double cc[3] = {g[0] + 0.5, g[1] + 0.5, g[2] + 0.5};
         int64_t lo[3], hi[3];
         for (int a = 0; a < 3; a++) {
-            lo[a] = (int64_t)floor((g[a] + 0.5 - reach) / 8.0);
-            hi[a] = (int64_t)floor((g[a] + 0.5 + reach) / 8.0);
+            lo[a] = (int64_t)floor((cc[a] - reach) / 8.0);
+            hi[a] = (int64_t)floor((cc[a] + reach) / 8.0);
         }
         for (int64_t bz = lo[2]; s == BF_OK && bz <= hi[2]; bz++)
             for (int64_t by = lo[1]; s == BF_OK && by <= hi[1]; by++)
-                for (int64_t bx = lo[0]; s == BF_OK && bx <= hi[0]; bx++)
-                    if (bx != b[0] || by != b[1] || bz != b[2]) s = bin_brick(st, (int64_t[3]){bx, by, bz}, &bi);
+                for (int64_t bx = lo[0]; s == BF_OK && bx <= hi[0]; bx++) {
+                    int64_t nb[3] = {bx, by, bz};
+                    s = bin_brick(st, nb, &bi);
+                    if (s == BF_OK) bin_reach(&st->bricks[bi], nb, cc, reach);
+                }
     }
     if (s != BF_OK) return s;
     uint32_t per = 1u << level;
@@ -316,17 +353,18 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
         .name = "render.particles",
         .spirv = bf_spv_render_particles,
         .spirv_bytes = bf_spv_render_particles_size,
-        .n_buffers = 7,
+        .n_buffers = 8,
         .push_bytes = sizeof(render_particles_push),
         .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &ps->pipe);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 7, "render.particles", &ps->bind);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 8, "render.particles", &ps->bind);
     fusion_gpu_view v = {0};
     if (s == BF_OK) v = fusion_gpu_view_get(ps->map);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 0, v.hash, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 1, v.nodes, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 2, v.sign, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 7, v.conf, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_pipeline_warm_up(ctx, &ps->pipe, 1);
     if (s != BF_OK) {
         render_particles_destroy(ps);

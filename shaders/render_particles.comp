@@ -22,12 +22,14 @@ layout(std430, binding = 3) buffer Depth { float v[]; } depth_io;
 layout(std430, binding = 4) writeonly buffer Level { uint v[]; } level_out;
 layout(std430, binding = 5) writeonly buffer Normal { vec4 v[]; } normal_out;
 layout(std430, binding = 6) writeonly buffer Colour { uint v[]; } colour_out;
+layout(std430, binding = 7) readonly buffer Reach { uint w[]; } reach_pool;
 
 layout(push_constant) uniform Push { render_particles_push pc; };
 
 uint fusion_hash_word(uint i) { return hash.w[i]; }
 uint render_node_word(uint i) { return nodes.w[i]; }
 uint render_sign_word(uint slot, uint w) { return bits_pool.w[slot * BRICK_WORDS + w]; }
+uint render_conf_word(uint slot, uint w) { return reach_pool.w[slot * BRICK_WORDS + w]; }
 
 #include "render_walk.glsl.h"
 

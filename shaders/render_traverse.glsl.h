@@ -21,6 +21,7 @@
  *   uint render_sign_word(uint slot, uint w);
  *   uint render_conf_word(uint slot, uint w);             (surface)
  *   float render_particle_radius_m();                     (particles)
+ *   uint render_conf_word(uint slot, uint w);             (particles: the reach bits)
  *   render_walk_map render_particle_map();                (particles: neighbour bricks)
  *
  * This file is GLSL only.
@@ -105,7 +106,8 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
  * segment in this brick have their centres within the radius of it: the
  * segment's box grown by the radius, which may cross into neighbouring
  * bricks (binning allocates every brick a sphere reaches, so the walk visits
- * each point of each sphere). In each brick of that box the sub-brick words
+ * each point of each sphere, and sets the reach bit, in the confidence
+ * plane, of every cell a sphere overlaps). In each brick of that box the sub-brick words
  * overlapping it are searched for set bits with findLSB, and each bit's
  * sphere is intersected with the ray; the nearest hit in [s_in, s_out) is
  * the hit (a nearer one lies in a brick the walk visited before, where the
@@ -127,11 +129,44 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                      uint flags, inout render_trace tr)
 {
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
+    /* Search only from the first cell on the ray that a sphere reaches (the
+     * reach bits, binned with the centres): a DDA over the brick's cells
+     * (Amanatides & Woo 1987) reading this brick's words only, so rays that
+     * pass between the spheres or through the empty bricks around them skip
+     * the search of the neighbours. */
+    vec3 p0 = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
+    ivec3 idx = clamp(ivec3(floor((p0 - brick_lo) * inv_v)), ivec3(0), ivec3(7));
+    ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
+    vec3 s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
+    vec3 s_delta = voxel_m * abs(ray.inv_dir);
+    float s_start = -1.0, s_enter = s_in;
+    for (uint k = 0u; k < 24u; k++) {
+        uint x = uint(idx.x), y = uint(idx.y), z = uint(idx.z);
+        if (((render_conf_word(slot, brick_word(x, y, z)) >> brick_bit(x, y, z)) & 1u) != 0u) {
+            s_start = s_enter;
+            break;
+        }
+        float s_next = min(s_max.x, min(s_max.y, s_max.z));
+        if (s_next >= s_out) break;
+        if (s_max.x <= s_max.y && s_max.x <= s_max.z) {
+            idx.x += stp.x;
+            s_max.x += s_delta.x;
+        } else if (s_max.y <= s_max.z) {
+            idx.y += stp.y;
+            s_max.y += s_delta.y;
+        } else {
+            idx.z += stp.z;
+            s_max.z += s_delta.z;
+        }
+        if (any(lessThan(idx, ivec3(0))) || any(greaterThan(idx, ivec3(7)))) break;
+        s_enter = s_next;
+    }
+    if (s_start < 0.0) return false;
     render_walk_map m = render_particle_map();
     ivec3 B = ivec3(floor(brick_lo * (0.125 * inv_v) + 0.5));
     /* Cells (global, on this level's grid) whose centre c + 0.5 is within
      * r of the segment's box. */
-    vec3 pa = (ray.o + s_in * ray.dir) * inv_v, pb = (ray.o + s_out * ray.dir) * inv_v;
+    vec3 pa = (ray.o + s_start * ray.dir) * inv_v, pb = (ray.o + s_out * ray.dir) * inv_v;
     float rc = r * inv_v;
     ivec3 c0 = ivec3(floor(min(pa, pb) - rc - 0.5)), c1 = ivec3(ceil(max(pa, pb) + rc - 0.5));
     ivec3 b0 = c0 >> 3, b1 = c1 >> 3;
