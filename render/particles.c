@@ -133,12 +133,22 @@ static uint32_t bin_level(double cell_m)
     return l < 1 ? 1u : (l > FUSION_MAX_LEVEL ? FUSION_MAX_LEVEL : (uint32_t)l);
 }
 
+/* The 21 low bits of v spread to every third bit (Morton order). */
+static uint64_t spread3(uint64_t v)
+{
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffull;
+    v = (v | v << 16) & 0x1f0000ff0000ffull;
+    v = (v | v << 8) & 0x100f00f00f00f00full;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+    v = (v | v << 2) & 0x1249249249249249ull;
+    return v;
+}
+
+/* Morton code of a brick: ancestors k levels up share its code >> 3k. */
 static uint64_t morton3(const int64_t b[3])
 {
-    uint64_t m = 0;
-    for (int i = 0; i < BIN_AXIS_BITS; i++)
-        for (int a = 0; a < 3; a++) m |= (uint64_t)((b[a] >> i) & 1) << (3 * i + (2 - a));
-    return m;
+    return spread3((uint64_t)b[0]) << 2 | spread3((uint64_t)b[1]) << 1 | spread3((uint64_t)b[2]);
 }
 
 static int cmp_u64(const void *a, const void *b)
@@ -204,6 +214,40 @@ static void bin_reach(hostmap_brick *hb, const int64_t b[3], const double cc[3],
     }
 }
 
+/* The reach bits of a centre depend only on its cell's place in its brick
+ * (the centre is the cell's middle): for each of the 512 places, the
+ * neighbour bricks (offsets -1..1) the sphere overlaps and their 16 words.
+ * Built once per set when the reach is at most 8 cells (a brick); beyond,
+ * bin_reach runs per particle. */
+typedef struct reach_table {
+    uint32_t n[512];
+    int8_t off[512][27][3];
+    uint32_t mask[512][27][16];
+} reach_table;
+
+static reach_table *reach_table_make(double reach)
+{
+    if (reach > 8.0) return NULL;
+    reach_table *t = calloc(1, sizeof *t);
+    if (!t) return NULL;
+    for (uint32_t l = 0; l < 512; l++) {
+        double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
+        for (int k = 0; k < 27; k++) {
+            int64_t b[3] = {k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1};
+            hostmap_brick hb;
+            memset(hb.conf, 0, sizeof hb.conf);
+            bin_reach(&hb, b, cc, reach);
+            bool any = false;
+            for (int w = 0; w < 16; w++) any |= hb.conf[w] != 0;
+            if (!any) continue;
+            uint32_t i = t->n[l]++;
+            for (int a = 0; a < 3; a++) t->off[l][i][a] = (int8_t)b[a];
+            memcpy(t->mask[l][i], hb.conf, sizeof hb.conf);
+        }
+    }
+    return t;
+}
+
 /* Bins the particles into st (bricks with their bits) and the host copy. */
 static bf_status bin_particles(const render_particles_config *c, const float *xyz, uint64_t n, bf_vec3 origin,
                                uint32_t level, bin_state *st, render_particles_stats *ps)
@@ -211,6 +255,7 @@ static bf_status bin_particles(const render_particles_config *c, const float *xy
     double cell = c->cell_m, inv = 1.0 / cell;
     double reach = c->radius_m * inv; /* the sphere's reach beyond the centre [cells] */
     bf_status s = table_grow(&st->t);
+    reach_table *rt = reach_table_make(reach); /* NULL: per particle (slower, any reach) */
     for (uint64_t i = 0; s == BF_OK && i < n; i++) {
         double p[3] = {xyz[3 * i] - origin.x, xyz[3 * i + 1] - origin.y, xyz[3 * i + 2] - origin.z};
         int64_t g[3], b[3];
@@ -226,6 +271,15 @@ static bf_status bin_particles(const render_particles_config *c, const float *xy
         ps->n_cells++;
         /* Every brick the sphere's box touches, and in it the reach bit of
          * every cell the sphere overlaps. */
+        if (rt) {
+            uint32_t l = x + 8 * y + 64 * z;
+            for (uint32_t k = 0; s == BF_OK && k < rt->n[l]; k++) {
+                int64_t nb[3] = {b[0] + rt->off[l][k][0], b[1] + rt->off[l][k][1], b[2] + rt->off[l][k][2]};
+                s = bin_brick(st, nb, &bi);
+                for (int q = 0; s == BF_OK && q < 16; q++) st->bricks[bi].conf[q] |= rt->mask[l][k][q];
+            }
+            continue;
+        }
         double cc[3] = {g[0] + 0.5, g[1] + 0.5, g[2] + 0.5};
         int64_t lo[3], hi[3];
         for (int a = 0; a < 3; a++) {
@@ -240,6 +294,7 @@ static bf_status bin_particles(const render_particles_config *c, const float *xy
                     if (s == BF_OK) bin_reach(&st->bricks[bi], nb, cc, reach);
                 }
     }
+    free(rt);
     if (s != BF_OK) return s;
     uint32_t per = 1u << level;
     uint64_t mask = (1ull << BIN_AXIS_BITS) - 1;
