@@ -57,6 +57,7 @@ void main()
     tr.hit_depth = 0.0;
     tr.hit_level = FUSION_NONE;
     tr.hit_normal = vec3(0.0);
+    render_particles_cache_clear();
     bool hit = render_walk(render_particle_map(), ray, pc.near_m, far_m, 0u, tr) && tr.hit_depth < far_m;
     if (hit) {
         /* The normal in camera coordinates: R^T n (R takes camera to map). */

@@ -125,6 +125,47 @@ float render_sphere_hit(render_ray ray, vec3 c, float r)
     return h < 0.0 ? -1.0 : tc - sqrt(h / a);
 }
 
+/* The last neighbour lookup's parent: the node one level above the bricks
+ * (its cell on that level's grid, from the map origin) and its first child.
+ * A brick's neighbours mostly share a parent (8 bricks each), so most
+ * lookups read two words instead of a hash probe and an octree descent.
+ * Per invocation; the shader clears it (render_particles_cache_clear). */
+ivec3 render_pcache_parent;
+uint render_pcache_child;
+
+void render_particles_cache_clear()
+{
+    render_pcache_parent = ivec3(-2147483647);
+    render_pcache_child = FUSION_NONE;
+}
+
+/* render_brick_at through the parent cache (level >= 1). */
+uint render_particles_brick(render_walk_map m, ivec3 b, uint level)
+{
+    ivec3 parent = b >> 1;
+    if (parent != render_pcache_parent) {
+        render_pcache_parent = parent;
+        render_pcache_child = FUSION_NONE;
+        ivec3 key = b >> int(level);
+        uint e = render_find_chunk(m, key);
+        if (e == FUSION_NONE) return FUSION_NONE;
+        uvec3 cell = uvec3(parent - (key << int(level - 1u)));
+        uint node = fusion_hash_word(e * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT);
+        for (uint l = 1u; l < level; l++) {
+            uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
+            if (child >= FUSION_LOCKED) return FUSION_NONE;
+            uvec3 c = cell >> (level - 1u - l);
+            node = child + fusion_octant(c.x, c.y, c.z);
+        }
+        uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
+        render_pcache_child = child < FUSION_LOCKED ? child : FUSION_NONE;
+    }
+    if (render_pcache_child == FUSION_NONE) return FUSION_NONE;
+    uvec3 c = uvec3(b);
+    uint slot = render_node_word((render_pcache_child + fusion_octant(c.x, c.y, c.z)) * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
+    return slot < FUSION_LOCKED ? slot : FUSION_NONE;
+}
+
 bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in, float s_out,
                      uint flags, inout render_trace tr)
 {
@@ -177,7 +218,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
         for (int by = b0.y; by <= b1.y; by++)
             for (int bx = b0.x; bx <= b1.x; bx++) {
                 ivec3 b = ivec3(bx, by, bz);
-                uint sl = b == B ? slot : render_brick_at(m, b, level);
+                uint sl = b == B ? slot : render_particles_brick(m, b, level);
                 if (sl == FUSION_NONE) continue;
                 ivec3 lo = clamp(c0 - b * 8, ivec3(0), ivec3(7)), hi = clamp(c1 - b * 8, ivec3(0), ivec3(7));
                 for (uint w = 0u; w < BRICK_WORDS; w++) {
