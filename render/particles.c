@@ -76,8 +76,8 @@ static uint64_t hash64(uint64_t x)
 static bf_status table_grow(bin_table *t)
 {
     uint64_t cap = t->cap ? 2 * t->cap : 1u << 12;
-    uint64_t *keys = calloc(cap, 8);
-    uint32_t *index = malloc(cap * 4);
+    uint64_t *keys = bf_calloc(cap, 8);
+    uint32_t *index = bf_malloc(cap * 4);
     if (!keys || !index) {
         free(keys), free(index);
         return bf_fail(BF_NO_MEMORY, "render: particle bins (%llu entries)", (unsigned long long)cap);
@@ -108,9 +108,9 @@ static bf_status bin_brick(bin_state *st, const int64_t b[3], uint32_t *out)
     }
     if (st->n == st->cap) {
         uint32_t cap = st->cap ? 2 * st->cap : 1024;
-        hostmap_brick *nb = realloc(st->bricks, (size_t)cap * sizeof *nb);
+        hostmap_brick *nb = bf_realloc(st->bricks, (size_t)cap * sizeof *nb);
         if (nb) st->bricks = nb;
-        uint64_t *nc = nb ? realloc(st->codes, (size_t)cap * 8) : NULL;
+        uint64_t *nc = nb ? bf_realloc(st->codes, (size_t)cap * 8) : NULL;
         if (nc) st->codes = nc;
         if (!nb || !nc) return bf_fail(BF_NO_MEMORY, "render: %u particle bricks", cap);
         st->cap = cap;
@@ -161,7 +161,7 @@ static int cmp_u64(const void *a, const void *b)
  * children for every node with one (fusion_load builds them so). */
 static bf_status count_nodes(const bin_state *st, uint32_t level, uint64_t *n_nodes, uint64_t *n_chunks)
 {
-    uint64_t *m = malloc((st->n ? st->n : 1) * 8ull);
+    uint64_t *m = bf_malloc((st->n ? st->n : 1) * 8ull);
     if (!m) return bf_fail(BF_NO_MEMORY, "render: particle octrees");
     for (uint32_t i = 0; i < st->n; i++) {
         uint64_t c = st->codes[i], mask = (1ull << BIN_AXIS_BITS) - 1;
@@ -228,7 +228,7 @@ typedef struct reach_table {
 static reach_table *reach_table_make(double reach)
 {
     if (reach > 8.0) return NULL;
-    reach_table *t = calloc(1, sizeof *t);
+    reach_table *t = bf_calloc(1, sizeof *t);
     if (!t) return NULL;
     for (uint32_t l = 0; l < 512; l++) {
         double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
@@ -360,7 +360,7 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     bf_vec3 origin = {0, 0, 0};
     if (s == BF_OK) s = set_frame(&c, xyz, n, &origin);
     if (s != BF_OK) return s;
-    render_particles *ps = calloc(1, sizeof *ps);
+    render_particles *ps = bf_calloc(1, sizeof *ps);
     if (!ps) return bf_fail(BF_NO_MEMORY, "render: particle set");
     ps->ctx = ctx;
     ps->cfg = c;
