@@ -34,7 +34,10 @@ uint render_conf_word(uint slot, uint w) { return reach_pool.w[slot * BRICK_WORD
 #include "render_walk.glsl.h"
 
 float render_particle_radius_m() { return pc.radius_m; }
-render_walk_map render_particle_map() { return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow); }
+render_walk_map render_particle_map()
+{
+    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, RENDER_PARTICLES_MAX_CELLS);
+}
 
 #define RENDER_TRAVERSE_PARTICLES
 #include "render_traverse.glsl.h"

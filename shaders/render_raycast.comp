@@ -33,7 +33,10 @@ uint render_node_word(uint i) { return nodes.w[i]; }
 
 #include "render_traverse.glsl.h"
 
-render_walk_map walk_map() { return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow); }
+render_walk_map walk_map()
+{
+    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, RENDER_MAX_CELLS);
+}
 
 /* ---------------------------------------------------- sub-voxel refinement
  *

@@ -63,6 +63,7 @@ struct render_walk_map {
     uint max_level;
     uint n_buckets;  /* fusion_hash's modulus */
     uint n_overflow; /* overflow entries after the buckets' slots */
+    uint max_cells;  /* cells a ray may visit (RENDER_MAX_CELLS, RENDER_PARTICLES_MAX_CELLS) */
 };
 
 /* Nudge into a cell past its entry face before locating the voxel there
@@ -141,7 +142,7 @@ bool render_walk(render_walk_map m, render_ray ray, float s, float s_far, uint f
     uint st_node[RENDER_STACK], st_brick[RENDER_STACK], st_blevel[RENDER_STACK];
     int deep = -1, lo = 0;
     uvec3 g_prev = uvec3(0u);
-    for (uint iter = 0u; iter < RENDER_MAX_CELLS && s < s_far; iter++) {
+    for (uint iter = 0u; iter < m.max_cells && s < s_far; iter++) {
         float sp = s + RENDER_NUDGE;
         vec3 p = ray.o + sp * ray.dir;
         ivec3 key = ivec3(floor(p * inv_chunk));
