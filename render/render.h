@@ -7,9 +7,11 @@
  * brick traverser. The `surface` traverser steps voxel by voxel until the
  * sign bit changes from front (1) to behind (0); the hit is refined to the
  * zero of a smoothed sign field on the ray (sub-voxel: ICP needs it), for
- * display only confident voxels count. The traverser is one GLSL function behind one seam
- * (shaders/render_traverse.glsl.h) so the particle and mesh renderers can
- * reuse the chunk and octree walk with their own.
+ * display only confident voxels count. The walk is one GLSL function
+ * (shaders/render_walk.glsl.h) and the traverser one function behind one
+ * seam (shaders/render_traverse.glsl.h): the particle renderer (below)
+ * walks with its `particles` traverser, the mesh renderer will walk with
+ * its own.
  *
  * Images stay on the GPU (tracking reads them there); render_download
  * copies them to the host for PNGs and tests.
