@@ -380,6 +380,13 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     st->bin_s = bf_time_s() - t0;
     if (s == BF_OK && (bs.n > (1u << 28) || n_nodes > (1u << 28)))
         s = bf_fail(BF_NO_MEMORY, "render: %u particle bricks, %llu nodes", bs.n, (unsigned long long)n_nodes);
+    /* The pass binds each bit plane whole: one storage binding must hold it
+     * (lavapipe: 128 MiB, 2 M bricks). */
+    uint64_t plane_bytes = (uint64_t)bs.n * BRICK_WORDS * 4;
+    if (s == BF_OK && plane_bytes > gpu_binding_max_bytes(ctx, 4))
+        s = bf_fail(BF_NO_MEMORY, "render: %u particle bricks need %.0f MiB bit planes, a binding holds %.0f MiB "
+                                  "(a larger cell or radius needs fewer)",
+                    bs.n, plane_bytes / 1048576.0, gpu_binding_max_bytes(ctx, 4) / 1048576.0);
     if (s == BF_OK) {
         /* A map that only ever holds what is loaded: no frames, no colour. */
         fusion_config fc = fusion_config_default();
