@@ -243,6 +243,7 @@ int cmd_eval_colour(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
 int cmd_calibrate(int argc, char **argv);
 int cmd_export(int argc, char **argv);
+int cmd_render(int argc, char **argv);
 /* cmd_export.c: bitfuse info on a scene store. */
 int app_info_store(const char *dir, bool json);
 int cmd_info(int argc, char **argv);

@@ -16,6 +16,7 @@ static const app_command commands[] = {
     {"replay", cmd_replay, "track and fuse a recorded sequence (the full loop): trajectory, mesh, stats"},
     {"fuse", cmd_fuse, "fuse a sequence with known poses into the map; export mesh and points"},
     {"info", cmd_info, "read a sequence or a scene store and print what it holds"},
+    {"render", cmd_render, "ray-cast one view of a saved map and/or particles into PNGs (shaded, depth)"},
     {"export", cmd_export, "write the mesh or the points of a scene store (no loop, no GPU)"},
     {"record", cmd_record, "record a camera (or a sequence) into a bitfuse log (.bflog)"},
     {"convert", cmd_convert, "convert a sequence or log into a TUM folder or a bitfuse log"},

@@ -364,7 +364,7 @@ expect 3 "$B" record --device "$T/missing" --out "$T/x.bflog"
 mentions "$T/missing"
 expect 4 "$B" record --device "v4l2:$T/no-such-video" --out "$T/x.bflog"
 mentions "$T/no-such-video"
-for c in demo synth replay fuse info record convert live eval-traj eval-surface devices; do
+for c in demo synth replay fuse info record convert live eval-traj eval-surface devices render; do
     expect 0 "$B" $c --help
     grep -q "^usage: bitfuse $c" "$T/out" || fail "$c --help: no usage line"
     grep -q -- "--help" "$T/out" || fail "$c --help: the help does not list --help"
