@@ -72,7 +72,7 @@ int main(int argc, char **argv)
         usage(stdout);
         return APP_EXIT_OK;
     }
-    if (!strcmp(argv[1], "--version") || !strcmp(argv[1], "version")) {
+    if (!strcmp(argv[1], "--version")) {
         printf("bitfuse %s\n", BF_VERSION);
         return APP_EXIT_OK;
     }
