@@ -11,6 +11,7 @@
 #include "gpu/gpu.h"
 #include "mesh/mesh.h"
 #include "render/render.h"
+#include "shaders/fusion.glsl.h"
 #include "replay/replay.h"
 
 static const char render_usage[] =
@@ -174,7 +175,14 @@ static bf_status load_map(gpu_context *ctx, const char *path, const bf_intrinsic
     fc.window = 2;
     fc.subcache = 1;
     fc.keep_colour = m.rgb565 != NULL;
-    fc.colour_block_cap = fc.keep_colour ? 4 * fc.brick_cap : 1;
+    /* Colour units: each brick's coloured voxels in units of 14 (fusion.glsl.h). */
+    uint64_t units = 1;
+    for (uint32_t i = 0; m.rgb565 && i < m.n_bricks; i++) {
+        uint32_t n = 0;
+        for (uint32_t v = 0; v < 512; v++) n += m.rgb565[(size_t)i * 512 + v] != 0;
+        units += (n + FUSION_COLOUR_UNIT_COLOURS - 1) / FUSION_COLOUR_UNIT_COLOURS;
+    }
+    fc.colour_unit_cap = (uint32_t)(units < UINT32_MAX ? units : UINT32_MAX);
     fc.hash_buckets = 64;
     while (fc.hash_buckets < rep.n_chunks * 2) fc.hash_buckets *= 2;
     fc.hash_overflow = fc.hash_buckets;
