@@ -15,7 +15,8 @@
 #include "replay/replay.h"
 
 static const char render_usage[] =
-    "usage: bitfuse render [--map STORE|DIR] [--particles FILE] [--particle-radius M] [--particle-cell M]\n"
+    "usage: bitfuse render [--map STORE|DIR] [--mesh FILE [--mesh-pose P]] [--particles FILE]\n"
+    "                      [--particle-radius M] [--particle-cell M]\n"
     "                      --pose \"tx ty tz qx qy qz qw\" [--camera fx,fy,cx,cy] --size WxH --out IMAGE.png\n"
     "                      [--depth DEPTH.png] [--far M] [--repeat N]\n\n"
     "Ray-casts one view of a scene on the GPU: a saved map (a scene store, bitfuse\n"
@@ -25,12 +26,14 @@ static const char render_usage[] =
     "TUM trajectories (the camera looks along +z, y down). IMAGE.png is the shaded view\n"
     "(the map in its colours when it has them, else shaded by octree level; particles in\n"
     "blue); DEPTH.png is 16-bit, 5000 per metre (TUM), 0 where nothing is hit (or beyond\n"
-    "13.1 m). The map shows its confident surface. docs/particles.md, docs/render.md.\n"
-    "--mesh (triangle meshes) is not built yet.\n";
+    "13.1 m). The map shows its confident surface. A mesh (--mesh, PLY or OFF, closed,\n"
+    "metres; placed by --mesh-pose) is voxelised into the map's own bricks at the level\n"
+    "whose voxel is a third of a pixel at its nearest point, and drawn by the same\n"
+    "ray-cast. docs/particles.md, docs/render.md.\n";
 
 static const char render_epilog[] =
     "exit codes: 0 ok, 1 failure (also an image not writable), 2 usage (also a bad pose,\n"
-    "size or camera), 3 unreadable map or particle file, 4 no usable Vulkan device\n";
+    "size or camera), 3 unreadable map, mesh or particle file, 4 no usable Vulkan device\n";
 
 /* "tx ty tz qx qy qz qw" -> T_wc; false with the reason in msg. */
 static bool parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
@@ -127,8 +130,10 @@ static int parse_args(int argc, char **argv, render_args *a)
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
                 "the particles' grid cell [m] (default: a quarter of the radius; at most 2 radii)", .min = 1e-5,
                 .max = 20, .no_default = true),
-        APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE", "a triangle mesh (not built yet)"),
-        APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "P", "the mesh's pose (not built yet)"),
+        APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
+                "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
+        APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
+                "the mesh's pose: mesh to world (default: identity)", .check = check_pose),
         APP_OPT("--pose", APP_OPT_STRING, &a->pose, "\"tx ty tz qx qy qz qw\"",
                 "camera to world (TUM: looks along +z, y down)", .required = true, .check = check_pose),
         APP_OPT("--camera", APP_OPT_STRING, &a->camera, "fx,fy,cx,cy",
@@ -149,9 +154,8 @@ static int parse_args(int argc, char **argv, render_args *a)
     return app_options_parse(&spec, argc, argv);
 }
 
-/* The map of a store (or DIR/store) into a GPU map of its own size. */
-static bf_status load_map(gpu_context *ctx, const char *path, const bf_intrinsics *K, fusion_map **out,
-                          uint32_t *n_bricks)
+/* The map of a store (or DIR/store) on the host. */
+static bf_status read_map(const char *path, hostmap *m)
 {
     char sub[4096];
     const char *dir = path;
@@ -162,37 +166,47 @@ static bf_status load_map(gpu_context *ctx, const char *path, const bf_intrinsic
                                       "as store/", path);
         dir = sub;
     }
-    hostmap m = {0};
+    memset(m, 0, sizeof *m);
     store_meta meta;
     store_report rep;
-    bf_status s = store_read(dir, &m, &meta, NULL, &rep);
+    bf_status s = store_read(dir, m, &meta, NULL, &rep);
     if (s == BF_OK && rep.n_bad)
         bf_warn("render: %s: %u chunk file(s) left out, the first: %s", dir, rep.n_bad, rep.first_bad);
-    if (s == BF_OK && m.n_bricks == 0) s = bf_fail(BF_FORMAT, "%s: the store holds no brick", dir);
+    if (s == BF_OK && m->n_bricks == 0) s = bf_fail(BF_FORMAT, "%s: the store holds no brick", dir);
+    if (s != BF_OK) hostmap_free(m);
+    return s;
+}
+
+/* A host map (a store's, a voxelised mesh's, or both merged) into a GPU map
+ * of its own size. */
+static bf_status load_map(gpu_context *ctx, const hostmap *m, uint32_t n_chunks, const bf_intrinsics *K,
+                          fusion_map **out)
+{
+    bf_status s = BF_OK;
     fusion_config fc = fusion_config_default();
-    fc.chunk_m = m.chunk_m;
-    fc.brick_cap = m.n_bricks + 1;
+    fc.chunk_m = m->chunk_m;
+    fc.brick_cap = m->n_bricks + 1;
     fc.window = 2;
     fc.subcache = 1;
-    fc.keep_colour = m.rgb565 != NULL;
+    fc.keep_colour = m->rgb565 != NULL;
     /* Colour units: each brick's coloured voxels in units of 14 (fusion.glsl.h). */
     uint64_t units = 1;
-    for (uint32_t i = 0; m.rgb565 && i < m.n_bricks; i++) {
+    for (uint32_t i = 0; m->rgb565 && i < m->n_bricks; i++) {
         uint32_t n = 0;
-        for (uint32_t v = 0; v < 512; v++) n += m.rgb565[(size_t)i * 512 + v] != 0;
+        for (uint32_t v = 0; v < 512; v++) n += m->rgb565[(size_t)i * 512 + v] != 0;
         units += (n + FUSION_COLOUR_UNIT_COLOURS - 1) / FUSION_COLOUR_UNIT_COLOURS;
     }
     fc.colour_unit_cap = (uint32_t)(units < UINT32_MAX ? units : UINT32_MAX);
     fc.hash_buckets = 64;
-    while (fc.hash_buckets < rep.n_chunks * 2) fc.hash_buckets *= 2;
+    while (fc.hash_buckets < n_chunks * 2) fc.hash_buckets *= 2;
     fc.hash_overflow = fc.hash_buckets;
     fusion_map *map = NULL;
     /* A fused map needs about 3 nodes a brick (DESIGN.md section 3); a sparse
      * one more: grow and retry when the node pool is short. */
     for (uint32_t per = 3; s == BF_OK && per <= 48; per *= 4) {
         fc.node_cap = per * fc.brick_cap + 64;
-        s = fusion_create(ctx, &fc, K, m.origin_w, &map);
-        if (s == BF_OK) s = fusion_load(map, &m);
+        s = fusion_create(ctx, &fc, K, m->origin_w, &map);
+        if (s == BF_OK) s = fusion_load(map, m);
         if (s == BF_POOL_FULL && per < 48) {
             fusion_destroy(map);
             map = NULL;
@@ -201,14 +215,47 @@ static bf_status load_map(gpu_context *ctx, const char *path, const bf_intrinsic
         }
         break;
     }
-    if (s == BF_OK) *n_bricks = m.n_bricks;
-    hostmap_free(&m);
     if (s != BF_OK) {
         fusion_destroy(map);
         return s;
     }
     *out = map;
     return BF_OK;
+}
+
+static int key_cmp(const void *x, const void *y)
+{
+    return memcmp(x, y, 3 * sizeof(int32_t)) < 0 ? -1 : memcmp(x, y, 3 * sizeof(int32_t)) > 0;
+}
+
+/* Chunks a host map touches (for the hash's size); at most its bricks. */
+static uint32_t count_chunks(const hostmap *m)
+{
+    int32_t (*k)[3] = malloc(((size_t)m->n_bricks + 1) * sizeof *k);
+    if (!k) return m->n_bricks;
+    for (uint32_t i = 0; i < m->n_bricks; i++) memcpy(k[i], m->bricks[i].key, sizeof k[i]);
+    qsort(k, m->n_bricks, sizeof *k, key_cmp);
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m->n_bricks; i++) n += i == 0 || memcmp(k[i], k[i - 1], sizeof k[i]) != 0;
+    free(k);
+    return n;
+}
+
+/* The level for the mesh: a third of the pixel footprint at its nearest
+ * vertex in front of the camera (render_level_for_footprint). */
+static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
+                           float chunk_m, uint32_t max_level, double near_m)
+{
+    bf_se3 T_cw = bf_se3_inverse(T_wc);
+    double z_min = INFINITY;
+    for (uint32_t i = 0; i < mesh->n_verts; i++) {
+        bf_vec3 p = bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
+                          mesh->origin.z + mesh->xyz[3 * i + 2]);
+        bf_vec3 c = bf_se3_apply(&T_cw, bf_se3_apply(T_wm, p));
+        if (c.z > near_m && c.z < z_min) z_min = c.z;
+    }
+    if (!isfinite(z_min)) z_min = 1.0; /* all behind the camera: any level shows nothing */
+    return render_level_for_footprint(chunk_m, z_min, K->fx_px > K->fy_px ? K->fx_px : K->fy_px, max_level);
 }
 
 /* The particles of a PLY (vertex x y z) into world floats. */
@@ -258,9 +305,9 @@ int cmd_render(int argc, char **argv)
     render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    if (a.mesh || a.mesh_pose)
-        return app_usage_error(cmd, "--mesh: the mesh renderer is not built yet (render a map or particles)");
-    if (!a.map && !a.particles) return app_usage_error(cmd, "nothing to render: give --map, --particles or both");
+    if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
+    if (!a.map && !a.particles && !a.mesh)
+        return app_usage_error(cmd, "nothing to render: give --map, --mesh, --particles or any of them");
     if (a.cell_m > 2 * a.radius_m)
         return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a.cell_m, 2 * a.radius_m);
     uint32_t W = 0, H = 0;
@@ -278,14 +325,40 @@ int cmd_render(int argc, char **argv)
     bf_status s = BF_OK;
     if (a.map && !bf_file_exists(a.map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a.map);
     if (s == BF_OK && a.particles) s = load_particles(a.particles, &xyz, &n_particles);
+    mesh_data mesh = {0};
+    bf_se3 T_wm = bf_se3_identity();
+    if (a.mesh_pose) parse_pose(a.mesh_pose, &T_wm, msg, sizeof msg);
+    if (s == BF_OK && a.mesh) s = mesh_read(a.mesh, &mesh);
+    if (s == BF_OK && a.mesh && mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a.mesh);
     gpu_context *ctx = NULL;
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     fusion_map *map = NULL;
     render_particles *ps = NULL;
     render_caster *caster = NULL;
-    uint32_t n_bricks = 0;
-    if (s == BF_OK && a.map) s = load_map(ctx, a.map, &K, &map, &n_bricks);
+    uint32_t n_bricks = 0, n_map_bricks = 0;
+    hostmap hm = {0};
+    render_voxelise_stats vst = {0};
+    uint32_t vlevel = 0;
+    if (s == BF_OK && a.map) s = read_map(a.map, &hm);
+    n_map_bricks = hm.n_bricks;
+    if (s == BF_OK && a.mesh) {
+        /* On the map's grid when there is one, so both are one ray-cast. */
+        render_voxelise_config vc = render_voxelise_config_default();
+        if (a.map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
+        vlevel = vc.level = mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
+        hostmap mh;
+        s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
+        if (s == BF_INVALID_ARG) {
+            snprintf(msg, sizeof msg, "%s", bf_last_error());
+            s = bf_fail(BF_FORMAT, "%s: %s", a.mesh, msg);
+        }
+        if (s == BF_OK && a.map) s = render_hostmap_merge(&hm, &mh);
+        else if (s == BF_OK) hm = mh;
+    }
+    if (s == BF_OK && (a.map || a.mesh)) s = load_map(ctx, &hm, count_chunks(&hm), &K, &map);
+    n_bricks = hm.n_bricks;
+    hostmap_free(&hm);
     if (s == BF_OK && a.particles) {
         render_particles_config pc = render_particles_config_default();
         pc.radius_m = (float)a.radius_m;
@@ -300,6 +373,8 @@ int cmd_render(int argc, char **argv)
     if (s == BF_OK) s = render_create(ctx, NULL, W, H, &caster);
     render_options opt = render_options_display();
     opt.far_m = (float)a.far_m;
+    /* A mesh's outline: pass by the hits that graze a voxel's corner (docs/render.md). */
+    opt.no_graze = a.mesh != NULL;
     double *ms = calloc(a.repeat, sizeof *ms), *ms_p = calloc(a.repeat, sizeof *ms_p);
     if (s == BF_OK && (!ms || !ms_p)) s = bf_fail(BF_NO_MEMORY, "render: timings");
     for (uint32_t i = 0; s == BF_OK && i < a.repeat; i++) {
@@ -321,7 +396,13 @@ int cmd_render(int argc, char **argv)
         qsort(ms_p, a.repeat, sizeof *ms_p, cmp_double);
         printf("bitfuse render: %ux%u on %s -> %s%s%s: %.1f%% of the pixels hit\n", W, H, gpu_device_name(ctx), a.out,
                a.depth ? ", " : "", a.depth ? a.depth : "", 100.0 * (double)n_hit / ((double)W * H));
-        if (map) printf("  map              %s: %u bricks\n", a.map, n_bricks);
+        if (a.map) printf("  map              %s: %u bricks\n", a.map, n_map_bricks);
+        if (a.mesh)
+            printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
+                   "%u bricks, voxelised in %.3f s (%.2f M triangles/s)\n",
+                   a.mesh, mesh.n_tris, vlevel, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
+                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0);
+        if (a.map && a.mesh) printf("  together         %u bricks\n", n_bricks);
         if (ps) {
             const render_particles_stats *st = render_particles_get_stats(ps);
             printf("  particles        %s: %llu, radius %.4g m, cell %.4g m (level %u): %llu cells, %u bricks "
@@ -343,6 +424,7 @@ int cmd_render(int argc, char **argv)
     fusion_destroy(map);
     gpu_context_destroy(ctx);
     free(xyz);
+    mesh_free(&mesh);
     if (s == BF_OK) return APP_EXIT_OK;
     int code = app_fail(cmd, s);
     return is_write_failure && code == APP_EXIT_INPUT ? APP_EXIT_FAILURE : code;

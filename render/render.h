@@ -129,6 +129,9 @@ typedef struct render_voxelise_config {
     float chunk_m;      /* chunk edge of the map it goes into, default 2 m */
     uint32_t level;     /* octree level: voxel edge chunk_m / (8 * 2^level), default 7 (1.95 mm) */
     uint64_t max_pairs; /* refuse meshes needing more (brick, triangle) pairs, default 2^28 */
+    bool has_origin;    /* the bricks on the grid of a map with this origin (to merge them into it); default
+                           false: the mesh's low corner less a brick */
+    bf_vec3 origin_w;
 } render_voxelise_config;
 
 typedef struct render_voxelise_stats {
@@ -140,11 +143,20 @@ typedef struct render_voxelise_stats {
 
 render_voxelise_config render_voxelise_config_default(void);
 /* Voxelises mesh (placed in the world by T_world_mesh, NULL: identity) into
- * out (its origin_w: the mesh's low corner less a brick). st may be NULL.
+ * out (its origin_w: cfg's, or the mesh's low corner less a brick). st may
+ * be NULL.
  * BF_INVALID_ARG for a vertex that is not finite, an index out of range, a
  * level above 12 or a mesh that needs more than max_pairs pairs. */
 bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf_se3 *T_world_mesh,
                                const render_voxelise_config *cfg, hostmap *out, render_voxelise_stats *st);
+/* The level whose voxel is at most a third of the pixel footprint at depth
+ * z_m (focal length f_px): a voxel's cube then widens an outline by a sixth
+ * of a pixel at most (docs/render.md), clamped to [0, max_level]. */
+uint32_t render_level_for_footprint(float chunk_m, double z_m, double f_px, uint32_t max_level);
+/* Merges b's bricks into a (same chunk edge and origin): a brick in both
+ * becomes the union of the solids (behind where either is behind, confident
+ * where either is). b is emptied. BF_INVALID_ARG for maps on other grids. */
+bf_status render_hostmap_merge(hostmap *a, hostmap *b);
 /* ------------------------------------------------------------ particles
  * The particle renderer (Reichl's dissertation, ch. 6; docs/particles.md):
  * particles binned on the host into the map's own structure (a hash of

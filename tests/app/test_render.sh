@@ -4,7 +4,8 @@
 # frame's, noise-free), particles added in front of the map (nearer where
 # they are, the map elsewhere), the particles alone, and the refusals: a bad
 # pose, size, camera or image name (exit 2, the option named), a missing or
-# corrupt file (exit 3, the file named), nothing to render, --mesh.
+# corrupt file (exit 3, the file named), nothing to render; a mesh (a
+# sphere whose depth and outline are known) and its refusals.
 # Usage: test_render.sh path/to/bitfuse
 set -u
 B=$1
@@ -75,6 +76,8 @@ elif mode == "agree":       # median |a - b| [m] where both have depth, and the 
     _, _, _, _, q = read(sys.argv[3])
     d = sorted(abs(a - b) / 5000.0 for ra, rb in zip(px, q) for a, b in zip(ra, rb) if a and b)
     print("%.4f %.3f" % (d[len(d) // 2] if d else 9, len(d) / float(w * h)))
+elif mode == "at":          # the value of pixel (x, y)
+    print(px[int(sys.argv[4])][int(sys.argv[3])])
 elif mode == "nearest":     # pixels of a that are not the nearest of b and c (0: none), and those where b is nearer than c
     _, _, _, _, q = read(sys.argv[3])
     _, _, _, _, r = read(sys.argv[4])
@@ -106,6 +109,48 @@ DEPTH=$T/seq/$(grep -v '^#' "$T/seq/depth.txt" | tail -n 1 | cut -d' ' -f2)
 
 expect 0 "$B" render --help
 grep -qF -- "--particle-radius" "$T/out" || fail "render --help does not list --particle-radius"
+
+# A mesh: a sphere of radius 0.1 m (an icosphere of 5120 triangles, OFF),
+# placed by --mesh-pose 0.5 m in front of the camera at the origin. The
+# centre pixel's depth is 0.4 m within a voxel (the level is chosen for a
+# third of a pixel: 1 mm here), the hit share that of the sphere's disc
+# (radius f tan(asin(r / d)) = 26.8 px of 160x120: 11.7%) within a pixel of
+# its outline.
+py - "$T/sphere.off" <<'PY'
+import sys, math
+t = (1 + 5 ** 0.5) / 2
+v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+     (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+v = [tuple(c / math.sqrt(sum(x * x for x in p)) for c in p) for p in v]
+f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
+     (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7),
+     (9, 8, 1)]
+for _ in range(4):
+    mid, nf = {}, []
+    def m(a, b):
+        k = (min(a, b), max(a, b))
+        if k not in mid:
+            p = [(x + y) / 2 for x, y in zip(v[a], v[b])]
+            n = math.sqrt(sum(x * x for x in p))
+            v.append(tuple(x / n for x in p))
+            mid[k] = len(v) - 1
+        return mid[k]
+    for a, b, c in f:
+        ab, bc, ca = m(a, b), m(b, c), m(c, a)
+        nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+    f = nf
+with open(sys.argv[1], "w") as o:
+    o.write("OFF\n%d %d 0\n" % (len(v), len(f)))
+    for p in v: o.write("%.7f %.7f %.7f\n" % tuple(0.1 * x for x in p))
+    for a, b, c in f: o.write("3 %d %d %d\n" % (a, b, c))
+PY
+expect 0 "$B" render --mesh "$T/sphere.off" --mesh-pose "0 0 0.5 0 0 0 1" --pose "0 0 0 0 0 0 1" --camera $CAM \
+    --size 160x120 --out "$T/sphere.png" --depth "$T/sphere_d.png"
+grep -qF "level 8" "$T/out" || fail "sphere: not voxelised at level 8 (1 mm): $(cat "$T/out")"
+read -r hits < <(py "$T/png.py" "$T/sphere_d.png" hits)
+py -c "import sys; sys.exit(0 if 0.109 <= $hits <= 0.126 else 1)" || fail "sphere: $hits of the pixels hit, not 0.109-0.126"
+read -r centre < <(py "$T/png.py" "$T/sphere_d.png" at 80 60)
+py -c "import sys; sys.exit(0 if abs($centre - 2000) <= 5 else 1)" || fail "sphere: centre depth $centre / 5000 m, not 0.4 m within 1 mm"
 
 # The map from the frame's pose: its depth is the frame's (noise-free, the
 # fused surface within a few voxels of 1-2 cm at these depths).
@@ -166,8 +211,13 @@ expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/x.jpg"
 mentions "--out"
 expect 2 "$B" render --pose "$POSE" --size 160x120 --out "$T/x.png"
 mentions "nothing to render"
-expect 2 "$B" render --mesh "$T/p.ply" --pose "$POSE" --size 160x120 --out "$T/x.png"
-mentions "not built yet"
+expect 2 "$B" render --mesh-pose "0 0 0 0 0 0 1" --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "--mesh-pose without --mesh"
+expect 3 "$B" render --mesh "$T/nope.off" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/nope.off"
+printf 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n' >"$T/bad.off"
+expect 3 "$B" render --mesh "$T/bad.off" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/bad.off"
 expect 3 "$B" render --map "$T/missing" --pose "$POSE" --size 160x120 --out "$T/x.png"
 mentions "$T/missing"
 expect 3 "$B" render --map "$T/nodata" --pose "$POSE" --size 160x120 --out "$T/x.png"
