@@ -66,7 +66,7 @@ void main()
     tr.hit_level = FUSION_NONE;
     tr.hit_normal = vec3(0.0);
     render_particles_cache_clear();
-    bool hit = render_walk(render_particle_map(), ray, s, far_m, 0u, tr) && tr.hit_depth < far_m;
+    bool hit = render_walk_from(render_particle_map(), ray, s, far_m, 0u, tr) && tr.hit_depth < far_m;
     bool done = hit || s >= far_m || (pc.flags & RENDER_PARTICLES_FLAG_LAST) != 0u;
     resume.v[pixel] = done ? -1.0 : s;
     if (!done) return;
