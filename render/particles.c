@@ -31,6 +31,8 @@ struct render_particles {
     gpu_pipeline *pipe;
     gpu_bindings *bind;
     gpu_buffer *bound[4]; /* the caster images bound at 3..6 */
+    gpu_buffer *resume;   /* binding 8: per pixel, where a ray resumes; made for the image size */
+    uint32_t cells_per_pass, n_passes;
     double last_ms;
 };
 
@@ -350,6 +352,22 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
     return BF_OK;
 }
 
+/* Cells a ray walks per dispatch and the dispatches (shaders/render.glsl.h,
+ * RENDER_PARTICLES_LOOP_BUDGET). The limit counts a loop's iterations once
+ * for the 8 lanes running it in lockstep; a cell costs at most the reach
+ * DDA's 24 steps and a search of up to nb bricks (the segment's box grown
+ * by the reach), each at most 20 iterations (its 16 words, the lookup
+ * through the cached parent, the brick loop). */
+static void pass_budget(const render_particles_config *c, uint32_t *cells_per_pass, uint32_t *n_passes)
+{
+    double reach = c->radius_m / c->cell_m;
+    double per_axis = floor((8.0 + 2.0 * reach) / 8.0) + 1.0;
+    double per_cell = 24.0 + 20.0 * per_axis * per_axis * per_axis;
+    double k = floor(RENDER_PARTICLES_LOOP_BUDGET / per_cell);
+    *cells_per_pass = k < 1 ? 1u : (k > 256 ? 256u : (uint32_t)k);
+    *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass;
+}
+
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
                                   render_particles **out)
 {
@@ -371,6 +389,7 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     st->level = level;
     st->cell_m = c.cell_m;
     st->chunk_m = (float)(c.cell_m * 8.0 * (double)(1u << level));
+    pass_budget(&c, &ps->cells_per_pass, &ps->n_passes);
 
     double t0 = bf_time_s();
     bin_state bs = {0};
@@ -415,18 +434,23 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
         .name = "render.particles",
         .spirv = bf_spv_render_particles,
         .spirv_bytes = bf_spv_render_particles_size,
-        .n_buffers = 8,
+        .n_buffers = 9,
         .push_bytes = sizeof(render_particles_push),
         .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &ps->pipe);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 8, "render.particles", &ps->bind);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 9, "render.particles", &ps->bind);
     fusion_gpu_view v = {0};
     if (s == BF_OK) v = fusion_gpu_view_get(ps->map);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 0, v.hash, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 1, v.nodes, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 2, v.sign, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 7, v.conf, 0, GPU_WHOLE_SIZE);
+    /* A resume buffer until the first cast makes one for its images (the warm-up binds every slot). */
+    gpu_buffer_desc rd = {.name = "render.particles.resume", .size_bytes = 16, .memory = GPU_MEMORY_DEVICE,
+                          .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
+    if (s == BF_OK) s = gpu_buffer_create(ctx, &rd, &ps->resume);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 8, ps->resume, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_pipeline_warm_up(ctx, &ps->pipe, 1);
     if (s != BF_OK) {
         render_particles_destroy(ps);
@@ -441,6 +465,7 @@ void render_particles_destroy(render_particles *ps)
     if (!ps) return;
     gpu_bindings_destroy(ps->bind);
     gpu_pipeline_destroy(ps->pipe);
+    gpu_buffer_destroy(ps->resume);
     fusion_destroy(ps->map);
     memset(ps, 0xff, sizeof *ps); /* poison: a use after destroy fails loudly */
     free(ps);
@@ -474,6 +499,22 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         if (s != BF_OK) return s;
         ps->bound[i] = imgs[i];
     }
+    uint64_t n_px = (uint64_t)K->width * K->height;
+    if (gpu_buffer_size(ps->resume) < n_px * 4) {
+        /* A new image size: the old buffer's last reader was waited for
+         * (render_scene waits; a caller recording its own waits too). */
+        gpu_buffer *nb;
+        gpu_buffer_desc rd = {.name = "render.particles.resume", .size_bytes = n_px * 4, .memory = GPU_MEMORY_DEVICE,
+                              .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
+        bf_status s = gpu_buffer_create(ps->ctx, &rd, &nb);
+        if (s == BF_OK) s = gpu_bindings_set(ps->bind, 8, nb, 0, GPU_WHOLE_SIZE);
+        if (s != BF_OK) {
+            gpu_buffer_destroy(nb);
+            return s;
+        }
+        gpu_buffer_destroy(ps->resume);
+        ps->resume = nb;
+    }
     fusion_gpu_view v = fusion_gpu_view_get(ps->map);
     bf_se3 T_mc = fusion_camera_to_map(ps->map, T_wc);
     render_particles_push pc = {
@@ -492,6 +533,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         .radius_m = ps->cfg.radius_m,
         .flags = keep_nearer ? RENDER_PARTICLES_FLAG_KEEP_NEARER : 0u,
         .rgb = ps->cfg.rgb,
+        .cells_per_pass = ps->cells_per_pass,
     };
     for (int r = 0; r < 3; r++)
         for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_mc.R[r][c];
@@ -500,8 +542,15 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
      * pass's reads and writes of them. */
     gpu_cmd_barrier(ps->ctx, GPU_BARRIER_COMPUTE);
     gpu_cmd_stage_begin(ps->ctx, "render.particles");
-    gpu_cmd_dispatch(ps->ctx, ps->pipe, ps->bind, &pc, gpu_groups(K->width, RENDER_LOCAL_X),
-                     gpu_groups(K->height, RENDER_LOCAL_Y), 1);
+    uint32_t flags = pc.flags;
+    for (uint32_t p = 0; p < ps->n_passes; p++) {
+        pc.flags = flags | (p == 0 ? RENDER_PARTICLES_FLAG_FIRST : 0u) |
+                   (p + 1 == ps->n_passes ? RENDER_PARTICLES_FLAG_LAST : 0u);
+        /* The last dispatch's resume depths and images -> this one's reads. */
+        if (p > 0) gpu_cmd_barrier(ps->ctx, GPU_BARRIER_COMPUTE);
+        gpu_cmd_dispatch(ps->ctx, ps->pipe, ps->bind, &pc, gpu_groups(K->width, RENDER_LOCAL_X),
+                         gpu_groups(K->height, RENDER_LOCAL_Y), 1);
+    }
     gpu_cmd_stage_end(ps->ctx);
     /* The images -> the readers recorded next. */
     gpu_cmd_barrier(ps->ctx, GPU_BARRIER_COMPUTE);

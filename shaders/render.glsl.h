@@ -42,10 +42,16 @@
 /* Bound on the cells a ray may visit: a guard against a corrupt map, far
  * above what a 6 m ray through a room visits (a few hundred). */
 #define RENDER_MAX_CELLS 4096u
-/* The same for the particle pass: a particle set at fine cells is many small
- * bricks (the dam break at 0.625 mm cells, 5 mm bricks, lost about 0.3% of
- * its hit pixels to 4096; docs/particles.md). */
-#define RENDER_PARTICLES_MAX_CELLS 65536u
+/* The particle pass walks in bounded dispatches (render/particles.c):
+ * lavapipe ends every loop of a shader once its loops together ran 65,535
+ * iterations for one call (8 lanes; gallivm's LP_MAX_TGSI_LOOP_ITERATIONS),
+ * and a particle search runs loops within loops. Each dispatch walks at
+ * most render_particles_push.cells_per_pass cells of a ray, so that its
+ * loop iterations stay below RENDER_PARTICLES_LOOP_BUDGET for 8 lanes, and
+ * the next resumes it; a ray walks at most RENDER_PARTICLES_MAX_CELLS cells
+ * in all (docs/particles.md). */
+#define RENDER_PARTICLES_LOOP_BUDGET 40000u
+#define RENDER_PARTICLES_MAX_CELLS 1024u
 
 /* Sub-voxel refinement of a tracking hit (render_raycast.comp's
  * subvoxel_depth, tests/render/raycast_ref.c in double): Newton steps on the
@@ -180,6 +186,8 @@ BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
 
 /* Push constants of render_particles.comp (the particle pass, render/particles.c). */
 #define RENDER_PARTICLES_FLAG_KEEP_NEARER 1u /* a pixel's existing hit (the map's) stays where it is nearer */
+#define RENDER_PARTICLES_FLAG_FIRST 2u       /* the first dispatch: rays start at near_m */
+#define RENDER_PARTICLES_FLAG_LAST 4u        /* the last dispatch: rays not done are misses */
 struct render_particles_push {
     bf_f32 R[9];             /* camera to particle-map rotation, row-major */
     bf_f32 t[3];             /* camera centre in the particle map's frame [m] */
@@ -191,8 +199,9 @@ struct render_particles_push {
     bf_f32 radius_m;         /* every particle's sphere */
     bf_u32 flags;            /* RENDER_PARTICLES_FLAG_* */
     bf_u32 rgb;              /* the particles' colour, R in the low byte */
+    bf_u32 cells_per_pass;   /* cells a ray walks in one dispatch */
 };
-#define RENDER_PARTICLES_PUSH_WORDS 27u
+#define RENDER_PARTICLES_PUSH_WORDS 28u
 #ifndef BF_GLSL
 typedef struct render_particles_push render_particles_push;
 _Static_assert(sizeof(render_particles_push) == RENDER_PARTICLES_PUSH_WORDS * 4, "render_particles_push must match std430");

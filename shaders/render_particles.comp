@@ -7,7 +7,8 @@
  * colour. With RENDER_PARTICLES_FLAG_KEEP_NEARER the pixel's existing hit
  * (the map's ray-cast, recorded just before) bounds the ray, and a pixel
  * the particles do not reach in front of it keeps it: one image with the
- * nearest hit of either.
+ * nearest hit of either. A dispatch walks a bounded number of cells per ray
+ * and the next resumes the rays not done (render.glsl.h says why).
  */
 #extension GL_GOOGLE_include_directive : require
 #include "fusion.glsl.h"
@@ -23,6 +24,8 @@ layout(std430, binding = 4) writeonly buffer Level { uint v[]; } level_out;
 layout(std430, binding = 5) writeonly buffer Normal { vec4 v[]; } normal_out;
 layout(std430, binding = 6) writeonly buffer Colour { uint v[]; } colour_out;
 layout(std430, binding = 7) readonly buffer Reach { uint w[]; } reach_pool;
+/* Per pixel: the depth where the ray resumes in the next dispatch; -1: done. */
+layout(std430, binding = 8) buffer Resume { float v[]; } resume;
 
 layout(push_constant) uniform Push { render_particles_push pc; };
 
@@ -36,7 +39,7 @@ uint render_conf_word(uint slot, uint w) { return reach_pool.w[slot * BRICK_WORD
 float render_particle_radius_m() { return pc.radius_m; }
 render_walk_map render_particle_map()
 {
-    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, RENDER_PARTICLES_MAX_CELLS);
+    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, pc.cells_per_pass);
 }
 
 #define RENDER_TRAVERSE_PARTICLES
@@ -47,6 +50,8 @@ void main()
     uvec2 px = gl_GlobalInvocationID.xy;
     if (px.x >= pc.width || px.y >= pc.height) return;
     uint pixel = px.y * pc.width + px.x;
+    float s = (pc.flags & RENDER_PARTICLES_FLAG_FIRST) != 0u ? pc.near_m : resume.v[pixel];
+    if (s < 0.0) return; /* done in an earlier dispatch */
     render_ray ray = render_pixel_ray(px, pc.R, pc.t, pc.fx, pc.fy, pc.cx, pc.cy);
     bool keep = (pc.flags & RENDER_PARTICLES_FLAG_KEEP_NEARER) != 0u;
     float far_m = pc.far_m;
@@ -61,7 +66,10 @@ void main()
     tr.hit_level = FUSION_NONE;
     tr.hit_normal = vec3(0.0);
     render_particles_cache_clear();
-    bool hit = render_walk(render_particle_map(), ray, pc.near_m, far_m, 0u, tr) && tr.hit_depth < far_m;
+    bool hit = render_walk_from(render_particle_map(), ray, s, far_m, 0u, tr) && tr.hit_depth < far_m;
+    bool done = hit || s >= far_m || (pc.flags & RENDER_PARTICLES_FLAG_LAST) != 0u;
+    resume.v[pixel] = done ? -1.0 : s;
+    if (!done) return;
     if (hit) {
         /* The normal in camera coordinates: R^T n (R takes camera to map). */
         vec3 n = tr.hit_normal;

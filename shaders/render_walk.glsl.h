@@ -129,8 +129,10 @@ uint render_brick_at(render_walk_map m, ivec3 b, uint level)
 }
 
 /* Walks the ray from depth s to s_far through map m, handing each brick it
- * crosses to render_traverse; true at the first hit (tr holds it). */
-bool render_walk(render_walk_map m, render_ray ray, float s, float s_far, uint flags, inout render_trace tr)
+ * crosses to render_traverse; true at the first hit (tr holds it). At most
+ * m.max_cells cells: false with s < s_far when the walk stopped there (s is
+ * where a later walk resumes). */
+bool render_walk_from(render_walk_map m, render_ray ray, inout float s, float s_far, uint flags, inout render_trace tr)
 {
     float inv_chunk = 1.0 / m.chunk_m;
     float grid_per_m = float(RENDER_GRID) * inv_chunk;
@@ -208,6 +210,12 @@ bool render_walk(render_walk_map m, render_ray ray, float s, float s_far, uint f
         s = max(s_exit, sp);
     }
     return false;
+}
+
+/* render_walk_from from depth s, for a caller that does not resume. */
+bool render_walk(render_walk_map m, render_ray ray, float s, float s_far, uint flags, inout render_trace tr)
+{
+    return render_walk_from(m, ray, s, s_far, flags, tr);
 }
 
 #endif
