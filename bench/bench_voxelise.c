@@ -106,13 +106,17 @@ int main(int argc, char **argv)
             }
             fusion_config fc = fusion_config_default();
             fc.brick_cap = hm.n_bricks + 64, fc.node_cap = 16 * hm.n_bricks + 1024;
+            fc.window = 2, fc.subcache = 1; /* no frames are fused: a small frame ring */
             double ms[8] = {0}, map_mib = 0;
             for (int wi = 0; wi < n_widths; wi++) {
                 uint32_t W = widths[wi], H = W * 3 / 4;
                 const bf_intrinsics K = {W, H, 525.0 * W / 640.0, 525.0 * W / 640.0, (W - 1) / 2.0, (H - 1) / 2.0, 5000};
                 fusion_map *map;
                 render_caster *rc;
-                if (fusion_create(ctx, &fc, &K, hm.origin_w, &map) != BF_OK) break;
+                if (fusion_create(ctx, &fc, &K, hm.origin_w, &map) != BF_OK) {
+                    fprintf(stderr, "bench_voxelise: %s\n", bf_last_error());
+                    break;
+                }
                 if (fusion_load(map, &hm) == BF_OK && render_create(ctx, NULL, K.width, K.height, &rc) == BF_OK) {
                     fusion_stats fs;
                     if (fusion_get_stats(map, &fs) == BF_OK) map_mib = fs.bytes_total / 1048576.0;
