@@ -86,8 +86,8 @@ typedef struct app_command_spec {
 
 /* Prints "bitfuse CMD: message" and where the help is; returns APP_EXIT_USAGE. */
 int app_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* 0: parsed; -1: --help was printed (exit 0); else the usage exit code,
- * the message printed. */
+/* 0: parsed; -1: --help or --version was printed (exit 0); else the usage
+ * exit code, the message printed. */
 int app_options_parse(const app_command_spec *spec, int argc, char **argv);
 void app_options_help(FILE *f, const app_command_spec *spec);
 
@@ -145,6 +145,15 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
                          app_map_report *r);
 /* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
+/* The input's part of stats.json: "frames_unreadable" (frames src skipped
+ * under --skip-bad-frames) and "input_error" (the failure of a frame that
+ * ended the run early, what was fused before it kept; null when none). */
+struct recon_run;
+void app_json_input(cJSON *o, const struct recon_run *run, const rgbd_source *src);
+/* A run's status s, but when it failed after every frame src delivered was
+ * skipped as unreadable, the message says so ("no frame could be read (N
+ * skipped)") rather than blaming the frames' content. */
+bf_status app_input_status(bf_status s, const rgbd_source *src, const char *name);
 /* The map's lines of the printed summary. */
 void app_print_map(const app_map_report *r, uint32_t max_level);
 
@@ -178,6 +187,9 @@ void app_store_close(app_store *st);
 
 /* json.c: JSON through cJSON. Objects are built with cJSON's own calls;
  * NaN and infinities come out as null. */
+/* The root of a command's stats.json: {"command": command, "version": the
+ * program's version}. */
+cJSON *app_json_stats(const char *command);
 /* A new object, added to parent under name when parent is not NULL. */
 cJSON *app_json_object(cJSON *parent, const char *name);
 /* {"median", "p95", "mean"} of s under name. */
@@ -231,6 +243,7 @@ int cmd_eval_colour(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
 int cmd_calibrate(int argc, char **argv);
 int cmd_export(int argc, char **argv);
+int cmd_render(int argc, char **argv);
 /* cmd_export.c: bitfuse info on a scene store. */
 int app_info_store(const char *dir, bool json);
 int cmd_info(int argc, char **argv);

@@ -103,8 +103,7 @@ int cmd_convert(int argc, char **argv)
         snprintf(json_path, sizeof json_path, "%.*s.stats.json", (int)(len - 6), a.out);
     else if ((s = bf_path_join(json_path, sizeof json_path, a.out, "stats.json")))
         return app_fail(cmd, s);
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "command", "convert");
+    cJSON *o = app_json_stats("convert");
     cJSON_AddStringToObject(o, "in", a.in);
     cJSON_AddStringToObject(o, "out", a.out);
     cJSON_AddStringToObject(o, "format", a.to_log ? "bflog" : "tum");

@@ -136,8 +136,7 @@ typedef struct demo_report {
 /* Distances are null when nothing was measured (JSON has no NaN). */
 static cJSON *demo_json(const demo_report *r)
 {
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "command", "demo");
+    cJSON *o = app_json_stats("demo");
     cJSON_AddStringToObject(o, "device", r->device);
     cJSON_AddNumberToObject(o, "frames", r->synth.n_frames);
     cJSON_AddNumberToObject(o, "render_ms_per_frame_median", 1e3 * r->synth.median_frame_s);
@@ -255,7 +254,7 @@ static bf_status demo_run(gpu_context *ctx, const char *out_dir, uint32_t n_fram
     /* 2. Render the room along it. */
     synth_config cfg = {
         .scene = "room", .data_dir = data_dir, .traj_path = path, .n_frames = n_frames,
-        .noise = SYNTH_NOISE_KINECT1, .seed = seed, .out_dir = seq,
+        .noise = SYNTH_NOISE_KINECT1, .seed = seed, .out_dir = seq, .version = BF_VERSION,
     };
     bf_info("rendering %u frames of the synthetic room into %s", n_frames, seq);
     if ((s = synth_run(&cfg, &r->synth)) != BF_OK) goto done;

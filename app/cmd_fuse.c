@@ -53,7 +53,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     app_command_spec spec = {
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
-        .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input, 4 no Vulkan device\n",
+        .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input (a corrupt frame\n"
+                  "mid-sequence: the frames before it are still fused and written), 4 no Vulkan device\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     return rc ? rc : app_check_map_options("fuse", &a->fcfg);
@@ -61,21 +62,24 @@ static int parse_args(int argc, char **argv, fuse_args *a)
 
 typedef struct fuse_result {
     recon_run run;
+    uint32_t n_unreadable; /* frames the source skipped (--skip-bad-frames) */
     app_map_report out;
     double seconds;
     char device[256];
 } fuse_result;
 
-static cJSON *stats_json(const fuse_args *a, const fuse_result *r)
+static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_source *src)
 {
     const recon_run_series *t = &r->run.series;
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "command", "fuse");
+    cJSON *o = app_json_stats("fuse");
     cJSON_AddStringToObject(o, "sequence", a->seq);
     cJSON_AddStringToObject(o, "device", r->device);
     app_json_fusion_config(o, "config", &a->fcfg);
     cJSON_AddNumberToObject(o, "frames", r->run.n_fused);
-    cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped);
+    /* Skipped: unreadable (--skip-bad-frames) or without a pose. */
+    cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped + r->n_unreadable);
+    cJSON_AddNumberToObject(o, "frames_without_pose", r->run.n_skipped);
+    app_json_input(o, &r->run, src);
     app_json_series(o, "frame_ms", &t->frame_ms);
     cJSON *g = app_json_object(o, "gpu_stage_ms_median");
     cJSON_AddNumberToObject(g, "upload", bf_stats_percentile(&t->upload_ms, 50));
@@ -117,18 +121,29 @@ int cmd_fuse(int argc, char **argv)
         rcfg.known = use_traj ? &traj : NULL;
         rcfg.name = a.seq;
         rcfg.label = cmd;
-        s = recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run);
+        /* A corrupt frame mid-sequence ends the run, and the frames fused
+         * before it are written; the exit code still says the input was bad. */
+        rcfg.keep_on_source_error = true;
+        s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
+        r.n_unreadable = replay_skipped_frames(src);
     }
     if (s == BF_OK) s = app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
     r.seconds = bf_time_s() - t_start;
-    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
+    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r, src));
     if (s == BF_OK) {
-        printf("bitfuse fuse: %u frames fused (%u skipped) on %s\n", r.run.n_fused, r.run.n_skipped, r.device);
+        printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
+               r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);
         printf("  wrote            %s/{%s%spoints.ply,stats.json} in %.1f s\n", a.out, r.out.mesh_file,
                r.out.mesh_file[0] ? "," : "", r.seconds);
+    }
+    bf_status s_input = r.run.source_status;
+    if (s == BF_OK && s_input != BF_OK) {
+        printf("  stopped early    %s: the frames before it were fused and written\n", r.run.source_error);
+        bf_fail(s_input, "%s", r.run.source_error);
+        s = s_input;
     }
     recon_run_free(&r.run);
     gpu_context_destroy(ctx);

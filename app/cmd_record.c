@@ -66,8 +66,7 @@ typedef struct record_result {
 static cJSON *stats_json(const record_args *a, const char *log_path, const record_result *r, bf_status s)
 {
     const replay_log_stats *L = &r->log;
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "command", "record");
+    cJSON *o = app_json_stats("record");
     cJSON_AddStringToObject(o, "device", a->device);
     cJSON_AddBoolToObject(o, "live", r->is_live);
     cJSON_AddStringToObject(o, "out", log_path);

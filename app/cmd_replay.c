@@ -34,7 +34,8 @@ static const char replay_usage[] =
 
 static const char replay_epilog[] =
     "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
-    "3 bad input, 4 no Vulkan device\n";
+    "3 bad input (a corrupt frame mid-sequence: what came before it is still written),\n"
+    "4 no Vulkan device\n";
 
 static const char live_usage[] =
     "usage: bitfuse live --device URI --out DIR [options]\n"
@@ -413,16 +414,16 @@ static void json_stream(cJSON *o, const replay_args *a, const replay_result *r)
     cJSON_AddNumberToObject(s, "move_ms_total", st.ms_total);
 }
 
-static cJSON *stats_json(const replay_args *a, const replay_result *r)
+static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgbd_source *src)
 {
     const recon_run_series *t = &r->run.series;
     const recon_counts *c = &r->run.counts;
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "command", a->is_live_cmd ? "live" : "replay");
+    cJSON *o = app_json_stats(a->is_live_cmd ? "live" : "replay");
     cJSON_AddStringToObject(o, a->is_live_cmd ? "source" : "sequence", a->seq);
     cJSON_AddStringToObject(o, "device", r->device);
     app_json_recon_config(o, "config", &a->rcfg);
     cJSON_AddNumberToObject(o, "frames", c->frames);
+    app_json_input(o, &r->run, src);
     cJSON *tr = app_json_object(o, "tracking");
     cJSON_AddNumberToObject(tr, "tracked", c->tracked);
     cJSON_AddNumberToObject(tr, "lost", c->lost);
@@ -591,13 +592,17 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     return s;
 }
 
-static void print_summary(const replay_args *a, const replay_result *r)
+static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src)
 {
     const recon_counts *c = &r->run.counts;
     const recon_run_series *t = &r->run.series;
     printf("bitfuse %s: %u frames on %s: %u tracked (%u relocalised), %u lost, %u without depth (%u degenerate)\n",
            a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->relocalised, c->lost, c->no_depth,
            c->degenerate);
+    if (replay_skipped_frames(src))
+        printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
+    if (r->run.source_status != BF_OK)
+        printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
     if (r->has_capture)
         printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
@@ -684,7 +689,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK) {
         recon_run_config rcfg = {
             .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,
-            .init_identity = a.init == 1, .keep_on_source_error = is_live_cmd, .name = a.seq,
+            /* A device failing or a corrupt frame mid-sequence keeps what was
+             * reconstructed before it; the exit code still reports it. */
+            .init_identity = a.init == 1, .keep_on_source_error = true, .name = a.seq,
             .label = cmd, .stop = stop,
         };
         recon_resume_state rs;
@@ -694,7 +701,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         }
         replay_sink sink = {.a = &a, .csv = csv, .log = log, .r = &r, .win = win,
                             .stop = (volatile sig_atomic_t *)stop};
-        s = recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run);
+        s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
     }
     if (r.has_capture) {
         r.cap = capture_threaded_stats(src);
@@ -715,9 +722,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
     hostmap_free(&whole);
     r.seconds = bf_time_s() - t_start;
-    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r));
+    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r, src));
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
-    if (s == BF_OK) print_summary(&a, &r);
+    if (s == BF_OK) print_summary(&a, &r, src);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);

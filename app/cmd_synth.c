@@ -154,7 +154,7 @@ int cmd_synth(int argc, char **argv)
 {
     const char *cmd = "synth";
     synth_config cfg = {.scene = "room", .noise = SYNTH_NOISE_KINECT1, .seed = 1, .rate_hz = 30, .seen_cell_m = 0.005,
-                        .mesh_scale = 1};
+                        .mesh_scale = 1, .version = BF_VERSION};
     const char *data_dir = NULL, *camera = NULL, *size = NULL;
     int noise = SYNTH_NOISE_KINECT1;
     for (int i = 1; i < argc; i++)

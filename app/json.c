@@ -10,6 +10,14 @@
 #include "calib/calib.h"
 #include "recon/recon.h"
 
+cJSON *app_json_stats(const char *command)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "command", command);
+    cJSON_AddStringToObject(o, "version", BF_VERSION);
+    return o;
+}
+
 cJSON *app_json_object(cJSON *parent, const char *name)
 {
     cJSON *o = cJSON_CreateObject();

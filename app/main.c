@@ -16,6 +16,7 @@ static const app_command commands[] = {
     {"replay", cmd_replay, "track and fuse a recorded sequence (the full loop): trajectory, mesh, stats"},
     {"fuse", cmd_fuse, "fuse a sequence with known poses into the map; export mesh and points"},
     {"info", cmd_info, "read a sequence or a scene store and print what it holds"},
+    {"render", cmd_render, "ray-cast one view of a saved map and/or particles into PNGs (shaded, depth)"},
     {"export", cmd_export, "write the mesh or the points of a scene store (no loop, no GPU)"},
     {"record", cmd_record, "record a camera (or a sequence) into a bitfuse log (.bflog)"},
     {"convert", cmd_convert, "convert a sequence or log into a TUM folder or a bitfuse log"},
@@ -31,7 +32,8 @@ static const app_command commands[] = {
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n\ncommands:\n");
+    fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n"
+               "       bitfuse --version\n\ncommands:\n");
     for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
     fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error (or no display)\n"
                "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"
@@ -70,6 +72,15 @@ int main(int argc, char **argv)
     if (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help")) {
         usage(stdout);
         return APP_EXIT_OK;
+    }
+    if (!strcmp(argv[1], "--version")) {
+        printf("bitfuse %s\n", BF_VERSION);
+        return APP_EXIT_OK;
+    }
+    if (argv[1][0] == '-') {
+        fprintf(stderr, "bitfuse: unknown option '%s' (options follow the command)\n", argv[1]);
+        usage(stderr);
+        return APP_EXIT_USAGE;
     }
     for (size_t i = 0; i < N_COMMANDS; i++)
         if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);

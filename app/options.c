@@ -25,7 +25,9 @@ static bool is_help(const char *arg) { return !strcmp(arg, "-h") || !strcmp(arg,
 
 /* The value of argv[*i] if it is row's option, as "--name value" or
  * "--name=value"; *i moves past what was used. NULL with *matched false:
- * another option; NULL with *matched true: the value is missing. */
+ * another option; NULL with *matched true: the value is missing. A next
+ * argument that is an option ("--out --ratio 2") is not taken as the value:
+ * "--name=--x" gives a value starting with "--". */
 static const char *option_value(const app_option *row, int argc, char **argv, int *i, bool *matched)
 {
     size_t len = strlen(row->name);
@@ -35,7 +37,7 @@ static const char *option_value(const app_option *row, int argc, char **argv, in
     *matched = true;
     if (row->kind == APP_OPT_FLAG) return a[len] == '=' ? NULL : a;
     if (a[len] == '=') return a + len + 1;
-    if (*i + 1 >= argc) return NULL;
+    if (*i + 1 >= argc || !strncmp(argv[*i + 1], "--", 2)) return NULL;
     return argv[++*i];
 }
 
@@ -198,6 +200,9 @@ int app_options_parse(const app_command_spec *spec, int argc, char **argv)
         if (is_help(argv[i])) {
             app_options_help(stdout, spec);
             return -1;
+        } else if (!strcmp(argv[i], "--version")) {
+            printf("bitfuse %s\n", BF_VERSION);
+            return -1;
         }
     bool seen[APP_OPT_ROWS_MAX] = {false};
     int n_pos = 0;
@@ -301,6 +306,7 @@ void app_options_help(FILE *f, const app_command_spec *spec)
         for (const app_option *row = *t; row->name; row++)
             if (row->help) help_row(f, row);
     fprintf(f, "  -h, --help          this text\n");
+    fprintf(f, "  --version           the program's version\n");
     if (spec->epilog) fprintf(f, "\n%s", spec->epilog);
 }
 

@@ -8,6 +8,8 @@
 
 #include "app.h"
 #include "mesh/mesh.h"
+#include "recon/recon.h"
+#include "replay/replay.h"
 
 /* The mesh lattice level: the finest level that holds at least a tenth of
  * the bricks. A handful of bricks at a finer level (a sample that came very
@@ -179,4 +181,18 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
         printf(", %s simplified to %llu (meshoptimizer's error estimate %.2f mm)", r->mesh_file,
                (unsigned long long)r->simplify.tris_after, 1e3 * r->simplify.error_m);
     printf("\n");
+}
+
+void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)
+{
+    cJSON_AddNumberToObject(o, "frames_unreadable", replay_skipped_frames(src));
+    if (run->source_status != BF_OK) cJSON_AddStringToObject(o, "input_error", run->source_error);
+    else cJSON_AddNullToObject(o, "input_error");
+}
+
+bf_status app_input_status(bf_status s, const rgbd_source *src, const char *name)
+{
+    uint32_t skipped = src ? replay_skipped_frames(src) : 0;
+    if (s != BF_FORMAT || skipped == 0 || skipped < src->n_frames) return s;
+    return bf_fail(BF_FORMAT, "%s: no frame could be read (%u skipped)", name, skipped);
 }

@@ -2,9 +2,11 @@
  * triangle count and level, and the ray-cast of the result at 640x480.
  * Meshes: a shared mesh (default the bunny, scaled to 25 cm) split into
  * four triangles per triangle `--subdivide` times (10^5..10^7 triangles).
- *   bench_voxelise [--mesh PLY] [--size M] [--levels 7,8] [--subdivide 0,1,2,3]
+ *   bench_voxelise [--mesh PLY] [--size M] [--levels 7,8] [--subdivide 0,1,2,3] [--widths 320,640,1280]
  * Prints one row per (triangles, level): bricks, pairs, binning seconds,
- * GPU seconds, total, triangles per second, ray-cast ms. */
+ * GPU seconds, total, triangles per second, the map's bytes (sign,
+ * confidence, records, nodes, hash) and per triangle, and the ray-cast's GPU
+ * time at each image width (4:3, the mesh filling about half the height). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -50,15 +52,17 @@ int main(int argc, char **argv)
 {
     const char *path = BF_SOURCE_DIR "/../shared/data/meshes/bunny.ply";
     double size = 0.25;
-    uint32_t levels[8] = {7, 8}, subs[8] = {0, 1, 2};
-    int n_levels = 2, n_subs = 3;
+    uint32_t levels[8] = {7, 8}, subs[8] = {0, 1, 2}, widths[8] = {640};
+    int n_levels = 2, n_subs = 3, n_widths = 1;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--mesh") && i + 1 < argc) path = argv[++i];
         else if (!strcmp(argv[i], "--size") && i + 1 < argc) size = atof(argv[++i]);
         else if (!strcmp(argv[i], "--levels") && i + 1 < argc) n_levels = parse_list(argv[++i], levels, 8);
         else if (!strcmp(argv[i], "--subdivide") && i + 1 < argc) n_subs = parse_list(argv[++i], subs, 8);
+        else if (!strcmp(argv[i], "--widths") && i + 1 < argc) n_widths = parse_list(argv[++i], widths, 8);
         else {
-            fprintf(stderr, "usage: bench_voxelise [--mesh PLY] [--size M] [--levels 7,8] [--subdivide 0,1,2]\n");
+            fprintf(stderr, "usage: bench_voxelise [--mesh PLY] [--size M] [--levels 7,8] [--subdivide 0,1,2] "
+                            "[--widths 320,640]\n");
             return 2;
         }
     }
@@ -78,8 +82,11 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_voxelise: %s\n", bf_last_error());
         return 1;
     }
-    printf("| triangles | level | voxel [mm] | bricks | pairs | binning [s] | GPU pass [s] | total [s] | M triangles/s | ray-cast 640x480 [ms] |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|\n");
+    printf("| triangles | level | voxel [mm] | bricks | pairs | binning [s] | GPU pass [s] | total [s] | M triangles/s | map [MiB] | bytes per triangle |");
+    for (int wi = 0; wi < n_widths; wi++) printf(" ray-cast %ux%u [ms] |", widths[wi], widths[wi] * 3 / 4);
+    printf("\n|---|---|---|---|---|---|---|---|---|---|---|");
+    for (int wi = 0; wi < n_widths; wi++) printf("---|");
+    printf("\n");
     for (int si = 0; si < n_subs; si++) {
         mesh_data m = base, next;
         bool owned = false;
@@ -99,12 +106,20 @@ int main(int argc, char **argv)
             }
             fusion_config fc = fusion_config_default();
             fc.brick_cap = hm.n_bricks + 64, fc.node_cap = 16 * hm.n_bricks + 1024;
-            const bf_intrinsics K = {640, 480, 525, 525, 319.5, 239.5, 5000};
-            fusion_map *map;
-            render_caster *rc;
-            double ms = 0;
-            if (fusion_create(ctx, &fc, &K, hm.origin_w, &map) == BF_OK) {
+            fc.window = 2, fc.subcache = 1; /* no frames are fused: a small frame ring */
+            double ms[8] = {0}, map_mib = 0;
+            for (int wi = 0; wi < n_widths; wi++) {
+                uint32_t W = widths[wi], H = W * 3 / 4;
+                const bf_intrinsics K = {W, H, 525.0 * W / 640.0, 525.0 * W / 640.0, (W - 1) / 2.0, (H - 1) / 2.0, 5000};
+                fusion_map *map;
+                render_caster *rc;
+                if (fusion_create(ctx, &fc, &K, hm.origin_w, &map) != BF_OK) {
+                    fprintf(stderr, "bench_voxelise: %s\n", bf_last_error());
+                    break;
+                }
                 if (fusion_load(map, &hm) == BF_OK && render_create(ctx, NULL, K.width, K.height, &rc) == BF_OK) {
+                    fusion_stats fs;
+                    if (fusion_get_stats(map, &fs) == BF_OK) map_mib = fs.bytes_total / 1048576.0;
                     bf_vec3 c = bf_v3(hm.origin_w.x + size / 2 + 0.016, hm.origin_w.y + size / 2 + 0.016,
                                       hm.origin_w.z + size / 2 + 0.016);
                     bf_se3 T = bf_se3_from_qt(bf_quat_identity(), bf_v3(c.x, c.y, c.z - 2.0 * size));
@@ -112,15 +127,17 @@ int main(int argc, char **argv)
                     ro.no_graze = true;
                     for (int r = 0; r < 3; r++) { /* the last of three: compiled and warm */
                         if (render_raycast(rc, map, &K, &T, &ro) != BF_OK) break;
-                        ms = render_last_ms(rc);
+                        ms[wi] = render_last_ms(rc);
                     }
                     render_destroy(rc);
                 }
                 fusion_destroy(map);
             }
-            printf("| %u | %u | %.2f | %u | %llu | %.3f | %.3f | %.3f | %.2f | %.1f |\n", m.n_tris, vc.level,
+            printf("| %u | %u | %.2f | %u | %llu | %.3f | %.3f | %.3f | %.2f | %.2f | %.1f |", m.n_tris, vc.level,
                    1e3 * st.voxel_m, st.n_bricks, (unsigned long long)st.n_pairs, st.seconds_bin, st.seconds_gpu,
-                   st.seconds, m.n_tris / st.seconds / 1e6, ms);
+                   st.seconds, m.n_tris / st.seconds / 1e6, map_mib, map_mib * 1048576.0 / m.n_tris);
+            for (int wi = 0; wi < n_widths; wi++) printf(" %.1f |", ms[wi]);
+            printf("\n");
             fflush(stdout);
             hostmap_free(&hm);
         }

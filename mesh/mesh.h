@@ -32,6 +32,12 @@ typedef struct mesh_data {
  * mesh_write_ply writes it) sets out->origin. Index out of range,
  * truncation, NaN: BF_FORMAT. */
 bf_status mesh_read_ply(const char *path, mesh_data *out);
+/* Reads an OFF mesh (Geomview's format: "OFF", counts, x y z lines, faces as
+ * "n i0 .. i(n-1)", polygons fanned into triangles, '#' comments, a face's
+ * colour skipped). A bad count, index or number: BF_FORMAT naming the line. */
+bf_status mesh_read_off(const char *path, mesh_data *out);
+/* mesh_read_off for a name ending .off (any case), else mesh_read_ply. */
+bf_status mesh_read(const char *path, mesh_data *out);
 void mesh_free(mesh_data *m);
 /* Appends a copy of src transformed by T (vertices and normals), in dst's
  * local frame: src's world points T * (src.origin + xyz) minus dst.origin

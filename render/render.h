@@ -7,9 +7,11 @@
  * brick traverser. The `surface` traverser steps voxel by voxel until the
  * sign bit changes from front (1) to behind (0); the hit is refined to the
  * zero of a smoothed sign field on the ray (sub-voxel: ICP needs it), for
- * display only confident voxels count. The traverser is one GLSL function behind one seam
- * (shaders/render_traverse.glsl.h) so the particle and mesh renderers can
- * reuse the chunk and octree walk with their own.
+ * display only confident voxels count. The walk is one GLSL function
+ * (shaders/render_walk.glsl.h) and the traverser one function behind one
+ * seam (shaders/render_traverse.glsl.h): the particle renderer (below)
+ * walks with its `particles` traverser, the mesh renderer will walk with
+ * its own.
  *
  * Images stay on the GPU (tracking reads them there); render_download
  * copies them to the host for PNGs and tests.
@@ -127,6 +129,9 @@ typedef struct render_voxelise_config {
     float chunk_m;      /* chunk edge of the map it goes into, default 2 m */
     uint32_t level;     /* octree level: voxel edge chunk_m / (8 * 2^level), default 7 (1.95 mm) */
     uint64_t max_pairs; /* refuse meshes needing more (brick, triangle) pairs, default 2^28 */
+    bool has_origin;    /* the bricks on the grid of a map with this origin (to merge them into it); default
+                           false: the mesh's low corner less a brick */
+    bf_vec3 origin_w;
 } render_voxelise_config;
 
 typedef struct render_voxelise_stats {
@@ -138,10 +143,79 @@ typedef struct render_voxelise_stats {
 
 render_voxelise_config render_voxelise_config_default(void);
 /* Voxelises mesh (placed in the world by T_world_mesh, NULL: identity) into
- * out (its origin_w: the mesh's low corner less a brick). st may be NULL.
+ * out (its origin_w: cfg's, or the mesh's low corner less a brick). st may
+ * be NULL.
  * BF_INVALID_ARG for a vertex that is not finite, an index out of range, a
  * level above 12 or a mesh that needs more than max_pairs pairs. */
 bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf_se3 *T_world_mesh,
                                const render_voxelise_config *cfg, hostmap *out, render_voxelise_stats *st);
+/* The level whose voxel is at most a third of the pixel footprint at depth
+ * z_m (focal length f_px): a voxel's cube then widens an outline by a sixth
+ * of a pixel at most (docs/render.md), clamped to [0, max_level]. */
+uint32_t render_level_for_footprint(float chunk_m, double z_m, double f_px, uint32_t max_level);
+/* Merges b's bricks into a (same chunk edge and origin): a brick in both
+ * becomes the union of the solids (behind where either is behind, confident
+ * where either is). b is emptied. BF_INVALID_ARG for maps on other grids. */
+bf_status render_hostmap_merge(hostmap *a, hostmap *b);
+/* ------------------------------------------------------------ particles
+ * The particle renderer (Reichl's dissertation, ch. 6; docs/particles.md):
+ * particles binned on the host into the map's own structure (a hash of
+ * chunks, octrees, 8x8x8 bricks), one bit per cell, in a fusion_map of
+ * their own; the ray-cast walks it on the GPU with the `particles`
+ * traverser, which takes each set bit for a sphere of the particle radius
+ * at the cell's centre. Positions are quantised to the cell: at most half a
+ * cell per axis. */
+
+typedef struct render_particles render_particles; /* opaque: one binned set on the GPU */
+
+typedef struct render_particles_config {
+    float radius_m;  /* every particle's sphere, default 0.01 */
+    float cell_m;    /* cell edge at the finest level; 0 (default): radius / 4; at most 2 radius */
+    uint32_t rgb;    /* colour, R in the low byte; default a water blue */
+} render_particles_config;
+
+render_particles_config render_particles_config_default(void);
+
+/* What binning did. */
+typedef struct render_particles_stats {
+    uint64_t n_particles;
+    uint64_t n_cells;       /* set bits: particles sharing a cell count once */
+    uint32_t n_bricks;      /* bricks holding set bits */
+    uint32_t n_pad_bricks;  /* empty bricks a neighbour's sphere reaches into (the walk must visit them) */
+    uint32_t level;         /* the bricks' octree level */
+    float chunk_m, cell_m;
+    bf_vec3 origin_w;       /* the grid's corner: cell i spans origin_w + [i, i + 1) cell_m, its sphere at the middle */
+    double bin_s;           /* host binning: cells, bricks, the host copy */
+    double load_s;          /* the host copy into the GPU pools (fusion_load) */
+} render_particles_stats;
+
+/* Bins the n particles xyz (3 n floats, world coordinates [m]) and puts
+ * them on the GPU. cfg NULL: the defaults. ctx is borrowed and must
+ * outlive the set. BF_INVALID_ARG for a bad radius or cell (the message
+ * says which), a position that is not finite (named by index) or a set
+ * wider than 2^24 cells; BF_NO_MEMORY when it does not fit. n may be 0 (an
+ * empty set: nothing is hit). A moving set is binned anew per step. */
+bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
+                                  render_particles **out);
+/* NULL is a no-op. */
+void render_particles_destroy(render_particles *ps);
+const render_particles_stats *render_particles_get_stats(const render_particles *ps);
+/* GPU time of the last particle pass [ms] (Vulkan timestamps). */
+double render_particles_last_ms(const render_particles *ps);
+
+/* Records the particle pass into the context's open command buffer: it
+ * writes the caster's depth, level, normal and colour images (no shading
+ * pass needed). keep_nearer: a pixel's existing hit (a render_cmd_raycast
+ * of a map recorded just before) bounds its ray and stays where nothing of
+ * the set is nearer; else every pixel is written (0 / FUSION_NONE where
+ * nothing is hit). opt gives near_m and far_m; depth_out must be NULL. */
+bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf_intrinsics *K, const bf_se3 *T_wc,
+                               const render_options *opt, bool keep_nearer);
+/* One scene in one image: the map (NULL: none; shaded as opt says) and
+ * the particles (NULL: none) from camera T_wc, each pixel the nearest hit
+ * of either, in one submission that it waits for. At least one of map and
+ * ps. The caster's images then hold the scene (render_download). */
+bf_status render_scene(render_caster *rc, fusion_map *map, render_particles *ps, const bf_intrinsics *K,
+                       const bf_se3 *T_wc, const render_options *opt);
 
 #endif

@@ -316,8 +316,9 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     }
     if (!mesh->n_verts) lo = bf_v3(0, 0, 0);
     out->chunk_m = c.chunk_m;
-    out->origin_w = bf_v3(floor(lo.x / voxel_m) * voxel_m - brick_m, floor(lo.y / voxel_m) * voxel_m - brick_m,
-                          floor(lo.z / voxel_m) * voxel_m - brick_m);
+    out->origin_w = c.has_origin ? c.origin_w
+                                 : bf_v3(floor(lo.x / voxel_m) * voxel_m - brick_m, floor(lo.y / voxel_m) * voxel_m - brick_m,
+                                         floor(lo.z / voxel_m) * voxel_m - brick_m);
     for (uint32_t i = 0; i < mesh->n_verts; i++) {
         bf_vec3 p = bf_se3_apply(&T, bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
                                            mesh->origin.z + mesh->xyz[3 * i + 2]));
@@ -366,4 +367,85 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     free(gpu_out);
     if (s != BF_OK) hostmap_free(out);
     return s;
+}
+
+uint32_t render_level_for_footprint(float chunk_m, double z_m, double f_px, uint32_t max_level)
+{
+    double want = z_m / f_px / 3.0; /* voxel edge at most a third of a pixel */
+    uint32_t level = 0;
+    while (level < max_level && hostmap_level_voxel_m(chunk_m, level) > want) level++;
+    return level;
+}
+
+/* Brick identity for the merge: chunk, level, cell. */
+static int brick_cmp(const void *a, const void *b)
+{
+    const hostmap_brick *p = a, *q = b;
+    for (int i = 0; i < 3; i++)
+        if (p->key[i] != q->key[i]) return p->key[i] < q->key[i] ? -1 : 1;
+    if (p->level != q->level) return p->level < q->level ? -1 : 1;
+    for (int i = 0; i < 3; i++)
+        if (p->cell[i] != q->cell[i]) return p->cell[i] < q->cell[i] ? -1 : 1;
+    return 0;
+}
+
+static int index_cmp(const void *x, const void *y, void *ctx)
+{
+    const hostmap_brick *bricks = ctx;
+    return brick_cmp(&bricks[*(const uint32_t *)x], &bricks[*(const uint32_t *)y]);
+}
+
+bf_status render_hostmap_merge(hostmap *a, hostmap *b)
+{
+    if (a->chunk_m != b->chunk_m || a->origin_w.x != b->origin_w.x || a->origin_w.y != b->origin_w.y ||
+        a->origin_w.z != b->origin_w.z)
+        return bf_fail(BF_INVALID_ARG, "render: merging maps on other grids (chunk edge or origin differs)");
+    hostmap_brick *all = bf_malloc(((size_t)a->n_bricks + b->n_bricks + 1) * sizeof *all);
+    uint16_t *rgb = a->rgb565 ? bf_malloc(((size_t)a->n_bricks + b->n_bricks + 1) * 1024) : NULL;
+    if (!all || (a->rgb565 && !rgb)) {
+        free(all);
+        free(rgb);
+        return bf_fail(BF_NO_MEMORY, "render: merging %u and %u bricks", a->n_bricks, b->n_bricks);
+    }
+    /* a's bricks keep their order (and colour); b's join them, or are
+     * folded into the one of a at the same place. */
+    memcpy(all, a->bricks, (size_t)a->n_bricks * sizeof *all);
+    if (rgb) memcpy(rgb, a->rgb565, (size_t)a->n_bricks * 1024);
+    /* a's bricks by place, as indices (a's order stays). */
+    uint32_t *order = bf_malloc(((size_t)a->n_bricks + 1) * 4);
+    if (!order) {
+        free(all), free(rgb);
+        return bf_fail(BF_NO_MEMORY, "render: merging %u bricks", a->n_bricks);
+    }
+    for (uint32_t i = 0; i < a->n_bricks; i++) order[i] = i;
+    qsort_r(order, a->n_bricks, 4, index_cmp, a->bricks);
+    uint32_t n = a->n_bricks;
+    for (uint32_t j = 0; j < b->n_bricks; j++) {
+        hostmap_brick *nb = &b->bricks[j];
+        uint32_t lo = 0, hi = a->n_bricks; /* first of order[] not below nb */
+        while (lo < hi) {
+            uint32_t mid = lo + (hi - lo) / 2;
+            if (brick_cmp(&a->bricks[order[mid]], nb) < 0) lo = mid + 1;
+            else hi = mid;
+        }
+        if (lo < a->n_bricks && brick_cmp(&a->bricks[order[lo]], nb) == 0) {
+            hostmap_brick *t = &all[order[lo]];
+            for (int w = 0; w < 16; w++) {
+                /* Behind (0) where either is confidently behind. */
+                uint32_t behind = (~t->sign[w] & t->conf[w]) | (~nb->sign[w] & nb->conf[w]);
+                t->sign[w] = ~behind;
+                t->conf[w] |= nb->conf[w];
+            }
+            continue;
+        }
+        all[n] = *nb;
+        if (rgb) memset(rgb + (size_t)n * 512, 0, 1024);
+        n++;
+    }
+    free(order);
+    free(a->bricks);
+    free(a->rgb565);
+    a->bricks = all, a->rgb565 = rgb, a->n_bricks = n;
+    hostmap_free(b);
+    return BF_OK;
 }

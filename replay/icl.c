@@ -77,6 +77,7 @@ bf_status replay__icl_list(const char *dir, const replay_options *opt, replay__l
         fr->has_pose = true;
         n_poses++;
     }
+    if (s == BF_OK) replay__text_warn(&t);
     replay__text_close(&t);
     if (s != BF_OK) return s;
     if (n_poses < list->n)

@@ -52,9 +52,12 @@ bf_status replay_png_write_rgb8(const char *path, const uint8_t *pix, uint32_t w
 
 /* TUM trajectory files (the type is core's bf_traj): one pose per line,
  * "t tx ty tz qx qy qz qw", camera-to-world, metres; '#' lines are
- * comments. Reading: unsorted or duplicate timestamps, NaN or a non-unit
- * quaternion (|q| off by more than 1e-3) are BF_FORMAT naming the file and
- * line; an empty file is BF_FORMAT too. Writing is atomic, quaternions with
+ * comments. Reading takes what TUM's own scripts take: a timestamp that
+ * repeats the previous line's keeps the first line, a quaternion is
+ * normalised, and either is reported by one warning naming the file and
+ * the first line. A timestamp going back, a number that does not parse or
+ * is not finite, a zero quaternion, a line without 8 fields and an empty
+ * file are BF_FORMAT naming the file and line. Writing is atomic, quaternions with
  * qw >= 0, 9 decimals. */
 bf_status replay_traj_read_tum(const char *path, bf_traj *out);
 bf_status replay_traj_write_tum(const char *path, const bf_traj *traj);

@@ -28,6 +28,10 @@ typedef struct replay__text {
     char *buf;        /* owned, NUL-terminated */
     char *p;          /* start of the next line */
     uint32_t line;    /* 1-based number of the line last returned */
+    /* What the file's reader let through and replay__text_warn reports once:
+     * quaternions normalised, repeated timestamps dropped (first line, count). */
+    uint32_t n_normalised, normalised_line, n_repeats, repeat_line;
+    double normalised_norm;
 } replay__text;
 
 /* BF_IO naming the file if it cannot be read. */
@@ -41,9 +45,18 @@ int replay__text_next(replay__text *t, char **fields, int cap);
  * number" otherwise. */
 bf_status replay__text_double(const replay__text *t, const char *s, const char *what, double *out);
 
-/* Builds a pose from TUM's order tx ty tz qx qy qz qw; a quaternion whose
- * norm is off by more than 1e-3 is BF_FORMAT naming file and line. */
-bf_status replay__pose_from_fields(const replay__text *t, char **f, bf_se3 *T_wc);
+/* Builds a pose from TUM's order tx ty tz qx qy qz qw. The quaternion is
+ * normalised, as TUM's evaluation scripts do (transform44); one off unit
+ * length by more than 1e-3 is counted for replay__text_warn. A zero
+ * quaternion (|q|^2 below the scripts' 4 eps) has no rotation to give:
+ * BF_FORMAT naming file and line. */
+bf_status replay__pose_from_fields(replay__text *t, char **f, bf_se3 *T_wc);
+/* A line whose timestamp repeats the previous line's: counted for
+ * replay__text_warn; the caller keeps the first of the two. */
+void replay__text_note_repeat(replay__text *t);
+/* One warning per file for what was accepted but not as written: the
+ * first line, the value and how many lines more. */
+void replay__text_warn(const replay__text *t);
 
 /* Copies the last error and fails with "<old message> (frame N)". */
 bf_status replay__fail_frame(bf_status s, uint32_t frame);

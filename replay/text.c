@@ -3,6 +3,7 @@
 #include "replay_int.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,6 +17,8 @@ bf_status replay__text_open(replay__text *t, const char *path)
     t->path = path;
     t->buf = t->p = buf;
     t->line = 0;
+    t->n_normalised = t->normalised_line = t->n_repeats = t->repeat_line = 0;
+    t->normalised_norm = 0;
     return BF_OK;
 }
 
@@ -68,7 +71,7 @@ bf_status replay__text_double(const replay__text *t, const char *s, const char *
     return BF_OK;
 }
 
-bf_status replay__pose_from_fields(const replay__text *t, char **f, bf_se3 *T_wc)
+bf_status replay__pose_from_fields(replay__text *t, char **f, bf_se3 *T_wc)
 {
     static const char *const names[7] = {"tx", "ty", "tz", "qx", "qy", "qz", "qw"};
     double v[7];
@@ -77,11 +80,35 @@ bf_status replay__pose_from_fields(const replay__text *t, char **f, bf_se3 *T_wc
         if (s != BF_OK) return s;
     }
     bf_quat q = {v[6], v[3], v[4], v[5]};
-    double norm = sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
-    if (fabs(norm - 1.0) > 1e-3)
-        return bf_fail(BF_FORMAT, "%s:%u: quaternion norm is %.6g, not 1", t->path, t->line, norm);
-    *T_wc = bf_se3_from_qt(bf_quat_normalize(q), bf_v3(v[0], v[1], v[2]));
+    double norm2 = q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z;
+    /* TUM's evaluate_rpe.py (transform44) treats |q|^2 < 4 eps as no rotation: unusable. */
+    if (!(norm2 >= 4 * DBL_EPSILON))
+        return bf_fail(BF_FORMAT, "%s:%u: quaternion (%g %g %g %g) is zero: no rotation", t->path, t->line, q.x, q.y,
+                       q.z, q.w);
+    double norm = sqrt(norm2);
+    if (fabs(norm - 1.0) > 1e-3 && t->n_normalised++ == 0) {
+        t->normalised_line = t->line;
+        t->normalised_norm = norm;
+    }
+    q = (bf_quat){q.w / norm, q.x / norm, q.y / norm, q.z / norm};
+    *T_wc = bf_se3_from_qt(q, bf_v3(v[0], v[1], v[2]));
     return BF_OK;
+}
+
+void replay__text_note_repeat(replay__text *t)
+{
+    if (t->n_repeats++ == 0) t->repeat_line = t->line;
+}
+
+void replay__text_warn(const replay__text *t)
+{
+    if (t->n_repeats)
+        bf_warn("%s:%u: timestamp repeats the previous line's: the first kept, this line ignored (%u such line%s in "
+                "the file)",
+                t->path, t->repeat_line, t->n_repeats, t->n_repeats == 1 ? "" : "s");
+    if (t->n_normalised)
+        bf_warn("%s:%u: quaternion norm is %.6g, not 1: normalised (%u such line%s in the file)", t->path,
+                t->normalised_line, t->normalised_norm, t->n_normalised, t->n_normalised == 1 ? "" : "s");
 }
 
 bf_status replay__fail_frame(bf_status s, uint32_t frame)

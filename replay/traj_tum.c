@@ -24,9 +24,15 @@ bf_status replay_traj_read_tum(const char *path, bf_traj *out)
         bf_se3 T;
         if ((s = replay__text_double(&txt, f[0], "timestamp", &t))) goto fail;
         if ((s = replay__pose_from_fields(&txt, f + 1, &T))) goto fail;
+        /* A repeated stamp (TUM's own rgbd_dataset_freiburg2_desk has one):
+         * the first is kept, as a reader walking the file in order would. */
+        if (tr.n > 0 && t == tr.t_s[tr.n - 1]) {
+            replay__text_note_repeat(&txt);
+            continue;
+        }
         if (tr.n > 0 && !(t > tr.t_s[tr.n - 1])) {
-            s = bf_fail(BF_FORMAT, "%s:%u: timestamp %.6f %s the previous one (%.6f)", path, txt.line, t,
-                        t == tr.t_s[tr.n - 1] ? "repeats" : "is before", tr.t_s[tr.n - 1]);
+            s = bf_fail(BF_FORMAT, "%s:%u: timestamp %.6f is before the previous one (%.6f)", path, txt.line, t,
+                        tr.t_s[tr.n - 1]);
             goto fail;
         }
         if ((s = bf_traj_push(&tr, t, &T))) goto fail;
@@ -35,6 +41,7 @@ bf_status replay_traj_read_tum(const char *path, bf_traj *out)
         s = bf_fail(BF_FORMAT, "%s: no poses in the file", path);
         goto fail;
     }
+    replay__text_warn(&txt);
     replay__text_close(&txt);
     *out = tr;
     return BF_OK;

@@ -21,7 +21,8 @@ static void tum_index_free(tum_index *x)
     memset(x, 0, sizeof *x);
 }
 
-/* Reads "timestamp filename" lines; times must strictly increase. */
+/* Reads "timestamp filename" lines; times must increase. A line repeating
+ * the previous line's time is dropped (the first kept, one warning). */
 static bf_status tum_index_read(const char *dir, const char *name, replay__list *list, tum_index *out)
 {
     char file[4096], joined[4096];
@@ -40,9 +41,13 @@ static bf_status tum_index_read(const char *dir, const char *name, replay__list 
         }
         double ts;
         if ((s = replay__text_double(&t, f[0], "timestamp", &ts))) goto fail;
+        if (x.n > 0 && ts == x.t_s[x.n - 1]) {
+            replay__text_note_repeat(&t);
+            continue;
+        }
         if (x.n > 0 && !(ts > x.t_s[x.n - 1])) {
-            s = bf_fail(BF_FORMAT, "%s:%u: timestamp %.6f %s the previous line's (%.6f); times must increase", file,
-                        t.line, ts, ts == x.t_s[x.n - 1] ? "repeats" : "is before", x.t_s[x.n - 1]);
+            s = bf_fail(BF_FORMAT, "%s:%u: timestamp %.6f is before the previous line's (%.6f); times must increase",
+                        file, t.line, ts, x.t_s[x.n - 1]);
             goto fail;
         }
         if (x.n == cap) {
@@ -70,6 +75,7 @@ static bf_status tum_index_read(const char *dir, const char *name, replay__list 
         s = bf_fail(BF_FORMAT, "%s: no frames listed", file);
         goto fail;
     }
+    replay__text_warn(&t);
     replay__text_close(&t);
     *out = x;
     return BF_OK;

@@ -42,6 +42,16 @@
 /* Bound on the cells a ray may visit: a guard against a corrupt map, far
  * above what a 6 m ray through a room visits (a few hundred). */
 #define RENDER_MAX_CELLS 4096u
+/* The particle pass walks in bounded dispatches (render/particles.c):
+ * lavapipe ends every loop of a shader once its loops together ran 65,535
+ * iterations for one call (8 lanes; gallivm's LP_MAX_TGSI_LOOP_ITERATIONS),
+ * and a particle search runs loops within loops. Each dispatch walks at
+ * most render_particles_push.cells_per_pass cells of a ray, so that its
+ * loop iterations stay below RENDER_PARTICLES_LOOP_BUDGET for 8 lanes, and
+ * the next resumes it; a ray walks at most RENDER_PARTICLES_MAX_CELLS cells
+ * in all (docs/particles.md). */
+#define RENDER_PARTICLES_LOOP_BUDGET 40000u
+#define RENDER_PARTICLES_MAX_CELLS 1024u
 
 /* Sub-voxel refinement of a tracking hit (render_raycast.comp's
  * subvoxel_depth, tests/render/raycast_ref.c in double): Newton steps on the
@@ -172,6 +182,43 @@ BF_FN bf_f32 render_edge(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by, bf_f32 px, 
 BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
 {
     return by < ay || (by == ay && bx < ax);
+}
+
+/* Push constants of render_particles.comp (the particle pass, render/particles.c). */
+#define RENDER_PARTICLES_FLAG_KEEP_NEARER 1u /* a pixel's existing hit (the map's) stays where it is nearer */
+#define RENDER_PARTICLES_FLAG_FIRST 2u       /* the first dispatch: rays start at near_m */
+#define RENDER_PARTICLES_FLAG_LAST 4u        /* the last dispatch: rays not done are misses */
+struct render_particles_push {
+    bf_f32 R[9];             /* camera to particle-map rotation, row-major */
+    bf_f32 t[3];             /* camera centre in the particle map's frame [m] */
+    bf_f32 fx, fy, cx, cy;   /* pixels */
+    bf_u32 width, height;
+    bf_f32 near_m, far_m;
+    bf_f32 chunk_m;
+    bf_u32 n_buckets, n_overflow, max_level;
+    bf_f32 radius_m;         /* every particle's sphere */
+    bf_u32 flags;            /* RENDER_PARTICLES_FLAG_* */
+    bf_u32 rgb;              /* the particles' colour, R in the low byte */
+    bf_u32 cells_per_pass;   /* cells a ray walks in one dispatch */
+};
+#define RENDER_PARTICLES_PUSH_WORDS 28u
+#ifndef BF_GLSL
+typedef struct render_particles_push render_particles_push;
+_Static_assert(sizeof(render_particles_push) == RENDER_PARTICLES_PUSH_WORDS * 4, "render_particles_push must match std430");
+_Static_assert(__builtin_offsetof(render_particles_push, chunk_m) == 80, "render_particles_push.chunk_m");
+_Static_assert(__builtin_offsetof(render_particles_push, rgb) == 104, "render_particles_push.rgb");
+#endif
+
+/* Shaded colour of a particle hit: the particles' RGB (R in the low byte)
+ * lit by the headlight (cos_theta in [0, 1]) over a little ambient. RGBA8. */
+BF_FN bf_u32 render_shade_particle(bf_f32 cos_theta, bf_u32 rgb)
+{
+    bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
+    bf_f32 i = 0.2f + 0.8f * c;
+    bf_u32 r = BF_U32(BF_F32(rgb & 255u) * i + 0.5f);
+    bf_u32 g = BF_U32(BF_F32((rgb >> 8) & 255u) * i + 0.5f);
+    bf_u32 b = BF_U32(BF_F32((rgb >> 16) & 255u) * i + 0.5f);
+    return r | (g << 8) | (b << 16) | (255u << 24);
 }
 
 #endif

@@ -1,24 +1,8 @@
 #version 450
 /* Ray-casting of the sign-bit map, one invocation per pixel (DESIGN.md
- * section 5; Reichl, Weiss, Westermann 2016, section 5).
- *
- * The ray walks the map hierarchically, always from the current depth s to
- * the exit of the largest region whose content it knows:
- *   - chunk level: the chunk of the point just past s is looked up in the
- *     hash as fusion does (fusion_hash, the bucket's slots, then the
- *     overflow chain; only VALID entries count); a chunk that does not exist
- *     is skipped whole (a DDA over chunks, Amanatides & Woo 1987, one cell
- *     size, re-located at each step);
- *   - octree level: from the chunk's root down to the deepest existing node
- *     containing the point, remembering the finest brick on the way. The
- *     deepest node's cell holds no finer data, so the ray crosses it in one
- *     step: through the finest brick's voxels when there is one, else as
- *     unknown space. Children come in groups of 8, so empty space is skipped
- *     at the coarsest cell without data. The path is kept in a short stack
- *     of RENDER_STACK entries; the next cell pops to the deepest common
- *     ancestor (the highest differing bit of the integer cell coordinates,
- *     Laine & Karras 2010's trick) and restarts from the root on underflow.
- *   - brick level: render_traverse (shaders/render_traverse.glsl.h).
+ * section 5; Reichl, Weiss, Westermann 2016, section 5): the chunk and
+ * octree walk of shaders/render_walk.glsl.h with the `surface` traverser
+ * (shaders/render_traverse.glsl.h), then the sub-voxel refinement below.
  * Outputs: camera depth of the hit (0: none) and the level of its brick
  * (FUSION_NONE: none); render_shade.comp derives normals and colour.
  */
@@ -45,20 +29,14 @@ layout(push_constant) uniform Push { render_push pc; };
 uint render_sign_word(uint slot, uint w) { return sign_pool.w[slot * BRICK_WORDS + w]; }
 uint render_conf_word(uint slot, uint w) { return conf_pool.w[slot * BRICK_WORDS + w]; }
 
+uint fusion_hash_word(uint i) { return hash.w[i]; }
+uint render_node_word(uint i) { return nodes.w[i]; }
+
 #include "render_traverse.glsl.h"
 
-uint fusion_hash_word(uint i) { return hash.w[i]; }
-#include "fusion_hash.glsl.h"
-
-/* Hash entry of the chunk, FUSION_NONE if absent (fusion's lookup). */
-uint find_chunk(ivec3 key) { return fusion_find_chunk(key.x, key.y, key.z, pc.n_buckets, pc.n_overflow); }
-
-/* Depth at which the ray leaves the axis-aligned cube [lo, lo + size]. */
-float cell_exit(render_ray ray, vec3 lo, float size)
+render_walk_map walk_map()
 {
-    vec3 bound = lo + vec3(greaterThan(ray.dir, vec3(0.0))) * size;
-    vec3 s = (bound - ray.o) * ray.inv_dir;
-    return min(s.x, min(s.y, s.z));
+    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, RENDER_MAX_CELLS);
 }
 
 /* ---------------------------------------------------- sub-voxel refinement
@@ -78,28 +56,6 @@ float cell_exit(render_ray ray, vec3 lo, float size)
  * image the field is symmetric about the face between the voxel layers, so
  * such a plane stays exactly flat at that face. */
 
-/* Slot of the brick at `level` with brick coordinate b (brick units from the
- * map origin on that level's grid), FUSION_NONE when the node or its brick
- * does not exist. Only this level counts: another level's voxels have
- * another size, and leaving them unknown costs only a few samples where
- * levels meet. */
-uint brick_at(ivec3 b, uint level)
-{
-    ivec3 key = b >> int(level);
-    uint e = find_chunk(key);
-    if (e == FUSION_NONE) return FUSION_NONE;
-    uvec3 cell = uvec3(b - (key << int(level)));
-    uint node = hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
-    for (uint l = 1u; l <= level; l++) {
-        uint child = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_CHILD];
-        if (child >= FUSION_LOCKED) return FUSION_NONE;
-        uvec3 c = cell >> (level - l);
-        node = child + fusion_octant(c.x, c.y, c.z);
-    }
-    uint slot = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_BRICK];
-    return slot < FUSION_LOCKED ? slot : FUSION_NONE;
-}
-
 /* Sign and known bits of the 4x4x4 voxels [B, B + 3] of `level` (voxel
  * coordinates from the map origin), bit x + 4y + 16z of a 64-bit word kept
  * as two uints. A voxel is known when its brick exists (and, confident_only,
@@ -113,7 +69,7 @@ void gather_block(ivec3 B, uint level, uint hit_slot, ivec3 hit_brick, bool conf
     for (uint i = 0u; i < 8u; i++) {
         ivec3 b = b0 + ivec3(int(i & 1u), int((i >> 1) & 1u), int(i >> 2));
         slots[i] = FUSION_NONE;
-        if (all(lessThanEqual(b, b1))) slots[i] = b == hit_brick ? hit_slot : brick_at(b, level);
+        if (all(lessThanEqual(b, b1))) slots[i] = b == hit_brick ? hit_slot : render_brick_at(walk_map(), b, level);
     }
     sgn = uvec2(0u);
     known = uvec2(0u);
@@ -152,7 +108,7 @@ uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
 {
     float v = fusion_voxel_m(pc.chunk_m, level);
     ivec3 G = ivec3(floor(p / v)), nb = G >> 3;
-    if (nb != brick) slot = brick_at(nb, level);
+    if (nb != brick) slot = render_brick_at(walk_map(), nb, level);
     if (slot == FUSION_NONE) return 0u;
     ivec3 g = G - nb * 8;
     uint w = brick_word(uint(g.x), uint(g.y), uint(g.z)), bit = brick_bit(uint(g.x), uint(g.y), uint(g.z));
@@ -248,38 +204,13 @@ void main()
     uvec2 px = gl_GlobalInvocationID.xy;
     if (px.x >= pc.width || px.y >= pc.height) return;
     uint pixel = px.y * pc.width + px.x;
-
-    float xc = (float(px.x) - pc.cx) / pc.fx, yc = (float(px.y) - pc.cy) / pc.fy;
-    render_ray ray;
-    ray.o = vec3(pc.t[0], pc.t[1], pc.t[2]);
-    ray.dir = vec3(pc.R[0] * xc + pc.R[1] * yc + pc.R[2], pc.R[3] * xc + pc.R[4] * yc + pc.R[5],
-                   pc.R[6] * xc + pc.R[7] * yc + pc.R[8]);
-    /* Keep every component away from 0 so 1/dir is finite: a ray parallel
-     * to a face then never crosses it within any range we walk. */
-    for (int a = 0; a < 3; a++)
-        if (abs(ray.dir[a]) < 1.0e-12) ray.dir[a] = 1.0e-12;
-    ray.inv_dir = 1.0 / ray.dir;
-    ray.zc = vec3(pc.R[2], pc.R[5], pc.R[8]);
+    render_ray ray = render_pixel_ray(px, pc.R, pc.t, pc.fx, pc.fy, pc.cx, pc.cy);
 
     render_trace tr;
     tr.has_front = 0u;
     tr.front_depth = 0.0;
     tr.hit_depth = 0.0;
     tr.hit_level = FUSION_NONE;
-
-    float inv_chunk = 1.0 / pc.chunk_m;
-    float grid_per_m = float(RENDER_GRID) * inv_chunk;
-    ivec3 cur_key = ivec3(0);
-    uint entry = FUSION_NONE;
-    bool have_key = false;
-    /* The short stack: the path's nodes at levels [lo, deep], entry of level
-     * l at index l % RENDER_STACK, each with the finest brick on the path
-     * down to it (slot, level). deep < 0: empty. */
-    uint st_node[RENDER_STACK], st_brick[RENDER_STACK], st_blevel[RENDER_STACK];
-    int deep = -1, lo = 0;
-    uvec3 g_prev = uvec3(0u);
-    bool hit = false, refined = false;
-    uint n_graze = 0u;
 
     float s = pc.near_m;
     if ((pc.flags & RENDER_FLAG_START) != 0u) {
@@ -289,84 +220,21 @@ void main()
         float z0 = start_in.v[pc.start_off + pixel];
         if (z0 > 0.0) s = max(s, z0 - (pc.start_margin_m + pc.start_margin_z2 * z0 * z0));
     }
-    for (uint iter = 0u; iter < RENDER_MAX_CELLS && s < pc.far_m; iter++) {
-        float sp = s + RENDER_NUDGE;
-        vec3 p = ray.o + sp * ray.dir;
-        ivec3 key = ivec3(floor(p * inv_chunk));
-        if (!have_key || key != cur_key) {
-            have_key = true;
-            cur_key = key;
-            entry = find_chunk(key);
-            deep = -1;
+    bool hit = render_walk(walk_map(), ray, s, pc.far_m, pc.flags, tr), refined = false;
+    /* no_graze: a hit whose refined depth stays in front of the smoothed
+     * surface grazed a behind voxel's corner; the walk goes on behind it, as
+     * from unknown space. */
+    for (uint n_graze = 0u; hit && (pc.flags & RENDER_FLAG_NO_GRAZE) != 0u && (pc.flags & RENDER_FLAG_REFINE) != 0u;) {
+        float f_end;
+        float d = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
+                                 (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u, true, f_end);
+        if (!(f_end > RENDER_GRAZE_F) || ++n_graze > RENDER_GRAZE_MAX) {
+            tr.hit_depth = d;
+            refined = true;
+            break;
         }
-        vec3 chunk_lo = vec3(key) * pc.chunk_m;
-        if (entry == FUSION_NONE) {
-            tr.has_front = 0u; /* unknown space */
-            s = max(cell_exit(ray, chunk_lo, pc.chunk_m), sp);
-            continue;
-        }
-        uvec3 g = uvec3(clamp(ivec3(floor((p - chunk_lo) * grid_per_m)), ivec3(0), ivec3(int(RENDER_GRID) - 1)));
-        if (deep >= 0) {
-            /* Pop to the deepest ancestor that also holds the new point. */
-            uint diff = (g.x ^ g_prev.x) | (g.y ^ g_prev.y) | (g.z ^ g_prev.z);
-            int shared_level = diff == 0u ? deep : int(RENDER_GRID_BITS) - 1 - findMSB(diff);
-            if (shared_level < deep) deep = shared_level < lo ? -1 : shared_level;
-        }
-        if (deep < 0) { /* (re)start at the root */
-            uint root = hash.w[entry * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
-            uint b = nodes.w[root * FUSION_NODE_WORDS + FUSION_NODE_BRICK];
-            deep = 0;
-            lo = 0;
-            st_node[0] = root;
-            st_brick[0] = b < FUSION_LOCKED ? b : FUSION_NONE;
-            st_blevel[0] = 0u;
-        }
-        /* Descend to the deepest existing node holding the point. */
-        while (uint(deep) < pc.max_level) {
-            uint top = uint(deep) % RENDER_STACK;
-            uint child = nodes.w[st_node[top] * FUSION_NODE_WORDS + FUSION_NODE_CHILD];
-            if (child >= FUSION_LOCKED) break; /* none (or, never while we read, being made) */
-            uint l = uint(deep) + 1u;
-            uvec3 c = g >> (RENDER_GRID_BITS - l);
-            uint node = child + fusion_octant(c.x, c.y, c.z);
-            uint b = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_BRICK];
-            uint k = l % RENDER_STACK;
-            st_node[k] = node;
-            st_brick[k] = b < FUSION_LOCKED ? b : st_brick[top];
-            st_blevel[k] = b < FUSION_LOCKED ? l : st_blevel[top];
-            deep = int(l);
-            if (deep - lo >= int(RENDER_STACK)) lo = deep - int(RENDER_STACK) + 1;
-        }
-        g_prev = g;
-        uint top = uint(deep) % RENDER_STACK;
-        float cell_m = pc.chunk_m / float(1u << uint(deep));
-        float s_exit = cell_exit(ray, chunk_lo + vec3(g >> (RENDER_GRID_BITS - uint(deep))) * cell_m, cell_m);
-        uint slot = st_brick[top];
-        if (slot == FUSION_NONE) {
-            tr.has_front = 0u; /* unknown space */
-        } else {
-            uint bl = st_blevel[top];
-            float brick_m = pc.chunk_m / float(1u << bl);
-            vec3 brick_lo = chunk_lo + vec3(g >> (RENDER_GRID_BITS - bl)) * brick_m;
-            if (render_traverse(slot, bl, brick_lo, brick_m * 0.125, ray, s, min(s_exit, pc.far_m), pc.flags, tr)) {
-                hit = true;
-                if ((pc.flags & RENDER_FLAG_NO_GRAZE) == 0u || (pc.flags & RENDER_FLAG_REFINE) == 0u) break;
-                float f_end;
-                float d = subvoxel_depth(ray, tr.hit_level, tr.hit_slot, tr.hit_brick, tr.hit_depth,
-                                         (pc.flags & RENDER_FLAG_CONFIDENT_ONLY) != 0u, true, f_end);
-                if (!(f_end > RENDER_GRAZE_F) || ++n_graze > RENDER_GRAZE_MAX) {
-                    tr.hit_depth = d;
-                    refined = true;
-                    break;
-                }
-                /* A corner grazed: go on behind it, as from unknown space. */
-                hit = false;
-                tr.has_front = 0u;
-                s = max(tr.hit_s_exit, sp);
-                continue;
-            }
-        }
-        s = max(s_exit, sp);
+        tr.has_front = 0u;
+        hit = render_walk(walk_map(), ray, tr.hit_s_exit + RENDER_NUDGE, pc.far_m, pc.flags, tr);
     }
     float f_unused;
     if (hit && !refined && (pc.flags & RENDER_FLAG_REFINE) != 0u)

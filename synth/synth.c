@@ -262,6 +262,7 @@ static bf_status write_stats(const synth_config *cfg, const bf_intrinsics *K, co
     const bf_vec3 *tw = &res->T_world_traj.t;
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "command", "synth");
+    if (cfg->version) cJSON_AddStringToObject(o, "version", cfg->version);
     cJSON_AddStringToObject(o, "scene", sc->desc);
     cJSON_AddNumberToObject(o, "scene_triangles", sc->mesh.n_tris);
     cJSON_AddStringToObject(o, "trajectory", cfg->traj_path);

@@ -134,6 +134,7 @@ typedef struct synth_config {
                                depth_scale 0 = 5000 */
     const char *out_dir;
     double seen_cell_m;     /* seen.ply grid; 0 = 0.005 */
+    const char *version;    /* the program's version, echoed in stats.json; NULL: left out */
 } synth_config;
 
 typedef struct synth_result {

@@ -77,6 +77,8 @@ BF_TEST(options_reject_bad_values_with_a_message_and_write_nothing)
         {"--icp-iters", "1,", "1,"},          {"--noise-weights", "yes", "on or off"},
         {"--init", "zero", "groundtruth or identity"},                              {"--json=1", NULL, "no value"},
         {"--cameras", "x", "unknown option '--cameras'"},
+        /* The next option is not a value ("--name=--x" is the way to give one). */
+        {"--camera", "--json", "--camera needs a value"},
     };
     for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
         char *argv[6] = {"cmd", "seq", "--out", "o", bad[k].a, bad[k].b};
@@ -131,5 +133,23 @@ BF_TEST(help_is_generated_from_the_rows_with_their_defaults)
     CHECK(strstr(buf, "--noise-weights on|off") != NULL && strstr(buf, "default on") != NULL);
     CHECK(strstr(buf, "--init groundtruth|identity") != NULL && strstr(buf, "default groundtruth") != NULL);
     CHECK(strstr(buf, "--skip-bad-frames") != NULL && strstr(buf, "--help") != NULL);
+    free(buf);
+}
+
+BF_TEST(version_is_printed_by_every_command)
+{
+    char *argv[] = {"cmd", "--ratio", "-1", "--version"};
+    demo_args a;
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    CHECK(f != NULL);
+    FILE *saved = stdout;
+    stdout = f;
+    int rc = parse(4, argv, &a); /* like --help, before the values are checked */
+    stdout = saved;
+    fclose(f);
+    CHECK_EQ_INT(rc, -1);
+    CHECK(!strcmp(buf, "bitfuse " BF_VERSION "\n"));
     free(buf);
 }

@@ -1,0 +1,431 @@
+/* bitfuse render: one view of a scene (a saved map, a particle set, or
+ * both) from a given pose, ray-cast on the GPU (render/), into a shaded
+ * PNG and optionally a TUM depth PNG. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include "app.h"
+#include "gpu/gpu.h"
+#include "mesh/mesh.h"
+#include "render/render.h"
+#include "shaders/fusion.glsl.h"
+#include "replay/replay.h"
+
+static const char render_usage[] =
+    "usage: bitfuse render [--map STORE|DIR] [--mesh FILE [--mesh-pose P]] [--particles FILE]\n"
+    "                      [--particle-radius M] [--particle-cell M]\n"
+    "                      --pose \"tx ty tz qx qy qz qw\" [--camera fx,fy,cx,cy] --size WxH --out IMAGE.png\n"
+    "                      [--depth DEPTH.png] [--far M] [--repeat N]\n\n"
+    "Ray-casts one view of a scene on the GPU: a saved map (a scene store, bitfuse\n"
+    "replay|live --store; or a folder holding one as DIR/store), a particle set (a PLY\n"
+    "with vertex x y z in metres; each particle a sphere of --particle-radius), or both in\n"
+    "one image, each pixel the nearest hit of either. The pose is camera to world as in\n"
+    "TUM trajectories (the camera looks along +z, y down). IMAGE.png is the shaded view\n"
+    "(the map in its colours when it has them, else shaded by octree level; particles in\n"
+    "blue); DEPTH.png is 16-bit, 5000 per metre (TUM), 0 where nothing is hit (or beyond\n"
+    "13.1 m). The map shows its confident surface. A mesh (--mesh, PLY or OFF, closed,\n"
+    "metres; placed by --mesh-pose) is voxelised into the map's own bricks at the level\n"
+    "whose voxel is a third of a pixel at its nearest point, and drawn by the same\n"
+    "ray-cast. docs/particles.md, docs/render.md.\n";
+
+static const char render_epilog[] =
+    "exit codes: 0 ok, 1 failure (also an image not writable), 2 usage (also a bad pose,\n"
+    "size or camera), 3 unreadable map, mesh or particle file, 4 no usable Vulkan device\n";
+
+/* "tx ty tz qx qy qz qw" -> T_wc; false with the reason in msg. */
+static bool parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
+{
+    double a[7];
+    int used = 0;
+    if (sscanf(v, "%lf %lf %lf %lf %lf %lf %lf %n", &a[0], &a[1], &a[2], &a[3], &a[4], &a[5], &a[6], &used) != 7 ||
+        v[used] != '\0') {
+        snprintf(msg, n, "--pose \"%s\": expected 7 numbers \"tx ty tz qx qy qz qw\"", v);
+        return false;
+    }
+    for (int i = 0; i < 7; i++)
+        if (!isfinite(a[i])) {
+            snprintf(msg, n, "--pose \"%s\": not finite", v);
+            return false;
+        }
+    double qn = sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6]);
+    if (fabs(qn - 1) > 1e-3) {
+        snprintf(msg, n, "--pose \"%s\": the quaternion's norm is %g, not 1", v, qn);
+        return false;
+    }
+    bf_quat q = bf_quat_normalize((bf_quat){.w = a[6], .x = a[3], .y = a[4], .z = a[5]});
+    *T = bf_se3_from_qt(q, bf_v3(a[0], a[1], a[2]));
+    return true;
+}
+
+static const char *check_pose(const char *name, const char *v)
+{
+    static char msg[512];
+    bf_se3 T;
+    (void)name;
+    return parse_pose(v, &T, msg, sizeof msg) ? NULL : msg;
+}
+
+/* "WxH" within 1..8192 each. */
+static bool parse_size(const char *v, uint32_t *w, uint32_t *h)
+{
+    unsigned a, b;
+    int used = 0;
+    if (sscanf(v, "%ux%u%n", &a, &b, &used) != 2 || v[used] != '\0' || a < 1 || b < 1 || a > 8192 || b > 8192)
+        return false;
+    *w = a, *h = b;
+    return true;
+}
+
+static const char *check_size(const char *name, const char *v)
+{
+    static char msg[256];
+    uint32_t w, h;
+    if (parse_size(v, &w, &h)) return NULL;
+    snprintf(msg, sizeof msg, "%s \"%s\": expected WxH, each 1..8192", name, v);
+    return msg;
+}
+
+/* "fx,fy,cx,cy" with positive focal lengths. */
+static bool parse_camera(const char *v, double k[4])
+{
+    int used = 0;
+    if (sscanf(v, "%lf,%lf,%lf,%lf%n", &k[0], &k[1], &k[2], &k[3], &used) != 4 || v[used] != '\0') return false;
+    return k[0] > 0 && k[1] > 0 && isfinite(k[0]) && isfinite(k[1]) && isfinite(k[2]) && isfinite(k[3]);
+}
+
+static const char *check_camera(const char *name, const char *v)
+{
+    static char msg[256];
+    double k[4];
+    if (parse_camera(v, k)) return NULL;
+    snprintf(msg, sizeof msg, "%s \"%s\": expected fx,fy,cx,cy in pixels (focal lengths above 0)", name, v);
+    return msg;
+}
+
+static const char *check_png(const char *name, const char *v)
+{
+    static char msg[256];
+    size_t n = strlen(v);
+    if (n > 4 && strcasecmp(v + n - 4, ".png") == 0) return NULL;
+    snprintf(msg, sizeof msg, "%s %s: the image is written as PNG (a name ending .png)", name, v);
+    return msg;
+}
+
+typedef struct render_args {
+    const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
+    double radius_m, cell_m, far_m;
+    uint32_t repeat;
+} render_args;
+
+static int parse_args(int argc, char **argv, render_args *a)
+{
+    const app_option rows[] = {
+        APP_OPT("--map", APP_OPT_STRING, &a->map, "STORE", "the map: a scene store, or a folder holding one as DIR/store"),
+        APP_OPT("--particles", APP_OPT_STRING, &a->particles, "FILE", "particles: a PLY with vertex x y z [m]"),
+        APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
+                .min = 0, .min_open = true, .max = 10),
+        APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
+                "the particles' grid cell [m] (default: a quarter of the radius; at most 2 radii)", .min = 1e-5,
+                .max = 20, .no_default = true),
+        APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
+                "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
+        APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
+                "the mesh's pose: mesh to world (default: identity)", .check = check_pose),
+        APP_OPT("--pose", APP_OPT_STRING, &a->pose, "\"tx ty tz qx qy qz qw\"",
+                "camera to world (TUM: looks along +z, y down)", .required = true, .check = check_pose),
+        APP_OPT("--camera", APP_OPT_STRING, &a->camera, "fx,fy,cx,cy",
+                "intrinsics in pixels (default: 525 * W / 640, the image's centre)", .no_default = true,
+                .check = check_camera),
+        APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "image size", .required = true, .check = check_size),
+        APP_OPT("--out", APP_OPT_STRING, &a->out, "IMAGE.png", "the shaded view (RGB PNG)", .required = true,
+                .check = check_png),
+        APP_OPT("--depth", APP_OPT_STRING, &a->depth, "DEPTH.png", "the depth (16-bit PNG, 5000 per metre, 0: none)",
+                .check = check_png),
+        APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
+        APP_OPT("--repeat", APP_OPT_U32, &a->repeat, "N", "ray-cast the view N times and report the median GPU time",
+                .min = 1, .max = 1000),
+        APP_OPT_END,
+    };
+    const app_option *tables[] = {rows, NULL};
+    app_command_spec spec = {.name = "render", .usage = render_usage, .tables = tables, .epilog = render_epilog};
+    return app_options_parse(&spec, argc, argv);
+}
+
+/* The map of a store (or DIR/store) on the host. */
+static bf_status read_map(const char *path, hostmap *m)
+{
+    char sub[4096];
+    const char *dir = path;
+    if (!store_exists(path)) {
+        snprintf(sub, sizeof sub, "%s/store", path);
+        if (!store_exists(sub))
+            return bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder holding one "
+                                      "as store/", path);
+        dir = sub;
+    }
+    memset(m, 0, sizeof *m);
+    store_meta meta;
+    store_report rep;
+    bf_status s = store_read(dir, m, &meta, NULL, &rep);
+    if (s == BF_OK && rep.n_bad)
+        bf_warn("render: %s: %u chunk file(s) left out, the first: %s", dir, rep.n_bad, rep.first_bad);
+    if (s == BF_OK && m->n_bricks == 0) s = bf_fail(BF_FORMAT, "%s: the store holds no brick", dir);
+    if (s != BF_OK) hostmap_free(m);
+    return s;
+}
+
+/* A host map (a store's, a voxelised mesh's, or both merged) into a GPU map
+ * of its own size. */
+static bf_status load_map(gpu_context *ctx, const hostmap *m, uint32_t n_chunks, const bf_intrinsics *K,
+                          fusion_map **out)
+{
+    bf_status s = BF_OK;
+    fusion_config fc = fusion_config_default();
+    fc.chunk_m = m->chunk_m;
+    fc.brick_cap = m->n_bricks + 1;
+    fc.window = 2;
+    fc.subcache = 1;
+    fc.keep_colour = m->rgb565 != NULL;
+    /* Colour units: each brick's coloured voxels in units of 14 (fusion.glsl.h). */
+    uint64_t units = 1;
+    for (uint32_t i = 0; m->rgb565 && i < m->n_bricks; i++) {
+        uint32_t n = 0;
+        for (uint32_t v = 0; v < 512; v++) n += m->rgb565[(size_t)i * 512 + v] != 0;
+        units += (n + FUSION_COLOUR_UNIT_COLOURS - 1) / FUSION_COLOUR_UNIT_COLOURS;
+    }
+    fc.colour_unit_cap = (uint32_t)(units < UINT32_MAX ? units : UINT32_MAX);
+    fc.hash_buckets = 64;
+    while (fc.hash_buckets < n_chunks * 2) fc.hash_buckets *= 2;
+    fc.hash_overflow = fc.hash_buckets;
+    fusion_map *map = NULL;
+    /* A fused map needs about 3 nodes a brick (DESIGN.md section 3); a sparse
+     * one more: grow and retry when the node pool is short. */
+    for (uint32_t per = 3; s == BF_OK && per <= 48; per *= 4) {
+        fc.node_cap = per * fc.brick_cap + 64;
+        s = fusion_create(ctx, &fc, K, m->origin_w, &map);
+        if (s == BF_OK) s = fusion_load(map, m);
+        if (s == BF_POOL_FULL && per < 48) {
+            fusion_destroy(map);
+            map = NULL;
+            s = BF_OK;
+            continue;
+        }
+        break;
+    }
+    if (s != BF_OK) {
+        fusion_destroy(map);
+        return s;
+    }
+    *out = map;
+    return BF_OK;
+}
+
+static int key_cmp(const void *x, const void *y)
+{
+    return memcmp(x, y, 3 * sizeof(int32_t)) < 0 ? -1 : memcmp(x, y, 3 * sizeof(int32_t)) > 0;
+}
+
+/* Chunks a host map touches (for the hash's size); at most its bricks. */
+static uint32_t count_chunks(const hostmap *m)
+{
+    int32_t (*k)[3] = malloc(((size_t)m->n_bricks + 1) * sizeof *k);
+    if (!k) return m->n_bricks;
+    for (uint32_t i = 0; i < m->n_bricks; i++) memcpy(k[i], m->bricks[i].key, sizeof k[i]);
+    qsort(k, m->n_bricks, sizeof *k, key_cmp);
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m->n_bricks; i++) n += i == 0 || memcmp(k[i], k[i - 1], sizeof k[i]) != 0;
+    free(k);
+    return n;
+}
+
+/* The level for the mesh: a third of the pixel footprint at its nearest
+ * vertex in front of the camera (render_level_for_footprint). */
+static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
+                           float chunk_m, uint32_t max_level, double near_m)
+{
+    bf_se3 T_cw = bf_se3_inverse(T_wc);
+    double z_min = INFINITY;
+    for (uint32_t i = 0; i < mesh->n_verts; i++) {
+        bf_vec3 p = bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
+                          mesh->origin.z + mesh->xyz[3 * i + 2]);
+        bf_vec3 c = bf_se3_apply(&T_cw, bf_se3_apply(T_wm, p));
+        if (c.z > near_m && c.z < z_min) z_min = c.z;
+    }
+    if (!isfinite(z_min)) z_min = 1.0; /* all behind the camera: any level shows nothing */
+    return render_level_for_footprint(chunk_m, z_min, K->fx_px > K->fy_px ? K->fx_px : K->fy_px, max_level);
+}
+
+/* The particles of a PLY (vertex x y z) into world floats. */
+static bf_status load_particles(const char *path, float **xyz, uint32_t *n)
+{
+    mesh_data md = {0};
+    bf_status s = mesh_read_ply(path, &md);
+    if (s != BF_OK) return s;
+    float *p = malloc((size_t)(md.n_verts ? md.n_verts : 1) * 12);
+    if (!p) {
+        mesh_free(&md);
+        return bf_fail(BF_NO_MEMORY, "%s: %u particles", path, md.n_verts);
+    }
+    double o[3] = {md.origin.x, md.origin.y, md.origin.z};
+    for (size_t i = 0; i < 3 * (size_t)md.n_verts; i++) p[i] = (float)(o[i % 3] + md.xyz[i]);
+    *xyz = p;
+    *n = md.n_verts;
+    mesh_free(&md);
+    return BF_OK;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static bf_status write_images(const render_images *im, const char *out, const char *depth_path)
+{
+    bf_status s = replay_png_write_rgb8(out, im->rgb, im->width, im->height);
+    if (s != BF_OK || !depth_path) return s;
+    size_t n = (size_t)im->width * im->height;
+    uint16_t *d = malloc(n * 2);
+    if (!d) return bf_fail(BF_NO_MEMORY, "render: depth image");
+    for (size_t i = 0; i < n; i++) {
+        double v = im->depth[i] > 0 ? floor(im->depth[i] * 5000.0 + 0.5) : 0;
+        d[i] = v > 0 && v <= 65535 ? (uint16_t)v : 0;
+    }
+    s = replay_png_write_u16(depth_path, d, im->width, im->height);
+    free(d);
+    return s;
+}
+
+int cmd_render(int argc, char **argv)
+{
+    const char *cmd = "render";
+    render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1};
+    int rc = parse_args(argc, argv, &a);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
+    if (!a.map && !a.particles && !a.mesh)
+        return app_usage_error(cmd, "nothing to render: give --map, --mesh, --particles or any of them");
+    if (a.cell_m > 2 * a.radius_m)
+        return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a.cell_m, 2 * a.radius_m);
+    uint32_t W = 0, H = 0;
+    parse_size(a.size, &W, &H);
+    bf_se3 T_wc;
+    char msg[512];
+    parse_pose(a.pose, &T_wc, msg, sizeof msg);
+    double k[4] = {525.0 * W / 640.0, 525.0 * W / 640.0, (W - 1) / 2.0, (H - 1) / 2.0};
+    if (a.camera) parse_camera(a.camera, k);
+    bf_intrinsics K = {W, H, k[0], k[1], k[2], k[3], 5000};
+
+    /* The inputs before the device: a missing file is named before anything starts. */
+    float *xyz = NULL;
+    uint32_t n_particles = 0;
+    bf_status s = BF_OK;
+    if (a.map && !bf_file_exists(a.map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a.map);
+    if (s == BF_OK && a.particles) s = load_particles(a.particles, &xyz, &n_particles);
+    mesh_data mesh = {0};
+    bf_se3 T_wm = bf_se3_identity();
+    if (a.mesh_pose) parse_pose(a.mesh_pose, &T_wm, msg, sizeof msg);
+    if (s == BF_OK && a.mesh) s = mesh_read(a.mesh, &mesh);
+    if (s == BF_OK && a.mesh && mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a.mesh);
+    gpu_context *ctx = NULL;
+    gpu_config gcfg = {0};
+    if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
+    fusion_map *map = NULL;
+    render_particles *ps = NULL;
+    render_caster *caster = NULL;
+    uint32_t n_bricks = 0, n_map_bricks = 0;
+    hostmap hm = {0};
+    render_voxelise_stats vst = {0};
+    uint32_t vlevel = 0;
+    if (s == BF_OK && a.map) s = read_map(a.map, &hm);
+    n_map_bricks = hm.n_bricks;
+    if (s == BF_OK && a.mesh) {
+        /* On the map's grid when there is one, so both are one ray-cast. */
+        render_voxelise_config vc = render_voxelise_config_default();
+        if (a.map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
+        vlevel = vc.level = mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
+        hostmap mh;
+        s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
+        if (s == BF_INVALID_ARG) {
+            snprintf(msg, sizeof msg, "%s", bf_last_error());
+            s = bf_fail(BF_FORMAT, "%s: %s", a.mesh, msg);
+        }
+        if (s == BF_OK && a.map) s = render_hostmap_merge(&hm, &mh);
+        else if (s == BF_OK) hm = mh;
+    }
+    if (s == BF_OK && (a.map || a.mesh)) s = load_map(ctx, &hm, count_chunks(&hm), &K, &map);
+    n_bricks = hm.n_bricks;
+    hostmap_free(&hm);
+    if (s == BF_OK && a.particles) {
+        render_particles_config pc = render_particles_config_default();
+        pc.radius_m = (float)a.radius_m;
+        pc.cell_m = (float)a.cell_m;
+        s = render_particles_create(ctx, &pc, xyz, n_particles, &ps);
+        /* A position the grid cannot hold is the file's fault. */
+        if (s == BF_INVALID_ARG) {
+            snprintf(msg, sizeof msg, "%s", bf_last_error());
+            s = bf_fail(BF_FORMAT, "%s: %s", a.particles, msg);
+        }
+    }
+    if (s == BF_OK) s = render_create(ctx, NULL, W, H, &caster);
+    render_options opt = render_options_display();
+    opt.far_m = (float)a.far_m;
+    /* A mesh's outline: pass by the hits that graze a voxel's corner (docs/render.md). */
+    opt.no_graze = a.mesh != NULL;
+    double *ms = calloc(a.repeat, sizeof *ms), *ms_p = calloc(a.repeat, sizeof *ms_p);
+    if (s == BF_OK && (!ms || !ms_p)) s = bf_fail(BF_NO_MEMORY, "render: timings");
+    for (uint32_t i = 0; s == BF_OK && i < a.repeat; i++) {
+        s = render_scene(caster, map, ps, &K, &T_wc, &opt);
+        if (s == BF_OK) ms[i] = (map ? render_last_ms(caster) : 0) + (ps ? render_particles_last_ms(ps) : 0);
+        if (s == BF_OK) ms_p[i] = ps ? render_particles_last_ms(ps) : 0;
+    }
+    render_images im = {0};
+    if (s == BF_OK) s = render_download(caster, &im);
+    bool is_write_failure = false;
+    if (s == BF_OK) {
+        s = write_images(&im, a.out, a.depth);
+        is_write_failure = s != BF_OK;
+    }
+    if (s == BF_OK) {
+        uint64_t n_hit = 0;
+        for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
+        qsort(ms, a.repeat, sizeof *ms, cmp_double);
+        qsort(ms_p, a.repeat, sizeof *ms_p, cmp_double);
+        printf("bitfuse render: %ux%u on %s -> %s%s%s: %.1f%% of the pixels hit\n", W, H, gpu_device_name(ctx), a.out,
+               a.depth ? ", " : "", a.depth ? a.depth : "", 100.0 * (double)n_hit / ((double)W * H));
+        if (a.map) printf("  map              %s: %u bricks\n", a.map, n_map_bricks);
+        if (a.mesh)
+            printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
+                   "%u bricks, voxelised in %.3f s (%.2f M triangles/s)\n",
+                   a.mesh, mesh.n_tris, vlevel, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
+                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0);
+        if (a.map && a.mesh) printf("  together         %u bricks\n", n_bricks);
+        if (ps) {
+            const render_particles_stats *st = render_particles_get_stats(ps);
+            printf("  particles        %s: %llu, radius %.4g m, cell %.4g m (level %u): %llu cells, %u bricks "
+                   "(+%u empty)\n",
+                   a.particles, (unsigned long long)st->n_particles, a.radius_m, st->cell_m, st->level,
+                   (unsigned long long)st->n_cells, st->n_bricks, st->n_pad_bricks);
+            printf("  binning          %.1f ms on the host (%.2f M particles/s), %.1f ms into the GPU pools\n",
+                   1e3 * st->bin_s, st->bin_s > 0 ? 1e-6 * (double)st->n_particles / st->bin_s : 0.0,
+                   1e3 * st->load_s);
+        }
+        printf("  ray-cast         %.1f ms GPU (median of %u)\n", ms[a.repeat / 2], a.repeat);
+        if (ps && map) printf("    of which particles %.1f ms\n", ms_p[a.repeat / 2]);
+    }
+    render_images_free(&im);
+    free(ms);
+    free(ms_p);
+    render_destroy(caster);
+    render_particles_destroy(ps);
+    fusion_destroy(map);
+    gpu_context_destroy(ctx);
+    free(xyz);
+    mesh_free(&mesh);
+    if (s == BF_OK) return APP_EXIT_OK;
+    int code = app_fail(cmd, s);
+    return is_write_failure && code == APP_EXIT_INPUT ? APP_EXIT_FAILURE : code;
+}

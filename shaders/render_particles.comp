@@ -1,0 +1,89 @@
+#version 450
+/* The particle pass, one invocation per pixel (render/particles.c; Reichl's
+ * dissertation, ch. 6): the chunk and octree walk of
+ * shaders/render_walk.glsl.h over the particles' binary grid with the
+ * `particles` traverser (shaders/render_traverse.glsl.h). It writes the
+ * caster's images itself: depth, level, the sphere's normal and the shaded
+ * colour. With RENDER_PARTICLES_FLAG_KEEP_NEARER the pixel's existing hit
+ * (the map's ray-cast, recorded just before) bounds the ray, and a pixel
+ * the particles do not reach in front of it keeps it: one image with the
+ * nearest hit of either. A dispatch walks a bounded number of cells per ray
+ * and the next resumes the rays not done (render.glsl.h says why).
+ */
+#extension GL_GOOGLE_include_directive : require
+#include "fusion.glsl.h"
+#include "render.glsl.h"
+
+BF_LOCAL_SIZE_FROM_SPEC
+
+layout(std430, binding = 0) readonly buffer Hash { uint w[]; } hash;
+layout(std430, binding = 1) readonly buffer Nodes { uint w[]; } nodes;
+layout(std430, binding = 2) readonly buffer Bits { uint w[]; } bits_pool;
+layout(std430, binding = 3) buffer Depth { float v[]; } depth_io;
+layout(std430, binding = 4) writeonly buffer Level { uint v[]; } level_out;
+layout(std430, binding = 5) writeonly buffer Normal { vec4 v[]; } normal_out;
+layout(std430, binding = 6) writeonly buffer Colour { uint v[]; } colour_out;
+layout(std430, binding = 7) readonly buffer Reach { uint w[]; } reach_pool;
+/* Per pixel: the depth where the ray resumes in the next dispatch; -1: done. */
+layout(std430, binding = 8) buffer Resume { float v[]; } resume;
+
+layout(push_constant) uniform Push { render_particles_push pc; };
+
+uint fusion_hash_word(uint i) { return hash.w[i]; }
+uint render_node_word(uint i) { return nodes.w[i]; }
+uint render_sign_word(uint slot, uint w) { return bits_pool.w[slot * BRICK_WORDS + w]; }
+uint render_conf_word(uint slot, uint w) { return reach_pool.w[slot * BRICK_WORDS + w]; }
+
+#include "render_walk.glsl.h"
+
+float render_particle_radius_m() { return pc.radius_m; }
+render_walk_map render_particle_map()
+{
+    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, pc.cells_per_pass);
+}
+
+#define RENDER_TRAVERSE_PARTICLES
+#include "render_traverse.glsl.h"
+
+void main()
+{
+    uvec2 px = gl_GlobalInvocationID.xy;
+    if (px.x >= pc.width || px.y >= pc.height) return;
+    uint pixel = px.y * pc.width + px.x;
+    float s = (pc.flags & RENDER_PARTICLES_FLAG_FIRST) != 0u ? pc.near_m : resume.v[pixel];
+    if (s < 0.0) return; /* done in an earlier dispatch */
+    render_ray ray = render_pixel_ray(px, pc.R, pc.t, pc.fx, pc.fy, pc.cx, pc.cy);
+    bool keep = (pc.flags & RENDER_PARTICLES_FLAG_KEEP_NEARER) != 0u;
+    float far_m = pc.far_m;
+    if (keep) {
+        float z = depth_io.v[pixel];
+        if (z > 0.0) far_m = min(far_m, z);
+    }
+    render_trace tr;
+    tr.has_front = 0u;
+    tr.front_depth = 0.0;
+    tr.hit_depth = 0.0;
+    tr.hit_level = FUSION_NONE;
+    tr.hit_normal = vec3(0.0);
+    render_particles_cache_clear();
+    bool hit = render_walk_from(render_particle_map(), ray, s, far_m, 0u, tr) && tr.hit_depth < far_m;
+    bool done = hit || s >= far_m || (pc.flags & RENDER_PARTICLES_FLAG_LAST) != 0u;
+    resume.v[pixel] = done ? -1.0 : s;
+    if (!done) return;
+    if (hit) {
+        /* The normal in camera coordinates: R^T n (R takes camera to map). */
+        vec3 n = tr.hit_normal;
+        vec3 nc = vec3(pc.R[0] * n.x + pc.R[3] * n.y + pc.R[6] * n.z, pc.R[1] * n.x + pc.R[4] * n.y + pc.R[7] * n.z,
+                       pc.R[2] * n.x + pc.R[5] * n.y + pc.R[8] * n.z);
+        vec3 view = normalize(vec3((float(px.x) - pc.cx) / pc.fx, (float(px.y) - pc.cy) / pc.fy, 1.0));
+        depth_io.v[pixel] = tr.hit_depth;
+        level_out.v[pixel] = tr.hit_level;
+        normal_out.v[pixel] = vec4(nc, 0.0);
+        colour_out.v[pixel] = render_shade_particle(-dot(nc, view), pc.rgb);
+    } else if (!keep) {
+        depth_io.v[pixel] = 0.0;
+        level_out.v[pixel] = FUSION_NONE;
+        normal_out.v[pixel] = vec4(0.0);
+        colour_out.v[pixel] = 0u;
+    }
+}

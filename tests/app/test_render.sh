@@ -1,0 +1,233 @@
+#!/usr/bin/env bash
+# bitfuse render as a user meets it: a scene store written by replay drawn
+# from the sequence's own first pose (its depth image must agree with the
+# frame's, noise-free), particles added in front of the map (nearer where
+# they are, the map elsewhere), the particles alone, and the refusals: a bad
+# pose, size, camera or image name (exit 2, the option named), a missing or
+# corrupt file (exit 3, the file named), nothing to render; a mesh (a
+# sphere whose depth and outline are known) and its refusals.
+# Usage: test_render.sh path/to/bitfuse
+set -u
+B=$1
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+fails=0
+fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
+expect() {
+    local want=$1
+    shift
+    "$@" >"$T/out" 2>"$T/err"
+    local rc=$?
+    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
+}
+mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
+command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+# python3 without the sanitizer build's preload (LeakSanitizer would end it).
+PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
+export BITFUSE_PROGRESS=0
+
+# A PNG reader (zlib and the five row filters) for the checks below: prints
+# width, height, bit depth, and with a second file the comparison asked.
+cat >"$T/png.py" <<'PY'
+import struct, sys, zlib
+def read(path):
+    b = open(path, "rb").read()
+    assert b[:8] == b"\x89PNG\r\n\x1a\n", path + ": not a PNG"
+    i, idat = 8, b""
+    while i < len(b):
+        n, kind = struct.unpack(">I4s", b[i:i + 8])
+        data = b[i + 8:i + 8 + n]
+        if kind == b"IHDR": w, h, depth, ctype = struct.unpack(">IIBB", data[:10])
+        if kind == b"IDAT": idat += data
+        i += 12 + n
+    ch = {0: 1, 2: 3, 6: 4}[ctype]
+    bpp = ch * depth // 8
+    raw, rows, prev = zlib.decompress(idat), [], bytearray(w * bpp)
+    stride = w * bpp
+    for y in range(h):
+        f, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for x in range(stride):
+            a = line[x - bpp] if x >= bpp else 0
+            c = prev[x - bpp] if x >= bpp else 0
+            up = prev[x]
+            if f == 1: line[x] = (line[x] + a) & 255
+            elif f == 2: line[x] = (line[x] + up) & 255
+            elif f == 3: line[x] = (line[x] + (a + up) // 2) & 255
+            elif f == 4:
+                p = a + up - c
+                pa, pb, pc = abs(p - a), abs(p - up), abs(p - c)
+                line[x] = (line[x] + (a if pa <= pb and pa <= pc else up if pb <= pc else c)) & 255
+        rows.append(line)
+        prev = line
+    if depth == 16:
+        px = [[(r[2 * k] << 8) | r[2 * k + 1] for k in range(w * ch)] for r in rows]
+    else:
+        px = [list(r) for r in rows]
+    return w, h, depth, ch, px
+w, h, depth, ch, px = read(sys.argv[1])
+if len(sys.argv) == 2:
+    print(w, h, depth, ch)
+    sys.exit(0)
+mode = sys.argv[2]
+if mode == "hits":          # share of non-zero depth pixels
+    print("%.3f" % (sum(v > 0 for r in px for v in r) / float(w * h)))
+elif mode == "agree":       # median |a - b| [m] where both have depth, and the share of such pixels
+    _, _, _, _, q = read(sys.argv[3])
+    d = sorted(abs(a - b) / 5000.0 for ra, rb in zip(px, q) for a, b in zip(ra, rb) if a and b)
+    print("%.4f %.3f" % (d[len(d) // 2] if d else 9, len(d) / float(w * h)))
+elif mode == "at":          # the value of pixel (x, y)
+    print(px[int(sys.argv[4])][int(sys.argv[3])])
+elif mode == "nearest":     # pixels of a that are not the nearest of b and c (0: none), and those where b is nearer than c
+    _, _, _, _, q = read(sys.argv[3])
+    _, _, _, _, r = read(sys.argv[4])
+    bad = in_front = 0
+    for ra, rb, rc in zip(px, q, r):
+        for a, b, c in zip(ra, rb, rc):
+            want = min(v for v in (b, c) if v) if (b or c) else 0
+            bad += abs(a - want) > 1
+            in_front += b > 0 and c > 0 and b < c
+    print(bad, in_front)
+PY
+
+# 20 frames of the synthetic room, small images, noise-free, into a store (as test_export.sh).
+py - "$T/traj.txt" <<'PY'
+import sys, math
+with open(sys.argv[1], "w") as f:
+    for i in range(30):
+        a = 0.004 * i
+        f.write("%.6f %.6f 0 0 0 %.6f 0 %.6f\n" % (1305031098.6659 + i / 30.0, 0.005 * i, math.sin(a / 2), math.cos(a / 2)))
+PY
+mkdir "$T/nodata"
+CAM=131.25,131.25,79.5,59.5
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 20 --size 160x120 --camera $CAM \
+    --data "$T/nodata" --noise none --out "$T/seq"
+expect 0 "$B" replay "$T/seq" --out "$T/run" --store "$T/S" --no-mesh
+# The last frame's pose and depth image: the map is fused there.
+POSE=$(grep -v '^#' "$T/seq/groundtruth.txt" | tail -n 1 | cut -d' ' -f2-8)
+DEPTH=$T/seq/$(grep -v '^#' "$T/seq/depth.txt" | tail -n 1 | cut -d' ' -f2)
+
+expect 0 "$B" render --help
+grep -qF -- "--particle-radius" "$T/out" || fail "render --help does not list --particle-radius"
+
+# A mesh: a sphere of radius 0.1 m (an icosphere of 5120 triangles, OFF),
+# placed by --mesh-pose 0.5 m in front of the camera at the origin. The
+# centre pixel's depth is 0.4 m within a voxel (the level is chosen for a
+# third of a pixel: 1 mm here), the hit share that of the sphere's disc
+# (radius f tan(asin(r / d)) = 26.8 px of 160x120: 11.7%) within a pixel of
+# its outline.
+py - "$T/sphere.off" <<'PY'
+import sys, math
+t = (1 + 5 ** 0.5) / 2
+v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+     (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+v = [tuple(c / math.sqrt(sum(x * x for x in p)) for c in p) for p in v]
+f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
+     (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7),
+     (9, 8, 1)]
+for _ in range(4):
+    mid, nf = {}, []
+    def m(a, b):
+        k = (min(a, b), max(a, b))
+        if k not in mid:
+            p = [(x + y) / 2 for x, y in zip(v[a], v[b])]
+            n = math.sqrt(sum(x * x for x in p))
+            v.append(tuple(x / n for x in p))
+            mid[k] = len(v) - 1
+        return mid[k]
+    for a, b, c in f:
+        ab, bc, ca = m(a, b), m(b, c), m(c, a)
+        nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+    f = nf
+with open(sys.argv[1], "w") as o:
+    o.write("OFF\n%d %d 0\n" % (len(v), len(f)))
+    for p in v: o.write("%.7f %.7f %.7f\n" % tuple(0.1 * x for x in p))
+    for a, b, c in f: o.write("3 %d %d %d\n" % (a, b, c))
+PY
+expect 0 "$B" render --mesh "$T/sphere.off" --mesh-pose "0 0 0.5 0 0 0 1" --pose "0 0 0 0 0 0 1" --camera $CAM \
+    --size 160x120 --out "$T/sphere.png" --depth "$T/sphere_d.png"
+grep -qF "level 8" "$T/out" || fail "sphere: not voxelised at level 8 (1 mm): $(cat "$T/out")"
+read -r hits < <(py "$T/png.py" "$T/sphere_d.png" hits)
+py -c "import sys; sys.exit(0 if 0.109 <= $hits <= 0.126 else 1)" || fail "sphere: $hits of the pixels hit, not 0.109-0.126"
+read -r centre < <(py "$T/png.py" "$T/sphere_d.png" at 80 60)
+py -c "import sys; sys.exit(0 if abs($centre - 2000) <= 5 else 1)" || fail "sphere: centre depth $centre / 5000 m, not 0.4 m within 1 mm"
+
+# The map from the frame's pose: its depth is the frame's (noise-free, the
+# fused surface within a few voxels of 1-2 cm at these depths).
+expect 0 "$B" render --map "$T/S" --pose "$POSE" --camera $CAM --size 160x120 --out "$T/map.png" --depth "$T/map_d.png"
+[ "$(py "$T/png.py" "$T/map.png")" = "160 120 8 3" ] || fail "map.png: $(py "$T/png.py" "$T/map.png")"
+[ "$(py "$T/png.py" "$T/map_d.png")" = "160 120 16 1" ] || fail "map_d.png: $(py "$T/png.py" "$T/map_d.png")"
+read -r med share < <(py "$T/png.py" "$T/map_d.png" agree "$DEPTH")
+py -c "import sys; sys.exit(0 if $med <= 0.02 and $share >= 0.8 else 1)" ||
+    fail "the map's depth against the frame's: median $med m on $share of the pixels"
+# A folder holding the store as DIR/store is a map too.
+mkdir "$T/dir" && cp -r "$T/S" "$T/dir/store"
+expect 0 "$B" render --map "$T/dir" --pose "$POSE" --camera $CAM --size 40x30 --out "$T/small.png"
+[ "$(py "$T/png.py" "$T/small.png")" = "40 30 8 3" ] || fail "small.png: $(py "$T/png.py" "$T/small.png")"
+
+# Particles 0.6 m in front of the camera, a 25 x 25 sheet of 4 cm spheres
+# (binary little-endian PLY with extra properties, as simulations write).
+py - "$POSE" "$T/p.ply" <<'PY'
+import sys, struct
+tx, ty, tz, qx, qy, qz, qw = map(float, sys.argv[1].split())
+def rot(v):  # R(q) v + t
+    x, y, z = v
+    R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+         [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+         [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]]
+    return tuple(R[r][0] * x + R[r][1] * y + R[r][2] * z + (tx, ty, tz)[r] for r in range(3))
+pts = [rot((-0.12 + 0.01 * i, -0.12 + 0.01 * j, 0.6)) for i in range(25) for j in range(25)]
+with open(sys.argv[2], "wb") as f:
+    f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+            b"property float z\nproperty float density\nend_header\n" % len(pts))
+    for p in pts: f.write(struct.pack("<4f", p[0], p[1], p[2], 1000.0))
+PY
+expect 0 "$B" render --map "$T/S" --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE" --camera $CAM \
+    --size 160x120 --out "$T/both.png" --depth "$T/both_d.png"
+grep -q "625 cells" "$T/out" || fail "render did not report 625 particle cells: $(cat "$T/out")"
+expect 0 "$B" render --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE" --camera $CAM --size 160x120 \
+    --out "$T/p.png" --depth "$T/p_d.png"
+# The sheet covers about (0.28 * 131 / 0.6)^2 = 3700 pixels (a fifth).
+hits=$(py "$T/png.py" "$T/p_d.png" hits)
+py -c "import sys; sys.exit(0 if 0.15 <= $hits <= 0.25 else 1)" || fail "particles alone hit $hits of the pixels"
+# Together: each pixel the nearer of the two alone (to the PNG's 0.2 mm);
+# the sheet lies in front of the map wherever both are.
+read -r bad in_front < <(py "$T/png.py" "$T/both_d.png" nearest "$T/p_d.png" "$T/map_d.png")
+[ "$bad" = 0 ] && [ "$in_front" -gt 1000 ] ||
+    fail "map and particles: $bad pixels not the nearer of the two, particles in front on $in_front"
+
+# Refusals: the option or the file named.
+expect 2 "$B" render --map "$T/S" --pose "1 2 3 0 0 0" --size 160x120 --out "$T/x.png"
+mentions "--pose"
+expect 2 "$B" render --map "$T/S" --pose "0 0 0 0 0 0 2" --size 160x120 --out "$T/x.png"
+mentions "norm"
+expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x --out "$T/x.png"
+mentions "--size"
+expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 0x120 --out "$T/x.png"
+mentions "--size"
+expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --camera 100,100 --out "$T/x.png"
+mentions "--camera"
+expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/x.jpg"
+mentions "--out"
+expect 2 "$B" render --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "nothing to render"
+expect 2 "$B" render --mesh-pose "0 0 0 0 0 0 1" --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "--mesh-pose without --mesh"
+expect 3 "$B" render --mesh "$T/nope.off" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/nope.off"
+printf 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n' >"$T/bad.off"
+expect 3 "$B" render --mesh "$T/bad.off" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/bad.off"
+expect 3 "$B" render --map "$T/missing" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/missing"
+expect 3 "$B" render --map "$T/nodata" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/nodata"
+expect 3 "$B" render --particles "$T/nope.ply" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/nope.ply"
+head -c 100 "$T/p.ply" >"$T/cut.ply"
+expect 3 "$B" render --particles "$T/cut.ply" --pose "$POSE" --size 160x120 --out "$T/x.png"
+mentions "$T/cut.ply"
+[ ! -e "$T/x.png" ] || fail "a refused render left $T/x.png"
+expect 1 "$B" render --particles "$T/p.ply" --pose "$POSE" --size 16x12 --out "$T/no/such/dir/x.png"
+
+[ "$fails" = 0 ] && echo "test_render.sh: all passed" || { echo "test_render.sh: $fails failed"; exit 1; }

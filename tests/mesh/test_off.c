@@ -1,0 +1,50 @@
+/* mesh: the OFF reader against a file written here (a quad fanned into two
+ * triangles, comments, a face colour), and its refusals naming the line. */
+#include <stdio.h>
+
+#include "mesh/mesh.h"
+#include "test.h"
+
+static const char *write_file(const char *name, const char *text)
+{
+    static char path[600];
+    snprintf(path, sizeof path, "%s/%s", bf_test_tmpdir(), name);
+    FILE *f = fopen(path, "w");
+    fputs(text, f);
+    fclose(f);
+    return path;
+}
+
+BF_TEST(off_reads_vertices_and_fans_polygons)
+{
+    const char *p = write_file("quad.OFF", "OFF\n# a unit quad and a triangle\n5 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
+                                           "0.5 0.5 1.5e0\n4 0 1 2 3\n3 0 1 4 255 0 0\n");
+    mesh_data m;
+    CHECK_OK(mesh_read(p, &m)); /* by the extension, any case */
+    CHECK_EQ_INT(m.n_verts, 5);
+    CHECK_EQ_INT(m.n_tris, 3);
+    const uint32_t want[9] = {0, 1, 2, 0, 2, 3, 0, 1, 4};
+    for (int i = 0; i < 9; i++) CHECK_EQ_INT(m.tri[i], want[i]);
+    CHECK(m.xyz[3 * 4 + 2] == 1.5f);
+    mesh_free(&m);
+}
+
+BF_TEST(off_refusals_name_the_line)
+{
+    mesh_data m;
+    const char *p = write_file("bad_index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("line 6");
+    CHECK_ERROR_MENTIONS("vertex 7 of 3");
+    p = write_file("short.off", "OFF\n3 1 0\n0 0 0\n1 0\n");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("ends before");
+    p = write_file("nan.off", "OFF\n1 0 0\n0 nan 0\n");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("not a finite number");
+    p = write_file("not.off", "ply\nformat ascii 1.0\n");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("not an OFF file");
+    CHECK_STATUS(mesh_read_off("/nonexistent/x.off", &m), BF_IO);
+    CHECK_ERROR_MENTIONS("/nonexistent/x.off");
+}
