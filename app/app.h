@@ -11,6 +11,7 @@
 #include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
+#include "gpu/gpu.h"
 #include "export/export.h"
 #include "mesh/mesh.h"
 #include "store/store.h"
@@ -232,6 +233,31 @@ void app_log_codec_apply(const app_log_codec *c, struct replay_log_config *lcfg)
  * in lcfg. Returns as app_options_parse. */
 int app_parse_log_command(app_command_spec *spec, const app_option *own, app_log_codec *codec,
                           struct replay_options *ropt, struct replay_log_config *lcfg, int argc, char **argv);
+
+/* scene.c: what render and view draw, and the options they share. */
+/* "tx ty tz qx qy qz qw" (camera or mesh to world, TUM; a unit quaternion
+ * within 1e-3) -> T; false with the reason in msg. */
+bool app_parse_pose(const char *v, bf_se3 *T, char *msg, size_t n);
+/* "WxH", each 1..8192. */
+bool app_parse_size(const char *v, uint32_t *w, uint32_t *h);
+/* "fx,fy,cx,cy" in pixels, focal lengths above 0. */
+bool app_parse_camera(const char *v, double k[4]);
+/* Option rows' checks of the above, and of a name ending .png. */
+const char *app_check_pose(const char *name, const char *v);
+const char *app_check_size(const char *name, const char *v);
+const char *app_check_camera(const char *name, const char *v);
+const char *app_check_png(const char *name, const char *v);
+/* The map of a scene store, or of DIR/store (BF_FORMAT: neither, or no
+ * brick); meta_out (may be NULL) gets the store's meta. */
+bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out);
+/* A host map into a GPU map of its own size (hash, nodes, colour units). */
+bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);
+/* The level to voxelise a mesh at: a third of the pixel footprint at its
+ * nearest vertex in front of the camera. */
+uint32_t app_scene_mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
+                              float chunk_m, uint32_t max_level, double near_m);
+/* The vertices of a PLY as particle centres (world floats, malloc'd). */
+bf_status app_scene_read_particles(const char *path, float **xyz, uint32_t *n);
 
 int cmd_demo(int argc, char **argv);
 int cmd_synth(int argc, char **argv);

@@ -35,85 +35,6 @@ static const char render_epilog[] =
     "exit codes: 0 ok, 1 failure (also an image not writable), 2 usage (also a bad pose,\n"
     "size or camera), 3 unreadable map, mesh or particle file, 4 no usable Vulkan device\n";
 
-/* "tx ty tz qx qy qz qw" -> T_wc; false with the reason in msg. */
-static bool parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
-{
-    double a[7];
-    int used = 0;
-    if (sscanf(v, "%lf %lf %lf %lf %lf %lf %lf %n", &a[0], &a[1], &a[2], &a[3], &a[4], &a[5], &a[6], &used) != 7 ||
-        v[used] != '\0') {
-        snprintf(msg, n, "--pose \"%s\": expected 7 numbers \"tx ty tz qx qy qz qw\"", v);
-        return false;
-    }
-    for (int i = 0; i < 7; i++)
-        if (!isfinite(a[i])) {
-            snprintf(msg, n, "--pose \"%s\": not finite", v);
-            return false;
-        }
-    double qn = sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6]);
-    if (fabs(qn - 1) > 1e-3) {
-        snprintf(msg, n, "--pose \"%s\": the quaternion's norm is %g, not 1", v, qn);
-        return false;
-    }
-    bf_quat q = bf_quat_normalize((bf_quat){.w = a[6], .x = a[3], .y = a[4], .z = a[5]});
-    *T = bf_se3_from_qt(q, bf_v3(a[0], a[1], a[2]));
-    return true;
-}
-
-static const char *check_pose(const char *name, const char *v)
-{
-    static char msg[512];
-    bf_se3 T;
-    (void)name;
-    return parse_pose(v, &T, msg, sizeof msg) ? NULL : msg;
-}
-
-/* "WxH" within 1..8192 each. */
-static bool parse_size(const char *v, uint32_t *w, uint32_t *h)
-{
-    unsigned a, b;
-    int used = 0;
-    if (sscanf(v, "%ux%u%n", &a, &b, &used) != 2 || v[used] != '\0' || a < 1 || b < 1 || a > 8192 || b > 8192)
-        return false;
-    *w = a, *h = b;
-    return true;
-}
-
-static const char *check_size(const char *name, const char *v)
-{
-    static char msg[256];
-    uint32_t w, h;
-    if (parse_size(v, &w, &h)) return NULL;
-    snprintf(msg, sizeof msg, "%s \"%s\": expected WxH, each 1..8192", name, v);
-    return msg;
-}
-
-/* "fx,fy,cx,cy" with positive focal lengths. */
-static bool parse_camera(const char *v, double k[4])
-{
-    int used = 0;
-    if (sscanf(v, "%lf,%lf,%lf,%lf%n", &k[0], &k[1], &k[2], &k[3], &used) != 4 || v[used] != '\0') return false;
-    return k[0] > 0 && k[1] > 0 && isfinite(k[0]) && isfinite(k[1]) && isfinite(k[2]) && isfinite(k[3]);
-}
-
-static const char *check_camera(const char *name, const char *v)
-{
-    static char msg[256];
-    double k[4];
-    if (parse_camera(v, k)) return NULL;
-    snprintf(msg, sizeof msg, "%s \"%s\": expected fx,fy,cx,cy in pixels (focal lengths above 0)", name, v);
-    return msg;
-}
-
-static const char *check_png(const char *name, const char *v)
-{
-    static char msg[256];
-    size_t n = strlen(v);
-    if (n > 4 && strcasecmp(v + n - 4, ".png") == 0) return NULL;
-    snprintf(msg, sizeof msg, "%s %s: the image is written as PNG (a name ending .png)", name, v);
-    return msg;
-}
-
 typedef struct render_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
     double radius_m, cell_m, far_m;
@@ -133,17 +54,17 @@ static int parse_args(int argc, char **argv, render_args *a)
         APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
                 "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
         APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
-                "the mesh's pose: mesh to world (default: identity)", .check = check_pose),
+                "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
         APP_OPT("--pose", APP_OPT_STRING, &a->pose, "\"tx ty tz qx qy qz qw\"",
-                "camera to world (TUM: looks along +z, y down)", .required = true, .check = check_pose),
+                "camera to world (TUM: looks along +z, y down)", .required = true, .check = app_check_pose),
         APP_OPT("--camera", APP_OPT_STRING, &a->camera, "fx,fy,cx,cy",
                 "intrinsics in pixels (default: 525 * W / 640, the image's centre)", .no_default = true,
-                .check = check_camera),
-        APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "image size", .required = true, .check = check_size),
+                .check = app_check_camera),
+        APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "image size", .required = true, .check = app_check_size),
         APP_OPT("--out", APP_OPT_STRING, &a->out, "IMAGE.png", "the shaded view (RGB PNG)", .required = true,
-                .check = check_png),
+                .check = app_check_png),
         APP_OPT("--depth", APP_OPT_STRING, &a->depth, "DEPTH.png", "the depth (16-bit PNG, 5000 per metre, 0: none)",
-                .check = check_png),
+                .check = app_check_png),
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--repeat", APP_OPT_U32, &a->repeat, "N", "ray-cast the view N times and report the median GPU time",
                 .min = 1, .max = 1000),
@@ -152,129 +73,6 @@ static int parse_args(int argc, char **argv, render_args *a)
     const app_option *tables[] = {rows, NULL};
     app_command_spec spec = {.name = "render", .usage = render_usage, .tables = tables, .epilog = render_epilog};
     return app_options_parse(&spec, argc, argv);
-}
-
-/* The map of a store (or DIR/store) on the host. */
-static bf_status read_map(const char *path, hostmap *m)
-{
-    char sub[4096];
-    const char *dir = path;
-    if (!store_exists(path)) {
-        snprintf(sub, sizeof sub, "%s/store", path);
-        if (!store_exists(sub))
-            return bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder holding one "
-                                      "as store/", path);
-        dir = sub;
-    }
-    memset(m, 0, sizeof *m);
-    store_meta meta;
-    store_report rep;
-    bf_status s = store_read(dir, m, &meta, NULL, &rep);
-    if (s == BF_OK && rep.n_bad)
-        bf_warn("render: %s: %u chunk file(s) left out, the first: %s", dir, rep.n_bad, rep.first_bad);
-    if (s == BF_OK && m->n_bricks == 0) s = bf_fail(BF_FORMAT, "%s: the store holds no brick", dir);
-    if (s != BF_OK) hostmap_free(m);
-    return s;
-}
-
-/* A host map (a store's, a voxelised mesh's, or both merged) into a GPU map
- * of its own size. */
-static bf_status load_map(gpu_context *ctx, const hostmap *m, uint32_t n_chunks, const bf_intrinsics *K,
-                          fusion_map **out)
-{
-    bf_status s = BF_OK;
-    fusion_config fc = fusion_config_default();
-    fc.chunk_m = m->chunk_m;
-    fc.brick_cap = m->n_bricks + 1;
-    fc.window = 2;
-    fc.subcache = 1;
-    fc.keep_colour = m->rgb565 != NULL;
-    /* Colour units: each brick's coloured voxels in units of 14 (fusion.glsl.h). */
-    uint64_t units = 1;
-    for (uint32_t i = 0; m->rgb565 && i < m->n_bricks; i++) {
-        uint32_t n = 0;
-        for (uint32_t v = 0; v < 512; v++) n += m->rgb565[(size_t)i * 512 + v] != 0;
-        units += (n + FUSION_COLOUR_UNIT_COLOURS - 1) / FUSION_COLOUR_UNIT_COLOURS;
-    }
-    fc.colour_unit_cap = (uint32_t)(units < UINT32_MAX ? units : UINT32_MAX);
-    fc.hash_buckets = 64;
-    while (fc.hash_buckets < n_chunks * 2) fc.hash_buckets *= 2;
-    fc.hash_overflow = fc.hash_buckets;
-    fusion_map *map = NULL;
-    /* A fused map needs about 3 nodes a brick (DESIGN.md section 3); a sparse
-     * one more: grow and retry when the node pool is short. */
-    for (uint32_t per = 3; s == BF_OK && per <= 48; per *= 4) {
-        fc.node_cap = per * fc.brick_cap + 64;
-        s = fusion_create(ctx, &fc, K, m->origin_w, &map);
-        if (s == BF_OK) s = fusion_load(map, m);
-        if (s == BF_POOL_FULL && per < 48) {
-            fusion_destroy(map);
-            map = NULL;
-            s = BF_OK;
-            continue;
-        }
-        break;
-    }
-    if (s != BF_OK) {
-        fusion_destroy(map);
-        return s;
-    }
-    *out = map;
-    return BF_OK;
-}
-
-static int key_cmp(const void *x, const void *y)
-{
-    return memcmp(x, y, 3 * sizeof(int32_t)) < 0 ? -1 : memcmp(x, y, 3 * sizeof(int32_t)) > 0;
-}
-
-/* Chunks a host map touches (for the hash's size); at most its bricks. */
-static uint32_t count_chunks(const hostmap *m)
-{
-    int32_t (*k)[3] = malloc(((size_t)m->n_bricks + 1) * sizeof *k);
-    if (!k) return m->n_bricks;
-    for (uint32_t i = 0; i < m->n_bricks; i++) memcpy(k[i], m->bricks[i].key, sizeof k[i]);
-    qsort(k, m->n_bricks, sizeof *k, key_cmp);
-    uint32_t n = 0;
-    for (uint32_t i = 0; i < m->n_bricks; i++) n += i == 0 || memcmp(k[i], k[i - 1], sizeof k[i]) != 0;
-    free(k);
-    return n;
-}
-
-/* The level for the mesh: a third of the pixel footprint at its nearest
- * vertex in front of the camera (render_level_for_footprint). */
-static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
-                           float chunk_m, uint32_t max_level, double near_m)
-{
-    bf_se3 T_cw = bf_se3_inverse(T_wc);
-    double z_min = INFINITY;
-    for (uint32_t i = 0; i < mesh->n_verts; i++) {
-        bf_vec3 p = bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
-                          mesh->origin.z + mesh->xyz[3 * i + 2]);
-        bf_vec3 c = bf_se3_apply(&T_cw, bf_se3_apply(T_wm, p));
-        if (c.z > near_m && c.z < z_min) z_min = c.z;
-    }
-    if (!isfinite(z_min)) z_min = 1.0; /* all behind the camera: any level shows nothing */
-    return render_level_for_footprint(chunk_m, z_min, K->fx_px > K->fy_px ? K->fx_px : K->fy_px, max_level);
-}
-
-/* The particles of a PLY (vertex x y z) into world floats. */
-static bf_status load_particles(const char *path, float **xyz, uint32_t *n)
-{
-    mesh_data md = {0};
-    bf_status s = mesh_read_ply(path, &md);
-    if (s != BF_OK) return s;
-    float *p = malloc((size_t)(md.n_verts ? md.n_verts : 1) * 12);
-    if (!p) {
-        mesh_free(&md);
-        return bf_fail(BF_NO_MEMORY, "%s: %u particles", path, md.n_verts);
-    }
-    double o[3] = {md.origin.x, md.origin.y, md.origin.z};
-    for (size_t i = 0; i < 3 * (size_t)md.n_verts; i++) p[i] = (float)(o[i % 3] + md.xyz[i]);
-    *xyz = p;
-    *n = md.n_verts;
-    mesh_free(&md);
-    return BF_OK;
 }
 
 static int cmp_double(const void *a, const void *b)
@@ -311,12 +109,12 @@ int cmd_render(int argc, char **argv)
     if (a.cell_m > 2 * a.radius_m)
         return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a.cell_m, 2 * a.radius_m);
     uint32_t W = 0, H = 0;
-    parse_size(a.size, &W, &H);
+    app_parse_size(a.size, &W, &H);
     bf_se3 T_wc;
     char msg[512];
-    parse_pose(a.pose, &T_wc, msg, sizeof msg);
+    app_parse_pose(a.pose, &T_wc, msg, sizeof msg);
     double k[4] = {525.0 * W / 640.0, 525.0 * W / 640.0, (W - 1) / 2.0, (H - 1) / 2.0};
-    if (a.camera) parse_camera(a.camera, k);
+    if (a.camera) app_parse_camera(a.camera, k);
     bf_intrinsics K = {W, H, k[0], k[1], k[2], k[3], 5000};
 
     /* The inputs before the device: a missing file is named before anything starts. */
@@ -324,10 +122,10 @@ int cmd_render(int argc, char **argv)
     uint32_t n_particles = 0;
     bf_status s = BF_OK;
     if (a.map && !bf_file_exists(a.map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a.map);
-    if (s == BF_OK && a.particles) s = load_particles(a.particles, &xyz, &n_particles);
+    if (s == BF_OK && a.particles) s = app_scene_read_particles(a.particles, &xyz, &n_particles);
     mesh_data mesh = {0};
     bf_se3 T_wm = bf_se3_identity();
-    if (a.mesh_pose) parse_pose(a.mesh_pose, &T_wm, msg, sizeof msg);
+    if (a.mesh_pose) app_parse_pose(a.mesh_pose, &T_wm, msg, sizeof msg);
     if (s == BF_OK && a.mesh) s = mesh_read(a.mesh, &mesh);
     if (s == BF_OK && a.mesh && mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a.mesh);
     gpu_context *ctx = NULL;
@@ -340,13 +138,13 @@ int cmd_render(int argc, char **argv)
     hostmap hm = {0};
     render_voxelise_stats vst = {0};
     uint32_t vlevel = 0;
-    if (s == BF_OK && a.map) s = read_map(a.map, &hm);
+    if (s == BF_OK && a.map) s = app_scene_read_map(a.map, &hm, NULL);
     n_map_bricks = hm.n_bricks;
     if (s == BF_OK && a.mesh) {
         /* On the map's grid when there is one, so both are one ray-cast. */
         render_voxelise_config vc = render_voxelise_config_default();
         if (a.map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
-        vlevel = vc.level = mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
+        vlevel = vc.level = app_scene_mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
         hostmap mh;
         s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
         if (s == BF_INVALID_ARG) {
@@ -356,7 +154,7 @@ int cmd_render(int argc, char **argv)
         if (s == BF_OK && a.map) s = render_hostmap_merge(&hm, &mh);
         else if (s == BF_OK) hm = mh;
     }
-    if (s == BF_OK && (a.map || a.mesh)) s = load_map(ctx, &hm, count_chunks(&hm), &K, &map);
+    if (s == BF_OK && (a.map || a.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);
     if (s == BF_OK && a.particles) {

@@ -3,7 +3,8 @@
 # while scanning and its screenshot, read back from the swapchain, equals
 # the headless ray-cast PNG of the same frame (--view-every) byte for byte;
 # --exit-after ends the scan as closing the window does, everything kept;
-# bitfuse view shows the stored map; no display is a clear exit 4.
+# bitfuse view of a map, a mesh and particles equals bitfuse render's image
+# of the same view byte for byte; no display is a clear exit 4.
 # Skips (77) without a display or a device that presents to it; ctest runs
 # it under its own Xvfb (with_xvfb.sh).
 # Usage: test_view.sh path/to/bitfuse path/to/png_compare.py
@@ -51,20 +52,64 @@ frames=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['frames
 # order, row pitch, scaling or a stale image all break it.
 python3 "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the window's screenshot differs from views/000004.png"
 
-# 2. bitfuse view of the stored map at the scan's last pose. Not the same
-# bytes: the store holds the map after the end-of-scan flush (the owed
-# window integrated: colour and confidence appear) and view shows confident
-# voxels only, while the scan's view of frame 5 showed every sign bit
-# shaded by level (no window done yet). So the hit masks are compared (lit
-# against black), which both share where the surface is confident.
-# Required: at most 30% of the pixels differ (measured on this sequence: 21%).
+# 2. bitfuse view of what bitfuse render draws (the stored map, a sphere
+# mesh voxelised into it and a sheet of particles, in front of the scan's
+# last camera) against bitfuse render's headless image of the same view:
+# the same scene loading (app/scene.c) and the same cast, so tolerance 0.
 P=$(grep -v '^#' "$T/rep/trajectory.txt" | tail -1 | cut -d' ' -f2-8)
-"$B" view --map "$T/rep" --pose "$P" --size 160x120 --camera 131.25,131.25,79.5,59.5 --exit-after 2 \
-    --overlay off --screenshot "$T/shot_view.png" >"$T/out" 2>"$T/err"
+python3 - "$P" "$T/sphere.off" "$T/p.ply" >"$T/mesh_pose" <<'PY'
+import sys, math
+tx, ty, tz, qx, qy, qz, qw = map(float, sys.argv[1].split())
+R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+     [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+     [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]]
+def world(v):  # camera to world
+    return tuple(sum(R[r][c] * v[c] for c in range(3)) + (tx, ty, tz)[r] for r in range(3))
+t = (1 + 5 ** 0.5) / 2  # an icosphere of radius 0.08 m, subdivided twice
+v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+     (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+v = [tuple(c / math.sqrt(sum(x * x for x in p)) for c in p) for p in v]
+f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
+     (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7),
+     (9, 8, 1)]
+for _ in range(2):
+    mid, nf = {}, []
+    def m(a, b):
+        k = (min(a, b), max(a, b))
+        if k not in mid:
+            p = [(x + y) / 2 for x, y in zip(v[a], v[b])]
+            n = math.sqrt(sum(x * x for x in p))
+            v.append(tuple(x / n for x in p))
+            mid[k] = len(v) - 1
+        return mid[k]
+    for a, b, c in f:
+        ab, bc, ca = m(a, b), m(b, c), m(c, a)
+        nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+    f = nf
+with open(sys.argv[2], "w") as o:
+    o.write("OFF\n%d %d 0\n" % (len(v), len(f)))
+    for p in v: o.write("%.7f %.7f %.7f\n" % tuple(0.08 * x for x in p))
+    for a, b, c in f: o.write("3 %d %d %d\n" % (a, b, c))
+pts = [world((0.05 + 0.02 * i, -0.1 + 0.02 * j, 0.7)) for i in range(8) for j in range(8)]
+with open(sys.argv[3], "w") as o:
+    o.write("ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\n"
+            "end_header\n" % len(pts))
+    for p in pts: o.write("%.6f %.6f %.6f\n" % p)
+print("%.6f %.6f %.6f 0 0 0 1" % world((-0.1, 0.0, 0.8)))  # the sphere's centre: left of the view's middle
+PY
+SCENE=(--map "$T/rep" --mesh "$T/sphere.off" --mesh-pose "$(cat "$T/mesh_pose")" --particles "$T/p.ply"
+       --particle-radius 0.01 --pose "$P" --size 160x120 --camera 131.25,131.25,79.5,59.5)
+"$B" render "${SCENE[@]}" --out "$T/render.png" >"$T/out" 2>"$T/err" || fail "render: $(head -c 600 "$T/err")"
+"$B" render --map "$T/rep" --pose "$P" --size 160x120 --camera 131.25,131.25,79.5,59.5 --out "$T/map.png" \
+    >"$T/out" 2>"$T/err" || fail "render of the map: $(head -c 600 "$T/err")"
+"$B" view "${SCENE[@]}" --exit-after 2 --overlay off --screenshot "$T/shot_view.png" >"$T/out" 2>"$T/err"
 rc=$?
 [ $rc = 0 ] || fail "view: exit $rc: $(head -c 600 "$T/err")"
 grep -q "vulkan validation" "$T/err" && fail "view: validation messages: $(grep -m1 'vulkan validation' "$T/err")"
-python3 "$CMP" "$T/shot_view.png" "$T/rep/views/000004.png" -1 0.3 || fail "view's screenshot is not the stored map at that pose"
+python3 "$CMP" "$T/shot_view.png" "$T/render.png" 0 0 || fail "view's screenshot differs from bitfuse render's image"
+# The mesh and the particles are in it (measured: 2,391 pixels, 12%, differ from the map alone).
+python3 "$CMP" "$T/shot_view.png" "$T/map.png" 0 0.02 >/dev/null && fail "view shows the map alone, or little more"
+[ -n "${KEEP:-}" ] && cp "$T"/*.png "$KEEP"/
 
 # 3. Refusals: no display (exit 4, said so), --screenshot without --exit-after, a missing map.
 env -u DISPLAY "$B" view --map "$T/rep" --exit-after 1 >"$T/out" 2>"$T/err"
