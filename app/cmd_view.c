@@ -261,6 +261,7 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
         bool is_last = a->exit_after && shown + 1 == a->exit_after, is_shown = false;
         view_set_status(L->win, &st);
         if (s == BF_OK) s = view_show(L->win, render_get_targets(last), is_last ? L->rgb : NULL, &is_shown);
+        if (s == BF_OK && !is_shown) view_wait(L->win, 0.1); /* minimised, or a swapchain remade */
         if (s != BF_OK || !is_shown) continue;
         bf_debug("view: frame %u: ray-cast %.1f ms (GPU %.1f, %ux%u), shown in %.1f ms", shown + 1, 1e3 * (t1 - t0),
                  render_last_ms(last), render_get_targets(last)->width, render_get_targets(last)->height,
