@@ -56,6 +56,9 @@ python3 "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the w
 # mesh voxelised into it and a sheet of particles, in front of the scan's
 # last camera) against bitfuse render's headless image of the same view:
 # the same scene loading (app/scene.c) and the same cast, so tolerance 0.
+# (The mesh and the particles are in the image: 2,391 pixels, 12%, differ
+# from the map's alone, measured once; test_render_cli checks that render
+# draws them, so a view leaving them out fails the comparison.)
 P=$(grep -v '^#' "$T/rep/trajectory.txt" | tail -1 | cut -d' ' -f2-8)
 python3 - "$P" "$T/sphere.off" "$T/p.ply" >"$T/mesh_pose" <<'PY'
 import sys, math
@@ -100,15 +103,11 @@ PY
 SCENE=(--map "$T/rep" --mesh "$T/sphere.off" --mesh-pose "$(cat "$T/mesh_pose")" --particles "$T/p.ply"
        --particle-radius 0.01 --pose "$P" --size 160x120 --camera 131.25,131.25,79.5,59.5)
 "$B" render "${SCENE[@]}" --out "$T/render.png" >"$T/out" 2>"$T/err" || fail "render: $(head -c 600 "$T/err")"
-"$B" render --map "$T/rep" --pose "$P" --size 160x120 --camera 131.25,131.25,79.5,59.5 --out "$T/map.png" \
-    >"$T/out" 2>"$T/err" || fail "render of the map: $(head -c 600 "$T/err")"
 "$B" view "${SCENE[@]}" --exit-after 2 --overlay off --screenshot "$T/shot_view.png" >"$T/out" 2>"$T/err"
 rc=$?
 [ $rc = 0 ] || fail "view: exit $rc: $(head -c 600 "$T/err")"
 grep -q "vulkan validation" "$T/err" && fail "view: validation messages: $(grep -m1 'vulkan validation' "$T/err")"
 python3 "$CMP" "$T/shot_view.png" "$T/render.png" 0 0 || fail "view's screenshot differs from bitfuse render's image"
-# The mesh and the particles are in it (measured: 2,391 pixels, 12%, differ from the map alone).
-python3 "$CMP" "$T/shot_view.png" "$T/map.png" 0 0.02 >/dev/null && fail "view shows the map alone, or little more"
 [ -n "${KEEP:-}" ] && cp "$T"/*.png "$KEEP"/
 
 # 3. Refusals: no display (exit 4, said so), --screenshot without --exit-after, a missing map.
