@@ -85,7 +85,6 @@ struct view_window {
     gpu_buffer *pixels;          /* the swapchain image's pixels before the copy */
     gpu_buffer *readback;        /* screenshots; made on first use */
     gpu_buffer *glyphs;          /* the overlay's glyphs, one per character (UPLOAD) */
-    const gpu_buffer *bound_src; /* the colour buffer binds[0] holds */
     uint32_t width, height;      /* the swapchain's */
     char title[256];
     char line[VIEW_TEXT_MAX + 1]; /* the overlay's text */
@@ -319,7 +318,6 @@ static bf_status make_size_buffers(view_window *v)
     gpu_buffer_destroy(v->pixels);
     gpu_buffer_destroy(v->readback);
     v->pixels = v->readback = NULL;
-    v->bound_src = NULL;
     v->width = si.width;
     v->height = si.height;
     gpu_buffer_desc d = {.name = "view.pixels", .size_bytes = 4ull * si.width * si.height, .memory = GPU_MEMORY_DEVICE};
@@ -372,7 +370,6 @@ void view_detach(view_window *v)
     v->readback = v->pixels = v->glyphs = NULL;
     v->binds = NULL;
     v->blit = NULL;
-    v->bound_src = NULL;
     v->ctx = NULL;
 }
 
@@ -404,10 +401,10 @@ bf_status view_show(view_window *v, const render_targets *t, uint8_t *rgb, bool 
                              .memory = GPU_MEMORY_READBACK, .usage = GPU_USAGE_TRANSFER};
         s = gpu_buffer_create(v->ctx, &d, &v->readback);
     }
-    if (s == BF_OK && v->bound_src != t->colour) {
-        s = gpu_bindings_set(v->binds, 0, t->colour, 0, GPU_WHOLE_SIZE);
-        if (s == BF_OK) v->bound_src = t->colour;
-    }
+    /* Bound every frame: a caster remade at the same address (a resized
+     * window) must not leave the set pointing at its destroyed buffer. The
+     * last submission has finished, so the set may change. */
+    if (s == BF_OK) s = gpu_bindings_set(v->binds, 0, t->colour, 0, GPU_WHOLE_SIZE);
     /* The glyphs: the previous submission has finished with the buffer. */
     uint32_t n_chars = v->cfg.overlay ? (uint32_t)strlen(v->line) : 0;
     uint32_t *g = gpu_buffer_map(v->glyphs);
