@@ -555,14 +555,15 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
     view_status vs = {.has_frame = true, .frame = run->est.n, .state = recon_state_name(fr->state),
                       .n_bricks = k->n_bricks};
     view_set_status(w, &vs);
-    const render_targets *t = render_get_targets(recon_caster(run->loop));
+    render_caster *caster = s == BF_OK ? recon_caster(run->loop) : NULL;
+    if (s == BF_OK && !caster) s = bf_fail(BF_NO_MEMORY, "view: the loop has no caster: %s", bf_last_error());
     bool is_last = k->a->exit_after && k->n_shown + 1 == k->a->exit_after, is_shown = false;
     uint8_t *rgb = NULL;
     uint32_t vw = 0, vh = 0;
     view_size(w, &vw, &vh);
     if (s == BF_OK && is_last && k->a->screenshot && !(rgb = malloc(3ull * vw * vh)))
         s = bf_fail(BF_NO_MEMORY, "view: screenshot");
-    if (s == BF_OK) s = view_show(w, t, rgb, &is_shown);
+    if (s == BF_OK) s = view_show(w, render_get_targets(caster), rgb, &is_shown);
     k->t_cast_s = bf_time_s();
     k->cast_s = k->t_cast_s - t0;
     if (s == BF_OK && is_shown && ++k->n_shown == k->a->exit_after) {
