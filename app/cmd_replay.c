@@ -556,7 +556,11 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
                       .n_bricks = k->n_bricks};
     view_set_status(w, &vs);
     render_caster *caster = s == BF_OK ? recon_caster(run->loop) : NULL;
-    if (s == BF_OK && !caster) s = bf_fail(BF_NO_MEMORY, "view: the loop has no caster: %s", bf_last_error());
+    if (s == BF_OK && !caster) {
+        char why[512];
+        snprintf(why, sizeof why, "%s", bf_last_error()); /* bf_fail writes the same buffer */
+        s = bf_fail(BF_NO_MEMORY, "view: the loop has no caster: %s", why);
+    }
     bool is_last = k->a->exit_after && k->n_shown + 1 == k->a->exit_after, is_shown = false;
     uint8_t *rgb = NULL;
     uint32_t vw = 0, vh = 0;
