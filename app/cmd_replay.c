@@ -665,6 +665,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         view_config vc = view_config_default();
         const bf_intrinsics *K = rgbd_source_intrinsics(src);
         vc.width = K->width, vc.height = K->height;
+        vc.fx_px = K->fx_px;
         vc.title = is_live_cmd ? "bitfuse live" : "bitfuse replay";
         vc.is_following = true;
         vc.overlay = a.overlay;

@@ -309,6 +309,7 @@ int cmd_view(int argc, char **argv)
     vc.width = W, vc.height = H;
     vc.title = "bitfuse view";
     vc.overlay = a.overlay;
+    vc.fx_px = k[0];
     gpu_config gcfg = {0};
     view_loop L = {0};
     view_scene sc = {0};

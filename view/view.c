@@ -237,7 +237,8 @@ bool view_poll(view_window *v)
     }
     if (v->orbit_x || v->orbit_y) view__camera_orbit(&v->cam, -k * v->orbit_x, -k * v->orbit_y);
     uint32_t w = v->width ? v->width : v->cfg.width;
-    if (v->pan_x || v->pan_y) view__camera_pan(&v->cam, v->pan_x, v->pan_y, 525.0 * w / 640.0);
+    double fx = v->cfg.fx_px > 0 ? v->cfg.fx_px : 525.0 * v->cfg.width / 640.0;
+    if (v->pan_x || v->pan_y) view__camera_pan(&v->cam, v->pan_x, v->pan_y, fx * w / v->cfg.width);
     if (v->scroll) view__camera_zoom(&v->cam, v->scroll, v->cfg.zoom_per_notch);
     v->orbit_x = v->orbit_y = v->pan_x = v->pan_y = v->scroll = 0;
     if (v->toggle_follow && v->has_follow_pose) { /* only a scan has a camera to follow */

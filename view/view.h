@@ -31,6 +31,7 @@ typedef struct view_config {
     const char *title;        /* default "bitfuse" */
     double orbit_deg_per_px;  /* turn per pixel dragged, default 0.3 */
     double zoom_per_notch;    /* fraction of the pivot distance one wheel notch moves, default 0.1 */
+    double fx_px;             /* the casts' focal length at width (pan follows the cursor); 0: 525 * width / 640 */
     bool is_following;        /* start following the scanning camera (view_follow) */
     bool overlay;             /* the status line also over the image's top left corner, default on */
 } view_config;
