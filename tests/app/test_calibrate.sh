@@ -12,17 +12,7 @@ B=$1
 CMP=$2
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-expect() {
-    local want=$1
-    shift
-    "$@" >"$T/out" 2>"$T/err"
-    local rc=$?
-    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
-}
-mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 400 "$T/err")"; }
-command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+. "$(dirname "$0")/common.sh"
 # The interpreter itself, not a version manager's shim script: under the
 # sanitizer build every shell the shim starts loads the sanitizer runtime.
 PY=$(python3 -c 'import sys; print(sys.executable)')
@@ -148,5 +138,4 @@ assert c['depth']['fx'] == f['depth']['fx'] and c['T_colour_depth'] == f['T_colo
 expect 0 "$B" replay --help
 grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
 
-echo "$fails failed"
-[ "$fails" = 0 ]
+finish test_calibrate.sh

@@ -11,23 +11,9 @@ SANITIZED=0
 [ "${2:-}" = sanitized ] && SANITIZED=1
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-# expect RC CMD...: runs CMD, keeps stdout in $T/out and stderr in $T/err.
-expect() {
-    local want=$1
-    shift
-    "$@" >"$T/out" 2>"$T/err"
-    local rc=$?
-    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 300 "$T/err"))"
-}
-mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
+. "$(dirname "$0")/common.sh"
 is_json() { python3 -m json.tool "$1" >/dev/null 2>&1 || fail "$1 is not valid JSON: $(head -c 300 "$1")"; }
-command -v python3 >/dev/null || { echo "no python3"; exit 77; }
-# python3 as the interpreter itself (not a version manager's shim script) and without the
-# sanitizer build's preload: every shell a shim starts would load the sanitizer runtime.
-PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)')
-python3() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
+python3() { py "$@"; }
 
 # A trajectory of 1.5 s at 30 Hz: a slow sideways move. A copy sits in a
 # folder whose name needs escaping in JSON (stats.json names the file).
@@ -372,5 +358,4 @@ done
 grep -q -- "--ratio R .*default 2" <("$B" replay --help) || fail "replay --help: no --ratio default 2"
 grep -q -- "--ratio R .*default 1" <("$B" fuse --help) || fail "fuse --help: no --ratio default 1"
 
-[ $fails = 0 ] && echo "all CLI checks passed"
-[ $fails = 0 ]
+finish test_cli.sh

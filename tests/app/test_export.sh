@@ -11,20 +11,7 @@ B=$1
 VALIDATE=$2
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-expect() {
-    local want=$1
-    shift
-    "$@" >"$T/out" 2>"$T/err"
-    local rc=$?
-    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
-}
-mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
-command -v python3 >/dev/null || { echo "no python3"; exit 77; }
-# python3 without the sanitizer build's preload (LeakSanitizer would end it).
-PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
+. "$(dirname "$0")/common.sh"
 json_get() { py -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
 validate() {
     command -v node >/dev/null || return 0
@@ -32,7 +19,6 @@ validate() {
     local rc=$?
     [ "$rc" = 0 ] || [ "$rc" = 77 ] || fail "glTF validator: $(head -c 600 "$T/val")"
 }
-export BITFUSE_PROGRESS=0
 
 # 30 frames of the synthetic room, small images, into a store (as test_store.sh).
 py - "$T/traj.txt" <<'PY'
@@ -113,5 +99,5 @@ fi
 rm -f "$T/ro/probe"
 ls "$T" "$T/run" | grep -q "\.tmp\." && fail "temporary files left behind: $(ls "$T" | grep '\.tmp\.')"
 
-echo "nfull=$nfull"; [ "$fails" = 0 ] && echo "test_export.sh: all passed" || echo "test_export.sh: $fails failed"
-[ "$fails" = 0 ]
+echo "nfull=$nfull"
+finish test_export.sh

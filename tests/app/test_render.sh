@@ -11,21 +11,7 @@ set -u
 B=$1
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-expect() {
-    local want=$1
-    shift
-    "$@" >"$T/out" 2>"$T/err"
-    local rc=$?
-    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
-}
-mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
-command -v python3 >/dev/null || { echo "no python3"; exit 77; }
-# python3 without the sanitizer build's preload (LeakSanitizer would end it).
-PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
-export BITFUSE_PROGRESS=0
+. "$(dirname "$0")/common.sh"
 
 # A PNG reader (zlib and the five row filters) for the checks below: prints
 # width, height, bit depth, and with a second file the comparison asked.
@@ -230,4 +216,4 @@ mentions "$T/cut.ply"
 [ ! -e "$T/x.png" ] || fail "a refused render left $T/x.png"
 expect 1 "$B" render --particles "$T/p.ply" --pose "$POSE" --size 16x12 --out "$T/no/such/dir/x.png"
 
-[ "$fails" = 0 ] && echo "test_render.sh: all passed" || { echo "test_render.sh: $fails failed"; exit 1; }
+finish test_render.sh

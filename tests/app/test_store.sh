@@ -7,23 +7,9 @@ set -u
 B=$1
 T=$(mktemp -d)
 trap 'umount "$T/tiny" 2>/dev/null; rm -rf "$T"' EXIT
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-expect() {
-    local want=$1
-    shift
-    "$@" >"$T/out" 2>"$T/err"
-    local rc=$?
-    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
-}
-mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 300 "$T/err")"; }
+. "$(dirname "$0")/common.sh"
 json_get() { py -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$1" "$2"; }
-command -v python3 >/dev/null || { echo "no python3"; exit 77; }
-# python3 without the sanitizer build's preload: LeakSanitizer would end it
 # before it flushes its output.
-PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
-export BITFUSE_PROGRESS=0
 
 # A 60-frame synthetic sequence, 2 s at 30 Hz: a slow sideways move and turn.
 py - "$T/traj.txt" <<'PY'
@@ -142,8 +128,4 @@ else
     echo "full disk: skipped (no tmpfs mount here; the injected ENOSPC of test_store covers it)"
 fi
 
-if [ "$fails" -gt 0 ]; then
-    echo "$fails failure(s)"
-    exit 1
-fi
-echo "test_store.sh: all passed"
+finish test_store.sh

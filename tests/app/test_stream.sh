@@ -15,14 +15,8 @@ B=$1
 WALK=$2
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
-command -v python3 >/dev/null || { echo "no python3"; exit 77; }
-# python3 without the sanitizer build's preload: LeakSanitizer would end it
+. "$(dirname "$0")/common.sh"
 # before it flushes its output.
-PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
-py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
-export BITFUSE_PROGRESS=0
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
 run() { "$@" >"$T/out" 2>"$T/err" || fail "exit $?: $* ($(tail -c 400 "$T/err"))"; }
 
 run py "$WALK" "$T/walk.txt" 7 0.12 30 0
@@ -55,8 +49,4 @@ if small["tracking"]["tracked"] != big["tracking"]["tracked"]:
     print("tracked frames differ"); ok = False
 sys.exit(0 if ok else 1)
 PY
-if [ "$fails" -gt 0 ]; then
-    echo "$fails failure(s)"
-    exit 1
-fi
-echo "test_stream.sh: all passed"
+finish test_stream.sh

@@ -1,0 +1,31 @@
+# Sourced by the command-line tests (tests/app/test_*.sh) after they set
+# T (their temporary folder): the checks they share.
+#   expect CODE CMD...   runs CMD, stdout to $T/out, stderr to $T/err; a
+#                        failure unless it exits CODE
+#   mentions TEXT        a failure unless $T/err holds TEXT
+#   fail MESSAGE         counts a failure (the script ends with finish)
+#   py ARGS...           python3 as itself: the sanitizer build's preload
+#                        (LeakSanitizer) and a version manager's shim left out
+#   finish NAME          prints the outcome, exits 1 when anything failed
+fails=0
+fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
+expect() {
+    local want=$1
+    shift
+    "$@" >"$T/out" 2>"$T/err"
+    local rc=$?
+    [ "$rc" = "$want" ] || fail "exit $rc, expected $want: $* ($(head -c 400 "$T/err"))"
+}
+mentions() { grep -qF -- "$1" "$T/err" || fail "stderr does not mention '$1': $(head -c 400 "$T/err")"; }
+command -v python3 >/dev/null || { echo "no python3"; exit 77; }
+PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
+py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
+export BITFUSE_PROGRESS=0
+finish() {
+    if [ "$fails" = 0 ]; then
+        echo "$1: all passed"
+    else
+        echo "$1: $fails failed"
+        exit 1
+    fi
+}
