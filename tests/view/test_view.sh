@@ -13,15 +13,12 @@ B=$1
 CMP=$2
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
-fails=0
-fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-command -v python3 >/dev/null || { echo "skip: no python3"; exit 77; }
-export BITFUSE_PROGRESS=0
+. "$(dirname "$0")/../app/common.sh" # expect, mentions, fail, py, finish
 
 [ -n "${DISPLAY:-}" ] || { echo "skip: no display (run under with_xvfb.sh)"; exit 77; }
 
 # A 12-frame synthetic sequence at 160x120 (half a second to make).
-python3 - "$T/traj.txt" <<'PY'
+py - "$T/traj.txt" <<'PY'
 import sys, math
 with open(sys.argv[1], "w") as f:
     for i in range(14):
@@ -43,14 +40,14 @@ if [ $rc = 4 ] && grep -qE "cannot present|no display|cannot make a Vulkan surfa
 fi
 [ $rc = 0 ] || fail "replay --view: exit $rc: $(head -c 600 "$T/err")"
 grep -q "vulkan validation" "$T/err" && fail "replay --view: validation messages: $(grep -m1 'vulkan validation' "$T/err")"
-frames=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['frames'])" "$T/rep/stats.json" 2>/dev/null)
+frames=$(py -c "import json,sys; print(json.load(open(sys.argv[1]))['frames'])" "$T/rep/stats.json" 2>/dev/null)
 [ "$frames" = 5 ] || fail "replay --view --exit-after 5 handled '$frames' frames, not 5"
 [ "$(grep -vc '^#' "$T/rep/trajectory.txt")" = 5 ] || fail "trajectory.txt: not 5 poses"
 [ -e "$T/rep/store/store.json" ] || fail "the store was not written at the stop"
 # The same ray-cast's bytes on both sides (recon_render_view at the frame's
 # pose, the window's size is the sequence's): tolerance 0. A wrong byte
 # order, row pitch, scaling or a stale image all break it.
-python3 "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the window's screenshot differs from views/000004.png"
+py "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the window's screenshot differs from views/000004.png"
 
 # 2. bitfuse view of what bitfuse render draws (the stored map, a sphere
 # mesh voxelised into it and a sheet of particles, in front of the scan's
@@ -60,7 +57,7 @@ python3 "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the w
 # from the map's alone, measured once; test_render_cli checks that render
 # draws them, so a view leaving them out fails the comparison.)
 P=$(grep -v '^#' "$T/rep/trajectory.txt" | tail -1 | cut -d' ' -f2-8)
-python3 - "$P" "$T/sphere.off" "$T/p.ply" >"$T/mesh_pose" <<'PY'
+py - "$P" "$T/sphere.off" "$T/p.ply" >"$T/mesh_pose" <<'PY'
 import sys, math
 tx, ty, tz, qx, qy, qz, qw = map(float, sys.argv[1].split())
 R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
@@ -107,25 +104,22 @@ SCENE=(--map "$T/rep" --mesh "$T/sphere.off" --mesh-pose "$(cat "$T/mesh_pose")"
 rc=$?
 [ $rc = 0 ] || fail "view: exit $rc: $(head -c 600 "$T/err")"
 grep -q "vulkan validation" "$T/err" && fail "view: validation messages: $(grep -m1 'vulkan validation' "$T/err")"
-python3 "$CMP" "$T/shot_view.png" "$T/render.png" 0 0 || fail "view's screenshot differs from bitfuse render's image"
-[ -n "${KEEP:-}" ] && cp "$T"/*.png "$KEEP"/
+py "$CMP" "$T/shot_view.png" "$T/render.png" 0 0 || fail "view's screenshot differs from bitfuse render's image"
 
-# 3. Refusals: no display (exit 4, said so), --screenshot without --exit-after, a missing map.
+# 3. Refusals: no display (exit 4, said so; replay makes no output folder),
+# --screenshot without --exit-after, --exit-after without --view, a missing map.
 env -u DISPLAY "$B" view --map "$T/rep" --exit-after 1 >"$T/out" 2>"$T/err"
 rc=$?
 [ $rc = 4 ] || fail "view without DISPLAY: exit $rc, expected 4"
-grep -q "no display" "$T/err" || fail "view without DISPLAY: $(head -c 300 "$T/err")"
+mentions "no display"
 env -u DISPLAY "$B" replay "$T/seq" --out "$T/nodisplay" --view >"$T/out" 2>"$T/err"
 rc=$?
 [ $rc = 4 ] || fail "replay --view without DISPLAY: exit $rc, expected 4"
 [ -e "$T/nodisplay" ] && fail "replay --view without DISPLAY made its output folder"
-"$B" view --map "$T/rep" --screenshot "$T/x.png" >"$T/out" 2>"$T/err"
-[ $? = 2 ] || fail "--screenshot without --exit-after: not a usage error"
-"$B" view --map "$T/nothing" --exit-after 1 >"$T/out" 2>"$T/err"
-rc=$?
-[ $rc = 3 ] && grep -q "$T/nothing" "$T/err" || fail "a missing map: exit $rc: $(head -c 300 "$T/err")"
-"$B" replay "$T/seq" --out "$T/r2" --exit-after 3 >"$T/out" 2>"$T/err"
-[ $? = 2 ] || fail "replay --exit-after without --view: not a usage error"
-
-[ $fails = 0 ] && echo "test_view: all passed"
-exit $((fails > 0))
+expect 2 "$B" view --map "$T/rep" --screenshot "$T/x.png"
+mentions "--screenshot needs --exit-after"
+expect 2 "$B" replay "$T/seq" --out "$T/r2" --exit-after 3
+mentions "--exit-after needs --view"
+expect 3 "$B" view --map "$T/nothing" --exit-after 1
+mentions "$T/nothing"
+finish test_view
