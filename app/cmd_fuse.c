@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "app.h"
 
@@ -110,6 +111,7 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
+    bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
@@ -145,6 +147,9 @@ int cmd_fuse(int argc, char **argv)
         bf_fail(s_input, "%s", r.run.source_error);
         s = s_input;
     }
+    /* A run that wrote nothing (a corrupt first frame, no device) leaves no
+     * empty folder it made behind; rmdir takes only an empty one. */
+    if (s != BF_OK && made_out) (void)rmdir(a.out);
     recon_run_free(&r.run);
     gpu_context_destroy(ctx);
     rgbd_source_close(src);

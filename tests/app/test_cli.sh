@@ -149,6 +149,13 @@ if [ $SANITIZED = 0 ]; then
     grep -q "(1 skipped: 1 unreadable" "$T/out" || fail "fuse --skip-bad-frames: the summary does not count it: $(head -c 300 "$T/out")"
     python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] == 2 and d['frames_skipped'] == 1 and d['frames_unreadable'] == 1 and d['input_error'] is None, d" \
         "$T/fuskip/stats.json" || fail "fuse --skip-bad-frames: stats.json does not count the skipped frame"
+    # A corrupt first frame: nothing to keep, and no empty folder left behind.
+    cp -r "$T/seq" "$T/cut0"
+    f0=$(ls "$T/cut0/depth" | head -n 1)
+    head -c 200 "$T/seq/depth/$f0" >"$T/cut0/depth/$f0"
+    expect 3 "$B" fuse "$T/cut0" --poses groundtruth --out "$T/fucut0" $small
+    mentions "frame 0"
+    [ ! -e "$T/fucut0" ] || fail "fuse stopped by a corrupt first frame left $T/fucut0 behind"
     expect 3 "$B" replay "$T/cut" --out "$T/rpcut" $small
     mentions "frame 1"
     [ "$(grep -vc '^#' "$T/rpcut/trajectory.txt")" = 1 ] || fail "replay stopped by a corrupt frame: no trajectory of the frame before it"
