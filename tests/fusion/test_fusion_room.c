@@ -33,6 +33,28 @@ static void write_sweep(const char *path)
     bf_traj_free(&t);
 }
 
+/* The scene's colour (0..255 per channel) at its point closest to p
+ * within 2 cm, seen along view; false when none is that close. */
+static bool scene_colour_near(const synth_scene *scene, const mesh_bvh *bvh, bf_vec3 p, bf_vec3 view, double rgb[3])
+{
+    bf_vec3 q;
+    uint32_t tri;
+    if (!(mesh_bvh_closest(bvh, p, 0.02, &q, &tri) < 0.02)) return false;
+    const uint32_t *tv = scene->mesh.tri + 3 * (size_t)tri;
+    const float *x = scene->mesh.xyz;
+    bf_vec3 a = bf_v3(x[3 * tv[0]], x[3 * tv[0] + 1], x[3 * tv[0] + 2]);
+    bf_vec3 b = bf_v3(x[3 * tv[1]], x[3 * tv[1] + 1], x[3 * tv[1] + 2]);
+    bf_vec3 c = bf_v3(x[3 * tv[2]], x[3 * tv[2] + 1], x[3 * tv[2] + 2]);
+    /* Barycentrics of q (Ericson, Real-Time Collision Detection 3.4). */
+    bf_vec3 e0 = bf_v3_sub(b, a), e1 = bf_v3_sub(c, a), e2 = bf_v3_sub(q, a);
+    double d00 = bf_v3_dot(e0, e0), d01 = bf_v3_dot(e0, e1), d11 = bf_v3_dot(e1, e1);
+    double d20 = bf_v3_dot(e2, e0), d21 = bf_v3_dot(e2, e1), den = d00 * d11 - d01 * d01;
+    double u = den != 0 ? (d11 * d20 - d01 * d21) / den : 0, v = den != 0 ? (d00 * d21 - d01 * d20) / den : 0;
+    synth_scene_shade(scene, tri, u, v, q, view, rgb);
+    for (int k = 0; k < 3; k++) rgb[k] = fmin(fmax(rgb[k], 0), 1) * 255.0;
+    return true;
+}
+
 BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
 {
     gpu_context *ctx;
@@ -112,23 +134,12 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
     double *err = calloc(pts.n_verts, sizeof *err);
     uint32_t n_err = 0, n_grey = 0;
     for (uint32_t i = 0; i < pts.n_verts; i++) {
-        bf_vec3 p = bf_v3(pts.xyz[3 * i], pts.xyz[3 * i + 1], pts.xyz[3 * i + 2]), q;
-        uint32_t tri;
-        if (!(mesh_bvh_closest(bvh, p, 0.02, &q, &tri) < 0.02)) continue;
-        const uint32_t *tv = scene.mesh.tri + 3 * (size_t)tri;
-        bf_vec3 a = bf_v3(scene.mesh.xyz[3 * tv[0]], scene.mesh.xyz[3 * tv[0] + 1], scene.mesh.xyz[3 * tv[0] + 2]);
-        bf_vec3 b = bf_v3(scene.mesh.xyz[3 * tv[1]], scene.mesh.xyz[3 * tv[1] + 1], scene.mesh.xyz[3 * tv[1] + 2]);
-        bf_vec3 c = bf_v3(scene.mesh.xyz[3 * tv[2]], scene.mesh.xyz[3 * tv[2] + 1], scene.mesh.xyz[3 * tv[2] + 2]);
-        /* Barycentrics of q (Ericson, Real-Time Collision Detection 3.4). */
-        bf_vec3 e0 = bf_v3_sub(b, a), e1 = bf_v3_sub(c, a), e2 = bf_v3_sub(q, a);
-        double d00 = bf_v3_dot(e0, e0), d01 = bf_v3_dot(e0, e1), d11 = bf_v3_dot(e1, e1);
-        double d20 = bf_v3_dot(e2, e0), d21 = bf_v3_dot(e2, e1), den = d00 * d11 - d01 * d01;
-        double u = den != 0 ? (d11 * d20 - d01 * d21) / den : 0, v = den != 0 ? (d00 * d21 - d01 * d20) / den : 0;
+        bf_vec3 p = bf_v3(pts.xyz[3 * i], pts.xyz[3 * i + 1], pts.xyz[3 * i + 2]);
         bf_vec3 view = bf_v3(-pts.normal[3 * i], -pts.normal[3 * i + 1], -pts.normal[3 * i + 2]);
         double rgb[3];
-        synth_scene_shade(&scene, tri, u, v, q, view, rgb);
+        if (!scene_colour_near(&scene, bvh, p, view, rgb)) continue;
         double e = 0;
-        for (int k = 0; k < 3; k++) e += fabs(fmin(fmax(rgb[k], 0), 1) * 255.0 - pts.rgb[3 * i + k]) / 3.0;
+        for (int k = 0; k < 3; k++) e += fabs(rgb[k] - pts.rgb[3 * i + k]) / 3.0;
         n_grey += pts.rgb[3 * i] == 160 && pts.rgb[3 * i + 1] == 160 && pts.rgb[3 * i + 2] == 160;
         err[n_err++] = e;
     }
@@ -171,22 +182,12 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
         }
         double u = (double)(i % K->width), v = (double)(i / K->width), z = depth[i];
         bf_vec3 pc = bf_v3((u - K->cx_px) / K->fx_px * z, (v - K->cy_px) / K->fy_px * z, z);
-        bf_vec3 p = bf_se3_apply(&T_last, pc), q;
-        uint32_t tri;
-        if (!(mesh_bvh_closest(bvh, p, 0.02, &q, &tri) < 0.02)) continue;
-        const uint32_t *tv = scene.mesh.tri + 3 * (size_t)tri;
-        bf_vec3 a = bf_v3(scene.mesh.xyz[3 * tv[0]], scene.mesh.xyz[3 * tv[0] + 1], scene.mesh.xyz[3 * tv[0] + 2]);
-        bf_vec3 b = bf_v3(scene.mesh.xyz[3 * tv[1]], scene.mesh.xyz[3 * tv[1] + 1], scene.mesh.xyz[3 * tv[1] + 2]);
-        bf_vec3 c = bf_v3(scene.mesh.xyz[3 * tv[2]], scene.mesh.xyz[3 * tv[2] + 1], scene.mesh.xyz[3 * tv[2] + 2]);
-        bf_vec3 e0 = bf_v3_sub(b, a), e1 = bf_v3_sub(c, a), e2 = bf_v3_sub(q, a);
-        double d00 = bf_v3_dot(e0, e0), d01 = bf_v3_dot(e0, e1), d11 = bf_v3_dot(e1, e1);
-        double d20 = bf_v3_dot(e2, e0), d21 = bf_v3_dot(e2, e1), den = d00 * d11 - d01 * d01;
-        double bu = den != 0 ? (d11 * d20 - d01 * d21) / den : 0, bv = den != 0 ? (d00 * d21 - d01 * d20) / den : 0;
+        bf_vec3 p = bf_se3_apply(&T_last, pc);
         double rgb[3];
-        synth_scene_shade(&scene, tri, bu, bv, q, bf_v3_sub(p, T_last.t), rgb);
+        if (!scene_colour_near(&scene, bvh, p, bf_v3_sub(p, T_last.t), rgb)) continue;
         uint32_t got[3] = {fusion_565_r(c565[i]), fusion_565_g(c565[i]), fusion_565_b(c565[i])};
         double e = 0;
-        for (int k = 0; k < 3; k++) e += fabs(fmin(fmax(rgb[k], 0), 1) * 255.0 - got[k]) / 3.0;
+        for (int k = 0; k < 3; k++) e += fabs(rgb[k] - got[k]) / 3.0;
         err_view[n_cmp++] = e;
     }
     double med_view = n_cmp ? bf_percentile_inplace(err_view, n_cmp, 50) : 1e9;

@@ -8,31 +8,11 @@
 #include <string.h>
 
 #include "gpu_fixture.h"
+#include "mesh_shapes.h"
 #include "mesh/mesh.h"
 #include "render/render.h"
 
 static const bf_intrinsics K_VIEW = {200, 150, 170.0, 170.0, 99.5, 74.5, 5000};
-
-/* A closed torus around the z axis (radii R, r), outward normals. */
-static mesh_data torus(double R, double r, uint32_t nu, uint32_t nv)
-{
-    mesh_data m = {0};
-    m.n_verts = nu * nv, m.n_tris = 2 * nu * nv;
-    m.xyz = malloc((size_t)m.n_verts * 12);
-    m.tri = malloc((size_t)m.n_tris * 12);
-    for (uint32_t i = 0; i < nu; i++)
-        for (uint32_t j = 0; j < nv; j++) {
-            double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
-            float *p = m.xyz + 3 * (size_t)(i * nv + j);
-            p[0] = (float)((R + r * cos(v)) * cos(u)), p[1] = (float)((R + r * cos(v)) * sin(u));
-            p[2] = (float)(r * sin(v));
-            uint32_t a = i * nv + j, b = ((i + 1) % nu) * nv + j, c = ((i + 1) % nu) * nv + (j + 1) % nv,
-                     d = i * nv + (j + 1) % nv;
-            uint32_t *t = m.tri + 6 * (size_t)(i * nv + j);
-            t[0] = a, t[1] = b, t[2] = c, t[3] = a, t[4] = c, t[5] = d;
-        }
-    return m;
-}
 
 /* Camera to world looking at `at` from `dist` away along the direction
  * (yaw about y, pitch about x) of its optical axis. */
@@ -140,7 +120,7 @@ BF_TEST(voxelised_torus_renders_like_the_mesh)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    mesh_data m = torus(0.12, 0.045, 96, 48);
+    mesh_data m = test_torus(0.12, 0.045, 96, 48);
     check_mesh(ctx, &m, 8, "torus");
     mesh_free(&m);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
@@ -167,7 +147,7 @@ BF_TEST(voxelise_refuses_bad_meshes)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    mesh_data m = torus(0.1, 0.03, 8, 6);
+    mesh_data m = test_torus(0.1, 0.03, 8, 6);
     hostmap hm;
     m.tri[5] = m.n_verts; /* out of range */
     CHECK_STATUS(render_voxelise_mesh(ctx, &m, NULL, NULL, &hm, NULL), BF_INVALID_ARG);

@@ -59,6 +59,7 @@ py "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the window
 # from the map's alone, measured once; test_render_cli checks that render
 # draws them, so a view leaving them out fails the comparison.)
 P=$(grep -v '^#' "$T/rep/trajectory.txt" | tail -1 | cut -d' ' -f2-8)
+py "$(dirname "$0")/../icosphere.py" "$T/sphere.off" 0.08 2 # an icosphere of radius 0.08 m, subdivided twice
 py - "$P" "$T/sphere.off" "$T/p.ply" >"$T/mesh_pose" <<'PY'
 import sys, math
 tx, ty, tz, qx, qy, qz, qw = map(float, sys.argv[1].split())
@@ -67,31 +68,6 @@ R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * 
      [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]]
 def world(v):  # camera to world
     return tuple(sum(R[r][c] * v[c] for c in range(3)) + (tx, ty, tz)[r] for r in range(3))
-t = (1 + 5 ** 0.5) / 2  # an icosphere of radius 0.08 m, subdivided twice
-v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
-     (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-v = [tuple(c / math.sqrt(sum(x * x for x in p)) for c in p) for p in v]
-f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
-     (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7),
-     (9, 8, 1)]
-for _ in range(2):
-    mid, nf = {}, []
-    def m(a, b):
-        k = (min(a, b), max(a, b))
-        if k not in mid:
-            p = [(x + y) / 2 for x, y in zip(v[a], v[b])]
-            n = math.sqrt(sum(x * x for x in p))
-            v.append(tuple(x / n for x in p))
-            mid[k] = len(v) - 1
-        return mid[k]
-    for a, b, c in f:
-        ab, bc, ca = m(a, b), m(b, c), m(c, a)
-        nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-    f = nf
-with open(sys.argv[2], "w") as o:
-    o.write("OFF\n%d %d 0\n" % (len(v), len(f)))
-    for p in v: o.write("%.7f %.7f %.7f\n" % tuple(0.08 * x for x in p))
-    for a, b, c in f: o.write("3 %d %d %d\n" % (a, b, c))
 pts = [world((0.05 + 0.02 * i, -0.1 + 0.02 * j, 0.7)) for i in range(8) for j in range(8)]
 with open(sys.argv[3], "w") as o:
     o.write("ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\n"

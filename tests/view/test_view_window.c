@@ -10,31 +10,12 @@
 #include <string.h>
 
 #include "gpu_fixture.h"
+#include "mesh_shapes.h"
 #include "mesh/mesh.h"
 #include "render/render.h"
 #include "view/view.h"
 
 enum { W = 200, H = 150 };
-
-static mesh_data torus(double R, double r, uint32_t nu, uint32_t nv)
-{
-    mesh_data m = {0};
-    m.n_verts = nu * nv, m.n_tris = 2 * nu * nv;
-    m.xyz = malloc((size_t)m.n_verts * 12);
-    m.tri = malloc((size_t)m.n_tris * 12);
-    for (uint32_t i = 0; i < nu; i++)
-        for (uint32_t j = 0; j < nv; j++) {
-            double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
-            float *p = m.xyz + 3 * (size_t)(i * nv + j);
-            p[0] = (float)((R + r * cos(v)) * cos(u)), p[1] = (float)((R + r * cos(v)) * sin(u));
-            p[2] = (float)(r * sin(v));
-            uint32_t a = i * nv + j, b = ((i + 1) % nu) * nv + j, c = ((i + 1) % nu) * nv + (j + 1) % nv,
-                     d = i * nv + (j + 1) % nv;
-            uint32_t *t = m.tri + 6 * (size_t)(i * nv + j);
-            t[0] = a, t[1] = b, t[2] = c, t[3] = a, t[4] = c, t[5] = d;
-        }
-    return m;
-}
 
 /* Shows caster's image for 3 frames and reads the last back into rgb. */
 static bf_status show_three(view_window *w, render_caster *rc, fusion_map *map, const bf_intrinsics *K, uint8_t *rgb)
@@ -92,7 +73,7 @@ BF_TEST(window_shows_the_headless_raycast_byte_for_byte_and_stretches_a_smaller_
     CHECK_EQ_INT(vw, W); /* Xvfb has no window manager to resize it */
     CHECK_EQ_INT(vh, H);
 
-    mesh_data m = torus(0.3, 0.1, 96, 48);
+    mesh_data m = test_torus(0.3, 0.1, 96, 48);
     render_voxelise_config cfg = render_voxelise_config_default();
     cfg.level = 5; /* 7.8 mm voxels: a few thousand bricks */
     hostmap hm;

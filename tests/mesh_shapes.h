@@ -1,0 +1,32 @@
+/* Closed meshes the tests make themselves (no shared data needed). */
+#ifndef BF_TEST_MESH_SHAPES_H
+#define BF_TEST_MESH_SHAPES_H
+
+#include <math.h>
+#include <stdlib.h>
+
+#include "mesh/mesh.h"
+
+/* A closed torus around the z axis (radii R, r; nu x nv quads split in two),
+ * outward normals; free with mesh_free. */
+static inline mesh_data test_torus(double R, double r, uint32_t nu, uint32_t nv)
+{
+    mesh_data m = {0};
+    m.n_verts = nu * nv, m.n_tris = 2 * nu * nv;
+    m.xyz = malloc((size_t)m.n_verts * 12);
+    m.tri = malloc((size_t)m.n_tris * 12);
+    for (uint32_t i = 0; i < nu; i++)
+        for (uint32_t j = 0; j < nv; j++) {
+            double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
+            float *p = m.xyz + 3 * (size_t)(i * nv + j);
+            p[0] = (float)((R + r * cos(v)) * cos(u)), p[1] = (float)((R + r * cos(v)) * sin(u));
+            p[2] = (float)(r * sin(v));
+            uint32_t a = i * nv + j, b = ((i + 1) % nu) * nv + j, c = ((i + 1) % nu) * nv + (j + 1) % nv,
+                     d = i * nv + (j + 1) % nv;
+            uint32_t *t = m.tri + 6 * (size_t)(i * nv + j);
+            t[0] = a, t[1] = b, t[2] = c, t[3] = a, t[4] = c, t[5] = d;
+        }
+    return m;
+}
+
+#endif
