@@ -75,7 +75,7 @@ typedef struct replay_args {
     double view_period_s;    /* with view: seconds between the window's casts of a followed scan */
 } replay_args;
 
-#define LOOP_ROWS 23
+#define LOOP_ROWS 26
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -189,6 +189,14 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--icp-sample-step", APP_OPT_U32, &tc->finest_sample_step, "S",
                 "ICP samples at the finest level: 1 every pixel, 2 every second one (a checkerboard, half the cost)",
                 .min = 1, .max = 2),
+        APP_OPT("--photometric", APP_OPT_FLOAT, &tc->photo_weight, "W",
+                "weight of the photometric term in the finest ICP level (the colour of each inlier against the "
+                "reference frame's), relative to a depth residual at 1 m; 0: off"),
+        APP_OPT("--photo-sigma", APP_OPT_FLOAT, &tc->photo_sigma, "S",
+                "the photometric term's intensity noise (luma in [0, 1])", .min_open = true, .max = 1),
+        APP_OPT("--photo-levels", APP_OPT_U32, &tc->photo_levels, "N",
+                "pyramid levels with the photometric term, from the finest (1: the finest only, 3: all)", .min = 1,
+                .max = TRACK_MAX_LEVELS),
         APP_OPT("--huber-scale", APP_OPT_CHOICE, &tc->huber_scaled, "residuals|sensor",
                 "the Huber threshold's unit: sigma_z(z) times the last iteration's RMS of r / sigma_z when above 1, "
                 "or sigma_z(z) alone"),

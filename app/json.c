@@ -154,6 +154,9 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     add_float(o, "noise_weight_exp", c->noise_weight_exp);
     cJSON_AddBoolToObject(o, "huber_scaled", c->huber_scaled);
     add_float(o, "huber_knee", c->huber_knee);
+    add_float(o, "photo_weight", c->photo_weight);
+    add_float(o, "photo_sigma", c->photo_sigma);
+    cJSON_AddNumberToObject(o, "photo_levels", c->photo_levels);
     cJSON_AddNumberToObject(o, "icp_local", c->icp_local);
     cJSON_AddNumberToObject(o, "icp_px_per_thread", c->icp_px_per_thread);
     cJSON_AddBoolToObject(o, "icp_subgroup", c->icp_subgroup);

@@ -46,7 +46,7 @@ static void colour_one(void *ctx, size_t i)
                         int64_t v[3] = {vx.g[0] + dx, vx.g[1] + dy, vx.g[2] + dz};
                         uint32_t cn = voxel_colour(g, vx.level, v);
                         if (!cn) continue;
-                        sum[0] += fusion_565_r(cn), sum[1] += fusion_565_g(cn), sum[2] += fusion_565_b(cn);
+                        sum[0] += bf_565_r(cn), sum[1] += bf_565_g(cn), sum[2] += bf_565_b(cn);
                         n++;
                     }
             if (n) {
@@ -59,7 +59,7 @@ static void colour_one(void *ctx, size_t i)
         o[0] = o[1] = o[2] = 160;
         return;
     }
-    o[0] = (uint8_t)fusion_565_r(c), o[1] = (uint8_t)fusion_565_g(c), o[2] = (uint8_t)fusion_565_b(c);
+    o[0] = (uint8_t)bf_565_r(c), o[1] = (uint8_t)bf_565_g(c), o[2] = (uint8_t)bf_565_b(c);
 }
 
 bf_status export__colourise(const export__grid *g, mesh_data *m)

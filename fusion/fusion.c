@@ -115,7 +115,11 @@ bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slo
     if (s != BF_OK) return s;
     m->has_incoming = true;
     m->incoming_index = f->index;
-    if (out) *out = (fusion_frame_slot){.depth = m->upload, .offset = FUSION_FRAME_WORDS * 4};
+    if (out)
+        *out = (fusion_frame_slot){.depth = m->upload,
+                                   .offset = FUSION_FRAME_WORDS * 4,
+                                   .colour = m->has_colour_frame ? m->upload : NULL,
+                                   .colour_offset = FUSION_FRAME_WORDS * 4 + depth_bytes(m)};
     return BF_OK;
 }
 

@@ -5,6 +5,8 @@
 
 #include "recon_int.h"
 
+static bf_status tracker_colour_camera(recon *r);
+
 /* The caster at the camera's size, when the reference is cast at a coarser
  * level: made at create with has_views, else at the first view. */
 static bf_status view_caster(recon *r)
@@ -119,6 +121,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
      * this returns must not wait for it (docs/tracking.md, start-up). */
     if (s == BF_OK) s = fusion_create(ctx, &r->cfg.fusion, K, r->T_first.t, &r->map);
     if (s == BF_OK) s = recon_set_colour_camera(r->map, &r->cfg);
+    if (s == BF_OK) s = tracker_colour_camera(r);
     if (s == BF_OK && r->cfg.has_views) s = view_caster(r);
     if (s == BF_OK && r->cfg.stream.enabled) s = stream_create(&r->cfg.stream, r->map, NULL, &r->stream);
     if (s != BF_OK) {
@@ -257,6 +260,7 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     double n = reloc ? recon__intervals(r, f) : 1.0;
     bool search_first = reloc && (r->is_lost || n > r->cfg.reloc.max_gate_intervals);
     bf_status s = fusion_upload_frame(r->map, f, &slot);
+    if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
     if (s == BF_OK && reloc) s = recon__set_gate(r, n);
     if (s != BF_OK) return s;
     if (!search_first) {
@@ -303,6 +307,7 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         fusion_frame_slot slot;
         if (known) s = recon_set_first_pose(r, known);
         if (s == BF_OK) s = fusion_upload_frame(r->map, f, &slot);
+        if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
         if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, &slot, out);
         if (s == BF_OK) {
             r->has_first = true;
@@ -347,16 +352,34 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
     return BF_OK;
 }
 
+/* The colour camera of --calibration: intrinsics and T_colour_depth.
+ * Without the depth camera the file gives no transform: the colour
+ * camera's own intrinsics at the depth camera's place. */
+static void colour_camera(const recon_config *cfg, bf_intrinsics *Kc, bf_se3 *T)
+{
+    const calib_camera *c = &cfg->calibration.colour;
+    *Kc = (bf_intrinsics){.width = c->width, .height = c->height, .fx_px = c->fx_px, .fy_px = c->fy_px,
+                          .cx_px = c->cx_px, .cy_px = c->cy_px, .depth_scale = 1};
+    *T = cfg->calibration.has_depth ? cfg->calibration.T_colour_depth : bf_se3_identity();
+}
+
 bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg)
 {
     if (!cfg->has_calibration) return BF_OK; /* registered: the format's or the device's */
-    const calib_camera *c = &cfg->calibration.colour;
-    bf_intrinsics Kc = {.width = c->width, .height = c->height, .fx_px = c->fx_px, .fy_px = c->fy_px,
-                        .cx_px = c->cx_px, .cy_px = c->cy_px, .depth_scale = 1};
-    /* Without the depth camera the file gives no transform: the colour
-     * camera's own intrinsics at the depth camera's place. */
-    bf_se3 T = cfg->calibration.has_depth ? cfg->calibration.T_colour_depth : bf_se3_identity();
-    return fusion_set_colour_camera(map, &Kc, c->dist, &T);
+    bf_intrinsics Kc;
+    bf_se3 T;
+    colour_camera(cfg, &Kc, &T);
+    return fusion_set_colour_camera(map, &Kc, cfg->calibration.colour.dist, &T);
+}
+
+/* The tracker's photometric term sees the colour as fusion does. */
+static bf_status tracker_colour_camera(recon *r)
+{
+    if (!r->cfg.has_calibration) return BF_OK;
+    bf_intrinsics Kc;
+    bf_se3 T;
+    colour_camera(&r->cfg, &Kc, &T);
+    return track_set_colour_camera(r->tracker, &Kc, r->cfg.calibration.colour.dist, &T);
 }
 
 bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj)

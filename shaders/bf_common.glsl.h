@@ -55,6 +55,34 @@ BF_FN bf_f32 bf_sensor_sigma(bf_f32 z, bf_f32 a, bf_f32 b, bf_f32 c)
     return s;
 }
 
+/* ------------------------------------------------------------ colour cameras */
+
+/* Channels of an RGB565 colour in [0, 255] (bit replication). */
+BF_FN bf_u32 bf_565_r(bf_u32 c) { return (((c >> 11) & 31u) << 3) | (((c >> 11) & 31u) >> 2); }
+BF_FN bf_u32 bf_565_g(bf_u32 c) { return (((c >> 5) & 63u) << 2) | (((c >> 5) & 63u) >> 4); }
+BF_FN bf_u32 bf_565_b(bf_u32 c) { return ((c & 31u) << 3) | ((c & 31u) >> 2); }
+/* Luma of an RGB565 colour in [0, 1] (ITU-R BT.601 weights, as OpenCV's
+ * RGB2GRAY): the photometric term of tracking compares these. */
+BF_FN bf_f32 bf_565_luma(bf_u32 c)
+{
+    return (0.299f * BF_F32(bf_565_r(c)) + 0.587f * BF_F32(bf_565_g(c)) + 0.114f * BF_F32(bf_565_b(c))) / 255.0f;
+}
+
+/* Brown-Conrady distortion of the normalised image point (x, y) = (X/Z,
+ * Y/Z), as OpenCV's projectPoints and calib/'s calib_distort apply it:
+ * radial 1 + k1 r2 + k2 r2^2 + k3 r2^3, tangential 2 p1 x y + p2 (r2 +
+ * 2 x^2) and p1 (r2 + 2 y^2) + 2 p2 x y. */
+BF_FN bf_f32 bf_distort_x(bf_f32 x, bf_f32 y, bf_f32 k1, bf_f32 k2, bf_f32 p1, bf_f32 p2, bf_f32 k3)
+{
+    bf_f32 r2 = x * x + y * y;
+    return x * (1.0f + r2 * (k1 + r2 * (k2 + r2 * k3))) + 2.0f * p1 * x * y + p2 * (r2 + 2.0f * x * x);
+}
+BF_FN bf_f32 bf_distort_y(bf_f32 x, bf_f32 y, bf_f32 k1, bf_f32 k2, bf_f32 p1, bf_f32 p2, bf_f32 k3)
+{
+    bf_f32 r2 = x * x + y * y;
+    return y * (1.0f + r2 * (k1 + r2 * (k2 + r2 * k3))) + p1 * (r2 + 2.0f * y * y) + 2.0f * p2 * x * y;
+}
+
 /* ------------------------------------------------------------ bricks */
 
 /* A brick is 8x8x8 voxels, one bit per voxel in each bit plane (sign,

@@ -647,11 +647,6 @@ BF_FN bf_u32 fusion_rgb565(bf_f32 r, bf_f32 g, bf_f32 b)
     bf_u32 c = (ri << 11) | (gi << 5) | bi;
     return c != 0u ? c : 1u;
 }
-/* Channels of an RGB565 colour in [0, 255] (bit replication). */
-BF_FN bf_u32 fusion_565_r(bf_u32 c) { return (((c >> 11) & 31u) << 3) | (((c >> 11) & 31u) >> 2); }
-BF_FN bf_u32 fusion_565_g(bf_u32 c) { return (((c >> 5) & 63u) << 2) | (((c >> 5) & 63u) >> 4); }
-BF_FN bf_u32 fusion_565_b(bf_u32 c) { return ((c & 31u) << 3) | ((c & 31u) >> 2); }
-
 /* Push constants of fusion_colour.comp. The colour camera: intrinsics,
  * Brown-Conrady distortion and T_colour_depth (rotation as a unit
  * quaternion, t), or registered != 0 when colour pixel i shows what depth
@@ -677,21 +672,6 @@ struct fusion_colour_push {
 typedef struct fusion_colour_push fusion_colour_push;
 _Static_assert(sizeof(fusion_colour_push) == 128, "fusion_colour_push must match std430");
 #endif
-
-/* Brown-Conrady distortion of the normalised image point (x, y) = (X/Z,
- * Y/Z), as OpenCV's projectPoints and calib/'s calib_distort apply it:
- * radial 1 + k1 r2 + k2 r2^2 + k3 r2^3, tangential 2 p1 x y + p2 (r2 +
- * 2 x^2) and p1 (r2 + 2 y^2) + 2 p2 x y. */
-BF_FN bf_f32 fusion_distort_x(bf_f32 x, bf_f32 y, bf_f32 k1, bf_f32 k2, bf_f32 p1, bf_f32 p2, bf_f32 k3)
-{
-    bf_f32 r2 = x * x + y * y;
-    return x * (1.0f + r2 * (k1 + r2 * (k2 + r2 * k3))) + 2.0f * p1 * x * y + p2 * (r2 + 2.0f * x * x);
-}
-BF_FN bf_f32 fusion_distort_y(bf_f32 x, bf_f32 y, bf_f32 k1, bf_f32 k2, bf_f32 p1, bf_f32 p2, bf_f32 k3)
-{
-    bf_f32 r2 = x * x + y * y;
-    return y * (1.0f + r2 * (k1 + r2 * (k2 + r2 * k3))) + p1 * (r2 + 2.0f * y * y) + 2.0f * p2 * x * y;
-}
 
 /* Weight of one frame's colour sample of a voxel: the cosine between the
  * viewing ray and the surface normal (from the depth image) over the

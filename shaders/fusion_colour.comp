@@ -190,8 +190,8 @@ void colour_brick(uint slot, uint tid)
                 vec3 qv = vec3(pc.q[0], pc.q[1], pc.q[2]);
                 vec3 pcol = pcam + 2.0 * cross(qv, cross(qv, pcam) + pc.q[3] * pcam) + vec3(pc.t[0], pc.t[1], pc.t[2]);
                 float xn = pcol.x / pcol.z, yn = pcol.y / pcol.z;
-                float xd = fusion_distort_x(xn, yn, pc.dist[0], pc.dist[1], pc.dist[2], pc.dist[3], pc.dist[4]);
-                float yd = fusion_distort_y(xn, yn, pc.dist[0], pc.dist[1], pc.dist[2], pc.dist[3], pc.dist[4]);
+                float xd = bf_distort_x(xn, yn, pc.dist[0], pc.dist[1], pc.dist[2], pc.dist[3], pc.dist[4]);
+                float yd = bf_distort_y(xn, yn, pc.dist[0], pc.dist[1], pc.dist[2], pc.dist[3], pc.dist[4]);
                 float cu = pc.cfx * xd + pc.ccx + 0.5, cv = pc.cfy * yd + pc.ccy + 0.5;
                 bool inside = pcol.z > 0.0 && cu >= 0.0 && cv >= 0.0 && cu < float(width) && cv < float(height);
                 near = near && inside;
@@ -199,7 +199,7 @@ void colour_brick(uint slot, uint tid)
             }
             uint c = ring_colour(base, cpix);
             float wgt = near ? fusion_colour_weight(cos_view, d0) : 0.0;
-            acc[k] += wgt * vec4(float(fusion_565_r(c)), float(fusion_565_g(c)), float(fusion_565_b(c)), 1.0);
+            acc[k] += wgt * vec4(float(bf_565_r(c)), float(bf_565_g(c)), float(bf_565_b(c)), 1.0);
             acc_d[k] += wgt * (d0 - h.z);
         }
     } while (++r < n_visible);
@@ -217,7 +217,7 @@ void colour_brick(uint slot, uint tid)
         uint si = w * 16u + (bit >> 1), sh = (bit & 1u) * 16u;
         uint old = (s_col[si] >> sh) & 0xFFFFu;
         if (old != FUSION_COLOUR_NONE)
-            col = 0.5 * (col + vec3(float(fusion_565_r(old)), float(fusion_565_g(old)), float(fusion_565_b(old))));
+            col = 0.5 * (col + vec3(float(bf_565_r(old)), float(bf_565_g(old)), float(bf_565_b(old))));
         uint c = fusion_rgb565(col.r, col.g, col.b);
         /* Two voxels share a word: clear this half, then set it. */
         atomicAnd(s_col[si], ~(0xFFFFu << sh));

@@ -120,9 +120,9 @@ BF_FN bf_u32 render_shade_colour(bf_f32 cos_theta, bf_u32 rgb565)
 {
     bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
     bf_f32 i = 0.55f + 0.45f * c;
-    bf_u32 r = BF_U32(BF_F32(fusion_565_r(rgb565)) * i + 0.5f);
-    bf_u32 g = BF_U32(BF_F32(fusion_565_g(rgb565)) * i + 0.5f);
-    bf_u32 b = BF_U32(BF_F32(fusion_565_b(rgb565)) * i + 0.5f);
+    bf_u32 r = BF_U32(BF_F32(bf_565_r(rgb565)) * i + 0.5f);
+    bf_u32 g = BF_U32(BF_F32(bf_565_g(rgb565)) * i + 0.5f);
+    bf_u32 b = BF_U32(BF_F32(bf_565_b(rgb565)) * i + 0.5f);
     return r | (g << 8) | (b << 16) | (255u << 24);
 }
 

@@ -26,7 +26,14 @@
  *              that normals are computed from (float, track_smooth.comp)
  * The ICP kernel: 0 frame depth, 1 frame normal, 2 reference depth,
  * 3 reference normal (pyramids), 4 partial sums (TRACK_PARTIAL_WORDS floats
- * per workgroup).
+ * per workgroup), 5 frame intensity, 6 reference intensity (pyramids).
+ *
+ * Intensity pyramids (the photometric term) are float luma in [0, 1] per
+ * pixel of the depth pyramid's geometry, TRACK_NO_INTENSITY where the pixel
+ * has no depth or its colour is outside the colour image. The intensity
+ * kernel (track_intensity.comp): 0 the frame's RGB565 colour (two per word,
+ * the depth image's size, from word raw_off), 1 the frame's depth pyramid,
+ * 2 the intensity pyramid written.
  */
 #ifndef BF_TRACK_GLSL_H
 #define BF_TRACK_GLSL_H
@@ -39,7 +46,9 @@
  * loop take TRACK_IMAGE_PX pixels each, TRACK_IMAGE_TILE apart in x. */
 #define TRACK_IMAGE_TILE 8u
 #define TRACK_IMAGE_PX 4u
-#define TRACK_ICP_BUFFERS 5u
+#define TRACK_ICP_BUFFERS 7u
+#define TRACK_INTENSITY_BUFFERS 3u
+#define TRACK_NO_INTENSITY (-1.0f)
 
 /* Counters (uint words of the counters buffer). */
 #define TRACK_CNT_FRAME_VALID 0u /* valid depth pixels of the frame, finest level */
@@ -64,8 +73,10 @@
 #define TRACK_SUM_VALID 29u    /* frame samples with vertex and normal */
 #define TRACK_SUM_Z 30u        /* sum of the inliers' depth in the reference camera */
 #define TRACK_SUM_RN 31u       /* sum (r / sigma_z)^2 of the inliers: their residuals in the sensor model's units */
-#define TRACK_SUMS 32u         /* words summed */
-#define TRACK_PARTIAL_WORDS 32u
+#define TRACK_SUM_PHOTO_N 32u  /* photometric rows (the term's inliers) */
+#define TRACK_SUM_PHOTO_RR 33u /* sum of their intensity residuals squared */
+#define TRACK_SUMS 36u         /* words summed */
+#define TRACK_PARTIAL_WORDS 36u
 #define TRACK_ICP_LOCAL_MAX 64u /* invocations per workgroup at most (shared arrays) */
 
 /* Push constants of the image kernels. */
@@ -97,7 +108,7 @@ struct track_icp_push {
     bf_f32 R[9];            /* row-major, frame camera -> reference camera */
     bf_f32 t[3];
     bf_f32 fx, fy, cx, cy;  /* of the level */
-    bf_u32 width, height;   /* of the level */
+    bf_u32 size;            /* of the level: width | height << 16 (track_icp_size) */
     bf_u32 off;             /* pixel offset of the level in the pyramids */
     bf_u32 n_threads;       /* workgroups * local size: the pixel loop's stride */
     bf_f32 dist_m;          /* association gates */
@@ -108,12 +119,42 @@ struct track_icp_push {
     /* The reference's level read: ref_shift levels above the frame's (0:
      * the same level), w x h pixels at pixel offset ref_off; its
      * intrinsics follow from the frame level's (track__level_intrinsics). */
-    bf_u32 ref_off, ref_width, ref_height, ref_shift;
+    bf_u32 ref_off, ref_size, ref_shift; /* ref_size: width | height << 16 */
     bf_f32 sigma_a, sigma_b, sigma_c; /* the sensor's noise (bf_sensor_sigma; the weights) */
+    /* The photometric term (0: off): each inlier's intensity residual counts
+     * with weight photo_w, Huber's weight beyond photo_huber (intensity). */
+    bf_f32 photo_w, photo_huber;
 };
+BF_FN bf_u32 track_icp_size(bf_u32 width, bf_u32 height) { return width | (height << 16); }
 #ifndef BF_GLSL
 typedef struct track_icp_push track_icp_push;
 _Static_assert(sizeof(track_icp_push) == 128, "track_icp_push must match std430");
+#endif
+
+/* Push constants of track_intensity.comp: the frame's luma at the finest
+ * level from its colour (TRACK_INT_REGISTERED: colour pixel i shows what
+ * depth pixel i measured; TRACK_INT_CAMERA: the pixel's point through
+ * T_colour_depth (R, t), the colour camera's Brown-Conrady distortion and
+ * intrinsics, sampled bilinearly), or a coarser level from the one below
+ * (TRACK_INT_DOWN: the mean of the 2x2 block's valid samples). */
+#define TRACK_INT_REGISTERED 0u
+#define TRACK_INT_CAMERA 1u
+#define TRACK_INT_DOWN 2u
+struct track_intensity_push {
+    bf_f32 R[9];            /* row-major, depth camera -> colour camera */
+    bf_f32 t[3];
+    bf_f32 fx, fy, cx, cy;  /* the depth camera, finest level */
+    bf_f32 cfx, cfy, ccx, ccy; /* the colour camera */
+    bf_f32 dist[5];         /* k1 k2 p1 p2 k3, OpenCV's order */
+    bf_u32 width, height;   /* of the level written (the colour image is the finest level's size) */
+    bf_u32 mode;            /* TRACK_INT_* */
+    bf_u32 raw_off;         /* word offset of the colour in binding 0 */
+    bf_u32 src_off, dst_off; /* pixel offsets of the level read (down) and written */
+    bf_u32 src_width;
+};
+#ifndef BF_GLSL
+typedef struct track_intensity_push track_intensity_push;
+_Static_assert(sizeof(track_intensity_push) == 128, "track_intensity_push must match std430");
 #endif
 
 /* ------------------------------------------------------------ shared math */

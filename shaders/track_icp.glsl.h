@@ -29,10 +29,12 @@ layout(std430, binding = 1) readonly buffer FrameN { uint n[]; } frame_n;
 layout(std430, binding = 2) readonly buffer RefD { float d[]; } ref_d;
 layout(std430, binding = 3) readonly buffer RefN { uint n[]; } ref_n;
 layout(std430, binding = 4) writeonly buffer Partial { float w[]; } partial;
+layout(std430, binding = 5) readonly buffer FrameI { float v[]; } frame_i;
+layout(std430, binding = 6) readonly buffer RefI { float v[]; } ref_i;
 
 layout(push_constant) uniform Push { track_icp_push pc; };
 
-shared vec4 s_sum[8u * TRACK_ICP_LOCAL_MAX];
+shared vec4 s_sum[9u * TRACK_ICP_LOCAL_MAX];
 
 /* Pixel (x, y) of the level back-projected at depth z (as track_vn.comp). */
 vec3 unproject(uint x, uint y, float z)
@@ -62,13 +64,60 @@ ref_geom ref_geometry()
  * reads and writes it lane by lane, which made this kernel 5x slower. */
 #define TRACK_ICP_ZERO4 vec4(0.0)
 struct icp_acc {
-    vec4 s0, s1, s2, s3, s4, s5, s6, s7;
+    vec4 s0, s1, s2, s3, s4, s5, s6, s7, s8;
 };
+
+/* Row a = (n, c) with residual r and weight w into the normal equations
+ * (TRACK_SUM_ATA, TRACK_SUM_ATR). */
+void add_row(vec3 n, vec3 c, float r, float wgt, inout icp_acc A)
+{
+    vec3 nq = wgt * n, cw = wgt * c;
+    float rw = wgt * r;
+    /* The upper triangle of a a^T row by row, then a r. */
+    A.s0 += nq.x * vec4(n, c.x);
+    A.s1 += vec4(nq.x * c.y, nq.x * c.z, nq.y * n.y, nq.y * n.z);
+    A.s2 += vec4(nq.y * c, nq.z * n.z);
+    A.s3 += vec4(nq.z * c, cw.x * c.x);
+    A.s4 += vec4(cw.x * c.y, cw.x * c.z, cw.y * c.y, cw.y * c.z);
+    A.s5 += vec4(cw.z * c.z, rw * n);
+    A.s6.xyz += rw * c;
+}
+
+/* The photometric term of an inlier (Steinbruecker, Sturm and Cremers
+ * 2011; joint with ICP as in ElasticFusion, Whelan et al. 2015, and
+ * Open3D's hybrid odometry): p, the frame pixel's point in the reference
+ * camera, projects with the frame level's intrinsics to (u, v) of the
+ * reference's intensity at this level (the frame the reference was made
+ * with, at the reference's pose). The residual is r = I_ref(u, v) -
+ * I_frame(pixel i); moving p by the twist (t, w) changes it by g . (t + w x
+ * p), g = J_pi(p)^T grad I_ref, so its row is (g, p x g) like a normal's.
+ * The gradient is the bilinear interpolant's own derivative. */
+void add_photometric(uint i, vec3 p, inout icp_acc A)
+{
+    uint W = pc.size & 0xFFFFu, H = pc.size >> 16;
+    float ic = frame_i.v[i];
+    float u = pc.fx * p.x / p.z + pc.cx, v = pc.fy * p.y / p.z + pc.cy;
+    if (!(ic >= 0.0) || !(u >= 0.0 && v >= 0.0 && u < float(W - 1u) && v < float(H - 1u))) return;
+    uint x0 = uint(u), y0 = uint(v);
+    float a = u - float(x0), b = v - float(y0);
+    uint j = pc.off + y0 * W + x0;
+    float i00 = ref_i.v[j], i10 = ref_i.v[j + 1u], i01 = ref_i.v[j + W], i11 = ref_i.v[j + W + 1u];
+    if (!(min(min(i00, i10), min(i01, i11)) >= 0.0)) return;
+    float r = mix(mix(i00, i10, a), mix(i01, i11, a), b) - ic;
+    float gu = mix(i10 - i00, i11 - i01, b), gv = mix(i01 - i00, i11 - i10, a);
+    float iz = 1.0 / p.z;
+    vec3 g = vec3(pc.fx * gu * iz, pc.fy * gv * iz, -(pc.fx * gu * p.x + pc.fy * gv * p.y) * iz * iz);
+    float e = abs(r), wgt = pc.photo_w;
+    if (e > pc.photo_huber) wgt *= pc.photo_huber / e;
+    add_row(g, cross(p, g), r, wgt, A);
+    A.s8.xy += vec2(1.0, r * r); /* TRACK_SUM_PHOTO_N, _RR */
+}
 
 /* One frame pixel's association, gates and contribution. */
 void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
 {
-    uint i = pc.off + y * pc.width + x;
+    uint W = pc.size & 0xFFFFu;
+    uint i = pc.off + y * W + x;
     float z = frame_d.d[i];
     uint mw = frame_n.n[i];
     if (!(z > 0.0) || mw == 0u) return;
@@ -82,9 +131,10 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     float u = G.fx * p.x / p.z + G.cx;
     float w = G.fy * p.y / p.z + G.cy;
     /* Nearest reference pixel; the float comparison also rejects NaN. */
-    if (!(u > -0.5 && w > -0.5 && u < float(pc.ref_width) - 0.5 && w < float(pc.ref_height) - 0.5)) return;
+    uint RW = pc.ref_size & 0xFFFFu, RH = pc.ref_size >> 16;
+    if (!(u > -0.5 && w > -0.5 && u < float(RW) - 0.5 && w < float(RH) - 0.5)) return;
     uint ux = uint(u + 0.5), wy = uint(w + 0.5);
-    uint j = pc.ref_off + wy * pc.ref_width + ux;
+    uint j = pc.ref_off + wy * RW + ux;
     float zq = ref_d.d[j];
     uint nw = ref_n.n[j];
     if (!(zq > 0.0) || nw == 0u) return;
@@ -116,34 +166,27 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
         }
         if (pc.huber_k > 0.0 && e > pc.huber_k) wgt *= pc.huber_k / e;
     }
-    vec3 nq = wgt * n;
-    vec3 c = cross(p, n), cw = wgt * c;
-    float rw = wgt * r;
-    /* a = (n, c); the upper triangle of a a^T row by row (TRACK_SUM_ATA),
-     * then a r (TRACK_SUM_ATR), r^2, the inlier and its depth. */
-    A.s0 += nq.x * vec4(n, c.x);
-    A.s1 += vec4(nq.x * c.y, nq.x * c.z, nq.y * n.y, nq.y * n.z);
-    A.s2 += vec4(nq.y * c, nq.z * n.z);
-    A.s3 += vec4(nq.z * c, cw.x * c.x);
-    A.s4 += vec4(cw.x * c.y, cw.x * c.z, cw.y * c.y, cw.y * c.z);
-    A.s5 += vec4(cw.z * c.z, rw * n);
-    A.s6 += vec4(rw * c, r * r);
+    /* a = (n, p x n); then r^2, the inlier and its depth. */
+    add_row(n, cross(p, n), r, wgt, A);
+    A.s6.w += r * r;
     A.s7 += vec4(1.0, 0.0, p.z, e * e);
+    if (pc.photo_w > 0.0) add_photometric(i, p, A);
 }
 
 void main()
 {
-    icp_acc A = icp_acc(vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0));
+    icp_acc A = icp_acc(vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0),
+                        vec4(0.0));
     /* Samples k = id, id + n_threads, ... of the level; sample k is pixel
      * k * sub (sub 2: even columns, shifted by one on odd rows, a
      * checkerboard). x and y are stepped, not divided: one division per
      * invocation (lavapipe divides lane by lane). */
-    uint W = pc.width;
+    uint W = pc.size & 0xFFFFu, H = pc.size >> 16;
     uint k0 = gl_GlobalInvocationID.x * pc.sub, stride = pc.n_threads * pc.sub;
     uint x = k0 % W, y = k0 / W;
     uint sx = stride % W, sy = stride / W;
     ref_geom G = ref_geometry();
-    while (y < pc.height) {
+    while (y < H) {
         uint xx = x + (pc.sub == 2u ? (y & 1u) : 0u);
         if (xx < W) add_pixel(xx, y, G, A);
         x += sx;
@@ -161,15 +204,17 @@ void main()
     /* Subgroup sums first; one shared vec4 per subgroup and quarter. */
     vec4 t0 = subgroupAdd(A.s0), t1 = subgroupAdd(A.s1), t2 = subgroupAdd(A.s2), t3 = subgroupAdd(A.s3);
     vec4 t4 = subgroupAdd(A.s4), t5 = subgroupAdd(A.s5), t6 = subgroupAdd(A.s6), t7 = subgroupAdd(A.s7);
+    vec4 t8 = subgroupAdd(A.s8);
     if (subgroupElect()) {
         uint g = gl_SubgroupID;
         s_sum[0u * TRACK_ICP_LOCAL_MAX + g] = t0, s_sum[1u * TRACK_ICP_LOCAL_MAX + g] = t1;
         s_sum[2u * TRACK_ICP_LOCAL_MAX + g] = t2, s_sum[3u * TRACK_ICP_LOCAL_MAX + g] = t3;
         s_sum[4u * TRACK_ICP_LOCAL_MAX + g] = t4, s_sum[5u * TRACK_ICP_LOCAL_MAX + g] = t5;
         s_sum[6u * TRACK_ICP_LOCAL_MAX + g] = t6, s_sum[7u * TRACK_ICP_LOCAL_MAX + g] = t7;
+        s_sum[8u * TRACK_ICP_LOCAL_MAX + g] = t8;
     }
     barrier();
-    if (li < 8u) {
+    if (li < 9u) {
         vec4 t = vec4(0.0);
         for (uint g = 0u; g < gl_NumSubgroups; g++) t += s_sum[li * TRACK_ICP_LOCAL_MAX + g];
         partial.w[base + 4u * li] = t.x, partial.w[base + 4u * li + 1u] = t.y;
@@ -181,14 +226,15 @@ void main()
     s_sum[2u * TRACK_ICP_LOCAL_MAX + li] = A.s2, s_sum[3u * TRACK_ICP_LOCAL_MAX + li] = A.s3;
     s_sum[4u * TRACK_ICP_LOCAL_MAX + li] = A.s4, s_sum[5u * TRACK_ICP_LOCAL_MAX + li] = A.s5;
     s_sum[6u * TRACK_ICP_LOCAL_MAX + li] = A.s6, s_sum[7u * TRACK_ICP_LOCAL_MAX + li] = A.s7;
+    s_sum[8u * TRACK_ICP_LOCAL_MAX + li] = A.s8;
     for (uint s = L / 2u; s > 0u; s >>= 1) {
         barrier();
         if (li < s)
-            for (uint q = 0u; q < 8u; q++)
+            for (uint q = 0u; q < 9u; q++)
                 s_sum[q * TRACK_ICP_LOCAL_MAX + li] += s_sum[q * TRACK_ICP_LOCAL_MAX + li + s];
     }
     barrier();
-    if (li < 8u) {
+    if (li < 9u) {
         vec4 t = s_sum[li * TRACK_ICP_LOCAL_MAX];
         partial.w[base + 4u * li] = t.x, partial.w[base + 4u * li + 1u] = t.y;
         partial.w[base + 4u * li + 2u] = t.z, partial.w[base + 4u * li + 3u] = t.w;

@@ -47,7 +47,8 @@ bf_status track__icp_create(track_tracker *t)
     t->partial_host = malloc(bytes);
     if (!t->partial_host) return bf_fail(BF_NO_MEMORY, "tracking: partial sums");
     if ((s = gpu_bindings_create(t->ctx, TRACK_ICP_BUFFERS, "track.icp", &t->b_icp)) != BF_OK) return s;
-    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal, t->partials};
+    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
+                                           t->partials,    t->frame_int,    t->ref_int};
     for (uint32_t i = 0; i < TRACK_ICP_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(t->b_icp, i, bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
     /* Zero push constants: an empty level, the workgroup writes zeros. */
@@ -75,7 +76,7 @@ typedef struct icp_sums {
  * read back. with_frame records the frame's preprocessing in front of it
  * (the first iteration of a frame: one submission and wait fewer). */
 static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, bool with_frame, bool weighted,
-                               double huber_unit, icp_sums *out, track_result *res)
+                               double huber_unit, double photo_unit, icp_sums *out, track_result *res)
 {
     uint32_t sub = l == 0 && t->cfg.finest_sample_step == 2 ? 2u : 1u;
     uint32_t n = t->geom.w[l] * t->geom.h[l] / sub;
@@ -84,8 +85,7 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
     if (g > t->icp_groups_max) g = t->icp_groups_max;
     if (g < 1) g = 1;
     track_icp_push pc = {
-        .width = t->geom.w[l],
-        .height = t->geom.h[l],
+        .size = track_icp_size(t->geom.w[l], t->geom.h[l]),
         .off = t->geom.off[l],
         .n_threads = g * t->icp_local,
         /* The distance gate widens with the level (dist_m at the finest,
@@ -107,9 +107,17 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
     /* Frame levels below the reference's finest are associated with it. */
     uint32_t rl = l > t->ref_first ? l : t->ref_first;
     pc.ref_off = t->geom.off[rl];
-    pc.ref_width = t->geom.w[rl];
-    pc.ref_height = t->geom.h[rl];
+    pc.ref_size = track_icp_size(t->geom.w[rl], t->geom.h[rl]);
     pc.ref_shift = rl - l;
+    if (l < t->cfg.photo_levels && t->frame_has_int && t->ref_has_int) {
+        /* Relative to a depth residual at 1 m, as the noise weights are. In
+         * the plain iteration too, so that texture constrains what the
+         * geometry alone leaves weak (a textured floor or wall: icp_subspace). */
+        double s1 = bf_sensor_sigma(1.0f, t->cfg.sensor.sigma_a, t->cfg.sensor.sigma_b, t->cfg.sensor.sigma_c);
+        double si = t->cfg.photo_sigma * photo_unit;
+        pc.photo_w = (float)(t->cfg.photo_weight * (s1 / si) * (s1 / si));
+        pc.photo_huber = t->cfg.huber_k > 0 ? (float)(t->cfg.huber_k * si) : 1e30f;
+    }
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) pc.R[3 * i + j] = (float)T_rc->R[i][j];
     }
@@ -156,7 +164,8 @@ typedef struct icp_step {
  * eigenvalue is >= ratio times the largest. A single plane constrains 3 of
  * 6; the rest keep the guess instead of following noise. The ratio is a
  * property of the scene's shape, so it is taken from a plain least-squares
- * system: robust and noise weights shift the spectrum (on the synthetic
+ * system (with the photometric term when it is on: the texture of a plane
+ * constrains the slides its shape leaves free): robust and noise weights shift the spectrum (on the synthetic
  * room the median ratio fell from 1.3e-2 to 6e-3, below the 5e-3 gate on a
  * third of the frames) without making the geometry any weaker. */
 typedef struct icp_subspace {
@@ -270,6 +279,18 @@ static void apply(bf_se3 *T_rc, const double xi[6])
  * level converges like an L1 fit, several millimetres per iteration, and
  * stops short in the weakly constrained directions. Scaled, it again bends
  * only the tail. On frames that fit the model the unit stays 1. */
+/* The photometric term's unit: photo_sigma, or the RMS of the level's last
+ * intensity residuals when larger. Frames whose colour does not fit their
+ * depth's motion (motion blur, rolling shutter, the exposure) then count
+ * less, as DVO's scale estimate does (Kerl, Sturm and Cremers 2013). */
+static double photo_unit_of(const track_config *c, const icp_sums *s)
+{
+    double n = s->s[TRACK_SUM_PHOTO_N], rr = s->s[TRACK_SUM_PHOTO_RR];
+    if (!(n > 0) || !isfinite(rr)) return 1.0;
+    double u = sqrt(rr / n) / c->photo_sigma;
+    return u > 1.0 ? u : 1.0;
+}
+
 static double huber_unit_of(const track_config *c, const icp_sums *s)
 {
     double n = s->s[TRACK_SUM_INLIERS], rn = s->s[TRACK_SUM_RN];
@@ -289,6 +310,7 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
     double huber_unit = 1.0;
     bool robust = c->huber_k > 0 || c->weight_noise;
     for (int l = (int)c->levels - 1; l >= 0; l--) {
+        double photo_unit = 1.0; /* residuals of a coarser level are smoother */
         for (uint32_t it = 0; it < c->iterations[l]; it++) {
             bool first = res->iterations == 0;
             /* Robust weights at the finest level only, after its first
@@ -299,7 +321,7 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
              * gives the constrained directions (icp_subspace) that the
              * weighted ones keep. */
             bool weighted = robust && l == 0 && it > 0 && S.k > 0;
-            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, weighted, huber_unit, &sums, res);
+            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, weighted, huber_unit, photo_unit, &sums, res);
             if (s != BF_OK) return s;
             if (first) {
                 uint32_t n_depth = 0;
@@ -312,6 +334,7 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
             }
             res->iterations++;
             huber_unit = huber_unit_of(c, &sums);
+            photo_unit = photo_unit_of(c, &sums);
             if (!weighted && !subspace_of(&sums, c->degenerate_ratio, &S)) S.k = 0;
             step = S.k > 0 ? solve(&sums, &S) : (icp_step){.ok = false};
             if (l == 0) have_finest = true;

@@ -65,14 +65,29 @@ bf_status track__pyramid_create(track_tracker *t)
     if ((s = image_pipeline(t, "track.rof_primal", bf_spv_track_rof_primal, bf_spv_track_rof_primal_size,
                             TRACK_IMAGE_TILE, &t->p_primal)) != BF_OK)
         return s;
+    gpu_pipeline_desc di = {
+        .name = "track.intensity",
+        .spirv = bf_spv_track_intensity,
+        .spirv_bytes = bf_spv_track_intensity_size,
+        .n_buffers = TRACK_INTENSITY_BUFFERS,
+        .push_bytes = sizeof(track_intensity_push),
+        .local_size = {TRACK_IMAGE_TILE, TRACK_IMAGE_TILE, 1},
+    };
+    if ((s = gpu_pipeline_create(t->ctx, &di, &t->p_int)) != BF_OK) return s;
+    if ((s = gpu_bindings_create(t->ctx, TRACK_INTENSITY_BUFFERS, "track.intensity", &t->b_int)) != BF_OK) return s;
+    /* Binding 0 is the frames' colour (track_set_frame_colour), bound per frame. */
+    gpu_buffer *ib[TRACK_INTENSITY_BUFFERS] = {t->upload, t->frame_depth, t->frame_int};
+    for (uint32_t i = 0; i < TRACK_INTENSITY_BUFFERS && s == BF_OK; i++)
+        s = gpu_bindings_set(t->b_int, i, ib[i], 0, GPU_WHOLE_SIZE);
+    if (s != BF_OK) return s;
     if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
     t->frame_raw_off = 0;
     for (uint32_t k = 0; k < 2; k++)
         if ((s = image_bindings(t, k ? "track.ref[1]" : "track.ref[0]", t->upload, true, k, &t->b_ref_up[k])) != BF_OK)
             return s;
     /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
-    gpu_pipeline *all[] = {t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal};
-    return gpu_pipeline_warm_up(t->ctx, all, 6);
+    gpu_pipeline *all[] = {t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal, t->p_int};
+    return gpu_pipeline_warm_up(t->ctx, all, 7);
 }
 
 void track__pyramid_destroy(track_tracker *t)
@@ -82,6 +97,10 @@ void track__pyramid_destroy(track_tracker *t)
         t->b_ref_up[k] = NULL;
     }
     gpu_bindings_destroy(t->b_frame);
+    gpu_bindings_destroy(t->b_int);
+    gpu_pipeline_destroy(t->p_int);
+    t->b_int = NULL;
+    t->p_int = NULL;
     gpu_pipeline_destroy(t->p_primal);
     gpu_pipeline_destroy(t->p_rof);
     gpu_pipeline_destroy(t->p_vn);
@@ -229,7 +248,44 @@ void track__cmd_frame_pyramid(track_tracker *t)
     track__stage_begin(t, "track.frame");
     cmd_depth(t, t->b_frame, 0, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID, t->frame_raw_off);
     cmd_pyramid(t, t->b_frame, 0, 1);
+    t->frame_has_int = t->colour && t->cfg.photo_weight > 0;
+    if (t->frame_has_int) track__cmd_frame_intensity(t);
     track__stage_end(t);
+}
+
+void track__cmd_frame_intensity(track_tracker *t)
+{
+    track_intensity_push pc = {
+        .mode = t->colour_registered ? TRACK_INT_REGISTERED : TRACK_INT_CAMERA,
+        .raw_off = t->colour_off,
+        .width = t->geom.w[0],
+        .height = t->geom.h[0],
+        .cfx = (float)t->Kc.fx_px,
+        .cfy = (float)t->Kc.fy_px,
+        .ccx = (float)t->Kc.cx_px,
+        .ccy = (float)t->Kc.cy_px,
+    };
+    track__level_intrinsics(&t->K, 0, &pc.fx, &pc.fy, &pc.cx, &pc.cy);
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) pc.R[3 * i + j] = (float)t->T_colour_depth.R[i][j];
+        pc.dist[i] = (float)t->colour_dist[i];
+    }
+    pc.dist[3] = (float)t->colour_dist[3], pc.dist[4] = (float)t->colour_dist[4];
+    pc.t[0] = (float)t->T_colour_depth.t.x, pc.t[1] = (float)t->T_colour_depth.t.y, pc.t[2] = (float)t->T_colour_depth.t.z;
+    /* The depth pyramid's last barrier made level 0's depth readable. */
+    gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE),
+                     gpu_groups(pc.height, TRACK_IMAGE_TILE), 1);
+    for (uint32_t l = 1; l < TRACK_LEVELS; l++) {
+        /* Level l - 1's writes -> level l's block reads. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
+        pc.mode = TRACK_INT_DOWN;
+        pc.width = t->geom.w[l], pc.height = t->geom.h[l];
+        pc.src_off = t->geom.off[l - 1], pc.dst_off = t->geom.off[l], pc.src_width = t->geom.w[l - 1];
+        gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE),
+                         gpu_groups(pc.height, TRACK_IMAGE_TILE), 1);
+    }
+    /* The intensity -> ICP's reads. */
+    gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
 }
 
 void track__cmd_reference(track_tracker *t, bool in_place)

@@ -98,6 +98,9 @@ track_config track_config_default(void)
         .icp_subgroup = true,
         /* Level 1's normals at the finest level: less noisy, and as accurate (docs/tracking.md). */
         .parent_normals = true,
+        .photo_weight = 0.0f,
+        .photo_sigma = 0.03f,
+        .photo_levels = 1,
     };
     return c;
 }
@@ -154,6 +157,11 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
         return bf_fail(BF_INVALID_ARG, "tracking: huber_k %g must be >= 0 (0: off)", c->huber_k);
     if (c->weight_noise && !(c->noise_weight_exp > 0 && c->noise_weight_exp <= 4))
         return bf_fail(BF_INVALID_ARG, "tracking: noise_weight_exp %g not in (0, 4]", c->noise_weight_exp);
+    if (!(c->photo_weight >= 0) || !isfinite(c->photo_weight) || !(c->photo_sigma > 0) || !isfinite(c->photo_sigma))
+        return bf_fail(BF_INVALID_ARG, "tracking: photo_weight %g (>= 0) or photo_sigma %g (> 0) out of range",
+                       c->photo_weight, c->photo_sigma);
+    if (c->photo_levels < 1 || c->photo_levels > TRACK_MAX_LEVELS)
+        return bf_fail(BF_INVALID_ARG, "tracking: photo_levels %u (1..%u)", c->photo_levels, TRACK_MAX_LEVELS);
     if (!(c->rof_lambda0 > 0)) return bf_fail(BF_INVALID_ARG, "tracking: rof_lambda0 %g must be positive", c->rof_lambda0);
     if (!(c->degenerate_ratio >= 0 && c->degenerate_ratio < 1))
         return bf_fail(BF_INVALID_ARG, "tracking: degenerate_ratio %g not in [0, 1)", c->degenerate_ratio);
@@ -182,6 +190,7 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     t->cfg = *cfg;
     t->K = *K;
     t->motion_scale = 1.0;
+    t->colour_registered = true;
     /* Every pyramid has all TRACK_LEVELS levels, whatever cfg.levels uses. */
     uint32_t off = 0;
     for (uint32_t l = 0; l < TRACK_LEVELS; l++) {
@@ -200,10 +209,14 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     if ((s = buffer(t, "track.rof_p[0]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[0])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.rof_p[1]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[1])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
+    /* The intensity pyramids: a word each while the photometric term is off. */
+    uint64_t ni = cfg->photo_weight > 0 ? np * 4 : 4;
+    if ((s = buffer(t, "track.frame_intensity", ni, GPU_MEMORY_DEVICE, &t->frame_int)) != BF_OK) goto fail;
+    if ((s = buffer(t, "track.ref_intensity", ni, GPU_MEMORY_DEVICE, &t->ref_int)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
     gpu_buffer *zero[] = {t->upload, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
-                          t->rof_p[0], t->rof_p[1], t->counters};
+                          t->rof_p[0], t->rof_p[1], t->counters, t->frame_int, t->ref_int};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
     if (s != BF_OK) goto fail;
     if ((s = track__pyramid_create(t)) != BF_OK) goto fail;
@@ -220,8 +233,8 @@ void track_destroy(track_tracker *t)
     if (!t) return;
     track__icp_destroy(t);
     track__pyramid_destroy(t);
-    gpu_buffer *bufs[] = {t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal, t->ref_depth,
-                          t->frame_normal, t->frame_depth, t->upload};
+    gpu_buffer *bufs[] = {t->ref_int, t->frame_int, t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal,
+                          t->ref_depth, t->frame_normal, t->frame_depth, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */
     free(t);
@@ -303,6 +316,7 @@ static void cmd_reference(track_tracker *t, bool in_place, const bf_se3 *T_wc)
 {
     t->has_ref = false; /* the pyramids are being rewritten */
     t->ref_pending = true;
+    t->ref_int_pending = false; /* track_cmd_reference sets it */
     t->ref_first = in_place ? t->cfg.ref_level : 0;
     t->T_wr_pending = *T_wc;
     track__cmd_reference(t, in_place);
@@ -314,6 +328,17 @@ bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc)
     bf_status s = check_pose(T_wc);
     if (s != BF_OK) return s;
     cmd_reference(t, true, T_wc);
+    /* The frame just preprocessed is the one the reference is made with
+     * (recon/ fuses it at T_wc and casts there): its intensity is the
+     * reference's. */
+    t->ref_int_pending = t->frame_has_int;
+    if (t->frame_has_int) {
+        /* ICP's reads of both pyramids -> the copy. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
+        gpu_cmd_copy(t->ctx, t->frame_int, 0, t->ref_int, 0, (uint64_t)t->geom.n_pix * 4);
+        /* The copy -> the next frame's ICP. */
+        gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    }
     return BF_OK;
 }
 
@@ -329,6 +354,8 @@ bf_status track_finish_reference(track_tracker *t)
     if (s != BF_OK) return s;
     t->ref_valid = n;
     t->has_ref = n >= min_valid(t, t->ref_first);
+    t->ref_has_int = t->ref_int_pending;
+    t->ref_int_pending = false;
     t->T_wr = nearest_rigid(&t->T_wr_pending);
     return BF_OK;
 }
@@ -391,6 +418,49 @@ bf_status track_set_reference_frame(track_tracker *t, const bf_frame *f, const b
     return set_reference(t, NULL, f->depth, T_wc);
 }
 
+/* The frame's colour into the intensity kernel's bindings (a host-side
+ * descriptor write, every frame as for the depth). */
+static bf_status bind_colour(track_tracker *t)
+{
+    if (!t->colour || !(t->cfg.photo_weight > 0)) return BF_OK;
+    return gpu_bindings_set(t->b_int, 0, t->colour, 0, GPU_WHOLE_SIZE);
+}
+
+bf_status track_set_colour_camera(track_tracker *t, const bf_intrinsics *Kc, const double *dist,
+                                  const bf_se3 *T_colour_depth)
+{
+    if (!t) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    if (!Kc) {
+        t->colour_registered = true;
+        return BF_OK;
+    }
+    bool ok = T_colour_depth && bf_se3_is_finite(T_colour_depth) && det3(T_colour_depth->R) > 0 && Kc->fx_px > 0 &&
+              Kc->fy_px > 0 && isfinite(Kc->fx_px) && isfinite(Kc->fy_px) && isfinite(Kc->cx_px) && isfinite(Kc->cy_px);
+    for (int i = 0; dist && i < 5; i++) ok = ok && isfinite(dist[i]);
+    if (!ok) return bf_fail(BF_INVALID_ARG, "tracking: colour camera (fx %g, fy %g), its distortion or T_colour_depth is not usable",
+                            Kc->fx_px, Kc->fy_px);
+    t->Kc = *Kc;
+    for (int i = 0; i < 5; i++) t->colour_dist[i] = dist ? dist[i] : 0.0;
+    t->T_colour_depth = *T_colour_depth;
+    t->colour_registered = false;
+    return BF_OK;
+}
+
+bf_status track_set_frame_colour(track_tracker *t, gpu_buffer *buf, uint64_t offset)
+{
+    if (!t) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
+    if (buf) {
+        uint64_t words = ((uint64_t)t->K.width * t->K.height + 1) / 2;
+        if (offset % 4 || offset / 4 > UINT32_MAX || gpu_buffer_size(buf) < offset + words * 4)
+            return bf_fail(BF_INVALID_ARG, "tracking: colour: %s holds %llu bytes, %llu words of colour from byte %llu",
+                           gpu_buffer_name(buf), (unsigned long long)gpu_buffer_size(buf), (unsigned long long)words,
+                           (unsigned long long)offset);
+    }
+    t->colour = buf;
+    t->colour_off = (uint32_t)(offset / 4);
+    return BF_OK;
+}
+
 /* Tracks the frame whose raw depth is at word raw_off of raw. */
 static bf_status frame_from(track_tracker *t, gpu_buffer *raw, uint32_t raw_off, uint32_t index,
                             const bf_se3 *guess_wc, track_result *out)
@@ -406,6 +476,7 @@ static bf_status frame_from(track_tracker *t, gpu_buffer *raw, uint32_t raw_off,
     /* Bound every frame (a host-side descriptor write): a buffer pointer
      * seen before may be a new buffer at a freed one's address. */
     bf_status s = gpu_bindings_set(t->b_frame, 0, raw, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = bind_colour(t);
     if (s != BF_OK) return s;
     t->frame_raw_off = raw_off;
     if ((s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0)) != BF_OK) return s;
@@ -474,6 +545,7 @@ bf_status track_cmd_frame(track_tracker *t, gpu_buffer *depth, uint64_t offset, 
     bf_status s = check_gpu_frame(t, depth, offset, index);
     /* Bound before the recording uses it (a host-side descriptor write). */
     if (s == BF_OK) s = gpu_bindings_set(t->b_frame, 0, depth, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = bind_colour(t);
     if (s == BF_OK) s = gpu_buffer_fill(t->counters, TRACK_CNT_FRAME_VALID * 4u, 4, 0);
     if (s != BF_OK) return s;
     t->frame_raw_off = (uint32_t)(offset / 4);

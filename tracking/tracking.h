@@ -87,6 +87,16 @@ typedef struct track_config {
                                    (default); false: the shared-memory reduction */
     bool parent_normals;        /* the finest level's normals copied from level 1, default true */
     bool profile;               /* every image dispatch its own timed stage, printed to stderr; default false */
+    /* The photometric term (docs/real_frames.md): in the iterations of the
+     * photo_levels finest levels every inlier also compares its intensity with the
+     * reference frame's (the frame the reference was made with, seen at its
+     * pose), weighted by photo_weight (sigma_z(1 m) / photo_sigma)^2 against
+     * the depth residuals' (sigma_z(1 m) / sigma_z(z))^noise_weight_exp, with
+     * Huber's weight beyond huber_k photo_sigma. Needs the frames' colour
+     * (track_set_frame_colour); 0: off. */
+    float photo_weight;
+    float photo_sigma;          /* the intensity noise, luma in [0, 1], default 0.03 */
+    uint32_t photo_levels;      /* 1: the finest level only (default), up to levels: all */
 } track_config;
 
 track_config track_config_default(void);
@@ -163,6 +173,21 @@ bf_status track_frame(track_tracker *t, const bf_frame *f, const bf_se3 *guess_w
 bf_status track_frame_gpu(track_tracker *t, gpu_buffer *depth, uint64_t offset, uint32_t index,
                           const bf_se3 *guess_wc, track_result *out);
 
+/* The colour camera for the photometric term: Kc (the colour image has the
+ * depth image's size), dist (k1 k2 p1 p2 k3, OpenCV's order; NULL: none) and
+ * T_colour_depth, which takes depth-camera points to colour-camera points.
+ * Kc NULL: colour pixel i shows what depth pixel i measured (the default). */
+bf_status track_set_colour_camera(track_tracker *t, const bf_intrinsics *Kc, const double *dist,
+                                  const bf_se3 *T_colour_depth);
+/* Where the colour of the frames tracked from now on is: RGB565, two per
+ * word (the lower half first), the depth image's size, from byte offset
+ * `offset` (a multiple of 4) of `buf` (recon/: fusion's incoming slot, next
+ * to the depth); buf NULL: the frames have no colour. The frame's
+ * intensity pyramid is made with its depth's (track_frame_gpu,
+ * track_cmd_frame), so the colour must be there until then; a reference
+ * recorded after that frame (track_cmd_reference) keeps its intensity for
+ * the photometric term of the frames that follow. */
+bf_status track_set_frame_colour(track_tracker *t, gpu_buffer *buf, uint64_t offset);
 /* Scales the motion gate of the frames tracked from now on: a result
  * further than scale * max_motion_m or scale * max_motion_deg from its
  * guess is TRACK_LARGE_MOTION. recon/ passes the frame intervals elapsed

@@ -35,9 +35,21 @@ struct track_tracker {
     gpu_buffer *ref_depth, *ref_normal;
     gpu_buffer *rof_p[2];      /* after the ROF (and for frames): scratch and the depth pyramid of the normals */
     gpu_buffer *counters;      /* TRACK_CNT_* */
+    /* The photometric term: intensity pyramids of the frame and of the
+     * frame the reference was made with (track_set_frame_colour). */
+    gpu_buffer *frame_int, *ref_int;
+    gpu_buffer *colour;        /* borrowed: where the next frames' RGB565 colour is, NULL: none */
+    uint32_t colour_off;       /* its word offset */
+    bool colour_registered;    /* colour pixel i shows depth pixel i (no colour camera set) */
+    bf_intrinsics Kc;          /* else the colour camera, */
+    double colour_dist[5];     /* its distortion */
+    bf_se3 T_colour_depth;     /* and pose */
+    bool frame_has_int;        /* frame_int holds the last preprocessed frame's intensity */
+    bool ref_has_int, ref_int_pending; /* ref_int holds the reference frame's (pending: being copied) */
     gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
 
-    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp;
+    gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp, *p_int;
+    gpu_bindings *b_int;       /* the intensity kernel: colour (bound per frame), frame depth, frame_int */
     /* Image binding sets: frame from its raw depth, reference from the upload
      * (a raw frame; unused in place) with the dual fields 0 -> 1 and 1 -> 0. */
     gpu_bindings *b_frame, *b_ref_up[2], *b_icp;
@@ -75,6 +87,9 @@ void track__pyramid_destroy(track_tracker *t);
 /* Records the raw frame (b_frame's binding 0 at frame_raw_off) -> frame pyramids
  * (depth, normal; counts the valid pixels into TRACK_CNT_FRAME_VALID). */
 void track__cmd_frame_pyramid(track_tracker *t);
+/* Records the frame's intensity pyramid from its colour (t->colour, bound
+ * into b_int by the caller) after its depth pyramid. */
+void track__cmd_frame_intensity(track_tracker *t);
 /* Records the reference: the count of its valid pixels cleared, depth
  * conversion from the upload (in_place false: a raw frame) or in place at
  * ref_level (a GPU reference), ROF smoothing (its own timed stage

@@ -147,8 +147,8 @@ BF_TEST(fusion_colour_distortion_matches_calib)
             calib_distort(dist, x, y, &xd, &yd);
             float k1 = (float)dist[0], k2 = (float)dist[1], p1 = (float)dist[2], p2 = (float)dist[3];
             float k3 = (float)dist[4];
-            float fx = fusion_distort_x((float)x, (float)y, k1, k2, p1, p2, k3);
-            float fy = fusion_distort_y((float)x, (float)y, k1, k2, p1, p2, k3);
+            float fx = bf_distort_x((float)x, (float)y, k1, k2, p1, p2, k3);
+            float fy = bf_distort_y((float)x, (float)y, k1, k2, p1, p2, k3);
             worst = fmax(worst, fmax(fabs(fx - xd), fabs(fy - yd)));
         }
     CHECK(worst > 0); /* float, not a copy of the double result */

@@ -185,7 +185,7 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
         bf_vec3 p = bf_se3_apply(&T_last, pc);
         double rgb[3];
         if (!scene_colour_near(&scene, bvh, p, bf_v3_sub(p, T_last.t), rgb)) continue;
-        uint32_t got[3] = {fusion_565_r(c565[i]), fusion_565_g(c565[i]), fusion_565_b(c565[i])};
+        uint32_t got[3] = {bf_565_r(c565[i]), bf_565_g(c565[i]), bf_565_b(c565[i])};
         double e = 0;
         for (int k = 0; k < 3; k++) e += fabs(rgb[k] - got[k]) / 3.0;
         err_view[n_cmp++] = e;
