@@ -3,7 +3,7 @@
  * tests/fuzz/corpus/TARGET goes through its target without a crash, the
  * whole ones (all but NAME.cut) without an error, and every input in tests/fuzz/regress/TARGET (each once crashed, hung or
  * leaked in a reader: docs/fuzz.md) is refused with an error that names the
- * file it came through. */
+ * file it came through and, where NAME.expect exists, says what it holds. */
 #include <dirent.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,7 +24,8 @@ static int run_dir(const char *dir, fuzz_fn fn, bool must_fail)
     int n = 0;
     struct dirent *de;
     while ((de = readdir(d))) {
-        if (de->d_name[0] == '.') continue;
+        size_t len = strlen(de->d_name);
+        if (de->d_name[0] == '.' || (len > 7 && strcmp(de->d_name + len - 7, ".expect") == 0)) continue;
         char path[4096];
         if (bf_path_join(path, sizeof path, dir, de->d_name) != BF_OK) continue;
         char *data = NULL;
@@ -37,7 +38,6 @@ static int run_dir(const char *dir, fuzz_fn fn, bool must_fail)
         bf_status s = fn((const uint8_t *)data, size);
         free(data);
         n++;
-        size_t len = strlen(de->d_name);
         bool is_cut = len > 4 && strcmp(de->d_name + len - 4, ".cut") == 0;
         if (!must_fail && !is_cut && s != BF_OK) {
             bf__test_fail(__FILE__, __LINE__, "%s: %s: %s", path, bf_status_name(s), bf_last_error());
@@ -51,6 +51,18 @@ static int run_dir(const char *dir, fuzz_fn fn, bool must_fail)
             bf__test_fail(__FILE__, __LINE__, "%s: %s: the message does not name the file", path,
                           bf_last_error());
             break;
+        }
+        /* NAME.expect: what the message must say (the reason the fix gives). */
+        char expect_path[4200], *expect = NULL;
+        snprintf(expect_path, sizeof expect_path, "%s.expect", path);
+        if (must_fail && bf_read_file(expect_path, &expect, NULL) == BF_OK) {
+            expect[strcspn(expect, "\n")] = '\0';
+            bool found = strstr(bf_last_error(), expect) != NULL;
+            if (!found)
+                bf__test_fail(__FILE__, __LINE__, "%s: %s: the message does not say '%s'", path, bf_last_error(),
+                              expect);
+            free(expect);
+            if (!found) break;
         }
     }
     closedir(d);
