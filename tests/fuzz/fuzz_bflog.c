@@ -8,7 +8,9 @@
  *          that mutations reach the code behind the checks; without it the
  *          checks themselves are fuzzed;
  *   bit 1: --skip-bad-frames;
- *   bits 2-7: the frame to seek to after the first pass (modulo frames + 1). */
+ *   bits 2-6: the frame to seek to after the first pass (modulo frames + 1);
+ *   bit 7: the file is named log.bin, found as a log by its magic bytes
+ *          (else log.bflog, by its name). */
 #include <stdlib.h>
 #include <string.h>
 
@@ -69,7 +71,7 @@ bf_status fuzz_bflog(const uint8_t *data, size_t size)
     if (!file) return BF_NO_MEMORY;
     memcpy(file, data + 1, size - 1);
     if (flags & 1) fix_checksums(file, size - 1);
-    const char *path = fuzz_write(fuzz_scratch(), "log.bflog", file, size - 1);
+    const char *path = fuzz_write(fuzz_scratch(), flags & 0x80 ? "log.bin" : "log.bflog", file, size - 1);
     free(file);
     if (!path) return BF_IO;
     replay_options opt = {.skip_bad_frames = flags & 2};
@@ -77,7 +79,7 @@ bf_status fuzz_bflog(const uint8_t *data, size_t size)
     bf_status s = replay_open(path, &opt, &src);
     if (s != BF_OK) return s;
     s = read_to_end(src);
-    bf_status s2 = replay_log_seek(src, (flags >> 2) % (src->n_frames + 1));
+    bf_status s2 = replay_log_seek(src, ((flags >> 2) & 31u) % (src->n_frames + 1));
     if (s2 == BF_OK) s2 = read_to_end(src);
     rgbd_source_close(src);
     return s != BF_OK ? s : s2;

@@ -265,7 +265,7 @@ static void seeds_bflog(void)
     buf j = make_log(REPLAY_LOG_COLOUR_JPEG, true, 2);
     seed_log("jpeg_fix_skip", 3, &j, true);
     buf n = make_log(REPLAY_LOG_COLOUR_NONE, false, 2);
-    seed_log("depth_unfinished_fix", 1, &n, false);
+    seed_log("depth_unfinished_fix_sniffed", 1 | 0x80, &n, false);
     free(a.p), free(j.p), free(n.p);
 }
 
