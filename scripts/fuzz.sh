@@ -16,7 +16,7 @@ cd "$(dirname "$0")/.."
 SECONDS_EACH=60
 JOBS=1
 WRITE_DOC=1
-TARGETS="image text folder bflog mesh store calib"
+TARGETS="image text folder bflog mesh store calib v4l2"
 while [ $# -gt 0 ]; do
   case "$1" in
     --jobs) JOBS=$2; shift 2 ;;
@@ -74,6 +74,7 @@ declare -A what=(
   [mesh]="PLY, OFF, particle PLY"
   [store]="store.json, trajectory.bin, chunk files"
   [calib]="calib.json"
+  [v4l2]="a V4L2 camera's formats, sizes, buffers, frames"
 )
 found=0
 for t in $TARGETS; do
@@ -99,7 +100,7 @@ echo "fuzz.sh: build ${t_build} s, fuzzing ${t_run} s ($JOBS at a time), $(nproc
 
 if [ "$WRITE_DOC" = 1 ]; then
   cmd="scripts/fuzz.sh $SECONDS_EACH --jobs $JOBS"
-  [ "$TARGETS" = "image text folder bflog mesh store calib" ] || cmd+=" --targets \"$TARGETS\""
+  [ "$TARGETS" = "image text folder bflog mesh store calib v4l2" ] || cmd+=" --targets \"$TARGETS\""
   stamp="$(date -u +%Y-%m-%d), commit $(git rev-parse --short HEAD), clang $(clang -dumpversion), $(nproc) cores"
   python3 - "$table" "$cmd" "$stamp" <<'EOF'
 import re, sys

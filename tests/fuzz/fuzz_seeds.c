@@ -407,6 +407,78 @@ static void seeds_calib(void)
     free(b.p);
 }
 
+/* ------------------------------------------------------------ a V4L2 camera */
+
+static void put(buf *b, uint32_t v, int bytes)
+{
+    for (int i = 0; i < bytes; i++) {
+        uint8_t c = (uint8_t)(v >> (8 * i));
+        buf_add(b, &c, 1);
+    }
+}
+
+/* A node's answers at open (fuzz_v4l2.c): capabilities, formats (indices
+ * into its table), size, bytes per line, S_FMT keeps the format. */
+static void v4l2_node(buf *b, uint32_t format, uint32_t bpp)
+{
+    put(b, 0, 1);
+    put(b, 2, 1);
+    put(b, 4, 1); /* a format it does not want first */
+    put(b, format, 1);
+    put(b, W, 2);
+    put(b, H, 2);
+    put(b, W * bpp + 4, 4);
+    put(b, 0, 1);
+}
+
+static void v4l2_buffers(buf *b, uint32_t bpp)
+{
+    put(b, 3, 1);
+    for (int i = 0; i < 3; i++) put(b, (W * bpp + 4) * H, 4);
+}
+
+static void v4l2_frame(buf *b, uint32_t index, uint32_t seq, uint32_t bpp, const void *px)
+{
+    put(b, 1, 1); /* poll: ready */
+    put(b, index, 1);
+    put(b, (W * bpp + 4) * H, 4);
+    put(b, seq, 4);
+    put(b, 2 | 40 << 2, 1);
+    for (int y = 0; y < H; y++) {
+        buf_add(b, (const uint8_t *)px + (size_t)y * W * bpp, W * bpp);
+        put(b, 0, 4);
+    }
+}
+
+static void seeds_v4l2(void)
+{
+    buf b = {0};
+    put(&b, 0, 1);
+    v4l2_node(&b, 0, 2);
+    v4l2_buffers(&b, 2);
+    for (uint32_t i = 0; i < 3; i++) v4l2_frame(&b, i, i == 2 ? 5 : i, 2, depth_px);
+    seed("v4l2", "depth", b.p, b.n, true);
+    free(b.p);
+    /* Depth and YUYV colour (2 bytes a pixel; the pixels' values do not
+     * matter) and BGR24 colour. */
+    for (int k = 0; k < 2; k++) {
+        uint32_t cbpp = k ? 3 : 2;
+        b = (buf){0};
+        put(&b, 1, 1);
+        v4l2_node(&b, 0, 2);
+        v4l2_node(&b, k ? 3 : 1, cbpp);
+        v4l2_buffers(&b, 2);
+        v4l2_buffers(&b, cbpp);
+        for (uint32_t i = 0; i < 2; i++) {
+            v4l2_frame(&b, i, i, 2, depth_px);
+            v4l2_frame(&b, i, i, cbpp, rgb_px);
+            put(&b, 0, 1); /* poll: no newer colour */
+        }
+        seed("v4l2", k ? "depth_bgr" : "depth_yuyv", b.p, b.n, false);
+        free(b.p);
+    }
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) {
@@ -423,5 +495,6 @@ int main(int argc, char **argv)
     seeds_mesh();
     seeds_store();
     seeds_calib();
+    seeds_v4l2();
     return 0;
 }
