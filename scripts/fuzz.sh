@@ -35,7 +35,7 @@ cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DBITFUSE_WERROR=ON
 cmake --build "$BUILD_DIR" -j "$(nproc)" --target fuzz_all >/dev/null
 t_build=$(( $(date +%s) - t0 ))
 
-WORK="$PWD/$BUILD_DIR/fuzz"
+case "$BUILD_DIR" in /*) WORK="$BUILD_DIR/fuzz" ;; *) WORK="$PWD/$BUILD_DIR/fuzz" ;; esac
 rm -rf "$WORK/corpus" "$WORK/logs" "$WORK/crashes"
 mkdir -p "$WORK/logs"
 # The targets write each input to files (fuzz_util.c): in memory where the
