@@ -153,6 +153,9 @@ static bf_status node_open(const capture_v4l2_io *io, const char *uri, v4l2_node
         return bf_fail(BF_UNSUPPORTED, "%s: %s: asked for '%s', driver set '%s' %ux%u", uri, n->path, cc, got,
                        f.fmt.pix.width, f.fmt.pix.height);
     }
+    if (f.fmt.pix.width > CAPTURE_V4L2_MAX_SIDE || f.fmt.pix.height > CAPTURE_V4L2_MAX_SIDE)
+        return bf_fail(BF_FORMAT, "%s: %s: driver reports '%s' %ux%u, outside 1..%u a side", uri, n->path, cc,
+                       f.fmt.pix.width, f.fmt.pix.height, CAPTURE_V4L2_MAX_SIDE);
     uint32_t bpp = chosen == V4L2_PIX_FMT_Z16 || chosen == V4L2_PIX_FMT_YUYV ? 2 : 3;
     n->pixfmt = chosen;
     n->width = f.fmt.pix.width;
@@ -164,6 +167,14 @@ static bf_status node_open(const capture_v4l2_io *io, const char *uri, v4l2_node
     bf_debug("%s: %s node %s: '%s' %ux%u, %u bytes per line", uri, n->role, n->path, cc, n->width, n->height,
              n->stride);
     return BF_OK;
+}
+
+/* Bytes a whole frame of n takes in a buffer: the last row needs no
+ * padding. */
+static size_t node_frame_bytes(const v4l2_node *n)
+{
+    size_t bpp = n->pixfmt == V4L2_PIX_FMT_Z16 || n->pixfmt == V4L2_PIX_FMT_YUYV ? 2 : 3;
+    return (size_t)n->stride * (n->height - 1) + (size_t)n->width * bpp;
 }
 
 static bf_status node_start(const capture_v4l2_io *io, const char *uri, v4l2_node *n)
@@ -182,7 +193,7 @@ static bf_status node_start(const capture_v4l2_io *io, const char *uri, v4l2_nod
         struct v4l2_buffer b = {.index = i, .type = V4L2_BUF_TYPE_VIDEO_CAPTURE, .memory = V4L2_MEMORY_MMAP};
         if (io->ioctl(n->fd, VIDIOC_QUERYBUF, &b) < 0)
             return bf_fail(BF_NO_DEVICE, "%s: %s: VIDIOC_QUERYBUF %u: %s", uri, n->path, i, strerror(errno));
-        if (b.length < n->stride * (n->height - 1) + n->width * (n->pixfmt == V4L2_PIX_FMT_Z16 ? 2u : 1u))
+        if (b.length < node_frame_bytes(n))
             return bf_fail(BF_FORMAT, "%s: %s: buffer %u holds %u bytes, too few for %ux%u", uri, n->path, i,
                            b.length, n->width, n->height);
         void *p = io->mmap(NULL, b.length, PROT_READ | PROT_WRITE, MAP_SHARED, n->fd, (off_t)b.m.offset);
@@ -258,6 +269,9 @@ static bf_status node_dequeue(v4l2_source *s, v4l2_node *n, int timeout_ms, stru
         }
         if (b->index >= n->n_buf) return bf_fail(BF_IO, "%s: %s: driver returned buffer %u of %u", s->uri, n->path,
                                                  b->index, n->n_buf);
+        if (b->bytesused > n->buf_len[b->index])
+            return bf_fail(BF_IO, "%s: %s: driver reports %u bytes used in buffer %u of %zu bytes", s->uri, n->path,
+                           b->bytesused, b->index, n->buf_len[b->index]);
         if (b->flags & V4L2_BUF_FLAG_ERROR) {
             bf_debug("%s: %s: buffer %u (sequence %u) marked broken; skipped", s->uri, n->path, b->index,
                      b->sequence);
@@ -287,8 +301,7 @@ static double buffer_time_s(const struct v4l2_buffer *b)
 static bf_status colour_take(v4l2_source *s, const struct v4l2_buffer *b)
 {
     v4l2_node *n = &s->colour;
-    uint32_t bpp = n->pixfmt == V4L2_PIX_FMT_YUYV ? 2 : 3;
-    size_t need = (size_t)n->stride * (n->height - 1) + (size_t)n->width * bpp;
+    size_t need = node_frame_bytes(n);
     if (b->bytesused < need) {
         bf_debug("%s: %s: colour buffer of %u bytes, expected %zu; kept the previous colour", s->uri, n->path,
                  b->bytesused, need);
@@ -340,7 +353,7 @@ static bf_status v4l2_next(rgbd_source *base, bf_frame *out)
         return bf_fail(BF_IO, "%s: frame %u: no depth frame from %s within %d ms", s->uri, s->index, s->depth.path,
                        CAPTURE_FRAME_TIMEOUT_MS);
     v4l2_node *n = &s->depth;
-    size_t need = (size_t)n->stride * (n->height - 1) + (size_t)n->width * 2;
+    size_t need = node_frame_bytes(n);
     if (b.bytesused < need) {
         bf_status q = node_requeue(s, n, &b);
         if (q) return q;

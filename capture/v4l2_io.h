@@ -39,4 +39,8 @@ uint64_t capture__v4l2_dropped_frames(const rgbd_source *src);
  * one being read, two in reserve so a late reader does not stall it. */
 #define CAPTURE_V4L2_N_BUFFERS 4u
 
+/* The largest frame side the backend accepts from a driver (as the image
+ * readers do): frame buffers are allocated at open from the driver's size. */
+#define CAPTURE_V4L2_MAX_SIDE 16384u
+
 #endif

@@ -17,6 +17,8 @@ PACKAGES=(
   # which the capture tests replay Kinect dumps through.
   libfreenect-dev libfreenect-bin libopenni2-dev
   python3 python3-numpy python3-matplotlib
+  # The fuzz targets (scripts/fuzz.sh): clang and its libFuzzer runtime.
+  clang libclang-rt-dev
   # The viewer window (view/: GLFW) and its test under a virtual X server.
   libglfw3-dev xvfb
 )

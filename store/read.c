@@ -16,6 +16,11 @@
  * level 8 would hold far fewer bricks than 2^24). */
 #define STORE_MAX_CHUNK_BRICKS (1u << 24)
 #define STORE_MAX_POSES (1u << 28)
+/* The most a zstd payload can expand: a block decodes to at most 128 KiB
+ * and takes at least 4 bytes (an RLE block, RFC 8878 section 3.1.1.2), so
+ * n bytes decode to at most 32768 n. A header claiming more is refused
+ * before its buffer is allocated (a forged 100-byte file asked for 19 GiB). */
+#define STORE_ZSTD_MAX_RATIO 32768u
 
 int store__entry_cmp(const void *pa, const void *pb)
 {
@@ -323,6 +328,10 @@ static bf_status read_chunk(const char *path, const int32_t key[3], geometry *ge
                     (unsigned long long)h.payload_bytes);
     else if (h.payload_hash != store__hash(p + sizeof h, len - sizeof h))
         s = bf_fail(BF_FORMAT, "%s: payload checksum mismatch (corrupt)", path);
+    else if (h.raw_bytes / STORE_ZSTD_MAX_RATIO > len - sizeof h ||
+             ZSTD_getFrameContentSize(p + sizeof h, len - sizeof h) != h.raw_bytes)
+        s = bf_fail(BF_FORMAT, "%s: %llu bytes of records cannot come from its %zu-byte payload (corrupt)", path,
+                    (unsigned long long)h.raw_bytes, len - sizeof h);
     else if (geo->known && (h.chunk_m != geo->chunk_m || h.origin_w[0] != geo->origin[0] ||
                             h.origin_w[1] != geo->origin[1] || h.origin_w[2] != geo->origin[2]))
         s = bf_fail(BF_FORMAT, "%s: chunk edge %g m or origin differs from the store's (%g m)", path, h.chunk_m,
