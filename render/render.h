@@ -186,17 +186,26 @@ typedef struct render_particles_stats {
     float chunk_m, cell_m;
     bf_vec3 origin_w;       /* the grid's corner: cell i spans origin_w + [i, i + 1) cell_m, its sphere at the middle */
     double bin_s;           /* host binning: cells, bricks, the host copy */
-    double load_s;          /* the host copy into the GPU pools (fusion_load) */
+    double load_s;          /* the host copy into the GPU pools (the map emptied or made, fusion_load) */
+    bool map_made;          /* the last binning made the map anew (the first, or a set grown past its pools) */
 } render_particles_stats;
 
 /* Bins the n particles xyz (3 n floats, world coordinates [m]) and puts
  * them on the GPU. cfg NULL: the defaults. ctx is borrowed and must
  * outlive the set. BF_INVALID_ARG for a bad radius or cell (the message
  * says which), a position that is not finite (named by index) or a set
- * wider than 2^24 cells; BF_NO_MEMORY when it does not fit. n may be 0 (an
- * empty set: nothing is hit). A moving set is binned anew per step. */
+ * wider than 2^21 cells; BF_NO_MEMORY when it does not fit. n may be 0 (an
+ * empty set: nothing is hit). */
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
                                   render_particles **out);
+/* A moving set's next time step: the n particles xyz binned anew into the
+ * same set (radius and cell kept), its GPU pools and pipeline reused, made
+ * larger only when the set outgrows them (then with a quarter to spare).
+ * The same refusals as render_particles_create; on failure the set holds
+ * the last step or, where the failure came after emptying it, nothing (its
+ * stats then count 0 particles). Not while a pass that reads the set is in
+ * flight (render_scene waits for its own). */
+bf_status render_particles_update(render_particles *ps, const float *xyz, uint64_t n);
 /* NULL is a no-op. */
 void render_particles_destroy(render_particles *ps);
 const render_particles_stats *render_particles_get_stats(const render_particles *ps);

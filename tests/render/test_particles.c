@@ -237,11 +237,11 @@ BF_TEST(one_image_holds_the_nearer_of_map_and_particles)
     xyz[3 * n] = 0.05f, xyz[3 * n + 1] = 0.2f, xyz[3 * n + 2] = (float)z0, n++;
     render_particles_config pc = render_particles_config_default();
     pc.radius_m = 0.03f;
-    /* Cells of r / 4.5: the grid's corner lies r + 8 cells below the set's
-     * box, so every centre here (at multiples of 0.05 m = 7.5 cells from the
-     * box's corner) is a cell's middle and the spheres are where they are
+    /* Cells of 6.25 mm: the grid puts the set box's lowest corner at a
+     * cell's middle, so every centre here (at multiples of 0.05 m = 8 cells
+     * from it) is a cell's middle and the spheres are where they are
      * drawn: the oracle's spheres are exact. */
-    pc.cell_m = 0.03f / 4.5f;
+    pc.cell_m = 0.00625f;
     render_particles *ps;
     CHECK_OK(render_particles_create(ctx, &pc, xyz, n, &ps));
     render_caster *rc;

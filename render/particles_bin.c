@@ -1,0 +1,597 @@
+/* Binning particles into bricks (particles_bin.h; Reichl's dissertation,
+ * ch. 6). Random access into the bricks is what costs (perf on 10^6
+ * particles: 70% of the time in the stores of a per-particle hash lookup
+ * and brick write), so the binning is ordered:
+ *   1. each particle's key, its brick's Morton code above its cell's place
+ *      in the brick (9 bits), and an LSD radix sort of the keys (two
+ *      threads, a half each, then one merge that drops repeats: particles
+ *      sharing a cell are one sphere);
+ *   2. per brick (a run of equal codes), the reach bits of all its cells
+ *      gathered into one mask per neighbour brick (a table per cell place),
+ *      then one lookup per neighbour instead of one per particle; bricks
+ *      come in Morton order, and the brick table keeps runs of 64 codes
+ *      (4x4x4 bricks) together, so the lookups and the brick writes stay
+ *      near each other. Two threads take a half of the bricks each, with
+ *      tables of their own; the bricks either made for the other half's
+ *      codes (a thin layer along the split) are merged after;
+ *   3. the octree's node count from the sorted Morton codes of all bricks.
+ */
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "particles_bin.h"
+#include "shaders/fusion.glsl.h"
+
+#define BIN_THREADS 2
+
+/* ------------------------------------------------------------ Morton codes */
+
+/* The 18 (PARTICLES_AXIS_BITS) low bits of v spread to every third bit. */
+static uint64_t spread3(uint64_t v)
+{
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffull;
+    v = (v | v << 16) & 0x1f0000ff0000ffull;
+    v = (v | v << 8) & 0x100f00f00f00f00full;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+    v = (v | v << 2) & 0x1249249249249249ull;
+    return v;
+}
+
+static uint64_t compact3(uint64_t v)
+{
+    v &= 0x1249249249249249ull;
+    v = (v | v >> 2) & 0x10c30c30c30c30c3ull;
+    v = (v | v >> 4) & 0x100f00f00f00f00full;
+    v = (v | v >> 8) & 0x1f0000ff0000ffull;
+    v = (v | v >> 16) & 0x1f00000000ffffull;
+    v = (v | v >> 32) & 0x1fffff;
+    return v;
+}
+
+/* Morton code of a brick: ancestors k levels up share its code >> 3k. */
+static uint64_t morton3(const int64_t b[3])
+{
+    return spread3((uint64_t)b[0]) << 2 | spread3((uint64_t)b[1]) << 1 | spread3((uint64_t)b[2]);
+}
+
+static void unmorton3(uint64_t m, int64_t b[3])
+{
+    b[0] = (int64_t)compact3(m >> 2), b[1] = (int64_t)compact3(m >> 1), b[2] = (int64_t)compact3(m);
+}
+
+/* ------------------------------------------------------------ two threads */
+
+typedef void *(*bin_fn)(void *);
+
+/* fn(args[0]) here and fn(args[1]) on a second thread (or here after,
+ * where no thread can be made: the result is the same). */
+static void run_two(bin_fn fn, void *a0, void *a1)
+{
+    pthread_t th;
+    bool threaded = BIN_THREADS > 1 && pthread_create(&th, NULL, fn, a1) == 0;
+    fn(a0);
+    if (threaded) pthread_join(th, NULL);
+    else fn(a1);
+}
+
+/* ------------------------------------------------------------ radix sort */
+
+/* Sorts v[0, n) (keys below 2^bits) with tmp[0, n) as scratch: LSD radix,
+ * 11-bit digits. */
+static void radix_sort(uint64_t *v, uint64_t *tmp, uint64_t n, uint32_t bits)
+{
+    enum { DIGIT = 11, BUCKETS = 1 << DIGIT };
+    static _Thread_local uint64_t count[BUCKETS];
+    uint64_t *src = v, *dst = tmp;
+    for (uint32_t shift = 0; shift < bits; shift += DIGIT) {
+        memset(count, 0, sizeof count);
+        for (uint64_t i = 0; i < n; i++) count[(src[i] >> shift) & (BUCKETS - 1)]++;
+        uint64_t sum = 0;
+        for (uint32_t d = 0; d < BUCKETS; d++) {
+            uint64_t c = count[d];
+            count[d] = sum;
+            sum += c;
+        }
+        for (uint64_t i = 0; i < n; i++) dst[count[(src[i] >> shift) & (BUCKETS - 1)]++] = src[i];
+        uint64_t *t = src;
+        src = dst, dst = t;
+    }
+    if (src != v) memcpy(v, src, n * 8);
+}
+
+static uint32_t bits_of(uint64_t x)
+{
+    return x ? 64u - (uint32_t)__builtin_clzll(x) : 1u;
+}
+
+/* Merges the sorted runs a[0, na) and b[0, nb) into out, each value once;
+ * returns the count. */
+static uint64_t merge_unique(const uint64_t *a, uint64_t na, const uint64_t *b, uint64_t nb, uint64_t *out)
+{
+    uint64_t i = 0, j = 0, k = 0;
+    while (i < na || j < nb) {
+        uint64_t x = j >= nb || (i < na && a[i] <= b[j]) ? a[i++] : b[j++];
+        if (k == 0 || out[k - 1] != x) out[k++] = x;
+    }
+    return k;
+}
+
+typedef struct sort_job {
+    uint64_t *v, *tmp, n;
+    uint32_t bits;
+    /* Keys of particles: */
+    const float *xyz;
+    double o[3], inv;
+    int64_t lo[3], hi[3]; /* the particles' brick box */
+} sort_job;
+
+static void *keys_main(void *arg)
+{
+    sort_job *j = arg;
+    uint64_t hi = 0;
+    for (int a = 0; a < 3; a++) j->lo[a] = INT64_MAX, j->hi[a] = -1;
+    for (uint64_t i = 0; i < j->n; i++) {
+        int64_t g[3];
+        for (int a = 0; a < 3; a++) g[a] = (int64_t)floor(((double)j->xyz[3 * i + a] - j->o[a]) * j->inv);
+        int64_t b[3] = {g[0] >> 3, g[1] >> 3, g[2] >> 3};
+        for (int a = 0; a < 3; a++) {
+            if (b[a] < j->lo[a]) j->lo[a] = b[a];
+            if (b[a] > j->hi[a]) j->hi[a] = b[a];
+        }
+        uint64_t k = morton3(b) << 9 | (uint64_t)((g[0] & 7) | (g[1] & 7) << 3 | (g[2] & 7) << 6);
+        j->v[i] = k;
+        hi |= k;
+    }
+    radix_sort(j->v, j->tmp, j->n, bits_of(hi));
+    return NULL;
+}
+
+static void *sort_main(void *arg)
+{
+    sort_job *j = arg;
+    radix_sort(j->v, j->tmp, j->n, j->bits);
+    return NULL;
+}
+
+/* ------------------------------------------------------------ reach */
+
+/* Sets the reach bits of brick hb (global coordinates b) for the cells the
+ * sphere at cc (cell units) of radius reach (cells) overlaps: those whose
+ * box is within reach of the centre. */
+static void bin_reach(uint32_t conf[16], const int64_t b[3], const double cc[3], double reach)
+{
+    int64_t lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = (int64_t)floor(cc[a] - reach) - b[a] * 8;
+        hi[a] = (int64_t)floor(cc[a] + reach) - b[a] * 8;
+        if (lo[a] < 0) lo[a] = 0;
+        if (hi[a] > 7) hi[a] = 7;
+    }
+    double r2 = reach * reach;
+    for (int64_t z = lo[2]; z <= hi[2]; z++) {
+        double dz = cc[2] - (double)(b[2] * 8 + z);
+        dz = dz < 0 ? -dz : (dz > 1 ? dz - 1 : 0);
+        for (int64_t y = lo[1]; y <= hi[1]; y++) {
+            double dy = cc[1] - (double)(b[1] * 8 + y);
+            dy = dy < 0 ? -dy : (dy > 1 ? dy - 1 : 0);
+            for (int64_t x = lo[0]; x <= hi[0]; x++) {
+                double dx = cc[0] - (double)(b[0] * 8 + x);
+                dx = dx < 0 ? -dx : (dx > 1 ? dx - 1 : 0);
+                if (dx * dx + dy * dy + dz * dz > r2) continue;
+                conf[brick_word((uint32_t)x, (uint32_t)y, (uint32_t)z)] |=
+                    1u << brick_bit((uint32_t)x, (uint32_t)y, (uint32_t)z);
+            }
+        }
+    }
+}
+
+/* The reach bits of a centre depend only on its cell's place in its brick
+ * (the centre is the cell's middle): for each of the 512 places, the mask
+ * of each neighbour brick (offsets -1..1, index ox + 3 oy + 9 oz + 13) and
+ * which neighbours it reaches. Built once per set when the reach is at
+ * most 8 cells (a brick); beyond, bin_reach runs per cell. */
+typedef struct reach_table {
+    uint32_t used[512]; /* bit k: neighbour k is reached */
+    uint32_t mask[512][27][16];
+} reach_table;
+
+static reach_table *reach_table_make(double reach)
+{
+    if (reach > 8.0) return NULL;
+    reach_table *t = bf_calloc(1, sizeof *t);
+    if (!t) return NULL;
+    for (uint32_t l = 0; l < 512; l++) {
+        double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
+        for (int k = 0; k < 27; k++) {
+            int64_t b[3] = {k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1};
+            bin_reach(t->mask[l][k], b, cc, reach);
+            bool any = false;
+            for (int w = 0; w < 16; w++) any |= t->mask[l][k][w] != 0;
+            if (any) t->used[l] |= 1u << k;
+        }
+    }
+    return t;
+}
+
+/* ------------------------------------------------------------ bricks of a half */
+
+typedef struct bin_slot {
+    uint64_t key; /* code + 1; 0 = empty */
+    uint32_t index;
+} bin_slot;
+
+/* Where a half finds its bricks by their global coordinates: a dense
+ * array over the set's brick box where that is small (a few bytes per
+ * particle), else a hash table. */
+typedef struct bin_index {
+    uint32_t *dense;    /* brick index + 1 at x + dim x (y + dim y z) from lo; 0 = none */
+    uint64_t dense_cap;
+    int64_t lo[3], dim[3]; /* dim 0: the hash table */
+    bin_slot *slots;    /* else this */
+    uint64_t cap;       /* a power of two */
+    uint64_t n_slots;
+} bin_index;
+
+typedef struct bin_part {
+    /* in */
+    const uint64_t *cells; /* sorted unique cell keys of this half's bricks */
+    uint64_t n_cells;
+    const reach_table *rt;
+    double reach;
+    uint32_t level;
+    /* out */
+    bin_index ix;
+    hostmap_brick *bricks;
+    uint64_t *codes;
+    uint32_t n, brick_cap, n_occupied;
+    bool failed; /* out of memory (the thread cannot set the caller's error) */
+} bin_part;
+
+/* Runs of 64 consecutive codes keep together; the runs are scattered. */
+static uint64_t slot_of(uint64_t code, uint64_t cap)
+{
+    uint64_t x = code >> 6;
+    x ^= x >> 33;
+    x *= 0xff51afd7ed558ccdull;
+    x ^= x >> 33;
+    return ((x << 6) | (code & 63)) & (cap - 1);
+}
+
+static bool index_grow(bin_index *ix)
+{
+    uint64_t cap = ix->cap ? 2 * ix->cap : 1u << 12;
+    while (cap < 2 * ix->n_slots + 2) cap *= 2;
+    bin_slot *s = bf_calloc(cap, sizeof *s);
+    if (!s) return false;
+    for (uint64_t i = 0; i < ix->cap; i++) {
+        if (!ix->slots[i].key) continue;
+        uint64_t h = slot_of(ix->slots[i].key - 1, cap);
+        while (s[h].key) h = (h + 1) & (cap - 1);
+        s[h] = ix->slots[i];
+    }
+    free(ix->slots);
+    ix->slots = s, ix->cap = cap;
+    return true;
+}
+
+/* The entry of brick c (global coordinates, code its Morton code): in the
+ * dense array, or the hash slot holding it or the empty one where it goes. */
+static uint32_t *index_entry(const bin_index *ix, const int64_t c[3], uint64_t code, bin_slot **slot)
+{
+    *slot = NULL;
+    if (ix->dense) {
+        int64_t x = c[0] - ix->lo[0], y = c[1] - ix->lo[1], z = c[2] - ix->lo[2];
+        return &ix->dense[x + ix->dim[0] * (y + ix->dim[1] * z)];
+    }
+    uint64_t h = slot_of(code, ix->cap);
+    while (ix->slots[h].key && ix->slots[h].key != code + 1) h = (h + 1) & (ix->cap - 1);
+    *slot = &ix->slots[h];
+    return NULL;
+}
+
+/* The brick c (code its Morton code), or UINT32_MAX. */
+static uint32_t part_find(const bin_part *p, const int64_t c[3], uint64_t code)
+{
+    bin_slot *sl;
+    uint32_t *d = index_entry(&p->ix, c, code, &sl);
+    if (d) return *d ? *d - 1 : UINT32_MAX;
+    return sl->key ? sl->index : UINT32_MAX;
+}
+
+/* The index of brick c (code its Morton code), added (empty) when new;
+ * UINT32_MAX when out of memory. */
+static uint32_t part_brick(bin_part *p, const int64_t c[3], uint64_t code)
+{
+    bin_slot *sl;
+    uint32_t *d = index_entry(&p->ix, c, code, &sl);
+    if (d && *d) return *d - 1;
+    if (sl && sl->key) return sl->index;
+    if (p->n == p->brick_cap) {
+        /* glibc moves large blocks by remapping: growing costs no copy */
+        uint32_t cap = p->brick_cap ? 2 * p->brick_cap : 1024;
+        hostmap_brick *nb = bf_realloc(p->bricks, (size_t)cap * sizeof *nb);
+        if (nb) p->bricks = nb;
+        uint64_t *nc = nb ? bf_realloc(p->codes, (size_t)cap * 8) : NULL;
+        if (nc) p->codes = nc;
+        if (!nb || !nc) return UINT32_MAX;
+        p->brick_cap = cap;
+    }
+    if (d) *d = p->n + 1;
+    else sl->key = code + 1, sl->index = p->n;
+    hostmap_brick *hb = &p->bricks[p->n];
+    memset(hb, 0, sizeof *hb);
+    uint32_t per = 1u << p->level;
+    for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(c[a] >> p->level), hb->cell[a] = (uint32_t)c[a] & (per - 1);
+    hb->level = p->level;
+    p->codes[p->n] = code;
+    /* Keep the table at most half full. */
+    if (!d && ++p->ix.n_slots * 2 > p->ix.cap && !index_grow(&p->ix)) return UINT32_MAX;
+    return p->n++;
+}
+
+/* One brick's run of cells [i, j): its sign bits, and the reach bits of
+ * its spheres in it and its neighbours. */
+static bool part_run(bin_part *p, uint64_t i, uint64_t j)
+{
+    uint64_t code = p->cells[i] >> 9;
+    int64_t b[3];
+    unmorton3(code, b);
+    uint32_t me = part_brick(p, b, code);
+    if (me == UINT32_MAX) return false;
+    hostmap_brick *hb = &p->bricks[me];
+    for (uint64_t k = i; k < j; k++) {
+        uint32_t l = (uint32_t)(p->cells[k] & 511), x = l & 7, y = (l >> 3) & 7, z = l >> 6;
+        hb->sign[brick_word(x, y, z)] |= 1u << brick_bit(x, y, z);
+    }
+    p->n_occupied++;
+    if (p->rt) {
+        uint32_t acc[27][16], used = 0;
+        for (uint64_t k = i; k < j; k++) {
+            uint32_t l = (uint32_t)(p->cells[k] & 511), u = p->rt->used[l];
+            for (uint32_t nb = 0; nb < 27; nb++) {
+                if (!(u >> nb & 1)) continue;
+                if (!(used >> nb & 1)) memset(acc[nb], 0, sizeof acc[nb]);
+                for (int w = 0; w < 16; w++) acc[nb][w] |= p->rt->mask[l][nb][w];
+            }
+            used |= u;
+        }
+        for (uint32_t nb = 0; nb < 27; nb++) {
+            if (!(used >> nb & 1)) continue;
+            int64_t c[3] = {b[0] + (int64_t)(nb % 3) - 1, b[1] + (int64_t)(nb / 3 % 3) - 1, b[2] + (int64_t)(nb / 9) - 1};
+            uint32_t t = nb == 13 ? me : part_brick(p, c, morton3(c));
+            if (t == UINT32_MAX) return false;
+            for (int w = 0; w < 16; w++) p->bricks[t].conf[w] |= acc[nb][w];
+        }
+        return true;
+    }
+    /* A reach beyond a brick: every brick of each sphere's box. */
+    for (uint64_t k = i; k < j; k++) {
+        uint32_t l = (uint32_t)(p->cells[k] & 511);
+        double cc[3] = {b[0] * 8 + (l & 7) + 0.5, b[1] * 8 + ((l >> 3) & 7) + 0.5, b[2] * 8 + (l >> 6) + 0.5};
+        int64_t lo[3], hi[3];
+        for (int a = 0; a < 3; a++) {
+            lo[a] = (int64_t)floor((cc[a] - p->reach) / 8.0);
+            hi[a] = (int64_t)floor((cc[a] + p->reach) / 8.0);
+        }
+        for (int64_t bz = lo[2]; bz <= hi[2]; bz++)
+            for (int64_t by = lo[1]; by <= hi[1]; by++)
+                for (int64_t bx = lo[0]; bx <= hi[0]; bx++) {
+                    int64_t c[3] = {bx, by, bz};
+                    uint32_t t = part_brick(p, c, morton3(c));
+                    if (t == UINT32_MAX) return false;
+                    bin_reach(p->bricks[t].conf, c, cc, p->reach);
+                }
+    }
+    return true;
+}
+
+/* Makes *buf hold at least need elements of size bytes (contents kept). */
+static bool reserve(void **buf, uint64_t *cap, uint64_t need, size_t size)
+{
+    if (need <= *cap) return true;
+    uint64_t c = need + need / 4;
+    void *nb = bf_realloc(*buf, (size_t)(c * size));
+    if (!nb) return false;
+    *buf = nb, *cap = c;
+    return true;
+}
+
+/* A half's bricks. Its buffers are kept from the last binning (a moving
+ * set re-binned per step touches no new memory) and cleared here. */
+static void *part_main(void *arg)
+{
+    bin_part *p = arg;
+    /* Sized for the bricks of a sparse set (each sphere reaching a
+     * neighbour per axis): few grow after. */
+    uint64_t runs = 0;
+    for (uint64_t i = 0; i < p->n_cells; i++) runs += i == 0 || p->cells[i] >> 9 != p->cells[i - 1] >> 9;
+    uint64_t guess = runs * (p->rt ? 4 : 8) + 1024, cap = p->brick_cap;
+    p->n = 0, p->n_occupied = 0, p->failed = false;
+    bool ok = guess < UINT32_MAX && reserve((void **)&p->bricks, &cap, guess, sizeof *p->bricks);
+    uint64_t ccap = p->brick_cap;
+    ok = ok && reserve((void **)&p->codes, &ccap, cap, 8);
+    if (ok) p->brick_cap = (uint32_t)(cap < ccap ? cap : ccap);
+    bin_index *ix = &p->ix;
+    if (ok && ix->dim[0]) {
+        uint64_t cells = (uint64_t)(ix->dim[0] * ix->dim[1] * ix->dim[2]);
+        ok = reserve((void **)&ix->dense, &ix->dense_cap, cells, 4);
+        if (ok) memset(ix->dense, 0, cells * 4);
+    } else if (ok) {
+        if (ix->cap < 2 * guess) {
+            free(ix->slots);
+            ix->slots = NULL, ix->cap = 0, ix->n_slots = guess;
+            ok = index_grow(ix);
+        } else {
+            memset(ix->slots, 0, ix->cap * sizeof *ix->slots);
+        }
+        ix->n_slots = 0;
+    }
+    if (!ok) {
+        p->failed = true;
+        return NULL;
+    }
+    for (uint64_t i = 0; i < p->n_cells;) {
+        uint64_t j = i + 1;
+        while (j < p->n_cells && p->cells[j] >> 9 == p->cells[i] >> 9) j++;
+        if (!part_run(p, i, j)) {
+            p->failed = true;
+            return NULL;
+        }
+        i = j;
+    }
+    return NULL;
+}
+
+static void part_free(bin_part *p)
+{
+    free(p->ix.dense), free(p->ix.slots), free(p->bricks), free(p->codes);
+}
+
+static void brick_or(hostmap_brick *dst, const hostmap_brick *src)
+{
+    for (int w = 0; w < 16; w++) dst->sign[w] |= src->sign[w], dst->conf[w] |= src->conf[w];
+}
+
+/* ------------------------------------------------------------ octrees */
+
+/* Nodes and chunks the octrees of these bricks (sorted Morton codes)
+ * need: a chunk's root, and 8 children for every node with one
+ * (fusion_load builds them so). */
+static void count_nodes(const uint64_t *m, uint64_t n, uint32_t level, uint64_t *n_nodes, uint64_t *n_chunks)
+{
+    uint64_t nodes = 0, chunks = 0;
+    for (uint32_t k = 1; k <= level; k++) {
+        uint64_t distinct = 0;
+        for (uint64_t i = 0; i < n; i++)
+            if (i == 0 || (m[i] >> (3 * k)) != (m[i - 1] >> (3 * k))) distinct++;
+        nodes += 8 * distinct; /* the children of each parent k levels up */
+        if (k == level) chunks = distinct, nodes += distinct; /* the roots */
+    }
+    *n_nodes = nodes;
+    *n_chunks = chunks;
+}
+
+/* ------------------------------------------------------------ all of it */
+
+struct particles_binner {
+    uint64_t *keys, *tmp; /* per particle, then per brick (the octree count) */
+    uint64_t keys_cap, tmp_cap;
+    reach_table *rt;
+    double rt_reach;
+    bin_part part[2];
+    hostmap_brick *all;
+    uint64_t all_cap;
+};
+
+particles_binner *particles_binner_create(void) { return bf_calloc(1, sizeof(particles_binner)); }
+
+void particles_binner_destroy(particles_binner *w)
+{
+    if (!w) return;
+    free(w->keys), free(w->tmp), free(w->rt), free(w->all);
+    part_free(&w->part[0]), part_free(&w->part[1]);
+    free(w);
+}
+
+/* Sorted unique cell keys of the particles into w->tmp, and their brick box. */
+static bf_status sorted_cells(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
+                              uint64_t *n_cells, int64_t lo[3], int64_t hi[3])
+{
+    if (!reserve((void **)&w->keys, &w->keys_cap, n + 1, 8) || !reserve((void **)&w->tmp, &w->tmp_cap, n + 1, 8))
+        return bf_fail(BF_NO_MEMORY, "render: sorting %llu particles", (unsigned long long)n);
+    uint64_t *v = w->keys, *tmp = w->tmp, h = n / 2;
+    sort_job j[2] = {{.v = v, .tmp = tmp, .n = h, .xyz = xyz}, {.v = v + h, .tmp = tmp + h, .n = n - h, .xyz = xyz + 3 * h}};
+    for (int t = 0; t < 2; t++) j[t].o[0] = origin.x, j[t].o[1] = origin.y, j[t].o[2] = origin.z, j[t].inv = 1.0 / cell_m;
+    run_two(keys_main, &j[0], &j[1]);
+    for (int a = 0; a < 3; a++) {
+        lo[a] = j[0].lo[a] < j[1].lo[a] ? j[0].lo[a] : j[1].lo[a];
+        hi[a] = j[0].hi[a] > j[1].hi[a] ? j[0].hi[a] : j[1].hi[a];
+    }
+    *n_cells = merge_unique(v, h, v + h, n - h, tmp);
+    return BF_OK;
+}
+
+/* The halves' bricks made for the other half's codes, merged into it
+ * where it has them; each brick then lives in one half. */
+static void merge_halves(bin_part *p, uint64_t split)
+{
+    for (int a = 0; a < 2; a++) {
+        bin_part *me = &p[a], *other = &p[1 - a];
+        for (uint32_t i = 0; i < me->n; i++) {
+            uint64_t c = me->codes[i];
+            if (c == UINT64_MAX || (a == 0 ? c < split : c >= split)) continue;
+            int64_t b[3];
+            unmorton3(c, b);
+            uint32_t k = part_find(other, b, c);
+            if (k == UINT32_MAX) continue;
+            brick_or(&other->bricks[k], &me->bricks[i]);
+            me->codes[i] = UINT64_MAX; /* dropped */
+        }
+    }
+}
+
+bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
+                        double radius_m, uint32_t level, particles_binned *out)
+{
+    memset(out, 0, sizeof *out);
+    uint64_t n_cells = 0;
+    int64_t lo[3], hi[3];
+    bf_status s = sorted_cells(w, xyz, n, origin, cell_m, &n_cells, lo, hi);
+    if (s != BF_OK) return s;
+    double reach = radius_m / cell_m; /* the sphere's reach beyond the centre [cells] */
+    if (w->rt_reach != reach) {
+        free(w->rt);
+        w->rt = reach_table_make(reach); /* NULL: per cell (slower, any reach) */
+        w->rt_reach = w->rt ? reach : 0;
+        if (!w->rt && reach <= 8.0) return bf_fail(BF_NO_MEMORY, "render: particle reach table");
+    }
+    /* The cells are in tmp; the keys buffer takes the brick codes after. */
+    uint64_t *cells = w->tmp;
+    /* The halves split between two bricks. */
+    uint64_t mid = n_cells / 2;
+    while (mid > 0 && mid < n_cells && cells[mid] >> 9 == cells[mid - 1] >> 9) mid++;
+    bin_part *p = w->part;
+    p[0].cells = cells, p[0].n_cells = mid;
+    p[1].cells = cells + mid, p[1].n_cells = n_cells - mid;
+    /* A dense index where the box of the bricks the spheres reach takes at
+     * most 4 M entries or 4 a particle (16 bytes), else the hash. */
+    int64_t pad = (int64_t)ceil(reach / 8.0), box = n ? 1 : 0;
+    for (int a = 0; a < 3 && n; a++) box *= hi[a] - lo[a] + 1 + 2 * pad;
+    bool dense = n && box <= (int64_t)(4 * n > (1u << 22) ? 4 * n : (1u << 22));
+    for (int t = 0; t < 2; t++) {
+        p[t].rt = w->rt, p[t].reach = reach, p[t].level = level;
+        for (int a = 0; a < 3; a++) p[t].ix.lo[a] = lo[a] - pad, p[t].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
+    }
+    run_two(part_main, &p[0], &p[1]);
+    if (p[0].failed || p[1].failed) return bf_fail(BF_NO_MEMORY, "render: particle bricks");
+    merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX);
+    /* Both halves' bricks into one array, and their codes sorted for the octrees. */
+    uint64_t total = (uint64_t)p[0].n + p[1].n;
+    if (total >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, total + 1, sizeof *w->all) ||
+        !reserve((void **)&w->keys, &w->keys_cap, total + 1, 8) || !reserve((void **)&w->tmp, &w->tmp_cap, total + 1, 8))
+        return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)total);
+    uint64_t *codes = w->keys, k = 0, k0 = 0;
+    for (int a = 0; a < 2; a++) {
+        for (uint32_t i = 0; i < p[a].n; i++) {
+            if (p[a].codes[i] == UINT64_MAX) continue;
+            w->all[k] = p[a].bricks[i];
+            codes[k++] = p[a].codes[i];
+        }
+        if (a == 0) k0 = k;
+        out->n_occupied += p[a].n_occupied;
+    }
+    uint64_t top = 0;
+    for (uint64_t i = 0; i < k; i++) top |= codes[i];
+    sort_job j[2] = {{.v = codes, .tmp = w->tmp, .n = k0, .bits = bits_of(top)},
+                     {.v = codes + k0, .tmp = w->tmp + k0, .n = k - k0, .bits = bits_of(top)}};
+    run_two(sort_main, &j[0], &j[1]);
+    uint64_t n_unique = merge_unique(codes, k0, codes + k0, k - k0, w->tmp);
+    count_nodes(w->tmp, n_unique, level, &out->n_nodes, &out->n_chunks);
+    out->bricks = w->all;
+    out->n_bricks = (uint32_t)k;
+    out->n_cells = n_cells;
+    return n_unique == k ? BF_OK : bf_fail(BF_NUMERIC, "render: %llu particle bricks made twice", (unsigned long long)(k - n_unique));
+}
