@@ -189,30 +189,45 @@ static void bin_reach(uint32_t conf[16], const int64_t b[3], const double cc[3],
 }
 
 /* The reach bits of a centre depend only on its cell's place in its brick
- * (the centre is the cell's middle): for each of the 512 places, the mask
- * of each neighbour brick (offsets -1..1, index ox + 3 oy + 9 oz + 13) and
- * which neighbours it reaches. Built once per set when the reach is at
- * most 8 cells (a brick); beyond, bin_reach runs per cell. */
+ * (the centre is the cell's middle): for each of the 512 places, which
+ * neighbour bricks (offsets -1..1, index ox + 3 oy + 9 oz + 13) it reaches
+ * and their masks, packed (a quarter-radius cell reaches 8 of the 27: the
+ * table stays in the L2 cache). Built once per reach of at most 8 cells (a
+ * brick); beyond, bin_reach runs per cell. */
 typedef struct reach_table {
-    uint32_t used[512]; /* bit k: neighbour k is reached */
-    uint32_t mask[512][27][16];
+    uint32_t used[512];  /* bit k: neighbour k is reached */
+    uint32_t first[513]; /* place l's masks: mask[first[l] ..], in neighbour order */
+    uint32_t mask[][16];
 } reach_table;
 
 static reach_table *reach_table_make(double reach)
 {
     if (reach > 8.0) return NULL;
-    reach_table *t = bf_calloc(1, sizeof *t);
-    if (!t) return NULL;
+    uint32_t (*all)[27][16] = bf_calloc(512, sizeof *all);
+    if (!all) return NULL;
+    uint32_t used[512] = {0}, total = 0;
     for (uint32_t l = 0; l < 512; l++) {
         double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
         for (int k = 0; k < 27; k++) {
             int64_t b[3] = {k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1};
-            bin_reach(t->mask[l][k], b, cc, reach);
+            bin_reach(all[l][k], b, cc, reach);
             bool any = false;
-            for (int w = 0; w < 16; w++) any |= t->mask[l][k][w] != 0;
-            if (any) t->used[l] |= 1u << k;
+            for (int w = 0; w < 16; w++) any |= all[l][k][w] != 0;
+            if (any) used[l] |= 1u << k, total++;
         }
     }
+    reach_table *t = bf_malloc(sizeof *t + (size_t)total * sizeof t->mask[0]);
+    if (t) {
+        uint32_t m = 0;
+        for (uint32_t l = 0; l < 512; l++) {
+            t->used[l] = used[l];
+            t->first[l] = m;
+            for (int k = 0; k < 27; k++)
+                if (used[l] >> k & 1) memcpy(t->mask[m++], all[l][k], sizeof t->mask[0]);
+        }
+        t->first[512] = m;
+    }
+    free(all);
     return t;
 }
 
@@ -235,16 +250,22 @@ typedef struct bin_index {
     uint64_t n_slots;
 } bin_index;
 
+/* A brick's bits while binning: each plane one cache line. */
+typedef struct bin_planes {
+    _Alignas(64) uint32_t sign[16];
+    uint32_t conf[16];
+} bin_planes;
+
 typedef struct bin_part {
     /* in */
     const uint64_t *cells; /* sorted unique cell keys of this half's bricks */
     uint64_t n_cells;
     const reach_table *rt;
     double reach;
-    uint32_t level;
     /* out */
     bin_index ix;
-    hostmap_brick *bricks;
+    bin_planes *bricks; /* in bricks_mem, aligned */
+    void *bricks_mem;
     uint64_t *codes;
     uint32_t n, brick_cap, n_occupied;
     bool failed; /* out of memory (the thread cannot set the caller's error) */
@@ -292,6 +313,26 @@ static uint32_t *index_entry(const bin_index *ix, const int64_t c[3], uint64_t c
     return NULL;
 }
 
+/* Room for cap bricks, those made kept (64-byte aligned: each plane of a
+ * brick is one cache line). */
+static bool part_reserve(bin_part *p, uint64_t cap)
+{
+    if (cap <= p->brick_cap) return true;
+    if (cap >= UINT32_MAX) return false;
+    void *mem = bf_malloc((size_t)cap * sizeof(bin_planes) + 64);
+    uint64_t *codes = mem ? bf_realloc(p->codes, (size_t)cap * 8) : NULL;
+    if (!codes) {
+        free(mem);
+        return false;
+    }
+    p->codes = codes;
+    bin_planes *b = (bin_planes *)(((uintptr_t)mem + 63) & ~(uintptr_t)63);
+    if (p->n) memcpy(b, p->bricks, (size_t)p->n * sizeof *b);
+    free(p->bricks_mem);
+    p->bricks_mem = mem, p->bricks = b, p->brick_cap = (uint32_t)cap;
+    return true;
+}
+
 /* The brick c (code its Morton code), or UINT32_MAX. */
 static uint32_t part_find(const bin_part *p, const int64_t c[3], uint64_t code)
 {
@@ -309,23 +350,10 @@ static uint32_t part_brick(bin_part *p, const int64_t c[3], uint64_t code)
     uint32_t *d = index_entry(&p->ix, c, code, &sl);
     if (d && *d) return *d - 1;
     if (sl && sl->key) return sl->index;
-    if (p->n == p->brick_cap) {
-        /* glibc moves large blocks by remapping: growing costs no copy */
-        uint32_t cap = p->brick_cap ? 2 * p->brick_cap : 1024;
-        hostmap_brick *nb = bf_realloc(p->bricks, (size_t)cap * sizeof *nb);
-        if (nb) p->bricks = nb;
-        uint64_t *nc = nb ? bf_realloc(p->codes, (size_t)cap * 8) : NULL;
-        if (nc) p->codes = nc;
-        if (!nb || !nc) return UINT32_MAX;
-        p->brick_cap = cap;
-    }
+    if (p->n == p->brick_cap && !part_reserve(p, 2 * (uint64_t)p->brick_cap + 1024)) return UINT32_MAX;
     if (d) *d = p->n + 1;
     else sl->key = code + 1, sl->index = p->n;
-    hostmap_brick *hb = &p->bricks[p->n];
-    memset(hb, 0, sizeof *hb);
-    uint32_t per = 1u << p->level;
-    for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(c[a] >> p->level), hb->cell[a] = (uint32_t)c[a] & (per - 1);
-    hb->level = p->level;
+    memset(&p->bricks[p->n], 0, sizeof p->bricks[p->n]);
     p->codes[p->n] = code;
     /* Keep the table at most half full. */
     if (!d && ++p->ix.n_slots * 2 > p->ix.cap && !index_grow(&p->ix)) return UINT32_MAX;
@@ -341,29 +369,37 @@ static bool part_run(bin_part *p, uint64_t i, uint64_t j)
     unmorton3(code, b);
     uint32_t me = part_brick(p, b, code);
     if (me == UINT32_MAX) return false;
-    hostmap_brick *hb = &p->bricks[me];
+    bin_planes *hb = &p->bricks[me];
     for (uint64_t k = i; k < j; k++) {
         uint32_t l = (uint32_t)(p->cells[k] & 511), x = l & 7, y = (l >> 3) & 7, z = l >> 6;
         hb->sign[brick_word(x, y, z)] |= 1u << brick_bit(x, y, z);
     }
     p->n_occupied++;
     if (p->rt) {
-        uint32_t acc[27][16], used = 0;
-        for (uint64_t k = i; k < j; k++) {
-            uint32_t l = (uint32_t)(p->cells[k] & 511), u = p->rt->used[l];
-            for (uint32_t nb = 0; nb < 27; nb++) {
-                if (!(u >> nb & 1)) continue;
-                if (!(used >> nb & 1)) memset(acc[nb], 0, sizeof acc[nb]);
-                for (int w = 0; w < 16; w++) acc[nb][w] |= p->rt->mask[l][nb][w];
-            }
-            used |= u;
-        }
+        /* The neighbours first, their lines fetched while the masks gather. */
+        uint32_t used = 0, t[27];
+        for (uint64_t k = i; k < j; k++) used |= p->rt->used[p->cells[k] & 511];
         for (uint32_t nb = 0; nb < 27; nb++) {
             if (!(used >> nb & 1)) continue;
             int64_t c[3] = {b[0] + (int64_t)(nb % 3) - 1, b[1] + (int64_t)(nb / 3 % 3) - 1, b[2] + (int64_t)(nb / 9) - 1};
-            uint32_t t = nb == 13 ? me : part_brick(p, c, morton3(c));
-            if (t == UINT32_MAX) return false;
-            for (int w = 0; w < 16; w++) p->bricks[t].conf[w] |= acc[nb][w];
+            t[nb] = nb == 13 ? me : part_brick(p, c, morton3(c));
+            if (t[nb] == UINT32_MAX) return false;
+            __builtin_prefetch(p->bricks[t[nb]].conf, 1);
+        }
+        uint32_t acc[27][16];
+        for (uint32_t nb = 0; nb < 27; nb++)
+            if (used >> nb & 1) memset(acc[nb], 0, sizeof acc[nb]);
+        for (uint64_t k = i; k < j; k++) {
+            uint32_t l = (uint32_t)(p->cells[k] & 511), u = p->rt->used[l];
+            const uint32_t(*m)[16] = &p->rt->mask[p->rt->first[l]];
+            for (; u; u &= u - 1, m++) {
+                uint32_t nb = (uint32_t)__builtin_ctz(u);
+                for (int w = 0; w < 16; w++) acc[nb][w] |= (*m)[w];
+            }
+        }
+        for (uint32_t nb = 0; nb < 27; nb++) {
+            if (!(used >> nb & 1)) continue;
+            for (int w = 0; w < 16; w++) p->bricks[t[nb]].conf[w] |= acc[nb][w];
         }
         return true;
     }
@@ -408,12 +444,9 @@ static void *part_main(void *arg)
      * neighbour per axis): few grow after. */
     uint64_t runs = 0;
     for (uint64_t i = 0; i < p->n_cells; i++) runs += i == 0 || p->cells[i] >> 9 != p->cells[i - 1] >> 9;
-    uint64_t guess = runs * (p->rt ? 4 : 8) + 1024, cap = p->brick_cap;
+    uint64_t guess = runs * (p->rt ? 4 : 8) + 1024;
     p->n = 0, p->n_occupied = 0, p->failed = false;
-    bool ok = guess < UINT32_MAX && reserve((void **)&p->bricks, &cap, guess, sizeof *p->bricks);
-    uint64_t ccap = p->brick_cap;
-    ok = ok && reserve((void **)&p->codes, &ccap, cap, 8);
-    if (ok) p->brick_cap = (uint32_t)(cap < ccap ? cap : ccap);
+    bool ok = part_reserve(p, guess);
     bin_index *ix = &p->ix;
     if (ok && ix->dim[0]) {
         uint64_t cells = (uint64_t)(ix->dim[0] * ix->dim[1] * ix->dim[2]);
@@ -447,10 +480,10 @@ static void *part_main(void *arg)
 
 static void part_free(bin_part *p)
 {
-    free(p->ix.dense), free(p->ix.slots), free(p->bricks), free(p->codes);
+    free(p->ix.dense), free(p->ix.slots), free(p->bricks_mem), free(p->codes);
 }
 
-static void brick_or(hostmap_brick *dst, const hostmap_brick *src)
+static void brick_or(bin_planes *dst, const bin_planes *src)
 {
     for (int w = 0; w < 16; w++) dst->sign[w] |= src->sign[w], dst->conf[w] |= src->conf[w];
 }
@@ -533,6 +566,35 @@ static void merge_halves(bin_part *p, uint64_t split)
     }
 }
 
+/* A half's bricks (those it kept) as the host copy's, and their codes. */
+typedef struct emit_job {
+    const bin_part *p;
+    hostmap_brick *out;
+    uint64_t *codes;
+    uint32_t level;
+} emit_job;
+
+static void *emit_main(void *arg)
+{
+    emit_job *e = arg;
+    uint32_t per = 1u << e->level;
+    uint64_t k = 0;
+    for (uint32_t i = 0; i < e->p->n; i++) {
+        uint64_t c = e->p->codes[i];
+        if (c == UINT64_MAX) continue;
+        hostmap_brick *hb = &e->out[k];
+        int64_t b[3];
+        unmorton3(c, b);
+        for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(b[a] >> e->level), hb->cell[a] = (uint32_t)b[a] & (per - 1);
+        hb->level = e->level;
+        hb->error = 0;
+        memcpy(hb->sign, e->p->bricks[i].sign, sizeof hb->sign);
+        memcpy(hb->conf, e->p->bricks[i].conf, sizeof hb->conf);
+        e->codes[k++] = c;
+    }
+    return NULL;
+}
+
 bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
                         double radius_m, uint32_t level, particles_binned *out)
 {
@@ -562,7 +624,7 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     for (int a = 0; a < 3 && n; a++) box *= hi[a] - lo[a] + 1 + 2 * pad;
     bool dense = n && box <= (int64_t)(4 * n > (1u << 22) ? 4 * n : (1u << 22));
     for (int t = 0; t < 2; t++) {
-        p[t].rt = w->rt, p[t].reach = reach, p[t].level = level;
+        p[t].rt = w->rt, p[t].reach = reach;
         for (int a = 0; a < 3; a++) p[t].ix.lo[a] = lo[a] - pad, p[t].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
     }
     run_two(part_main, &p[0], &p[1]);
@@ -573,16 +635,13 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     if (total >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, total + 1, sizeof *w->all) ||
         !reserve((void **)&w->keys, &w->keys_cap, total + 1, 8) || !reserve((void **)&w->tmp, &w->tmp_cap, total + 1, 8))
         return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)total);
-    uint64_t *codes = w->keys, k = 0, k0 = 0;
-    for (int a = 0; a < 2; a++) {
-        for (uint32_t i = 0; i < p[a].n; i++) {
-            if (p[a].codes[i] == UINT64_MAX) continue;
-            w->all[k] = p[a].bricks[i];
-            codes[k++] = p[a].codes[i];
-        }
-        if (a == 0) k0 = k;
-        out->n_occupied += p[a].n_occupied;
-    }
+    uint64_t *codes = w->keys, k0 = 0, k = 0;
+    for (uint32_t i = 0; i < p[0].n; i++) k0 += p[0].codes[i] != UINT64_MAX;
+    for (uint32_t i = 0; i < p[1].n; i++) k += p[1].codes[i] != UINT64_MAX;
+    k += k0;
+    emit_job e[2] = {{&p[0], w->all, codes, level}, {&p[1], w->all + k0, codes + k0, level}};
+    run_two(emit_main, &e[0], &e[1]);
+    out->n_occupied = p[0].n_occupied + p[1].n_occupied;
     uint64_t top = 0;
     for (uint64_t i = 0; i < k; i++) top |= codes[i];
     sort_job j[2] = {{.v = codes, .tmp = w->tmp, .n = k0, .bits = bits_of(top)},

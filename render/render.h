@@ -185,7 +185,8 @@ typedef struct render_particles_stats {
     uint32_t level;         /* the bricks' octree level */
     float chunk_m, cell_m;
     bf_vec3 origin_w;       /* the grid's corner: cell i spans origin_w + [i, i + 1) cell_m, its sphere at the middle */
-    double bin_s;           /* host binning: cells, bricks, the host copy */
+    double bin_s;           /* host binning: cells, bricks, the host copy (wall clock) */
+    double bin_cpu_s;       /* the same in CPU seconds of the process (both binning threads) */
     double load_s;          /* the host copy into the GPU pools (the map emptied or made, fusion_load) */
     bool map_made;          /* the last binning made the map anew (the first, or a set grown past its pools) */
 } render_particles_stats;
