@@ -36,6 +36,7 @@ struct render_particles {
     gpu_buffer *resume;   /* binding 8: per pixel, where a ray resumes; made for the image size */
     particles_binner *binner; /* kept: a re-binned set touches no new host memory */
     uint32_t brick_cap, node_cap, n_buckets; /* what ps->map holds */
+    bool too_many; /* the last binning needed more bricks than a binding holds */
     uint32_t cells_per_pass, n_passes;
     double last_ms;
 };
@@ -61,7 +62,7 @@ static bf_status check_config(const render_particles_config *in, render_particle
     render_particles_config c = *in;
     if (!(c.radius_m > 0) || !isfinite(c.radius_m) || c.radius_m > 10)
         return bf_fail(BF_INVALID_ARG, "render: particle radius %g m (above 0, at most 10)", c.radius_m);
-    if (c.cell_m == 0) c.cell_m = 0.25f * c.radius_m;
+    if (c.cell_m == 0) c.cell_m = c.radius_m / 8.0f;
     if (!(c.cell_m >= 1e-5f) || !(c.cell_m <= 2 * c.radius_m))
         return bf_fail(BF_INVALID_ARG, "render: particle cell %g m (10 um .. 2 radii = %g m)", c.cell_m,
                        2 * c.radius_m);
@@ -173,22 +174,23 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
     render_particles_stats *st = &ps->stats;
     double t0 = bf_time_s(), c0 = cpu_s();
     particles_binned bs;
-    s = particles_bin(ps->binner, xyz, n, origin, c->cell_m, c->radius_m, st->level, &bs);
+    /* The pass binds each bit plane whole: one storage binding must hold it
+     * (lavapipe: 128 MiB, 2 M bricks). */
+    uint64_t max_bricks = gpu_binding_max_bytes(ps->ctx, 4) / (BRICK_WORDS * 4);
+    s = particles_bin(ps->binner, xyz, n, origin, c->cell_m, c->radius_m, st->level, max_bricks, &bs);
     double bin_s = bf_time_s() - t0, bin_cpu_s = cpu_s() - c0;
+    ps->too_many = bs.too_many;
+    if (bs.too_many)
+        return bf_fail(BF_NO_MEMORY, "render: %llu particles at %g m cells need more than %llu bricks, the most one "
+                                     "binding holds (a larger cell or radius needs fewer)",
+                       (unsigned long long)n, c->cell_m, (unsigned long long)max_bricks);
     if (s != BF_OK) return s;
     if (bs.n_bricks > (1u << 28) || bs.n_nodes > (1u << 28))
         return bf_fail(BF_NO_MEMORY, "render: %u particle bricks, %llu nodes", bs.n_bricks,
                        (unsigned long long)bs.n_nodes);
-    /* The pass binds each bit plane whole: one storage binding must hold it
-     * (lavapipe: 128 MiB, 2 M bricks). */
-    uint64_t plane_bytes = (uint64_t)bs.n_bricks * BRICK_WORDS * 4;
-    if (plane_bytes > gpu_binding_max_bytes(ps->ctx, 4))
-        return bf_fail(BF_NO_MEMORY, "render: %u particle bricks need %.0f MiB bit planes, a binding holds %.0f MiB "
-                                     "(a larger cell or radius needs fewer)",
-                       bs.n_bricks, plane_bytes / 1048576.0, gpu_binding_max_bytes(ps->ctx, 4) / 1048576.0);
-    double t1 = bf_time_s();
     bool fits = ps->map && bs.n_bricks <= ps->brick_cap && bs.n_nodes + 64 <= ps->node_cap &&
                 2 * bs.n_chunks <= ps->n_buckets;
+    double t1 = bf_time_s();
     if (fits) {
         s = fusion_clear(ps->map);
     } else {
@@ -199,6 +201,7 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
             ps->map = nm;
             if (ps->bind) s = bind_map(ps);
         }
+        t1 = bf_time_s(); /* making the map (its pipelines) is not loading it */
     }
     if (s == BF_OK) {
         hostmap hm = {.chunk_m = st->chunk_m, .origin_w = origin, .n_bricks = bs.n_bricks, .bricks = bs.bricks};
@@ -217,6 +220,23 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
     return BF_OK;
 }
 
+/* The set binned at the cell of c (the level, chunk and dispatches it
+ * takes with it). */
+static bf_status set_cell(render_particles *ps, const render_particles_config *c, const float *xyz, uint64_t n)
+{
+    ps->cfg = *c;
+    render_particles_stats *st = &ps->stats;
+    st->level = bin_level(c->cell_m);
+    st->cell_m = c->cell_m;
+    st->chunk_m = (float)(c->cell_m * 8.0 * (double)(1u << st->level));
+    pass_budget(c, &ps->cells_per_pass, &ps->n_passes);
+    if (ps->map) { /* another cell: another chunk edge */
+        fusion_destroy(ps->map);
+        ps->map = NULL;
+    }
+    return bin_and_load(ps, xyz, n, 1.0);
+}
+
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
                                   render_particles **out)
 {
@@ -228,15 +248,17 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     render_particles *ps = bf_calloc(1, sizeof *ps);
     if (!ps) return bf_fail(BF_NO_MEMORY, "render: particle set");
     ps->ctx = ctx;
-    ps->cfg = c;
-    render_particles_stats *st = &ps->stats;
-    st->level = bin_level(c.cell_m);
-    st->cell_m = c.cell_m;
-    st->chunk_m = (float)(c.cell_m * 8.0 * (double)(1u << st->level));
-    pass_budget(&c, &ps->cells_per_pass, &ps->n_passes);
     ps->binner = particles_binner_create();
     if (!ps->binner) s = bf_fail(BF_NO_MEMORY, "render: particle binning");
-    if (s == BF_OK) s = bin_and_load(ps, xyz, n, 1.0);
+    if (s == BF_OK) s = set_cell(ps, &c, xyz, n);
+    /* The default cell (cell_m 0) is an eighth of the radius where its
+     * bricks fit, else a quarter (sparse sets of many particles: a sphere
+     * reaches 27 bricks of eighth-radius cells, 8 of quarter-radius ones). */
+    bool auto_cell = !(cfg ? cfg : &def)->cell_m;
+    if (s == BF_NO_MEMORY && ps->too_many && auto_cell) {
+        c.cell_m = c.radius_m / 4.0f;
+        s = set_cell(ps, &c, xyz, n);
+    }
     gpu_pipeline_desc pd = {
         .name = "render.particles",
         .spirv = bf_spv_render_particles,

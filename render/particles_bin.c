@@ -268,7 +268,9 @@ typedef struct bin_part {
     void *bricks_mem;
     uint64_t *codes;
     uint32_t n, brick_cap, n_occupied;
-    bool failed; /* out of memory (the thread cannot set the caller's error) */
+    uint64_t max_bricks;
+    bool failed;    /* out of memory (the thread cannot set the caller's error) */
+    bool too_many;  /* past max_bricks */
 } bin_part;
 
 /* Runs of 64 consecutive codes keep together; the runs are scattered. */
@@ -445,7 +447,7 @@ static void *part_main(void *arg)
     uint64_t runs = 0;
     for (uint64_t i = 0; i < p->n_cells; i++) runs += i == 0 || p->cells[i] >> 9 != p->cells[i - 1] >> 9;
     uint64_t guess = runs * (p->rt ? 4 : 8) + 1024;
-    p->n = 0, p->n_occupied = 0, p->failed = false;
+    p->n = 0, p->n_occupied = 0, p->failed = false, p->too_many = false;
     bool ok = part_reserve(p, guess);
     bin_index *ix = &p->ix;
     if (ok && ix->dim[0]) {
@@ -471,6 +473,10 @@ static void *part_main(void *arg)
         while (j < p->n_cells && p->cells[j] >> 9 == p->cells[i] >> 9) j++;
         if (!part_run(p, i, j)) {
             p->failed = true;
+            return NULL;
+        }
+        if (p->n > p->max_bricks) {
+            p->too_many = true;
             return NULL;
         }
         i = j;
@@ -596,7 +602,7 @@ static void *emit_main(void *arg)
 }
 
 bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
-                        double radius_m, uint32_t level, particles_binned *out)
+                        double radius_m, uint32_t level, uint64_t max_bricks, particles_binned *out)
 {
     memset(out, 0, sizeof *out);
     uint64_t n_cells = 0;
@@ -624,11 +630,15 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     for (int a = 0; a < 3 && n; a++) box *= hi[a] - lo[a] + 1 + 2 * pad;
     bool dense = n && box <= (int64_t)(4 * n > (1u << 22) ? 4 * n : (1u << 22));
     for (int t = 0; t < 2; t++) {
-        p[t].rt = w->rt, p[t].reach = reach;
+        p[t].rt = w->rt, p[t].reach = reach, p[t].max_bricks = max_bricks;
         for (int a = 0; a < 3; a++) p[t].ix.lo[a] = lo[a] - pad, p[t].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
     }
     run_two(part_main, &p[0], &p[1]);
     if (p[0].failed || p[1].failed) return bf_fail(BF_NO_MEMORY, "render: particle bricks");
+    if (p[0].too_many || p[1].too_many || (uint64_t)p[0].n + p[1].n > 2 * max_bricks) {
+        out->too_many = true;
+        return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
+    }
     merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX);
     /* Both halves' bricks into one array, and their codes sorted for the octrees. */
     uint64_t total = (uint64_t)p[0].n + p[1].n;

@@ -24,15 +24,17 @@ typedef struct particles_binned {
     uint32_t n_occupied;   /* bricks holding set bits */
     uint64_t n_cells;      /* set bits */
     uint64_t n_nodes, n_chunks; /* what the octrees of these bricks need (fusion_load) */
+    bool too_many;         /* failed: more than max_bricks */
 } particles_binned;
 
 /* Bins xyz (n particles, world metres) into cells of cell_m from origin
  * (every cell within the grid: set_frame checked) on octree level `level`:
  * each particle sets its cell's bit (sign plane); each cell a sphere of
  * radius_m at a set cell's middle overlaps gets a reach bit (confidence
- * plane), in bricks allocated (empty) where need be. BF_NO_MEMORY, *out
- * then empty. */
+ * plane), in bricks allocated (empty) where need be. BF_NO_MEMORY when
+ * out of memory or past max_bricks (out->too_many: it stops early there,
+ * so a grid too fine costs little to try). */
 bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
-                        double radius_m, uint32_t level, particles_binned *out);
+                        double radius_m, uint32_t level, uint64_t max_bricks, particles_binned *out);
 
 #endif

@@ -170,7 +170,9 @@ typedef struct render_particles render_particles; /* opaque: one binned set on t
 
 typedef struct render_particles_config {
     float radius_m;  /* every particle's sphere, default 0.01 */
-    float cell_m;    /* cell edge at the finest level; 0 (default): radius / 4; at most 2 radius */
+    float cell_m;    /* cell edge at the finest level, at most 2 radii; 0 (default): radius / 8 (depths within
+                        2 mm of the exact spheres' on 95% of the pixels at a 1 cm radius, docs/particles.md), or
+                        radius / 4 where the finer cells' bricks do not fit one binding (large sparse sets) */
     uint32_t rgb;    /* colour, R in the low byte; default a water blue */
 } render_particles_config;
 
@@ -187,7 +189,7 @@ typedef struct render_particles_stats {
     bf_vec3 origin_w;       /* the grid's corner: cell i spans origin_w + [i, i + 1) cell_m, its sphere at the middle */
     double bin_s;           /* host binning: cells, bricks, the host copy (wall clock) */
     double bin_cpu_s;       /* the same in CPU seconds of the process (both binning threads) */
-    double load_s;          /* the host copy into the GPU pools (the map emptied or made, fusion_load) */
+    double load_s;          /* the host copy into the GPU pools (emptying them, fusion_load; not making a map) */
     bool map_made;          /* the last binning made the map anew (the first, or a set grown past its pools) */
 } render_particles_stats;
 
