@@ -5,10 +5,15 @@
 # binding), each binned and ray-cast at 640x480 by `bitfuse render` (the
 # median of 3 casts). Writes OUT/particles_sweep.md (a table) and
 # OUT/particles_sweep.png (a plot).
-# Usage: bench/particles_sweep.sh OUT [N ...]   (default N: 10000 100000 1000000)
+# Usage: bench/particles_sweep.sh OUT [--cell M] [N ...]   (default N: 10000 100000 1000000)
 set -euo pipefail
 OUT=$1
 shift
+CELL=()
+if [ "${1:-}" = "--cell" ]; then
+    CELL=(--particle-cell "$2")
+    shift 2
+fi
 NS=${*:-10000 100000 1000000}
 B=${BIN:-build/app/bitfuse}
 mkdir -p "$OUT"
@@ -17,7 +22,7 @@ echo "| particles | cell [mm] | bricks with particles (+ empty) | binning on the
 echo "|---|---|---|---|---|---|---|---|" >>"$T"
 for n in $NS; do
     python3 -c 'import struct,random,sys; random.seed(1); n=int(sys.argv[1]); f=open(sys.argv[2],"wb"); f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n"%n); f.write(b"".join(struct.pack("<3f",random.uniform(0,2),random.uniform(0,1),random.uniform(0,1)) for i in range(n)))' "$n" "$OUT/p$n.ply"
-    "$B" render --particles "$OUT/p$n.ply" --particle-radius 0.005 \
+    "$B" render --particles "$OUT/p$n.ply" --particle-radius 0.005 "${CELL[@]}" \
         --pose "2 -0.8 0.9 -0.772625 -0.329703 0.212940 0.499002" --size 640x480 --out "$OUT/p$n.png" --repeat 3 \
         >"$OUT/p$n.txt" 2>/dev/null
     python3 - "$OUT/p$n.txt" "$n" >>"$T" <<'PY'
