@@ -37,6 +37,7 @@ struct render_particles {
     particles_binner *binner; /* kept: a re-binned set touches no new host memory */
     uint32_t brick_cap, node_cap, n_buckets; /* what ps->map holds */
     bool too_many; /* the last binning needed more bricks than a binding holds */
+    bool unbound;  /* a failed update left the pass bound to a destroyed map */
     uint32_t cells_per_pass, n_passes;
     double last_ms;
 };
@@ -200,6 +201,8 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
             fusion_destroy(ps->map);
             ps->map = nm;
             if (ps->bind) s = bind_map(ps);
+            /* Bindings part old, part new: the set stays unusable. */
+            ps->unbound = s != BF_OK;
         }
         t1 = bf_time_s(); /* making the map (its pipelines) is not loading it */
     }
@@ -330,6 +333,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
     if (!(opt->near_m > 0) || !(opt->far_m > opt->near_m) || !isfinite(opt->far_m))
         return bf_fail(BF_INVALID_ARG, "render: depth range [%g, %g] m", opt->near_m, opt->far_m);
     if (opt->depth_out) return bf_fail(BF_INVALID_ARG, "render: particles write the caster's own depth image");
+    if (ps->unbound) return bf_fail(BF_INVALID_ARG, "render: the particle set lost its pools in a failed update");
     gpu_buffer *imgs[4] = {tg->depth, tg->level, tg->normal, tg->colour};
     for (uint32_t i = 0; i < 4; i++) {
         if (ps->bound[i] == imgs[i]) continue;

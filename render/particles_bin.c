@@ -305,7 +305,7 @@ static bool index_grow(bin_index *ix)
 static uint32_t *index_entry(const bin_index *ix, const int64_t c[3], uint64_t code, bin_slot **slot)
 {
     *slot = NULL;
-    if (ix->dense) {
+    if (ix->dim[0]) {
         int64_t x = c[0] - ix->lo[0], y = c[1] - ix->lo[1], z = c[2] - ix->lo[2];
         return &ix->dense[x + ix->dim[0] * (y + ix->dim[1] * z)];
     }
@@ -635,20 +635,24 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     }
     run_two(part_main, &p[0], &p[1]);
     if (p[0].failed || p[1].failed) return bf_fail(BF_NO_MEMORY, "render: particle bricks");
-    if (p[0].too_many || p[1].too_many || (uint64_t)p[0].n + p[1].n > 2 * max_bricks) {
+    if (p[0].too_many || p[1].too_many) {
         out->too_many = true;
         return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
     }
     merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX);
     /* Both halves' bricks into one array, and their codes sorted for the octrees. */
-    uint64_t total = (uint64_t)p[0].n + p[1].n;
-    if (total >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, total + 1, sizeof *w->all) ||
-        !reserve((void **)&w->keys, &w->keys_cap, total + 1, 8) || !reserve((void **)&w->tmp, &w->tmp_cap, total + 1, 8))
-        return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)total);
-    uint64_t *codes = w->keys, k0 = 0, k = 0;
+    uint64_t k0 = 0, k = 0;
     for (uint32_t i = 0; i < p[0].n; i++) k0 += p[0].codes[i] != UINT64_MAX;
     for (uint32_t i = 0; i < p[1].n; i++) k += p[1].codes[i] != UINT64_MAX;
     k += k0;
+    if (k > max_bricks) {
+        out->too_many = true;
+        return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
+    }
+    if (k >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, k + 1, sizeof *w->all) ||
+        !reserve((void **)&w->keys, &w->keys_cap, k + 1, 8) || !reserve((void **)&w->tmp, &w->tmp_cap, k + 1, 8))
+        return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)k);
+    uint64_t *codes = w->keys;
     emit_job e[2] = {{&p[0], w->all, codes, level}, {&p[1], w->all + k0, codes + k0, level}};
     run_two(emit_main, &e[0], &e[1]);
     out->n_occupied = p[0].n_occupied + p[1].n_occupied;
