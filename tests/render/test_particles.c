@@ -433,6 +433,55 @@ BF_TEST(a_moving_set_rebinned_per_step_matches_its_new_positions)
     mesh_free(&m);
 }
 
+/* Particles metres apart: their brick box (10 m at 1 cm bricks, 10^9
+ * bricks) is too large for the dense brick index, so the binning goes
+ * through its hash table; the same particles 10 cm apart (a dense index)
+ * sit at the same places in their bricks (both spacings are whole bricks)
+ * and need as many bricks. The far set is drawn exactly against the
+ * cell-centred oracle. */
+BF_TEST(far_apart_particles_bin_through_the_hash_alike)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    render_particles_stats st[2];
+    float far_xyz[12] = {0, 0, 1, 10, 0, 1, 0, 10, 1, 0, 0, 11};
+    for (int k = 0; k < 2; k++) {
+        float xyz[12];
+        for (int i = 0; i < 12; i++) xyz[i] = k ? far_xyz[i] * 0.01f : far_xyz[i];
+        render_particles *ps;
+        CHECK_OK(render_particles_create(ctx, NULL, k ? xyz : far_xyz, 4, &ps));
+        st[k] = *render_particles_get_stats(ps);
+        if (k == 0) {
+            /* One sphere 0.5 m ahead of the camera, the others out of view. */
+            const bf_intrinsics K = {48, 36, 600.0, 600.0, 23.5, 17.5, 5000};
+            render_caster *rc;
+            CHECK_OK(render_create(ctx, NULL, K.width, K.height, &rc));
+            bf_se3 T = bf_se3_identity();
+            T.t = bf_v3(0.003, -0.002, 0.5);
+            uint32_t bad;
+            double mask;
+            cast_and_compare(rc, ps, far_xyz, 4, &K, &T, &bad, &mask);
+            CHECK_EQ_INT(bad, 0);
+            CHECK(mask >= 0.97);
+            float ref[48 * 36];
+            uint32_t n_hit = 0;
+            particles_ref_cast(far_xyz, 4, 0.01, &K, &T, 0.1, 8.0, ref);
+            for (uint32_t i = 0; i < 48 * 36; i++) n_hit += ref[i] > 0;
+            CHECK(n_hit > 300); /* the sphere is in view: about 450 pixels */
+            render_destroy(rc);
+        }
+        render_particles_destroy(ps);
+    }
+    fprintf(stderr, "  far apart: %u bricks (+%u empty); 10 cm apart: %u (+%u)\n", st[0].n_bricks, st[0].n_pad_bricks,
+            st[1].n_bricks, st[1].n_pad_bricks);
+    CHECK_EQ_INT(st[0].n_cells, 4);
+    CHECK_EQ_INT(st[0].n_bricks, 4);
+    CHECK(st[0].n_pad_bricks >= 4 * 7); /* each sphere reaches at least 7 neighbours */
+    CHECK_EQ_INT(st[0].n_pad_bricks, st[1].n_pad_bricks);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 /* The fault points of making a set (host allocations, Vulkan calls) fail
  * in turn: a status, *out untouched, nothing leaked (validation counts the
  * objects left at the context's end). Each try makes a whole map (about
