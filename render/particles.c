@@ -4,16 +4,17 @@
  * a fusion_map of the set's own (the same pools, hash and octrees the
  * ray-caster walks), and the particle pass (shaders/render_particles.comp).
  *
- * Binning: each particle sets the bit of the cell holding it (cells of
- * cell_m on the bricks' level, bricks found through an open-addressing
- * table keyed by the global brick coordinate). A sphere reaches up to the
+ * Binning (render/particles_bin.c: sorted by brick, two threads): each
+ * particle sets the bit of the cell holding it (cells of cell_m on the
+ * bricks' level). A sphere reaches up to the
  * radius beyond its cell, into bricks that may hold no particle; the walk
  * only visits bricks that exist, so every brick the sphere's box touches
  * is allocated too (empty), and every cell a sphere overlaps gets a reach
  * bit in the confidence plane: the traverser searches the neighbours only
  * from the first reached cell on the ray. That costs memory and binning
  * time (docs/particles.md counts both) but keeps the traverser's search
- * local and short. */
+ * local and short. A moving set is re-binned into the same map, emptied
+ * (render_particles_update). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -50,7 +51,7 @@ render_particles_config render_particles_config_default(void)
 /* ------------------------------------------------------------ binning */
 
 /* The level of the bricks: chunks of about a metre (fusion's default is 2
- * m; a metre keeps the octree 6 levels deep at the default 2.5 mm cells). */
+ * m; a metre keeps the octree 7 levels deep at the default 1.25 mm cells). */
 static uint32_t bin_level(double cell_m)
 {
     double l = floor(log2(1.0 / (8.0 * cell_m)) + 0.5);
