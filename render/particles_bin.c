@@ -362,36 +362,52 @@ static uint32_t part_brick(bin_part *p, const int64_t c[3], uint64_t code)
     return p->n++;
 }
 
-/* One brick's run of cells [i, j): its sign bits, and the reach bits of
- * its spheres in it and its neighbours. */
-static bool part_run(bin_part *p, uint64_t i, uint64_t j)
+/* One brick's run of cells [i, j) and the bricks its spheres reach. */
+typedef struct bin_run {
+    uint64_t i, j;
+    int64_t b[3];
+    uint32_t me, used, t[27]; /* its brick; the neighbours reached (bit k) and their bricks */
+} bin_run;
+
+/* A run's bricks found (made where new) and its sign bits set; the lines
+ * of its neighbours' reach planes prefetched, to be written by
+ * run_apply after the next run is prepared (the lookups of one run
+ * overlap the memory latency of the last). */
+static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
 {
     uint64_t code = p->cells[i] >> 9;
-    int64_t b[3];
-    unmorton3(code, b);
-    uint32_t me = part_brick(p, b, code);
-    if (me == UINT32_MAX) return false;
-    bin_planes *hb = &p->bricks[me];
+    r->i = i, r->j = j;
+    unmorton3(code, r->b);
+    r->me = part_brick(p, r->b, code);
+    if (r->me == UINT32_MAX) return false;
+    bin_planes *hb = &p->bricks[r->me];
     for (uint64_t k = i; k < j; k++) {
         uint32_t l = (uint32_t)(p->cells[k] & 511), x = l & 7, y = (l >> 3) & 7, z = l >> 6;
         hb->sign[brick_word(x, y, z)] |= 1u << brick_bit(x, y, z);
     }
     p->n_occupied++;
+    r->used = 0;
+    if (!p->rt) return true;
+    for (uint64_t k = i; k < j; k++) r->used |= p->rt->used[p->cells[k] & 511];
+    for (uint32_t u = r->used; u; u &= u - 1) {
+        uint32_t nb = (uint32_t)__builtin_ctz(u);
+        int64_t c[3] = {r->b[0] + (int64_t)(nb % 3) - 1, r->b[1] + (int64_t)(nb / 3 % 3) - 1,
+                        r->b[2] + (int64_t)(nb / 9) - 1};
+        r->t[nb] = nb == 13 ? r->me : part_brick(p, c, morton3(c));
+        if (r->t[nb] == UINT32_MAX) return false;
+        __builtin_prefetch(p->bricks[r->t[nb]].conf, 1);
+    }
+    return true;
+}
+
+/* The reach bits of a prepared run's spheres, in its brick and its
+ * neighbours. */
+static bool run_apply(bin_part *p, const bin_run *r)
+{
     if (p->rt) {
-        /* The neighbours first, their lines fetched while the masks gather. */
-        uint32_t used = 0, t[27];
-        for (uint64_t k = i; k < j; k++) used |= p->rt->used[p->cells[k] & 511];
-        for (uint32_t nb = 0; nb < 27; nb++) {
-            if (!(used >> nb & 1)) continue;
-            int64_t c[3] = {b[0] + (int64_t)(nb % 3) - 1, b[1] + (int64_t)(nb / 3 % 3) - 1, b[2] + (int64_t)(nb / 9) - 1};
-            t[nb] = nb == 13 ? me : part_brick(p, c, morton3(c));
-            if (t[nb] == UINT32_MAX) return false;
-            __builtin_prefetch(p->bricks[t[nb]].conf, 1);
-        }
         uint32_t acc[27][16];
-        for (uint32_t nb = 0; nb < 27; nb++)
-            if (used >> nb & 1) memset(acc[nb], 0, sizeof acc[nb]);
-        for (uint64_t k = i; k < j; k++) {
+        for (uint32_t u = r->used; u; u &= u - 1) memset(acc[__builtin_ctz(u)], 0, sizeof acc[0]);
+        for (uint64_t k = r->i; k < r->j; k++) {
             uint32_t l = (uint32_t)(p->cells[k] & 511), u = p->rt->used[l];
             const uint32_t(*m)[16] = &p->rt->mask[p->rt->first[l]];
             for (; u; u &= u - 1, m++) {
@@ -399,14 +415,15 @@ static bool part_run(bin_part *p, uint64_t i, uint64_t j)
                 for (int w = 0; w < 16; w++) acc[nb][w] |= (*m)[w];
             }
         }
-        for (uint32_t nb = 0; nb < 27; nb++) {
-            if (!(used >> nb & 1)) continue;
-            for (int w = 0; w < 16; w++) p->bricks[t[nb]].conf[w] |= acc[nb][w];
+        for (uint32_t u = r->used; u; u &= u - 1) {
+            uint32_t nb = (uint32_t)__builtin_ctz(u);
+            for (int w = 0; w < 16; w++) p->bricks[r->t[nb]].conf[w] |= acc[nb][w];
         }
         return true;
     }
     /* A reach beyond a brick: every brick of each sphere's box. */
-    for (uint64_t k = i; k < j; k++) {
+    const int64_t *b = r->b;
+    for (uint64_t k = r->i; k < r->j; k++) {
         uint32_t l = (uint32_t)(p->cells[k] & 511);
         double cc[3] = {b[0] * 8 + (l & 7) + 0.5, b[1] * 8 + ((l >> 3) & 7) + 0.5, b[2] * 8 + (l >> 6) + 0.5};
         int64_t lo[3], hi[3];
@@ -468,19 +485,24 @@ static void *part_main(void *arg)
         p->failed = true;
         return NULL;
     }
+    bin_run run[2];
+    int cur = 0;
+    bool have = false;
     for (uint64_t i = 0; i < p->n_cells;) {
         uint64_t j = i + 1;
         while (j < p->n_cells && p->cells[j] >> 9 == p->cells[i] >> 9) j++;
-        if (!part_run(p, i, j)) {
+        if (!run_prepare(p, i, j, &run[cur ^ 1]) || (have && !run_apply(p, &run[cur]))) {
             p->failed = true;
             return NULL;
         }
+        cur ^= 1, have = true;
         if (p->n > p->max_bricks) {
             p->too_many = true;
             return NULL;
         }
         i = j;
     }
+    if (have && !run_apply(p, &run[cur])) p->failed = true;
     return NULL;
 }
 
