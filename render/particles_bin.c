@@ -518,21 +518,37 @@ static void brick_or(bin_planes *dst, const bin_planes *src)
 
 /* ------------------------------------------------------------ octrees */
 
+/* Distinct ancestors k levels up, for k in [k0, k1], of the bricks m[0, n)
+ * (sorted Morton codes: ancestors k levels up share code >> 3k). */
+typedef struct count_job {
+    const uint64_t *m;
+    uint64_t n;
+    uint32_t k0, k1;
+    uint64_t distinct[FUSION_MAX_LEVEL + 1];
+} count_job;
+
+static void *count_main(void *arg)
+{
+    count_job *c = arg;
+    for (uint32_t k = c->k0; k <= c->k1; k++) {
+        uint64_t d = 0;
+        for (uint64_t i = 0; i < c->n; i++) d += i == 0 || (c->m[i] >> (3 * k)) != (c->m[i - 1] >> (3 * k));
+        c->distinct[k] = d;
+    }
+    return NULL;
+}
+
 /* Nodes and chunks the octrees of these bricks (sorted Morton codes)
  * need: a chunk's root, and 8 children for every node with one
- * (fusion_load builds them so). */
+ * (fusion_load builds them so). The levels are counted on two threads. */
 static void count_nodes(const uint64_t *m, uint64_t n, uint32_t level, uint64_t *n_nodes, uint64_t *n_chunks)
 {
-    uint64_t nodes = 0, chunks = 0;
-    for (uint32_t k = 1; k <= level; k++) {
-        uint64_t distinct = 0;
-        for (uint64_t i = 0; i < n; i++)
-            if (i == 0 || (m[i] >> (3 * k)) != (m[i - 1] >> (3 * k))) distinct++;
-        nodes += 8 * distinct; /* the children of each parent k levels up */
-        if (k == level) chunks = distinct, nodes += distinct; /* the roots */
-    }
-    *n_nodes = nodes;
-    *n_chunks = chunks;
+    count_job c[2] = {{.m = m, .n = n, .k0 = 1, .k1 = level / 2}, {.m = m, .n = n, .k0 = level / 2 + 1, .k1 = level}};
+    run_two(count_main, &c[0], &c[1]);
+    uint64_t nodes = 0;
+    for (uint32_t k = 1; k <= level; k++) nodes += 8 * c[k <= level / 2 ? 0 : 1].distinct[k]; /* the children of each parent k levels up */
+    *n_chunks = c[1].distinct[level];
+    *n_nodes = nodes + *n_chunks; /* and the roots */
 }
 
 /* ------------------------------------------------------------ all of it */
