@@ -7,15 +7,20 @@
  *      threads, a half each, then one merge that drops repeats: particles
  *      sharing a cell are one sphere);
  *   2. per brick (a run of equal codes), the reach bits of all its cells
- *      gathered into one mask per neighbour brick (a table per cell place),
- *      then one lookup per neighbour instead of one per particle; bricks
- *      come in Morton order, and the brick table keeps runs of 64 codes
- *      (4x4x4 bricks) together, so the lookups and the brick writes stay
- *      near each other. Two threads take a half of the bricks each, with
- *      tables of their own; the bricks either made for the other half's
- *      codes (a thin layer along the split) are merged after;
- *   3. the octree's node count from the sorted Morton codes of all bricks.
- */
+ *      gathered into one mask per neighbour brick (a packed table per cell
+ *      place), then one lookup per neighbour instead of one per particle;
+ *      runs come in Morton order, so the bricks made and touched stay near
+ *      each other, and a run's neighbours are looked up (made where new)
+ *      and their lines prefetched while the last run's bits are written.
+ *      The index is a dense array over the set's brick box where that is
+ *      small, else a hash table keeping runs of 64 codes (4x4x4 bricks)
+ *      together. Two threads take a half of the runs each, with indexes of
+ *      their own; the bricks either made for the other half's codes (a
+ *      thin layer along the split) are merged after;
+ *   3. the host copy written by both threads, and the octree's node count
+ *      from the radix-sorted Morton codes of all bricks.
+ * The buffers are kept in the binner for the next binning (a moving set's
+ * next step). */
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
