@@ -49,7 +49,7 @@ static int parse_args(int argc, char **argv, render_args *a)
         APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
                 .min = 0, .min_open = true, .max = 10),
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
-                "the particles' grid cell [m] (default: a quarter of the radius; at most 2 radii)", .min = 1e-5,
+                "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
                 .max = 20, .no_default = true),
         APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
                 "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
@@ -207,9 +207,10 @@ int cmd_render(int argc, char **argv)
                    "(+%u empty)\n",
                    a.particles, (unsigned long long)st->n_particles, a.radius_m, st->cell_m, st->level,
                    (unsigned long long)st->n_cells, st->n_bricks, st->n_pad_bricks);
-            printf("  binning          %.1f ms on the host (%.2f M particles/s), %.1f ms into the GPU pools\n",
+            printf("  binning          %.1f ms on the host (%.2f M particles/s; %.1f ms CPU), %.1f ms into the GPU "
+                   "pools\n",
                    1e3 * st->bin_s, st->bin_s > 0 ? 1e-6 * (double)st->n_particles / st->bin_s : 0.0,
-                   1e3 * st->load_s);
+                   1e3 * st->bin_cpu_s, 1e3 * st->load_s);
         }
         printf("  ray-cast         %.1f ms GPU (median of %u)\n", ms[a.repeat / 2], a.repeat);
         if (ps && map) printf("    of which particles %.1f ms\n", ms_p[a.repeat / 2]);

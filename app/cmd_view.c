@@ -47,7 +47,7 @@ static int parse_args(int argc, char **argv, view_args *a)
         APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
                 .min = 0, .min_open = true, .max = 10),
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
-                "the particles' grid cell [m] (default: a quarter of the radius; at most 2 radii)", .min = 1e-5,
+                "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
                 .max = 20, .no_default = true),
         APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
                 "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks at the first pose's "

@@ -216,6 +216,11 @@ bf_status fusion_snapshot_take(fusion_map *map, hostmap *out);
  * brick given twice; BF_POOL_FULL when the pools cannot hold it. On failure
  * the map is empty again. */
 bf_status fusion_load(fusion_map *map, const hostmap *in);
+/* Empties a map that holds only what fusion_load put in (no frame
+ * uploaded): as fusion_create made it, pools and pipelines kept, ready for
+ * the next load (render/'s particle sets, re-binned per time step).
+ * BF_INVALID_ARG for a map with frames. */
+bf_status fusion_clear(fusion_map *map);
 
 /* ------------------------------------------------------------ streaming
  * Chunks out of the pools and back (stream/ decides which; DESIGN.md

@@ -507,6 +507,17 @@ const fusion_config *fusion_get_config(const fusion_map *m) { return &m->cfg; }
 uint32_t fusion_frame_count(const fusion_map *m) { return m->n_frames; }
 uint32_t fusion_windows_done(const fusion_map *m) { return m->n_windows_done; }
 
+bf_status fusion_clear(fusion_map *m)
+{
+    if (!m) return bf_fail(BF_INVALID_ARG, "fusion_clear: NULL map");
+    if (m->n_frames > 0 || m->has_incoming)
+        return bf_fail(BF_INVALID_ARG, "fusion: only a map without frames is cleared (a loaded one)");
+    bf_status s = fusion__reset(m);
+    m->n_loaded = 0;
+    m->use.bricks = m->use.nodes = m->use.overflow = 0;
+    return s;
+}
+
 bf_status fusion_set_origin(fusion_map *m, bf_vec3 origin_w)
 {
     if (!isfinite(origin_w.x) || !isfinite(origin_w.y) || !isfinite(origin_w.z))

@@ -4,21 +4,24 @@
  * a fusion_map of the set's own (the same pools, hash and octrees the
  * ray-caster walks), and the particle pass (shaders/render_particles.comp).
  *
- * Binning: each particle sets the bit of the cell holding it (cells of
- * cell_m on the bricks' level, bricks found through an open-addressing
- * table keyed by the global brick coordinate). A sphere reaches up to the
+ * Binning (render/particles_bin.c: sorted by brick, two threads): each
+ * particle sets the bit of the cell holding it (cells of cell_m on the
+ * bricks' level). A sphere reaches up to the
  * radius beyond its cell, into bricks that may hold no particle; the walk
  * only visits bricks that exist, so every brick the sphere's box touches
  * is allocated too (empty), and every cell a sphere overlaps gets a reach
  * bit in the confidence plane: the traverser searches the neighbours only
  * from the first reached cell on the ray. That costs memory and binning
  * time (docs/particles.md counts both) but keeps the traverser's search
- * local and short. */
+ * local and short. A moving set is re-binned into the same map, emptied
+ * (render_particles_update). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "bf_shaders_spv.h"
+#include "particles_bin.h"
 #include "render.h"
 #include "shaders/fusion.glsl.h"
 #include "shaders/render.glsl.h"
@@ -32,6 +35,10 @@ struct render_particles {
     gpu_bindings *bind;
     gpu_buffer *bound[4]; /* the caster images bound at 3..6 */
     gpu_buffer *resume;   /* binding 8: per pixel, where a ray resumes; made for the image size */
+    particles_binner *binner; /* kept: a re-binned set touches no new host memory */
+    uint32_t brick_cap, node_cap, n_buckets; /* what ps->map holds */
+    bool too_many; /* the last binning needed more bricks than a binding holds */
+    bool unbound;  /* a failed update left the pass bound to a destroyed map */
     uint32_t cells_per_pass, n_passes;
     double last_ms;
 };
@@ -43,275 +50,12 @@ render_particles_config render_particles_config_default(void)
 
 /* ------------------------------------------------------------ binning */
 
-/* Global brick coordinates are below 2^BIN_AXIS_BITS per axis (the origin
- * sits below the set's box, so they are never negative). */
-#define BIN_AXIS_BITS 21
-#define BIN_MAX_CELLS ((int64_t)1 << 24)
-
-typedef struct bin_table {
-    uint64_t *keys;  /* code + 1; 0 = empty */
-    uint32_t *index; /* brick index */
-    uint64_t cap;    /* a power of two */
-    uint32_t n;
-} bin_table;
-
-typedef struct bin_state {
-    bin_table t;
-    hostmap_brick *bricks;
-    uint32_t n, cap;
-    uint64_t *codes; /* global brick coordinate code of each brick */
-} bin_state;
-
-static uint64_t brick_code(const int64_t b[3])
-{
-    return ((uint64_t)b[0] << (2 * BIN_AXIS_BITS)) | ((uint64_t)b[1] << BIN_AXIS_BITS) | (uint64_t)b[2];
-}
-
-static uint64_t hash64(uint64_t x)
-{
-    x ^= x >> 33;
-    x *= 0xff51afd7ed558ccdull;
-    x ^= x >> 33;
-    return x;
-}
-
-static bf_status table_grow(bin_table *t)
-{
-    uint64_t cap = t->cap ? 2 * t->cap : 1u << 12;
-    uint64_t *keys = bf_calloc(cap, 8);
-    uint32_t *index = bf_malloc(cap * 4);
-    if (!keys || !index) {
-        free(keys), free(index);
-        return bf_fail(BF_NO_MEMORY, "render: particle bins (%llu entries)", (unsigned long long)cap);
-    }
-    for (uint64_t i = 0; i < t->cap; i++) {
-        if (!t->keys[i]) continue;
-        uint64_t h = hash64(t->keys[i]) & (cap - 1);
-        while (keys[h]) h = (h + 1) & (cap - 1);
-        keys[h] = t->keys[i];
-        index[h] = t->index[i];
-    }
-    free(t->keys), free(t->index);
-    t->keys = keys, t->index = index, t->cap = cap;
-    return BF_OK;
-}
-
-/* Index of the brick with global coordinates b, added (empty) when new. */
-static bf_status bin_brick(bin_state *st, const int64_t b[3], uint32_t *out)
-{
-    uint64_t key = brick_code(b) + 1;
-    uint64_t h = hash64(key) & (st->t.cap - 1);
-    while (st->t.keys[h]) {
-        if (st->t.keys[h] == key) {
-            *out = st->t.index[h];
-            return BF_OK;
-        }
-        h = (h + 1) & (st->t.cap - 1);
-    }
-    if (st->n == st->cap) {
-        uint32_t cap = st->cap ? 2 * st->cap : 1024;
-        hostmap_brick *nb = bf_realloc(st->bricks, (size_t)cap * sizeof *nb);
-        if (nb) st->bricks = nb;
-        uint64_t *nc = nb ? bf_realloc(st->codes, (size_t)cap * 8) : NULL;
-        if (nc) st->codes = nc;
-        if (!nb || !nc) return bf_fail(BF_NO_MEMORY, "render: %u particle bricks", cap);
-        st->cap = cap;
-    }
-    st->t.keys[h] = key;
-    st->t.index[h] = st->n;
-    memset(&st->bricks[st->n], 0, sizeof st->bricks[st->n]);
-    st->codes[st->n] = key - 1;
-    *out = st->n++;
-    /* Keep the table at most half full. */
-    if (++st->t.n * 2 > st->t.cap) return table_grow(&st->t);
-    return BF_OK;
-}
-
 /* The level of the bricks: chunks of about a metre (fusion's default is 2
- * m; a metre keeps the octree 6 levels deep at the default 2.5 mm cells). */
+ * m; a metre keeps the octree 7 levels deep at the default 1.25 mm cells). */
 static uint32_t bin_level(double cell_m)
 {
     double l = floor(log2(1.0 / (8.0 * cell_m)) + 0.5);
     return l < 1 ? 1u : (l > FUSION_MAX_LEVEL ? FUSION_MAX_LEVEL : (uint32_t)l);
-}
-
-/* The 21 low bits of v spread to every third bit (Morton order). */
-static uint64_t spread3(uint64_t v)
-{
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffull;
-    v = (v | v << 16) & 0x1f0000ff0000ffull;
-    v = (v | v << 8) & 0x100f00f00f00f00full;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
-    v = (v | v << 2) & 0x1249249249249249ull;
-    return v;
-}
-
-/* Morton code of a brick: ancestors k levels up share its code >> 3k. */
-static uint64_t morton3(const int64_t b[3])
-{
-    return spread3((uint64_t)b[0]) << 2 | spread3((uint64_t)b[1]) << 1 | spread3((uint64_t)b[2]);
-}
-
-static int cmp_u64(const void *a, const void *b)
-{
-    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
-    return (x > y) - (x < y);
-}
-
-/* Nodes and chunks the octrees of these bricks need: a chunk's root, and 8
- * children for every node with one (fusion_load builds them so). */
-static bf_status count_nodes(const bin_state *st, uint32_t level, uint64_t *n_nodes, uint64_t *n_chunks)
-{
-    uint64_t *m = bf_malloc((st->n ? st->n : 1) * 8ull);
-    if (!m) return bf_fail(BF_NO_MEMORY, "render: particle octrees");
-    for (uint32_t i = 0; i < st->n; i++) {
-        uint64_t c = st->codes[i], mask = (1ull << BIN_AXIS_BITS) - 1;
-        int64_t b[3] = {(int64_t)(c >> (2 * BIN_AXIS_BITS)), (int64_t)((c >> BIN_AXIS_BITS) & mask),
-                        (int64_t)(c & mask)};
-        m[i] = morton3(b);
-    }
-    qsort(m, st->n, 8, cmp_u64);
-    uint64_t nodes = 0, chunks = 0;
-    for (uint32_t k = 1; k <= level; k++) {
-        uint64_t distinct = 0;
-        for (uint32_t i = 0; i < st->n; i++)
-            if (i == 0 || (m[i] >> (3 * k)) != (m[i - 1] >> (3 * k))) distinct++;
-        nodes += 8 * distinct; /* the children of each parent k levels up */
-        if (k == level) chunks = distinct, nodes += distinct; /* the roots */
-    }
-    free(m);
-    *n_nodes = nodes;
-    *n_chunks = chunks;
-    return BF_OK;
-}
-
-/* Sets the reach bits of brick hb (global coordinates b) for the cells the
- * sphere at cc (cell units) of radius reach (cells) overlaps: those whose
- * box is within reach of the centre. */
-static void bin_reach(hostmap_brick *hb, const int64_t b[3], const double cc[3], double reach)
-{
-    int64_t lo[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-        lo[a] = (int64_t)floor(cc[a] - reach) - b[a] * 8;
-        hi[a] = (int64_t)floor(cc[a] + reach) - b[a] * 8;
-        if (lo[a] < 0) lo[a] = 0;
-        if (hi[a] > 7) hi[a] = 7;
-    }
-    double r2 = reach * reach;
-    for (int64_t z = lo[2]; z <= hi[2]; z++) {
-        double dz = cc[2] - (double)(b[2] * 8 + z);
-        dz = dz < 0 ? -dz : (dz > 1 ? dz - 1 : 0);
-        for (int64_t y = lo[1]; y <= hi[1]; y++) {
-            double dy = cc[1] - (double)(b[1] * 8 + y);
-            dy = dy < 0 ? -dy : (dy > 1 ? dy - 1 : 0);
-            for (int64_t x = lo[0]; x <= hi[0]; x++) {
-                double dx = cc[0] - (double)(b[0] * 8 + x);
-                dx = dx < 0 ? -dx : (dx > 1 ? dx - 1 : 0);
-                if (dx * dx + dy * dy + dz * dz > r2) continue;
-                hb->conf[brick_word((uint32_t)x, (uint32_t)y, (uint32_t)z)] |=
-                    1u << brick_bit((uint32_t)x, (uint32_t)y, (uint32_t)z);
-            }
-        }
-    }
-}
-
-/* The reach bits of a centre depend only on its cell's place in its brick
- * (the centre is the cell's middle): for each of the 512 places, the
- * neighbour bricks (offsets -1..1) the sphere overlaps and their 16 words.
- * Built once per set when the reach is at most 8 cells (a brick); beyond,
- * bin_reach runs per particle. */
-typedef struct reach_table {
-    uint32_t n[512];
-    int8_t off[512][27][3];
-    uint32_t mask[512][27][16];
-} reach_table;
-
-static reach_table *reach_table_make(double reach)
-{
-    if (reach > 8.0) return NULL;
-    reach_table *t = bf_calloc(1, sizeof *t);
-    if (!t) return NULL;
-    for (uint32_t l = 0; l < 512; l++) {
-        double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
-        for (int k = 0; k < 27; k++) {
-            int64_t b[3] = {k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1};
-            hostmap_brick hb;
-            memset(hb.conf, 0, sizeof hb.conf);
-            bin_reach(&hb, b, cc, reach);
-            bool any = false;
-            for (int w = 0; w < 16; w++) any |= hb.conf[w] != 0;
-            if (!any) continue;
-            uint32_t i = t->n[l]++;
-            for (int a = 0; a < 3; a++) t->off[l][i][a] = (int8_t)b[a];
-            memcpy(t->mask[l][i], hb.conf, sizeof hb.conf);
-        }
-    }
-    return t;
-}
-
-/* Bins the particles into st (bricks with their bits) and the host copy. */
-static bf_status bin_particles(const render_particles_config *c, const float *xyz, uint64_t n, bf_vec3 origin,
-                               uint32_t level, bin_state *st, render_particles_stats *ps)
-{
-    double cell = c->cell_m, inv = 1.0 / cell;
-    double reach = c->radius_m * inv; /* the sphere's reach beyond the centre [cells] */
-    bf_status s = table_grow(&st->t);
-    reach_table *rt = reach_table_make(reach); /* NULL: per particle (slower, any reach) */
-    for (uint64_t i = 0; s == BF_OK && i < n; i++) {
-        double p[3] = {xyz[3 * i] - origin.x, xyz[3 * i + 1] - origin.y, xyz[3 * i + 2] - origin.z};
-        int64_t g[3], b[3];
-        for (int a = 0; a < 3; a++) g[a] = (int64_t)floor(p[a] * inv), b[a] = g[a] >> 3;
-        uint32_t bi = 0;
-        s = bin_brick(st, b, &bi);
-        if (s != BF_OK) break;
-        uint32_t x = (uint32_t)(g[0] & 7), y = (uint32_t)(g[1] & 7), z = (uint32_t)(g[2] & 7);
-        uint32_t w = brick_word(x, y, z), bit = 1u << brick_bit(x, y, z);
-        hostmap_brick *hb = &st->bricks[bi];
-        if (hb->sign[w] & bit) continue; /* the cell is set, its reach done */
-        hb->sign[w] |= bit;
-        ps->n_cells++;
-        /* Every brick the sphere's box touches, and in it the reach bit of
-         * every cell the sphere overlaps. */
-        if (rt) {
-            uint32_t l = x + 8 * y + 64 * z;
-            for (uint32_t k = 0; s == BF_OK && k < rt->n[l]; k++) {
-                int64_t nb[3] = {b[0] + rt->off[l][k][0], b[1] + rt->off[l][k][1], b[2] + rt->off[l][k][2]};
-                s = bin_brick(st, nb, &bi);
-                for (int q = 0; s == BF_OK && q < 16; q++) st->bricks[bi].conf[q] |= rt->mask[l][k][q];
-            }
-            continue;
-        }
-        double cc[3] = {g[0] + 0.5, g[1] + 0.5, g[2] + 0.5};
-        int64_t lo[3], hi[3];
-        for (int a = 0; a < 3; a++) {
-            lo[a] = (int64_t)floor((cc[a] - reach) / 8.0);
-            hi[a] = (int64_t)floor((cc[a] + reach) / 8.0);
-        }
-        for (int64_t bz = lo[2]; s == BF_OK && bz <= hi[2]; bz++)
-            for (int64_t by = lo[1]; s == BF_OK && by <= hi[1]; by++)
-                for (int64_t bx = lo[0]; s == BF_OK && bx <= hi[0]; bx++) {
-                    int64_t nb[3] = {bx, by, bz};
-                    s = bin_brick(st, nb, &bi);
-                    if (s == BF_OK) bin_reach(&st->bricks[bi], nb, cc, reach);
-                }
-    }
-    free(rt);
-    if (s != BF_OK) return s;
-    uint32_t per = 1u << level;
-    uint64_t mask = (1ull << BIN_AXIS_BITS) - 1;
-    for (uint32_t i = 0; i < st->n; i++) {
-        hostmap_brick *hb = &st->bricks[i];
-        uint64_t code = st->codes[i];
-        uint64_t b[3] = {code >> (2 * BIN_AXIS_BITS), (code >> BIN_AXIS_BITS) & mask, code & mask};
-        for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(b[a] >> level), hb->cell[a] = (uint32_t)(b[a] & (per - 1));
-        hb->level = level;
-        bool any = false;
-        for (int w = 0; w < 16; w++) any |= hb->sign[w] != 0;
-        if (any) ps->n_bricks++;
-        else ps->n_pad_bricks++;
-    }
-    return BF_OK;
 }
 
 /* The config with its defaults filled in, or BF_INVALID_ARG. */
@@ -320,7 +64,7 @@ static bf_status check_config(const render_particles_config *in, render_particle
     render_particles_config c = *in;
     if (!(c.radius_m > 0) || !isfinite(c.radius_m) || c.radius_m > 10)
         return bf_fail(BF_INVALID_ARG, "render: particle radius %g m (above 0, at most 10)", c.radius_m);
-    if (c.cell_m == 0) c.cell_m = 0.25f * c.radius_m;
+    if (c.cell_m == 0) c.cell_m = c.radius_m / 8.0f;
     if (!(c.cell_m >= 1e-5f) || !(c.cell_m <= 2 * c.radius_m))
         return bf_fail(BF_INVALID_ARG, "render: particle cell %g m (10 um .. 2 radii = %g m)", c.cell_m,
                        2 * c.radius_m);
@@ -341,13 +85,17 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
             if (i == 0 || v < lo[a]) lo[a] = v;
             if (i == 0 || v > hi[a]) hi[a] = v;
         }
-    /* The origin a brick below the box less the reach: no brick coordinate
-     * is negative, padding included. */
-    double margin = c->radius_m + 8.0 * c->cell_m;
+    /* The origin a brick below the box less the reach (whole cells): no
+     * brick coordinate is negative, padding included. And half a cell more,
+     * so the box's lowest corner is a cell's middle: a lattice (a
+     * simulation's first step) whose spacing is a whole number of cells
+     * keeps its centres exactly; at a cell's face, as from a corner on the
+     * grid, they would move by half a cell. */
+    double margin = (ceil(c->radius_m / c->cell_m) + 8.5) * c->cell_m;
     for (int a = 0; a < 3; a++)
-        if ((hi[a] - lo[a] + 2 * margin) / c->cell_m >= (double)BIN_MAX_CELLS)
+        if ((hi[a] - lo[a] + 2 * margin) / c->cell_m >= (double)PARTICLES_MAX_CELLS)
             return bf_fail(BF_INVALID_ARG, "render: particles span %g m on axis %d: more than %lld cells of %g m",
-                           hi[a] - lo[a], a, (long long)BIN_MAX_CELLS, c->cell_m);
+                           hi[a] - lo[a], a, (long long)PARTICLES_MAX_CELLS, c->cell_m);
     *origin = bf_v3(lo[0] - margin, lo[1] - margin, lo[2] - margin);
     return BF_OK;
 }
@@ -368,6 +116,131 @@ static void pass_budget(const render_particles_config *c, uint32_t *cells_per_pa
     *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass;
 }
 
+/* The map's buffers -> the pass's bindings 0, 1, 2 and 7. */
+static bf_status bind_map(render_particles *ps)
+{
+    fusion_gpu_view v = fusion_gpu_view_get(ps->map);
+    bf_status s = gpu_bindings_set(ps->bind, 0, v.hash, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 1, v.nodes, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 2, v.sign, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 7, v.conf, 0, GPU_WHOLE_SIZE);
+    return s;
+}
+
+/* A map that only ever holds what is loaded (no frames, no colour) for at
+ * least these bricks, nodes and chunks; grow > 1 makes room for a set that
+ * grows by that factor, so a moving set seldom needs another. */
+static bf_status make_map(render_particles *ps, bf_vec3 origin, const particles_binned *bs, double grow,
+                          fusion_map **out)
+{
+    const render_particles_stats *st = &ps->stats;
+    uint64_t bind_bricks = gpu_binding_max_bytes(ps->ctx, 4) / (BRICK_WORDS * 4);
+    uint64_t bricks = (uint64_t)(grow * bs->n_bricks) + 1, nodes = (uint64_t)(grow * bs->n_nodes) + 64;
+    if (bricks > bind_bricks) bricks = bind_bricks > bs->n_bricks ? bind_bricks : bs->n_bricks;
+    fusion_config fc = fusion_config_default();
+    fc.chunk_m = st->chunk_m;
+    fc.max_level = st->level;
+    fc.window = 2;
+    fc.subcache = 1;
+    fc.keep_colour = false;
+    fc.brick_cap = (uint32_t)bricks;
+    fc.node_cap = (uint32_t)nodes;
+    uint32_t buckets = 64;
+    while (buckets < 2 * grow * bs->n_chunks) buckets *= 2;
+    fc.hash_buckets = buckets;
+    fc.hash_overflow = buckets;
+    bf_intrinsics K = {8, 8, 8.0, 8.0, 3.5, 3.5, 5000};
+    bf_status s = fusion_create(ps->ctx, &fc, &K, origin, out);
+    if (s != BF_OK) return s;
+    ps->brick_cap = fc.brick_cap, ps->node_cap = fc.node_cap, ps->n_buckets = buckets;
+    return BF_OK;
+}
+
+/* CPU seconds of the process so far: binning's cost apart from what
+ * else shares the cores. */
+static double cpu_s(void)
+{
+    struct timespec t;
+    return clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t) == 0 ? (double)t.tv_sec + 1e-9 * (double)t.tv_nsec : 0.0;
+}
+
+/* Bins xyz into the set's map: the map emptied and kept where it holds
+ * the new bricks, else made anew (grow: room to spare). On failure the map
+ * is empty or the old one. */
+static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n, double grow)
+{
+    const render_particles_config *c = &ps->cfg;
+    bf_vec3 origin = {0, 0, 0};
+    bf_status s = set_frame(c, xyz, n, &origin);
+    if (s != BF_OK) return s;
+    render_particles_stats *st = &ps->stats;
+    double t0 = bf_time_s(), c0 = cpu_s();
+    particles_binned bs;
+    /* The pass binds each bit plane whole: one storage binding must hold it
+     * (lavapipe: 128 MiB, 2 M bricks). */
+    uint64_t max_bricks = gpu_binding_max_bytes(ps->ctx, 4) / (BRICK_WORDS * 4);
+    s = particles_bin(ps->binner, xyz, n, origin, c->cell_m, c->radius_m, st->level, max_bricks, &bs);
+    double bin_s = bf_time_s() - t0, bin_cpu_s = cpu_s() - c0;
+    ps->too_many = bs.too_many;
+    if (bs.too_many)
+        return bf_fail(BF_NO_MEMORY, "render: %llu particles at %g m cells need more than %llu bricks, the most one "
+                                     "binding holds (a larger cell or radius needs fewer)",
+                       (unsigned long long)n, c->cell_m, (unsigned long long)max_bricks);
+    if (s != BF_OK) return s;
+    if (bs.n_bricks > (1u << 28) || bs.n_nodes > (1u << 28))
+        return bf_fail(BF_NO_MEMORY, "render: %u particle bricks, %llu nodes", bs.n_bricks,
+                       (unsigned long long)bs.n_nodes);
+    bool fits = ps->map && bs.n_bricks <= ps->brick_cap && bs.n_nodes + 64 <= ps->node_cap &&
+                2 * bs.n_chunks <= ps->n_buckets;
+    double t1 = bf_time_s();
+    if (fits) {
+        s = fusion_clear(ps->map);
+    } else {
+        fusion_map *nm = NULL;
+        s = make_map(ps, origin, &bs, grow, &nm);
+        if (s == BF_OK) {
+            fusion_destroy(ps->map);
+            ps->map = nm;
+            if (ps->bind) s = bind_map(ps);
+            /* Bindings part old, part new: the set stays unusable. */
+            ps->unbound = s != BF_OK;
+        }
+        t1 = bf_time_s(); /* making the map (its pipelines) is not loading it */
+    }
+    if (s == BF_OK) {
+        hostmap hm = {.chunk_m = st->chunk_m, .origin_w = origin, .n_bricks = bs.n_bricks, .bricks = bs.bricks};
+        s = fusion_load(ps->map, &hm);
+    }
+    if (s != BF_OK) return s;
+    st->n_particles = n;
+    st->origin_w = origin;
+    st->n_cells = bs.n_cells;
+    st->n_bricks = bs.n_occupied;
+    st->n_pad_bricks = bs.n_bricks - bs.n_occupied;
+    st->bin_s = bin_s;
+    st->bin_cpu_s = bin_cpu_s;
+    st->load_s = bf_time_s() - t1;
+    st->map_made = !fits;
+    return BF_OK;
+}
+
+/* The set binned at the cell of c (the level, chunk and dispatches it
+ * takes with it). */
+static bf_status set_cell(render_particles *ps, const render_particles_config *c, const float *xyz, uint64_t n)
+{
+    ps->cfg = *c;
+    render_particles_stats *st = &ps->stats;
+    st->level = bin_level(c->cell_m);
+    st->cell_m = c->cell_m;
+    st->chunk_m = (float)(c->cell_m * 8.0 * (double)(1u << st->level));
+    pass_budget(c, &ps->cells_per_pass, &ps->n_passes);
+    if (ps->map) { /* another cell: another chunk edge */
+        fusion_destroy(ps->map);
+        ps->map = NULL;
+    }
+    return bin_and_load(ps, xyz, n, 1.0);
+}
+
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
                                   render_particles **out)
 {
@@ -375,61 +248,21 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     render_particles_config c;
     render_particles_config def = render_particles_config_default();
     bf_status s = check_config(cfg ? cfg : &def, &c);
-    bf_vec3 origin = {0, 0, 0};
-    if (s == BF_OK) s = set_frame(&c, xyz, n, &origin);
     if (s != BF_OK) return s;
     render_particles *ps = bf_calloc(1, sizeof *ps);
     if (!ps) return bf_fail(BF_NO_MEMORY, "render: particle set");
     ps->ctx = ctx;
-    ps->cfg = c;
-    uint32_t level = bin_level(c.cell_m);
-    render_particles_stats *st = &ps->stats;
-    st->n_particles = n;
-    st->origin_w = origin;
-    st->level = level;
-    st->cell_m = c.cell_m;
-    st->chunk_m = (float)(c.cell_m * 8.0 * (double)(1u << level));
-    pass_budget(&c, &ps->cells_per_pass, &ps->n_passes);
-
-    double t0 = bf_time_s();
-    bin_state bs = {0};
-    s = bin_particles(&c, xyz, n, origin, level, &bs, st);
-    uint64_t n_nodes = 0, n_chunks = 0;
-    if (s == BF_OK) s = count_nodes(&bs, level, &n_nodes, &n_chunks);
-    st->bin_s = bf_time_s() - t0;
-    if (s == BF_OK && (bs.n > (1u << 28) || n_nodes > (1u << 28)))
-        s = bf_fail(BF_NO_MEMORY, "render: %u particle bricks, %llu nodes", bs.n, (unsigned long long)n_nodes);
-    /* The pass binds each bit plane whole: one storage binding must hold it
-     * (lavapipe: 128 MiB, 2 M bricks). */
-    uint64_t plane_bytes = (uint64_t)bs.n * BRICK_WORDS * 4;
-    if (s == BF_OK && plane_bytes > gpu_binding_max_bytes(ctx, 4))
-        s = bf_fail(BF_NO_MEMORY, "render: %u particle bricks need %.0f MiB bit planes, a binding holds %.0f MiB "
-                                  "(a larger cell or radius needs fewer)",
-                    bs.n, plane_bytes / 1048576.0, gpu_binding_max_bytes(ctx, 4) / 1048576.0);
-    if (s == BF_OK) {
-        /* A map that only ever holds what is loaded: no frames, no colour. */
-        fusion_config fc = fusion_config_default();
-        fc.chunk_m = st->chunk_m;
-        fc.max_level = level;
-        fc.window = 2;
-        fc.subcache = 1;
-        fc.keep_colour = false;
-        fc.brick_cap = bs.n ? bs.n : 1;
-        fc.node_cap = (uint32_t)n_nodes + 64;
-        uint32_t buckets = 64;
-        while (buckets < 2 * n_chunks) buckets *= 2;
-        fc.hash_buckets = buckets;
-        fc.hash_overflow = buckets;
-        bf_intrinsics K = {8, 8, 8.0, 8.0, 3.5, 3.5, 5000};
-        s = fusion_create(ctx, &fc, &K, origin, &ps->map);
+    ps->binner = particles_binner_create();
+    if (!ps->binner) s = bf_fail(BF_NO_MEMORY, "render: particle binning");
+    if (s == BF_OK) s = set_cell(ps, &c, xyz, n);
+    /* The default cell (cell_m 0) is an eighth of the radius where its
+     * bricks fit, else a quarter (sparse sets of many particles: a sphere
+     * reaches 27 bricks of eighth-radius cells, 8 of quarter-radius ones). */
+    bool auto_cell = !(cfg ? cfg : &def)->cell_m;
+    if (s == BF_NO_MEMORY && ps->too_many && auto_cell) {
+        c.cell_m = c.radius_m / 4.0f;
+        s = set_cell(ps, &c, xyz, n);
     }
-    if (s == BF_OK) {
-        hostmap hm = {.chunk_m = st->chunk_m, .origin_w = origin, .n_bricks = bs.n, .bricks = bs.bricks};
-        double t1 = bf_time_s();
-        s = fusion_load(ps->map, &hm);
-        st->load_s = bf_time_s() - t1;
-    }
-    free(bs.t.keys), free(bs.t.index), free(bs.bricks), free(bs.codes);
     gpu_pipeline_desc pd = {
         .name = "render.particles",
         .spirv = bf_spv_render_particles,
@@ -440,12 +273,7 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &ps->pipe);
     if (s == BF_OK) s = gpu_bindings_create(ctx, 9, "render.particles", &ps->bind);
-    fusion_gpu_view v = {0};
-    if (s == BF_OK) v = fusion_gpu_view_get(ps->map);
-    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 0, v.hash, 0, GPU_WHOLE_SIZE);
-    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 1, v.nodes, 0, GPU_WHOLE_SIZE);
-    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 2, v.sign, 0, GPU_WHOLE_SIZE);
-    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 7, v.conf, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = bind_map(ps);
     /* A resume buffer until the first cast makes one for its images (the warm-up binds every slot). */
     gpu_buffer_desc rd = {.name = "render.particles.resume", .size_bytes = 16, .memory = GPU_MEMORY_DEVICE,
                           .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
@@ -460,6 +288,19 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
     return BF_OK;
 }
 
+bf_status render_particles_update(render_particles *ps, const float *xyz, uint64_t n)
+{
+    if (!ps || (n && !xyz)) return bf_fail(BF_INVALID_ARG, "render_particles_update: NULL argument");
+    /* Room for a quarter more when the map must grow. */
+    bf_status s = bin_and_load(ps, xyz, n, 1.25);
+    if (s != BF_OK && fusion_pool_usage(ps->map).bricks == 0) { /* emptied */
+        render_particles_stats *st = &ps->stats;
+        st->n_particles = st->n_cells = 0;
+        st->n_bricks = st->n_pad_bricks = 0;
+    }
+    return s;
+}
+
 void render_particles_destroy(render_particles *ps)
 {
     if (!ps) return;
@@ -467,6 +308,7 @@ void render_particles_destroy(render_particles *ps)
     gpu_pipeline_destroy(ps->pipe);
     gpu_buffer_destroy(ps->resume);
     fusion_destroy(ps->map);
+    particles_binner_destroy(ps->binner);
     memset(ps, 0xff, sizeof *ps); /* poison: a use after destroy fails loudly */
     free(ps);
 }
@@ -492,6 +334,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
     if (!(opt->near_m > 0) || !(opt->far_m > opt->near_m) || !isfinite(opt->far_m))
         return bf_fail(BF_INVALID_ARG, "render: depth range [%g, %g] m", opt->near_m, opt->far_m);
     if (opt->depth_out) return bf_fail(BF_INVALID_ARG, "render: particles write the caster's own depth image");
+    if (ps->unbound) return bf_fail(BF_INVALID_ARG, "render: the particle set lost its pools in a failed update");
     gpu_buffer *imgs[4] = {tg->depth, tg->level, tg->normal, tg->colour};
     for (uint32_t i = 0; i < 4; i++) {
         if (ps->bound[i] == imgs[i]) continue;

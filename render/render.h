@@ -170,7 +170,9 @@ typedef struct render_particles render_particles; /* opaque: one binned set on t
 
 typedef struct render_particles_config {
     float radius_m;  /* every particle's sphere, default 0.01 */
-    float cell_m;    /* cell edge at the finest level; 0 (default): radius / 4; at most 2 radius */
+    float cell_m;    /* cell edge at the finest level, at most 2 radii; 0 (default): radius / 8 (depths within
+                        2 mm of the exact spheres' on 95% of the pixels at a 1 cm radius, docs/particles.md), or
+                        radius / 4 where the finer cells' bricks do not fit one binding (large sparse sets) */
     uint32_t rgb;    /* colour, R in the low byte; default a water blue */
 } render_particles_config;
 
@@ -185,18 +187,28 @@ typedef struct render_particles_stats {
     uint32_t level;         /* the bricks' octree level */
     float chunk_m, cell_m;
     bf_vec3 origin_w;       /* the grid's corner: cell i spans origin_w + [i, i + 1) cell_m, its sphere at the middle */
-    double bin_s;           /* host binning: cells, bricks, the host copy */
-    double load_s;          /* the host copy into the GPU pools (fusion_load) */
+    double bin_s;           /* host binning: cells, bricks, the host copy (wall clock) */
+    double bin_cpu_s;       /* the same in CPU seconds of the process (both binning threads) */
+    double load_s;          /* the host copy into the GPU pools (emptying them, fusion_load; not making a map) */
+    bool map_made;          /* the last binning made the map anew (the first, or a set grown past its pools) */
 } render_particles_stats;
 
 /* Bins the n particles xyz (3 n floats, world coordinates [m]) and puts
  * them on the GPU. cfg NULL: the defaults. ctx is borrowed and must
  * outlive the set. BF_INVALID_ARG for a bad radius or cell (the message
  * says which), a position that is not finite (named by index) or a set
- * wider than 2^24 cells; BF_NO_MEMORY when it does not fit. n may be 0 (an
- * empty set: nothing is hit). A moving set is binned anew per step. */
+ * wider than 2^21 cells; BF_NO_MEMORY when it does not fit. n may be 0 (an
+ * empty set: nothing is hit). */
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
                                   render_particles **out);
+/* A moving set's next time step: the n particles xyz binned anew into the
+ * same set (radius and cell kept), its GPU pools and pipeline reused, made
+ * larger only when the set outgrows them (then with a quarter to spare).
+ * The same refusals as render_particles_create; on failure the set holds
+ * the last step or, where the failure came after emptying it, nothing (its
+ * stats then count 0 particles). Not while a pass that reads the set is in
+ * flight (render_scene waits for its own). */
+bf_status render_particles_update(render_particles *ps, const float *xyz, uint64_t n);
 /* NULL is a no-op. */
 void render_particles_destroy(render_particles *ps);
 const render_particles_stats *render_particles_get_stats(const render_particles *ps);

@@ -366,6 +366,19 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
     /* Neither a second load nor a new origin once loaded. */
     CHECK_STATUS(fusion_load(map2, &a), BF_INVALID_ARG);
     CHECK_STATUS(fusion_set_origin(map2, bf_v3(0, 0, 0)), BF_INVALID_ARG);
+    /* Emptied (fusion_clear: a particle set's next time step), it is whole
+     * and empty and loads the same map again; not once it has frames. */
+    CHECK_OK(fusion_clear(map2));
+    CHECK_OK(fusion_check(map2));
+    CHECK_OK(fusion_get_stats(map2, &sc));
+    CHECK_EQ_INT(sc.n_bricks, 0);
+    CHECK_OK(fusion_load(map2, &a));
+    CHECK_OK(fusion_check(map2));
+    hostmap again = {0};
+    CHECK_OK(fusion_snapshot_take(map2, &again));
+    CHECK_OK(store_map_digest(&again, &db));
+    CHECK(da == db);
+    hostmap_free(&again);
     /* The loaded octree is the one the GPU finds: the same frame added to
      * both maps gives bricks at the same places (their bits differ: the
      * original's ring still holds its frames). */
@@ -374,6 +387,7 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
     f.index = 6;
     CHECK_OK(fusion_add_frame(map, &f, &T0));
     CHECK_OK(fusion_check(map2));
+    CHECK_STATUS(fusion_clear(map2), BF_INVALID_ARG);
     hostmap pa = {0}, pb = {0};
     CHECK_OK(fusion_snapshot_take(map, &pa));
     CHECK_OK(fusion_snapshot_take(map2, &pb));

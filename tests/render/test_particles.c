@@ -69,14 +69,17 @@ static int cmp_float(const void *a, const void *b)
  * keeps them (cell centres): the walk and the traverser must find the
  * nearest sphere on every ray, so the images agree to float precision.
  * (2) The exact spheres (Reichl's dissertation ch. 6; issue 14's check at
- * a 1 cm radius and the default cells of a quarter radius, 2.5 mm): a
- * centre moves by at most half a cell per axis, so where the same sphere
+ * a 1 cm radius and the default cells, an eighth of the radius: 1.25 mm):
+ * a centre moves by at most half a cell per axis, so where the same sphere
  * is hit head-on the depth moves by at most that along the ray; outlines
  * move as much, so rays near them hit another sphere, and the mask and the
- * depths differ there. Asserted: the masks agree on 97% of the pixels, and
- * the median depth difference is within the largest move of a centre,
- * sqrt(3) / 2 cells (the median pixel is a head-on hit, whose depth moves
- * by at most that). docs/particles.md gives the share within 2 mm. */
+ * depths differ there. Asserted: issue 14's numbers (the masks agree on
+ * 97% of the pixels, 95% of the depths within 2 mm) on the dam break (a
+ * lattice whose spacings are whole cells from the grid's centred corner:
+ * its centres are exact) and on the turned set (centres anywhere in their
+ * cells: the typical case, 95.2% within 2 mm), and the median depth
+ * difference within the largest move of a centre, sqrt(3) / 2 cells (the
+ * median pixel is a head-on hit, whose depth moves by at most that). */
 static void check_set(gpu_context *ctx, render_caster *rc, const float *xyz, uint32_t n, const bf_se3 *T_wc,
                       const char *what)
 {
@@ -85,7 +88,7 @@ static void check_set(gpu_context *ctx, render_caster *rc, const float *xyz, uin
     CHECK_OK(render_particles_create(ctx, &pc, xyz, n, &ps));
     const render_particles_stats *st = render_particles_get_stats(ps);
     CHECK_EQ_INT(st->n_particles, n);
-    CHECK_NEAR(st->cell_m, 0.0025, 1e-9);
+    CHECK_NEAR(st->cell_m, 0.00125, 1e-9); /* the default: an eighth of the radius */
     CHECK(st->n_cells > 0.99 * n && st->n_cells <= n);
     render_options opt = render_options_display();
     opt.far_m = 8;
@@ -123,7 +126,9 @@ static void check_set(gpu_context *ctx, render_caster *rc, const float *xyz, uin
             render_particles_last_ms(ps), mask_differs + depth_differs, 100 * a.mask, 100 * a.mask_any,
             100 * a.depth_2mm, 1e3 * median);
     CHECK(a.n_hit_ref > n_px / 3); /* the view is mostly particles: the numbers mean something */
+    /* Issue 14's numbers at the default cell. */
     CHECK(a.mask >= 0.97);
+    CHECK(a.depth_2mm >= 0.95);
     CHECK_LE(median, 0.8661 * st->cell_m);
     /* Shaded, with unit normals facing the camera, where hit. */
     for (uint32_t i = 0; i < n_px; i++)
@@ -237,11 +242,11 @@ BF_TEST(one_image_holds_the_nearer_of_map_and_particles)
     xyz[3 * n] = 0.05f, xyz[3 * n + 1] = 0.2f, xyz[3 * n + 2] = (float)z0, n++;
     render_particles_config pc = render_particles_config_default();
     pc.radius_m = 0.03f;
-    /* Cells of r / 4.5: the grid's corner lies r + 8 cells below the set's
-     * box, so every centre here (at multiples of 0.05 m = 7.5 cells from the
-     * box's corner) is a cell's middle and the spheres are where they are
+    /* Cells of 6.25 mm: the grid puts the set box's lowest corner at a
+     * cell's middle, so every centre here (at multiples of 0.05 m = 8 cells
+     * from it) is a cell's middle and the spheres are where they are
      * drawn: the oracle's spheres are exact. */
-    pc.cell_m = 0.03f / 4.5f;
+    pc.cell_m = 0.00625f;
     render_particles *ps;
     CHECK_OK(render_particles_create(ctx, &pc, xyz, n, &ps));
     render_caster *rc;
@@ -305,7 +310,7 @@ BF_TEST(bad_radius_cell_and_positions_are_refused_and_an_empty_set_hits_nothing)
     xyz[4] = NAN;
     CHECK_STATUS(render_particles_create(ctx, &pc, xyz, 2, &ps), BF_INVALID_ARG);
     CHECK(strstr(bf_last_error(), "particle 1") != NULL);
-    /* 50 km across at 2.5 mm cells: more cells than the grid holds. */
+    /* 50 km across at 1.25 mm cells: more cells than the grid holds. */
     xyz[4] = 50000.0f;
     CHECK_STATUS(render_particles_create(ctx, &pc, xyz, 2, &ps), BF_INVALID_ARG);
     CHECK(ps == NULL);
@@ -323,6 +328,156 @@ BF_TEST(bad_radius_cell_and_positions_are_refused_and_an_empty_set_hits_nothing)
     CHECK_STATUS(render_scene(rc, NULL, NULL, &K, &T, &opt), BF_INVALID_ARG);
     render_destroy(rc);
     render_particles_destroy(ps);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* One swirl step about the vertical axis through (cx, cy): the inside
+ * turns faster, so the set shears and bins anew. */
+static void swirl(float *xyz, uint32_t n, double cx, double cy, double step)
+{
+    for (uint32_t i = 0; i < n; i++) {
+        double x = xyz[3 * i] - cx, y = xyz[3 * i + 1] - cy, r = sqrt(x * x + y * y);
+        double a = step / (0.2 + r), c = cos(a), s = sin(a);
+        xyz[3 * i] = (float)(cx + c * x - s * y);
+        xyz[3 * i + 1] = (float)(cy + s * x + c * y);
+    }
+}
+
+/* *differ: pixels where the pass and the oracle of the centres the grid
+ * keeps differ (mask, or depth by more than 50 um); *mask_exact: the
+ * masks' agreement with the exact spheres. */
+static void cast_and_compare(render_caster *rc, render_particles *ps, const float *xyz, uint32_t n,
+                             const bf_intrinsics *K, const bf_se3 *T, uint32_t *differ, double *mask_exact)
+{
+    render_options opt = render_options_display();
+    opt.far_m = 8;
+    CHECK_OK(render_scene(rc, NULL, ps, K, T, &opt));
+    render_images im;
+    CHECK_OK(render_download(rc, &im));
+    uint32_t n_px = K->width * K->height, bad = 0;
+    float *ref = malloc(n_px * sizeof *ref), *snap = snapped(xyz, n, render_particles_get_stats(ps));
+    particles_ref_cast(snap, n, 0.01, K, T, opt.near_m, opt.far_m, ref);
+    for (uint32_t i = 0; i < n_px; i++)
+        bad += (im.depth[i] > 0) != (ref[i] > 0) || (ref[i] > 0 && fabsf(im.depth[i] - ref[i]) > 5e-5f);
+    particles_ref_cast(xyz, n, 0.01, K, T, opt.near_m, opt.far_m, ref);
+    *mask_exact = compare(im.depth, ref, n_px).mask;
+    free(snap);
+    free(ref);
+    render_images_free(&im);
+    *differ = bad;
+}
+
+BF_TEST(a_moving_set_rebinned_per_step_matches_its_new_positions)
+{
+    const char *path = bf_test_data("particles/dambreak_29814.ply");
+    if (!path) BF_SKIP("shared data absent: particles/dambreak_29814.ply");
+    mesh_data m = {0};
+    CHECK_OK(mesh_read_ply(path, &m));
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    const bf_intrinsics K = {100, 75, 95.0, 95.0, 49.5, 37.0, 5000};
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, NULL, K.width, K.height, &rc));
+    bf_se3 T = look_at(bf_v3(0.8, -0.55, 0.75), bf_v3(0.55, 0.35, 0.15), bf_v3(0, 0, 1));
+    uint32_t n = m.n_verts;
+    float *xyz = malloc((size_t)n * 12);
+    memcpy(xyz, m.xyz, (size_t)n * 12);
+    render_particles *ps;
+    CHECK_OK(render_particles_create(ctx, NULL, xyz, n, &ps));
+    const render_particles_stats *st = render_particles_get_stats(ps);
+    CHECK(st->map_made);
+    double mask;
+    /* Steps of a swirl (the first grows the set past its pools: a map made
+     * anew with room to spare; the next fit it), each against the oracles
+     * at the new positions. */
+    uint32_t made = 0;
+    for (int step = 1; step <= 3; step++) {
+        swirl(xyz, n, 0.8, 0.35, 0.03);
+        CHECK_OK(render_particles_update(ps, xyz, n));
+        made += st->map_made;
+        CHECK_EQ_INT(st->n_particles, n);
+        uint32_t bad;
+        cast_and_compare(rc, ps, xyz, n, &K, &T, &bad, &mask);
+        fprintf(stderr, "  step %d: %u bricks (+%u empty), binned in %.1f ms (%.1f ms CPU), %.1f ms into the pools%s; "
+                "%u pixels differ from the cell centres, masks agree with the exact spheres on %.2f%%\n",
+                step, st->n_bricks, st->n_pad_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s,
+                st->map_made ? " (map made anew)" : "", bad, 100 * mask);
+        CHECK_LE(bad, K.width * K.height / 1000);
+        CHECK(mask >= 0.97);
+    }
+    CHECK(made <= 1); /* the pools are reused */
+    /* A bad step is refused and leaves the last one. */
+    float keep = xyz[5];
+    xyz[5] = NAN;
+    CHECK_STATUS(render_particles_update(ps, xyz, n), BF_INVALID_ARG);
+    CHECK(strstr(bf_last_error(), "particle 1") != NULL);
+    xyz[5] = keep;
+    CHECK_EQ_INT(st->n_particles, n);
+    uint32_t bad;
+    cast_and_compare(rc, ps, xyz, n, &K, &T, &bad, &mask);
+    CHECK_LE(bad, K.width * K.height / 1000);
+    /* An empty step: nothing is hit. */
+    CHECK_OK(render_particles_update(ps, xyz, 0));
+    render_options opt = render_options_display();
+    CHECK_OK(render_scene(rc, NULL, ps, &K, &T, &opt));
+    render_images im;
+    CHECK_OK(render_download(rc, &im));
+    for (uint32_t i = 0; i < K.width * K.height; i++) CHECK(im.depth[i] == 0);
+    render_images_free(&im);
+    free(xyz);
+    render_particles_destroy(ps);
+    render_destroy(rc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+    mesh_free(&m);
+}
+
+/* Particles metres apart: their brick box (10 m at 1 cm bricks, 10^9
+ * bricks) is too large for the dense brick index, so the binning goes
+ * through its hash table; the same particles 10 cm apart (a dense index)
+ * sit at the same places in their bricks (both spacings are whole bricks)
+ * and need as many bricks. The far set is drawn exactly against the
+ * cell-centred oracle. */
+BF_TEST(far_apart_particles_bin_through_the_hash_alike)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    render_particles_stats st[2];
+    float far_xyz[12] = {0, 0, 1, 10, 0, 1, 0, 10, 1, 0, 0, 11};
+    for (int k = 0; k < 2; k++) {
+        float xyz[12];
+        for (int i = 0; i < 12; i++) xyz[i] = k ? far_xyz[i] * 0.01f : far_xyz[i];
+        render_particles *ps;
+        CHECK_OK(render_particles_create(ctx, NULL, k ? xyz : far_xyz, 4, &ps));
+        st[k] = *render_particles_get_stats(ps);
+        if (k == 0) {
+            /* One sphere 0.5 m ahead of the camera, the others out of view. */
+            const bf_intrinsics K = {48, 36, 600.0, 600.0, 23.5, 17.5, 5000};
+            render_caster *rc;
+            CHECK_OK(render_create(ctx, NULL, K.width, K.height, &rc));
+            bf_se3 T = bf_se3_identity();
+            T.t = bf_v3(0.003, -0.002, 0.5);
+            uint32_t bad;
+            double mask;
+            cast_and_compare(rc, ps, far_xyz, 4, &K, &T, &bad, &mask);
+            CHECK_EQ_INT(bad, 0);
+            CHECK(mask >= 0.97);
+            float ref[48 * 36];
+            uint32_t n_hit = 0;
+            particles_ref_cast(far_xyz, 4, 0.01, &K, &T, 0.1, 8.0, ref);
+            for (uint32_t i = 0; i < 48 * 36; i++) n_hit += ref[i] > 0;
+            CHECK(n_hit > 300); /* the sphere is in view: about 450 pixels */
+            render_destroy(rc);
+        }
+        render_particles_destroy(ps);
+    }
+    fprintf(stderr, "  far apart: %u bricks (+%u empty); 10 cm apart: %u (+%u)\n", st[0].n_bricks, st[0].n_pad_bricks,
+            st[1].n_bricks, st[1].n_pad_bricks);
+    CHECK_EQ_INT(st[0].n_cells, 4);
+    CHECK_EQ_INT(st[0].n_bricks, 4);
+    CHECK(st[0].n_pad_bricks >= 4 * 7); /* each sphere reaches at least 7 neighbours */
+    CHECK_EQ_INT(st[0].n_pad_bricks, st[1].n_pad_bricks);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
