@@ -23,6 +23,7 @@ enum {
     APP_EXIT_USAGE = 2,   /* bad command line */
     APP_EXIT_INPUT = 3,   /* unreadable or malformed input file */
     APP_EXIT_DEVICE = 4,  /* no usable Vulkan device or a device error */
+    APP_EXIT_WRITE = 5,   /* an output could not be written (disk full, I/O error, permissions) */
 };
 
 /* main.c: maps a status to an exit code and prints "bitfuse CMD: error:

@@ -55,7 +55,9 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
         .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input (a corrupt frame\n"
-                  "mid-sequence: the frames before it are still fused and written), 4 no Vulkan device\n",
+                  "mid-sequence: the frames before it are still fused and written), 4 no Vulkan device,\n"
+                  "5 an output could not be written (disk full, I/O error: the file is named; every\n"
+                  "file in DIR is whole or absent)\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     return rc ? rc : app_check_map_options("fuse", &a->fcfg);

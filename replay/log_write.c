@@ -34,7 +34,7 @@ static bf_status write_bytes(replay_log_writer *w, const void *p, size_t n)
 {
     if (n && fwrite(p, 1, n, w->f) != n) {
         w->is_broken = true;
-        return bf_fail(BF_IO, "%s: write failed at byte %llu: %s", w->path, (unsigned long long)w->offset,
+        return bf_fail(BF_WRITE, "%s: write failed at byte %llu: %s", w->path, (unsigned long long)w->offset,
                        strerror(errno));
     }
     w->offset += n;
@@ -87,7 +87,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     }
     w->f = fopen(path, "wb");
     if (!w->f) {
-        s = bf_fail(BF_IO, "%s: cannot create: %s", path, strerror(errno));
+        s = bf_fail(BF_WRITE, "%s: cannot create: %s", path, strerror(errno));
         goto fail;
     }
     uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
@@ -111,7 +111,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     log__put_u32(hdr + LOG_HEADER_FIXED + dev_len, log__crc32(0, hdr, LOG_HEADER_FIXED + dev_len));
     if ((s = write_bytes(w, hdr, hdr_size))) goto fail;
     if (fflush(w->f) != 0) {
-        s = bf_fail(BF_IO, "%s: write failed: %s", path, strerror(errno));
+        s = bf_fail(BF_WRITE, "%s: write failed: %s", path, strerror(errno));
         goto fail;
     }
     w->st.file_bytes = w->offset;
@@ -130,7 +130,7 @@ fail:
 bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
 {
     if (w->is_finished) return bf_fail(BF_INVALID_ARG, "%s: log already finished", w->path);
-    if (w->is_broken) return bf_fail(BF_IO, "%s: an earlier write failed; the log ends before frame %u", w->path, f->index);
+    if (w->is_broken) return bf_fail(BF_WRITE, "%s: an earlier write failed; the log ends before frame %u", w->path, f->index);
     if (!f->depth || f->width != w->K.width || f->height != w->K.height)
         return bf_fail(BF_INVALID_ARG, "%s: frame %u is %ux%u%s, the log's frames are %ux%u", w->path, f->index,
                        f->width, f->height, f->depth ? "" : " without depth", w->K.width, w->K.height);
@@ -192,7 +192,7 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
         return s;
     if (fflush(w->f) != 0) {
         w->is_broken = true;
-        return bf_fail(BF_IO, "%s: frame %u: write failed: %s", w->path, f->index, strerror(errno));
+        return bf_fail(BF_WRITE, "%s: frame %u: write failed: %s", w->path, f->index, strerror(errno));
     }
     uint8_t *e = w->index + (size_t)w->st.n_frames * LOG_INDEX_ENTRY;
     log__put_u64(e, at);
@@ -211,7 +211,7 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
 bf_status replay_log_writer_finish(replay_log_writer *w)
 {
     if (w->is_finished) return BF_OK;
-    if (w->is_broken) return bf_fail(BF_IO, "%s: an earlier write failed; the log has no index", w->path);
+    if (w->is_broken) return bf_fail(BF_WRITE, "%s: an earlier write failed; the log has no index", w->path);
     uint64_t index_at = w->offset;
     uint8_t head[8], tail[4], foot[LOG_FOOTER];
     log__put_u32(head, LOG_INDEX_MAGIC);
@@ -234,7 +234,7 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
     w->f = NULL;
     if (bad) {
         w->is_broken = true;
-        return bf_fail(BF_IO, "%s: cannot finish the log: %s", w->path, strerror(err));
+        return bf_fail(BF_WRITE, "%s: cannot finish the log: %s", w->path, strerror(err));
     }
     w->st.file_bytes = w->offset;
     w->is_finished = true;
