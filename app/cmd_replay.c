@@ -516,8 +516,7 @@ typedef struct replay_sink {
     double cast_s;          /* how long that cast and show took */
     bf_se3 T_shown;         /* the pose it was cast at */
     uint64_t n_bricks;
-    bf_status s_write;      /* an output that failed mid-scan: the scan stopped there */
-    char write_error[1024];
+    app_write_failure wf;   /* an output that failed mid-scan: the scan stopped there */
 } replay_sink;
 
 /* The window's frame: the map at the window's camera (the frame's pose
@@ -589,18 +588,16 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
 static bf_status stop_on_write_failure(replay_sink *k, bf_status s)
 {
     if (s != BF_WRITE) return s;
-    k->s_write = s;
-    snprintf(k->write_error, sizeof k->write_error, "%s", bf_last_error());
-    bf_warn("%s: %s: the scan stops here; the trajectory and the map so far are still written",
-            k->a->is_live_cmd ? "live" : "replay", k->write_error);
+    const char *cmd = k->a->is_live_cmd ? "live" : "replay";
+    bf_warn("%s: the scan stops here: an output cannot be written", cmd);
     app_stop_request(k->stop);
-    return BF_OK;
+    return app_note_write(&k->wf, cmd, s);
 }
 
 static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
 {
     replay_sink *k = user;
-    if (k->s_write != BF_OK) return BF_OK; /* stopping: the frame the stop found in flight */
+    if (k->wf.s != BF_OK) return BF_OK; /* stopping: the frame the stop found in flight */
     bf_status s = BF_OK;
     csv_frame(k->csv, f, fr);
     if (k->csv->err) s = bf_fail(BF_WRITE, "%s: write failed: %s", k->csv->path, strerror(k->csv->err));
@@ -670,8 +667,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* replay: set when the window closes or an output fails mid-scan */
     static volatile sig_atomic_t replay_stop;
     view_window *win = NULL;
-    bf_status s_write = BF_OK, s_gpu = BF_OK; /* mid-scan failures that kept the work done */
-    char write_error[1024] = "", gpu_error[1024] = "";
+    app_write_failure wf = {0};  /* outputs that failed: the others are still written */
+    bf_status s_gpu = BF_OK;     /* a GPU failure mid-scan: the work done is still written */
+    char gpu_error[1024] = "";
     bool has_map = true;
     /* The input first: a missing one leaves no empty output folder. */
     bf_status s;
@@ -735,9 +733,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         replay_sink sink = {.a = &a, .csv = &csv, .log = log, .r = &r, .win = win,
                             .stop = (volatile sig_atomic_t *)stop};
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
-        if (sink.s_write != BF_OK) {
-            s_write = sink.s_write;
-            snprintf(write_error, sizeof write_error, "%s", sink.write_error);
+        if (sink.wf.s != BF_OK) {
+            wf = sink.wf;
             r.run.is_interrupted = false; /* the stop was ours, not a signal's */
         }
         /* A GPU failure mid-scan (out of device memory, a lost device):
@@ -757,17 +754,20 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     }
     if (log) {
         bf_status s_log = replay_log_writer_finish(log);
-        if (s == BF_OK && s_write == BF_OK) s = s_log;
+        if (s == BF_OK) s = app_note_write(&wf, cmd, s_log);
     }
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
-        s = replay_traj_write_tum(path, &r.run.est);
+        s = app_note_write(&wf, cmd, replay_traj_write_tum(path, &r.run.est));
     /* Then the store: the whole map at the end (or at Ctrl-C). */
-    if (s == BF_OK && a.store) s = app_store_finish(&r.store, &r.run);
+    if (s == BF_OK && a.store) s = app_note_write(&wf, cmd, app_store_finish(&r.store, &r.run));
     if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
     hostmap whole = {0};
     if (s == BF_OK && r.run.loop) s = recon_snapshot(r.run.loop, &whole);
-    if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
+    if (s == BF_OK)
+        s = app_note_write(&wf, cmd,
+                           app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out,
+                                          &r.out));
     hostmap_free(&whole);
     if (s_gpu != BF_OK && s != BF_OK) {
         /* The device did not answer for the map: the trajectory stays. */
@@ -778,16 +778,16 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     r.seconds = bf_time_s() - t_start;
     if (s == BF_OK && has_map) {
         cJSON *o = stats_json(&a, &r, src);
-        if (s_write != BF_OK) cJSON_AddStringToObject(o, "output_error", write_error);
+        if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
         if (s_gpu != BF_OK) cJSON_AddStringToObject(o, "gpu_error", gpu_error);
-        s = app_json_write_in(a.out, "stats.json", o);
+        s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
     }
     if (has_csv && s == BF_OK) {
-        s = bf_out_commit(&csv);
+        s = app_note_write(&wf, cmd, bf_out_commit(&csv));
         has_csv = false;
     }
     if (has_csv) bf_out_abort(&csv);
-    if (s == BF_OK && has_map && s_write == BF_OK && s_gpu == BF_OK) print_summary(&a, &r, src);
+    if (s == BF_OK && has_map && wf.s == BF_OK && s_gpu == BF_OK) print_summary(&a, &r, src);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
@@ -800,7 +800,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (s == BF_OK && s_gpu != BF_OK) s = bf_fail(s_gpu, "%s", gpu_error);
-    else if (s == BF_OK && s_write != BF_OK) s = bf_fail(s_write, "%s", write_error);
+    else if (s == BF_OK) s = app_write_status(&wf);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
