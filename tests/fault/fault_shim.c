@@ -29,7 +29,9 @@
  * points seen), "vk A S" (Vulkan allocations and submits seen) and, when a
  * fault fired, "fired PATH" or "fired-vk NAME". The environment variables
  * are read by this test harness only, never by bitfuse. */
+#ifndef _GNU_SOURCE
 #define _GNU_SOURCE
+#endif
 #include <dlfcn.h>
 #include <errno.h>
 #include <fcntl.h>
@@ -215,7 +217,7 @@ int close(int fd)
     }
     int c = real_close(fd);
     if (r == 1) { /* closed all the same, as Linux does (NFS reports late) */
-        errno = EIO;
+        errno = kind == 0 ? ENOSPC : EIO;
         return -1;
     }
     return c;
