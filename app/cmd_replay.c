@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "app.h"
 #include "calib/calib.h"
@@ -699,6 +700,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (!stop) stop = &replay_stop;
     /* The store is read (to resume) or claimed before anything is made. */
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
+    bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
@@ -787,6 +789,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         has_csv = false;
     }
     if (has_csv) bf_out_abort(&csv);
+    /* A run that wrote nothing (no device, a failure at start-up) leaves
+     * no empty folder it made behind; rmdir takes only an empty one. */
+    if (s != BF_OK && made_out) (void)rmdir(a.out);
     if (s == BF_OK && has_map && wf.s == BF_OK && s_gpu == BF_OK) print_summary(&a, &r, src);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);

@@ -233,6 +233,20 @@ py -c "import json,sys; assert 'views/' in json.load(open(sys.argv[1]))['output_
     fail "mid-scan: stats.json has no output_error naming the view"
 no_temp "mid-scan"
 
+# The scene store cannot be written mid-scan (its first chunk file, at the
+# first flush): the scan stops, the rest is written, exit 5 naming the
+# chunk file, and the store still opens (what its flushes kept).
+rm -rf "$O/run"
+shim 1 enospc 0 "" "$B" replay "$T/seq" --out "$O/run" --store "$O/run/S" --store-every 0.001
+[ "$rc" = 5 ] || fail "mid-scan store failure: exit $rc ($(head -c 300 "$T/err"))"
+mentions "$O/run/S/chunks/"
+mentions "No space left on device"
+for f in trajectory.txt mesh.ply points.ply frames.csv stats.json; do
+    [ -f "$O/run/$f" ] && whole "$O/run/$f" || fail "mid-scan store failure: $f not written whole"
+done
+no_temp "mid-scan store failure"
+expect 0 "$B" info "$O/run/S" --json
+
 # ---------------------------------------------------------------- export
 MKRUN=1 # export writes a file into a folder that exists
 ONE_OUTPUT=1
@@ -266,6 +280,7 @@ for k in $sample; do
         fail "$name: the message does not say out of device memory: $(head -c 300 "$T/err")"
     no_validation "$name"
     no_temp "$name"
+    [ -d "$O/run" ] && [ -z "$(ls -A "$O/run")" ] && fail "$name: an empty output folder was left behind"
     for f in $(ls "$O/run" 2>/dev/null); do
         [ -f "$O/run/$f" ] || continue
         whole "$O/run/$f" 2>>"$T/whole" || fail "$name: $f is not whole"
@@ -294,4 +309,5 @@ if [ -d "$O/run/S" ]; then
 fi
 
 echo "test_faults.sh: $runs runs under the shim in $(($(date +%s) - t0)) s"
+[ -n "${FAULT_SHOW:-}" ] && cat "$T/err"
 finish test_faults.sh
