@@ -669,8 +669,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     static volatile sig_atomic_t replay_stop;
     view_window *win = NULL;
     app_write_failure wf = {0};  /* outputs that failed: the others are still written */
-    bf_status s_gpu = BF_OK;     /* a GPU failure mid-scan: the work done is still written */
-    char gpu_error[1024] = "";
+    bf_status s_loop = BF_OK;    /* the loop failed mid-scan: the work done is still written */
+    char loop_error[1024] = "";
     bool has_map = true;
     /* The input first: a missing one leaves no empty output folder. */
     bf_status s;
@@ -739,13 +739,14 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             wf = sink.wf;
             r.run.is_interrupted = false; /* the stop was ours, not a signal's */
         }
-        /* A GPU failure mid-scan (out of device memory, a lost device):
-         * the trajectory so far is host data and is written, the map too
-         * when the device still answers; the exit code reports it. */
-        if ((s == BF_VULKAN || s == BF_NO_MEMORY) && r.run.est.n > 0) {
-            s_gpu = s;
-            snprintf(gpu_error, sizeof gpu_error, "%s", bf_last_error());
-            bf_warn("%s: %s: the scan stops after %zu frames; writing what was reconstructed", cmd, gpu_error,
+        /* The loop failing mid-scan (a lost device, out of memory, the
+         * stream's spill folder not writable): the trajectory so far is
+         * host data and is written, the map too when it can still be read
+         * back; the exit code reports the failure. */
+        if ((s == BF_VULKAN || s == BF_NO_MEMORY || s == BF_WRITE) && r.run.est.n > 0) {
+            s_loop = s;
+            snprintf(loop_error, sizeof loop_error, "%s", bf_last_error());
+            bf_warn("%s: %s: the scan stops after %zu frames; writing what was reconstructed", cmd, loop_error,
                     r.run.est.n);
             s = BF_OK;
         }
@@ -771,7 +772,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
                            app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out,
                                           &r.out));
     hostmap_free(&whole);
-    if (s_gpu != BF_OK && s != BF_OK) {
+    if (s_loop != BF_OK && s != BF_OK) {
         /* The device did not answer for the map: the trajectory stays. */
         bf_warn("%s: the map could not be read back (%s): only the trajectory is written", cmd, bf_last_error());
         s = BF_OK;
@@ -781,7 +782,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && has_map) {
         cJSON *o = stats_json(&a, &r, src);
         if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
-        if (s_gpu != BF_OK) cJSON_AddStringToObject(o, "gpu_error", gpu_error);
+        if (s_loop != BF_OK) cJSON_AddStringToObject(o, "scan_error", loop_error);
         s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
     }
     if (has_csv && s == BF_OK) {
@@ -792,7 +793,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* A run that wrote nothing (no device, a failure at start-up) leaves
      * no empty folder it made behind; rmdir takes only an empty one. */
     if (s != BF_OK && made_out) (void)rmdir(a.out);
-    if (s == BF_OK && has_map && wf.s == BF_OK && s_gpu == BF_OK) print_summary(&a, &r, src);
+    if (s == BF_OK && has_map && wf.s == BF_OK && s_loop == BF_OK) print_summary(&a, &r, src);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
@@ -804,7 +805,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     rgbd_source_close(src);
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
-    if (s == BF_OK && s_gpu != BF_OK) s = bf_fail(s_gpu, "%s", gpu_error);
+    if (s == BF_OK && s_loop != BF_OK) s = bf_fail(s_loop, "%s", loop_error);
     else if (s == BF_OK) s = app_write_status(&wf);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
