@@ -602,7 +602,7 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     bf_status s = BF_OK;
     csv_frame(k->csv, f, fr);
     if (k->csv->err) s = bf_fail(BF_WRITE, "%s: write failed: %s", k->csv->path, strerror(k->csv->err));
-    if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
+    if (s == BF_OK && k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
     /* Every K frames handled, not K indices: a live queue drops frames, and
      * indices that skip would miss most multiples of K. */
     bool has_view = false;
