@@ -258,6 +258,33 @@ done
 MKRUN=0
 ONE_OUTPUT=0
 
+# ---------------------------------------------------------------- record
+# A log streams into its final name by design: after a failed write the
+# command exits 5 naming it, and the log replays up to its last whole frame
+# (or is absent when its header never made it).
+mkdir -p "$O/rec"
+rm -f "$T/rep"
+shim 0 enospc 0 "" "$B" record --device "$T/seq" --out "$O/rec/l.bflog"
+[ "$rc" = 0 ] || fail "record: the clean run failed: exit $rc ($(head -c 300 "$T/err"))"
+grep -q "fault_shim: stdio stream" "$T/err" && fail "record: the log escapes the injection: $(grep -m 1 fault_shim "$T/err")"
+np=$(report points)
+echo "record: $np file fault points"
+for ((n = 1; n <= np; n++)); do
+    # The header, frames spread over the log, its index and footer, and
+    # the stats file beside it (its last three points).
+    [ "$FULL" = 1 ] || [ $((n % 5)) = 1 ] || [ "$n" -ge $((np - 4)) ] || continue
+    kind=${KINDS[$((n % 3))]}
+    rm -rf "$O/rec" && mkdir -p "$O/rec"
+    shim "$n" "$kind" 0 "" "$B" record --device "$T/seq" --out "$O/rec/l.bflog"
+    [ "$rc" = 5 ] || fail "record point $n ($kind): exit $rc, expected 5 ($(head -c 300 "$T/err"))"
+    fired=$(report fired)
+    mentions "$(echo "$fired" | sed -E 's/\.tmp(\.[0-9]+)?$//')"
+    no_temp "record point $n"
+    if [ -e "$O/rec/l.bflog" ]; then
+        "$B" info "$O/rec/l.bflog" --json >"$T/out" 2>"$T/err" || fail "record point $n: the log does not read: $(head -c 300 "$T/err")"
+    fi
+done
+
 # ---------------------------------------------------------------- Vulkan
 # The N-th allocation fails: a clean error naming the call and the buffer
 # (exit 1, out of memory), nothing half written, no validation message
