@@ -32,8 +32,20 @@ struct replay_log_writer {
     bool is_finished, is_broken;
 };
 
-/* All n bytes, short writes continued; a failure breaks the log for good
- * (it then ends at its last whole frame). */
+/* After a failed write: a log that holds no whole frame is no log (it
+ * would only fail to open), so it goes; one with frames stays, readable up
+ * to its last whole frame. */
+static void break_log(replay_log_writer *w)
+{
+    w->is_broken = true;
+    if (w->st.n_frames == 0 && w->fd >= 0) {
+        close(w->fd);
+        w->fd = -1;
+        remove(w->path);
+    }
+}
+
+/* All n bytes, short writes continued; a failure breaks the log for good. */
 static bf_status write_bytes(replay_log_writer *w, const void *p, size_t n)
 {
     const uint8_t *c = p;
@@ -41,9 +53,10 @@ static bf_status write_bytes(replay_log_writer *w, const void *p, size_t n)
         ssize_t k = write(w->fd, c, n);
         if (k < 0 && errno == EINTR) continue;
         if (k <= 0) {
-            w->is_broken = true;
-            return bf_fail(BF_WRITE, "%s: write failed at byte %llu: %s", w->path, (unsigned long long)w->offset,
-                           k < 0 ? strerror(errno) : "nothing written");
+            bf_status s = bf_fail(BF_WRITE, "%s: write failed at byte %llu: %s", w->path,
+                                  (unsigned long long)w->offset, k < 0 ? strerror(errno) : "nothing written");
+            break_log(w);
+            return s;
         }
         c += k;
         n -= (size_t)k;
@@ -237,8 +250,10 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
     if (close(w->fd) != 0 && !bad) bad = true, err = errno;
     w->fd = -1;
     if (bad) {
+        bf_status s = bf_fail(BF_WRITE, "%s: cannot finish the log: %s", w->path, strerror(err));
+        if (w->st.n_frames == 0) remove(w->path);
         w->is_broken = true;
-        return bf_fail(BF_WRITE, "%s: cannot finish the log: %s", w->path, strerror(err));
+        return s;
     }
     w->st.file_bytes = w->offset;
     w->is_finished = true;

@@ -269,11 +269,17 @@ shim 0 enospc 0 "" "$B" record --device "$T/seq" --out "$O/rec/l.bflog"
 grep -q "fault_shim: stdio stream" "$T/err" && fail "record: the log escapes the injection: $(grep -m 1 fault_shim "$T/err")"
 np=$(report points)
 echo "record: $np file fault points"
-for ((n = 1; n <= np; n++)); do
+for ((i = 3; i < 3 * (np + 1); i++)); do
+    n=$((i / 3))
     # The header, frames spread over the log, its index and footer, and
-    # the stats file beside it (its last three points).
-    [ "$FULL" = 1 ] || [ $((n % 5)) = 1 ] || [ "$n" -ge $((np - 4)) ] || continue
-    kind=${KINDS[$((n % 3))]}
+    # the stats file beside it (its last three points), one kind each;
+    # FAULT_FULL: every point with every kind.
+    if [ "$FULL" = 1 ]; then
+        kind=${KINDS[$((i % 3))]}
+    else
+        [ $((i % 3)) = 0 ] && { [ $((n % 5)) = 1 ] || [ "$n" -ge $((np - 4)) ]; } || continue
+        kind=${KINDS[$((n % 3))]}
+    fi
     rm -rf "$O/rec" && mkdir -p "$O/rec"
     shim "$n" "$kind" 0 "" "$B" record --device "$T/seq" --out "$O/rec/l.bflog"
     [ "$rc" = 5 ] || fail "record point $n ($kind): exit $rc, expected 5 ($(head -c 300 "$T/err"))"
