@@ -147,17 +147,18 @@ check_file_fault() {
 
 # walk NAME REF DETERMINISTIC CMD...: the file faults of CMD (whose output
 # folder is $O/run) against the clean run REF. Each file of these small
-# runs is three points (its one write, fsync, close): by default at most 5
-# files, spread over the run, each at one of its points with one kind, the
+# runs is three points (its one write, fsync, close): by default every file
+# of a run of up to 6 files, else the first, the middle one and the last
+# four (replay: the trajectory, a store file, the mesh, the points,
+# stats.json, frames.csv), each at one of its points with one kind, the
 # point and the kind turning; FAULT_FULL walks each point with each kind.
 KINDS=(enospc eio short)
 walk() {
     local name=$1 ref=$2 det=$3
     shift 3
-    local points n k kind files step
+    local points n k kind files
     points=$(cat "$ref.points")
     files=$(((points + 2) / 3))
-    step=$(((files + 4) / 5))
     VALIDATION=0
     for ((n = 1; n <= points; n++)); do
         for k in 0 1 2; do
@@ -165,8 +166,10 @@ walk() {
                 kind=${KINDS[$k]}
             else
                 local file=$(((n - 1) / 3)) in_file=$(((n - 1) % 3))
-                [ $((file % step)) = 0 ] && [ "$in_file" = $((file / step % 3)) ] && [ "$k" = 0 ] || continue
-                kind=${KINDS[$((file / step % 3))]}
+                [ "$files" -le 6 ] || [ "$file" = 0 ] || [ "$file" = $((files / 2)) ] || [ "$file" -ge $((files - 4)) ] ||
+                    continue
+                [ "$in_file" = $((file % 3)) ] && [ "$k" = 0 ] || continue
+                kind=${KINDS[$((file % 3))]}
             fi
             fresh
             shim "$n" "$kind" 0 "" "$@"
