@@ -23,6 +23,7 @@ enum {
     APP_EXIT_USAGE = 2,   /* bad command line */
     APP_EXIT_INPUT = 3,   /* unreadable or malformed input file */
     APP_EXIT_DEVICE = 4,  /* no usable Vulkan device or a device error */
+    APP_EXIT_WRITE = 5,   /* an output could not be written (disk full, I/O error, permissions) */
 };
 
 /* main.c: maps a status to an exit code and prints "bitfuse CMD: error:
@@ -126,6 +127,19 @@ bf_status app_mesh_write(const char *path, mesh_format f, const app_mesh_out *o,
  * "used_sloppy", "seconds"} when asked for. */
 void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mesh_out *mo, const mesh_data *m,
                         const mesh_simplify_stats *st);
+
+/* output.c: an output that cannot be written (BF_WRITE: disk full, I/O
+ * error) does not stop the others: the first failure is kept here and
+ * decides the exit code (5), each is warned about, and the work done is
+ * written wherever it still can be (docs/faults.md). */
+typedef struct app_write_failure {
+    bf_status s; /* BF_OK, or BF_WRITE once an output failed */
+    char message[1024];
+} app_write_failure;
+/* s, or BF_OK when s is BF_WRITE (then noted in w and warned about). */
+bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s);
+/* The first failure noted as the status (its message restored), or BF_OK. */
+bf_status app_write_status(const app_write_failure *w);
 
 /* output.c: what the commands that build a map report about it. */
 typedef struct app_map_report {

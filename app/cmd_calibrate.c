@@ -27,7 +27,8 @@ static const char calibrate_usage[] =
 
 static const char calibrate_epilog[] =
     "exit codes: 0 ok, 1 the calibration failed (numerics), 2 usage, 3 an unreadable image,\n"
-    "images of different sizes or too few views with the board found (the files are named)\n"
+    "images of different sizes or too few views with the board found (the files are named),\n"
+    "5 calib.json could not be written (disk full, I/O error; no half file is left)\n"
     "See docs/calibration.md.\n";
 
 static const char *check_board(const char *name, const char *v)

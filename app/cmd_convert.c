@@ -38,7 +38,8 @@ static int parse_args(int argc, char **argv, convert_args *a)
     app_command_spec spec = {
         .name = "convert", .usage = convert_usage, .positional = &a->in, .min_positional = 1, .max_positional = 1,
         .positional_missing = "no sequence given",
-        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 unreadable or malformed input\n",
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 unreadable or malformed input, 5 an output\n"
+                  "could not be written (disk full, I/O error)\n",
     };
     int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
     if (rc) return rc;

@@ -21,8 +21,9 @@ static const char export_usage[] =
     "out; the rest is exported.\n";
 
 static const char export_epilog[] =
-    "exit codes: 0 ok (also with chunk files left out: they are warned about), 1 failure\n"
-    "(also FILE not writable: nothing is left behind), 2 usage, 3 no readable store\n";
+    "exit codes: 0 ok (also with chunk files left out: they are warned about), 1 failure,\n"
+    "2 usage, 3 no readable store, 5 FILE could not be written (disk full, I/O error, no such\n"
+    "folder: nothing is left behind, an earlier FILE stays as it was)\n";
 
 /* Reads a store, warning about what it left out. */
 static bf_status read_store(const char *dir, hostmap *m, store_meta *meta, bf_traj *traj, store_report *rep)
@@ -81,13 +82,8 @@ int cmd_export(int argc, char **argv)
         mc.max_level = level != UINT32_MAX ? level : app_mesh_level(&m);
         s = export_mesh(&m, &mc, &data, &st);
     }
-    /* Writing is the work, not the input: its failure exits 1. */
-    bool is_write_failure = false;
     double t_write = bf_time_s();
-    if (s == BF_OK) {
-        s = app_mesh_write(out, fmt, &mo, &data, &ss);
-        is_write_failure = s != BF_OK;
-    }
+    if (s == BF_OK) s = app_mesh_write(out, fmt, &mo, &data, &ss);
     double secs = bf_time_s() - t0;
     if (s == BF_OK && json) {
         cJSON *o = cJSON_CreateObject();
@@ -116,9 +112,7 @@ int cmd_export(int argc, char **argv)
     }
     mesh_free(&data);
     hostmap_free(&m);
-    if (s == BF_OK) return APP_EXIT_OK;
-    int code = app_fail(cmd, s);
-    return is_write_failure && code == APP_EXIT_INPUT ? APP_EXIT_FAILURE : code;
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
 
 /* ------------------------------------------------------------ info */

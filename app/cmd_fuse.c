@@ -55,7 +55,9 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
         .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input (a corrupt frame\n"
-                  "mid-sequence: the frames before it are still fused and written), 4 no Vulkan device\n",
+                  "mid-sequence: the frames before it are still fused and written), 4 no Vulkan device,\n"
+                  "5 an output could not be written (disk full, I/O error: the file is named; every\n"
+                  "file in DIR is whole or absent)\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     return rc ? rc : app_check_map_options("fuse", &a->fcfg);
@@ -129,9 +131,16 @@ int cmd_fuse(int argc, char **argv)
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
         r.n_unreadable = replay_skipped_frames(src);
     }
-    if (s == BF_OK) s = app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
+    /* An output that cannot be written does not stop the others. */
+    app_write_failure wf = {0};
+    if (s == BF_OK) s = app_note_write(&wf, cmd, app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out));
     r.seconds = bf_time_s() - t_start;
-    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r, src));
+    if (s == BF_OK) {
+        cJSON *o = stats_json(&a, &r, src);
+        if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
+        s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
+    }
+    if (s == BF_OK) s = app_write_status(&wf);
     if (s == BF_OK) {
         printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
                r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);

@@ -49,7 +49,8 @@ static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
     app_command_spec spec = {
         .name = cmd, .usage = record_usage,
         .epilog = "exit codes: 0 ok (also when stopped by Ctrl-C), 1 failure, 2 usage, 3 unreadable input\n"
-                  "or device error mid-recording (the log keeps the frames before it), 4 no device\n",
+                  "or device error mid-recording (the log keeps the frames before it), 4 no device,\n"
+                  "5 the log could not be written (disk full, I/O error)\n",
     };
     return app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
 }

@@ -32,8 +32,8 @@ static const char render_usage[] =
     "ray-cast. docs/particles.md, docs/render.md.\n";
 
 static const char render_epilog[] =
-    "exit codes: 0 ok, 1 failure (also an image not writable), 2 usage (also a bad pose,\n"
-    "size or camera), 3 unreadable map, mesh or particle file, 4 no usable Vulkan device\n";
+    "exit codes: 0 ok, 1 failure, 2 usage (also a bad pose, size or camera), 3 unreadable\n"
+    "map, mesh or particle file, 4 no usable Vulkan device, 5 an image could not be written\n";
 
 typedef struct render_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
@@ -182,11 +182,7 @@ int cmd_render(int argc, char **argv)
     }
     render_images im = {0};
     if (s == BF_OK) s = render_download(caster, &im);
-    bool is_write_failure = false;
-    if (s == BF_OK) {
-        s = write_images(&im, a.out, a.depth);
-        is_write_failure = s != BF_OK;
-    }
+    if (s == BF_OK) s = write_images(&im, a.out, a.depth);
     if (s == BF_OK) {
         uint64_t n_hit = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
@@ -224,7 +220,5 @@ int cmd_render(int argc, char **argv)
     gpu_context_destroy(ctx);
     free(xyz);
     mesh_free(&mesh);
-    if (s == BF_OK) return APP_EXIT_OK;
-    int code = app_fail(cmd, s);
-    return is_write_failure && code == APP_EXIT_INPUT ? APP_EXIT_FAILURE : code;
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "app.h"
 #include "calib/calib.h"
@@ -35,7 +36,9 @@ static const char replay_usage[] =
 static const char replay_epilog[] =
     "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
     "3 bad input (a corrupt frame mid-sequence: what came before it is still written),\n"
-    "4 no Vulkan device\n";
+    "4 no Vulkan device or a device error (mid-scan: the trajectory so far is written, and\n"
+    "the map when the device still answers), 5 an output could not be written (disk full,\n"
+    "I/O error: the scan stops, the rest is still written; every file is whole or absent)\n";
 
 static const char live_usage[] =
     "usage: bitfuse live --device URI --out DIR [options]\n"
@@ -47,7 +50,8 @@ static const char live_usage[] =
 
 static const char live_epilog[] =
     "exit codes: 0 ok (also when stopped by Ctrl-C), 1 failure, 2 usage, 3 bad input or a\n"
-    "device error mid-scan (what was reconstructed is still written), 4 no device\n";
+    "device error mid-scan (what was reconstructed is still written), 4 no device, or a\n"
+    "GPU error (as for replay), 5 an output could not be written (as for replay)\n";
 
 typedef struct replay_args {
     const char *seq, *out;   /* seq: the sequence, or the device URI (live) */
@@ -494,10 +498,10 @@ static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, cons
     return s;
 }
 
-static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr)
+static void csv_frame(bf_out *csv, const bf_frame *f, const recon_frame_result *fr)
 {
     bool ran = recon_state_ran_icp(fr->state);
-    fprintf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f\n", f->index, f->t_depth_s,
+    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f\n", f->index, f->t_depth_s,
             recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
@@ -510,7 +514,7 @@ static void csv_frame(FILE *csv, const bf_frame *f, const recon_frame_result *fr
 /* What the replay writes per frame beside the runner's own records. */
 typedef struct replay_sink {
     const replay_args *a;
-    FILE *csv;
+    bf_out *csv;
     replay_log_writer *log; /* live --record, else NULL */
     replay_result *r;
     view_window *win;       /* --view, else NULL */
@@ -521,6 +525,7 @@ typedef struct replay_sink {
     double cast_s;          /* how long that cast and show took */
     bf_se3 T_shown;         /* the pose it was cast at */
     uint64_t n_bricks;
+    app_write_failure wf;   /* an output that failed mid-scan: the scan stopped there */
 } replay_sink;
 
 /* The window's frame: the map at the window's camera (the frame's pose
@@ -586,12 +591,26 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
     return s;
 }
 
+/* An output that cannot be written mid-scan (a view, the store, the log,
+ * frames.csv) stops the scan as Ctrl-C does, so that what was reconstructed
+ * so far is still written (docs/faults.md); the exit code reports it. */
+static bf_status stop_on_write_failure(replay_sink *k, bf_status s)
+{
+    if (s != BF_WRITE) return s;
+    const char *cmd = k->a->is_live_cmd ? "live" : "replay";
+    bf_warn("%s: the scan stops here: an output cannot be written", cmd);
+    app_stop_request(k->stop);
+    return app_note_write(&k->wf, cmd, s);
+}
+
 static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr)
 {
     replay_sink *k = user;
+    if (k->wf.s != BF_OK) return BF_OK; /* stopping: the frame the stop found in flight */
     bf_status s = BF_OK;
     csv_frame(k->csv, f, fr);
-    if (k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
+    if (k->csv->err) s = bf_fail(BF_WRITE, "%s: write failed: %s", k->csv->path, strerror(k->csv->err));
+    if (s == BF_OK && k->log && (s = replay_log_writer_add(k->log, f)) == BF_OK) k->r->n_recorded++;
     /* Every K frames handled, not K indices: a live queue drops frames, and
      * indices that skip would miss most multiples of K. */
     bool has_view = false;
@@ -602,7 +621,7 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     }
     if (s == BF_OK && k->win && run->loop) s = show_frame(k, run, fr, has_view);
     if (s == BF_OK) s = app_store_frame(&k->r->store, run, f);
-    return s;
+    return stop_on_write_failure(k, s);
 }
 
 static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src)
@@ -650,11 +669,17 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     rgbd_source *src = NULL;
     gpu_context *ctx = NULL;
     replay_log_writer *log = NULL;
-    FILE *csv = NULL;
+    static bf_out csv; /* 8 KiB of paths */
+    bool has_csv = false;
     char path[4096];
     const volatile sig_atomic_t *stop = NULL;
-    static volatile sig_atomic_t view_closed; /* replay --view: the window's stop flag */
+    /* replay: set when the window closes or an output fails mid-scan */
+    static volatile sig_atomic_t replay_stop;
     view_window *win = NULL;
+    app_write_failure wf = {0};  /* outputs that failed: the others are still written */
+    bf_status s_loop = BF_OK;    /* the loop failed mid-scan: the work done is still written */
+    char loop_error[1024] = "";
+    bool has_map = true;
     /* The input first: a missing one leaves no empty output folder. */
     bf_status s;
     if (is_live_cmd) {
@@ -678,20 +703,22 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         vc.is_following = true;
         vc.overlay = a.overlay;
         s = view_open(&vc, &gcfg, &win);
-        if (!stop) stop = &view_closed;
     }
+    replay_stop = 0;
+    if (!stop) stop = &replay_stop;
     /* The store is read (to resume) or claimed before anything is made. */
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
+    bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
                                 .has_groundtruth = src->has_groundtruth};
         s = replay_log_writer_create(a.record_path, rgbd_source_intrinsics(src), &lc, &log);
     }
-    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "frames.csv")) == BF_OK && !(csv = fopen(path, "w")))
-        s = bf_fail(BF_IO, "%s: cannot create", path);
-    if (csv)
-        fprintf(csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
+    if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "frames.csv")) == BF_OK)
+        has_csv = (s = bf_out_open(&csv, path)) == BF_OK;
+    if (has_csv)
+        bf_out_printf(&csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms\n");
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK && win) s = view_attach(win, ctx);
@@ -713,9 +740,24 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             app_store_resume_config(&r.store, &rs, &rcfg.loop);
             rcfg.resume = &rs;
         }
-        replay_sink sink = {.a = &a, .csv = csv, .log = log, .r = &r, .win = win,
+        replay_sink sink = {.a = &a, .csv = &csv, .log = log, .r = &r, .win = win,
                             .stop = (volatile sig_atomic_t *)stop};
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
+        if (sink.wf.s != BF_OK) {
+            wf = sink.wf;
+            r.run.is_interrupted = false; /* the stop was ours, not a signal's */
+        }
+        /* The loop failing mid-scan (a lost device, out of memory, the
+         * stream's spill folder not writable): the trajectory so far is
+         * host data and is written, the map too when it can still be read
+         * back; the exit code reports the failure. */
+        if ((s == BF_VULKAN || s == BF_NO_MEMORY || s == BF_WRITE) && r.run.est.n > 0) {
+            s_loop = s;
+            snprintf(loop_error, sizeof loop_error, "%s", bf_last_error());
+            bf_warn("%s: %s: the scan stops after %zu frames; writing what was reconstructed", cmd, loop_error,
+                    r.run.est.n);
+            s = BF_OK;
+        }
     }
     if (r.has_capture) {
         r.cap = capture_threaded_stats(src);
@@ -723,22 +765,43 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     }
     if (log) {
         bf_status s_log = replay_log_writer_finish(log);
-        if (s == BF_OK) s = s_log;
+        if (s == BF_OK) s = app_note_write(&wf, cmd, s_log);
     }
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
-        s = replay_traj_write_tum(path, &r.run.est);
+        s = app_note_write(&wf, cmd, replay_traj_write_tum(path, &r.run.est));
     /* Then the store: the whole map at the end (or at Ctrl-C). */
-    if (s == BF_OK && a.store) s = app_store_finish(&r.store, &r.run);
+    if (s == BF_OK && a.store) s = app_note_write(&wf, cmd, app_store_finish(&r.store, &r.run));
     if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
     hostmap whole = {0};
     if (s == BF_OK && r.run.loop) s = recon_snapshot(r.run.loop, &whole);
-    if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
+    if (s == BF_OK)
+        s = app_note_write(&wf, cmd,
+                           app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out,
+                                          &r.out));
     hostmap_free(&whole);
+    if (s_loop != BF_OK && s != BF_OK) {
+        /* The device did not answer for the map: the trajectory stays. */
+        bf_warn("%s: the map could not be read back (%s): only the trajectory is written", cmd, bf_last_error());
+        s = BF_OK;
+        has_map = false;
+    }
     r.seconds = bf_time_s() - t_start;
-    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r, src));
-    if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
-    if (s == BF_OK) print_summary(&a, &r, src);
+    if (s == BF_OK && has_map) {
+        cJSON *o = stats_json(&a, &r, src);
+        if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
+        if (s_loop != BF_OK) cJSON_AddStringToObject(o, "scan_error", loop_error);
+        s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
+    }
+    if (has_csv && s == BF_OK) {
+        s = app_note_write(&wf, cmd, bf_out_commit(&csv));
+        has_csv = false;
+    }
+    if (has_csv) bf_out_abort(&csv);
+    /* A run that wrote nothing (no device, a failure at start-up) leaves
+     * no empty folder it made behind; rmdir takes only an empty one. */
+    if (s != BF_OK && made_out) (void)rmdir(a.out);
+    if (s == BF_OK && has_map && wf.s == BF_OK && s_loop == BF_OK) print_summary(&a, &r, src);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
@@ -748,6 +811,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     gpu_context_destroy(ctx);
     view_destroy(win);
     rgbd_source_close(src);
+    /* The first failure decides the exit code: a GPU or output failure
+     * mid-scan, else a later one, else the source's. */
+    if (s == BF_OK && s_loop != BF_OK) s = bf_fail(s_loop, "%s", loop_error);
+    else if (s == BF_OK) s = app_write_status(&wf);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -28,9 +28,9 @@ static const char view_usage[] =
     "scripts xvfb-run) and a Vulkan device that presents to it. docs/view.md.\n";
 
 static const char view_epilog[] =
-    "exit codes: 0 ok, 1 failure (also a screenshot not writable), 2 usage (also a bad pose,\n"
-    "size or camera), 3 unreadable map, mesh or particle file, 4 no display, no usable\n"
-    "Vulkan device, or a device that cannot present to the window\n";
+    "exit codes: 0 ok, 1 failure, 2 usage (also a bad pose, size or camera), 3 unreadable\n"
+    "map, mesh or particle file, 4 no display, no usable Vulkan device, or a device that\n"
+    "cannot present to the window, 5 the screenshot could not be written\n";
 
 typedef struct view_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *screenshot;
@@ -322,7 +322,6 @@ int cmd_view(int argc, char **argv)
         view_set_pose(L.win, &T_wc, pivot_m(&sc, &T_wc));
         s = run_window(&L, &sc, &a, k, W, H);
     }
-    bool is_write_failure = s == BF_IO && L.ctx && (sc.map || sc.ps);
     view_detach(L.win);
     render_destroy(L.caster);
     render_destroy(L.coarse);
@@ -333,7 +332,5 @@ int cmd_view(int argc, char **argv)
     free(L.rgb);
     free(f.xyz);
     mesh_free(&f.mesh);
-    if (s == BF_OK) return APP_EXIT_OK;
-    int code = app_fail(cmd, s);
-    return is_write_failure ? APP_EXIT_FAILURE : code;
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -35,7 +35,8 @@ static void usage(FILE *f)
     fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n"
                "       bitfuse --version\n\ncommands:\n");
     for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
-    fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error (or no display)\n"
+    fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error (or no display),\n"
+               "            5 an output could not be written (disk full, I/O error)\n"
                "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"
                "             BITFUSE_THREADS (CPU threads), BITFUSE_VALIDATION=1 (Vulkan validation)\n");
 }
@@ -51,6 +52,7 @@ int app_fail(const char *cmd, bf_status s)
     case BF_FORMAT: return APP_EXIT_INPUT;
     case BF_VULKAN:
     case BF_NO_DEVICE: return APP_EXIT_DEVICE;
+    case BF_WRITE: return APP_EXIT_WRITE;
     default: return APP_EXIT_FAILURE;
     }
 }

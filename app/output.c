@@ -94,6 +94,7 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
     else if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
     if (s != BF_OK) return s;
     mesh_data mesh = {0}, pts = {0};
+    char mesh_error[1024] = ""; /* a mesh that cannot be written: the points still are */
     if (mo) {
         r->mesh_out = *mo;
         snprintf(r->mesh_file, sizeof r->mesh_file, "mesh.%s", mesh_format_name((mesh_format)mo->format));
@@ -103,10 +104,16 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
         if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, r->mesh_file)) == BF_OK)
             s = app_mesh_write(path, (mesh_format)mo->format, mo, &mesh, &r->simplify);
         r->mesh_origin = mesh.origin;
+        if (s == BF_WRITE) {
+            snprintf(mesh_error, sizeof mesh_error, "%s", bf_last_error());
+            bf_warn("%s; the points are still written", mesh_error);
+            s = BF_OK;
+        }
     }
     if (s == BF_OK) s = export_points(&snap, &pts, &r->points);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
         s = mesh_write_ply(path, &pts);
+    if (s == BF_OK && mesh_error[0]) s = bf_fail(BF_WRITE, "%s", mesh_error);
     mesh_free(&mesh);
     mesh_free(&pts);
     hostmap_free(&snap);
@@ -181,6 +188,23 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
         printf(", %s simplified to %llu (meshoptimizer's error estimate %.2f mm)", r->mesh_file,
                (unsigned long long)r->simplify.tris_after, 1e3 * r->simplify.error_m);
     printf("\n");
+}
+
+bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s)
+{
+    if (s != BF_WRITE) return s;
+    if (w->s != BF_OK && !strcmp(w->message, bf_last_error())) return BF_OK; /* the same one again (a sticky writer) */
+    bf_warn("%s: %s; the other outputs are still written", cmd, bf_last_error());
+    if (w->s == BF_OK) {
+        w->s = s;
+        snprintf(w->message, sizeof w->message, "%s", bf_last_error());
+    }
+    return BF_OK;
+}
+
+bf_status app_write_status(const app_write_failure *w)
+{
+    return w->s == BF_OK ? BF_OK : bf_fail(w->s, "%s", w->message);
 }
 
 void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)

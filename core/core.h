@@ -33,7 +33,8 @@
     X(NO_DEVICE, "no suitable device")                                    \
     X(UNSUPPORTED, "unsupported")                                         \
     X(NUMERIC, "numerical failure")                                       \
-    X(END, "end of stream")
+    X(END, "end of stream")                                               \
+    X(WRITE, "cannot write an output file")
 
 typedef enum bf_status {
 #define BF__ENUM(name, msg) BF_##name,
@@ -233,8 +234,39 @@ void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx);
 bf_status bf_read_file(const char *path, char **data, size_t *size);
 /* Creates a directory and its parents (mkdir -p). */
 bf_status bf_mkdir_p(const char *path);
-/* Writes data to path atomically: temporary file, fsync, rename. */
+/* Writes data to path atomically: temporary file, fsync, rename (a bf_out
+ * of one write). BF_WRITE on failure, path as it was. */
 bf_status bf_write_file_atomic(const char *path, const void *data, size_t size);
+
+/* An output file that appears whole or not at all (every file bitfuse
+ * writes goes through one, or through bf_write_file_atomic): the bytes go
+ * through a buffer into PATH.tmp.PID with write(2), and bf_out_commit
+ * flushes, fsyncs, closes and renames it into place. A short write is
+ * continued; a failed one (disk full, I/O error) is sticky: later writes do
+ * nothing and commit reports it as BF_WRITE, "PATH: write failed: REASON",
+ * after removing the temporary file, so PATH keeps its earlier contents (or
+ * stays absent). bf_out_abort removes the temporary file. The struct is
+ * the caller's; open fills it, commit or abort releases it. */
+typedef struct bf_out {
+    char path[4096];
+    char tmp[4128];
+    int fd;        /* -1: closed */
+    int err;       /* the first errno, 0 while all is well */
+    const char *op; /* what failed: "write", "fsync", "close" */
+    char *buf;     /* BF_OUT_BUFFER bytes, at the first bf_out_write */
+    size_t n;      /* bytes buffered */
+    uint64_t bytes; /* bytes handed over so far */
+} bf_out;
+#define BF_OUT_BUFFER (1u << 20)
+bf_status bf_out_open(bf_out *o, const char *path);
+void bf_out_write(bf_out *o, const void *p, size_t n);
+void bf_out_printf(bf_out *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Flushes what is buffered to the temporary file now (a streamed output
+ * such as frames.csv keeps its memory bounded); failures are sticky as
+ * above. */
+void bf_out_flush(bf_out *o);
+bf_status bf_out_commit(bf_out *o);
+void bf_out_abort(bf_out *o);
 bool bf_file_exists(const char *path);
 /* Joins dir and name into out (size cap); fails with BF_INVALID_ARG if too long. */
 bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name);

@@ -4,6 +4,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -55,51 +56,136 @@ bf_status bf_mkdir_p(const char *path)
         if (*p != '/') continue;
         *p = '\0';
         if (mkdir(tmp, 0755) != 0 && errno != EEXIST)
-            return bf_fail(BF_IO, "%s: cannot create directory: %s", tmp, strerror(errno));
+            return bf_fail(BF_WRITE, "%s: cannot create directory: %s", tmp, strerror(errno));
         *p = '/';
     }
     if (mkdir(tmp, 0755) != 0 && errno != EEXIST)
-        return bf_fail(BF_IO, "%s: cannot create directory: %s", tmp, strerror(errno));
+        return bf_fail(BF_WRITE, "%s: cannot create directory: %s", tmp, strerror(errno));
     struct stat st;
     if (stat(tmp, &st) != 0 || !S_ISDIR(st.st_mode))
-        return bf_fail(BF_IO, "%s: exists and is not a directory", tmp);
+        return bf_fail(BF_WRITE, "%s: exists and is not a directory", tmp);
+    return BF_OK;
+}
+
+/* ------------------------------------------------------------ outputs */
+
+bf_status bf_out_open(bf_out *o, const char *path)
+{
+    memset(o, 0, sizeof *o);
+    o->fd = -1;
+    if (snprintf(o->path, sizeof o->path, "%s", path) >= (int)sizeof o->path ||
+        snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%d", path, (int)getpid()) >= (int)sizeof o->tmp)
+        return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
+    o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (o->fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(errno));
+    return BF_OK;
+}
+
+/* Hands p[0..n) to the file, continuing short writes. */
+static void out_put(bf_out *o, const char *p, size_t n)
+{
+    while (n > 0 && !o->err) {
+        ssize_t w = write(o->fd, p, n);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) {
+            o->err = w < 0 && errno ? errno : EIO;
+            o->op = "write";
+            return;
+        }
+        p += w;
+        n -= (size_t)w;
+        o->bytes += (uint64_t)w;
+    }
+}
+
+void bf_out_flush(bf_out *o)
+{
+    if (o->n && !o->err) out_put(o, o->buf, o->n);
+    o->n = 0;
+}
+
+void bf_out_write(bf_out *o, const void *p, size_t n)
+{
+    if (o->err || o->fd < 0) return;
+    if (!o->buf && !(o->buf = malloc(BF_OUT_BUFFER))) {
+        o->err = ENOMEM, o->op = "buffer";
+        return;
+    }
+    if (o->n + n > BF_OUT_BUFFER) bf_out_flush(o);
+    if (n >= BF_OUT_BUFFER) {
+        out_put(o, p, n);
+        return;
+    }
+    memcpy(o->buf + o->n, p, n);
+    o->n += n;
+}
+
+void bf_out_printf(bf_out *o, const char *fmt, ...)
+{
+    char line[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    if (n < 0) return;
+    if ((size_t)n < sizeof line) {
+        bf_out_write(o, line, (size_t)n);
+        return;
+    }
+    char *big = malloc((size_t)n + 1);
+    if (!big) {
+        if (!o->err) o->err = ENOMEM, o->op = "format";
+        return;
+    }
+    va_start(ap, fmt);
+    vsnprintf(big, (size_t)n + 1, fmt, ap);
+    va_end(ap);
+    bf_out_write(o, big, (size_t)n);
+    free(big);
+}
+
+void bf_out_abort(bf_out *o)
+{
+    if (o->fd >= 0) {
+        close(o->fd);
+        unlink(o->tmp);
+    }
+    o->fd = -1;
+    free(o->buf);
+    o->buf = NULL;
+}
+
+bf_status bf_out_commit(bf_out *o)
+{
+    if (o->fd < 0) return bf_fail(BF_WRITE, "%s: the output was not opened", o->path);
+    bf_out_flush(o);
+    if (!o->err && fsync(o->fd) != 0) o->err = errno, o->op = "fsync";
+    /* Close even after a failure, or the descriptor leaks; a failed close
+     * can be the first report of a lost write (NFS, quotas). */
+    if (close(o->fd) != 0 && !o->err) o->err = errno, o->op = "close";
+    o->fd = -1;
+    free(o->buf);
+    o->buf = NULL;
+    if (o->err) {
+        unlink(o->tmp);
+        return bf_fail(BF_WRITE, "%s: %s failed: %s", o->path, o->op, strerror(o->err));
+    }
+    if (rename(o->tmp, o->path) != 0) {
+        int e = errno;
+        unlink(o->tmp);
+        return bf_fail(BF_WRITE, "%s: cannot rename into place: %s", o->path, strerror(e));
+    }
     return BF_OK;
 }
 
 bf_status bf_write_file_atomic(const char *path, const void *data, size_t size)
 {
-    char tmp[4200];
-    if (snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)getpid()) >= (int)sizeof tmp)
-        return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (fd < 0) return bf_fail(BF_IO, "%s: cannot create: %s", tmp, strerror(errno));
-    const char *p = data;
-    size_t left = size;
-    while (left > 0) {
-        ssize_t w = write(fd, p, left);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) {
-            int e = errno;
-            close(fd);
-            unlink(tmp);
-            return bf_fail(BF_IO, "%s: write failed: %s", tmp, strerror(e));
-        }
-        p += w;
-        left -= (size_t)w;
-    }
-    /* Close even when fsync fails, or the descriptor leaks. */
-    int e = fsync(fd) != 0 ? errno : 0;
-    if (close(fd) != 0 && !e) e = errno;
-    if (e) {
-        unlink(tmp);
-        return bf_fail(BF_IO, "%s: cannot flush: %s", tmp, strerror(e));
-    }
-    if (rename(tmp, path) != 0) {
-        int e = errno;
-        unlink(tmp);
-        return bf_fail(BF_IO, "%s: cannot rename into place: %s", path, strerror(e));
-    }
-    return BF_OK;
+    bf_out o;
+    bf_status s = bf_out_open(&o, path);
+    if (s != BF_OK) return s;
+    /* Straight to the file: no copy into the buffer. */
+    out_put(&o, data, size);
+    return bf_out_commit(&o);
 }
 
 bool bf_file_exists(const char *path)

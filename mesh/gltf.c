@@ -132,41 +132,41 @@ bf_status mesh_write_glb(const char *path, const mesh_data *m)
         return bf_fail(BF_UNSUPPORTED, "%s: %llu bytes: beyond glb's 4 GiB (simplify the mesh, or write PLY)", path,
                        (unsigned long long)total);
 
-    mesh__out o;
-    if ((s = mesh__out_open(&o, path)) != BF_OK) return s;
+    bf_out o;
+    if ((s = bf_out_open(&o, path)) != BF_OK) return s;
     uint8_t rec[20], *p = rec;
     p = mesh__put_u32(p, GLB_MAGIC);
     p = mesh__put_u32(p, 2);
     p = mesh__put_u32(p, (uint32_t)total);
     p = mesh__put_u32(p, (uint32_t)j.len);
     p = mesh__put_u32(p, GLB_CHUNK_JSON);
-    mesh__out_write(&o, rec, (size_t)(p - rec));
-    mesh__out_write(&o, buf, j.len);
+    bf_out_write(&o, rec, (size_t)(p - rec));
+    bf_out_write(&o, buf, j.len);
     if (nv) {
         p = mesh__put_u32(rec, (uint32_t)bin_len);
         p = mesh__put_u32(p, GLB_CHUNK_BIN);
-        mesh__out_write(&o, rec, (size_t)(p - rec));
+        bf_out_write(&o, rec, (size_t)(p - rec));
         for (size_t i = 0; i < nv; i++) {
             p = rec;
             for (int k = 0; k < 3; k++) p = mesh__put_f32(p, m->xyz[3 * i + k]);
-            mesh__out_write(&o, rec, 12);
+            bf_out_write(&o, rec, 12);
         }
         for (size_t i = 0; has_normal && i < nv; i++) {
             float n[3];
             unit_normal(&m->normal[3 * i], n);
             p = rec;
             for (int k = 0; k < 3; k++) p = mesh__put_f32(p, n[k]);
-            mesh__out_write(&o, rec, 12);
+            bf_out_write(&o, rec, 12);
         }
         for (size_t i = 0; has_rgb && i < nv; i++) {
             p = rec;
             for (int k = 0; k < 3; k++) p = mesh__put_f32(p, srgb_to_linear(m->rgb[3 * i + k]));
-            mesh__out_write(&o, rec, 12);
+            bf_out_write(&o, rec, 12);
         }
         for (size_t t = 0; t < 3 * nt; t++) {
             p = mesh__put_u32(rec, m->tri[t]);
-            mesh__out_write(&o, rec, 4);
+            bf_out_write(&o, rec, 4);
         }
     }
-    return mesh__out_commit(&o);
+    return bf_out_commit(&o);
 }

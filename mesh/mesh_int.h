@@ -1,7 +1,7 @@
-/* Declarations shared by mesh/'s writers: a buffered output file written
- * atomically (a temporary file beside the target, fsync, rename), so a
- * large mesh streams to disk instead of being built in memory first. Not
- * public. */
+/* Declarations shared by mesh/'s writers (their output file is core's
+ * bf_out: streamed through a buffer into a temporary file beside the
+ * target, fsync, rename, so a large mesh is never built in memory first
+ * and never appears half written). Not public. */
 #ifndef BF_MESH_INT_H
 #define BF_MESH_INT_H
 
@@ -9,25 +9,6 @@
 #include <string.h>
 
 #include "mesh.h"
-
-typedef struct mesh__out {
-    const char *path; /* borrowed: the target */
-    char tmp[4200];   /* the temporary file beside it */
-    FILE *f;
-    int err;          /* the first errno of a failed write, 0 while all is well */
-} mesh__out;
-
-/* Creates the temporary file for path. BF_IO names it. */
-bf_status mesh__out_open(mesh__out *o, const char *path);
-/* Appends n bytes; a failure is kept and reported by mesh__out_commit. */
-void mesh__out_write(mesh__out *o, const void *p, size_t n);
-/* printf into the file (one line of text; a failure as above). */
-void mesh__out_printf(mesh__out *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* Flushes, fsyncs, closes and renames into place; on any failure removes
- * the temporary file and returns BF_IO naming the path. */
-bf_status mesh__out_commit(mesh__out *o);
-/* Closes and removes the temporary file (after a failure elsewhere). */
-void mesh__out_abort(mesh__out *o);
 
 /* Little-endian stores (the files' byte order, whatever the host's). */
 static inline uint8_t *mesh__put_u32(uint8_t *p, uint32_t b)

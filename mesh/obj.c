@@ -67,14 +67,14 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
                                   "newmtl bitfuse\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n";
         if ((s = bf_write_file_atomic(mtl_path, mtl, sizeof mtl - 1)) != BF_OK) return s;
     }
-    mesh__out o;
-    if ((s = mesh__out_open(&o, path)) != BF_OK) return s;
-    mesh__out_printf(&o, "# written by bitfuse: %u vertices, %u triangles%s\n", m->n_verts, m->n_tris,
+    bf_out o;
+    if ((s = bf_out_open(&o, path)) != BF_OK) return s;
+    bf_out_printf(&o, "# written by bitfuse: %u vertices, %u triangles%s\n", m->n_verts, m->n_tris,
                      m->rgb ? "; vertex colours as v x y z r g b" : "");
     if (mesh__has_origin(m))
-        mesh__out_printf(&o, "# origin_w %.17g %.17g %.17g (a vertex's world position is origin_w + v)\n",
+        bf_out_printf(&o, "# origin_w %.17g %.17g %.17g (a vertex's world position is origin_w + v)\n",
                          m->origin.x, m->origin.y, m->origin.z);
-    if (is_mesh) mesh__out_printf(&o, "mtllib %s\n", mtl_name);
+    if (is_mesh) bf_out_printf(&o, "mtllib %s\n", mtl_name);
     char line[256];
     for (size_t i = 0; i < m->n_verts; i++) {
         char *p = line;
@@ -85,7 +85,7 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
         if (m->rgb)
             for (int k = 0; k < 3; k++) *p++ = ' ', p = obj_fixed(p, m->rgb[3 * i + k] / 255.0, 4);
         *p++ = '\n';
-        mesh__out_write(&o, line, (size_t)(p - line));
+        bf_out_write(&o, line, (size_t)(p - line));
     }
     if (is_mesh && m->normal)
         for (size_t i = 0; i < m->n_verts; i++) {
@@ -93,9 +93,9 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
             *p++ = 'v', *p++ = 'n';
             for (int k = 0; k < 3; k++) *p++ = ' ', p = obj_fixed(p, m->normal[3 * i + k], 4);
             *p++ = '\n';
-            mesh__out_write(&o, line, (size_t)(p - line));
+            bf_out_write(&o, line, (size_t)(p - line));
         }
-    if (is_mesh) mesh__out_printf(&o, "usemtl bitfuse\n");
+    if (is_mesh) bf_out_printf(&o, "usemtl bitfuse\n");
     for (size_t t = 0; t < m->n_tris; t++) {
         char *p = line;
         *p++ = 'f';
@@ -106,7 +106,7 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
             if (m->normal) *p++ = '/', *p++ = '/', p = obj_u32(p, v);
         }
         *p++ = '\n';
-        mesh__out_write(&o, line, (size_t)(p - line));
+        bf_out_write(&o, line, (size_t)(p - line));
     }
-    return mesh__out_commit(&o);
+    return bf_out_commit(&o);
 }

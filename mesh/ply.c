@@ -636,9 +636,9 @@ bf_status mesh_write_ply(const char *path, const mesh_data *m)
     char origin[160] = "";
     if (mesh__has_origin(m))
         snprintf(origin, sizeof origin, "comment origin_w %.17g %.17g %.17g\n", m->origin.x, m->origin.y, m->origin.z);
-    mesh__out o;
-    if ((s = mesh__out_open(&o, path)) != BF_OK) return s;
-    mesh__out_printf(&o,
+    bf_out o;
+    if ((s = bf_out_open(&o, path)) != BF_OK) return s;
+    bf_out_printf(&o,
                      "ply\nformat binary_little_endian 1.0\ncomment written by bitfuse\n%s"
                      "element vertex %u\nproperty float x\nproperty float y\nproperty float z\n%s%s"
                      "element face %u\nproperty list uchar int vertex_indices\nend_header\n",
@@ -653,15 +653,15 @@ bf_status mesh_write_ply(const char *path, const mesh_data *m)
             for (int k = 0; k < 3; k++) p = mesh__put_f32(p, m->normal[3 * i + k]);
         if (m->rgb)
             for (int k = 0; k < 3; k++) *p++ = m->rgb[3 * i + k];
-        mesh__out_write(&o, rec, (size_t)(p - rec));
+        bf_out_write(&o, rec, (size_t)(p - rec));
     }
     for (size_t i = 0; i < m->n_tris; i++) {
         uint8_t *p = rec;
         *p++ = 3;
         for (int k = 0; k < 3; k++) p = mesh__put_u32(p, m->tri[3 * i + k]);
-        mesh__out_write(&o, rec, (size_t)(p - rec));
+        bf_out_write(&o, rec, (size_t)(p - rec));
     }
-    return mesh__out_commit(&o);
+    return bf_out_commit(&o);
 }
 
 void mesh_free(mesh_data *m)

@@ -329,32 +329,33 @@ bf_status replay_image_read_rgb8(const char *path, uint8_t **pix, uint32_t *w, u
 
 /* ------------------------------------------------------------ PNG writing */
 
-/* Writes to path.tmp.PID and renames, so a reader never sees half a PNG. */
+static void png_put(png_structp png, png_bytep data, size_t n) { bf_out_write(png_get_io_ptr(png), data, n); }
+static void png_no_flush(png_structp png) { (void)png; }
+
+/* Through core's bf_out (a temporary file, fsync, rename), so a reader
+ * never sees half a PNG. */
 static bf_status png_write(const char *path, const void *pix, uint32_t w, uint32_t h, bool is_u16)
 {
     if (!pix || w == 0 || h == 0 || w > REPLAY_MAX_SIDE || h > REPLAY_MAX_SIDE)
         return bf_fail(BF_INVALID_ARG, "%s: cannot write a %ux%u image", path, w, h);
-    char tmp[4200];
-    if (snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)getpid()) >= (int)sizeof tmp)
-        return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
-    FILE *f = fopen(tmp, "wb");
-    if (!f) return bf_fail(BF_IO, "%s: cannot create: %s", tmp, strerror(errno));
+    bf_out out;
+    bf_out *o = &out;
+    bf_status s = bf_out_open(o, path);
+    if (s != BF_OK) return s;
     png_err err = {.path = path};
     png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &err, png_on_error, png_on_warning);
     png_infop info = png ? png_create_info_struct(png) : NULL;
     if (!info) {
         png_destroy_write_struct(&png, NULL);
-        fclose(f);
-        remove(tmp);
+        bf_out_abort(o);
         return bf_fail(BF_NO_MEMORY, "%s: cannot create a PNG encoder", path);
     }
     if (setjmp(png_jmpbuf(png))) {
         png_destroy_write_struct(&png, &info);
-        fclose(f);
-        remove(tmp);
-        return bf_fail(BF_IO, "%s: cannot write PNG (%s)", path, err.msg);
+        bf_out_abort(o);
+        return bf_fail(BF_WRITE, "%s: cannot write PNG (%s)", path, err.msg);
     }
-    png_init_io(png, f);
+    png_set_write_fn(png, o, png_put, png_no_flush);
     /* Level 3: close to the default's size at a fraction of its time. */
     png_set_compression_level(png, 3);
     png_set_IHDR(png, info, w, h, is_u16 ? 16 : 8, is_u16 ? PNG_COLOR_TYPE_GRAY : PNG_COLOR_TYPE_RGB,
@@ -368,17 +369,7 @@ static bf_status png_write(const char *path, const void *pix, uint32_t w, uint32
     for (uint32_t y = 0; y < h; y++) png_write_row(png, (png_const_bytep)pix + y * row_bytes);
     png_write_end(png, NULL);
     png_destroy_write_struct(&png, &info);
-    bool bad = ferror(f) != 0;
-    if (fclose(f) != 0 || bad) {
-        remove(tmp);
-        return bf_fail(BF_IO, "%s: write failed", path);
-    }
-    if (rename(tmp, path) != 0) {
-        int e = errno;
-        remove(tmp);
-        return bf_fail(BF_IO, "%s: cannot rename into place: %s", path, strerror(e));
-    }
-    return BF_OK;
+    return bf_out_commit(o);
 }
 
 bf_status replay_png_write_u16(const char *path, const uint16_t *pix, uint32_t w, uint32_t h)

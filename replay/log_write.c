@@ -1,12 +1,14 @@
 /* replay: the bitfuse log writer. Frames are compressed into buffers sized
- * at create (zstd's bound for the frame size), written with buffered stdio
- * and flushed to the OS after every frame, so a process that dies loses at
- * most the frame being written. The index of frame offsets grows in memory
+ * at create (zstd's bound for the frame size) and handed to the OS with
+ * write(2) frame by frame, so a process that dies loses at most the frame
+ * being written (and a fault test's injected write failure reaches it:
+ * tests/fault). The index of frame offsets grows in memory
  * (16 bytes a frame; the only growth while recording) and goes to the file
  * in finish(), followed by the footer that points at it. */
 #include "log_int.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -15,7 +17,7 @@
 
 struct replay_log_writer {
     char *path;
-    FILE *f;
+    int fd; /* -1: closed */
     bf_intrinsics K;
     replay_log_config cfg;
     size_t n_px;
@@ -30,14 +32,36 @@ struct replay_log_writer {
     bool is_finished, is_broken;
 };
 
+/* After a failed write: a log that holds no whole frame is no log (it
+ * would only fail to open), so it goes; one with frames stays, readable up
+ * to its last whole frame. */
+static void break_log(replay_log_writer *w)
+{
+    w->is_broken = true;
+    if (w->st.n_frames == 0 && w->fd >= 0) {
+        close(w->fd);
+        w->fd = -1;
+        remove(w->path);
+    }
+}
+
+/* All n bytes, short writes continued; a failure breaks the log for good. */
 static bf_status write_bytes(replay_log_writer *w, const void *p, size_t n)
 {
-    if (n && fwrite(p, 1, n, w->f) != n) {
-        w->is_broken = true;
-        return bf_fail(BF_IO, "%s: write failed at byte %llu: %s", w->path, (unsigned long long)w->offset,
-                       strerror(errno));
+    const uint8_t *c = p;
+    while (n > 0) {
+        ssize_t k = write(w->fd, c, n);
+        if (k < 0 && errno == EINTR) continue;
+        if (k <= 0) {
+            bf_status s = bf_fail(BF_WRITE, "%s: write failed at byte %llu: %s", w->path,
+                                  (unsigned long long)w->offset, k < 0 ? strerror(errno) : "nothing written");
+            break_log(w);
+            return s;
+        }
+        c += k;
+        n -= (size_t)k;
+        w->offset += (uint64_t)k;
     }
-    w->offset += n;
     return BF_OK;
 }
 
@@ -63,6 +87,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
 
     replay_log_writer *w = bf_calloc(1, sizeof *w);
     if (!w) return bf_fail(BF_NO_MEMORY, "%s: log writer", path);
+    w->fd = -1;
     bf_status s = BF_OK;
     w->K = *K;
     w->cfg = *cfg;
@@ -85,9 +110,9 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
         s = bf_fail(BF_INVALID_ARG, "%s: zstd refuses level %d", path, w->cfg.zstd_level);
         goto fail;
     }
-    w->f = fopen(path, "wb");
-    if (!w->f) {
-        s = bf_fail(BF_IO, "%s: cannot create: %s", path, strerror(errno));
+    w->fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (w->fd < 0) {
+        s = bf_fail(BF_WRITE, "%s: cannot create: %s", path, strerror(errno));
         goto fail;
     }
     uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
@@ -110,17 +135,13 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     if (dev_len) memcpy(hdr + LOG_HEADER_FIXED, cfg->device, dev_len);
     log__put_u32(hdr + LOG_HEADER_FIXED + dev_len, log__crc32(0, hdr, LOG_HEADER_FIXED + dev_len));
     if ((s = write_bytes(w, hdr, hdr_size))) goto fail;
-    if (fflush(w->f) != 0) {
-        s = bf_fail(BF_IO, "%s: write failed: %s", path, strerror(errno));
-        goto fail;
-    }
     w->st.file_bytes = w->offset;
     *out = w;
     return BF_OK;
 fail:
-    if (w->f) {
-        fclose(w->f);
-        w->f = NULL;
+    if (w->fd >= 0) {
+        close(w->fd);
+        w->fd = -1;
         remove(path); /* a header that never made it is no log */
     }
     replay_log_writer_destroy(w);
@@ -130,7 +151,7 @@ fail:
 bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
 {
     if (w->is_finished) return bf_fail(BF_INVALID_ARG, "%s: log already finished", w->path);
-    if (w->is_broken) return bf_fail(BF_IO, "%s: an earlier write failed; the log ends before frame %u", w->path, f->index);
+    if (w->is_broken) return bf_fail(BF_WRITE, "%s: an earlier write failed; the log ends before frame %u", w->path, f->index);
     if (!f->depth || f->width != w->K.width || f->height != w->K.height)
         return bf_fail(BF_INVALID_ARG, "%s: frame %u is %ux%u%s, the log's frames are %ux%u", w->path, f->index,
                        f->width, f->height, f->depth ? "" : " without depth", w->K.width, w->K.height);
@@ -190,10 +211,6 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
     if ((s = write_bytes(w, hb, sizeof hb)) || (s = write_bytes(w, w->depth_buf, dz)) ||
         (s = write_bytes(w, w->rgb_buf, rz)))
         return s;
-    if (fflush(w->f) != 0) {
-        w->is_broken = true;
-        return bf_fail(BF_IO, "%s: frame %u: write failed: %s", w->path, f->index, strerror(errno));
-    }
     uint8_t *e = w->index + (size_t)w->st.n_frames * LOG_INDEX_ENTRY;
     log__put_u64(e, at);
     log__put_f64(e + 8, f->t_depth_s);
@@ -211,7 +228,7 @@ bf_status replay_log_writer_add(replay_log_writer *w, const bf_frame *f)
 bf_status replay_log_writer_finish(replay_log_writer *w)
 {
     if (w->is_finished) return BF_OK;
-    if (w->is_broken) return bf_fail(BF_IO, "%s: an earlier write failed; the log has no index", w->path);
+    if (w->is_broken) return bf_fail(BF_WRITE, "%s: an earlier write failed; the log has no index", w->path);
     uint64_t index_at = w->offset;
     uint8_t head[8], tail[4], foot[LOG_FOOTER];
     log__put_u32(head, LOG_INDEX_MAGIC);
@@ -228,13 +245,15 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
         return s;
     /* fsync: the footer claims the whole file is there; make it so before
      * anyone relies on it. */
-    bool bad = fflush(w->f) != 0 || fsync(fileno(w->f)) != 0;
+    bool bad = fsync(w->fd) != 0;
     int err = errno;
-    bad |= fclose(w->f) != 0;
-    w->f = NULL;
+    if (close(w->fd) != 0 && !bad) bad = true, err = errno;
+    w->fd = -1;
     if (bad) {
+        bf_status s = bf_fail(BF_WRITE, "%s: cannot finish the log: %s", w->path, strerror(err));
+        if (w->st.n_frames == 0) remove(w->path);
         w->is_broken = true;
-        return bf_fail(BF_IO, "%s: cannot finish the log: %s", w->path, strerror(err));
+        return s;
     }
     w->st.file_bytes = w->offset;
     w->is_finished = true;
@@ -246,7 +265,7 @@ replay_log_stats replay_log_writer_stats(const replay_log_writer *w) { return w-
 void replay_log_writer_destroy(replay_log_writer *w)
 {
     if (!w) return;
-    if (w->f) fclose(w->f);
+    if (w->fd >= 0) close(w->fd);
     ZSTD_freeCCtx(w->zc);
     free(w->swapped);
     free(w->depth_buf);

@@ -153,7 +153,7 @@ static bf_status write_all(int fd, const char *path, const void *p, size_t n)
     while (n) {
         ssize_t k = bf_fault_now() ? (errno = ENOSPC, -1) : write(fd, c, n);
         if (k < 0 && errno == EINTR) continue;
-        if (k < 0) return bf_fail(BF_IO, "%s: write failed: %s", path, strerror(errno));
+        if (k < 0) return bf_fail(BF_WRITE, "%s: write failed: %s", path, strerror(errno));
         c += k;
         n -= (size_t)k;
     }
@@ -166,13 +166,13 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
     if ((size_t)snprintf(tmp, sizeof tmp, "%s.tmp", path) >= sizeof tmp)
         return bf_fail(BF_INVALID_ARG, "%s: path too long", path);
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) return bf_fail(BF_IO, "%s: cannot create: %s", tmp, strerror(errno));
+    if (fd < 0) return bf_fail(BF_WRITE, "%s: cannot create: %s", tmp, strerror(errno));
     bf_status s = write_all(fd, tmp, a, na);
     if (s == BF_OK && nb) s = write_all(fd, tmp, b, nb);
     if (s == BF_OK && (bf_fault_now() ? (errno = ENOSPC, 1) : fsync(fd) != 0))
-        s = bf_fail(BF_IO, "%s: fsync failed: %s", tmp, strerror(errno));
-    if (close(fd) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s: close failed: %s", tmp, strerror(errno));
-    if (s == BF_OK && rename(tmp, path) != 0) s = bf_fail(BF_IO, "%s: rename failed: %s", path, strerror(errno));
+        s = bf_fail(BF_WRITE, "%s: fsync failed: %s", tmp, strerror(errno));
+    if (close(fd) != 0 && s == BF_OK) s = bf_fail(BF_WRITE, "%s: close failed: %s", tmp, strerror(errno));
+    if (s == BF_OK && rename(tmp, path) != 0) s = bf_fail(BF_WRITE, "%s: rename failed: %s", path, strerror(errno));
     if (s != BF_OK) unlink(tmp); /* the earlier version of path, if any, stays whole */
     return s;
 }
@@ -180,8 +180,8 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
 bf_status store__sync_dir(const char *dir)
 {
     int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0) return bf_fail(BF_IO, "%s: cannot open the folder: %s", dir, strerror(errno));
-    bf_status s = fsync(fd) == 0 ? BF_OK : bf_fail(BF_IO, "%s: fsync of the folder failed: %s", dir, strerror(errno));
+    if (fd < 0) return bf_fail(BF_WRITE, "%s: cannot open the folder: %s", dir, strerror(errno));
+    bf_status s = fsync(fd) == 0 ? BF_OK : bf_fail(BF_WRITE, "%s: fsync of the folder failed: %s", dir, strerror(errno));
     close(fd);
     return s;
 }

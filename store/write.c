@@ -321,7 +321,7 @@ static bf_status unlink_suffix(const char *dir, const char *suffix)
         size_t n = strlen(e->d_name);
         if (n <= k || strcmp(e->d_name + n - k, suffix) != 0) continue;
         snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
-        if (unlink(path) != 0) s = bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
+        if (unlink(path) != 0) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
     }
     if (d) closedir(d);
     return s;
@@ -337,7 +337,7 @@ bf_status store_clear(const char *dir)
     const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME};
     for (int i = 0; s == BF_OK && i < 2; i++) {
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
-        if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_IO, "%s: cannot remove: %s", path, strerror(errno));
+        if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
     }
     return s == BF_OK ? store__sync_dir(dir) : s;
 }

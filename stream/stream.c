@@ -183,7 +183,7 @@ static bf_status cache_trim(stream *s)
         if (!oldest) return BF_OK;
         if (!s->spill_made) {
             if (s->spill_owned && !mkdtemp(s->spill))
-                return bf_fail(BF_IO, "stream: cannot make a spill folder %s: %s", s->spill, strerror(errno));
+                return bf_fail(BF_WRITE, "stream: cannot make a spill folder %s: %s", s->spill, strerror(errno));
             s->spill_made = true;
         }
         store_meta meta = spill_meta(s);

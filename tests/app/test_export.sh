@@ -2,7 +2,7 @@
 # Export as a user meets it: a scene store written by replay, exported in
 # each format (the format from the name or --format), simplified to a cap
 # and to an error bound, the same options on replay's own mesh, and the
-# refusals: an unknown format, an unwritable file (exit 1, nothing left
+# refusals: an unknown format, an unwritable file (exit 5, nothing left
 # behind), --points with a cap. glb files go through the Khronos validator
 # when node has it (tests/mesh/validate_glb.js).
 # Usage: test_export.sh path/to/bitfuse path/to/validate_glb.js
@@ -89,11 +89,11 @@ mentions "--format"
 expect 2 "$B" export "$T/S" --out "$T/x.ply" --points --max-triangles 100
 expect 2 "$B" replay "$T/seq" --out "$T/r2" --mesh-format stl
 [ -e "$T/r2" ] && fail "a refused replay made its folder"
-expect 1 "$B" export "$T/S" --out "$T/no/such/dir/x.glb"
+expect 5 "$B" export "$T/S" --out "$T/no/such/dir/x.glb"
 mentions "$T/no/such/dir/x.glb"
 mkdir "$T/ro" && echo old >"$T/ro/x.obj" && chmod 555 "$T/ro"
 if ! touch "$T/ro/probe" 2>/dev/null; then # root writes anyway: then this case says nothing
-    expect 1 "$B" export "$T/S" --out "$T/ro/x.obj"
+    expect 5 "$B" export "$T/S" --out "$T/ro/x.obj"
     [ "$(cat "$T/ro/x.obj")" = old ] || fail "a failed export changed the old file"
 fi
 rm -f "$T/ro/probe"

@@ -40,7 +40,7 @@ BF_TEST(json_writes_nan_as_null_and_escapes_strings)
     CHECK(cJSON_IsNull(cJSON_GetObjectItem(cJSON_GetObjectItem(back, "empty"), "median")));
     cJSON_Delete(back);
     /* A folder that does not exist: the status says so. */
-    CHECK_STATUS(app_json_write("/nonexistent/dir/file.json", cJSON_CreateObject()), BF_IO);
+    CHECK_STATUS(app_json_write("/nonexistent/dir/file.json", cJSON_CreateObject()), BF_WRITE);
 }
 
 BF_TEST(json_config_echoes_every_field_as_it_was_set)

@@ -187,6 +187,6 @@ head -c 100 "$T/p.ply" >"$T/cut.ply"
 expect 3 "$B" render --particles "$T/cut.ply" --pose "$POSE" --size 160x120 --out "$T/x.png"
 mentions "$T/cut.ply"
 [ ! -e "$T/x.png" ] || fail "a refused render left $T/x.png"
-expect 1 "$B" render --particles "$T/p.ply" --pose "$POSE" --size 16x12 --out "$T/no/such/dir/x.png"
+expect 5 "$B" render --particles "$T/p.ply" --pose "$POSE" --size 16x12 --out "$T/no/such/dir/x.png"
 
 finish test_render.sh

@@ -119,7 +119,7 @@ echo "kill -9: $kills kills, the store reopened and exported after each"
 # the store's file, and what the store holds still reads.
 mkdir "$T/tiny"
 if mount -t tmpfs -o size=48k tmpfs "$T/tiny" 2>/dev/null; then
-    expect 3 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S"
+    expect 5 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S"
     mentions "No space left on device"
     mentions "$T/tiny/S"
     expect 0 "$B" info "$T/tiny/S"

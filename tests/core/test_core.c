@@ -1,4 +1,8 @@
 /* core: SE(3), quaternions, eigen-decomposition, parsing, statistics. */
+#include <dirent.h>
+#include <signal.h>
+#include <sys/resource.h>
+
 #include "core/core.h"
 #include "test.h"
 
@@ -208,6 +212,79 @@ BF_TEST(atomic_write_replaces_file_and_reads_back)
     /* A folder opens for reading on Linux; the read then says why it failed. */
     CHECK_STATUS(bf_read_file(bf_test_tmpdir(), &data, &n), BF_IO);
     CHECK_ERROR_MENTIONS("directory");
+}
+
+static int count_tmp_files(const char *dir)
+{
+    DIR *d = opendir(dir);
+    int n = 0;
+    for (struct dirent *e; d && (e = readdir(d));) n += strstr(e->d_name, ".tmp") != NULL;
+    if (d) closedir(d);
+    return n;
+}
+
+/* bf_out: pieces larger and smaller than its buffer and a line longer than
+ * its printf buffer arrive in order; a failure (a file size limit: write
+ * fails with EFBIG mid-file) is BF_WRITE naming the file and the reason,
+ * the earlier file stays as it was and no temporary file is left; abort
+ * leaves nothing. Faults through the program: tests/fault. */
+BF_TEST(output_file_is_whole_or_absent)
+{
+    char dir[512], path[600];
+    CHECK_OK(bf_path_join(dir, sizeof dir, bf_test_tmpdir(), "out"));
+    CHECK_OK(bf_mkdir_p(dir));
+    CHECK_OK(bf_path_join(path, sizeof path, dir, "f.bin"));
+    size_t big = BF_OUT_BUFFER + 12345;
+    uint8_t *ref = malloc(big + 3000);
+    CHECK(ref != NULL);
+    for (size_t i = 0; i < big; i++) ref[i] = (uint8_t)(i * 7 + (i >> 9));
+    char line[3000];
+    memset(line, 'x', sizeof line - 1);
+    line[sizeof line - 1] = 0;
+    bf_out o;
+    CHECK_OK(bf_out_open(&o, path));
+    bf_out_write(&o, ref, 10);
+    bf_out_write(&o, ref + 10, big - 10); /* larger than the buffer: straight through */
+    bf_out_printf(&o, "%s", line);        /* longer than printf's line buffer */
+    CHECK_OK(bf_out_commit(&o));
+    memcpy(ref + big, line, sizeof line - 1);
+    char *data;
+    size_t n;
+    CHECK_OK(bf_read_file(path, &data, &n));
+    CHECK_EQ_INT(n, big + sizeof line - 1);
+    CHECK(!memcmp(data, ref, n));
+    free(data);
+    /* A write that fails mid-file (RLIMIT_FSIZE: EFBIG, SIGXFSZ ignored). */
+    struct rlimit old, lim;
+    CHECK(getrlimit(RLIMIT_FSIZE, &old) == 0);
+    void (*old_handler)(int) = signal(SIGXFSZ, SIG_IGN);
+    lim = (struct rlimit){65536, old.rlim_max};
+    CHECK(setrlimit(RLIMIT_FSIZE, &lim) == 0);
+    CHECK_OK(bf_out_open(&o, path));
+    bf_out_write(&o, ref, big);
+    bf_out_printf(&o, "more"); /* after the failure: nothing */
+    bf_status s = bf_out_commit(&o);
+    bf_status s2 = bf_write_file_atomic(path, ref, big);
+    CHECK(setrlimit(RLIMIT_FSIZE, &old) == 0);
+    signal(SIGXFSZ, old_handler);
+    CHECK_STATUS(s, BF_WRITE);
+    CHECK_ERROR_MENTIONS("too large"); /* strerror(EFBIG), for s2 */
+    CHECK_STATUS(s2, BF_WRITE);
+    CHECK_OK(bf_read_file(path, &data, &n));
+    CHECK_EQ_INT(n, big + sizeof line - 1); /* the earlier file, whole */
+    free(data);
+    CHECK_EQ_INT(count_tmp_files(dir), 0);
+    /* Abort, and a folder that does not exist. */
+    CHECK_OK(bf_path_join(path, sizeof path, dir, "g.bin"));
+    CHECK_OK(bf_out_open(&o, path));
+    bf_out_write(&o, ref, 100);
+    bf_out_abort(&o);
+    CHECK(!bf_file_exists(path));
+    CHECK_EQ_INT(count_tmp_files(dir), 0);
+    CHECK_STATUS(bf_out_open(&o, "/nonexistent/dir/h.bin"), BF_WRITE);
+    CHECK_ERROR_MENTIONS("/nonexistent/dir/h.bin");
+    CHECK_STATUS(bf_write_file_atomic("/nonexistent/dir/h.bin", "x", 1), BF_WRITE);
+    free(ref);
 }
 
 BF_TEST(status_table_names_every_code)

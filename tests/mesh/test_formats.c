@@ -374,7 +374,7 @@ BF_TEST(failed_write_keeps_the_old_file_and_leaves_no_temporary)
         CHECK(setrlimit(RLIMIT_FSIZE, &lim) == 0);
         bf_status s = mesh_write(path, f, &m);
         CHECK(setrlimit(RLIMIT_FSIZE, &old) == 0);
-        CHECK_EQ_INT(s, BF_IO);
+        CHECK_EQ_INT(s, BF_WRITE);
         CHECK_ERROR_MENTIONS(path);
         char *data;
         size_t size;
@@ -384,9 +384,9 @@ BF_TEST(failed_write_keeps_the_old_file_and_leaves_no_temporary)
         CHECK_EQ_INT(count_temp_files(dir), 0);
     }
     signal(SIGXFSZ, old_handler);
-    /* A folder that does not exist: BF_IO naming it, nothing made. */
+    /* A folder that does not exist: BF_WRITE naming it, nothing made. */
     snprintf(path, sizeof path, "%s/no/such/dir/m.glb", dir);
-    CHECK_STATUS(mesh_write_glb(path, &m), BF_IO);
+    CHECK_STATUS(mesh_write_glb(path, &m), BF_WRITE);
     CHECK_ERROR_MENTIONS("no/such/dir");
     /* An index out of range: refused before anything is written. */
     m.tri[5] = m.n_verts;

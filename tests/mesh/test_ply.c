@@ -402,12 +402,12 @@ BF_TEST(ply_large_polygon_fans_into_n_minus_2_triangles)
     mesh_free(&m);
 }
 
-BF_TEST(ply_write_to_a_missing_directory_is_an_io_error)
+BF_TEST(ply_write_to_a_missing_directory_is_a_write_error)
 {
     mesh_data m = make_quad();
     bf_status s = mesh_write_ply("/nonexistent-dir/x.ply", &m);
     mesh_free(&m);
-    CHECK_STATUS(s, BF_IO);
+    CHECK_STATUS(s, BF_WRITE);
     CHECK_ERROR_MENTIONS("nonexistent-dir");
 }
 

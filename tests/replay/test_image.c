@@ -76,7 +76,7 @@ BF_TEST(png_write_read_round_trip_is_bit_exact)
     free(c2);
     /* Bad arguments are refused, not written. */
     CHECK_STATUS(replay_png_write_u16(rt_tmp("rt_zero.png"), d, 0, H), BF_INVALID_ARG);
-    CHECK_STATUS(replay_png_write_u16("/nonexistent/dir/x.png", d, W, H), BF_IO);
+    CHECK_STATUS(replay_png_write_u16("/nonexistent/dir/x.png", d, W, H), BF_WRITE);
     CHECK_ERROR_MENTIONS("/nonexistent/dir/x.png");
 }
 

@@ -398,7 +398,7 @@ BF_TEST(store_survives_a_failed_write_at_every_point)
             break;
         }
         /* A fault the writer recovers from (an unreadable index at resume: it rewrites every chunk) ends well. */
-        if (s != BF_OK && s != BF_IO && s != BF_NO_MEMORY) {
+        if (s != BF_OK && s != BF_WRITE && s != BF_NO_MEMORY) {
             fprintf(stderr, "  fault %u: %s: %s\n", k, bf_status_name(s), bf_last_error());
             CHECK(false);
         }
