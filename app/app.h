@@ -135,6 +135,7 @@ typedef struct app_map_report {
     mesh_simplify_stats simplify; /* of the mesh written */
     char mesh_file[16];           /* "mesh.ply", "mesh.obj" or "mesh.glb"; "" without a mesh */
     bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
+    uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */
 } app_map_report;
 /* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
 uint32_t app_mesh_level(const hostmap *snap);
