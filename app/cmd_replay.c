@@ -73,6 +73,9 @@ typedef struct replay_args {
     uint32_t exit_after;     /* with view: end the scan after this many frames shown (0: never) */
     bool overlay;            /* with view: the status line over the image too */
     double view_period_s;    /* with view: seconds between the window's casts of a followed scan */
+    const char *expect_path; /* --expect: the baseline stats.json */
+    const char *tolerance;   /* --tolerance NAME=VALUE,... */
+    app_expect expect;       /* the baseline, read before the device opens */
 } replay_args;
 
 #define LOOP_ROWS 23
@@ -300,7 +303,20 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                 "format's or the device's; its distortion is not applied)", .no_default = true),
         APP_OPT_END,
     };
-    const app_option *replay_tables[] = {own, vw, msh, fuse_gt, cal, sto, stm, map, seq, NULL};
+    const app_option gate[] = {
+        APP_OPT("--expect", APP_OPT_STRING, &a->expect_path, "BASELINE.json",
+                "a regression gate: compare this run's stats.json with BASELINE.json (an earlier run's) and exit 1 "
+                "naming each measure that moved beyond its tolerance (ATE, surface error, map digest, tracked, lost "
+                "and relocalised frames; time only when --tolerance names it); everything is still written",
+                .no_default = true),
+        APP_OPT("--tolerance", APP_OPT_STRING, &a->tolerance, "NAME=V,...",
+                "with --expect: tolerances replacing the defaults ate=0.001 (m, ATE RMSE), surface=0.001 (m, "
+                "median), tracked=0, lost=0, relocalised=0 (frames), digest (exact); time=F gates the median "
+                "frame time at F times slower (0.2: 20%); NAME=off leaves a measure out",
+                .check = app_check_tolerance, .no_default = true),
+        APP_OPT_END,
+    };
+    const app_option *replay_tables[] = {own, vw, msh, fuse_gt, cal, gate, sto, stm, map, seq, NULL};
     const app_option *live_tables[] = {dev, own, vw, msh, cal, sto, stm, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
@@ -329,7 +345,15 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
                                    a->calibration);
     }
-    return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
+    if (!rc && a->tolerance && !a->expect_path) return app_usage_error(cmd, "--tolerance needs --expect BASELINE.json");
+    if (!rc) rc = app_check_map_options(cmd, &a->rcfg.fusion);
+    if (!rc && a->expect_path) {
+        /* Read and checked last (it owns memory), before any device opens
+         * or output is made. */
+        bf_status s = app_expect_load(&a->expect, a->expect_path, a->tolerance);
+        if (s != BF_OK) return app_fail(cmd, s);
+    }
+    return rc;
 }
 
 /* --calibration's depth camera replaces the source's pinhole (the sizes
@@ -728,9 +752,15 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
     hostmap_free(&whole);
     r.seconds = bf_time_s() - t_start;
-    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats_json(&a, &r, src));
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
-    if (s == BF_OK) print_summary(&a, &r, src);
+    cJSON *stats = s == BF_OK ? stats_json(&a, &r, src) : NULL;
+    if (stats) print_summary(&a, &r, src);
+    /* The gate, after the summary: its outcome goes into stats.json too,
+     * and the exit code says it. */
+    char moved[2048] = "";
+    uint32_t n_moved = 0;
+    if (stats && a.expect.baseline) n_moved = app_expect_check(&a.expect, stats, moved, sizeof moved);
+    if (s == BF_OK) s = app_json_write_in(a.out, "stats.json", stats);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);
@@ -740,7 +770,13 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     gpu_context_destroy(ctx);
     view_destroy(win);
     rgbd_source_close(src);
+    app_expect_free(&a.expect);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
+    if (s == BF_OK && n_moved) {
+        fprintf(stderr, "bitfuse %s: %u measure%s moved beyond tolerance against %s: %s\n", cmd, n_moved,
+                n_moved > 1 ? "s" : "", a.expect_path, moved);
+        return APP_EXIT_FAILURE;
+    }
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
 
