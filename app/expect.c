@@ -117,7 +117,11 @@ bf_status app_expect_load(app_expect *e, const char *path, const char *tolerance
     char *text = NULL;
     size_t n = 0;
     bf_status s = bf_read_file(path, &text, &n);
-    if (s != BF_OK) return s;
+    if (s != BF_OK) {
+        char why_read[512];
+        snprintf(why_read, sizeof why_read, "%s", bf_last_error()); /* bf_fail writes the same buffer */
+        return bf_fail(s, "--expect: %s", why_read);
+    }
     e->baseline = cJSON_ParseWithLength(text, n);
     if (!e->baseline) {
         const char *err = cJSON_GetErrorPtr();
