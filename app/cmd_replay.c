@@ -76,6 +76,8 @@ typedef struct replay_args {
     const char *expect_path; /* --expect: the baseline stats.json */
     const char *tolerance;   /* --tolerance NAME=VALUE,... */
     app_expect expect;       /* the baseline, read before the device opens */
+    const char *ref_path, *vis_path; /* --reference MESH, --visible SEEN.ply */
+    mesh_data ref, vis;      /* read before the device opens */
 } replay_args;
 
 #define LOOP_ROWS 23
@@ -309,6 +311,13 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                 "naming each measure that moved beyond its tolerance (ATE, surface error, map digest, tracked, lost "
                 "and relocalised frames; time only when --tolerance names it); everything is still written",
                 .no_default = true),
+        APP_OPT("--reference", APP_OPT_STRING, &a->ref_path, "MESH",
+                "the true surface (bitfuse synth's scene.ply): the map's surface voxels (points.ply) against it, "
+                "stats.json surface_m (accuracy median, p90, completeness within 1 cm), gated by --expect",
+                .no_default = true),
+        APP_OPT("--visible", APP_OPT_STRING, &a->vis_path, "SEEN.ply",
+                "with --reference: completeness over these observed reference points (synth's seen.ply)",
+                .no_default = true),
         APP_OPT("--tolerance", APP_OPT_STRING, &a->tolerance, "NAME=V,...",
                 "with --expect: tolerances replacing the defaults ate=0.001 (m, ATE RMSE), surface=0.001 (m, "
                 "median), tracked=0, lost=0, relocalised=0 (frames), digest (exact); time=F gates the median "
@@ -346,12 +355,29 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                                    a->calibration);
     }
     if (!rc && a->tolerance && !a->expect_path) return app_usage_error(cmd, "--tolerance needs --expect BASELINE.json");
+    if (!rc && a->vis_path && !a->ref_path) return app_usage_error(cmd, "--visible needs --reference MESH");
     if (!rc) rc = app_check_map_options(cmd, &a->rcfg.fusion);
+    if (!rc && a->ref_path) {
+        bf_status s = mesh_read(a->ref_path, &a->ref);
+        if (s == BF_OK && a->ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", a->ref_path);
+        if (s == BF_OK && a->vis_path) s = mesh_read(a->vis_path, &a->vis);
+        if (s == BF_OK && a->vis_path && a->vis.n_verts == 0)
+            s = bf_fail(BF_FORMAT, "%s: no visible points", a->vis_path);
+        if (s != BF_OK) {
+            mesh_free(&a->ref);
+            mesh_free(&a->vis);
+            return app_fail(cmd, s);
+        }
+    }
     if (!rc && a->expect_path) {
         /* Read and checked last (it owns memory), before any device opens
          * or output is made. */
         bf_status s = app_expect_load(&a->expect, a->expect_path, a->tolerance);
-        if (s != BF_OK) return app_fail(cmd, s);
+        if (s != BF_OK) {
+            mesh_free(&a->ref);
+            mesh_free(&a->vis);
+            return app_fail(cmd, s);
+        }
     }
     return rc;
 }
@@ -382,6 +408,8 @@ typedef struct replay_result {
     app_map_report out;
     bool has_ate;
     eval_ate_result ate;
+    bool has_surface;          /* --reference */
+    eval_surface_result surf;
     uint32_t n_views;
     double seconds;
     double t_start_s;          /* bf_time_s() at the command's start */
@@ -467,6 +495,16 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
         cJSON_AddNumberToObject(ate, "pairs", (double)r->ate.n_matched);
     } else {
         cJSON_AddNullToObject(o, "ate_m");
+    }
+    if (r->has_surface) {
+        cJSON *sf = app_json_object(o, "surface_m");
+        cJSON_AddStringToObject(sf, "reference", a->ref_path);
+        cJSON_AddNumberToObject(sf, "median", r->surf.accuracy.median);
+        cJSON_AddNumberToObject(sf, "mean", r->surf.accuracy.mean);
+        cJSON_AddNumberToObject(sf, "p90", r->surf.accuracy.p90);
+        cJSON_AddNumberToObject(sf, "completeness_1cm", r->surf.completeness);
+        cJSON_AddBoolToObject(sf, "over_visible", r->surf.used_visible);
+        cJSON_AddNumberToObject(sf, "points", (double)r->surf.n_rec_vertices);
     }
     app_json_series(o, "frame_ms", &t->frame_ms);
     cJSON *g = app_json_object(o, "gpu_stage_ms");
@@ -621,6 +659,23 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     return s;
 }
 
+/* --reference: the surface voxels just written (points.ply) against the
+ * true surface, as bitfuse demo scores the fused map (distances beyond
+ * 0.5 m are left out: a stray voxel must not own the mean). */
+static bf_status eval_fused_surface(const replay_args *a, replay_result *r)
+{
+    char path[4096];
+    mesh_data pts = {0};
+    bf_status s = bf_path_join(path, sizeof path, a->out, "points.ply");
+    if (s == BF_OK) s = mesh_read_ply(path, &pts);
+    eval_surface_config scfg = eval_surface_config_default();
+    scfg.max_dist_m = 0.5;
+    if (s == BF_OK) s = eval_surface(&a->ref, &pts, a->vis_path ? &a->vis : NULL, &scfg, &r->surf);
+    r->has_surface = s == BF_OK;
+    mesh_free(&pts);
+    return s;
+}
+
 static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src)
 {
     const recon_counts *c = &r->run.counts;
@@ -648,6 +703,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
+    if (r->has_surface)
+        printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of it within 1 cm\n",
+               1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness);
     app_print_map(&r->out, a->rcfg.fusion.max_level);
     printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
            r->out.mesh_file[0] ? r->out.mesh_file : "", r->out.mesh_file[0] ? "," : "", r->seconds);
@@ -751,6 +809,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && r.run.loop) s = recon_snapshot(r.run.loop, &whole);
     if (s == BF_OK) s = app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out);
     hostmap_free(&whole);
+    if (s == BF_OK && a.ref_path) s = eval_fused_surface(&a, &r);
     r.seconds = bf_time_s() - t_start;
     if (csv && fclose(csv) != 0 && s == BF_OK) s = bf_fail(BF_IO, "%s/frames.csv: write failed", a.out);
     cJSON *stats = s == BF_OK ? stats_json(&a, &r, src) : NULL;
@@ -771,6 +830,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     view_destroy(win);
     rgbd_source_close(src);
     app_expect_free(&a.expect);
+    mesh_free(&a.ref);
+    mesh_free(&a.vis);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
     if (s == BF_OK && n_moved) {
         fprintf(stderr, "bitfuse %s: %u measure%s moved beyond tolerance against %s: %s\n", cmd, n_moved,

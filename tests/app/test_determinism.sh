@@ -25,11 +25,13 @@ PY
 mkdir "$T/nodata"
 expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 14 --size 320x240 --camera 262.5,262.5,159.5,119.5 \
     --data "$T/nodata" --noise kinect1 --seed 3 --out "$T/seq"
-RUN=(--window 8 --subcache 4)
+RUN=(--window 8 --subcache 4 --reference "$T/seq/scene.ply" --visible "$T/seq/seen.ply")
 expect 0 "$B" replay "$T/seq" --out "$T/a" "${RUN[@]}"
 # The second run is also the gate's passing case: against the first run.
 expect 0 "$B" replay "$T/seq" --out "$T/b" "${RUN[@]}" --expect "$T/a/stats.json"
-grep -q "expect digest .*: ok" "$T/out" || fail "--expect against the first run: no 'digest ... ok' line: $(cat "$T/out")"
+for m in ate surface digest tracked lost; do
+    grep -q "expect $m .*: ok" "$T/out" || fail "--expect against the first run: no '$m ... ok' line: $(cat "$T/out")"
+done
 
 for f in trajectory.txt mesh.ply points.ply; do
     cmp -s "$T/a/$f" "$T/b/$f" || fail "$f differs between two replays of the same input: $(cmp "$T/a/$f" "$T/b/$f")"
@@ -52,28 +54,32 @@ for k in ("bricks", "chunks", "confident_voxels", "surface_voxels"):
 if a["bricks"] < 1000:
     sys.exit("only %d bricks: the test's map is too small to show anything" % a["bricks"])
 e = b.get("expect", {})
-if e.get("passed") is not True or e.get("moved") != 0 or e.get("gated", 0) < 5:
+if not 0 < a["surface_m"]["median"] < 0.02:
+    sys.exit("surface_m: %r" % a["surface_m"])
+if e.get("passed") is not True or e.get("moved") != 0 or e.get("gated", 0) < 6:
     sys.exit("the second run's expect: %r" % e)
 PY
 
-# A doctored baseline: another digest and 3 lost frames. The ATE and the
-# tracked count would move too on these 4 frames, so they are left out:
-# exactly digest and lost must be named, with their values.
+# A doctored baseline: another digest, 3 lost frames, a surface 1 m off. The
+# ATE and the tracked count would move too on these 4 frames, so they are
+# left out: exactly digest, lost and surface must be named, with values.
 py - "$T/a/stats.json" "$T/bad.json" <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
 d["map_digest"] = "xxh3:0123456789abcdef"
 d["tracking"]["lost"] = 3
+d["surface_m"]["median"] = 1.0
 json.dump(d, open(sys.argv[2], "w"))
 PY
 expect 1 "$B" replay "$T/seq" --out "$T/c" "${RUN[@]}" --frames 4 --no-mesh --expect "$T/bad.json" \
     --tolerance ate=off,tracked=off
-mentions "2 measures moved beyond tolerance"
+mentions "3 measures moved beyond tolerance"
+mentions "surface 1 -> 0.0"
 mentions "digest xxh3:0123456789abcdef -> xxh3:"
 mentions "lost 3 -> 0, tolerance 0 frames"
 grep -qF "relocalised" "$T/err" && fail "relocalised named though it did not move: $(cat "$T/err")"
 [ -f "$T/c/stats.json" ] && [ -f "$T/c/trajectory.txt" ] || fail "a failed gate must still write the outputs"
-py -c "import json,sys; e=json.load(open(sys.argv[1]))['expect']; sys.exit(e['passed'] is not False or e['moved'] != 2)" \
+py -c "import json,sys; e=json.load(open(sys.argv[1]))['expect']; sys.exit(e['passed'] is not False or e['moved'] != 3)" \
     "$T/c/stats.json" || fail "stats.json expect of the failed gate: $(grep -A3 '"expect"' "$T/c/stats.json")"
 
 # Bad baselines and tolerances: refused before the device opens and before
