@@ -189,7 +189,8 @@ uint32_t app_expect_check(const app_expect *e, cJSON *stats, char *why, size_t c
         if (m->kind != MEASURE_EXACT) cJSON_AddNumberToObject(r, "tolerance", e->tol[i]);
         cJSON_AddBoolToObject(r, "ok", ok);
         char tol[64] = "";
-        if (m->kind == MEASURE_ABS) snprintf(tol, sizeof tol, ", tolerance %g%s%s", e->tol[i], *m->unit ? " " : "", m->unit);
+        if (m->kind == MEASURE_ABS)
+            snprintf(tol, sizeof tol, ", tolerance %g%s%s", e->tol[i], *m->unit ? " " : "", m->unit);
         if (m->kind == MEASURE_SLOWER) snprintf(tol, sizeof tol, ", tolerance %g%% slower", 100 * e->tol[i]);
         printf("  expect %-11s %s -> %s%s%s%s: %s\n", m->name, b, x, *m->unit ? " " : "", m->unit, tol,
                ok ? "ok" : "MOVED");

@@ -71,7 +71,8 @@ void fusion__schedule_destroy(fusion_map *m)
  * slice by slice (shaders/fusion_window_list.comp). */
 static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
 {
-    fusion_window_list_push pc = {m->cfg.brick_cap, m->n_entries, first, last, half_window(m), FUSION_GATHER_COUNT, {0, 0}};
+    fusion_window_list_push pc = {.brick_cap = m->cfg.brick_cap, .n_entries = m->n_entries, .first = first,
+                                  .last = last, .n_slices = half_window(m), .pass = FUSION_GATHER_COUNT};
     uint32_t groups = gpu_groups(m->cfg.brick_cap, 64);
     /* The previous window's slices read the list -> the fills that reset it. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);

@@ -236,7 +236,8 @@ void fusion_destroy(fusion_map *m)
     fusion__schedule_destroy(m);
     fusion__integrate_destroy(m);
     fusion__alloc_destroy(m);
-    gpu_buffer *bufs[] = {m->readback, m->window_slices, m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
+    gpu_buffer *bufs[] = {m->readback, m->window_slices, m->window_list, m->new_list,
+                          m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
                           m->locks, m->hash, m->colour_ring, m->cmask, m->chead, m->cpool, m->cfree};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
