@@ -201,6 +201,7 @@ uint32_t app_expect_check(const app_expect *e, cJSON *stats, char *why, size_t c
             used += k > 0 ? (size_t)k : 0;
         }
     }
+    if (n_gated == 0) printf("  expect           nothing gated: %s holds none of the measures left on\n", e->path);
     cJSON_AddNumberToObject(o, "gated", n_gated);
     cJSON_AddNumberToObject(o, "moved", n_moved);
     cJSON_AddBoolToObject(o, "passed", n_moved == 0);
