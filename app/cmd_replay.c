@@ -33,9 +33,10 @@ static const char replay_usage[] =
     "  views/N.png     shaded ray-cast views, with --view-every\n";
 
 static const char replay_epilog[] =
-    "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
-    "3 bad input (a corrupt frame mid-sequence: what came before it is still written),\n"
-    "4 no Vulkan device\n";
+    "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure (also: a\n"
+    "measure moved beyond its --tolerance of --expect's baseline; everything is written),\n"
+    "2 usage, 3 bad input (a corrupt frame mid-sequence: what came before it is still\n"
+    "written; a baseline that cannot be read), 4 no Vulkan device\n";
 
 static const char live_usage[] =
     "usage: bitfuse live --device URI --out DIR [options]\n"
