@@ -149,6 +149,7 @@ typedef struct app_map_report {
     mesh_simplify_stats simplify; /* of the mesh written */
     char mesh_file[16];           /* "mesh.ply", "mesh.obj" or "mesh.glb"; "" without a mesh */
     bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
+    uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */
 } app_map_report;
 /* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
 uint32_t app_mesh_level(const hostmap *snap);
@@ -158,6 +159,27 @@ uint32_t app_mesh_level(const hostmap *snap);
  * recon_snapshot) or, when whole is NULL, of the pools' snapshot. */
 bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, const app_mesh_out *mo,
                          app_map_report *r);
+/* expect.c: replay --expect BASELINE.json --tolerance NAME=VALUE,...: the
+ * new stats.json's measures (ATE, surface error, map digest, tracked, lost
+ * and relocalised counts; time only when its tolerance is given) against a
+ * baseline's (docs/determinism.md). */
+#define APP_EXPECT_MEASURES 7
+typedef struct app_expect {
+    const char *path;                /* BASELINE.json (borrowed) */
+    cJSON *baseline;                 /* its contents, owned */
+    double tol[APP_EXPECT_MEASURES]; /* < 0: not gated */
+} app_expect;
+/* --tolerance's row check: the list's syntax, names and values. */
+const char *app_check_tolerance(const char *name, const char *value);
+/* Reads and checks the baseline before any device opens: BF_IO when it
+ * cannot be read, BF_FORMAT when it is not a replay's stats.json. */
+bf_status app_expect_load(app_expect *e, const char *path, const char *tolerance);
+void app_expect_free(app_expect *e);
+/* Compares stats (the run's stats.json, before it is written; gets an
+ * "expect" object) with the baseline, prints a line per measure, and
+ * returns how many moved beyond their tolerance, named with their values in
+ * why. */
+uint32_t app_expect_check(const app_expect *e, cJSON *stats, char *why, size_t cap);
 /* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
 /* The input's part of stats.json: "frames_unreadable" (frames src skipped

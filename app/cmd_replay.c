@@ -34,11 +34,13 @@ static const char replay_usage[] =
     "  views/N.png     shaded ray-cast views, with --view-every\n";
 
 static const char replay_epilog[] =
-    "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure, 2 usage,\n"
-    "3 bad input (a corrupt frame mid-sequence: what came before it is still written),\n"
-    "4 no Vulkan device or a device error (mid-scan: the trajectory so far is written, and\n"
-    "the map when the device still answers), 5 an output could not be written (disk full,\n"
-    "I/O error: the scan stops, the rest is still written; every file is whole or absent)\n";
+    "exit codes: 0 ok (tracking failures are reported, not fatal), 1 failure (also: a\n"
+    "measure moved beyond its --tolerance of --expect's baseline; everything is written),\n"
+    "2 usage, 3 bad input (a corrupt frame mid-sequence: what came before it is still\n"
+    "written; a baseline that cannot be read), 4 no Vulkan device or a device error\n"
+    "(mid-scan: the trajectory so far is written, and the map when the device still\n"
+    "answers), 5 an output could not be written (disk full, I/O error: the scan stops, the\n"
+    "rest is still written; every file is whole or absent)\n";
 
 static const char live_usage[] =
     "usage: bitfuse live --device URI --out DIR [options]\n"
@@ -77,6 +79,11 @@ typedef struct replay_args {
     uint32_t exit_after;     /* with view: end the scan after this many frames shown (0: never) */
     bool overlay;            /* with view: the status line over the image too */
     double view_period_s;    /* with view: seconds between the window's casts of a followed scan */
+    const char *expect_path; /* --expect: the baseline stats.json */
+    const char *tolerance;   /* --tolerance NAME=VALUE,... */
+    app_expect expect;       /* the baseline, read before the device opens */
+    const char *ref_path, *vis_path; /* --reference MESH, --visible SEEN.ply */
+    mesh_data ref, vis;      /* read before the device opens */
 } replay_args;
 
 #define LOOP_ROWS 26
@@ -312,7 +319,27 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                 "format's or the device's; its distortion is not applied)", .no_default = true),
         APP_OPT_END,
     };
-    const app_option *replay_tables[] = {own, vw, msh, fuse_gt, cal, sto, stm, map, seq, NULL};
+    const app_option gate[] = {
+        APP_OPT("--expect", APP_OPT_STRING, &a->expect_path, "BASELINE.json",
+                "a regression gate: compare this run's stats.json with BASELINE.json (an earlier run's) and exit 1 "
+                "naming each measure that moved beyond its tolerance (ATE, surface error, map digest, tracked, lost "
+                "and relocalised frames; time only when --tolerance names it); everything is still written",
+                .no_default = true),
+        APP_OPT("--reference", APP_OPT_STRING, &a->ref_path, "MESH",
+                "the true surface (bitfuse synth's scene.ply): the map's surface voxels (points.ply) against it, "
+                "stats.json surface_m (accuracy median, p90, completeness within 1 cm), gated by --expect",
+                .no_default = true),
+        APP_OPT("--visible", APP_OPT_STRING, &a->vis_path, "SEEN.ply",
+                "with --reference: completeness over these observed reference points (synth's seen.ply)",
+                .no_default = true),
+        APP_OPT("--tolerance", APP_OPT_STRING, &a->tolerance, "NAME=V,...",
+                "with --expect: tolerances replacing the defaults ate=0.001 (m, ATE RMSE), surface=0.001 (m, "
+                "median), tracked=0, lost=0, relocalised=0 (frames), digest (exact); time=F gates the median "
+                "frame time at F times slower (0.2: 20%); NAME=off leaves a measure out",
+                .check = app_check_tolerance, .no_default = true),
+        APP_OPT_END,
+    };
+    const app_option *replay_tables[] = {own, vw, msh, fuse_gt, cal, gate, sto, stm, map, seq, NULL};
     const app_option *live_tables[] = {dev, own, vw, msh, cal, sto, stm, map, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = is_live_cmd ? live_usage : replay_usage,
@@ -341,7 +368,32 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
             return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
                                    a->calibration);
     }
-    return rc ? rc : app_check_map_options(cmd, &a->rcfg.fusion);
+    if (!rc && a->tolerance && !a->expect_path) return app_usage_error(cmd, "--tolerance needs --expect BASELINE.json");
+    if (!rc && a->vis_path && !a->ref_path) return app_usage_error(cmd, "--visible needs --reference MESH");
+    if (!rc) rc = app_check_map_options(cmd, &a->rcfg.fusion);
+    if (!rc && a->ref_path) {
+        bf_status s = mesh_read(a->ref_path, &a->ref);
+        if (s == BF_OK && a->ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", a->ref_path);
+        if (s == BF_OK && a->vis_path) s = mesh_read(a->vis_path, &a->vis);
+        if (s == BF_OK && a->vis_path && a->vis.n_verts == 0)
+            s = bf_fail(BF_FORMAT, "%s: no visible points", a->vis_path);
+        if (s != BF_OK) {
+            mesh_free(&a->ref);
+            mesh_free(&a->vis);
+            return app_fail(cmd, s);
+        }
+    }
+    if (!rc && a->expect_path) {
+        /* Read and checked last (it owns memory), before any device opens
+         * or output is made. */
+        bf_status s = app_expect_load(&a->expect, a->expect_path, a->tolerance);
+        if (s != BF_OK) {
+            mesh_free(&a->ref);
+            mesh_free(&a->vis);
+            return app_fail(cmd, s);
+        }
+    }
+    return rc;
 }
 
 /* --calibration's depth camera replaces the source's pinhole (the sizes
@@ -370,6 +422,8 @@ typedef struct replay_result {
     app_map_report out;
     bool has_ate;
     eval_ate_result ate;
+    bool has_surface;          /* --reference */
+    eval_surface_result surf;
     uint32_t n_views;
     double seconds;
     double t_start_s;          /* bf_time_s() at the command's start */
@@ -455,6 +509,16 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
         cJSON_AddNumberToObject(ate, "pairs", (double)r->ate.n_matched);
     } else {
         cJSON_AddNullToObject(o, "ate_m");
+    }
+    if (r->has_surface) {
+        cJSON *sf = app_json_object(o, "surface_m");
+        cJSON_AddStringToObject(sf, "reference", a->ref_path);
+        cJSON_AddNumberToObject(sf, "median", r->surf.accuracy.median);
+        cJSON_AddNumberToObject(sf, "mean", r->surf.accuracy.mean);
+        cJSON_AddNumberToObject(sf, "p90", r->surf.accuracy.p90);
+        cJSON_AddNumberToObject(sf, "completeness_1cm", r->surf.completeness);
+        cJSON_AddBoolToObject(sf, "over_visible", r->surf.used_visible);
+        cJSON_AddNumberToObject(sf, "points", (double)r->surf.n_rec_vertices);
     }
     app_json_series(o, "frame_ms", &t->frame_ms);
     cJSON *g = app_json_object(o, "gpu_stage_ms");
@@ -624,6 +688,23 @@ static bf_status on_frame(void *user, recon_run *run, const bf_frame *f, const r
     return stop_on_write_failure(k, s);
 }
 
+/* --reference: the surface voxels just written (points.ply) against the
+ * true surface, as bitfuse demo scores the fused map (distances beyond
+ * 0.5 m are left out: a stray voxel must not own the mean). */
+static bf_status eval_fused_surface(const replay_args *a, replay_result *r)
+{
+    char path[4096];
+    mesh_data pts = {0};
+    bf_status s = bf_path_join(path, sizeof path, a->out, "points.ply");
+    if (s == BF_OK) s = mesh_read_ply(path, &pts);
+    eval_surface_config scfg = eval_surface_config_default();
+    scfg.max_dist_m = 0.5;
+    if (s == BF_OK) s = eval_surface(&a->ref, &pts, a->vis_path ? &a->vis : NULL, &scfg, &r->surf);
+    r->has_surface = s == BF_OK;
+    mesh_free(&pts);
+    return s;
+}
+
 static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src)
 {
     const recon_counts *c = &r->run.counts;
@@ -651,6 +732,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
+    if (r->has_surface)
+        printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of it within 1 cm\n",
+               1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness);
     app_print_map(&r->out, a->rcfg.fusion.max_level);
     printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
            r->out.mesh_file[0] ? r->out.mesh_file : "", r->out.mesh_file[0] ? "," : "", r->seconds);
@@ -786,11 +870,17 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = BF_OK;
         has_map = false;
     }
+    if (s == BF_OK && has_map && a.ref_path) s = eval_fused_surface(&a, &r);
     r.seconds = bf_time_s() - t_start;
+    /* The gate: its outcome goes into stats.json too, and the exit code
+     * says it (after everything is written). */
+    char moved[2048] = "";
+    uint32_t n_moved = 0;
     if (s == BF_OK && has_map) {
         cJSON *o = stats_json(&a, &r, src);
         if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
         if (s_loop != BF_OK) cJSON_AddStringToObject(o, "scan_error", loop_error);
+        if (a.expect.baseline) n_moved = app_expect_check(&a.expect, o, moved, sizeof moved);
         s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
     }
     if (has_csv && s == BF_OK) {
@@ -811,11 +901,19 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     gpu_context_destroy(ctx);
     view_destroy(win);
     rgbd_source_close(src);
+    app_expect_free(&a.expect);
+    mesh_free(&a.ref);
+    mesh_free(&a.vis);
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (s == BF_OK && s_loop != BF_OK) s = bf_fail(s_loop, "%s", loop_error);
     else if (s == BF_OK) s = app_write_status(&wf);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);
+    if (s == BF_OK && n_moved) {
+        fprintf(stderr, "bitfuse %s: %u measure%s moved beyond tolerance against %s: %s\n", cmd, n_moved,
+                n_moved > 1 ? "s" : "", a.expect_path, moved);
+        return APP_EXIT_FAILURE;
+    }
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
 

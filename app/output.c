@@ -92,7 +92,14 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
     bf_status s = fusion_get_stats(map, &r->map);
     if (s == BF_OK && whole) snap = *whole, memset(whole, 0, sizeof *whole);
     else if (s == BF_OK) s = fusion_snapshot_take(map, &snap);
-    if (s != BF_OK) return s;
+    /* The canonical order (slot numbers differ run to run): the same map
+     * gives the same files and digest (docs/determinism.md). */
+    if (s == BF_OK) s = hostmap_sort(&snap);
+    if (s == BF_OK) s = store_map_digest(&snap, &r->digest);
+    if (s != BF_OK) {
+        hostmap_free(&snap);
+        return s;
+    }
     mesh_data mesh = {0}, pts = {0};
     char mesh_error[1024] = ""; /* a mesh that cannot be written: the points still are */
     if (mo) {
@@ -124,6 +131,9 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
 {
     const fusion_stats *m = &r->map;
     uint64_t voxels = (uint64_t)m->n_bricks * 512;
+    char digest[32];
+    snprintf(digest, sizeof digest, "xxh3:%016llx", (unsigned long long)r->digest);
+    cJSON_AddStringToObject(o, "map_digest", digest);
     cJSON *b = app_json_object(o, "map_bytes");
     cJSON_AddNumberToObject(b, "sign", (double)m->bytes_sign);
     cJSON_AddNumberToObject(b, "confidence", (double)m->bytes_conf);

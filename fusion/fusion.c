@@ -22,13 +22,13 @@ static bf_status window_list_create(fusion_map *m)
         .name = "fusion.window_list",
         .spirv = bf_spv_fusion_window_list,
         .spirv_bytes = bf_spv_fusion_window_list_size,
-        .n_buffers = 3,
+        .n_buffers = 5,
         .push_bytes = sizeof(fusion_window_list_push),
         .local_size = {64, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_window_list);
-    gpu_buffer *bufs[3] = {m->info, m->stamp, m->window_list};
-    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.window_list", bufs, 3, &m->b_window_list);
+    gpu_buffer *bufs[5] = {m->info, m->stamp, m->window_list, m->hash, m->window_slices};
+    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.window_list", bufs, 5, &m->b_window_list);
     return s;
 }
 
@@ -67,16 +67,27 @@ void fusion__schedule_destroy(fusion_map *m)
     m->p_remove = m->p_window_list = NULL;
 }
 
-/* Records the gathering of the bricks stamped by frames [first, last]. */
+/* Records the gathering of the bricks stamped by frames [first, last],
+ * slice by slice (shaders/fusion_window_list.comp). */
 static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
 {
-    fusion_window_list_push pc = {m->cfg.brick_cap, m->n_entries, first, last};
-    /* The previous window's slices read the list -> the fill that resets it. */
+    fusion_window_list_push pc = {.brick_cap = m->cfg.brick_cap, .n_entries = m->n_entries, .first = first,
+                                  .last = last, .n_slices = half_window(m), .pass = FUSION_GATHER_COUNT};
+    uint32_t groups = gpu_groups(m->cfg.brick_cap, 64);
+    /* The previous window's slices read the list -> the fills that reset it. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_fill(m->ctx, m->window_list, 0, FUSION_LIST_HEADER * 4, 0);
-    /* The cleared count -> the gathering pass. */
+    gpu_cmd_fill(m->ctx, m->window_slices, 0, GPU_WHOLE_SIZE, 0);
+    /* The cleared counts -> the counting pass. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, gpu_groups(m->cfg.brick_cap, 64), 1, 1);
+    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, groups, 1, 1);
+    /* Counts -> their prefix sums -> the scatter. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+    pc.pass = FUSION_GATHER_PREFIX;
+    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, 1, 1, 1);
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+    pc.pass = FUSION_GATHER_SCATTER;
+    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, groups, 1, 1);
 }
 
 /* The frame record: T_cm takes map points (world minus the map origin) to
@@ -146,8 +157,8 @@ static bf_status cmd_upload(fusion_map *m, const fusion_frame *rec, uint32_t slo
 static void cmd_window_slice(fusion_map *m, bool colour_now)
 {
     uint32_t half = half_window(m);
-    uint32_t per = (m->window_count + half - 1) / half;
-    uint32_t first = m->window_slices_done * per;
+    uint32_t k = m->window_slices_done;
+    uint32_t first = m->slice_start[k], per = m->slice_start[k + 1] - first;
     uint32_t n_frames = m->window_end - m->window_first;
     if (per > 0 && first < m->window_count) {
         fusion__cmd_integrate(m, m->b_integrate_window, first, per, m->window_first, n_frames, true);
@@ -182,13 +193,22 @@ static void read_stage_times(fusion_map *m)
     m->ms_colour = m->p_colour ? gpu_stage_ms(m->ctx, "fusion.colour") : 0;
 }
 
-/* Reads the count of the window list gathered in the last submission
- * (fusion_flush; a frame copies it into the readback buffer instead). */
+/* A gathered window's slice starts (the last one is its count). */
+static void set_slices(fusion_map *m, const uint32_t *starts)
+{
+    uint32_t half = half_window(m);
+    memcpy(m->slice_start, starts, (half + 1) * sizeof *starts);
+    m->window_count = starts[half];
+}
+
+/* Reads the slices of the window list gathered in the last submission
+ * (fusion_flush; a frame copies them into the readback buffer instead). */
 static bf_status read_window_count(fusion_map *m)
 {
-    uint32_t n;
-    bf_status s = gpu_buffer_download(m->window_list, 0, &n, 4);
-    if (s == BF_OK) m->window_count = n;
+    uint32_t starts[FUSION_MAX_SLICES + 1];
+    bf_status s = gpu_buffer_download(m->window_slices, FUSION_SLICE_STARTS * 4, starts,
+                                      (half_window(m) + 1) * sizeof *starts);
+    if (s == BF_OK) set_slices(m, starts);
     return s;
 }
 
@@ -201,6 +221,7 @@ static void start_window(fusion_map *m, uint32_t last)
     m->window_slices_done = 0;
     m->window_pending = true;
     m->window_count = 0;
+    memset(m->slice_start, 0, sizeof m->slice_start);
     gpu_cmd_stage_begin(m->ctx, "fusion.window_list");
     cmd_window_list(m, m->window_first, last);
     gpu_cmd_stage_end(m->ctx);
@@ -273,7 +294,9 @@ bf_status fusion_cmd_fuse(fusion_map *m, const bf_se3 *T_wc)
      * download of its own per frame. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_copy(m->ctx, m->counters, 0, m->readback, 0, FUSION_CNT_WORDS * 4);
-    if (closes) gpu_cmd_copy(m->ctx, m->window_list, 0, m->readback, FUSION_CNT_WORDS * 4, 4);
+    if (closes)
+        gpu_cmd_copy(m->ctx, m->window_slices, FUSION_SLICE_STARTS * 4, m->readback, FUSION_CNT_WORDS * 4,
+                     (half_window(m) + 1) * 4);
     /* The copies -> the host's reads in fusion_finish_frame; the map's
      * writes -> readers recorded next (the ray-cast). */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
@@ -291,7 +314,7 @@ bf_status fusion_finish_frame(fusion_map *m)
     read_stage_times(m);
     const uint32_t *rb = gpu_buffer_map(m->readback);
     if (!rb) return bf_fail(BF_VULKAN, "fusion: readback buffer is not mapped");
-    if (m->pending_closes) m->window_count = rb[FUSION_CNT_WORDS];
+    if (m->pending_closes) set_slices(m, rb + FUSION_CNT_WORDS);
     m->use.bricks = rb[FUSION_CNT_BRICKS];
     m->use.nodes = rb[FUSION_CNT_NODES];
     m->use.overflow = rb[FUSION_CNT_OVERFLOW];

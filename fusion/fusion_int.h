@@ -30,11 +30,12 @@ struct fusion_map {
     gpu_buffer *depth_ring;   /* ring_slots depth images, 2 pixels per word */
     gpu_buffer *colour_ring;  /* ring_slots colour images, RGB565, 2 pixels per word (with colour) */
     gpu_buffer *upload;       /* the incoming slot, host-visible: record, depth (and colour) of the next frame */
-    gpu_buffer *readback;     /* host-visible: the counters and a new window's brick count, per frame */
+    gpu_buffer *readback;     /* host-visible: the counters and a new window's slice starts, per frame */
     /* Work lists. */
     gpu_buffer *samples;      /* retry queue of the allocation passes */
     gpu_buffer *new_list;     /* bricks created by the current frame */
-    gpu_buffer *window_list;  /* bricks of the window being integrated */
+    gpu_buffer *window_list;  /* bricks of the window being integrated, slice by slice */
+    gpu_buffer *window_slices; /* its slices' counts and starts (FUSION_SLICE_WORDS) */
 
     /* Pipelines and binding sets, created by each stage's file. */
     gpu_pipeline *p_alloc, *p_alloc_args;
@@ -58,6 +59,7 @@ struct fusion_map {
     uint32_t window_first;    /* first frame of the window being integrated */
     uint32_t window_end;      /* one past its last frame */
     uint32_t window_count;    /* bricks in its list (read back when it closed) */
+    uint32_t slice_start[FUSION_MAX_SLICES + 1]; /* slice k's first list place (read back with the count) */
     uint32_t window_slices_done;
     bool window_pending;
     uint32_t n_windows_done;  /* windows whose last slice has been recorded */

@@ -86,7 +86,7 @@ static bf_status create_buffers(fusion_map *m)
         {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
         {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4 * (c->keep_colour ? 2 : 1),
          GPU_MEMORY_UPLOAD, st},
-        {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + 1) * 4, GPU_MEMORY_READBACK, st},
+        {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + FUSION_MAX_SLICES + 1) * 4, GPU_MEMORY_READBACK, st},
         /* Up to 3 band points per pixel wait for a retry pass. */
         {&m->samples, "fusion.retry", (FUSION_QUEUE_ENTRIES + 2 * 3 * pixels) * 4, GPU_MEMORY_DEVICE,
          st | GPU_USAGE_INDIRECT},
@@ -94,6 +94,7 @@ static bf_status create_buffers(fusion_map *m)
          st | GPU_USAGE_INDIRECT},
         {&m->window_list, "fusion.window_list", ((uint64_t)FUSION_LIST_HEADER + c->brick_cap) * 4,
          GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
+        {&m->window_slices, "fusion.window_slices", FUSION_SLICE_WORDS * 4, GPU_MEMORY_DEVICE, st},
     };
     uint64_t max_binding = gpu_device_limits(m->ctx)->max_storage_buffer_range;
     for (size_t i = 0; i < sizeof plan / sizeof plan[0]; i++) {
@@ -176,6 +177,7 @@ bf_status fusion__reset(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_zero(m->samples);
     if (s == BF_OK) s = gpu_buffer_zero(m->new_list);
     if (s == BF_OK) s = gpu_buffer_zero(m->window_list);
+    if (s == BF_OK) s = gpu_buffer_zero(m->window_slices);
     if (s == BF_OK) s = gpu_buffer_zero(m->readback);
     uint32_t cnt[FUSION_CNT_WORDS] = {0};
     cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
@@ -234,7 +236,8 @@ void fusion_destroy(fusion_map *m)
     fusion__schedule_destroy(m);
     fusion__integrate_destroy(m);
     fusion__alloc_destroy(m);
-    gpu_buffer *bufs[] = {m->readback, m->window_list, m->new_list, m->samples, m->upload, m->depth_ring, m->frames,
+    gpu_buffer *bufs[] = {m->readback, m->window_slices, m->window_list, m->new_list,
+                          m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
                           m->locks, m->hash, m->colour_ring, m->cmask, m->chead, m->cpool, m->cfree};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);

@@ -32,6 +32,14 @@ typedef struct hostmap {
     uint16_t *rgb565;
 } hostmap;
 
+/* The canonical brick order: chunk key (x, y, z), level, then cell (z, y,
+ * x). The scene store's files, the map's digest (store_map_digest) and the
+ * exported meshes list bricks in it, so two maps with the same bricks list
+ * them alike whatever slots the GPU pools gave them (docs/determinism.md). */
+int hostmap_brick_cmp(const hostmap_brick *a, const hostmap_brick *b);
+/* Sorts m's bricks, their colours with them, into the canonical order.
+ * BF_NO_MEMORY (for the colours' copy) leaves m as it was. */
+bf_status hostmap_sort(hostmap *m);
 /* Frees the bricks and leaves an empty map. NULL is a no-op. */
 void hostmap_free(hostmap *m);
 /* Voxel edge of a level [m]. */

@@ -172,11 +172,46 @@ struct fusion_window_list_push {
     bf_u32 brick_cap;
     bf_u32 n_entries;  /* hash entries: a brick record's chunk below it is live */
     bf_u32 first, last; /* frame indices of the window, inclusive */
+    bf_u32 n_slices;   /* slices the window is integrated in, <= FUSION_MAX_SLICES */
+    bf_u32 pass;       /* FUSION_GATHER_COUNT, _PREFIX or _SCATTER */
+    bf_u32 pad[2];
 };
 #ifndef BF_GLSL
 typedef struct fusion_window_list_push fusion_window_list_push;
-_Static_assert(sizeof(fusion_window_list_push) == 16, "fusion_window_list_push must match std430");
+_Static_assert(sizeof(fusion_window_list_push) == 32, "fusion_window_list_push must match std430");
 #endif
+
+/* A window's bricks are integrated in n/2 slices, one per frame, and the
+ * map the tracker sees between them holds the slices done so far: which
+ * slice a brick falls in must not depend on the order in which atomics
+ * hand out list places (nor on its slot, which allocation atomics choose),
+ * or two runs of the same input part (docs/determinism.md). A brick's slice
+ * is a hash of what it is, its chunk and its cell; the list is gathered
+ * slice by slice, in three passes: count per slice, prefix sums, scatter.
+ * The slice buffer: counts at FUSION_SLICE_COUNTS, slice s's first list
+ * place at FUSION_SLICE_STARTS + s (s = 0..n_slices, the last is the total),
+ * the scatter's cursors at FUSION_SLICE_CURSORS. */
+#define FUSION_MAX_SLICES 128u
+#define FUSION_SLICE_COUNTS 0u
+#define FUSION_SLICE_STARTS FUSION_MAX_SLICES
+#define FUSION_SLICE_CURSORS (2u * FUSION_MAX_SLICES + 1u)
+#define FUSION_SLICE_WORDS (3u * FUSION_MAX_SLICES + 1u)
+#define FUSION_GATHER_COUNT 0u
+#define FUSION_GATHER_PREFIX 1u
+#define FUSION_GATHER_SCATTER 2u
+
+/* The slice of the brick at pos in chunk (x, y, z): the words mixed by
+ * MurmurHash3's finaliser (Appleby), so neighbouring cells spread evenly. */
+BF_FN bf_u32 fusion_slice_of(bf_i32 x, bf_i32 y, bf_i32 z, bf_u32 pos, bf_u32 n_slices)
+{
+    bf_u32 h = (BF_U32(x) * 73856093u) ^ (BF_U32(y) * 19349669u) ^ (BF_U32(z) * 83492791u) ^ (pos * 2654435761u);
+    h ^= h >> 16;
+    h *= 0x85ebca6bu;
+    h ^= h >> 13;
+    h *= 0xc2b2ae35u;
+    h ^= h >> 16;
+    return h % n_slices;
+}
 
 /* Push constants of fusion_remove.comp. */
 struct fusion_remove_push {

@@ -1,7 +1,13 @@
 #version 450
 /* Gathers the bricks of a window: every live brick stamped by a frame in
  * [first, last] (DESIGN.md section 4: the bricks visible in at least one
- * frame of the window). One invocation per brick slot. */
+ * frame of the window), grouped by slice (fusion_slice_of in fusion.glsl.h:
+ * which frame integrates a brick follows from what the brick is, not from
+ * the order of the atomics, docs/determinism.md). Three passes: COUNT and
+ * SCATTER have one invocation per brick slot, PREFIX one invocation in
+ * all. Within a slice the order still follows the atomics; the slice's
+ * bricks are integrated by one dispatch and each independently of the
+ * others, so their order changes nothing. */
 #extension GL_GOOGLE_include_directive : require
 #include "fusion.glsl.h"
 
@@ -10,16 +16,40 @@ BF_LOCAL_SIZE_FROM_SPEC
 layout(std430, binding = 0) readonly buffer Info { uint w[]; } info;
 layout(std430, binding = 1) readonly buffer Stamp { uint w[]; } stamp;
 layout(std430, binding = 2) buffer List { uint w[]; } list;
+layout(std430, binding = 3) readonly buffer Hash { uint w[]; } hash;
+layout(std430, binding = 4) buffer Slices { uint w[]; } slices;
 
 layout(push_constant) uniform Push { fusion_window_list_push pc; };
 
 void main()
 {
+    uint n_slices = clamp(pc.n_slices, 1u, FUSION_MAX_SLICES);
+    if (pc.pass == FUSION_GATHER_PREFIX) {
+        if (gl_GlobalInvocationID.x != 0u) return;
+        uint sum = 0u;
+        for (uint s = 0u; s < n_slices; s++) {
+            slices.w[FUSION_SLICE_STARTS + s] = sum;
+            slices.w[FUSION_SLICE_CURSORS + s] = sum;
+            sum += slices.w[FUSION_SLICE_COUNTS + s];
+        }
+        slices.w[FUSION_SLICE_STARTS + n_slices] = sum;
+        list.w[FUSION_LIST_COUNT] = sum;
+        return;
+    }
     uint b = gl_GlobalInvocationID.x;
     if (b >= pc.brick_cap) return;
-    if (info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] >= pc.n_entries) return; /* free slot */
-    uint s = stamp.w[b];
-    if (s == FUSION_NONE || s < pc.first || s > pc.last) return;
-    uint i = atomicAdd(list.w[FUSION_LIST_COUNT], 1u);
-    list.w[FUSION_LIST_HEADER + i] = b;
+    uint chunk = info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
+    if (chunk >= pc.n_entries) return; /* free slot */
+    uint st = stamp.w[b];
+    if (st == FUSION_NONE || st < pc.first || st > pc.last) return;
+    uint base = chunk * FUSION_ENTRY_WORDS;
+    uint s = fusion_slice_of(int(hash.w[base + FUSION_ENTRY_X]), int(hash.w[base + FUSION_ENTRY_Y]),
+                             int(hash.w[base + FUSION_ENTRY_Z]), info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS],
+                             n_slices);
+    if (pc.pass == FUSION_GATHER_COUNT) {
+        atomicAdd(slices.w[FUSION_SLICE_COUNTS + s], 1u);
+    } else {
+        uint i = atomicAdd(slices.w[FUSION_SLICE_CURSORS + s], 1u);
+        list.w[FUSION_LIST_HEADER + i] = b;
+    }
 }

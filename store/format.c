@@ -16,58 +16,15 @@ _Static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the store's files are
 
 uint64_t store__hash(const void *p, size_t n) { return XXH3_64bits(p, n); }
 
-static int cmp_i32(int32_t a, int32_t b) { return (a > b) - (a < b); }
-static int cmp_u32(uint32_t a, uint32_t b) { return (a > b) - (a < b); }
-
-static int brick_cmp(const void *pa, const void *pb)
-{
-    const hostmap_brick *a = pa, *b = pb;
-    int c = 0;
-    for (int i = 0; i < 3 && !c; i++) c = cmp_i32(a->key[i], b->key[i]);
-    if (!c) c = cmp_u32(a->level, b->level);
-    for (int i = 2; i >= 0 && !c; i--) c = cmp_u32(a->cell[i], b->cell[i]);
-    return c;
-}
-
-/* Sorting carries each brick's colour along: an index sort (glibc's
- * qsort_r: the writer thread and the caller's may sort at once), then both
- * arrays in that order. */
-static int index_cmp(const void *pa, const void *pb, void *ctx)
-{
-    const hostmap_brick *base = ctx;
-    uint32_t a = *(const uint32_t *)pa, b = *(const uint32_t *)pb;
-    int c = brick_cmp(&base[a], &base[b]);
-    return c ? c : (a > b) - (a < b);
-}
-
 void store__sort(hostmap *m)
 {
-    if (m->n_bricks < 2) return;
-    if (!m->rgb565) {
-        qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
-        return;
-    }
-    uint32_t *idx = bf_malloc((size_t)m->n_bricks * sizeof *idx);
-    hostmap_brick *b = bf_malloc((size_t)m->n_bricks * sizeof *b);
-    uint16_t *c = bf_malloc((size_t)m->n_bricks * 1024);
-    if (!idx || !b || !c) { /* no memory to carry colour: keep the geometry in order */
-        free(idx), free(b), free(c);
-        free(m->rgb565);
-        m->rgb565 = NULL;
-        qsort(m->bricks, m->n_bricks, sizeof *m->bricks, brick_cmp);
-        return;
-    }
-    for (uint32_t i = 0; i < m->n_bricks; i++) idx[i] = i;
-    qsort_r(idx, m->n_bricks, sizeof *idx, index_cmp, m->bricks);
-    for (uint32_t i = 0; i < m->n_bricks; i++) {
-        b[i] = m->bricks[idx[i]];
-        memcpy(c + (size_t)i * 512, m->rgb565 + (size_t)idx[i] * 512, 1024);
-    }
-    free(idx);
-    free(m->bricks);
+    if (hostmap_sort(m) == BF_OK) return;
+    /* No memory to carry colour: keep the geometry in order. */
     free(m->rgb565);
-    m->bricks = b;
-    m->rgb565 = c;
+    m->rgb565 = NULL;
+    bf_clear_error();
+    bf_status s = hostmap_sort(m); /* without colour it allocates nothing */
+    BF_ASSERT(s == BF_OK);
 }
 
 void store__pack(const hostmap *m, uint32_t first, uint32_t n, bool with_colour, uint8_t *buf)
@@ -120,24 +77,52 @@ bf_status store__groups(const hostmap *m, store_group **out, uint32_t *n_out)
     return BF_OK;
 }
 
+static bool is_sorted(const hostmap *m)
+{
+    for (uint32_t i = 1; i < m->n_bricks; i++)
+        if (hostmap_brick_cmp(&m->bricks[i - 1], &m->bricks[i]) > 0) return false;
+    return true;
+}
+
+/* A copy of map in the canonical order, its colours with it. */
+static bf_status sorted_copy(const hostmap *map, hostmap *copy)
+{
+    size_t n = map->n_bricks;
+    *copy = *map;
+    copy->bricks = bf_malloc(n * sizeof *copy->bricks + 1);
+    copy->rgb565 = map->rgb565 ? bf_malloc(n * 512 * 2 + 1) : NULL;
+    if (!copy->bricks || (map->rgb565 && !copy->rgb565)) {
+        hostmap_free(copy);
+        return bf_fail(BF_NO_MEMORY, "store: digest of %zu bricks", n);
+    }
+    memcpy(copy->bricks, map->bricks, n * sizeof *copy->bricks);
+    if (map->rgb565) memcpy(copy->rgb565, map->rgb565, n * 512 * 2);
+    bf_status s = hostmap_sort(copy);
+    if (s != BF_OK) hostmap_free(copy);
+    return s;
+}
+
 bf_status store_map_digest(const hostmap *map, uint64_t *out)
 {
     if (!map || !out) return bf_fail(BF_INVALID_ARG, "store_map_digest: NULL argument");
-    hostmap copy = *map;
-    copy.rgb565 = NULL; /* map owns it; the digest covers the geometry */
-    copy.bricks = map->n_bricks ? bf_malloc((size_t)map->n_bricks * sizeof *copy.bricks) : NULL;
-    if (map->n_bricks && !copy.bricks) return bf_fail(BF_NO_MEMORY, "store: digest of %u bricks", map->n_bricks);
-    if (map->n_bricks) memcpy(copy.bricks, map->bricks, (size_t)map->n_bricks * sizeof *copy.bricks);
-    store__sort(&copy);
+    hostmap copy = {0};
+    const hostmap *m = map;
+    if (!is_sorted(map)) {
+        bf_status s = sorted_copy(map, &copy);
+        if (s != BF_OK) return s;
+        m = &copy;
+    }
     XXH3_state_t st;
     XXH3_64bits_reset(&st);
     uint8_t rec[STORE_RECORD_BYTES];
-    for (uint32_t i = 0; i < copy.n_bricks; i++) {
-        XXH3_64bits_update(&st, copy.bricks[i].key, sizeof copy.bricks[i].key);
-        store__pack(&copy, i, 1, false, rec);
+    for (uint32_t i = 0; i < m->n_bricks; i++) {
+        XXH3_64bits_update(&st, m->bricks[i].key, sizeof m->bricks[i].key);
+        store__pack(m, i, 1, false, rec);
         XXH3_64bits_update(&st, rec, sizeof rec);
+        /* RGB565, little-endian like the files (the assertion above). */
+        if (m->rgb565) XXH3_64bits_update(&st, m->rgb565 + (size_t)i * 512, 512 * 2);
     }
-    free(copy.bricks);
+    hostmap_free(&copy);
     *out = XXH3_64bits_digest(&st);
     return BF_OK;
 }

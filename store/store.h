@@ -78,9 +78,13 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
 bf_status store_put_chunks(const char *dir, hostmap *m, const store_meta *meta, uint64_t *bytes);
 bf_status store_get_chunk(const char *dir, const int32_t key[3], const store_meta *meta, hostmap *out, uint64_t *bytes);
 
-/* xxHash (XXH3, 64 bits) of a map's contents in the canonical order above:
- * equal for equal maps whatever the order of their bricks (stats.json's
- * map_digest). */
+/* xxHash (XXH3, 64 bits) of a map's contents in the canonical order
+ * (hostmap_sort): per brick its chunk key and its record as a chunk file
+ * holds it without colour (cell, level, error, sign and confidence words),
+ * then, when the map has colour, its 512 RGB565 colours. Equal for equal
+ * maps whatever the order of their bricks (stats.json's map_digest,
+ * docs/determinism.md). A map already in the canonical order is read in
+ * place; another is sorted in a copy. */
 bf_status store_map_digest(const hostmap *map, uint64_t *out);
 
 /* ------------------------------------------------------------ writing */

@@ -224,15 +224,30 @@ static bf_status cache_pop(stream *s, uint32_t i, hostmap *out)
 typedef struct cand {
     double d;
     uint32_t i;
+    int32_t key[3];
 } cand;
+
+/* Chunks at the same distance go in key order: the resident chunks come in
+ * hash-entry order, which the allocation's atomics choose, and a move of
+ * max_chunks at a time must not depend on it (docs/determinism.md). */
+static int cand_key_cmp(const cand *a, const cand *b)
+{
+    for (int i = 0; i < 3; i++)
+        if (a->key[i] != b->key[i]) return (a->key[i] > b->key[i]) - (a->key[i] < b->key[i]);
+    return 0;
+}
 
 static int cand_far_first(const void *a, const void *b)
 {
     double x = ((const cand *)a)->d, y = ((const cand *)b)->d;
-    return (x < y) - (x > y);
+    return x != y ? (x < y) - (x > y) : cand_key_cmp(a, b);
 }
 
-static int cand_near_first(const void *a, const void *b) { return -cand_far_first(a, b); }
+static int cand_near_first(const void *a, const void *b)
+{
+    double x = ((const cand *)a)->d, y = ((const cand *)b)->d;
+    return x != y ? (x > y) - (x < y) : cand_key_cmp(a, b);
+}
 
 static bool above_high_water(const stream *s)
 {
@@ -258,7 +273,7 @@ static bf_status move_out(stream *s, bf_vec3 p, bool pressure, bool make_room)
     double far = s->cfg.radius_m + (make_room ? 0 : s->cfg.hysteresis_m), near = fusion_get_config(s->map)->chunk_m;
     for (uint32_t i = 0; st == BF_OK && i < n; i++) {
         double d = chunk_distance(s->map, keys[i], p);
-        if (d > far || (pressure && d > near)) c[k++] = (cand){d, i};
+        if (d > far || (pressure && d > near)) c[k++] = (cand){d, i, {keys[i][0], keys[i][1], keys[i][2]}};
     }
     if (k > 1) qsort(c, k, sizeof *c, cand_far_first);
     if (k > s->cfg.max_chunks) k = s->cfg.max_chunks;
@@ -298,7 +313,8 @@ static bf_status move_in(stream *s, bf_vec3 p)
     if (s->n_chunks && !c) return bf_fail(BF_NO_MEMORY, "stream: %u chunks", s->n_chunks);
     for (uint32_t i = 0; i < s->n_chunks; i++) {
         double d = chunk_distance(s->map, s->chunks[i].key, p);
-        if (d < s->cfg.radius_m) c[k++] = (cand){d, i};
+        if (d < s->cfg.radius_m)
+            c[k++] = (cand){d, i, {s->chunks[i].key[0], s->chunks[i].key[1], s->chunks[i].key[2]}};
     }
     if (k > 1) qsort(c, k, sizeof *c, cand_near_first);
     if (k > s->cfg.max_chunks) k = s->cfg.max_chunks;

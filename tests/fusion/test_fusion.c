@@ -484,13 +484,15 @@ BF_TEST(evicted_chunks_come_back_bit_for_bit)
     CHECK(st1.n_nodes < st0.n_nodes);
     /* What stayed plus what left is what was. */
     CHECK_OK(fusion_snapshot_take(map, &s1));
-    hostmap both = s1;
-    both.rgb565 = NULL; /* s1 owns it (and holds s1's bricks' colour only) */
+    hostmap both = s1; /* the digest covers colour: both carries s1's and ev's */
     both.n_bricks = s1.n_bricks + ev.n_bricks;
     both.bricks = malloc(both.n_bricks * sizeof *both.bricks);
-    CHECK(both.bricks != NULL);
+    both.rgb565 = malloc((size_t)both.n_bricks * 512 * 2);
+    CHECK(both.bricks != NULL && both.rgb565 != NULL && s1.rgb565 != NULL && ev.rgb565 != NULL);
     memcpy(both.bricks, s1.bricks, s1.n_bricks * sizeof *both.bricks);
     memcpy(both.bricks + s1.n_bricks, ev.bricks, ev.n_bricks * sizeof *both.bricks);
+    memcpy(both.rgb565, s1.rgb565, (size_t)s1.n_bricks * 512 * 2);
+    memcpy(both.rgb565 + (size_t)s1.n_bricks * 512, ev.rgb565, (size_t)ev.n_bricks * 512 * 2);
     uint64_t d0, d1, d2;
     CHECK_OK(store_map_digest(&s0, &d0));
     CHECK_OK(store_map_digest(&both, &d1));
