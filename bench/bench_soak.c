@@ -5,7 +5,15 @@
  * the map's bytes reported per block of frames. Time per frame and memory
  * must not grow beyond what the map itself needs.
  *
+ * Under faults (issue 15): --drop P drops each frame with probability P
+ * (the next one comes later, as from a camera that lost frames), --zero
+ * N/E gives N frames of zero depth every E frames (a covered lens), and a
+ * small --cache-mib with a short --stream-radius sends chunks to the
+ * stream's spill folder (under $TMPDIR); run under tests/fault's shim with
+ * FAULT_DIR=$TMPDIR FAULT_DELAY_US=D for a slow disk (docs/faults.md).
+ *
  *   bench_soak [--frames N] [--loop M] [--size WxH] [--block B] [--out FILE.tsv]
+ *              [--drop P] [--zero N/E] [--seed S] [--stream-radius M] [--cache-mib C]
  */
 #include <math.h>
 #include <stdio.h>
@@ -41,18 +49,41 @@ static bf_se3 loop_pose(const synth_scene *sc, uint32_t k, uint32_t m)
 typedef struct soak_frames {
     const synth_scene *sc;
     const uint16_t *depth; /* m frames of w x h */
+    const uint16_t *zero;  /* one frame of zero depth */
     uint32_t m, w, h;
+    const uint32_t *tick;  /* frame i of the source is camera tick tick[i] (drops skip ticks) */
+    uint32_t zero_n, zero_every; /* zero_n frames of zero depth every zero_every ticks */
 } soak_frames;
 
 static bf_status soak_frame(void *user, uint32_t i, bf_frame *f)
 {
     const soak_frames *sf = user;
-    uint32_t period = 2 * (sf->m - 1), p = i % period, k = p < sf->m ? p : period - p;
-    *f = (bf_frame){.index = i, .width = sf->w, .height = sf->h, .t_depth_s = i / 30.0,
-                    .depth = sf->depth + (size_t)sf->w * sf->h * k, .has_pose = true,
+    uint32_t c = sf->tick[i];
+    uint32_t period = 2 * (sf->m - 1), p = c % period, k = p < sf->m ? p : period - p;
+    bool zero = sf->zero_every && c % sf->zero_every >= sf->zero_every - sf->zero_n;
+    *f = (bf_frame){.index = i, .width = sf->w, .height = sf->h, .t_depth_s = c / 30.0,
+                    .depth = zero ? sf->zero : sf->depth + (size_t)sf->w * sf->h * k, .has_pose = true,
                     .T_wc = loop_pose(sf->sc, k, sf->m)};
     f->t_rgb_s = f->t_depth_s;
     return BF_OK;
+}
+
+/* The camera ticks the source delivers: n of them, each tick dropped with
+ * probability drop (xorshift64, seeded). */
+static uint32_t *soak_ticks(uint32_t n, double drop, uint64_t seed, uint32_t *dropped)
+{
+    uint32_t *t = malloc((size_t)n * sizeof *t);
+    uint64_t x = seed * 2654435761u + 88172645463325252ull;
+    *dropped = 0;
+    for (uint32_t i = 0, c = 0; t && i < n; c++) {
+        x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+        if ((x >> 11) * (1.0 / 9007199254740992.0) < drop) {
+            (*dropped)++;
+            continue;
+        }
+        t[i++] = c;
+    }
+    return t;
 }
 
 /* One line per block of frames: time, memory, map, tracking. */
@@ -67,16 +98,21 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
 {
     soak_report *sr = user;
     uint32_t i = f->index;
+    /* The error of the frames the loop placed (a frame without depth keeps
+     * the last pose while the camera moves on). */
     double err = bf_v3_norm(bf_v3_sub(f->T_wc.t, fr->T_wc.t));
-    if (err > sr->max_err) sr->max_err = err;
+    bool placed = fr->state == RECON_TRACKED || fr->state == RECON_RELOCALISED || fr->state == RECON_FIRST;
+    if (placed && err > sr->max_err) sr->max_err = err;
     bf_status s = bf_stats_push(&sr->ms, fr->ms_frame);
     if (s != BF_OK || ((i + 1) % sr->block != 0 && i + 1 != sr->n)) return s;
     fusion_stats st;
     if ((s = fusion_get_stats(run->map, &st)) != BF_OK) return s;
     recon_counts c = run->counts;
-    fprintf(sr->out, "%u\t%.2f\t%.2f\t%.1f\t%.2f\t%u\t%u\t%u\t%.2f\n", i + 1, bf_stats_percentile(&sr->ms, 50),
-            bf_stats_percentile(&sr->ms, 95), rss_mib(), st.bytes_total / 1048576.0, st.n_bricks, c.tracked, c.lost,
-            1e3 * sr->max_err);
+    stream_stats ss = run->loop ? recon_stream_stats(run->loop) : (stream_stats){0};
+    fprintf(sr->out, "%u\t%.2f\t%.2f\t%.1f\t%.2f\t%u\t%u\t%u\t%.2f\t%u\t%u\t%llu\t%llu\n", i + 1,
+            bf_stats_percentile(&sr->ms, 50), bf_stats_percentile(&sr->ms, 95), rss_mib(), st.bytes_total / 1048576.0,
+            st.n_bricks, c.tracked, c.lost, 1e3 * sr->max_err, c.no_depth, c.relocalised,
+            (unsigned long long)ss.to_disk, (unsigned long long)ss.from_disk);
     fflush(sr->out);
     fprintf(stderr, "bench_soak: %u/%u frames, %.1f ms median, RSS %.0f MiB, map %.2f MiB, %u lost, "
                     "max error %.1f mm, %.0f s\n",
@@ -90,7 +126,9 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
 
 int main(int argc, char **argv)
 {
-    uint32_t n = 10000, m = 300, block = 250, w = 640, h = 480;
+    uint32_t n = 10000, m = 300, block = 250, w = 640, h = 480, zero_n = 0, zero_every = 0;
+    double drop = 0, radius = -1, cache_mib = -1;
+    uint64_t seed = 1;
     const char *out_path = "soak.tsv";
     for (int i = 1; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--frames")) n = (uint32_t)atoi(argv[i + 1]);
@@ -98,16 +136,26 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--block")) block = (uint32_t)atoi(argv[i + 1]);
         else if (!strcmp(argv[i], "--size")) sscanf(argv[i + 1], "%ux%u", &w, &h);
         else if (!strcmp(argv[i], "--out")) out_path = argv[i + 1];
+        else if (!strcmp(argv[i], "--drop")) drop = atof(argv[i + 1]);
+        else if (!strcmp(argv[i], "--zero")) sscanf(argv[i + 1], "%u/%u", &zero_n, &zero_every);
+        else if (!strcmp(argv[i], "--seed")) seed = strtoull(argv[i + 1], NULL, 10);
+        else if (!strcmp(argv[i], "--stream-radius")) radius = atof(argv[i + 1]);
+        else if (!strcmp(argv[i], "--cache-mib")) cache_mib = atof(argv[i + 1]);
         else {
-            fprintf(stderr, "usage: bench_soak [--frames N] [--loop M] [--size WxH] [--block B] [--out FILE]\n");
+            fprintf(stderr, "usage: bench_soak [--frames N] [--loop M] [--size WxH] [--block B] [--out FILE] "
+                            "[--drop P] [--zero N/E] [--seed S] [--stream-radius M] [--cache-mib C]\n");
             return 2;
         }
     }
     if (argc > 1 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
-        printf("usage: bench_soak [--frames N] [--loop M] [--size WxH] [--block B] [--out FILE.tsv]\n");
+        printf("usage: bench_soak [--frames N] [--loop M] [--size WxH] [--block B] [--out FILE.tsv]\n"
+               "                  [--drop P] [--zero N/E] [--seed S] [--stream-radius M] [--cache-mib C]\n");
         return 0;
     }
-    if (m < 2 || block < 1 || w < 16 || h < 16) return 2;
+    if (m < 2 || block < 1 || w < 16 || h < 16 || !(drop >= 0 && drop < 1) || zero_n > zero_every) {
+        fprintf(stderr, "bench_soak: bad option value\n");
+        return 2;
+    }
     double f_px = 525.0 * w / 640.0;
     bf_intrinsics K = {w, h, f_px, f_px, (w - 1) / 2.0, (h - 1) / 2.0, 5000};
     synth_scene sc = {0};
@@ -133,12 +181,23 @@ int main(int argc, char **argv)
      * wide its depth is coarser than a Kinect's, so the residual gate widens
      * as in tests/tracking. The loop starts at the first frame's true pose. */
     cfg.loop.track.max_residual_m *= (float)(640.0 / w);
+    cfg.loop.reloc.max_residual_m *= (float)(640.0 / w); /* a candidate is judged by the same gate */
     cfg.label = "bench_soak";
-    soak_frames sf = {&sc, frames, m, w, h};
+    if (radius >= 0) cfg.loop.stream.radius_m = (float)radius;
+    if (cache_mib >= 0) cfg.loop.stream.cache_bytes = (uint64_t)(cache_mib * 1048576.0);
+    uint32_t dropped = 0;
+    uint32_t *ticks = soak_ticks(n, drop, seed, &dropped);
+    uint16_t *zero = calloc(np, sizeof *zero);
+    if (s == BF_OK && (!ticks || !zero)) s = BF_NO_MEMORY;
+    fprintf(stderr, "bench_soak: %u frames, %u ticks dropped, %u zero-depth frames every %u\n", n, dropped, zero_n,
+            zero_every);
+    soak_frames sf = {&sc, frames, zero, m, w, h, ticks, zero_n, zero_every};
     if (s == BF_OK) s = capture_source_from_fn(&K, n, true, soak_frame, &sf, &src);
     soak_report sr = {.n = n, .block = block, .t_start = bf_time_s()};
     if (s == BF_OK && !(sr.out = fopen(out_path, "w"))) s = bf_fail(BF_IO, "%s: cannot create", out_path);
-    if (sr.out) fprintf(sr.out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\n");
+    if (sr.out)
+        fprintf(sr.out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\tno_depth\t"
+                        "relocalised\tto_disk\tfrom_disk\n");
     if (s == BF_OK) s = recon_run_sequence(ctx, src, &cfg, soak_on_frame, &sr, &run);
     if (s != BF_OK) fprintf(stderr, "bench_soak: %s: %s\n", bf_status_name(s), bf_last_error());
     bf_stats_free(&sr.ms);
@@ -149,5 +208,7 @@ int main(int argc, char **argv)
     synth_renderer_destroy(ren);
     synth_scene_free(&sc);
     free(frames);
+    free(ticks);
+    free(zero);
     return s == BF_OK ? 0 : 1;
 }

@@ -25,6 +25,9 @@
  * loader and asks it for vkGetInstanceProcAddr; the shim's dlsym hands out
  * a wrapper that wraps the calls above.
  *
+ * FAULT_DELAY_US: every write(2) and fsync(2) on a watched descriptor first
+ * sleeps this long (a slow disk; bench/bench_soak's spill folder).
+ *
  * FAULT_REPORT: a file the shim appends to at exit: "points W" (file fault
  * points seen), "vk A S" (Vulkan allocations and submits seen) and, when a
  * fault fired, "fired PATH" or "fired-vk NAME". The environment variables
@@ -51,7 +54,7 @@
 
 static char dir[PATH_MAX];
 static size_t dir_len;
-static long fault_n, vk_n;
+static long fault_n, vk_n, delay_us;
 static int kind; /* 0 enospc, 1 eio, 2 short, 3 partial */
 static bool vk_lost;
 static _Atomic long points, vk_allocs, vk_submits;
@@ -108,6 +111,8 @@ __attribute__((constructor)) static void init(void)
     fault_n = n ? atol(n) : 0;
     const char *k = getenv("FAULT_KIND");
     kind = !k || !strcmp(k, "enospc") ? 0 : !strcmp(k, "eio") ? 1 : !strcmp(k, "short") ? 2 : 3;
+    const char *dl = getenv("FAULT_DELAY_US");
+    delay_us = dl ? atol(dl) : 0;
     const char *v = getenv("FAULT_VK_N");
     vk_n = v ? atol(v) : 0;
     const char *vk = getenv("FAULT_VK_KIND");
@@ -159,6 +164,7 @@ static void watch(int fd, int flags, int dirfd, const char *path)
 static int at_point(int fd, bool is_write)
 {
     if (fd < 0 || fd >= MAX_FD || !watched[fd]) return 0;
+    if (delay_us > 0) usleep((useconds_t)delay_us);
     if (broken[fd]) return 1;
     long k = atomic_fetch_add(&points, 1) + 1;
     if (k != fault_n || (kind == 3 && !is_write)) return 0;
