@@ -19,4 +19,4 @@ bash scripts/build.sh
 BUILD_DIR=build-asan bash scripts/build.sh -DBITFUSE_SANITIZE=ON
 (cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
    ctest --output-on-failure -j 2 -LE gpu_bound)
-bash scripts/fuzz.sh 30 --jobs 2 --no-doc
+bash scripts/fuzz.sh 30 --jobs 2 --no-doc --seed 1
