@@ -86,7 +86,7 @@ typedef struct replay_args {
     mesh_data ref, vis;      /* read before the device opens */
 } replay_args;
 
-#define LOOP_ROWS 26
+#define LOOP_ROWS 27
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -208,6 +208,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--photo-levels", APP_OPT_U32, &tc->photo_levels, "N",
                 "pyramid levels with the photometric term, from the finest (1: the finest only, 3: all)", .min = 1,
                 .max = TRACK_MAX_LEVELS),
+        APP_OPT("--photo-sharpness", APP_OPT_FLOAT, &tc->photo_sharpness_min, "R",
+                "drop the photometric term for a frame whose intensity gradient energy and the reference's differ "
+                "by more than this ratio either way (motion blur); 0: never", .max = 1),
         APP_OPT("--huber-scale", APP_OPT_CHOICE, &tc->huber_scaled, "residuals|sensor",
                 "the Huber threshold's unit: sigma_z(z) times the last iteration's RMS of r / sigma_z when above 1, "
                 "or sigma_z(z) alone"),
@@ -565,14 +568,14 @@ static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, cons
 static void csv_frame(bf_out *csv, const bf_frame *f, const recon_frame_result *fr)
 {
     bool ran = recon_state_ran_icp(fr->state);
-    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f\n", f->index, f->t_depth_s,
+    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f,%.3f,%d\n", f->index, f->t_depth_s,
             recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
             ran ? fr->track.eig_min / (fr->track.eig_max > 0 ? fr->track.eig_max : 1) : 0.0, fr->ms_frame,
             fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window + fr->fuse.colour, fr->reloc_tried,
             recon_reloc_kind_name(fr->reloc), ran ? fr->track.iterations : 0, ran ? fr->track.residual_sigma : 0.0,
-            fr->ms_stream);
+            fr->ms_stream, ran ? fr->track.photo_sharpness : 0.0, ran ? (int)fr->track.photo_dropped : 0);
 }
 
 /* What the replay writes per frame beside the runner's own records. */
@@ -803,7 +806,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         has_csv = (s = bf_out_open(&csv, path)) == BF_OK;
     if (has_csv)
         bf_out_printf(&csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
-                     "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms\n");
+                     "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms,"
+                     "photo_sharpness,photo_dropped\n");
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK && win) s = view_attach(win, ctx);
     if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);

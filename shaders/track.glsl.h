@@ -75,6 +75,8 @@
 #define TRACK_SUM_RN 31u       /* sum (r / sigma_z)^2 of the inliers: their residuals in the sensor model's units */
 #define TRACK_SUM_PHOTO_N 32u  /* photometric rows (the term's inliers) */
 #define TRACK_SUM_PHOTO_RR 33u /* sum of their intensity residuals squared */
+#define TRACK_SUM_PHOTO_GREF 34u   /* sum |grad I_ref|^2 over the rows where the frame's gradient is known too */
+#define TRACK_SUM_PHOTO_GFRAME 35u /* sum |grad I_frame|^2 over the same rows */
 #define TRACK_SUMS 36u         /* words summed */
 #define TRACK_PARTIAL_WORDS 36u
 #define TRACK_ICP_LOCAL_MAX 64u /* invocations per workgroup at most (shared arrays) */

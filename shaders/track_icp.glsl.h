@@ -110,7 +110,14 @@ void add_photometric(uint i, vec3 p, inout icp_acc A)
     float e = abs(r), wgt = pc.photo_w;
     if (e > pc.photo_huber) wgt *= pc.photo_huber / e;
     add_row(g, cross(p, g), r, wgt, A);
-    A.s8.xy += vec2(1.0, r * r); /* TRACK_SUM_PHOTO_N, _RR */
+    /* The frame's own gradient at the pixel (forward differences, as the
+     * reference's above): a frame blurred by its motion has less of it than
+     * the sharp reference (track_config.photo_sharpness_min). */
+    uint fx = (i - pc.off) % W, fy = (i - pc.off) / W;
+    float ir = fx + 1u < W ? frame_i.v[i + 1u] : -1.0, id = fy + 1u < H ? frame_i.v[i + W] : -1.0;
+    float gf = ir >= 0.0 && id >= 0.0 ? (ir - ic) * (ir - ic) + (id - ic) * (id - ic) : 0.0;
+    float gr = ir >= 0.0 && id >= 0.0 ? gu * gu + gv * gv : 0.0;
+    A.s8 += vec4(1.0, r * r, gr, gf); /* TRACK_SUM_PHOTO_N, _RR, _GREF, _GFRAME */
 }
 
 /* One frame pixel's association, gates and contribution. */

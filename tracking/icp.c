@@ -72,9 +72,10 @@ typedef struct icp_sums {
     double s[TRACK_SUMS];
 } icp_sums;
 
-/* One iteration: one submission, one dispatch, 32 floats per workgroup
+/* One iteration: one submission, one dispatch, 36 floats per workgroup
  * read back. with_frame records the frame's preprocessing in front of it
- * (the first iteration of a frame: one submission and wait fewer). */
+ * (the first iteration of a frame: one submission and wait fewer);
+ * photo_unit 0 leaves the photometric term out. */
 static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, bool with_frame, bool weighted,
                                double huber_unit, double photo_unit, icp_sums *out, track_result *res)
 {
@@ -109,7 +110,7 @@ static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc,
     pc.ref_off = t->geom.off[rl];
     pc.ref_size = track_icp_size(t->geom.w[rl], t->geom.h[rl]);
     pc.ref_shift = rl - l;
-    if (l < t->cfg.photo_levels && t->frame_has_int && t->ref_has_int) {
+    if (photo_unit > 0 && l < t->cfg.photo_levels && t->frame_has_int && t->ref_has_int) {
         /* Relative to a depth residual at 1 m, as the noise weights are. In
          * the plain iteration too, so that texture constrains what the
          * geometry alone leaves weak (a textured floor or wall: icp_subspace). */
@@ -291,6 +292,24 @@ static double photo_unit_of(const track_config *c, const icp_sums *s)
     return u > 1.0 ? u : 1.0;
 }
 
+/* Whether the photometric term is to be dropped for this frame, from the
+ * first finest-level system: brightness constancy assumes the frame and
+ * the reference image the same texture the same way; a camera turning fast
+ * smears one of them (Kinect v1's colour exposes for up to 1/30 s), which
+ * removes gradient energy. On the real dev frames the term's steps were
+ * 11-19 mm wrong exactly on such frames (docs/real_frames.md). The ratio of
+ * the two energies at the same rows measures the smear without a model of
+ * the scene's texture. */
+static bool photo_dropped(const track_config *c, const icp_sums *s, track_result *res)
+{
+    double gr = s->s[TRACK_SUM_PHOTO_GREF], gf = s->s[TRACK_SUM_PHOTO_GFRAME];
+    if (!(s->s[TRACK_SUM_PHOTO_N] > 0) || !(gr > 0) || !isfinite(gf)) return false;
+    double ratio = gf / gr;
+    res->photo_sharpness = ratio;
+    double m = c->photo_sharpness_min;
+    return m > 0 && (ratio < m || ratio * m > 1.0);
+}
+
 static double huber_unit_of(const track_config *c, const icp_sums *s)
 {
     double n = s->s[TRACK_SUM_INLIERS], rn = s->s[TRACK_SUM_RN];
@@ -309,6 +328,9 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
     bool have_finest = false;
     double huber_unit = 1.0;
     bool robust = c->huber_k > 0 || c->weight_noise;
+    bool photo = true;
+    res->photo_sharpness = 0;
+    res->photo_dropped = false;
     for (int l = (int)c->levels - 1; l >= 0; l--) {
         double photo_unit = 1.0; /* residuals of a coarser level are smoother */
         for (uint32_t it = 0; it < c->iterations[l]; it++) {
@@ -321,7 +343,8 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
              * gives the constrained directions (icp_subspace) that the
              * weighted ones keep. */
             bool weighted = robust && l == 0 && it > 0 && S.k > 0;
-            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, weighted, huber_unit, photo_unit, &sums, res);
+            bf_status s = run_iteration(t, (uint32_t)l, T_rc, first, weighted, huber_unit, photo ? photo_unit : 0,
+                                        &sums, res);
             if (s != BF_OK) return s;
             if (first) {
                 uint32_t n_depth = 0;
@@ -333,6 +356,14 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
                 }
             }
             res->iterations++;
+            if (photo && l == 0 && it == 0 && photo_dropped(c, &sums, res)) {
+                /* The plain iteration again without the term: its system
+                 * also gives the directions the weighted ones keep. */
+                photo = false;
+                res->photo_dropped = true;
+                it--;
+                continue;
+            }
             huber_unit = huber_unit_of(c, &sums);
             photo_unit = photo_unit_of(c, &sums);
             if (!weighted && !subspace_of(&sums, c->degenerate_ratio, &S)) S.k = 0;

@@ -97,6 +97,12 @@ typedef struct track_config {
     float photo_weight;
     float photo_sigma;          /* the intensity noise, luma in [0, 1], default 0.03 */
     uint32_t photo_levels;      /* 1: the finest level only (default), up to levels: all */
+    /* The term is dropped for a frame (its finest level restarted without
+     * it) when the frame's intensity gradient energy at the term's rows and
+     * the reference's differ by more than this ratio, either way: one of the
+     * two is blurred by the camera's motion and their intensities no longer
+     * compare (docs/real_frames.md). Default 0.6; 0: never dropped. */
+    float photo_sharpness_min;
 } track_config;
 
 track_config track_config_default(void);
@@ -124,6 +130,9 @@ typedef struct track_result {
     double residual_sigma; /* RMS of the inliers' residual / sigma_z(z): about 1 where the depth fits the
                               sensor model; the Huber unit when above 1 (track_config.huber_scaled) */
     double eig_min, eig_max; /* of the last system (rotation columns scaled by the scene depth) */
+    double photo_sharpness; /* the frame's intensity gradient energy over the reference's at the photometric
+                               term's rows (first finest-level iteration); 0 where the term did not run */
+    bool photo_dropped;     /* the term was dropped for this frame (track_config.photo_sharpness_min) */
     uint32_t iterations; /* run in all levels */
     double ms_gpu;       /* GPU time of the tracking (pyramids + ICP), ms */
     double ms_rof;       /* GPU time of the last reference smoothing, ms */

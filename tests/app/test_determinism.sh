@@ -37,8 +37,8 @@ for f in trajectory.txt mesh.ply points.ply; do
     cmp -s "$T/a/$f" "$T/b/$f" || fail "$f differs between two replays of the same input: $(cmp "$T/a/$f" "$T/b/$f")"
 done
 # frames.csv without its time columns (frame_ms, track_ms, raycast_ms, fuse_ms, stream_ms).
-cut -d, -f1-10,15-18 "$T/a/frames.csv" >"$T/a.csv"
-cut -d, -f1-10,15-18 "$T/b/frames.csv" >"$T/b.csv"
+cut -d, -f1-10,15-18,20- "$T/a/frames.csv" >"$T/a.csv"
+cut -d, -f1-10,15-18,20- "$T/b/frames.csv" >"$T/b.csv"
 cmp -s "$T/a.csv" "$T/b.csv" || fail "frames.csv differs: $(diff "$T/a.csv" "$T/b.csv" | head -n 3)"
 py - "$T/a/stats.json" "$T/b/stats.json" >"$T/cmp" <<'PY' || fail "stats.json: $(cat "$T/cmp")"
 import json, sys

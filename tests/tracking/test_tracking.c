@@ -1036,6 +1036,24 @@ static bf_status mosaic_scene(synth_scene *sc, bf_se3 *T0)
  * 3 pixels at the finest one. (synth's wooden floor has gaps thinner than a
  * pixel, rendered without antialiasing: they flicker from view to view, and
  * the term followed them to a wrong pose.) */
+/* A horizontal box blur of odd length len, RGB8, clamped at the edges. */
+static void box_blur_rows(const uint8_t *src, uint8_t *dst, uint32_t w, uint32_t h, int len)
+{
+    for (uint32_t y = 0; y < h; y++) {
+        for (uint32_t x = 0; x < w; x++) {
+            for (int c = 0; c < 3; c++) {
+                int sum = 0;
+                for (int k = -len / 2; k <= len / 2; k++) {
+                    int xx = (int)x + k;
+                    xx = xx < 0 ? 0 : xx >= (int)w ? (int)w - 1 : xx;
+                    sum += src[3 * ((size_t)y * w + (size_t)xx) + (size_t)c];
+                }
+                dst[3 * ((size_t)y * w + x) + (size_t)c] = (uint8_t)((sum + len / 2) / len);
+            }
+        }
+    }
+}
+
 BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
 {
     gpu_context *ctx;
@@ -1054,21 +1072,28 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     bf_se3 T1 = bf_se3_mul(&T0, &d);
     uint32_t n = K_MID.width * K_MID.height;
     uint16_t *d0 = malloc(n * 2), *d1 = malloc(n * 2);
-    uint8_t *c0 = malloc(n * 3), *c1 = malloc(n * 3);
+    uint8_t *c0 = malloc(n * 3), *c1 = malloc(n * 3), *cb1 = malloc(n * 3);
     CHECK_OK(synth_render(rr, 0, &T0, d0, c0, NULL));
     CHECK_OK(synth_render(rr, 1, &T1, d1, c1, NULL));
-    gpu_buffer *s0, *s1;
-    uint64_t off0, off1;
+    /* The second frame smeared as a camera turning during the exposure
+     * smears it: a 9-pixel horizontal box. */
+    box_blur_rows(c1, cb1, K_MID.width, K_MID.height, 9);
+    gpu_buffer *s0, *s1, *sb1;
+    uint64_t off0, off1, offb1;
     CHECK_OK(slot_of(ctx, d0, c0, n, &s0, &off0));
     CHECK_OK(slot_of(ctx, d1, c1, n, &s1, &off1));
-    double err[3][2];
-    bf_se3 est[3];
-    /* Off, on, and on through a colour camera that is the depth camera
-     * (the distortion path, no distortion): as registered colour. */
-    for (int photo = 0; photo < 3; photo++) {
+    CHECK_OK(slot_of(ctx, d1, cb1, n, &sb1, &offb1));
+    double err[4][2];
+    bf_se3 est[4];
+    /* Off, on, on through a colour camera that is the depth camera (the
+     * distortion path, no distortion): as registered colour, and on with
+     * the second frame's colour blurred: the term is dropped. */
+    for (int photo = 0; photo < 4; photo++) {
         track_config cfg = test_config(&K_MID);
         cfg.photo_weight = photo ? 1.0f : 0.0f;
-        cfg.photo_levels = 3;
+        /* The drop is decided at the finest level (photo_levels 1, the
+         * default): coarser levels keep what the term did there. */
+        cfg.photo_levels = photo == 3 ? 1 : 3;
         track_tracker *t;
         CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
         if (photo == 2) {
@@ -1077,9 +1102,10 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
             CHECK_OK(track_set_colour_camera(t, &K_MID, no_dist, &I));
         }
         CHECK_OK(reference_of_slot(ctx, t, s0, off0, &T0));
-        CHECK_OK(track_set_frame_colour(t, s1, off1));
+        gpu_buffer *f1 = photo == 3 ? sb1 : s1;
+        CHECK_OK(track_set_frame_colour(t, f1, photo == 3 ? offb1 : off1));
         track_result r;
-        CHECK_OK(track_frame_gpu(t, s1, 0, 1, &T0, &r));
+        CHECK_OK(track_frame_gpu(t, f1, 0, 1, &T0, &r));
         est[photo] = r.T_wc;
         /* The error along the floor (world z is its normal): the camera's
          * position in x, y and its heading about z. */
@@ -1088,12 +1114,19 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
         bf_se3_log(&e, xi);
         err[photo][0] = hypot(r.T_wc.t.x - T1.t.x, r.T_wc.t.y - T1.t.y);
         err[photo][1] = fabs(xi[5]) * 180 / M_PI;
+        static const char *what[4] = {"off", "on", "on (colour camera)", "on, frame blurred"};
         fprintf(stderr, "  textured floor, photometric %s: %s, degenerate %d, eig ratio %.3g, along the floor %.2f mm, "
-                        "about its normal %.3f deg\n",
-                photo == 0 ? "off" : photo == 1 ? "on" : "on (colour camera)", track_outcome_name(r.outcome), r.degenerate, r.eig_min / r.eig_max,
-                1e3 * err[photo][0], err[photo][1]);
+                        "about its normal %.3f deg, sharpness %.3f%s\n",
+                what[photo], track_outcome_name(r.outcome), r.degenerate, r.eig_min / r.eig_max, 1e3 * err[photo][0],
+                err[photo][1], r.photo_sharpness, r.photo_dropped ? " (term dropped)" : "");
         CHECK_EQ_INT(r.outcome, TRACK_OK);
-        CHECK_EQ_INT(r.degenerate, photo == 0);
+        CHECK_EQ_INT(r.degenerate, photo == 0 || photo == 3);
+        /* The same texture seen 2 cm further: the gradient energies agree
+         * (sharpness about 1); a 9-pixel box keeps well under half of the
+         * mosaic's edge energy. */
+        CHECK_EQ_INT(r.photo_dropped, photo == 3);
+        if (photo == 1 || photo == 2) CHECK(r.photo_sharpness > 0.8 && r.photo_sharpness < 1.25);
+        if (photo == 3) CHECK(r.photo_sharpness > 0 && r.photo_sharpness < 0.5);
         track_destroy(t);
     }
     /* Off: the guess's 2 cm and 2 degrees stay (degenerate). On: a tenth
@@ -1104,6 +1137,10 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     CHECK_LE(err[1][1], 0.05);
     double dt, da;
     pose_error(&est[1], &est[2], &dt, &da);
+    CHECK_LE(dt, 5e-5);
+    CHECK_LE(da, 0.002);
+    /* Dropped, the term leaves the depth-only pose. */
+    pose_error(&est[0], &est[3], &dt, &da);
     CHECK_LE(dt, 5e-5);
     CHECK_LE(da, 0.002);
     /* Settings out of range are refused at create. */
@@ -1117,9 +1154,13 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     cb = test_config(&K_MID);
     cb.photo_sigma = 0;
     CHECK_STATUS(track_create(ctx, &cb, &K_MID, &bad), BF_INVALID_ARG);
+    cb = test_config(&K_MID);
+    cb.photo_sharpness_min = 1.5f;
+    CHECK_STATUS(track_create(ctx, &cb, &K_MID, &bad), BF_INVALID_ARG);
     gpu_buffer_destroy(s0);
     gpu_buffer_destroy(s1);
-    free(d0), free(d1), free(c0), free(c1);
+    gpu_buffer_destroy(sb1);
+    free(d0), free(d1), free(c0), free(c1), free(cb1);
     synth_renderer_destroy(rr);
     synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
