@@ -172,7 +172,7 @@ struct fusion_window_list_push {
     bf_u32 brick_cap;
     bf_u32 n_entries;  /* hash entries: a brick record's chunk below it is live */
     bf_u32 first, last; /* frame indices of the window, inclusive */
-    bf_u32 n_slices;   /* slices the window is integrated in, <= FUSION_MAX_SLICES */
+    bf_u32 n_buckets;  /* the window's slices times FUSION_SLICE_BUCKETS, <= FUSION_MAX_BUCKETS */
     bf_u32 pass;       /* FUSION_GATHER_COUNT, _PREFIX or _SCATTER */
     bf_u32 pad[2];
 };
@@ -185,17 +185,21 @@ _Static_assert(sizeof(fusion_window_list_push) == 32, "fusion_window_list_push m
  * map the tracker sees between them holds the slices done so far: which
  * slice a brick falls in must not depend on the order in which atomics
  * hand out list places (nor on its slot, which allocation atomics choose),
- * or two runs of the same input part (docs/determinism.md). A brick's slice
+ * or two runs of the same input part (docs/determinism.md). A brick's bucket
  * is a hash of what it is, its chunk and its cell; the list is gathered
- * slice by slice, in three passes: count per slice, prefix sums, scatter.
- * The slice buffer: counts at FUSION_SLICE_COUNTS, slice s's first list
- * place at FUSION_SLICE_STARTS + s (s = 0..n_slices, the last is the total),
+ * bucket by bucket, in three passes: count per bucket, prefix sums, scatter,
+ * and fusion/ cuts it into slices at bucket boundaries.
+ * The bucket buffer: counts at FUSION_SLICE_COUNTS, bucket s's first list
+ * place at FUSION_SLICE_STARTS + s (s = 0..n_buckets, the last is the total),
  * the scatter's cursors at FUSION_SLICE_CURSORS. */
 #define FUSION_MAX_SLICES 128u
+#define FUSION_SLICE_BUCKETS 64u /* hash buckets per slice: fusion/ cuts the list into slices of nearly equal size at
+                                    bucket boundaries (a frame's share of the window's work stays even) */
+#define FUSION_MAX_BUCKETS (FUSION_MAX_SLICES * FUSION_SLICE_BUCKETS)
 #define FUSION_SLICE_COUNTS 0u
-#define FUSION_SLICE_STARTS FUSION_MAX_SLICES
-#define FUSION_SLICE_CURSORS (2u * FUSION_MAX_SLICES + 1u)
-#define FUSION_SLICE_WORDS (3u * FUSION_MAX_SLICES + 1u)
+#define FUSION_SLICE_STARTS FUSION_MAX_BUCKETS
+#define FUSION_SLICE_CURSORS (2u * FUSION_MAX_BUCKETS + 1u)
+#define FUSION_SLICE_WORDS (3u * FUSION_MAX_BUCKETS + 1u)
 #define FUSION_GATHER_COUNT 0u
 #define FUSION_GATHER_PREFIX 1u
 #define FUSION_GATHER_SCATTER 2u
@@ -207,7 +211,7 @@ _Static_assert(sizeof(fusion_window_list_push) == 32, "fusion_window_list_push m
  * together, as it did when slices were runs of the allocation order (real
  * dev frames: ATE 22.0 mm with a slice per brick, 21.4 with groups, 20.1-20.3
  * with the old racy order; docs/determinism.md). */
-BF_FN bf_u32 fusion_slice_of(bf_i32 x, bf_i32 y, bf_i32 z, bf_u32 pos, bf_u32 n_slices)
+BF_FN bf_u32 fusion_bucket_of(bf_i32 x, bf_i32 y, bf_i32 z, bf_u32 pos, bf_u32 n_buckets)
 {
     bf_u32 g = (pos & 0xFF000000u) | ((pos >> 2) & 0x003F3F3Fu); /* the level and the cell / 4 */
     bf_u32 h = (BF_U32(x) * 73856093u) ^ (BF_U32(y) * 19349669u) ^ (BF_U32(z) * 83492791u) ^ (g * 2654435761u);
@@ -216,7 +220,7 @@ BF_FN bf_u32 fusion_slice_of(bf_i32 x, bf_i32 y, bf_i32 z, bf_u32 pos, bf_u32 n_
     h ^= h >> 13;
     h *= 0xc2b2ae35u;
     h ^= h >> 16;
-    return h % n_slices;
+    return h % n_buckets;
 }
 
 /* Push constants of fusion_remove.comp. */

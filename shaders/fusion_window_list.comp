@@ -1,11 +1,12 @@
 #version 450
 /* Gathers the bricks of a window: every live brick stamped by a frame in
  * [first, last] (DESIGN.md section 4: the bricks visible in at least one
- * frame of the window), grouped by slice (fusion_slice_of in fusion.glsl.h:
- * which frame integrates a brick follows from what the brick is, not from
- * the order of the atomics, docs/determinism.md). Three passes: COUNT and
+ * frame of the window), grouped by hash bucket (fusion_bucket_of in
+ * fusion.glsl.h: which frame integrates a brick follows from what the brick
+ * is, not from the order of the atomics, docs/determinism.md; fusion/ cuts
+ * the list into slices at bucket boundaries). Three passes: COUNT and
  * SCATTER have one invocation per brick slot, PREFIX one invocation in
- * all. Within a slice the order still follows the atomics; the slice's
+ * all. Within a bucket the order still follows the atomics; the slice's
  * bricks are integrated by one dispatch and each independently of the
  * others, so their order changes nothing. */
 #extension GL_GOOGLE_include_directive : require
@@ -23,16 +24,16 @@ layout(push_constant) uniform Push { fusion_window_list_push pc; };
 
 void main()
 {
-    uint n_slices = clamp(pc.n_slices, 1u, FUSION_MAX_SLICES);
+    uint n_buckets = clamp(pc.n_buckets, 1u, FUSION_MAX_BUCKETS);
     if (pc.pass == FUSION_GATHER_PREFIX) {
         if (gl_GlobalInvocationID.x != 0u) return;
         uint sum = 0u;
-        for (uint s = 0u; s < n_slices; s++) {
+        for (uint s = 0u; s < n_buckets; s++) {
             slices.w[FUSION_SLICE_STARTS + s] = sum;
             slices.w[FUSION_SLICE_CURSORS + s] = sum;
             sum += slices.w[FUSION_SLICE_COUNTS + s];
         }
-        slices.w[FUSION_SLICE_STARTS + n_slices] = sum;
+        slices.w[FUSION_SLICE_STARTS + n_buckets] = sum;
         list.w[FUSION_LIST_COUNT] = sum;
         return;
     }
@@ -43,9 +44,9 @@ void main()
     uint st = stamp.w[b];
     if (st == FUSION_NONE || st < pc.first || st > pc.last) return;
     uint base = chunk * FUSION_ENTRY_WORDS;
-    uint s = fusion_slice_of(int(hash.w[base + FUSION_ENTRY_X]), int(hash.w[base + FUSION_ENTRY_Y]),
+    uint s = fusion_bucket_of(int(hash.w[base + FUSION_ENTRY_X]), int(hash.w[base + FUSION_ENTRY_Y]),
                              int(hash.w[base + FUSION_ENTRY_Z]), info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS],
-                             n_slices);
+                              n_buckets);
     if (pc.pass == FUSION_GATHER_COUNT) {
         atomicAdd(slices.w[FUSION_SLICE_COUNTS + s], 1u);
     } else {
