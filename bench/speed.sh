@@ -1,0 +1,130 @@
+#!/usr/bin/env bash
+# Speed against error of the full loop (the speed issue): `bitfuse replay`
+# with today's defaults and each variant, on the real 7-Scenes dev frames
+# (when DEV is given; ../shared/tools/get-7scenes-dev.sh, never copied into
+# the repository) and on the synthetic room (600 frames, Kinect v1 noise,
+# seed 1). One row per (sequence, variant): time per frame median and p95
+# (and their ratio), the first frame, per-stage GPU medians, ATE (and its max),
+# the surface error, the map and the process's peak resident memory. Writes
+# OUT/speed.tsv, docs/bench_speed.md (table) and docs/bench_speed.png (time
+# against ATE), then (SWEEP=1, the default) bench/replay_sweep.sh again, so
+# docs/bench_replay_sweep.md is made by the same command.
+#
+#   bench/speed.sh [OUT_DIR]                          (default /tmp/bitfuse-speed)
+#   DEV=/path/7scenes-dev bench/speed.sh /tmp/sp
+#   VARIANTS="defaults|;icp15|--icp-iters 15,5,4" bench/speed.sh    (name|replay options)
+#   FRAMES=600 DEV_FRAMES=500 SWEEP=0 REUSE=1 bench/speed.sh       (REUSE: keep runs with a stats.json)
+#
+# Runs are one at a time: the stage times of runs made side by side on two
+# cores are not comparable. Compare ratios within one run of this script.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-/tmp/bitfuse-speed}
+FRAMES=${FRAMES:-600}
+DEV=${DEV:-}
+DEV_FRAMES=${DEV_FRAMES:-500}
+SWEEP=${SWEEP:-1}
+REUSE=${REUSE:-0}
+VARIANTS=${VARIANTS:-"defaults|;icp15|--icp-iters 15,5,4;sample1|--icp-sample-step 1;colour-off|--colour off;window20|--window 20;ratio1|--ratio 1"}
+source bench/common.sh
+export BITFUSE_VALIDATION=0 BITFUSE_PROGRESS=0
+mkdir -p "$OUT"
+SEQ="$OUT/room$FRAMES"
+bench_room_sequence "$SEQ" "$FRAMES" >/dev/null
+
+RESULTS="$OUT/speed.tsv"
+printf "sequence\tvariant\toptions\tframes\tframe_ms_median\tframe_ms_p95\tp95_over_median\tfirst_frame_ms\ttrack_ms\traycast_ms\talloc_ms\tsubcache_ms\twindow_ms\tcolour_ms\tate_mm\tate_max_mm\tsurface_median_mm\tsurface_p90_mm\tmap_mib\tpeak_rss_mib\n" >"$RESULTS"
+
+# run SEQNAME SEQ EXTRA NAME OPTIONS: one replay (with its mesh), its peak
+# resident memory, its surface error, and a row of the table.
+run() {
+  local seqname=$1 seq=$2 extra=$3 name=$4 opts=$5
+  local dir="$OUT/$seqname-$name"
+  if [ "$REUSE" != 1 ] || [ ! -f "$dir/stats.json" ]; then
+    rm -rf "$dir"
+    echo "speed: $seqname, $name ($opts)" >&2
+    # shellcheck disable=SC2086
+    $PY - "$dir.rss" $BIN replay "$seq" --out "$dir" $extra $opts >"$dir.log" 2>&1 <<'PYEOF'
+import resource, subprocess, sys
+rc = subprocess.run(sys.argv[2:]).returncode
+open(sys.argv[1], "w").write("%d\n" % resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+sys.exit(rc)
+PYEOF
+    if [ "$seqname" = real ]; then
+      # Real frames have no true surface: the sensor's own depth at the run's poses against its mesh.
+      $BIN eval-surface --reference "$dir/mesh.ply" --depth "$seq" --poses "$dir/trajectory.txt" --json \
+          >"$dir/surface.json" 2>>"$dir.log"
+    else
+      $BIN eval-surface --reference "$SEQ/scene.ply" --reconstruction "$dir/mesh.ply" --visible "$SEQ/seen.ply" \
+          --json >"$dir/surface.json" 2>>"$dir.log"
+    fi
+  fi
+  $PY - "$dir" "$seqname" "$name" "$opts" >>"$RESULTS" <<'PYEOF'
+import json, sys
+d, seqname, name, opts = sys.argv[1:5]
+s = json.load(open(d + "/stats.json"))
+e = json.load(open(d + "/surface.json"))
+g = s["gpu_stage_ms"]
+f = s["frame_ms"]
+ate = s["ate_m"] or {}
+rss = int(open(d + ".rss").read()) / 1024.0
+st = lambda k: round(g[k]["median"], 1) if k in g else ""
+row = [seqname, name, opts or "(defaults)", s["frames"]["total"] if isinstance(s["frames"], dict) else s["frames"],
+       round(f["median"], 1), round(f["p95"], 1), round(f["p95"] / f["median"], 2),
+       round(s["startup"]["first_frame_ms"], 1), st("track"), st("raycast"), st("alloc"), st("subcache"), st("window"),
+       st("colour"), round(1e3 * ate.get("rmse", float("nan")), 2), round(1e3 * ate.get("max", float("nan")), 1),
+       round(1e3 * e["accuracy"]["median_m"], 2), round(1e3 * e["accuracy"]["p90_m"], 2),
+       round(s["map_bytes"]["total"] / 2**20, 2), round(rss, 1)]
+print("\t".join(str(x) for x in row))
+PYEOF
+  tail -n 1 "$RESULTS" >&2
+}
+
+IFS=';' read -r -a VARS <<<"$VARIANTS"
+for v in "${VARS[@]}"; do
+  name=${v%%|*}
+  opts=${v#*|}
+  if [ -n "$DEV" ]; then run real "$DEV" "--frames $DEV_FRAMES" "$name" "$opts"; fi
+  run room "$SEQ" "" "$name" "$opts"
+done
+
+$PY - "$RESULTS" "$(git rev-parse --short HEAD)" "$FRAMES" "$DEV_FRAMES" "${DEV:+1}" <<'PYEOF'
+import csv, sys
+path, commit, frames, dev_frames, has_dev = sys.argv[1:6]
+rows = list(csv.DictReader(open(path), delimiter="\t"))
+with open("docs/bench_speed.md", "w") as f:
+    f.write("# The full loop: speed against error, real and synthetic\n\n")
+    f.write(f"`bench/speed.sh` (generated; commit {commit}): `bitfuse replay SEQ --out R OPTIONS`, one run at a "
+            "time, lavapipe on 2 cores. `real`: the "
+            f"{dev_frames} 7-Scenes dev frames (DEV=...; surface: the sensor's depth at the run's poses against "
+            "the run's mesh, `eval-surface --depth`); "
+            f"`room`: the synthetic room, {frames} frames along fr1_xyz (surface: the mesh against the scene, "
+            "over its seen part). Stage times are GPU timestamp medians; frame times are wall time; peak RSS "
+            "is the replay process's maximum resident set.\n\n")
+    if has_dev != "1":
+        f.write("(No DEV given: synthetic rows only.)\n\n")
+    cols = list(rows[0].keys())
+    f.write("| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n")
+    for r in rows:
+        f.write("| " + " | ".join(r[c] for c in cols) + " |\n")
+try:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    seqs = sorted({r["sequence"] for r in rows})
+    fig, axes = plt.subplots(1, len(seqs), figsize=(5.5 * len(seqs), 4.2), squeeze=False)
+    for ax, sq in zip(axes[0], seqs):
+        for r in (r for r in rows if r["sequence"] == sq):
+            x, y = float(r["frame_ms_median"]), float(r["ate_mm"])
+            ax.errorbar(x, y, xerr=[[0], [float(r["frame_ms_p95"]) - x]], fmt="o", capsize=3)
+            ax.annotate(r["variant"], (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax.set_xlabel("time per frame, median (bar: to p95) [ms]")
+        ax.set_ylabel("ATE RMSE [mm]")
+        ax.set_title(f"{sq}: speed against error")
+    fig.tight_layout()
+    fig.savefig("docs/bench_speed.png", dpi=100)
+except ImportError:
+    print("matplotlib missing: no plot", file=sys.stderr)
+PYEOF
+echo "speed: wrote docs/bench_speed.md, docs/bench_speed.png ($RESULTS)" >&2
+if [ "$SWEEP" = 1 ]; then bash bench/replay_sweep.sh "$FRAMES" "$OUT/sweep"; fi
