@@ -1,0 +1,57 @@
+#!/usr/bin/env python3
+"""Plots a bench_soak TSV (docs/bench_replay.md, "Soak"): per block of
+frames, the process's resident memory and the map's bytes, the time per
+frame (median and p95), and, when the stream moved chunks, the chunks
+spilled to disk and reloaded from it with the bytes written.
+
+    plot_soak.py SOAK.tsv OUT.png [TITLE]
+"""
+import csv
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+tsv, out = sys.argv[1], sys.argv[2]
+title = sys.argv[3] if len(sys.argv) > 3 else tsv
+rows = list(csv.DictReader(open(tsv), delimiter="\t"))
+x = [int(r["frames"]) for r in rows]
+col = lambda k: [float(r[k]) for r in rows]  # noqa: E731
+has_spill = "spilled" in rows[0]
+fig, ax = plt.subplots(3 if has_spill else 2, 1, figsize=(8, 9 if has_spill else 6), sharex=True)
+ax[0].plot(x, col("rss_mib"), "o-", label="resident memory (MiB)")
+ax[0].set_ylabel("resident MiB")
+ax[0].set_ylim(0, max(col("rss_mib")) * 1.15)
+m = ax[0].twinx()
+m.plot(x, col("map_mib"), "s--", color="tab:green", label="map in the pools (MiB)")
+if has_spill:
+    m.plot(x, col("cache_mib"), "^:", color="tab:olive", label="CPU cache (MiB)")
+m.set_ylabel("map / cache MiB")
+m.set_ylim(0, max(col("map_mib")) * 1.6)
+h0, l0 = ax[0].get_legend_handles_labels()
+h1, l1 = m.get_legend_handles_labels()
+ax[0].legend(h0 + h1, l0 + l1, loc="lower right", fontsize=8)
+ax[1].plot(x, col("ms_median"), "o-", label="median")
+ax[1].plot(x, col("ms_p95"), "v--", label="p95")
+ax[1].set_ylabel("ms per frame (per block)")
+ax[1].set_ylim(0, max(col("ms_p95")) * 1.15)
+ax[1].legend(fontsize=8)
+if has_spill:
+    w = (x[1] - x[0]) * 0.35 if len(x) > 1 else 10
+    ax[2].bar([v - w / 2 for v in x], col("spilled"), w, label="chunks spilled to disk")
+    ax[2].bar([v + w / 2 for v in x], col("reloaded"), w, label="chunks reloaded from disk")
+    ax[2].set_ylabel("chunks per block")
+    k = ax[2].twinx()
+    k.plot(x, [b / 1024 for b in col("spill_bytes")], "k.:", label="KiB written")
+    k.set_ylabel("KiB written per block")
+    k.set_ylim(0, max(1, max(col("spill_bytes")) / 1024) * 1.3)
+    h0, l0 = ax[2].get_legend_handles_labels()
+    h1, l1 = k.get_legend_handles_labels()
+    ax[2].legend(h0 + h1, l0 + l1, loc="lower right", fontsize=8)
+ax[-1].set_xlabel("frames")
+fig.suptitle(title, fontsize=10)
+fig.tight_layout()
+fig.savefig(out, dpi=90)
+print("wrote", out)
