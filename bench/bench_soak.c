@@ -111,7 +111,8 @@ static uint32_t *soak_ticks(uint32_t n, double drop, uint64_t seed, uint32_t *dr
 
 /* One line per block of frames: time, memory, map, tracking. */
 typedef struct soak_report {
-    FILE *out;
+    FILE *out, *trace; /* trace: one line per frame (--trace), or NULL */
+    const soak_frames *sf;
     uint32_t n, block;
     bf_stats ms;
     double max_err, t_start;
@@ -127,6 +128,11 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
     double err = bf_v3_norm(bf_v3_sub(f->T_wc.t, fr->T_wc.t));
     bool placed = fr->state == RECON_TRACKED || fr->state == RECON_RELOCALISED || fr->state == RECON_FIRST;
     if (placed && err > sr->max_err) sr->max_err = err;
+    if (sr->trace) {
+        uint32_t c = sr->sf->tick[i], period = 2 * (sr->sf->m - 1), p = c % period;
+        fprintf(sr->trace, "%u\t%u\t%u\t%s\t%.2f\t%.1f\t%.2f\t%.2f\n", i, c, p < sr->sf->m ? p : period - p,
+                recon_state_name(fr->state), 1e3 * err, 100 * fr->track.inlier_frac, fr->ms_frame, fr->ms_stream);
+    }
     bf_status s = bf_stats_push(&sr->ms, fr->ms_frame);
     if (s != BF_OK || ((i + 1) % sr->block != 0 && i + 1 != sr->n)) return s;
     fusion_stats st;
@@ -163,7 +169,7 @@ int main(int argc, char **argv)
     uint32_t n = 10000, m = 300, block = 250, w = 640, h = 480, zero_n = 0, zero_every = 0;
     double drop = 0, radius = -1, cache_mib = -1;
     uint64_t seed = 1;
-    const char *out_path = "soak.tsv", *scene = "room";
+    const char *out_path = "soak.tsv", *scene = "room", *trace_path = NULL;
     double step = 0.05;
     uint32_t rooms = 0;
     bool fuse_gt = false;
@@ -180,11 +186,12 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--cache-mib")) cache_mib = atof(argv[i + 1]);
         else if (!strcmp(argv[i], "--scene")) scene = argv[i + 1];
         else if (!strcmp(argv[i], "--step")) step = atof(argv[i + 1]);
+        else if (!strcmp(argv[i], "--trace")) trace_path = argv[i + 1];
         else if (!strcmp(argv[i], "--fuse-at-gt")) fuse_gt = atoi(argv[i + 1]) != 0;
         else {
             fprintf(stderr, "usage: bench_soak [--frames N] [--loop M] [--size WxH] [--block B] [--out FILE] "
                             "[--drop P] [--zero N/E] [--seed S] [--stream-radius M] [--cache-mib C] "
-                            "[--scene room|rooms:N] [--step M] [--fuse-at-gt 0|1]\n");
+                            "[--scene room|rooms:N] [--step M] [--fuse-at-gt 0|1] [--trace FILE]\n");
             return 2;
         }
     }
@@ -193,7 +200,9 @@ int main(int argc, char **argv)
                "                  [--drop P] [--zero N/E] [--seed S] [--stream-radius M] [--cache-mib C]\n"
                "                  [--scene room|rooms:N] [--step M]   (rooms: a walk down the row and back,\n"
                "                  M metres a frame; --loop is then the walk's length)\n"
-               "                  [--fuse-at-gt 1]   (track every frame, fuse at the true pose)\n");
+               "                  [--fuse-at-gt 1]   (track every frame, fuse at the true pose)\n"
+               "                  [--trace FILE]   (per frame: index, tick, walk or loop frame, state, error mm,\n"
+               "                  inliers %%, ms, stream ms)\n");
         return 0;
     }
     int used = 0;
@@ -254,7 +263,9 @@ int main(int argc, char **argv)
             zero_every);
     soak_frames sf = {poses, frames, zero, m, w, h, ticks, zero_n, zero_every};
     if (s == BF_OK) s = capture_source_from_fn(&K, n, true, soak_frame, &sf, &src);
-    soak_report sr = {.n = n, .block = block, .t_start = bf_time_s()};
+    soak_report sr = {.n = n, .block = block, .t_start = bf_time_s(), .sf = &sf};
+    if (s == BF_OK && trace_path && !(sr.trace = fopen(trace_path, "w")))
+        s = bf_fail(BF_IO, "%s: cannot create", trace_path);
     if (s == BF_OK && !(sr.out = fopen(out_path, "w"))) s = bf_fail(BF_IO, "%s: cannot create", out_path);
     if (sr.out)
         fprintf(sr.out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\tno_depth\t"
@@ -269,6 +280,7 @@ int main(int argc, char **argv)
             ss.disk_bytes / 1048576.0, (unsigned long long)ss.from_disk, ss.cache_bytes_max / 1048576.0, ss.ms_max);
     bf_stats_free(&sr.ms);
     if (sr.out) fclose(sr.out);
+    if (sr.trace) fclose(sr.trace);
     recon_run_free(&run);
     rgbd_source_close(src);
     gpu_context_destroy(ctx);
