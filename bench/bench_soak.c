@@ -21,6 +21,7 @@
  *              [--drop P] [--zero N/E] [--seed S] [--stream-radius M] [--cache-mib C]
  *              [--scene room|rooms:N] [--step M]
  */
+#include <malloc.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -39,6 +40,29 @@ static double rss_mib(void)
         fclose(f);
     }
     return resident * (double)sysconf(_SC_PAGESIZE) / 1048576.0;
+}
+
+/* Bytes malloc holds for the process (in use, arenas and mmapped blocks):
+ * what grows with live allocations, unlike RSS it leaves out the driver's
+ * and the pools' mappings. */
+static double heap_mib(void)
+{
+    struct mallinfo2 mi = mallinfo2();
+    return (mi.uordblks + mi.hblkhd) / 1048576.0;
+}
+
+/* The run's per-frame records, which grow by design (recon_run: the
+ * estimated and true trajectories and the per-frame time series): their
+ * allocated bytes. */
+static double records_mib(const recon_run *run)
+{
+    const recon_run_series *se = &run->series;
+    const bf_stats *st[] = {&se->frame_ms, &se->track_ms,  &se->inlier_frac, &se->residual_mm,
+                            &se->rof_ms,   &se->raycast_ms, &se->upload_ms,  &se->alloc_ms,
+                            &se->subcache_ms, &se->window_ms, &se->colour_ms};
+    double b = (double)(run->est.cap + run->gt.cap) * (sizeof(double) + sizeof(bf_se3));
+    for (size_t i = 0; i < sizeof st / sizeof *st; i++) b += (double)st[i]->cap * sizeof(double);
+    return b / 1048576.0;
 }
 
 /* A closed hand-held loop: sway, bob and yaw, period M frames. */
@@ -141,7 +165,7 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
     stream_stats ss = run->loop ? recon_stream_stats(run->loop) : (stream_stats){0};
     fprintf(sr->out,
             "%u\t%.2f\t%.2f\t%.1f\t%.2f\t%u\t%u\t%u\t%.2f\t%u\t%u\t%llu\t%llu\t%llu\t%llu\t%llu\t%llu\t%llu\t%u\t"
-            "%.3f\t%u\n",
+            "%.3f\t%u\t%.2f\t%.2f\n",
             i + 1, bf_stats_percentile(&sr->ms, 50), bf_stats_percentile(&sr->ms, 95), rss_mib(),
             st.bytes_total / 1048576.0, st.n_bricks, c.tracked, c.lost, 1e3 * sr->max_err, c.no_depth, c.relocalised,
             (unsigned long long)ss.to_disk, (unsigned long long)ss.from_disk,
@@ -150,7 +174,7 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
             (unsigned long long)(ss.to_disk - sr->last.to_disk),
             (unsigned long long)(ss.from_disk - sr->last.from_disk),
             (unsigned long long)(ss.disk_bytes - sr->last.disk_bytes), ss.on_disk, ss.cache_bytes / 1048576.0,
-            ss.resident);
+            ss.resident, heap_mib(), records_mib(run));
     fflush(sr->out);
     fprintf(stderr, "bench_soak: %u/%u frames, %.1f ms median, RSS %.0f MiB, map %.2f MiB, %u lost, "
                     "max error %.1f mm, %llu chunks spilled and %llu reloaded this block, %.0f s\n",
@@ -270,7 +294,7 @@ int main(int argc, char **argv)
     if (sr.out)
         fprintf(sr.out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\tno_depth\t"
                         "relocalised\tto_disk\tfrom_disk\tchunks_out\tchunks_in\tspilled\treloaded\tspill_bytes\t"
-                        "on_disk\tcache_mib\tresident_chunks\n");
+                        "on_disk\tcache_mib\tresident_chunks\theap_mib\trecords_mib\n");
     if (s == BF_OK) s = recon_run_sequence(ctx, src, &cfg, soak_on_frame, &sr, &run);
     if (s != BF_OK) fprintf(stderr, "bench_soak: %s: %s\n", bf_status_name(s), bf_last_error());
     stream_stats ss = run.loop ? recon_stream_stats(run.loop) : (stream_stats){0};
