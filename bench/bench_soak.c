@@ -42,6 +42,19 @@ static double rss_mib(void)
     return resident * (double)sysconf(_SC_PAGESIZE) / 1048576.0;
 }
 
+/* The machine's load (1-minute average): time per frame on a shared
+ * machine follows it. */
+static double load_avg(void)
+{
+    double l = -1;
+    FILE *f = fopen("/proc/loadavg", "r");
+    if (f) {
+        if (fscanf(f, "%lf", &l) != 1) l = -1;
+        fclose(f);
+    }
+    return l;
+}
+
 /* Bytes malloc holds for the process (in use, arenas and mmapped blocks):
  * what grows with live allocations, unlike RSS it leaves out the driver's
  * and the pools' mappings. */
@@ -165,7 +178,7 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
     stream_stats ss = run->loop ? recon_stream_stats(run->loop) : (stream_stats){0};
     fprintf(sr->out,
             "%u\t%.2f\t%.2f\t%.1f\t%.2f\t%u\t%u\t%u\t%.2f\t%u\t%u\t%llu\t%llu\t%llu\t%llu\t%llu\t%llu\t%llu\t%u\t"
-            "%.3f\t%u\t%.2f\t%.2f\n",
+            "%.3f\t%u\t%.2f\t%.2f\t%.2f\n",
             i + 1, bf_stats_percentile(&sr->ms, 50), bf_stats_percentile(&sr->ms, 95), rss_mib(),
             st.bytes_total / 1048576.0, st.n_bricks, c.tracked, c.lost, 1e3 * sr->max_err, c.no_depth, c.relocalised,
             (unsigned long long)ss.to_disk, (unsigned long long)ss.from_disk,
@@ -174,7 +187,7 @@ static bf_status soak_on_frame(void *user, recon_run *run, const bf_frame *f, co
             (unsigned long long)(ss.to_disk - sr->last.to_disk),
             (unsigned long long)(ss.from_disk - sr->last.from_disk),
             (unsigned long long)(ss.disk_bytes - sr->last.disk_bytes), ss.on_disk, ss.cache_bytes / 1048576.0,
-            ss.resident, heap_mib(), records_mib(run));
+            ss.resident, heap_mib(), records_mib(run), load_avg());
     fflush(sr->out);
     fprintf(stderr, "bench_soak: %u/%u frames, %.1f ms median, RSS %.0f MiB, map %.2f MiB, %u lost, "
                     "max error %.1f mm, %llu chunks spilled and %llu reloaded this block, %.0f s\n",
@@ -294,7 +307,7 @@ int main(int argc, char **argv)
     if (sr.out)
         fprintf(sr.out, "frames\tms_median\tms_p95\trss_mib\tmap_mib\tbricks\ttracked\tlost\tmax_error_mm\tno_depth\t"
                         "relocalised\tto_disk\tfrom_disk\tchunks_out\tchunks_in\tspilled\treloaded\tspill_bytes\t"
-                        "on_disk\tcache_mib\tresident_chunks\theap_mib\trecords_mib\n");
+                        "on_disk\tcache_mib\tresident_chunks\theap_mib\trecords_mib\tload\n");
     if (s == BF_OK) s = recon_run_sequence(ctx, src, &cfg, soak_on_frame, &sr, &run);
     if (s != BF_OK) fprintf(stderr, "bench_soak: %s: %s\n", bf_status_name(s), bf_last_error());
     stream_stats ss = run.loop ? recon_stream_stats(run.loop) : (stream_stats){0};
