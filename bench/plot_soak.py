@@ -49,7 +49,9 @@ if "records_mib" in rows[0]:
     ax[0].plot(x, [r - k for r, k in zip(col("rss_mib"), col("records_mib"))], "x:", color="tab:blue",
                label="resident less the run's per-frame records")
 ax[0].set_ylabel("resident MiB")
-ax[0].set_ylim(0, max(col("rss_mib")) * 1.15)
+# A narrow range: a creep of a few MiB must show.
+lo = min(col("rss_mib") + ([r - k for r, k in zip(col("rss_mib"), col("records_mib"))] if "records_mib" in rows[0] else []))
+ax[0].set_ylim(lo - 10, max(col("rss_mib")) + 10)
 m = ax[0].twinx()
 m.plot(x, col("map_mib"), "s--", color="tab:green", label="map in the pools (MiB)")
 if has_spill:
