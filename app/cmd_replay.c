@@ -147,7 +147,8 @@ static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
                 "stream out (default: --bricks when given, else from the device: 64 on a CPU device, a quarter of a "
                 "GPU's memory up to 2048)", .min = 0.1, .no_default = true),
         APP_OPT("--cache-budget", APP_OPT_DOUBLE, &a->cache_budget_mib, "MIB",
-                "bytes of the CPU cache of chunks streamed out of the GPU, in MiB; beyond it they go to disk", .min = 1),
+                "bytes of the CPU cache of chunks streamed out of the GPU, in MiB; beyond it they go to disk (0: "
+                "every one)", .min = 0),
         APP_OPT("--stream", APP_OPT_CHOICE, &sc->enabled, "on|off",
                 "stream chunks out of the GPU pools beyond --stream-radius (or when the pools fill) and back"),
         APP_OPT("--stream-radius", APP_OPT_FLOAT, &sc->radius_m, "M",
@@ -479,6 +480,8 @@ static void json_stream(cJSON *o, const replay_args *a, const replay_result *r)
     cJSON_AddNumberToObject(s, "chunks_from_disk", (double)st.from_disk);
     cJSON_AddNumberToObject(s, "cache_bytes_max", (double)st.cache_bytes_max);
     cJSON_AddNumberToObject(s, "disk_bytes", (double)st.disk_bytes);
+    const char *spill_error = recon_stream_spill_error(r->run.loop);
+    if (spill_error) cJSON_AddStringToObject(s, "spill_error", spill_error); /* the scan went on without the disk */
     cJSON_AddNumberToObject(s, "move_ms_max", st.ms_max);
     cJSON_AddNumberToObject(s, "move_ms_total", st.ms_total);
 }

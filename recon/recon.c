@@ -429,6 +429,8 @@ stream_stats recon_stream_stats(const recon *r)
     return r->stream ? stream_get_stats(r->stream) : z;
 }
 
+const char *recon_stream_spill_error(const recon *r) { return r->stream ? stream_spill_error(r->stream) : NULL; }
+
 bf_status recon_render_view(recon *r, const bf_se3 *T_wc)
 {
     bf_status s = view_caster(r);

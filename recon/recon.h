@@ -172,6 +172,9 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
 bf_status recon_snapshot(recon *r, hostmap *out);
 /* The streaming counts (zero when streaming is off). */
 stream_stats recon_stream_stats(const recon *r);
+/* The stream's first failed spill (the scan went on with the chunk in
+ * memory: stream_spill_error), or NULL. */
+const char *recon_stream_spill_error(const recon *r);
 /* The map (made by recon_create; empty before the first frame with depth)
  * and the caster at the camera's size, for export, statistics and views
  * (NULL when it cannot be made; bf_last_error says why). */

@@ -30,6 +30,7 @@ struct stream {
     uint32_t last_check;
     bool has_checked;
     stream_stats st;
+    char spill_error[1024]; /* the first failed spill's message; the disk tier is off after it */
 };
 
 stream_config stream_config_default(void)
@@ -92,6 +93,8 @@ void stream_destroy(stream *s)
 }
 
 stream_stats stream_get_stats(const stream *s) { return s->st; }
+
+const char *stream_spill_error(const stream *s) { return s && s->spill_error[0] ? s->spill_error : NULL; }
 
 /* ------------------------------------------------------------ geometry */
 
@@ -173,22 +176,44 @@ static bf_status cache_take(stream *s, hostmap *ev)
     return st;
 }
 
+/* A spill that failed (a full disk, an I/O error): the spill folder is
+ * scratch space, not an output, so the scan goes on with the chunk kept in
+ * the cache, whose budget is then exceeded, rather than end for want of
+ * disk; the disk tier stays off for the rest of the run (a full disk stays
+ * full, and every retry would cost a failed write per check). Chunks on
+ * disk already still come back from it. */
+static void spill_failed(stream *s)
+{
+    snprintf(s->spill_error, sizeof s->spill_error, "%s", bf_last_error());
+    s->st.spill_failures++;
+    bf_warn("stream: %s: the spill folder is not used again in this run; chunks out of the GPU stay in memory "
+            "(the CPU cache grows past its %.1f MiB)",
+            s->spill_error, s->cfg.cache_bytes / 1048576.0);
+}
+
 /* Over budget: the chunks that left the pools first go to disk. */
 static bf_status cache_trim(stream *s)
 {
-    while (s->st.cache_bytes > s->cfg.cache_bytes) {
+    while (!s->spill_error[0] && s->st.cache_bytes > s->cfg.cache_bytes) {
         stream_chunk *oldest = NULL;
         for (uint32_t i = 0; i < s->n_chunks; i++)
             if (!s->chunks[i].on_disk && (!oldest || s->chunks[i].seq < oldest->seq)) oldest = &s->chunks[i];
         if (!oldest) return BF_OK;
         if (!s->spill_made) {
-            if (s->spill_owned && !mkdtemp(s->spill))
-                return bf_fail(BF_WRITE, "stream: cannot make a spill folder %s: %s", s->spill, strerror(errno));
+            if (s->spill_owned && !mkdtemp(s->spill)) {
+                bf_fail(BF_WRITE, "stream: cannot make a spill folder %s: %s", s->spill, strerror(errno));
+                spill_failed(s);
+                return BF_OK;
+            }
             s->spill_made = true;
         }
         store_meta meta = spill_meta(s);
         uint64_t bytes = 0;
         bf_status st = store_put_chunks(s->spill, &oldest->bricks, &meta, &bytes);
+        if (st == BF_WRITE) { /* the file is absent (written whole or not at all): the chunk stays cached */
+            spill_failed(s);
+            return BF_OK;
+        }
         if (st != BF_OK) return st;
         s->st.cache_bytes -= chunk_bytes(oldest);
         hostmap_free(&oldest->bricks);

@@ -48,6 +48,7 @@ typedef struct stream_stats {
     uint32_t pressure_checks;    /* checks that evicted for pool pressure, not distance */
     uint32_t compactions;        /* index rebuilds for a full node pool with nothing to evict */
     uint32_t loads_deferred;     /* checks where near chunks had to wait for room in the pools */
+    uint32_t spill_failures;     /* spills that failed (0 or 1: the disk tier is off after one) */
     double ms_last, ms_max, ms_total; /* wall time of the checks that moved chunks */
 } stream_stats;
 
@@ -71,5 +72,11 @@ bf_status stream_adopt(stream *s, hostmap *map);
  * and disk), for export and the scene store. */
 bf_status stream_gather(stream *s, hostmap *out);
 stream_stats stream_get_stats(const stream *s);
+/* A chunk file that could not be written (a full disk, an I/O error) does
+ * not end the scan: the chunk stays in the CPU cache, a warning names the
+ * file and the reason, and no chunk goes to disk for the rest of the run
+ * (the cache then grows past cache_bytes). The first failure's message, or
+ * NULL when none failed. */
+const char *stream_spill_error(const stream *s);
 
 #endif
