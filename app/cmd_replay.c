@@ -177,6 +177,14 @@ static void store_options(app_option rows[STORE_ROWS], replay_args *a)
 }
 
 /* The options of the loop itself: tracking, ray-cast and outputs. */
+static const char *check_sample_step(const char *name, const char *v)
+{
+    static char msg[128];
+    if (strcmp(v, "3")) return NULL; /* the range check does the rest */
+    snprintf(msg, sizeof msg, "%s: 3 is not a sample step (1, 2 or 4)", name);
+    return msg;
+}
+
 static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
 {
     track_config *tc = &a->rcfg.track;
@@ -199,8 +207,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "than --icp-stop-deg (0 and 0: always every iteration)"),
         APP_OPT("--icp-stop-deg", APP_OPT_FLOAT, &tc->converged_deg, "DEG", "see --icp-stop-m"),
         APP_OPT("--icp-sample-step", APP_OPT_U32, &tc->finest_sample_step, "S",
-                "ICP samples at the finest level: 1 every pixel, 2 every second one (a checkerboard, half the cost)",
-                .min = 1, .max = 2),
+                "ICP samples at the finest level: 1 every pixel, 2 every second one (a checkerboard, half the cost), "
+                "4 every fourth (a quarter)",
+                .min = 1, .max = 4, .check = check_sample_step),
         APP_OPT("--photometric", APP_OPT_FLOAT, &tc->photo_weight, "W",
                 "weight of the photometric term in the finest ICP level (the colour of each inlier against the "
                 "reference frame's), relative to a depth residual at 1 m; 0: off"),

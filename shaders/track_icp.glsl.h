@@ -186,7 +186,8 @@ void main()
                         vec4(0.0));
     /* Samples k = id, id + n_threads, ... of the level; sample k is pixel
      * k * sub (sub 2: even columns, shifted by one on odd rows, a
-     * checkerboard). x and y are stepped, not divided: one division per
+     * checkerboard; sub 4: every fourth column, shifted by two on odd rows,
+     * the checkerboard of the 2x2 blocks' corners). x and y are stepped, not divided: one division per
      * invocation (lavapipe divides lane by lane). */
     uint W = pc.size & 0xFFFFu, H = pc.size >> 16;
     uint k0 = gl_GlobalInvocationID.x * pc.sub, stride = pc.n_threads * pc.sub;
@@ -194,7 +195,7 @@ void main()
     uint sx = stride % W, sy = stride / W;
     ref_geom G = ref_geometry();
     while (y < H) {
-        uint xx = x + (pc.sub == 2u ? (y & 1u) : 0u);
+        uint xx = x + (y & 1u) * (pc.sub >> 1);
         if (xx < W) add_pixel(xx, y, G, A);
         x += sx;
         y += sy;

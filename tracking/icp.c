@@ -79,7 +79,7 @@ typedef struct icp_sums {
 static bf_status run_iteration(track_tracker *t, uint32_t l, const bf_se3 *T_rc, bool with_frame, bool weighted,
                                double huber_unit, double photo_unit, icp_sums *out, track_result *res)
 {
-    uint32_t sub = l == 0 && t->cfg.finest_sample_step == 2 ? 2u : 1u;
+    uint32_t sub = l == 0 ? t->cfg.finest_sample_step : 1u;
     uint32_t n = t->geom.w[l] * t->geom.h[l] / sub;
     uint32_t per_group = t->icp_local * t->icp_px_per_thread;
     uint32_t g = (n + per_group - 1) / per_group;

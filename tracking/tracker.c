@@ -144,8 +144,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
         return bf_fail(BF_INVALID_ARG, "tracking: rof_level %u (0 or 1, below levels %u)", c->rof_level, c->levels);
     if (c->ref_level > 1 || c->ref_level >= c->levels)
         return bf_fail(BF_INVALID_ARG, "tracking: ref_level %u (0 or 1, below levels %u)", c->ref_level, c->levels);
-    if (c->finest_sample_step != 1 && c->finest_sample_step != 2)
-        return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1 or 2)", c->finest_sample_step);
+    if (c->finest_sample_step != 1 && c->finest_sample_step != 2 && c->finest_sample_step != 4)
+        return bf_fail(BF_INVALID_ARG, "tracking: finest_sample_step %u (1, 2 or 4)", c->finest_sample_step);
     if (c->icp_local < 1 || c->icp_local > TRACK_ICP_LOCAL_MAX || (c->icp_local & (c->icp_local - 1)))
         return bf_fail(BF_INVALID_ARG, "tracking: icp_local %u (a power of two up to %u)", c->icp_local,
                        TRACK_ICP_LOCAL_MAX);

@@ -65,8 +65,9 @@ typedef struct track_config {
                                 TRACK_NO_REFERENCE (reference); default 0.01 */
     float converged_m;       /* a level stops iterating when the update moves less than this */
     float converged_deg;     /* and turns less than this; 0 and 0: always run all iterations */
-    uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one
-                                    (a checkerboard, the default), half the cost (docs/tracking.md: speed against error) */
+    uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one (a
+                                    checkerboard, the default), half the cost; 4: every fourth, a quarter
+                                    (docs/tracking.md: speed against error) */
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
     float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 3; 0: off */
     bool weight_noise;       /* weight residuals by the sensor's noise (sigma_z(1 m) / sigma_z(z))^noise_weight_exp,
