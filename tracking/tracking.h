@@ -38,7 +38,7 @@ typedef struct track_tracker track_tracker; /* opaque */
 
 typedef struct track_config {
     uint32_t levels;                       /* pyramid levels, 1..3, default 3 */
-    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 10, 5, 4 (KinectFusion's) */
+    uint32_t iterations[TRACK_MAX_LEVELS]; /* per level, finest first, default 15, 5, 4 (KinectFusion: 10, 5, 4) */
     float dist_m;                          /* association distance gate, default 0.1 (finest level; x2 per level up) */
     float angle_deg;                       /* normal angle gate, default 45 (DESIGN.md: 20; docs/tracking.md) */
     float fine_angle_deg;                  /* the gate of the finest level's weighted iterations, default 30;
@@ -66,8 +66,8 @@ typedef struct track_config {
     float converged_m;       /* a level stops iterating when the update moves less than this */
     float converged_deg;     /* and turns less than this; 0 and 0: always run all iterations */
     uint32_t finest_sample_step; /* 1: ICP uses every pixel of the finest level; 2: every second one (a
-                                    checkerboard, the default), half the cost; 4: every fourth, a quarter
-                                    (docs/tracking.md: speed against error) */
+                                    checkerboard), half the cost; 4: every fourth, a quarter (the default;
+                                    docs/tracking.md: speed against error) */
     /* Robust weights (iteratively reweighted least squares, docs/tracking.md). */
     float huber_k;           /* Huber threshold on the residual in units of sigma_z(z), default 3; 0: off */
     bool weight_noise;       /* weight residuals by the sensor's noise (sigma_z(1 m) / sigma_z(z))^noise_weight_exp,
