@@ -200,9 +200,9 @@ int cmd_render(int argc, char **argv)
         if (ps) {
             const render_particles_stats *st = render_particles_get_stats(ps);
             printf("  particles        %s: %llu, radius %.4g m, cell %.4g m (level %u): %llu cells, %u bricks "
-                   "(+%u empty)\n",
+                   "(+%u coarse)\n",
                    a.particles, (unsigned long long)st->n_particles, a.radius_m, st->cell_m, st->level,
-                   (unsigned long long)st->n_cells, st->n_bricks, st->n_pad_bricks);
+                   (unsigned long long)st->n_cells, st->n_bricks, st->n_coarse_bricks);
             printf("  binning          %.1f ms on the host (%.2f M particles/s; %.1f ms CPU), %.1f ms into the GPU "
                    "pools\n",
                    1e3 * st->bin_s, st->bin_s > 0 ? 1e-6 * (double)st->n_particles / st->bin_s : 0.0,

@@ -90,7 +90,7 @@ int main(int argc, char **argv)
     render_options opt = render_options_display();
     opt.far_m = 20;
     if (W && render_create(ctx, NULL, W, H, &rc) != BF_OK) return 1;
-    printf("| step | particles | bricks (+ empty) | binning [ms] | binning [CPU ms] | into the pools [ms] | M particles/s binned | map made | ray-cast [ms GPU] |\n");
+    printf("| step | particles | bricks (+ coarse) | binning [ms] | binning [CPU ms] | into the pools [ms] | M particles/s binned | map made | ray-cast [ms GPU] |\n");
     printf("|---|---|---|---|---|---|---|---|---|\n");
     render_particles *ps = NULL;
     int rc_out = 0;
@@ -104,7 +104,7 @@ int main(int argc, char **argv)
         }
         const render_particles_stats *st = render_particles_get_stats(ps);
         printf("| %u | %llu | %u (+%u) | %.1f | %.1f | %.1f | %.2f | %s | %.1f |\n", k, (unsigned long long)n, st->n_bricks,
-               st->n_pad_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s, n / st->bin_s / 1e6, st->map_made ? "yes" : "no",
+               st->n_coarse_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s, n / st->bin_s / 1e6, st->map_made ? "yes" : "no",
                rc ? render_particles_last_ms(ps) : 0.0);
         fflush(stdout);
         swirl(xyz, n, cx, cy, 0.02);

@@ -6,14 +6,14 @@
  *
  * Binning (render/particles_bin.c: sorted by brick, two threads): each
  * particle sets the bit of the cell holding it (cells of cell_m on the
- * bricks' level). A sphere reaches up to the
- * radius beyond its cell, into bricks that may hold no particle; the walk
- * only visits bricks that exist, so every brick the sphere's box touches
- * is allocated too (empty), and every cell a sphere overlaps gets a reach
- * bit in the confidence plane: the traverser searches the neighbours only
- * from the first reached cell on the ray. That costs memory and binning
- * time (docs/particles.md counts both) but keeps the traverser's search
- * local and short. A moving set is re-binned into the same map, emptied
+ * centres' level; only bricks holding centres are made). Three levels up,
+ * the coarse level's cells are those bricks: a coarse cell's sign bit says
+ * its brick exists, its reach bit that a sphere overlaps it. The ray walks
+ * the coarse level only, so the bricks around the spheres that an earlier
+ * single-level layout had to allocate empty (86% of the dam break's) are
+ * gone, and a ray crosses empty space eight times faster; the traverser
+ * searches the bricks of centres near each reached coarse cell on the ray.
+ * A moving set is re-binned into the same map, emptied
  * (render_particles_update). */
 #include <math.h>
 #include <stdlib.h>
@@ -50,12 +50,15 @@ render_particles_config render_particles_config_default(void)
 
 /* ------------------------------------------------------------ binning */
 
-/* The level of the bricks: chunks of about a metre (fusion's default is 2
- * m; a metre keeps the octree 7 levels deep at the default 1.25 mm cells). */
+/* The level of the bricks of centres: chunks of about a metre (fusion's
+ * default is 2 m; a metre keeps the octree 7 levels deep at the default
+ * 1.25 mm cells), and the coarse level (PARTICLES_COARSE_LEVELS above) at
+ * least 1 (its lookups go through the parent node). */
 static uint32_t bin_level(double cell_m)
 {
     double l = floor(log2(1.0 / (8.0 * cell_m)) + 0.5);
-    return l < 1 ? 1u : (l > FUSION_MAX_LEVEL ? FUSION_MAX_LEVEL : (uint32_t)l);
+    uint32_t min = (uint32_t)PARTICLES_COARSE_LEVELS + 1u;
+    return l < min ? min : (l > FUSION_MAX_LEVEL ? FUSION_MAX_LEVEL : (uint32_t)l);
 }
 
 /* The config with its defaults filled in, or BF_INVALID_ARG. */
@@ -100,20 +103,19 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
     return BF_OK;
 }
 
-/* Cells a ray walks per dispatch and the dispatches (shaders/render.glsl.h,
- * RENDER_PARTICLES_LOOP_BUDGET). The limit counts a loop's iterations once
- * for the 8 lanes running it in lockstep; a cell costs at most the reach
- * DDA's 24 steps and a search of up to nb bricks (the segment's box grown
- * by the reach), each at most 20 iterations (its 16 words, the lookup
- * through the cached parent, the brick loop). */
-static void pass_budget(const render_particles_config *c, uint32_t *cells_per_pass, uint32_t *n_passes)
+/* Coarse bricks a ray walks per dispatch and the dispatches
+ * (shaders/render.glsl.h, RENDER_PARTICLES_LOOP_BUDGET). The limit counts a
+ * loop's iterations once for the 8 lanes running it in lockstep: a walk
+ * step costs at most its descent (the coarse level's depth) and the DDA's
+ * 24 steps, and the searches stop themselves at
+ * RENDER_PARTICLES_WORK_BUDGET. Four dispatches more than the walk needs
+ * finish the rays paused by the searches' budget. */
+static void pass_budget(uint32_t coarse_level, uint32_t *cells_per_pass, uint32_t *n_passes)
 {
-    double reach = c->radius_m / c->cell_m;
-    double per_axis = floor((8.0 + 2.0 * reach) / 8.0) + 1.0;
-    double per_cell = 24.0 + 20.0 * per_axis * per_axis * per_axis;
-    double k = floor(RENDER_PARTICLES_LOOP_BUDGET / per_cell);
+    double per_cell = 1.0 + coarse_level + 24.0;
+    double k = floor((RENDER_PARTICLES_LOOP_BUDGET - RENDER_PARTICLES_WORK_BUDGET) / per_cell);
     *cells_per_pass = k < 1 ? 1u : (k > 256 ? 256u : (uint32_t)k);
-    *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass;
+    *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass + 4;
 }
 
 /* The map's buffers -> the pass's bindings 0, 1, 2 and 7. */
@@ -216,7 +218,7 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
     st->origin_w = origin;
     st->n_cells = bs.n_cells;
     st->n_bricks = bs.n_occupied;
-    st->n_pad_bricks = bs.n_bricks - bs.n_occupied;
+    st->n_coarse_bricks = bs.n_coarse;
     st->bin_s = bin_s;
     st->bin_cpu_s = bin_cpu_s;
     st->load_s = bf_time_s() - t1;
@@ -233,7 +235,7 @@ static bf_status set_cell(render_particles *ps, const render_particles_config *c
     st->level = bin_level(c->cell_m);
     st->cell_m = c->cell_m;
     st->chunk_m = (float)(c->cell_m * 8.0 * (double)(1u << st->level));
-    pass_budget(c, &ps->cells_per_pass, &ps->n_passes);
+    pass_budget(st->level - PARTICLES_COARSE_LEVELS, &ps->cells_per_pass, &ps->n_passes);
     if (ps->map) { /* another cell: another chunk edge */
         fusion_destroy(ps->map);
         ps->map = NULL;
@@ -296,7 +298,7 @@ bf_status render_particles_update(render_particles *ps, const float *xyz, uint64
     if (s != BF_OK && fusion_pool_usage(ps->map).bricks == 0) { /* emptied */
         render_particles_stats *st = &ps->stats;
         st->n_particles = st->n_cells = 0;
-        st->n_bricks = st->n_pad_bricks = 0;
+        st->n_bricks = st->n_coarse_bricks = 0;
     }
     return s;
 }
@@ -372,7 +374,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         .chunk_m = v.chunk_m,
         .n_buckets = v.n_buckets,
         .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
-        .max_level = v.max_level,
+        .max_level = ps->stats.level - PARTICLES_COARSE_LEVELS, /* the walk's: the coarse level */
         .radius_m = ps->cfg.radius_m,
         .flags = keep_nearer ? RENDER_PARTICLES_FLAG_KEEP_NEARER : 0u,
         .rgb = ps->cfg.rgb,

@@ -163,15 +163,17 @@ static void *sort_main(void *arg)
 
 /* ------------------------------------------------------------ reach */
 
-/* Sets the reach bits of brick hb (global coordinates b) for the cells the
- * sphere at cc (cell units) of radius reach (cells) overlaps: those whose
- * box is within reach of the centre. */
-static void bin_reach(uint32_t conf[16], const int64_t b[3], const double cc[3], double reach)
+/* Sets the reach bits of brick hb (global coordinates b) for the cells a
+ * sphere of radius reach (cells) overlaps whose centre lies within half
+ * (cells, per axis) of cc: those whose box is within reach of that box.
+ * half is 0 on the centres' level (the centre is its cell's middle) and 0.5
+ * on the coarse level (anywhere in the coarse cell). */
+static void bin_reach(uint32_t conf[16], const int64_t b[3], const double cc[3], double reach, double half)
 {
     int64_t lo[3], hi[3];
     for (int a = 0; a < 3; a++) {
-        lo[a] = (int64_t)floor(cc[a] - reach) - b[a] * 8;
-        hi[a] = (int64_t)floor(cc[a] + reach) - b[a] * 8;
+        lo[a] = (int64_t)floor(cc[a] - reach - half) - b[a] * 8;
+        hi[a] = (int64_t)floor(cc[a] + reach + half) - b[a] * 8;
         if (lo[a] < 0) lo[a] = 0;
         if (hi[a] > 7) hi[a] = 7;
     }
@@ -179,12 +181,15 @@ static void bin_reach(uint32_t conf[16], const int64_t b[3], const double cc[3],
     for (int64_t z = lo[2]; z <= hi[2]; z++) {
         double dz = cc[2] - (double)(b[2] * 8 + z);
         dz = dz < 0 ? -dz : (dz > 1 ? dz - 1 : 0);
+        dz = dz > half ? dz - half : 0;
         for (int64_t y = lo[1]; y <= hi[1]; y++) {
             double dy = cc[1] - (double)(b[1] * 8 + y);
             dy = dy < 0 ? -dy : (dy > 1 ? dy - 1 : 0);
+            dy = dy > half ? dy - half : 0;
             for (int64_t x = lo[0]; x <= hi[0]; x++) {
                 double dx = cc[0] - (double)(b[0] * 8 + x);
                 dx = dx < 0 ? -dx : (dx > 1 ? dx - 1 : 0);
+                dx = dx > half ? dx - half : 0;
                 if (dx * dx + dy * dy + dz * dz > r2) continue;
                 conf[brick_word((uint32_t)x, (uint32_t)y, (uint32_t)z)] |=
                     1u << brick_bit((uint32_t)x, (uint32_t)y, (uint32_t)z);
@@ -205,9 +210,9 @@ typedef struct reach_table {
     uint32_t mask[][16];
 } reach_table;
 
-static reach_table *reach_table_make(double reach)
+static reach_table *reach_table_make(double reach, double half)
 {
-    if (reach > 8.0) return NULL;
+    if (reach + half > 8.0) return NULL;
     uint32_t (*all)[27][16] = bf_calloc(512, sizeof *all);
     if (!all) return NULL;
     uint32_t used[512] = {0}, total = 0;
@@ -215,7 +220,7 @@ static reach_table *reach_table_make(double reach)
         double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
         for (int k = 0; k < 27; k++) {
             int64_t b[3] = {k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1};
-            bin_reach(all[l][k], b, cc, reach);
+            bin_reach(all[l][k], b, cc, reach, half);
             bool any = false;
             for (int w = 0; w < 16; w++) any |= all[l][k][w] != 0;
             if (any) used[l] |= 1u << k, total++;
@@ -266,7 +271,7 @@ typedef struct bin_part {
     const uint64_t *cells; /* sorted unique cell keys of this half's bricks */
     uint64_t n_cells;
     const reach_table *rt;
-    double reach;
+    double reach, half;
     /* out */
     bin_index ix;
     bin_planes *bricks; /* in bricks_mem, aligned */
@@ -433,8 +438,8 @@ static bool run_apply(bin_part *p, const bin_run *r)
         double cc[3] = {b[0] * 8 + (l & 7) + 0.5, b[1] * 8 + ((l >> 3) & 7) + 0.5, b[2] * 8 + (l >> 6) + 0.5};
         int64_t lo[3], hi[3];
         for (int a = 0; a < 3; a++) {
-            lo[a] = (int64_t)floor((cc[a] - p->reach) / 8.0);
-            hi[a] = (int64_t)floor((cc[a] + p->reach) / 8.0);
+            lo[a] = (int64_t)floor((cc[a] - p->reach - p->half) / 8.0);
+            hi[a] = (int64_t)floor((cc[a] + p->reach + p->half) / 8.0);
         }
         for (int64_t bz = lo[2]; bz <= hi[2]; bz++)
             for (int64_t by = lo[1]; by <= hi[1]; by++)
@@ -442,7 +447,7 @@ static bool run_apply(bin_part *p, const bin_run *r)
                     int64_t c[3] = {bx, by, bz};
                     uint32_t t = part_brick(p, c, morton3(c));
                     if (t == UINT32_MAX) return false;
-                    bin_reach(p->bricks[t].conf, c, cc, p->reach);
+                    bin_reach(p->bricks[t].conf, c, cc, p->reach, p->half);
                 }
     }
     return true;
@@ -561,10 +566,12 @@ static void count_nodes(const uint64_t *m, uint64_t n, uint32_t level, uint64_t 
 struct particles_binner {
     uint64_t *keys, *tmp; /* per particle, then per brick (the octree count) */
     uint64_t keys_cap, tmp_cap;
-    reach_table *rt;
-    double rt_reach;
+    uint64_t *ckeys;      /* the coarse level's cell keys: one per brick of the centres */
+    uint64_t ckeys_cap;
+    reach_table *rt[2];   /* the centres' level, the coarse level */
+    double rt_reach[2], rt_half[2];
     bin_part part[2];
-    hostmap_brick *all;
+    hostmap_brick *all;   /* both levels' bricks: the centres', then the coarse level's */
     uint64_t all_cap;
 };
 
@@ -573,7 +580,7 @@ particles_binner *particles_binner_create(void) { return bf_calloc(1, sizeof(par
 void particles_binner_destroy(particles_binner *w)
 {
     if (!w) return;
-    free(w->keys), free(w->tmp), free(w->rt), free(w->all);
+    free(w->keys), free(w->tmp), free(w->ckeys), free(w->rt[0]), free(w->rt[1]), free(w->all);
     part_free(&w->part[0]), part_free(&w->part[1]);
     free(w);
 }
@@ -644,23 +651,28 @@ static void *emit_main(void *arg)
     return NULL;
 }
 
-bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
-                        double radius_m, uint32_t level, uint64_t max_bricks, particles_binned *out)
+/* What one level's binning made. */
+typedef struct level_binned {
+    uint64_t k;            /* bricks, written to w->all from the caller's offset */
+    uint32_t n_occupied;
+    uint64_t n_nodes, n_chunks;
+} level_binned;
+
+/* Bins the sorted cell keys cells[0, n_cells) (bricks in box lo..hi) on
+ * octree level `level`, each set cell's spheres reaching `reach` cells
+ * beyond a box of half cells about its middle, into w->all from offset
+ * `off` (and the bricks' sorted codes into w->tmp for the caller). */
+static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells, uint64_t n_cells, const int64_t lo[3],
+                           const int64_t hi[3], double reach, double half, uint32_t level, uint64_t max_bricks,
+                           uint64_t off, bool *too_many, level_binned *out)
 {
     memset(out, 0, sizeof *out);
-    uint64_t n_cells = 0;
-    int64_t lo[3], hi[3];
-    bf_status s = sorted_cells(w, xyz, n, origin, cell_m, &n_cells, lo, hi);
-    if (s != BF_OK) return s;
-    double reach = radius_m / cell_m; /* the sphere's reach beyond the centre [cells] */
-    if (w->rt_reach != reach) {
-        free(w->rt);
-        w->rt = reach_table_make(reach); /* NULL: per cell (slower, any reach) */
-        w->rt_reach = w->rt ? reach : 0;
-        if (!w->rt && reach <= 8.0) return bf_fail(BF_NO_MEMORY, "render: particle reach table");
+    if (w->rt_reach[t] != reach || w->rt_half[t] != half || !w->rt[t]) {
+        free(w->rt[t]);
+        w->rt[t] = reach_table_make(reach, half); /* NULL: per cell (slower, any reach) */
+        w->rt_reach[t] = reach, w->rt_half[t] = half;
+        if (!w->rt[t] && reach + half <= 8.0) return bf_fail(BF_NO_MEMORY, "render: particle reach table");
     }
-    /* The cells are in tmp; the keys buffer takes the brick codes after. */
-    uint64_t *cells = w->tmp;
     /* The halves split between two bricks. */
     uint64_t mid = n_cells / 2;
     while (mid > 0 && mid < n_cells && cells[mid] >> 9 == cells[mid - 1] >> 9) mid++;
@@ -668,18 +680,18 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     p[0].cells = cells, p[0].n_cells = mid;
     p[1].cells = cells + mid, p[1].n_cells = n_cells - mid;
     /* A dense index where the box of the bricks the spheres reach takes at
-     * most 4 M entries or 4 a particle (16 bytes), else the hash. */
-    int64_t pad = (int64_t)ceil(reach / 8.0), box = n ? 1 : 0;
-    for (int a = 0; a < 3 && n; a++) box *= hi[a] - lo[a] + 1 + 2 * pad;
-    bool dense = n && box <= (int64_t)(4 * n > (1u << 22) ? 4 * n : (1u << 22));
-    for (int t = 0; t < 2; t++) {
-        p[t].rt = w->rt, p[t].reach = reach, p[t].max_bricks = max_bricks;
-        for (int a = 0; a < 3; a++) p[t].ix.lo[a] = lo[a] - pad, p[t].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
+     * most 4 M entries or 4 a cell (16 bytes), else the hash. */
+    int64_t pad = (int64_t)ceil((reach + half) / 8.0), box = n_cells ? 1 : 0;
+    for (int a = 0; a < 3 && n_cells; a++) box *= hi[a] - lo[a] + 1 + 2 * pad;
+    bool dense = n_cells && box <= (int64_t)(4 * n_cells > (1u << 22) ? 4 * n_cells : (1u << 22));
+    for (int h = 0; h < 2; h++) {
+        p[h].rt = w->rt[t], p[h].reach = reach, p[h].half = half, p[h].max_bricks = max_bricks;
+        for (int a = 0; a < 3; a++) p[h].ix.lo[a] = lo[a] - pad, p[h].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
     }
     run_two(part_main, &p[0], &p[1]);
     if (p[0].failed || p[1].failed) return bf_fail(BF_NO_MEMORY, "render: particle bricks");
     if (p[0].too_many || p[1].too_many) {
-        out->too_many = true;
+        *too_many = true;
         return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
     }
     merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX);
@@ -688,15 +700,15 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     for (uint32_t i = 0; i < p[0].n; i++) k0 += p[0].codes[i] != UINT64_MAX;
     for (uint32_t i = 0; i < p[1].n; i++) k += p[1].codes[i] != UINT64_MAX;
     k += k0;
-    if (k > max_bricks) {
-        out->too_many = true;
+    if (off + k > max_bricks) {
+        *too_many = true;
         return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
     }
-    if (k >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, k + 1, sizeof *w->all) ||
+    if (off + k >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, off + k + 1, sizeof *w->all) ||
         !reserve((void **)&w->keys, &w->keys_cap, k + 1, 8) || !reserve((void **)&w->tmp, &w->tmp_cap, k + 1, 8))
-        return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)k);
+        return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)(off + k));
     uint64_t *codes = w->keys;
-    emit_job e[2] = {{&p[0], w->all, codes, level}, {&p[1], w->all + k0, codes + k0, level}};
+    emit_job e[2] = {{&p[0], w->all + off, codes, level}, {&p[1], w->all + off + k0, codes + k0, level}};
     run_two(emit_main, &e[0], &e[1]);
     out->n_occupied = p[0].n_occupied + p[1].n_occupied;
     uint64_t top = 0;
@@ -706,8 +718,61 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     run_two(sort_main, &j[0], &j[1]);
     uint64_t n_unique = merge_unique(codes, k0, codes + k0, k - k0, w->tmp);
     count_nodes(w->tmp, n_unique, level, &out->n_nodes, &out->n_chunks);
-    out->bricks = w->all;
-    out->n_bricks = (uint32_t)k;
-    out->n_cells = n_cells;
+    out->k = k;
     return n_unique == k ? BF_OK : bf_fail(BF_NUMERIC, "render: %llu particle bricks made twice", (unsigned long long)(k - n_unique));
+}
+
+/* The coarse level's cell keys, one per brick of the centres (sorted
+ * Morton codes in w->tmp): the coarse brick is the centres' brick three
+ * levels up (its Morton code >> 9), the cell the brick's place in it. */
+static bf_status coarse_cells(particles_binner *w, uint64_t n, int64_t lo[3], int64_t hi[3])
+{
+    if (!reserve((void **)&w->ckeys, &w->ckeys_cap, n + 1, 8)) return bf_fail(BF_NO_MEMORY, "render: coarse cells");
+    for (int a = 0; a < 3; a++) lo[a] = INT64_MAX, hi[a] = -1;
+    for (uint64_t i = 0; i < n; i++) {
+        int64_t b[3];
+        unmorton3(w->tmp[i], b);
+        for (int a = 0; a < 3; a++) {
+            int64_t c = b[a] >> 3;
+            if (c < lo[a]) lo[a] = c;
+            if (c > hi[a]) hi[a] = c;
+        }
+        w->ckeys[i] = (w->tmp[i] >> 9) << 9 | (uint64_t)((b[0] & 7) | (b[1] & 7) << 3 | (b[2] & 7) << 6);
+    }
+    return BF_OK;
+}
+
+bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
+                        double radius_m, uint32_t level, uint64_t max_bricks, particles_binned *out)
+{
+    memset(out, 0, sizeof *out);
+    if (level < PARTICLES_COARSE_LEVELS)
+        return bf_fail(BF_INVALID_ARG, "render: particle bricks on level %u (at least %d)", level,
+                       PARTICLES_COARSE_LEVELS);
+    uint64_t n_cells = 0;
+    int64_t lo[3], hi[3];
+    bf_status s = sorted_cells(w, xyz, n, origin, cell_m, &n_cells, lo, hi);
+    if (s != BF_OK) return s;
+    /* The centres: no reach (the cells are in tmp; the keys buffer takes
+     * the brick codes after). */
+    level_binned fine, coarse;
+    s = bin_one_level(w, 0, w->tmp, n_cells, lo, hi, 0.0, 0.0, level, max_bricks, 0, &out->too_many, &fine);
+    if (s != BF_OK) return s;
+    /* The coarse level: a cell per brick of centres, reaching the radius
+     * (in coarse cells: a brick of centres) beyond its whole cell. */
+    if (s == BF_OK && (s = coarse_cells(w, fine.k, lo, hi)) != BF_OK) return s;
+    double reach = radius_m / (8.0 * cell_m);
+    s = bin_one_level(w, 1, w->ckeys, fine.k, lo, hi, reach, 0.5, level - PARTICLES_COARSE_LEVELS, max_bricks, fine.k,
+                  &out->too_many, &coarse);
+    if (s != BF_OK) return s;
+    out->bricks = w->all;
+    out->n_bricks = (uint32_t)(fine.k + coarse.k);
+    out->n_occupied = fine.n_occupied;
+    out->n_coarse = (uint32_t)coarse.k;
+    out->n_cells = n_cells;
+    /* Nodes: each level's octrees counted apart (the coarse bricks' nodes
+     * are mostly the centres' ancestors: an upper bound). */
+    out->n_nodes = fine.n_nodes + coarse.n_nodes;
+    out->n_chunks = fine.n_chunks + coarse.n_chunks;
+    return BF_OK;
 }

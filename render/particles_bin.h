@@ -5,6 +5,9 @@
 
 #include "core/core.h"
 #include "hostmap/hostmap.h"
+#include "shaders/render.glsl.h"
+
+#define PARTICLES_COARSE_LEVELS ((int)RENDER_PARTICLES_COARSE_LEVELS)
 
 /* Global brick coordinates are below 2^PARTICLES_AXIS_BITS per axis (the
  * origin sits below the set's box, so they are never negative): a brick's
@@ -20,20 +23,26 @@ void particles_binner_destroy(particles_binner *w);
 
 typedef struct particles_binned {
     hostmap_brick *bricks; /* the binner's: key, cell, level and both planes filled; until its next binning */
-    uint32_t n_bricks;
-    uint32_t n_occupied;   /* bricks holding set bits */
+    uint32_t n_bricks;     /* both levels' */
+    uint32_t n_occupied;   /* bricks of centres (the first n_bricks - n_coarse) */
+    uint32_t n_coarse;     /* bricks of the coarse level (the last n_coarse) */
     uint64_t n_cells;      /* set bits */
     uint64_t n_nodes, n_chunks; /* what the octrees of these bricks need (fusion_load) */
     bool too_many;         /* failed: more than max_bricks */
 } particles_binned;
 
 /* Bins xyz (n particles, world metres) into cells of cell_m from origin
- * (every cell within the grid: set_frame checked) on octree level `level`:
- * each particle sets its cell's bit (sign plane); each cell a sphere of
- * radius_m at a set cell's middle overlaps gets a reach bit (confidence
- * plane), in bricks allocated (empty) where need be. BF_NO_MEMORY when
- * out of memory or past max_bricks (out->too_many: it stops early there,
- * so a grid too fine costs little to try). */
+ * (every cell within the grid: set_frame checked) on two octree levels:
+ *   - `level`, the centres: each particle sets its cell's bit (both
+ *     planes); only bricks holding centres are made;
+ *   - level - PARTICLES_COARSE_LEVELS, the coarse level, whose cells are
+ *     the centres' bricks: a cell's sign bit says its brick holds centres,
+ *     its confidence bit that a sphere of radius_m centred anywhere in a
+ *     set cell overlaps it (the reach), in bricks made (empty) where need
+ *     be.
+ * BF_NO_MEMORY when out of memory or past max_bricks (out->too_many: it
+ * stops early there, so a grid too fine costs little to try);
+ * BF_INVALID_ARG for a level below PARTICLES_COARSE_LEVELS. */
 bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
                         double radius_m, uint32_t level, uint64_t max_bricks, particles_binned *out);
 

@@ -182,9 +182,10 @@ render_particles_config render_particles_config_default(void);
 typedef struct render_particles_stats {
     uint64_t n_particles;
     uint64_t n_cells;       /* set bits: particles sharing a cell count once */
-    uint32_t n_bricks;      /* bricks holding set bits */
-    uint32_t n_pad_bricks;  /* empty bricks a neighbour's sphere reaches into (the walk must visit them) */
-    uint32_t level;         /* the bricks' octree level */
+    uint32_t n_bricks;      /* bricks of centres (holding set bits) */
+    uint32_t n_coarse_bricks; /* bricks of the coarse level the ray walks (RENDER_PARTICLES_COARSE_LEVELS up: a
+                                 cell per brick of centres, and the cells the spheres reach) */
+    uint32_t level;         /* the centres' octree level */
     float chunk_m, cell_m;
     bf_vec3 origin_w;       /* the grid's corner: cell i spans origin_w + [i, i + 1) cell_m, its sphere at the middle */
     double bin_s;           /* host binning: cells, bricks, the host copy (wall clock) */

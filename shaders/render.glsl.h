@@ -46,11 +46,17 @@
  * lavapipe ends every loop of a shader once its loops together ran 65,535
  * iterations for one call (8 lanes; gallivm's LP_MAX_TGSI_LOOP_ITERATIONS),
  * and a particle search runs loops within loops. Each dispatch walks at
- * most render_particles_push.cells_per_pass cells of a ray, so that its
- * loop iterations stay below RENDER_PARTICLES_LOOP_BUDGET for 8 lanes, and
- * the next resumes it; a ray walks at most RENDER_PARTICLES_MAX_CELLS cells
- * in all (docs/particles.md). */
+ * most render_particles_push.cells_per_pass coarse bricks of a ray and
+ * searches until its count of loop iterations passes
+ * RENDER_PARTICLES_WORK_BUDGET (a cell's search is at most a few hundred),
+ * then pauses the ray (a hit of level RENDER_PARTICLES_PAUSED at the depth
+ * to resume from); the next dispatch resumes it. A ray walks at most
+ * RENDER_PARTICLES_MAX_CELLS coarse bricks in all (docs/particles.md). */
 #define RENDER_PARTICLES_LOOP_BUDGET 40000u
+#define RENDER_PARTICLES_WORK_BUDGET 30000u
+#define RENDER_PARTICLES_PAUSED 0xfffffffeu
+#define RENDER_PARTICLES_MAX_CELLS 1024u
+#define RENDER_PARTICLES_COARSE_LEVELS 3u
 #define RENDER_PARTICLES_MAX_CELLS 1024u
 
 /* Sub-voxel refinement of a tracking hit (render_raycast.comp's

@@ -4,11 +4,13 @@
  * shaders/render_walk.glsl.h over the particles' binary grid with the
  * `particles` traverser (shaders/render_traverse.glsl.h). It writes the
  * caster's images itself: depth, level, the sphere's normal and the shaded
- * colour. With RENDER_PARTICLES_FLAG_KEEP_NEARER the pixel's existing hit
+ * colour. The walk runs on the particles' coarse level (max_level is that
+ * level). With RENDER_PARTICLES_FLAG_KEEP_NEARER the pixel's existing hit
  * (the map's ray-cast, recorded just before) bounds the ray, and a pixel
  * the particles do not reach in front of it keeps it: one image with the
  * nearest hit of either. A dispatch walks a bounded number of cells per ray
- * and the next resumes the rays not done (render.glsl.h says why).
+ * and bounded work, and the next resumes the rays not done (render.glsl.h
+ * says why).
  */
 #extension GL_GOOGLE_include_directive : require
 #include "fusion.glsl.h"
@@ -66,7 +68,10 @@ void main()
     tr.hit_level = FUSION_NONE;
     tr.hit_normal = vec3(0.0);
     render_particles_cache_clear();
-    bool hit = render_walk_from(render_particle_map(), ray, s, far_m, 0u, tr) && tr.hit_depth < far_m;
+    bool walked = render_walk_from(render_particle_map(), ray, s, far_m, 0u, tr);
+    bool paused = walked && tr.hit_level == RENDER_PARTICLES_PAUSED;
+    if (paused) s = tr.hit_depth;
+    bool hit = walked && !paused && tr.hit_depth < far_m;
     bool done = hit || s >= far_m || (pc.flags & RENDER_PARTICLES_FLAG_LAST) != 0u;
     resume.v[pixel] = done ? -1.0 : s;
     if (!done) return;

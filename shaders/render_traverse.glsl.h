@@ -102,17 +102,28 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
 
 /* The `particles` traverser (Reichl's dissertation, ch. 6: particles binned
  * into a binary grid, each set bit standing for a sphere of the particle
- * radius at its cell's centre; search, then intersect). A sphere reaches up
- * to the radius beyond its cell, so the spheres that can meet the ray's
- * segment in this brick have their centres within the radius of it: the
- * segment's box grown by the radius, which may cross into neighbouring
- * bricks (binning allocates every brick a sphere reaches, so the walk visits
- * each point of each sphere, and sets the reach bit, in the confidence
- * plane, of every cell a sphere overlaps). In each brick of that box the sub-brick words
- * overlapping it are searched for set bits with findLSB, and each bit's
- * sphere is intersected with the ray; the nearest hit in [s_in, s_out) is
- * the hit (a nearer one lies in a brick the walk visited before, where the
- * same sphere was searched). */
+ * radius at its cell's centre; search, then intersect). It runs on the
+ * coarse level (render/particles_bin.h), whose cells are the bricks of
+ * centres RENDER_PARTICLES_COARSE_LEVELS levels below: a coarse cell's sign
+ * bit says its brick of centres exists, its confidence bit that a sphere
+ * reaches into it. The walk visits coarse bricks only (bricks of centres
+ * are never walked, and no empty bricks surround them), so a ray crosses
+ * empty and sparse space eight times faster than on the centres' level.
+ *
+ * In a coarse brick a DDA (Amanatides & Woo 1987) visits the ray's cells;
+ * at each cell a sphere reaches, the spheres that can meet the ray there
+ * have their centres within the radius of the ray's piece in that cell:
+ * the coarse cells of that box holding centres are looked up (one node
+ * descent of three levels each) and their sub-brick words overlapping the
+ * box searched with findLSB, each bit's sphere intersected with the ray.
+ * A sphere's entry point lies in a cell it reaches, so once every reached
+ * cell up to the current one was searched, a hit before the current
+ * cell's exit is the nearest: the search stops there.
+ *
+ * The work is counted (render_pwork): past RENDER_PARTICLES_WORK_BUDGET the
+ * traverser pauses at the entry of the cell it was to search, reported as
+ * a hit of level RENDER_PARTICLES_PAUSED at that depth, and the next
+ * dispatch resumes the ray there (render_particles.comp). */
 
 /* Camera depth at which ray enters the sphere (c, r), -1 if it misses; the
  * closest-approach form keeps float precision when |o - c| >> r. */
@@ -126,11 +137,14 @@ float render_sphere_hit(render_ray ray, vec3 c, float r)
     return h < 0.0 ? -1.0 : tc - sqrt(h / a);
 }
 
-/* The last neighbour lookup's parent: the node one level above the bricks
- * (its cell on that level's grid, from the map origin) and its first child.
- * A brick's neighbours mostly share a parent (8 bricks each), so most
- * lookups read two words instead of a hash probe and an octree descent.
- * Per invocation; the shader clears it (render_particles_cache_clear). */
+/* Loop iterations of this invocation in this dispatch, walk and search. */
+uint render_pwork;
+
+/* The last coarse lookup's parent: the node one level above the coarse
+ * bricks (its cell on that level's grid, from the map origin) and its first
+ * child. A brick's neighbours mostly share a parent (8 bricks each), so
+ * most lookups read two words instead of a hash probe and an octree
+ * descent. Per invocation; the shader clears it (render_particles_cache_clear). */
 ivec3 render_pcache_parent;
 uint render_pcache_child;
 
@@ -138,10 +152,12 @@ void render_particles_cache_clear()
 {
     render_pcache_parent = ivec3(-2147483647);
     render_pcache_child = FUSION_NONE;
+    render_pwork = 0u;
 }
 
-/* render_brick_at through the parent cache (level >= 1). */
-uint render_particles_brick(render_walk_map m, ivec3 b, uint level)
+/* The node of coarse brick b (level >= 1) through the parent cache, or
+ * FUSION_NONE. */
+uint render_particles_node(render_walk_map m, ivec3 b, uint level)
 {
     ivec3 parent = b >> 1;
     if (parent != render_pcache_parent) {
@@ -158,37 +174,111 @@ uint render_particles_brick(render_walk_map m, ivec3 b, uint level)
             uvec3 c = cell >> (level - 1u - l);
             node = child + fusion_octant(c.x, c.y, c.z);
         }
+        render_pwork += level;
         uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
         render_pcache_child = child < FUSION_LOCKED ? child : FUSION_NONE;
     }
     if (render_pcache_child == FUSION_NONE) return FUSION_NONE;
     uvec3 c = uvec3(b);
-    uint slot = render_node_word((render_pcache_child + fusion_octant(c.x, c.y, c.z)) * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
+    return render_pcache_child + fusion_octant(c.x, c.y, c.z);
+}
+
+/* The brick of centres of coarse cell k (global, on the coarse level's
+ * grid: the brick's own coordinate on the centres' level), below the
+ * coarse node holding it; FUSION_NONE if absent. */
+uint render_particles_centres(uint node, ivec3 k)
+{
+    uvec3 u = uvec3(k);
+    for (int l = int(RENDER_PARTICLES_COARSE_LEVELS) - 1; l >= 0; l--) {
+        uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
+        if (child >= FUSION_LOCKED) return FUSION_NONE;
+        uvec3 c = u >> uint(l);
+        node = child + fusion_octant(c.x, c.y, c.z);
+    }
+    uint slot = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
     return slot < FUSION_LOCKED ? slot : FUSION_NONE;
+}
+
+/* The nearest sphere entry in [s_lo, best) among the spheres whose centres
+ * lie in the cells [c0, c1] (global, on the centres' grid of cells of
+ * fine_m); level is the coarse level, B and node the coarse brick being
+ * walked. */
+void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 c1, uint level, ivec3 B, uint node_B,
+                             uint slot_B, float fine_m, float r, float s_lo, inout float best, inout vec3 best_c)
+{
+    ivec3 k0 = c0 >> 3, k1 = c1 >> 3;
+    for (int kz = k0.z; kz <= k1.z; kz++)
+        for (int ky = k0.y; ky <= k1.y; ky++)
+            for (int kx = k0.x; kx <= k1.x; kx++) {
+                render_pwork++;
+                ivec3 k = ivec3(kx, ky, kz), kb = k >> 3;
+                uint node = kb == B ? node_B : render_particles_node(m, kb, level);
+                if (node == FUSION_NONE) continue;
+                uint sl = kb == B ? slot_B : render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
+                if (sl >= FUSION_LOCKED) continue;
+                uvec3 kc = uvec3(k & 7);
+                if (((render_sign_word(sl, brick_word(kc.x, kc.y, kc.z)) >> brick_bit(kc.x, kc.y, kc.z)) & 1u) == 0u)
+                    continue;
+                uint fs = render_particles_centres(node, k);
+                render_pwork += RENDER_PARTICLES_COARSE_LEVELS;
+                if (fs == FUSION_NONE) continue;
+                ivec3 lo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), hi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
+                for (uint w = 0u; w < BRICK_WORDS; w++) {
+                    /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
+                    ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
+                    if (any(greaterThan(s0, hi)) || any(lessThan(s0 + ivec3(3, 3, 1), lo))) continue;
+                    render_pwork++;
+                    uint bits = render_sign_word(fs, w);
+                    while (bits != 0u) {
+                        int i = findLSB(bits);
+                        bits &= bits - 1u;
+                        render_pwork++;
+                        vec3 c = (vec3(k * 8 + s0 + ivec3(i & 3, (i >> 2) & 3, i >> 4)) + 0.5) * fine_m;
+                        float t = render_sphere_hit(ray, c, r);
+                        if (t >= s_lo && t < best) {
+                            best = t;
+                            best_c = c;
+                        }
+                    }
+                }
+            }
 }
 
 bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in, float s_out,
                      uint flags, inout render_trace tr)
 {
+    render_walk_map m = render_particle_map();
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
-    /* Search only from the first cell on the ray that a sphere reaches (the
-     * reach bits, binned with the centres): a DDA over the brick's cells
-     * (Amanatides & Woo 1987) reading this brick's words only, so rays that
-     * pass between the spheres or through the empty bricks around them skip
-     * the search of the neighbours. */
+    float fine_m = voxel_m * 0.125, inv_f = 8.0 * inv_v, rc = r * inv_f;
     vec3 p0 = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
     ivec3 idx = clamp(ivec3(floor((p0 - brick_lo) * inv_v)), ivec3(0), ivec3(7));
     ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
     vec3 s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
     vec3 s_delta = voxel_m * abs(ray.inv_dir);
-    float s_start = -1.0, s_enter = s_in;
+    ivec3 B = ivec3(floor(brick_lo * inv_v * 0.125 + 0.5));
+    uint node_B = FUSION_NONE;
+    float best = s_out, s_enter = s_in;
+    vec3 best_c = vec3(0.0);
+    render_pwork += 4u; /* the walk's step to this brick */
     for (uint k = 0u; k < 24u; k++) {
         uint x = uint(idx.x), y = uint(idx.y), z = uint(idx.z);
+        float s_next = min(min(s_max.x, min(s_max.y, s_max.z)), s_out);
+        render_pwork++;
         if (((render_conf_word(slot, brick_word(x, y, z)) >> brick_bit(x, y, z)) & 1u) != 0u) {
-            s_start = s_enter;
-            break;
+            if (render_pwork > RENDER_PARTICLES_WORK_BUDGET) {
+                tr.hit_depth = s_enter;
+                tr.hit_level = RENDER_PARTICLES_PAUSED;
+                return true;
+            }
+            if (node_B == FUSION_NONE) node_B = render_particles_node(m, B, level);
+            /* Cells (global, on the centres' grid) whose centre c + 0.5 is
+             * within r of the ray's piece in this cell. */
+            vec3 pa = (ray.o + s_enter * ray.dir) * inv_f, pb = (ray.o + s_next * ray.dir) * inv_f;
+            ivec3 c0 = ivec3(floor(min(pa, pb) - rc - 0.5)), c1 = ivec3(ceil(max(pa, pb) + rc - 0.5));
+            render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE, best,
+                                    best_c);
+            if (best < s_next) break;
         }
-        float s_next = min(s_max.x, min(s_max.y, s_max.z));
         if (s_next >= s_out) break;
         if (s_max.x <= s_max.y && s_max.x <= s_max.z) {
             idx.x += stp.x;
@@ -203,47 +293,9 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
         if (any(lessThan(idx, ivec3(0))) || any(greaterThan(idx, ivec3(7)))) break;
         s_enter = s_next;
     }
-    if (s_start < 0.0) return false;
-    render_walk_map m = render_particle_map();
-    ivec3 B = ivec3(floor(brick_lo * (0.125 * inv_v) + 0.5));
-    /* Cells (global, on this level's grid) whose centre c + 0.5 is within
-     * r of the segment's box. */
-    vec3 pa = (ray.o + s_start * ray.dir) * inv_v, pb = (ray.o + s_out * ray.dir) * inv_v;
-    float rc = r * inv_v;
-    ivec3 c0 = ivec3(floor(min(pa, pb) - rc - 0.5)), c1 = ivec3(ceil(max(pa, pb) + rc - 0.5));
-    ivec3 b0 = c0 >> 3, b1 = c1 >> 3;
-    float best = s_out;
-    bool hit = false;
-    vec3 best_c = vec3(0.0);
-    for (int bz = b0.z; bz <= b1.z; bz++)
-        for (int by = b0.y; by <= b1.y; by++)
-            for (int bx = b0.x; bx <= b1.x; bx++) {
-                ivec3 b = ivec3(bx, by, bz);
-                uint sl = b == B ? slot : render_particles_brick(m, b, level);
-                if (sl == FUSION_NONE) continue;
-                ivec3 lo = clamp(c0 - b * 8, ivec3(0), ivec3(7)), hi = clamp(c1 - b * 8, ivec3(0), ivec3(7));
-                for (uint w = 0u; w < BRICK_WORDS; w++) {
-                    /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
-                    ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
-                    if (any(greaterThan(s0, hi)) || any(lessThan(s0 + ivec3(3, 3, 1), lo))) continue;
-                    uint bits = render_sign_word(sl, w);
-                    while (bits != 0u) {
-                        int i = findLSB(bits);
-                        bits &= bits - 1u;
-                        ivec3 cell = b * 8 + s0 + ivec3(i & 3, (i >> 2) & 3, i >> 4);
-                        vec3 c = (vec3(cell) + 0.5) * voxel_m;
-                        float t = render_sphere_hit(ray, c, r);
-                        if (t >= s_in - RENDER_NUDGE && t < best) {
-                            best = t;
-                            best_c = c;
-                            hit = true;
-                        }
-                    }
-                }
-            }
-    if (!hit) return false;
+    if (!(best < s_out)) return false;
     tr.hit_depth = best;
-    tr.hit_level = level;
+    tr.hit_level = level + RENDER_PARTICLES_COARSE_LEVELS;
     tr.hit_normal = (ray.o + best * ray.dir - best_c) / r;
     return true;
 }

@@ -119,10 +119,10 @@ static void check_set(gpu_context *ctx, render_caster *rc, const float *xyz, uin
     qsort(diff, n_both, sizeof *diff, cmp_float);
     double median = n_both ? diff[n_both / 2] : INFINITY;
     fprintf(stderr,
-            "  %s: %u particles, %llu cells, %u bricks (+%u empty), binned in %.0f ms, pass %.1f ms; against the "
+            "  %s: %u particles, %llu cells, %u bricks (+%u coarse), binned in %.0f ms, pass %.1f ms; against the "
             "cell centres %u pixels differ; against the exact spheres: masks agree on %.2f%% (%.2f%% of the pixels "
             "either hits), depths within 2 mm %.2f%%, median difference %.2f mm\n",
-            what, n, (unsigned long long)st->n_cells, st->n_bricks, st->n_pad_bricks, 1e3 * st->bin_s,
+            what, n, (unsigned long long)st->n_cells, st->n_bricks, st->n_coarse_bricks, 1e3 * st->bin_s,
             render_particles_last_ms(ps), mask_differs + depth_differs, 100 * a.mask, 100 * a.mask_any,
             100 * a.depth_2mm, 1e3 * median);
     CHECK(a.n_hit_ref > n_px / 3); /* the view is mostly particles: the numbers mean something */
@@ -399,9 +399,9 @@ BF_TEST(a_moving_set_rebinned_per_step_matches_its_new_positions)
         CHECK_EQ_INT(st->n_particles, n);
         uint32_t bad;
         cast_and_compare(rc, ps, xyz, n, &K, &T, &bad, &mask);
-        fprintf(stderr, "  step %d: %u bricks (+%u empty), binned in %.1f ms (%.1f ms CPU), %.1f ms into the pools%s; "
+        fprintf(stderr, "  step %d: %u bricks (+%u coarse), binned in %.1f ms (%.1f ms CPU), %.1f ms into the pools%s; "
                 "%u pixels differ from the cell centres, masks agree with the exact spheres on %.2f%%\n",
-                step, st->n_bricks, st->n_pad_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s,
+                step, st->n_bricks, st->n_coarse_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s,
                 st->map_made ? " (map made anew)" : "", bad, 100 * mask);
         CHECK_LE(bad, K.width * K.height / 1000);
         CHECK(mask >= 0.97);
@@ -435,10 +435,10 @@ BF_TEST(a_moving_set_rebinned_per_step_matches_its_new_positions)
 
 /* Particles metres apart: their brick box (10 m at 1 cm bricks, 10^9
  * bricks) is too large for the dense brick index, so the binning goes
- * through its hash table; the same particles 10 cm apart (a dense index)
- * sit at the same places in their bricks (both spacings are whole bricks)
- * and need as many bricks. The far set is drawn exactly against the
- * cell-centred oracle. */
+ * through its hash table; the same particles 8 cm apart (a dense index)
+ * sit at the same places in their bricks and coarse bricks (both spacings
+ * are whole coarse bricks of 8 cm) and need as many of either. The far set
+ * is drawn exactly against the cell-centred oracle. */
 BF_TEST(far_apart_particles_bin_through_the_hash_alike)
 {
     gpu_context *ctx;
@@ -447,7 +447,7 @@ BF_TEST(far_apart_particles_bin_through_the_hash_alike)
     float far_xyz[12] = {0, 0, 1, 10, 0, 1, 0, 10, 1, 0, 0, 11};
     for (int k = 0; k < 2; k++) {
         float xyz[12];
-        for (int i = 0; i < 12; i++) xyz[i] = k ? far_xyz[i] * 0.01f : far_xyz[i];
+        for (int i = 0; i < 12; i++) xyz[i] = k ? far_xyz[i] * 0.008f : far_xyz[i];
         render_particles *ps;
         CHECK_OK(render_particles_create(ctx, NULL, k ? xyz : far_xyz, 4, &ps));
         st[k] = *render_particles_get_stats(ps);
@@ -472,12 +472,13 @@ BF_TEST(far_apart_particles_bin_through_the_hash_alike)
         }
         render_particles_destroy(ps);
     }
-    fprintf(stderr, "  far apart: %u bricks (+%u empty); 10 cm apart: %u (+%u)\n", st[0].n_bricks, st[0].n_pad_bricks,
-            st[1].n_bricks, st[1].n_pad_bricks);
+    fprintf(stderr, "  far apart: %u bricks (+%u coarse); 8 cm apart: %u (+%u)\n", st[0].n_bricks, st[0].n_coarse_bricks,
+            st[1].n_bricks, st[1].n_coarse_bricks);
     CHECK_EQ_INT(st[0].n_cells, 4);
     CHECK_EQ_INT(st[0].n_bricks, 4);
-    CHECK(st[0].n_pad_bricks >= 4 * 7); /* each sphere reaches at least 7 neighbours */
-    CHECK_EQ_INT(st[0].n_pad_bricks, st[1].n_pad_bricks);
+    CHECK_EQ_INT(st[1].n_bricks, 4);
+    CHECK(st[0].n_coarse_bricks >= 4); /* one each at least, 125 coarse bricks apart */
+    CHECK_EQ_INT(st[0].n_coarse_bricks, st[1].n_coarse_bricks);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
