@@ -40,6 +40,7 @@ struct render_particles {
     bool too_many; /* the last binning needed more bricks than a binding holds */
     bool unbound;  /* a failed update left the pass bound to a destroyed map */
     uint32_t cells_per_pass, n_passes;
+    double box_w[2][3]; /* the particles' box (world), lowest then highest */
     double last_ms;
 };
 
@@ -77,7 +78,8 @@ static bf_status check_config(const render_particles_config *in, render_particle
 
 /* The set's box, origin and level, or BF_INVALID_ARG for a bad position or
  * a set too wide for the cells. */
-static bf_status set_frame(const render_particles_config *c, const float *xyz, uint64_t n, bf_vec3 *origin)
+static bf_status set_frame(const render_particles_config *c, const float *xyz, uint64_t n, bf_vec3 *origin,
+                           double box[2][3])
 {
     double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
     for (uint64_t i = 0; i < n; i++)
@@ -100,6 +102,7 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
             return bf_fail(BF_INVALID_ARG, "render: particles span %g m on axis %d: more than %lld cells of %g m",
                            hi[a] - lo[a], a, (long long)PARTICLES_MAX_CELLS, c->cell_m);
     *origin = bf_v3(lo[0] - margin, lo[1] - margin, lo[2] - margin);
+    for (int a = 0; a < 3; a++) box[0][a] = lo[a], box[1][a] = hi[a];
     return BF_OK;
 }
 
@@ -173,7 +176,8 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
 {
     const render_particles_config *c = &ps->cfg;
     bf_vec3 origin = {0, 0, 0};
-    bf_status s = set_frame(c, xyz, n, &origin);
+    double box[2][3];
+    bf_status s = set_frame(c, xyz, n, &origin, box);
     if (s != BF_OK) return s;
     render_particles_stats *st = &ps->stats;
     double t0 = bf_time_s(), c0 = cpu_s();
@@ -216,6 +220,7 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
     if (s != BF_OK) return s;
     st->n_particles = n;
     st->origin_w = origin;
+    memcpy(ps->box_w, box, sizeof box);
     st->n_cells = bs.n_cells;
     st->n_bricks = bs.n_occupied;
     st->n_coarse_bricks = bs.n_coarse;
@@ -382,6 +387,16 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
     };
     for (int r = 0; r < 3; r++)
         for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_mc.R[r][c];
+    /* The box in the map frame grown by the radius and a cell (rounding):
+     * every sphere lies in it. Empty set: a box no ray enters. */
+    const render_particles_stats *st = &ps->stats;
+    double grow = ps->cfg.radius_m + ps->cfg.cell_m, o[3] = {st->origin_w.x, st->origin_w.y, st->origin_w.z};
+    pc.box_lo = st->n_particles ? INFINITY : -1.0f;
+    for (int a = 0; a < 3 && st->n_particles; a++) {
+        float l = (float)(ps->box_w[0][a] - o[a] - grow);
+        if (l < pc.box_lo) pc.box_lo = l;
+    }
+    for (int a = 0; a < 3; a++) pc.box_hi[a] = st->n_particles ? (float)(ps->box_w[1][a] - o[a] + grow) : -2.0f;
     pc.t[0] = (float)T_mc.t.x, pc.t[1] = (float)T_mc.t.y, pc.t[2] = (float)T_mc.t.z;
     /* The images' earlier writes (the map's ray-cast and shading) -> this
      * pass's reads and writes of them. */

@@ -206,8 +206,10 @@ struct render_particles_push {
     bf_u32 flags;            /* RENDER_PARTICLES_FLAG_* */
     bf_u32 rgb;              /* the particles' colour, R in the low byte */
     bf_u32 cells_per_pass;   /* cells a ray walks in one dispatch */
+    bf_f32 box_lo;           /* the set's box grown by the radius, map frame: [box_lo, box_hi] on every axis */
+    bf_f32 box_hi[3];
 };
-#define RENDER_PARTICLES_PUSH_WORDS 28u
+#define RENDER_PARTICLES_PUSH_WORDS 32u
 #ifndef BF_GLSL
 typedef struct render_particles_push render_particles_push;
 _Static_assert(sizeof(render_particles_push) == RENDER_PARTICLES_PUSH_WORDS * 4, "render_particles_push must match std430");

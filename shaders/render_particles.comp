@@ -61,6 +61,12 @@ void main()
         float z = depth_io.v[pixel];
         if (z > 0.0) far_m = min(far_m, z);
     }
+    /* Only the set's box can hold a hit: the ray from where it enters the
+     * box to where it leaves (a ray that misses it is done). */
+    vec3 b0 = (vec3(pc.box_lo) - ray.o) * ray.inv_dir, b1 = (vec3(pc.box_hi[0], pc.box_hi[1], pc.box_hi[2]) - ray.o) * ray.inv_dir;
+    vec3 bn = min(b0, b1), bx = max(b0, b1);
+    s = max(s, max(bn.x, max(bn.y, bn.z)));
+    far_m = min(far_m, min(bx.x, min(bx.y, bx.z)));
     render_trace tr;
     tr.has_front = 0u;
     tr.front_depth = 0.0;

@@ -112,13 +112,15 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
  *
  * In a coarse brick a DDA (Amanatides & Woo 1987) visits the ray's cells;
  * at each cell a sphere reaches, the spheres that can meet the ray there
- * have their centres within the radius of the ray's piece in that cell:
- * the coarse cells of that box holding centres are looked up (one node
- * descent of three levels each) and their sub-brick words overlapping the
- * box searched with findLSB, each bit's sphere intersected with the ray.
- * A sphere's entry point lies in a cell it reaches, so once every reached
- * cell up to the current one was searched, a hit before the current
- * cell's exit is the nearest: the search stops there.
+ * have their centres within the radius of that cell: the coarse cells of
+ * that box holding centres are looked up (one node descent of three levels
+ * each) and their sub-brick words overlapping the box searched with
+ * findLSB, each bit's sphere intersected with the ray. Consecutive cells'
+ * boxes overlap: after a searched cell, the next searches only the slab of
+ * its box the last one did not cover, and the nearest entry found is
+ * carried along the ray. A sphere's entry point lies in a cell it reaches,
+ * so once every reached cell up to the current one was searched, a hit
+ * before the current cell's exit is the nearest: the search stops there.
  *
  * The work is counted (render_pwork): past RENDER_PARTICLES_WORK_BUDGET the
  * traverser pauses at the entry of the cell it was to search, reported as
@@ -137,8 +139,16 @@ float render_sphere_hit(render_ray ray, vec3 c, float r)
     return h < 0.0 ? -1.0 : tc - sqrt(h / a);
 }
 
-/* Loop iterations of this invocation in this dispatch, walk and search. */
+/* Per invocation and dispatch (render_particles_cache_clear): loop
+ * iterations of the walk and search so far; the nearest sphere entry found
+ * so far on the ray and its centre (carried from brick to brick: a sphere
+ * found near a brick's exit may be entered in the next); whether the last
+ * cell the DDA visited was searched, and that cell (global, coarse level). */
 uint render_pwork;
+float render_pbest;
+vec3 render_pbest_c;
+bool render_pchain;
+ivec3 render_plast;
 
 /* The last coarse lookup's parent: the node one level above the coarse
  * bricks (its cell on that level's grid, from the map origin) and its first
@@ -153,6 +163,10 @@ void render_particles_cache_clear()
     render_pcache_parent = ivec3(-2147483647);
     render_pcache_child = FUSION_NONE;
     render_pwork = 0u;
+    render_pbest = 3.0e38;
+    render_pbest_c = vec3(0.0);
+    render_pchain = false;
+    render_plast = ivec3(0);
 }
 
 /* The node of coarse brick b (level >= 1) through the parent cache, or
@@ -249,7 +263,11 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
 {
     render_walk_map m = render_particle_map();
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
-    float fine_m = voxel_m * 0.125, inv_f = 8.0 * inv_v, rc = r * inv_f;
+    float fine_m = voxel_m * 0.125, rc = r * 8.0 * inv_v;
+    /* The cells of centres (offsets from a coarse cell's first) whose
+     * sphere can reach into the coarse cell: centre (i + 0.5) within rc of
+     * [0, 8]. */
+    int lo_off = int(ceil(-rc - 0.5)), hi_off = int(floor(8.0 + rc - 0.5));
     vec3 p0 = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
     ivec3 idx = clamp(ivec3(floor((p0 - brick_lo) * inv_v)), ivec3(0), ivec3(7));
     ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
@@ -257,12 +275,12 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
     vec3 s_delta = voxel_m * abs(ray.inv_dir);
     ivec3 B = ivec3(floor(brick_lo * inv_v * 0.125 + 0.5));
     uint node_B = FUSION_NONE;
-    float best = s_out, s_enter = s_in;
-    vec3 best_c = vec3(0.0);
+    float s_enter = s_in;
     render_pwork += 4u; /* the walk's step to this brick */
     for (uint k = 0u; k < 24u; k++) {
         uint x = uint(idx.x), y = uint(idx.y), z = uint(idx.z);
         float s_next = min(min(s_max.x, min(s_max.y, s_max.z)), s_out);
+        ivec3 kg = B * 8 + idx;
         render_pwork++;
         if (((render_conf_word(slot, brick_word(x, y, z)) >> brick_bit(x, y, z)) & 1u) != 0u) {
             if (render_pwork > RENDER_PARTICLES_WORK_BUDGET) {
@@ -271,13 +289,24 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                 return true;
             }
             if (node_B == FUSION_NONE) node_B = render_particles_node(m, B, level);
-            /* Cells (global, on the centres' grid) whose centre c + 0.5 is
-             * within r of the ray's piece in this cell. */
-            vec3 pa = (ray.o + s_enter * ray.dir) * inv_f, pb = (ray.o + s_next * ray.dir) * inv_f;
-            ivec3 c0 = ivec3(floor(min(pa, pb) - rc - 0.5)), c1 = ivec3(ceil(max(pa, pb) + rc - 0.5));
-            render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE, best,
-                                    best_c);
-            if (best < s_next) break;
+            /* The centres whose spheres reach this cell; after a searched
+             * neighbour one step back along axis a, only the slab its
+             * search did not cover (the window slides one cell). */
+            ivec3 c0 = kg * 8 + lo_off, c1 = kg * 8 + hi_off;
+            ivec3 d = kg - render_plast;
+            if (render_pchain && abs(d.x) + abs(d.y) + abs(d.z) == 1) {
+                for (int a = 0; a < 3; a++) {
+                    if (d[a] > 0) c0[a] = c1[a] - 7;
+                    if (d[a] < 0) c1[a] = c0[a] + 7;
+                }
+            }
+            render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE,
+                                    render_pbest, render_pbest_c);
+            render_pchain = true;
+            render_plast = kg;
+            if (render_pbest < s_next) break;
+        } else {
+            render_pchain = false;
         }
         if (s_next >= s_out) break;
         if (s_max.x <= s_max.y && s_max.x <= s_max.z) {
@@ -293,10 +322,10 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
         if (any(lessThan(idx, ivec3(0))) || any(greaterThan(idx, ivec3(7)))) break;
         s_enter = s_next;
     }
-    if (!(best < s_out)) return false;
-    tr.hit_depth = best;
+    if (!(render_pbest < s_out)) return false;
+    tr.hit_depth = render_pbest;
     tr.hit_level = level + RENDER_PARTICLES_COARSE_LEVELS;
-    tr.hit_normal = (ray.o + best * ray.dir - best_c) / r;
+    tr.hit_normal = (ray.o + render_pbest * ray.dir - render_pbest_c) / r;
     return true;
 }
 
