@@ -35,11 +35,13 @@ struct render_particles {
     gpu_bindings *bind;
     gpu_buffer *bound[4]; /* the caster images bound at 3..6 */
     gpu_buffer *resume;   /* binding 8: per pixel, where a ray resumes; made for the image size */
+    gpu_buffer *lists;    /* binding 9: two lists of unfinished rays' pixels; made for the image size */
+    gpu_buffer *args;     /* binding 10: per dispatch, the next one's group counts and list length */
     particles_binner *binner; /* kept: a re-binned set touches no new host memory */
     uint32_t brick_cap, node_cap, n_buckets; /* what ps->map holds */
     bool too_many; /* the last binning needed more bricks than a binding holds */
     bool unbound;  /* a failed update left the pass bound to a destroyed map */
-    uint32_t cells_per_pass, n_passes;
+    uint32_t cells_per_pass, n_passes, work_budget;
     double box_w[2][3]; /* the particles' box (world), lowest then highest */
     double last_ms;
 };
@@ -72,6 +74,9 @@ static bf_status check_config(const render_particles_config *in, render_particle
     if (!(c.cell_m >= 1e-5f) || !(c.cell_m <= 2 * c.radius_m))
         return bf_fail(BF_INVALID_ARG, "render: particle cell %g m (10 um .. 2 radii = %g m)", c.cell_m,
                        2 * c.radius_m);
+    if (c.work_budget > RENDER_PARTICLES_WORK_BUDGET)
+        return bf_fail(BF_INVALID_ARG, "render: particle work budget %u (at most %u)", c.work_budget,
+                       RENDER_PARTICLES_WORK_BUDGET);
     *out = c;
     return BF_OK;
 }
@@ -110,15 +115,16 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
  * (shaders/render.glsl.h, RENDER_PARTICLES_LOOP_BUDGET). The limit counts a
  * loop's iterations once for the 8 lanes running it in lockstep: a walk
  * step costs at most its descent (the coarse level's depth) and the DDA's
- * 24 steps, and the searches stop themselves at
- * RENDER_PARTICLES_WORK_BUDGET. Four dispatches more than the walk needs
- * finish the rays paused by the searches' budget. */
+ * 24 steps, and the searches stop themselves at the work budget. The
+ * dispatches after the first run only on the rays left unfinished (a list,
+ * indirect group counts): a dispatch with none costs nothing, so there are
+ * 28 more than the walk needs, for the rays the searches paused. */
 static void pass_budget(uint32_t coarse_level, uint32_t *cells_per_pass, uint32_t *n_passes)
 {
     double per_cell = 1.0 + coarse_level + 24.0;
     double k = floor((RENDER_PARTICLES_LOOP_BUDGET - RENDER_PARTICLES_WORK_BUDGET) / per_cell);
     *cells_per_pass = k < 1 ? 1u : (k > 256 ? 256u : (uint32_t)k);
-    *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass + 4;
+    *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass + 28;
 }
 
 /* The map's buffers -> the pass's bindings 0, 1, 2 and 7. */
@@ -241,6 +247,7 @@ static bf_status set_cell(render_particles *ps, const render_particles_config *c
     st->cell_m = c->cell_m;
     st->chunk_m = (float)(c->cell_m * 8.0 * (double)(1u << st->level));
     pass_budget(st->level - PARTICLES_COARSE_LEVELS, &ps->cells_per_pass, &ps->n_passes);
+    ps->work_budget = c->work_budget ? c->work_budget : RENDER_PARTICLES_WORK_BUDGET;
     if (ps->map) { /* another cell: another chunk edge */
         fusion_destroy(ps->map);
         ps->map = NULL;
@@ -274,18 +281,29 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
         .name = "render.particles",
         .spirv = bf_spv_render_particles,
         .spirv_bytes = bf_spv_render_particles_size,
-        .n_buffers = 9,
+        .n_buffers = 11,
         .push_bytes = sizeof(render_particles_push),
         .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &ps->pipe);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 9, "render.particles", &ps->bind);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 11, "render.particles", &ps->bind);
     if (s == BF_OK) s = bind_map(ps);
-    /* A resume buffer until the first cast makes one for its images (the warm-up binds every slot). */
+    /* Resume and list buffers until the first cast makes them for its
+     * images (the warm-up binds every slot); the arguments for every
+     * dispatch. */
     gpu_buffer_desc rd = {.name = "render.particles.resume", .size_bytes = 16, .memory = GPU_MEMORY_DEVICE,
                           .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
+    gpu_buffer_desc ld = rd, ad = rd;
+    ld.name = "render.particles.lists";
+    ad.name = "render.particles.args";
+    ad.size_bytes = (uint64_t)ps->n_passes * RENDER_PARTICLES_ARGS_WORDS * 4;
+    ad.usage |= GPU_USAGE_INDIRECT;
     if (s == BF_OK) s = gpu_buffer_create(ctx, &rd, &ps->resume);
+    if (s == BF_OK) s = gpu_buffer_create(ctx, &ld, &ps->lists);
+    if (s == BF_OK) s = gpu_buffer_create(ctx, &ad, &ps->args);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 8, ps->resume, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 9, ps->lists, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 10, ps->args, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_pipeline_warm_up(ctx, &ps->pipe, 1);
     if (s != BF_OK) {
         render_particles_destroy(ps);
@@ -314,6 +332,8 @@ void render_particles_destroy(render_particles *ps)
     gpu_bindings_destroy(ps->bind);
     gpu_pipeline_destroy(ps->pipe);
     gpu_buffer_destroy(ps->resume);
+    gpu_buffer_destroy(ps->lists);
+    gpu_buffer_destroy(ps->args);
     fusion_destroy(ps->map);
     particles_binner_destroy(ps->binner);
     memset(ps, 0xff, sizeof *ps); /* poison: a use after destroy fails loudly */
@@ -323,6 +343,18 @@ void render_particles_destroy(render_particles *ps)
 const render_particles_stats *render_particles_get_stats(const render_particles *ps) { return &ps->stats; }
 
 double render_particles_last_ms(const render_particles *ps) { return ps->last_ms; }
+
+bf_status render_particles_last_resumed(render_particles *ps, uint64_t *rays)
+{
+    if (!ps || !rays) return bf_fail(BF_INVALID_ARG, "render_particles_last_resumed: NULL argument");
+    uint32_t *a = bf_malloc((size_t)ps->n_passes * RENDER_PARTICLES_ARGS_WORDS * 4);
+    if (!a) return bf_fail(BF_NO_MEMORY, "render: particle pass counts");
+    bf_status s = gpu_buffer_download(ps->args, 0, a, (uint64_t)ps->n_passes * RENDER_PARTICLES_ARGS_WORDS * 4);
+    *rays = 0;
+    for (uint32_t p = 0; s == BF_OK && p < ps->n_passes; p++) *rays += a[p * RENDER_PARTICLES_ARGS_WORDS + 3];
+    free(a);
+    return s;
+}
 
 /* ------------------------------------------------------------ the pass */
 
@@ -351,19 +383,29 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
     }
     uint64_t n_px = (uint64_t)K->width * K->height;
     if (gpu_buffer_size(ps->resume) < n_px * 4) {
-        /* A new image size: the old buffer's last reader was waited for
+        /* A new image size: the old buffers' last reader was waited for
          * (render_scene waits; a caller recording its own waits too). */
-        gpu_buffer *nb;
+        gpu_buffer *nb = NULL, *nl = NULL;
         gpu_buffer_desc rd = {.name = "render.particles.resume", .size_bytes = n_px * 4, .memory = GPU_MEMORY_DEVICE,
                               .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
+        gpu_buffer_desc ld = rd;
+        ld.name = "render.particles.lists";
+        ld.size_bytes = 2 * n_px * 4;
         bf_status s = gpu_buffer_create(ps->ctx, &rd, &nb);
+        if (s == BF_OK) s = gpu_buffer_create(ps->ctx, &ld, &nl);
         if (s == BF_OK) s = gpu_bindings_set(ps->bind, 8, nb, 0, GPU_WHOLE_SIZE);
+        if (s == BF_OK) s = gpu_bindings_set(ps->bind, 9, nl, 0, GPU_WHOLE_SIZE);
         if (s != BF_OK) {
+            /* The old buffers stay bound where the new ones were not. */
+            gpu_bindings_set(ps->bind, 8, ps->resume, 0, GPU_WHOLE_SIZE);
+            gpu_bindings_set(ps->bind, 9, ps->lists, 0, GPU_WHOLE_SIZE);
             gpu_buffer_destroy(nb);
+            gpu_buffer_destroy(nl);
             return s;
         }
         gpu_buffer_destroy(ps->resume);
-        ps->resume = nb;
+        gpu_buffer_destroy(ps->lists);
+        ps->resume = nb, ps->lists = nl;
     }
     fusion_gpu_view v = fusion_gpu_view_get(ps->map);
     bf_se3 T_mc = fusion_camera_to_map(ps->map, T_wc);
@@ -383,7 +425,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         .radius_m = ps->cfg.radius_m,
         .flags = keep_nearer ? RENDER_PARTICLES_FLAG_KEEP_NEARER : 0u,
         .rgb = ps->cfg.rgb,
-        .cells_per_pass = ps->cells_per_pass,
+        .limits = ps->cells_per_pass | ps->work_budget << RENDER_PARTICLES_LIMIT_CELL_BITS,
     };
     for (int r = 0; r < 3; r++)
         for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_mc.R[r][c];
@@ -402,14 +444,24 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
      * pass's reads and writes of them. */
     gpu_cmd_barrier(ps->ctx, GPU_BARRIER_COMPUTE);
     gpu_cmd_stage_begin(ps->ctx, "render.particles");
+    /* The arguments of every dispatch zeroed (the last cast's reads were
+     * waited for) -> the dispatches' appends. */
+    gpu_cmd_fill(ps->ctx, ps->args, 0, GPU_WHOLE_SIZE, 0);
+    gpu_cmd_barrier(ps->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
     uint32_t flags = pc.flags;
     for (uint32_t p = 0; p < ps->n_passes; p++) {
-        pc.flags = flags | (p == 0 ? RENDER_PARTICLES_FLAG_FIRST : 0u) |
-                   (p + 1 == ps->n_passes ? RENDER_PARTICLES_FLAG_LAST : 0u);
-        /* The last dispatch's resume depths and images -> this one's reads. */
-        if (p > 0) gpu_cmd_barrier(ps->ctx, GPU_BARRIER_COMPUTE);
-        gpu_cmd_dispatch(ps->ctx, ps->pipe, ps->bind, &pc, gpu_groups(K->width, RENDER_LOCAL_X),
-                         gpu_groups(K->height, RENDER_LOCAL_Y), 1);
+        pc.flags = flags | (p == 0 ? RENDER_PARTICLES_FLAG_FIRST : RENDER_PARTICLES_FLAG_LIST) |
+                   (p + 1 == ps->n_passes ? RENDER_PARTICLES_FLAG_LAST : 0u) | p << RENDER_PARTICLES_PASS_SHIFT;
+        if (p == 0) {
+            gpu_cmd_dispatch(ps->ctx, ps->pipe, ps->bind, &pc, gpu_groups(K->width, RENDER_LOCAL_X),
+                             gpu_groups(K->height, RENDER_LOCAL_Y), 1);
+            continue;
+        }
+        /* The last dispatch's list, its group counts, resume depths and
+         * images -> this one's indirect arguments and reads. */
+        gpu_cmd_barrier(ps->ctx, GPU_BARRIER_INDIRECT);
+        gpu_cmd_dispatch_indirect(ps->ctx, ps->pipe, ps->bind, &pc, ps->args,
+                                  (uint64_t)(p - 1) * RENDER_PARTICLES_ARGS_WORDS * 4);
     }
     gpu_cmd_stage_end(ps->ctx);
     /* The images -> the readers recorded next. */

@@ -174,6 +174,9 @@ typedef struct render_particles_config {
                         2 mm of the exact spheres' on 95% of the pixels at a 1 cm radius, docs/particles.md), or
                         radius / 4 where the finer cells' bricks do not fit one binding (large sparse sets) */
     uint32_t rgb;    /* colour, R in the low byte; default a water blue */
+    uint32_t work_budget; /* loop iterations a ray's searches take in one dispatch before the ray pauses for the
+                             next (lavapipe ends a shader's loops past 65,535); 0 (default):
+                             RENDER_PARTICLES_WORK_BUDGET, the most allowed; less only adds dispatches (tests) */
 } render_particles_config;
 
 render_particles_config render_particles_config_default(void);
@@ -215,6 +218,10 @@ void render_particles_destroy(render_particles *ps);
 const render_particles_stats *render_particles_get_stats(const render_particles *ps);
 /* GPU time of the last particle pass [ms] (Vulkan timestamps). */
 double render_particles_last_ms(const render_particles *ps);
+/* Rays of the last particle pass continued by a later dispatch, each time
+ * one was (a ray the walk's or the searches' budget paused; read back from
+ * the GPU: after the pass was waited for, as render_scene does). */
+bf_status render_particles_last_resumed(render_particles *ps, uint64_t *rays);
 
 /* Records the particle pass into the context's open command buffer: it
  * writes the caster's depth, level, normal and colour images (no shading

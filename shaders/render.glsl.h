@@ -46,9 +46,9 @@
  * lavapipe ends every loop of a shader once its loops together ran 65,535
  * iterations for one call (8 lanes; gallivm's LP_MAX_TGSI_LOOP_ITERATIONS),
  * and a particle search runs loops within loops. Each dispatch walks at
- * most render_particles_push.cells_per_pass coarse bricks of a ray and
- * searches until its count of loop iterations passes
- * RENDER_PARTICLES_WORK_BUDGET (a cell's search is at most a few hundred),
+ * most a number of coarse bricks of a ray (render_particles_push.limits)
+ * and searches until its count of loop iterations passes a budget of at
+ * most RENDER_PARTICLES_WORK_BUDGET (a cell's search is a few hundred),
  * then pauses the ray (a hit of level RENDER_PARTICLES_PAUSED at the depth
  * to resume from); the next dispatch resumes it. A ray walks at most
  * RENDER_PARTICLES_MAX_CELLS coarse bricks in all (docs/particles.md). */
@@ -56,8 +56,10 @@
 #define RENDER_PARTICLES_WORK_BUDGET 30000u
 #define RENDER_PARTICLES_PAUSED 0xfffffffeu
 #define RENDER_PARTICLES_MAX_CELLS 1024u
+#define RENDER_PARTICLES_LIMIT_CELL_BITS 12u
 #define RENDER_PARTICLES_COARSE_LEVELS 3u
 #define RENDER_PARTICLES_MAX_CELLS 1024u
+#define RENDER_PARTICLES_LIMIT_CELL_BITS 12u
 
 /* Sub-voxel refinement of a tracking hit (render_raycast.comp's
  * subvoxel_depth, tests/render/raycast_ref.c in double): Newton steps on the
@@ -194,6 +196,13 @@ BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
 #define RENDER_PARTICLES_FLAG_KEEP_NEARER 1u /* a pixel's existing hit (the map's) stays where it is nearer */
 #define RENDER_PARTICLES_FLAG_FIRST 2u       /* the first dispatch: rays start at near_m */
 #define RENDER_PARTICLES_FLAG_LAST 4u        /* the last dispatch: rays not done are misses */
+#define RENDER_PARTICLES_FLAG_LIST 8u        /* a later dispatch: the rays of the last one's list, not the image */
+/* The dispatch's index in flags' high bits: the list and arguments it
+ * appends its unfinished rays to (render/particles.c). */
+#define RENDER_PARTICLES_PASS_SHIFT 8u
+/* Per dispatch in the arguments buffer: the indirect group counts (x, y, z)
+ * of the next dispatch and the count of rays appended. */
+#define RENDER_PARTICLES_ARGS_WORDS 4u
 struct render_particles_push {
     bf_f32 R[9];             /* camera to particle-map rotation, row-major */
     bf_f32 t[3];             /* camera centre in the particle map's frame [m] */
@@ -203,9 +212,10 @@ struct render_particles_push {
     bf_f32 chunk_m;
     bf_u32 n_buckets, n_overflow, max_level;
     bf_f32 radius_m;         /* every particle's sphere */
-    bf_u32 flags;            /* RENDER_PARTICLES_FLAG_* */
+    bf_u32 flags;            /* RENDER_PARTICLES_FLAG_*, the dispatch's index << RENDER_PARTICLES_PASS_SHIFT */
     bf_u32 rgb;              /* the particles' colour, R in the low byte */
-    bf_u32 cells_per_pass;   /* cells a ray walks in one dispatch */
+    bf_u32 limits;           /* per ray and dispatch: coarse bricks walked (bits 0-11) and the searches'
+                                work budget (bits 12-31; RENDER_PARTICLES_WORK_BUDGET or less) */
     bf_f32 box_lo;           /* the set's box grown by the radius, map frame: [box_lo, box_hi] on every axis */
     bf_f32 box_hi[3];
 };

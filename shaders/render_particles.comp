@@ -5,7 +5,8 @@
  * `particles` traverser (shaders/render_traverse.glsl.h). It writes the
  * caster's images itself: depth, level, the sphere's normal and the shaded
  * colour. The walk runs on the particles' coarse level (max_level is that
- * level). With RENDER_PARTICLES_FLAG_KEEP_NEARER the pixel's existing hit
+ * level). The first dispatch covers the image; each later one only the rays
+ * the last one left unfinished (a list and indirect group counts). With RENDER_PARTICLES_FLAG_KEEP_NEARER the pixel's existing hit
  * (the map's ray-cast, recorded just before) bounds the ray, and a pixel
  * the particles do not reach in front of it keeps it: one image with the
  * nearest hit of either. A dispatch walks a bounded number of cells per ray
@@ -28,6 +29,12 @@ layout(std430, binding = 6) writeonly buffer Colour { uint v[]; } colour_out;
 layout(std430, binding = 7) readonly buffer Reach { uint w[]; } reach_pool;
 /* Per pixel: the depth where the ray resumes in the next dispatch; -1: done. */
 layout(std430, binding = 8) buffer Resume { float v[]; } resume;
+/* Two lists of pixels (width x height each): dispatch k appends the rays it
+ * did not finish to list k % 2, which dispatch k + 1 walks; and per
+ * dispatch RENDER_PARTICLES_ARGS_WORDS: the next dispatch's group counts
+ * and the list's length (zeroed before the first). */
+layout(std430, binding = 9) buffer Lists { uint v[]; } lists;
+layout(std430, binding = 10) buffer Args { uint v[]; } args;
 
 layout(push_constant) uniform Push { render_particles_push pc; };
 
@@ -41,17 +48,42 @@ uint render_conf_word(uint slot, uint w) { return reach_pool.w[slot * BRICK_WORD
 float render_particle_radius_m() { return pc.radius_m; }
 render_walk_map render_particle_map()
 {
-    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, pc.cells_per_pass);
+    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow,
+                           pc.limits & ((1u << RENDER_PARTICLES_LIMIT_CELL_BITS) - 1u));
 }
+uint render_particles_budget() { return pc.limits >> RENDER_PARTICLES_LIMIT_CELL_BITS; }
 
 #define RENDER_TRAVERSE_PARTICLES
 #include "render_traverse.glsl.h"
 
+/* Appends an unfinished ray to this dispatch's list; the next dispatch
+ * runs a workgroup per workgroup size of them. */
+void append(uint pixel)
+{
+    uint k = pc.flags >> RENDER_PARTICLES_PASS_SHIFT, n_px = pc.width * pc.height;
+    uint a = k * RENDER_PARTICLES_ARGS_WORDS;
+    uint i = atomicAdd(args.v[a + 3u], 1u);
+    lists.v[(k & 1u) * n_px + i] = pixel;
+    atomicMax(args.v[a], i / (gl_WorkGroupSize.x * gl_WorkGroupSize.y) + 1u);
+    args.v[a + 1u] = 1u;
+    args.v[a + 2u] = 1u;
+}
+
 void main()
 {
-    uvec2 px = gl_GlobalInvocationID.xy;
-    if (px.x >= pc.width || px.y >= pc.height) return;
-    uint pixel = px.y * pc.width + px.x;
+    uint pixel;
+    uvec2 px;
+    if ((pc.flags & RENDER_PARTICLES_FLAG_LIST) != 0u) {
+        uint k = pc.flags >> RENDER_PARTICLES_PASS_SHIFT, n_px = pc.width * pc.height;
+        uint i = gl_WorkGroupID.x * (gl_WorkGroupSize.x * gl_WorkGroupSize.y) + gl_LocalInvocationIndex;
+        if (i >= args.v[(k - 1u) * RENDER_PARTICLES_ARGS_WORDS + 3u]) return;
+        pixel = lists.v[((k - 1u) & 1u) * n_px + i];
+        px = uvec2(pixel % pc.width, pixel / pc.width);
+    } else {
+        px = gl_GlobalInvocationID.xy;
+        if (px.x >= pc.width || px.y >= pc.height) return;
+        pixel = px.y * pc.width + px.x;
+    }
     float s = (pc.flags & RENDER_PARTICLES_FLAG_FIRST) != 0u ? pc.near_m : resume.v[pixel];
     if (s < 0.0) return; /* done in an earlier dispatch */
     render_ray ray = render_pixel_ray(px, pc.R, pc.t, pc.fx, pc.fy, pc.cx, pc.cy);
@@ -80,7 +112,10 @@ void main()
     bool hit = walked && !paused && tr.hit_depth < far_m;
     bool done = hit || s >= far_m || (pc.flags & RENDER_PARTICLES_FLAG_LAST) != 0u;
     resume.v[pixel] = done ? -1.0 : s;
-    if (!done) return;
+    if (!done) {
+        append(pixel);
+        return;
+    }
     if (hit) {
         /* The normal in camera coordinates: R^T n (R takes camera to map). */
         vec3 n = tr.hit_normal;

@@ -23,6 +23,7 @@
  *   float render_particle_radius_m();                     (particles)
  *   uint render_conf_word(uint slot, uint w);             (particles: the reach bits)
  *   render_walk_map render_particle_map();                (particles: neighbour bricks)
+ *   uint render_particles_budget();                       (particles: work before a pause)
  *
  * This file is GLSL only.
  */
@@ -122,7 +123,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
  * so once every reached cell up to the current one was searched, a hit
  * before the current cell's exit is the nearest: the search stops there.
  *
- * The work is counted (render_pwork): past RENDER_PARTICLES_WORK_BUDGET the
+ * The work is counted (render_pwork): past render_particles_budget() the
  * traverser pauses at the entry of the cell it was to search, reported as
  * a hit of level RENDER_PARTICLES_PAUSED at that depth, and the next
  * dispatch resumes the ray there (render_particles.comp). */
@@ -283,7 +284,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
         ivec3 kg = B * 8 + idx;
         render_pwork++;
         if (((render_conf_word(slot, brick_word(x, y, z)) >> brick_bit(x, y, z)) & 1u) != 0u) {
-            if (render_pwork > RENDER_PARTICLES_WORK_BUDGET) {
+            if (render_pwork > render_particles_budget()) {
                 tr.hit_depth = s_enter;
                 tr.hit_level = RENDER_PARTICLES_PAUSED;
                 return true;

@@ -12,6 +12,7 @@
 #include "particles_ref.h"
 #include "render/render.h"
 #include "shaders/fusion.glsl.h"
+#include "shaders/render.glsl.h"
 
 static const bf_intrinsics K_VIEW = {200, 150, 190.0, 190.0, 99.5, 74.5, 5000};
 
@@ -174,6 +175,64 @@ BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
     bf_se3 MT = bf_se3_mul(&M, &T);
     check_set(ctx, rc, turned, m.n_verts, &MT, "turned");
     free(turned);
+    render_destroy(rc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+    mesh_free(&m);
+}
+
+/* Rays paused by the searches' work budget resume in later dispatches
+ * (the rays a dispatch leaves unfinished, listed, and an indirect
+ * dispatch over them) exactly where they stopped: with a budget of 40
+ * loop iterations the rays pause about 60,000 times in all (the hit ones
+ * twice on average), and the image is the one the default budget makes,
+ * depth for depth and colour for colour (the same candidate spheres, the
+ * same float operations); with the default none pauses on this view. */
+BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
+{
+    const char *path = bf_test_data("particles/dambreak_29814.ply");
+    if (!path) BF_SKIP("shared data absent: particles/dambreak_29814.ply");
+    mesh_data m = {0};
+    CHECK_OK(mesh_read_ply(path, &m));
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
+    bf_se3 T = look_at(bf_v3(0.8, -0.55, 0.75), bf_v3(0.55, 0.35, 0.15), bf_v3(0, 0, 1));
+    render_options opt = render_options_display();
+    opt.far_m = 8;
+    uint32_t n_px = K_VIEW.width * K_VIEW.height;
+    float *depth[2] = {malloc(n_px * 4), malloc(n_px * 4)};
+    uint8_t *colour[2] = {malloc(n_px * 3), malloc(n_px * 3)};
+    uint64_t resumed[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        render_particles_config pc = render_particles_config_default();
+        pc.work_budget = k ? 40 : 0;
+        render_particles *ps;
+        CHECK_OK(render_particles_create(ctx, &pc, m.xyz, m.n_verts, &ps));
+        CHECK_OK(render_scene(rc, NULL, ps, &K_VIEW, &T, &opt));
+        CHECK_OK(render_particles_last_resumed(ps, &resumed[k]));
+        render_images im;
+        CHECK_OK(render_download(rc, &im));
+        memcpy(depth[k], im.depth, n_px * 4);
+        memcpy(colour[k], im.rgb, n_px * 3);
+        render_images_free(&im);
+        render_particles_destroy(ps);
+    }
+    uint32_t n_hit = 0;
+    for (uint32_t i = 0; i < n_px; i++) n_hit += depth[0][i] > 0;
+    fprintf(stderr, "  %u pixels hit; rays resumed: %llu with the default budget, %llu with 40\n", n_hit,
+            (unsigned long long)resumed[0], (unsigned long long)resumed[1]);
+    CHECK(n_hit > n_px / 3);
+    CHECK_EQ_INT(resumed[0], 0);
+    CHECK(resumed[1] > n_hit / 2);
+    CHECK(memcmp(depth[0], depth[1], n_px * 4) == 0);
+    CHECK(memcmp(colour[0], colour[1], n_px * 3) == 0);
+    render_particles_config bad = render_particles_config_default();
+    bad.work_budget = RENDER_PARTICLES_WORK_BUDGET + 1;
+    render_particles *ps = NULL;
+    CHECK(render_particles_create(ctx, &bad, m.xyz, m.n_verts, &ps) == BF_INVALID_ARG && !ps);
+    for (int k = 0; k < 2; k++) free(depth[k]), free(colour[k]);
     render_destroy(rc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
