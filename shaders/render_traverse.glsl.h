@@ -234,6 +234,11 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                 uvec3 kc = uvec3(k & 7);
                 if (((render_sign_word(sl, brick_word(kc.x, kc.y, kc.z)) >> brick_bit(kc.x, kc.y, kc.z)) & 1u) == 0u)
                     continue;
+                /* The ray must pass within r of the cell's centres: through
+                 * the cell grown by r (the slab test, beyond s_lo). */
+                vec3 g0 = (vec3(k * 8) * fine_m - r - ray.o) * ray.inv_dir, g1 = g0 + (8.0 * fine_m + 2.0 * r) * ray.inv_dir;
+                vec3 gn = min(g0, g1), gx = max(g0, g1);
+                if (min(gx.x, min(gx.y, gx.z)) < max(s_lo, max(gn.x, max(gn.y, gn.z)))) continue;
                 uint fs = render_particles_centres(node, k);
                 render_pwork += RENDER_PARTICLES_COARSE_LEVELS;
                 if (fs == FUSION_NONE) continue;
