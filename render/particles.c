@@ -115,13 +115,13 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
  * (shaders/render.glsl.h, RENDER_PARTICLES_LOOP_BUDGET). The limit counts a
  * loop's iterations once for the 8 lanes running it in lockstep: a walk
  * step costs at most its descent (the coarse level's depth) and the DDA's
- * 24 steps, and the searches stop themselves at the work budget. The
+ * 32 steps (cells and skipped sub-bricks), and the searches stop themselves at the work budget. The
  * dispatches after the first run only on the rays left unfinished (a list,
  * indirect group counts): a dispatch with none costs nothing, so there are
  * 28 more than the walk needs, for the rays the searches paused. */
 static void pass_budget(uint32_t coarse_level, uint32_t *cells_per_pass, uint32_t *n_passes)
 {
-    double per_cell = 1.0 + coarse_level + 24.0;
+    double per_cell = 1.0 + coarse_level + 32.0;
     double k = floor((RENDER_PARTICLES_LOOP_BUDGET - RENDER_PARTICLES_WORK_BUDGET) / per_cell);
     *cells_per_pass = k < 1 ? 1u : (k > 256 ? 256u : (uint32_t)k);
     *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass + 28;

@@ -283,12 +283,29 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
     uint node_B = FUSION_NONE;
     float s_enter = s_in;
     render_pwork += 4u; /* the walk's step to this brick */
-    for (uint k = 0u; k < 24u; k++) {
+    for (uint k = 0u; k < 32u; k++) {
         uint x = uint(idx.x), y = uint(idx.y), z = uint(idx.z);
         float s_next = min(min(s_max.x, min(s_max.y, s_max.z)), s_out);
         ivec3 kg = B * 8 + idx;
         render_pwork++;
-        if (((render_conf_word(slot, brick_word(x, y, z)) >> brick_bit(x, y, z)) & 1u) != 0u) {
+        uint reach = render_conf_word(slot, brick_word(x, y, z));
+        if (reach == 0u) {
+            /* No sphere reaches this cell's sub-brick (4 x 4 x 2 cells):
+             * the DDA goes on from where the ray leaves it. */
+            ivec3 q0 = idx & ivec3(~3, ~3, ~1);
+            vec3 q_hi = brick_lo + (vec3(q0) + vec3(greaterThan(ray.dir, vec3(0.0))) * vec3(4.0, 4.0, 2.0)) * voxel_m;
+            vec3 qs = (q_hi - ray.o) * ray.inv_dir;
+            float s_q = min(qs.x, min(qs.y, qs.z));
+            render_pchain = false;
+            if (s_q >= s_out) break;
+            s_enter = s_q;
+            vec3 pq = ray.o + (s_q + RENDER_NUDGE) * ray.dir;
+            idx = ivec3(floor((pq - brick_lo) * inv_v));
+            if (any(lessThan(idx, ivec3(0))) || any(greaterThan(idx, ivec3(7)))) break;
+            s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
+            continue;
+        }
+        if (((reach >> brick_bit(x, y, z)) & 1u) != 0u) {
             if (render_pwork > render_particles_budget()) {
                 tr.hit_depth = s_enter;
                 tr.hit_level = RENDER_PARTICLES_PAUSED;
