@@ -5,7 +5,7 @@
 # binding), each binned and ray-cast at 640x480 by `bitfuse render` (the
 # median of 3 casts) from two poses: close (a corner of the set fills the
 # image, every ray hits deep in the cloud) and whole (the set seen whole
-# from its long side, 5 m away, as bench_particles views it). Writes
+# from its long side, 2 m away: it spans 525 of the 640 columns). Writes
 # OUT/particles_sweep.md (a table) and OUT/particles_sweep.png (a plot).
 # Usage: bench/particles_sweep.sh OUT [--cell M] [N ...]   (default N: 10000 100000 1000000)
 set -euo pipefail
@@ -28,7 +28,7 @@ for n in $NS; do
         --pose "2 -0.8 0.9 -0.772625 -0.329703 0.212940 0.499002" --size 640x480 --out "$OUT/p$n.png" --repeat 3 \
         >"$OUT/p$n.txt" 2>/dev/null
     "$B" render --particles "$OUT/p$n.ply" --particle-radius 0.005 "${CELL[@]}" \
-        --pose "1 -5 0.5 -0.70710678 0 0 0.70710678" --size 640x480 --out "$OUT/p$n-whole.png" --repeat 3 \
+        --pose "1 -2 0.5 -0.70710678 0 0 0.70710678" --size 640x480 --out "$OUT/p$n-whole.png" --repeat 3 \
         >"$OUT/p$n-whole.txt" 2>/dev/null
     python3 - "$OUT/p$n.txt" "$n" "$OUT/p$n-whole.txt" >>"$T" <<'PY'
 import re, sys
