@@ -214,53 +214,80 @@ uint render_particles_centres(uint node, ivec3 k)
     return slot < FUSION_LOCKED ? slot : FUSION_NONE;
 }
 
+/* The set bits of a sub-brick word whose cells lie in [l, h] (cells of the
+ * word, x and y in [0, 3], z in [0, 1]; bit x + 4 y + 16 z). */
+uint render_particles_box_mask(ivec3 l, ivec3 h)
+{
+    uint xm = ((1u << uint(h.x - l.x + 1)) - 1u) << uint(l.x);
+    uint ym = ((1u << uint(4 * (h.y - l.y + 1))) - 1u) << uint(4 * l.y);
+    uint zm = l.z == 0 ? (h.z == 1 ? 0xffffffffu : 0x0000ffffu) : 0xffff0000u;
+    return (xm * 0x11111111u) & (ym | (ym << 16)) & zm;
+}
+
 /* The nearest sphere entry in [s_lo, best) among the spheres whose centres
  * lie in the cells [c0, c1] (global, on the centres' grid of cells of
  * fine_m); level is the coarse level, B and node the coarse brick being
- * walked. */
+ * walked. The coarse cells of the box that hold centres are found as the
+ * set sign bits of the coarse bricks' sub-brick words under a mask of the
+ * box (findLSB), so empty coarse cells cost nothing. */
 void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 c1, uint level, ivec3 B, uint node_B,
                              uint slot_B, float fine_m, float r, float s_lo, inout float best, inout vec3 best_c)
 {
-    ivec3 k0 = c0 >> 3, k1 = c1 >> 3;
-    for (int kz = k0.z; kz <= k1.z; kz++)
-        for (int ky = k0.y; ky <= k1.y; ky++)
-            for (int kx = k0.x; kx <= k1.x; kx++) {
-                render_pwork++;
-                ivec3 k = ivec3(kx, ky, kz), kb = k >> 3;
+    ivec3 k0 = c0 >> 3, k1 = c1 >> 3, b0 = k0 >> 3, b1 = k1 >> 3;
+    for (int bz = b0.z; bz <= b1.z; bz++)
+        for (int by = b0.y; by <= b1.y; by++)
+            for (int bx = b0.x; bx <= b1.x; bx++) {
+                ivec3 kb = ivec3(bx, by, bz);
                 uint node = kb == B ? node_B : render_particles_node(m, kb, level);
+                render_pwork++;
                 if (node == FUSION_NONE) continue;
                 uint sl = kb == B ? slot_B : render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
                 if (sl >= FUSION_LOCKED) continue;
-                uvec3 kc = uvec3(k & 7);
-                if (((render_sign_word(sl, brick_word(kc.x, kc.y, kc.z)) >> brick_bit(kc.x, kc.y, kc.z)) & 1u) == 0u)
-                    continue;
-                /* The ray must pass within r of the cell's centres: through
-                 * the cell grown by r (the slab test, beyond s_lo). */
-                vec3 g0 = (vec3(k * 8) * fine_m - r - ray.o) * ray.inv_dir, g1 = g0 + (8.0 * fine_m + 2.0 * r) * ray.inv_dir;
-                vec3 gn = min(g0, g1), gx = max(g0, g1);
-                if (min(gx.x, min(gx.y, gx.z)) < max(s_lo, max(gn.x, max(gn.y, gn.z)))) continue;
-                uint fs = render_particles_centres(node, k);
-                render_pwork += RENDER_PARTICLES_COARSE_LEVELS;
-                if (fs == FUSION_NONE) continue;
-                ivec3 lo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), hi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
-                for (uint w = 0u; w < BRICK_WORDS; w++) {
-                    /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
-                    ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
-                    if (any(greaterThan(s0, hi)) || any(lessThan(s0 + ivec3(3, 3, 1), lo))) continue;
-                    render_pwork++;
-                    uint bits = render_sign_word(fs, w);
-                    while (bits != 0u) {
-                        int i = findLSB(bits);
-                        bits &= bits - 1u;
-                        render_pwork++;
-                        vec3 c = (vec3(k * 8 + s0 + ivec3(i & 3, (i >> 2) & 3, i >> 4)) + 0.5) * fine_m;
-                        float t = render_sphere_hit(ray, c, r);
-                        if (t >= s_lo && t < best) {
-                            best = t;
-                            best_c = c;
+                ivec3 lo = clamp(k0 - kb * 8, ivec3(0), ivec3(7)), hi = clamp(k1 - kb * 8, ivec3(0), ivec3(7));
+                ivec3 w0 = ivec3(lo.x >> 2, lo.y >> 2, lo.z >> 1), w1 = ivec3(hi.x >> 2, hi.y >> 2, hi.z >> 1);
+                for (int wz = w0.z; wz <= w1.z; wz++)
+                    for (int wy = w0.y; wy <= w1.y; wy++)
+                        for (int wx = w0.x; wx <= w1.x; wx++) {
+                            render_pwork++;
+                            ivec3 q0 = ivec3(4 * wx, 4 * wy, 2 * wz);
+                            uint occ = render_sign_word(sl, uint(wx + 2 * wy + 4 * wz)) &
+                                       render_particles_box_mask(max(lo - q0, ivec3(0)), min(hi - q0, ivec3(3, 3, 1)));
+                            while (occ != 0u) {
+                                int b = findLSB(occ);
+                                occ &= occ - 1u;
+                                render_pwork++;
+                                ivec3 k = kb * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
+                                /* The ray must pass within r of the cell's
+                                 * centres: through the cell grown by r (the
+                                 * slab test, beyond s_lo). */
+                                vec3 g0 = (vec3(k * 8) * fine_m - r - ray.o) * ray.inv_dir,
+                                     g1 = g0 + (8.0 * fine_m + 2.0 * r) * ray.inv_dir;
+                                vec3 gn = min(g0, g1), gx = max(g0, g1);
+                                if (min(gx.x, min(gx.y, gx.z)) < max(s_lo, max(gn.x, max(gn.y, gn.z)))) continue;
+                                uint fs = render_particles_centres(node, k);
+                                render_pwork += RENDER_PARTICLES_COARSE_LEVELS;
+                                if (fs == FUSION_NONE) continue;
+                                ivec3 flo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), fhi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
+                                for (uint w = 0u; w < BRICK_WORDS; w++) {
+                                    /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
+                                    ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
+                                    if (any(greaterThan(s0, fhi)) || any(lessThan(s0 + ivec3(3, 3, 1), flo))) continue;
+                                    render_pwork++;
+                                    uint bits = render_sign_word(fs, w);
+                                    while (bits != 0u) {
+                                        int i = findLSB(bits);
+                                        bits &= bits - 1u;
+                                        render_pwork++;
+                                        vec3 c = (vec3(k * 8 + s0 + ivec3(i & 3, (i >> 2) & 3, i >> 4)) + 0.5) * fine_m;
+                                        float t = render_sphere_hit(ray, c, r);
+                                        if (t >= s_lo && t < best) {
+                                            best = t;
+                                            best_c = c;
+                                        }
+                                    }
+                                }
+                            }
                         }
-                    }
-                }
             }
 }
 
