@@ -26,10 +26,11 @@ for cfg in "1 40" "2 40" "1 20" "2 20"; do
   $BIN eval-surface --reference "$SEQ/scene.ply" --reconstruction "$RUN/mesh.ply" --visible "$SEQ/seen.ply" \
        --json > "$RUN/surface.json"
   $PY - "$RUN" "$1" "$2" >> "$RESULTS" <<'EOF'
-import json, sys
+import sys
+sys.path.insert(0, "bench")
+from benchlib import run_outputs
 run, ratio, window = sys.argv[1:4]
-s = json.load(open(run + "/stats.json"))
-e = json.load(open(run + "/surface.json"))
+s, e = run_outputs(run)
 g = s["gpu_stage_ms_median"]
 acc = e["accuracy"]
 print("\t".join(str(x) for x in [ratio, window, round(s["frame_ms"]["median"], 1), round(s["frame_ms"]["p95"], 1),
@@ -40,22 +41,17 @@ EOF
 done
 
 $PY - "$RESULTS" "${SWEEP_COMMIT:-$(git rev-parse --short HEAD)}" "$FRAMES" <<'EOF'
-import csv, sys
+import sys
+sys.path.insert(0, "bench")
+from benchlib import pyplot, read_rows, write_table
 path, commit, frames = sys.argv[1:4]
-rows = list(csv.DictReader(open(path), delimiter="\t"))
-with open("docs/bench_fusion.md", "w") as f:
-    f.write("# Fusion: speed against error\n\n")
-    f.write(f"`bench/fusion_sweep.sh {frames}`, commit {commit}, synthetic room (Kinect v1 noise, seed 1) "
+rows = read_rows(path)
+write_table("docs/bench_fusion.md", "Fusion: speed against error",
+            f"`bench/fusion_sweep.sh {frames}`, commit {commit}, synthetic room (Kinect v1 noise, seed 1) "
             "along the fr1_xyz trajectory, ground-truth poses, lavapipe on 2 cores. Surface error of "
-            "`mesh.ply` against `scene.ply`; completeness over `seen.ply` within 1 cm.\n\n")
-    cols = list(rows[0].keys())
-    f.write("| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n")
-    for r in rows:
-        f.write("| " + " | ".join(r[c] for c in cols) + " |\n")
-try:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+            "`mesh.ply` against `scene.ply`; completeness over `seen.ply` within 1 cm.", rows)
+plt = pyplot()
+if plt:
     fig, ax = plt.subplots(figsize=(6, 4))
     for r in rows:
         ax.scatter(float(r["frame_ms_median"]), float(r["acc_median_mm"]))
@@ -65,7 +61,7 @@ try:
     ax.set_title("bitfuse fusion on lavapipe: speed against error")
     fig.tight_layout()
     fig.savefig("docs/bench_fusion.png", dpi=100)
-except ImportError:
+else:
     print("matplotlib missing: no plot", file=sys.stderr)
 EOF
 cat docs/bench_fusion.md

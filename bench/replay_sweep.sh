@@ -29,17 +29,17 @@ for cfg in $CONFIGS; do
   $BIN eval-surface --reference "$SEQ/scene.ply" --reconstruction "$RUN/mesh.ply" --visible "$SEQ/seen.ply" \
        --json > "$RUN/surface.json"
   $PY - "$RUN" "$ratio" "$icp" "$window" >> "$RESULTS" <<'PYEOF'
-import json, sys
+import sys
+sys.path.insert(0, "bench")
+from benchlib import run_outputs, stage_ms
 run, ratio, icp, window = sys.argv[1:5]
-s = json.load(open(run + "/stats.json"))
-e = json.load(open(run + "/surface.json"))
-g = s["gpu_stage_ms"]
+s, e = run_outputs(run)
 acc = e["accuracy"]
 t = s["tracking"]
 ate = s["ate_m"]["rmse"] if s["ate_m"] else float("nan")
 print("\t".join(str(x) for x in [ratio, icp, window, round(s["frame_ms"]["median"], 1), round(s["frame_ms"]["p95"], 1),
-      round(g["track"]["median"], 1), round(g["rof"]["median"], 1), round(g["raycast"]["median"], 1),
-      round(g["alloc"]["median"], 1), round(g["subcache"]["median"], 1), round(g["window"]["median"], 1),
+      stage_ms(s, "track"), stage_ms(s, "rof"), stage_ms(s, "raycast"),
+      stage_ms(s, "alloc"), stage_ms(s, "subcache"), stage_ms(s, "window"),
       round(1e3 * ate, 2), t["tracked"], t["lost"], round(s["map_bytes"]["total"] / 2**20, 2),
       round(1e3 * acc["median_m"], 2), round(1e3 * acc["p90_m"], 2), round(e["completeness"]["ratio"], 4)]))
 PYEOF
@@ -47,24 +47,19 @@ PYEOF
 done
 
 $PY - "$RESULTS" "${SWEEP_COMMIT:-$(git rev-parse --short HEAD)}" "$FRAMES" <<'PYEOF'
-import csv, sys
+import sys
+sys.path.insert(0, "bench")
+from benchlib import pyplot, read_rows, write_table
 path, commit, frames = sys.argv[1:4]
-rows = list(csv.DictReader(open(path), delimiter="\t"))
-with open("docs/bench_replay_sweep.md", "w") as f:
-    f.write("# Full loop: speed against error\n\n")
-    f.write(f"`bench/replay_sweep.sh {frames}`, commit {commit}: `bitfuse replay` (ICP tracking against the "
+rows = read_rows(path)
+write_table("docs/bench_replay_sweep.md", "Full loop: speed against error",
+            f"`bench/replay_sweep.sh {frames}`, commit {commit}: `bitfuse replay` (ICP tracking against the "
             "ROF-smoothed ray-cast, fusion, ray-cast) on a synthetic room (640x480, Kinect v1 noise, seed 1) "
             "along the real fr1_xyz trajectory, started at the first true pose; lavapipe on 2 cores. "
             "ATE RMSE as TUM's evaluate_ate.py; surface error of `mesh.ply` against `scene.ply`, completeness "
-            "over `seen.ply` within 1 cm. Stage times are GPU timestamps (medians); frame_ms is wall time.\n\n")
-    cols = list(rows[0].keys())
-    f.write("| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n")
-    for r in rows:
-        f.write("| " + " | ".join(r[c] for c in cols) + " |\n")
-try:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+            "over `seen.ply` within 1 cm. Stage times are GPU timestamps (medians); frame_ms is wall time.", rows)
+plt = pyplot()
+if plt:
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for r in rows:
         x, y = float(r["frame_ms_median"]), float(r["ate_rmse_mm"])
@@ -76,7 +71,7 @@ try:
     ax.set_title("bitfuse full loop on lavapipe: speed against error")
     fig.tight_layout()
     fig.savefig("docs/bench_replay_sweep.png", dpi=100)
-except ImportError:
+else:
     print("matplotlib missing: no plot", file=sys.stderr)
 PYEOF
 cat docs/bench_replay_sweep.md

@@ -60,15 +60,15 @@ PYEOF
     fi
   fi
   $PY - "$dir" "$seqname" "$name" "$opts" >>"$RESULTS" <<'PYEOF'
-import json, sys
+import sys
+sys.path.insert(0, "bench")
+from benchlib import run_outputs, stage_ms
 d, seqname, name, opts = sys.argv[1:5]
-s = json.load(open(d + "/stats.json"))
-e = json.load(open(d + "/surface.json"))
-g = s["gpu_stage_ms"]
+s, e = run_outputs(d)
 f = s["frame_ms"]
 ate = s["ate_m"] or {}
 rss = int(open(d + ".rss").read()) / 1024.0
-st = lambda k: round(g[k]["median"], 1) if k in g else ""
+st = lambda k: stage_ms(s, k)
 row = [seqname, name, opts or "(defaults)", s["frames"]["total"] if isinstance(s["frames"], dict) else s["frames"],
        round(f["median"], 1), round(f["p95"], 1), round(f["p95"] / f["median"], 2),
        round(s["startup"]["first_frame_ms"], 1), st("track"), st("raycast"), st("alloc"), st("subcache"), st("window"),
@@ -89,28 +89,22 @@ for v in "${VARS[@]}"; do
 done
 
 $PY - "$RESULTS" "$(git rev-parse --short HEAD)" "$FRAMES" "$DEV_FRAMES" "${DEV:+1}" <<'PYEOF'
-import csv, sys
+import sys
+sys.path.insert(0, "bench")
+from benchlib import pyplot, read_rows, write_table
 path, commit, frames, dev_frames, has_dev = sys.argv[1:6]
-rows = list(csv.DictReader(open(path), delimiter="\t"))
-with open("docs/bench_speed.md", "w") as f:
-    f.write("# The full loop: speed against error, real and synthetic\n\n")
-    f.write(f"`bench/speed.sh` (generated; commit {commit}): `bitfuse replay SEQ --out R OPTIONS`, one run at a "
+rows = read_rows(path)
+write_table("docs/bench_speed.md", "The full loop: speed against error, real and synthetic",
+            f"`bench/speed.sh` (generated; commit {commit}): `bitfuse replay SEQ --out R OPTIONS`, one run at a "
             "time, lavapipe on 2 cores. `real`: the "
             f"{dev_frames} 7-Scenes dev frames (DEV=...; surface: the sensor's depth at the run's poses against "
             "the run's mesh, `eval-surface --depth`); "
             f"`room`: the synthetic room, {frames} frames along fr1_xyz (surface: the mesh against the scene, "
             "over its seen part). Stage times are GPU timestamp medians; frame times are wall time; peak RSS "
-            "is the replay process's maximum resident set.\n\n")
-    if has_dev != "1":
-        f.write("(No DEV given: synthetic rows only.)\n\n")
-    cols = list(rows[0].keys())
-    f.write("| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n")
-    for r in rows:
-        f.write("| " + " | ".join(r[c] for c in cols) + " |\n")
-try:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+            "is the replay process's maximum resident set." +
+            ("" if has_dev == "1" else "\n\n(No DEV given: synthetic rows only.)"), rows)
+plt = pyplot()
+if plt:
     seqs = sorted({r["sequence"] for r in rows})
     fig, axes = plt.subplots(1, len(seqs), figsize=(5.5 * len(seqs), 4.2), squeeze=False)
     for ax, sq in zip(axes[0], seqs):
@@ -123,7 +117,7 @@ try:
         ax.set_title(f"{sq}: speed against error")
     fig.tight_layout()
     fig.savefig("docs/bench_speed.png", dpi=100)
-except ImportError:
+else:
     print("matplotlib missing: no plot", file=sys.stderr)
 PYEOF
 echo "speed: wrote docs/bench_speed.md, docs/bench_speed.png ($RESULTS)" >&2
