@@ -148,19 +148,32 @@ static void check_set(gpu_context *ctx, render_caster *rc, const float *xyz, uin
     render_particles_destroy(ps);
 }
 
+/* The SPHysics dam-break set from ../shared/data into mesh_data m (its
+ * vertices are the particles); the test is skipped where the data is
+ * absent. */
+#define LOAD_DAM_BREAK_OR_SKIP(m)                                                  \
+    do {                                                                           \
+        const char *path_ = bf_test_data("particles/dambreak_29814.ply");          \
+        if (!path_) BF_SKIP("shared data absent: particles/dambreak_29814.ply");   \
+        CHECK_OK(mesh_read_ply(path_, &(m)));                                      \
+    } while (0)
+
+/* The tank (x 0..1.6 m, y 0..0.69, z 0..0.45 up) from the front, above. */
+static bf_se3 dam_break_view(void)
+{
+    return look_at(bf_v3(0.8, -0.55, 0.75), bf_v3(0.55, 0.35, 0.15), bf_v3(0, 0, 1));
+}
+
 BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
 {
-    const char *path = bf_test_data("particles/dambreak_29814.ply");
-    if (!path) BF_SKIP("shared data absent: particles/dambreak_29814.ply");
     mesh_data m = {0};
-    CHECK_OK(mesh_read_ply(path, &m));
+    LOAD_DAM_BREAK_OR_SKIP(m);
     CHECK_EQ_INT(m.n_verts, 29814);
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     render_caster *rc;
     CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
-    /* The tank (x 0..1.6 m, y 0..0.69, z 0..0.45 up) from the front, above. */
-    bf_se3 T = look_at(bf_v3(0.8, -0.55, 0.75), bf_v3(0.55, 0.35, 0.15), bf_v3(0, 0, 1));
+    bf_se3 T = dam_break_view();
     check_set(ctx, rc, m.xyz, m.n_verts, &T, "dam break");
     /* The set is a lattice whose spacing (22.5 mm) is 9 cells: turned by 17
      * degrees about a tilted axis and moved by an odd offset, its centres
@@ -190,15 +203,13 @@ BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
  * same float operations); with the default none pauses on this view. */
 BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
 {
-    const char *path = bf_test_data("particles/dambreak_29814.ply");
-    if (!path) BF_SKIP("shared data absent: particles/dambreak_29814.ply");
     mesh_data m = {0};
-    CHECK_OK(mesh_read_ply(path, &m));
+    LOAD_DAM_BREAK_OR_SKIP(m);
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     render_caster *rc;
     CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
-    bf_se3 T = look_at(bf_v3(0.8, -0.55, 0.75), bf_v3(0.55, 0.35, 0.15), bf_v3(0, 0, 1));
+    bf_se3 T = dam_break_view();
     render_options opt = render_options_display();
     opt.far_m = 8;
     uint32_t n_px = K_VIEW.width * K_VIEW.height;
@@ -429,16 +440,14 @@ static void cast_and_compare(render_caster *rc, render_particles *ps, const floa
 
 BF_TEST(a_moving_set_rebinned_per_step_matches_its_new_positions)
 {
-    const char *path = bf_test_data("particles/dambreak_29814.ply");
-    if (!path) BF_SKIP("shared data absent: particles/dambreak_29814.ply");
     mesh_data m = {0};
-    CHECK_OK(mesh_read_ply(path, &m));
+    LOAD_DAM_BREAK_OR_SKIP(m);
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     const bf_intrinsics K = {100, 75, 95.0, 95.0, 49.5, 37.0, 5000};
     render_caster *rc;
     CHECK_OK(render_create(ctx, NULL, K.width, K.height, &rc));
-    bf_se3 T = look_at(bf_v3(0.8, -0.55, 0.75), bf_v3(0.55, 0.35, 0.15), bf_v3(0, 0, 1));
+    bf_se3 T = dam_break_view();
     uint32_t n = m.n_verts;
     float *xyz = malloc((size_t)n * 12);
     memcpy(xyz, m.xyz, (size_t)n * 12);
