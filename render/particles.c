@@ -115,10 +115,11 @@ static bf_status set_frame(const render_particles_config *c, const float *xyz, u
  * (shaders/render.glsl.h, RENDER_PARTICLES_LOOP_BUDGET). The limit counts a
  * loop's iterations once for the 8 lanes running it in lockstep: a walk
  * step costs at most its descent (the coarse level's depth) and the DDA's
- * 32 steps (cells and skipped sub-bricks), and the searches stop themselves at the work budget. The
- * dispatches after the first run only on the rays left unfinished (a list,
- * indirect group counts): a dispatch with none costs nothing, so there are
- * 28 more than the walk needs, for the rays the searches paused. */
+ * 32 steps (cells and skipped sub-bricks), and the searches stop
+ * themselves at the work budget. The dispatches after the first run only
+ * on the rays left unfinished (a list, indirect group counts): a dispatch
+ * with none costs nothing, so there are 28 more than the walk needs, for
+ * the rays the searches paused. */
 static void pass_budget(uint32_t coarse_level, uint32_t *cells_per_pass, uint32_t *n_passes)
 {
     double per_cell = 1.0 + coarse_level + 32.0;
