@@ -127,7 +127,17 @@ void render_images_free(render_images *im);
  * columns through them. */
 typedef struct render_voxelise_config {
     float chunk_m;      /* chunk edge of the map it goes into, default 2 m */
-    uint32_t level;     /* octree level: voxel edge chunk_m / (8 * 2^level), default 7 (1.95 mm) */
+    uint32_t level;     /* octree level: voxel edge chunk_m / (8 * 2^level), default 7 (1.95 mm); with lod the finest */
+    /* Level of detail by pixel footprint, seen from one camera (default off: every brick at `level`). The
+       mesh's box is cut into columns along z, each a brick of the level its farthest depth needs wide; each
+       column is voxelised at the level whose voxel is at most a third of the smallest pixel footprint in it
+       (render_level_for_footprint at its nearest depth, times the cosine of the image corner's ray), no finer
+       than `level`. Columns keep one level from bottom to top, so the parity is exact in each. A column
+       wholly behind the camera gets the coarsest level. Seen from elsewhere, the far parts stay coarse. */
+    bool lod;
+    bf_se3 lod_T_wc;     /* the camera (camera to world) */
+    bf_intrinsics lod_K; /* its intrinsics: focal length and image size */
+    float lod_near_m;    /* depths nearer than this count as this, 0 (default): 0.05 m */
     uint64_t max_pairs; /* refuse meshes needing more (brick, triangle) pairs, default 2^28 */
     bool has_origin;    /* the bricks on the grid of a map with this origin (to merge them into it); default
                            false: the mesh's low corner less a brick */
@@ -137,7 +147,12 @@ typedef struct render_voxelise_config {
 typedef struct render_voxelise_stats {
     uint32_t n_bricks;
     uint64_t n_pairs;          /* (brick, triangle) pairs of the bins */
-    double voxel_m;
+    double voxel_m;            /* at the finest level */
+    uint32_t level_coarse, level_fine; /* the levels used (both `level` without lod) */
+    uint32_t bricks_at_level[13];
+    uint32_t n_columns;        /* level-of-detail columns (1 without lod) */
+    uint32_t column_axis;      /* the map axis the columns and the crossing parity run along: 0 x, 1 y, 2 z
+                                  (z without lod; with it the axis most across the view) */
     double seconds, seconds_bin, seconds_gpu; /* all; binning on the host; the GPU pass with its transfers */
 } render_voxelise_stats;
 

@@ -19,6 +19,13 @@
 #include "render.h"
 #include "shaders/render.glsl.h"
 
+/* The columns' axis. The parity runs along the third coordinate of the
+ * binning and the GPU pass; with level of detail that is the map axis most
+ * across the camera's view (a column along the view would span near and
+ * far), reached by permuting the coordinates: coordinate i of the binning
+ * is map axis PERM[axis][i]. */
+static const uint32_t PERM[3][3] = {{1, 2, 0}, {2, 0, 1}, {0, 1, 2}};
+
 /* Brick coordinates packed into one key (21 bits each, offset to be
  * non-negative): the bins' hash and the sort order (x, y, then z). */
 #define KEY_BITS 21
@@ -82,18 +89,66 @@ static uint32_t hash_get(brick_hash *h, uint64_t key, bool insert, bf_status *s)
     return h->n++;
 }
 
-/* Brick range of triangle t's bounding box. */
-static uint64_t tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double brick_m, int64_t b0[3],
-                           int64_t b1[3])
+/* Brick range of triangle t's bounding box grown by half a voxel: a
+ * surface within half a voxel of a brick's face puts the voxel layer next
+ * to it behind, and the ray needs the front voxel before it, in the brick
+ * beyond the face (without it a face-on surface there is not hit). */
+static void tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double brick_m, int64_t b0[3], int64_t b1[3])
 {
+    const double grow = brick_m / 16 * 1.001;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int k = 0; k < 3; k++)
         for (int a = 0; a < 3; a++) {
             double c = v[3 * (size_t)mesh->tri[3 * (size_t)t + k] + a];
             lo[a] = fmin(lo[a], c), hi[a] = fmax(hi[a], c);
         }
-    for (int a = 0; a < 3; a++) b0[a] = (int64_t)floor(lo[a] / brick_m), b1[a] = (int64_t)floor(hi[a] / brick_m);
-    return (uint64_t)(b1[0] - b0[0] + 1) * (uint64_t)(b1[1] - b0[1] + 1) * (uint64_t)(b1[2] - b0[2] + 1);
+    for (int a = 0; a < 3; a++)
+        b0[a] = (int64_t)floor((lo[a] - grow) / brick_m), b1[a] = (int64_t)floor((hi[a] + grow) / brick_m);
+}
+
+static int64_t floor_div(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/* Level of detail (render_voxelise_config.lod): the space is cut into
+ * columns along z whose cross-section is a brick of the coarsest level
+ * used; every brick of a column is at the column's level, so the parity a
+ * column carries up through its bricks stays that of one grid. */
+typedef struct lod_plan {
+    uint32_t axis;           /* the map axis the columns run along (below) */
+    uint32_t coarse, finest; /* the columns are bricks of level `coarse` wide */
+    int64_t x0, y0;          /* the first column, in brick coordinates of `coarse` */
+    uint32_t nx, ny;
+    uint8_t *level;          /* nx * ny: each column's level */
+} lod_plan;
+
+/* The bricks of level `level` a triangle's box [b0, b1] touches in the
+ * columns of that level: one xy range per column met (all of it without a
+ * plan). Returns how many ranges were written to r (at most cap; the count
+ * is exact when it exceeds cap, so the caller can size r). */
+typedef struct xy_range {
+    int64_t x0, x1, y0, y1;
+} xy_range;
+
+static uint32_t tri_ranges(const lod_plan *p, uint32_t level, const int64_t b0[3], const int64_t b1[3], xy_range *r,
+                           uint32_t cap)
+{
+    if (!p) {
+        if (cap) r[0] = (xy_range){b0[0], b1[0], b0[1], b1[1]};
+        return 1;
+    }
+    int64_t per = (int64_t)1 << (level - p->coarse);
+    int64_t c0x = floor_div(b0[0], per), c1x = floor_div(b1[0], per);
+    int64_t c0y = floor_div(b0[1], per), c1y = floor_div(b1[1], per);
+    uint32_t n = 0;
+    for (int64_t cy = c0y; cy <= c1y; cy++)
+        for (int64_t cx = c0x; cx <= c1x; cx++) {
+            int64_t ix = cx - p->x0, iy = cy - p->y0;
+            if (ix < 0 || iy < 0 || ix >= p->nx || iy >= p->ny || p->level[iy * p->nx + ix] != level) continue;
+            if (n < cap)
+                r[n] = (xy_range){b0[0] > cx * per ? b0[0] : cx * per, b1[0] < (cx + 1) * per - 1 ? b1[0] : (cx + 1) * per - 1,
+                                  b0[1] > cy * per ? b0[1] : cy * per, b1[1] < (cy + 1) * per - 1 ? b1[1] : (cy + 1) * per - 1};
+            n++;
+        }
+    return n;
 }
 
 static int key_cmp(const void *a, const void *b)
@@ -119,41 +174,80 @@ static void bins_free(bins *b)
     memset(b, 0, sizeof *b);
 }
 
-static bf_status bin_triangles(const float *v, const mesh_data *mesh, double brick_m, uint64_t max_pairs, bins *out)
+/* What the two passes over the triangles share. */
+typedef struct bin_pass {
+    const float *v;
+    const mesh_data *mesh;
+    const lod_plan *plan;
+    uint32_t level;
+    double brick_m;
+    xy_range *ranges; /* scratch: a triangle's ranges */
+    uint32_t ranges_cap;
+} bin_pass;
+
+/* Triangle t's ranges at the pass's level into bp->ranges (grown as
+ * needed); their count, or UINT32_MAX when out of memory. */
+static uint32_t pass_ranges(bin_pass *bp, uint32_t t, int64_t b0[3], int64_t b1[3])
+{
+    tri_bricks(bp->v, bp->mesh, t, bp->brick_m, b0, b1);
+    uint32_t n = tri_ranges(bp->plan, bp->level, b0, b1, bp->ranges, bp->ranges_cap);
+    if (n > bp->ranges_cap) {
+        xy_range *r = bf_realloc(bp->ranges, (size_t)n * sizeof *r);
+        if (!r) return UINT32_MAX;
+        bp->ranges = r, bp->ranges_cap = n;
+        n = tri_ranges(bp->plan, bp->level, b0, b1, bp->ranges, bp->ranges_cap);
+    }
+    return n;
+}
+
+/* Bins the triangles into the bricks of `level` their boxes touch (with a
+ * plan: only in the columns of that level). */
+static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_plan *plan, uint32_t level,
+                               double brick_m, uint64_t max_pairs, bins *out)
 {
     memset(out, 0, sizeof *out);
     brick_hash h = {0};
     uint32_t *count = NULL, count_cap = 0;
+    bin_pass bp = {.v = v, .mesh = mesh, .plan = plan, .level = level, .brick_m = brick_m};
     bf_status s = hash_grow(&h);
     uint64_t n_pairs = 0;
     /* Pass 1: the bricks and how many triangles each gets. */
     for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
         int64_t b0[3], b1[3];
-        uint64_t n = tri_bricks(v, mesh, t, brick_m, b0, b1);
+        uint32_t nr = pass_ranges(&bp, t, b0, b1);
+        if (nr == UINT32_MAX) {
+            s = bf_fail(BF_NO_MEMORY, "render: column ranges of triangle %u", t);
+            break;
+        }
+        uint64_t n = 0;
+        for (uint32_t r = 0; r < nr; r++)
+            n += (uint64_t)(bp.ranges[r].x1 - bp.ranges[r].x0 + 1) * (uint64_t)(bp.ranges[r].y1 - bp.ranges[r].y0 + 1) *
+                 (uint64_t)(b1[2] - b0[2] + 1);
         if (n_pairs + n > max_pairs) {
-            s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at this level "
+            s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u "
                         "(triangle %u spans %llu bricks): choose a coarser level",
-                        (unsigned long long)max_pairs, t, (unsigned long long)n);
+                        (unsigned long long)max_pairs, level, t, (unsigned long long)n);
             break;
         }
         n_pairs += n;
-        for (int64_t z = b0[2]; s == BF_OK && z <= b1[2]; z++)
-            for (int64_t y = b0[1]; s == BF_OK && y <= b1[1]; y++)
-                for (int64_t x = b0[0]; s == BF_OK && x <= b1[0]; x++) {
-                    uint32_t i = hash_get(&h, brick_key(x, y, z), true, &s);
-                    if (s != BF_OK) break;
-                    if (i >= count_cap) {
-                        uint32_t cap = count_cap ? 2 * count_cap : 4096;
-                        uint32_t *c = bf_realloc(count, (size_t)cap * 4);
-                        if (!c) {
-                            s = bf_fail(BF_NO_MEMORY, "render: counting %u bricks", cap);
-                            break;
+        for (uint32_t r = 0; s == BF_OK && r < nr; r++)
+            for (int64_t z = b0[2]; s == BF_OK && z <= b1[2]; z++)
+                for (int64_t y = bp.ranges[r].y0; s == BF_OK && y <= bp.ranges[r].y1; y++)
+                    for (int64_t x = bp.ranges[r].x0; s == BF_OK && x <= bp.ranges[r].x1; x++) {
+                        uint32_t i = hash_get(&h, brick_key(x, y, z), true, &s);
+                        if (s != BF_OK) break;
+                        if (i >= count_cap) {
+                            uint32_t cap = count_cap ? 2 * count_cap : 4096;
+                            uint32_t *c = bf_realloc(count, (size_t)cap * 4);
+                            if (!c) {
+                                s = bf_fail(BF_NO_MEMORY, "render: counting %u bricks", cap);
+                                break;
+                            }
+                            memset(c + count_cap, 0, (size_t)(cap - count_cap) * 4);
+                            count = c, count_cap = cap;
                         }
-                        memset(c + count_cap, 0, (size_t)(cap - count_cap) * 4);
-                        count = c, count_cap = cap;
+                        count[i]++;
                     }
-                    count[i]++;
-                }
     }
     uint32_t nb = h.n;
     uint32_t *rank = NULL, *fill = NULL;
@@ -183,11 +277,12 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, double bri
     /* Pass 2: the triangles into their bins, in mesh order. */
     for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
         int64_t b0[3], b1[3];
-        (void)tri_bricks(v, mesh, t, brick_m, b0, b1);
-        for (int64_t z = b0[2]; z <= b1[2]; z++)
-            for (int64_t y = b0[1]; y <= b1[1]; y++)
-                for (int64_t x = b0[0]; x <= b1[0]; x++)
-                    out->tri_ids[fill[rank[hash_get(&h, brick_key(x, y, z), false, &s)]]++] = t;
+        uint32_t nr = pass_ranges(&bp, t, b0, b1); /* the scratch already fits: no allocation */
+        for (uint32_t r = 0; r < nr; r++)
+            for (int64_t z = b0[2]; z <= b1[2]; z++)
+                for (int64_t y = bp.ranges[r].y0; y <= bp.ranges[r].y1; y++)
+                    for (int64_t x = bp.ranges[r].x0; x <= bp.ranges[r].x1; x++)
+                        out->tri_ids[fill[rank[hash_get(&h, brick_key(x, y, z), false, &s)]]++] = t;
     }
     out->n_bricks = nb;
     out->n_pairs = n_pairs;
@@ -196,6 +291,7 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, double bri
     free(count);
     free(rank);
     free(fill);
+    free(bp.ranges);
     if (s != BF_OK) bins_free(out);
     return s;
 }
@@ -207,7 +303,7 @@ render_voxelise_config render_voxelise_config_default(void)
 
 /* The GPU pass over the bricks: out gets RENDER_VOX_OUT_WORDS per brick. */
 static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mesh, const uint32_t *brick_words,
-                          uint32_t n_bricks, const uint32_t *tri_ids, uint64_t n_pairs, float voxel_m, uint32_t *out)
+                          uint32_t n_bricks, const uint32_t *tri_ids, uint64_t n_pairs, float chunk_m, uint32_t *out)
 {
     gpu_buffer *buf[5] = {0};
     uint64_t bytes[5] = {(uint64_t)mesh->n_verts * 12, (uint64_t)mesh->n_tris * 12,
@@ -237,7 +333,7 @@ static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mes
     for (uint32_t i = 0; i < 5 && s == BF_OK; i++) s = gpu_bindings_set(binds, i, buf[i], 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_begin(ctx);
     if (s == BF_OK) {
-        render_vox_push pc = {.n_bricks = n_bricks, .voxel_m = voxel_m};
+        render_vox_push pc = {.n_bricks = n_bricks, .chunk_m = chunk_m};
         uint32_t max_x = gpu_device_limits(ctx)->max_compute_workgroup_count[0];
         if (max_x > 65535u) max_x = 65535u;
         uint32_t gx = n_bricks < max_x ? n_bricks : max_x, gy = gpu_groups(n_bricks, gx ? gx : 1);
@@ -256,14 +352,15 @@ static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mes
  * columns carry in: bricks are in (x, y, z) key order, so a stack of
  * bricks in one column is consecutive, lowest first. */
 static void finish_bricks(const uint64_t *keys, const uint32_t *gpu_out, uint32_t n_bricks, uint32_t level,
-                          hostmap *out)
+                          uint32_t axis, hostmap_brick *bricks)
 {
     uint64_t carry = 0;
     for (uint32_t i = 0; i < n_bricks; i++) {
         if (i == 0 || key_x(keys[i]) != key_x(keys[i - 1]) || key_y(keys[i]) != key_y(keys[i - 1])) carry = 0;
         const uint32_t *g = gpu_out + (size_t)i * RENDER_VOX_OUT_WORDS;
-        hostmap_brick *b = &out->bricks[i];
-        int32_t B[3] = {key_x(keys[i]), key_y(keys[i]), key_z(keys[i])};
+        hostmap_brick *b = &bricks[i];
+        int32_t Bp[3] = {key_x(keys[i]), key_y(keys[i]), key_z(keys[i])}, B[3];
+        for (int a = 0; a < 3; a++) B[PERM[axis][a]] = Bp[a];
         for (int a = 0; a < 3; a++) {
             /* Chunk key and cell: floor division by the bricks per chunk edge. */
             int32_t per = (int32_t)1 << level;
@@ -272,19 +369,141 @@ static void finish_bricks(const uint64_t *keys, const uint32_t *gpu_out, uint32_
         }
         b->level = level;
         b->error = 0;
+        uint32_t inside[BRICK_WORDS];
         for (uint32_t w = 0; w < BRICK_WORDS; w++) {
-            uint32_t inside = g[w];
+            inside[w] = g[w];
             /* Columns that enter inside: every voxel of them flips. */
             for (uint32_t bit = 0; bit < 32; bit++) {
                 uint32_t x = (w & 1) * 4 + (bit & 3), y = ((w >> 1) & 1) * 4 + ((bit >> 2) & 3);
-                if ((carry >> (x + 8 * y)) & 1) inside ^= 1u << bit;
+                if ((carry >> (x + 8 * y)) & 1) inside[w] ^= 1u << bit;
             }
-            b->sign[w] = ~inside; /* 1: in front of the surface (outside) */
+        }
+        if (axis != 2) {
+            /* The bits in the binning's coordinates back to the map's: voxel p (permuted) is map voxel r. */
+            uint32_t perm[BRICK_WORDS] = {0};
+            for (uint32_t v = 0; v < 512; v++) {
+                uint32_t p[3] = {v & 7, (v >> 3) & 7, v >> 6}, r[3];
+                for (int a = 0; a < 3; a++) r[PERM[axis][a]] = p[a];
+                if ((inside[brick_word(p[0], p[1], p[2])] >> brick_bit(p[0], p[1], p[2])) & 1)
+                    perm[brick_word(r[0], r[1], r[2])] |= 1u << brick_bit(r[0], r[1], r[2]);
+            }
+            memcpy(inside, perm, sizeof inside);
+        }
+        for (uint32_t w = 0; w < BRICK_WORDS; w++) {
+            b->sign[w] = ~inside[w]; /* 1: in front of the surface (outside) */
             b->conf[w] = 0xFFFFFFFFu;
         }
         carry ^= (uint64_t)g[BRICK_WORDS] | ((uint64_t)g[BRICK_WORDS + 1] << 32);
     }
 }
+
+/* The footprint's depth factor: a pixel at angle theta off the optical axis
+ * spans z cos(theta) / f across its ray (against z / f on the axis), so the
+ * widest ray of the image, at its corners, bounds the footprint from below. */
+static double lod_cos_max(const bf_intrinsics *K)
+{
+    double r2 = 0;
+    for (int k = 0; k < 4; k++) {
+        double u = ((k & 1) ? K->width : 0) - 0.5 - K->cx_px, w = ((k & 2) ? K->height : 0) - 0.5 - K->cy_px;
+        double q = (u / K->fx_px) * (u / K->fx_px) + (w / K->fy_px) * (w / K->fy_px);
+        r2 = q > r2 ? q : r2;
+    }
+    return 1.0 / sqrt(1.0 + r2);
+}
+
+/* World point of permuted map coordinates q. */
+static bf_vec3 unpermute(uint32_t axis, bf_vec3 origin_w, const double q[3])
+{
+    double r[3];
+    for (int i = 0; i < 3; i++) r[PERM[axis][i]] = q[i];
+    return bf_v3(origin_w.x + r[0], origin_w.y + r[1], origin_w.z + r[2]);
+}
+
+/* Camera depth range of the box [lo, hi] (permuted map metres) seen by T_cw. */
+static void box_depths(const bf_se3 *T_cw, uint32_t axis, bf_vec3 origin_w, const double lo[3], const double hi[3],
+                       double *z_min, double *z_max)
+{
+    *z_min = INFINITY, *z_max = -INFINITY;
+    for (int k = 0; k < 8; k++) {
+        double q[3] = {(k & 1) ? hi[0] : lo[0], (k & 2) ? hi[1] : lo[1], (k & 4) ? hi[2] : lo[2]};
+        double z = bf_se3_apply(T_cw, unpermute(axis, origin_w, q)).z;
+        *z_min = fmin(*z_min, z), *z_max = fmax(*z_max, z);
+    }
+}
+
+/* The map axis least along the optical axis of T_wc. */
+static uint32_t lod_axis(const bf_se3 *T_wc)
+{
+    bf_vec3 d = bf_v3_sub(bf_se3_apply(T_wc, bf_v3(0, 0, 1)), T_wc->t);
+    double a[3] = {fabs(d.x), fabs(d.y), fabs(d.z)};
+    return a[2] <= a[0] && a[2] <= a[1] ? 2 : a[0] <= a[1] ? 0 : 1;
+}
+
+/* The level whose voxel is a third of the footprint at depth z (at least
+ * near), between coarse and finest. */
+static uint32_t lod_level_at(const render_voxelise_config *c, double cos_max, double f_px, double z, uint32_t coarse,
+                             uint32_t finest)
+{
+    double near = c->lod_near_m > 0 ? c->lod_near_m : 0.05;
+    uint32_t l = render_level_for_footprint(c->chunk_m, fmax(z, near) * cos_max, f_px, finest);
+    return l < coarse ? coarse : l;
+}
+
+/* Each column's level from the camera of c (render_voxelise_config.lod):
+ * the columns are bricks of the level the mesh's farthest depth needs
+ * (coarser where there would be more than 2^20 of them); a column's level
+ * is the one its nearest depth needs, but no finer than the nearest
+ * vertex's (a surface point lies between its triangle's vertices). */
+static bf_status lod_make_plan(const render_voxelise_config *c, uint32_t axis, bf_vec3 origin_w, const float *v,
+                               uint32_t n_verts, lod_plan *p)
+{
+    memset(p, 0, sizeof *p);
+    p->axis = axis;
+    bf_se3 T_cw = bf_se3_inverse(&c->lod_T_wc);
+    double f_px = c->lod_K.fx_px > c->lod_K.fy_px ? c->lod_K.fx_px : c->lod_K.fy_px, cos_max = lod_cos_max(&c->lod_K);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, zv = INFINITY;
+    for (uint32_t i = 0; i < n_verts; i++) {
+        for (int a = 0; a < 3; a++) lo[a] = fmin(lo[a], v[3 * i + a]), hi[a] = fmax(hi[a], v[3 * i + a]);
+        double q[3] = {v[3 * i], v[3 * i + 1], v[3 * i + 2]};
+        zv = fmin(zv, bf_se3_apply(&T_cw, unpermute(axis, origin_w, q)).z);
+    }
+    if (!n_verts) lo[0] = lo[1] = lo[2] = hi[0] = hi[1] = hi[2] = zv = 0;
+    double z_min, z_max;
+    box_depths(&T_cw, axis, origin_w, lo, hi, &z_min, &z_max);
+    p->finest = c->level;
+    p->coarse = lod_level_at(c, cos_max, f_px, z_max, 0, c->level);
+    for (;;) {
+        double cell = 8 * hostmap_level_voxel_m(c->chunk_m, p->coarse);
+        p->x0 = (int64_t)floor(lo[0] / cell), p->y0 = (int64_t)floor(lo[1] / cell);
+        uint64_t nx = (uint64_t)((int64_t)floor(hi[0] / cell) - p->x0 + 1), ny = (uint64_t)((int64_t)floor(hi[1] / cell) - p->y0 + 1);
+        if (nx * ny <= (1u << 20) || p->coarse == 0) {
+            p->nx = (uint32_t)nx, p->ny = (uint32_t)ny;
+            break;
+        }
+        p->coarse--;
+    }
+    p->level = bf_malloc((size_t)p->nx * p->ny);
+    if (!p->level) return bf_fail(BF_NO_MEMORY, "render: level of detail over %u x %u columns", p->nx, p->ny);
+    double cell = 8 * hostmap_level_voxel_m(c->chunk_m, p->coarse);
+    for (uint32_t iy = 0; iy < p->ny; iy++)
+        for (uint32_t ix = 0; ix < p->nx; ix++) {
+            double cl[3] = {fmax(lo[0], (double)(p->x0 + ix) * cell), fmax(lo[1], (double)(p->y0 + iy) * cell), lo[2]};
+            double ch[3] = {fmin(hi[0], (double)(p->x0 + ix + 1) * cell), fmin(hi[1], (double)(p->y0 + iy + 1) * cell), hi[2]};
+            box_depths(&T_cw, axis, origin_w, cl, ch, &z_min, &z_max);
+            /* Wholly behind the camera: never seen from it, the coarsest will do. */
+            uint32_t l = z_max <= 0 ? p->coarse : lod_level_at(c, cos_max, f_px, fmax(z_min, zv), p->coarse, p->finest);
+            p->level[(size_t)iy * p->nx + ix] = (uint8_t)l;
+        }
+    return BF_OK;
+}
+
+/* The bins of every level, one after the other: the GPU pass takes them
+ * as one list. */
+typedef struct level_bins {
+    bins b[13];
+    uint32_t first_brick[14];
+    uint64_t first_pair[14];
+} level_bins;
 
 bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf_se3 *T_world_mesh,
                                const render_voxelise_config *cfg, hostmap *out, render_voxelise_stats *st)
@@ -295,6 +514,8 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     if (!(c.chunk_m > 0) || c.level > 12)
         return bf_fail(BF_INVALID_ARG, "render: voxelising at level %u of %g m chunks (level at most 12)", c.level,
                        (double)c.chunk_m);
+    if (c.lod && !(c.lod_K.fx_px > 0 && c.lod_K.fy_px > 0 && c.lod_K.width && c.lod_K.height))
+        return bf_fail(BF_INVALID_ARG, "render: level of detail needs the camera's intrinsics");
     memset(out, 0, sizeof *out);
     if (st) memset(st, 0, sizeof *st);
     double t0 = bf_time_s();
@@ -304,6 +525,7 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     float *v = bf_malloc((size_t)(mesh->n_verts ? mesh->n_verts : 1) * 12);
     if (!v) return bf_fail(BF_NO_MEMORY, "render: %u mesh vertices", mesh->n_verts);
     bf_vec3 lo = bf_v3(INFINITY, INFINITY, INFINITY);
+    /* The grid's origin at the finest level's voxels (coarser levels' bricks nest in the chunks all the same). */
     double voxel_m = hostmap_level_voxel_m(c.chunk_m, c.level), brick_m = 8 * voxel_m;
     for (uint32_t i = 0; i < mesh->n_verts; i++) {
         bf_vec3 p = bf_se3_apply(&T, bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
@@ -319,11 +541,12 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     out->origin_w = c.has_origin ? c.origin_w
                                  : bf_v3(floor(lo.x / voxel_m) * voxel_m - brick_m, floor(lo.y / voxel_m) * voxel_m - brick_m,
                                          floor(lo.z / voxel_m) * voxel_m - brick_m);
+    uint32_t axis = c.lod ? lod_axis(&c.lod_T_wc) : 2;
     for (uint32_t i = 0; i < mesh->n_verts; i++) {
         bf_vec3 p = bf_se3_apply(&T, bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
                                            mesh->origin.z + mesh->xyz[3 * i + 2]));
-        v[3 * i] = (float)(p.x - out->origin_w.x), v[3 * i + 1] = (float)(p.y - out->origin_w.y);
-        v[3 * i + 2] = (float)(p.z - out->origin_w.z);
+        double r[3] = {p.x - out->origin_w.x, p.y - out->origin_w.y, p.z - out->origin_w.z};
+        for (int k = 0; k < 3; k++) v[3 * i + k] = (float)r[PERM[axis][k]];
     }
     for (uint32_t t = 0; t < 3 * (size_t)mesh->n_tris; t++)
         if (mesh->tri[t] >= mesh->n_verts) {
@@ -331,38 +554,67 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
             return bf_fail(BF_INVALID_ARG, "render: triangle %u names vertex %u of %u", t / 3, mesh->tri[t],
                            mesh->n_verts);
         }
-    bins bn;
-    bf_status s = bin_triangles(v, mesh, brick_m, c.max_pairs, &bn);
-    uint32_t n_bricks = s == BF_OK ? bn.n_bricks : 0;
-    uint32_t *brick_words = NULL, *gpu_out = NULL;
+    lod_plan plan = {0};
+    bf_status s = c.lod ? lod_make_plan(&c, axis, out->origin_w, v, mesh->n_verts, &plan) : BF_OK;
+    uint32_t l_lo = c.lod ? plan.coarse : c.level, l_hi = c.level;
+    level_bins lb = {0};
+    uint64_t max_pairs = c.max_pairs;
+    for (uint32_t l = l_lo; s == BF_OK && l <= l_hi; l++) {
+        bins *bn = &lb.b[l];
+        s = bin_triangles(v, mesh, c.lod ? &plan : NULL, l, 8 * hostmap_level_voxel_m(c.chunk_m, l), max_pairs, bn);
+        if (s == BF_OK) max_pairs -= bn->n_pairs;
+    }
+    uint32_t n_bricks = 0;
+    uint64_t n_pairs = 0;
+    for (uint32_t l = 0; l <= 12; l++) {
+        lb.first_brick[l] = n_bricks, lb.first_pair[l] = n_pairs;
+        n_bricks += lb.b[l].n_bricks, n_pairs += lb.b[l].n_pairs;
+    }
+    lb.first_brick[13] = n_bricks, lb.first_pair[13] = n_pairs;
+    uint32_t *brick_words = NULL, *gpu_out = NULL, *tri_ids = NULL;
     if (s == BF_OK) {
         brick_words = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_BRICK_WORDS * 4);
         gpu_out = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_OUT_WORDS * 4);
+        tri_ids = l_lo == l_hi ? lb.b[l_lo].tri_ids : bf_malloc((size_t)(n_pairs ? n_pairs : 1) * 4);
         out->bricks = bf_calloc(n_bricks ? n_bricks : 1, sizeof *out->bricks);
-        if (!brick_words || !gpu_out || !out->bricks) s = bf_fail(BF_NO_MEMORY, "render: voxelising into %u bricks", n_bricks);
+        if (!brick_words || !gpu_out || !tri_ids || !out->bricks)
+            s = bf_fail(BF_NO_MEMORY, "render: voxelising into %u bricks", n_bricks);
     }
-    for (uint32_t i = 0; s == BF_OK && i < n_bricks; i++) {
-        uint32_t *w = brick_words + (size_t)i * RENDER_VOX_BRICK_WORDS;
-        w[0] = (uint32_t)key_x(bn.keys[i]), w[1] = (uint32_t)key_y(bn.keys[i]), w[2] = (uint32_t)key_z(bn.keys[i]);
-        w[3] = bn.first[i], w[4] = bn.first[i + 1], w[5] = 0;
+    for (uint32_t l = l_lo; s == BF_OK && l <= l_hi; l++) {
+        const bins *bn = &lb.b[l];
+        if (tri_ids != bn->tri_ids && bn->n_pairs) memcpy(tri_ids + lb.first_pair[l], bn->tri_ids, bn->n_pairs * 4);
+        for (uint32_t i = 0; i < bn->n_bricks; i++) {
+            uint32_t *w = brick_words + (size_t)(lb.first_brick[l] + i) * RENDER_VOX_BRICK_WORDS;
+            w[0] = (uint32_t)key_x(bn->keys[i]), w[1] = (uint32_t)key_y(bn->keys[i]), w[2] = (uint32_t)key_z(bn->keys[i]);
+            w[3] = (uint32_t)(lb.first_pair[l] + bn->first[i]), w[4] = (uint32_t)(lb.first_pair[l] + bn->first[i + 1]);
+            w[5] = l;
+        }
     }
     double t1 = bf_time_s();
-    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_bricks, bn.tri_ids, bn.n_pairs, (float)voxel_m, gpu_out);
+    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_bricks, tri_ids, n_pairs, c.chunk_m, gpu_out);
     double t2 = bf_time_s();
     if (s == BF_OK) {
-        finish_bricks(bn.keys, gpu_out, n_bricks, c.level, out);
+        for (uint32_t l = l_lo; l <= l_hi; l++)
+            finish_bricks(lb.b[l].keys, gpu_out + (size_t)lb.first_brick[l] * RENDER_VOX_OUT_WORDS, lb.b[l].n_bricks, l,
+                          axis, out->bricks + lb.first_brick[l]);
         out->n_bricks = n_bricks;
     }
     if (s == BF_OK && st) {
         st->n_bricks = n_bricks;
-        st->n_pairs = bn.n_pairs;
+        st->n_pairs = n_pairs;
         st->voxel_m = voxel_m;
+        st->level_coarse = l_lo, st->level_fine = l_hi;
+        for (uint32_t l = l_lo; l <= l_hi; l++) st->bricks_at_level[l] = lb.b[l].n_bricks;
+        st->n_columns = c.lod ? plan.nx * plan.ny : 1;
+        st->column_axis = axis;
         st->seconds_bin = t1 - t0;
         st->seconds_gpu = t2 - t1;
         st->seconds = bf_time_s() - t0;
     }
     free(v);
-    bins_free(&bn);
+    free(plan.level);
+    if (tri_ids != lb.b[l_lo].tri_ids) free(tri_ids);
+    for (uint32_t l = 0; l <= 12; l++) bins_free(&lb.b[l]);
     free(brick_words);
     free(gpu_out);
     if (s != BF_OK) hostmap_free(out);

@@ -161,11 +161,11 @@ BF_FN bf_u32 render_shade(bf_f32 cos_theta, bf_u32 level)
  * a crossing inside the brick's z range flips the column's voxels above it
  * and toggles the column's parity. The host adds the parity entering each
  * brick from below (the XOR of the parities of the bricks beneath it). */
-#define RENDER_VOX_BRICK_WORDS 6u  /* per brick: ix, iy, iz (brick coordinates on the level's grid), tri_begin, tri_end, pad */
+#define RENDER_VOX_BRICK_WORDS 6u  /* per brick: ix, iy, iz (brick coordinates on its level's grid), tri_begin, tri_end, level */
 #define RENDER_VOX_OUT_WORDS 18u   /* per brick: 16 flip words (brick bit layout), 2 column parity words (bit x + 8y) */
 struct render_vox_push {
     bf_u32 n_bricks;
-    bf_f32 voxel_m;      /* voxel edge at the level */
+    bf_f32 chunk_m;      /* chunk edge: a brick's voxel is chunk_m / (8 * 2^level) */
     bf_u32 pad[2];
 };
 #ifndef BF_GLSL

@@ -22,7 +22,10 @@ shared uint s_flip[BRICK_WORDS];
 shared uint s_par[2];
 
 /* Vertex k in voxel units relative to the brick's low corner lo (metres). */
-vec3 vertex(uint k, vec3 lo) { return (vec3(verts.v[3u * k], verts.v[3u * k + 1u], verts.v[3u * k + 2u]) - lo) / pc.voxel_m; }
+vec3 vertex(uint k, vec3 lo, float voxel_m)
+{
+    return (vec3(verts.v[3u * k], verts.v[3u * k + 1u], verts.v[3u * k + 2u]) - lo) / voxel_m;
+}
 
 void main()
 {
@@ -35,13 +38,16 @@ void main()
     ivec3 B = ivec3(int(bricks.w[b * RENDER_VOX_BRICK_WORDS]), int(bricks.w[b * RENDER_VOX_BRICK_WORDS + 1u]),
                     int(bricks.w[b * RENDER_VOX_BRICK_WORDS + 2u]));
     uint first = bricks.w[b * RENDER_VOX_BRICK_WORDS + 3u], last = bricks.w[b * RENDER_VOX_BRICK_WORDS + 4u];
-    vec3 lo = vec3(B * 8) * pc.voxel_m;
+    /* Bricks of every level in one list (level of detail); a power-of-two division is exact. */
+    float voxel_m = pc.chunk_m / float(8u << bricks.w[b * RENDER_VOX_BRICK_WORDS + 5u]);
+    vec3 lo = vec3(B * 8) * voxel_m;
     /* One triangle per invocation at a time, over the columns its xy
      * bounding box covers in the brick (usually one to four): the work
      * follows the triangles' area, not 64 columns per triangle. */
     for (uint k = first + t; k < last; k += gl_WorkGroupSize.x) {
         uint tri = tri_ids.i[k];
-        vec3 a = vertex(tris.i[3u * tri], lo), c1 = vertex(tris.i[3u * tri + 1u], lo), c2 = vertex(tris.i[3u * tri + 2u], lo);
+        vec3 a = vertex(tris.i[3u * tri], lo, voxel_m), c1 = vertex(tris.i[3u * tri + 1u], lo, voxel_m);
+        vec3 c2 = vertex(tris.i[3u * tri + 2u], lo, voxel_m);
         /* Counter-clockwise in xy; a triangle seen edge-on crosses nothing. */
         float area = (c1.x - a.x) * (c2.y - a.y) - (c1.y - a.y) * (c2.x - a.x);
         if (area == 0.0) continue;
