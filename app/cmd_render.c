@@ -15,7 +15,7 @@
 #include "replay/replay.h"
 
 static const char render_usage[] =
-    "usage: bitfuse render [--map STORE|DIR] [--mesh FILE [--mesh-pose P]] [--particles FILE]\n"
+    "usage: bitfuse render [--map STORE|DIR] [--mesh FILE [--mesh-pose P] [--mesh-lod on|off]] [--particles FILE]\n"
     "                      [--particle-radius M] [--particle-cell M]\n"
     "                      --pose \"tx ty tz qx qy qz qw\" [--camera fx,fy,cx,cy] --size WxH --out IMAGE.png\n"
     "                      [--depth DEPTH.png] [--far M] [--repeat N]\n\n"
@@ -27,9 +27,10 @@ static const char render_usage[] =
     "(the map in its colours when it has them, else shaded by octree level; particles in\n"
     "blue); DEPTH.png is 16-bit, 5000 per metre (TUM), 0 where nothing is hit (or beyond\n"
     "13.1 m). The map shows its confident surface. A mesh (--mesh, PLY or OFF, closed,\n"
-    "metres; placed by --mesh-pose) is voxelised into the map's own bricks at the level\n"
-    "whose voxel is a third of a pixel at its nearest point, and drawn by the same\n"
-    "ray-cast. docs/particles.md, docs/render.md.\n";
+    "metres; placed by --mesh-pose) is voxelised into the map's own bricks and drawn by\n"
+    "the same ray-cast, each part at the level whose voxel is at most a third of a pixel\n"
+    "there (level of detail: far parts coarser; --mesh-lod off: all of it at the level of\n"
+    "its nearest point). docs/particles.md, docs/render.md.\n";
 
 static const char render_epilog[] =
     "exit codes: 0 ok, 1 failure, 2 usage (also a bad pose, size or camera), 3 unreadable\n"
@@ -39,6 +40,7 @@ typedef struct render_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
     double radius_m, cell_m, far_m;
     uint32_t repeat;
+    bool mesh_lod;
 } render_args;
 
 static int parse_args(int argc, char **argv, render_args *a)
@@ -55,6 +57,9 @@ static int parse_args(int argc, char **argv, render_args *a)
                 "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
         APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
                 "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
+        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off",
+                "level of detail within the mesh: each part at the level its pixel footprint needs (off: the "
+                "nearest point's level everywhere)"),
         APP_OPT("--pose", APP_OPT_STRING, &a->pose, "\"tx ty tz qx qy qz qw\"",
                 "camera to world (TUM: looks along +z, y down)", .required = true, .check = app_check_pose),
         APP_OPT("--camera", APP_OPT_STRING, &a->camera, "fx,fy,cx,cy",
@@ -100,7 +105,7 @@ static bf_status write_images(const render_images *im, const char *out, const ch
 int cmd_render(int argc, char **argv)
 {
     const char *cmd = "render";
-    render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1};
+    render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1, .mesh_lod = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
@@ -137,14 +142,18 @@ int cmd_render(int argc, char **argv)
     uint32_t n_bricks = 0, n_map_bricks = 0;
     hostmap hm = {0};
     render_voxelise_stats vst = {0};
-    uint32_t vlevel = 0;
     if (s == BF_OK && a.map) s = app_scene_read_map(a.map, &hm, NULL);
     n_map_bricks = hm.n_bricks;
     if (s == BF_OK && a.mesh) {
         /* On the map's grid when there is one, so both are one ray-cast. */
         render_voxelise_config vc = render_voxelise_config_default();
         if (a.map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
-        vlevel = vc.level = app_scene_mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
+        vc.level = app_scene_mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
+        if (a.mesh_lod) {
+            /* The columns choose their own levels, the nearest no finer than the map allows. */
+            vc.lod = true, vc.lod_T_wc = T_wc, vc.lod_K = K, vc.lod_near_m = 0.05f;
+            vc.level = fusion_config_default().max_level;
+        }
         hostmap mh;
         s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
         if (s == BF_INVALID_ARG) {
@@ -191,11 +200,22 @@ int cmd_render(int argc, char **argv)
         printf("bitfuse render: %ux%u on %s -> %s%s%s: %.1f%% of the pixels hit\n", W, H, gpu_device_name(ctx), a.out,
                a.depth ? ", " : "", a.depth ? a.depth : "", 100.0 * (double)n_hit / ((double)W * H));
         if (a.map) printf("  map              %s: %u bricks\n", a.map, n_map_bricks);
-        if (a.mesh)
+        bool one_level = !a.mesh_lod || vst.level_coarse == vst.level_fine;
+        if (a.mesh && one_level)
             printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
-                   "%u bricks, voxelised in %.3f s (%.2f M triangles/s)\n",
-                   a.mesh, mesh.n_tris, vlevel, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
-                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0);
+                   "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s)\n",
+                   a.mesh, mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
+                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu);
+        if (a.mesh && !one_level) {
+            printf("  mesh             %s: %u triangles at levels %u-%u (level of detail, %u columns along %c): %u "
+                   "bricks (",
+                   a.mesh, mesh.n_tris, vst.level_coarse, vst.level_fine, vst.n_columns, "xyz"[vst.column_axis],
+                   vst.n_bricks);
+            for (uint32_t l = vst.level_coarse; l <= vst.level_fine; l++)
+                printf("%s%u at %u", l > vst.level_coarse ? ", " : "", vst.bricks_at_level[l], l);
+            printf("), voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s)\n", vst.seconds,
+                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu);
+        }
         if (a.map && a.mesh) printf("  together         %u bricks\n", n_bricks);
         if (ps) {
             const render_particles_stats *st = render_particles_get_stats(ps);
