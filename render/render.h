@@ -147,8 +147,9 @@ typedef struct render_voxelise_config {
 typedef struct render_voxelise_stats {
     uint32_t n_bricks;
     uint64_t n_pairs;          /* (brick, triangle) pairs of the bins */
-    double voxel_m;            /* at the finest level */
-    uint32_t level_coarse, level_fine; /* the levels used (both `level` without lod) */
+    double voxel_m;            /* at level_fine */
+    uint32_t level_coarse, level_fine; /* the levels used (both `level` without lod; with it the columns' coarsest
+                                          and finest) */
     uint32_t bricks_at_level[13];
     uint32_t n_columns;        /* level-of-detail columns (1 without lod) */
     uint32_t column_axis;      /* the map axis the columns and the crossing parity run along: 0 x, 1 y, 2 z

@@ -485,6 +485,7 @@ static bf_status lod_make_plan(const render_voxelise_config *c, uint32_t axis, b
     p->level = bf_malloc((size_t)p->nx * p->ny);
     if (!p->level) return bf_fail(BF_NO_MEMORY, "render: level of detail over %u x %u columns", p->nx, p->ny);
     double cell = 8 * hostmap_level_voxel_m(c->chunk_m, p->coarse);
+    uint32_t finest = p->coarse;
     for (uint32_t iy = 0; iy < p->ny; iy++)
         for (uint32_t ix = 0; ix < p->nx; ix++) {
             double cl[3] = {fmax(lo[0], (double)(p->x0 + ix) * cell), fmax(lo[1], (double)(p->y0 + iy) * cell), lo[2]};
@@ -493,7 +494,9 @@ static bf_status lod_make_plan(const render_voxelise_config *c, uint32_t axis, b
             /* Wholly behind the camera: never seen from it, the coarsest will do. */
             uint32_t l = z_max <= 0 ? p->coarse : lod_level_at(c, cos_max, f_px, fmax(z_min, zv), p->coarse, p->finest);
             p->level[(size_t)iy * p->nx + ix] = (uint8_t)l;
+            finest = l > finest ? l : finest;
         }
+    p->finest = finest;
     return BF_OK;
 }
 
@@ -556,7 +559,7 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
         }
     lod_plan plan = {0};
     bf_status s = c.lod ? lod_make_plan(&c, axis, out->origin_w, v, mesh->n_verts, &plan) : BF_OK;
-    uint32_t l_lo = c.lod ? plan.coarse : c.level, l_hi = c.level;
+    uint32_t l_lo = c.lod ? plan.coarse : c.level, l_hi = c.lod ? plan.finest : c.level;
     level_bins lb = {0};
     uint64_t max_pairs = c.max_pairs;
     for (uint32_t l = l_lo; s == BF_OK && l <= l_hi; l++) {
@@ -602,7 +605,7 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     if (s == BF_OK && st) {
         st->n_bricks = n_bricks;
         st->n_pairs = n_pairs;
-        st->voxel_m = voxel_m;
+        st->voxel_m = hostmap_level_voxel_m(c.chunk_m, l_hi);
         st->level_coarse = l_lo, st->level_fine = l_hi;
         for (uint32_t l = l_lo; l <= l_hi; l++) st->bricks_at_level[l] = lb.b[l].n_bricks;
         st->n_columns = c.lod ? plan.nx * plan.ny : 1;
