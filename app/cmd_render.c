@@ -16,7 +16,7 @@
 
 static const char render_usage[] =
     "usage: bitfuse render [--map STORE|DIR] [--mesh FILE [--mesh-pose P] [--mesh-lod on|off]] [--particles FILE]\n"
-    "                      [--particle-radius M] [--particle-cell M]\n"
+    "                      [--particle-radius M] [--particle-cell M] [--particle-lod on|off]\n"
     "                      --pose \"tx ty tz qx qy qz qw\" [--camera fx,fy,cx,cy] --size WxH --out IMAGE.png\n"
     "                      [--depth DEPTH.png] [--far M] [--repeat N]\n\n"
     "Ray-casts one view of a scene on the GPU: a saved map (a scene store, bitfuse\n"
@@ -39,6 +39,7 @@ static const char render_epilog[] =
 typedef struct render_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
     double radius_m, cell_m, far_m;
+    bool particle_lod;
     uint32_t repeat;
     bool mesh_lod;
 } render_args;
@@ -53,6 +54,10 @@ static int parse_args(int argc, char **argv, render_args *a)
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
                 "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
                 .max = 20, .no_default = true),
+        APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
+                "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
+                "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
+                "cell puts it)"),
         APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
                 "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
         APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
@@ -105,7 +110,7 @@ static bf_status write_images(const render_images *im, const char *out, const ch
 int cmd_render(int argc, char **argv)
 {
     const char *cmd = "render";
-    render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1, .mesh_lod = true};
+    render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1, .mesh_lod = true, .particle_lod = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
@@ -170,6 +175,7 @@ int cmd_render(int argc, char **argv)
         render_particles_config pc = render_particles_config_default();
         pc.radius_m = (float)a.radius_m;
         pc.cell_m = (float)a.cell_m;
+        pc.lod = a.particle_lod;
         s = render_particles_create(ctx, &pc, xyz, n_particles, &ps);
         /* A position the grid cannot hold is the file's fault. */
         if (s == BF_INVALID_ARG) {

@@ -35,6 +35,7 @@ static const char view_epilog[] =
 typedef struct view_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *screenshot;
     double radius_m, cell_m, far_m;
+    bool particle_lod;
     uint32_t exit_after;
     bool overlay;
 } view_args;
@@ -49,6 +50,10 @@ static int parse_args(int argc, char **argv, view_args *a)
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
                 "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
                 .max = 20, .no_default = true),
+        APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
+                "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
+                "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
+                "cell puts it)"),
         APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
                 "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks at the first pose's "
                 "detail"),
@@ -150,6 +155,7 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, view_files *f,
         render_particles_config pc = render_particles_config_default();
         pc.radius_m = (float)a->radius_m;
         pc.cell_m = (float)a->cell_m;
+        pc.lod = a->particle_lod;
         s = render_particles_create(ctx, &pc, f->xyz, f->n_particles, &sc->ps);
         if (s == BF_INVALID_ARG) { /* a position the grid cannot hold is the file's fault */
             snprintf(msg, sizeof msg, "%s", bf_last_error());
@@ -283,7 +289,7 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 int cmd_view(int argc, char **argv)
 {
     const char *cmd = "view";
-    view_args a = {.size = "640x480", .radius_m = 0.01, .far_m = 13.1, .overlay = true};
+    view_args a = {.size = "640x480", .radius_m = 0.01, .far_m = 13.1, .overlay = true, .particle_lod = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");

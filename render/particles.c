@@ -424,7 +424,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
         .max_level = ps->stats.level - PARTICLES_COARSE_LEVELS, /* the walk's: the coarse level */
         .radius_m = ps->cfg.radius_m,
-        .flags = keep_nearer ? RENDER_PARTICLES_FLAG_KEEP_NEARER : 0u,
+        .flags = (keep_nearer ? RENDER_PARTICLES_FLAG_KEEP_NEARER : 0u) | (ps->cfg.lod ? RENDER_PARTICLES_FLAG_LOD : 0u),
         .rgb = ps->cfg.rgb,
         .limits = ps->cells_per_pass | ps->work_budget << RENDER_PARTICLES_LIMIT_CELL_BITS,
     };

@@ -193,6 +193,11 @@ typedef struct render_particles_config {
     uint32_t work_budget; /* loop iterations a ray's searches take in one dispatch before the ray pauses for the
                              next (lavapipe ends a shader's loops past 65,535); 0 (default):
                              RENDER_PARTICLES_WORK_BUDGET, the most allowed; less only adds dispatches (tests) */
+    /* Level of detail (default false: every sphere where its cell puts it): from the depth where a pixel's
+       footprint is twice the coarse cell's half-diagonal on, each coarse cell holding centres (8 x 8 x 8 cells)
+       is drawn as one sphere of the radius at its centre, its brick of centres unread: the spheres move by at
+       most half a pixel there, and hits there report the coarse level (docs/particles.md). */
+    bool lod;
 } render_particles_config;
 
 render_particles_config render_particles_config_default(void);

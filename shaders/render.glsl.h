@@ -197,6 +197,7 @@ BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
 #define RENDER_PARTICLES_FLAG_FIRST 2u       /* the first dispatch: rays start at near_m */
 #define RENDER_PARTICLES_FLAG_LAST 4u        /* the last dispatch: rays not done are misses */
 #define RENDER_PARTICLES_FLAG_LIST 8u        /* a later dispatch: the rays of the last one's list, not the image */
+#define RENDER_PARTICLES_FLAG_LOD 16u        /* level of detail: far coarse cells drawn as one sphere each */
 /* The dispatch's index in flags' high bits: the list and arguments it
  * appends its unfinished rays to (render/particles.c). */
 #define RENDER_PARTICLES_PASS_SHIFT 8u

@@ -52,6 +52,19 @@ render_walk_map render_particle_map()
                            pc.limits & ((1u << RENDER_PARTICLES_LIMIT_CELL_BITS) - 1u));
 }
 uint render_particles_budget() { return pc.limits >> RENDER_PARTICLES_LIMIT_CELL_BITS; }
+/* Level of detail (RENDER_PARTICLES_FLAG_LOD): a coarse cell of edge e
+ * beyond depth lod_k * e is drawn as one sphere at its centre. Its spheres
+ * then move by at most e sqrt(3) / 2, which is half a pixel's footprint
+ * z cos(theta) / f from there on (theta: the image corner's ray, where the
+ * footprint is smallest). Off: never. */
+float render_particles_lod_k()
+{
+    if ((pc.flags & RENDER_PARTICLES_FLAG_LOD) == 0u) return 3.0e38;
+    float ax = max(pc.cx + 0.5, float(pc.width) - 0.5 - pc.cx) / pc.fx;
+    float ay = max(pc.cy + 0.5, float(pc.height) - 0.5 - pc.cy) / pc.fy;
+    float cos_max = inversesqrt(1.0 + ax * ax + ay * ay);
+    return sqrt(3.0) * max(pc.fx, pc.fy) / cos_max;
+}
 
 #define RENDER_TRAVERSE_PARTICLES
 #include "render_traverse.glsl.h"

@@ -24,6 +24,7 @@
  *   uint render_conf_word(uint slot, uint w);             (particles: the reach bits)
  *   render_walk_map render_particle_map();                (particles: neighbour bricks)
  *   uint render_particles_budget();                       (particles: work before a pause)
+ *   float render_particles_lod_k();                       (particles: level of detail from depth lod_k * cell)
  *
  * This file is GLSL only.
  */
@@ -150,6 +151,7 @@ float render_pbest;
 vec3 render_pbest_c;
 bool render_pchain;
 ivec3 render_plast;
+bool render_pbest_lod; /* render_pbest came from a level-of-detail search */
 
 /* The last coarse lookup's parent: the node one level above the coarse
  * bricks (its cell on that level's grid, from the map origin) and its first
@@ -168,6 +170,7 @@ void render_particles_cache_clear()
     render_pbest_c = vec3(0.0);
     render_pchain = false;
     render_plast = ivec3(0);
+    render_pbest_lod = false;
 }
 
 /* The node of coarse brick b (level >= 1) through the parent cache, or
@@ -229,9 +232,12 @@ uint render_particles_box_mask(ivec3 l, ivec3 h)
  * fine_m); level is the coarse level, B and node the coarse brick being
  * walked. The coarse cells of the box that hold centres are found as the
  * set sign bits of the coarse bricks' sub-brick words under a mask of the
- * box (findLSB), so empty coarse cells cost nothing. */
+ * box (findLSB), so empty coarse cells cost nothing. With lod each such
+ * coarse cell is one sphere at its centre, its brick of centres unread
+ * (render_pbest_lod says which kind the nearest is). */
 void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 c1, uint level, ivec3 B, uint node_B,
-                             uint slot_B, float fine_m, float r, float s_lo, inout float best, inout vec3 best_c)
+                             uint slot_B, float fine_m, float r, float s_lo, bool lod, inout float best,
+                             inout vec3 best_c)
 {
     ivec3 k0 = c0 >> 3, k1 = c1 >> 3, b0 = k0 >> 3, b1 = k1 >> 3;
     for (int bz = b0.z; bz <= b1.z; bz++)
@@ -257,6 +263,17 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                 occ &= occ - 1u;
                                 render_pwork++;
                                 ivec3 k = kb * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
+                                if (lod) {
+                                    /* Level of detail: the coarse cell's centres as one sphere at its centre. */
+                                    vec3 c = (vec3(k) + 0.5) * (8.0 * fine_m);
+                                    float t = render_sphere_hit(ray, c, r);
+                                    if (t >= s_lo && t < best) {
+                                        best = t;
+                                        best_c = c;
+                                        render_pbest_lod = true;
+                                    }
+                                    continue;
+                                }
                                 /* The ray must pass within r of the cell's
                                  * centres: through the cell grown by r (the
                                  * slab test, beyond s_lo). */
@@ -283,6 +300,7 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                         if (t >= s_lo && t < best) {
                                             best = t;
                                             best_c = c;
+                                            render_pbest_lod = false;
                                         }
                                     }
                                 }
@@ -296,7 +314,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
 {
     render_walk_map m = render_particle_map();
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
-    float fine_m = voxel_m * 0.125, rc = r * 8.0 * inv_v;
+    float fine_m = voxel_m * 0.125, rc = r * 8.0 * inv_v, lod_k = render_particles_lod_k();
     /* The cells of centres (offsets from a coarse cell's first) whose
      * sphere can reach into the coarse cell: centre (i + 0.5) within rc of
      * [0, 8]. */
@@ -350,7 +368,9 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                     if (d[a] < 0) c1[a] = c0[a] + 7;
                 }
             }
-            render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE,
+            /* Level of detail from the nearest depth a sphere met here can have (two cells before). */
+            bool lod = s_enter - 2.0 * voxel_m >= lod_k * voxel_m;
+            render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE, lod,
                                     render_pbest, render_pbest_c);
             render_pchain = true;
             render_plast = kg;
@@ -374,7 +394,8 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
     }
     if (!(render_pbest < s_out)) return false;
     tr.hit_depth = render_pbest;
-    tr.hit_level = level + RENDER_PARTICLES_COARSE_LEVELS;
+    /* The level image says which level drew the hit (the coarse one: level of detail). */
+    tr.hit_level = render_pbest_lod ? level : level + RENDER_PARTICLES_COARSE_LEVELS;
     tr.hit_normal = (ray.o + render_pbest * ray.dir - render_pbest_c) / r;
     return true;
 }

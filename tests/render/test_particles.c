@@ -250,6 +250,121 @@ BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
     mesh_free(&m);
 }
 
+/* The coarse cells' centres the level of detail draws: one per coarse
+ * cell (8 x 8 x 8 cells, from the grid's corner) holding a particle; their
+ * count in *n_out. */
+static float *coarse_centres(const float *xyz, uint32_t n, const render_particles_stats *st, uint32_t *n_out)
+{
+    float *out = malloc((size_t)n * 12);
+    double o[3] = {st->origin_w.x, st->origin_w.y, st->origin_w.z}, e = 8.0 * st->cell_m;
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        float c[3];
+        for (int a = 0; a < 3; a++) c[a] = (float)(o[a] + (floor((xyz[3 * i + a] - o[a]) / e) + 0.5) * e);
+        bool seen = false;
+        for (uint32_t j = 0; j < k && !seen; j++) seen = !memcmp(out + 3 * j, c, 12);
+        if (!seen) memcpy(out + 3 * k++, c, 12);
+    }
+    *n_out = k;
+    return out;
+}
+
+/* Level of detail (render_particles_config.lod). From the depth where a
+ * coarse cell's half-diagonal is half a pixel's footprint on, each coarse
+ * cell holding centres is drawn as one sphere at its centre: seen from
+ * 5 m (beyond that depth, 3.94 m here) the image is the cast of those
+ * spheres to float precision, its hits report the coarse level, and
+ * against the exact spheres every pixel where the masks differ lies within
+ * a pixel of the other kind's projected spheres. Nearer than that depth nothing changes: the dam
+ * break's usual view is the same image byte for byte. */
+BF_TEST(level_of_detail_draws_far_coarse_cells_as_spheres)
+{
+    mesh_data m = {0};
+    LOAD_DAM_BREAK_OR_SKIP(m);
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
+    render_options opt = render_options_display();
+    opt.far_m = 12;
+    uint32_t n_px = K_VIEW.width * K_VIEW.height;
+    render_particles_config pc = render_particles_config_default(), pl = pc;
+    pl.lod = true;
+    render_particles *exact, *lod;
+    CHECK_OK(render_particles_create(ctx, &pc, m.xyz, m.n_verts, &exact));
+    CHECK_OK(render_particles_create(ctx, &pl, m.xyz, m.n_verts, &lod));
+    const render_particles_stats *st = render_particles_get_stats(lod);
+    /* Near: the same image. */
+    bf_se3 T = dam_break_view();
+    render_images a, b;
+    CHECK_OK(render_scene(rc, NULL, exact, &K_VIEW, &T, &opt));
+    CHECK_OK(render_download(rc, &a));
+    CHECK_OK(render_scene(rc, NULL, lod, &K_VIEW, &T, &opt));
+    CHECK_OK(render_download(rc, &b));
+    CHECK(memcmp(a.depth, b.depth, n_px * 4) == 0);
+    CHECK(memcmp(a.rgb, b.rgb, n_px * 3) == 0);
+    render_images_free(&a);
+    render_images_free(&b);
+    /* Far: the tank seen from 5 m, every depth beyond where the coarse cells take over
+       (sqrt(3) e f / cos(corner) = 1.732 * 10 mm * 190 / 0.835 = 3.94 m, and two cells more). */
+    T = look_at(bf_v3(0.8, -4.2, 2.9), bf_v3(0.8, 0.35, 0.2), bf_v3(0, 0, 1));
+    CHECK_OK(render_scene(rc, NULL, lod, &K_VIEW, &T, &opt));
+    CHECK_OK(render_download(rc, &b));
+    uint32_t n_coarse;
+    float *cc = coarse_centres(m.xyz, m.n_verts, st, &n_coarse);
+    float *ref = malloc(n_px * sizeof *ref);
+    particles_ref_cast(cc, n_coarse, pl.radius_m, &K_VIEW, &T, opt.near_m, opt.far_m, ref);
+    uint32_t differs = 0, n_hit = 0, coarse_level = 0;
+    double z_min = INFINITY;
+    for (uint32_t i = 0; i < n_px; i++) {
+        bool g = b.depth[i] > 0, r = ref[i] > 0;
+        differs += g != r || (g && r && fabsf(b.depth[i] - ref[i]) > 5e-5f);
+        n_hit += g;
+        coarse_level += g && b.level[i] == st->level - RENDER_PARTICLES_COARSE_LEVELS;
+        if (g) z_min = fmin(z_min, b.depth[i]);
+    }
+    /* Against the exact spheres: outlines within a pixel. The spheres are
+       under a pixel here, so each pixel the two disagree on must lie within
+       a pixel of a disc of the other kind: the projected sphere of a
+       particle where only the level of detail hits, of a coarse cell where
+       only the exact spheres do. */
+    particles_ref_cast(m.xyz, m.n_verts, pl.radius_m, &K_VIEW, &T, opt.near_m, opt.far_m, ref);
+    uint32_t off_outline = 0, mask_differs = 0;
+    bf_se3 T_cw = bf_se3_inverse(&T);
+    for (uint32_t i = 0; i < n_px; i++) {
+        bool g = b.depth[i] > 0, r = ref[i] > 0;
+        if (g == r) continue;
+        mask_differs++;
+        const float *c = g ? m.xyz : cc;
+        uint32_t nc = g ? m.n_verts : n_coarse;
+        double u = i % K_VIEW.width, v = i / K_VIEW.width, gap = INFINITY;
+        for (uint32_t j = 0; j < nc; j++) {
+            bf_vec3 q = bf_se3_apply(&T_cw, bf_v3(c[3 * j], c[3 * j + 1], c[3 * j + 2]));
+            double du = K_VIEW.fx_px * q.x / q.z + K_VIEW.cx_px - u, dv = K_VIEW.fy_px * q.y / q.z + K_VIEW.cy_px - v;
+            gap = fmin(gap, sqrt(du * du + dv * dv) - K_VIEW.fx_px * pl.radius_m / q.z);
+        }
+        off_outline += gap > 1.0;
+    }
+    fprintf(stderr, "  lod from 5 m: %u coarse cells for %u particles, %u pixels hit (nearest %.2f m), %u at the coarse "
+                    "level; against their spheres %u pixels differ; against the exact spheres %u masks differ, %u of "
+                    "them off the outline\n",
+            n_coarse, m.n_verts, n_hit, z_min, coarse_level, differs, mask_differs, off_outline);
+    CHECK(n_hit > 500);
+    CHECK(z_min > 3.94 + 2 * 0.01);
+    CHECK_EQ_INT(coarse_level, n_hit);
+    CHECK_LE(differs, n_px / 1000);
+    CHECK_EQ_INT(off_outline, 0);
+    free(cc);
+    free(ref);
+    render_images_free(&b);
+    render_particles_destroy(lod);
+    render_particles_destroy(exact);
+    render_destroy(rc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+    mesh_free(&m);
+}
+
 /* A fronto-parallel wall at z = z0 (map frame = world, camera at the
  * origin looking along +z) as a hostmap: level-4 bricks (15.6 mm voxels),
  * sign 1 in front of the wall. */
