@@ -7,8 +7,9 @@
 # image, every ray hits deep in the cloud) and whole (the set seen whole
 # from its long side, 2 m away: it spans 525 of the 640 columns). Writes
 # OUT/particles_sweep.md (a table) and OUT/particles_sweep.png (a plot).
-# Usage: bench/particles_sweep.sh OUT [--cell M] [N ...]   (default N: 10000 100000 1000000)
+# Usage: bench/particles_sweep.sh OUT [--cell M] [N ...]   (default N: 10000 100000 1000000 10000000)
 set -euo pipefail
+. "$(dirname "$0")/common.sh"
 OUT=$1
 shift
 CELL=()
@@ -16,14 +17,14 @@ if [ "${1:-}" = "--cell" ]; then
     CELL=(--particle-cell "$2")
     shift 2
 fi
-NS=${*:-10000 100000 1000000}
-B=${BIN:-build/app/bitfuse}
+NS=${*:-10000 100000 1000000 10000000}
+B=$BIN
 mkdir -p "$OUT"
 T="$OUT/particles_sweep.md"
 echo "| particles | cell [mm] | bricks with particles (+ coarse) | binning on the host [ms] | binning [CPU ms] | into the GPU pools [ms] | M particles/s binned | ray-cast 640x480, close [ms GPU] | ray-cast 640x480, whole [ms GPU] |" >"$T"
 echo "|---|---|---|---|---|---|---|---|---|" >>"$T"
 for n in $NS; do
-    python3 -c 'import struct,random,sys; random.seed(1); n=int(sys.argv[1]); f=open(sys.argv[2],"wb"); f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n"%n); f.write(b"".join(struct.pack("<3f",random.uniform(0,2),random.uniform(0,1),random.uniform(0,1)) for i in range(n)))' "$n" "$OUT/p$n.ply"
+    "$PY" -c 'import sys, numpy as np; n=int(sys.argv[1]); p=(np.random.default_rng(1).random((n,3))*np.array([2,1,1])).astype("<f4"); f=open(sys.argv[2],"wb"); f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n"%n); f.write(p.tobytes())' "$n" "$OUT/p$n.ply"
     "$B" render --particles "$OUT/p$n.ply" --particle-radius 0.005 "${CELL[@]}" \
         --pose "2 -0.8 0.9 -0.772625 -0.329703 0.212940 0.499002" --size 640x480 --out "$OUT/p$n.png" --repeat 3 \
         >"$OUT/p$n.txt" 2>/dev/null
@@ -42,10 +43,7 @@ print("| %d | %.3g | %s (+%s) | %.1f | %.1f | %.1f | %.2f | %.1f | %.1f |" % (n,
 PY
     rm -f "$OUT/p$n.ply"
 done
-# The plot needs matplotlib (Debian: python3-matplotlib), in whichever python3 has it.
-PLOT=python3
-python3 -c 'import matplotlib' 2>/dev/null || PLOT=/usr/bin/python3
-"$PLOT" - "$T" "$OUT/particles_sweep.png" <<'PY'
+"$PY" - "$T" "$OUT/particles_sweep.png" <<'PY'
 import sys
 import matplotlib
 matplotlib.use("Agg")
