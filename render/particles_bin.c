@@ -299,6 +299,7 @@ static bool index_grow(bin_index *ix)
     while (cap < 2 * ix->n_slots + 2) cap *= 2;
     bin_slot *s = bf_calloc(cap, sizeof *s);
     if (!s) return false;
+    bf_advise_huge(s, cap * sizeof *s);
     for (uint64_t i = 0; i < ix->cap; i++) {
         if (!ix->slots[i].key) continue;
         uint64_t h = slot_of(ix->slots[i].key - 1, cap);
@@ -338,6 +339,9 @@ static bool part_reserve(bin_part *p, uint64_t cap)
         return false;
     }
     p->codes = codes;
+    /* The first binning of a large set spends most of its time in page faults of these. */
+    bf_advise_huge(mem, (size_t)cap * sizeof(bin_planes) + 64);
+    bf_advise_huge(codes, (size_t)cap * 8);
     bin_planes *b = (bin_planes *)(((uintptr_t)mem + 63) & ~(uintptr_t)63);
     if (p->n) memcpy(b, p->bricks, (size_t)p->n * sizeof *b);
     free(p->bricks_mem);
@@ -460,6 +464,7 @@ static bool reserve(void **buf, uint64_t *cap, uint64_t need, size_t size)
     uint64_t c = need + need / 4;
     void *nb = bf_realloc(*buf, (size_t)(c * size));
     if (!nb) return false;
+    bf_advise_huge(nb, (size_t)(c * size));
     *buf = nb, *cap = c;
     return true;
 }
