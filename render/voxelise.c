@@ -200,18 +200,39 @@ static uint32_t pass_ranges(bin_pass *bp, uint32_t t, int64_t b0[3], int64_t b1[
     return n;
 }
 
+/* Grows a buffer of elements of `size` bytes to hold at least need (kept
+ * contents; huge pages asked for: these are filled once, front to back). */
+static bool grow_buf(void **buf, uint64_t *cap, uint64_t need, size_t size)
+{
+    if (need <= *cap) return true;
+    uint64_t c = *cap ? *cap : 1u << 16;
+    while (c < need) c *= 2;
+    void *nb = bf_realloc(*buf, (size_t)(c * size));
+    if (!nb) return false;
+    bf_advise_huge(nb, (size_t)(c * size));
+    *buf = nb, *cap = c;
+    return true;
+}
+
 /* Bins the triangles into the bricks of `level` their boxes touch (with a
- * plan: only in the columns of that level). */
+ * plan: only in the columns of that level). Pass 1 finds each (brick,
+ * triangle) pair's brick once, in triangle order, and remembers it (a
+ * triangle's pairs follow the last one's brick more often than not: one
+ * compare instead of a hash probe); after the bricks are sorted, pass 2
+ * only scatters the remembered pairs into the bins. */
 static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_plan *plan, uint32_t level,
                                double brick_m, uint64_t max_pairs, bins *out)
 {
     memset(out, 0, sizeof *out);
     brick_hash h = {0};
     uint32_t *count = NULL, count_cap = 0;
+    uint32_t *pair_brick = NULL, *tri_pairs = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
+    uint64_t pair_cap = 0;
     bin_pass bp = {.v = v, .mesh = mesh, .plan = plan, .level = level, .brick_m = brick_m};
-    bf_status s = hash_grow(&h);
-    uint64_t n_pairs = 0;
-    /* Pass 1: the bricks and how many triangles each gets. */
+    bf_status s = tri_pairs ? hash_grow(&h) : bf_fail(BF_NO_MEMORY, "render: pairs of %u triangles", mesh->n_tris);
+    uint64_t n_pairs = 0, last_key = 0;
+    uint32_t last_i = UINT32_MAX;
+    /* Pass 1: the bricks, how many triangles each gets, and each pair's brick. */
     for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
         int64_t b0[3], b1[3];
         uint32_t nr = pass_ranges(&bp, t, b0, b1);
@@ -223,19 +244,25 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
         for (uint32_t r = 0; r < nr; r++)
             n += (uint64_t)(bp.ranges[r].x1 - bp.ranges[r].x0 + 1) * (uint64_t)(bp.ranges[r].y1 - bp.ranges[r].y0 + 1) *
                  (uint64_t)(b1[2] - b0[2] + 1);
-        if (n_pairs + n > max_pairs) {
+        if (n_pairs + n > max_pairs || n > UINT32_MAX) {
             s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u "
                         "(triangle %u spans %llu bricks): choose a coarser level",
                         (unsigned long long)max_pairs, level, t, (unsigned long long)n);
             break;
         }
-        n_pairs += n;
+        if (!grow_buf((void **)&pair_brick, &pair_cap, n_pairs + n, 4)) {
+            s = bf_fail(BF_NO_MEMORY, "render: %llu (brick, triangle) pairs", (unsigned long long)(n_pairs + n));
+            break;
+        }
+        tri_pairs[t] = (uint32_t)n;
         for (uint32_t r = 0; s == BF_OK && r < nr; r++)
             for (int64_t z = b0[2]; s == BF_OK && z <= b1[2]; z++)
                 for (int64_t y = bp.ranges[r].y0; s == BF_OK && y <= bp.ranges[r].y1; y++)
                     for (int64_t x = bp.ranges[r].x0; s == BF_OK && x <= bp.ranges[r].x1; x++) {
-                        uint32_t i = hash_get(&h, brick_key(x, y, z), true, &s);
+                        uint64_t key = brick_key(x, y, z);
+                        uint32_t i = key == last_key ? last_i : hash_get(&h, key, true, &s);
                         if (s != BF_OK) break;
+                        last_key = key, last_i = i;
                         if (i >= count_cap) {
                             uint32_t cap = count_cap ? 2 * count_cap : 4096;
                             uint32_t *c = bf_realloc(count, (size_t)cap * 4);
@@ -247,18 +274,20 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
                             count = c, count_cap = cap;
                         }
                         count[i]++;
+                        pair_brick[n_pairs++] = i;
                     }
     }
     uint32_t nb = h.n;
-    uint32_t *rank = NULL, *fill = NULL;
+    uint32_t *fill = NULL;
     if (s == BF_OK) {
         out->keys = bf_malloc((size_t)(nb ? nb : 1) * 8);
         out->first = bf_malloc((size_t)(nb + 1) * 4);
         out->tri_ids = bf_malloc((size_t)(n_pairs ? n_pairs : 1) * 4);
-        rank = bf_malloc((size_t)(nb ? nb : 1) * 4);
-        fill = bf_malloc((size_t)(nb ? nb : 1) * 4);
-        if (!out->keys || !out->first || !out->tri_ids || !rank || !fill)
+        fill = bf_malloc((size_t)(nb ? nb : 1) * 4); /* by arrival index: the next free place of its bin */
+        if (!out->keys || !out->first || !out->tri_ids || !fill)
             s = bf_fail(BF_NO_MEMORY, "render: bins of %u bricks", nb);
+        else
+            bf_advise_huge(out->tri_ids, (size_t)n_pairs * 4);
     }
     if (s == BF_OK) {
         /* Bricks in (x, y, z) order: the host's parity sweep walks the stacks. */
@@ -266,32 +295,26 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
         for (uint32_t i = 0; i < h.cap; i++)
             if (h.keys[i]) out->keys[k++] = h.keys[i];
         qsort(out->keys, nb, 8, key_cmp);
-        for (uint32_t r = 0; r < nb; r++) rank[hash_get(&h, out->keys[r], false, &s)] = r;
         out->first[0] = 0;
         for (uint32_t r = 0; r < nb; r++) {
             uint32_t i = hash_get(&h, out->keys[r], false, &s);
             out->first[r + 1] = out->first[r] + count[i];
-            fill[r] = out->first[r];
+            fill[i] = out->first[r];
         }
-    }
-    /* Pass 2: the triangles into their bins, in mesh order. */
-    for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
-        int64_t b0[3], b1[3];
-        uint32_t nr = pass_ranges(&bp, t, b0, b1); /* the scratch already fits: no allocation */
-        for (uint32_t r = 0; r < nr; r++)
-            for (int64_t z = b0[2]; z <= b1[2]; z++)
-                for (int64_t y = bp.ranges[r].y0; y <= bp.ranges[r].y1; y++)
-                    for (int64_t x = bp.ranges[r].x0; x <= bp.ranges[r].x1; x++)
-                        out->tri_ids[fill[rank[hash_get(&h, brick_key(x, y, z), false, &s)]]++] = t;
+        /* Pass 2: each pair into its brick's bin, triangles in mesh order. */
+        uint64_t k2 = 0;
+        for (uint32_t t = 0; t < mesh->n_tris; t++)
+            for (uint32_t j = 0; j < tri_pairs[t]; j++) out->tri_ids[fill[pair_brick[k2++]]++] = t;
     }
     out->n_bricks = nb;
     out->n_pairs = n_pairs;
     free(h.keys);
     free(h.idx);
     free(count);
-    free(rank);
     free(fill);
     free(bp.ranges);
+    free(pair_brick);
+    free(tri_pairs);
     if (s != BF_OK) bins_free(out);
     return s;
 }
