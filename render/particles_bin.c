@@ -203,41 +203,52 @@ static void bin_reach(uint32_t conf[16], const int64_t b[3], const double cc[3],
  * neighbour bricks (offsets -1..1, index ox + 3 oy + 9 oz + 13) it reaches
  * and their masks, packed (a quarter-radius cell reaches 8 of the 27: the
  * table stays in the L2 cache). Built once per reach of at most 8 cells (a
- * brick); beyond, bin_reach runs per cell. */
+ * brick); beyond, bin_reach runs per cell. With octants (the coarse level)
+ * an entry is a place and one octant of its cell, o << 9 | l: centres
+ * anywhere in that octant, a quarter cell about its middle. */
+#define REACH_PLACES 512u
 typedef struct reach_table {
-    uint32_t used[512];  /* bit k: neighbour k is reached */
-    uint32_t first[513]; /* place l's masks: mask[first[l] ..], in neighbour order */
+    uint32_t used[8 * REACH_PLACES];      /* bit k: neighbour k is reached */
+    uint32_t first[8 * REACH_PLACES + 1]; /* entry e's masks: mask[first[e] ..], in neighbour order */
     uint32_t mask[][16];
 } reach_table;
 
-static reach_table *reach_table_make(double reach, double half)
+static reach_table *reach_table_make(double reach, double half, bool octants)
 {
     if (reach + half > 8.0) return NULL;
-    uint32_t (*all)[27][16] = bf_calloc(512, sizeof *all);
-    if (!all) return NULL;
-    uint32_t used[512] = {0}, total = 0;
-    for (uint32_t l = 0; l < 512; l++) {
+    uint32_t n_entries = octants ? 8 * REACH_PLACES : REACH_PLACES;
+    uint32_t (*all)[27][16] = bf_calloc(n_entries, sizeof *all);
+    uint32_t *used = bf_calloc(n_entries, 4), total = 0;
+    if (!all || !used) {
+        free(all), free(used);
+        return NULL;
+    }
+    for (uint32_t e = 0; e < n_entries; e++) {
+        uint32_t l = e & (REACH_PLACES - 1), o = e >> 9;
         double cc[3] = {(l & 7) + 0.5, ((l >> 3) & 7) + 0.5, (l >> 6) + 0.5};
+        if (octants)
+            for (int a = 0; a < 3; a++) cc[a] += (o >> a & 1) ? 0.25 : -0.25;
         for (int k = 0; k < 27; k++) {
             int64_t b[3] = {k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1};
-            bin_reach(all[l][k], b, cc, reach, half);
+            bin_reach(all[e][k], b, cc, reach, octants ? 0.25 : half);
             bool any = false;
-            for (int w = 0; w < 16; w++) any |= all[l][k][w] != 0;
-            if (any) used[l] |= 1u << k, total++;
+            for (int w = 0; w < 16; w++) any |= all[e][k][w] != 0;
+            if (any) used[e] |= 1u << k, total++;
         }
     }
-    reach_table *t = bf_malloc(sizeof *t + (size_t)total * sizeof t->mask[0]);
+    reach_table *t = bf_calloc(1, sizeof *t + (size_t)total * sizeof t->mask[0]);
     if (t) {
         uint32_t m = 0;
-        for (uint32_t l = 0; l < 512; l++) {
-            t->used[l] = used[l];
-            t->first[l] = m;
+        for (uint32_t e = 0; e < n_entries; e++) {
+            t->used[e] = used[e];
+            t->first[e] = m;
             for (int k = 0; k < 27; k++)
-                if (used[l] >> k & 1) memcpy(t->mask[m++], all[l][k], sizeof t->mask[0]);
+                if (used[e] >> k & 1) memcpy(t->mask[m++], all[e][k], sizeof t->mask[0]);
         }
-        t->first[512] = m;
+        t->first[n_entries] = m;
     }
     free(all);
+    free(used);
     return t;
 }
 
@@ -269,6 +280,7 @@ typedef struct bin_planes {
 typedef struct bin_part {
     /* in */
     const uint64_t *cells; /* sorted unique cell keys of this half's bricks */
+    const uint8_t *octs;   /* NULL, or per cell the octants of it that hold centres (bit x + 2 y + 4 z) */
     uint64_t n_cells;
     const reach_table *rt;
     double reach, half;
@@ -402,7 +414,11 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
     p->n_occupied++;
     r->used = 0;
     if (!p->rt) return true;
-    for (uint64_t k = i; k < j; k++) r->used |= p->rt->used[p->cells[k] & 511];
+    for (uint64_t k = i; k < j; k++) {
+        uint32_t l = (uint32_t)(p->cells[k] & 511);
+        if (!p->octs) r->used |= p->rt->used[l];
+        for (uint32_t o = p->octs ? p->octs[k] : 0; o; o &= o - 1) r->used |= p->rt->used[(uint32_t)__builtin_ctz(o) << 9 | l];
+    }
     for (uint32_t u = r->used; u; u &= u - 1) {
         uint32_t nb = (uint32_t)__builtin_ctz(u);
         int64_t c[3] = {r->b[0] + (int64_t)(nb % 3) - 1, r->b[1] + (int64_t)(nb / 3 % 3) - 1,
@@ -422,11 +438,17 @@ static bool run_apply(bin_part *p, const bin_run *r)
         uint32_t acc[27][16];
         for (uint32_t u = r->used; u; u &= u - 1) memset(acc[__builtin_ctz(u)], 0, sizeof acc[0]);
         for (uint64_t k = r->i; k < r->j; k++) {
-            uint32_t l = (uint32_t)(p->cells[k] & 511), u = p->rt->used[l];
-            const uint32_t(*m)[16] = &p->rt->mask[p->rt->first[l]];
-            for (; u; u &= u - 1, m++) {
-                uint32_t nb = (uint32_t)__builtin_ctz(u);
-                for (int w = 0; w < 16; w++) acc[nb][w] |= (*m)[w];
+            uint32_t l = (uint32_t)(p->cells[k] & 511), octs = p->octs ? p->octs[k] : 0;
+            /* Each octant holding centres (with no octants: the cell, entry l). */
+            for (uint32_t e = p->octs ? (uint32_t)__builtin_ctz(octs) << 9 | l : l;;) {
+                uint32_t u = p->rt->used[e];
+                const uint32_t(*m)[16] = &p->rt->mask[p->rt->first[e]];
+                for (; u; u &= u - 1, m++) {
+                    uint32_t nb = (uint32_t)__builtin_ctz(u);
+                    for (int w = 0; w < 16; w++) acc[nb][w] |= (*m)[w];
+                }
+                if (!p->octs || !(octs &= octs - 1)) break;
+                e = (uint32_t)__builtin_ctz(octs) << 9 | l;
             }
         }
         for (uint32_t u = r->used; u; u &= u - 1) {
@@ -573,6 +595,8 @@ struct particles_binner {
     uint64_t keys_cap, tmp_cap;
     uint64_t *ckeys;      /* the coarse level's cell keys: one per brick of the centres */
     uint64_t ckeys_cap;
+    uint8_t *coct;        /* per brick of the centres (coarse cell): the octants that hold centres */
+    uint64_t coct_cap;
     reach_table *rt[2];   /* the centres' level, the coarse level */
     double rt_reach[2], rt_half[2];
     bin_part part[2];
@@ -585,7 +609,7 @@ particles_binner *particles_binner_create(void) { return bf_calloc(1, sizeof(par
 void particles_binner_destroy(particles_binner *w)
 {
     if (!w) return;
-    free(w->keys), free(w->tmp), free(w->ckeys), free(w->rt[0]), free(w->rt[1]), free(w->all);
+    free(w->keys), free(w->tmp), free(w->ckeys), free(w->coct), free(w->rt[0]), free(w->rt[1]), free(w->all);
     part_free(&w->part[0]), part_free(&w->part[1]);
     free(w);
 }
@@ -667,14 +691,14 @@ typedef struct level_binned {
  * octree level `level`, each set cell's spheres reaching `reach` cells
  * beyond a box of half cells about its middle, into w->all from offset
  * `off` (and the bricks' sorted codes into w->tmp for the caller). */
-static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells, uint64_t n_cells, const int64_t lo[3],
-                           const int64_t hi[3], double reach, double half, uint32_t level, uint64_t max_bricks,
-                           uint64_t off, bool *too_many, level_binned *out)
+static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells, const uint8_t *octs, uint64_t n_cells,
+                               const int64_t lo[3], const int64_t hi[3], double reach, double half, uint32_t level,
+                               uint64_t max_bricks, uint64_t off, bool *too_many, level_binned *out)
 {
     memset(out, 0, sizeof *out);
     if (w->rt_reach[t] != reach || w->rt_half[t] != half || !w->rt[t]) {
         free(w->rt[t]);
-        w->rt[t] = reach_table_make(reach, half); /* NULL: per cell (slower, any reach) */
+        w->rt[t] = reach_table_make(reach, half, octs != NULL); /* NULL: per cell (slower, any reach) */
         w->rt_reach[t] = reach, w->rt_half[t] = half;
         if (!w->rt[t] && reach + half <= 8.0) return bf_fail(BF_NO_MEMORY, "render: particle reach table");
     }
@@ -684,6 +708,8 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
     bin_part *p = w->part;
     p[0].cells = cells, p[0].n_cells = mid;
     p[1].cells = cells + mid, p[1].n_cells = n_cells - mid;
+    /* Octants only through the table (beyond it bin_reach takes the whole cell: more bits, still all). */
+    p[0].octs = octs && w->rt[t] ? octs : NULL, p[1].octs = octs && w->rt[t] ? octs + mid : NULL;
     /* A dense index where the box of the bricks the spheres reach takes at
      * most 4 M entries or 4 a cell (16 bytes), else the hash. */
     int64_t pad = (int64_t)ceil((reach + half) / 8.0), box = n_cells ? 1 : 0;
@@ -761,14 +787,25 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     /* The centres: no reach (the cells are in tmp; the keys buffer takes
      * the brick codes after). */
     level_binned fine, coarse;
-    s = bin_one_level(w, 0, w->tmp, n_cells, lo, hi, 0.0, 0.0, level, max_bricks, 0, &out->too_many, &fine);
+    /* The octants of each brick of centres that hold centres (the cells are sorted: a brick's are
+       consecutive), for the coarse level's reach below. */
+    if (!reserve((void **)&w->coct, &w->coct_cap, n_cells + 1, 1)) return bf_fail(BF_NO_MEMORY, "render: octants");
+    uint64_t nb = 0;
+    for (uint64_t i = 0; i < n_cells; i++) {
+        if (i == 0 || w->tmp[i] >> 9 != w->tmp[i - 1] >> 9) w->coct[nb++] = 0;
+        uint32_t l = (uint32_t)(w->tmp[i] & 511);
+        w->coct[nb - 1] |= (uint8_t)(1u << ((l >> 2 & 1) | (l >> 5 & 1) << 1 | (l >> 8 & 1) << 2));
+    }
+    s = bin_one_level(w, 0, w->tmp, NULL, n_cells, lo, hi, 0.0, 0.0, level, max_bricks, 0, &out->too_many, &fine);
     if (s != BF_OK) return s;
     /* The coarse level: a cell per brick of centres, reaching the radius
      * (in coarse cells: a brick of centres) beyond its whole cell. */
     if (s == BF_OK && (s = coarse_cells(w, fine.k, lo, hi)) != BF_OK) return s;
     double reach = radius_m / (8.0 * cell_m);
-    s = bin_one_level(w, 1, w->ckeys, fine.k, lo, hi, reach, 0.5, level - PARTICLES_COARSE_LEVELS, max_bricks, fine.k,
-                  &out->too_many, &coarse);
+    if (nb != fine.k) return bf_fail(BF_INVALID_ARG, "render: %llu bricks of centres, %llu with octants",
+                                     (unsigned long long)fine.k, (unsigned long long)nb);
+    s = bin_one_level(w, 1, w->ckeys, w->coct, fine.k, lo, hi, reach, 0.5, level - PARTICLES_COARSE_LEVELS, max_bricks,
+                      fine.k, &out->too_many, &coarse);
     if (s != BF_OK) return s;
     out->bricks = w->all;
     out->n_bricks = (uint32_t)(fine.k + coarse.k);
