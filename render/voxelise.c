@@ -12,6 +12,7 @@
  * mesh. Method: solid voxelisation by crossing parity (Schwarz and Seidel,
  * "Fast parallel surface and solid voxelization on GPUs", 2010). */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -214,26 +215,34 @@ static bool grow_buf(void **buf, uint64_t *cap, uint64_t need, size_t size)
     return true;
 }
 
-/* Bins the triangles into the bricks of `level` their boxes touch (with a
- * plan: only in the columns of that level). Pass 1 finds each (brick,
- * triangle) pair's brick once, in triangle order, and remembers it (a
- * triangle's pairs follow the last one's brick more often than not: one
- * compare instead of a hash probe); after the bricks are sorted, pass 2
- * only scatters the remembered pairs into the bins. */
-static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_plan *plan, uint32_t level,
-                               double brick_m, uint64_t max_pairs, bins *out)
+/* Pass 1 over triangles [t0, t1): the bricks (a hash of its own), how
+ * many pairs each gets, and each pair's brick in triangle order. Two run
+ * at once, a half of the triangles each; a failure is kept as status and
+ * message (bf_fail's message is the thread's own). */
+typedef struct bin_half {
+    const float *v;
+    const mesh_data *mesh;
+    const lod_plan *plan;
+    uint32_t level, t0, t1;
+    double brick_m;
+    uint64_t max_pairs;
+    uint32_t *tri_pairs; /* shared: [t0, t1) written here */
+    brick_hash h;
+    uint32_t *count, count_cap;
+    uint32_t *pair_brick;
+    uint64_t pair_cap, n_pairs;
+    bf_status s;
+    char msg[256];
+} bin_half;
+
+static void bin_half_run(void *ctx, size_t which)
 {
-    memset(out, 0, sizeof *out);
-    brick_hash h = {0};
-    uint32_t *count = NULL, count_cap = 0;
-    uint32_t *pair_brick = NULL, *tri_pairs = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
-    uint64_t pair_cap = 0;
-    bin_pass bp = {.v = v, .mesh = mesh, .plan = plan, .level = level, .brick_m = brick_m};
-    bf_status s = tri_pairs ? hash_grow(&h) : bf_fail(BF_NO_MEMORY, "render: pairs of %u triangles", mesh->n_tris);
-    uint64_t n_pairs = 0, last_key = 0;
+    bin_half *hf = (bin_half *)ctx + which;
+    bin_pass bp = {.v = hf->v, .mesh = hf->mesh, .plan = hf->plan, .level = hf->level, .brick_m = hf->brick_m};
+    bf_status s = hash_grow(&hf->h);
+    uint64_t last_key = 0;
     uint32_t last_i = UINT32_MAX;
-    /* Pass 1: the bricks, how many triangles each gets, and each pair's brick. */
-    for (uint32_t t = 0; s == BF_OK && t < mesh->n_tris; t++) {
+    for (uint32_t t = hf->t0; s == BF_OK && t < hf->t1; t++) {
         int64_t b0[3], b1[3];
         uint32_t nr = pass_ranges(&bp, t, b0, b1);
         if (nr == UINT32_MAX) {
@@ -244,77 +253,125 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
         for (uint32_t r = 0; r < nr; r++)
             n += (uint64_t)(bp.ranges[r].x1 - bp.ranges[r].x0 + 1) * (uint64_t)(bp.ranges[r].y1 - bp.ranges[r].y0 + 1) *
                  (uint64_t)(b1[2] - b0[2] + 1);
-        if (n_pairs + n > max_pairs || n > UINT32_MAX) {
+        if (hf->n_pairs + n > hf->max_pairs || n > UINT32_MAX) {
             s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u "
                         "(triangle %u spans %llu bricks): choose a coarser level",
-                        (unsigned long long)max_pairs, level, t, (unsigned long long)n);
+                        (unsigned long long)hf->max_pairs, hf->level, t, (unsigned long long)n);
             break;
         }
-        if (!grow_buf((void **)&pair_brick, &pair_cap, n_pairs + n, 4)) {
-            s = bf_fail(BF_NO_MEMORY, "render: %llu (brick, triangle) pairs", (unsigned long long)(n_pairs + n));
+        if (!grow_buf((void **)&hf->pair_brick, &hf->pair_cap, hf->n_pairs + n, 4)) {
+            s = bf_fail(BF_NO_MEMORY, "render: %llu (brick, triangle) pairs", (unsigned long long)(hf->n_pairs + n));
             break;
         }
-        tri_pairs[t] = (uint32_t)n;
+        hf->tri_pairs[t] = (uint32_t)n;
         for (uint32_t r = 0; s == BF_OK && r < nr; r++)
             for (int64_t z = b0[2]; s == BF_OK && z <= b1[2]; z++)
                 for (int64_t y = bp.ranges[r].y0; s == BF_OK && y <= bp.ranges[r].y1; y++)
                     for (int64_t x = bp.ranges[r].x0; s == BF_OK && x <= bp.ranges[r].x1; x++) {
                         uint64_t key = brick_key(x, y, z);
-                        uint32_t i = key == last_key ? last_i : hash_get(&h, key, true, &s);
+                        uint32_t i = key == last_key ? last_i : hash_get(&hf->h, key, true, &s);
                         if (s != BF_OK) break;
                         last_key = key, last_i = i;
-                        if (i >= count_cap) {
-                            uint32_t cap = count_cap ? 2 * count_cap : 4096;
-                            uint32_t *c = bf_realloc(count, (size_t)cap * 4);
+                        if (i >= hf->count_cap) {
+                            uint32_t cap = hf->count_cap ? 2 * hf->count_cap : 4096;
+                            uint32_t *c = bf_realloc(hf->count, (size_t)cap * 4);
                             if (!c) {
                                 s = bf_fail(BF_NO_MEMORY, "render: counting %u bricks", cap);
                                 break;
                             }
-                            memset(c + count_cap, 0, (size_t)(cap - count_cap) * 4);
-                            count = c, count_cap = cap;
+                            memset(c + hf->count_cap, 0, (size_t)(cap - hf->count_cap) * 4);
+                            hf->count = c, hf->count_cap = cap;
                         }
-                        count[i]++;
-                        pair_brick[n_pairs++] = i;
+                        hf->count[i]++;
+                        hf->pair_brick[hf->n_pairs++] = i;
                     }
     }
-    uint32_t nb = h.n;
-    uint32_t *fill = NULL;
+    free(bp.ranges);
+    hf->s = s;
+    if (s != BF_OK) snprintf(hf->msg, sizeof hf->msg, "%s", bf_last_error());
+}
+
+static void bin_half_free(bin_half *hf)
+{
+    free(hf->h.keys), free(hf->h.idx), free(hf->count), free(hf->pair_brick);
+}
+
+/* Bins the triangles into the bricks of `level` their boxes touch (with a
+ * plan: only in the columns of that level). Pass 1 (two threads, a half of
+ * the triangles each) finds each (brick, triangle) pair's brick once, in
+ * triangle order, and remembers it (a pair whose brick is the last pair's
+ * skips the hash probe); the halves' bricks are merged and sorted, and
+ * pass 2 only scatters the remembered pairs into the bins, triangles in
+ * mesh order. */
+static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_plan *plan, uint32_t level,
+                               double brick_m, uint64_t max_pairs, bins *out)
+{
+    memset(out, 0, sizeof *out);
+    uint32_t *tri_pairs = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
+    if (!tri_pairs) return bf_fail(BF_NO_MEMORY, "render: pairs of %u triangles", mesh->n_tris);
+    bin_half hf[2];
+    for (int k = 0; k < 2; k++)
+        hf[k] = (bin_half){.v = v, .mesh = mesh, .plan = plan, .level = level, .brick_m = brick_m,
+                           .max_pairs = max_pairs, .tri_pairs = tri_pairs,
+                           .t0 = k ? mesh->n_tris / 2 : 0, .t1 = k ? mesh->n_tris : mesh->n_tris / 2};
+    bf_parallel_for(2, bin_half_run, hf);
+    bf_status s = BF_OK;
+    for (int k = 0; k < 2 && s == BF_OK; k++)
+        if (hf[k].s != BF_OK) s = bf_fail(hf[k].s, "%s", hf[k].msg);
+    uint64_t n_pairs = hf[0].n_pairs + hf[1].n_pairs;
+    if (s == BF_OK && n_pairs > max_pairs)
+        s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u: "
+                    "choose a coarser level", (unsigned long long)max_pairs, level);
+    /* The second half's bricks into the first's hash (remap: its indices to the merged ones). */
+    brick_hash *h = &hf[0].h;
+    uint32_t n0 = h->n; /* the first half's own bricks (its counts) */
+    uint32_t *remap = s == BF_OK ? bf_malloc((size_t)(hf[1].h.n ? hf[1].h.n : 1) * 4) : NULL;
+    if (s == BF_OK && !remap) s = bf_fail(BF_NO_MEMORY, "render: merging %u bricks", hf[1].h.n);
+    for (uint32_t j = 0; s == BF_OK && j < hf[1].h.cap; j++)
+        if (hf[1].h.keys[j]) remap[hf[1].h.idx[j]] = hash_get(h, hf[1].h.keys[j], true, &s);
+    uint32_t nb = h->n;
+    uint32_t *count = NULL, *fill = NULL;
     if (s == BF_OK) {
+        count = bf_calloc(nb ? nb : 1, 4);
         out->keys = bf_malloc((size_t)(nb ? nb : 1) * 8);
         out->first = bf_malloc((size_t)(nb + 1) * 4);
         out->tri_ids = bf_malloc((size_t)(n_pairs ? n_pairs : 1) * 4);
-        fill = bf_malloc((size_t)(nb ? nb : 1) * 4); /* by arrival index: the next free place of its bin */
-        if (!out->keys || !out->first || !out->tri_ids || !fill)
+        fill = bf_malloc((size_t)(nb ? nb : 1) * 4); /* by merged index: the next free place of its bin */
+        if (!count || !out->keys || !out->first || !out->tri_ids || !fill)
             s = bf_fail(BF_NO_MEMORY, "render: bins of %u bricks", nb);
         else
             bf_advise_huge(out->tri_ids, (size_t)n_pairs * 4);
     }
     if (s == BF_OK) {
+        for (uint32_t i = 0; i < n0; i++) count[i] += hf[0].count[i];
+        for (uint32_t i = 0; i < hf[1].h.n; i++) count[remap[i]] += hf[1].count[i];
+        for (uint64_t k = 0; k < hf[1].n_pairs; k++) hf[1].pair_brick[k] = remap[hf[1].pair_brick[k]];
         /* Bricks in (x, y, z) order: the host's parity sweep walks the stacks. */
         uint32_t k = 0;
-        for (uint32_t i = 0; i < h.cap; i++)
-            if (h.keys[i]) out->keys[k++] = h.keys[i];
+        for (uint32_t i = 0; i < h->cap; i++)
+            if (h->keys[i]) out->keys[k++] = h->keys[i];
         qsort(out->keys, nb, 8, key_cmp);
         out->first[0] = 0;
         for (uint32_t r = 0; r < nb; r++) {
-            uint32_t i = hash_get(&h, out->keys[r], false, &s);
+            uint32_t i = hash_get(h, out->keys[r], false, &s);
             out->first[r + 1] = out->first[r] + count[i];
             fill[i] = out->first[r];
         }
         /* Pass 2: each pair into its brick's bin, triangles in mesh order. */
-        uint64_t k2 = 0;
-        for (uint32_t t = 0; t < mesh->n_tris; t++)
-            for (uint32_t j = 0; j < tri_pairs[t]; j++) out->tri_ids[fill[pair_brick[k2++]]++] = t;
+        for (int half = 0; half < 2; half++) {
+            uint64_t k2 = 0;
+            for (uint32_t t = hf[half].t0; t < hf[half].t1; t++)
+                for (uint32_t j = 0; j < tri_pairs[t]; j++) out->tri_ids[fill[hf[half].pair_brick[k2++]]++] = t;
+        }
     }
     out->n_bricks = nb;
     out->n_pairs = n_pairs;
-    free(h.keys);
-    free(h.idx);
+    free(remap);
     free(count);
     free(fill);
-    free(bp.ranges);
-    free(pair_brick);
     free(tri_pairs);
+    bin_half_free(&hf[0]);
+    bin_half_free(&hf[1]);
     if (s != BF_OK) bins_free(out);
     return s;
 }
@@ -523,6 +580,57 @@ static bf_status lod_make_plan(const render_voxelise_config *c, uint32_t axis, b
     return BF_OK;
 }
 
+/* The mesh's vertices in blocks on the worker threads: their world box
+ * (and the first that is not finite), then their places relative to the
+ * map's origin in the binning's coordinates. */
+#define VERT_BLOCK (1u << 18)
+typedef struct vert_block {
+    bf_vec3 lo;
+    uint32_t bad; /* the first vertex that is not finite, UINT32_MAX: none */
+} vert_block;
+typedef struct vert_job {
+    const mesh_data *mesh;
+    const bf_se3 *T;
+    float *v;
+    vert_block *blocks;
+    uint32_t n_blocks, axis;
+    bf_vec3 origin_w;
+} vert_job;
+
+static bf_vec3 vert_world(const vert_job *j, uint32_t i)
+{
+    const mesh_data *m = j->mesh;
+    return bf_se3_apply(j->T, bf_v3(m->origin.x + m->xyz[3 * i], m->origin.y + m->xyz[3 * i + 1],
+                                    m->origin.z + m->xyz[3 * i + 2]));
+}
+
+static void vert_bounds(void *ctx, size_t b)
+{
+    vert_job *j = ctx;
+    uint32_t i0 = (uint32_t)b * VERT_BLOCK, i1 = i0 + VERT_BLOCK < j->mesh->n_verts ? i0 + VERT_BLOCK : j->mesh->n_verts;
+    vert_block r = {.lo = bf_v3(INFINITY, INFINITY, INFINITY), .bad = UINT32_MAX};
+    for (uint32_t i = i0; i < i1; i++) {
+        bf_vec3 p = vert_world(j, i);
+        if (!isfinite(p.x) || !isfinite(p.y) || !isfinite(p.z)) {
+            r.bad = i;
+            break;
+        }
+        r.lo = bf_v3(fmin(r.lo.x, p.x), fmin(r.lo.y, p.y), fmin(r.lo.z, p.z));
+    }
+    j->blocks[b] = r;
+}
+
+static void vert_place(void *ctx, size_t b)
+{
+    vert_job *j = ctx;
+    uint32_t i0 = (uint32_t)b * VERT_BLOCK, i1 = i0 + VERT_BLOCK < j->mesh->n_verts ? i0 + VERT_BLOCK : j->mesh->n_verts;
+    for (uint32_t i = i0; i < i1; i++) {
+        bf_vec3 p = vert_world(j, i);
+        double r[3] = {p.x - j->origin_w.x, p.y - j->origin_w.y, p.z - j->origin_w.z};
+        for (int k = 0; k < 3; k++) j->v[3 * i + k] = (float)r[PERM[j->axis][k]];
+    }
+}
+
 /* The bins of every level, one after the other: the GPU pass takes them
  * as one list. */
 typedef struct level_bins {
@@ -547,20 +655,28 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     double t0 = bf_time_s();
     bf_se3 T = T_world_mesh ? *T_world_mesh : bf_se3_identity();
     /* World points; the map's origin is their bounding box's low corner
-     * (whole voxels), so brick coordinates start near zero. */
+     * (whole voxels), so brick coordinates start near zero. Both passes
+     * over the vertices run in blocks on the worker threads. */
     float *v = bf_malloc((size_t)(mesh->n_verts ? mesh->n_verts : 1) * 12);
     if (!v) return bf_fail(BF_NO_MEMORY, "render: %u mesh vertices", mesh->n_verts);
-    bf_vec3 lo = bf_v3(INFINITY, INFINITY, INFINITY);
+    bf_advise_huge(v, (size_t)mesh->n_verts * 12);
     /* The grid's origin at the finest level's voxels (coarser levels' bricks nest in the chunks all the same). */
     double voxel_m = hostmap_level_voxel_m(c.chunk_m, c.level), brick_m = 8 * voxel_m;
-    for (uint32_t i = 0; i < mesh->n_verts; i++) {
-        bf_vec3 p = bf_se3_apply(&T, bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
-                                           mesh->origin.z + mesh->xyz[3 * i + 2]));
-        if (!isfinite(p.x) || !isfinite(p.y) || !isfinite(p.z)) {
-            free(v);
-            return bf_fail(BF_INVALID_ARG, "render: mesh vertex %u is not finite", i);
+    vert_job vj = {.mesh = mesh, .T = &T, .v = v, .n_blocks = (mesh->n_verts + VERT_BLOCK - 1) / VERT_BLOCK};
+    vj.blocks = bf_calloc(vj.n_blocks ? vj.n_blocks : 1, sizeof *vj.blocks);
+    if (!vj.blocks) {
+        free(v);
+        return bf_fail(BF_NO_MEMORY, "render: %u mesh vertices", mesh->n_verts);
+    }
+    bf_parallel_for(vj.n_blocks, vert_bounds, &vj);
+    bf_vec3 lo = bf_v3(INFINITY, INFINITY, INFINITY);
+    for (uint32_t b = 0; b < vj.n_blocks; b++) {
+        if (vj.blocks[b].bad != UINT32_MAX) {
+            uint32_t bad = vj.blocks[b].bad;
+            free(v), free(vj.blocks);
+            return bf_fail(BF_INVALID_ARG, "render: mesh vertex %u is not finite", bad);
         }
-        lo = bf_v3(fmin(lo.x, p.x), fmin(lo.y, p.y), fmin(lo.z, p.z));
+        lo = bf_v3(fmin(lo.x, vj.blocks[b].lo.x), fmin(lo.y, vj.blocks[b].lo.y), fmin(lo.z, vj.blocks[b].lo.z));
     }
     if (!mesh->n_verts) lo = bf_v3(0, 0, 0);
     out->chunk_m = c.chunk_m;
@@ -568,12 +684,9 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
                                  : bf_v3(floor(lo.x / voxel_m) * voxel_m - brick_m, floor(lo.y / voxel_m) * voxel_m - brick_m,
                                          floor(lo.z / voxel_m) * voxel_m - brick_m);
     uint32_t axis = c.lod ? lod_axis(&c.lod_T_wc) : 2;
-    for (uint32_t i = 0; i < mesh->n_verts; i++) {
-        bf_vec3 p = bf_se3_apply(&T, bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
-                                           mesh->origin.z + mesh->xyz[3 * i + 2]));
-        double r[3] = {p.x - out->origin_w.x, p.y - out->origin_w.y, p.z - out->origin_w.z};
-        for (int k = 0; k < 3; k++) v[3 * i + k] = (float)r[PERM[axis][k]];
-    }
+    vj.origin_w = out->origin_w, vj.axis = axis;
+    bf_parallel_for(vj.n_blocks, vert_place, &vj);
+    free(vj.blocks);
     for (uint32_t t = 0; t < 3 * (size_t)mesh->n_tris; t++)
         if (mesh->tri[t] >= mesh->n_verts) {
             free(v);
