@@ -58,8 +58,10 @@ static void compare_view(gpu_context *ctx, fusion_map *map, const mesh_bvh *bvh,
         mask[i] = (uint8_t)(truth | got << 1);
         r.n_truth += truth;
         n_and += truth && got, n_or += truth || got;
-        double vox = voxel_m > 0 ? voxel_m : hostmap_level_voxel_m(2.0f, im.level[i]);
-        if (truth && got) err[n_err++] = fabs(im.depth[i] - hit.t) / vox; /* d_c.z = 1: t is the depth */
+        if (truth && got) {
+            double vox = voxel_m > 0 ? voxel_m : hostmap_level_voxel_m(2.0f, im.level[i]);
+            err[n_err++] = fabs(im.depth[i] - hit.t) / vox; /* d_c.z = 1: t is the depth */
+        }
     }
     /* A silhouette within a pixel: every pixel the two disagree on touches the true outline. */
     for (uint32_t i = 0; i < n_px; i++) {
