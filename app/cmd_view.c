@@ -15,7 +15,7 @@
 #include "view/view.h"
 
 static const char view_usage[] =
-    "usage: bitfuse view [--map STORE|DIR] [--mesh FILE [--mesh-pose P]] [--particles FILE]\n"
+    "usage: bitfuse view [--map STORE|DIR] [--mesh FILE [--mesh-pose P] [--mesh-lod on|off]] [--particles FILE]\n"
     "                    [--pose \"tx ty tz qx qy qz qw\"] [--camera fx,fy,cx,cy] [--size WxH]\n"
     "                    [--screenshot IMAGE.png --exit-after N]\n\n"
     "Shows what bitfuse render draws, in a window: a saved map (a scene store, bitfuse\n"
@@ -35,7 +35,7 @@ static const char view_epilog[] =
 typedef struct view_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *screenshot;
     double radius_m, cell_m, far_m;
-    bool particle_lod;
+    bool particle_lod, mesh_lod;
     uint32_t exit_after;
     bool overlay;
 } view_args;
@@ -50,6 +50,9 @@ static int parse_args(int argc, char **argv, view_args *a)
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
                 "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
                 .max = 20, .no_default = true),
+        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off",
+                "level of detail within the mesh, from the first camera (--pose or the store's): each part at the "
+                "level its pixel footprint needs there (off: the nearest point's level everywhere)"),
         APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
                 "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
                 "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
@@ -138,6 +141,12 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, view_files *f,
         if (a->map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
         vc.level = app_scene_mesh_level(&f->mesh, &f->T_wm, &T_first, K, vc.chunk_m, fusion_config_default().max_level,
                                         0.05);
+        if (a->mesh_lod && (T_wc || sc->has_pose)) {
+            /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
+               camera the whole-scene view is made later: one level). */
+            vc.lod = true, vc.lod_T_wc = T_first, vc.lod_K = *K, vc.lod_near_m = 0.05f;
+            vc.level = fusion_config_default().max_level;
+        }
         hostmap mh;
         s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, NULL);
         if (s == BF_INVALID_ARG) {
@@ -289,7 +298,8 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 int cmd_view(int argc, char **argv)
 {
     const char *cmd = "view";
-    view_args a = {.size = "640x480", .radius_m = 0.01, .far_m = 13.1, .overlay = true, .particle_lod = true};
+    view_args a = {.size = "640x480", .radius_m = 0.01, .far_m = 13.1, .overlay = true, .particle_lod = true,
+                   .mesh_lod = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
