@@ -14,6 +14,7 @@
 #include "gpu/gpu.h"
 #include "export/export.h"
 #include "mesh/mesh.h"
+#include "render/render.h"
 #include "store/store.h"
 
 /* Exit codes scripts can rely on (docs/cli.md). */
@@ -288,10 +289,13 @@ const char *app_check_png(const char *name, const char *v);
 bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out);
 /* A host map into a GPU map of its own size (hash, nodes, colour units). */
 bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);
-/* The level to voxelise a mesh at: a third of the pixel footprint at its
- * nearest vertex in front of the camera. */
-uint32_t app_scene_mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
-                              float chunk_m, uint32_t max_level, double near_m);
+/* How to voxelise a mesh seen by camera T_wc (K), on the grid of map m
+ * (NULL: its own): with lod, each column at the level its pixel footprint
+ * needs, no finer than fusion's finest; without, all of it at the level
+ * whose voxel is a third of the footprint at its nearest vertex in front
+ * of the camera. */
+render_voxelise_config app_scene_mesh_config(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc,
+                                             const bf_intrinsics *K, const hostmap *m, bool lod);
 /* The vertices of a PLY as particle centres (world floats, malloc'd). */
 bf_status app_scene_read_particles(const char *path, float **xyz, uint32_t *n);
 

@@ -39,9 +39,8 @@ static const char render_epilog[] =
 typedef struct render_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
     double radius_m, cell_m, far_m;
-    bool particle_lod;
     uint32_t repeat;
-    bool mesh_lod;
+    bool particle_lod, mesh_lod;
 } render_args;
 
 static int parse_args(int argc, char **argv, render_args *a)
@@ -151,14 +150,7 @@ int cmd_render(int argc, char **argv)
     n_map_bricks = hm.n_bricks;
     if (s == BF_OK && a.mesh) {
         /* On the map's grid when there is one, so both are one ray-cast. */
-        render_voxelise_config vc = render_voxelise_config_default();
-        if (a.map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
-        vc.level = app_scene_mesh_level(&mesh, &T_wm, &T_wc, &K, vc.chunk_m, fusion_config_default().max_level, 0.05);
-        if (a.mesh_lod) {
-            /* The columns choose their own levels, the nearest no finer than the map allows. */
-            vc.lod = true, vc.lod_T_wc = T_wc, vc.lod_K = K, vc.lod_near_m = 0.05f;
-            vc.level = fusion_config_default().max_level;
-        }
+        render_voxelise_config vc = app_scene_mesh_config(&mesh, &T_wm, &T_wc, &K, a.map ? &hm : NULL, a.mesh_lod);
         hostmap mh;
         s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
         if (s == BF_INVALID_ARG) {

@@ -137,16 +137,10 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, view_files *f,
     sc->last_pose = meta.last_pose;
     if (s == BF_OK && a->mesh) {
         bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
-        render_voxelise_config vc = render_voxelise_config_default();
-        if (a->map) vc.chunk_m = hm.chunk_m, vc.has_origin = true, vc.origin_w = hm.origin_w;
-        vc.level = app_scene_mesh_level(&f->mesh, &f->T_wm, &T_first, K, vc.chunk_m, fusion_config_default().max_level,
-                                        0.05);
-        if (a->mesh_lod && (T_wc || sc->has_pose)) {
-            /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
-               camera the whole-scene view is made later: one level). */
-            vc.lod = true, vc.lod_T_wc = T_first, vc.lod_K = *K, vc.lod_near_m = 0.05f;
-            vc.level = fusion_config_default().max_level;
-        }
+        /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
+           camera the whole-scene view is made later: one level). */
+        render_voxelise_config vc = app_scene_mesh_config(&f->mesh, &f->T_wm, &T_first, K, a->map ? &hm : NULL,
+                                                          a->mesh_lod && (T_wc || sc->has_pose));
         hostmap mh;
         s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, NULL);
         if (s == BF_INVALID_ARG) {

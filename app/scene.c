@@ -184,8 +184,8 @@ bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrin
 
 /* The level for the mesh: a third of the pixel footprint at its nearest
  * vertex in front of the camera (render_level_for_footprint). */
-uint32_t app_scene_mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
-                              float chunk_m, uint32_t max_level, double near_m)
+static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc, const bf_intrinsics *K,
+                           float chunk_m, uint32_t max_level, double near_m)
 {
     bf_se3 T_cw = bf_se3_inverse(T_wc);
     double z_min = INFINITY;
@@ -197,6 +197,20 @@ uint32_t app_scene_mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const b
     }
     if (!isfinite(z_min)) z_min = 1.0; /* all behind the camera: any level shows nothing */
     return render_level_for_footprint(chunk_m, z_min, K->fx_px > K->fy_px ? K->fx_px : K->fy_px, max_level);
+}
+
+render_voxelise_config app_scene_mesh_config(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc,
+                                             const bf_intrinsics *K, const hostmap *m, bool lod)
+{
+    const float near_m = 0.05f;
+    render_voxelise_config vc = render_voxelise_config_default();
+    if (m) vc.chunk_m = m->chunk_m, vc.has_origin = true, vc.origin_w = m->origin_w;
+    uint32_t finest = fusion_config_default().max_level;
+    if (lod)
+        vc.lod = true, vc.lod_T_wc = *T_wc, vc.lod_K = *K, vc.lod_near_m = near_m, vc.level = finest;
+    else
+        vc.level = mesh_level(mesh, T_wm, T_wc, K, vc.chunk_m, finest, near_m);
+    return vc;
 }
 
 /* The particles of a PLY (vertex x y z) into world floats. */

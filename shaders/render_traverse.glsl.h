@@ -152,6 +152,7 @@ vec3 render_pbest_c;
 bool render_pchain;
 ivec3 render_plast;
 bool render_pbest_lod; /* render_pbest came from a level-of-detail search */
+float render_plod_k;    /* render_particles_lod_k(), once per ray */
 
 /* The last coarse lookup's parent: the node one level above the coarse
  * bricks (its cell on that level's grid, from the map origin) and its first
@@ -171,6 +172,7 @@ void render_particles_cache_clear()
     render_pchain = false;
     render_plast = ivec3(0);
     render_pbest_lod = false;
+    render_plod_k = render_particles_lod_k();
 }
 
 /* The node of coarse brick b (level >= 1) through the parent cache, or
@@ -314,7 +316,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
 {
     render_walk_map m = render_particle_map();
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
-    float fine_m = voxel_m * 0.125, rc = r * 8.0 * inv_v, lod_k = render_particles_lod_k();
+    float fine_m = voxel_m * 0.125, rc = r * 8.0 * inv_v;
     /* The cells of centres (offsets from a coarse cell's first) whose
      * sphere can reach into the coarse cell: centre (i + 0.5) within rc of
      * [0, 8]. */
@@ -369,7 +371,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                 }
             }
             /* Level of detail from the nearest depth a sphere met here can have (two cells before). */
-            bool lod = s_enter - 2.0 * voxel_m >= lod_k * voxel_m;
+            bool lod = s_enter - 2.0 * voxel_m >= render_plod_k * voxel_m;
             render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE, lod,
                                     render_pbest, render_pbest_c);
             render_pchain = true;

@@ -158,6 +158,23 @@ static void check_set(gpu_context *ctx, render_caster *rc, const float *xyz, uin
         CHECK_OK(mesh_read_ply(path_, &(m)));                                      \
     } while (0)
 
+/* The dam-break set in m (or the test skipped), the GPU fixture in ctx and
+ * a caster of K_VIEW's size in rc; DAM_BREAK_CLOSE checks the fixture is
+ * clean and frees them. */
+#define DAM_BREAK_OPEN(m, ctx, rc)                                                  \
+    LOAD_DAM_BREAK_OR_SKIP(m);                                                      \
+    gpu_context *ctx;                                                               \
+    GPU_FIXTURE_OPEN(ctx);                                                          \
+    render_caster *rc;                                                              \
+    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc))
+#define DAM_BREAK_CLOSE(m, ctx, rc)                                                 \
+    do {                                                                            \
+        render_destroy(rc);                                                         \
+        GPU_FIXTURE_CHECK_CLEAN(ctx);                                               \
+        gpu_context_destroy(ctx);                                                   \
+        mesh_free(&(m));                                                            \
+    } while (0)
+
 /* The tank (x 0..1.6 m, y 0..0.69, z 0..0.45 up) from the front, above. */
 static bf_se3 dam_break_view(void)
 {
@@ -167,12 +184,8 @@ static bf_se3 dam_break_view(void)
 BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
 {
     mesh_data m = {0};
-    LOAD_DAM_BREAK_OR_SKIP(m);
+    DAM_BREAK_OPEN(m, ctx, rc);
     CHECK_EQ_INT(m.n_verts, 29814);
-    gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
-    render_caster *rc;
-    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
     bf_se3 T = dam_break_view();
     check_set(ctx, rc, m.xyz, m.n_verts, &T, "dam break");
     /* The set is a lattice whose spacing (22.5 mm) is 9 cells: turned by 17
@@ -188,10 +201,7 @@ BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
     bf_se3 MT = bf_se3_mul(&M, &T);
     check_set(ctx, rc, turned, m.n_verts, &MT, "turned");
     free(turned);
-    render_destroy(rc);
-    GPU_FIXTURE_CHECK_CLEAN(ctx);
-    gpu_context_destroy(ctx);
-    mesh_free(&m);
+    DAM_BREAK_CLOSE(m, ctx, rc);
 }
 
 /* Rays paused by the searches' work budget resume in later dispatches
@@ -204,11 +214,7 @@ BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
 BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
 {
     mesh_data m = {0};
-    LOAD_DAM_BREAK_OR_SKIP(m);
-    gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
-    render_caster *rc;
-    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
+    DAM_BREAK_OPEN(m, ctx, rc);
     bf_se3 T = dam_break_view();
     render_options opt = render_options_display();
     opt.far_m = 8;
@@ -244,10 +250,7 @@ BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
     render_particles *ps = NULL;
     CHECK(render_particles_create(ctx, &bad, m.xyz, m.n_verts, &ps) == BF_INVALID_ARG && !ps);
     for (int k = 0; k < 2; k++) free(depth[k]), free(colour[k]);
-    render_destroy(rc);
-    GPU_FIXTURE_CHECK_CLEAN(ctx);
-    gpu_context_destroy(ctx);
-    mesh_free(&m);
+    DAM_BREAK_CLOSE(m, ctx, rc);
 }
 
 /* The coarse cells' centres the level of detail draws: one per coarse
@@ -280,11 +283,7 @@ static float *coarse_centres(const float *xyz, uint32_t n, const render_particle
 BF_TEST(level_of_detail_draws_far_coarse_cells_as_spheres)
 {
     mesh_data m = {0};
-    LOAD_DAM_BREAK_OR_SKIP(m);
-    gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
-    render_caster *rc;
-    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
+    DAM_BREAK_OPEN(m, ctx, rc);
     render_options opt = render_options_display();
     opt.far_m = 12;
     uint32_t n_px = K_VIEW.width * K_VIEW.height;
@@ -359,10 +358,7 @@ BF_TEST(level_of_detail_draws_far_coarse_cells_as_spheres)
     render_images_free(&b);
     render_particles_destroy(lod);
     render_particles_destroy(exact);
-    render_destroy(rc);
-    GPU_FIXTURE_CHECK_CLEAN(ctx);
-    gpu_context_destroy(ctx);
-    mesh_free(&m);
+    DAM_BREAK_CLOSE(m, ctx, rc);
 }
 
 /* A fronto-parallel wall at z = z0 (map frame = world, camera at the
@@ -610,10 +606,7 @@ BF_TEST(a_moving_set_rebinned_per_step_matches_its_new_positions)
     render_images_free(&im);
     free(xyz);
     render_particles_destroy(ps);
-    render_destroy(rc);
-    GPU_FIXTURE_CHECK_CLEAN(ctx);
-    gpu_context_destroy(ctx);
-    mesh_free(&m);
+    DAM_BREAK_CLOSE(m, ctx, rc);
 }
 
 /* Particles metres apart: their brick box (10 m at 1 cm bricks, 10^9
