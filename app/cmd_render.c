@@ -201,9 +201,11 @@ int cmd_render(int argc, char **argv)
         bool one_level = !a.mesh_lod || vst.level_coarse == vst.level_fine;
         if (a.mesh && one_level)
             printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
-                   "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s)\n",
+                   "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks "
+                   "with crossings to test)\n",
                    a.mesh, mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
-                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu);
+                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu,
+                   vst.n_gpu_bricks);
         if (a.mesh && !one_level) {
             printf("  mesh             %s: %u triangles at levels %u-%u (level of detail, %u columns along %c): %u "
                    "bricks (",
@@ -211,8 +213,10 @@ int cmd_render(int argc, char **argv)
                    vst.n_bricks);
             for (uint32_t l = vst.level_coarse; l <= vst.level_fine; l++)
                 printf("%s%u at %u", l > vst.level_coarse ? ", " : "", vst.bricks_at_level[l], l);
-            printf("), voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s)\n", vst.seconds,
-                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu);
+            printf("), voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks with "
+                   "crossings to test)\n",
+                   vst.seconds, vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin,
+                   vst.seconds_gpu, vst.n_gpu_bricks);
         }
         if (a.map && a.mesh) printf("  together         %u bricks\n", n_bricks);
         if (ps) {

@@ -146,7 +146,9 @@ typedef struct render_voxelise_config {
 
 typedef struct render_voxelise_stats {
     uint32_t n_bricks;
-    uint64_t n_pairs;          /* (brick, triangle) pairs of the bins */
+    uint64_t n_pairs;          /* (brick, triangle) pairs of the bins: a triangle is in a brick's bin only where
+                                  its xy box holds one of the brick's column centres */
+    uint32_t n_gpu_bricks;     /* bricks with pairs, the GPU pass's (the others flip nothing) */
     double voxel_m;            /* at level_fine */
     uint32_t level_coarse, level_fine; /* the levels used (both `level` without lod; with it the columns' coarsest
                                           and finest) */

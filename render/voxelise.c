@@ -90,24 +90,56 @@ static uint32_t hash_get(brick_hash *h, uint64_t key, bool insert, bf_status *s)
     return h->n++;
 }
 
-/* Brick range of triangle t's bounding box grown by half a voxel: a
- * surface within half a voxel of a brick's face puts the voxel layer next
- * to it behind, and the ray needs the front voxel before it, in the brick
- * beyond the face (without it a face-on surface there is not hit). */
-static void tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double brick_m, int64_t b0[3], int64_t b1[3])
+static int64_t floor_div(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/* floor() for finite x within int64's range, without the library call
+ * (x86-64's baseline has no rounding instruction). */
+static inline int64_t ifloor(double x)
 {
-    const double grow = brick_m / 16 * 1.001;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int k = 0; k < 3; k++)
-        for (int a = 0; a < 3; a++) {
-            double c = v[3 * (size_t)mesh->tri[3 * (size_t)t + k] + a];
-            lo[a] = fmin(lo[a], c), hi[a] = fmax(hi[a], c);
-        }
-    for (int a = 0; a < 3; a++)
-        b0[a] = (int64_t)floor((lo[a] - grow) / brick_m), b1[a] = (int64_t)floor((hi[a] + grow) / brick_m);
+    int64_t i = (int64_t)x;
+    return i - (x < (double)i);
 }
 
-static int64_t floor_div(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+/* Triangle t's brick ranges. [b0, b1]: its bounding box grown by half a
+ * voxel; those bricks must exist (a surface within half a voxel of a
+ * brick's face puts the voxel layer next to it behind, and the ray needs
+ * the front voxel before it, in the brick beyond the face; without it a
+ * face-on surface there is not hit).
+ * [p0, p1], inside it: the bricks where the triangle can cross a column,
+ * which are all the GPU pass needs to see it in. A crossing is at a column
+ * centre (i + 0.5 voxels) inside the triangle's xy box; a triangle whose
+ * box holds no column centre (most, when triangles are smaller than
+ * voxels) crosses nothing and is in no pair. (In z the range stays the
+ * grown box's: a near-vertical triangle's crossing height, interpolated
+ * in float, can land outside its z range, and the bits stay the same.)
+ * The test is widened by more than the GPU's float rounding (its
+ * coordinates relative to the brick: ~6e-8 of the distance from the
+ * origin, in voxels), so the bits are those of every pair being seen.
+ * Returns false when [p0, p1] is empty. */
+static bool tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double brick_m, int64_t b0[3], int64_t b1[3],
+                       int64_t p0[3], int64_t p1[3])
+{
+    const double voxel = brick_m / 8, grow = voxel / 2 * 1.001, inv_voxel = 1 / voxel;
+    const uint32_t *tri = mesh->tri + 3 * (size_t)t;
+    const float *q0 = v + 3 * (size_t)tri[0], *q1 = v + 3 * (size_t)tri[1], *q2 = v + 3 * (size_t)tri[2];
+    bool any = true;
+    for (int a = 0; a < 3; a++) {
+        /* (Comparisons, not fmin: no library call on this hot path.) */
+        float l = q0[a] < q1[a] ? q0[a] : q1[a], h = q0[a] < q1[a] ? q1[a] : q0[a];
+        double lo = l < q2[a] ? l : q2[a], hi = h > q2[a] ? h : q2[a];
+        b0[a] = ifloor((lo - grow) / brick_m), b1[a] = ifloor((hi + grow) / brick_m);
+        p0[a] = b0[a], p1[a] = b1[a];
+        if (a == 2) continue;
+        /* Column centres in the box: ceil(lo / voxel - 0.5) .. floor(hi / voxel - 0.5). */
+        double eps = 1e-4 + 2.4e-7 * (fabs(lo) > fabs(hi) ? fabs(lo) : fabs(hi)) * inv_voxel; /* voxels */
+        int64_t c0 = -ifloor(0.5 + eps - lo * inv_voxel), c1 = ifloor(hi * inv_voxel - 0.5 + eps);
+        if (c0 > c1) any = false;
+        if (floor_div(c0, 8) > p0[a]) p0[a] = floor_div(c0, 8);
+        if (floor_div(c1, 8) < p1[a]) p1[a] = floor_div(c1, 8);
+        if (p0[a] > p1[a]) any = false;
+    }
+    return any;
+}
 
 /* Level of detail (render_voxelise_config.lod): the space is cut into
  * columns along z whose cross-section is a brick of the coarsest level
@@ -187,10 +219,12 @@ typedef struct bin_pass {
 } bin_pass;
 
 /* Triangle t's ranges at the pass's level into bp->ranges (grown as
- * needed); their count, or UINT32_MAX when out of memory. */
-static uint32_t pass_ranges(bin_pass *bp, uint32_t t, int64_t b0[3], int64_t b1[3])
+ * needed) and its pair range (tri_bricks; *pairs false when empty);
+ * their count, or UINT32_MAX when out of memory. */
+static uint32_t pass_ranges(bin_pass *bp, uint32_t t, int64_t b0[3], int64_t b1[3], int64_t p0[3], int64_t p1[3],
+                            bool *pairs)
 {
-    tri_bricks(bp->v, bp->mesh, t, bp->brick_m, b0, b1);
+    *pairs = tri_bricks(bp->v, bp->mesh, t, bp->brick_m, b0, b1, p0, p1);
     uint32_t n = tri_ranges(bp->plan, bp->level, b0, b1, bp->ranges, bp->ranges_cap);
     if (n > bp->ranges_cap) {
         xy_range *r = bf_realloc(bp->ranges, (size_t)n * sizeof *r);
@@ -243,16 +277,20 @@ static void bin_half_run(void *ctx, size_t which)
     uint64_t last_key = 0;
     uint32_t last_i = UINT32_MAX;
     for (uint32_t t = hf->t0; s == BF_OK && t < hf->t1; t++) {
-        int64_t b0[3], b1[3];
-        uint32_t nr = pass_ranges(&bp, t, b0, b1);
+        int64_t b0[3], b1[3], p0[3], p1[3];
+        bool pairs;
+        uint32_t nr = pass_ranges(&bp, t, b0, b1, p0, p1, &pairs);
         if (nr == UINT32_MAX) {
             s = bf_fail(BF_NO_MEMORY, "render: column ranges of triangle %u", t);
             break;
         }
+        /* Pairs: the ranges' bricks inside the pair range. */
         uint64_t n = 0;
-        for (uint32_t r = 0; r < nr; r++)
-            n += (uint64_t)(bp.ranges[r].x1 - bp.ranges[r].x0 + 1) * (uint64_t)(bp.ranges[r].y1 - bp.ranges[r].y0 + 1) *
-                 (uint64_t)(b1[2] - b0[2] + 1);
+        for (uint32_t r = 0; pairs && r < nr; r++) {
+            int64_t x0 = bp.ranges[r].x0 > p0[0] ? bp.ranges[r].x0 : p0[0], x1 = bp.ranges[r].x1 < p1[0] ? bp.ranges[r].x1 : p1[0];
+            int64_t y0 = bp.ranges[r].y0 > p0[1] ? bp.ranges[r].y0 : p0[1], y1 = bp.ranges[r].y1 < p1[1] ? bp.ranges[r].y1 : p1[1];
+            if (x0 <= x1 && y0 <= y1) n += (uint64_t)(x1 - x0 + 1) * (uint64_t)(y1 - y0 + 1) * (uint64_t)(p1[2] - p0[2] + 1);
+        }
         if (hf->n_pairs + n > hf->max_pairs || n > UINT32_MAX) {
             s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u "
                         "(triangle %u spans %llu bricks): choose a coarser level",
@@ -282,8 +320,10 @@ static void bin_half_run(void *ctx, size_t which)
                             memset(c + hf->count_cap, 0, (size_t)(cap - hf->count_cap) * 4);
                             hf->count = c, hf->count_cap = cap;
                         }
-                        hf->count[i]++;
-                        hf->pair_brick[hf->n_pairs++] = i;
+                        if (pairs && x >= p0[0] && x <= p1[0] && y >= p0[1] && y <= p1[1]) {
+                            hf->count[i]++;
+                            hf->pair_brick[hf->n_pairs++] = i;
+                        }
                     }
     }
     free(bp.ranges);
@@ -428,16 +468,42 @@ static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mes
     return s;
 }
 
+/* Voxel v = x + 8 y + 64 z of the binning's coordinates -> its word and
+ * bit in the map's coordinates (word << 5 | bit) for a column axis. */
+static void perm_table(uint32_t axis, uint16_t dst[512])
+{
+    for (uint32_t v = 0; v < 512; v++) {
+        uint32_t p[3] = {v & 7, (v >> 3) & 7, v >> 6}, r[3];
+        for (int a = 0; a < 3; a++) r[PERM[axis][a]] = p[a];
+        dst[v] = (uint16_t)(brick_word(r[0], r[1], r[2]) << 5 | brick_bit(r[0], r[1], r[2]));
+    }
+}
+
+/* The word's voxels whose columns enter inside: a word holds a 4x4
+ * patch of columns (bits 0-15 and again 16-31, two heights), so the 16
+ * columns' carry bits make its mask. */
+static uint32_t carry_mask(uint64_t carry, uint32_t w)
+{
+    uint32_t x0 = (w & 1) * 4, y0 = ((w >> 1) & 1) * 4, m = 0;
+    for (uint32_t r = 0; r < 4; r++) m |= (uint32_t)((carry >> (x0 + 8 * (y0 + r))) & 0xF) << (4 * r);
+    return m | m << 16;
+}
+
 /* Sign and confidence of each brick from its flips and the parity its
  * columns carry in: bricks are in (x, y, z) key order, so a stack of
- * bricks in one column is consecutive, lowest first. */
-static void finish_bricks(const uint64_t *keys, const uint32_t *gpu_out, uint32_t n_bricks, uint32_t level,
-                          uint32_t axis, hostmap_brick *bricks)
+ * bricks in one column is consecutive, lowest first. A brick without
+ * pairs (gpu_slot UINT32_MAX) was not in the GPU pass: nothing flips in
+ * it. */
+static void finish_bricks(const uint64_t *keys, const uint32_t *gpu_out, const uint32_t *gpu_slot, uint32_t n_bricks,
+                          uint32_t level, uint32_t axis, hostmap_brick *bricks)
 {
+    uint16_t dst[512];
+    perm_table(axis, dst);
     uint64_t carry = 0;
     for (uint32_t i = 0; i < n_bricks; i++) {
         if (i == 0 || key_x(keys[i]) != key_x(keys[i - 1]) || key_y(keys[i]) != key_y(keys[i - 1])) carry = 0;
-        const uint32_t *g = gpu_out + (size_t)i * RENDER_VOX_OUT_WORDS;
+        static const uint32_t none[RENDER_VOX_OUT_WORDS];
+        const uint32_t *g = gpu_slot[i] == UINT32_MAX ? none : gpu_out + (size_t)gpu_slot[i] * RENDER_VOX_OUT_WORDS;
         hostmap_brick *b = &bricks[i];
         int32_t Bp[3] = {key_x(keys[i]), key_y(keys[i]), key_z(keys[i])}, B[3];
         for (int a = 0; a < 3; a++) B[PERM[axis][a]] = Bp[a];
@@ -450,22 +516,14 @@ static void finish_bricks(const uint64_t *keys, const uint32_t *gpu_out, uint32_
         b->level = level;
         b->error = 0;
         uint32_t inside[BRICK_WORDS];
-        for (uint32_t w = 0; w < BRICK_WORDS; w++) {
-            inside[w] = g[w];
-            /* Columns that enter inside: every voxel of them flips. */
-            for (uint32_t bit = 0; bit < 32; bit++) {
-                uint32_t x = (w & 1) * 4 + (bit & 3), y = ((w >> 1) & 1) * 4 + ((bit >> 2) & 3);
-                if ((carry >> (x + 8 * y)) & 1) inside[w] ^= 1u << bit;
-            }
-        }
+        /* Columns that enter inside: every voxel of them flips. */
+        for (uint32_t w = 0; w < BRICK_WORDS; w++) inside[w] = g[w] ^ carry_mask(carry, w);
         if (axis != 2) {
-            /* The bits in the binning's coordinates back to the map's: voxel p (permuted) is map voxel r. */
+            /* The bits in the binning's coordinates back to the map's. */
             uint32_t perm[BRICK_WORDS] = {0};
             for (uint32_t v = 0; v < 512; v++) {
-                uint32_t p[3] = {v & 7, (v >> 3) & 7, v >> 6}, r[3];
-                for (int a = 0; a < 3; a++) r[PERM[axis][a]] = p[a];
-                if ((inside[brick_word(p[0], p[1], p[2])] >> brick_bit(p[0], p[1], p[2])) & 1)
-                    perm[brick_word(r[0], r[1], r[2])] |= 1u << brick_bit(r[0], r[1], r[2]);
+                uint32_t x = v & 7, y = (v >> 3) & 7, z = v >> 6, d = dst[v];
+                perm[d >> 5] |= ((inside[brick_word(x, y, z)] >> brick_bit(x, y, z)) & 1u) << (d & 31);
             }
             memcpy(inside, perm, sizeof inside);
         }
@@ -710,37 +768,45 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
         n_bricks += lb.b[l].n_bricks, n_pairs += lb.b[l].n_pairs;
     }
     lb.first_brick[13] = n_bricks, lb.first_pair[13] = n_pairs;
-    uint32_t *brick_words = NULL, *gpu_out = NULL, *tri_ids = NULL;
+    uint32_t *brick_words = NULL, *gpu_out = NULL, *tri_ids = NULL, *gpu_slot = NULL;
     if (s == BF_OK) {
         brick_words = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_BRICK_WORDS * 4);
         gpu_out = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_OUT_WORDS * 4);
+        gpu_slot = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * 4);
         tri_ids = l_lo == l_hi ? lb.b[l_lo].tri_ids : bf_malloc((size_t)(n_pairs ? n_pairs : 1) * 4);
         out->bricks = bf_calloc(n_bricks ? n_bricks : 1, sizeof *out->bricks);
-        if (!brick_words || !gpu_out || !tri_ids || !out->bricks)
+        if (!brick_words || !gpu_out || !gpu_slot || !tri_ids || !out->bricks)
             s = bf_fail(BF_NO_MEMORY, "render: voxelising into %u bricks", n_bricks);
     }
+    uint32_t n_gpu = 0;
     for (uint32_t l = l_lo; s == BF_OK && l <= l_hi; l++) {
         const bins *bn = &lb.b[l];
         if (tri_ids != bn->tri_ids && bn->n_pairs) memcpy(tri_ids + lb.first_pair[l], bn->tri_ids, bn->n_pairs * 4);
+        /* Only bricks with pairs go to the GPU: the others (a grown box's
+         * edge, or only triangles that hold no column centre) flip nothing. */
         for (uint32_t i = 0; i < bn->n_bricks; i++) {
-            uint32_t *w = brick_words + (size_t)(lb.first_brick[l] + i) * RENDER_VOX_BRICK_WORDS;
+            gpu_slot[lb.first_brick[l] + i] = UINT32_MAX;
+            if (bn->first[i] == bn->first[i + 1]) continue;
+            gpu_slot[lb.first_brick[l] + i] = n_gpu;
+            uint32_t *w = brick_words + (size_t)n_gpu++ * RENDER_VOX_BRICK_WORDS;
             w[0] = (uint32_t)key_x(bn->keys[i]), w[1] = (uint32_t)key_y(bn->keys[i]), w[2] = (uint32_t)key_z(bn->keys[i]);
             w[3] = (uint32_t)(lb.first_pair[l] + bn->first[i]), w[4] = (uint32_t)(lb.first_pair[l] + bn->first[i + 1]);
             w[5] = l;
         }
     }
     double t1 = bf_time_s();
-    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_bricks, tri_ids, n_pairs, c.chunk_m, gpu_out);
+    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_gpu, tri_ids, n_pairs, c.chunk_m, gpu_out);
     double t2 = bf_time_s();
     if (s == BF_OK) {
         for (uint32_t l = l_lo; l <= l_hi; l++)
-            finish_bricks(lb.b[l].keys, gpu_out + (size_t)lb.first_brick[l] * RENDER_VOX_OUT_WORDS, lb.b[l].n_bricks, l,
+            finish_bricks(lb.b[l].keys, gpu_out, gpu_slot + lb.first_brick[l], lb.b[l].n_bricks, l,
                           axis, out->bricks + lb.first_brick[l]);
         out->n_bricks = n_bricks;
     }
     if (s == BF_OK && st) {
         st->n_bricks = n_bricks;
         st->n_pairs = n_pairs;
+        st->n_gpu_bricks = n_gpu;
         st->voxel_m = hostmap_level_voxel_m(c.chunk_m, l_hi);
         st->level_coarse = l_lo, st->level_fine = l_hi;
         for (uint32_t l = l_lo; l <= l_hi; l++) st->bricks_at_level[l] = lb.b[l].n_bricks;
@@ -756,6 +822,7 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     for (uint32_t l = 0; l <= 12; l++) bins_free(&lb.b[l]);
     free(brick_words);
     free(gpu_out);
+    free(gpu_slot);
     if (s != BF_OK) hostmap_free(out);
     return s;
 }
