@@ -456,7 +456,8 @@ static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mes
         render_vox_push pc = {.n_bricks = n_bricks, .chunk_m = chunk_m};
         uint32_t max_x = gpu_device_limits(ctx)->max_compute_workgroup_count[0];
         if (max_x > 65535u) max_x = 65535u;
-        uint32_t gx = n_bricks < max_x ? n_bricks : max_x, gy = gpu_groups(n_bricks, gx ? gx : 1);
+        uint32_t groups = gpu_groups(n_bricks, 64); /* one invocation a brick */
+        uint32_t gx = groups < max_x ? groups : max_x, gy = gpu_groups(groups, gx ? gx : 1);
         if (n_bricks) gpu_cmd_dispatch(ctx, pipe, binds, &pc, gx, gy, 1);
         gpu_cmd_barrier(ctx, GPU_BARRIER_HOST);
         s = gpu_submit_wait(ctx);

@@ -156,8 +156,9 @@ BF_FN bf_u32 render_shade(bf_f32 cos_theta, bf_u32 level)
  * the map's bricks (the mesh renderer, issue 14), by the parity of the
  * surface crossings along +z columns through voxel centres, as Schwarz and
  * Seidel's solid voxelisation (2010) flips every voxel above a crossing.
- * Per brick of the list one workgroup, one invocation per column (x, y):
- * the brick's triangles (CSR list) are tested against the column's centre;
+ * Per brick of the list one invocation: the brick's triangles (CSR list;
+ * the host lists only those whose xy box holds a column centre of the
+ * brick) are tested against the column centres their boxes hold;
  * a crossing inside the brick's z range flips the column's voxels above it
  * and toggles the column's parity. The host adds the parity entering each
  * brick from below (the XOR of the parities of the bricks beneath it). */

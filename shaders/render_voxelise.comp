@@ -1,8 +1,8 @@
 #version 450
 /* Mesh voxelisation (render.glsl.h, "mesh voxelisation"): for each brick
  * of the list, the crossings of its triangles with the 64 columns of voxel
- * centres along +z: each invocation takes one triangle at a time and XORs
- * its flips into the brick's 16 words in shared memory.
+ * centres along +z: one invocation a brick takes its triangles in turn and
+ * XORs their flips into the brick's 16 words.
  * Coordinates are relative to the brick's low corner, in voxels, so float
  * keeps sub-voxel precision however far the brick is from the origin. */
 #extension GL_GOOGLE_include_directive : require
@@ -18,8 +18,12 @@ layout(std430, binding = 4) writeonly buffer Out { uint w[]; } outw;      /* REN
 
 layout(push_constant) uniform Push { render_vox_push pc; };
 
-shared uint s_flip[BRICK_WORDS];
-shared uint s_par[2];
+/* One invocation a brick: after the host's culling a brick's list holds
+ * only triangles whose xy box holds one of its column centres (tens at
+ * most, a few where triangles are larger than voxels), and a workgroup a
+ * brick cost lavapipe more to start than the brick's work. Each
+ * invocation keeps its brick's words in its own row of shared memory. */
+shared uint s_w[gl_WorkGroupSize.x * RENDER_VOX_OUT_WORDS];
 
 /* Vertex k in voxel units relative to the brick's low corner lo (metres). */
 vec3 vertex(uint k, vec3 lo, float voxel_m)
@@ -29,22 +33,17 @@ vec3 vertex(uint k, vec3 lo, float voxel_m)
 
 void main()
 {
-    uint b = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
-    if (b >= pc.n_bricks) return; /* uniform */
-    uint t = gl_LocalInvocationID.x;
-    if (t < BRICK_WORDS) s_flip[t] = 0u;
-    if (t < 2u) s_par[t] = 0u;
-    barrier();
+    uint b = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
+    if (b >= pc.n_bricks) return; /* no barrier below */
+    uint row = gl_LocalInvocationID.x * RENDER_VOX_OUT_WORDS;
+    for (uint i = 0u; i < RENDER_VOX_OUT_WORDS; i++) s_w[row + i] = 0u;
     ivec3 B = ivec3(int(bricks.w[b * RENDER_VOX_BRICK_WORDS]), int(bricks.w[b * RENDER_VOX_BRICK_WORDS + 1u]),
                     int(bricks.w[b * RENDER_VOX_BRICK_WORDS + 2u]));
     uint first = bricks.w[b * RENDER_VOX_BRICK_WORDS + 3u], last = bricks.w[b * RENDER_VOX_BRICK_WORDS + 4u];
     /* Bricks of every level in one list (level of detail); a power-of-two division is exact. */
     float voxel_m = pc.chunk_m / float(8u << bricks.w[b * RENDER_VOX_BRICK_WORDS + 5u]);
     vec3 lo = vec3(B * 8) * voxel_m;
-    /* One triangle per invocation at a time, over the columns its xy
-     * bounding box covers in the brick (usually one to four): the work
-     * follows the triangles' area, not 64 columns per triangle. */
-    for (uint k = first + t; k < last; k += gl_WorkGroupSize.x) {
+    for (uint k = first; k < last; k++) {
         uint tri = tri_ids.i[k];
         vec3 a = vertex(tris.i[3u * tri], lo, voxel_m), c1 = vertex(tris.i[3u * tri + 1u], lo, voxel_m);
         vec3 c2 = vertex(tris.i[3u * tri + 2u], lo, voxel_m);
@@ -73,16 +72,16 @@ void main()
                 float z = (e0 * a.z + e1 * c1.z + e2 * c2.z) / area;
                 /* The crossing belongs to the brick whose z range holds it. */
                 if (!(z >= 0.0 && z < 8.0)) continue;
-                /* Voxel centres k + 0.5 above z flip (a centre on the surface is outside). */
+                /* Voxel centres k + 0.5 above z flip (a centre on the surface is outside):
+                 * the column's voxels of heights 2j and 2j + 1 are bits b and b + 16 of word w0 + 4j. */
                 int k0 = int(ceil(z - 0.5));
                 if (z - 0.5 == float(k0)) k0++;
-                for (int zz = max(k0, 0); zz < 8; zz++)
-                    atomicXor(s_flip[brick_word(uint(cx), uint(cy), uint(zz))], 1u << brick_bit(uint(cx), uint(cy), uint(zz)));
+                uint w0 = brick_word(uint(cx), uint(cy), 0u), bit = brick_bit(uint(cx), uint(cy), 0u);
+                for (int j = max(k0, 0) >> 1; j < 4; j++)
+                    s_w[row + w0 + 4u * uint(j)] ^= (2 * j >= k0 ? 1u << bit : 0u) | (1u << (bit + 16u));
                 uint col = uint(cx) + 8u * uint(cy);
-                atomicXor(s_par[col >> 5], 1u << (col & 31u));
+                s_w[row + BRICK_WORDS + (col >> 5)] ^= 1u << (col & 31u);
             }
     }
-    barrier();
-    if (t < BRICK_WORDS) outw.w[b * RENDER_VOX_OUT_WORDS + t] = s_flip[t];
-    if (t < 2u) outw.w[b * RENDER_VOX_OUT_WORDS + BRICK_WORDS + t] = s_par[t];
+    for (uint i = 0u; i < RENDER_VOX_OUT_WORDS; i++) outw.w[b * RENDER_VOX_OUT_WORDS + i] = s_w[row + i];
 }
