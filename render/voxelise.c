@@ -421,36 +421,36 @@ render_voxelise_config render_voxelise_config_default(void)
     return (render_voxelise_config){.chunk_m = 2.0f, .level = 7, .max_pairs = 1ull << 28};
 }
 
-/* The GPU pass over the bricks: out gets RENDER_VOX_OUT_WORDS per brick. */
-static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mesh, const uint32_t *brick_words,
+/* The GPU pass over the bricks: out gets RENDER_VOX_OUT_WORDS per brick.
+ * tri_xyz: the listed triangles' corners, 9 floats each, in the order
+ * tri_ids index. */
+static bf_status run_pass(gpu_context *ctx, const float *tri_xyz, uint32_t n_tris, const uint32_t *brick_words,
                           uint32_t n_bricks, const uint32_t *tri_ids, uint64_t n_pairs, float chunk_m, uint32_t *out)
 {
-    gpu_buffer *buf[5] = {0};
-    uint64_t bytes[5] = {(uint64_t)mesh->n_verts * 12, (uint64_t)mesh->n_tris * 12,
-                         (uint64_t)n_bricks * RENDER_VOX_BRICK_WORDS * 4, n_pairs * 4,
+    gpu_buffer *buf[4] = {0};
+    uint64_t bytes[4] = {(uint64_t)n_tris * 36, (uint64_t)n_bricks * RENDER_VOX_BRICK_WORDS * 4, n_pairs * 4,
                          (uint64_t)n_bricks * RENDER_VOX_OUT_WORDS * 4};
-    const char *names[5] = {"render.vox_verts", "render.vox_tris", "render.vox_bricks", "render.vox_tri_ids",
-                            "render.vox_out"};
-    const void *src[4] = {v, mesh->tri, brick_words, tri_ids};
+    const char *names[4] = {"render.vox_tris", "render.vox_bricks", "render.vox_tri_ids", "render.vox_out"};
+    const void *src[3] = {tri_xyz, brick_words, tri_ids};
     gpu_pipeline *pipe = NULL;
     gpu_bindings *binds = NULL;
     bf_status s = BF_OK;
-    for (int i = 0; i < 5 && s == BF_OK; i++) {
+    for (int i = 0; i < 4 && s == BF_OK; i++) {
         gpu_buffer_desc d = {.name = names[i], .size_bytes = bytes[i] ? bytes[i] : 4, .memory = GPU_MEMORY_DEVICE};
         s = gpu_buffer_create(ctx, &d, &buf[i]);
-        if (s == BF_OK && i < 4 && bytes[i]) s = gpu_buffer_upload(buf[i], 0, src[i], bytes[i]);
+        if (s == BF_OK && i < 3 && bytes[i]) s = gpu_buffer_upload(buf[i], 0, src[i], bytes[i]);
     }
     gpu_pipeline_desc pd = {
         .name = "render.voxelise",
         .spirv = bf_spv_render_voxelise,
         .spirv_bytes = bf_spv_render_voxelise_size,
-        .n_buffers = 5,
+        .n_buffers = 4,
         .push_bytes = sizeof(render_vox_push),
         .local_size = {64, 1, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &pipe);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 5, "render.voxelise", &binds);
-    for (uint32_t i = 0; i < 5 && s == BF_OK; i++) s = gpu_bindings_set(binds, i, buf[i], 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 4, "render.voxelise", &binds);
+    for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(binds, i, buf[i], 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_begin(ctx);
     if (s == BF_OK) {
         render_vox_push pc = {.n_bricks = n_bricks, .chunk_m = chunk_m};
@@ -462,10 +462,10 @@ static bf_status run_pass(gpu_context *ctx, const float *v, const mesh_data *mes
         gpu_cmd_barrier(ctx, GPU_BARRIER_HOST);
         s = gpu_submit_wait(ctx);
     }
-    if (s == BF_OK && bytes[4]) s = gpu_buffer_download(buf[4], 0, out, bytes[4]);
+    if (s == BF_OK && bytes[3]) s = gpu_buffer_download(buf[3], 0, out, bytes[3]);
     gpu_bindings_destroy(binds);
     gpu_pipeline_destroy(pipe);
-    for (int i = 4; i >= 0; i--) gpu_buffer_destroy(buf[i]);
+    for (int i = 3; i >= 0; i--) gpu_buffer_destroy(buf[i]);
     return s;
 }
 
@@ -795,8 +795,31 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
             w[5] = l;
         }
     }
+    /* Only the listed triangles go to the GPU, their corners packed in the
+     * order they are first listed (ids renumbered in place): most of a
+     * finely tessellated mesh is in no pair. */
+    float *tri_xyz = NULL;
+    uint32_t n_used = 0, *packed = NULL;
+    if (s == BF_OK) {
+        packed = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
+        tri_xyz = bf_malloc((size_t)(n_pairs < mesh->n_tris ? n_pairs : mesh->n_tris) * 36 + 36);
+        if (!packed || !tri_xyz) s = bf_fail(BF_NO_MEMORY, "render: packing %llu listed triangles", (unsigned long long)n_pairs);
+    }
+    if (s == BF_OK) {
+        memset(packed, 0xFF, (size_t)mesh->n_tris * 4);
+        for (uint64_t k = 0; k < n_pairs; k++) {
+            uint32_t t = tri_ids[k];
+            if (packed[t] == UINT32_MAX) {
+                for (int j = 0; j < 3; j++) memcpy(tri_xyz + 9 * (size_t)n_used + 3 * j, v + 3 * (size_t)mesh->tri[3 * (size_t)t + j], 12);
+                packed[t] = n_used++;
+            }
+            tri_ids[k] = packed[t];
+        }
+    }
+    free(packed);
     double t1 = bf_time_s();
-    if (s == BF_OK) s = run_pass(ctx, v, mesh, brick_words, n_gpu, tri_ids, n_pairs, c.chunk_m, gpu_out);
+    if (s == BF_OK) s = run_pass(ctx, tri_xyz, n_used, brick_words, n_gpu, tri_ids, n_pairs, c.chunk_m, gpu_out);
+    free(tri_xyz);
     double t2 = bf_time_s();
     if (s == BF_OK) {
         for (uint32_t l = l_lo; l <= l_hi; l++)

@@ -10,11 +10,10 @@
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 0) readonly buffer Verts { float v[]; } verts;  /* x y z per vertex, map metres */
-layout(std430, binding = 1) readonly buffer Tris { uint i[]; } tris;     /* 3 vertex indices per triangle */
-layout(std430, binding = 2) readonly buffer Bricks { uint w[]; } bricks; /* RENDER_VOX_BRICK_WORDS per brick */
-layout(std430, binding = 3) readonly buffer TriIds { uint i[]; } tri_ids;
-layout(std430, binding = 4) writeonly buffer Out { uint w[]; } outw;      /* RENDER_VOX_OUT_WORDS per brick */
+layout(std430, binding = 0) readonly buffer Tris { float v[]; } tris;     /* 3 corners x y z per triangle, map metres */
+layout(std430, binding = 1) readonly buffer Bricks { uint w[]; } bricks; /* RENDER_VOX_BRICK_WORDS per brick */
+layout(std430, binding = 2) readonly buffer TriIds { uint i[]; } tri_ids;
+layout(std430, binding = 3) writeonly buffer Out { uint w[]; } outw;      /* RENDER_VOX_OUT_WORDS per brick */
 
 layout(push_constant) uniform Push { render_vox_push pc; };
 
@@ -25,10 +24,11 @@ layout(push_constant) uniform Push { render_vox_push pc; };
  * invocation keeps its brick's words in its own row of shared memory. */
 shared uint s_w[gl_WorkGroupSize.x * RENDER_VOX_OUT_WORDS];
 
-/* Vertex k in voxel units relative to the brick's low corner lo (metres). */
-vec3 vertex(uint k, vec3 lo, float voxel_m)
+/* Corner j of triangle tri in voxel units relative to the brick's low corner lo (metres). */
+vec3 corner(uint tri, uint j, vec3 lo, float voxel_m)
 {
-    return (vec3(verts.v[3u * k], verts.v[3u * k + 1u], verts.v[3u * k + 2u]) - lo) / voxel_m;
+    uint o = 9u * tri + 3u * j;
+    return (vec3(tris.v[o], tris.v[o + 1u], tris.v[o + 2u]) - lo) / voxel_m;
 }
 
 void main()
@@ -45,8 +45,7 @@ void main()
     vec3 lo = vec3(B * 8) * voxel_m;
     for (uint k = first; k < last; k++) {
         uint tri = tri_ids.i[k];
-        vec3 a = vertex(tris.i[3u * tri], lo, voxel_m), c1 = vertex(tris.i[3u * tri + 1u], lo, voxel_m);
-        vec3 c2 = vertex(tris.i[3u * tri + 2u], lo, voxel_m);
+        vec3 a = corner(tri, 0u, lo, voxel_m), c1 = corner(tri, 1u, lo, voxel_m), c2 = corner(tri, 2u, lo, voxel_m);
         /* Counter-clockwise in xy; a triangle seen edge-on crosses nothing. */
         float area = (c1.x - a.x) * (c2.y - a.y) - (c1.y - a.y) * (c2.x - a.x);
         if (area == 0.0) continue;
