@@ -119,7 +119,9 @@ static inline int64_t ifloor(double x)
 static bool tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double brick_m, int64_t b0[3], int64_t b1[3],
                        int64_t p0[3], int64_t p1[3])
 {
-    const double voxel = brick_m / 8, grow = voxel / 2 * 1.001, inv_voxel = 1 / voxel;
+    /* Products with the inverses, not quotients (the divisions were most of
+     * this function's time); exact for the power-of-two chunks (2 m). */
+    const double voxel = brick_m / 8, grow = voxel / 2 * 1.001, inv_voxel = 1 / voxel, inv_brick = 1 / brick_m;
     const uint32_t *tri = mesh->tri + 3 * (size_t)t;
     const float *q0 = v + 3 * (size_t)tri[0], *q1 = v + 3 * (size_t)tri[1], *q2 = v + 3 * (size_t)tri[2];
     bool any = true;
@@ -127,7 +129,7 @@ static bool tri_bricks(const float *v, const mesh_data *mesh, uint32_t t, double
         /* (Comparisons, not fmin: no library call on this hot path.) */
         float l = q0[a] < q1[a] ? q0[a] : q1[a], h = q0[a] < q1[a] ? q1[a] : q0[a];
         double lo = l < q2[a] ? l : q2[a], hi = h > q2[a] ? h : q2[a];
-        b0[a] = ifloor((lo - grow) / brick_m), b1[a] = ifloor((hi + grow) / brick_m);
+        b0[a] = ifloor((lo - grow) * inv_brick), b1[a] = ifloor((hi + grow) * inv_brick);
         p0[a] = b0[a], p1[a] = b1[a];
         if (a == 2) continue;
         /* Column centres in the box: ceil(lo / voxel - 0.5) .. floor(hi / voxel - 0.5). */
