@@ -109,6 +109,7 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     add_float(o, "chunk_m", c->chunk_m);
     cJSON_AddNumberToObject(o, "max_level", c->max_level);
     add_float(o, "voxel_ratio", c->voxel_ratio);
+    add_float(o, "voxel_sigmas", c->voxel_sigmas);
     cJSON_AddNumberToObject(o, "window", c->window);
     cJSON_AddNumberToObject(o, "subcache", c->subcache);
     cJSON_AddNumberToObject(o, "brick_cap", c->brick_cap);

@@ -354,6 +354,10 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc)
     const app_option r[APP_MAP_ROWS] = {
         APP_OPT("--ratio", APP_OPT_FLOAT, &fc->voxel_ratio, "R", "voxel-to-pixel ratio of the level rule", .min = 0.05,
                 .max = 64, .min_open = true),
+        APP_OPT("--voxel-sigmas", APP_OPT_FLOAT, &fc->voxel_sigmas, "K",
+                "the level rule's voxel is also at least K times the sensor's depth noise sigma(z) (far samples "
+                "get voxels as coarse as their noise); 0: the footprint alone",
+                .min = 0, .max = 64),
         APP_OPT("--window", APP_OPT_U32, &fc->window, "N", "frames per fusion window (even)", .min = 2, .max = 256,
                 .check = check_even),
         APP_OPT("--subcache", APP_OPT_U32, &fc->subcache, "N", "frames of the new-brick pass (at most the window)",

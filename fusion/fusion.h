@@ -32,6 +32,8 @@ typedef struct fusion_config {
     float chunk_m;          /* edge of a world chunk [m], default 2 */
     uint32_t max_level;     /* finest octree level, default 8 (~1 mm at 2 m chunks) */
     float voxel_ratio;      /* voxel-to-pixel ratio of the level rule, default 1 */
+    float voxel_sigmas;     /* the level rule's voxel is also at least this many sigma(z) of the sensor's
+                               noise, 0 (default): the footprint alone (docs/real_frames.md) */
     uint32_t window;        /* n: frames per window, even, default 40 */
     uint32_t subcache;      /* n^: frames for new bricks' quick integration, default 10 */
     uint32_t brick_cap;     /* bricks allocated at create, never grown; default 1 << 20 */

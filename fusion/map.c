@@ -35,6 +35,8 @@ static bf_status config_check(const fusion_config *c, const bf_intrinsics *K)
         return bf_fail(BF_INVALID_ARG, "fusion: max_level %u above %u", c->max_level, FUSION_MAX_LEVEL);
     if (!(c->voxel_ratio > 0.05f && c->voxel_ratio <= 64.0f))
         return bf_fail(BF_INVALID_ARG, "fusion: voxel_ratio %g outside (0.05, 64]", c->voxel_ratio);
+    if (!(c->voxel_sigmas >= 0.0f && c->voxel_sigmas <= 64.0f))
+        return bf_fail(BF_INVALID_ARG, "fusion: voxel_sigmas %g outside [0, 64]", c->voxel_sigmas);
     if (c->window < 2 || c->window % 2 || c->window > 256)
         return bf_fail(BF_INVALID_ARG, "fusion: window %u must be even, 2..256", c->window);
     if (c->subcache < 1 || c->subcache > c->window)

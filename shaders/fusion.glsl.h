@@ -88,6 +88,17 @@ BF_FN bf_f32 fusion_voxel_m(bf_f32 chunk_m, bf_u32 level)
  * ratio * z / f, i.e. voxel / sqrt(2) < footprint <= voxel * sqrt(2),
  * clamped to [0, max_level] (DESIGN.md section 3: model only what the
  * sensor resolves). A loop of exact halvings, so C and GLSL agree. */
+/* The size the level rule asks of a voxel for a sample at depth z: ratio
+ * times the pixel footprint z / fx, and with voxel_sigmas > 0 at least
+ * voxel_sigmas times the sensor's sigma(z) (Kinect v1's grows as z^2, the
+ * footprint as z: far samples get voxels as coarse as their noise). */
+BF_FN bf_f32 fusion_level_size(bf_f32 z, bf_f32 inv_abs_fx, bf_f32 ratio, bf_f32 voxel_sigmas, bf_f32 sigma_z)
+{
+    BF_PRECISE bf_f32 f = ratio * z * inv_abs_fx;
+    BF_PRECISE bf_f32 n = voxel_sigmas * sigma_z;
+    return n > f ? n : f;
+}
+
 BF_FN bf_u32 fusion_level_for_footprint(bf_f32 footprint_m, bf_f32 chunk_m, bf_u32 max_level)
 {
     bf_f32 voxel = chunk_m * 0.125f;
@@ -160,7 +171,7 @@ struct fusion_alloc_push {
     bf_f32 band_sigmas;
     bf_f32 max_depth_m;
     bf_f32 sigma_a, sigma_b, sigma_c;
-    bf_u32 pad;
+    bf_f32 voxel_sigmas;  /* the level rule's voxel is at least this many sigma(z) (0: the footprint alone) */
 };
 #ifndef BF_GLSL
 typedef struct fusion_alloc_push fusion_alloc_push;

@@ -215,8 +215,10 @@ bool sample_at(mat3 Rt, uint x, uint y, out sample_ray s)
     s.band = 0.0;
     s.level = 0u;
     if (!(s.z > 0.0) || s.z > pc.max_depth_m) return false;
-    s.band = pc.band_sigmas * bf_sensor_sigma(s.z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
-    s.level = fusion_level_for_footprint(pc.voxel_ratio * s.z * g_inv_abs_fx, pc.chunk_m, pc.max_level);
+    float sigma = bf_sensor_sigma(s.z, pc.sigma_a, pc.sigma_b, pc.sigma_c);
+    s.band = pc.band_sigmas * sigma;
+    s.level = fusion_level_for_footprint(fusion_level_size(s.z, g_inv_abs_fx, pc.voxel_ratio, pc.voxel_sigmas, sigma),
+                                         pc.chunk_m, pc.max_level);
     s.d = Rt * vec3((float(x) - g_cx) * g_inv_fx, (float(y) - g_cy) * g_inv_fy, 1.0);
     return true;
 }

@@ -52,6 +52,22 @@ BF_TEST(far_sample_lands_on_coarse_level)
     CHECK_NEAR(fusion_voxel_m(2.0f, 6), 2.0 / 512, 0);
 }
 
+BF_TEST(level_size_follows_the_noise_where_it_exceeds_the_footprint)
+{
+    /* Kinect v1: sigma(1 m) = 1.88 mm, sigma(4 m) = 25.8 mm; ratio 2 at f = 585:
+     * footprints 3.42 and 13.7 mm. With one sigma the far sample's voxel is its
+     * noise (level 3: 31 mm voxels, nearest to 25.8; level 4 without: 15.6 mm),
+     * the near one keeps the footprint. */
+    bf_sensor k = {.sigma_a = 0.0012f, .sigma_b = 0.0019f, .sigma_c = 0.4f};
+    float s1 = bf_sensor_sigma(1.0f, k.sigma_a, k.sigma_b, k.sigma_c), s4 = bf_sensor_sigma(4.0f, k.sigma_a, k.sigma_b, k.sigma_c);
+    CHECK_NEAR(fusion_level_size(1.0f, 1.0f / 585, 2.0f, 0.0f, s1), 2.0 / 585, 1e-6);
+    CHECK_NEAR(fusion_level_size(4.0f, 1.0f / 585, 2.0f, 0.0f, s4), 8.0 / 585, 1e-6);
+    CHECK_NEAR(fusion_level_size(1.0f, 1.0f / 585, 2.0f, 1.0f, s1), 2.0 / 585, 1e-6);
+    CHECK_NEAR(fusion_level_size(4.0f, 1.0f / 585, 2.0f, 1.0f, s4), 0.0012 + 0.0019 * 3.6 * 3.6, 1e-6);
+    CHECK_EQ_INT(fusion_level_for_footprint(fusion_level_size(4.0f, 1.0f / 585, 2.0f, 1.0f, s4), 2.0f, 8), 3);
+    CHECK_EQ_INT(fusion_level_for_footprint(fusion_level_size(4.0f, 1.0f / 585, 2.0f, 0.0f, s4), 2.0f, 8), 4);
+}
+
 BF_TEST(create_rejects_bad_config_with_a_message)
 {
     gpu_context *ctx;
@@ -93,7 +109,9 @@ static size_t expected_cells(const bf_intrinsics *K, const fusion_config *c, con
 {
     size_t n = 0;
     double sigma = c->sensor.sigma_a + c->sensor.sigma_b * (z - c->sensor.sigma_c) * (z - c->sensor.sigma_c);
-    uint32_t level = fusion_level_for_footprint((float)(c->voxel_ratio * z / K->fx_px), c->chunk_m, c->max_level);
+    uint32_t level = fusion_level_for_footprint(
+        fusion_level_size((float)z, (float)(1.0 / K->fx_px), c->voxel_ratio, c->voxel_sigmas, (float)sigma), c->chunk_m,
+        c->max_level);
     double cell_m = c->chunk_m / (double)(1u << level);
     for (uint32_t v = 0; v < K->height; v++)
         for (uint32_t u = 0; u < K->width; u++)
