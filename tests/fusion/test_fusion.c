@@ -142,11 +142,13 @@ static size_t expected_cells(const bf_intrinsics *K, const fusion_config *c, con
 
 /* Runs one plane frame through a fresh map and compares the allocated
  * bricks with the CPU's expectation. */
-static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_se3 T_wc, double z)
+static void check_plane_allocation_k(const bf_intrinsics *K, bf_vec3 origin_w, bf_se3 T_wc, double z,
+                                     float voxel_sigmas, uint32_t want_level)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     fusion_config c = small_config();
+    c.voxel_sigmas = voxel_sigmas;
     fusion_map *map;
     CHECK_OK(fusion_create(ctx, &c, K, origin_w, &map));
     uint16_t *depth = plane_depth(K, z);
@@ -179,6 +181,7 @@ static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_
     }
     CHECK(n_sure > 10);
     CHECK(snap.n_bricks >= n_sure && snap.n_bricks <= n);
+    for (uint32_t b = 0; want_level != UINT32_MAX && b < snap.n_bricks; b++) CHECK_EQ_INT(snap.bricks[b].level, want_level);
     fusion_stats st;
     CHECK_OK(fusion_get_stats(map, &st));
     CHECK_EQ_INT(st.n_bricks, snap.n_bricks);
@@ -191,6 +194,11 @@ static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_
     gpu_context_destroy(ctx);
 }
 
+static void check_plane_allocation(const bf_intrinsics *K, bf_vec3 origin_w, bf_se3 T_wc, double z)
+{
+    check_plane_allocation_k(K, origin_w, T_wc, z, 0.0f, UINT32_MAX);
+}
+
 BF_TEST(plane_allocates_exactly_the_band_bricks)
 {
     /* Camera at the origin looking along +z at a plane 1.3 m away: the
@@ -199,6 +207,15 @@ BF_TEST(plane_allocates_exactly_the_band_bricks)
     /* A width whose tiles do not fill the last workgroup. */
     bf_intrinsics K = {164, 118, 130.0, 130.0, 81.5, 58.5, 5000};
     check_plane_allocation(&K, bf_v3(0, 0, 0), bf_se3_identity(), 0.8);
+}
+
+BF_TEST(noise_sized_voxels_put_a_far_plane_on_a_coarser_level)
+{
+    /* A plane 4 m away, f = 130 px: the pixel footprint, 30.8 mm, asks for
+     * level 3 (31.3 mm voxels); two sigma(4 m) of Kinect v1, 51.6 mm, for
+     * level 2 (62.5 mm). The bricks are exactly the CPU oracle's either way. */
+    check_plane_allocation_k(&K_TEST, bf_v3(0, 0, 0), bf_se3_identity(), 4.0, 0.0f, 3);
+    check_plane_allocation_k(&K_TEST, bf_v3(0, 0, 0), bf_se3_identity(), 4.0, 2.0f, 2);
 }
 
 BF_TEST(allocation_10_km_from_the_origin_matches_the_origin)
