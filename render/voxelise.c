@@ -502,10 +502,10 @@ static void finish_bricks(const uint64_t *keys, const uint32_t *gpu_out, const u
 {
     uint16_t dst[512];
     perm_table(axis, dst);
+    static const uint32_t none[RENDER_VOX_OUT_WORDS];
     uint64_t carry = 0;
     for (uint32_t i = 0; i < n_bricks; i++) {
         if (i == 0 || key_x(keys[i]) != key_x(keys[i - 1]) || key_y(keys[i]) != key_y(keys[i - 1])) carry = 0;
-        static const uint32_t none[RENDER_VOX_OUT_WORDS];
         const uint32_t *g = gpu_slot[i] == UINT32_MAX ? none : gpu_out + (size_t)gpu_slot[i] * RENDER_VOX_OUT_WORDS;
         hostmap_brick *b = &bricks[i];
         int32_t Bp[3] = {key_x(keys[i]), key_y(keys[i]), key_z(keys[i])}, B[3];
@@ -692,6 +692,33 @@ static void vert_place(void *ctx, size_t b)
     }
 }
 
+/* Only the listed triangles go to the GPU, their corners packed (9 floats
+ * each) in the order they are first listed, the ids renumbered in place:
+ * most of a finely tessellated mesh is in no pair. */
+static bf_status pack_listed_triangles(const float *v, const mesh_data *mesh, uint32_t *tri_ids, uint64_t n_pairs,
+                                       float **tri_xyz, uint32_t *n_used)
+{
+    uint32_t *packed = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
+    float *xyz = bf_malloc((size_t)(n_pairs < mesh->n_tris ? n_pairs : mesh->n_tris) * 36 + 36);
+    if (!packed || !xyz) {
+        free(packed), free(xyz);
+        return bf_fail(BF_NO_MEMORY, "render: packing %llu listed triangles", (unsigned long long)n_pairs);
+    }
+    memset(packed, 0xFF, (size_t)mesh->n_tris * 4);
+    uint32_t n = 0;
+    for (uint64_t k = 0; k < n_pairs; k++) {
+        uint32_t t = tri_ids[k];
+        if (packed[t] == UINT32_MAX) {
+            for (int j = 0; j < 3; j++) memcpy(xyz + 9 * (size_t)n + 3 * j, v + 3 * (size_t)mesh->tri[3 * (size_t)t + j], 12);
+            packed[t] = n++;
+        }
+        tri_ids[k] = packed[t];
+    }
+    free(packed);
+    *tri_xyz = xyz, *n_used = n;
+    return BF_OK;
+}
+
 /* The bins of every level, one after the other: the GPU pass takes them
  * as one list. */
 typedef struct level_bins {
@@ -797,28 +824,9 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
             w[5] = l;
         }
     }
-    /* Only the listed triangles go to the GPU, their corners packed in the
-     * order they are first listed (ids renumbered in place): most of a
-     * finely tessellated mesh is in no pair. */
     float *tri_xyz = NULL;
-    uint32_t n_used = 0, *packed = NULL;
-    if (s == BF_OK) {
-        packed = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
-        tri_xyz = bf_malloc((size_t)(n_pairs < mesh->n_tris ? n_pairs : mesh->n_tris) * 36 + 36);
-        if (!packed || !tri_xyz) s = bf_fail(BF_NO_MEMORY, "render: packing %llu listed triangles", (unsigned long long)n_pairs);
-    }
-    if (s == BF_OK) {
-        memset(packed, 0xFF, (size_t)mesh->n_tris * 4);
-        for (uint64_t k = 0; k < n_pairs; k++) {
-            uint32_t t = tri_ids[k];
-            if (packed[t] == UINT32_MAX) {
-                for (int j = 0; j < 3; j++) memcpy(tri_xyz + 9 * (size_t)n_used + 3 * j, v + 3 * (size_t)mesh->tri[3 * (size_t)t + j], 12);
-                packed[t] = n_used++;
-            }
-            tri_ids[k] = packed[t];
-        }
-    }
-    free(packed);
+    uint32_t n_used = 0;
+    if (s == BF_OK) s = pack_listed_triangles(v, mesh, tri_ids, n_pairs, &tri_xyz, &n_used);
     double t1 = bf_time_s();
     if (s == BF_OK) s = run_pass(ctx, tri_xyz, n_used, brick_words, n_gpu, tri_ids, n_pairs, c.chunk_m, gpu_out);
     free(tri_xyz);
