@@ -197,7 +197,7 @@ BF_TEST(real_desk_frames_b1_reproduced_and_b2_tracked)
         double z = d1[i] / 5000.0, sigma = 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4);
         /* 3 sigma of noise plus half a voxel at the level of the sample. */
         double voxel = hostmap_level_voxel_m(2.0, 0), foot = z / 520.9;
-        while (voxel > foot * 1.41421356) voxel *= 0.5;
+        for (uint32_t l = 0; l < cfg.fusion.max_level && voxel > foot * 1.41421356; l++) voxel *= 0.5;
         if (fabs(im.depth[i] - z) <= 3 * sigma + voxel) n_within++;
     }
     fprintf(stderr, "  b1 ray-cast at b1: %u of %u pixels with depth hit, %.1f%% of the hits within 3 sigma + voxel\n",
