@@ -25,7 +25,7 @@ DEV=${DEV:-}
 DEV_FRAMES=${DEV_FRAMES:-500}
 SWEEP=${SWEEP:-1}
 REUSE=${REUSE:-0}
-VARIANTS=${VARIANTS:-"defaults|;previous|--icp-iters 10,5,4 --icp-sample-step 2;step2|--icp-sample-step 2;colour-off|--colour off;window20|--window 20;ratio3|--ratio 3;ratio1|--ratio 1"}
+VARIANTS=${VARIANTS:-"defaults|;level8|--max-level 8;previous|--icp-iters 10,5,4 --icp-sample-step 2;step2|--icp-sample-step 2;colour-off|--colour off;window20|--window 20;ratio3|--ratio 3;ratio1|--ratio 1"}
 source bench/common.sh
 export BITFUSE_VALIDATION=0 BITFUSE_PROGRESS=0
 mkdir -p "$OUT"
