@@ -57,8 +57,9 @@ recon_config recon_config_default(void)
      * so level 7's 1.95 mm voxels, which ratio 2 gives surfaces nearer than
      * about 0.8 m (f = 585 px), are below two sigma everywhere in its range
      * and hold the fewest samples each. On the real frames both the
-     * trajectory and the surface gain (docs/real_frames.md, "No voxels finer than 3.9 mm");
-     * the synthetic room never reaches level 7. */
+     * trajectory and the surface gain (docs/real_frames.md, "The finest
+     * level 6 by default"); the synthetic room never reaches level 7. The
+     * level counts from the chunk edge: another --chunk moves this voxel. */
     c.fusion.max_level = 6;
     return c;
 }
