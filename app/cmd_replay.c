@@ -86,7 +86,7 @@ typedef struct replay_args {
     mesh_data ref, vis;      /* read before the device opens */
 } replay_args;
 
-#define LOOP_ROWS 27
+#define LOOP_ROWS 28
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -226,8 +226,11 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "or sigma_z(z) alone"),
         APP_OPT("--huber-knee", APP_OPT_FLOAT, &tc->huber_knee, "R",
                 "with --huber-scale residuals: the RMS of r / sigma_z below which the unit stays sigma_z", .min = 1),
+        APP_OPT("--max-residual-sigma", APP_OPT_FLOAT, &tc->max_residual_sigma, "S",
+                "a frame whose inliers' RMS residual is over 2 cm counts as lost only when it is also over S times "
+                "the sensor's noise at their depths; 0: over 2 cm is lost"),
         APP_OPT("--ref-level", APP_OPT_U32, &tc->ref_level, "L",
-                "resolution of the tracking reference's ray-cast: 0 full, 1 half", .max = 1),
+                "resolution of the tracking reference's ray-cast: 0 full, 1 half, 2 quarter", .max = 2),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
                 "the tracker's first guess: the last pose times the last motion, or the last pose"),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",

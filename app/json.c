@@ -139,6 +139,7 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     json_sensor(o, "sensor", &c->sensor);
     add_float(o, "min_inlier_frac", c->min_inlier_frac);
     add_float(o, "max_residual_m", c->max_residual_m);
+    add_float(o, "max_residual_sigma", c->max_residual_sigma);
     add_float(o, "max_motion_m", c->max_motion_m);
     add_float(o, "max_motion_deg", c->max_motion_deg);
     cJSON_AddNumberToObject(o, "degenerate_ratio", c->degenerate_ratio);

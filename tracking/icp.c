@@ -398,7 +398,9 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
     else if (!bf_se3_is_finite(T_rc)) res->outcome = TRACK_NUMERIC;
     else if (res->inlier_frac < c->min_inlier_frac) res->outcome = TRACK_FEW_INLIERS;
     else if (!step.ok) res->outcome = TRACK_NUMERIC;
-    else if (res->residual_m > c->max_residual_m) res->outcome = TRACK_HIGH_RESIDUAL;
+    else if (res->residual_m > c->max_residual_m &&
+             !(c->max_residual_sigma > 0 && res->residual_sigma <= c->max_residual_sigma))
+        res->outcome = TRACK_HIGH_RESIDUAL;
     else if (bf_v3_norm(motion.t) > c->max_motion_m * t->motion_scale ||
              bf_se3_angle(&motion) * 180.0 / M_PI > c->max_motion_deg * t->motion_scale)
         res->outcome = TRACK_LARGE_MOTION;

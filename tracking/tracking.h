@@ -46,7 +46,8 @@ typedef struct track_config {
     bf_sensor sensor;                      /* noise model and range, default Kinect v1 (recon/ sets its own) */
     /* Failure and degeneracy (checked at the end of the finest level). */
     float min_inlier_frac;   /* inliers / valid samples of the frame below this: failure */
-    float max_residual_m;    /* RMS point-to-plane residual of the inliers above this: failure */
+    float max_residual_m;    /* RMS point-to-plane residual of the inliers above this: failure, */
+    float max_residual_sigma; /* when their RMS of r / sigma_z(z) is above this too (0: the metric gate alone) */
     float max_motion_m;      /* estimated motion from the guess beyond these: failure */
     float max_motion_deg;
     double degenerate_ratio; /* smallest / largest eigenvalue of the scaled system below this: degenerate */
@@ -56,7 +57,8 @@ typedef struct track_config {
     uint32_t rof_level;      /* pyramid level the ROF runs on: 0 full resolution, 1 half (default; the
                                 finest level then keeps the unsmoothed depth, docs/tracking.md) */
     uint32_t ref_level;      /* the reference's finest level: 0 full resolution, 1 half (default: a
-                                ray-cast of a quarter of the pixels, docs/tracking.md). References on the
+                                ray-cast of a quarter of the pixels, docs/tracking.md), 2 a quarter
+                                (a sixteenth of the pixels; below levels). References on the
                                 GPU then come at (width >> ref_level) x (height >> ref_level); frame
                                 levels below it are associated with it. The ROF runs at
                                 max(rof_level, ref_level). */

@@ -330,7 +330,7 @@ expect 3 "$B" replay "$T/int.bflog" --out "$T/rpgt2" --fuse-at-groundtruth
 mentions "no ground-truth pose"
 expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ray-start middle
 expect 2 "$B" replay "$T/seq" --out "$T/rp4" --huber -1
-expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ref-level 2
+expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ref-level 3
 
 # live: the same loop on a device (here a recording standing in for one),
 # recording what it consumed on the side.

@@ -350,6 +350,54 @@ static void track_room_pair(synth_noise noise, const bf_intrinsics *K, const bf_
     track_room_pair_step(noise, K, T_off, noise_exp, 0, est_rel, res, ok);
 }
 
+/* The residual gate: over max_residual_m counts as lost only where the
+ * inliers' RMS of r / sigma_z(z) is over max_residual_sigma too (real
+ * frames of a far view leave 18-21 mm at the right pose, docs/tracking.md).
+ * A noisy pair at the right pose leaves about sqrt(2) sigma (two noisy
+ * images); with the metric gate set below its residual, the frame is kept
+ * by the sigma gate, and lost without it or with a gate below its RMS. */
+BF_TEST(residual_gate_counts_in_the_sensor_noise)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    room rm;
+    CHECK_OK(room_open(&rm, &K_MID, SYNTH_NOISE_KINECT1));
+    bf_se3 T0 = rm.scene.T_wc_view, d = small_motion();
+    bf_se3 T1 = bf_se3_mul(&T0, &d);
+    uint16_t *d0 = render(&rm, 0, &T0), *d1 = render(&rm, 1, &T1);
+    CHECK(d0 && d1);
+    track_config base = test_config(&K_MID);
+    CHECK(base.max_residual_sigma > 0);
+    double r_m = 0, r_sigma = 0;
+    for (int run = 0; run < 4; run++) {
+        track_config cfg = base;
+        if (run > 0) cfg.max_residual_m = (float)(0.5 * r_m);
+        if (run == 2) cfg.max_residual_sigma = 0;
+        if (run == 3) cfg.max_residual_sigma = (float)(0.5 * r_sigma);
+        track_tracker *t;
+        CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
+        bf_frame f0 = frame_of(&K_MID, d0, 0), f1 = frame_of(&K_MID, d1, 1);
+        track_result r;
+        CHECK_OK(track_set_reference_frame(t, &f0, &T0));
+        CHECK_OK(track_frame(t, &f1, &T0, &r));
+        track_destroy(t);
+        fprintf(stderr, "  gate %.1f mm / %.2f sigma: %s, residual %.2f mm, %.2f sigma\n", 1e3 * cfg.max_residual_m,
+                cfg.max_residual_sigma, track_outcome_name(r.outcome), 1e3 * r.residual_m, r.residual_sigma);
+        if (run == 0) {
+            CHECK_EQ_INT(r.outcome, TRACK_OK);
+            r_m = r.residual_m, r_sigma = r.residual_sigma;
+            CHECK(r_m > 0 && r_m < base.max_residual_m);
+            CHECK(r_sigma > 0.5 && r_sigma < base.max_residual_sigma);
+        } else {
+            CHECK_EQ_INT(r.outcome, run == 1 ? TRACK_OK : TRACK_HIGH_RESIDUAL);
+        }
+    }
+    free(d0), free(d1);
+    room_close(&rm);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 static void check_room(synth_noise noise, double tol_m, double tol_deg)
 {
     bf_se3 I = bf_se3_identity(), est, est_far;
@@ -547,15 +595,15 @@ BF_TEST(noise_weight_exponent_reaches_the_icp_and_is_validated)
  * a full-resolution frame moved by small_motion() from it. */
 typedef struct half_pair {
     room full, half;
-    bf_intrinsics Kh; /* K_MID at level 1 */
+    bf_intrinsics Kh; /* K_MID at the reference's level */
     bf_se3 T0, d;     /* the reference's pose; the frame's motion from it */
     uint16_t *ref, *d1;
 } half_pair;
 
-static bf_status half_pair_open(half_pair *p, synth_noise noise)
+static bf_status half_pair_open(half_pair *p, synth_noise noise, uint32_t level)
 {
     memset(p, 0, sizeof *p);
-    p->Kh = bf_intrinsics_level(&K_MID, 1);
+    p->Kh = bf_intrinsics_level(&K_MID, level);
     bf_status s = room_open(&p->full, &K_MID, noise);
     if (s == BF_OK) s = room_open(&p->half, &p->Kh, noise);
     if (s != BF_OK) return s;
@@ -572,20 +620,21 @@ static void half_pair_close(half_pair *p)
     room_close(&p->half);
 }
 
-/* The default reference level: a GPU reference at half resolution (the
- * ray-cast of recon/), the frame at full resolution. The finest frame level
- * is associated with the reference's level 1, so the motion must come out
- * as well as with a full-resolution reference: noiseless 320x240 frames
- * against a 160x120 reference rendered at level 1's intrinsics. */
-BF_TEST(half_resolution_reference_tracks_like_a_full_one)
+/* A GPU reference at half resolution (the default: the ray-cast of
+ * recon/) or a quarter (`--ref-level 2`), the frame at full resolution. The
+ * finest frame level is associated with the reference's level, so the
+ * motion must come out as well as with a full-resolution reference:
+ * noiseless 320x240 frames against a 160x120 or 80x60 reference rendered at
+ * that level's intrinsics. */
+static void check_coarse_reference(uint32_t level)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     half_pair hp;
-    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_NONE));
+    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_NONE, level));
     bf_intrinsics Kh = hp.Kh;
-    CHECK_EQ_INT(Kh.width, 160);
-    CHECK(fabs(Kh.cx_px - 79.5) < 1e-12 && fabs(Kh.fx_px - 131.25) < 1e-12);
+    CHECK_EQ_INT(Kh.width, 320u >> level);
+    CHECK(fabs(Kh.cx_px - (160.0 / (1u << level) - 0.5)) < 1e-12 && fabs(Kh.fx_px - 262.5 / (1u << level)) < 1e-12);
     bf_se3 T0 = hp.T0, d = hp.d;
     const uint16_t *ref = hp.ref, *d1 = hp.d1;
     uint32_t nh = Kh.width * Kh.height;
@@ -594,7 +643,8 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     gpu_buffer *buf;
     CHECK_OK(upload_float(ctx, zf, nh, &buf));
     track_config cfg = test_config(&K_MID);
-    CHECK_EQ_INT(cfg.ref_level, 1);
+    CHECK_EQ_INT(track_config_default().ref_level, 1);
+    cfg.ref_level = level;
     track_tracker *t;
     CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
     CHECK_OK(track_set_reference_gpu(t, buf, &T0));
@@ -613,13 +663,13 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     double dt, da;
     bf_se3 inv = bf_se3_inverse(&T0), est = bf_se3_mul(&inv, &r.T_wc);
     pose_error(&d, &est, &dt, &da);
-    fprintf(stderr, "  half-resolution reference: %s, error %.3f mm %.4f deg; %u/%u inliers, %u of %u pixels kept\n",
+    fprintf(stderr, "  reference at level %u: %s, error %.3f mm %.4f deg; %u/%u inliers, %u of %u pixels kept\n", level,
             track_outcome_name(r.outcome), 1e3 * dt, da, r.n_inliers, r.n_valid, kept, nh);
     CHECK(kept >= nh * 9 / 10);
     CHECK_EQ_INT(r.outcome, TRACK_OK);
     CHECK_LE(dt, 0.001);
     CHECK_LE(da, 0.1);
-    /* A reference of the full size is accepted (its first quarter is read);
+    /* A reference of the full size is accepted (its first part is read);
      * one too small is not. */
     gpu_buffer *small;
     CHECK_OK(upload_float(ctx, zf, nh / 2, &small));
@@ -633,6 +683,24 @@ BF_TEST(half_resolution_reference_tracks_like_a_full_one)
     gpu_context_destroy(ctx);
 }
 
+BF_TEST(half_resolution_reference_tracks_like_a_full_one) { check_coarse_reference(1); }
+
+BF_TEST(quarter_resolution_reference_tracks_like_a_full_one) { check_coarse_reference(2); }
+
+/* The reference's level must be one of the tracker's pyramid levels. */
+BF_TEST(reference_level_beyond_the_pyramid_is_refused)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    track_config cfg = test_config(&K_MID);
+    cfg.ref_level = cfg.levels;
+    track_tracker *t = NULL;
+    CHECK_STATUS(track_create(ctx, &cfg, &K_MID, &t), BF_INVALID_ARG);
+    CHECK(t == NULL);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 /* The loop's paths (recon/) read the frame where fusion uploaded it and
  * prepare a reference written in place in the caller's submission: the
  * same inputs through the same kernels as the host copies, so the same
@@ -642,7 +710,7 @@ BF_TEST(frame_on_the_gpu_and_reference_in_place_match_the_copying_paths)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     half_pair hp;
-    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_KINECT1));
+    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_KINECT1, 1));
     bf_intrinsics Kh = hp.Kh;
     bf_se3 T0 = hp.T0;
     const uint16_t *ref = hp.ref, *d1 = hp.d1;
