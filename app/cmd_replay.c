@@ -185,6 +185,9 @@ static const char *check_sample_step(const char *name, const char *v)
     return msg;
 }
 
+/* --ref-level's choices: RECON_REF_LEVEL_AUTO is UINT32_MAX, -1 as an int. */
+static const int ref_level_codes[] = {-1, 0, 1, 2};
+
 static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
 {
     track_config *tc = &a->rcfg.track;
@@ -229,8 +232,10 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--max-residual-sigma", APP_OPT_FLOAT, &tc->max_residual_sigma, "S",
                 "a frame whose inliers' RMS residual is over 2 cm counts as lost only when it is also over S times "
                 "the sensor's noise at their depths; 0: over 2 cm is lost"),
-        APP_OPT("--ref-level", APP_OPT_U32, &tc->ref_level, "L",
-                "resolution of the tracking reference's ray-cast: 0 full, 1 half, 2 quarter", .max = 2),
+        APP_OPT("--ref-level", APP_OPT_ENUM, (int *)&tc->ref_level, "auto|0|1|2",
+                "resolution of the tracking reference's ray-cast: 0 full, 1 half, 2 quarter; auto: the coarsest "
+                "of 1 and 2 that keeps 160 pixels a row (a quarter of 640x480)",
+                .codes = ref_level_codes),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
                 "the tracker's first guess: the last pose times the last motion, or the last pose"),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",

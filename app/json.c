@@ -146,7 +146,8 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     cJSON_AddNumberToObject(o, "rof_iterations", c->rof_iterations);
     add_float(o, "rof_lambda0", c->rof_lambda0);
     cJSON_AddNumberToObject(o, "rof_level", c->rof_level);
-    cJSON_AddNumberToObject(o, "ref_level", c->ref_level);
+    if (c->ref_level == RECON_REF_LEVEL_AUTO) cJSON_AddStringToObject(o, "ref_level", "auto");
+    else cJSON_AddNumberToObject(o, "ref_level", c->ref_level);
     add_float(o, "min_valid_frac", c->min_valid_frac);
     add_float(o, "converged_m", c->converged_m);
     add_float(o, "converged_deg", c->converged_deg);

@@ -56,11 +56,17 @@ typedef struct recon_reloc_config {
                                   front of the predicted surface (where the map holds free space), default 0.03 */
 } recon_reloc_config;
 
+/* track.ref_level for the loop's tracking reference: the coarsest pyramid
+ * level, at most 2, whose image is still at least RECON_REF_MIN_WIDTH pixels
+ * wide (160x120 for a 640x480 camera, 160x120 for 320x240). */
+#define RECON_REF_LEVEL_AUTO UINT32_MAX
+#define RECON_REF_MIN_WIDTH 160u
+
 typedef struct recon_config {
     bf_sensor sensor;         /* the depth sensor, default Kinect v1: recon_create hands it to fusion and
                                  tracking (the sensor fields of .fusion and .track are not read) */
     fusion_config fusion;     /* fusion's defaults but voxel_ratio 2 (docs/bench_replay_sweep.md) */
-    track_config track;
+    track_config track;       /* its ref_level may be RECON_REF_LEVEL_AUTO (the default): see there */
     render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined */
     render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
@@ -87,6 +93,8 @@ bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg);
 /* The fusion config the loop uses: cfg->fusion with the loop's sensor (also
  * for fusing at known poses without the loop). */
 fusion_config recon_fusion_config(const recon_config *cfg);
+/* What RECON_REF_LEVEL_AUTO resolves to for this camera and tracker. */
+uint32_t recon_ref_level_auto(const bf_intrinsics *K, const track_config *tc);
 
 /* What happened to one frame. */
 typedef enum recon_frame_state {
