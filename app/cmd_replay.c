@@ -518,6 +518,13 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddNumberToObject(tr, "lost", c->lost);
     cJSON_AddNumberToObject(tr, "relocalised", c->relocalised);
     cJSON_AddNumberToObject(tr, "keyframes", c->keyframes);
+    /* The tracking reference's size (auto resolves per camera). */
+    const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    uint32_t rl = a->rcfg.track.ref_level == RECON_REF_LEVEL_AUTO ? recon_ref_level_auto(K, &a->rcfg.track)
+                                                                     : a->rcfg.track.ref_level;
+    cJSON *ref = cJSON_AddArrayToObject(tr, "reference_size");
+    cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->width >> rl));
+    cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->height >> rl));
     cJSON_AddNumberToObject(tr, "no_depth", c->no_depth);
     cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
     cJSON_AddNumberToObject(tr, "pool_full", c->pool_full);
