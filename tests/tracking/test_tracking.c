@@ -350,54 +350,6 @@ static void track_room_pair(synth_noise noise, const bf_intrinsics *K, const bf_
     track_room_pair_step(noise, K, T_off, noise_exp, 0, est_rel, res, ok);
 }
 
-/* The residual gate: over max_residual_m counts as lost only where the
- * inliers' RMS of r / sigma_z(z) is over max_residual_sigma too (real
- * frames of a far view leave 18-21 mm at the right pose, docs/tracking.md).
- * A noisy pair at the right pose leaves about sqrt(2) sigma (two noisy
- * images); with the metric gate set below its residual, the frame is kept
- * by the sigma gate, and lost without it or with a gate below its RMS. */
-BF_TEST(residual_gate_counts_in_the_sensor_noise)
-{
-    gpu_context *ctx;
-    GPU_FIXTURE_OPEN(ctx);
-    room rm;
-    CHECK_OK(room_open(&rm, &K_MID, SYNTH_NOISE_KINECT1));
-    bf_se3 T0 = rm.scene.T_wc_view, d = small_motion();
-    bf_se3 T1 = bf_se3_mul(&T0, &d);
-    uint16_t *d0 = render(&rm, 0, &T0), *d1 = render(&rm, 1, &T1);
-    CHECK(d0 && d1);
-    track_config base = test_config(&K_MID);
-    CHECK(base.max_residual_sigma > 0);
-    double r_m = 0, r_sigma = 0;
-    for (int run = 0; run < 4; run++) {
-        track_config cfg = base;
-        if (run > 0) cfg.max_residual_m = (float)(0.5 * r_m);
-        if (run == 2) cfg.max_residual_sigma = 0;
-        if (run == 3) cfg.max_residual_sigma = (float)(0.5 * r_sigma);
-        track_tracker *t;
-        CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
-        bf_frame f0 = frame_of(&K_MID, d0, 0), f1 = frame_of(&K_MID, d1, 1);
-        track_result r;
-        CHECK_OK(track_set_reference_frame(t, &f0, &T0));
-        CHECK_OK(track_frame(t, &f1, &T0, &r));
-        track_destroy(t);
-        fprintf(stderr, "  gate %.1f mm / %.2f sigma: %s, residual %.2f mm, %.2f sigma\n", 1e3 * cfg.max_residual_m,
-                cfg.max_residual_sigma, track_outcome_name(r.outcome), 1e3 * r.residual_m, r.residual_sigma);
-        if (run == 0) {
-            CHECK_EQ_INT(r.outcome, TRACK_OK);
-            r_m = r.residual_m, r_sigma = r.residual_sigma;
-            CHECK(r_m > 0 && r_m < base.max_residual_m);
-            CHECK(r_sigma > 0.5 && r_sigma < base.max_residual_sigma);
-        } else {
-            CHECK_EQ_INT(r.outcome, run == 1 ? TRACK_OK : TRACK_HIGH_RESIDUAL);
-        }
-    }
-    free(d0), free(d1);
-    room_close(&rm);
-    GPU_FIXTURE_CHECK_CLEAN(ctx);
-    gpu_context_destroy(ctx);
-}
-
 static void check_room(synth_noise noise, double tol_m, double tol_deg)
 {
     bf_se3 I = bf_se3_identity(), est, est_far;
@@ -595,7 +547,7 @@ BF_TEST(noise_weight_exponent_reaches_the_icp_and_is_validated)
  * a full-resolution frame moved by small_motion() from it. */
 typedef struct half_pair {
     room full, half;
-    bf_intrinsics Kh; /* K_MID at the reference's level */
+    bf_intrinsics Kh; /* K_MID at the reference's level (0: the same images' size) */
     bf_se3 T0, d;     /* the reference's pose; the frame's motion from it */
     uint16_t *ref, *d1;
 } half_pair;
@@ -618,6 +570,51 @@ static void half_pair_close(half_pair *p)
     free(p->ref), free(p->d1);
     room_close(&p->full);
     room_close(&p->half);
+}
+
+/* The residual gate: over max_residual_m counts as lost only where the
+ * inliers' RMS of r / sigma_z(z) is over max_residual_sigma too (real
+ * frames of a far view leave 18-21 mm at the right pose, docs/tracking.md).
+ * A noisy pair at the right pose leaves about sqrt(2) sigma (two noisy
+ * images); with the metric gate set below its residual, the frame is kept
+ * by the sigma gate, and lost without it or with a gate below its RMS. */
+BF_TEST(residual_gate_counts_in_the_sensor_noise)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    half_pair hp; /* level 0: both images at K_MID */
+    CHECK_OK(half_pair_open(&hp, SYNTH_NOISE_KINECT1, 0));
+    bf_se3 T0 = hp.T0;
+    const uint16_t *d0 = hp.ref, *d1 = hp.d1;
+    track_config base = test_config(&K_MID);
+    CHECK(base.max_residual_sigma > 0);
+    double r_m = 0, r_sigma = 0;
+    for (int run = 0; run < 4; run++) {
+        track_config cfg = base;
+        if (run > 0) cfg.max_residual_m = (float)(0.5 * r_m);
+        if (run == 2) cfg.max_residual_sigma = 0;
+        if (run == 3) cfg.max_residual_sigma = (float)(0.5 * r_sigma);
+        track_tracker *t;
+        CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
+        bf_frame f0 = frame_of(&K_MID, d0, 0), f1 = frame_of(&K_MID, d1, 1);
+        track_result r;
+        CHECK_OK(track_set_reference_frame(t, &f0, &T0));
+        CHECK_OK(track_frame(t, &f1, &T0, &r));
+        track_destroy(t);
+        fprintf(stderr, "  gate %.1f mm / %.2f sigma: %s, residual %.2f mm, %.2f sigma\n", 1e3 * cfg.max_residual_m,
+                cfg.max_residual_sigma, track_outcome_name(r.outcome), 1e3 * r.residual_m, r.residual_sigma);
+        if (run == 0) {
+            CHECK_EQ_INT(r.outcome, TRACK_OK);
+            r_m = r.residual_m, r_sigma = r.residual_sigma;
+            CHECK(r_m > 0 && r_m < base.max_residual_m);
+            CHECK(r_sigma > 0.5 && r_sigma < base.max_residual_sigma);
+        } else {
+            CHECK_EQ_INT(r.outcome, run == 1 ? TRACK_OK : TRACK_HIGH_RESIDUAL);
+        }
+    }
+    half_pair_close(&hp);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
 }
 
 /* A GPU reference at half resolution (the default: the ray-cast of
