@@ -520,8 +520,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddNumberToObject(tr, "keyframes", c->keyframes);
     /* The tracking reference's size (auto resolves per camera). */
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
-    uint32_t rl = a->rcfg.track.ref_level == RECON_REF_LEVEL_AUTO ? recon_ref_level_auto(K, &a->rcfg.track)
-                                                                     : a->rcfg.track.ref_level;
+    uint32_t rl = recon_ref_level(K, &a->rcfg.track);
     cJSON *ref = cJSON_AddArrayToObject(tr, "reference_size");
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->width >> rl));
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->height >> rl));

@@ -75,8 +75,9 @@ recon_config recon_config_default(void)
     return c;
 }
 
-uint32_t recon_ref_level_auto(const bf_intrinsics *K, const track_config *tc)
+uint32_t recon_ref_level(const bf_intrinsics *K, const track_config *tc)
 {
+    if (tc->ref_level != RECON_REF_LEVEL_AUTO) return tc->ref_level;
     uint32_t l = 0;
     while (l + 1 < tc->levels && l + 1 <= 2 && (K->width >> (l + 1)) >= RECON_REF_MIN_WIDTH) l++;
     return l;
@@ -137,8 +138,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     /* The reference at track.ref_level (recon_config_default: a quarter of
      * the resolution): the ray-cast is the loop's largest cost per ray.
      * track_create checks the level. */
-    if (r->cfg.track.ref_level == RECON_REF_LEVEL_AUTO) r->cfg.track.ref_level = recon_ref_level_auto(K, &r->cfg.track);
-    uint32_t l = r->cfg.track.ref_level;
+    uint32_t l = r->cfg.track.ref_level = recon_ref_level(K, &r->cfg.track);
     r->K_ref = bf_intrinsics_level(K, l);
     bf_status s = recon__reloc_create(r);
     if (s == BF_OK) s = track_create(ctx, &r->cfg.track, K, &r->tracker);

@@ -93,8 +93,9 @@ bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg);
 /* The fusion config the loop uses: cfg->fusion with the loop's sensor (also
  * for fusing at known poses without the loop). */
 fusion_config recon_fusion_config(const recon_config *cfg);
-/* What RECON_REF_LEVEL_AUTO resolves to for this camera and tracker. */
-uint32_t recon_ref_level_auto(const bf_intrinsics *K, const track_config *tc);
+/* The loop's tracking reference level for this camera: tc->ref_level, or
+ * what RECON_REF_LEVEL_AUTO resolves to. */
+uint32_t recon_ref_level(const bf_intrinsics *K, const track_config *tc);
 
 /* What happened to one frame. */
 typedef enum recon_frame_state {
