@@ -15,6 +15,12 @@
 #   VARIANTS="defaults|;icp15|--icp-iters 15,5,4" bench/speed.sh    (name|replay options)
 #   FRAMES=600 DEV_FRAMES=500 SWEEP=0 REUSE=1 bench/speed.sh       (REUSE: keep runs with a stats.json)
 #
+# The yardstick: before bitfuse's runs of each sequence, OpenCV's TSDF 256^3
+# with its ICP odometry (bench/opencv_tsdf/, built where Debian's
+# libopencv-contrib-dev is installed; OPENCV=0: left out) runs the same
+# frames, and every row's vs_opencv is its median time per frame over the
+# yardstick's in this run (the speed issue's target: at most 0.65).
+#
 # Runs are one at a time: the stage times of runs made side by side on two
 # cores are not comparable. Compare ratios within one run of this script.
 set -euo pipefail
@@ -25,15 +31,21 @@ DEV=${DEV:-}
 DEV_FRAMES=${DEV_FRAMES:-500}
 SWEEP=${SWEEP:-1}
 REUSE=${REUSE:-0}
+OPENCV=${OPENCV:-1}
+CV_BIN=${OPENCV_BIN:-build/bench/bench_opencv_tsdf}
 VARIANTS=${VARIANTS:-"defaults|;level8|--max-level 8;previous|--icp-iters 10,5,4 --icp-sample-step 2;step2|--icp-sample-step 2;colour-off|--colour off;window20|--window 20;ratio3|--ratio 3;ratio1|--ratio 1"}
 source bench/common.sh
 export BITFUSE_VALIDATION=0 BITFUSE_PROGRESS=0
 mkdir -p "$OUT"
 SEQ="$OUT/room$FRAMES"
 bench_room_sequence "$SEQ" "$FRAMES" >/dev/null
+if [ "$OPENCV" = 1 ] && [ ! -x "$CV_BIN" ]; then
+  echo "speed: no $CV_BIN (apt-get install libopencv-contrib-dev, then build): no yardstick rows" >&2
+  OPENCV=0
+fi
 
 RESULTS="$OUT/speed.tsv"
-printf "sequence\tvariant\toptions\tframes\tframe_ms_median\tframe_ms_p95\tp95_over_median\tfirst_frame_ms\ttrack_ms\traycast_ms\talloc_ms\tsubcache_ms\twindow_ms\tcolour_ms\tate_mm\tate_max_mm\tsurface_median_mm\tsurface_p90_mm\tmap_mib\tpeak_rss_mib\n" >"$RESULTS"
+printf "sequence\tvariant\toptions\tframes\tframe_ms_median\tvs_opencv\tframe_ms_p95\tp95_over_median\tfirst_frame_ms\ttrack_ms\traycast_ms\talloc_ms\tsubcache_ms\twindow_ms\tcolour_ms\tintegrate_ms\tate_mm\tate_max_mm\tsurface_median_mm\tsurface_p90_mm\tmap_mib\tpeak_rss_mib\n" >"$RESULTS"
 
 # run SEQNAME SEQ EXTRA NAME OPTIONS: one replay (with its mesh), its peak
 # resident memory, its surface error, and a row of the table.
@@ -59,20 +71,21 @@ PYEOF
           --json >"$dir/surface.json" 2>>"$dir.log"
     fi
   fi
-  $PY - "$dir" "$seqname" "$name" "$opts" >>"$RESULTS" <<'PYEOF'
-import sys
+  $PY - "$dir" "$seqname" "$name" "$opts" "$OUT/$seqname-opencv-tsdf256/stats.json" >>"$RESULTS" <<'PYEOF'
+import json, os, sys
 sys.path.insert(0, "bench")
 from benchlib import run_outputs, stage_ms
-d, seqname, name, opts = sys.argv[1:5]
+d, seqname, name, opts, cv = sys.argv[1:6]
 s, e = run_outputs(d)
 f = s["frame_ms"]
 ate = s["ate_m"] or {}
 rss = int(open(d + ".rss").read()) / 1024.0
 st = lambda k: stage_ms(s, k)
+cv_ms = json.load(open(cv))["frame_ms"]["median"] if os.path.exists(cv) else None
 row = [seqname, name, opts or "(defaults)", s["frames"]["total"] if isinstance(s["frames"], dict) else s["frames"],
-       round(f["median"], 1), round(f["p95"], 1), round(f["p95"] / f["median"], 2),
-       round(s["startup"]["first_frame_ms"], 1), st("track"), st("raycast"), st("alloc"), st("subcache"), st("window"),
-       st("colour"), round(1e3 * ate.get("rmse", float("nan")), 2), round(1e3 * ate.get("max", float("nan")), 1),
+       round(f["median"], 1), round(f["median"] / cv_ms, 2) if cv_ms else "", round(f["p95"], 1),
+       round(f["p95"] / f["median"], 2), round(s["startup"]["first_frame_ms"], 1), st("track"), st("raycast"),
+       st("alloc"), st("subcache"), st("window"), st("colour"), "", round(1e3 * ate.get("rmse", float("nan")), 2), round(1e3 * ate.get("max", float("nan")), 1),
        round(1e3 * e["accuracy"]["median_m"], 2), round(1e3 * e["accuracy"]["p90_m"], 2),
        round(s["map_bytes"]["total"] / 2**20, 2), round(rss, 1)]
 print("\t".join(str(x) for x in row))
@@ -80,6 +93,42 @@ PYEOF
   tail -n 1 "$RESULTS" >&2
 }
 
+# yardstick SEQNAME SEQ FRAMES: OpenCV's loop on the same frames, its ATE
+# (bitfuse eval-traj against the frames' own ground truth) and a row.
+yardstick() {
+  local seqname=$1 seq=$2 frames=$3
+  local dir="$OUT/$seqname-opencv-tsdf256"
+  if [ "$REUSE" != 1 ] || [ ! -f "$dir/stats.json" ]; then
+    rm -rf "$dir"
+    echo "speed: $seqname, the yardstick (OpenCV TSDF 256^3 + ICP odometry)" >&2
+    $PY - "$dir.rss" "$CV_BIN" "$seq" --out "$dir" --res 256 --frames "$frames" >"$dir.log" 2>&1 <<'PYEOF'
+import resource, subprocess, sys
+rc = subprocess.run(sys.argv[2:]).returncode
+open(sys.argv[1], "w").write("%d\n" % resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+sys.exit(rc)
+PYEOF
+    $BIN eval-traj "$dir/groundtruth.txt" "$dir/trajectory.txt" --json >"$dir/ate.json" 2>>"$dir.log"
+  fi
+  $PY - "$dir" "$seqname" "$frames" >>"$RESULTS" <<'PYEOF'
+import json, sys
+d, seqname, frames = sys.argv[1:4]
+s = json.load(open(d + "/stats.json"))
+a = json.load(open(d + "/ate.json"))["ate"]["trans_m"]
+f, st = s["frame_ms"], s["stage_ms"]
+rss = int(open(d + ".rss").read()) / 1024.0
+row = [seqname, "opencv-tsdf256", "bench_opencv_tsdf --res 256", s["frames"]["total"], round(f["median"], 1), 1.0,
+       round(f["p95"], 1), round(f["p95"] / f["median"], 2), round(f["first"], 1), round(st["track"]["median"], 1),
+       round(st["raycast"]["median"], 1), "", "", "", "", round(st["integrate"]["median"], 1),
+       round(1e3 * a["rmse"], 2), round(1e3 * a["max"], 1), "", "", "", round(rss, 1)]
+print("\t".join(str(x) for x in row))
+PYEOF
+  tail -n 1 "$RESULTS" >&2
+}
+
+if [ "$OPENCV" = 1 ]; then
+  if [ -n "$DEV" ]; then yardstick real "$DEV" "$DEV_FRAMES"; fi
+  yardstick room "$SEQ" "$FRAMES"
+fi
 IFS=';' read -r -a VARS <<<"$VARIANTS"
 for v in "${VARS[@]}"; do
   name=${v%%|*}
@@ -101,7 +150,11 @@ write_table("docs/bench_speed.md", "The full loop: speed against error, real and
             "the run's mesh, `eval-surface --depth`); "
             f"`room`: the synthetic room, {frames} frames along fr1_xyz (surface: the mesh against the scene, "
             "over its seen part). Stage times are GPU timestamp medians; frame times are wall time; peak RSS "
-            "is the replay process's maximum resident set." +
+            "is the replay process's maximum resident set. `opencv-tsdf256` is the yardstick, run on the same "
+            "frames in this run: OpenCV 4.6's TSDF volume, 256^3 over 3 m, with its FastICPOdometry "
+            "against the volume's ray-cast (bench/opencv_tsdf/; its stage times are wall time, its map "
+            "32 MiB whatever the scene); `vs_opencv` is a row's median time per frame over the "
+            "yardstick's on the same sequence." +
             ("" if has_dev == "1" else "\n\n(No DEV given: synthetic rows only.)"), rows)
 plt = pyplot()
 if plt:
@@ -110,7 +163,8 @@ if plt:
     for ax, sq in zip(axes[0], seqs):
         for r in (r for r in rows if r["sequence"] == sq):
             x, y = float(r["frame_ms_median"]), float(r["ate_mm"])
-            ax.errorbar(x, y, xerr=[[0], [float(r["frame_ms_p95"]) - x]], fmt="o", capsize=3)
+            fmt = "s" if r["variant"].startswith("opencv") else "o"
+            ax.errorbar(x, y, xerr=[[0], [float(r["frame_ms_p95"]) - x]], fmt=fmt, capsize=3)
             ax.annotate(r["variant"], (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax.set_xlabel("time per frame, median (bar: to p95) [ms]")
         ax.set_ylabel("ATE RMSE [mm]")
