@@ -13,7 +13,8 @@
  * Reads any sequence bitfuse reads (replay/), starts at the first frame's
  * ground truth (or the identity), writes DIR/trajectory.txt and
  * DIR/groundtruth.txt (TUM; the latter where frames have poses) and
- * DIR/stats.json (time per frame and per stage, wall clock: median, p95).
+ * DIR/stats.json (time per frame and per stage, wall clock: median, p95)
+ * and DIR/frames.csv (the same per frame).
  * A bench tool, not part of bitfuse: built only where libopencv-contrib-dev
  * is installed. */
 #include <opencv2/core.hpp>
@@ -122,6 +123,22 @@ struct series {
     std::vector<double> frame, track, integrate, raycast;
 };
 
+/* DIR/frames.csv: a frame a line, to tell the frames it tracked from the
+ * ones after it lost the camera (its ray-cast then sees other parts of the
+ * volume, and its time with them). */
+bool write_frames(const std::string &dir, const series &s, const std::vector<char> &ok)
+{
+    std::string path = dir + "/frames.csv";
+    FILE *f = std::fopen(path.c_str(), "w");
+    if (!f) return false;
+    std::fprintf(f, "index,tracked,frame_ms,track_ms,integrate_ms,raycast_ms\n");
+    for (size_t i = 0; i < s.frame.size(); i++) {
+        std::fprintf(f, "%zu,%d,%.3f,%.3f,%.3f,%.3f\n", i, ok[i], s.frame[i], i > 0 ? s.track[i - 1] : 0.0,
+                     s.integrate[i], s.raycast[i]);
+    }
+    return std::fclose(f) == 0;
+}
+
 void write_pose(FILE *f, double t_s, const bf_se3 &T)
 {
     bf_quat q;
@@ -184,6 +201,7 @@ int run(const options &o)
     cv::Matx44f T_0c = cv::Matx44f::eye(); /* first camera from the current one */
     cv::Mat ref_depth;                     /* the volume's ray-cast at the last pose, metres */
     series s;
+    std::vector<char> frame_ok;
     uint32_t tracked = 0, failed = 0, no_depth = 0;
     std::string traj_path = o.out + "/trajectory.txt";
     FILE *traj = std::fopen(traj_path.c_str(), "w");
@@ -213,6 +231,7 @@ int run(const options &o)
         uint64_t t0 = bf_time_ns();
         double track_ms = 0;
         if (!vol) {
+            frame_ok.push_back(1);
             if (fr.has_pose) T_w0 = to_cv(fr.T_wc);
             /* The volume in front of the first camera, centred across its view
              * (KinFu's placement). */
@@ -237,6 +256,7 @@ int run(const options &o)
             } else {
                 failed++;
             }
+            frame_ok.push_back(ok);
             track_ms = ms_since(t0);
         }
         if (cv::countNonZero(depth) == 0) no_depth++;
@@ -268,7 +288,7 @@ int run(const options &o)
         std::fprintf(stderr, "bench_opencv_tsdf: %s\n", bf_last_error());
         return 1;
     }
-    ok = write_stats(o, s, tracked, failed, no_depth) && ok;
+    ok = write_stats(o, s, tracked, failed, no_depth) && write_frames(o.out, s, frame_ok) && ok;
     std::printf("bench_opencv_tsdf: %u frames (%u tracked, %u failed), %.1f ms median (p95 %.1f): track %.1f, "
                 "integrate %.1f, ray-cast %.1f ms\n",
                 n, tracked, failed, percentile(s.frame, 50), percentile(s.frame, 95), percentile(s.track, 50),
