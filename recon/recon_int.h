@@ -13,6 +13,9 @@ struct recon {
     bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
     fusion_map *map;     /* made at create, at T_first's origin */
     bool has_first;      /* the first frame with depth has been fused */
+    bool frame_fused;    /* the tracker's frame (this add_frame's) was fused at T_frame: a view at that
+                            pose starts its rays at the frame's depth, as the reference does */
+    bf_se3 T_frame;
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
     render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at create (has_views)
