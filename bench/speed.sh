@@ -6,8 +6,9 @@
 # seed 1). One row per (sequence, variant): time per frame median and p95
 # (and their ratio), the first frame, per-stage GPU medians, ATE (and its max),
 # the surface error, the map and the process's peak resident memory. Writes
-# OUT/speed.tsv, docs/bench_speed.md (table) and docs/bench_speed.png (time
-# against ATE), then (SWEEP=1, the default) bench/replay_sweep.sh again, so
+# OUT/speed.tsv, docs/bench_speed.md (table), docs/bench_speed.png (time
+# against ATE) and docs/bench_speed_frames.png (time per frame along each
+# sequence, the defaults beside the yardstick), then (SWEEP=1, the default) bench/replay_sweep.sh again, so
 # docs/bench_replay_sweep.md is made by the same command.
 #
 #   bench/speed.sh [OUT_DIR]                          (default /tmp/bitfuse-speed)
@@ -171,8 +172,25 @@ if plt:
         ax.set_title(f"{sq}: speed against error")
     fig.tight_layout()
     fig.savefig("docs/bench_speed.png", dpi=100)
+    # The per-frame series: where the p95 comes from, the defaults beside the yardstick.
+    import csv, os
+    out = os.path.dirname(path)
+    fig, axes = plt.subplots(len(seqs), 1, figsize=(11, 3.2 * len(seqs)), squeeze=False)
+    for ax, sq in zip(axes[:, 0], seqs):
+        for name, label in (("opencv-tsdf256", "OpenCV TSDF 256^3 + ICP"), ("defaults", "bitfuse defaults")):
+            f = os.path.join(out, f"{sq}-{name}", "frames.csv")
+            if not os.path.exists(f):
+                continue
+            rows_f = list(csv.DictReader(open(f)))
+            ax.plot([int(r["index"]) for r in rows_f], [float(r["frame_ms"]) for r in rows_f], lw=0.8, label=label)
+        ax.set_xlabel("frame")
+        ax.set_ylabel("time per frame [ms]")
+        ax.set_title(f"{sq}: time per frame along the sequence")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig("docs/bench_speed_frames.png", dpi=100)
 else:
     print("matplotlib missing: no plot", file=sys.stderr)
 PYEOF
-echo "speed: wrote docs/bench_speed.md, docs/bench_speed.png ($RESULTS)" >&2
+echo "speed: wrote docs/bench_speed.md, docs/bench_speed.png, docs/bench_speed_frames.png ($RESULTS)" >&2
 if [ "$SWEEP" = 1 ]; then bash bench/replay_sweep.sh "$FRAMES" "$OUT/sweep"; fi
