@@ -185,14 +185,6 @@ static uint32_t count_valid(const bf_frame *f)
     return n;
 }
 
-/* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
- * next reference, in one submission: fusion, the ray-cast (written straight
- * into the tracker's reference) and the reference's preparation share it,
- * so the frame costs one host wait besides its ICP iterations. first: the
- * uploaded frame (not tracked, so not preprocessed) is the first one; its
- * preprocessing goes into the submission too, so its rays start at its depth
- * as a tracked frame's do (from the near plane the first ray-cast cost about
- * two frames' ray-casts: docs/tracking.md, start-up). */
 /* Rays of ro start a margin in front of the tracker's frame depth at
  * `level` (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
  * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the map's
@@ -205,6 +197,14 @@ static bool start_at_frame(recon *r, uint32_t level, render_options *ro)
     return true;
 }
 
+/* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
+ * next reference, in one submission: fusion, the ray-cast (written straight
+ * into the tracker's reference) and the reference's preparation share it,
+ * so the frame costs one host wait besides its ICP iterations. first: the
+ * uploaded frame (not tracked, so not preprocessed) is the first one; its
+ * preprocessing goes into the submission too, so its rays start at its depth
+ * as a tracked frame's do (from the near plane the first ray-cast cost about
+ * two frames' ray-casts: docs/tracking.md, start-up). */
 static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T, bool tracked,
                                     const fusion_frame_slot *first, recon_frame_result *out)
 {
