@@ -73,6 +73,21 @@ static bf_frame frame_of(const bf_intrinsics *K, const uint16_t *depth, uint32_t
     return (bf_frame){.index = index, .width = K->width, .height = K->height, .depth = depth};
 }
 
+/* Depth d1 tracked from the guess T0 against d0 as the reference at T0,
+ * by a tracker of its own (cfg, camera K). */
+static bf_status track_pair(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, const uint16_t *d0,
+                            const uint16_t *d1, const bf_se3 *T0, track_result *r)
+{
+    track_tracker *t;
+    bf_status s = track_create(ctx, cfg, K, &t);
+    if (s != BF_OK) return s;
+    bf_frame f0 = frame_of(K, d0, 0), f1 = frame_of(K, d1, 1);
+    s = track_set_reference_frame(t, &f0, T0);
+    if (s == BF_OK) s = track_frame(t, &f1, T0, r);
+    track_destroy(t);
+    return s;
+}
+
 /* Renders the room at T_wc (noise as given) into a new depth image. */
 typedef struct room {
     synth_scene scene;
@@ -594,13 +609,8 @@ BF_TEST(residual_gate_counts_in_the_sensor_noise)
         if (run > 0) cfg.max_residual_m = (float)(0.5 * r_m);
         if (run == 2) cfg.max_residual_sigma = 0;
         if (run == 3) cfg.max_residual_sigma = (float)(0.5 * r_sigma);
-        track_tracker *t;
-        CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
-        bf_frame f0 = frame_of(&K_MID, d0, 0), f1 = frame_of(&K_MID, d1, 1);
         track_result r;
-        CHECK_OK(track_set_reference_frame(t, &f0, &T0));
-        CHECK_OK(track_frame(t, &f1, &T0, &r));
-        track_destroy(t);
+        CHECK_OK(track_pair(ctx, &cfg, &K_MID, d0, d1, &T0, &r));
         fprintf(stderr, "  gate %.1f mm / %.2f sigma: %s, residual %.2f mm, %.2f sigma\n", 1e3 * cfg.max_residual_m,
                 cfg.max_residual_sigma, track_outcome_name(r.outcome), 1e3 * r.residual_m, r.residual_sigma);
         if (run == 0) {
@@ -1005,12 +1015,8 @@ static void check_plane(synth_noise noise, double tol_m)
     CHECK_OK(synth_render(rr, 0, &T0, d0, NULL, NULL));
     CHECK_OK(synth_render(rr, 1, &T1, d1, NULL, NULL));
     track_config cfg = test_config(&K_MID);
-    track_tracker *t;
-    CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
-    bf_frame f0 = frame_of(&K_MID, d0, 0), f1 = frame_of(&K_MID, d1, 1);
     track_result r;
-    CHECK_OK(track_set_reference_frame(t, &f0, &T0));
-    CHECK_OK(track_frame(t, &f1, &T0, &r));
+    CHECK_OK(track_pair(ctx, &cfg, &K_MID, d0, d1, &T0, &r));
     /* Constrained: the frame's plane lands on the world plane. Every
      * pixel's true point, taken into the frame camera and back to the world
      * with the estimate, must lie on z = 0. */
@@ -1042,7 +1048,6 @@ static void check_plane(synth_noise noise, double tol_m)
     CHECK_LE(worst, tol_m);
     CHECK_LE(bf_v3_norm(t_in), 0.001);
     CHECK_LE(fabs(w_n), 0.05);
-    track_destroy(t);
     free(d0), free(d1);
     synth_renderer_destroy(rr);
     synth_scene_free(&sc);
