@@ -8,8 +8,9 @@
 # the surface error, the map and the process's peak resident memory. Writes
 # OUT/speed.tsv, docs/bench_speed.md (table), docs/bench_speed.png (time
 # against ATE) and docs/bench_speed_frames.png (time per frame along each
-# sequence, the defaults beside the yardstick), then (SWEEP=1, the default) bench/replay_sweep.sh again, so
-# docs/bench_replay_sweep.md is made by the same command.
+# sequence, the defaults beside the yardstick), then (SWEEP=1, the default)
+# bench/replay_sweep.sh again, so docs/bench_replay_sweep.md is made by the
+# same command.
 #
 #   bench/speed.sh [OUT_DIR]                          (default /tmp/bitfuse-speed)
 #   DEV=/path/7scenes-dev bench/speed.sh /tmp/sp
@@ -48,6 +49,17 @@ fi
 RESULTS="$OUT/speed.tsv"
 printf "sequence\tvariant\toptions\tframes\tframe_ms_median\tvs_opencv\tframe_ms_p95\tp95_over_median\tfirst_frame_ms\ttrack_ms\traycast_ms\talloc_ms\tsubcache_ms\twindow_ms\tcolour_ms\tintegrate_ms\tate_mm\tate_max_mm\tsurface_median_mm\tsurface_p90_mm\tmap_mib\tpeak_rss_mib\n" >"$RESULTS"
 
+# with_rss FILE CMD...: runs CMD, writes its peak resident memory (KiB) to
+# FILE and returns its exit status.
+with_rss() {
+  $PY - "$@" <<'PYEOF'
+import resource, subprocess, sys
+rc = subprocess.run(sys.argv[2:]).returncode
+open(sys.argv[1], "w").write("%d\n" % resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+sys.exit(rc)
+PYEOF
+}
+
 # run SEQNAME SEQ EXTRA NAME OPTIONS: one replay (with its mesh), its peak
 # resident memory, its surface error, and a row of the table.
 run() {
@@ -57,12 +69,7 @@ run() {
     rm -rf "$dir"
     echo "speed: $seqname, $name ($opts)" >&2
     # shellcheck disable=SC2086
-    $PY - "$dir.rss" $BIN replay "$seq" --out "$dir" $extra $opts >"$dir.log" 2>&1 <<'PYEOF'
-import resource, subprocess, sys
-rc = subprocess.run(sys.argv[2:]).returncode
-open(sys.argv[1], "w").write("%d\n" % resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
-sys.exit(rc)
-PYEOF
+    with_rss "$dir.rss" $BIN replay "$seq" --out "$dir" $extra $opts >"$dir.log" 2>&1
     if [ "$seqname" = real ]; then
       # Real frames have no true surface: the sensor's own depth at the run's poses against its mesh.
       $BIN eval-surface --reference "$dir/mesh.ply" --depth "$seq" --poses "$dir/trajectory.txt" --json \
@@ -86,7 +93,8 @@ cv_ms = json.load(open(cv))["frame_ms"]["median"] if os.path.exists(cv) else Non
 row = [seqname, name, opts or "(defaults)", s["frames"]["total"] if isinstance(s["frames"], dict) else s["frames"],
        round(f["median"], 1), round(f["median"] / cv_ms, 2) if cv_ms else "", round(f["p95"], 1),
        round(f["p95"] / f["median"], 2), round(s["startup"]["first_frame_ms"], 1), st("track"), st("raycast"),
-       st("alloc"), st("subcache"), st("window"), st("colour"), "", round(1e3 * ate.get("rmse", float("nan")), 2), round(1e3 * ate.get("max", float("nan")), 1),
+       st("alloc"), st("subcache"), st("window"), st("colour"), "", round(1e3 * ate.get("rmse", float("nan")), 2),
+       round(1e3 * ate.get("max", float("nan")), 1),
        round(1e3 * e["accuracy"]["median_m"], 2), round(1e3 * e["accuracy"]["p90_m"], 2),
        round(s["map_bytes"]["total"] / 2**20, 2), round(rss, 1)]
 print("\t".join(str(x) for x in row))
@@ -107,13 +115,8 @@ yardstick() {
   if [ "$REUSE" != 1 ] || [ ! -f "$dir/stats.json" ]; then
     rm -rf "$dir"
     echo "speed: $seqname, the yardstick (OpenCV TSDF 256^3 + ICP odometry)" >&2
-    $PY - "$dir.rss" "$CV_BIN" "$seq" --out "$dir" --res 256 --frames "$frames" --fuse-at-groundtruth \
-        >"$dir.log" 2>&1 <<'PYEOF'
-import resource, subprocess, sys
-rc = subprocess.run(sys.argv[2:]).returncode
-open(sys.argv[1], "w").write("%d\n" % resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
-sys.exit(rc)
-PYEOF
+    with_rss "$dir.rss" "$CV_BIN" "$seq" --out "$dir" --res 256 --frames "$frames" --fuse-at-groundtruth \
+        >"$dir.log" 2>&1
   fi
   $PY - "$dir" "$seqname" "$frames" >>"$RESULTS" <<'PYEOF'
 import json, sys
