@@ -188,13 +188,13 @@ static uint32_t count_valid(const bf_frame *f)
 /* Rays of ro start a margin in front of the tracker's frame depth at
  * `level` (docs/render.md): 3 sigma(z) of the sensor noise fusion assumes
  * (a + b (z - c)^2 <= a + b z^2 for the z that matter) bounds the map's
- * surface behind the frame's, plus 2 cm for the map's own error. */
-static bool start_at_frame(recon *r, uint32_t level, render_options *ro)
+ * surface behind the frame's, plus 2 cm for the map's own error. Without
+ * a frame depth at that level the rays start at near_m. */
+static void start_at_frame(recon *r, uint32_t level, render_options *ro)
 {
-    if (track_frame_depth_gpu(r->tracker, level, &ro->start_depth, &ro->start_offset) != BF_OK) return false;
+    if (track_frame_depth_gpu(r->tracker, level, &ro->start_depth, &ro->start_offset) != BF_OK) return;
     ro->start_margin_m = 0.02f + 3.0f * r->cfg.sensor.sigma_a;
     ro->start_margin_z2 = 3.0f * r->cfg.sensor.sigma_b;
-    return true;
 }
 
 /* Fuses the uploaded frame at T and makes the ray-cast of the map at T the
