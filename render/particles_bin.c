@@ -284,6 +284,7 @@ typedef struct bin_part {
     uint64_t n_cells;
     const reach_table *rt;
     double reach, half;
+    bool centres;          /* the centres' level: no reach; the confidence plane is the summary (emit_main) */
     /* out */
     bin_index ix;
     bin_planes *bricks; /* in bricks_mem, aligned */
@@ -413,7 +414,7 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
     }
     p->n_occupied++;
     r->used = 0;
-    if (!p->rt) return true;
+    if (!p->rt || p->centres) return true;
     for (uint64_t k = i; k < j; k++) {
         uint32_t l = (uint32_t)(p->cells[k] & 511);
         if (!p->octs) r->used |= p->rt->used[l];
@@ -434,6 +435,7 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
  * neighbours. */
 static bool run_apply(bin_part *p, const bin_run *r)
 {
+    if (p->centres) return true;
     if (p->rt) {
         uint32_t acc[27][16];
         for (uint32_t u = r->used; u; u &= u - 1) memset(acc[__builtin_ctz(u)], 0, sizeof acc[0]);
@@ -659,6 +661,16 @@ typedef struct emit_job {
     uint32_t level;
 } emit_job;
 
+/* A brick of centres' confidence plane: word 0 says which sub-brick words
+ * of its sign plane hold centres (bit w), the rest are 0. A sparse set has
+ * a centre or two a brick, so the particle traverser reads those words
+ * only instead of all 16 (shaders/render_traverse.glsl.h). */
+static void centres_summary(const uint32_t sign[16], uint32_t conf[16])
+{
+    memset(conf, 0, 16 * sizeof *conf);
+    for (int w = 0; w < 16; w++) conf[0] |= (uint32_t)(sign[w] != 0) << w;
+}
+
 static void *emit_main(void *arg)
 {
     emit_job *e = arg;
@@ -674,7 +686,8 @@ static void *emit_main(void *arg)
         hb->level = e->level;
         hb->error = 0;
         memcpy(hb->sign, e->p->bricks[i].sign, sizeof hb->sign);
-        memcpy(hb->conf, e->p->bricks[i].conf, sizeof hb->conf);
+        if (e->p->centres) centres_summary(hb->sign, hb->conf);
+        else memcpy(hb->conf, e->p->bricks[i].conf, sizeof hb->conf);
         e->codes[k++] = c;
     }
     return NULL;
@@ -717,6 +730,7 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
     bool dense = n_cells && box <= (int64_t)(4 * n_cells > (1u << 22) ? 4 * n_cells : (1u << 22));
     for (int h = 0; h < 2; h++) {
         p[h].rt = w->rt[t], p[h].reach = reach, p[h].half = half, p[h].max_bricks = max_bricks;
+        p[h].centres = t == 0;
         for (int a = 0; a < 3; a++) p[h].ix.lo[a] = lo[a] - pad, p[h].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
     }
     run_two(part_main, &p[0], &p[1]);

@@ -33,8 +33,9 @@ typedef struct particles_binned {
 
 /* Bins xyz (n particles, world metres) into cells of cell_m from origin
  * (every cell within the grid: set_frame checked) on two octree levels:
- *   - `level`, the centres: each particle sets its cell's bit (both
- *     planes); only bricks holding centres are made;
+ *   - `level`, the centres: each particle sets its cell's sign bit; only
+ *     bricks holding centres are made; the confidence plane's word 0 says
+ *     which sign words hold centres (bit w), its other words are 0;
  *   - level - PARTICLES_COARSE_LEVELS, the coarse level, whose cells are
  *     the centres' bricks: a cell's sign bit says its brick holds centres,
  *     its confidence bit that a sphere of radius_m centred anywhere in a

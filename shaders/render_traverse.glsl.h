@@ -130,15 +130,16 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
  * dispatch resumes the ray there (render_particles.comp). */
 
 /* Camera depth at which ray enters the sphere (c, r), -1 if it misses; the
- * closest-approach form keeps float precision when |o - c| >> r. */
+ * closest-approach form keeps float precision when |o - c| >> r. The ray's
+ * 1 / |dir| replaces the two divisions by |dir|^2 (on lavapipe the
+ * divisions and the root were a quarter of a particle cast). */
 float render_sphere_hit(render_ray ray, vec3 c, float r)
 {
     vec3 m = ray.o - c;
-    float a = dot(ray.dir, ray.dir);
-    float tc = -dot(m, ray.dir) / a;
+    float tc = -dot(m, ray.dir) * (ray.inv_len * ray.inv_len);
     vec3 q = m + tc * ray.dir;
     float h = r * r - dot(q, q);
-    return h < 0.0 ? -1.0 : tc - sqrt(h / a);
+    return h < 0.0 ? -1.0 : tc - sqrt(h) * ray.inv_len;
 }
 
 /* Per invocation and dispatch (render_particles_cache_clear): loop
@@ -287,7 +288,10 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                 render_pwork += RENDER_PARTICLES_COARSE_LEVELS;
                                 if (fs == FUSION_NONE) continue;
                                 ivec3 flo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), fhi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
-                                for (uint w = 0u; w < BRICK_WORDS; w++) {
+                                /* The sub-brick words holding centres: word 0 of the brick's confidence plane
+                                 * (render/particles_bin.h). */
+                                for (uint words = render_conf_word(fs, 0u); words != 0u; words &= words - 1u) {
+                                    uint w = uint(findLSB(words));
                                     /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
                                     ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
                                     if (any(greaterThan(s0, fhi)) || any(lessThan(s0 + ivec3(3, 3, 1), flo))) continue;

@@ -44,6 +44,7 @@ struct render_ray {
     vec3 dir;
     vec3 inv_dir; /* 1 / dir, components of dir kept away from 0 */
     vec3 zc;      /* the camera's optical axis in the map frame: depth(p) = dot(p - o, zc) */
+    float inv_len; /* 1 / |dir| (the particles' sphere test: no division per sphere) */
 };
 
 /* State carried along the ray from brick to brick. */
@@ -91,6 +92,7 @@ render_ray render_pixel_ray(uvec2 px, float R[9], float t[3], float fx, float fy
         if (abs(ray.dir[a]) < 1.0e-12) ray.dir[a] = 1.0e-12;
     ray.inv_dir = 1.0 / ray.dir;
     ray.zc = vec3(R[2], R[5], R[8]);
+    ray.inv_len = inversesqrt(dot(ray.dir, ray.dir));
     return ray;
 }
 
