@@ -37,6 +37,7 @@ struct render_particles {
     gpu_buffer *resume;   /* binding 8: per pixel, where a ray resumes; made for the image size */
     gpu_buffer *lists;    /* binding 9: two lists of unfinished rays' pixels; made for the image size */
     gpu_buffer *args;     /* binding 10: per dispatch, the next one's group counts and list length */
+    gpu_buffer *index;    /* binding 11: the centres' index (render/particles_bin.h) */
     particles_binner *binner; /* kept: a re-binned set touches no new host memory */
     uint32_t brick_cap, node_cap, n_buckets; /* what ps->map holds */
     bool too_many; /* the last binning needed more bricks than a binding holds */
@@ -128,7 +129,7 @@ static void pass_budget(uint32_t coarse_level, uint32_t *cells_per_pass, uint32_
     *n_passes = (RENDER_PARTICLES_MAX_CELLS + *cells_per_pass - 1) / *cells_per_pass + 28;
 }
 
-/* The map's buffers -> the pass's bindings 0, 1, 2 and 7. */
+/* The map's buffers and the centres' index -> the pass's bindings 0, 1, 2, 7 and 11. */
 static bf_status bind_map(render_particles *ps)
 {
     fusion_gpu_view v = fusion_gpu_view_get(ps->map);
@@ -136,7 +137,29 @@ static bf_status bind_map(render_particles *ps)
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 1, v.nodes, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 2, v.sign, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) s = gpu_bindings_set(ps->bind, 7, v.conf, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(ps->bind, 11, ps->index, 0, GPU_WHOLE_SIZE);
     return s;
+}
+
+/* The binning's centres' index into ps->index (made larger where it must
+ * be, and bound where the bindings exist). */
+static bf_status load_index(render_particles *ps, const particles_binned *bs)
+{
+    uint64_t bytes = bs->n_index * 4;
+    if (!ps->index || gpu_buffer_size(ps->index) < bytes) {
+        gpu_buffer *nb = NULL;
+        gpu_buffer_desc d = {.name = "render.particles.index", .size_bytes = bytes + bytes / 4,
+                             .memory = GPU_MEMORY_DEVICE, .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER};
+        bf_status s = gpu_buffer_create(ps->ctx, &d, &nb);
+        if (s == BF_OK && ps->bind) s = gpu_bindings_set(ps->bind, 11, nb, 0, GPU_WHOLE_SIZE);
+        if (s != BF_OK) {
+            gpu_buffer_destroy(nb);
+            return s;
+        }
+        gpu_buffer_destroy(ps->index);
+        ps->index = nb;
+    }
+    return gpu_buffer_upload(ps->index, 0, bs->index, bytes);
 }
 
 /* A map that only ever holds what is loaded (no frames, no colour) for at
@@ -224,6 +247,7 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
         hostmap hm = {.chunk_m = st->chunk_m, .origin_w = origin, .n_bricks = bs.n_bricks, .bricks = bs.bricks};
         s = fusion_load(ps->map, &hm);
     }
+    if (s == BF_OK) s = load_index(ps, &bs);
     if (s != BF_OK) return s;
     st->n_particles = n;
     st->origin_w = origin;
@@ -282,12 +306,12 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
         .name = "render.particles",
         .spirv = bf_spv_render_particles,
         .spirv_bytes = bf_spv_render_particles_size,
-        .n_buffers = 11,
+        .n_buffers = 12,
         .push_bytes = sizeof(render_particles_push),
         .local_size = {RENDER_LOCAL_X, RENDER_LOCAL_Y, 1},
     };
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &pd, &ps->pipe);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 11, "render.particles", &ps->bind);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, 12, "render.particles", &ps->bind);
     if (s == BF_OK) s = bind_map(ps);
     /* Resume and list buffers until the first cast makes them for its
      * images (the warm-up binds every slot); the arguments for every
@@ -335,6 +359,7 @@ void render_particles_destroy(render_particles *ps)
     gpu_buffer_destroy(ps->resume);
     gpu_buffer_destroy(ps->lists);
     gpu_buffer_destroy(ps->args);
+    gpu_buffer_destroy(ps->index);
     fusion_destroy(ps->map);
     particles_binner_destroy(ps->binner);
     memset(ps, 0xff, sizeof *ps); /* poison: a use after destroy fails loudly */

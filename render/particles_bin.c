@@ -604,6 +604,10 @@ struct particles_binner {
     bin_part part[2];
     hostmap_brick *all;   /* both levels' bricks: the centres', then the coarse level's */
     uint64_t all_cap;
+    uint32_t *index;      /* the centres' index (particles_binned.index) */
+    uint64_t index_cap;
+    uint64_t *cpairs;     /* the coarse bricks' Morton codes << 32 | their place, sorted */
+    uint64_t cpairs_cap;
 };
 
 particles_binner *particles_binner_create(void) { return bf_calloc(1, sizeof(particles_binner)); }
@@ -612,6 +616,7 @@ void particles_binner_destroy(particles_binner *w)
 {
     if (!w) return;
     free(w->keys), free(w->tmp), free(w->ckeys), free(w->coct), free(w->rt[0]), free(w->rt[1]), free(w->all);
+    free(w->index), free(w->cpairs);
     part_free(&w->part[0]), part_free(&w->part[1]);
     free(w);
 }
@@ -787,6 +792,69 @@ static bf_status coarse_cells(particles_binner *w, uint64_t n, int64_t lo[3], in
     return BF_OK;
 }
 
+/* A brick's coordinate on its level's grid (brick units from the origin). */
+static void brick_coord(const hostmap_brick *b, int64_t g[3])
+{
+    for (int a = 0; a < 3; a++) g[a] = (int64_t)b->key[a] << b->level | (int64_t)b->cell[a];
+}
+
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* The centres' index (particles_binned.index) of the n_fine bricks of
+ * centres and the n_coarse coarse bricks after them in w->all. */
+static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_coarse)
+{
+    uint64_t words = PARTICLES_INDEX_HEADER + 16 * n_coarse + n_fine;
+    if (!reserve((void **)&w->index, &w->index_cap, words, 4) ||
+        !reserve((void **)&w->cpairs, &w->cpairs_cap, n_coarse + 1, 8))
+        return bf_fail(BF_NO_MEMORY, "render: the particles' index");
+    uint32_t *ix = w->index, *first = ix + PARTICLES_INDEX_HEADER;
+    uint64_t slots_at = PARTICLES_INDEX_HEADER + 16 * n_coarse;
+    ix[0] = (uint32_t)n_fine, ix[1] = (uint32_t)slots_at;
+    /* Each coarse word's first entry: the set cells of the coarse bricks in
+     * slot order, each brick's words in order, each word's bits in order. */
+    uint32_t at = 0;
+    for (uint64_t j = 0; j < n_coarse; j++) {
+        const hostmap_brick *cb = &w->all[n_fine + j];
+        for (int k = 0; k < 16; k++) first[16 * j + k] = at, at += (uint32_t)__builtin_popcount(cb->sign[k]);
+        int64_t g[3];
+        brick_coord(cb, g);
+        w->cpairs[j] = morton3(g) << 32 | j;
+    }
+    if (at != n_fine)
+        return bf_fail(BF_NUMERIC, "render: %u coarse cells hold centres, %llu bricks of centres", at,
+                       (unsigned long long)n_fine);
+    qsort(w->cpairs, n_coarse, 8, cmp_u64);
+    /* Each brick of centres at its coarse cell's entry (the bricks come
+     * sorted by Morton code: a coarse brick's are consecutive). */
+    uint64_t last = UINT64_MAX, j = 0;
+    for (uint64_t i = 0; i < n_fine; i++) {
+        int64_t g[3], c[3];
+        brick_coord(&w->all[i], g);
+        for (int a = 0; a < 3; a++) c[a] = g[a] >> 3;
+        uint64_t code = morton3(c);
+        if (code != last) {
+            uint64_t lo = 0, hi = n_coarse;
+            while (lo < hi) {
+                uint64_t mid = (lo + hi) / 2;
+                if (w->cpairs[mid] >> 32 < code) lo = mid + 1;
+                else hi = mid;
+            }
+            if (lo == n_coarse || w->cpairs[lo] >> 32 != code)
+                return bf_fail(BF_NUMERIC, "render: a brick of centres without its coarse brick");
+            j = w->cpairs[lo] & 0xffffffffu, last = code;
+        }
+        uint32_t x = (uint32_t)(g[0] & 7), y = (uint32_t)(g[1] & 7), z = (uint32_t)(g[2] & 7);
+        uint32_t wd = brick_word(x, y, z), bit = brick_bit(x, y, z), sw = w->all[n_fine + j].sign[wd];
+        ix[slots_at + first[16 * j + wd] + (uint32_t)__builtin_popcount(sw & ((1u << bit) - 1u))] = (uint32_t)i;
+    }
+    return BF_OK;
+}
+
 bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_vec3 origin, double cell_m,
                         double radius_m, uint32_t level, uint64_t max_bricks, particles_binned *out)
 {
@@ -821,6 +889,9 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     s = bin_one_level(w, 1, w->ckeys, w->coct, fine.k, lo, hi, reach, 0.5, level - PARTICLES_COARSE_LEVELS, max_bricks,
                       fine.k, &out->too_many, &coarse);
     if (s != BF_OK) return s;
+    if ((s = centres_index(w, fine.k, coarse.k)) != BF_OK) return s;
+    out->index = w->index;
+    out->n_index = PARTICLES_INDEX_HEADER + 16 * coarse.k + fine.k;
     out->bricks = w->all;
     out->n_bricks = (uint32_t)(fine.k + coarse.k);
     out->n_occupied = fine.n_occupied;

@@ -14,6 +14,7 @@
  * Morton code and its cell's place in it fit one 64-bit sort key. */
 #define PARTICLES_AXIS_BITS 18
 #define PARTICLES_MAX_CELLS ((int64_t)1 << (PARTICLES_AXIS_BITS + 3))
+#define PARTICLES_INDEX_HEADER RENDER_PARTICLES_INDEX_HEADER
 
 /* The binning's buffers, kept from one binning to the next (a moving set
  * re-binned per step touches no new memory). NULL when out of memory. */
@@ -28,6 +29,17 @@ typedef struct particles_binned {
     uint32_t n_coarse;     /* bricks of the coarse level (the last n_coarse) */
     uint64_t n_cells;      /* set bits */
     uint64_t n_nodes, n_chunks; /* what the octrees of these bricks need (fusion_load) */
+    /* The centres' index: each brick of centres found from its coarse cell
+     * without the octree's three levels between (the child pointer and
+     * mask of Laine & Karras's sparse voxel octrees, per coarse word):
+     *   [0] the first coarse brick's slot (the bricks of centres fill the
+     *       slots before it), [1] where the slots below start (S);
+     *   [2 + 16 j + w] the entry of coarse brick j's (slot [0] + j) first
+     *       set cell in sign word w (the cells in word order, then bit order);
+     *   [S + e] the slot of entry e's brick of centres.
+     * The binner's, until its next binning. */
+    const uint32_t *index;
+    uint64_t n_index;      /* words */
     bool too_many;         /* failed: more than max_bricks */
 } particles_binned;
 

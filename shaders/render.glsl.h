@@ -205,6 +205,10 @@ BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
 /* Per dispatch in the arguments buffer: the indirect group counts (x, y, z)
  * of the next dispatch and the count of rays appended. */
 #define RENDER_PARTICLES_ARGS_WORDS 4u
+/* The centres' index (binding 11, render/particles_bin.h): two header words,
+ * then per coarse brick and sign word the entry of its first brick of
+ * centres, then the bricks' slots. */
+#define RENDER_PARTICLES_INDEX_HEADER 2u
 struct render_particles_push {
     bf_f32 R[9];             /* camera to particle-map rotation, row-major */
     bf_f32 t[3];             /* camera centre in the particle map's frame [m] */

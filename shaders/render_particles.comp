@@ -35,6 +35,9 @@ layout(std430, binding = 8) buffer Resume { float v[]; } resume;
  * and the list's length (zeroed before the first). */
 layout(std430, binding = 9) buffer Lists { uint v[]; } lists;
 layout(std430, binding = 10) buffer Args { uint v[]; } args;
+/* The centres' index (render/particles_bin.h): a brick of centres' slot
+ * from its coarse cell. */
+layout(std430, binding = 11) readonly buffer Index { uint w[]; } cindex;
 
 layout(push_constant) uniform Push { render_particles_push pc; };
 
@@ -42,6 +45,7 @@ uint fusion_hash_word(uint i) { return hash.w[i]; }
 uint render_node_word(uint i) { return nodes.w[i]; }
 uint render_sign_word(uint slot, uint w) { return bits_pool.w[slot * BRICK_WORDS + w]; }
 uint render_conf_word(uint slot, uint w) { return reach_pool.w[slot * BRICK_WORDS + w]; }
+uint render_particles_index_word(uint i) { return cindex.w[i]; }
 
 #include "render_walk.glsl.h"
 

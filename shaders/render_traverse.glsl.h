@@ -25,6 +25,7 @@
  *   render_walk_map render_particle_map();                (particles: neighbour bricks)
  *   uint render_particles_budget();                       (particles: work before a pause)
  *   float render_particles_lod_k();                       (particles: level of detail from depth lod_k * cell)
+ *   uint render_particles_index_word(uint i);             (particles: the centres' index, render/particles_bin.h)
  *
  * This file is GLSL only.
  */
@@ -115,8 +116,11 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
  * In a coarse brick a DDA (Amanatides & Woo 1987) visits the ray's cells;
  * at each cell a sphere reaches, the spheres that can meet the ray there
  * have their centres within the radius of that cell: the coarse cells of
- * that box holding centres are looked up (one node descent of three levels
- * each) and their sub-brick words overlapping the box searched with
+ * that box holding centres are found in the coarse sign words, each one's
+ * brick of centres through the centres' index (the entry of the coarse
+ * word's first brick, plus the set bits below it: one read instead of a
+ * descent of three octree levels), and the words of that brick that hold
+ * centres (word 0 of its confidence plane says which) searched with
  * findLSB, each bit's sphere intersected with the ray. Consecutive cells'
  * boxes overlap: after a searched cell, the next searches only the slab of
  * its box the last one did not cover, and the nearest entry found is
@@ -162,6 +166,9 @@ float render_plod_k;    /* render_particles_lod_k(), once per ray */
  * descent. Per invocation; the shader clears it (render_particles_cache_clear). */
 ivec3 render_pcache_parent;
 uint render_pcache_child;
+/* From the centres' index header (once per invocation): the first coarse
+ * brick's slot and where the bricks of centres' slots start. */
+uint render_pfirst_coarse, render_pslots_at;
 
 void render_particles_cache_clear()
 {
@@ -174,6 +181,8 @@ void render_particles_cache_clear()
     render_plast = ivec3(0);
     render_pbest_lod = false;
     render_plod_k = render_particles_lod_k();
+    render_pfirst_coarse = render_particles_index_word(0u);
+    render_pslots_at = render_particles_index_word(1u);
 }
 
 /* The node of coarse brick b (level >= 1) through the parent cache, or
@@ -202,22 +211,6 @@ uint render_particles_node(render_walk_map m, ivec3 b, uint level)
     if (render_pcache_child == FUSION_NONE) return FUSION_NONE;
     uvec3 c = uvec3(b);
     return render_pcache_child + fusion_octant(c.x, c.y, c.z);
-}
-
-/* The brick of centres of coarse cell k (global, on the coarse level's
- * grid: the brick's own coordinate on the centres' level), below the
- * coarse node holding it; FUSION_NONE if absent. */
-uint render_particles_centres(uint node, ivec3 k)
-{
-    uvec3 u = uvec3(k);
-    for (int l = int(RENDER_PARTICLES_COARSE_LEVELS) - 1; l >= 0; l--) {
-        uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
-        if (child >= FUSION_LOCKED) return FUSION_NONE;
-        uvec3 c = u >> uint(l);
-        node = child + fusion_octant(c.x, c.y, c.z);
-    }
-    uint slot = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
-    return slot < FUSION_LOCKED ? slot : FUSION_NONE;
 }
 
 /* The set bits of a sub-brick word whose cells lie in [l, h] (cells of the
@@ -259,8 +252,12 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                         for (int wx = w0.x; wx <= w1.x; wx++) {
                             render_pwork++;
                             ivec3 q0 = ivec3(4 * wx, 4 * wy, 2 * wz);
-                            uint occ = render_sign_word(sl, uint(wx + 2 * wy + 4 * wz)) &
-                                       render_particles_box_mask(max(lo - q0, ivec3(0)), min(hi - q0, ivec3(3, 3, 1)));
+                            uint wi = uint(wx + 2 * wy + 4 * wz), sw = render_sign_word(sl, wi);
+                            uint occ = sw & render_particles_box_mask(max(lo - q0, ivec3(0)), min(hi - q0, ivec3(3, 3, 1)));
+                            /* The index entry of the word's first brick of centres. */
+                            uint e0 = occ != 0u && !lod ? render_particles_index_word(RENDER_PARTICLES_INDEX_HEADER +
+                                                                                     16u * (sl - render_pfirst_coarse) + wi)
+                                                        : 0u;
                             while (occ != 0u) {
                                 int b = findLSB(occ);
                                 occ &= occ - 1u;
@@ -284,9 +281,10 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                      g1 = g0 + (8.0 * fine_m + 2.0 * r) * ray.inv_dir;
                                 vec3 gn = min(g0, g1), gx = max(g0, g1);
                                 if (min(gx.x, min(gx.y, gx.z)) < max(s_lo, max(gn.x, max(gn.y, gn.z)))) continue;
-                                uint fs = render_particles_centres(node, k);
-                                render_pwork += RENDER_PARTICLES_COARSE_LEVELS;
-                                if (fs == FUSION_NONE) continue;
+                                /* Its brick of centres: the entry after the word's set bits below b. */
+                                uint fs = render_particles_index_word(render_pslots_at + e0 +
+                                                                      uint(bitCount(sw & ((1u << uint(b)) - 1u))));
+                                render_pwork++;
                                 ivec3 flo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), fhi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
                                 /* The sub-brick words holding centres: word 0 of the brick's confidence plane
                                  * (render/particles_bin.h). */

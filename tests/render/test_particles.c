@@ -206,9 +206,9 @@ BF_TEST(dam_break_matches_the_exact_spheres_also_turned)
 
 /* Rays paused by the searches' work budget resume in later dispatches
  * (the rays a dispatch leaves unfinished, listed, and an indirect
- * dispatch over them) exactly where they stopped: with a budget of 40
- * loop iterations the rays pause about 60,000 times in all (the hit ones
- * twice on average), and the image is the one the default budget makes,
+ * dispatch over them) exactly where they stopped: with a budget of 25
+ * loop iterations the rays pause about 31,000 times in all (the hit ones
+ * about once on average), and the image is the one the default budget makes,
  * depth for depth and colour for colour (the same candidate spheres, the
  * same float operations); with the default none pauses on this view. */
 BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
@@ -224,7 +224,7 @@ BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
     uint64_t resumed[2] = {0, 0};
     for (int k = 0; k < 2; k++) {
         render_particles_config pc = render_particles_config_default();
-        pc.work_budget = k ? 40 : 0;
+        pc.work_budget = k ? 25 : 0;
         render_particles *ps;
         CHECK_OK(render_particles_create(ctx, &pc, m.xyz, m.n_verts, &ps));
         CHECK_OK(render_scene(rc, NULL, ps, &K_VIEW, &T, &opt));
@@ -238,7 +238,7 @@ BF_TEST(rays_paused_by_the_work_budget_resume_to_the_same_image)
     }
     uint32_t n_hit = 0;
     for (uint32_t i = 0; i < n_px; i++) n_hit += depth[0][i] > 0;
-    fprintf(stderr, "  %u pixels hit; rays resumed: %llu with the default budget, %llu with 40\n", n_hit,
+    fprintf(stderr, "  %u pixels hit; rays resumed: %llu with the default budget, %llu with 25\n", n_hit,
             (unsigned long long)resumed[0], (unsigned long long)resumed[1]);
     CHECK(n_hit > n_px / 3);
     CHECK_EQ_INT(resumed[0], 0);
