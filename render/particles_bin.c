@@ -850,7 +850,15 @@ static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_
         }
         uint32_t x = (uint32_t)(g[0] & 7), y = (uint32_t)(g[1] & 7), z = (uint32_t)(g[2] & 7);
         uint32_t wd = brick_word(x, y, z), bit = brick_bit(x, y, z), sw = w->all[n_fine + j].sign[wd];
-        ix[slots_at + first[16 * j + wd] + (uint32_t)__builtin_popcount(sw & ((1u << bit) - 1u))] = (uint32_t)i;
+        /* A brick holding one centre: the centre itself (no read of the brick). */
+        uint32_t e = (uint32_t)i, n_in = 0, cell = 0;
+        for (int k = 0; k < 16; k++) {
+            uint32_t v = w->all[i].sign[k];
+            n_in += (uint32_t)__builtin_popcount(v);
+            if (v) cell = (uint32_t)k << 5 | (uint32_t)__builtin_ctz(v);
+        }
+        if (n_in == 1) e = PARTICLES_INDEX_ONE | cell;
+        ix[slots_at + first[16 * j + wd] + (uint32_t)__builtin_popcount(sw & ((1u << bit) - 1u))] = e;
     }
     return BF_OK;
 }

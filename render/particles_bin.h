@@ -15,6 +15,7 @@
 #define PARTICLES_AXIS_BITS 18
 #define PARTICLES_MAX_CELLS ((int64_t)1 << (PARTICLES_AXIS_BITS + 3))
 #define PARTICLES_INDEX_HEADER RENDER_PARTICLES_INDEX_HEADER
+#define PARTICLES_INDEX_ONE RENDER_PARTICLES_INDEX_ONE
 
 /* The binning's buffers, kept from one binning to the next (a moving set
  * re-binned per step touches no new memory). NULL when out of memory. */
@@ -36,7 +37,8 @@ typedef struct particles_binned {
      *       slots before it), [1] where the slots below start (S);
      *   [2 + 16 j + w] the entry of coarse brick j's (slot [0] + j) first
      *       set cell in sign word w (the cells in word order, then bit order);
-     *   [S + e] the slot of entry e's brick of centres.
+     *   [S + e] the slot of entry e's brick of centres, or where it holds one
+ *       centre, PARTICLES_INDEX_ONE | its cell (sign word << 5 | bit).
      * The binner's, until its next binning. */
     const uint32_t *index;
     uint64_t n_index;      /* words */

@@ -209,6 +209,9 @@ BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
  * then per coarse brick and sign word the entry of its first brick of
  * centres, then the bricks' slots. */
 #define RENDER_PARTICLES_INDEX_HEADER 2u
+/* An entry with this bit is a brick of one centre: its cell in the low 9
+ * bits (sign word << 5 | bit), the brick itself not read. */
+#define RENDER_PARTICLES_INDEX_ONE 0x80000000u
 struct render_particles_push {
     bf_f32 R[9];             /* camera to particle-map rotation, row-major */
     bf_f32 t[3];             /* camera centre in the particle map's frame [m] */

@@ -213,6 +213,27 @@ uint render_particles_node(render_walk_map m, ivec3 b, uint level)
     return render_pcache_child + fusion_octant(c.x, c.y, c.z);
 }
 
+/* The centre of cell (sub-brick word w, bit i) of the brick of centres
+ * under coarse cell k (global, coarse grid), map frame. */
+vec3 render_particles_centre(ivec3 k, uint w, int i, float fine_m)
+{
+    /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
+    ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
+    return (vec3(k * 8 + s0 + ivec3(i & 3, (i >> 2) & 3, i >> 4)) + 0.5) * fine_m;
+}
+
+/* The sphere (c, r) as the nearest entry in [s_lo, best) (lod: drawn for a
+ * coarse cell). */
+void render_particles_try(render_ray ray, vec3 c, float r, float s_lo, bool lod, inout float best, inout vec3 best_c)
+{
+    float t = render_sphere_hit(ray, c, r);
+    if (t >= s_lo && t < best) {
+        best = t;
+        best_c = c;
+        render_pbest_lod = lod;
+    }
+}
+
 /* The set bits of a sub-brick word whose cells lie in [l, h] (cells of the
  * word, x and y in [0, 3], z in [0, 1]; bit x + 4 y + 16 z). */
 uint render_particles_box_mask(ivec3 l, ivec3 h)
@@ -265,13 +286,7 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                 ivec3 k = kb * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
                                 if (lod) {
                                     /* Level of detail: the coarse cell's centres as one sphere at its centre. */
-                                    vec3 c = (vec3(k) + 0.5) * (8.0 * fine_m);
-                                    float t = render_sphere_hit(ray, c, r);
-                                    if (t >= s_lo && t < best) {
-                                        best = t;
-                                        best_c = c;
-                                        render_pbest_lod = true;
-                                    }
+                                    render_particles_try(ray, (vec3(k) + 0.5) * (8.0 * fine_m), r, s_lo, true, best, best_c);
                                     continue;
                                 }
                                 /* The ray must pass within r of the cell's
@@ -285,6 +300,12 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                 uint fs = render_particles_index_word(render_pslots_at + e0 +
                                                                       uint(bitCount(sw & ((1u << uint(b)) - 1u))));
                                 render_pwork++;
+                                if ((fs & RENDER_PARTICLES_INDEX_ONE) != 0u) {
+                                    /* A brick of one centre: the entry holds its cell. */
+                                    render_particles_try(ray, render_particles_centre(k, fs >> 5 & 15u, int(fs & 31u), fine_m),
+                                                         r, s_lo, false, best, best_c);
+                                    continue;
+                                }
                                 ivec3 flo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), fhi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
                                 /* The sub-brick words holding centres: word 0 of the brick's confidence plane
                                  * (render/particles_bin.h). */
@@ -299,13 +320,8 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                         int i = findLSB(bits);
                                         bits &= bits - 1u;
                                         render_pwork++;
-                                        vec3 c = (vec3(k * 8 + s0 + ivec3(i & 3, (i >> 2) & 3, i >> 4)) + 0.5) * fine_m;
-                                        float t = render_sphere_hit(ray, c, r);
-                                        if (t >= s_lo && t < best) {
-                                            best = t;
-                                            best_c = c;
-                                            render_pbest_lod = false;
-                                        }
+                                        render_particles_try(ray, render_particles_centre(k, w, i, fine_m), r, s_lo, false,
+                                                             best, best_c);
                                     }
                                 }
                             }
