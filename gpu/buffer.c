@@ -100,6 +100,11 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
     buf->is_coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     if (want_map && (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT))
         GPU__CHECK(vk->MapMemory(ctx->device, buf->memory, 0, VK_WHOLE_SIZE, 0, &buf->mapped), buf->name);
+    /* A large buffer the host maps (lavapipe: all of them) on huge pages
+     * where the kernel gives them on request: the shaders' scattered reads
+     * of the pools miss the TLB less. Elsewhere (device memory mapped
+     * through a driver) the advice is refused, harmlessly. */
+    if (buf->mapped && req.size >= GPU_HUGE_PAGE_MIN_BYTES) bf_advise_huge(buf->mapped, (size_t)req.size);
     *out = buf;
     return BF_OK;
 
