@@ -246,14 +246,13 @@ uint render_particles_box_mask(ivec3 l, ivec3 h)
 
 /* The nearest sphere entry in [s_lo, best) among the spheres whose centres
  * lie in the cells [c0, c1] (global, on the centres' grid of cells of
- * fine_m); level is the coarse level, B and node the coarse brick being
+ * fine_m); level is the coarse level, B and slot_B the coarse brick being
  * walked. The coarse cells of the box that hold centres are found as the
  * set sign bits of the coarse bricks' sub-brick words under a mask of the
  * box (findLSB), so empty coarse cells cost nothing. With lod each such
  * coarse cell is one sphere at its centre, its brick of centres unread
  * (render_pbest_lod says which kind the nearest is). */
-void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 c1, uint level, ivec3 B, uint node_B,
-                             uint slot_B, float fine_m, float r, float s_lo, bool lod, inout float best,
+void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 c1, uint level, ivec3 B, uint slot_B, float fine_m, float r, float s_lo, bool lod, inout float best,
                              inout vec3 best_c)
 {
     ivec3 k0 = c0 >> 3, k1 = c1 >> 3, b0 = k0 >> 3, b1 = k1 >> 3;
@@ -261,11 +260,14 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
         for (int by = b0.y; by <= b1.y; by++)
             for (int bx = b0.x; bx <= b1.x; bx++) {
                 ivec3 kb = ivec3(bx, by, bz);
-                uint node = kb == B ? node_B : render_particles_node(m, kb, level);
+                uint sl = slot_B;
                 render_pwork++;
-                if (node == FUSION_NONE) continue;
-                uint sl = kb == B ? slot_B : render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
-                if (sl >= FUSION_LOCKED) continue;
+                if (kb != B) {
+                    uint node = render_particles_node(m, kb, level);
+                    if (node == FUSION_NONE) continue;
+                    sl = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
+                    if (sl >= FUSION_LOCKED) continue;
+                }
                 ivec3 lo = clamp(k0 - kb * 8, ivec3(0), ivec3(7)), hi = clamp(k1 - kb * 8, ivec3(0), ivec3(7));
                 ivec3 w0 = ivec3(lo.x >> 2, lo.y >> 2, lo.z >> 1), w1 = ivec3(hi.x >> 2, hi.y >> 2, hi.z >> 1);
                 for (int wz = w0.z; wz <= w1.z; wz++)
@@ -345,7 +347,6 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
     vec3 s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
     vec3 s_delta = voxel_m * abs(ray.inv_dir);
     ivec3 B = ivec3(floor(brick_lo * inv_v * 0.125 + 0.5));
-    uint node_B = FUSION_NONE;
     float s_enter = s_in;
     render_pwork += 4u; /* the walk's step to this brick */
     for (uint k = 0u; k < 32u; k++) {
@@ -376,7 +377,6 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
                 tr.hit_level = RENDER_PARTICLES_PAUSED;
                 return true;
             }
-            if (node_B == FUSION_NONE) node_B = render_particles_node(m, B, level);
             /* The centres whose spheres reach this cell; after a searched
              * neighbour one step back along axis a, only the slab its
              * search did not cover (the window slides one cell). */
@@ -390,7 +390,7 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
             }
             /* Level of detail from the nearest depth a sphere met here can have (two cells before). */
             bool lod = s_enter - 2.0 * voxel_m >= render_plod_k * voxel_m;
-            render_particles_search(m, ray, c0, c1, level, B, node_B, slot, fine_m, r, s_in - RENDER_NUDGE, lod,
+            render_particles_search(m, ray, c0, c1, level, B, slot, fine_m, r, s_in - RENDER_NUDGE, lod,
                                     render_pbest, render_pbest_c);
             render_pchain = true;
             render_plast = kg;
