@@ -4,9 +4,9 @@
  * the ray crosses, with the ray's segment inside the part of the brick that
  * is the finest data at those points, to one function:
  *
- *   bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m,
- *                        render_ray ray, float s_in, float s_out, uint flags,
- *                        inout render_trace tr)
+ *   bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo,
+ *                        float voxel_m, render_ray ray, float s_in, float s_out,
+ *                        uint flags, inout render_trace tr)
  *
  * which returns true when the ray hits inside [s_in, s_out) and then fills
  * tr.hit_depth and tr.hit_level. tr carries what a traverser must remember
@@ -45,8 +45,8 @@
  * is unknown and skipped (it neither starts nor ends a front run). The hit
  * depth is the entry face of the behind voxel, or with RENDER_FLAG_REFINE
  * render_refine_depth of the two voxel centres. */
-bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in, float s_out,
-                     uint flags, inout render_trace tr)
+bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in,
+                     float s_out, uint flags, inout render_trace tr)
 {
     vec3 p = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
     ivec3 idx = clamp(ivec3(floor((p - brick_lo) * (1.0 / voxel_m))), ivec3(0), ivec3(7));
@@ -331,8 +331,8 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
             }
 }
 
-bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in, float s_out,
-                     uint flags, inout render_trace tr)
+bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in,
+                     float s_out, uint flags, inout render_trace tr)
 {
     render_walk_map m = render_particle_map();
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
@@ -347,6 +347,13 @@ bool render_traverse(uint slot, uint level, vec3 brick_lo, float voxel_m, render
     vec3 s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
     vec3 s_delta = voxel_m * abs(ray.inv_dir);
     ivec3 B = ivec3(floor(brick_lo * inv_v * 0.125 + 0.5));
+    if (node != FUSION_NONE) {
+        /* The walk's node of this brick: its parent's children are its
+         * siblings, which most of the searches' neighbours are. */
+        uvec3 u = uvec3(B);
+        render_pcache_parent = B >> 1;
+        render_pcache_child = node - fusion_octant(u.x, u.y, u.z);
+    }
     float s_enter = s_in;
     render_pwork += 4u; /* the walk's step to this brick */
     for (uint k = 0u; k < 32u; k++) {
