@@ -598,6 +598,7 @@ struct particles_binner {
     uint64_t *ckeys;      /* the coarse level's cell keys: one per brick of the centres */
     uint64_t ckeys_cap;
     uint8_t *coct;        /* per brick of the centres (coarse cell): the octants that hold centres */
+    uint16_t *cone;       /* per brick of the centres: its one cell (x | y << 3 | z << 6), or CONE_MANY */
     uint64_t coct_cap;
     reach_table *rt[2];   /* the centres' level, the coarse level */
     double rt_reach[2], rt_half[2];
@@ -606,6 +607,7 @@ struct particles_binner {
     uint64_t all_cap;
     uint32_t *index;      /* the centres' index (particles_binned.index) */
     uint64_t index_cap;
+    uint64_t cone_cap;
     uint64_t *cpairs;     /* the coarse bricks' Morton codes << 32 | their place, sorted */
     uint64_t cpairs_cap;
 };
@@ -616,7 +618,7 @@ void particles_binner_destroy(particles_binner *w)
 {
     if (!w) return;
     free(w->keys), free(w->tmp), free(w->ckeys), free(w->coct), free(w->rt[0]), free(w->rt[1]), free(w->all);
-    free(w->index), free(w->cpairs);
+    free(w->index), free(w->cpairs), free(w->cone);
     part_free(&w->part[0]), part_free(&w->part[1]);
     free(w);
 }
@@ -792,6 +794,8 @@ static bf_status coarse_cells(particles_binner *w, uint64_t n, int64_t lo[3], in
     return BF_OK;
 }
 
+#define CONE_MANY 0xffffu
+
 /* A brick's coordinate on its level's grid (brick units from the origin). */
 static void brick_coord(const hostmap_brick *b, int64_t g[3])
 {
@@ -805,38 +809,38 @@ static int cmp_u64(const void *a, const void *b)
 }
 
 /* The centres' index (particles_binned.index) of the n_fine bricks of
- * centres and the n_coarse coarse bricks after them in w->all. */
+ * centres and the n_coarse coarse bricks after them in w->all (brick k of
+ * w->all goes to slot k: fusion_load). The bricks of centres are those of
+ * w->ckeys and w->cone, in the same order: sorted by Morton code. */
 static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_coarse)
 {
     uint64_t words = PARTICLES_INDEX_HEADER + 16 * n_coarse + n_fine;
     if (!reserve((void **)&w->index, &w->index_cap, words, 4) ||
         !reserve((void **)&w->cpairs, &w->cpairs_cap, n_coarse + 1, 8))
         return bf_fail(BF_NO_MEMORY, "render: the particles' index");
-    uint32_t *ix = w->index, *first = ix + PARTICLES_INDEX_HEADER;
+    const hostmap_brick *coarse = w->all + n_fine;
+    uint32_t *ix = w->index, *first = ix + PARTICLES_INDEX_HEADER, *slots;
     uint64_t slots_at = PARTICLES_INDEX_HEADER + 16 * n_coarse;
     ix[0] = (uint32_t)n_fine, ix[1] = (uint32_t)slots_at;
+    slots = ix + slots_at;
     /* Each coarse word's first entry: the set cells of the coarse bricks in
      * slot order, each brick's words in order, each word's bits in order. */
     uint32_t at = 0;
     for (uint64_t j = 0; j < n_coarse; j++) {
-        const hostmap_brick *cb = &w->all[n_fine + j];
-        for (int k = 0; k < 16; k++) first[16 * j + k] = at, at += (uint32_t)__builtin_popcount(cb->sign[k]);
+        for (int k = 0; k < 16; k++) first[16 * j + k] = at, at += (uint32_t)__builtin_popcount(coarse[j].sign[k]);
         int64_t g[3];
-        brick_coord(cb, g);
+        brick_coord(&coarse[j], g);
         w->cpairs[j] = morton3(g) << 32 | j;
     }
     if (at != n_fine)
         return bf_fail(BF_NUMERIC, "render: %u coarse cells hold centres, %llu bricks of centres", at,
                        (unsigned long long)n_fine);
     qsort(w->cpairs, n_coarse, 8, cmp_u64);
-    /* Each brick of centres at its coarse cell's entry (the bricks come
-     * sorted by Morton code: a coarse brick's are consecutive). */
+    /* Each brick of centres at its coarse cell's entry (a coarse brick's
+     * bricks of centres are consecutive). */
     uint64_t last = UINT64_MAX, j = 0;
     for (uint64_t i = 0; i < n_fine; i++) {
-        int64_t g[3], c[3];
-        brick_coord(&w->all[i], g);
-        for (int a = 0; a < 3; a++) c[a] = g[a] >> 3;
-        uint64_t code = morton3(c);
+        uint64_t code = w->ckeys[i] >> 9;
         if (code != last) {
             uint64_t lo = 0, hi = n_coarse;
             while (lo < hi) {
@@ -848,17 +852,21 @@ static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_
                 return bf_fail(BF_NUMERIC, "render: a brick of centres without its coarse brick");
             j = w->cpairs[lo] & 0xffffffffu, last = code;
         }
-        uint32_t x = (uint32_t)(g[0] & 7), y = (uint32_t)(g[1] & 7), z = (uint32_t)(g[2] & 7);
-        uint32_t wd = brick_word(x, y, z), bit = brick_bit(x, y, z), sw = w->all[n_fine + j].sign[wd];
+        uint32_t l = (uint32_t)(w->ckeys[i] & 511), x = l & 7, y = l >> 3 & 7, z = l >> 6;
+        uint32_t wd = brick_word(x, y, z), bit = brick_bit(x, y, z), sw = coarse[j].sign[wd];
         /* A brick holding one centre: the centre itself (no read of the brick). */
-        uint32_t e = (uint32_t)i, n_in = 0, cell = 0;
-        for (int k = 0; k < 16; k++) {
-            uint32_t v = w->all[i].sign[k];
-            n_in += (uint32_t)__builtin_popcount(v);
-            if (v) cell = (uint32_t)k << 5 | (uint32_t)__builtin_ctz(v);
-        }
-        if (n_in == 1) e = PARTICLES_INDEX_ONE | cell;
-        ix[slots_at + first[16 * j + wd] + (uint32_t)__builtin_popcount(sw & ((1u << bit) - 1u))] = e;
+        uint32_t e = (uint32_t)i, c = w->cone[i];
+        if (c != CONE_MANY)
+            e = PARTICLES_INDEX_ONE | brick_word(c & 7, c >> 3 & 7, c >> 6) << 5 | brick_bit(c & 7, c >> 3 & 7, c >> 6);
+        slots[first[16 * j + wd] + (uint32_t)__builtin_popcount(sw & ((1u << bit) - 1u))] = e;
+    }
+    /* The bricks of centres are where the keys say (every 4096th checked). */
+    for (uint64_t i = 0; i < n_fine; i += 4096) {
+        int64_t g[3], c[3];
+        brick_coord(&w->all[i], g);
+        for (int a = 0; a < 3; a++) c[a] = g[a] >> 3;
+        if (morton3(c) != w->ckeys[i] >> 9 || (uint64_t)((g[0] & 7) | (g[1] & 7) << 3 | (g[2] & 7) << 6) != (w->ckeys[i] & 511))
+            return bf_fail(BF_NUMERIC, "render: brick of centres %llu out of order", (unsigned long long)i);
     }
     return BF_OK;
 }
@@ -879,11 +887,15 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     level_binned fine, coarse;
     /* The octants of each brick of centres that hold centres (the cells are sorted: a brick's are
        consecutive), for the coarse level's reach below. */
-    if (!reserve((void **)&w->coct, &w->coct_cap, n_cells + 1, 1)) return bf_fail(BF_NO_MEMORY, "render: octants");
+    /* And each brick's one cell where it holds one (the centres' index). */
+    if (!reserve((void **)&w->coct, &w->coct_cap, n_cells + 1, 1) ||
+        !reserve((void **)&w->cone, &w->cone_cap, n_cells + 1, 2))
+        return bf_fail(BF_NO_MEMORY, "render: octants");
     uint64_t nb = 0;
     for (uint64_t i = 0; i < n_cells; i++) {
-        if (i == 0 || w->tmp[i] >> 9 != w->tmp[i - 1] >> 9) w->coct[nb++] = 0;
         uint32_t l = (uint32_t)(w->tmp[i] & 511);
+        if (i == 0 || w->tmp[i] >> 9 != w->tmp[i - 1] >> 9) w->coct[nb] = 0, w->cone[nb++] = (uint16_t)l;
+        else w->cone[nb - 1] = CONE_MANY;
         w->coct[nb - 1] |= (uint8_t)(1u << ((l >> 2 & 1) | (l >> 5 & 1) << 1 | (l >> 8 & 1) << 2));
     }
     s = bin_one_level(w, 0, w->tmp, NULL, n_cells, lo, hi, 0.0, 0.0, level, max_bricks, 0, &out->too_many, &fine);
