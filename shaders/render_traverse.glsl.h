@@ -4,9 +4,10 @@
  * the ray crosses, with the ray's segment inside the part of the brick that
  * is the finest data at those points, to one function:
  *
- *   bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo,
- *                        float voxel_m, render_ray ray, float s_in, float s_out,
- *                        uint flags, inout render_trace tr)
+ *   bool render_traverse(uint slot, uint node, uint parent, uint level,
+ *                        vec3 brick_lo, float voxel_m, render_ray ray,
+ *                        float s_in, float s_out, uint flags,
+ *                        inout render_trace tr)
  *
  * which returns true when the ray hits inside [s_in, s_out) and then fills
  * tr.hit_depth and tr.hit_level. tr carries what a traverser must remember
@@ -45,8 +46,8 @@
  * is unknown and skipped (it neither starts nor ends a front run). The hit
  * depth is the entry face of the behind voxel, or with RENDER_FLAG_REFINE
  * render_refine_depth of the two voxel centres. */
-bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in,
-                     float s_out, uint flags, inout render_trace tr)
+bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_lo, float voxel_m, render_ray ray,
+                     float s_in, float s_out, uint flags, inout render_trace tr)
 {
     vec3 p = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
     ivec3 idx = clamp(ivec3(floor((p - brick_lo) * (1.0 / voxel_m))), ivec3(0), ivec3(7));
@@ -166,6 +167,10 @@ float render_plod_k;    /* render_particles_lod_k(), once per ray */
  * descent. Per invocation; the shader clears it (render_particles_cache_clear). */
 ivec3 render_pcache_parent;
 uint render_pcache_child;
+/* The walked brick's grandparent (its cell one level above the parents)
+ * and its first child, from the walk's stack (FUSION_NONE: none). */
+ivec3 render_pgp;
+uint render_pgp_child;
 /* From the centres' index header (once per invocation): the first coarse
  * brick's slot and where the bricks of centres' slots start. */
 uint render_pfirst_coarse, render_pslots_at;
@@ -174,6 +179,8 @@ void render_particles_cache_clear()
 {
     render_pcache_parent = ivec3(-2147483647);
     render_pcache_child = FUSION_NONE;
+    render_pgp = ivec3(-2147483647);
+    render_pgp_child = FUSION_NONE;
     render_pwork = 0u;
     render_pbest = 3.0e38;
     render_pbest_c = vec3(0.0);
@@ -193,18 +200,26 @@ uint render_particles_node(render_walk_map m, ivec3 b, uint level)
     if (parent != render_pcache_parent) {
         render_pcache_parent = parent;
         render_pcache_child = FUSION_NONE;
-        ivec3 key = b >> int(level);
-        uint e = render_find_chunk(m, key);
-        if (e == FUSION_NONE) return FUSION_NONE;
-        uvec3 cell = uvec3(parent - (key << int(level - 1u)));
-        uint node = fusion_hash_word(e * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT);
-        for (uint l = 1u; l < level; l++) {
-            uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
-            if (child >= FUSION_LOCKED) return FUSION_NONE;
-            uvec3 c = cell >> (level - 1u - l);
-            node = child + fusion_octant(c.x, c.y, c.z);
+        uint node;
+        if (render_pgp_child != FUSION_NONE && parent >> 1 == render_pgp) {
+            /* A child of the walked brick's grandparent: no hash probe or descent. */
+            uvec3 u = uvec3(parent);
+            node = render_pgp_child + fusion_octant(u.x, u.y, u.z);
+            render_pwork++;
+        } else {
+            ivec3 key = b >> int(level);
+            uint e = render_find_chunk(m, key);
+            if (e == FUSION_NONE) return FUSION_NONE;
+            uvec3 cell = uvec3(parent - (key << int(level - 1u)));
+            node = fusion_hash_word(e * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT);
+            for (uint l = 1u; l < level; l++) {
+                uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
+                if (child >= FUSION_LOCKED) return FUSION_NONE;
+                uvec3 c = cell >> (level - 1u - l);
+                node = child + fusion_octant(c.x, c.y, c.z);
+            }
+            render_pwork += level;
         }
-        render_pwork += level;
         uint child = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_CHILD);
         render_pcache_child = child < FUSION_LOCKED ? child : FUSION_NONE;
     }
@@ -331,8 +346,8 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
             }
 }
 
-bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in,
-                     float s_out, uint flags, inout render_trace tr)
+bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_lo, float voxel_m, render_ray ray,
+                     float s_in, float s_out, uint flags, inout render_trace tr)
 {
     render_walk_map m = render_particle_map();
     float r = render_particle_radius_m(), inv_v = 1.0 / voxel_m;
@@ -353,6 +368,13 @@ bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo, float voxe
         uvec3 u = uvec3(B);
         render_pcache_parent = B >> 1;
         render_pcache_child = node - fusion_octant(u.x, u.y, u.z);
+    }
+    if (parent != FUSION_NONE && level >= 2u) {
+        /* And its parent (not a chunk's root: one of 8 siblings): the
+         * grandparent's children are the parents of most other neighbours. */
+        uvec3 u = uvec3(B >> 1);
+        render_pgp = B >> 2;
+        render_pgp_child = parent - fusion_octant(u.x, u.y, u.z);
     }
     float s_enter = s_in;
     render_pwork += 4u; /* the walk's step to this brick */

@@ -76,9 +76,10 @@ struct render_walk_map {
  * brick (slot, level) whose corner is brick_lo (map frame), then
  * tr.hit_depth and tr.hit_level are set. node is the brick's octree node
  * where the walk's stack holds it (the brick is on the deepest node
- * reached), else FUSION_NONE. */
-bool render_traverse(uint slot, uint node, uint level, vec3 brick_lo, float voxel_m, render_ray ray, float s_in,
-                     float s_out, uint flags, inout render_trace tr);
+ * reached), parent the node above that where the stack holds it too; else
+ * FUSION_NONE. */
+bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_lo, float voxel_m, render_ray ray,
+                     float s_in, float s_out, uint flags, inout render_trace tr);
 
 /* The ray of pixel px of a camera at (R, t) in the map frame (render.glsl.h
  * says why dir has camera z 1). */
@@ -209,7 +210,9 @@ bool render_walk_from(render_walk_map m, render_ray ray, inout float s, float s_
             float brick_m = m.chunk_m / float(1u << bl);
             vec3 brick_lo = chunk_lo + vec3(g >> (RENDER_GRID_BITS - bl)) * brick_m;
             uint node = bl == uint(deep) ? st_node[top] : FUSION_NONE;
-            if (render_traverse(slot, node, bl, brick_lo, brick_m * 0.125, ray, s, min(s_exit, s_far), flags, tr))
+            uint parent = node != FUSION_NONE && deep > lo ? st_node[uint(deep - 1) % RENDER_STACK] : FUSION_NONE;
+            if (render_traverse(slot, node, parent, bl, brick_lo, brick_m * 0.125, ray, s, min(s_exit, s_far), flags,
+                                tr))
                 return true;
         }
         s = max(s_exit, sp);
