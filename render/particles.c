@@ -247,7 +247,11 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
         hostmap hm = {.chunk_m = st->chunk_m, .origin_w = origin, .n_bricks = bs.n_bricks, .bricks = bs.bricks};
         s = fusion_load(ps->map, &hm);
     }
-    if (s == BF_OK) s = load_index(ps, &bs);
+    if (s == BF_OK && (s = load_index(ps, &bs)) != BF_OK) {
+        /* The pools hold the new set, the index the old one: empty the map
+         * (a set that draws nothing) rather than cast a mix. */
+        (void)fusion_clear(ps->map);
+    }
     if (s != BF_OK) return s;
     st->n_particles = n;
     st->origin_w = origin;

@@ -136,8 +136,7 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
 
 /* Camera depth at which ray enters the sphere (c, r), -1 if it misses; the
  * closest-approach form keeps float precision when |o - c| >> r. The ray's
- * 1 / |dir| replaces the two divisions by |dir|^2 (on lavapipe the
- * divisions and the root were a quarter of a particle cast). */
+ * 1 / |dir| replaces two divisions by |dir|^2 per sphere. */
 float render_sphere_hit(render_ray ray, vec3 c, float r)
 {
     vec3 m = ray.o - c;
