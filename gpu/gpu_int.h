@@ -3,12 +3,12 @@
 #ifndef BF_GPU_INT_H
 #define BF_GPU_INT_H
 
-/* Mapped buffers from this size on are advised onto huge pages (buffer.c). */
-#define GPU_HUGE_PAGE_MIN_BYTES ((VkDeviceSize)4 << 20)
-
 #include <stdatomic.h>
 
 #include "gpu/gpu.h"
+
+/* Mapped buffers from this size on are advised onto huge pages (buffer.c). */
+#define GPU_HUGE_PAGE_MIN_BYTES ((VkDeviceSize)4 << 20)
 
 /* Functions the loader exports before any instance exists. */
 #define GPU__VK_GLOBAL(X)                    \

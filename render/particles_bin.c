@@ -598,8 +598,9 @@ struct particles_binner {
     uint64_t *ckeys;      /* the coarse level's cell keys: one per brick of the centres */
     uint64_t ckeys_cap;
     uint8_t *coct;        /* per brick of the centres (coarse cell): the octants that hold centres */
-    uint16_t *cone;       /* per brick of the centres: its one cell (x | y << 3 | z << 6), or CONE_MANY */
     uint64_t coct_cap;
+    uint16_t *cone;       /* per brick of the centres: its one cell (x | y << 3 | z << 6), or CONE_MANY */
+    uint64_t cone_cap;
     reach_table *rt[2];   /* the centres' level, the coarse level */
     double rt_reach[2], rt_half[2];
     bin_part part[2];
@@ -607,7 +608,6 @@ struct particles_binner {
     uint64_t all_cap;
     uint32_t *index;      /* the centres' index (particles_binned.index) */
     uint64_t index_cap;
-    uint64_t cone_cap;
     uint64_t *cpairs;     /* the coarse bricks' Morton codes << 32 | their place, sorted */
     uint64_t cpairs_cap;
 };
@@ -710,7 +710,9 @@ typedef struct level_binned {
 /* Bins the sorted cell keys cells[0, n_cells) (bricks in box lo..hi) on
  * octree level `level`, each set cell's spheres reaching `reach` cells
  * beyond a box of half cells about its middle, into w->all from offset
- * `off` (and the bricks' sorted codes into w->tmp for the caller). */
+ * `off` (and the bricks' sorted codes into w->tmp for the caller). t is 0
+ * for the centres' level (no reach; the confidence plane is emit_main's
+ * summary), 1 for the coarse level. */
 static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells, const uint8_t *octs, uint64_t n_cells,
                                const int64_t lo[3], const int64_t hi[3], double reach, double half, uint32_t level,
                                uint64_t max_bricks, uint64_t off, bool *too_many, level_binned *out)

@@ -38,7 +38,7 @@ typedef struct particles_binned {
      *   [2 + 16 j + w] the entry of coarse brick j's (slot [0] + j) first
      *       set cell in sign word w (the cells in word order, then bit order);
      *   [S + e] the slot of entry e's brick of centres, or where it holds one
- *       centre, PARTICLES_INDEX_ONE | its cell (sign word << 5 | bit).
+     *       centre, PARTICLES_INDEX_ONE | its cell (sign word << 5 | bit).
      * The binner's, until its next binning. */
     const uint32_t *index;
     uint64_t n_index;      /* words */
