@@ -93,6 +93,7 @@ static bf_status slot_colour_fill(fusion_map *m, host_all *a, uint32_t b, const 
  * highest slot now live). */
 static bf_status host_all_store(fusion_map *m, const host_all *a, uint32_t high)
 {
+    m->only_loaded = false; /* slots and nodes anywhere now: fusion_clear resets all */
     m->use.bricks = a->h.counters[FUSION_CNT_BRICKS];
     m->use.nodes = a->h.counters[FUSION_CNT_NODES];
     m->use.overflow = a->h.counters[FUSION_CNT_OVERFLOW];

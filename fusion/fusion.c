@@ -125,6 +125,7 @@ bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slo
     bf_status s = gpu_buffer_flush(m->upload);
     if (s != BF_OK) return s;
     m->has_incoming = true;
+    m->only_loaded = false;
     m->incoming_index = f->index;
     if (out)
         *out = (fusion_frame_slot){.depth = m->upload,

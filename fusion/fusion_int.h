@@ -69,6 +69,10 @@ struct fusion_map {
     bool fuse_pending;        /* fusion_cmd_fuse recorded, fusion_finish_frame not yet run */
     bool pending_closes;      /* that frame closes a window: its count comes back in readback */
     uint32_t n_loaded;        /* bricks loaded from a host copy (fusion_load) */
+    /* Since the last reset only fusion_load has written the map: its bricks
+     * fill slots [0, n_loaded) and its nodes [0, use.nodes), so that is all
+     * fusion_clear has to clear. Frames, eviction and insertion end it. */
+    bool only_loaded;
     fusion_pool_use use;      /* as of the last finished frame or streaming move */
 
     double ms_upload, ms_alloc, ms_subcache, ms_window, ms_colour;

@@ -96,6 +96,25 @@ bf_status fusion__host_map_store(fusion_map *m, const fusion_host_map *h)
     return s;
 }
 
+/* The map's own index structures as h where the host can edit them in
+ * place (gpu_buffer_map_cached: lavapipe, most UMA devices), so a load
+ * copies none of them down and back up. */
+static bool host_map_direct(fusion_map *m, fusion_host_map *h)
+{
+    *h = (fusion_host_map){gpu_buffer_map_cached(m->hash), gpu_buffer_map_cached(m->nodes),
+                           gpu_buffer_map_cached(m->info), gpu_buffer_map_cached(m->counters),
+                           gpu_buffer_map_cached(m->free_stack)};
+    return h->hash && h->nodes && h->info && h->counters && h->free_stack;
+}
+
+static bf_status flush_direct(fusion_map *m)
+{
+    gpu_buffer *b[] = {m->hash, m->nodes, m->info, m->counters, m->free_stack, m->sign, m->conf};
+    bf_status s = BF_OK;
+    for (size_t i = 0; i < sizeof b / sizeof b[0] && s == BF_OK; i++) s = gpu_buffer_flush(b[i]);
+    return s;
+}
+
 bf_status fusion_load(fusion_map *m, const hostmap *in)
 {
     if (!m || !in || (in->n_bricks && !in->bricks)) return bf_fail(BF_INVALID_ARG, "fusion_load: NULL argument");
@@ -109,10 +128,17 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     bf_status s = fusion_set_origin(m, in->origin_w);
     if (s != BF_OK) return s;
     fusion_host_map h;
-    if ((s = fusion__host_map_load(m, &h)) != BF_OK) return s;
+    /* In place where the host may edit the buffers (the bit planes are
+     * only written, so any mapping takes them): no host copies, no
+     * uploads. */
+    bool direct = host_map_direct(m, &h);
+    if (!direct && (s = fusion__host_map_load(m, &h)) != BF_OK) return s;
     /* The free stack hands out slot 0 first: n bricks fill slots [0, n). */
     size_t n = in->n_bricks;
-    uint32_t *sign = bf_calloc(n ? n : 1, BRICK_WORDS * 4), *conf = bf_calloc(n ? n : 1, BRICK_WORDS * 4);
+    uint32_t *sign_pool = gpu_buffer_map(m->sign), *conf_pool = gpu_buffer_map(m->conf);
+    bool pools_direct = direct && sign_pool && conf_pool;
+    uint32_t *sign = pools_direct ? sign_pool : bf_calloc(n ? n : 1, BRICK_WORDS * 4);
+    uint32_t *conf = pools_direct ? conf_pool : bf_calloc(n ? n : 1, BRICK_WORDS * 4);
     /* With colour: each brick's slot, for its colour after the geometry. */
     uint32_t *slots = in->rgb565 && m->cfg.keep_colour ? bf_malloc((n ? n : 1) * 4) : NULL;
     if (!sign || !conf || (in->rgb565 && m->cfg.keep_colour && !slots))
@@ -135,9 +161,10 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     }
     /* Loaded bricks keep no stamp (FUSION_NONE): no window holds them until
      * a frame touches them again. */
-    if (s == BF_OK) s = fusion__host_map_store(m, &h);
-    if (s == BF_OK && high) s = gpu_buffer_upload(m->sign, 0, sign, (uint64_t)high * BRICK_WORDS * 4);
-    if (s == BF_OK && high) s = gpu_buffer_upload(m->conf, 0, conf, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && direct) s = flush_direct(m);
+    if (s == BF_OK && !direct) s = fusion__host_map_store(m, &h);
+    if (s == BF_OK && high && !pools_direct) s = gpu_buffer_upload(m->sign, 0, sign, (uint64_t)high * BRICK_WORDS * 4);
+    if (s == BF_OK && high && !pools_direct) s = gpu_buffer_upload(m->conf, 0, conf, (uint64_t)high * BRICK_WORDS * 4);
     if (s == BF_OK && slots) s = fusion__colour_load(m, in, slots);
     if (s == BF_OK) {
         m->n_loaded = (uint32_t)n;
@@ -145,10 +172,12 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
         m->use.nodes = h.counters[FUSION_CNT_NODES];
         m->use.overflow = h.counters[FUSION_CNT_OVERFLOW];
     }
-    free(sign);
-    free(conf);
+    if (!pools_direct) {
+        free(sign);
+        free(conf);
+    }
     free(slots);
-    fusion__host_map_free(&h);
+    if (!direct) fusion__host_map_free(&h);
     if (s != BF_OK) {
         /* Back to the empty map it was: nothing half-loaded is left. */
         bf_status r = fusion__reset(m);

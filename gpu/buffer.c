@@ -98,6 +98,7 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
     gpu__name(ctx, VK_OBJECT_TYPE_DEVICE_MEMORY, (uint64_t)buf->memory, "%s.memory", buf->name);
     GPU__CHECK(vk->BindBufferMemory(ctx->device, buf->buffer, buf->memory, 0), buf->name);
     buf->is_coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    buf->is_cached = flags & VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
     if (want_map && (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT))
         GPU__CHECK(vk->MapMemory(ctx->device, buf->memory, 0, VK_WHOLE_SIZE, 0, &buf->mapped), buf->name);
     /* A large buffer the host maps (lavapipe: all of them) on huge pages
@@ -131,6 +132,7 @@ uint64_t gpu_buffer_size(const gpu_buffer *buf) { return buf->size; }
 const char *gpu_buffer_name(const gpu_buffer *buf) { return buf->name; }
 VkBuffer gpu_buffer_handle(const gpu_buffer *buf) { return buf->buffer; }
 void *gpu_buffer_map(const gpu_buffer *buf) { return buf->mapped; }
+void *gpu_buffer_map_cached(const gpu_buffer *buf) { return buf->is_cached && buf->is_coherent ? buf->mapped : NULL; }
 
 bf_status gpu_buffer_flush(gpu_buffer *buf)
 {

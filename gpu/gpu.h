@@ -212,6 +212,11 @@ VkBuffer gpu_buffer_handle(const gpu_buffer *buf);
  * READBACK), NULL otherwise. Writes must be followed by gpu_buffer_flush()
  * (a no-op on coherent memory) before the GPU reads them. */
 void *gpu_buffer_map(const gpu_buffer *buf);
+/* The mapping where the host may also read and edit the buffer in place at
+ * its own memory's speed (host-cached and coherent: lavapipe, most UMA
+ * devices), NULL otherwise (uncached, write-combined mappings are slow to
+ * read). */
+void *gpu_buffer_map_cached(const gpu_buffer *buf);
 bf_status gpu_buffer_flush(gpu_buffer *buf);
 
 /* Synchronous transfers: copy size bytes between host memory and the buffer

@@ -184,6 +184,7 @@ struct gpu_buffer {
     uint32_t usage;                  /* gpu_usage bits */
     gpu_memory kind;
     bool is_coherent;
+    bool is_cached;                  /* host-cached: host reads of the mapping are ordinary loads */
     void *mapped;                    /* NULL if not (or not to be) mapped */
     char name[64];
 };

@@ -371,7 +371,7 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
     CHECK_OK(fusion_flush(map));
     hostmap a = {0}, b = {0};
     CHECK_OK(fusion_snapshot_take(map, &a));
-    fusion_stats sa, sb, sc;
+    fusion_stats sa, sb, sc, sc3;
     CHECK_OK(fusion_get_stats(map, &sa));
     CHECK(sa.n_chunks >= 2 && sa.n_confident_voxels > 0);
 
@@ -414,6 +414,58 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
     CHECK_OK(store_map_digest(&again, &db));
     CHECK(da == db);
     hostmap_free(&again);
+    /* Without colour a clear undoes only what the load wrote (its slots,
+     * nodes, hash and counters): the pools then read as a new map's, and the
+     * load edited in place (mapped, host-cached: lavapipe) builds what the
+     * staged copies do (force_staging). */
+    uint64_t dn[2];
+    for (int staged = 0; staged < 2; staged++) {
+        gpu_config sc = gpu_fixture_config();
+        sc.force_staging = staged;
+        gpu_context *cx = NULL;
+        CHECK_OK(gpu_context_create(&sc, &cx));
+        fusion_config cn = c;
+        cn.keep_colour = false;
+        fusion_map *m3 = NULL, *fresh = NULL;
+        CHECK_OK(fusion_create(cx, &cn, &K_TEST, bf_v3(0, 0, 0), &m3));
+        CHECK_OK(fusion_create(cx, &cn, &K_TEST, bf_v3(0, 0, 0), &fresh));
+        CHECK(staged ? gpu_buffer_map(fusion_gpu_view_get(m3).nodes) == NULL : true);
+        for (int round = 0; round < 2; round++) {
+            CHECK_OK(fusion_load(m3, &a));
+            CHECK_OK(fusion_check(m3));
+            hostmap h3 = {0};
+            CHECK_OK(fusion_snapshot_take(m3, &h3));
+            uint64_t d3;
+            CHECK_OK(store_map_digest(&h3, &d3));
+            CHECK_EQ_INT(h3.n_bricks, a.n_bricks);
+            hostmap_free(&h3);
+            if (round == 0) dn[staged] = d3;
+            CHECK(d3 == dn[staged]);
+            CHECK_OK(fusion_clear(m3));
+            fusion_gpu_view v3 = fusion_gpu_view_get(m3), v4 = fusion_gpu_view_get(fresh);
+            gpu_buffer *b3[] = {v3.hash, v3.nodes, v3.info, v3.sign, v3.conf};
+            gpu_buffer *b4[] = {v4.hash, v4.nodes, v4.info, v4.sign, v4.conf};
+            for (int k = 0; k < 5; k++) {
+                uint64_t bytes = gpu_buffer_size(b3[k]);
+                CHECK_EQ_INT(bytes, gpu_buffer_size(b4[k]));
+                uint8_t *x = malloc(bytes), *y = malloc(bytes);
+                CHECK(x && y);
+                CHECK_OK(gpu_buffer_download(b3[k], 0, x, bytes));
+                CHECK_OK(gpu_buffer_download(b4[k], 0, y, bytes));
+                if (memcmp(x, y, bytes) != 0) fprintf(stderr, "  %s differs after the clear\n", gpu_buffer_name(b3[k]));
+                CHECK(memcmp(x, y, bytes) == 0);
+                free(x);
+                free(y);
+            }
+            CHECK_OK(fusion_get_stats(m3, &sc3));
+            CHECK_EQ_INT(sc3.n_bricks, 0);
+        }
+        fusion_destroy(m3);
+        fusion_destroy(fresh);
+        GPU_FIXTURE_CHECK_CLEAN(cx);
+        gpu_context_destroy(cx);
+    }
+    CHECK(dn[0] == dn[1]);
     /* The loaded octree is the one the GPU finds: the same frame added to
      * both maps gives bricks at the same places (their bits differ: the
      * original's ring still holds its frames). */
