@@ -389,6 +389,16 @@ static uint32_t part_brick(bin_part *p, const int64_t c[3], uint64_t code)
     return p->n++;
 }
 
+/* A new brick (code its Morton code) with no index entry; UINT32_MAX when
+ * out of memory. */
+static uint32_t part_append(bin_part *p, uint64_t code)
+{
+    if (p->n == p->brick_cap && !part_reserve(p, 2 * (uint64_t)p->brick_cap + 1024)) return UINT32_MAX;
+    memset(&p->bricks[p->n], 0, sizeof p->bricks[p->n]);
+    p->codes[p->n] = code;
+    return p->n++;
+}
+
 /* One brick's run of cells [i, j) and the bricks its spheres reach. */
 typedef struct bin_run {
     uint64_t i, j;
@@ -405,7 +415,9 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
     uint64_t code = p->cells[i] >> 9;
     r->i = i, r->j = j;
     unmorton3(code, r->b);
-    r->me = part_brick(p, r->b, code);
+    /* The centres' runs are distinct bricks (sorted keys, no reach, halves
+     * split between bricks): each is new, with no lookup. */
+    r->me = p->centres ? part_append(p, code) : part_brick(p, r->b, code);
     if (r->me == UINT32_MAX) return false;
     bin_planes *hb = &p->bricks[r->me];
     for (uint64_t k = i; k < j; k++) {
@@ -506,7 +518,9 @@ static void *part_main(void *arg)
     p->n = 0, p->n_occupied = 0, p->failed = false, p->too_many = false;
     bool ok = part_reserve(p, guess);
     bin_index *ix = &p->ix;
-    if (ok && ix->dim[0]) {
+    if (p->centres) {
+        /* No index: every brick is new (part_append). */
+    } else if (ok && ix->dim[0]) {
         uint64_t cells = (uint64_t)(ix->dim[0] * ix->dim[1] * ix->dim[2]);
         ok = reserve((void **)&ix->dense, &ix->dense_cap, cells, 4);
         if (ok) memset(ix->dense, 0, cells * 4);
@@ -748,7 +762,7 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
         *too_many = true;
         return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
     }
-    merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX);
+    if (t != 0) merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX); /* the centres' halves share no brick */
     /* Both halves' bricks into one array, and their codes sorted for the octrees. */
     uint64_t k0 = 0, k = 0;
     for (uint32_t i = 0; i < p[0].n; i++) k0 += p[0].codes[i] != UINT64_MAX;
@@ -769,7 +783,7 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
     for (uint64_t i = 0; i < k; i++) top |= codes[i];
     sort_job j[2] = {{.v = codes, .tmp = w->tmp, .n = k0, .bits = bits_of(top)},
                      {.v = codes + k0, .tmp = w->tmp + k0, .n = k - k0, .bits = bits_of(top)}};
-    run_two(sort_main, &j[0], &j[1]);
+    if (t != 0) run_two(sort_main, &j[0], &j[1]); /* the centres' runs came in order */
     uint64_t n_unique = merge_unique(codes, k0, codes + k0, k - k0, w->tmp);
     count_nodes(w->tmp, n_unique, level, &out->n_nodes, &out->n_chunks);
     out->k = k;
