@@ -226,9 +226,9 @@ int cmd_render(int argc, char **argv)
                    a.particles, (unsigned long long)st->n_particles, a.radius_m, st->cell_m, st->level,
                    (unsigned long long)st->n_cells, st->n_bricks, st->n_coarse_bricks);
             printf("  binning          %.1f ms on the host (%.2f M particles/s; %.1f ms CPU), %.1f ms into the GPU "
-                   "pools\n",
+                   "pools (made in %.1f ms)\n",
                    1e3 * st->bin_s, st->bin_s > 0 ? 1e-6 * (double)st->n_particles / st->bin_s : 0.0,
-                   1e3 * st->bin_cpu_s, 1e3 * st->load_s);
+                   1e3 * st->bin_cpu_s, 1e3 * st->load_s, 1e3 * st->make_s);
         }
         printf("  ray-cast         %.1f ms GPU (median of %u)\n", ms[a.repeat / 2], a.repeat);
         if (ps && map) printf("    of which particles %.1f ms\n", ms_p[a.repeat / 2]);

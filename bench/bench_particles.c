@@ -90,12 +90,14 @@ int main(int argc, char **argv)
     render_options opt = render_options_display();
     opt.far_m = 20;
     if (W && render_create(ctx, NULL, W, H, &rc) != BF_OK) return 1;
-    printf("| step | particles | bricks (+ coarse) | binning [ms] | binning [CPU ms] | into the pools [ms] | M particles/s binned | map made | ray-cast [ms GPU] |\n");
-    printf("|---|---|---|---|---|---|---|---|---|\n");
+    printf("| step | particles | bricks (+ coarse) | binning [ms] | binning [CPU ms] | into the pools [ms] | map made [ms] | whole step [ms] | M particles/s binned | M particles/s whole step | ray-cast [ms GPU] |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
     render_particles *ps = NULL;
     int rc_out = 0;
     for (uint32_t k = 0; k <= steps; k++) {
+        double t0 = bf_time_s();
         bf_status s = k == 0 ? render_particles_create(ctx, &pc, xyz, n, &ps) : render_particles_update(ps, xyz, n);
+        double step_s = bf_time_s() - t0;
         if (s == BF_OK && rc) s = render_scene(rc, NULL, ps, &K, &T, &opt);
         if (s != BF_OK) {
             fprintf(stderr, "bench_particles: step %u: %s\n", k, bf_last_error());
@@ -103,9 +105,11 @@ int main(int argc, char **argv)
             break;
         }
         const render_particles_stats *st = render_particles_get_stats(ps);
-        printf("| %u | %llu | %u (+%u) | %.1f | %.1f | %.1f | %.2f | %s | %.1f |\n", k, (unsigned long long)n, st->n_bricks,
-               st->n_coarse_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s, n / st->bin_s / 1e6, st->map_made ? "yes" : "no",
-               rc ? render_particles_last_ms(ps) : 0.0);
+        char made[32] = "no";
+        if (st->map_made) snprintf(made, sizeof made, "%.1f", 1e3 * st->make_s);
+        printf("| %u | %llu | %u (+%u) | %.1f | %.1f | %.1f | %s | %.1f | %.2f | %.2f | %.1f |\n", k, (unsigned long long)n,
+               st->n_bricks, st->n_coarse_bricks, 1e3 * st->bin_s, 1e3 * st->bin_cpu_s, 1e3 * st->load_s, made, 1e3 * step_s,
+               n / st->bin_s / 1e6, n / step_s / 1e6, rc ? render_particles_last_ms(ps) : 0.0);
         fflush(stdout);
         swirl(xyz, n, cx, cy, 0.02);
     }

@@ -226,6 +226,7 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
     if (bs.n_bricks > (1u << 28) || bs.n_nodes > (1u << 28))
         return bf_fail(BF_NO_MEMORY, "render: %u particle bricks, %llu nodes", bs.n_bricks,
                        (unsigned long long)bs.n_nodes);
+    st->make_s = 0;
     bool fits = ps->map && bs.n_bricks <= ps->brick_cap && bs.n_nodes + 64 <= ps->node_cap &&
                 2 * bs.n_chunks <= ps->n_buckets;
     double t1 = bf_time_s();
@@ -241,6 +242,7 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
             /* Bindings part old, part new: the set stays unusable. */
             ps->unbound = s != BF_OK;
         }
+        st->make_s = bf_time_s() - t1;
         t1 = bf_time_s(); /* making the map (its pipelines) is not loading it */
     }
     if (s == BF_OK) {

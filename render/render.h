@@ -217,6 +217,7 @@ typedef struct render_particles_stats {
     double bin_s;           /* host binning: cells, bricks, the host copy (wall clock) */
     double bin_cpu_s;       /* the same in CPU seconds of the process (both binning threads) */
     double load_s;          /* the host copy into the GPU pools (emptying them, fusion_load; not making a map) */
+    double make_s;          /* making the map anew (its pools filled, its pipelines): 0 when it was reused */
     bool map_made;          /* the last binning made the map anew (the first, or a set grown past its pools) */
 } render_particles_stats;
 
