@@ -284,7 +284,6 @@ typedef struct bin_part {
     uint64_t n_cells;
     const reach_table *rt;
     double reach, half;
-    bool centres;          /* the centres' level: no reach; the confidence plane is the summary (emit_main) */
     /* out */
     bin_index ix;
     bin_planes *bricks; /* in bricks_mem, aligned */
@@ -389,16 +388,6 @@ static uint32_t part_brick(bin_part *p, const int64_t c[3], uint64_t code)
     return p->n++;
 }
 
-/* A new brick (code its Morton code) with no index entry; UINT32_MAX when
- * out of memory. */
-static uint32_t part_append(bin_part *p, uint64_t code)
-{
-    if (p->n == p->brick_cap && !part_reserve(p, 2 * (uint64_t)p->brick_cap + 1024)) return UINT32_MAX;
-    memset(&p->bricks[p->n], 0, sizeof p->bricks[p->n]);
-    p->codes[p->n] = code;
-    return p->n++;
-}
-
 /* One brick's run of cells [i, j) and the bricks its spheres reach. */
 typedef struct bin_run {
     uint64_t i, j;
@@ -415,9 +404,7 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
     uint64_t code = p->cells[i] >> 9;
     r->i = i, r->j = j;
     unmorton3(code, r->b);
-    /* The centres' runs are distinct bricks (sorted keys, no reach, halves
-     * split between bricks): each is new, with no lookup. */
-    r->me = p->centres ? part_append(p, code) : part_brick(p, r->b, code);
+    r->me = part_brick(p, r->b, code);
     if (r->me == UINT32_MAX) return false;
     bin_planes *hb = &p->bricks[r->me];
     for (uint64_t k = i; k < j; k++) {
@@ -426,7 +413,7 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
     }
     p->n_occupied++;
     r->used = 0;
-    if (!p->rt || p->centres) return true;
+    if (!p->rt) return true;
     for (uint64_t k = i; k < j; k++) {
         uint32_t l = (uint32_t)(p->cells[k] & 511);
         if (!p->octs) r->used |= p->rt->used[l];
@@ -447,7 +434,6 @@ static bool run_prepare(bin_part *p, uint64_t i, uint64_t j, bin_run *r)
  * neighbours. */
 static bool run_apply(bin_part *p, const bin_run *r)
 {
-    if (p->centres) return true;
     if (p->rt) {
         uint32_t acc[27][16];
         for (uint32_t u = r->used; u; u &= u - 1) memset(acc[__builtin_ctz(u)], 0, sizeof acc[0]);
@@ -518,9 +504,7 @@ static void *part_main(void *arg)
     p->n = 0, p->n_occupied = 0, p->failed = false, p->too_many = false;
     bool ok = part_reserve(p, guess);
     bin_index *ix = &p->ix;
-    if (p->centres) {
-        /* No index: every brick is new (part_append). */
-    } else if (ok && ix->dim[0]) {
+    if (ok && ix->dim[0]) {
         uint64_t cells = (uint64_t)(ix->dim[0] * ix->dim[1] * ix->dim[2]);
         ok = reserve((void **)&ix->dense, &ix->dense_cap, cells, 4);
         if (ok) memset(ix->dense, 0, cells * 4);
@@ -615,8 +599,8 @@ struct particles_binner {
     uint64_t coct_cap;
     uint16_t *cone;       /* per brick of the centres: its one cell (x | y << 3 | z << 6), or CONE_MANY */
     uint64_t cone_cap;
-    reach_table *rt[2];   /* the centres' level, the coarse level */
-    double rt_reach[2], rt_half[2];
+    reach_table *rt;      /* the coarse level's */
+    double rt_reach, rt_half;
     bin_part part[2];
     hostmap_brick *all;   /* both levels' bricks: the centres', then the coarse level's */
     uint64_t all_cap;
@@ -631,7 +615,7 @@ particles_binner *particles_binner_create(void) { return bf_calloc(1, sizeof(par
 void particles_binner_destroy(particles_binner *w)
 {
     if (!w) return;
-    free(w->keys), free(w->tmp), free(w->ckeys), free(w->coct), free(w->rt[0]), free(w->rt[1]), free(w->all);
+    free(w->keys), free(w->tmp), free(w->ckeys), free(w->coct), free(w->rt), free(w->all);
     free(w->index), free(w->cpairs), free(w->cone);
     part_free(&w->part[0]), part_free(&w->part[1]);
     free(w);
@@ -707,8 +691,7 @@ static void *emit_main(void *arg)
         hb->level = e->level;
         hb->error = 0;
         memcpy(hb->sign, e->p->bricks[i].sign, sizeof hb->sign);
-        if (e->p->centres) centres_summary(hb->sign, hb->conf);
-        else memcpy(hb->conf, e->p->bricks[i].conf, sizeof hb->conf);
+        memcpy(hb->conf, e->p->bricks[i].conf, sizeof hb->conf);
         e->codes[k++] = c;
     }
     return NULL;
@@ -722,21 +705,20 @@ typedef struct level_binned {
 } level_binned;
 
 /* Bins the sorted cell keys cells[0, n_cells) (bricks in box lo..hi) on
- * octree level `level`, each set cell's spheres reaching `reach` cells
- * beyond a box of half cells about its middle, into w->all from offset
- * `off` (and the bricks' sorted codes into w->tmp for the caller). t is 0
- * for the centres' level (no reach; the confidence plane is emit_main's
- * summary), 1 for the coarse level. */
-static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells, const uint8_t *octs, uint64_t n_cells,
+ * octree level `level` (the coarse level), each set cell's spheres
+ * reaching `reach` cells beyond a box of half cells about its middle, into
+ * w->all from offset `off` (and the bricks' sorted codes into w->tmp for
+ * the caller). */
+static bf_status bin_one_level(particles_binner *w, const uint64_t *cells, const uint8_t *octs, uint64_t n_cells,
                                const int64_t lo[3], const int64_t hi[3], double reach, double half, uint32_t level,
                                uint64_t max_bricks, uint64_t off, bool *too_many, level_binned *out)
 {
     memset(out, 0, sizeof *out);
-    if (w->rt_reach[t] != reach || w->rt_half[t] != half || !w->rt[t]) {
-        free(w->rt[t]);
-        w->rt[t] = reach_table_make(reach, half, octs != NULL); /* NULL: per cell (slower, any reach) */
-        w->rt_reach[t] = reach, w->rt_half[t] = half;
-        if (!w->rt[t] && reach + half <= 8.0) return bf_fail(BF_NO_MEMORY, "render: particle reach table");
+    if (w->rt_reach != reach || w->rt_half != half || !w->rt) {
+        free(w->rt);
+        w->rt = reach_table_make(reach, half, octs != NULL); /* NULL: per cell (slower, any reach) */
+        w->rt_reach = reach, w->rt_half = half;
+        if (!w->rt && reach + half <= 8.0) return bf_fail(BF_NO_MEMORY, "render: particle reach table");
     }
     /* The halves split between two bricks. */
     uint64_t mid = n_cells / 2;
@@ -745,15 +727,14 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
     p[0].cells = cells, p[0].n_cells = mid;
     p[1].cells = cells + mid, p[1].n_cells = n_cells - mid;
     /* Octants only through the table (beyond it bin_reach takes the whole cell: more bits, still all). */
-    p[0].octs = octs && w->rt[t] ? octs : NULL, p[1].octs = octs && w->rt[t] ? octs + mid : NULL;
+    p[0].octs = octs && w->rt ? octs : NULL, p[1].octs = octs && w->rt ? octs + mid : NULL;
     /* A dense index where the box of the bricks the spheres reach takes at
      * most 4 M entries or 4 a cell (16 bytes), else the hash. */
     int64_t pad = (int64_t)ceil((reach + half) / 8.0), box = n_cells ? 1 : 0;
     for (int a = 0; a < 3 && n_cells; a++) box *= hi[a] - lo[a] + 1 + 2 * pad;
     bool dense = n_cells && box <= (int64_t)(4 * n_cells > (1u << 22) ? 4 * n_cells : (1u << 22));
     for (int h = 0; h < 2; h++) {
-        p[h].rt = w->rt[t], p[h].reach = reach, p[h].half = half, p[h].max_bricks = max_bricks;
-        p[h].centres = t == 0;
+        p[h].rt = w->rt, p[h].reach = reach, p[h].half = half, p[h].max_bricks = max_bricks;
         for (int a = 0; a < 3; a++) p[h].ix.lo[a] = lo[a] - pad, p[h].ix.dim[a] = dense ? hi[a] - lo[a] + 1 + 2 * pad : 0;
     }
     run_two(part_main, &p[0], &p[1]);
@@ -762,7 +743,7 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
         *too_many = true;
         return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
     }
-    if (t != 0) merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX); /* the centres' halves share no brick */
+    merge_halves(p, mid < n_cells ? cells[mid] >> 9 : UINT64_MAX);
     /* Both halves' bricks into one array, and their codes sorted for the octrees. */
     uint64_t k0 = 0, k = 0;
     for (uint32_t i = 0; i < p[0].n; i++) k0 += p[0].codes[i] != UINT64_MAX;
@@ -783,11 +764,74 @@ static bf_status bin_one_level(particles_binner *w, int t, const uint64_t *cells
     for (uint64_t i = 0; i < k; i++) top |= codes[i];
     sort_job j[2] = {{.v = codes, .tmp = w->tmp, .n = k0, .bits = bits_of(top)},
                      {.v = codes + k0, .tmp = w->tmp + k0, .n = k - k0, .bits = bits_of(top)}};
-    if (t != 0) run_two(sort_main, &j[0], &j[1]); /* the centres' runs came in order */
+    run_two(sort_main, &j[0], &j[1]);
     uint64_t n_unique = merge_unique(codes, k0, codes + k0, k - k0, w->tmp);
     count_nodes(w->tmp, n_unique, level, &out->n_nodes, &out->n_chunks);
     out->k = k;
     return n_unique == k ? BF_OK : bf_fail(BF_NUMERIC, "render: %llu particle bricks made twice", (unsigned long long)(k - n_unique));
+}
+
+/* A half of the centres' level: each run of its sorted cells is one brick
+ * (the centres reach nothing), written straight into the host copy in
+ * order, with its code. */
+typedef struct centres_job {
+    const uint64_t *cells;
+    uint64_t n_cells;
+    hostmap_brick *out;
+    uint64_t *codes;
+    uint32_t level;
+} centres_job;
+
+static void *centres_main(void *arg)
+{
+    centres_job *c = arg;
+    uint32_t per = 1u << c->level;
+    uint64_t k = 0;
+    for (uint64_t i = 0; i < c->n_cells; k++) {
+        uint64_t code = c->cells[i] >> 9;
+        hostmap_brick *hb = &c->out[k];
+        int64_t b[3];
+        unmorton3(code, b);
+        for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(b[a] >> c->level), hb->cell[a] = (uint32_t)b[a] & (per - 1);
+        hb->level = c->level;
+        hb->error = 0;
+        memset(hb->sign, 0, sizeof hb->sign);
+        for (; i < c->n_cells && c->cells[i] >> 9 == code; i++) {
+            uint32_t l = (uint32_t)(c->cells[i] & 511), x = l & 7, y = (l >> 3) & 7, z = l >> 6;
+            hb->sign[brick_word(x, y, z)] |= 1u << brick_bit(x, y, z);
+        }
+        centres_summary(hb->sign, hb->conf);
+        c->codes[k] = code;
+    }
+    return NULL;
+}
+
+/* The centres' level of the sorted cell keys cells[0, n_cells) (n_runs
+ * bricks) into w->all from 0, their codes (sorted, as the cells were) into
+ * w->tmp. The cells may be w->tmp: they are read before it is written. */
+static bf_status bin_centres(particles_binner *w, const uint64_t *cells, uint64_t n_cells, uint64_t n_runs,
+                             uint32_t level, uint64_t max_bricks, bool *too_many, level_binned *out)
+{
+    memset(out, 0, sizeof *out);
+    if (n_runs > max_bricks) {
+        *too_many = true;
+        return bf_fail(BF_NO_MEMORY, "render: the particles need more than %llu bricks", (unsigned long long)max_bricks);
+    }
+    if (n_runs >= UINT32_MAX || !reserve((void **)&w->all, &w->all_cap, n_runs + 1, sizeof *w->all) ||
+        !reserve((void **)&w->keys, &w->keys_cap, n_runs + 1, 8))
+        return bf_fail(BF_NO_MEMORY, "render: %llu particle bricks", (unsigned long long)n_runs);
+    /* The halves split between two bricks. */
+    uint64_t mid = n_cells / 2, k0 = 0;
+    while (mid > 0 && mid < n_cells && cells[mid] >> 9 == cells[mid - 1] >> 9) mid++;
+    for (uint64_t i = 0; i < mid; i++) k0 += i == 0 || cells[i] >> 9 != cells[i - 1] >> 9;
+    centres_job j[2] = {{cells, mid, w->all, w->keys, level},
+                        {cells + mid, n_cells - mid, w->all + k0, w->keys + k0, level}};
+    run_two(centres_main, &j[0], &j[1]);
+    memcpy(w->tmp, w->keys, n_runs * 8);
+    count_nodes(w->tmp, n_runs, level, &out->n_nodes, &out->n_chunks);
+    out->k = n_runs;
+    out->n_occupied = (uint32_t)n_runs;
+    return BF_OK;
 }
 
 /* The coarse level's cell keys, one per brick of the centres (sorted
@@ -914,7 +958,7 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
         else w->cone[nb - 1] = CONE_MANY;
         w->coct[nb - 1] |= (uint8_t)(1u << ((l >> 2 & 1) | (l >> 5 & 1) << 1 | (l >> 8 & 1) << 2));
     }
-    s = bin_one_level(w, 0, w->tmp, NULL, n_cells, lo, hi, 0.0, 0.0, level, max_bricks, 0, &out->too_many, &fine);
+    s = bin_centres(w, w->tmp, n_cells, nb, level, max_bricks, &out->too_many, &fine);
     if (s != BF_OK) return s;
     /* The coarse level: a cell per brick of centres, reaching the radius
      * (in coarse cells: a brick of centres) beyond its whole cell. */
@@ -922,7 +966,7 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     double reach = radius_m / (8.0 * cell_m);
     if (nb != fine.k) return bf_fail(BF_INVALID_ARG, "render: %llu bricks of centres, %llu with octants",
                                      (unsigned long long)fine.k, (unsigned long long)nb);
-    s = bin_one_level(w, 1, w->ckeys, w->coct, fine.k, lo, hi, reach, 0.5, level - PARTICLES_COARSE_LEVELS, max_bricks,
+    s = bin_one_level(w, w->ckeys, w->coct, fine.k, lo, hi, reach, 0.5, level - PARTICLES_COARSE_LEVELS, max_bricks,
                       fine.k, &out->too_many, &coarse);
     if (s != BF_OK) return s;
     if ((s = centres_index(w, fine.k, coarse.k)) != BF_OK) return s;
