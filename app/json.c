@@ -124,6 +124,7 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     cJSON_AddBoolToObject(o, "keep_colour", c->keep_colour);
     cJSON_AddNumberToObject(o, "colour_frames", c->colour_frames);
     cJSON_AddNumberToObject(o, "colour_unit_cap", c->colour_unit_cap);
+    cJSON_AddBoolToObject(o, "load_only", c->load_only);
 }
 
 static void json_track_config(cJSON *parent, const char *name, const track_config *c)

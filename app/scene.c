@@ -148,6 +148,7 @@ bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrin
     fc.window = 2;
     fc.subcache = 1;
     fc.keep_colour = m->rgb565 != NULL;
+    fc.load_only = true; /* drawn, never fused into */
     /* Colour units: each brick's coloured voxels in units of 14 (fusion.glsl.h). */
     uint64_t units = 1;
     for (uint32_t i = 0; m->rgb565 && i < m->n_bricks; i++) {

@@ -106,7 +106,8 @@ int main(int argc, char **argv)
             }
             fusion_config fc = fusion_config_default();
             fc.brick_cap = hm.n_bricks + 64, fc.node_cap = 16 * hm.n_bricks + 1024;
-            fc.window = 2, fc.subcache = 1; /* no frames are fused: a small frame ring */
+            fc.window = 2, fc.subcache = 1; /* no frames are fused: a small frame ring, no frame pipelines */
+            fc.load_only = true;
             double ms[8] = {0}, map_mib = 0;
             for (int wi = 0; wi < n_widths; wi++) {
                 uint32_t W = widths[wi], H = W * 3 / 4;

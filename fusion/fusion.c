@@ -112,6 +112,8 @@ static uint64_t depth_bytes(const fusion_map *m) { return ((uint64_t)m->K.width 
 
 bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slot *out)
 {
+    if (m->cfg.load_only)
+        return bf_fail(BF_INVALID_ARG, "fusion: frame %u: the map was made for loaded bricks only (load_only)", f->index);
     if (f->width != m->K.width || f->height != m->K.height || !f->depth)
         return bf_fail(BF_INVALID_ARG, "fusion: frame %u is %ux%u, the map was made for %ux%u", f->index, f->width,
                        f->height, m->K.width, m->K.height);

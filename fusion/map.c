@@ -273,7 +273,7 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     pthread_t filler;
     bool threaded = reset_is_host_only(m) && pthread_create(&filler, NULL, reset_main, &job) == 0;
     if (!threaded) job.s = fusion__reset(m);
-    s = job.s == BF_OK ? create_pipelines(m) : job.s;
+    s = job.s != BF_OK ? job.s : c.load_only ? BF_OK : create_pipelines(m);
     if (threaded) {
         pthread_join(filler, NULL);
         /* The message was recorded on the filler's thread: again on this one. */

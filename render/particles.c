@@ -178,6 +178,7 @@ static bf_status make_map(render_particles *ps, bf_vec3 origin, const particles_
     fc.window = 2;
     fc.subcache = 1;
     fc.keep_colour = false;
+    fc.load_only = true;
     fc.brick_cap = (uint32_t)bricks;
     fc.node_cap = (uint32_t)nodes;
     uint32_t buckets = 64;

@@ -426,6 +426,7 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
         CHECK_OK(gpu_context_create(&sc, &cx));
         fusion_config cn = c;
         cn.keep_colour = false;
+        cn.load_only = staged == 0; /* and a map without the frame pipelines loads the same */
         fusion_map *m3 = NULL, *fresh = NULL;
         CHECK_OK(fusion_create(cx, &cn, &K_TEST, bf_v3(0, 0, 0), &m3));
         CHECK_OK(fusion_create(cx, &cn, &K_TEST, bf_v3(0, 0, 0), &fresh));
@@ -459,6 +460,10 @@ BF_TEST(map_loaded_from_a_host_copy_is_the_same_map)
             }
             CHECK_OK(fusion_get_stats(m3, &sc3));
             CHECK_EQ_INT(sc3.n_bricks, 0);
+        }
+        if (cn.load_only) {
+            CHECK_STATUS(fusion_add_frame(m3, &f, &T0), BF_INVALID_ARG);
+            CHECK(strstr(bf_last_error(), "load_only") != NULL);
         }
         fusion_destroy(m3);
         fusion_destroy(fresh);
