@@ -18,7 +18,7 @@ static const char render_usage[] =
     "usage: bitfuse render [--map STORE|DIR] [--mesh FILE [--mesh-pose P] [--mesh-lod on|off]] [--particles FILE]\n"
     "                      [--particle-radius M] [--particle-cell M] [--particle-lod on|off]\n"
     "                      --pose \"tx ty tz qx qy qz qw\" [--camera fx,fy,cx,cy] --size WxH --out IMAGE.png\n"
-    "                      [--depth DEPTH.png] [--far M] [--repeat N]\n\n"
+    "                      [--depth DEPTH.png] [--far M] [--repeat N] [--json]\n\n"
     "Ray-casts one view of a scene on the GPU: a saved map (a scene store, bitfuse\n"
     "replay|live --store; or a folder holding one as DIR/store), a particle set (a PLY\n"
     "with vertex x y z in metres; each particle a sphere of --particle-radius), or both in\n"
@@ -30,7 +30,8 @@ static const char render_usage[] =
     "metres; placed by --mesh-pose) is voxelised into the map's own bricks and drawn by\n"
     "the same ray-cast, each part at the level whose voxel is at most a third of a pixel\n"
     "there (level of detail: far parts coarser; --mesh-lod off: all of it at the level of\n"
-    "its nearest point). docs/particles.md, docs/render.md.\n";
+    "its nearest point). --json prints what the human lines say as one JSON object\n"
+    "(docs/cli.md). docs/particles.md, docs/render.md.\n";
 
 static const char render_epilog[] =
     "exit codes: 0 ok, 1 failure, 2 usage (also a bad pose, size or camera), 3 unreadable\n"
@@ -40,7 +41,7 @@ typedef struct render_args {
     const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
     double radius_m, cell_m, far_m;
     uint32_t repeat;
-    bool particle_lod, mesh_lod;
+    bool particle_lod, mesh_lod, json;
 } render_args;
 
 static int parse_args(int argc, char **argv, render_args *a)
@@ -77,6 +78,7 @@ static int parse_args(int argc, char **argv, render_args *a)
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--repeat", APP_OPT_U32, &a->repeat, "N", "ray-cast the view N times and report the median GPU time",
                 .min = 1, .max = 1000),
+        APP_OPT("--json", APP_OPT_FLAG, &a->json, NULL, "machine-readable output on stdout instead of the lines"),
         APP_OPT_END,
     };
     const app_option *tables[] = {rows, NULL};
@@ -104,6 +106,73 @@ static bf_status write_images(const render_images *im, const char *out, const ch
     s = replay_png_write_u16(depth_path, d, im->width, im->height);
     free(d);
     return s;
+}
+
+/* What the human lines say, for --json (docs/cli.md). */
+typedef struct render_report {
+    const render_args *a;
+    uint32_t W, H;
+    const char *device;
+    double hit_frac;
+    uint32_t n_map_bricks, n_bricks, n_tris;
+    const render_voxelise_stats *vst;
+    const render_particles_stats *pst; /* NULL without particles */
+    const double *ms, *ms_p;           /* sorted */
+} render_report;
+
+static cJSON *render_json(const render_report *r)
+{
+    const render_args *a = r->a;
+    cJSON *o = app_json_stats("render");
+    cJSON_AddStringToObject(o, "device", r->device);
+    cJSON_AddNumberToObject(o, "width", r->W);
+    cJSON_AddNumberToObject(o, "height", r->H);
+    cJSON_AddStringToObject(o, "out", a->out);
+    if (a->depth) cJSON_AddStringToObject(o, "depth", a->depth);
+    cJSON_AddNumberToObject(o, "hit_fraction", r->hit_frac);
+    if (a->map) {
+        cJSON *m = app_json_object(o, "map");
+        cJSON_AddStringToObject(m, "path", a->map);
+        cJSON_AddNumberToObject(m, "bricks", r->n_map_bricks);
+    }
+    if (a->mesh) {
+        const render_voxelise_stats *v = r->vst;
+        cJSON *m = app_json_object(o, "mesh");
+        cJSON_AddStringToObject(m, "path", a->mesh);
+        cJSON_AddNumberToObject(m, "triangles", r->n_tris);
+        cJSON_AddNumberToObject(m, "level_coarse", v->level_coarse);
+        cJSON_AddNumberToObject(m, "level_fine", v->level_fine);
+        cJSON_AddNumberToObject(m, "voxel_m", v->voxel_m);
+        cJSON_AddNumberToObject(m, "bricks", v->n_bricks);
+        cJSON_AddNumberToObject(m, "voxelise_seconds", v->seconds);
+        cJSON_AddNumberToObject(m, "binning_seconds", v->seconds_bin);
+        cJSON_AddNumberToObject(m, "gpu_pass_seconds", v->seconds_gpu);
+        cJSON_AddNumberToObject(m, "triangles_per_second", v->seconds > 0 ? r->n_tris / v->seconds : 0.0);
+    }
+    if (a->map || a->mesh) cJSON_AddNumberToObject(o, "bricks", r->n_bricks);
+    if (r->pst) {
+        const render_particles_stats *st = r->pst;
+        cJSON *p = app_json_object(o, "particles");
+        cJSON_AddStringToObject(p, "path", a->particles);
+        cJSON_AddNumberToObject(p, "count", (double)st->n_particles);
+        cJSON_AddNumberToObject(p, "radius_m", a->radius_m);
+        cJSON_AddNumberToObject(p, "cell_m", st->cell_m);
+        cJSON_AddNumberToObject(p, "level", st->level);
+        cJSON_AddBoolToObject(p, "lod", a->particle_lod);
+        cJSON_AddNumberToObject(p, "cells", (double)st->n_cells);
+        cJSON_AddNumberToObject(p, "bricks", st->n_bricks);
+        cJSON_AddNumberToObject(p, "coarse_bricks", st->n_coarse_bricks);
+        cJSON_AddNumberToObject(p, "binning_seconds", st->bin_s);
+        cJSON_AddNumberToObject(p, "binning_cpu_seconds", st->bin_cpu_s);
+        cJSON_AddNumberToObject(p, "particles_per_second", st->bin_s > 0 ? (double)st->n_particles / st->bin_s : 0.0);
+        cJSON_AddNumberToObject(p, "load_seconds", st->load_s);
+        cJSON_AddNumberToObject(p, "make_map_seconds", st->make_s);
+    }
+    cJSON *c = app_json_object(o, "raycast_ms");
+    cJSON_AddNumberToObject(c, "median", r->ms[a->repeat / 2]);
+    app_json_numbers(c, "sorted", r->ms, a->repeat);
+    if (r->pst && (a->map || a->mesh)) cJSON_AddNumberToObject(c, "particles_median", r->ms_p[a->repeat / 2]);
+    return o;
 }
 
 int cmd_render(int argc, char **argv)
@@ -191,10 +260,18 @@ int cmd_render(int argc, char **argv)
     if (s == BF_OK) s = render_download(caster, &im);
     if (s == BF_OK) s = write_images(&im, a.out, a.depth);
     if (s == BF_OK) {
-        uint64_t n_hit = 0;
-        for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
         qsort(ms, a.repeat, sizeof *ms, cmp_double);
         qsort(ms_p, a.repeat, sizeof *ms_p, cmp_double);
+    }
+    if (s == BF_OK && a.json) {
+        uint64_t n_hit = 0;
+        for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
+        render_report r = {&a, W, H, gpu_device_name(ctx), (double)n_hit / ((double)W * H), n_map_bricks, n_bricks,
+                           mesh.n_tris, &vst, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
+        s = app_json_print(render_json(&r));
+    } else if (s == BF_OK) {
+        uint64_t n_hit = 0;
+        for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
         printf("bitfuse render: %ux%u on %s -> %s%s%s: %.1f%% of the pixels hit\n", W, H, gpu_device_name(ctx), a.out,
                a.depth ? ", " : "", a.depth ? a.depth : "", 100.0 * (double)n_hit / ((double)W * H));
         if (a.map) printf("  map              %s: %u bricks\n", a.map, n_map_bricks);

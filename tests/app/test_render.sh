@@ -144,6 +144,20 @@ PY
 expect 0 "$B" render --map "$T/S" --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE" --camera $CAM \
     --size 160x120 --out "$T/both.png" --depth "$T/both_d.png"
 grep -q "625 cells" "$T/out" || fail "render did not report 625 particle cells: $(cat "$T/out")"
+# --json: the same image, and what the lines say as one object.
+expect 0 "$B" render --map "$T/S" --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE" --camera $CAM \
+    --size 160x120 --out "$T/both_j.png" --depth "$T/both_jd.png" --repeat 2 --json
+cmp -s "$T/both_d.png" "$T/both_jd.png" || fail "render --json drew another depth image"
+hits=$(py "$T/png.py" "$T/both_d.png" hits)
+py - "$T/out" "$hits" <<'PY' || fail "render --json: $(head -c 600 "$T/out")"
+import json, sys
+d = json.load(open(sys.argv[1]))
+ok = (d["command"] == "render" and d["width"] == 160 and d["particles"]["cells"] == 625
+      and d["map"]["bricks"] > 0 and d["bricks"] == d["map"]["bricks"] and len(d["raycast_ms"]["sorted"]) == 2
+      and d["raycast_ms"]["sorted"][0] <= d["raycast_ms"]["sorted"][1] and "particles_median" in d["raycast_ms"]
+      and abs(d["hit_fraction"] - float(sys.argv[2])) <= 0.0005)  # png.py prints 3 decimals
+sys.exit(0 if ok else 1)
+PY
 expect 0 "$B" render --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE" --camera $CAM --size 160x120 \
     --out "$T/p.png" --depth "$T/p_d.png"
 # The sheet covers about (0.28 * 131 / 0.6)^2 = 3700 pixels (a fifth).
