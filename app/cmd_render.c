@@ -144,6 +144,16 @@ static cJSON *render_json(const render_report *r)
         cJSON_AddNumberToObject(m, "level_fine", v->level_fine);
         cJSON_AddNumberToObject(m, "voxel_m", v->voxel_m);
         cJSON_AddNumberToObject(m, "bricks", v->n_bricks);
+        if (v->level_coarse != v->level_fine) { /* level of detail: the bricks per level and the columns */
+            double per[FUSION_MAX_LEVEL + 1];
+            uint32_t n = 0;
+            for (uint32_t l = v->level_coarse; l <= v->level_fine && n <= FUSION_MAX_LEVEL; l++) per[n++] = v->bricks_at_level[l];
+            app_json_numbers(m, "bricks_per_level", per, n);
+            cJSON_AddNumberToObject(m, "columns", v->n_columns);
+            char axis[2] = {"xyz"[v->column_axis % 3], 0};
+            cJSON_AddStringToObject(m, "column_axis", axis);
+        }
+        cJSON_AddNumberToObject(m, "gpu_bricks", v->n_gpu_bricks);
         cJSON_AddNumberToObject(m, "voxelise_seconds", v->seconds);
         cJSON_AddNumberToObject(m, "binning_seconds", v->seconds_bin);
         cJSON_AddNumberToObject(m, "gpu_pass_seconds", v->seconds_gpu);

@@ -224,8 +224,10 @@ bf_status fusion_snapshot_take(fusion_map *map, hostmap *out);
 bf_status fusion_load(fusion_map *map, const hostmap *in);
 /* Empties a map that holds only what fusion_load put in (no frame
  * uploaded): as fusion_create made it, pools and pipelines kept, ready for
- * the next load (render/'s particle sets, re-binned per time step).
- * BF_INVALID_ARG for a map with frames. */
+ * the next load (render/'s particle sets, re-binned per time step). After
+ * a load it clears only what the load wrote (docs/fusion.md), so buffers
+ * of fusion_gpu_view_get are for reading: writes through them are not
+ * undone. BF_INVALID_ARG for a map with frames. */
 bf_status fusion_clear(fusion_map *map);
 
 /* ------------------------------------------------------------ streaming

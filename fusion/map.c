@@ -597,7 +597,7 @@ bf_status fusion_clear(fusion_map *m)
     if (m->n_frames > 0 || m->has_incoming)
         return bf_fail(BF_INVALID_ARG, "fusion: only a map without frames is cleared (a loaded one)");
     /* A failed partial clear falls back to the whole reset. */
-    bool partial = m->only_loaded && !m->cfg.keep_colour;
+    bool partial = m->only_loaded && m->n_loaded > 0 && !m->cfg.keep_colour;
     bf_status s = partial ? clear_loaded(m) : BF_OK;
     if (!partial || s != BF_OK) s = fusion__reset(m);
     m->n_loaded = 0;
