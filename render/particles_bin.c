@@ -676,20 +676,27 @@ static void centres_summary(const uint32_t sign[16], uint32_t conf[16])
     for (int w = 0; w < 16; w++) conf[0] |= (uint32_t)(sign[w] != 0) << w;
 }
 
+/* A host brick's place (chunk key, cell, level) from its Morton code on
+ * its level's grid. */
+static void brick_place(hostmap_brick *hb, uint64_t code, uint32_t level)
+{
+    int64_t b[3];
+    unmorton3(code, b);
+    uint32_t per = 1u << level;
+    for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(b[a] >> level), hb->cell[a] = (uint32_t)b[a] & (per - 1);
+    hb->level = level;
+    hb->error = 0;
+}
+
 static void *emit_main(void *arg)
 {
     emit_job *e = arg;
-    uint32_t per = 1u << e->level;
     uint64_t k = 0;
     for (uint32_t i = 0; i < e->p->n; i++) {
         uint64_t c = e->p->codes[i];
         if (c == UINT64_MAX) continue;
         hostmap_brick *hb = &e->out[k];
-        int64_t b[3];
-        unmorton3(c, b);
-        for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(b[a] >> e->level), hb->cell[a] = (uint32_t)b[a] & (per - 1);
-        hb->level = e->level;
-        hb->error = 0;
+        brick_place(hb, c, e->level);
         memcpy(hb->sign, e->p->bricks[i].sign, sizeof hb->sign);
         memcpy(hb->conf, e->p->bricks[i].conf, sizeof hb->conf);
         e->codes[k++] = c;
@@ -785,16 +792,11 @@ typedef struct centres_job {
 static void *centres_main(void *arg)
 {
     centres_job *c = arg;
-    uint32_t per = 1u << c->level;
     uint64_t k = 0;
     for (uint64_t i = 0; i < c->n_cells; k++) {
         uint64_t code = c->cells[i] >> 9;
         hostmap_brick *hb = &c->out[k];
-        int64_t b[3];
-        unmorton3(code, b);
-        for (int a = 0; a < 3; a++) hb->key[a] = (int32_t)(b[a] >> c->level), hb->cell[a] = (uint32_t)b[a] & (per - 1);
-        hb->level = c->level;
-        hb->error = 0;
+        brick_place(hb, code, c->level);
         memset(hb->sign, 0, sizeof hb->sign);
         for (; i < c->n_cells && c->cells[i] >> 9 == code; i++) {
             uint32_t l = (uint32_t)(c->cells[i] & 511), x = l & 7, y = (l >> 3) & 7, z = l >> 6;
