@@ -149,6 +149,15 @@ void fusion__hash_empty(uint32_t *words, uint32_t n_entries)
     }
 }
 
+/* The empty map's counters: every brick slot (and colour unit) free. */
+static bf_status counters_empty(fusion_map *m)
+{
+    uint32_t cnt[FUSION_CNT_WORDS] = {0};
+    cnt[FUSION_CNT_FREE_TOP] = m->cfg.brick_cap;
+    cnt[FUSION_CNT_COLOUR_TOP] = m->cfg.keep_colour ? m->cfg.colour_unit_cap : 0;
+    return gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
+}
+
 bf_status fusion__reset(fusion_map *m)
 {
     const fusion_config *c = &m->cfg;
@@ -187,10 +196,7 @@ bf_status fusion__reset(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_zero(m->window_list);
     if (s == BF_OK) s = gpu_buffer_zero(m->window_slices);
     if (s == BF_OK) s = gpu_buffer_zero(m->readback);
-    uint32_t cnt[FUSION_CNT_WORDS] = {0};
-    cnt[FUSION_CNT_FREE_TOP] = c->brick_cap;
-    cnt[FUSION_CNT_COLOUR_TOP] = c->keep_colour ? c->colour_unit_cap : 0;
-    if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
+    if (s == BF_OK) s = counters_empty(m);
     m->only_loaded = s == BF_OK;
     return s;
 }
@@ -585,9 +591,7 @@ static bf_status clear_loaded(fusion_map *m)
     if (s == BF_OK) s = gpu_buffer_fill(m->info, 0, bricks * FUSION_BRICK_INFO_WORDS * 4, FUSION_NONE);
     if (s == BF_OK) s = gpu_buffer_fill(m->sign, 0, bricks * BRICK_WORDS * 4, 0);
     if (s == BF_OK) s = gpu_buffer_fill(m->conf, 0, bricks * BRICK_WORDS * 4, 0);
-    uint32_t cnt[FUSION_CNT_WORDS] = {0};
-    cnt[FUSION_CNT_FREE_TOP] = m->cfg.brick_cap;
-    if (s == BF_OK) s = gpu_buffer_upload(m->counters, 0, cnt, sizeof cnt);
+    if (s == BF_OK) s = counters_empty(m);
     return s;
 }
 

@@ -243,8 +243,9 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
             /* Bindings part old, part new: the set stays unusable. */
             ps->unbound = s != BF_OK;
         }
-        st->make_s = bf_time_s() - t1;
-        t1 = bf_time_s(); /* making the map (its pipelines) is not loading it */
+        double made = bf_time_s();
+        st->make_s = made - t1;
+        t1 = made; /* making the map (its pools) is not loading it */
     }
     if (s == BF_OK) {
         hostmap hm = {.chunk_m = st->chunk_m, .origin_w = origin, .n_bricks = bs.n_bricks, .bricks = bs.bricks};
