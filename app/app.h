@@ -239,6 +239,10 @@ void app_json_numbers(cJSON *parent, const char *name, const double *v, size_t n
 struct recon_config;
 void app_json_recon_config(cJSON *parent, const char *name, const struct recon_config *c);
 void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config *c);
+/* --depth-correction's file and what it holds under "depth_correction", or
+ * null when path or c is NULL. */
+struct calib_depth_correction;
+void app_json_depth_correction(cJSON *parent, const char *path, const struct calib_depth_correction *c);
 /* Write root to path atomically (dir/name), or print it on stdout; each
  * takes root and deletes it. */
 bf_status app_json_write(const char *path, cJSON *root);
@@ -308,6 +312,7 @@ int cmd_eval_surface(int argc, char **argv);
 int cmd_eval_colour(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
 int cmd_calibrate(int argc, char **argv);
+int cmd_calibrate_depth(int argc, char **argv);
 int cmd_export(int argc, char **argv);
 int cmd_render(int argc, char **argv);
 /* cmd_export.c: bitfuse info on a scene store. */

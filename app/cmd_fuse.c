@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include "app.h"
+#include "calib/calib.h"
 
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
@@ -26,7 +27,7 @@ static const char fuse_usage[] =
     "               stage, map bytes by part, bricks per level, surface voxels, bits per voxel\n";
 
 typedef struct fuse_args {
-    const char *seq, *poses, *out;
+    const char *seq, *poses, *out, *depth_correction;
     replay_options ropt;
     fusion_config fcfg;
     bool no_mesh;
@@ -44,6 +45,9 @@ static int parse_args(int argc, char **argv, fuse_args *a)
                 .required = true),
         APP_OPT("--out", APP_OPT_STRING, &a->out, "DIR", "output folder (created)", .required = true),
         APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
+        APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
+                "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
+                "out of every frame before fusion (docs/calibration.md)", .no_default = true),
         APP_OPT_END,
     };
     app_option map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], msh[APP_MESH_ROWS];
@@ -63,6 +67,9 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     return rc ? rc : app_check_map_options("fuse", &a->fcfg);
 }
 
+/* --depth-correction's multipliers (19 KB: not on the stack). */
+static calib_depth_correction fuse_depth_fix;
+
 typedef struct fuse_result {
     recon_run run;
     uint32_t n_unreadable; /* frames the source skipped (--skip-bad-frames) */
@@ -78,6 +85,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddStringToObject(o, "sequence", a->seq);
     cJSON_AddStringToObject(o, "device", r->device);
     app_json_fusion_config(o, "config", &a->fcfg);
+    app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &fuse_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", r->run.n_fused);
     /* Skipped: unreadable (--skip-bad-frames) or without a pose. */
     cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped + r->n_unreadable);
@@ -110,6 +118,7 @@ int cmd_fuse(int argc, char **argv)
     gpu_context *ctx = NULL;
     /* The inputs first: a missing one leaves no empty output folder. */
     bf_status s = use_traj ? replay_traj_read_tum(a.poses, &traj) : BF_OK;
+    if (s == BF_OK && a.depth_correction) s = calib_depth_read(a.depth_correction, &fuse_depth_fix);
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
@@ -123,6 +132,7 @@ int cmd_fuse(int argc, char **argv)
         rcfg.loop.fusion = a.fcfg;
         rcfg.poses = RECON_POSES_KNOWN;
         rcfg.known = use_traj ? &traj : NULL;
+        rcfg.depth_correction = a.depth_correction ? &fuse_depth_fix : NULL;
         rcfg.name = a.seq;
         rcfg.label = cmd;
         /* A corrupt frame mid-sequence ends the run, and the frames fused

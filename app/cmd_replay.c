@@ -74,6 +74,7 @@ typedef struct replay_args {
     double cache_budget_mib; /* the streaming cache's bytes */
     bool auto_budget;        /* neither --gpu-budget nor --bricks: the device decides */
     const char *calibration; /* calib.json: read into rcfg.calibration by parse_args */
+    const char *depth_correction; /* depth_correction.json: read into replay_depth_fix by parse_args */
     bool view;               /* show the map in a window as the scan goes (view/) */
     const char *screenshot;  /* with view: the window's last frame, after exit_after frames */
     uint32_t exit_after;     /* with view: end the scan after this many frames shown (0: never) */
@@ -85,6 +86,10 @@ typedef struct replay_args {
     const char *ref_path, *vis_path; /* --reference MESH, --visible SEEN.ply */
     mesh_data ref, vis;      /* read before the device opens */
 } replay_args;
+
+/* --depth-correction's multipliers (one run per process; 19 KB, so not in
+ * replay_args, which is copied). */
+static calib_depth_correction replay_depth_fix;
 
 #define LOOP_ROWS 28
 #define LIVE_ROWS 5
@@ -338,6 +343,9 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                 "calib.json of bitfuse calibrate: the colour camera and T_colour_depth for registering colour to "
                 "depth; when it has the depth camera, its fx, fy, cx, cy replace the sequence's (camera.txt, the "
                 "format's or the device's; its distortion is not applied)", .no_default = true),
+        APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
+                "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
+                "out of every frame before tracking and fusion (docs/calibration.md)", .no_default = true),
         APP_OPT_END,
     };
     const app_option gate[] = {
@@ -388,6 +396,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         if (a->rcfg.calibration.has_depth && a->ropt.camera)
             return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
                                    a->calibration);
+    }
+    if (!rc && a->depth_correction) {
+        bf_status s = calib_depth_read(a->depth_correction, &replay_depth_fix);
+        if (s != BF_OK) return app_fail(cmd, s);
     }
     if (!rc && a->tolerance && !a->expect_path) return app_usage_error(cmd, "--tolerance needs --expect BASELINE.json");
     if (!rc && a->vis_path && !a->ref_path) return app_usage_error(cmd, "--visible needs --reference MESH");
@@ -511,6 +523,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddStringToObject(o, a->is_live_cmd ? "source" : "sequence", a->seq);
     cJSON_AddStringToObject(o, "device", r->device);
     app_json_recon_config(o, "config", &a->rcfg);
+    app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &replay_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", c->frames);
     app_json_input(o, &r->run, src);
     cJSON *tr = app_json_object(o, "tracking");
@@ -847,7 +860,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             /* A device failing or a corrupt frame mid-sequence keeps what was
              * reconstructed before it; the exit code still reports it. */
             .init_identity = a.init == 1, .keep_on_source_error = true, .name = a.seq,
-            .label = cmd, .stop = stop,
+            .label = cmd, .stop = stop, .depth_correction = a.depth_correction ? &replay_depth_fix : NULL,
         };
         recon_resume_state rs;
         if (r.store.is_resumed) {

@@ -180,6 +180,28 @@ static void json_calibration(cJSON *o, const recon_config *c)
     else cJSON_AddNullToObject(o, "calibration");
 }
 
+void app_json_depth_correction(cJSON *parent, const char *path, const struct calib_depth_correction *c)
+{
+    if (!path || !c) {
+        cJSON_AddNullToObject(parent, "depth_correction");
+        return;
+    }
+    cJSON *o = app_json_object(parent, "depth_correction");
+    cJSON_AddStringToObject(o, "file", path);
+    cJSON_AddNumberToObject(o, "cell_px", c->cell_px);
+    cJSON_AddNumberToObject(o, "grid_w", c->grid_w);
+    cJSON_AddNumberToObject(o, "grid_h", c->grid_h);
+    float lo = c->mult[0], hi = c->mult[0];
+    for (uint32_t i = 1; i < c->grid_w * c->grid_h; i++) {
+        lo = c->mult[i] < lo ? c->mult[i] : lo;
+        hi = c->mult[i] > hi ? c->mult[i] : hi;
+    }
+    add_float(o, "min_multiplier", lo);
+    add_float(o, "max_multiplier", hi);
+    cJSON_AddNumberToObject(o, "rms_before", c->rms_before);
+    cJSON_AddNumberToObject(o, "rms_after", c->rms_after);
+}
+
 void app_json_recon_config(cJSON *parent, const char *name, const recon_config *c)
 {
     cJSON *o = app_json_object(parent, name);

@@ -25,6 +25,7 @@ static const app_command commands[] = {
     {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},
     {"eval-colour", cmd_eval_colour, "colour error: a coloured mesh re-rendered at the frames' poses (PSNR)"},
     {"calibrate", cmd_calibrate, "calibrate the colour and depth cameras from checkerboard images (calib.json)"},
+    {"calibrate-depth", cmd_calibrate_depth, "the depth camera's fixed error pattern from a sequence and its poses"},
     {"view", cmd_view, "show a saved map in a window: orbit, pan, zoom; --screenshot for scripts"},
     {"devices", cmd_devices, "list Vulkan devices and say which one bitfuse uses"},
 };

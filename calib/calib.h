@@ -123,4 +123,65 @@ bool calib_unproject(const calib_camera *c, double u_px, double v_px, bf_vec3 *r
  * depth_scale left 0 for the caller). */
 bf_intrinsics calib_camera_intrinsics(const calib_camera *c);
 
+/* ------------------------------------------------------------ depth correction (depth.c, depth_json.c) */
+
+/* The depth camera's fixed error pattern (vertical bands and a slow bowl of
+ * a few parts per thousand on Kinect v1; Smisek et al. 2011), as one
+ * multiplier per cell of cell_px x cell_px pixels, the same at every depth:
+ * corrected depth = raw depth x the multiplier, bilinear between the cells'
+ * centres (calib_depth_map). Estimated from a sequence and its trajectory
+ * by pairs of frames (calib_depth_estimate: the self-calibration of
+ * Teichman, Miller and Thrun 2013, "CLAMS", in its simplest form); the
+ * image's mean multiplier is 1 (a scale error of the whole image is not
+ * seen by pairs of frames). Written as depth_correction.json
+ * (docs/formats.md); replay, live and fuse take it with --depth-correction. */
+#define CALIB_DEPTH_GRID_MAX 4800u /* cells: 40 x 30 of 16 px at 640 x 480, 80 x 60 of 8 px at 640 x 480 */
+#define CALIB_DEPTH_GAPS 2u
+typedef struct calib_depth_correction {
+    uint32_t width, height;   /* the depth image it applies to */
+    uint32_t cell_px;
+    uint32_t grid_w, grid_h;  /* ceil(width / cell_px), ceil(height / cell_px) */
+    float mult[CALIB_DEPTH_GRID_MAX]; /* grid_h rows of grid_w: raw depth times this */
+    /* How it was made (reported; 0 when unknown): frames and pairs used, the
+     * cells with enough samples, and the RMS over those cells of the
+     * pattern measured before the first pass and after the last. */
+    uint32_t n_frames, n_pairs, n_cells_measured;
+    double rms_before, rms_after;
+} calib_depth_correction;
+
+typedef struct calib_depth_config {
+    uint32_t cell_px;       /* 16 */
+    uint32_t gaps[CALIB_DEPTH_GAPS]; /* the pairs: frames this many apart (by index), 15 and 30; 0: unused */
+    uint32_t stride;        /* a pair's first frame every stride frames, 3 */
+    uint32_t iterations;    /* passes that update the multipliers, 10 (a last one measures what is left) */
+    float max_depth_m;      /* samples beyond are not used, 4 m */
+    float agree;            /* a landed point counts where |z_a - z_b->a| < agree z_a (else another surface), 0.04 */
+    uint32_t min_samples;   /* a cell's multiplier moves only with this many samples in a pass, 100 */
+} calib_depth_config;
+calib_depth_config calib_depth_config_default(void);
+
+/* n depth images (raw units, depth_scale per metre), each with its index in
+ * the sequence (increasing) and its camera-to-world pose. Only frames the
+ * pairs need are read (stride, gaps): a caller may keep only those. */
+typedef struct calib_depth_frames {
+    uint32_t n;
+    const uint16_t *const *depth;
+    const uint32_t *index;
+    const bf_se3 *T_wc;
+    bf_intrinsics K;
+} calib_depth_frames;
+
+/* BF_FORMAT when no pair of frames is at a gap; *out written on success. */
+bf_status calib_depth_estimate(const calib_depth_config *cfg, const calib_depth_frames *in,
+                               calib_depth_correction *out);
+/* The multiplier of every pixel (width x height floats). */
+void calib_depth_map(const calib_depth_correction *c, float *map);
+/* dst = round(src x map), 0 stays 0 (no depth), clamped to [1, 65535]; dst may be src. */
+void calib_depth_apply(const float *map, const uint16_t *src, uint16_t *dst, size_t n);
+/* depth_correction.json: atomic write; read checks every field (BF_IO
+ * unreadable, BF_FORMAT naming the file and field). */
+bf_status calib_depth_write(const char *path, const calib_depth_correction *c);
+bf_status calib_depth_read(const char *path, calib_depth_correction *c);
+bf_status calib_depth_parse(const char *path, const char *text, size_t len, calib_depth_correction *c);
+
 #endif

@@ -244,6 +244,10 @@ typedef struct recon_run_config {
     const recon_resume_state *resume; /* continue a stored scan: frames of the source with a depth time up to
                                          resume->t_last_s are skipped (their ground truth still counts); NULL:
                                          a new scan. Not with RECON_POSES_KNOWN. */
+    /* The depth camera's fixed error pattern taken out of every frame before
+     * anything reads it (calib_depth_correction, --depth-correction); its size
+     * must be the source's. NULL: the depth as the source gives it. Borrowed. */
+    const calib_depth_correction *depth_correction;
 } recon_run_config;
 
 /* recon_config_default(), tracking, first pose from ground truth. */

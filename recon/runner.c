@@ -3,6 +3,7 @@
 #include "recon.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 recon_run_config recon_run_config_default(void)
@@ -204,6 +205,52 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
     return s;
 }
 
+/* The depth correction's multiplier per pixel and the corrected frame the
+ * loop reads instead of the source's. */
+typedef struct depth_fix {
+    float *map;
+    uint16_t *depth;
+    uint32_t width, height;
+} depth_fix;
+
+static bf_status depth_fix_begin(depth_fix *d, const calib_depth_correction *c, const rgbd_source *src,
+                                 const char *name)
+{
+    const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    if (c->width != K->width || c->height != K->height)
+        return bf_fail(BF_FORMAT, "%s: the depth correction is for %ux%u depth images, the sequence's are %ux%u", name,
+                       c->width, c->height, K->width, K->height);
+    size_t n = (size_t)c->width * c->height;
+    d->map = malloc(n * sizeof *d->map);
+    d->depth = malloc(n * sizeof *d->depth);
+    if (!d->map || !d->depth) {
+        free(d->map);
+        free(d->depth);
+        return bf_fail(BF_NO_MEMORY, "%s: depth correction of %ux%u", name, c->width, c->height);
+    }
+    calib_depth_map(c, d->map);
+    d->width = c->width, d->height = c->height;
+    return BF_OK;
+}
+
+static bf_status depth_fix_frame(depth_fix *d, bf_frame *f, const char *name)
+{
+    if (!d->map || !f->depth) return BF_OK;
+    if (f->width != d->width || f->height != d->height)
+        return bf_fail(BF_FORMAT, "%s: frame %u is %ux%u, the depth correction's images %ux%u", name, f->index,
+                       f->width, f->height, d->width, d->height);
+    calib_depth_apply(d->map, f->depth, d->depth, (size_t)d->width * d->height);
+    f->depth = d->depth;
+    return BF_OK;
+}
+
+static void depth_fix_end(depth_fix *d)
+{
+    free(d->map);
+    free(d->depth);
+    memset(d, 0, sizeof *d);
+}
+
 bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg_in,
                              recon_frame_fn on_frame, void *user, recon_run *out)
 {
@@ -217,13 +264,20 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
      * (capture.h), so a camera never waits for the start-up. */
     bf_status s = prepare(ctx, src, &cfg, out);
     if (s != BF_OK) return s;
+    depth_fix fix = {0};
+    if (cfg.depth_correction && (s = depth_fix_begin(&fix, cfg.depth_correction, src, cfg.name)) != BF_OK) return s;
     bf_progress prog;
     bf_progress_begin(&prog, cfg.label, src->n_frames);
     bf_frame f;
     uint32_t seen = 0;
     while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
-        bf_status sf;
+        bf_status sf = depth_fix_frame(&fix, &f, cfg.name);
+        if (sf != BF_OK) {
+            bf_progress_end(&prog, seen);
+            depth_fix_end(&fix);
+            return sf;
+        }
         if (cfg.resume && f.t_depth_s <= cfg.resume->t_last_s) {
             /* The stored scan handled it: its pose is in the estimates already. */
             out->n_resume_skipped++;
@@ -233,11 +287,13 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
         }
         if (sf != BF_OK) {
             bf_progress_end(&prog, seen);
+            depth_fix_end(&fix);
             return sf;
         }
         bf_progress_update(&prog, seen);
     }
     bf_progress_end(&prog, seen);
+    depth_fix_end(&fix);
     /* A stop may also reach the source first (a capture thread told to
      * stop ends its frames): the flag says it was the stop. */
     out->is_interrupted = cfg.stop && *cfg.stop;

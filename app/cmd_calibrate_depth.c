@@ -1,0 +1,207 @@
+/* bitfuse calibrate-depth: the depth camera's fixed error pattern from a
+ * sequence and its trajectory (calib.h, "depth correction";
+ * docs/calibration.md), written as depth_correction.json for replay, live
+ * and fuse's --depth-correction. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "app.h"
+#include "calib/calib.h"
+#include "replay/replay.h"
+
+static const char usage_text[] =
+    "usage: bitfuse calibrate-depth SEQUENCE --poses FILE|groundtruth --out depth_correction.json [options]\n"
+    "\n"
+    "Measures the depth camera's fixed error pattern (Kinect v1: vertical bands and a bowl\n"
+    "of a few parts per thousand, fixed in the image) from SEQUENCE and its camera poses:\n"
+    "pairs of frames --gaps apart are brought together by the poses, and where one frame's\n"
+    "points land on the other's surface the relative depth difference is gathered per cell\n"
+    "of the image (a self-calibration in the manner of Teichman, Miller and Thrun 2013,\n"
+    "CLAMS). The poses may be the sequence's ground truth or a trajectory bitfuse replay\n"
+    "made of it (its trajectory.txt): no ground truth is needed. The result is one\n"
+    "multiplier per cell, the same at every depth, whose mean over the image is 1; replay,\n"
+    "live and fuse take it with --depth-correction. Use a sequence of a few hundred frames\n"
+    "that moves about a scene with surfaces at several depths.\n";
+
+typedef struct depth_frames {
+    calib_depth_frames in;
+    uint16_t **depth;
+    uint32_t *index;
+    bf_se3 *T_wc;
+    uint32_t n, cap;
+} depth_frames;
+
+static void frames_free(depth_frames *d)
+{
+    for (uint32_t i = 0; i < d->n; i++) free(d->depth[i]);
+    free(d->depth);
+    free(d->index);
+    free(d->T_wc);
+    memset(d, 0, sizeof *d);
+}
+
+static bf_status frames_push(depth_frames *d, const bf_frame *f, const bf_se3 *T)
+{
+    if (d->n == d->cap) {
+        uint32_t cap = d->cap ? 2 * d->cap : 64;
+        uint16_t **dp = realloc(d->depth, cap * sizeof *dp);
+        if (dp) d->depth = dp;
+        uint32_t *ip = realloc(d->index, cap * sizeof *ip);
+        if (ip) d->index = ip;
+        bf_se3 *tp = realloc(d->T_wc, cap * sizeof *tp);
+        if (tp) d->T_wc = tp;
+        if (!dp || !ip || !tp) return bf_fail(BF_NO_MEMORY, "calibrate-depth: %u frames", cap);
+        d->cap = cap;
+    }
+    size_t n = (size_t)f->width * f->height;
+    uint16_t *copy = malloc(n * sizeof *copy);
+    if (!copy) return bf_fail(BF_NO_MEMORY, "calibrate-depth: frame %u", f->index);
+    memcpy(copy, f->depth, n * sizeof *copy);
+    d->depth[d->n] = copy;
+    d->index[d->n] = f->index;
+    d->T_wc[d->n] = *T;
+    d->n++;
+    return BF_OK;
+}
+
+/* Whether frame i is one a pair needs: a first frame (every stride) or
+ * its partner at a gap. */
+static bool frame_needed(const calib_depth_config *c, uint32_t i)
+{
+    if (i % c->stride == 0) return true;
+    for (uint32_t g = 0; g < CALIB_DEPTH_GAPS; g++)
+        if (c->gaps[g] && i >= c->gaps[g] && (i - c->gaps[g]) % c->stride == 0) return true;
+    return false;
+}
+
+/* Reads the frames the pairs need, each with its pose (the ground truth or
+ * traj's at its depth time); frames without one are counted in *n_no_pose. */
+static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_depth_config *c, depth_frames *d,
+                             uint32_t *n_no_pose, const char *seq)
+{
+    bf_frame f;
+    bf_status s;
+    bf_progress prog;
+    bf_progress_begin(&prog, "calibrate-depth: reading", src->n_frames);
+    uint32_t seen = 0;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+        bf_progress_update(&prog, ++seen);
+        if (!frame_needed(c, f.index) || !f.depth) continue;
+        bf_se3 T;
+        bool has = traj ? bf_traj_interpolate(traj, f.t_depth_s, &T) : f.has_pose;
+        if (!traj && has) T = f.T_wc;
+        if (!has) {
+            (*n_no_pose)++;
+            continue;
+        }
+        if ((s = frames_push(d, &f, &T)) != BF_OK) break;
+    }
+    bf_progress_end(&prog, seen);
+    if (s == BF_END) s = BF_OK;
+    if (s == BF_OK && d->n < 2) s = bf_fail(BF_FORMAT, "%s: %u frames with a pose: too few for pairs", seq, d->n);
+    return s;
+}
+
+static cJSON *result_json(const char *seq, const char *out, const calib_depth_correction *c, uint32_t n_no_pose,
+                          double seconds)
+{
+    cJSON *o = app_json_stats("calibrate-depth");
+    cJSON_AddStringToObject(o, "sequence", seq);
+    cJSON_AddStringToObject(o, "out", out);
+    cJSON_AddNumberToObject(o, "frames", c->n_frames);
+    cJSON_AddNumberToObject(o, "frames_without_pose", n_no_pose);
+    cJSON_AddNumberToObject(o, "pairs", c->n_pairs);
+    cJSON_AddNumberToObject(o, "cells", c->grid_w * c->grid_h);
+    cJSON_AddNumberToObject(o, "cells_measured", c->n_cells_measured);
+    cJSON_AddNumberToObject(o, "rms_before", c->rms_before);
+    cJSON_AddNumberToObject(o, "rms_after", c->rms_after);
+    cJSON_AddNumberToObject(o, "seconds", seconds);
+    app_json_depth_correction(o, out, c);
+    return o;
+}
+
+int cmd_calibrate_depth(int argc, char **argv)
+{
+    const char *cmd = "calibrate-depth", *seq = NULL, *poses = NULL, *out = NULL;
+    calib_depth_config cfg = calib_depth_config_default();
+    replay_options ropt;
+    memset(&ropt, 0, sizeof ropt);
+    bool json = false;
+    const app_option own[] = {
+        APP_OPT("--poses", APP_OPT_STRING, &poses, "P",
+                "'groundtruth' (the sequence's own) or a TUM trajectory file (camera-to-world, e.g. replay's "
+                "trajectory.txt; poses interpolated at the depth timestamps)",
+                .required = true),
+        APP_OPT("--out", APP_OPT_STRING, &out, "FILE", "the file to write (depth_correction.json)", .required = true),
+        APP_OPT("--cell", APP_OPT_U32, &cfg.cell_px, "PX", "the cells' edge in pixels", .min = 4, .max = 256),
+        APP_OPT("--iterations", APP_OPT_U32, &cfg.iterations, "N", "passes that update the multipliers", .min = 1,
+                .max = 20),
+        APP_OPT("--stride", APP_OPT_U32, &cfg.stride, "N", "a pair's first frame every N frames", .min = 1,
+                .max = 1000),
+        APP_OPT("--max-depth", APP_OPT_FLOAT, &cfg.max_depth_m, "M", "samples beyond are not used", .min = 0.3,
+                .max = 20),
+        APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "print the result as JSON instead of the summary"),
+        APP_OPT_END,
+    };
+    app_option sq[APP_SEQUENCE_ROWS];
+    app_sequence_options(sq, &ropt);
+    const app_option *tables[] = {own, sq, NULL};
+    app_command_spec spec = {
+        .name = cmd, .usage = usage_text, .tables = tables, .positional = &seq, .min_positional = 1,
+        .max_positional = 1, .positional_missing = "no sequence given",
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 bad input (an unreadable frame or trajectory, too few\n"
+                  "frames with a pose, no pair of frames at the gaps), 5 the output could not be written\n"
+                  "\nSee docs/calibration.md.\n",
+    };
+    int rc = app_options_parse(&spec, argc, argv);
+    if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (cfg.gaps[0] % cfg.stride || cfg.gaps[1] % cfg.stride)
+        return app_usage_error(cmd, "--stride %u must divide the gaps %u and %u", cfg.stride, cfg.gaps[0], cfg.gaps[1]);
+
+    double t0 = bf_time_s();
+    bool use_traj = strcmp(poses, "groundtruth") != 0;
+    bf_traj traj = {0};
+    rgbd_source *src = NULL;
+    depth_frames d = {0};
+    uint32_t n_no_pose = 0;
+    calib_depth_correction *c = malloc(sizeof *c);
+    bf_status s = c ? BF_OK : bf_fail(BF_NO_MEMORY, "calibrate-depth");
+    if (s == BF_OK && use_traj) s = replay_traj_read_tum(poses, &traj);
+    if (s == BF_OK) s = replay_open(seq, &ropt, &src);
+    if (s == BF_OK && !use_traj && !src->has_groundtruth)
+        s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", seq);
+    if (s == BF_OK) s = read_frames(src, use_traj ? &traj : NULL, &cfg, &d, &n_no_pose, seq);
+    if (s == BF_OK) {
+        d.in = (calib_depth_frames){.n = d.n, .depth = (const uint16_t *const *)d.depth, .index = d.index,
+                                    .T_wc = d.T_wc, .K = *rgbd_source_intrinsics(src)};
+        fprintf(stderr, "calibrate-depth: %u frames read, %u passes over their pairs\n", d.n, cfg.iterations + 1);
+        s = calib_depth_estimate(&cfg, &d.in, c);
+        if (s == BF_FORMAT) bf_fail(BF_FORMAT, "%s: %s", seq, bf_last_error());
+    }
+    if (s == BF_OK) s = calib_depth_write(out, c);
+    if (s == BF_OK) {
+        double secs = bf_time_s() - t0;
+        if (json) {
+            s = app_json_print(result_json(seq, out, c, n_no_pose, secs));
+        } else {
+            float lo = c->mult[0], hi = c->mult[0];
+            for (uint32_t i = 1; i < c->grid_w * c->grid_h; i++) {
+                lo = c->mult[i] < lo ? c->mult[i] : lo;
+                hi = c->mult[i] > hi ? c->mult[i] : hi;
+            }
+            printf("bitfuse calibrate-depth: %s -> %s\n", seq, out);
+            printf("  frames           %u with a pose (%u without), %u pairs\n", c->n_frames, n_no_pose, c->n_pairs);
+            printf("  cells            %ux%u of %u px, %u measured\n", c->grid_w, c->grid_h, c->cell_px,
+                   c->n_cells_measured);
+            printf("  pattern          RMS %.2f per mille before, %.2f after; multipliers %.4f..%.4f\n",
+                   1000 * c->rms_before, 1000 * c->rms_after, lo, hi);
+            printf("  time             %.1f s\n", secs);
+        }
+    }
+    frames_free(&d);
+    rgbd_source_close(src);
+    bf_traj_free(&traj);
+    free(c);
+    return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
+}
