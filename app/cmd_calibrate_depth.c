@@ -177,7 +177,13 @@ int cmd_calibrate_depth(int argc, char **argv)
                                     .T_wc = d.T_wc, .K = *rgbd_source_intrinsics(src)};
         fprintf(stderr, "calibrate-depth: %u frames read, %u passes over their pairs\n", d.n, cfg.iterations + 1);
         s = calib_depth_estimate(&cfg, &d.in, c);
-        if (s == BF_FORMAT) bf_fail(BF_FORMAT, "%s: %s", seq, bf_last_error());
+        if (s == BF_FORMAT) {
+            /* The estimate's message, named by the sequence instead of the function. */
+            char why[512];
+            const char *e = bf_last_error(), *p = strstr(e, ": ");
+            snprintf(why, sizeof why, "%s", p ? p + 2 : e);
+            bf_fail(BF_FORMAT, "%s: %s", seq, why);
+        }
     }
     if (s == BF_OK) s = calib_depth_write(out, c);
     if (s == BF_OK) {

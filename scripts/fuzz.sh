@@ -19,7 +19,7 @@ cd "$(dirname "$0")/.."
 SECONDS_EACH=60
 JOBS=1
 WRITE_DOC=1
-TARGETS="image text folder bflog mesh store calib v4l2"
+TARGETS="image text folder bflog mesh store calib depthcorr v4l2"
 SEED=0
 while [ $# -gt 0 ]; do
   case "$1" in

@@ -69,6 +69,7 @@ bf_status fuzz_bflog(const uint8_t *data, size_t size);
 bf_status fuzz_mesh(const uint8_t *data, size_t size);
 bf_status fuzz_store(const uint8_t *data, size_t size);
 bf_status fuzz_calib(const uint8_t *data, size_t size);
+bf_status fuzz_depthcorr(const uint8_t *data, size_t size);
 bf_status fuzz_v4l2(const uint8_t *data, size_t size);
 
 #endif

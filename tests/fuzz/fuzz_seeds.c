@@ -407,6 +407,21 @@ static void seeds_calib(void)
     free(b.p);
 }
 
+/* ------------------------------------------------------------ depth correction */
+
+static void seeds_depthcorr(void)
+{
+    static calib_depth_correction c = {.width = 64, .height = 48, .cell_px = 16, .grid_w = 4, .grid_h = 3,
+                                       .n_frames = 40, .n_pairs = 20, .n_cells_measured = 12, .rms_before = 0.003,
+                                       .rms_after = 0.0002};
+    for (uint32_t i = 0; i < 12; i++) c.mult[i] = 1.0f + 0.001f * (float)i - 0.006f;
+    check(calib_depth_write(tmp("depth_correction.json"), &c));
+    buf b = {0};
+    buf_file(&b, tmp("depth_correction.json"));
+    seed("depthcorr", "grid_4x3.json", b.p, b.n, true);
+    free(b.p);
+}
+
 /* ------------------------------------------------------------ a V4L2 camera */
 
 static void put(buf *b, uint32_t v, int bytes)
@@ -495,6 +510,7 @@ int main(int argc, char **argv)
     seeds_mesh();
     seeds_store();
     seeds_calib();
+    seeds_depthcorr();
     seeds_v4l2();
     return 0;
 }

@@ -87,4 +87,5 @@ BF_TEST(bflog_inputs) { run_target("bflog", fuzz_bflog); }
 BF_TEST(mesh_inputs) { run_target("mesh", fuzz_mesh); }
 BF_TEST(store_inputs) { run_target("store", fuzz_store); }
 BF_TEST(calib_inputs) { run_target("calib", fuzz_calib); }
+BF_TEST(depthcorr_inputs) { run_target("depthcorr", fuzz_depthcorr); }
 BF_TEST(v4l2_inputs) { run_target("v4l2", fuzz_v4l2); }

@@ -1,0 +1,151 @@
+#!/usr/bin/env bash
+# bitfuse calibrate-depth as a user runs it: a synthetic sequence (Kinect v1
+# noise, no fixed pattern) calibrated from its ground truth gives
+# multipliers within the noise of 1; one spoiled by a known pattern fixed in
+# the image (bands along x) gives that pattern's inverse; replay and fuse
+# take the file (stats.json echoes it); a missing trajectory, a malformed
+# file and one for another image size are refused with the exit code and
+# the file named, before any output is made.
+# Usage: test_calibrate_depth.sh path/to/bitfuse
+set -u
+B=$1
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+. "$(dirname "$0")/common.sh"
+
+# 61 frames of 160x120 turning and moving about the procedural room.
+py - "$T/traj.txt" <<'PY'
+import math, sys
+with open(sys.argv[1], "w") as f:
+    for i in range(61):
+        s = i / 60.0
+        yaw, pitch = -0.6 + 1.2 * s, 0.15 * math.sin(6 * s)
+        cy, sy, cp, sp = math.cos(yaw / 2), math.sin(yaw / 2), math.cos(pitch / 2), math.sin(pitch / 2)
+        # q = q_yaw (about y) * q_pitch (about x)
+        qw, qx, qy, qz = cy * cp, cy * sp, sy * cp, -sy * sp
+        f.write("%.6f %.4f %.4f %.4f %.6f %.6f %.6f %.6f\n" % (i / 30.0, -0.3 + 0.6 * s, 0.1 * math.sin(9 * s),
+                0.2 * math.cos(5 * s), qx, qy, qz, qw))
+PY
+mkdir "$T/nodata"
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 61 --size 160x120 --camera 131.25,131.25,79.5,59.5 \
+    --data "$T/nodata" --out "$T/seq"
+
+# From the ground truth: no pattern to find, multipliers near 1.
+expect 0 "$B" calibrate-depth "$T/seq" --poses groundtruth --cell 8 --out "$T/flat.json"
+grep -qF "pairs" "$T/out" || fail "the summary does not count pairs: $(cat "$T/out")"
+py - "$T/flat.json" <<'PY' || fail "calibrate-depth of unspoiled depth is not flat"
+import json, sys
+d = json.load(open(sys.argv[1]))
+m = [v for row in d["multipliers"] for v in row]
+assert d["grid_w"] == 20 and d["grid_h"] == 15 and len(m) == 300, d
+assert d["pairs"] == 27, d["pairs"]
+# What the synthetic Kinect v1 depth leaves (its disparity steps of 1/8 px
+# are errors that follow depth, and so the room's layout in the image):
+# about 1.2 per mille RMS over 27 pairs of 160x120 frames. A pattern like
+# the bands below is 5.7 per mille RMS.
+rms = (sum((v - 1) ** 2 for v in m) / len(m)) ** 0.5
+assert rms < 2e-3 and max(abs(v - 1) for v in m) < 6e-3, (rms, min(m), max(m))
+PY
+
+# The same depth spoiled by a pattern fixed in the image: its inverse comes back.
+cp -r "$T/seq" "$T/spoiled"
+py - "$T/spoiled" <<'PY'
+import math, os, struct, sys, zlib
+# 16-bit grey PNGs: read, multiply, write (no imaging library needed).
+def read_png(p):
+    b = open(p, "rb").read()
+    pos, idat, w, h = 8, b"", 0, 0
+    while pos < len(b):
+        n, t = struct.unpack(">I4s", b[pos:pos + 8])
+        d = b[pos + 8:pos + 8 + n]
+        if t == b"IHDR": w, h = struct.unpack(">II", d[:8]); assert d[8] == 16 and d[9] == 0
+        if t == b"IDAT": idat += d
+        pos += 12 + n
+    raw, rows, prev = zlib.decompress(idat), [], bytearray(2 * w)
+    for y in range(h):
+        f, line = raw[y * (2 * w + 1)], bytearray(raw[y * (2 * w + 1) + 1:(y + 1) * (2 * w + 1)])
+        for i in range(len(line)):
+            a = line[i - 2] if i >= 2 else 0
+            up, c = prev[i], prev[i - 2] if i >= 2 else 0
+            if f == 1: line[i] = (line[i] + a) & 255
+            elif f == 2: line[i] = (line[i] + up) & 255
+            elif f == 3: line[i] = (line[i] + (a + up) // 2) & 255
+            elif f == 4:
+                pa, pb, pc = abs(up - c), abs(a - c), abs(a + up - 2 * c)
+                pr = a if pa <= pb and pa <= pc else up if pb <= pc else c
+                line[i] = (line[i] + pr) & 255
+        rows.append(list(struct.unpack(">%dH" % w, bytes(line))))
+        prev = line
+    return w, h, rows
+def write_png(p, w, h, rows):
+    raw = b"".join(b"\0" + struct.pack(">%dH" % w, *r) for r in rows)
+    chunk = lambda t, d: struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+    open(p, "wb").write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0))
+                        + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+d = os.path.join(sys.argv[1], "depth")
+for n in sorted(os.listdir(d)):
+    w, h, rows = read_png(os.path.join(d, n))
+    for y in range(h):
+        for x in range(w):
+            v = rows[y][x]
+            if v: rows[y][x] = min(65535, round(v * (1 + 0.008 * math.sin(2 * math.pi * 2 * (x + 0.5) / w))))
+    write_png(os.path.join(d, n), w, h, rows)
+PY
+expect 0 "$B" calibrate-depth "$T/spoiled" --poses groundtruth --cell 8 --out "$T/bands.json" --json
+py - "$T/bands.json" "$T/out" <<'PY' || fail "calibrate-depth did not find the bands"
+import json, math, sys
+d = json.load(open(sys.argv[1]))
+out = json.load(open(sys.argv[2]))
+assert out["command"] == "calibrate-depth" and out["pairs"] == 27 and out["rms_after"] < out["rms_before"], out
+w, m = d["grid_w"], d["multipliers"]
+# Each column of cells against the inverse of the bands at its centre (x
+# 8 i + 3.5), both divided by their mean over the image (pairs of frames
+# do not see the image's mean).
+col = [sum(r[i] for r in m) / len(m) for i in range(w)]
+want = [1 / (1 + 0.008 * math.sin(2 * math.pi * 2 * (8 * i + 4) / 160)) for i in range(w)]
+mc, mw = sum(col) / w, sum(want) / w
+err = max(abs(c / mc - v / mw) for c, v in zip(col, want))
+amp = max(abs(v / mw - 1) for v in want)
+print("bands %.2f per mille, left %.2f" % (1000 * amp, 1000 * err))
+assert err < 0.3 * amp, (err, amp)
+PY
+
+# replay and fuse take it; stats.json echoes it.
+expect 0 "$B" replay "$T/spoiled" --out "$T/rp" --depth-correction "$T/bands.json" --no-mesh --frames 10
+py -c "
+import json, sys
+c = json.load(open(sys.argv[1]))['depth_correction']
+assert c['file'] == sys.argv[2] and c['grid_w'] == 20 and c['min_multiplier'] < 0.995 < 1.005 < c['max_multiplier'], c
+" "$T/rp/stats.json" "$T/bands.json" || fail "replay's stats.json does not echo --depth-correction"
+expect 0 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu" --depth-correction "$T/bands.json" --no-mesh --frames 10
+py -c "import json,sys; assert json.load(open(sys.argv[1]))['depth_correction']['file'] == sys.argv[2]" \
+    "$T/fu/stats.json" "$T/bands.json" || fail "fuse's stats.json does not echo --depth-correction"
+py -c "import json,sys; assert json.load(open(sys.argv[1]))['depth_correction'] is None" "$T/fu/../rp/stats.json" 2>/dev/null &&
+    fail "stats.json of a corrected run says null"
+
+# Refusals: exit 3, the file named, no output folder.
+expect 3 "$B" calibrate-depth "$T/seq" --poses "$T/absent.txt" --out "$T/x.json"
+mentions "absent.txt"
+[ ! -e "$T/x.json" ] || fail "calibrate-depth with a missing trajectory wrote a file"
+expect 3 "$B" calibrate-depth "$T/seq" --poses groundtruth --frames 14 --out "$T/x.json"
+mentions "no pair of frames"
+expect 2 "$B" calibrate-depth "$T/seq" --poses groundtruth --stride 4 --out "$T/x.json"
+mentions "must divide"
+printf '{"format": "bitfuse-depth-correction", "version": 1, "width": 160}' >"$T/broken.json"
+expect 3 "$B" replay "$T/seq" --out "$T/rp_broken" --depth-correction "$T/broken.json"
+mentions "$T/broken.json"
+mentions "height: missing"
+[ ! -e "$T/rp_broken" ] || fail "replay with a broken depth correction made the output folder"
+py -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+d.update(width=320, height=240, cell_px=16)
+json.dump(d, open(sys.argv[2], 'w'))" "$T/flat.json" "$T/big.json"
+expect 3 "$B" replay "$T/seq" --out "$T/rp_big" --depth-correction "$T/big.json" --no-mesh
+mentions "the depth correction is for 320x240 depth images, the sequence's are 160x120"
+expect 3 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fu_big" --depth-correction "$T/big.json" --no-mesh
+mentions "320x240"
+expect 0 "$B" calibrate-depth --help
+grep -qF -- "--poses P" "$T/out" || fail "calibrate-depth --help does not show --poses"
+
+finish test_calibrate_depth.sh
