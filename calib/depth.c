@@ -79,14 +79,20 @@ void calib_depth_apply(const float *map, const uint16_t *src, uint16_t *dst, siz
 }
 
 /* Scratch of one pass: per cell the sums. */
+/* The pairs are split into DEPTH_SLICES fixed slices, each summed on its
+ * own and the slices added in order: the same file on any number of
+ * threads. */
+#define DEPTH_SLICES 8u
+
 typedef struct depth_pass {
     const calib_depth_config *cfg;
     const calib_depth_frames *in;
     uint32_t gw, gh;
-    const float *map; /* the current multipliers per pixel */
-    double *sum;      /* per cell */
+    const float *map;     /* the current multipliers per pixel */
+    const uint32_t *pair; /* n_pairs (a, b) frame numbers */
+    uint32_t n_pairs;
+    double *sum;          /* DEPTH_SLICES x cells */
     uint64_t *count;
-    uint64_t pairs;
 } depth_pass;
 
 static float depth_at(const depth_pass *p, uint32_t f, size_t i)
@@ -117,7 +123,7 @@ static float depth_between(const depth_pass *p, uint32_t b, double u, double v)
  * b's depth where it lands, r = (z_b - z_a->b) / z_a->b, which is b's error
  * there less a's at the pixel. The cell of the landing point gets +r and
  * the pixel's cell -r, so each cell meets partners on every side. */
-static void add_pair(depth_pass *p, uint32_t a, uint32_t b)
+static void add_pair(const depth_pass *p, uint32_t a, uint32_t b, double *sum, uint64_t *count)
 {
     const bf_intrinsics *K = &p->in->K;
     uint32_t w = K->width, h = K->height, cp = p->cfg->cell_px;
@@ -136,34 +142,57 @@ static void add_pair(depth_pass *p, uint32_t a, uint32_t b)
             double r = (zb - q.z) / q.z;
             size_t ca = (size_t)(y / cp) * p->gw + x / cp;
             size_t cb = (size_t)((uint32_t)(v + 0.5) / cp) * p->gw + (uint32_t)(u + 0.5) / cp;
-            p->sum[cb] += r;
-            p->count[cb]++;
-            p->sum[ca] -= r;
-            p->count[ca]++;
+            sum[cb] += r;
+            count[cb]++;
+            sum[ca] -= r;
+            count[ca]++;
         }
-    p->pairs++;
+}
+
+static void add_slice(void *ctx, size_t k)
+{
+    const depth_pass *p = ctx;
+    size_t nc = (size_t)p->gw * p->gh;
+    double *sum = p->sum + k * nc;
+    uint64_t *count = p->count + k * nc;
+    memset(sum, 0, nc * sizeof *sum);
+    memset(count, 0, nc * sizeof *count);
+    for (uint32_t i = (uint32_t)k; i < p->n_pairs; i += DEPTH_SLICES) add_pair(p, p->pair[2 * i], p->pair[2 * i + 1], sum, count);
+}
+
+/* The pairs: a first frame every stride frames (by index) and its partner
+ * a gap ahead, where both were given. Returns how many (pair holds 2 per). */
+static uint32_t list_pairs(const calib_depth_config *cfg, const calib_depth_frames *in, uint32_t *pair)
+{
+    uint32_t n = 0;
+    for (uint32_t g = 0; g < CALIB_DEPTH_GAPS; g++) {
+        uint32_t gap = cfg->gaps[g];
+        if (gap == 0) continue;
+        for (uint32_t a = 0; a < in->n; a++) {
+            if (in->index[a] % cfg->stride != 0) continue;
+            /* Frames come in index order: the partner, if given, is ahead. */
+            for (uint32_t b = a + 1; b < in->n && in->index[b] <= in->index[a] + gap; b++)
+                if (in->index[b] == in->index[a] + gap) {
+                    if (pair) pair[2 * n] = a, pair[2 * n + 1] = b;
+                    n++;
+                }
+        }
+    }
+    return n;
 }
 
 /* One pass over every pair: the mean per cell, less the image's mean
  * (the scale stays the sensor's); cells with too few samples keep 0.
- * Returns the RMS over the measured cells. */
-static double one_pass(depth_pass *p, double *mean)
+ * Returns the RMS over the measured cells; *measured their number. */
+static double one_pass(depth_pass *p, double *mean, uint32_t *measured)
 {
-    const calib_depth_frames *in = p->in;
     size_t nc = (size_t)p->gw * p->gh;
-    memset(p->sum, 0, nc * sizeof *p->sum);
-    memset(p->count, 0, nc * sizeof *p->count);
-    p->pairs = 0;
-    for (uint32_t g = 0; g < CALIB_DEPTH_GAPS; g++) {
-        uint32_t gap = p->cfg->gaps[g];
-        if (gap == 0) continue;
-        for (uint32_t a = 0; a < in->n; a++) {
-            if (in->index[a] % p->cfg->stride != 0) continue;
-            /* Frames come in index order: the partner, if kept, is ahead. */
-            for (uint32_t b = a + 1; b < in->n && in->index[b] <= in->index[a] + gap; b++)
-                if (in->index[b] == in->index[a] + gap) add_pair(p, a, b);
+    bf_parallel_for(DEPTH_SLICES, add_slice, p);
+    for (uint32_t k = 1; k < DEPTH_SLICES; k++)
+        for (size_t c = 0; c < nc; c++) {
+            p->sum[c] += p->sum[k * nc + c];
+            p->count[c] += p->count[k * nc + c];
         }
-    }
     double s = 0, n = 0;
     for (size_t c = 0; c < nc; c++)
         if (p->count[c] >= p->cfg->min_samples) {
@@ -179,6 +208,7 @@ static double one_pass(depth_pass *p, double *mean)
             k++;
         }
     }
+    *measured = k;
     return k ? sqrt(rr / k) : 0.0;
 }
 
@@ -216,37 +246,39 @@ bf_status calib_depth_estimate(const calib_depth_config *cfg, const calib_depth_
     };
     size_t nc = (size_t)c.grid_w * c.grid_h, npx = (size_t)K->width * K->height;
     for (size_t i = 0; i < nc; i++) c.mult[i] = 1.0f;
-    depth_pass p = {.cfg = cfg, .in = in, .gw = c.grid_w, .gh = c.grid_h};
+    uint32_t n_pairs = list_pairs(cfg, in, NULL);
+    if (n_pairs == 0)
+        return bf_fail(BF_FORMAT, "calib_depth_estimate: no pair of frames %u or %u apart (with a first frame every %u)",
+                       cfg->gaps[0], cfg->gaps[1], cfg->stride);
+    depth_pass p = {.cfg = cfg, .in = in, .gw = c.grid_w, .gh = c.grid_h, .n_pairs = n_pairs};
     float *map = malloc(npx * sizeof *map);
-    p.sum = malloc(nc * sizeof *p.sum);
-    p.count = malloc(nc * sizeof *p.count);
+    uint32_t *pair = malloc(2 * (size_t)n_pairs * sizeof *pair);
+    p.sum = malloc(DEPTH_SLICES * nc * sizeof *p.sum);
+    p.count = malloc(DEPTH_SLICES * nc * sizeof *p.count);
     double *mean = malloc(nc * sizeof *mean);
-    if (!map || !p.sum || !p.count || !mean) {
+    if (!map || !pair || !p.sum || !p.count || !mean) {
         s = bf_fail(BF_NO_MEMORY, "calib_depth_estimate: %zu pixels", npx);
         goto done;
     }
+    list_pairs(cfg, in, pair);
     p.map = map;
+    p.pair = pair;
+    uint32_t measured = 0;
     for (uint32_t it = 0; it <= cfg->iterations; it++) {
         calib_depth_map(&c, map);
-        double rms = one_pass(&p, mean);
-        if (p.pairs == 0) {
-            s = bf_fail(BF_FORMAT, "calib_depth_estimate: no pair of frames %u or %u apart (with a first frame every %u)",
-                        cfg->gaps[0], cfg->gaps[1], cfg->stride);
-            goto done;
-        }
+        double rms = one_pass(&p, mean, &measured);
         if (it == 0) c.rms_before = rms;
         c.rms_after = rms;
         if (it == cfg->iterations) break; /* the last pass only measures */
         for (size_t k = 0; k < nc; k++) c.mult[k] = (float)(c.mult[k] / (1.0 + mean[k]));
     }
-    uint32_t measured = 0;
-    for (size_t k = 0; k < nc; k++) measured += p.count[k] >= cfg->min_samples;
     c.n_frames = in->n;
-    c.n_pairs = (uint32_t)p.pairs;
+    c.n_pairs = n_pairs;
     c.n_cells_measured = measured;
     *out = c;
 done:
     free(map);
+    free(pair);
     free(p.sum);
     free(p.count);
     free(mean);
