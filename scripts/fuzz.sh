@@ -79,6 +79,7 @@ declare -A what=(
   [mesh]="PLY, OFF, particle PLY"
   [store]="store.json, trajectory.bin, chunk files"
   [calib]="calib.json"
+  [depthcorr]="depth_correction.json"
   [v4l2]="a V4L2 camera's formats, sizes, buffers, frames"
 )
 found=0
