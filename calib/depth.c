@@ -26,11 +26,6 @@
 
 #include "calib.h"
 
-
-
-
-
-
 calib_depth_config calib_depth_config_default(void)
 {
     return (calib_depth_config){
