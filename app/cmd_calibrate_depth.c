@@ -103,12 +103,21 @@ static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_
     return s;
 }
 
-static cJSON *result_json(const char *seq, const char *out, const calib_depth_correction *c, uint32_t n_no_pose,
-                          double seconds)
+static cJSON *result_json(const char *seq, const char *out, const calib_depth_config *cfg,
+                          const calib_depth_correction *c, uint32_t n_no_pose, double seconds)
 {
     cJSON *o = app_json_stats("calibrate-depth");
     cJSON_AddStringToObject(o, "sequence", seq);
     cJSON_AddStringToObject(o, "out", out);
+    cJSON *k = app_json_object(o, "config");
+    cJSON_AddNumberToObject(k, "cell_px", cfg->cell_px);
+    double gaps[CALIB_DEPTH_GAPS] = {cfg->gaps[0], cfg->gaps[1]};
+    app_json_numbers(k, "gaps", gaps, CALIB_DEPTH_GAPS);
+    cJSON_AddNumberToObject(k, "stride", cfg->stride);
+    cJSON_AddNumberToObject(k, "iterations", cfg->iterations);
+    cJSON_AddNumberToObject(k, "max_depth_m", cfg->max_depth_m);
+    cJSON_AddNumberToObject(k, "agree", cfg->agree);
+    cJSON_AddNumberToObject(k, "min_samples", cfg->min_samples);
     cJSON_AddNumberToObject(o, "frames", c->n_frames);
     cJSON_AddNumberToObject(o, "frames_without_pose", n_no_pose);
     cJSON_AddNumberToObject(o, "pairs", c->n_pairs);
@@ -189,7 +198,7 @@ int cmd_calibrate_depth(int argc, char **argv)
     if (s == BF_OK) {
         double secs = bf_time_s() - t0;
         if (json) {
-            s = app_json_print(result_json(seq, out, c, n_no_pose, secs));
+            s = app_json_print(result_json(seq, out, &cfg, c, n_no_pose, secs));
         } else {
             float lo = c->mult[0], hi = c->mult[0];
             for (uint32_t i = 1; i < c->grid_w * c->grid_h; i++) {

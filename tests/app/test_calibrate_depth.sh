@@ -97,6 +97,7 @@ import json, math, sys
 d = json.load(open(sys.argv[1]))
 out = json.load(open(sys.argv[2]))
 assert out["command"] == "calibrate-depth" and out["pairs"] == 27 and out["rms_after"] < out["rms_before"], out
+assert out["config"]["cell_px"] == 8 and out["config"]["gaps"] == [15, 30] and out["config"]["iterations"] == 10, out
 w, m = d["grid_w"], d["multipliers"]
 # Each column of cells against the inverse of the bands at its centre (x
 # 8 i + 3.5), both divided by their mean over the image (pairs of frames
