@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "app.h"
+#include "calib/calib.h"
 #include "core/core.h"
 #include "eval/eval.h"
 #include "mesh/mesh.h"
@@ -29,6 +30,7 @@ static const char usage_text[] =
 /* What --depth reads. */
 typedef struct depth_points_args {
     const char *seq, *poses; /* poses: "groundtruth" or a TUM trajectory file */
+    const char *correction;  /* depth_correction.json applied to the depth, or NULL */
     uint32_t every, pixel_step;
     double max_depth_m;
     replay_options ropt;
@@ -46,6 +48,19 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
     if (s == BF_OK) s = replay_open(a->seq, &a->ropt, &src);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a->seq);
+    /* --depth-correction: the depth the loop saw (replay --depth-correction). */
+    float *mult = NULL;
+    if (s == BF_OK && a->correction) {
+        static calib_depth_correction dc; /* 19 KB */
+        const bf_intrinsics *K = &src->intrinsics;
+        s = calib_depth_read(a->correction, &dc);
+        if (s == BF_OK && (dc.width != K->width || dc.height != K->height))
+            s = bf_fail(BF_FORMAT, "%s: the depth correction is for %ux%u depth images, the sequence's are %ux%u",
+                        a->correction, dc.width, dc.height, K->width, K->height);
+        if (s == BF_OK && !(mult = malloc((size_t)dc.width * dc.height * sizeof *mult)))
+            s = bf_fail(BF_NO_MEMORY, "eval-surface: depth correction");
+        if (s == BF_OK) calib_depth_map(&dc, mult);
+    }
     size_t cap = 0, n = 0;
     float *xyz = NULL;
     uint32_t used = 0, no_pose = 0;
@@ -71,7 +86,9 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
         }
         for (uint32_t y = 0; y < f.height; y += a->pixel_step)
             for (uint32_t x = 0; x < f.width; x += a->pixel_step) {
-                double z = f.depth[(size_t)y * f.width + x] / K->depth_scale;
+                size_t i = (size_t)y * f.width + x;
+                double z = f.depth[i] * (mult && f.width == K->width && f.height == K->height ? mult[i] : 1.0f) /
+                           K->depth_scale;
                 if (!(z > 0) || z > a->max_depth_m) continue;
                 bf_vec3 p = bf_v3((x - K->cx_px) * z / K->fx_px, (y - K->cy_px) * z / K->fy_px, z);
                 p = bf_se3_apply(&T, p);
@@ -81,6 +98,7 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
         used++;
     }
     if (s == BF_END) s = BF_OK;
+    free(mult);
     if (src) rgbd_source_close(src);
     bf_traj_free(&traj);
     if (s == BF_OK && n == 0) s = bf_fail(BF_FORMAT, "%s: no depth sample with a pose", a->seq);
@@ -127,6 +145,9 @@ int cmd_eval_surface(int argc, char **argv)
                 "the reconstruction is SEQUENCE's depth, back-projected at --poses (see above)", .no_default = true),
         APP_OPT("--poses", APP_OPT_STRING, &dp.poses, "P",
                 "with --depth: 'groundtruth' (the sequence's own) or a TUM trajectory file"),
+        APP_OPT("--depth-correction", APP_OPT_STRING, &dp.correction, "FILE",
+                "with --depth: the depth multiplied by this depth_correction.json first (as replay "
+                "--depth-correction has it)", .no_default = true),
         APP_OPT("--every", APP_OPT_U32, &dp.every, "K", "with --depth: every K-th frame", .min = 1),
         APP_OPT("--pixel-step", APP_OPT_U32, &dp.pixel_step, "S", "with --depth: every S-th pixel in x and y",
                 .min = 1, .max = 64),
@@ -153,6 +174,7 @@ int cmd_eval_surface(int argc, char **argv)
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (!rec_path == !dp.seq) return app_usage_error(cmd, "give exactly one of --reconstruction and --depth");
+    if (dp.correction && !dp.seq) return app_usage_error(cmd, "--depth-correction goes with --depth");
     if (dp.seq) rec_path = dp.seq;
 
     mesh_data ref = {0}, rec = {0}, vis = {0};
@@ -184,6 +206,8 @@ int cmd_eval_surface(int argc, char **argv)
         if (dp.seq) {
             cJSON *d = app_json_object(o, "depth");
             cJSON_AddStringToObject(d, "poses", dp.poses);
+            if (dp.correction) cJSON_AddStringToObject(d, "depth_correction", dp.correction);
+            else cJSON_AddNullToObject(d, "depth_correction");
             cJSON_AddNumberToObject(d, "frames", depth_frames);
             cJSON_AddNumberToObject(d, "every", dp.every);
             cJSON_AddNumberToObject(d, "pixel_step", dp.pixel_step);

@@ -118,11 +118,28 @@ import json, sys
 c = json.load(open(sys.argv[1]))['depth_correction']
 assert c['file'] == sys.argv[2] and c['grid_w'] == 20 and c['min_multiplier'] < 0.995 < 1.005 < c['max_multiplier'], c
 " "$T/rp/stats.json" "$T/bands.json" || fail "replay's stats.json does not echo --depth-correction"
-expect 0 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu" --depth-correction "$T/bands.json" --no-mesh --frames 10
+expect 0 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu" --depth-correction "$T/bands.json"
+expect 0 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu_raw"
+# The map fused from the corrected depth explains that depth better than
+# the map fused as the depth came explains it (the bands, 16 mm at 2 m,
+# smear surfaces seen from several places).
+expect 0 "$B" eval-surface --reference "$T/fu/mesh.ply" --depth "$T/spoiled" --depth-correction "$T/bands.json" \
+    --every 2 --pixel-step 2 --json
+cp "$T/out" "$T/ev_fixed.json"
+expect 0 "$B" eval-surface --reference "$T/fu_raw/mesh.ply" --depth "$T/spoiled" --every 2 --pixel-step 2 --json
+py - "$T/ev_fixed.json" "$T/out" "$T/bands.json" <<'PY' || fail "eval-surface --depth-correction"
+import json, sys
+a, b = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+assert a["depth"]["depth_correction"] == sys.argv[3] and b["depth"]["depth_correction"] is None, (a["depth"], b["depth"])
+ma, mb = a["accuracy"]["median_m"], b["accuracy"]["median_m"]
+print("depth to the map, median: %.2f mm corrected, %.2f mm as it came" % (1e3 * ma, 1e3 * mb))
+assert ma < 0.85 * mb, (ma, mb)
+PY
+expect 2 "$B" eval-surface --reference "$T/fu/mesh.ply" --reconstruction "$T/fu/mesh.ply" --depth-correction "$T/bands.json"
 py -c "import json,sys; assert json.load(open(sys.argv[1]))['depth_correction']['file'] == sys.argv[2]" \
     "$T/fu/stats.json" "$T/bands.json" || fail "fuse's stats.json does not echo --depth-correction"
-py -c "import json,sys; assert json.load(open(sys.argv[1]))['depth_correction'] is None" "$T/fu/../rp/stats.json" 2>/dev/null &&
-    fail "stats.json of a corrected run says null"
+py -c "import json,sys; assert json.load(open(sys.argv[1]))['depth_correction'] is None" "$T/fu_raw/stats.json" ||
+    fail "fuse's stats.json without --depth-correction does not say null"
 
 # Refusals: exit 3, the file named, no output folder.
 expect 3 "$B" calibrate-depth "$T/seq" --poses "$T/absent.txt" --out "$T/x.json"
