@@ -15,7 +15,7 @@ static const char usage_text[] =
     "\n"
     "Measures the depth camera's fixed error pattern (Kinect v1: vertical bands and a bowl\n"
     "of a few parts per thousand, fixed in the image) from SEQUENCE and its camera poses:\n"
-    "pairs of frames --gaps apart are brought together by the poses, and where one frame's\n"
+    "pairs of frames 15 and 30 apart are brought together by the poses, and where one frame's\n"
     "points land on the other's surface the relative depth difference is gathered per cell\n"
     "of the image (a self-calibration in the manner of Teichman, Miller and Thrun 2013,\n"
     "CLAMS). The poses may be the sequence's ground truth or a trajectory bitfuse replay\n"
