@@ -200,11 +200,8 @@ int cmd_calibrate_depth(int argc, char **argv)
         if (json) {
             s = app_json_print(result_json(seq, out, &cfg, c, n_no_pose, secs));
         } else {
-            float lo = c->mult[0], hi = c->mult[0];
-            for (uint32_t i = 1; i < c->grid_w * c->grid_h; i++) {
-                lo = c->mult[i] < lo ? c->mult[i] : lo;
-                hi = c->mult[i] > hi ? c->mult[i] : hi;
-            }
+            float lo, hi;
+            calib_depth_range(c, &lo, &hi);
             printf("bitfuse calibrate-depth: %s -> %s\n", seq, out);
             printf("  frames           %u with a pose (%u without), %u pairs\n", c->n_frames, n_no_pose, c->n_pairs);
             printf("  cells            %ux%u of %u px, %u measured\n", c->grid_w, c->grid_h, c->cell_px,

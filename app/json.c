@@ -191,11 +191,8 @@ void app_json_depth_correction(cJSON *parent, const char *path, const struct cal
     cJSON_AddNumberToObject(o, "cell_px", c->cell_px);
     cJSON_AddNumberToObject(o, "grid_w", c->grid_w);
     cJSON_AddNumberToObject(o, "grid_h", c->grid_h);
-    float lo = c->mult[0], hi = c->mult[0];
-    for (uint32_t i = 1; i < c->grid_w * c->grid_h; i++) {
-        lo = c->mult[i] < lo ? c->mult[i] : lo;
-        hi = c->mult[i] > hi ? c->mult[i] : hi;
-    }
+    float lo, hi;
+    calib_depth_range(c, &lo, &hi);
     add_float(o, "min_multiplier", lo);
     add_float(o, "max_multiplier", hi);
     cJSON_AddNumberToObject(o, "rms_before", c->rms_before);

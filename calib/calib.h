@@ -174,6 +174,8 @@ typedef struct calib_depth_frames {
 /* BF_FORMAT when no pair of frames is at a gap; *out written on success. */
 bf_status calib_depth_estimate(const calib_depth_config *cfg, const calib_depth_frames *in,
                                calib_depth_correction *out);
+/* The smallest and largest multiplier of the grid. */
+void calib_depth_range(const calib_depth_correction *c, float *lo, float *hi);
 /* The multiplier of every pixel (width x height floats). */
 void calib_depth_map(const calib_depth_correction *c, float *map);
 /* dst = round(src x map), 0 stays 0 (no depth), clamped to [1, 65535]; dst may be src. */

@@ -39,6 +39,15 @@ calib_depth_config calib_depth_config_default(void)
     };
 }
 
+void calib_depth_range(const calib_depth_correction *c, float *lo, float *hi)
+{
+    *lo = *hi = c->mult[0];
+    for (uint32_t i = 1; i < c->grid_w * c->grid_h; i++) {
+        *lo = fminf(*lo, c->mult[i]);
+        *hi = fmaxf(*hi, c->mult[i]);
+    }
+}
+
 /* The multiplier at every pixel: bilinear between cell centres, constant
  * beyond the outer centres. */
 void calib_depth_map(const calib_depth_correction *c, float *map)
