@@ -88,6 +88,12 @@ static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_
     while ((s = rgbd_source_next(src, &f)) == BF_OK) {
         bf_progress_update(&prog, ++seen);
         if (!frame_needed(c, f.index) || !f.depth) continue;
+        const bf_intrinsics *K = rgbd_source_intrinsics(src);
+        if (f.width != K->width || f.height != K->height) {
+            s = bf_fail(BF_FORMAT, "%s: frame %u is %ux%u, the sequence's camera %ux%u", seq, f.index, f.width,
+                        f.height, K->width, K->height);
+            break;
+        }
         bf_se3 T;
         bool has = traj ? bf_traj_interpolate(traj, f.t_depth_s, &T) : f.has_pose;
         if (!traj && has) T = f.T_wc;

@@ -161,6 +161,7 @@ d.update(width=320, height=240, cell_px=16)
 json.dump(d, open(sys.argv[2], 'w'))" "$T/flat.json" "$T/big.json"
 expect 3 "$B" replay "$T/seq" --out "$T/rp_big" --depth-correction "$T/big.json" --no-mesh
 mentions "the depth correction is for 320x240 depth images, the sequence's are 160x120"
+[ ! -e "$T/rp_big" ] || fail "replay with a depth correction of another size left an output folder"
 expect 3 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fu_big" --depth-correction "$T/big.json" --no-mesh
 mentions "320x240"
 expect 0 "$B" calibrate-depth --help
