@@ -116,6 +116,7 @@ done:
 
 typedef struct demo_report {
     char device[256];
+    char device_driver[256]; /* the driver's own words, e.g. Mesa's version */
     synth_result synth;
     uint32_t n_replayed;
     uint32_t n_points;
@@ -138,6 +139,7 @@ static cJSON *demo_json(const demo_report *r)
 {
     cJSON *o = app_json_stats("demo");
     cJSON_AddStringToObject(o, "device", r->device);
+    cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     cJSON_AddNumberToObject(o, "frames", r->synth.n_frames);
     cJSON_AddNumberToObject(o, "render_ms_per_frame_median", 1e3 * r->synth.median_frame_s);
     cJSON_AddNumberToObject(o, "valid_depth_share", r->synth.valid_share);
@@ -187,6 +189,7 @@ static gpu_context *demo_device(bool use_gpu, demo_report *r)
         return NULL;
     }
     snprintf(r->device, sizeof r->device, "%s", gpu_device_name(ctx));
+    snprintf(r->device_driver, sizeof r->device_driver, "%s", gpu_device(ctx)->driver_info);
     return ctx;
 }
 

@@ -76,6 +76,7 @@ typedef struct fuse_result {
     app_map_report out;
     double seconds;
     char device[256];
+    char device_driver[256]; /* the driver's own words, e.g. Mesa's version */
 } fuse_result;
 
 static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_source *src)
@@ -84,6 +85,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON *o = app_json_stats("fuse");
     cJSON_AddStringToObject(o, "sequence", a->seq);
     cJSON_AddStringToObject(o, "device", r->device);
+    cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_fusion_config(o, "config", &a->fcfg);
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &fuse_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", r->run.n_fused);
@@ -126,7 +128,10 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
-    if (s == BF_OK) snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+    if (s == BF_OK) {
+        snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+        snprintf(r.device_driver, sizeof r.device_driver, "%s", gpu_device(ctx)->driver_info);
+    }
     if (s == BF_OK) {
         recon_run_config rcfg = recon_run_config_default();
         rcfg.loop.fusion = a.fcfg;

@@ -112,7 +112,7 @@ static bf_status write_images(const render_images *im, const char *out, const ch
 typedef struct render_report {
     const render_args *a;
     uint32_t W, H;
-    const char *device;
+    const char *device, *device_driver;
     double hit_frac;
     uint32_t n_map_bricks, n_bricks, n_tris;
     const render_voxelise_stats *vst;
@@ -125,6 +125,7 @@ static cJSON *render_json(const render_report *r)
     const render_args *a = r->a;
     cJSON *o = app_json_stats("render");
     cJSON_AddStringToObject(o, "device", r->device);
+    cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     cJSON_AddNumberToObject(o, "width", r->W);
     cJSON_AddNumberToObject(o, "height", r->H);
     cJSON_AddStringToObject(o, "out", a->out);
@@ -276,7 +277,7 @@ int cmd_render(int argc, char **argv)
     if (s == BF_OK && a.json) {
         uint64_t n_hit = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
-        render_report r = {&a, W, H, gpu_device_name(ctx), (double)n_hit / ((double)W * H), n_map_bricks, n_bricks,
+        render_report r = {&a, W, H, gpu_device_name(ctx), gpu_device(ctx)->driver_info, (double)n_hit / ((double)W * H), n_map_bricks, n_bricks,
                            mesh.n_tris, &vst, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
         s = app_json_print(render_json(&r));
     } else if (s == BF_OK) {

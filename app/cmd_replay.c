@@ -462,6 +462,7 @@ typedef struct replay_result {
     double t_start_s;          /* bf_time_s() at the command's start */
     size_t cache_loaded_bytes; /* of the pipeline cache file */
     char device[256];
+    char device_driver[256]; /* the driver's own words, e.g. Mesa's version */
     app_store store;           /* --store */
     bool has_capture;          /* live: the capture thread's counts */
     capture_thread_stats cap;
@@ -522,6 +523,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON *o = app_json_stats(a->is_live_cmd ? "live" : "replay");
     cJSON_AddStringToObject(o, a->is_live_cmd ? "source" : "sequence", a->seq);
     cJSON_AddStringToObject(o, "device", r->device);
+    cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_recon_config(o, "config", &a->rcfg);
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &replay_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", c->frames);
@@ -852,6 +854,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);
     if (s == BF_OK) {
         snprintf(r.device, sizeof r.device, "%s", gpu_device_name(ctx));
+        snprintf(r.device_driver, sizeof r.device_driver, "%s", gpu_device(ctx)->driver_info);
         r.cache_loaded_bytes = gpu_pipeline_cache_loaded_bytes(ctx);
     }
     if (s == BF_OK) {

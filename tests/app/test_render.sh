@@ -149,10 +149,14 @@ expect 0 "$B" render --map "$T/S" --particles "$T/p.ply" --particle-radius 0.02 
     --size 160x120 --out "$T/both_j.png" --depth "$T/both_jd.png" --repeat 2 --json
 cmp -s "$T/both_d.png" "$T/both_jd.png" || fail "render --json drew another depth image"
 hits=$(py "$T/png.py" "$T/both_d.png" hits)
-py - "$T/out" "$hits" <<'PY' || fail "render --json: $(head -c 600 "$T/out")"
+"$B" devices > "$T/devices.txt" 2>&1 || fail "bitfuse devices failed: $(cat "$T/devices.txt")"
+py - "$T/out" "$hits" "$T/devices.txt" <<'PY' || fail "render --json: $(head -c 600 "$T/out")"
 import json, sys
 d = json.load(open(sys.argv[1]))
-ok = (d["command"] == "render" and d["width"] == 160 and d["particles"]["cells"] == 625
+devices = open(sys.argv[3]).read()
+# The device and its driver's version as `bitfuse devices` names them.
+ok = (d["device_driver"] != "" and d["device"] in devices and d["device_driver"] in devices
+      and d["command"] == "render" and d["width"] == 160 and d["particles"]["cells"] == 625
       and d["map"]["bricks"] > 0 and d["bricks"] == d["map"]["bricks"] and len(d["raycast_ms"]["sorted"]) == 2
       and d["raycast_ms"]["sorted"][0] <= d["raycast_ms"]["sorted"][1] and "particles_median" in d["raycast_ms"]
       and abs(d["hit_fraction"] - float(sys.argv[2])) <= 0.0005)  # png.py prints 3 decimals
