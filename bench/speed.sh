@@ -146,15 +146,22 @@ for v in "${VARS[@]}"; do
   run room "$SEQ" "" "$name" "$opts"
 done
 
-$PY - "$RESULTS" "$(git rev-parse --short HEAD)" "$FRAMES" "$DEV_FRAMES" "${DEV:+1}" <<'PYEOF'
+# The driver as the runs saw it (stats.json's device_driver): lavapipe's
+# speed depends on Mesa's version (docs/gpu.md, "The driver").
+DRIVER=$($PY -c 'import json, sys; print(json.load(open(sys.argv[1])).get("device_driver", "?"))' \
+  "$OUT/room-defaults/stats.json" 2>/dev/null || echo "?")
+if [ "$DRIVER" = "?" ]; then # runs kept from a build before stats.json named it
+  DRIVER=$($BIN devices 2>/dev/null | sed -n 's/^\* .*\[[^,]*, Vulkan [^,]*, \(.*\)\]$/\1/p')
+fi
+$PY - "$RESULTS" "$(git rev-parse --short HEAD)" "$FRAMES" "$DEV_FRAMES" "${DEV:+1}" "$DRIVER" <<'PYEOF'
 import sys
 sys.path.insert(0, "bench")
 from benchlib import pyplot, read_rows, write_table
-path, commit, frames, dev_frames, has_dev = sys.argv[1:6]
+path, commit, frames, dev_frames, has_dev, driver = sys.argv[1:7]
 rows = read_rows(path)
 write_table("docs/bench_speed.md", "The full loop: speed against error, real and synthetic",
             f"`bench/speed.sh` (generated; commit {commit}): `bitfuse replay SEQ --out R OPTIONS`, one run at a "
-            "time, lavapipe on 2 cores. `real`: the "
+            f"time, lavapipe ({driver}) on 2 cores. `real`: the "
             f"{dev_frames} 7-Scenes dev frames (DEV=...; surface: the sensor's depth at the run's poses against "
             "the run's mesh, `eval-surface --depth`); "
             f"`room`: the synthetic room, {frames} frames along fr1_xyz (surface: the mesh against the scene, "
