@@ -43,7 +43,7 @@ export DEBIAN_FRONTEND=noninteractive
 # lavapipe, the CPU Vulkan driver every run uses without a GPU, from Mesa 25
 # (bookworm-backports, Debian's own) when bookworm's is older: Debian 12's
 # Mesa 22.3 loads each storage-buffer word in a loop over the SIMD lanes, and
-# the same shaders run 1.4-3.1x faster on Mesa 25 with the same results
+# its ray-casts run 1.4-3.5x faster on Mesa 25 with the same results
 # (docs/gpu.md, "The driver"). Falls back to bookworm's Mesa when the
 # backports archive cannot be reached.
 MESA_MIN=25
