@@ -4,6 +4,8 @@
  * step: host binning, into the GPU pools, M particles/s binned, bricks,
  * whether the map was made anew, and (with --cast) the ray-cast's GPU time.
  *   bench_particles [--ply FILE | --random N] [--radius M] [--cell M] [--steps K] [--cast WxH]
+ *                   [--no-host-import]
+ * --no-host-import: the driver's own memory for the pools (gpu_config.no_host_import).
  * --random N: uniform in 2 x 1 x 1 m (bench/particles_sweep.sh's sets). */
 #include <math.h>
 #include <stdio.h>
@@ -45,6 +47,7 @@ int main(int argc, char **argv)
     uint64_t n_random = 0;
     render_particles_config pc = render_particles_config_default();
     uint32_t steps = 5, W = 0, H = 0;
+    gpu_config gc = {0};
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--ply") && i + 1 < argc) ply = argv[++i];
         else if (!strcmp(argv[i], "--random") && i + 1 < argc) n_random = strtoull(argv[++i], NULL, 10);
@@ -52,9 +55,10 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--cell") && i + 1 < argc) pc.cell_m = (float)atof(argv[++i]);
         else if (!strcmp(argv[i], "--steps") && i + 1 < argc) steps = (uint32_t)atoi(argv[++i]);
         else if (!strcmp(argv[i], "--cast") && i + 1 < argc && sscanf(argv[++i], "%ux%u", &W, &H) == 2) continue;
+        else if (!strcmp(argv[i], "--no-host-import")) gc.no_host_import = true;
         else {
-            fprintf(stderr, "usage: %s [--ply FILE | --random N] [--radius M] [--cell M] [--steps K] [--cast WxH]\n",
-                    argv[0]);
+            fprintf(stderr, "usage: %s [--ply FILE | --random N] [--radius M] [--cell M] [--steps K] [--cast WxH] "
+                    "[--no-host-import]\n", argv[0]);
             return 2;
         }
     }
@@ -75,7 +79,7 @@ int main(int argc, char **argv)
     for (uint64_t i = 0; i < 3 * n; i++) lo[i % 3] = fmin(lo[i % 3], xyz[i]), hi[i % 3] = fmax(hi[i % 3], xyz[i]);
     double cx = 0.5 * (lo[0] + hi[0]), cy = 0.5 * (lo[1] + hi[1]);
     gpu_context *ctx;
-    if (gpu_context_create(NULL, &ctx) != BF_OK) {
+    if (gpu_context_create(&gc, &ctx) != BF_OK) {
         fprintf(stderr, "bench_particles: %s\n", bf_last_error());
         return 1;
     }

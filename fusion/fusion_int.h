@@ -89,8 +89,9 @@ bf_status fusion__host_map_load(fusion_map *map, fusion_host_map *h);
 void fusion__host_map_free(fusion_host_map *h);
 /* map.c: n_entries free hash entries (no root, no next) into words. */
 void fusion__hash_empty(uint32_t *words, uint32_t n_entries);
-/* map.c: fills every buffer with the empty map's state (fusion_create). */
-bf_status fusion__reset(fusion_map *map);
+/* map.c: fills every buffer with the empty map's state; is_fresh: the
+ * buffers are new (fusion_create), so zeroed memory needs no zero fill. */
+bf_status fusion__reset(fusion_map *map, bool is_fresh);
 /* load.c: inserts a brick into the host copy h as the allocation kernel
  * would (its chunk and nodes created as needed) and says its slot; a brick
  * already there keeps its slot. BF_POOL_FULL when a pool ran out. */

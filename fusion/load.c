@@ -180,7 +180,7 @@ bf_status fusion_load(fusion_map *m, const hostmap *in)
     if (!direct) fusion__host_map_free(&h);
     if (s != BF_OK) {
         /* Back to the empty map it was: nothing half-loaded is left. */
-        bf_status r = fusion__reset(m);
+        bf_status r = fusion__reset(m, false);
         if (r != BF_OK) return r;
     }
     return s;

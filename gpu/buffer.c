@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 
 /* The first memory type allowed by type_bits that has all of required and
  * as many of the preferred flag sets (tried in order) as possible. */
@@ -28,6 +29,95 @@ static VkBufferUsageFlags vk_usage(uint32_t usage)
     return u;
 }
 
+/* The memory type for a buffer of this kind among type_bits: device
+ * memory device-local first (on a UMA device and lavapipe it is also
+ * host-visible and is then mapped, saving the staging copy); upload memory
+ * host-visible, coherent if it can; readback memory host-visible, cached
+ * and coherent if it can. */
+static uint32_t choose_type(const gpu_context *ctx, gpu_memory kind, uint32_t type_bits)
+{
+    if (kind == GPU_MEMORY_DEVICE) {
+        const VkMemoryPropertyFlags pref[] = {VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT};
+        return find_memory_type(ctx, type_bits, 0, pref, 1);
+    }
+    if (kind == GPU_MEMORY_UPLOAD) {
+        const VkMemoryPropertyFlags pref[] = {VK_MEMORY_PROPERTY_HOST_COHERENT_BIT};
+        return find_memory_type(ctx, type_bits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, pref, 1);
+    }
+    const VkMemoryPropertyFlags pref[] = {
+        VK_MEMORY_PROPERTY_HOST_CACHED_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+        VK_MEMORY_PROPERTY_HOST_CACHED_BIT, VK_MEMORY_PROPERTY_HOST_COHERENT_BIT};
+    return find_memory_type(ctx, type_bits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, pref, 3);
+}
+
+/* Large buffers on a CPU device (gpu_context.host_import_align). */
+static bool wants_import(const gpu_context *ctx, uint64_t bytes)
+{
+    return ctx->host_import_align && bytes >= GPU_HUGE_PAGE_MIN_BYTES;
+}
+
+/* An anonymous private mapping of bytes rounded up to whole huge pages,
+ * aligned to one and advised onto them; NULL when the kernel refuses. */
+static void *map_huge(size_t bytes, size_t *out_bytes)
+{
+    const size_t huge = (size_t)2 << 20;
+    size_t n = (bytes + huge - 1) & ~(huge - 1);
+    char *p = mmap(NULL, n + huge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) return NULL;
+    char *a = (char *)(((uintptr_t)p + huge - 1) & ~(uintptr_t)(huge - 1));
+    if (a > p) munmap(p, (size_t)(a - p));
+    if (p + n + huge > a + n) munmap(a + n, (size_t)(p + n + huge - (a + n)));
+    bf_advise_huge(a, n);
+    *out_bytes = n;
+    return a;
+}
+
+/* Backs buf with memory of our own mapping, imported: anonymous memory
+ * takes transparent huge pages where the driver's memfd does not, so the
+ * first touch of a large pool faults once per 2 MiB instead of per 4 KiB
+ * and the shaders' scattered reads miss the TLB less. false (nothing
+ * kept) when any step says no; the caller then allocates as usual. */
+static bool import_host(gpu_buffer *buf, const VkMemoryRequirements *req)
+{
+    gpu_context *ctx = buf->ctx;
+    gpu__vk *vk = &ctx->inst.vk;
+    size_t n = 0;
+    void *p = map_huge((size_t)req->size, &n);
+    if (!p) return false;
+    const uint64_t max_alloc = ctx->info.limits.max_memory_allocation_size;
+    VkMemoryHostPointerPropertiesEXT hp = {.sType = VK_STRUCTURE_TYPE_MEMORY_HOST_POINTER_PROPERTIES_EXT};
+    uint32_t type = UINT32_MAX;
+    if ((!max_alloc || n <= max_alloc) &&
+        ctx->GetMemoryHostPointerPropertiesEXT(ctx->device, VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT, p,
+                                               &hp) == VK_SUCCESS)
+        type = choose_type(ctx, buf->kind, req->memoryTypeBits & hp.memoryTypeBits);
+    VkMemoryPropertyFlags flags = type == UINT32_MAX ? 0 : ctx->mem_props.memoryTypes[type].propertyFlags;
+    if (!(flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT)) goto no;
+    VkImportMemoryHostPointerInfoEXT imp = {
+        .sType = VK_STRUCTURE_TYPE_IMPORT_MEMORY_HOST_POINTER_INFO_EXT,
+        .handleType = VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT,
+        .pHostPointer = p,
+    };
+    VkMemoryAllocateInfo ai = {
+        .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO, .pNext = &imp, .allocationSize = n, .memoryTypeIndex = type};
+    if (vk->AllocateMemory(ctx->device, &ai, NULL, &buf->memory) != VK_SUCCESS) goto no;
+    if (vk->BindBufferMemory(ctx->device, buf->buffer, buf->memory, 0) != VK_SUCCESS) {
+        vk->FreeMemory(ctx->device, buf->memory, NULL);
+        buf->memory = VK_NULL_HANDLE;
+        goto no;
+    }
+    gpu__name(ctx, VK_OBJECT_TYPE_DEVICE_MEMORY, (uint64_t)buf->memory, "%s.memory (imported)", buf->name);
+    buf->host_alloc = p;
+    buf->host_alloc_bytes = n;
+    buf->mapped = p; /* the memory is our mapping: no vkMapMemory */
+    buf->is_coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    buf->is_cached = flags & VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
+    return true;
+no:
+    munmap(p, n);
+    return false;
+}
+
 bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_buffer **out)
 {
     bf_status status = BF_OK;
@@ -47,8 +137,16 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
     buf->usage = desc->usage ? desc->usage : GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER;
     snprintf(buf->name, sizeof buf->name, "%s", name);
 
+    const bool is_import = wants_import(ctx, desc->size_bytes);
+    /* Declared importable; such a buffer may still be bound to ordinary
+     * memory when the import says no. */
+    VkExternalMemoryBufferCreateInfo ext = {
+        .sType = VK_STRUCTURE_TYPE_EXTERNAL_MEMORY_BUFFER_CREATE_INFO,
+        .handleTypes = VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT,
+    };
     VkBufferCreateInfo bi = {
         .sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO,
+        .pNext = is_import ? &ext : NULL,
         .size = desc->size_bytes,
         .usage = vk_usage(buf->usage),
         .sharingMode = VK_SHARING_MODE_EXCLUSIVE,
@@ -57,24 +155,13 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
     gpu__name(ctx, VK_OBJECT_TYPE_BUFFER, (uint64_t)buf->buffer, "%s", buf->name);
     VkMemoryRequirements req;
     vk->GetBufferMemoryRequirements(ctx->device, buf->buffer, &req);
-
-    uint32_t type = UINT32_MAX;
-    bool want_map = true;
-    if (desc->memory == GPU_MEMORY_DEVICE) {
-        /* Device-local first; on a UMA device (and lavapipe) it is also
-         * host-visible and is then mapped, saving the staging copy. */
-        const VkMemoryPropertyFlags pref[] = {VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT};
-        type = find_memory_type(ctx, req.memoryTypeBits, 0, pref, 1);
-        want_map = !ctx->force_staging;
-    } else if (desc->memory == GPU_MEMORY_UPLOAD) {
-        const VkMemoryPropertyFlags pref[] = {VK_MEMORY_PROPERTY_HOST_COHERENT_BIT};
-        type = find_memory_type(ctx, req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, pref, 1);
-    } else {
-        const VkMemoryPropertyFlags pref[] = {
-            VK_MEMORY_PROPERTY_HOST_CACHED_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
-            VK_MEMORY_PROPERTY_HOST_CACHED_BIT, VK_MEMORY_PROPERTY_HOST_COHERENT_BIT};
-        type = find_memory_type(ctx, req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, pref, 3);
+    if (is_import && import_host(buf, &req)) {
+        *out = buf;
+        return BF_OK;
     }
+
+    uint32_t type = choose_type(ctx, desc->memory, req.memoryTypeBits);
+    bool want_map = desc->memory != GPU_MEMORY_DEVICE || !ctx->force_staging;
     if (type == UINT32_MAX) {
         status = bf_fail(BF_UNSUPPORTED, "gpu buffer %s: no suitable memory type on %s", buf->name, ctx->info.name);
         goto fail;
@@ -104,7 +191,7 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
     /* A large buffer the host maps (lavapipe: all of them) on huge pages
      * where the kernel gives them on request: the shaders' scattered reads
      * of the pools miss the TLB less. Elsewhere (device memory mapped
-     * through a driver) the advice is refused, harmlessly. */
+     * through a driver, or Mesa 25's memfd) the advice is refused, harmlessly. */
     if (buf->mapped && req.size >= GPU_HUGE_PAGE_MIN_BYTES) bf_advise_huge(buf->mapped, (size_t)req.size);
     *out = buf;
     return BF_OK;
@@ -119,9 +206,10 @@ void gpu_buffer_destroy(gpu_buffer *buf)
     if (!buf) return;
     gpu_context *ctx = buf->ctx;
     gpu__vk *vk = &ctx->inst.vk;
-    if (buf->mapped) vk->UnmapMemory(ctx->device, buf->memory);
+    if (buf->mapped && !buf->host_alloc) vk->UnmapMemory(ctx->device, buf->memory);
     if (buf->buffer) vk->DestroyBuffer(ctx->device, buf->buffer, NULL);
     if (buf->memory) vk->FreeMemory(ctx->device, buf->memory, NULL);
+    if (buf->host_alloc) munmap(buf->host_alloc, buf->host_alloc_bytes); /* after the memory that used it */
 #ifndef NDEBUG
     memset(buf, 0xff, sizeof *buf);
 #endif
@@ -133,6 +221,8 @@ const char *gpu_buffer_name(const gpu_buffer *buf) { return buf->name; }
 VkBuffer gpu_buffer_handle(const gpu_buffer *buf) { return buf->buffer; }
 void *gpu_buffer_map(const gpu_buffer *buf) { return buf->mapped; }
 void *gpu_buffer_map_cached(const gpu_buffer *buf) { return buf->is_cached && buf->is_coherent ? buf->mapped : NULL; }
+bool gpu_buffer_is_imported(const gpu_buffer *buf) { return buf->host_alloc != NULL; }
+bool gpu_buffer_created_zero(const gpu_buffer *buf) { return buf->host_alloc != NULL; }
 
 bf_status gpu_buffer_flush(gpu_buffer *buf)
 {

@@ -508,13 +508,16 @@ static bf_status create_device(gpu_context *ctx)
         .queueCount = 1,
         .pQueuePriorities = &priority,
     };
-    const char *swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
+    const char *exts[2];
+    uint32_t n_exts = 0;
+    if (ctx->surface) exts[n_exts++] = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
+    if (ctx->host_import_align) exts[n_exts++] = VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME;
     VkDeviceCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO,
         .queueCreateInfoCount = 1,
         .pQueueCreateInfos = &queue,
-        .enabledExtensionCount = ctx->surface ? 1 : 0,
-        .ppEnabledExtensionNames = &swapchain_ext,
+        .enabledExtensionCount = n_exts,
+        .ppEnabledExtensionNames = exts,
     };
     GPU__CHECK(ctx->inst.vk.CreateDevice(ctx->phys, &info, NULL, &ctx->device), ctx->info.name);
     gpu__vk *vk = &ctx->inst.vk;
@@ -529,6 +532,11 @@ static bf_status create_device(gpu_context *ctx)
         GPU__VK_SWAPCHAIN(GPU__LOAD)
     }
 #undef GPU__LOAD
+    if (ctx->host_import_align) {
+        ctx->GetMemoryHostPointerPropertiesEXT = (PFN_vkGetMemoryHostPointerPropertiesEXT)vk->GetDeviceProcAddr(
+            ctx->device, "vkGetMemoryHostPointerPropertiesEXT");
+        if (!ctx->GetMemoryHostPointerPropertiesEXT) ctx->host_import_align = 0;
+    }
     vk->GetDeviceQueue(ctx->device, ctx->info.queue_family, 0, &ctx->queue);
     gpu__name(ctx, VK_OBJECT_TYPE_DEVICE, (uint64_t)(uintptr_t)ctx->device, "gpu.device");
     gpu__name(ctx, VK_OBJECT_TYPE_QUEUE, (uint64_t)(uintptr_t)ctx->queue, "gpu.compute_queue");
@@ -631,6 +639,26 @@ static bool has_device_extension(const gpu_context *ctx, const char *name)
     return false;
 }
 
+/* The alignment of host memory a CPU device imports, or 0 where buffers
+ * keep the driver's memory. Only a CPU device: its device memory is host
+ * memory anyway, and Mesa 25's lavapipe takes it from a memfd (shared
+ * memory), which this kernel's transparent huge pages skip; memory we map
+ * ourselves is anonymous and takes them (docs/gpu.md, "The driver"). A GPU
+ * would read imported memory across the bus. */
+static VkDeviceSize host_import_alignment(const gpu_context *ctx, const gpu_config *cfg)
+{
+    if ((cfg && cfg->no_host_import) || ctx->force_staging || ctx->info.type != VK_PHYSICAL_DEVICE_TYPE_CPU ||
+        !has_device_extension(ctx, VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME))
+        return 0;
+    VkPhysicalDeviceExternalMemoryHostPropertiesEXT host = {
+        .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_EXTERNAL_MEMORY_HOST_PROPERTIES_EXT};
+    VkPhysicalDeviceProperties2 p2 = {.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &host};
+    ctx->inst.vk.GetPhysicalDeviceProperties2(ctx->phys, &p2);
+    VkDeviceSize a = host.minImportedHostPointerAlignment;
+    /* A power of two that divides a huge page, or not at all. */
+    return a && !(a & (a - 1)) && a <= ((VkDeviceSize)2 << 20) ? a : 0;
+}
+
 /* The window's surface (made by the caller's function on our instance),
  * and a compute queue family of the chosen device that presents to it:
  * the one device choice picked when it can, else the first that can
@@ -695,6 +723,7 @@ bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
         if (status != BF_OK) goto fail;
     }
 
+    ctx->host_import_align = host_import_alignment(ctx, cfg);
     status = create_device(ctx);
     if (status != BF_OK) goto fail;
     status = create_commands(ctx, cfg);
@@ -746,6 +775,7 @@ void gpu_context_destroy(gpu_context *ctx)
 const gpu_device_info *gpu_device(const gpu_context *ctx) { return &ctx->info; }
 const gpu_limits *gpu_device_limits(const gpu_context *ctx) { return &ctx->info.limits; }
 VkPhysicalDeviceType gpu_device_type(const gpu_context *ctx) { return ctx->info.type; }
+bool gpu_imports_host_memory(const gpu_context *ctx) { return ctx->host_import_align != 0; }
 
 const char *gpu_device_name(const gpu_context *ctx) { return ctx->info.name; }
 bool gpu_validation_enabled(const gpu_context *ctx) { return ctx->inst.has_validation; }

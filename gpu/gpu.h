@@ -74,6 +74,10 @@ typedef struct gpu_config {
     /* Treat device memory as not host-visible, as on a discrete GPU, so that
      * uploads and downloads go through the staging buffer (tests use it). */
     bool force_staging;
+    /* On a CPU device (lavapipe) large buffers live in memory bitfuse maps
+     * itself and imports (VK_EXT_external_memory_host), so that they can be
+     * on huge pages; this keeps the driver's own allocations instead. */
+    bool no_host_import;
     const char *loader;         /* Vulkan loader library; NULL: "libvulkan.so.1" */
     /* Presentation to a window (view/), asked for only when one is wanted:
      * the instance extensions the window system needs (GLFW's
@@ -156,6 +160,10 @@ const gpu_device_info *gpu_device(const gpu_context *ctx);
 const gpu_limits *gpu_device_limits(const gpu_context *ctx);
 const char *gpu_device_name(const gpu_context *ctx);
 VkPhysicalDeviceType gpu_device_type(const gpu_context *ctx);
+/* Large buffers are backed by memory bitfuse maps itself and imports
+ * (gpu_config.no_host_import; a CPU device offering
+ * VK_EXT_external_memory_host). */
+bool gpu_imports_host_memory(const gpu_context *ctx);
 
 bool gpu_validation_enabled(const gpu_context *ctx);
 /* Validation warnings and errors reported for this context so far (each is
@@ -217,6 +225,13 @@ void *gpu_buffer_map(const gpu_buffer *buf);
  * devices), NULL otherwise (uncached, write-combined mappings are slow to
  * read). */
 void *gpu_buffer_map_cached(const gpu_buffer *buf);
+/* The buffer's memory is imported from bitfuse's own mapping (huge pages
+ * where the kernel gives them; gpu_imports_host_memory). */
+bool gpu_buffer_is_imported(const gpu_buffer *buf);
+/* The buffer held zeros when it was created (imported: fresh anonymous
+ * memory). Its content since is the caller's to know: a new buffer's
+ * zero fill can be left out, leaving its pages unfaulted. */
+bool gpu_buffer_created_zero(const gpu_buffer *buf);
 bf_status gpu_buffer_flush(gpu_buffer *buf);
 
 /* Synchronous transfers: copy size bytes between host memory and the buffer

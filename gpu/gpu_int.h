@@ -149,6 +149,10 @@ struct gpu_context {
     VkSurfaceKHR surface;            /* presentation only (gpu_config.make_surface), owned */
     uint32_t n_swapchains;           /* alive, checked at destroy */
     bool force_staging;
+    /* VK_EXT_external_memory_host is enabled: large buffers are imported
+     * from our own huge-page mappings (buffer.c); 0 alignment when not. */
+    VkDeviceSize host_import_align;
+    PFN_vkGetMemoryHostPointerPropertiesEXT GetMemoryHostPointerPropertiesEXT;
 
     VkPipelineCache pipeline_cache;
     char cache_path[4096];           /* "" when not persisted */
@@ -186,6 +190,8 @@ struct gpu_buffer {
     bool is_coherent;
     bool is_cached;                  /* host-cached: host reads of the mapping are ordinary loads */
     void *mapped;                    /* NULL if not (or not to be) mapped */
+    void *host_alloc;                /* our mapping the memory was imported from, or NULL */
+    size_t host_alloc_bytes;
     char name[64];
 };
 

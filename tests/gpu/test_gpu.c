@@ -265,15 +265,18 @@ BF_TEST(validation_without_layer_fails_clearly)
 
 /* ------------------------------------------------------------ buffers */
 
-static void round_trip(bool force_staging)
+/* N words through a shader and back; large (above the 4 MiB from which a
+ * CPU device's buffers are imported) or not. */
+static void round_trip(bool force_staging, bool is_large, bool no_import)
 {
     uint32_t v0 = gpu_validation_message_total();
     gpu_config cfg = test_config();
     cfg.force_staging = force_staging;
+    cfg.no_host_import = no_import;
     cfg.staging_bytes = 64u << 10; /* several staging chunks per transfer */
     gpu_context *ctx = NULL;
     OPEN_CTX(ctx, &cfg);
-    enum { N = 100003 }; /* not a multiple of the local size */
+    const uint32_t N = is_large ? 1500007 : 100003; /* not a multiple of the local size */
     uint32_t *host = malloc(N * sizeof *host), *back = malloc(N * sizeof *back);
     CHECK(host && back);
     uint32_t seed = 12345;
@@ -288,6 +291,19 @@ static void round_trip(bool force_staging)
     gpu_buffer_desc bd = {.name = "test.data", .size_bytes = N * sizeof(uint32_t) + 64};
     CHECK_OK(gpu_buffer_create(ctx, &bd, &data));
     CHECK(force_staging ? gpu_buffer_map(data) == NULL : true);
+    /* Lavapipe (both Mesa 22.3 and 25) offers VK_EXT_external_memory_host:
+     * its large buffers are imported, from a mapping aligned to a huge page. */
+    bool is_cpu = gpu_device_type(ctx) == VK_PHYSICAL_DEVICE_TYPE_CPU;
+    if (strstr(gpu_device_name(ctx), "llvmpipe") || !is_cpu || no_import || force_staging)
+        CHECK(gpu_imports_host_memory(ctx) == (is_cpu && !no_import && !force_staging));
+    bool want_import = gpu_imports_host_memory(ctx) && is_large;
+    CHECK(gpu_buffer_is_imported(data) == want_import);
+    CHECK(gpu_buffer_created_zero(data) == want_import);
+    if (want_import) { /* our own mapping: aligned to a huge page, zero until written */
+        CHECK((uintptr_t)gpu_buffer_map(data) % (2u << 20) == 0);
+        const uint32_t *w = gpu_buffer_map(data);
+        for (uint32_t i = 0; i < N; i += 4099) CHECK_EQ_INT(w[i], 0);
+    }
     CHECK_OK(gpu_buffer_fill(data, N * sizeof(uint32_t), 64, 0xabcdabcdu)); /* guard words */
     CHECK_OK(gpu_buffer_upload(data, 0, host, N * sizeof(uint32_t)));
     CHECK_OK(gpu_bindings_create(ctx, 1, "test.data_bindings", &b));
@@ -314,8 +330,10 @@ static void round_trip(bool force_staging)
     CLOSE_CTX_CLEAN(ctx, v0);
 }
 
-BF_TEST(buffer_round_trip_shader_adds_one) { round_trip(false); }
-BF_TEST(buffer_round_trip_through_staging_as_on_a_discrete_gpu) { round_trip(true); }
+BF_TEST(buffer_round_trip_shader_adds_one) { round_trip(false, false, false); }
+BF_TEST(buffer_round_trip_through_staging_as_on_a_discrete_gpu) { round_trip(true, true, false); }
+BF_TEST(large_buffer_round_trip_imported_host_memory) { round_trip(false, true, false); }
+BF_TEST(large_buffer_round_trip_driver_memory) { round_trip(false, true, true); }
 
 BF_TEST(recorded_fill_and_copy)
 {
