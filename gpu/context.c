@@ -731,10 +731,11 @@ bf_status gpu_context_create(const gpu_config *cfg, gpu_context **out)
     status = gpu__pipeline_cache_open(ctx, cfg);
     if (status != BF_OK) goto fail;
 
-    bf_info("gpu: %s (%s, Vulkan %u.%u.%u%s%s%s)", ctx->info.name, gpu_device_type_name(ctx->info.type),
+    bf_info("gpu: %s (%s, Vulkan %u.%u.%u%s%s%s%s)", ctx->info.name, gpu_device_type_name(ctx->info.type),
             VK_API_VERSION_MAJOR(ctx->info.api_version), VK_API_VERSION_MINOR(ctx->info.api_version),
             VK_API_VERSION_PATCH(ctx->info.api_version), ctx->inst.has_validation ? ", validation on" : "",
-            ctx->staging ? ", staged transfers" : "", ctx->surface ? ", presenting" : "");
+            ctx->staging ? ", staged transfers" : "", ctx->host_import_align ? ", imported host memory" : "",
+            ctx->surface ? ", presenting" : "");
     *out = ctx;
     return BF_OK;
 
