@@ -50,6 +50,7 @@ static cJSON *json_limits(const gpu_limits *l)
     cJSON_AddBoolToObject(o, "has_timestamps", l->has_timestamps);
     cJSON_AddNumberToObject(o, "timestamp_valid_bits", l->timestamp_valid_bits);
     cJSON_AddNumberToObject(o, "timestamp_period_ns", l->timestamp_period_ns);
+    cJSON_AddNumberToObject(o, "host_import_alignment", (double)l->host_import_alignment);
     cJSON *heaps = cJSON_AddArrayToObject(o, "heaps");
     for (uint32_t h = 0; h < l->n_heaps; h++) {
         cJSON *heap = cJSON_CreateObject();
@@ -134,6 +135,14 @@ static void print_text(const gpu_device_info *d, uint32_t n, uint32_t chosen)
                    (double)l->timestamp_period_ns);
         else
             printf("     timestamps        no (stage times unavailable)\n");
+        if (!l->host_import_alignment)
+            printf("     host import       no (VK_EXT_external_memory_host absent)\n");
+        else if (d[i].type == VK_PHYSICAL_DEVICE_TYPE_CPU)
+            printf("     host import       yes, %llu-byte alignment: buffers of 4 MiB and more are bitfuse's own "
+                   "memory, on huge pages\n", (unsigned long long)l->host_import_alignment);
+        else
+            printf("     host import       offered, %llu-byte alignment; not used on a GPU (its own memory is "
+                   "nearer)\n", (unsigned long long)l->host_import_alignment);
         for (uint32_t h = 0; h < l->n_heaps; h++)
             printf("     memory heap %u     %.1f GiB%s\n", h, (double)l->heaps[h].size_bytes / (1u << 30),
                    l->heaps[h].is_device_local ? ", device-local" : "");

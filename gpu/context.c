@@ -313,6 +313,17 @@ static int type_rank(VkPhysicalDeviceType type)
     }
 }
 
+static bool device_has_extension(const gpu__vk *vk, VkPhysicalDevice phys, const char *name)
+{
+    VkExtensionProperties props[512];
+    uint32_t n = 512;
+    VkResult r = vk->EnumerateDeviceExtensionProperties(phys, NULL, &n, props);
+    if (r != VK_SUCCESS && r != VK_INCOMPLETE) return false;
+    for (uint32_t i = 0; i < n; i++)
+        if (!strcmp(props[i].extensionName, name)) return true;
+    return false;
+}
+
 void gpu__query_device(const gpu__instance *inst, VkPhysicalDevice phys, gpu_device_info *info)
 {
     const gpu__vk *vk = &inst->vk;
@@ -362,6 +373,14 @@ void gpu__query_device(const gpu__instance *inst, VkPhysicalDevice phys, gpu_dev
     lim->max_push_constants_size = l->maxPushConstantsSize;
     lim->max_per_stage_storage_buffers = l->maxPerStageDescriptorStorageBuffers;
     lim->timestamp_period_ns = l->timestampPeriod;
+    if (p0.apiVersion >= VK_API_VERSION_1_1 &&
+        device_has_extension(vk, phys, VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME)) {
+        VkPhysicalDeviceExternalMemoryHostPropertiesEXT host = {
+            .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_EXTERNAL_MEMORY_HOST_PROPERTIES_EXT};
+        VkPhysicalDeviceProperties2 ph = {.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &host};
+        vk->GetPhysicalDeviceProperties2(phys, &ph);
+        lim->host_import_alignment = host.minImportedHostPointerAlignment;
+    }
 
     VkPhysicalDeviceMemoryProperties mem;
     vk->GetPhysicalDeviceMemoryProperties(phys, &mem);
@@ -630,13 +649,7 @@ fail:
 
 static bool has_device_extension(const gpu_context *ctx, const char *name)
 {
-    VkExtensionProperties props[512];
-    uint32_t n = 512;
-    VkResult r = ctx->inst.vk.EnumerateDeviceExtensionProperties(ctx->phys, NULL, &n, props);
-    if (r != VK_SUCCESS && r != VK_INCOMPLETE) return false;
-    for (uint32_t i = 0; i < n; i++)
-        if (!strcmp(props[i].extensionName, name)) return true;
-    return false;
+    return device_has_extension(&ctx->inst.vk, ctx->phys, name);
 }
 
 /* The alignment of host memory a CPU device imports, or 0 where buffers
@@ -647,14 +660,9 @@ static bool has_device_extension(const gpu_context *ctx, const char *name)
  * would read imported memory across the bus. */
 static VkDeviceSize host_import_alignment(const gpu_context *ctx, const gpu_config *cfg)
 {
-    if ((cfg && cfg->no_host_import) || ctx->force_staging || ctx->info.type != VK_PHYSICAL_DEVICE_TYPE_CPU ||
-        !has_device_extension(ctx, VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME))
+    if ((cfg && cfg->no_host_import) || ctx->force_staging || ctx->info.type != VK_PHYSICAL_DEVICE_TYPE_CPU)
         return 0;
-    VkPhysicalDeviceExternalMemoryHostPropertiesEXT host = {
-        .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_EXTERNAL_MEMORY_HOST_PROPERTIES_EXT};
-    VkPhysicalDeviceProperties2 p2 = {.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &host};
-    ctx->inst.vk.GetPhysicalDeviceProperties2(ctx->phys, &p2);
-    VkDeviceSize a = host.minImportedHostPointerAlignment;
+    VkDeviceSize a = ctx->info.limits.host_import_alignment;
     /* A power of two that divides a huge page, or not at all. */
     return a && !(a & (a - 1)) && a <= ((VkDeviceSize)2 << 20) ? a : 0;
 }

@@ -115,6 +115,10 @@ typedef struct gpu_limits {
     bool has_timestamps;                    /* the compute queue can write timestamps */
     uint32_t timestamp_valid_bits;          /* of the compute queue family, 0 if none */
     float timestamp_period_ns;              /* nanoseconds per timestamp tick */
+    /* VK_EXT_external_memory_host's minImportedHostPointerAlignment; 0
+     * without the extension. A CPU device's large buffers are imported
+     * (gpu_imports_host_memory). */
+    uint64_t host_import_alignment;
     uint32_t n_heaps;
     gpu_heap heaps[GPU_MAX_HEAPS];
 } gpu_limits;
