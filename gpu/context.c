@@ -647,11 +647,6 @@ fail:
     return status;
 }
 
-static bool has_device_extension(const gpu_context *ctx, const char *name)
-{
-    return device_has_extension(&ctx->inst.vk, ctx->phys, name);
-}
-
 /* The alignment of host memory a CPU device imports, or 0 where buffers
  * keep the driver's memory. Only a CPU device: its device memory is host
  * memory anyway, and Mesa 25's lavapipe takes it from a memfd (shared
@@ -679,7 +674,7 @@ static bf_status open_surface(gpu_context *ctx, const gpu_config *cfg)
         return status;
     }
     gpu__vk *vk = &ctx->inst.vk;
-    if (!has_device_extension(ctx, VK_KHR_SWAPCHAIN_EXTENSION_NAME))
+    if (!device_has_extension(&ctx->inst.vk, ctx->phys, VK_KHR_SWAPCHAIN_EXTENSION_NAME))
         return bf_fail(BF_UNSUPPORTED, "%s cannot present to a window: no %s", ctx->info.name,
                        VK_KHR_SWAPCHAIN_EXTENSION_NAME);
     VkQueueFamilyProperties fams[32];
