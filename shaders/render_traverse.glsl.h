@@ -269,24 +269,39 @@ uint render_particles_box_mask(ivec3 l, ivec3 h)
 void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 c1, uint level, ivec3 B, uint slot_B, float fine_m, float r, float s_lo, bool lod, inout float best,
                              inout vec3 best_c)
 {
-    ivec3 k0 = c0 >> 3, k1 = c1 >> 3, b0 = k0 >> 3, b1 = k1 >> 3;
-    for (int bz = b0.z; bz <= b1.z; bz++)
-        for (int by = b0.y; by <= b1.y; by++)
-            for (int bx = b0.x; bx <= b1.x; bx++) {
-                ivec3 kb = ivec3(bx, by, bz);
-                uint sl = slot_B;
-                render_pwork++;
-                if (kb != B) {
-                    uint node = render_particles_node(m, kb, level);
-                    if (node == FUSION_NONE) continue;
-                    sl = render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
-                    if (sl >= FUSION_LOCKED) continue;
-                }
-                ivec3 lo = clamp(k0 - kb * 8, ivec3(0), ivec3(7)), hi = clamp(k1 - kb * 8, ivec3(0), ivec3(7));
-                ivec3 w0 = ivec3(lo.x >> 2, lo.y >> 2, lo.z >> 1), w1 = ivec3(hi.x >> 2, hi.y >> 2, hi.z >> 1);
-                for (int wz = w0.z; wz <= w1.z; wz++)
-                    for (int wy = w0.y; wy <= w1.y; wy++)
-                        for (int wx = w0.x; wx <= w1.x; wx++) {
+    ivec3 k0 = c0 >> 3, k1 = c1 >> 3;
+    /* The box's sub-brick words on the coarse grid (4 x 4 x 2 cells each;
+     * a brick holds 2 x 2 x 4 of them) in one loop over a 3-d counter, z
+     * fastest (a brick spans most words along z): nested loops cost
+     * llvmpipe an execution mask per level. The brick's slot is looked up
+     * when the brick changes. */
+    ivec3 gw0 = ivec3(k0.x >> 2, k0.y >> 2, k0.z >> 1), gw1 = ivec3(k1.x >> 2, k1.y >> 2, k1.z >> 1);
+    ivec3 g = gw0, kc_last = ivec3(-2147483647);
+    uint sl = FUSION_NONE;
+    bool more = true;
+    while (more) {
+        ivec3 gc = g;
+        if (++g.z > gw1.z) {
+            g.z = gw0.z;
+            if (++g.y > gw1.y) {
+                g.y = gw0.y;
+                more = ++g.x <= gw1.x;
+            }
+        }
+        ivec3 kc = ivec3(gc.x >> 1, gc.y >> 1, gc.z >> 2);
+        if (kc != kc_last) {
+            kc_last = kc;
+            render_pwork++;
+            sl = slot_B;
+            if (kc != B) {
+                uint node = render_particles_node(m, kc, level);
+                sl = node == FUSION_NONE ? FUSION_NONE : render_node_word(node * FUSION_NODE_WORDS + FUSION_NODE_BRICK);
+                if (sl >= FUSION_LOCKED) sl = FUSION_NONE;
+            }
+        }
+        if (sl == FUSION_NONE) continue;
+        int wx = gc.x & 1, wy = gc.y & 1, wz = gc.z & 3;
+        ivec3 lo = k0 - kc * 8, hi = k1 - kc * 8;
                             render_pwork++;
                             ivec3 q0 = ivec3(4 * wx, 4 * wy, 2 * wz);
                             uint wi = uint(wx + 2 * wy + 4 * wz), sw = render_sign_word(sl, wi);
@@ -299,7 +314,7 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                 int b = findLSB(occ);
                                 occ &= occ - 1u;
                                 render_pwork++;
-                                ivec3 k = kb * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
+                                ivec3 k = kc * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
                                 if (lod) {
                                     /* Level of detail: the coarse cell's centres as one sphere at its centre. */
                                     render_particles_try(ray, (vec3(k) + 0.5) * (8.0 * fine_m), r, s_lo, true, best, best_c);
@@ -342,7 +357,6 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
                                 }
                             }
                         }
-            }
 }
 
 bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_lo, float voxel_m, render_ray ray,
