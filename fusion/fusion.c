@@ -406,6 +406,15 @@ fusion_stage_ms fusion_last_stage_ms(const fusion_map *m)
     return t;
 }
 
+uint64_t fusion_reserved_bytes(const fusion_map *m)
+{
+    if (!m) return 0;
+    return gpu_buffer_size(m->hash) + gpu_buffer_size(m->nodes) + gpu_buffer_size(m->info) + gpu_buffer_size(m->sign) +
+           gpu_buffer_size(m->conf) + gpu_buffer_size(m->free_stack) + gpu_buffer_size(m->stamp) +
+           gpu_buffer_size(m->locks) + gpu_buffer_size(m->cmask) + gpu_buffer_size(m->chead) +
+           gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
+}
+
 bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
 {
     uint32_t cnt[FUSION_CNT_WORDS];
@@ -454,10 +463,7 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
                                                (uint64_t)st.n_colour_units * FUSION_COLOUR_UNIT_WORDS * 4
                                          : 0;
     st.bytes_total = st.bytes_sign + st.bytes_conf + st.bytes_info + st.bytes_nodes + st.bytes_hash;
-    st.bytes_reserved = gpu_buffer_size(m->hash) + gpu_buffer_size(m->nodes) + gpu_buffer_size(m->info) +
-                        gpu_buffer_size(m->sign) + gpu_buffer_size(m->conf) + gpu_buffer_size(m->free_stack) +
-                        gpu_buffer_size(m->stamp) + gpu_buffer_size(m->locks) + gpu_buffer_size(m->cmask) +
-                        gpu_buffer_size(m->chead) + gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
+    st.bytes_reserved = fusion_reserved_bytes(m);
     st.ms_upload = m->ms_upload, st.ms_alloc = m->ms_alloc;
     st.ms_subcache = m->ms_subcache, st.ms_window = m->ms_window, st.ms_colour = m->ms_colour;
     *out = st;

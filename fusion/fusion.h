@@ -166,6 +166,9 @@ fusion_stage_ms fusion_last_stage_ms(const fusion_map *map);
 /* Downloads the map (counters, records, bit planes) and fills *out: for
  * reports at the end of a run, not per frame. */
 bf_status fusion_get_stats(fusion_map *map, fusion_stats *out);
+/* GPU memory the map's pools take (fusion_stats.bytes_reserved, without
+ * the download); 0 for NULL. */
+uint64_t fusion_reserved_bytes(const fusion_map *map);
 
 /* ------------------------------------------------------------ GPU view */
 

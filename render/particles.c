@@ -267,6 +267,9 @@ static bf_status bin_and_load(render_particles *ps, const float *xyz, uint64_t n
     st->bin_cpu_s = bin_cpu_s;
     st->load_s = bf_time_s() - t1;
     st->map_made = !fits;
+    st->bytes_used = (uint64_t)bs.n_bricks * (2 * BRICK_WORDS + FUSION_BRICK_INFO_WORDS + 1) * 4 +
+                     bs.n_nodes * FUSION_NODE_WORDS * 4 + bs.n_chunks * FUSION_ENTRY_WORDS * 4 + bs.n_index * 4;
+    st->bytes_reserved = fusion_reserved_bytes(ps->map) + (ps->index ? gpu_buffer_size(ps->index) : 0);
     return BF_OK;
 }
 

@@ -219,6 +219,10 @@ typedef struct render_particles_stats {
     double load_s;          /* the host copy into the GPU pools (emptying them, fusion_load; not making a map) */
     double make_s;          /* making the map anew (its pools filled, its pipelines): 0 when it was reused */
     bool map_made;          /* the last binning made the map anew (the first, or a set grown past its pools) */
+    /* GPU memory: the set's structure in use (both levels' bricks with their planes and records, the octree
+       nodes, the hash entries and the centres' index; as fusion_stats.bytes_total counts a map), and what
+       the set holds allocated (its map's pools, with room to spare for later steps, and the index). */
+    uint64_t bytes_used, bytes_reserved;
 } render_particles_stats;
 
 /* Bins the n particles xyz (3 n floats, world coordinates [m]) and puts

@@ -160,6 +160,11 @@ ok = (d["device_driver"] != "" and d["device"] in devices and d["device_driver"]
       and d["map"]["bricks"] > 0 and d["bricks"] == d["map"]["bricks"] and len(d["raycast_ms"]["sorted"]) == 2
       and d["raycast_ms"]["sorted"][0] <= d["raycast_ms"]["sorted"][1] and "particles_median" in d["raycast_ms"]
       and abs(d["hit_fraction"] - float(sys.argv[2])) <= 0.0005)  # png.py prints 3 decimals
+# GPU memory: at least both bit planes (2 x 64 bytes), the record and the
+# stamp (20 bytes) of every brick of both levels, at most what is allocated.
+p = d["particles"]
+ok = (ok and p["gpu_bytes_reserved"] >= p["gpu_bytes_used"] >= (p["bricks"] + p["coarse_bricks"]) * 148
+      and abs(p["gpu_bytes_per_particle"] * p["count"] - p["gpu_bytes_used"]) <= 1e-6 * p["gpu_bytes_used"])
 sys.exit(0 if ok else 1)
 PY
 expect 0 "$B" render --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE" --camera $CAM --size 160x120 \
