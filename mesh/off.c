@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/stat.h>
 
 #include "mesh.h"
 
@@ -92,6 +93,14 @@ bf_status mesh_read_off(const char *path, mesh_data *out)
     if (s == BF_OK) s = read_count(&r, "the vertex count", 1u << 28, &nv);
     if (s == BF_OK) s = read_count(&r, "the face count", 1u << 28, &nf);
     if (s == BF_OK) s = read_count(&r, "the edge count", UINT32_MAX, &ne);
+    /* The header's count sizes the vertex array: each vertex takes at least
+     * 6 bytes of text ("0 0 0" and a separator), so the rest of the file
+     * bounds it (a short file claiming 2^28 vertices would ask 3 GB). */
+    struct stat st;
+    long at = ftell(f);
+    if (s == BF_OK && fstat(fileno(f), &st) == 0 && at >= 0 && (uint64_t)nv * 6 > (uint64_t)st.st_size - (uint64_t)at)
+        s = bf_fail(BF_FORMAT, "%s: line %u: %u vertices cannot fit in the %llu bytes left (6 or more each)", path,
+                    r.line, nv, (unsigned long long)((uint64_t)st.st_size - (uint64_t)at));
     if (s == BF_OK) {
         out->xyz = malloc((size_t)(nv ? nv : 1) * 12);
         if (!out->xyz) s = bf_fail(BF_NO_MEMORY, "%s: %u vertices", path, nv);

@@ -36,9 +36,18 @@ BF_TEST(off_refusals_name_the_line)
     CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
     CHECK_ERROR_MENTIONS("line 6");
     CHECK_ERROR_MENTIONS("vertex 7 of 3");
-    p = write_file("short.off", "OFF\n3 1 0\n0 0 0\n1 0\n");
+    p = write_file("short.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n");
     CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
     CHECK_ERROR_MENTIONS("ends before");
+    /* A count the file cannot hold is refused before anything is allocated
+     * for it (the fuzzer's case: 214,746,663 vertices claimed in 18 bytes). */
+    p = write_file("huge.off", "OFF\n214746663 3 0\n");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("214746663 vertices cannot fit in the 1 bytes left");
+    p = write_file("tight.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_OK);
+    CHECK(m.n_verts == 3 && m.n_tris == 1);
+    mesh_free(&m);
     p = write_file("nan.off", "OFF\n1 0 0\n0 nan 0\n");
     CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
     CHECK_ERROR_MENTIONS("not a finite number");
