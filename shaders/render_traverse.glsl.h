@@ -302,61 +302,61 @@ void render_particles_search(render_walk_map m, render_ray ray, ivec3 c0, ivec3 
         if (sl == FUSION_NONE) continue;
         int wx = gc.x & 1, wy = gc.y & 1, wz = gc.z & 3;
         ivec3 lo = k0 - kc * 8, hi = k1 - kc * 8;
-                            render_pwork++;
-                            ivec3 q0 = ivec3(4 * wx, 4 * wy, 2 * wz);
-                            uint wi = uint(wx + 2 * wy + 4 * wz), sw = render_sign_word(sl, wi);
-                            uint occ = sw & render_particles_box_mask(max(lo - q0, ivec3(0)), min(hi - q0, ivec3(3, 3, 1)));
-                            /* The index entry of the word's first brick of centres. */
-                            uint e0 = occ != 0u && !lod ? render_particles_index_word(RENDER_PARTICLES_INDEX_HEADER +
-                                                                                     16u * (sl - render_pfirst_coarse) + wi)
-                                                        : 0u;
-                            while (occ != 0u) {
-                                int b = findLSB(occ);
-                                occ &= occ - 1u;
-                                render_pwork++;
-                                ivec3 k = kc * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
-                                if (lod) {
-                                    /* Level of detail: the coarse cell's centres as one sphere at its centre. */
-                                    render_particles_try(ray, (vec3(k) + 0.5) * (8.0 * fine_m), r, s_lo, true, best, best_c);
-                                    continue;
-                                }
-                                /* The ray must pass within r of the cell's
-                                 * centres: through the cell grown by r (the
-                                 * slab test, beyond s_lo). */
-                                vec3 g0 = (vec3(k * 8) * fine_m - r - ray.o) * ray.inv_dir,
-                                     g1 = g0 + (8.0 * fine_m + 2.0 * r) * ray.inv_dir;
-                                vec3 gn = min(g0, g1), gx = max(g0, g1);
-                                if (min(gx.x, min(gx.y, gx.z)) < max(s_lo, max(gn.x, max(gn.y, gn.z)))) continue;
-                                /* Its brick of centres: the entry after the word's set bits below b. */
-                                uint fs = render_particles_index_word(render_pslots_at + e0 +
-                                                                      uint(bitCount(sw & ((1u << uint(b)) - 1u))));
-                                render_pwork++;
-                                if ((fs & RENDER_PARTICLES_INDEX_ONE) != 0u) {
-                                    /* A brick of one centre: the entry holds its cell. */
-                                    render_particles_try(ray, render_particles_centre(k, fs >> 5 & 15u, int(fs & 31u), fine_m),
-                                                         r, s_lo, false, best, best_c);
-                                    continue;
-                                }
-                                ivec3 flo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), fhi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
-                                /* The sub-brick words holding centres: word 0 of the brick's confidence plane
-                                 * (render/particles_bin.h). */
-                                for (uint words = render_conf_word(fs, 0u); words != 0u; words &= words - 1u) {
-                                    uint w = uint(findLSB(words));
-                                    /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
-                                    ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
-                                    if (any(greaterThan(s0, fhi)) || any(lessThan(s0 + ivec3(3, 3, 1), flo))) continue;
-                                    render_pwork++;
-                                    uint bits = render_sign_word(fs, w);
-                                    while (bits != 0u) {
-                                        int i = findLSB(bits);
-                                        bits &= bits - 1u;
-                                        render_pwork++;
-                                        render_particles_try(ray, render_particles_centre(k, w, i, fine_m), r, s_lo, false,
-                                                             best, best_c);
-                                    }
-                                }
-                            }
-                        }
+        render_pwork++;
+        ivec3 q0 = ivec3(4 * wx, 4 * wy, 2 * wz);
+        uint wi = uint(wx + 2 * wy + 4 * wz), sw = render_sign_word(sl, wi);
+        uint occ = sw & render_particles_box_mask(max(lo - q0, ivec3(0)), min(hi - q0, ivec3(3, 3, 1)));
+        /* The index entry of the word's first brick of centres. */
+        uint e0 = occ != 0u && !lod ? render_particles_index_word(RENDER_PARTICLES_INDEX_HEADER +
+                                                                 16u * (sl - render_pfirst_coarse) + wi)
+                                    : 0u;
+        while (occ != 0u) {
+            int b = findLSB(occ);
+            occ &= occ - 1u;
+            render_pwork++;
+            ivec3 k = kc * 8 + q0 + ivec3(b & 3, (b >> 2) & 3, b >> 4);
+            if (lod) {
+                /* Level of detail: the coarse cell's centres as one sphere at its centre. */
+                render_particles_try(ray, (vec3(k) + 0.5) * (8.0 * fine_m), r, s_lo, true, best, best_c);
+                continue;
+            }
+            /* The ray must pass within r of the cell's
+             * centres: through the cell grown by r (the
+             * slab test, beyond s_lo). */
+            vec3 g0 = (vec3(k * 8) * fine_m - r - ray.o) * ray.inv_dir,
+                 g1 = g0 + (8.0 * fine_m + 2.0 * r) * ray.inv_dir;
+            vec3 gn = min(g0, g1), gx = max(g0, g1);
+            if (min(gx.x, min(gx.y, gx.z)) < max(s_lo, max(gn.x, max(gn.y, gn.z)))) continue;
+            /* Its brick of centres: the entry after the word's set bits below b. */
+            uint fs = render_particles_index_word(render_pslots_at + e0 +
+                                                  uint(bitCount(sw & ((1u << uint(b)) - 1u))));
+            render_pwork++;
+            if ((fs & RENDER_PARTICLES_INDEX_ONE) != 0u) {
+                /* A brick of one centre: the entry holds its cell. */
+                render_particles_try(ray, render_particles_centre(k, fs >> 5 & 15u, int(fs & 31u), fine_m),
+                                     r, s_lo, false, best, best_c);
+                continue;
+            }
+            ivec3 flo = clamp(c0 - k * 8, ivec3(0), ivec3(7)), fhi = clamp(c1 - k * 8, ivec3(0), ivec3(7));
+            /* The sub-brick words holding centres: word 0 of the brick's confidence plane
+             * (render/particles_bin.h). */
+            for (uint words = render_conf_word(fs, 0u); words != 0u; words &= words - 1u) {
+                uint w = uint(findLSB(words));
+                /* Sub-brick w: x in 4 (w & 1) + [0, 3], y in 4 ((w >> 1) & 1) + [0, 3], z in 2 (w >> 2) + [0, 1]. */
+                ivec3 s0 = ivec3(4 * int(w & 1u), 4 * int((w >> 1) & 1u), 2 * int(w >> 2));
+                if (any(greaterThan(s0, fhi)) || any(lessThan(s0 + ivec3(3, 3, 1), flo))) continue;
+                render_pwork++;
+                uint bits = render_sign_word(fs, w);
+                while (bits != 0u) {
+                    int i = findLSB(bits);
+                    bits &= bits - 1u;
+                    render_pwork++;
+                    render_particles_try(ray, render_particles_centre(k, w, i, fine_m), r, s_lo, false,
+                                         best, best_c);
+                }
+            }
+        }
+    }
 }
 
 bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_lo, float voxel_m, render_ray ray,
