@@ -36,7 +36,8 @@
 
 /* Entries of the octree walk's short stack (Laine & Karras 2010 keep a
  * full stack; a short one with a restart from the root on underflow is
- * what DESIGN.md section 5 and Reichl 2016 use). */
+ * what DESIGN.md section 5 and Reichl 2016 use). 4: the walk keeps it
+ * in uvec4s (shaders/render_walk.glsl.h). */
 #define RENDER_STACK 4u
 
 /* Bound on the cells a ray may visit: a guard against a corrupt map, far
