@@ -18,3 +18,10 @@ bench_room_sequence() {
   fi
   $BIN synth --scene room --trajectory "$traj" --frames "$frames" --noise kinect1 --seed 1 --out "$seq"
 }
+
+# bench_random_particles N FILE: N particles drawn uniformly in a 2 x 1 x 1 m
+# box (numpy's generator, seed 1) as a binary PLY of float x y z; the sets
+# of bench/particles_sweep.sh and bench/particles_views.sh.
+bench_random_particles() {
+  "$PY" -c 'import sys, numpy as np; n=int(sys.argv[1]); p=(np.random.default_rng(1).random((n,3))*np.array([2,1,1])).astype("<f4"); f=open(sys.argv[2],"wb"); f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n"%n); f.write(p.tobytes())' "$1" "$2"
+}

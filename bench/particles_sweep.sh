@@ -25,7 +25,7 @@ T="$OUT/particles_sweep.md"
 echo "| particles | cell [mm] | bricks with particles (+ coarse) | binning on the host [ms] | binning [CPU ms] | into the GPU pools [ms] | M particles/s binned | ray-cast 640x480, close [ms GPU] | ray-cast 640x480, whole [ms GPU] | GPU memory in use [MB] | bytes a particle |" >"$T"
 echo "|---|---|---|---|---|---|---|---|---|---|---|" >>"$T"
 for n in $NS; do
-    "$PY" -c 'import sys, numpy as np; n=int(sys.argv[1]); p=(np.random.default_rng(1).random((n,3))*np.array([2,1,1])).astype("<f4"); f=open(sys.argv[2],"wb"); f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n"%n); f.write(p.tobytes())' "$n" "$OUT/p$n.ply"
+    bench_random_particles "$n" "$OUT/p$n.ply"
     "$B" render --particles "$OUT/p$n.ply" --particle-radius 0.005 "${CELL[@]}" \
         --pose "2 -0.8 0.9 -0.772625 -0.329703 0.212940 0.499002" --size 640x480 --out "$OUT/p$n.png" --repeat 3 \
         >"$OUT/p$n.txt" 2>/dev/null

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The particle renderer against the image size and the distance, with level
 # of detail on and off: the random set of N particles (default 10^6) in a
-# 2 x 1 x 1 m box that bench/particles_sweep.sh draws (numpy, seed 1; 5 mm
+# 2 x 1 x 1 m box that bench/particles_sweep.sh draws (bench_random_particles; 5 mm
 # radius, the default cell), ray-cast by `bitfuse render` (the median of 3
 # casts):
 #   - close and whole (particles_sweep.sh's two poses) at 320x240, 640x480
@@ -19,7 +19,7 @@ N=${2:-1000000}
 ROUNDS=${ROUNDS:-3}
 mkdir -p "$OUT"
 P="$OUT/p$N.ply"
-"$PY" -c 'import sys, numpy as np; n=int(sys.argv[1]); p=(np.random.default_rng(1).random((n,3))*np.array([2,1,1])).astype("<f4"); f=open(sys.argv[2],"wb"); f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n"%n); f.write(p.tobytes())' "$N" "$P"
+bench_random_particles "$N" "$P"
 CLOSE="2 -0.8 0.9 -0.772625 -0.329703 0.212940 0.499002"
 cast() { # name pose size lod
     "$BIN" render --particles "$P" --particle-radius 0.005 --particle-lod "$4" --pose "$2" --size "$3" --far 50 \
@@ -61,7 +61,7 @@ t += ["", f"| distance [m] | pixels hit | lod on [ms GPU, median of {rounds}] | 
       "|---|---|---|---|---|---|---|"]
 far = []
 for d in [2, 4, 8, 16, 32]:
-    on, off = J(f"far{d}-on-r1"), J(f"far{d}-off-r1")
+    on = J(f"far{d}-on-r1")
     a, b = D(f"far{d}-on-r1"), D(f"far{d}-off-r1")
     # The shaded images (the 16-bit depth ends at 13.1 m).
     ca = np.asarray(Image.open(f"{out}/far{d}-on-r1.png").convert("RGB"), dtype=np.int32)

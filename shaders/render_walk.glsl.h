@@ -146,11 +146,10 @@ bool render_walk_from(render_walk_map m, render_ray ray, inout float s, float s_
     bool have_key = false;
     /* The short stack: the path's nodes at levels [lo, deep], entry of level
      * l at index l % RENDER_STACK, each with the finest brick on the path
-     * down to it (slot, level). deep < 0: empty. */
-    /* uvec4s, not arrays (RENDER_STACK is 4): llvmpipe keeps a private array
-     * in memory and reads and writes it lane by lane; a vector's component
-     * is selected in registers (docs/particles.md, "One loop over the
-     * search box's words"). */
+     * down to it (slot, level). deep < 0: empty. uvec4s, not arrays
+     * (RENDER_STACK is 4): llvmpipe keeps a private array in memory and
+     * reads and writes it lane by lane; a vector's component is selected in
+     * registers (docs/particles.md, "One loop over the search box's words"). */
     uvec4 st_node = uvec4(0u), st_brick = uvec4(0u), st_blevel = uvec4(0u);
     int deep = -1, lo = 0;
     uvec3 g_prev = uvec3(0u);
