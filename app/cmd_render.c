@@ -120,6 +120,12 @@ typedef struct render_report {
     const double *ms, *ms_p;           /* sorted */
 } render_report;
 
+/* GPU bytes in use per particle (0 for an empty set). */
+static double bytes_per_particle(const render_particles_stats *st)
+{
+    return st->n_particles ? (double)st->bytes_used / (double)st->n_particles : 0.0;
+}
+
 static cJSON *render_json(const render_report *r)
 {
     const render_args *a = r->a;
@@ -180,8 +186,7 @@ static cJSON *render_json(const render_report *r)
         cJSON_AddNumberToObject(p, "make_map_seconds", st->make_s);
         cJSON_AddNumberToObject(p, "gpu_bytes_used", (double)st->bytes_used);
         cJSON_AddNumberToObject(p, "gpu_bytes_reserved", (double)st->bytes_reserved);
-        cJSON_AddNumberToObject(p, "gpu_bytes_per_particle",
-                                st->n_particles ? (double)st->bytes_used / (double)st->n_particles : 0.0);
+        cJSON_AddNumberToObject(p, "gpu_bytes_per_particle", bytes_per_particle(st));
     }
     cJSON *c = app_json_object(o, "raycast_ms");
     cJSON_AddNumberToObject(c, "median", r->ms[a->repeat / 2]);
@@ -322,9 +327,7 @@ int cmd_render(int argc, char **argv)
                    1e3 * st->bin_s, st->bin_s > 0 ? 1e-6 * (double)st->n_particles / st->bin_s : 0.0,
                    1e3 * st->bin_cpu_s, 1e3 * st->load_s, 1e3 * st->make_s);
             printf("  GPU memory       %.1f MB in use, %.0f bytes a particle (%.1f MB allocated)\n",
-                   1e-6 * (double)st->bytes_used,
-                   st->n_particles ? (double)st->bytes_used / (double)st->n_particles : 0.0,
-                   1e-6 * (double)st->bytes_reserved);
+                   1e-6 * (double)st->bytes_used, bytes_per_particle(st), 1e-6 * (double)st->bytes_reserved);
         }
         printf("  ray-cast         %.1f ms GPU (median of %u)\n", ms[a.repeat / 2], a.repeat);
         if (ps && map) printf("    of which particles %.1f ms\n", ms_p[a.repeat / 2]);
