@@ -310,6 +310,7 @@ int cmd_replay(int argc, char **argv);
 int cmd_eval_traj(int argc, char **argv);
 int cmd_eval_surface(int argc, char **argv);
 int cmd_eval_colour(int argc, char **argv);
+int cmd_eval_motion(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
 int cmd_calibrate(int argc, char **argv);
 int cmd_calibrate_depth(int argc, char **argv);

@@ -24,6 +24,7 @@ static const app_command commands[] = {
     {"eval-traj", cmd_eval_traj, "trajectory error: ATE and RPE (TUM benchmark rules)"},
     {"eval-surface", cmd_eval_surface, "surface error: accuracy and completeness against a mesh"},
     {"eval-colour", cmd_eval_colour, "colour error: a coloured mesh re-rendered at the frames' poses (PSNR)"},
+    {"eval-motion", cmd_eval_motion, "trajectories (or ground truth) against the motion the colour images show"},
     {"calibrate", cmd_calibrate, "calibrate the colour and depth cameras from checkerboard images (calib.json)"},
     {"calibrate-depth", cmd_calibrate_depth, "the depth camera's fixed error pattern from a sequence and its poses"},
     {"view", cmd_view, "show a saved map in a window: orbit, pan, zoom; --screenshot for scripts"},

@@ -142,4 +142,62 @@ void eval_colour_compare(const uint8_t *a, const uint8_t *b, const uint8_t *mask
 /* 10 log10(255^2 / MSE) [dB]; NAN without samples. */
 double eval_colour_psnr(const eval_colour_sums *s);
 
+/* ------------------------------------------------------------ motion from colour (docs/eval.md)
+ * A check of camera poses that needs no ground truth: the motion between
+ * two frames as their colour images show it. ORB features of both images
+ * (OpenCV's features2d) are matched, the first frame's depth lifts its
+ * features to 3-D, and PnP with RANSAC and a Levenberg-Marquardt refinement
+ * (calib3d) gives the second camera's pose in the first's frame. The
+ * colour carries neither the depth camera's fixed error pattern nor
+ * anything of a tracker, so a trajectory, or a ground truth, can be
+ * checked against it (bitfuse eval-motion). The colour is taken as
+ * registered to the depth (TUM, 7-Scenes, bitfuse logs). */
+
+typedef struct eval_motion_config {
+    uint32_t n_features;        /* ORB features per image, default 4000 */
+    double ransac_px;           /* RANSAC's reprojection threshold in pixels, default 2 */
+    uint32_t ransac_iterations; /* default 2000 */
+    uint32_t min_inliers;       /* a pair with fewer gives no motion, default 50 */
+    float min_depth_m;          /* features lifted only from depths in */
+    float max_depth_m;          /* [min, max], default 0.3 .. 4 m */
+} eval_motion_config;
+
+eval_motion_config eval_motion_config_default(void);
+
+/* One frame's ORB features (from the luma of its RGB image). */
+typedef struct eval_motion_image eval_motion_image;
+
+/* BF_INVALID_ARG without an image or with a size of 0; BF_NO_MEMORY. */
+bf_status eval_motion_image_make(const uint8_t *rgb, uint32_t w, uint32_t h, const eval_motion_config *cfg,
+                                 eval_motion_image **out);
+void eval_motion_image_free(eval_motion_image *im); /* NULL is a no-op */
+uint32_t eval_motion_image_features(const eval_motion_image *im);
+
+typedef struct eval_motion_pair {
+    bool ok;                 /* a pose with at least min_inliers inliers */
+    bf_se3 T_ab;             /* camera b's pose in camera a's frame (T_wa^-1 T_wb) */
+    uint32_t n_matches;      /* mutual nearest neighbours of the descriptors */
+    uint32_t n_lifted;       /* of them with a's depth in range */
+    uint32_t n_inliers;      /* RANSAC's inliers (0 when none was found) */
+    double rms_px;           /* their reprojection RMS after the refinement */
+} eval_motion_pair;
+
+/* The motion from a to b: a's features lifted by depth_a (raw units,
+ * K->depth_scale per metre, 0 = none; K is a's and b's camera), matched to
+ * b's. Too few inliers is not an error: out->ok is false and the counts say
+ * how far it got. BF_INVALID_ARG for images of another size than K's. */
+bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, const bf_intrinsics *K,
+                          const eval_motion_image *b, const eval_motion_config *cfg, eval_motion_pair *out);
+
+/* A trajectory's relative pose over a pair (T_wa, T_wb: its poses of the
+ * pair's two frames) against the colour's T_ab. */
+typedef struct eval_motion_error {
+    double trans_m;   /* |t_traj - t_colour|, in a's camera frame */
+    double rot_deg;   /* angle of R_colour^T R_traj */
+    double along_m;   /* t_traj . t_colour / |t_colour|: the trajectory's step along the colour's */
+    double colour_m;  /* |t_colour| */
+} eval_motion_error;
+
+void eval_motion_compare(const bf_se3 *T_ab_colour, const bf_se3 *T_wa, const bf_se3 *T_wb, eval_motion_error *out);
+
 #endif

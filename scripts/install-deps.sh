@@ -10,9 +10,10 @@ PACKAGES=(
   libpng-dev libjpeg-dev libzstd-dev libcjson-dev libxxhash-dev
   # Mesh simplification for export (mesh/simplify.c).
   libmeshoptimizer-dev
-  # bitfuse calibrate (calib/): OpenCV's calib3d and what it needs, without
+  # bitfuse calibrate (calib/) and eval-motion (eval/): OpenCV's calib3d,
+  # features2d and video (Lucas-Kanade) and what they need, without
   # libopencv-dev, which brings every OpenCV module, VTK and Qt.
-  libopencv-core-dev libopencv-imgproc-dev libopencv-calib3d-dev
+  libopencv-core-dev libopencv-imgproc-dev libopencv-calib3d-dev libopencv-features2d-dev libopencv-video-dev
   # Live capture backends (docs/devices.md); libfreenect-bin brings fakenect,
   # which the capture tests replay Kinect dumps through.
   libfreenect-dev libfreenect-bin libopenni2-dev
