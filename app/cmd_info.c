@@ -12,18 +12,62 @@ static const char info_usage[] =
     "usage: bitfuse info SEQUENCE|STORE [options] [--json]\n\n"
     "Reads every frame of a TUM RGB-D, ICL-NUIM or pose-per-frame folder and prints\n"
     "its kind, intrinsics, frame count, time span, share of pixels with depth,\n"
-    "depth range (min/median/max, metres), ground truth and skipped frames.\n"
+    "depth range (min/median/max, metres), ground truth, skipped frames, and the frames\n"
+    "whose depth or colour repeats the frame before byte for byte (a driver that handed\n"
+    "on the last image when a new one was late: no new data, and no motion in it).\n"
     "Of a scene store (replay|live --store): chunks, bricks per level, bytes on disk,\n"
     "extent, frames, the last pose and any damage found (bad or missing chunk files).\n";
 
 /* What one pass over the sequence gathers. The depth histogram has one bin
  * per raw value, so the median is exact without keeping any frame. */
+#define INFO_REPEATS_LISTED 12
+
 typedef struct info_stats {
     uint32_t n_frames, n_with_pose, n_with_rgb;
+    /* Frames whose depth (colour) is the previous frame's byte for byte,
+     * and the first few of them. */
+    uint32_t n_depth_repeats, n_rgb_repeats;
+    uint32_t depth_repeats[INFO_REPEATS_LISTED], rgb_repeats[INFO_REPEATS_LISTED];
+    uint16_t *prev_depth;
+    uint8_t *prev_rgb;
+    size_t prev_n;
     double t_first_s, t_last_s;
     uint64_t n_pixels, n_valid;
     uint64_t *hist; /* 65536 bins of raw depth */
 } info_stats;
+
+/* Counts a frame whose depth or colour is the previous frame's exactly and
+ * keeps this frame's for the next. */
+static bf_status note_repeats(info_stats *st, const bf_frame *f, size_t n, bool has_depth)
+{
+    if (st->prev_n != n) {
+        free(st->prev_depth);
+        free(st->prev_rgb);
+        st->prev_depth = malloc(n * sizeof *st->prev_depth);
+        st->prev_rgb = calloc(n, 3);
+        if (!st->prev_depth || !st->prev_rgb) return bf_fail(BF_NO_MEMORY, "info: frame %u", f->index);
+        st->prev_n = n;
+        memcpy(st->prev_depth, f->depth, n * sizeof *f->depth);
+        if (f->rgb) memcpy(st->prev_rgb, f->rgb, 3 * n);
+        return BF_OK;
+    }
+    /* A frame without depth (a covered lens) is no repeat however many come. */
+    if (has_depth && !memcmp(st->prev_depth, f->depth, n * sizeof *f->depth)) {
+        if (st->n_depth_repeats < INFO_REPEATS_LISTED) st->depth_repeats[st->n_depth_repeats] = f->index;
+        st->n_depth_repeats++;
+    } else {
+        memcpy(st->prev_depth, f->depth, n * sizeof *f->depth);
+    }
+    if (f->rgb) {
+        if (!memcmp(st->prev_rgb, f->rgb, 3 * n)) {
+            if (st->n_rgb_repeats < INFO_REPEATS_LISTED) st->rgb_repeats[st->n_rgb_repeats] = f->index;
+            st->n_rgb_repeats++;
+        } else {
+            memcpy(st->prev_rgb, f->rgb, 3 * n);
+        }
+    }
+    return BF_OK;
+}
 
 static bf_status info_gather(rgbd_source *src, info_stats *st)
 {
@@ -39,10 +83,16 @@ static bf_status info_gather(rgbd_source *src, info_stats *st)
         st->n_with_rgb += f.rgb != NULL;
         size_t n = (size_t)f.width * f.height;
         st->n_pixels += n;
+        uint64_t zeros = st->hist[0];
         for (size_t i = 0; i < n; i++) st->hist[f.depth[i]]++;
+        if ((s = note_repeats(st, &f, n, st->hist[0] - zeros < n)) != BF_OK) break;
         bf_progress_update(&prog, st->n_frames);
     }
     bf_progress_end(&prog, st->n_frames);
+    free(st->prev_depth);
+    free(st->prev_rgb);
+    st->prev_depth = NULL;
+    st->prev_rgb = NULL;
     if (s != BF_END) return s;
     st->n_valid = st->n_pixels - st->hist[0];
     return BF_OK;
@@ -57,6 +107,14 @@ static uint32_t hist_rank(const uint64_t *hist, uint64_t k)
         if (acc > k) return v;
     }
     return 65535;
+}
+
+static void print_repeats(const char *what, uint32_t n, const uint32_t *first)
+{
+    printf("repeats       %u %s frame%s the one before byte for byte", n, what, n == 1 ? " repeats" : "s repeat");
+    uint32_t k = n < INFO_REPEATS_LISTED ? n : INFO_REPEATS_LISTED;
+    for (uint32_t i = 0; i < k; i++) printf("%s%u", i ? ", " : n == 1 ? " (frame " : " (frames ", first[i]);
+    printf("%s\n", n > k ? ", ...)" : k ? ")" : "");
 }
 
 int cmd_info(int argc, char **argv)
@@ -133,6 +191,12 @@ int cmd_info(int argc, char **argv)
         cJSON_AddNumberToObject(o, "depth_max_m", d_max);
         cJSON_AddBoolToObject(o, "has_groundtruth", src->has_groundtruth);
         cJSON_AddNumberToObject(o, "frames_with_pose", st.n_with_pose);
+        cJSON_AddNumberToObject(o, "repeated_depth_frames", st.n_depth_repeats);
+        cJSON_AddNumberToObject(o, "repeated_colour_frames", st.n_rgb_repeats);
+        double first[INFO_REPEATS_LISTED];
+        uint32_t k = st.n_depth_repeats < INFO_REPEATS_LISTED ? st.n_depth_repeats : INFO_REPEATS_LISTED;
+        for (uint32_t i = 0; i < k; i++) first[i] = st.depth_repeats[i];
+        app_json_numbers(o, "repeated_depth_first", first, k);
         s = app_json_print(o);
     } else {
         printf("sequence      %s\n", path);
@@ -150,6 +214,8 @@ int cmd_info(int argc, char **argv)
             printf("depth         none\n");
         printf("ground truth  %s (%u of %u frames have a pose)\n", src->has_groundtruth ? "yes" : "no",
                st.n_with_pose, st.n_frames);
+        print_repeats("depth", st.n_depth_repeats, st.depth_repeats);
+        if (st.n_with_rgb) print_repeats("colour", st.n_rgb_repeats, st.rgb_repeats);
     }
     free(st.hist);
     rgbd_source_close(src);

@@ -41,6 +41,20 @@ t0=$(awk '!/^#/ {print $1; exit}' "$T/seq/depth.txt")
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert abs(d['t_first_s'] - float(sys.argv[2])) < 1e-6, d['t_first_s']" \
     "$T/out" "$t0" || fail "info --json t_first_s differs from depth.txt's first stamp $t0"
 
+# info: a depth image handed on twice (a driver's late frame) counts as a
+# repeat; the colour of that frame is new, and the sequence itself has none.
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_depth_frames'] == 0 and d['repeated_colour_frames'] == 0, d" \
+    "$T/out" || fail "info counts repeats in a sequence without any"
+cp -r "$T/seq" "$T/rep"
+d1=$(awk '!/^#/ {n++; if (n == 2) print $2}' "$T/rep/depth.txt")
+d2=$(awk '!/^#/ {n++; if (n == 3) print $2}' "$T/rep/depth.txt")
+cp "$T/rep/$d1" "$T/rep/$d2"
+expect 0 "$B" info "$T/rep" --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_depth_frames'] == 1 and d['repeated_depth_first'] == [2] and d['repeated_colour_frames'] == 0, d" \
+    "$T/out" || fail "info does not find frame 2's depth repeating frame 1's: $(cat "$T/out")"
+expect 0 "$B" info "$T/rep"
+grep -q "1 depth frame repeats the one before byte for byte (frame 2)" "$T/out" || fail "info's repeats line: $(cat "$T/out")"
+
 # eval-traj: a sequence shorter than the RPE delta still gets its ATE.
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/seq/groundtruth.txt" --json
 is_json "$T/out"
