@@ -130,7 +130,9 @@ BF_TEST(motion_pnp_without_texture_gives_no_motion_and_no_error)
     bf_intrinsics K2 = K;
     K2.width = 320;
     CHECK_STATUS(eval_motion_pnp(a, d, &K2, b, &cfg, &p), BF_INVALID_ARG);
-    CHECK_STATUS(eval_motion_image_make(NULL, W, H, &cfg, &a), BF_INVALID_ARG);
+    eval_motion_image *none = a;
+    CHECK_STATUS(eval_motion_image_make(NULL, W, H, &cfg, &none), BF_INVALID_ARG);
+    CHECK(none == NULL);
     eval_motion_image_free(a);
     eval_motion_image_free(b);
     free(rgb), free(d);
