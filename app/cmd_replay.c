@@ -91,7 +91,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 28
+#define LOOP_ROWS 29
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -243,6 +243,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 .codes = ref_level_codes),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
                 "the tracker's first guess: the last pose times the last motion, or the last pose"),
+        APP_OPT("--repeated", APP_OPT_CHOICE, &a->rcfg.skip_repeated, "skip|track",
+                "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
+                "image): skipped, the last pose kept, or tracked and fused like a new one"),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",
                 "look for a lost camera from candidate poses (last pose, continued motion, turns, keyframes) and "
                 "widen the motion gate with the frames since the last good one; off: keep the last pose"),
@@ -540,6 +543,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->width >> rl));
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->height >> rl));
     cJSON_AddNumberToObject(tr, "no_depth", c->no_depth);
+    cJSON_AddNumberToObject(tr, "repeated", c->repeated);
     cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
     cJSON_AddNumberToObject(tr, "pool_full", c->pool_full);
     app_json_series(tr, "inlier_fraction", &t->inlier_frac);
@@ -758,6 +762,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
            c->degenerate);
     if (replay_skipped_frames(src))
         printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
+    if (c->repeated)
+        printf("  input            %u frames repeated the depth before them byte for byte: skipped, pose kept\n",
+               c->repeated);
     if (r->run.source_status != BF_OK)
         printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
     if (r->has_capture)

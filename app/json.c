@@ -213,6 +213,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddNumberToObject(l, "min_valid_pixels", c->min_valid_pixels);
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
     cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
+    cJSON_AddBoolToObject(l, "skip_repeated", c->skip_repeated);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
     cJSON *rl = app_json_object(l, "reloc");
     cJSON_AddBoolToObject(rl, "enabled", c->reloc.enabled);

@@ -25,6 +25,7 @@ recon_config recon_config_default(void)
         .caster = render_config_default(),
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
+        .skip_repeated = true,
         .start_at_frame = true,
         .stream = stream_config_default(),
         /* Four candidates a lost frame: the last pose, the continued motion
@@ -99,6 +100,7 @@ const char *recon_state_name(recon_frame_state s)
     case RECON_NO_DEPTH: return "no-depth";
     case RECON_LOST: return "lost";
     case RECON_RELOCALISED: return "relocalised";
+    case RECON_REPEATED: return "repeated";
     }
     return "?";
 }
@@ -169,6 +171,7 @@ void recon_destroy(recon *r)
     render_destroy(r->ref_caster);
     fusion_destroy(r->map);
     recon__reloc_destroy(r);
+    free(r->prev_depth);
     free(r);
 }
 
@@ -247,6 +250,22 @@ static bf_status no_depth(recon *r, recon_frame_result *out)
     out->state = RECON_NO_DEPTH;
     r->counts.no_depth++;
     return BF_OK;
+}
+
+/* Whether f's depth is the last depth-carrying frame's byte for byte; the
+ * copy is kept for the next frame. Real sensor noise makes two captures
+ * differ in thousands of pixels, so an exact repeat is a driver handing on
+ * its last image: tracking it finds no motion and fusing it counts one
+ * view twice. */
+static bool is_repeat(recon *r, const bf_frame *f)
+{
+    if (!r->cfg.skip_repeated) return false;
+    size_t n = (size_t)f->width * f->height;
+    if (!r->prev_depth && !(r->prev_depth = malloc(n * sizeof *r->prev_depth))) return false; /* no check, no harm */
+    bool same = r->has_prev_depth && !memcmp(r->prev_depth, f->depth, n * sizeof *f->depth);
+    if (!same) memcpy(r->prev_depth, f->depth, n * sizeof *f->depth);
+    r->has_prev_depth = true;
+    return same;
 }
 
 /* A good frame (tracked or relocalised): fused at its pose, or at *known
@@ -338,6 +357,11 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     bf_status s = BF_OK;
     if (out->n_valid < r->cfg.min_valid_pixels) {
         s = no_depth(r, out);
+    } else if (!known && is_repeat(r, f) && r->has_first) {
+        /* With known poses (--fuse-at-groundtruth: one step from each true
+         * pose) every frame is tracked as it comes. */
+        out->state = RECON_REPEATED;
+        r->counts.repeated++;
     } else if (!r->has_first) {
         out->state = RECON_FIRST;
         fusion_frame_slot slot;

@@ -73,6 +73,9 @@ typedef struct recon_config {
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
     bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
                                  last pose (docs/real_frames.md, the guess); default false */
+    bool skip_repeated;       /* a frame whose depth is the previous frame's byte for byte (a driver that
+                                 handed on its last image when a new one was late: 47 of 7-Scenes' 500 dev
+                                 frames) is neither tracked nor fused and keeps the last pose; default true */
     recon_reloc_config reloc;
     stream_config stream;     /* chunks out of the GPU pools and back (stream.h): on by default; far chunks leave
                                  only beyond its radius or when the pools fill */
@@ -104,6 +107,8 @@ typedef enum recon_frame_state {
     RECON_NO_DEPTH,   /* too few valid depth samples: skipped */
     RECON_LOST,       /* tracking failed (result.track.outcome says why): not fused */
     RECON_RELOCALISED, /* lost (or after a gap), found again from a candidate pose: fused */
+    RECON_REPEATED,   /* the depth repeats the previous frame's byte for byte (skip_repeated): no new data,
+                         neither tracked nor fused, the last pose kept */
 } recon_frame_state;
 
 const char *recon_state_name(recon_frame_state s);
@@ -198,6 +203,7 @@ bf_status recon_render_view(recon *r, const bf_se3 *T_wc);
 /* Running counts. */
 typedef struct recon_counts {
     uint32_t frames, tracked, lost, no_depth, degenerate, pool_full;
+    uint32_t repeated;    /* frames whose depth repeated the previous one's (skip_repeated) */
     uint32_t relocalised; /* frames found again by a search (also counted in tracked) */
     uint32_t keyframes;   /* keyframes held now */
 } recon_counts;

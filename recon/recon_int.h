@@ -35,6 +35,10 @@ struct recon {
     uint32_t n_keyframes; /* held */
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
     float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */
+
+    /* skip_repeated: the depth of the last frame that had some, to find its repeats. */
+    uint16_t *prev_depth;
+    bool has_prev_depth;
 };
 
 /* reloc.c */

@@ -38,6 +38,9 @@ static bf_status push_fuse_times(recon_run_series *t, const fusion_stage_ms *ms)
 
 static bf_status push_series(recon_run_series *t, const recon_frame_result *fr, bool has_loop)
 {
+    /* A repeated frame costs a comparison, not a frame of the loop: left
+     * out of the time per frame, as it is of the work. */
+    if (fr->state == RECON_REPEATED) return BF_OK;
     bf_status s = bf_stats_push(&t->frame_ms, fr->ms_frame);
     if (has_loop && recon_state_ran_icp(fr->state)) {
         if (s == BF_OK) s = bf_stats_push(&t->track_ms, fr->ms_track);

@@ -56,6 +56,56 @@ BF_TEST(frames_without_depth_are_skipped_and_tracking_resumes)
     gpu_context_destroy(ctx);
 }
 
+/* Frame 8's depth is frame 7's, byte for byte: a driver that handed on its
+ * last image (47 of 7-Scenes' 500 dev frames). */
+enum { REPEAT = 8 };
+static uint16_t repeat_saved[W * H];
+static void repeat_depth(uint32_t k, uint16_t *depth)
+{
+    if (k == REPEAT - 1) memcpy(repeat_saved, depth, sizeof repeat_saved);
+    if (k == REPEAT) memcpy(depth, repeat_saved, sizeof repeat_saved);
+}
+
+BF_TEST(a_repeated_depth_frame_is_skipped_and_keeps_the_last_pose)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
+    enum { N = 14 };
+    bf_se3 truth[N];
+    for (uint32_t k = 0; k < N; k++) truth[k] = sweep_pose(&sc, k);
+    static run_out o;
+    memset(&o, 0, sizeof o);
+    bf_se3 I = bf_se3_identity();
+    CHECK_OK(run_loop(ctx, &sc, truth, N, &I, repeat_depth, &o));
+    CHECK_EQ_INT(o.fr[REPEAT].state, RECON_REPEATED);
+    CHECK(!o.fr[REPEAT].fused);
+    CHECK_NEAR(trans_dist(&o.est[REPEAT], &o.est[REPEAT - 1]), 0, 1e-12);
+    CHECK_NEAR(rot_dist_deg(&o.est[REPEAT], &o.est[REPEAT - 1]), 0, 1e-9);
+    CHECK_EQ_INT(o.counts.repeated, 1);
+    CHECK_EQ_INT(o.counts.tracked, N - 1); /* the first frame counts as tracked; the repeat does not */
+    /* The next frame moved two steps from the last data: it is tracked. */
+    for (uint32_t k = REPEAT + 1; k < N; k++) {
+        CHECK_EQ_INT(o.fr[k].state, RECON_TRACKED);
+        CHECK_LE(trans_dist(&o.est[k], &truth[k]), 0.02);
+    }
+    mesh_free(&o.points);
+
+    /* skip_repeated off: the repeat is tracked and fused like a new frame. */
+    recon_run_config cfg = fixture_run_config();
+    cfg.loop.skip_repeated = false;
+    memset(&o, 0, sizeof o);
+    CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N, &I, repeat_depth, &o));
+    CHECK_EQ_INT(o.fr[REPEAT].state, RECON_TRACKED);
+    CHECK(o.fr[REPEAT].fused);
+    CHECK_EQ_INT(o.counts.repeated, 0);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 BF_TEST(a_sudden_jump_is_detected_and_the_map_is_not_corrupted)
 {
     gpu_context *ctx;
