@@ -26,7 +26,9 @@ static const char usage_text[] =
     "trajectory.txt; poses interpolated at the depth timestamps) or 'groundtruth' (the\n"
     "sequence's own). The colour is taken as registered to the depth (TUM, 7-Scenes\n"
     "folders, bitfuse logs); pairs are compared where the colour gives a motion and every\n"
-    "TRAJ has both poses.\n";
+    "TRAJ has both poses. A pair with a frame whose depth or colour repeats the frame\n"
+    "before byte for byte (a driver handing on its last image: stale data, which a tracker\n"
+    "may also have skipped) is left out and counted.\n";
 
 /* A frame kept until its pairs are made: features, depth and poses. */
 typedef struct kept_frame {
@@ -36,11 +38,13 @@ typedef struct kept_frame {
     uint16_t *depth;
     bool has_gt;
     bf_se3 T_gt;
+    bool repeat;         /* its depth or colour is the previous frame's byte for byte */
 } kept_frame;
 
 typedef struct pair_rec {
     uint32_t a, b;
     double t_a, t_b;
+    bool repeat;           /* a or b repeats the frame before it: left out */
     eval_motion_pair m;
     bool has_gt;
     bf_se3 T_gt_a, T_gt_b;
@@ -101,6 +105,32 @@ static bf_status keep(kept_frame *slot, const bf_frame *f, const bf_intrinsics *
     return BF_OK;
 }
 
+/* The previous frame's depth and colour, to find repeats. */
+typedef struct prev_frame {
+    uint16_t *depth;
+    uint8_t *rgb;
+    bool has_depth, has_rgb;
+} prev_frame;
+
+/* Whether f's depth or colour is the previous frame's byte for byte; f's
+ * become the previous ones. */
+static bf_status note_repeat(prev_frame *p, const bf_frame *f, bool *repeat)
+{
+    size_t n = (size_t)f->width * f->height;
+    if (!p->depth) {
+        p->depth = malloc(n * sizeof *p->depth);
+        p->rgb = malloc(3 * n);
+        if (!p->depth || !p->rgb) return bf_fail(BF_NO_MEMORY, "eval-motion: frame %u", f->index);
+    }
+    *repeat = (f->depth && p->has_depth && !memcmp(p->depth, f->depth, n * sizeof *f->depth)) ||
+              (f->rgb && p->has_rgb && !memcmp(p->rgb, f->rgb, 3 * n));
+    p->has_depth = f->depth != NULL;
+    p->has_rgb = f->rgb != NULL;
+    if (f->depth) memcpy(p->depth, f->depth, n * sizeof *f->depth);
+    if (f->rgb) memcpy(p->rgb, f->rgb, 3 * n);
+    return BF_OK;
+}
+
 /* Reads the sequence once; each frame a pair needs is kept in a ring of
  * span + 1 slots until its partner has come. */
 static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, uint32_t *n_frames)
@@ -115,8 +145,11 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
     bf_frame f;
     bf_status s;
     uint32_t seen = 0;
+    prev_frame prev = {0};
     while ((s = rgbd_source_next(src, &f)) == BF_OK) {
         bf_progress_update(&prog, ++seen);
+        bool repeat = false;
+        if (f.width == K->width && f.height == K->height && (s = note_repeat(&prev, &f, &repeat)) != BF_OK) break;
         bool first = is_first(a, f.index), second = is_second(a, f.index);
         if (!first && !second) continue;
         if (f.width != K->width || f.height != K->height) {
@@ -131,15 +164,19 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         if (!f.depth) continue;
         kept_frame *slot = &ring[f.index % ring_n];
         if ((s = keep(slot, &f, K, &a->cfg)) != BF_OK) break;
+        slot->repeat = repeat;
         if (!second) continue;
         const kept_frame *fa = &ring[(f.index - a->span) % ring_n];
         if (!fa->im || fa->index != f.index - a->span) continue; /* a skipped or depthless first frame */
         pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_depth_s,
+                      .repeat = fa->repeat || repeat,
                       .has_gt = fa->has_gt && f.has_pose, .T_gt_a = fa->T_gt, .T_gt_b = f.T_wc};
-        if ((s = eval_motion_pnp(fa->im, fa->depth, K, slot->im, &a->cfg, &r.m)) != BF_OK) break;
+        if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, slot->im, &a->cfg, &r.m)) != BF_OK) break;
         if ((s = pairs_push(out, &r)) != BF_OK) break;
     }
     bf_progress_end(&prog, seen);
+    free(prev.depth);
+    free(prev.rgb);
     for (uint32_t i = 0; i < ring_n; i++) kept_free(&ring[i]);
     free(ring);
     *n_frames = seen;
@@ -227,7 +264,7 @@ static bf_status write_csv(const char *path, const pairs *p, const traj_result *
     bf_out_printf(&o, "# frame_a,frame_b,t_a,t_b,matches,lifted,inliers,rms_px,colour_tx_m,colour_ty_m,colour_tz_m,"
                       "colour_rot_deg,compared");
     for (int k = 0; k < n_t; k++) bf_out_printf(&o, ",trans_err_m_%d,rot_err_deg_%d,along_m_%d", k + 1, k + 1, k + 1);
-    bf_out_printf(&o, "\n");
+    bf_out_printf(&o, ",repeat\n");
     for (int k = 0; k < n_t; k++) bf_out_printf(&o, "# trajectory %d: %s\n", k + 1, t[k].name);
     for (uint32_t i = 0; i < p->n; i++) {
         const pair_rec *r = &p->v[i];
@@ -243,7 +280,7 @@ static bf_status write_csv(const char *path, const pairs *p, const traj_result *
             else
                 bf_out_printf(&o, ",,,");
         }
-        bf_out_printf(&o, "\n");
+        bf_out_printf(&o, ",%d\n", r->repeat ? 1 : 0);
     }
     return bf_out_commit(&o);
 }
@@ -286,8 +323,9 @@ static cJSON *result_json(const motion_args *a, const pairs *p, const traj_resul
     cJSON_AddNumberToObject(k, "max_depth_m", a->cfg.max_depth_m);
     cJSON_AddNumberToObject(o, "frames", n_frames);
     cJSON_AddNumberToObject(o, "pairs", p->n);
-    uint32_t n_ok = 0;
-    for (uint32_t i = 0; i < p->n; i++) n_ok += p->v[i].m.ok;
+    uint32_t n_ok = 0, n_rep = 0;
+    for (uint32_t i = 0; i < p->n; i++) n_ok += p->v[i].m.ok, n_rep += p->v[i].repeat;
+    cJSON_AddNumberToObject(o, "pairs_repeated", n_rep);
     cJSON_AddNumberToObject(o, "pairs_with_motion", n_ok);
     cJSON_AddNumberToObject(o, "pairs_compared", n_common);
     cJSON *c = app_json_object(o, "colour");
@@ -320,11 +358,12 @@ static cJSON *result_json(const motion_args *a, const pairs *p, const traj_resul
 static void print_result(const motion_args *a, const pairs *p, const traj_result *t, int n_t, uint32_t n_common,
                          double med_inl, double med_rms, double med_len, double secs)
 {
-    uint32_t n_ok = 0;
-    for (uint32_t i = 0; i < p->n; i++) n_ok += p->v[i].m.ok;
+    uint32_t n_ok = 0, n_rep = 0;
+    for (uint32_t i = 0; i < p->n; i++) n_ok += p->v[i].m.ok, n_rep += p->v[i].repeat;
     printf("bitfuse eval-motion: %s, pairs %u frames apart, one every %u frames\n", a->paths[0], a->span, a->every);
-    printf("  pairs            %u; the colour gave a motion in %u (at least %u inliers), %u compared\n", p->n,
-           n_ok, a->cfg.min_inliers, n_common);
+    printf("  pairs            %u, %u of them with a repeated frame (left out); the colour gave a motion in %u\n"
+           "                   (at least %u inliers), %u compared\n",
+           p->n, n_rep, n_ok, a->cfg.min_inliers, n_common);
     printf("  colour           median %.0f inliers, %.2f px reprojection RMS, step %.1f mm\n", med_inl, med_rms,
            1e3 * med_len);
     printf("  %-28s %33s  %21s  %7s  %s\n", "", "translation error mm", "rotation error deg", "length", "closest");

@@ -31,41 +31,42 @@ typedef struct info_stats {
     uint16_t *prev_depth;
     uint8_t *prev_rgb;
     size_t prev_n;
+    bool has_prev_depth, has_prev_rgb;
     double t_first_s, t_last_s;
     uint64_t n_pixels, n_valid;
     uint64_t *hist; /* 65536 bins of raw depth */
 } info_stats;
 
-/* Counts a frame whose depth or colour is the previous frame's exactly and
- * keeps this frame's for the next. */
+/* Counts a frame whose depth is the last depth-carrying frame's exactly (the
+ * rule replay's loop skips by) or whose colour is the previous frame's, and
+ * keeps this frame's for the next. A frame without depth (a covered lens)
+ * is no repeat however many come, and leaves the last depth in place. */
 static bf_status note_repeats(info_stats *st, const bf_frame *f, size_t n, bool has_depth)
 {
     if (st->prev_n != n) {
         free(st->prev_depth);
         free(st->prev_rgb);
         st->prev_depth = malloc(n * sizeof *st->prev_depth);
-        st->prev_rgb = calloc(n, 3);
+        st->prev_rgb = malloc(3 * n);
+        st->has_prev_depth = st->has_prev_rgb = false;
+        st->prev_n = 0;
         if (!st->prev_depth || !st->prev_rgb) return bf_fail(BF_NO_MEMORY, "info: frame %u", f->index);
         st->prev_n = n;
-        memcpy(st->prev_depth, f->depth, n * sizeof *f->depth);
-        if (f->rgb) memcpy(st->prev_rgb, f->rgb, 3 * n);
-        return BF_OK;
     }
-    /* A frame without depth (a covered lens) is no repeat however many come. */
-    if (has_depth && !memcmp(st->prev_depth, f->depth, n * sizeof *f->depth)) {
-        if (st->n_depth_repeats < INFO_REPEATS_LISTED) st->depth_repeats[st->n_depth_repeats] = f->index;
-        st->n_depth_repeats++;
-    } else {
-        memcpy(st->prev_depth, f->depth, n * sizeof *f->depth);
-    }
-    if (f->rgb) {
-        if (!memcmp(st->prev_rgb, f->rgb, 3 * n)) {
-            if (st->n_rgb_repeats < INFO_REPEATS_LISTED) st->rgb_repeats[st->n_rgb_repeats] = f->index;
-            st->n_rgb_repeats++;
-        } else {
-            memcpy(st->prev_rgb, f->rgb, 3 * n);
+    if (has_depth) {
+        if (st->has_prev_depth && !memcmp(st->prev_depth, f->depth, n * sizeof *f->depth)) {
+            if (st->n_depth_repeats < INFO_REPEATS_LISTED) st->depth_repeats[st->n_depth_repeats] = f->index;
+            st->n_depth_repeats++;
         }
+        memcpy(st->prev_depth, f->depth, n * sizeof *f->depth);
+        st->has_prev_depth = true;
     }
+    if (f->rgb && st->has_prev_rgb && !memcmp(st->prev_rgb, f->rgb, 3 * n)) {
+        if (st->n_rgb_repeats < INFO_REPEATS_LISTED) st->rgb_repeats[st->n_rgb_repeats] = f->index;
+        st->n_rgb_repeats++;
+    }
+    if (f->rgb) memcpy(st->prev_rgb, f->rgb, 3 * n);
+    st->has_prev_rgb = f->rgb != NULL;
     return BF_OK;
 }
 

@@ -36,12 +36,13 @@ typedef struct eval__cv_pnp_result {
 } eval__cv_pnp_result;
 
 /* a's features lifted by depth_a_m (w*h metres, 0 = none; a pixel's depth
- * at the feature's nearest pixel), matched to b's, PnP with RANSAC (EPnP,
- * ransac_px, ransac_iterations, OpenCV's generator seeded with seed), then
- * Levenberg-Marquardt on the inliers. K: fx fy cx cy. */
+ * at the feature's nearest pixel), their places in b refined by
+ * Lucas-Kanade, PnP with RANSAC (EPnP, ransac_px, ransac_iterations;
+ * OpenCV's fixed seed), then Levenberg-Marquardt on the inliers. K: fx fy
+ * cx cy. */
 int eval__cv_pnp(const eval__cv_features *a, const float *depth_a_m, const eval__cv_features *b, int w, int h,
-                 const double K[4], double ransac_px, int ransac_iterations, uint64_t seed, eval__cv_pnp_result *r,
-                 char *msg, size_t cap);
+                 const double K[4], double ransac_px, int ransac_iterations, eval__cv_pnp_result *r, char *msg,
+                 size_t cap);
 
 #ifdef __cplusplus
 }

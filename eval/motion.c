@@ -86,7 +86,7 @@ bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, c
     const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
     eval__cv_pnp_result r;
     char msg[256];
-    int rc = eval__cv_pnp(a->f, z, b->f, (int)a->w, (int)a->h, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, 1, &r,
+    int rc = eval__cv_pnp(a->f, z, b->f, (int)a->w, (int)a->h, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, &r,
                           msg, sizeof msg);
     free(z);
     if (rc != EVAL__CV_OK) return cv_status(rc, "eval_motion_pnp", msg);

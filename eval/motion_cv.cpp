@@ -70,7 +70,7 @@ extern "C" void eval__cv_features_free(eval__cv_features *f) { delete f; }
 extern "C" int eval__cv_features_count(const eval__cv_features *f) { return f ? (int)f->keys.size() : 0; }
 
 extern "C" int eval__cv_pnp(const eval__cv_features *a, const float *depth_a_m, const eval__cv_features *b, int w,
-                            int h, const double K[4], double ransac_px, int ransac_iterations, uint64_t seed,
+                            int h, const double K[4], double ransac_px, int ransac_iterations,
                             eval__cv_pnp_result *r, char *msg, size_t cap)
 {
     *r = eval__cv_pnp_result{};
@@ -121,7 +121,8 @@ extern "C" int eval__cv_pnp(const eval__cv_features *a, const float *depth_a_m, 
         const cv::Mat Km = (cv::Mat_<double>(3, 3) << K[0], 0, K[2], 0, K[1], K[3], 0, 0, 1);
         cv::Mat rv, tv;
         std::vector<int> inl;
-        cv::theRNG().state = seed ? seed : 1; // the same pairs give the same poses
+        // solvePnPRansac draws from a generator of its own with a fixed seed:
+        // the same pairs give the same poses.
         if (!cv::solvePnPRansac(obj, img, Km, cv::noArray(), rv, tv, false, ransac_iterations, (float)ransac_px, 0.999,
                                 inl, cv::SOLVEPNP_EPNP) ||
             inl.size() < 6)

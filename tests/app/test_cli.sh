@@ -54,6 +54,14 @@ python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_
     "$T/out" || fail "info does not find frame 2's depth repeating frame 1's: $(cat "$T/out")"
 expect 0 "$B" info "$T/rep"
 grep -q "1 depth frame repeats the one before byte for byte (frame 2)" "$T/out" || fail "info's repeats line: $(cat "$T/out")"
+# A colour image handed on twice, the depth new.
+cp -r "$T/seq" "$T/reprgb"
+c1=$(awk '!/^#/ {n++; if (n == 2) print $2}' "$T/reprgb/rgb.txt")
+c2=$(awk '!/^#/ {n++; if (n == 3) print $2}' "$T/reprgb/rgb.txt")
+cp "$T/reprgb/$c1" "$T/reprgb/$c2"
+expect 0 "$B" info "$T/reprgb" --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_depth_frames'] == 0 and d['repeated_colour_frames'] == 1, d" \
+    "$T/out" || fail "info does not find frame 2's colour repeating frame 1's: $(cat "$T/out")"
 
 # eval-traj: a sequence shorter than the RPE delta still gets its ATE.
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/seq/groundtruth.txt" --json

@@ -48,8 +48,9 @@ py - "$T/result.json" "$T/pairs.csv" <<'PY' || fail "eval-motion's result is not
 import json, sys
 d = json.load(open(sys.argv[1]))
 assert d["config"]["span"] == 10 and d["config"]["every"] == 5, d["config"]
-# Frames 0..39: pairs start at 0, 5, ..., 25 (29 is the last with a partner).
-assert d["pairs"] == 6 and d["pairs_compared"] == 6, d
+# synth renders the 40 frames the trajectory's 1.3 s hold (0..39): pairs
+# start at 0, 5, ..., 25, the last whose partner (35) exists.
+assert d["pairs"] == 6 and d["pairs_compared"] == 6 and d["pairs_repeated"] == 0, d
 gt, short = d["trajectories"]
 assert gt["name"] == "groundtruth", gt
 # The colour's own error: ORB matches refined by Lucas-Kanade, lifted by
@@ -68,7 +69,22 @@ assert 0.1 < step < 0.14, d["colour"]
 assert short["trans_err_m"]["median"] > 0.15 * step, (short, step)
 assert short["rot_err_deg"]["median"] == gt["rot_err_deg"]["median"], (short, gt)
 lines = [l for l in open(sys.argv[2]) if not l.startswith("#")]
-assert len(lines) == 6 and all(l.split(",")[12] == "1" for l in lines), lines
+assert len(lines) == 6 and all(l.split(",")[12] == "1" and l.strip().endswith(",0") for l in lines), lines
+PY
+
+# A depth image handed on twice (frame 15's is frame 14's): the two pairs
+# with frame 15 are left out and counted, the others stay.
+cp -r "$T/seq" "$T/rep"
+d14=$(awk '!/^#/ {n++; if (n == 15) print $2}' "$T/rep/depth.txt")
+d15=$(awk '!/^#/ {n++; if (n == 16) print $2}' "$T/rep/depth.txt")
+cp "$T/rep/$d14" "$T/rep/$d15"
+expect 0 "$B" eval-motion "$T/rep" groundtruth --json --csv "$T/rep.csv"
+py - "$T/out" "$T/rep.csv" <<'PY' || fail "eval-motion does not leave out the pairs of a repeated frame"
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert d["pairs"] == 6 and d["pairs_repeated"] == 2 and d["pairs_compared"] == 4, d
+rep = sorted(l.split(",")[:2] for l in open(sys.argv[2]) if not l.startswith("#") and l.strip().endswith(",1"))
+assert rep == [["15", "25"], ["5", "15"]], rep
 PY
 
 # The summary names both trajectories.
