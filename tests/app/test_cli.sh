@@ -183,6 +183,27 @@ if [ $SANITIZED = 0 ]; then
     [ "$(grep -vc '^#' "$T/rpcut/trajectory.txt")" = 1 ] || fail "replay stopped by a corrupt frame: no trajectory of the frame before it"
     python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] == 1 and 'frame 1' in d['input_error'], d" \
         "$T/rpcut/stats.json" || fail "replay stopped by a corrupt frame: stats.json"
+    # A repeated depth frame (info's case above): skipped with its pose kept by default,
+    # tracked with --repeated track; stats.json echoes the choice and counts it.
+    expect 0 "$B" replay "$T/rep" --out "$T/rprep" $small
+    grep -q "1 frames repeated the depth before them" "$T/out" || fail "replay does not report the repeat: $(head -c 400 "$T/out")"
+    python3 - "$T/rprep" skip <<'PY' || fail "replay of a repeated frame (default)"
+import csv, json, sys
+d = json.load(open(sys.argv[1] + "/stats.json"))
+rows = list(csv.DictReader(open(sys.argv[1] + "/frames.csv")))
+assert d["config"]["loop"]["skip_repeated"] is True and d["tracking"]["repeated"] == 1, d["tracking"]
+assert [r["state"] for r in rows] == ["first", "tracked", "repeated"], [r["state"] for r in rows]
+t = [l.split()[1:] for l in open(sys.argv[1] + "/trajectory.txt") if not l.startswith("#")]
+assert t[2] == t[1], t
+PY
+    expect 0 "$B" replay "$T/rep" --out "$T/rptrack" $small --repeated track
+    python3 - "$T/rptrack" <<'PY' || fail "replay --repeated track"
+import csv, json, sys
+d = json.load(open(sys.argv[1] + "/stats.json"))
+rows = list(csv.DictReader(open(sys.argv[1] + "/frames.csv")))
+assert d["config"]["loop"]["skip_repeated"] is False and d["tracking"]["repeated"] == 0, d["tracking"]
+assert [r["state"] for r in rows] == ["first", "tracked", "tracked"], [r["state"] for r in rows]
+PY
 fi
 # Every frame unreadable: skipping them all is not a success.
 cp -r "$T/seq" "$T/allcut"
