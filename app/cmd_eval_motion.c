@@ -88,7 +88,7 @@ static bool is_first(const motion_args *a, uint32_t i) { return i % a->every == 
 static bool is_second(const motion_args *a, uint32_t i) { return i >= a->span && is_first(a, i - a->span); }
 
 /* Keeps frame f (its features and depth) in the ring slot of its index. */
-static bf_status keep(kept_frame *slot, const bf_frame *f, const bf_intrinsics *K, const eval_motion_config *cfg)
+static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_config *cfg)
 {
     kept_free(slot);
     size_t n = (size_t)f->width * f->height;
@@ -101,7 +101,6 @@ static bf_status keep(kept_frame *slot, const bf_frame *f, const bf_intrinsics *
     slot->t_s = f->t_depth_s;
     slot->has_gt = f->has_pose;
     slot->T_gt = f->T_wc;
-    (void)K;
     return BF_OK;
 }
 
@@ -163,7 +162,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         }
         if (!f.depth) continue;
         kept_frame *slot = &ring[f.index % ring_n];
-        if ((s = keep(slot, &f, K, &a->cfg)) != BF_OK) break;
+        if ((s = keep(slot, &f, &a->cfg)) != BF_OK) break;
         slot->repeat = repeat;
         if (!second) continue;
         const kept_frame *fa = &ring[(f.index - a->span) % ring_n];
@@ -205,8 +204,6 @@ static bool traj_pose(const traj_result *t, const pair_rec *r, bool second, bf_s
     return bf_traj_interpolate(&t->traj, second ? r->t_b : r->t_a, T);
 }
 
-static double percentile(double *v, size_t n, double p) { return bf_percentile_inplace(v, n, p); }
-
 /* Errors of every trajectory on the pairs where the colour gave a motion
  * and every trajectory has both poses; *common marks those pairs. */
 static bf_status compare(const pairs *p, traj_result *t, int n_t, bool *common, uint32_t *n_common)
@@ -247,8 +244,8 @@ static bf_status compare(const pairs *p, traj_result *t, int n_t, bool *common, 
         }
         eval_err_stats_compute(tr, m, &t[k].trans);
         eval_err_stats_compute(ro, m, &t[k].rot);
-        t[k].p90_trans = percentile(tr, m, 90);
-        t[k].p90_rot = percentile(ro, m, 90);
+        t[k].p90_trans = bf_percentile_inplace(tr, m, 90);
+        t[k].p90_rot = bf_percentile_inplace(ro, m, 90);
         t[k].length_ratio = den > 0 ? num / den : NAN;
     }
     free(tr);
@@ -300,9 +297,9 @@ static void colour_summary(const pairs *p, const bool *common, double *med_inl, 
         m++;
     }
     if (m) {
-        *med_inl = percentile(v, m, 50);
-        *med_rms = percentile(v + p->n, m, 50);
-        *med_len = percentile(v + 2 * p->n, m, 50);
+        *med_inl = bf_percentile_inplace(v, m, 50);
+        *med_rms = bf_percentile_inplace(v + p->n, m, 50);
+        *med_len = bf_percentile_inplace(v + 2 * p->n, m, 50);
     }
     free(v);
 }

@@ -7,6 +7,10 @@
 #   py ARGS...           python3 as itself: the sanitizer build's preload
 #                        (LeakSanitizer) and a version manager's shim left out
 #   finish NAME          prints the outcome, exits 1 when anything failed
+#   repeat_frame SEQ depth|rgb K
+#                        in the TUM folder SEQ, frame K's image becomes a
+#                        byte-for-byte copy of frame K-1's (a driver handing
+#                        on its last image)
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
 expect() {
@@ -21,6 +25,13 @@ command -v python3 >/dev/null || { echo "no python3"; exit 77; }
 PY3=$(env -u LD_PRELOAD python3 -c 'import sys; print(sys.executable)') # the interpreter, not a shim
 py() { env -u LD_PRELOAD -u ASAN_OPTIONS -u LSAN_OPTIONS "$PY3" "$@"; }
 export BITFUSE_PROGRESS=0
+repeat_frame() {
+    local list="$1/$2.txt" k=$3
+    local prev cur
+    prev=$(awk -v n="$k" '!/^#/ {i++; if (i == n) print $2}' "$list")
+    cur=$(awk -v n="$((k + 1))" '!/^#/ {i++; if (i == n) print $2}' "$list")
+    cp "$1/$prev" "$1/$cur"
+}
 finish() {
     if [ "$fails" = 0 ]; then
         echo "$1: all passed"

@@ -43,25 +43,23 @@ python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert abs(d['t_fir
 
 # info: a depth image handed on twice (a driver's late frame) counts as a
 # repeat; the colour of that frame is new, and the sequence itself has none.
-python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_depth_frames'] == 0 and d['repeated_colour_frames'] == 0, d" \
-    "$T/out" || fail "info counts repeats in a sequence without any"
+# repeats_are DEPTH COLOUR FIRST: info --json's counts in $T/out.
+repeats_are() {
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert (d['repeated_depth_frames'], d['repeated_colour_frames'], d['repeated_depth_first']) == (int(sys.argv[2]), int(sys.argv[3]), json.loads(sys.argv[4])), d" \
+        "$T/out" "$1" "$2" "$3"
+}
+repeats_are 0 0 "[]" || fail "info counts repeats in a sequence without any"
 cp -r "$T/seq" "$T/rep"
-d1=$(awk '!/^#/ {n++; if (n == 2) print $2}' "$T/rep/depth.txt")
-d2=$(awk '!/^#/ {n++; if (n == 3) print $2}' "$T/rep/depth.txt")
-cp "$T/rep/$d1" "$T/rep/$d2"
+repeat_frame "$T/rep" depth 2
 expect 0 "$B" info "$T/rep" --json
-python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_depth_frames'] == 1 and d['repeated_depth_first'] == [2] and d['repeated_colour_frames'] == 0, d" \
-    "$T/out" || fail "info does not find frame 2's depth repeating frame 1's: $(cat "$T/out")"
+repeats_are 1 0 "[2]" || fail "info does not find frame 2's depth repeating frame 1's: $(cat "$T/out")"
 expect 0 "$B" info "$T/rep"
 grep -q "1 depth frame repeats the one before byte for byte (frame 2)" "$T/out" || fail "info's repeats line: $(cat "$T/out")"
 # A colour image handed on twice, the depth new.
 cp -r "$T/seq" "$T/reprgb"
-c1=$(awk '!/^#/ {n++; if (n == 2) print $2}' "$T/reprgb/rgb.txt")
-c2=$(awk '!/^#/ {n++; if (n == 3) print $2}' "$T/reprgb/rgb.txt")
-cp "$T/reprgb/$c1" "$T/reprgb/$c2"
+repeat_frame "$T/reprgb" rgb 2
 expect 0 "$B" info "$T/reprgb" --json
-python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_depth_frames'] == 0 and d['repeated_colour_frames'] == 1, d" \
-    "$T/out" || fail "info does not find frame 2's colour repeating frame 1's: $(cat "$T/out")"
+repeats_are 0 1 "[]" || fail "info does not find frame 2's colour repeating frame 1's: $(cat "$T/out")"
 
 # eval-traj: a sequence shorter than the RPE delta still gets its ATE.
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/seq/groundtruth.txt" --json

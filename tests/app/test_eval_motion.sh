@@ -75,9 +75,7 @@ PY
 # A depth image handed on twice (frame 15's is frame 14's): the two pairs
 # with frame 15 are left out and counted, the others stay.
 cp -r "$T/seq" "$T/rep"
-d14=$(awk '!/^#/ {n++; if (n == 15) print $2}' "$T/rep/depth.txt")
-d15=$(awk '!/^#/ {n++; if (n == 16) print $2}' "$T/rep/depth.txt")
-cp "$T/rep/$d14" "$T/rep/$d15"
+repeat_frame "$T/rep" depth 15
 expect 0 "$B" eval-motion "$T/rep" groundtruth --json --csv "$T/rep.csv"
 py - "$T/out" "$T/rep.csv" <<'PY' || fail "eval-motion does not leave out the pairs of a repeated frame"
 import json, sys
