@@ -104,32 +104,6 @@ static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_con
     return BF_OK;
 }
 
-/* The previous frame's depth and colour, to find repeats. */
-typedef struct prev_frame {
-    uint16_t *depth;
-    uint8_t *rgb;
-    bool has_depth, has_rgb;
-} prev_frame;
-
-/* Whether f's depth or colour is the previous frame's byte for byte; f's
- * become the previous ones. */
-static bf_status note_repeat(prev_frame *p, const bf_frame *f, bool *repeat)
-{
-    size_t n = (size_t)f->width * f->height;
-    if (!p->depth) {
-        p->depth = malloc(n * sizeof *p->depth);
-        p->rgb = malloc(3 * n);
-        if (!p->depth || !p->rgb) return bf_fail(BF_NO_MEMORY, "eval-motion: frame %u", f->index);
-    }
-    *repeat = (f->depth && p->has_depth && !memcmp(p->depth, f->depth, n * sizeof *f->depth)) ||
-              (f->rgb && p->has_rgb && !memcmp(p->rgb, f->rgb, 3 * n));
-    p->has_depth = f->depth != NULL;
-    p->has_rgb = f->rgb != NULL;
-    if (f->depth) memcpy(p->depth, f->depth, n * sizeof *f->depth);
-    if (f->rgb) memcpy(p->rgb, f->rgb, 3 * n);
-    return BF_OK;
-}
-
 /* Reads the sequence once; each frame a pair needs is kept in a ring of
  * span + 1 slots until its partner has come. */
 static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, uint32_t *n_frames)
@@ -144,11 +118,12 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
     bf_frame f;
     bf_status s;
     uint32_t seen = 0;
-    prev_frame prev = {0};
+    bf_repeats prev = {0}; /* a pair with a repeated frame is left out */
     while ((s = rgbd_source_next(src, &f)) == BF_OK) {
         bf_progress_update(&prog, ++seen);
-        bool repeat = false;
-        if (f.width == K->width && f.height == K->height && (s = note_repeat(&prev, &f, &repeat)) != BF_OK) break;
+        bool dr = false, cr = false;
+        if (f.width == K->width && f.height == K->height && (s = bf_repeats_note(&prev, &f, &dr, &cr)) != BF_OK) break;
+        bool repeat = dr || cr;
         bool first = is_first(a, f.index), second = is_second(a, f.index);
         if (!first && !second) continue;
         if (f.width != K->width || f.height != K->height) {
@@ -174,8 +149,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         if ((s = pairs_push(out, &r)) != BF_OK) break;
     }
     bf_progress_end(&prog, seen);
-    free(prev.depth);
-    free(prev.rgb);
+    bf_repeats_free(&prev);
     for (uint32_t i = 0; i < ring_n; i++) kept_free(&ring[i]);
     free(ring);
     *n_frames = seen;

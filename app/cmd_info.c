@@ -28,45 +28,23 @@ typedef struct info_stats {
      * and the first few of them. */
     uint32_t n_depth_repeats, n_rgb_repeats;
     uint32_t depth_repeats[INFO_REPEATS_LISTED], rgb_repeats[INFO_REPEATS_LISTED];
-    uint16_t *prev_depth;
-    uint8_t *prev_rgb;
-    size_t prev_n;
-    bool has_prev_depth, has_prev_rgb;
+    bf_repeats repeats;
     double t_first_s, t_last_s;
     uint64_t n_pixels, n_valid;
     uint64_t *hist; /* 65536 bins of raw depth */
 } info_stats;
 
-/* Counts a frame whose depth is the last depth-carrying frame's exactly (the
- * rule replay's loop skips by) or whose colour is the previous frame's, and
- * keeps this frame's for the next. A frame without depth (a covered lens)
- * is no repeat however many come, and leaves the last depth in place. */
-static bf_status note_repeats(info_stats *st, const bf_frame *f, size_t n, bool has_depth)
+/* Counts a frame whose depth or colour repeats (core.h, "Repeated frames":
+ * the rule replay's loop skips by). */
+static bf_status note_repeats(info_stats *st, const bf_frame *f)
 {
-    if (st->prev_n != n) {
-        free(st->prev_depth);
-        free(st->prev_rgb);
-        st->prev_depth = malloc(n * sizeof *st->prev_depth);
-        st->prev_rgb = malloc(3 * n);
-        st->has_prev_depth = st->has_prev_rgb = false;
-        st->prev_n = 0;
-        if (!st->prev_depth || !st->prev_rgb) return bf_fail(BF_NO_MEMORY, "info: frame %u", f->index);
-        st->prev_n = n;
-    }
-    if (has_depth) {
-        if (st->has_prev_depth && !memcmp(st->prev_depth, f->depth, n * sizeof *f->depth)) {
-            if (st->n_depth_repeats < INFO_REPEATS_LISTED) st->depth_repeats[st->n_depth_repeats] = f->index;
-            st->n_depth_repeats++;
-        }
-        memcpy(st->prev_depth, f->depth, n * sizeof *f->depth);
-        st->has_prev_depth = true;
-    }
-    if (f->rgb && st->has_prev_rgb && !memcmp(st->prev_rgb, f->rgb, 3 * n)) {
-        if (st->n_rgb_repeats < INFO_REPEATS_LISTED) st->rgb_repeats[st->n_rgb_repeats] = f->index;
-        st->n_rgb_repeats++;
-    }
-    if (f->rgb) memcpy(st->prev_rgb, f->rgb, 3 * n);
-    st->has_prev_rgb = f->rgb != NULL;
+    bool dr, cr;
+    bf_status s = bf_repeats_note(&st->repeats, f, &dr, &cr);
+    if (s != BF_OK) return s;
+    if (dr && st->n_depth_repeats < INFO_REPEATS_LISTED) st->depth_repeats[st->n_depth_repeats] = f->index;
+    if (cr && st->n_rgb_repeats < INFO_REPEATS_LISTED) st->rgb_repeats[st->n_rgb_repeats] = f->index;
+    st->n_depth_repeats += dr;
+    st->n_rgb_repeats += cr;
     return BF_OK;
 }
 
@@ -84,16 +62,12 @@ static bf_status info_gather(rgbd_source *src, info_stats *st)
         st->n_with_rgb += f.rgb != NULL;
         size_t n = (size_t)f.width * f.height;
         st->n_pixels += n;
-        uint64_t zeros = st->hist[0];
         for (size_t i = 0; i < n; i++) st->hist[f.depth[i]]++;
-        if ((s = note_repeats(st, &f, n, st->hist[0] - zeros < n)) != BF_OK) break;
+        if ((s = note_repeats(st, &f)) != BF_OK) break;
         bf_progress_update(&prog, st->n_frames);
     }
     bf_progress_end(&prog, st->n_frames);
-    free(st->prev_depth);
-    free(st->prev_rgb);
-    st->prev_depth = NULL;
-    st->prev_rgb = NULL;
+    bf_repeats_free(&st->repeats);
     if (s != BF_END) return s;
     st->n_valid = st->n_pixels - st->hist[0];
     return BF_OK;

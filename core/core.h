@@ -191,6 +191,26 @@ typedef struct bf_frame {
     bf_se3 T_wc;          /* ground-truth camera-to-world, if has_pose */
 } bf_frame;
 
+/* Repeated frames. Real sensor noise makes two captures differ in
+ * thousands of pixels, so a depth (colour) image equal byte for byte to the
+ * one before is a driver handing on its last image: stale data from an
+ * earlier moment. The two streams repeat independently (on 7-Scenes' Kinect
+ * 12 of 500 frames repeat the depth alone, 12 the colour alone, 35 both). */
+typedef struct bf_repeats {
+    uint16_t *depth;      /* the last depth-carrying frame's */
+    uint8_t *rgb;         /* the previous frame's colour */
+    size_t n;             /* pixels of the buffers */
+    bool has_depth, has_rgb;
+} bf_repeats;
+
+/* Whether f's depth is the last depth-carrying frame's and whether its
+ * colour is the previous frame's (both frames with colour), byte for byte;
+ * f's images are kept for the next call. A frame without depth (all zero: a
+ * covered lens) repeats nothing and leaves the last depth in place. Either
+ * output may be NULL. Starts over when the frame size changes. */
+bf_status bf_repeats_note(bf_repeats *r, const bf_frame *f, bool *depth_repeat, bool *rgb_repeat);
+void bf_repeats_free(bf_repeats *r); /* zeroes *r; NULL is a no-op */
+
 /* ---------------------------------------------------------------- time */
 
 uint64_t bf_time_ns(void);       /* monotonic */

@@ -296,3 +296,55 @@ BF_TEST(status_table_names_every_code)
     CHECK_ERROR_MENTIONS("x.txt: line 3");
 }
 
+
+/* A driver's repeats (core.h): depth against the last frame with depth,
+ * colour against the previous frame; one changed sample is new data. */
+BF_TEST(repeats_are_found_per_stream_byte_for_byte)
+{
+    enum { PW = 4, PH = 3, PN = PW * PH };
+    uint16_t d0[PN], d1[PN], zero[PN] = {0};
+    uint8_t c0[3 * PN], c1[3 * PN];
+    for (int i = 0; i < PN; i++) d0[i] = d1[i] = (uint16_t)(1000 + i);
+    d1[PN - 1]++;
+    for (int i = 0; i < 3 * PN; i++) c0[i] = c1[i] = (uint8_t)i;
+    c1[0]++;
+    bf_frame f = {.width = PW, .height = PH, .depth = d0, .rgb = c0};
+    bf_repeats r = {0};
+    bool dr = true, cr = true;
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, &cr));
+    CHECK(!dr && !cr); /* nothing before the first frame */
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, &cr));
+    CHECK(dr && cr);
+    /* New depth, the same colour: the streams are judged apart. */
+    f.depth = d1;
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, &cr));
+    CHECK(!dr && cr);
+    f.rgb = c1;
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, &cr));
+    CHECK(dr && !cr);
+    /* A frame without depth repeats nothing and keeps the last depth: the
+     * next frame with d1 repeats it. */
+    f.depth = zero;
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, NULL));
+    CHECK(!dr);
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, NULL));
+    CHECK(!dr);
+    f.depth = d1;
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, NULL));
+    CHECK(dr);
+    /* A frame without colour: the next colour is compared with nothing. */
+    f.rgb = NULL;
+    CHECK_OK(bf_repeats_note(&r, &f, NULL, &cr));
+    CHECK(!cr);
+    f.rgb = c1;
+    CHECK_OK(bf_repeats_note(&r, &f, NULL, &cr));
+    CHECK(!cr);
+    /* Another size starts over. */
+    f.width = PW - 1;
+    CHECK_OK(bf_repeats_note(&r, &f, &dr, &cr));
+    CHECK(!dr && !cr);
+    bf_repeats_free(&r);
+    CHECK(r.depth == NULL && r.n == 0);
+    bf_repeats_free(NULL);
+    CHECK_STATUS(bf_repeats_note(&r, NULL, &dr, &cr), BF_INVALID_ARG);
+}
