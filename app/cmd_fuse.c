@@ -30,6 +30,7 @@ typedef struct fuse_args {
     const char *seq, *poses, *out, *depth_correction;
     replay_options ropt;
     fusion_config fcfg;
+    bool skip_repeated;
     bool no_mesh;
     app_mesh_out mesh_out;
 } fuse_args;
@@ -38,6 +39,7 @@ static int parse_args(int argc, char **argv, fuse_args *a)
 {
     memset(a, 0, sizeof *a);
     a->fcfg = fusion_config_default();
+    a->skip_repeated = true;
     const app_option own[] = {
         APP_OPT("--poses", APP_OPT_STRING, &a->poses, "P",
                 "'groundtruth' (the sequence's own) or a TUM trajectory file (camera-to-world; poses interpolated at "
@@ -45,6 +47,10 @@ static int parse_args(int argc, char **argv, fuse_args *a)
                 .required = true),
         APP_OPT("--out", APP_OPT_STRING, &a->out, "DIR", "output folder (created)", .required = true),
         APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
+        APP_OPT("--repeated", APP_OPT_CHOICE, &a->skip_repeated, "skip|fuse",
+                "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
+                "image, an earlier moment than its pose): skipped, or fused like a new one; a colour repeated "
+                "alone is left out of the map's colour"),
         APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
                 "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
                 "out of every frame before fusion (docs/calibration.md)", .no_default = true),
@@ -89,6 +95,9 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     app_json_fusion_config(o, "config", &a->fcfg);
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &fuse_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", r->run.n_fused);
+    cJSON_AddBoolToObject(o, "skip_repeated", a->skip_repeated);
+    cJSON_AddNumberToObject(o, "repeated", r->run.counts.repeated);
+    cJSON_AddNumberToObject(o, "colour_repeated", r->run.counts.colour_repeated);
     /* Skipped: unreadable (--skip-bad-frames) or without a pose. */
     cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped + r->n_unreadable);
     cJSON_AddNumberToObject(o, "frames_without_pose", r->run.n_skipped);
@@ -135,6 +144,7 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) {
         recon_run_config rcfg = recon_run_config_default();
         rcfg.loop.fusion = a.fcfg;
+        rcfg.loop.skip_repeated = a.skip_repeated;
         rcfg.poses = RECON_POSES_KNOWN;
         rcfg.known = use_traj ? &traj : NULL;
         rcfg.depth_correction = a.depth_correction ? &fuse_depth_fix : NULL;
@@ -159,6 +169,9 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) {
         printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
                r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
+        if (r.run.counts.repeated)
+            printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
+                   r.run.counts.repeated);
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);

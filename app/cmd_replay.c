@@ -245,7 +245,8 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "the tracker's first guess: the last pose times the last motion, or the last pose"),
         APP_OPT("--repeated", APP_OPT_CHOICE, &a->rcfg.skip_repeated, "skip|track",
                 "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
-                "image): skipped, the last pose kept, or tracked and fused like a new one"),
+                "image): skipped, the last pose kept, or tracked and fused like a new one; with skip, a colour "
+                "repeated alone is left out of the photometric term and the map's colour"),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",
                 "look for a lost camera from candidate poses (last pose, continued motion, turns, keyframes) and "
                 "widen the motion gate with the frames since the last good one; off: keep the last pose"),
@@ -544,6 +545,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->height >> rl));
     cJSON_AddNumberToObject(tr, "no_depth", c->no_depth);
     cJSON_AddNumberToObject(tr, "repeated", c->repeated);
+    cJSON_AddNumberToObject(tr, "colour_repeated", c->colour_repeated);
     cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
     cJSON_AddNumberToObject(tr, "pool_full", c->pool_full);
     app_json_series(tr, "inlier_fraction", &t->inlier_frac);
@@ -765,6 +767,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (c->repeated)
         printf("  input            %u frames repeated the depth before them byte for byte: skipped, pose kept\n",
                c->repeated);
+    if (c->colour_repeated)
+        printf("  input            %u frames repeated only the colour before them: tracked and fused without it\n",
+               c->colour_repeated);
     if (r->run.source_status != BF_OK)
         printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
     if (r->has_capture)

@@ -133,7 +133,6 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->K = *K;
     r->T_first = *T_wc0;
     r->T_last = *T_wc0;
-    r->V = bf_se3_identity();
     r->cfg.fusion = recon_fusion_config(cfg);
     r->cfg.track.sensor = r->cfg.sensor;
     if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
@@ -171,7 +170,7 @@ void recon_destroy(recon *r)
     render_destroy(r->ref_caster);
     fusion_destroy(r->map);
     recon__reloc_destroy(r);
-    free(r->prev_depth);
+    bf_repeats_free(&r->repeats);
     free(r);
 }
 
@@ -252,22 +251,6 @@ static bf_status no_depth(recon *r, recon_frame_result *out)
     return BF_OK;
 }
 
-/* Whether f's depth is the last depth-carrying frame's byte for byte; the
- * copy is kept for the next frame. Real sensor noise makes two captures
- * differ in thousands of pixels, so an exact repeat is a driver handing on
- * its last image: tracking it finds no motion and fusing it counts one
- * view twice. */
-static bool is_repeat(recon *r, const bf_frame *f)
-{
-    if (!r->cfg.skip_repeated) return false;
-    size_t n = (size_t)f->width * f->height;
-    if (!r->prev_depth && !(r->prev_depth = malloc(n * sizeof *r->prev_depth))) return false; /* no check, no harm */
-    bool same = r->has_prev_depth && !memcmp(r->prev_depth, f->depth, n * sizeof *f->depth);
-    if (!same) memcpy(r->prev_depth, f->depth, n * sizeof *f->depth);
-    r->has_prev_depth = true;
-    return same;
-}
-
 /* A good frame (tracked or relocalised): fused at its pose, or at *known
  * (recon_add_frame_known), which becomes the last pose. */
 static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_state state,
@@ -289,7 +272,7 @@ static bf_status lose(recon *r, const bf_frame *f, const bf_se3 *known, recon_fr
     out->state = RECON_LOST;
     r->counts.lost++;
     r->is_lost = true;
-    r->V = bf_se3_identity(); /* the motion is unknown now */
+    r->motion_known = false; /* the guess goes back to the last pose */
     if (!known) return BF_OK;
     r->T_last = *known;
     return fuse_and_reference(r, f, known, false, NULL, out);
@@ -319,7 +302,11 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     if (s != BF_OK) return s;
     if (!search_first) {
         /* The reference is the ray-cast at the last good pose. */
-        bf_se3 guess = r->cfg.constant_velocity ? bf_se3_mul(&r->T_last, &r->V) : r->T_last;
+        /* The last motion per interval, over the intervals since the last
+         * good frame: a skipped or dropped frame between them is a longer
+         * step, as it is for the gate. */
+        bool cv = r->cfg.constant_velocity && r->motion_known;
+        bf_se3 guess = cv ? recon__velocity_pose(r, recon__intervals(r, f)) : r->T_last;
         s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &guess, &out->track);
         if (s != BF_OK) return s;
         out->ms_track = out->track.ms_gpu;
@@ -354,12 +341,19 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     out->T_wc = r->T_last;
     out->n_valid = count_valid(f);
     r->counts.frames++;
-    bf_status s = BF_OK;
+    /* Every frame's images count, a skipped one's too: the next frame's
+     * colour may be that one's (core.h, "Repeated frames"). A repeated
+     * depth is an earlier moment's: neither tracked nor fused, with known
+     * poses (--fuse-at-groundtruth) too, whose pose has moved on. A colour
+     * repeated alone leaves the frame its new depth: tracked and fused
+     * without colour, which would be painted (and compared, by the
+     * photometric term) at a pose it was not taken at. */
+    bool stale_depth = false, stale_rgb = false;
+    bf_status s = r->cfg.skip_repeated ? bf_repeats_note(&r->repeats, f, &stale_depth, &stale_rgb) : BF_OK;
+    if (s != BF_OK) return s;
     if (out->n_valid < r->cfg.min_valid_pixels) {
         s = no_depth(r, out);
-    } else if (!known && is_repeat(r, f) && r->has_first) {
-        /* With known poses (--fuse-at-groundtruth: one step from each true
-         * pose) every frame is tracked as it comes. */
+    } else if (stale_depth && r->has_first) {
         out->state = RECON_REPEATED;
         r->counts.repeated++;
     } else if (!r->has_first) {
@@ -376,7 +370,13 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
         }
         out->T_wc = r->T_first;
     } else {
-        s = track_and_fuse(r, f, known, out);
+        bf_frame g = *f;
+        if (stale_rgb) {
+            g.rgb = NULL; /* the depth alone */
+            out->colour_repeated = true;
+            r->counts.colour_repeated++;
+        }
+        s = track_and_fuse(r, &g, known, out);
     }
     out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
     /* Far chunks out, near ones in, between frames (stream.h). */

@@ -135,6 +135,7 @@ typedef struct recon_frame_result {
     recon_reloc_kind reloc;  /* RECON_RELOCALISED: the candidate the pose was found from */
     uint32_t reloc_rejected; /* candidates that passed the tracker's gates but disagreed with the map */
     bool fused;
+    bool colour_repeated;    /* the colour repeated the previous frame's (skip_repeated): left out */
     bf_status fuse_status;   /* BF_POOL_FULL is reported here and the loop goes on */
     uint32_t n_valid;        /* valid depth samples */
     /* Times [ms]: wall clock of the whole frame and GPU time per stage. */
@@ -204,6 +205,7 @@ bf_status recon_render_view(recon *r, const bf_se3 *T_wc);
 typedef struct recon_counts {
     uint32_t frames, tracked, lost, no_depth, degenerate, pool_full;
     uint32_t repeated;    /* frames whose depth repeated the previous one's (skip_repeated) */
+    uint32_t colour_repeated; /* frames whose colour alone repeated: tracked and fused on depth alone */
     uint32_t relocalised; /* frames found again by a search (also counted in tracked) */
     uint32_t keyframes;   /* keyframes held now */
 } recon_counts;
@@ -275,6 +277,7 @@ typedef struct recon_run {
     recon_counts counts; /* the loop's counts; with known poses frames and pool_full only */
     uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
     uint32_t n_resume_skipped; /* frames of the source the resumed scan had handled already */
+    bf_repeats repeats;  /* RECON_POSES_KNOWN with skip_repeated: the last images (the loop keeps its own) */
     bool is_resumed;     /* the run continues a stored scan (recon_run_config.resume) */
     bf_traj est;         /* one pose per frame handled: tracked, the last good one, or the known one */
     bf_traj gt;          /* the frames' ground truth, where they have it */
@@ -291,8 +294,8 @@ typedef struct recon_run {
 
 /* Called after every frame the run handles (frames skipped for want of a
  * known pose excepted); a status other than BF_OK ends the run with it.
- * With known poses fr->state is RECON_FIRST or RECON_TRACKED and fr->T_wc
- * the known pose. */
+ * With known poses fr->state is RECON_FIRST, RECON_TRACKED or (a repeated
+ * depth, not fused) RECON_REPEATED, and fr->T_wc the known pose. */
 typedef bf_status (*recon_frame_fn)(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr);
 
 /* Runs every frame of src (borrowed) through the loop and flushes the map.

@@ -10,7 +10,7 @@ struct recon {
     bf_intrinsics K;
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
-    bf_se3 V;            /* the last tracked motion, T_prev^-1 T_last (constant_velocity's guess) */
+    bool motion_known;   /* V_step leads up to T_last (cleared by a loss): constant_velocity's guess continues it */
     fusion_map *map;     /* made at create, at T_first's origin */
     bool has_first;      /* the first frame with depth has been fused */
     bool frame_fused;    /* the tracker's frame (this add_frame's) was fused at T_frame: a view at that
@@ -36,12 +36,13 @@ struct recon {
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
     float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */
 
-    /* skip_repeated: the depth of the last frame that had some, to find its repeats. */
-    uint16_t *prev_depth;
-    bool has_prev_depth;
+    /* skip_repeated: the last images, to find the frames that repeat them. */
+    bf_repeats repeats;
 };
 
 /* reloc.c */
+/* T_last moved on by n frame intervals of V_step. */
+bf_se3 recon__velocity_pose(const recon *r, double n);
 bf_status recon__reloc_create(recon *r);  /* the keyframe store; checks cfg.reloc */
 void recon__reloc_destroy(recon *r);
 /* Frame intervals from the last good frame to f: by the depth timestamps

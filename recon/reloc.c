@@ -147,7 +147,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
         /* Not the first good frame: the step from the last one. */
         double n = recon__intervals(r, f);
         bf_se3 Li = bf_se3_inverse(&r->T_last), D = bf_se3_mul(&Li, T_new);
-        r->V = D;
+        r->motion_known = true;
         r->V_step = per_interval(&D, n);
         r->has_velocity = true;
         if (f->index == r->good_index + 1 && f->t_depth_s > r->good_t_s) {
@@ -167,7 +167,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
  * pose, 1 the motion continued over n intervals (with a velocity). */
 static uint32_t n_primary(const recon *r) { return r->has_velocity ? 2u : 1u; }
 
-static bf_se3 velocity_pose(const recon *r, double n)
+bf_se3 recon__velocity_pose(const recon *r, double n)
 {
     double xi[6];
     bf_se3_log(&r->V_step, xi);
@@ -186,7 +186,7 @@ static recon_reloc_kind round_entry(const recon *r, uint32_t i, double n, bf_se3
         *T = r->keyframes[i - n_primary(r) * N_TURNS];
         return RECON_RELOC_KEYFRAME;
     }
-    bf_se3 base = i < N_TURNS ? r->T_last : velocity_pose(r, n);
+    bf_se3 base = i < N_TURNS ? r->T_last : recon__velocity_pose(r, n);
     const double *ta = turn_axis_deg[i % N_TURNS];
     bf_vec3 axis = ta[0] == 1 ? bf_v3(0, 1, 0) : bf_v3(1, 0, 0);
     bf_se3 turn = bf_se3_from_qt(bf_quat_from_axis_angle(axis, ta[1] * M_PI / 180.0), bf_v3(0, 0, 0));
@@ -343,7 +343,7 @@ bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *sl
     for (uint32_t i = 0; i < n_primary(r) && budget > 0 && s == BF_OK && !st.is_no_depth; i++) {
         recon_reloc_kind kind = i == 0 ? RECON_RELOC_LAST : RECON_RELOC_VELOCITY;
         if (kind == skip) continue;
-        bf_se3 T = i == 0 ? r->T_last : velocity_pose(r, n);
+        bf_se3 T = i == 0 ? r->T_last : recon__velocity_pose(r, n);
         s = try_candidate(r, f, slot, &T, kind, &st, out);
         budget--;
     }

@@ -18,6 +18,7 @@ void recon_run_free(recon_run *run)
     else fusion_destroy(run->map);
     bf_traj_free(&run->est);
     bf_traj_free(&run->gt);
+    bf_repeats_free(&run->repeats);
     recon_run_series *t = &run->series;
     bf_stats *all[] = {&t->frame_ms,  &t->track_ms, &t->inlier_frac, &t->residual_mm, &t->rof_ms,
                        &t->raycast_ms, &t->upload_ms, &t->alloc_ms,   &t->subcache_ms, &t->window_ms,
@@ -72,17 +73,33 @@ static bool has_fused(const recon_run *run)
 }
 
 /* Fusion alone at a known pose: the map, made before the first frame, gets
- * its origin at the first posed frame. */
-static bf_status fuse_known(const bf_frame *f, const bf_se3 *T_wc, recon_run *run, recon_frame_result *fr)
+ * its origin at the first posed frame. A repeated depth is not fused (its
+ * pose has moved on from the moment it shows), a colour repeated alone
+ * leaves the depth to fuse without it (core.h, "Repeated frames"). */
+static bf_status fuse_known(const recon_run_config *cfg, const bf_frame *f, const bf_se3 *T_wc, recon_run *run,
+                            recon_frame_result *fr)
 {
     double t0 = bf_time_s();
     memset(fr, 0, sizeof *fr);
     fr->index = f->index;
     fr->state = run->n_fused ? RECON_TRACKED : RECON_FIRST;
     fr->T_wc = *T_wc;
-    bf_status s = BF_OK;
+    bool stale_depth = false, stale_rgb = false;
+    bf_status s = cfg->loop.skip_repeated ? bf_repeats_note(&run->repeats, f, &stale_depth, &stale_rgb) : BF_OK;
+    if (s != BF_OK) return s;
+    if (stale_depth && run->n_fused) {
+        fr->state = RECON_REPEATED;
+        run->counts.repeated++;
+        return BF_OK;
+    }
+    bf_frame g = *f;
+    if (stale_rgb) {
+        g.rgb = NULL;
+        fr->colour_repeated = true;
+        run->counts.colour_repeated++;
+    }
     if (!run->n_fused) s = fusion_set_origin(run->map, T_wc->t);
-    if (s == BF_OK) s = fusion_add_frame(run->map, f, T_wc);
+    if (s == BF_OK) s = fusion_add_frame(run->map, &g, T_wc);
     fr->fuse = fusion_last_stage_ms(run->map);
     fr->fuse_status = s;
     if (s == BF_POOL_FULL) run->counts.pool_full++;
@@ -148,7 +165,7 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, recon
             bf_warn("%s: frame %u (t = %.6f): no pose, skipped", cfg->label, f->index, f->t_depth_s);
             return BF_OK;
         }
-        s = fuse_known(f, &T_wc, run, &fr);
+        s = fuse_known(cfg, f, &T_wc, run, &fr);
     } else {
         s = track_frame_in_loop(cfg, f, run, &fr);
     }
