@@ -49,8 +49,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         APP_OPT("--no-mesh", APP_OPT_FLAG, &a->no_mesh, NULL, "skip the mesh (points and stats only)"),
         APP_OPT("--repeated", APP_OPT_CHOICE, &a->skip_repeated, "skip|fuse",
                 "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
-                "image, an earlier moment than its pose): skipped, or fused like a new one; a colour repeated "
-                "alone is left out of the map's colour"),
+                "image, an earlier moment than its pose): skipped, or fused like a new one; with skip, a colour "
+                "repeated alone is left out of the map's colour"),
         APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
                 "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
                 "out of every frame before fusion (docs/calibration.md)", .no_default = true),
@@ -172,6 +172,9 @@ int cmd_fuse(int argc, char **argv)
         if (r.run.counts.repeated)
             printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
                    r.run.counts.repeated);
+        if (r.run.counts.colour_repeated)
+            printf("  input            %u frames repeated only the colour before them: fused without it\n",
+                   r.run.counts.colour_repeated);
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);

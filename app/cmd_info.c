@@ -35,7 +35,7 @@ typedef struct info_stats {
 } info_stats;
 
 /* Counts a frame whose depth or colour repeats (core.h, "Repeated frames":
- * the rule replay's loop skips by). */
+ * the rule the loop skips a depth by and leaves a colour out by). */
 static bf_status note_repeats(info_stats *st, const bf_frame *f)
 {
     bool dr, cr;

@@ -242,7 +242,8 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "of 1 and 2 that keeps 160 pixels a row (a quarter of 640x480)",
                 .codes = ref_level_codes),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
-                "the tracker's first guess: the last pose times the last motion, or the last pose"),
+                "the tracker's first guess: the last pose moved on by the last motion per frame interval over "
+                "the intervals since the last good frame, or the last pose"),
         APP_OPT("--repeated", APP_OPT_CHOICE, &a->rcfg.skip_repeated, "skip|track",
                 "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
                 "image): skipped, the last pose kept, or tracked and fused like a new one; with skip, a colour "
@@ -331,7 +332,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     const app_option fuse_gt[] = {
         APP_OPT("--fuse-at-groundtruth", APP_OPT_FLAG, &a->fuse_at_gt, NULL,
                 "track every frame but fuse it at its true pose: the map is the one the sensor gives and the "
-                "trajectory's error is the tracker's own, one frame at a time (needs ground truth)"),
+                "trajectory's error is the tracker's own, one frame at a time (needs ground truth; a repeated "
+                "depth is skipped as in the loop)"),
         APP_OPT_END,
     };
     loop_options(own, a);

@@ -32,6 +32,7 @@ bf_status bf_repeats_note(bf_repeats *r, const bf_frame *f, bool *depth_repeat, 
     if (rgb_repeat) *rgb_repeat = false;
     if (!r || !f) return bf_fail(BF_INVALID_ARG, "bf_repeats_note: NULL argument");
     size_t n = (size_t)f->width * f->height;
+    if (!n) return BF_OK; /* nothing to compare */
     bf_status s = resize(r, n, f->index);
     if (s != BF_OK) return s;
     if (f->depth && any_depth(f->depth, n)) {

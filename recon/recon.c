@@ -272,16 +272,20 @@ static bf_status lose(recon *r, const bf_frame *f, const bf_se3 *known, recon_fr
     out->state = RECON_LOST;
     r->counts.lost++;
     r->is_lost = true;
-    r->motion_known = false; /* the guess goes back to the last pose */
     if (!known) return BF_OK;
+    /* The last pose is this frame's now: the next step is from here. */
     r->T_last = *known;
+    r->good_index = f->index;
+    r->good_t_s = f->t_depth_s;
     return fuse_and_reference(r, f, known, false, NULL, out);
 }
 
 /* A frame once the map exists. The frame goes up once, into fusion's
  * incoming slot: the tracker reads it there, fusing copies it into the
  * ring. The guess is the last pose (DESIGN.md section 6: no motion model),
- * or with constant_velocity the last motion repeated, which catches steps
+ * or with constant_velocity the last motion per frame interval continued
+ * over the intervals since the last good frame (a skipped or dropped frame
+ * between them makes it the longer step it is), which catches steps
  * beyond max_motion_m from the last pose; on the real frames it moved
  * nothing (docs/real_frames.md), so it is off by default. With reloc, the
  * motion gate grows with the frames elapsed since the last good one, and a
@@ -294,19 +298,17 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     bool reloc = r->cfg.reloc.enabled && !known;
     /* Beyond the gate's cap the camera may be anywhere the gate no longer
      * bounds (a covered lens): the frame is searched for like a lost one. */
-    double n = reloc ? recon__intervals(r, f) : 1.0;
+    double n = recon__intervals(r, f);
     bool search_first = reloc && (r->is_lost || n > r->cfg.reloc.max_gate_intervals);
     bf_status s = fusion_upload_frame(r->map, f, &slot);
     if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
     if (s == BF_OK && reloc) s = recon__set_gate(r, n);
     if (s != BF_OK) return s;
     if (!search_first) {
-        /* The reference is the ray-cast at the last good pose. */
-        /* The last motion per interval, over the intervals since the last
-         * good frame: a skipped or dropped frame between them is a longer
-         * step, as it is for the gate. */
-        bool cv = r->cfg.constant_velocity && r->motion_known;
-        bf_se3 guess = cv ? recon__velocity_pose(r, recon__intervals(r, f)) : r->T_last;
+        /* The reference is the ray-cast at the last good pose; a loss
+         * leaves the motion unknown. */
+        bool cv = r->cfg.constant_velocity && r->has_velocity && !r->is_lost;
+        bf_se3 guess = cv ? recon__velocity_pose(r, n) : r->T_last;
         s = track_frame_gpu(r->tracker, slot.depth, slot.offset, f->index, &guess, &out->track);
         if (s != BF_OK) return s;
         out->ms_track = out->track.ms_gpu;
@@ -324,6 +326,39 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     if (found) return accept(r, f, NULL, RECON_RELOCALISED, out);
     if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
     return lose(r, f, known, out);
+}
+
+/* The first frame with depth: fused at the first pose, which it makes the
+ * reference's. */
+static bf_status first_frame(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_result *out)
+{
+    out->state = RECON_FIRST;
+    fusion_frame_slot slot;
+    bf_status s = known ? recon_set_first_pose(r, known) : BF_OK;
+    if (s == BF_OK) s = fusion_upload_frame(r->map, f, &slot);
+    if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
+    if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, &slot, out);
+    if (s == BF_OK) {
+        r->has_first = true;
+        recon__good_frame(r, f, &r->T_first, true);
+        r->counts.tracked++;
+    }
+    out->T_wc = r->T_first;
+    return s;
+}
+
+/* After a frame, whatever became of it: streaming and the times. */
+static bf_status finish_frame(recon *r, bf_status s, double t0, recon_frame_result *out)
+{
+    out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
+    /* Far chunks out, near ones in, between frames (stream.h). */
+    if (s == BF_OK && out->fused && r->stream) {
+        double ts = bf_time_s();
+        s = stream_update(r->stream, &r->T_last, out->index, false);
+        out->ms_stream = 1e3 * (bf_time_s() - ts);
+    }
+    out->ms_frame = 1e3 * (bf_time_s() - t0);
+    return s;
 }
 
 /* known: NULL for the loop; else the frame is tracked as usual but fused
@@ -351,42 +386,20 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     bool stale_depth = false, stale_rgb = false;
     bf_status s = r->cfg.skip_repeated ? bf_repeats_note(&r->repeats, f, &stale_depth, &stale_rgb) : BF_OK;
     if (s != BF_OK) return s;
-    if (out->n_valid < r->cfg.min_valid_pixels) {
-        s = no_depth(r, out);
-    } else if (stale_depth && r->has_first) {
+    bf_frame g = *f;
+    if (out->n_valid < r->cfg.min_valid_pixels) return finish_frame(r, no_depth(r, out), t0, out);
+    if (stale_depth && r->has_first) {
         out->state = RECON_REPEATED;
         r->counts.repeated++;
-    } else if (!r->has_first) {
-        out->state = RECON_FIRST;
-        fusion_frame_slot slot;
-        if (known) s = recon_set_first_pose(r, known);
-        if (s == BF_OK) s = fusion_upload_frame(r->map, f, &slot);
-        if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
-        if (s == BF_OK) s = fuse_and_reference(r, f, &r->T_first, false, &slot, out);
-        if (s == BF_OK) {
-            r->has_first = true;
-            recon__good_frame(r, f, &r->T_first, true);
-            r->counts.tracked++;
-        }
-        out->T_wc = r->T_first;
-    } else {
-        bf_frame g = *f;
-        if (stale_rgb) {
-            g.rgb = NULL; /* the depth alone */
-            out->colour_repeated = true;
-            r->counts.colour_repeated++;
-        }
-        s = track_and_fuse(r, &g, known, out);
+        return finish_frame(r, BF_OK, t0, out);
     }
-    out->ms_rof = out->track.ms_rof; /* the smoothing of this frame's reference */
-    /* Far chunks out, near ones in, between frames (stream.h). */
-    if (s == BF_OK && out->fused && r->stream) {
-        double ts = bf_time_s();
-        s = stream_update(r->stream, &r->T_last, f->index, false);
-        out->ms_stream = 1e3 * (bf_time_s() - ts);
+    if (stale_rgb) {
+        g.rgb = NULL; /* the depth alone */
+        out->colour_repeated = true;
+        r->counts.colour_repeated++;
     }
-    out->ms_frame = 1e3 * (bf_time_s() - t0);
-    return s;
+    s = r->has_first ? track_and_fuse(r, &g, known, out) : first_frame(r, &g, known, out);
+    return finish_frame(r, s, t0, out);
 }
 
 bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out)

@@ -71,11 +71,14 @@ typedef struct recon_config {
     render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
-    bool constant_velocity;   /* the tracker's guess is the last pose times the last tracked motion, not the
-                                 last pose (docs/real_frames.md, the guess); default false */
-    bool skip_repeated;       /* a frame whose depth is the previous frame's byte for byte (a driver that
-                                 handed on its last image when a new one was late: 47 of 7-Scenes' 500 dev
-                                 frames) is neither tracked nor fused and keeps the last pose; default true */
+    bool constant_velocity;   /* the tracker's guess is the last pose moved on by the last motion per frame
+                                 interval over the intervals since the last good frame, not the last pose
+                                 (docs/real_frames.md, the guess); default false */
+    bool skip_repeated;       /* a frame whose depth is the last depth's byte for byte (a driver that handed on
+                                 its last image when a new one was late: 47 of 7-Scenes' 500 dev frames) is
+                                 neither tracked nor fused and keeps the last pose, with known poses too; one
+                                 whose colour alone repeats is tracked and fused without it (core.h,
+                                 bf_repeats); default true */
     recon_reloc_config reloc;
     stream_config stream;     /* chunks out of the GPU pools and back (stream.h): on by default; far chunks leave
                                  only beyond its radius or when the pools fill */
@@ -161,7 +164,9 @@ bf_status recon_add_frame(recon *r, const bf_frame *f, recon_frame_result *out);
 /* The tracker's own error, without drift: the frame is tracked against the
  * map as above (out->T_wc is the estimate), but fused at T_known, also when
  * tracking fails (state RECON_LOST, fused true), and T_known becomes the
- * next frame's guess and reference pose. With the true
+ * next frame's guess and reference pose; a repeated depth is neither
+ * tracked nor fused (skip_repeated), so the next frame is tracked from the
+ * last true pose fused. With the true
  * poses the map is the one the sensor would give, and each estimate's error
  * is one step's (`bitfuse replay --fuse-at-groundtruth`). */
 bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_known, recon_frame_result *out);
@@ -226,7 +231,8 @@ recon_counts recon_get_counts(const recon *r);
 
 typedef enum recon_pose_source {
     RECON_POSES_TRACK = 0,    /* track every frame, fuse at the pose found */
-    RECON_POSES_TRACK_FUSE_GT, /* track every frame, fuse at its ground truth: the tracker's one-step error */
+    RECON_POSES_TRACK_FUSE_GT, /* track every frame (a repeated depth skipped), fuse at its ground truth: the
+                                  tracker's one-step error */
     RECON_POSES_KNOWN,        /* no tracking: fuse at known poses, skip frames without one; a full
                                  pool fails the run (the loop drops and counts instead) */
 } recon_pose_source;
@@ -274,7 +280,7 @@ typedef struct recon_run_series {
 typedef struct recon_run {
     recon *loop;         /* the loop; NULL with RECON_POSES_KNOWN */
     fusion_map *map;     /* the map: the loop's, or the run's own with known poses; made before the first frame */
-    recon_counts counts; /* the loop's counts; with known poses frames and pool_full only */
+    recon_counts counts; /* the loop's counts; with known poses frames, pool_full, repeated and colour_repeated */
     uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
     uint32_t n_resume_skipped; /* frames of the source the resumed scan had handled already */
     bf_repeats repeats;  /* RECON_POSES_KNOWN with skip_repeated: the last images (the loop keeps its own) */

@@ -10,7 +10,6 @@ struct recon {
     bf_intrinsics K;
     bf_se3 T_first;      /* pose of the first frame with depth */
     bf_se3 T_last;       /* last good pose */
-    bool motion_known;   /* V_step leads up to T_last (cleared by a loss): constant_velocity's guess continues it */
     fusion_map *map;     /* made at create, at T_first's origin */
     bool has_first;      /* the first frame with depth has been fused */
     bool frame_fused;    /* the tracker's frame (this add_frame's) was fused at T_frame: a view at that

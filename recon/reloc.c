@@ -147,7 +147,6 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
         /* Not the first good frame: the step from the last one. */
         double n = recon__intervals(r, f);
         bf_se3 Li = bf_se3_inverse(&r->T_last), D = bf_se3_mul(&Li, T_new);
-        r->motion_known = true;
         r->V_step = per_interval(&D, n);
         r->has_velocity = true;
         if (f->index == r->good_index + 1 && f->t_depth_s > r->good_t_s) {

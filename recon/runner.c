@@ -76,7 +76,7 @@ static bool has_fused(const recon_run *run)
  * its origin at the first posed frame. A repeated depth is not fused (its
  * pose has moved on from the moment it shows), a colour repeated alone
  * leaves the depth to fuse without it (core.h, "Repeated frames"). */
-static bf_status fuse_known(const recon_run_config *cfg, const bf_frame *f, const bf_se3 *T_wc, recon_run *run,
+static bf_status fuse_known(const bf_frame *f, const bf_se3 *T_wc, bool stale_depth, bool stale_rgb, recon_run *run,
                             recon_frame_result *fr)
 {
     double t0 = bf_time_s();
@@ -84,9 +84,7 @@ static bf_status fuse_known(const recon_run_config *cfg, const bf_frame *f, cons
     fr->index = f->index;
     fr->state = run->n_fused ? RECON_TRACKED : RECON_FIRST;
     fr->T_wc = *T_wc;
-    bool stale_depth = false, stale_rgb = false;
-    bf_status s = cfg->loop.skip_repeated ? bf_repeats_note(&run->repeats, f, &stale_depth, &stale_rgb) : BF_OK;
-    if (s != BF_OK) return s;
+    bf_status s = BF_OK;
     if (stale_depth && run->n_fused) {
         fr->state = RECON_REPEATED;
         run->counts.repeated++;
@@ -160,12 +158,17 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, recon
     if (cfg->poses == RECON_POSES_KNOWN) {
         bf_se3 T_wc;
         run->counts.frames++; /* the loop counts its own */
+        /* Every frame's images count, one without a pose too: the next
+         * frame's colour may be that one's (core.h, "Repeated frames"). */
+        bool stale_depth = false, stale_rgb = false;
+        if (cfg->loop.skip_repeated && (s = bf_repeats_note(&run->repeats, f, &stale_depth, &stale_rgb)) != BF_OK)
+            return s;
         if (!known_pose(cfg, f, &T_wc)) {
             run->n_skipped++;
             bf_warn("%s: frame %u (t = %.6f): no pose, skipped", cfg->label, f->index, f->t_depth_s);
             return BF_OK;
         }
-        s = fuse_known(cfg, f, &T_wc, run, &fr);
+        s = fuse_known(f, &T_wc, stale_depth, stale_rgb, run, &fr);
     } else {
         s = track_frame_in_loop(cfg, f, run, &fr);
     }

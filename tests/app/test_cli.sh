@@ -203,20 +203,27 @@ assert d["config"]["loop"]["skip_repeated"] is False and d["tracking"]["repeated
 assert [r["state"] for r in rows] == ["first", "tracked", "tracked"], [r["state"] for r in rows]
 PY
     # A colour repeated alone: the frame's depth is new, so it is tracked, without the
-    # colour (an earlier moment's) in the photometric term or the map's colour.
-    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgb" $small
+    # colour (an earlier moment's) in the photometric term or the map's colour. With the
+    # term on, frames.csv's photo_sharpness is 0 where the term did not run: on that frame
+    # (and the next, whose reference it made, if there were one); --repeated track uses it.
+    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgb" $small --photometric 0.3
     grep -q "1 frames repeated only the colour before them" "$T/out" || fail "replay does not report the colour repeat: $(head -c 400 "$T/out")"
-    python3 - "$T/rprgb" <<'PY' || fail "replay of a repeated colour"
+    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgbt" $small --photometric 0.3 --repeated track
+    py - "$T/rprgb" "$T/rprgbt" <<'PY' || fail "replay of a repeated colour"
 import csv, json, sys
-d = json.load(open(sys.argv[1] + "/stats.json"))
-rows = list(csv.DictReader(open(sys.argv[1] + "/frames.csv")))
-assert d["tracking"]["repeated"] == 0 and d["tracking"]["colour_repeated"] == 1, d["tracking"]
+def run(d):
+    return json.load(open(d + "/stats.json"))["tracking"], list(csv.DictReader(open(d + "/frames.csv")))
+t, rows = run(sys.argv[1])
+assert t["repeated"] == 0 and t["colour_repeated"] == 1, t
 assert [r["state"] for r in rows] == ["first", "tracked", "tracked"], [r["state"] for r in rows]
+assert float(rows[1]["photo_sharpness"]) > 0 and float(rows[2]["photo_sharpness"]) == 0, rows
+t, rows = run(sys.argv[2])
+assert t["colour_repeated"] == 0 and float(rows[2]["photo_sharpness"]) > 0, (t, rows)
 PY
     # fuse at known poses: a repeated depth is not fused (its pose has moved on), unless
     # --repeated fuse; a colour repeated alone is fused without its colour.
     fused_are() { # DIR FRAMES REPEATED COLOUR_REPEATED
-        python3 -c "import json,sys; d=json.load(open(sys.argv[1]+'/stats.json')); assert (d['frames'], d['repeated'], d['colour_repeated']) == tuple(map(int, sys.argv[2:5])), d" "$@"
+        py -c "import json,sys; d=json.load(open(sys.argv[1]+'/stats.json')); assert (d['frames'], d['repeated'], d['colour_repeated']) == tuple(map(int, sys.argv[2:5])), d" "$@"
     }
     expect 0 "$B" fuse "$T/rep" --poses groundtruth --out "$T/furep" $small
     grep -q "1 frames repeated the depth before them byte for byte: not fused" "$T/out" || fail "fuse does not report the repeat: $(head -c 400 "$T/out")"
@@ -225,6 +232,8 @@ PY
     fused_are "$T/furepf" 3 0 0 || fail "fuse --repeated fuse did not fuse the repeat"
     expect 0 "$B" fuse "$T/reprgb" --poses groundtruth --out "$T/furgb" $small
     fused_are "$T/furgb" 3 0 1 || fail "fuse of a repeated colour"
+    expect 0 "$B" fuse "$T/reprgb" --poses groundtruth --out "$T/furgbf" $small --repeated fuse
+    fused_are "$T/furgbf" 3 0 0 || fail "fuse --repeated fuse left a repeated colour out"
 fi
 # Every frame unreadable: skipping them all is not a success.
 cp -r "$T/seq" "$T/allcut"

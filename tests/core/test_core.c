@@ -296,7 +296,6 @@ BF_TEST(status_table_names_every_code)
     CHECK_ERROR_MENTIONS("x.txt: line 3");
 }
 
-
 /* A driver's repeats (core.h): depth against the last frame with depth,
  * colour against the previous frame; one changed sample is new data. */
 BF_TEST(repeats_are_found_per_stream_byte_for_byte)

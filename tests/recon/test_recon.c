@@ -56,15 +56,16 @@ BF_TEST(frames_without_depth_are_skipped_and_tracking_resumes)
     gpu_context_destroy(ctx);
 }
 
-/* Frame 8's depth is frame 7's, byte for byte: a driver that handed on its
- * last image (47 of 7-Scenes' 500 dev frames). */
-enum { REPEAT = 8 };
+/* Frame repeat_at's depth is the one before's, byte for byte: a driver that
+ * handed on its last image (47 of 7-Scenes' 500 dev frames). */
+static uint32_t repeat_at;
 static uint16_t repeat_saved[W * H];
 static void repeat_depth(uint32_t k, uint16_t *depth)
 {
-    if (k == REPEAT - 1) memcpy(repeat_saved, depth, sizeof repeat_saved);
-    if (k == REPEAT) memcpy(depth, repeat_saved, sizeof repeat_saved);
+    if (k + 1 == repeat_at) memcpy(repeat_saved, depth, sizeof repeat_saved);
+    if (k == repeat_at) memcpy(depth, repeat_saved, sizeof repeat_saved);
 }
+enum { REPEAT = 8 };
 
 BF_TEST(a_repeated_depth_frame_is_skipped_and_keeps_the_last_pose)
 {
@@ -78,6 +79,7 @@ BF_TEST(a_repeated_depth_frame_is_skipped_and_keeps_the_last_pose)
     static run_out o;
     memset(&o, 0, sizeof o);
     bf_se3 I = bf_se3_identity();
+    repeat_at = REPEAT;
     CHECK_OK(run_loop(ctx, &sc, truth, N, &I, repeat_depth, &o));
     CHECK_EQ_INT(o.fr[REPEAT].state, RECON_REPEATED);
     CHECK(!o.fr[REPEAT].fused);
@@ -335,12 +337,6 @@ BF_TEST(a_static_camera_stays_put)
  * was) is lost. Relocalisation is off: nothing else would find those
  * frames. */
 enum { SLIDE_REPEAT = 5 };
-static uint16_t slide_saved[W * H];
-static void slide_repeat(uint32_t k, uint16_t *depth)
-{
-    if (k == SLIDE_REPEAT - 1) memcpy(slide_saved, depth, sizeof slide_saved);
-    if (k == SLIDE_REPEAT) memcpy(depth, slide_saved, sizeof slide_saved);
-}
 
 BF_TEST(constant_velocity_guess_spans_a_skipped_frame)
 {
@@ -362,7 +358,8 @@ BF_TEST(constant_velocity_guess_spans_a_skipped_frame)
     cfg.loop.reloc.enabled = false;
     cfg.loop.track.max_motion_m = 0.05;
     bf_se3 I = bf_se3_identity();
-    CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N, &I, slide_repeat, &o));
+    repeat_at = SLIDE_REPEAT;
+    CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N, &I, repeat_depth, &o));
     CHECK_EQ_INT(o.fr[SLIDE_REPEAT].state, RECON_REPEATED);
     CHECK_EQ_INT(o.counts.lost, 0);
     for (uint32_t k = 1; k < N; k++)
