@@ -23,31 +23,32 @@ static const char usage_text[] =
     "colour carries neither the depth camera's fixed error pattern nor anything of a\n"
     "tracker, so this checks a tracker's output, or a sequence's ground truth, by data it\n"
     "did not use. TRAJ is a TUM trajectory file (camera-to-world, e.g. replay's\n"
-    "trajectory.txt; poses interpolated at the depth timestamps) or 'groundtruth' (the\n"
-    "sequence's own). The colour is taken as registered to the depth (TUM, 7-Scenes\n"
+    "trajectory.txt) or 'groundtruth' (the sequence's own). The motion is the one between\n"
+    "the two colour images' timestamps, and every TRAJ is interpolated there (in TUM\n"
+    "sequences a colour image is up to 20 ms from its depth). The colour is taken as\n"
+    "registered to the depth (TUM, 7-Scenes\n"
     "folders, bitfuse logs); pairs are compared where the colour gives a motion and every\n"
     "TRAJ has both poses. A pair with a frame whose depth or colour repeats the frame\n"
     "before byte for byte (a driver handing on its last image: stale data, which a tracker\n"
     "may also have skipped) is left out and counted.\n";
 
-/* A frame kept until its pairs are made: features, depth and poses. */
+/* A frame kept until its pairs are made: features and depth. */
 typedef struct kept_frame {
     uint32_t index;
-    double t_s;
+    double t_s;          /* its colour's timestamp */
     eval_motion_image *im;
     uint16_t *depth;
-    bool has_gt;
-    bf_se3 T_gt;
     bool repeat;         /* its depth or colour is the previous frame's byte for byte */
 } kept_frame;
 
+/* The colour's motion is from a's colour image to b's: the features are
+ * lifted along a's colour rays (by the depth taken nearest in time), and b's
+ * colour gives the pose. The trajectories are read at those two moments. */
 typedef struct pair_rec {
     uint32_t a, b;
-    double t_a, t_b;
+    double t_a, t_b;       /* the colour timestamps */
     bool repeat;           /* a or b repeats the frame before it: left out */
     eval_motion_pair m;
-    bool has_gt;
-    bf_se3 T_gt_a, T_gt_b;
 } pair_rec;
 
 typedef struct motion_args {
@@ -62,6 +63,7 @@ typedef struct motion_args {
 typedef struct pairs {
     pair_rec *v;
     uint32_t n, cap;
+    bf_traj gt;            /* the frames' own poses at their depth timestamps ('groundtruth') */
 } pairs;
 
 static void kept_free(kept_frame *k)
@@ -98,9 +100,7 @@ static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_con
     if (!slot->depth) return bf_fail(BF_NO_MEMORY, "eval-motion: frame %u", f->index);
     memcpy(slot->depth, f->depth, n * sizeof *slot->depth);
     slot->index = f->index;
-    slot->t_s = f->t_depth_s;
-    slot->has_gt = f->has_pose;
-    slot->T_gt = f->T_wc;
+    slot->t_s = f->t_rgb_s;
     return BF_OK;
 }
 
@@ -124,6 +124,10 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         bool dr = false, cr = false;
         if (f.width == K->width && f.height == K->height && (s = bf_repeats_note(&prev, &f, &dr, &cr)) != BF_OK) break;
         bool repeat = dr || cr;
+        /* Every frame's own pose, for 'groundtruth' at the colour times. */
+        if (f.has_pose && (!out->gt.n || f.t_depth_s > out->gt.t_s[out->gt.n - 1]) &&
+            (s = bf_traj_push(&out->gt, f.t_depth_s, &f.T_wc)) != BF_OK)
+            break;
         bool first = is_first(a, f.index), second = is_second(a, f.index);
         if (!first && !second) continue;
         if (f.width != K->width || f.height != K->height) {
@@ -142,9 +146,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         if (!second) continue;
         const kept_frame *fa = &ring[(f.index - a->span) % ring_n];
         if (!fa->im || fa->index != f.index - a->span) continue; /* a skipped or depthless first frame */
-        pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_depth_s,
-                      .repeat = fa->repeat || repeat,
-                      .has_gt = fa->has_gt && f.has_pose, .T_gt_a = fa->T_gt, .T_gt_b = f.T_wc};
+        pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_rgb_s, .repeat = fa->repeat || repeat};
         if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, slot->im, &a->cfg, &r.m)) != BF_OK) break;
         if ((s = pairs_push(out, &r)) != BF_OK) break;
     }
@@ -168,14 +170,11 @@ typedef struct traj_result {
     uint32_t n_closest;
 } traj_result;
 
-static bool traj_pose(const traj_result *t, const pair_rec *r, bool second, bf_se3 *T)
+/* A trajectory's pose at a pair's colour moment; 'groundtruth' is the
+ * frames' own poses, interpolated between their depth timestamps. */
+static bool traj_pose(const traj_result *t, const pairs *p, const pair_rec *r, bool second, bf_se3 *T)
 {
-    if (t->is_gt) {
-        if (!r->has_gt) return false;
-        *T = second ? r->T_gt_b : r->T_gt_a;
-        return true;
-    }
-    return bf_traj_interpolate(&t->traj, second ? r->t_b : r->t_a, T);
+    return bf_traj_interpolate(t->is_gt ? &p->gt : &t->traj, second ? r->t_b : r->t_a, T);
 }
 
 /* Errors of every trajectory on the pairs where the colour gave a motion
@@ -188,7 +187,7 @@ static bf_status compare(const pairs *p, traj_result *t, int n_t, bool *common, 
         common[i] = r->m.ok;
         for (int k = 0; k < n_t && common[i]; k++) {
             bf_se3 Ta, Tb;
-            common[i] = traj_pose(&t[k], r, false, &Ta) && traj_pose(&t[k], r, true, &Tb);
+            common[i] = traj_pose(&t[k], p, r, false, &Ta) && traj_pose(&t[k], p, r, true, &Tb);
             if (common[i]) eval_motion_compare(&r->m.T_ab, &Ta, &Tb, &t[k].err[i]);
         }
         *n_common += common[i];
@@ -442,6 +441,7 @@ int cmd_eval_motion(int argc, char **argv)
     }
     free(common);
     free(p.v);
+    bf_traj_free(&p.gt);
     rgbd_source_close(src);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
