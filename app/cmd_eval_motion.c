@@ -23,19 +23,20 @@ static const char usage_text[] =
     "colour carries neither the depth camera's fixed error pattern nor anything of a\n"
     "tracker, so this checks a tracker's output, or a sequence's ground truth, by data it\n"
     "did not use. TRAJ is a TUM trajectory file (camera-to-world, e.g. replay's\n"
-    "trajectory.txt) or 'groundtruth' (the sequence's own). The motion is the one between\n"
-    "the two colour images' timestamps, and every TRAJ is interpolated there (in TUM\n"
-    "sequences a colour image is up to 20 ms from its depth). The colour is taken as\n"
-    "registered to the depth (TUM, 7-Scenes\n"
-    "folders, bitfuse logs); pairs are compared where the colour gives a motion and every\n"
-    "TRAJ has both poses. A pair with a frame whose depth or colour repeats the frame\n"
-    "before byte for byte (a driver handing on its last image: stale data, which a tracker\n"
-    "may also have skipped) is left out and counted.\n";
+    "trajectory.txt) or 'groundtruth' (the frames' own poses). The motion is the one\n"
+    "between the two colour images' timestamps, and every TRAJ is interpolated there (in\n"
+    "TUM sequences a colour image is up to 20 ms from its depth). The colour is taken as\n"
+    "registered to the depth (TUM, 7-Scenes folders, bitfuse logs); pairs are compared\n"
+    "where the colour gives a motion and every TRAJ has a pose at both colour times (a\n"
+    "time outside a trajectory's span has none). A pair with a frame whose depth or\n"
+    "colour repeats the frame before byte for byte (a driver handing on its last image:\n"
+    "stale data, which a tracker may also have skipped) is left out and counted.\n";
 
 /* A frame kept until its pairs are made: features and depth. */
 typedef struct kept_frame {
     uint32_t index;
     double t_s;          /* its colour's timestamp */
+    bool has_pose;       /* its own ground truth */
     eval_motion_image *im;
     uint16_t *depth;
     bool repeat;         /* its depth or colour is the previous frame's byte for byte */
@@ -47,6 +48,7 @@ typedef struct kept_frame {
 typedef struct pair_rec {
     uint32_t a, b;
     double t_a, t_b;       /* the colour timestamps */
+    bool has_gt;           /* a and b have their own ground truth (not only neighbours far off) */
     bool repeat;           /* a or b repeats the frame before it: left out */
     eval_motion_pair m;
 } pair_rec;
@@ -101,6 +103,7 @@ static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_con
     memcpy(slot->depth, f->depth, n * sizeof *slot->depth);
     slot->index = f->index;
     slot->t_s = f->t_rgb_s;
+    slot->has_pose = f->has_pose;
     return BF_OK;
 }
 
@@ -146,7 +149,8 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         if (!second) continue;
         const kept_frame *fa = &ring[(f.index - a->span) % ring_n];
         if (!fa->im || fa->index != f.index - a->span) continue; /* a skipped or depthless first frame */
-        pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_rgb_s, .repeat = fa->repeat || repeat};
+        pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_rgb_s,
+                      .has_gt = fa->has_pose && f.has_pose, .repeat = fa->repeat || repeat};
         if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, slot->im, &a->cfg, &r.m)) != BF_OK) break;
         if ((s = pairs_push(out, &r)) != BF_OK) break;
     }
@@ -171,9 +175,12 @@ typedef struct traj_result {
 } traj_result;
 
 /* A trajectory's pose at a pair's colour moment; 'groundtruth' is the
- * frames' own poses, interpolated between their depth timestamps. */
+ * frames' own poses, interpolated between their depth timestamps, where
+ * both frames have one (not across a gap of frames without). A moment
+ * outside a trajectory's time span has no pose: the pair is not compared. */
 static bool traj_pose(const traj_result *t, const pairs *p, const pair_rec *r, bool second, bf_se3 *T)
 {
+    if (t->is_gt && !r->has_gt) return false;
     return bf_traj_interpolate(t->is_gt ? &p->gt : &t->traj, second ? r->t_b : r->t_a, T);
 }
 
@@ -423,7 +430,7 @@ int cmd_eval_motion(int argc, char **argv)
         for (uint32_t i = 0; i < p.n; i++) n_ok += p.v[i].m.ok;
         s = bf_fail(BF_FORMAT,
                     "%s: none of %u pairs can be compared: the colour gave a motion in %u (at least %u inliers), "
-                    "and the trajectories must have poses at both frames",
+                    "and the trajectories must have poses at both colour times",
                     a.paths[0], p.n, n_ok, a.cfg.min_inliers);
     }
     if (s == BF_OK && a.csv) s = write_csv(a.csv, &p, t, n_t, common);

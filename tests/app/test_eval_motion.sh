@@ -118,13 +118,16 @@ for list_name, first in (("depth.txt", 0), ("rgb.txt", 1)):
             shutil.copy(os.path.join(src, name), os.path.join(dst, name))
             f.write("%s %s\n" % (t, name))
 PY
-expect 0 "$B" eval-motion "$T/late" groundtruth --json
-py - "$T/out" <<'PY' || fail "eval-motion does not read the ground truth at the colour's moments"
+expect 0 "$B" eval-motion "$T/late" groundtruth "$T/late/groundtruth.txt" --json --csv "$T/late.csv"
+py - "$T/out" "$T/late.csv" <<'PY' || fail "eval-motion does not read the trajectories at the colour's moments"
 import json, sys
 d = json.load(open(sys.argv[1]))
-gt = d["trajectories"][0]
-# 1.3 mm measured; the 14 cm steps make 11 ms of a changing velocity 10-20 mm.
-assert d["pairs_compared"] == 6 and gt["trans_err_m"]["median"] < 0.005, d
+gt, gtfile = d["trajectories"]
+# 1.3 and 1.2 mm measured; the 14 cm steps make 11 ms of a changing velocity 10-20 mm.
+assert d["pairs_compared"] == 6, d
+assert gt["trans_err_m"]["median"] < 0.005 and gtfile["trans_err_m"]["median"] < 0.005, d
+first = [l.split(",") for l in open(sys.argv[2]) if not l.startswith("#")][0]
+assert first[:4] == ["0", "10", "0.011111", "0.344444"], first
 PY
 
 # Refusals.
