@@ -5,31 +5,30 @@
 #   plain   the full loop, started at the first true pose
 #   fgt     --fuse-at-groundtruth: every frame tracked against a map fused at the true poses, so
 #           each estimate's error is one tracking step's
-#   probes  replays with options changed (PROBES; the default set: the defaults of 2026-12-02's
-#           start (first) and of its third session's start (morning), and today's with one of
-#           the third session's two changes undone)
-# at most two at a time, evaluates each trajectory with `bitfuse eval-traj` over frames 0-499 and
+#   probes  replays with options changed (PROBES; the default set: one per variant of the
+#           later sessions that is still an option, docs/real_frames.md)
+# JOBS at a time (default 1: the times per frame are then the loop's own), evaluates each trajectory with `bitfuse eval-traj` over frames 0-499 and
 # 0-420 (the ground truth jumps 27 mm between 420 and 421), and writes the generated tables of
 # docs/real_frames.md (between <!-- gen:... --> markers; the analysis around them is kept) and
 # docs/real_frames.png (bench/real_frames.py).
 #
 #   bench/real_frames.sh [OUT_DIR]                      (default /tmp/bitfuse-real-frames)
 #   BIN=build/app/bitfuse DATA=/path/7scenes-dev bench/real_frames.sh /tmp/rf
-#   PROBES="ratio1|--ratio 1;again|" bench/real_frames.sh     (name|replay options; '' for none)
+#   PROBES="ratio1|--ratio 1" bench/real_frames.sh    (name|replay options, ';' between; '' for none)
 #   REUSE=1 bench/real_frames.sh /tmp/rf                (keep runs whose stats.json exists)
 #
-# Each replay takes 10-20 minutes on the shared 2-core machine (1.3-2.4 s per frame under load);
-# the ten of the default take one to two hours.
+# Each replay takes 30-80 s on the 2-core machine with lavapipe from Mesa 25 (54-157 ms a frame);
+# the ten of the default 7.5 minutes, the tables after them about two more.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-/tmp/bitfuse-real-frames}
-BIN=${BIN:-/work/bench-data/bitfuse-base}
+BIN=${BIN:-build/app/bitfuse}
 DATA=${DATA:-/work/bench-data/7scenes-dev}
-# name|options; empty options: the plain loop again (run-to-run spread: lavapipe's reductions are
-# not bit-reproducible across runs)
-PROBES=${PROBES-"first|--icp-iters 5,5,4 --icp-sample-step 1 --rof-iters 10 --noise-exp 2 --fine-angle-gate 0 --huber 2;morning|--fine-angle-gate 0 --huber 2;gate45|--fine-angle-gate 0;h2|--huber 2;repeat|"}
+# name|options; empty options: the plain loop again (replay is deterministic since the sixth
+# session, so a second plain run should match the first byte for byte)
+PROBES=${PROBES-"ratio3|--ratio 3;ratio1|--ratio 1;level8|--max-level 8;window20|--window 20;rof10|--rof-iters 10;photo|--photometric 0.3;velocity|--guess velocity;repeats|--repeated track"}
 REUSE=${REUSE:-0}
-JOBS=${JOBS:-2}
+JOBS=${JOBS:-1}
 PY=python3
 [ -x /usr/bin/python3 ] && PY=/usr/bin/python3
 [ -x "$BIN" ] || { echo "no binary at $BIN (set BIN)" >&2; exit 1; }

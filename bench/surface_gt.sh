@@ -43,6 +43,7 @@ for r in $runs; do
   done
 done
 
+# shellcheck disable=SC2086 # runs: one word per run
 "$PY" - "$OUT" "$FUSE_OPTS" $runs <<'PYEOF' | tee "$OUT/surface_gt.md"
 import json, sys
 out, opts, runs = sys.argv[1], sys.argv[2], sys.argv[3:]
