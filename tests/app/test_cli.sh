@@ -234,6 +234,17 @@ PY
     fused_are "$T/furgb" 3 0 1 || fail "fuse of a repeated colour"
     expect 0 "$B" fuse "$T/reprgb" --poses groundtruth --out "$T/furgbf" $small --repeated fuse
     fused_are "$T/furgbf" 3 0 0 || fail "fuse --repeated fuse left a repeated colour out"
+    # A frame without a pose is not fused, but its images are still the ones the next
+    # frame's are compared with: frame 1's colour, handed on from pose-less frame 0, is
+    # stale. (The ground truth starts at frame 1: frame 0 is 33 ms before it, beyond the
+    # 20 ms a pose may be carried.)
+    cp -r "$T/seq" "$T/nopose"
+    repeat_frame "$T/nopose" rgb 1
+    awk -v t1="$(awk '!/^#/ {i++; if (i == 2) print $1}' "$T/seq/depth.txt")" '/^#/ || $1 >= t1 - 1e-4' \
+        "$T/seq/groundtruth.txt" >"$T/nopose/groundtruth.txt"
+    expect 0 "$B" fuse "$T/nopose" --poses groundtruth --out "$T/funopose" $small
+    py -c "import json,sys; d=json.load(open(sys.argv[1]+'/stats.json')); assert (d['frames'], d['frames_without_pose'], d['colour_repeated']) == (2, 1, 1), d" \
+        "$T/funopose" || fail "fuse: a pose-less frame's colour handed on to the next was not found stale"
 fi
 # Every frame unreadable: skipping them all is not a success.
 cp -r "$T/seq" "$T/allcut"
