@@ -4,7 +4,8 @@ surface of the reference system ../shared/BENCHMARKS.md calls "Open3D 0.16
 dense SLAM (VoxelBlockGrid)", made from our own frames so that its surface
 error sits beside bitfuse's, measured by the same `bitfuse eval-surface`.
 
-    open3d_tsdf.py DATA --out DIR [--frames N] [--voxel M] [--depth-max M]
+    open3d_tsdf.py DATA --out DIR [--frames N] [--voxel M] [--depth-scale S]
+                   [--depth-max M] [--trunc-mult K] [--block-count N]
                    [--weight-threshold W]
 
 DATA: frame-NNNNNN.{depth.png,color.jpg,pose.txt} (camera to world) and
@@ -14,9 +15,10 @@ t_reconstruction_system/integrate.py does, and the mesh
 (extract_triangle_mesh) is written to DIR/mesh.ply, DIR/stats.json beside it
 (time per frame, wall clock; the configuration).
 
-The parameters are Open3D's reconstruction-system defaults (default_config.yml):
-voxel 3/512 m, 16^3 blocks, depth up to 3.0 m, truncation 8 voxels, mesh
-where the weight reaches 3. Its dense SLAM (frame-to-model tracking) does not
+The parameters are those of Open3D's reconstruction system
+(t_reconstruction_system: integrate.py's voxel of 3/512 m and 16^3 blocks,
+default_config.yml's depth up to 3.0 m, truncation of 8 voxels and surface
+weight threshold of 3; the block count only sizes the hash). Its dense SLAM (frame-to-model tracking) does not
 run on Debian's build: the odometry's bilateral filter has no CPU kernel
 there. A bench tool: Debian's python3-open3d, not part of bitfuse.
 """
@@ -115,8 +117,6 @@ def main():
     grid, times = fuse(frames, K, a)
     total = time.perf_counter() - t0
     mesh = grid.extract_triangle_mesh(weight_threshold=a.weight_threshold).to_legacy()
-    if mesh.has_vertex_colors():  # integrated from 8-bit colour: 0-255, the writer wants 0-1
-        mesh.vertex_colors = o3d.utility.Vector3dVector(np.asarray(mesh.vertex_colors) / 255.0)
     o3d.io.write_triangle_mesh(os.path.join(a.out, "mesh.ply"), mesh, write_ascii=False)
     stats = {"tool": "open3d_tsdf.py", "open3d": o3d.__version__, "frames": len(frames),
              "config": {k: v for k, v in vars(a).items() if k not in ("data", "out")},

@@ -473,8 +473,9 @@ def main():
     Tc = np.array(Tc)
     ate_c, _ = ate_rmse(Tc[:, :3, 3], G[:, :3, 3])
     ate_cc, _ = ate_rmse(Tc[:CUT + 1, :3, 3], G[:CUT + 1, :3, 3])
-    rows.append("The plain loop's steps chained with these %d steps replaced by the true ones: ATE %s mm "
-                "(0-%d: %s) against %s (%s)." % (len(sel), fmt(ate_c * 1e3), CUT, fmt(ate_cc * 1e3),
+    rows.append("The plain loop's steps chained with %s replaced by the true one%s: ATE %s mm "
+                "(0-%d: %s) against %s (%s)." % ("this step" if len(sel) == 1 else "these %d steps" % len(sel),
+                                                 "" if len(sel) == 1 else "s", fmt(ate_c * 1e3), CUT, fmt(ate_cc * 1e3),
                                                  fmt(plain.ate_all * 1e3), fmt(plain.ate_cut * 1e3)))
     for lo, hi in ((250, 349), (200, 399)):
         Tc = [G[0]]
