@@ -118,6 +118,16 @@ import json, sys
 c = json.load(open(sys.argv[1]))['depth_correction']
 assert c['file'] == sys.argv[2] and c['grid_w'] == 20 and c['min_multiplier'] < 0.995 < 1.005 < c['max_multiplier'], c
 " "$T/rp/stats.json" "$T/bands.json" || fail "replay's stats.json does not echo --depth-correction"
+# With the file the noise weight's exponent defaults to 2.5 (its far samples are corrected);
+# without it, 3; a given --noise-exp stays what it says either way.
+noise_exp_is() { # DIR E
+    py -c "import json,sys; e=json.load(open(sys.argv[1]+'/stats.json'))['config']['track']['noise_weight_exp']; assert abs(e - float(sys.argv[2])) < 1e-6, e" "$1" "$2"
+}
+noise_exp_is "$T/rp" 2.5 || fail "replay --depth-correction: the noise exponent is not 2.5"
+expect 0 "$B" replay "$T/spoiled" --out "$T/rp3" --depth-correction "$T/bands.json" --noise-exp 3 --no-mesh --frames 3
+noise_exp_is "$T/rp3" 3 || fail "replay --depth-correction --noise-exp 3: the given exponent was not kept"
+expect 0 "$B" replay "$T/spoiled" --out "$T/rpraw" --no-mesh --frames 3
+noise_exp_is "$T/rpraw" 3 || fail "replay without --depth-correction: the noise exponent is not 3"
 expect 0 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu" --depth-correction "$T/bands.json"
 expect 0 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu_raw"
 # The map fused from the corrected depth explains that depth better than
