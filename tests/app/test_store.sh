@@ -85,8 +85,14 @@ PY
 # reopens (info), exports, and the next run resumes it; at the end one run
 # finishes the scan.
 K="$T/K"
+# The kills land within an uninterrupted scan's own duration on this machine
+# (a fixed 0.2-2 s window missed most scans on a faster one); a run that ends
+# before its kill just makes the loop try again.
+t0=$(date +%s.%N)
+expect 0 "$B" replay "$SEQ" --out "$T/ktime" --no-mesh --store "$T/Ktime" --store-every 0.1
+scan_s=$(py -c "import sys; print(max(0.3, float(sys.argv[2]) - float(sys.argv[1])))" "$t0" "$(date +%s.%N)")
 kills=0
-for i in $(seq 1 40); do
+for i in $(seq 1 80); do
     [ "$kills" -ge 22 ] && break
     # Every other run resumes what the killed one left; the others start a
     # new scan, which lasts long enough to be killed mid-scan.
@@ -94,7 +100,7 @@ for i in $(seq 1 40); do
     if [ $((i % 2)) = 0 ] && [ -d "$K" ]; then extra="--resume"; else rm -rf "$K"; fi
     "$B" replay "$SEQ" --out "$T/k$i" --no-mesh --store "$K" --store-every 0.1 $extra >"$T/k.log" 2>&1 &
     pid=$!
-    sleep "$(py -c "import random; print(round(random.uniform(0.2, 2.0), 2))")"
+    sleep "$(py -c "import random, sys; print(round(random.uniform(0.1, 0.9) * float(sys.argv[1]), 2))" "$scan_s")"
     if kill -9 "$pid" 2>/dev/null; then
         kills=$((kills + 1))
         wait "$pid" 2>/dev/null
