@@ -25,6 +25,16 @@ import numpy as np
 BANDS = ((1.0, 1.5), (1.5, 2.0), (2.0, 2.5), (2.5, 3.0), (3.0, 3.5))
 
 
+def smooth_mask(d):
+    """Pixels of depth image d (metres, 0: none) whose 5x5 neighbourhood all has depth within
+    2% of the pixel's depth plus 3 mm: no edge there, so a small shift does not change the depth
+    much (bench/map_bias.sh takes it too)."""
+    k5 = np.ones((5, 5), np.uint8)
+    hi = cv2.dilate(d.astype(np.float32), k5)
+    lo = cv2.erode(np.where(d > 0, d, 99).astype(np.float32), k5)
+    return (lo < 99) & ((hi - lo) < 0.02 * d + 0.003) & (d > 0)
+
+
 def quat_to_R(q):
     x, y, z, w = q / np.linalg.norm(q)
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -72,10 +82,7 @@ def main():
     db = depth(a.kb)
     H, W = db.shape
     u, v = np.meshgrid(np.arange(W), np.arange(H))
-    k5 = np.ones((5, 5), np.uint8)
-    hi = cv2.dilate(db.astype(np.float32), k5)
-    lo = cv2.erode(np.where(db > 0, db, 99).astype(np.float32), k5)
-    smooth = (lo < 99) & ((hi - lo) < 0.02 * db + 0.003) & (db > 0)
+    smooth = smooth_mask(db)
 
     def moved(ka, pose):
         da = depth(ka)

@@ -27,18 +27,15 @@ cam=$(awk 'NR == 1 {fx = $1; cx = $3} NR == 2 {fy = $2; cy = $3} END {print fx "
   "$DATA/camera-intrinsics.txt")
 "$BIN" render --map "$OUT/store" --pose "$pose" --camera "$cam" --size 640x480 --out "$OUT/view.png" \
   --depth "$OUT/map_depth.png" >/dev/null
-"$PY" - "$OUT/map_depth.png" "$DATA/frame-$(printf %06d $((N - 1))).depth.png" <<'PYEOF'
+PYTHONPATH=bench "$PY" - "$OUT/map_depth.png" "$DATA/frame-$(printf %06d $((N - 1))).depth.png" <<'PYEOF'
 import sys
 import cv2
 import numpy as np
+from frame_consistency import smooth_mask
 r = cv2.imread(sys.argv[1], -1).astype(np.float32) / 5000  # render's depth: TUM's 5000 a metre
 d = cv2.imread(sys.argv[2], -1).astype(np.float32) / 1000  # 7-Scenes: millimetres, 65535 none
 d[d >= 65] = 0
-k = np.ones((5, 5), np.uint8)
-hi = cv2.dilate(d, k)
-lo = cv2.erode(np.where(d > 0, d, 99).astype(np.float32), k)
-smooth = (lo < 99) & ((hi - lo) < 0.02 * d + 0.003)
-v = (r > 0) & (d > 0) & smooth
+v = (r > 0) & smooth_mask(d)
 print("map - frame on %d smooth pixels, median mm by the frame's depth:" % v.sum())
 for a in np.arange(0.5, 4.5, 0.5):
     s = v & (d >= a) & (d < a + 0.5)

@@ -336,14 +336,15 @@ def main():
     gt_rstep = np.r_[np.nan, [angle_deg(G[i - 1][:3, :3].T @ G[i][:3, :3]) for i in range(1, n)]]
 
     # --- summary table
-    rows = ["| run | options | tracked / repeated (skipped) / lost / degenerate | ATE 0-499 mm | ATE 0-%d mm | max unaligned error mm "
-            "(frame) | RPE per frame median trans mm / rot deg | time per frame median (p95) ms |" % CUT,
+    rows = ["| run | options | tracked / repeated (skipped) / lost / degenerate | ATE 0-499 mm | ATE 0-%d mm "
+            "| max unaligned error mm (frame) | RPE per frame median trans mm / rot deg | time per frame median (p95) ms |" % CUT,
             "|---|---|---|---|---|---|---|---|"]
     for r in runs:
         t = r.stats["tracking"]
         k = int(np.argmax(r.e_pos))
         rows.append("| %s | `%s` | %d / %d / %d / %d | %s | %s | %s (%d) | %s / %s | %s (%s) |" % (
-            r.label, r.opts or "(defaults)", t["tracked"], t.get("repeated", 0), t["lost"], t["degenerate"], fmt(1e3 * r.ate_all),
+            r.label, r.opts or "(defaults)", t["tracked"], t.get("repeated", 0), t["lost"], t["degenerate"],
+            fmt(1e3 * r.ate_all),
             fmt(1e3 * r.ate_cut), fmt(r.e_pos[k] * 1e3), k, fmt(np.nanmedian(r.step_t), 2),
             fmt(np.nanmedian(r.step_r), 3), fmt(r.stats["frame_ms"]["median"], 0), fmt(r.stats["frame_ms"]["p95"], 0)))
     rows.append("")

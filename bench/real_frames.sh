@@ -7,8 +7,9 @@
 #           each estimate's error is one tracking step's
 #   probes  replays with options changed (PROBES; the default set: one per variant of the
 #           later sessions that is still an option, docs/real_frames.md)
-# JOBS at a time (default 1: the times per frame are then the loop's own), evaluates each trajectory with `bitfuse eval-traj` over frames 0-499 and
-# 0-420 (the ground truth jumps 27 mm between 420 and 421), and writes the generated tables of
+# JOBS at a time (default 1: the times per frame are then the loop's own), evaluates each
+# trajectory with `bitfuse eval-traj` over frames 0-499 and 0-420 (the ground truth jumps 27 mm
+# between 420 and 421), and writes the generated tables of
 # docs/real_frames.md (between <!-- gen:... --> markers; the analysis around them is kept) and
 # docs/real_frames.png (bench/real_frames.py).
 #

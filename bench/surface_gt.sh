@@ -10,7 +10,6 @@
 #   bench/surface_gt.sh [OUT_DIR]             (default /tmp/bitfuse-surface-gt)
 #   BIN=build/app/bitfuse DATA=/path/7scenes-dev bench/surface_gt.sh /tmp/sg
 #   FUSE_OPTS="--ratio 2" bench/surface_gt.sh  (bitfuse fuse's options; default: its defaults)
-#
 #   O3D_OPTS="--depth-max 4.5" bench/surface_gt.sh  (open3d_tsdf.py's options; default: its defaults)
 #
 # Prints a markdown table and writes OUT/surface_gt.md. bitfuse's fuse of the 500 dev frames at
