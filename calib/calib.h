@@ -123,6 +123,38 @@ bool calib_unproject(const calib_camera *c, double u_px, double v_px, bf_vec3 *r
  * depth_scale left 0 for the caller). */
 bf_intrinsics calib_camera_intrinsics(const calib_camera *c);
 
+/* ------------------------------------------------------------ undistorted images (undistort.c) */
+
+/* A lens's distortion taken out of its images: each pixel of the pinhole
+ * camera with the same fx, fy, cx, cy takes the image's pixel nearest to
+ * where the lens put that ray (calib_distort), as OpenCV's remap with
+ * initUndistortRectifyMap and INTER_NEAREST does. Nearest, not
+ * interpolated: a depth sample is never blended across a depth edge (it
+ * moves by at most half a pixel), and its value, the depth along the
+ * optical axis, does not change with the pixel's place. Pixels whose ray
+ * the lens puts outside the image get 0 (no depth; black). */
+typedef struct calib_undistort_map {
+    uint32_t width, height;
+    int32_t *src;  /* width*height: the source pixel of each pixel, -1 for none; owned */
+    uint32_t n_outside; /* pixels with no source */
+    double max_shift_px; /* the largest distance between a pixel and its source */
+} calib_undistort_map;
+
+/* Builds the map of camera c (its size, intrinsics and dist). BF_INVALID_ARG
+ * naming the coefficients when the lens folds the image over itself within
+ * its corners (the radial term's r (1 + k1 r^2 + k2 r^4 + k3 r^6) stops
+ * growing before the corners' radius: the model does not describe a real
+ * lens there). *out is written on success; free with
+ * calib_undistort_map_free. */
+bf_status calib_undistort_map_make(const calib_camera *c, calib_undistort_map *out);
+void calib_undistort_map_free(calib_undistort_map *m); /* zeroes *m; NULL is a no-op */
+/* dst[i] = src[map->src[i]] (0 where none); dst must not be src. rgb8:
+ * three bytes a pixel. */
+void calib_undistort_u16(const calib_undistort_map *m, const uint16_t *src, uint16_t *dst);
+void calib_undistort_rgb8(const calib_undistort_map *m, const uint8_t *src, uint8_t *dst);
+/* Whether any coefficient is non-zero. */
+bool calib_has_distortion(const double dist[CALIB_DIST_N]);
+
 /* ------------------------------------------------------------ depth correction (depth.c, depth_json.c) */
 
 /* The depth camera's fixed error pattern (vertical bands and a slow bowl of

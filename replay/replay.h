@@ -6,6 +6,7 @@
 #ifndef BF_REPLAY_H
 #define BF_REPLAY_H
 
+#include "calib/calib.h"
 #include "capture/capture.h"
 #include "core/core.h"
 
@@ -33,10 +34,20 @@ bf_status replay_open(const char *path, const replay_options *opt, rgbd_source *
  * sequence, so a skipped frame leaves a gap in bf_frame.index. */
 uint32_t replay_skipped_frames(const rgbd_source *src);
 
-/* Fills K (fx, fy, cx, cy) from "fr1" | "fr2" | "fr3" (TUM's published
- * calibration), "icl" (ICL-NUIM, fy < 0) or "fx,fy,cx,cy"; width/height/
- * depth_scale are left alone. BF_INVALID_ARG for anything else. */
+/* Fills K (fx, fy, cx, cy) and the lens's distortion from "fr1" | "fr2" |
+ * "fr3" (TUM's published calibration, with its distortion), "icl"
+ * (ICL-NUIM, fy < 0), "fx,fy,cx,cy" (no distortion) or
+ * "fx,fy,cx,cy,k1,k2,p1,p2,k3"; width/height/depth_scale are left alone.
+ * BF_INVALID_ARG for anything else. A replay source whose camera has a
+ * distortion delivers its frames undistorted (replay_undistortion). */
+bf_status replay_parse_camera_lens(const char *spec, bf_intrinsics *K, double dist[CALIB_DIST_N]);
+/* The pinhole part, for commands whose camera is a pinhole (render,
+ * synth): a preset's distortion is dropped, numbers with one are refused. */
 bf_status replay_parse_camera(const char *spec, bf_intrinsics *K);
+/* Whether src (made by replay_open) takes a lens's distortion out of its
+ * frames, with the coefficients and the largest shift of a pixel; false for
+ * any other source. */
+bool replay_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double *max_shift_px);
 
 /* ------------------------------------------------------------ images */
 

@@ -104,6 +104,7 @@ void replay__list_free(replay__list *l);
 /* Camera settings a folder reader resolves before the source is built. */
 typedef struct replay__camera {
     bf_intrinsics K;   /* fx, fy, cx, cy, depth_scale (size filled later) */
+    double dist[CALIB_DIST_N]; /* the lens's distortion (all 0: a pinhole): the source undistorts */
     const char *origin; /* "fr2 preset", "camera.txt", ... for logs */
 } replay__camera;
 
@@ -111,8 +112,9 @@ typedef struct replay__camera {
  * --depth-scale, then camera.txt in dir (if present), then the format's
  * defaults already in cam. */
 bf_status replay__camera_resolve(const char *dir, const replay_options *opt, replay__camera *cam);
-/* Reads "fx fy cx cy depth_scale" (depth_scale optional). */
-bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K);
+/* Reads "fx fy cx cy depth_scale" (depth_scale optional) or "fx fy cx cy
+ * depth_scale k1 k2 p1 p2 k3"; dist is all 0 without the five. */
+bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K, double dist[CALIB_DIST_N]);
 
 /* Builds the source from a frame list (taking ownership of it, also on
  * failure), probing the first readable frame for the image size. */

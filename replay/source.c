@@ -66,6 +66,13 @@ typedef struct replay__source {
     bool has_rgb;        /* some frame lists a colour image */
     uint16_t *depth;     /* width*height, reused for every frame */
     uint8_t *rgb;        /* width*height*3, or NULL */
+    /* With a lens's distortion: the files are decoded into raw_* and
+     * resampled into depth / rgb (calib_undistort_map). */
+    bool is_undistorting;
+    double dist[CALIB_DIST_N];
+    calib_undistort_map lens;
+    uint16_t *raw_depth;
+    uint8_t *raw_rgb;
 } replay__source;
 
 static const rgbd_source_ops replay__ops;
@@ -75,14 +82,20 @@ static bf_status source_load(replay__source *src, uint32_t idx, bf_frame *out)
     const replay__frame_ref *f = &src->list.v[idx];
     uint32_t W = src->base.intrinsics.width, H = src->base.intrinsics.height, w, h;
     size_t n_px = (size_t)W * H;
-    bf_status s = replay__png_decode_u16(f->depth_path, src->depth, n_px, W, H, &w, &h);
+    uint16_t *depth = src->is_undistorting ? src->raw_depth : src->depth;
+    uint8_t *rgb = src->is_undistorting ? src->raw_rgb : src->rgb;
+    bf_status s = replay__png_decode_u16(f->depth_path, depth, n_px, W, H, &w, &h);
     if (s != BF_OK) return replay__fail_frame(s, idx);
     if (src->list.depth_invalid)
         for (size_t i = 0; i < n_px; i++)
-            if (src->depth[i] == src->list.depth_invalid) src->depth[i] = 0;
+            if (depth[i] == src->list.depth_invalid) depth[i] = 0;
     if (f->rgb_path) {
-        s = replay__image_decode_rgb8(f->rgb_path, src->rgb, n_px, W, H, &w, &h);
+        s = replay__image_decode_rgb8(f->rgb_path, rgb, n_px, W, H, &w, &h);
         if (s != BF_OK) return replay__fail_frame(s, idx);
+    }
+    if (src->is_undistorting) {
+        calib_undistort_u16(&src->lens, depth, src->depth);
+        if (f->rgb_path) calib_undistort_rgb8(&src->lens, rgb, src->rgb);
     }
     bool has_pose = f->has_pose;
     bf_se3 T_wc = f->T_wc;
@@ -125,6 +138,9 @@ static void source_close(rgbd_source *base)
     replay__list_free(&src->list);
     free(src->depth);
     free(src->rgb);
+    free(src->raw_depth);
+    free(src->raw_rgb);
+    calib_undistort_map_free(&src->lens);
     memset(src, 0xff, sizeof *src); /* poison: a use after close fails loudly */
     free(src);
 }
@@ -166,6 +182,25 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
         s = bf_fail(BF_NO_MEMORY, "%s source: frame buffers of %ux%u", kind, w, h);
         goto fail;
     }
+    if (calib_has_distortion(cam->dist)) {
+        calib_camera lens = {.width = w, .height = h, .fx_px = cam->K.fx_px, .fy_px = cam->K.fy_px,
+                             .cx_px = cam->K.cx_px, .cy_px = cam->K.cy_px};
+        memcpy(lens.dist, cam->dist, sizeof lens.dist);
+        if ((s = calib_undistort_map_make(&lens, &src->lens)) != BF_OK) {
+            char why[512];
+            snprintf(why, sizeof why, "%s", bf_last_error());
+            s = bf_fail(s, "%s (camera from %s)", why, cam->origin ? cam->origin : "defaults");
+            goto fail;
+        }
+        src->is_undistorting = true;
+        memcpy(src->dist, cam->dist, sizeof src->dist);
+        src->raw_depth = bf_malloc((size_t)w * h * sizeof *src->raw_depth);
+        src->raw_rgb = src->has_rgb ? bf_malloc((size_t)w * h * 3) : NULL;
+        if (!src->raw_depth || (src->has_rgb && !src->raw_rgb)) {
+            s = bf_fail(BF_NO_MEMORY, "%s source: undistortion buffers of %ux%u", kind, w, h);
+            goto fail;
+        }
+    }
     src->skip_bad = opt->skip_bad_frames;
     src->base.ops = &replay__ops;
     src->base.kind = kind;
@@ -175,6 +210,9 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
     src->base.n_frames = src->list.n;
     for (uint32_t i = 0; i < src->list.n; i++)
         if (src->list.v[i].has_pose || src->list.v[i].pose_path) src->base.has_groundtruth = true;
+    if (src->is_undistorting)
+        bf_debug("%s: the lens's distortion taken out of every frame (pixels move up to %.1f px, %u get none)",
+                 kind, src->lens.max_shift_px, src->lens.n_outside);
     bf_debug("%s: %u frames, %ux%u, camera from %s", kind, src->base.n_frames, w, h,
              cam->origin ? cam->origin : "defaults");
     *out = &src->base;
@@ -185,9 +223,22 @@ fail:
         replay__list_free(&src->list);
         free(src->depth);
         free(src->rgb);
+        free(src->raw_depth);
+        free(src->raw_rgb);
+        calib_undistort_map_free(&src->lens);
         free(src);
     }
     return s;
+}
+
+bool replay_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double *max_shift_px)
+{
+    if (!src || src->ops != &replay__ops) return false;
+    const replay__source *r = (const replay__source *)src;
+    if (!r->is_undistorting) return false;
+    memcpy(dist, r->dist, sizeof r->dist);
+    if (max_shift_px) *max_shift_px = r->lens.max_shift_px;
+    return true;
 }
 
 uint32_t replay_skipped_frames(const rgbd_source *src)
