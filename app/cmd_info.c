@@ -140,6 +140,8 @@ int cmd_info(int argc, char **argv)
     double valid_share = st.n_pixels ? (double)st.n_valid / (double)st.n_pixels : NAN;
     double span = st.n_frames ? st.t_last_s - st.t_first_s : NAN;
     uint32_t skipped = replay_skipped_frames(src);
+    double lens[CALIB_DIST_N], lens_shift = 0;
+    bool has_lens = replay_undistortion(src, lens, &lens_shift);
 
     if (is_json) {
         /* cJSON prints doubles that round-trip: timestamps keep their microseconds. */
@@ -153,6 +155,8 @@ int cmd_info(int argc, char **argv)
         cJSON_AddNumberToObject(o, "cx", K->cx_px);
         cJSON_AddNumberToObject(o, "cy", K->cy_px);
         cJSON_AddNumberToObject(o, "depth_scale", K->depth_scale);
+        if (has_lens) app_json_numbers(o, "undistorted", lens, CALIB_DIST_N);
+        else cJSON_AddNullToObject(o, "undistorted");
         cJSON_AddNumberToObject(o, "frames", st.n_frames);
         cJSON_AddNumberToObject(o, "frames_listed", src->n_frames);
         cJSON_AddNumberToObject(o, "skipped_frames", skipped);
@@ -178,6 +182,10 @@ int cmd_info(int argc, char **argv)
         printf("kind          %s\n", src->kind);
         printf("camera        %ux%u  fx %.6g  fy %.6g  cx %.6g  cy %.6g  depth scale %.6g per metre\n", K->width,
                K->height, K->fx_px, K->fy_px, K->cx_px, K->cy_px, K->depth_scale);
+        if (has_lens)
+            printf("lens          k1 %.6g  k2 %.6g  p1 %.6g  p2 %.6g  k3 %.6g: taken out of every frame (pixels move "
+                   "up to %.1f px)\n",
+                   lens[0], lens[1], lens[2], lens[3], lens[4], lens_shift);
         printf("frames        %u read (%u with colour), %u skipped, %u listed\n", st.n_frames, st.n_with_rgb, skipped,
                src->n_frames);
         if (st.n_frames)

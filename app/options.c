@@ -312,20 +312,23 @@ void app_options_help(FILE *f, const app_command_spec *spec)
 
 /* ------------------------------------------------------------ shared rows */
 
-/* replay_parse_camera's message names the value and what was expected. */
+/* replay_parse_camera_lens's message names the value and what was expected. */
 static const char *check_camera(const char *name, const char *v)
 {
     (void)name;
     bf_intrinsics K = {0};
-    return replay_parse_camera(v, &K) == BF_OK ? NULL : bf_last_error();
+    double dist[CALIB_DIST_N];
+    return replay_parse_camera_lens(v, &K, dist) == BF_OK ? NULL : bf_last_error();
 }
 
 void app_sequence_options(app_option rows[APP_SEQUENCE_ROWS], replay_options *o)
 {
     const app_option r[APP_SEQUENCE_ROWS] = {
         APP_OPT("--camera", APP_OPT_STRING, &o->camera, "C",
-                "intrinsics: fr1 | fr2 | fr3 (TUM), icl (ICL-NUIM) or fx,fy,cx,cy in pixels (default: camera.txt in "
-                "the folder, else the format's camera)",
+                "intrinsics: fr1 | fr2 | fr3 (TUM's calibration; fr1 and fr2 with their lens distortion, taken "
+                "out of every frame), icl (ICL-NUIM), fx,fy,cx,cy in pixels, or fx,fy,cx,cy,k1,k2,p1,p2,k3 with a "
+                "lens's distortion (OpenCV's order) (default: camera.txt in the folder, else the format's camera; "
+                "a TUM folder named for its sensor, rgbd_dataset_freiburg1_..., takes that sensor's)",
                 .check = check_camera),
         APP_OPT("--depth-scale", APP_OPT_DOUBLE, &o->depth_scale, "S",
                 "raw depth units per metre (default: TUM/ICL 5000, pose folders 1000)", .min_open = true,

@@ -219,6 +219,24 @@ bf_status app_write_status(const app_write_failure *w)
 
 void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)
 {
+    /* The camera the frames were read with, and the lens taken out of them. */
+    const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    cJSON *cam = app_json_object(o, "camera");
+    cJSON_AddNumberToObject(cam, "width", K->width);
+    cJSON_AddNumberToObject(cam, "height", K->height);
+    cJSON_AddNumberToObject(cam, "fx", K->fx_px);
+    cJSON_AddNumberToObject(cam, "fy", K->fy_px);
+    cJSON_AddNumberToObject(cam, "cx", K->cx_px);
+    cJSON_AddNumberToObject(cam, "cy", K->cy_px);
+    cJSON_AddNumberToObject(cam, "depth_scale", K->depth_scale);
+    double dist[CALIB_DIST_N], shift = 0;
+    if (replay_undistortion(src, dist, &shift)) {
+        cJSON *d = cJSON_AddArrayToObject(cam, "undistorted");
+        for (int k = 0; k < CALIB_DIST_N; k++) cJSON_AddItemToArray(d, cJSON_CreateNumber(dist[k]));
+        cJSON_AddNumberToObject(cam, "undistort_max_shift_px", shift);
+    } else {
+        cJSON_AddNullToObject(cam, "undistorted");
+    }
     cJSON_AddNumberToObject(o, "frames_unreadable", replay_skipped_frames(src));
     if (run->source_status != BF_OK) cJSON_AddStringToObject(o, "input_error", run->source_error);
     else cJSON_AddNullToObject(o, "input_error");

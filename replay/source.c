@@ -189,7 +189,10 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
         if ((s = calib_undistort_map_make(&lens, &src->lens)) != BF_OK) {
             char why[512];
             snprintf(why, sizeof why, "%s", bf_last_error());
-            s = bf_fail(s, "%s (camera from %s)", why, cam->origin ? cam->origin : "defaults");
+            /* A lens the user typed is a usage error; one from a file is bad input. */
+            bool is_option = cam->origin && !strcmp(cam->origin, "--camera");
+            s = bf_fail(s == BF_INVALID_ARG && !is_option ? BF_FORMAT : s, "%s (camera from %s)", why,
+                        cam->origin ? cam->origin : "defaults");
             goto fail;
         }
         src->is_undistorting = true;

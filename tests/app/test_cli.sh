@@ -41,6 +41,31 @@ t0=$(awk '!/^#/ {print $1; exit}' "$T/seq/depth.txt")
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert abs(d['t_first_s'] - float(sys.argv[2])) < 1e-6, d['t_first_s']" \
     "$T/out" "$t0" || fail "info --json t_first_s differs from depth.txt's first stamp $t0"
 
+# A lens in camera.txt (k1 k2 p1 p2 k3 after the depth scale): info says
+# its frames come undistorted; a lens that folds the image is bad input (3)
+# naming camera.txt; the same numbers typed with --camera are a usage error.
+python3 - "$T/out" <<'PY' || fail "info --json of the plain sequence has a lens: $(cat "$T/out")"
+import json, sys
+assert json.load(open(sys.argv[1]))["undistorted"] is None
+PY
+cp -r "$T/seq" "$T/lens"
+read -r fx fy cx cy sc < "$T/seq/camera.txt"
+echo "$fx $fy $cx $cy ${sc:-5000} 0.2624 -0.9531 -0.0054 0.0026 1.1633" > "$T/lens/camera.txt"
+expect 0 "$B" info "$T/lens" --json
+python3 - "$T/out" <<'PY' || fail "info --json does not report camera.txt's lens: $(cat "$T/out")"
+import json, sys
+assert json.load(open(sys.argv[1]))["undistorted"] == [0.2624, -0.9531, -0.0054, 0.0026, 1.1633]
+PY
+expect 0 "$B" info "$T/lens"
+grep -q "^lens .*taken out of every frame" "$T/out" || fail "info does not show the lens: $(cat "$T/out")"
+echo "$fx $fy $cx $cy ${sc:-5000} -0.9 0 0 0 0" > "$T/lens/camera.txt"
+expect 3 "$B" info "$T/lens"
+mentions "camera.txt"
+mentions "folds"
+expect 2 "$B" info "$T/seq" --camera "$fx,$fy,$cx,$cy,-0.9,0,0,0,0"
+mentions "--camera"
+expect 0 "$B" info "$T/seq" --json # $T/out again: the plain sequence's, for the checks below
+
 # info: a depth image handed on twice (a driver's late frame) counts as a
 # repeat; the colour of that frame is new, and the sequence itself has none.
 # repeats_are DEPTH COLOUR FIRST: info --json's counts in $T/out.

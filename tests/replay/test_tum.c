@@ -1,6 +1,8 @@
 /* replay: TUM RGB-D folders built in the temporary folder around the real
  * fr2 desk frames, with timestamps chosen to exercise association. */
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "replay/replay.h"
@@ -209,6 +211,85 @@ BF_TEST(tum_camera_precedence_options_over_camera_txt_over_default)
     CHECK(rt_write_text(rt_join(d, "camera.txt"), "500 0 300.5 200 5000\n"));
     CHECK_STATUS(replay_open(d, NULL, &src), BF_FORMAT);
     CHECK_ERROR_MENTIONS("camera.txt:1");
+}
+
+/* A lens's distortion in the camera (TUM's fr2 preset, or the five numbers
+ * of camera.txt): every frame comes undistorted, depth and colour by one
+ * map, which is calib's (tests/calib/test_undistort.c checks it against
+ * the geometry); without one the files come as they are. */
+BF_TEST(tum_camera_with_a_lens_delivers_undistorted_frames)
+{
+    const char *dir = make_tum("tum_lens");
+    if (!dir) BF_SKIP("tum/frames absent");
+    char d[1024];
+    snprintf(d, sizeof d, "%s", dir);
+    const char *data = bf_test_data("tum/frames");
+    char depth_png[1024], rgb_png[1024];
+    snprintf(depth_png, sizeof depth_png, "%s/fr2_desk_a_depth.png", data);
+    snprintf(rgb_png, sizeof rgb_png, "%s/fr2_desk_a_rgb.png", data);
+    uint16_t *raw;
+    uint8_t *raw_rgb;
+    uint32_t w, h;
+    CHECK(rt_png_read_u16(depth_png, &raw, &w, &h));
+    CHECK(rt_png_read_rgb8(rgb_png, &raw_rgb, &w, &h));
+    size_t n = (size_t)w * h;
+    uint16_t *want = malloc(n * sizeof *want);
+    uint8_t *want_rgb = malloc(3 * n);
+    CHECK(want && want_rgb);
+    const double fr2[CALIB_DIST_N] = {0.2312, -0.7849, -0.0033, -0.0001, 0.9172};
+    const char *specs[2] = {"fr2", NULL};
+    for (int k = 0; k < 2; k++) {
+        if (!specs[k]) /* the same lens from camera.txt */
+            CHECK(rt_write_text(rt_join(d, "camera.txt"),
+                                "520.9 521.0 325.1 249.7 5000 0.2312 -0.7849 -0.0033 -0.0001 0.9172\n"));
+        replay_options opt = {.camera = specs[k]};
+        rgbd_source *src;
+        CHECK_OK(replay_open(d, &opt, &src));
+        double dist[CALIB_DIST_N], shift = 0;
+        CHECK(replay_undistortion(src, dist, &shift));
+        CHECK(memcmp(dist, fr2, sizeof dist) == 0);
+        CHECK(shift > 10 && shift < 40); /* up to 37 px for fr1 at 640 x 480 */
+        calib_camera lens = {.width = w, .height = h, .fx_px = 520.9, .fy_px = 521.0, .cx_px = 325.1, .cy_px = 249.7};
+        memcpy(lens.dist, fr2, sizeof fr2);
+        calib_undistort_map m;
+        CHECK_OK(calib_undistort_map_make(&lens, &m));
+        calib_undistort_u16(&m, raw, want);
+        calib_undistort_rgb8(&m, raw_rgb, want_rgb);
+        calib_undistort_map_free(&m);
+        bf_frame f;
+        CHECK_OK(rgbd_source_next(src, &f));
+        CHECK(f.width == w && f.height == h);
+        CHECK(memcmp(f.depth, want, n * sizeof *want) == 0);
+        CHECK(f.rgb && memcmp(f.rgb, want_rgb, 3 * n) == 0);
+        CHECK(memcmp(f.depth, raw, n * sizeof *raw) != 0); /* it did move pixels */
+        rgbd_source_close(src);
+    }
+    /* Four numbers: a pinhole, the files as they are. */
+    replay_options opt = {.camera = "520.9,521.0,325.1,249.7"};
+    rgbd_source *src;
+    CHECK_OK(replay_open(d, &opt, &src));
+    double dist[CALIB_DIST_N];
+    CHECK(!replay_undistortion(src, dist, NULL));
+    bf_frame f;
+    CHECK_OK(rgbd_source_next(src, &f));
+    CHECK(memcmp(f.depth, raw, n * sizeof *raw) == 0);
+    rgbd_source_close(src);
+    /* A lens that folds the image is refused at open, naming where it came from. */
+    CHECK(rt_write_text(rt_join(d, "camera.txt"), "520.9 521.0 325.1 249.7 5000 -0.9 0 0 0 0\n"));
+    CHECK_STATUS(replay_open(d, NULL, &src), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("folds");
+    CHECK_ERROR_MENTIONS("camera.txt");
+    opt = (replay_options){.camera = "520.9,521.0,325.1,249.7,-0.9,0,0,0,0"};
+    CHECK_STATUS(replay_open(d, &opt, &src), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("--camera");
+    /* Six to nine fields are neither form. */
+    CHECK(rt_write_text(rt_join(d, "camera.txt"), "520.9 521.0 325.1 249.7 5000 0.2\n"));
+    CHECK_STATUS(replay_open(d, NULL, &src), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("camera.txt:1");
+    free(raw);
+    free(raw_rgb);
+    free(want);
+    free(want_rgb);
 }
 
 /* Opens dir expecting status want and a message mentioning what. */
