@@ -115,8 +115,9 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
 {
     /* TUM's default when the sensor is unknown ("ROS default"); a folder
      * named for its sensor takes that sensor's published calibration, lens
-     * included (on fr1/rpy, 694 frames from four starts: mean ATE 17.8 mm
-     * with it, 39.6 mm with the four numbers alone; docs/real_frames.md). */
+     * included (fr1/rpy from four starts: mean ATE 17.9 mm with it, 39.6 mm
+     * with fr1's four numbers, 43.3 mm with this default;
+     * docs/real_frames.md, "A second real sequence"). */
     cam->K = (bf_intrinsics){.fx_px = 525.0, .fy_px = 525.0, .cx_px = 319.5, .cy_px = 239.5, .depth_scale = 5000};
     cam->origin = "TUM default camera";
     const char *hint = tum_preset_hint(dir);
