@@ -12,7 +12,7 @@ include(CMakePackageConfigHelpers)
 
 # Modules in link order (a library before the ones it uses; DESIGN.md
 # section 2), the embedded shaders after the modules that run them.
-set(BITFUSE_MODULES recon stream tracking render export fusion store synth eval mesh hostmap calib replay
+set(BITFUSE_MODULES recon stream tracking render export fusion store synth eval mesh hostmap replay calib
     capture gpu core)
 install(TARGETS bitfuse RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 set(bitfuse_targets "")
