@@ -8,6 +8,7 @@
 
 #include <cjson/cJSON.h>
 
+#include "calib/calib.h"
 #include "capture/capture.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
@@ -329,6 +330,9 @@ int cmd_view(int argc, char **argv);
 struct replay_options;
 bf_status app_open_device(const char *uri, const struct replay_options *ropt, bool realtime, uint32_t queue,
                           bool *is_live, rgbd_source **out);
+/* The lens taken out of src's frames: replay_undistortion, or for the
+ * recording app_open_device last wrapped as a camera, that recording's. */
+bool app_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double *shift_px);
 /* Until app_stop_end, Ctrl-C and SIGTERM stop src's capture thread and set
  * the returned flag instead of ending the program; a second one ends it. */
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src);

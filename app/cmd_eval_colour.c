@@ -87,7 +87,10 @@ int cmd_eval_colour(int argc, char **argv)
         s = bf_fail(BF_FORMAT, "%s: a mesh with vertex colour is needed", paths[0]);
     if (s == BF_OK) s = replay_traj_read_tum(traj_path, &tr);
     if (s == BF_OK && calib_path) s = calib_read(calib_path, &cal);
-    if (s == BF_OK) s = replay_open(paths[1], NULL, &src);
+    /* With a calibration the colour is the colour camera's own image: the
+     * depth camera's lens (a TUM folder's preset) must not resample it. */
+    replay_options ropt = {.raw_colour = calib_path != NULL};
+    if (s == BF_OK) s = replay_open(paths[1], &ropt, &src);
     if (s != BF_OK) {
         mesh_free(&m);
         bf_traj_free(&tr);

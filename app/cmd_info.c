@@ -155,8 +155,14 @@ int cmd_info(int argc, char **argv)
         cJSON_AddNumberToObject(o, "cx", K->cx_px);
         cJSON_AddNumberToObject(o, "cy", K->cy_px);
         cJSON_AddNumberToObject(o, "depth_scale", K->depth_scale);
-        if (has_lens) app_json_numbers(o, "undistorted", lens, CALIB_DIST_N);
-        else cJSON_AddNullToObject(o, "undistorted");
+        /* The lens as stats.json's camera object has it. */
+        if (has_lens) {
+            app_json_numbers(o, "undistorted", lens, CALIB_DIST_N);
+            cJSON_AddNumberToObject(o, "undistort_max_shift_px", lens_shift);
+        } else {
+            cJSON_AddNullToObject(o, "undistorted");
+            cJSON_AddNullToObject(o, "undistort_max_shift_px");
+        }
         cJSON_AddNumberToObject(o, "frames", st.n_frames);
         cJSON_AddNumberToObject(o, "frames_listed", src->n_frames);
         cJSON_AddNumberToObject(o, "skipped_frames", skipped);

@@ -2,19 +2,51 @@
  * that; app adds the recordings replay reads) and the one Ctrl-C handler,
  * which ends the capture instead of the program. */
 #include <signal.h>
+#include <string.h>
 
 #include "app.h"
 #include "replay/replay.h"
 
+/* A recording played as a camera is wrapped (paced, threaded), so
+ * replay_undistortion no longer sees its lens: it is kept here for the
+ * wrapper app_open_device returned last. */
+typedef struct recording_open {
+    const replay_options *ropt;
+    bool has_lens;
+    double dist[CALIB_DIST_N], shift_px;
+} recording_open;
+
+static struct {
+    const rgbd_source *src;
+    double dist[CALIB_DIST_N], shift_px;
+} g_wrapped_lens;
+
 static bf_status open_recording(void *user, const char *path, rgbd_source **out)
 {
-    return replay_open(path, user, out);
+    recording_open *r = user;
+    bf_status s = replay_open(path, r->ropt, out);
+    if (s == BF_OK) r->has_lens = replay_undistortion(*out, r->dist, &r->shift_px);
+    return s;
 }
 
 bf_status app_open_device(const char *uri, const replay_options *ropt, bool realtime, uint32_t queue, bool *is_live,
                           rgbd_source **out)
 {
-    return capture_open_device(uri, open_recording, (void *)ropt, realtime, queue, is_live, out);
+    recording_open r = {.ropt = ropt};
+    bf_status s = capture_open_device(uri, open_recording, &r, realtime, queue, is_live, out);
+    g_wrapped_lens.src = s == BF_OK && r.has_lens ? *out : NULL;
+    memcpy(g_wrapped_lens.dist, r.dist, sizeof r.dist);
+    g_wrapped_lens.shift_px = r.shift_px;
+    return s;
+}
+
+bool app_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double *shift_px)
+{
+    if (replay_undistortion(src, dist, shift_px)) return true;
+    if (!src || src != g_wrapped_lens.src) return false;
+    memcpy(dist, g_wrapped_lens.dist, sizeof g_wrapped_lens.dist);
+    if (shift_px) *shift_px = g_wrapped_lens.shift_px;
+    return true;
 }
 
 static rgbd_source *volatile g_stop_src;

@@ -230,12 +230,12 @@ void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)
     cJSON_AddNumberToObject(cam, "cy", K->cy_px);
     cJSON_AddNumberToObject(cam, "depth_scale", K->depth_scale);
     double dist[CALIB_DIST_N], shift = 0;
-    if (replay_undistortion(src, dist, &shift)) {
-        cJSON *d = cJSON_AddArrayToObject(cam, "undistorted");
-        for (int k = 0; k < CALIB_DIST_N; k++) cJSON_AddItemToArray(d, cJSON_CreateNumber(dist[k]));
+    if (app_undistortion(src, dist, &shift)) {
+        app_json_numbers(cam, "undistorted", dist, CALIB_DIST_N);
         cJSON_AddNumberToObject(cam, "undistort_max_shift_px", shift);
     } else {
         cJSON_AddNullToObject(cam, "undistorted");
+        cJSON_AddNullToObject(cam, "undistort_max_shift_px");
     }
     cJSON_AddNumberToObject(o, "frames_unreadable", replay_skipped_frames(src));
     if (run->source_status != BF_OK) cJSON_AddStringToObject(o, "input_error", run->source_error);

@@ -50,13 +50,18 @@ run_start() {
   "$BIN" eval-traj "$SEQ/groundtruth.txt" "$r/trajectory.txt" --json >"$r/eval.json" 2>"$r/eval.log"
 }
 
-running=0
+# JOBS at a time, oldest first; every start's status is collected.
+pids=() fails=0
 for s in $STARTS; do
   run_start "$s" "$@" &
-  running=$((running + 1))
-  if [ "$running" -ge "$JOBS" ]; then wait -n; running=$((running - 1)); fi
+  pids+=($!)
+  if [ "${#pids[@]}" -ge "$JOBS" ]; then
+    wait "${pids[0]}" || fails=$((fails + 1))
+    pids=("${pids[@]:1}")
+  fi
 done
-wait
+for p in "${pids[@]}"; do wait "$p" || fails=$((fails + 1)); done
+[ "$fails" -eq 0 ] || { echo "tum_starts.sh: $fails of the starts failed" >&2; exit 1; }
 
 "$PY" - "$OUT" "$SEQ/groundtruth.txt" "$*" $STARTS <<'PYEOF'
 import json, sys

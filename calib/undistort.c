@@ -42,8 +42,12 @@ bf_status calib_undistort_map_make(const calib_camera *c, calib_undistort_map *o
     if (c->width == 0 || c->height == 0 || !(c->fx_px != 0) || !(c->fy_px != 0))
         return bf_fail(BF_INVALID_ARG, "undistortion: a %ux%u camera with fx %g, fy %g", c->width, c->height,
                        c->fx_px, c->fy_px);
+    static const char *const names[CALIB_DIST_N] = {"k1", "k2", "p1", "p2", "k3"};
     for (int k = 0; k < CALIB_DIST_N; k++)
-        if (!isfinite(c->dist[k])) return bf_fail(BF_INVALID_ARG, "undistortion: coefficient %d is not finite", k + 1);
+        if (!isfinite(c->dist[k])) return bf_fail(BF_INVALID_ARG, "undistortion: %s is not finite", names[k]);
+    /* Pixel indices are int32_t (-1: none). */
+    if ((uint64_t)c->width * c->height > (uint64_t)INT32_MAX)
+        return bf_fail(BF_INVALID_ARG, "undistortion: a %ux%u image is too large", c->width, c->height);
     /* The farthest corner of the image, in the normalised plane (a little
      * beyond: the pixels' edges). */
     double r_max = 0;
@@ -58,7 +62,7 @@ bf_status calib_undistort_map_make(const calib_camera *c, calib_undistort_map *o
                        "itself before its corners (not a lens)",
                        c->dist[0], c->dist[1], c->dist[2], c->dist[3], c->dist[4], c->width, c->height);
     size_t n = (size_t)c->width * c->height;
-    int32_t *src = malloc(n * sizeof *src);
+    int32_t *src = bf_malloc(n * sizeof *src);
     if (!src) return bf_fail(BF_NO_MEMORY, "undistortion map of %ux%u", c->width, c->height);
     uint32_t n_outside = 0;
     double max_shift = 0;

@@ -69,8 +69,9 @@ bf_status replay_parse_camera(const char *spec, bf_intrinsics *K)
     bool is_preset = false;
     for (size_t i = 0; i < sizeof presets / sizeof presets[0]; i++) is_preset |= !strcmp(spec, presets[i].name);
     if (!is_preset && calib_has_distortion(dist))
-        return bf_fail(BF_INVALID_ARG, "--camera '%s': expected fr1, fr2, fr3, icl or four numbers fx,fy,cx,cy "
-                                       "(this camera is a pinhole)", spec);
+        return bf_fail(BF_INVALID_ARG, "--camera '%s': a lens is not applied here (a bitfuse log keeps its "
+                                       "frames as recorded; synth renders a pinhole): give fr1, fr2, fr3, icl or "
+                                       "fx,fy,cx,cy", spec);
     *K = k;
     return BF_OK;
 }
@@ -128,10 +129,13 @@ bf_status replay__camera_resolve(const char *dir, const replay_options *opt, rep
         cam->K = K;
         memcpy(cam->dist, dist, sizeof dist);
         cam->origin = "camera.txt";
+        cam->is_from_name = false;
     }
     if (opt->camera) {
         if ((s = replay_parse_camera_lens(opt->camera, &cam->K, cam->dist))) return s;
         cam->origin = "--camera";
+        cam->is_from_option = true;
+        cam->is_from_name = false;
     }
     if (opt->depth_scale > 0) cam->K.depth_scale = opt->depth_scale;
     return BF_OK;

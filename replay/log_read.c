@@ -385,6 +385,9 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
         bf_debug("%s: no index; %u frames found by reading the records in order", path, ls->n);
     }
     bf_intrinsics K = ls->hdr.K;
+    /* A log keeps its frames as recorded (a replay that recorded them had
+     * taken any lens out): a preset gives its four numbers, a lens typed in
+     * numbers is refused. */
     if (opt->camera && (s = replay_parse_camera(opt->camera, &K))) goto fail;
     if (opt->depth_scale > 0) K.depth_scale = opt->depth_scale;
     ls->skip_bad = opt->skip_bad_frames;

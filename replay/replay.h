@@ -18,6 +18,8 @@ typedef struct replay_options {
     double depth_scale;   /* raw units per metre; 0 = format default */
     uint32_t max_frames;  /* only the first N frames; 0 = all */
     bool skip_bad_frames; /* skip an unreadable frame with a warning */
+    bool raw_colour;      /* the colour is its own camera's image (a calib.json registers it to the
+                             depth): never resampled by the depth camera's lens */
 } replay_options;
 
 /* Opens the sequence at path, detecting its layout:
@@ -41,8 +43,9 @@ uint32_t replay_skipped_frames(const rgbd_source *src);
  * BF_INVALID_ARG for anything else. A replay source whose camera has a
  * distortion delivers its frames undistorted (replay_undistortion). */
 bf_status replay_parse_camera_lens(const char *spec, bf_intrinsics *K, double dist[CALIB_DIST_N]);
-/* The pinhole part, for commands whose camera is a pinhole (render,
- * synth): a preset's distortion is dropped, numbers with one are refused. */
+/* The pinhole part, for inputs whose camera is a pinhole (a bitfuse log,
+ * whose frames are kept as recorded; synth): a preset's distortion is
+ * dropped, numbers with one are refused. */
 bf_status replay_parse_camera(const char *spec, bf_intrinsics *K);
 /* Whether src (made by replay_open) takes a lens's distortion out of its
  * frames, with the coefficients and the largest shift of a pixel; false for

@@ -105,6 +105,8 @@ void replay__list_free(replay__list *l);
 typedef struct replay__camera {
     bf_intrinsics K;   /* fx, fy, cx, cy, depth_scale (size filled later) */
     double dist[CALIB_DIST_N]; /* the lens's distortion (all 0: a pinhole): the source undistorts */
+    bool is_from_option; /* --camera set it (a bad lens is a usage error, else bad input) */
+    bool is_from_name;   /* a TUM folder's name chose the preset (nothing overrode it) */
     const char *origin; /* "fr2 preset", "camera.txt", ... for logs */
 } replay__camera;
 

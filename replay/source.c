@@ -69,6 +69,7 @@ typedef struct replay__source {
     /* With a lens's distortion: the files are decoded into raw_* and
      * resampled into depth / rgb (calib_undistort_map). */
     bool is_undistorting;
+    bool is_colour_raw; /* replay_options.raw_colour: the colour stays as captured */
     double dist[CALIB_DIST_N];
     calib_undistort_map lens;
     uint16_t *raw_depth;
@@ -83,7 +84,7 @@ static bf_status source_load(replay__source *src, uint32_t idx, bf_frame *out)
     uint32_t W = src->base.intrinsics.width, H = src->base.intrinsics.height, w, h;
     size_t n_px = (size_t)W * H;
     uint16_t *depth = src->is_undistorting ? src->raw_depth : src->depth;
-    uint8_t *rgb = src->is_undistorting ? src->raw_rgb : src->rgb;
+    uint8_t *rgb = src->is_undistorting && !src->is_colour_raw ? src->raw_rgb : src->rgb;
     bf_status s = replay__png_decode_u16(f->depth_path, depth, n_px, W, H, &w, &h);
     if (s != BF_OK) return replay__fail_frame(s, idx);
     if (src->list.depth_invalid)
@@ -95,7 +96,7 @@ static bf_status source_load(replay__source *src, uint32_t idx, bf_frame *out)
     }
     if (src->is_undistorting) {
         calib_undistort_u16(&src->lens, depth, src->depth);
-        if (f->rgb_path) calib_undistort_rgb8(&src->lens, rgb, src->rgb);
+        if (f->rgb_path && !src->is_colour_raw) calib_undistort_rgb8(&src->lens, rgb, src->rgb);
     }
     bool has_pose = f->has_pose;
     bf_se3 T_wc = f->T_wc;
@@ -190,16 +191,17 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
             char why[512];
             snprintf(why, sizeof why, "%s", bf_last_error());
             /* A lens the user typed is a usage error; one from a file is bad input. */
-            bool is_option = cam->origin && !strcmp(cam->origin, "--camera");
-            s = bf_fail(s == BF_INVALID_ARG && !is_option ? BF_FORMAT : s, "%s (camera from %s)", why,
+            s = bf_fail(s == BF_INVALID_ARG && !cam->is_from_option ? BF_FORMAT : s, "%s (camera from %s)", why,
                         cam->origin ? cam->origin : "defaults");
             goto fail;
         }
         src->is_undistorting = true;
+        src->is_colour_raw = opt->raw_colour;
         memcpy(src->dist, cam->dist, sizeof src->dist);
         src->raw_depth = bf_malloc((size_t)w * h * sizeof *src->raw_depth);
-        src->raw_rgb = src->has_rgb ? bf_malloc((size_t)w * h * 3) : NULL;
-        if (!src->raw_depth || (src->has_rgb && !src->raw_rgb)) {
+        bool needs_raw_rgb = src->has_rgb && !src->is_colour_raw;
+        src->raw_rgb = needs_raw_rgb ? bf_malloc((size_t)w * h * 3) : NULL;
+        if (!src->raw_depth || (needs_raw_rgb && !src->raw_rgb)) {
             s = bf_fail(BF_NO_MEMORY, "%s source: undistortion buffers of %ux%u", kind, w, h);
             goto fail;
         }

@@ -102,12 +102,21 @@ static bool tum_gt_pose(const bf_traj *gt, double t_s, bf_se3 *T_wc)
     return false;
 }
 
-/* The TUM sensor a folder name mentions ("rgbd_dataset_freiburg2_desk"). */
+/* The TUM sensor a folder's own name mentions ("rgbd_dataset_freiburg2_desk");
+ * its parents' names do not count. */
 static const char *tum_preset_hint(const char *dir)
 {
-    if (strstr(dir, "freiburg1")) return "fr1";
-    if (strstr(dir, "freiburg2")) return "fr2";
-    if (strstr(dir, "freiburg3")) return "fr3";
+    size_t n = strlen(dir);
+    while (n > 1 && dir[n - 1] == '/') n--;
+    size_t start = n;
+    while (start > 0 && dir[start - 1] != '/') start--;
+    char name[256];
+    size_t len = n - start < sizeof name - 1 ? n - start : sizeof name - 1;
+    memcpy(name, dir + start, len);
+    name[len] = 0;
+    if (strstr(name, "freiburg1")) return "fr1";
+    if (strstr(name, "freiburg2")) return "fr2";
+    if (strstr(name, "freiburg3")) return "fr3";
     return NULL;
 }
 
@@ -125,9 +134,10 @@ bf_status replay__tum_list(const char *dir, const replay_options *opt, replay__l
     if (hint) {
         if ((s = replay_parse_camera_lens(hint, &cam->K, cam->dist)) != BF_OK) return s;
         cam->origin = "the folder's name";
+        cam->is_from_name = true;
     }
     if ((s = replay__camera_resolve(dir, opt, cam)) != BF_OK) return s;
-    if (hint && !strcmp(cam->origin, "the folder's name"))
+    if (cam->is_from_name)
         bf_info("%s: camera: TUM's %s calibration (the folder's name)%s; --camera to choose another", dir, hint,
                 calib_has_distortion(cam->dist) ? ", its lens taken out of every frame" : "");
 

@@ -58,6 +58,15 @@ assert json.load(open(sys.argv[1]))["undistorted"] == [0.2624, -0.9531, -0.0054,
 PY
 expect 0 "$B" info "$T/lens"
 grep -q "^lens .*taken out of every frame" "$T/out" || fail "info does not show the lens: $(cat "$T/out")"
+if [ "$SANITIZED" = 0 ]; then
+  expect 0 "$B" replay "$T/lens" --out "$T/lens_run" --no-mesh
+  python3 - "$T/lens_run/stats.json" "$fx" <<'PY' || fail "stats.json's camera does not hold the lens: $(head -c 600 "$T/lens_run/stats.json")"
+import json, sys
+c = json.load(open(sys.argv[1]))["camera"]
+assert c["undistorted"] == [0.2624, -0.9531, -0.0054, 0.0026, 1.1633], c
+assert c["fx"] == float(sys.argv[2]) and c["width"] == 160 and c["undistort_max_shift_px"] > 0, c
+PY
+fi
 echo "$fx $fy $cx $cy ${sc:-5000} -0.9 0 0 0 0" > "$T/lens/camera.txt"
 expect 3 "$B" info "$T/lens"
 mentions "camera.txt"

@@ -159,6 +159,8 @@ static void seeds_text(void)
     seed("text", "trajectory_repeat.txt", traj_text, sizeof traj_text - 1, false);
     const char cam[] = "525.0 525.0 319.5 239.5 5000\n";
     seed("text", "camera.txt", cam, sizeof cam - 1, false);
+    const char cam_lens[] = "517.3 516.5 318.6 255.3 5000 0.2624 -0.9531 -0.0054 0.0026 1.1633\n";
+    seed("text", "camera_lens.txt", cam_lens, sizeof cam_lens - 1, false);
     seed("text", "pose.txt", pose_text, sizeof pose_text - 1, true);
 }
 
@@ -183,6 +185,23 @@ static void seeds_folder(void)
     buf_sep(&b);
     buf_add(&b, c.p, c.n);
     seed("folder", "tum", b.p, b.n, true);
+    free(b.p);
+    /* The same with a lens in camera.txt: every frame undistorted. */
+    b = (buf){0};
+    buf_str(&b, "tum");
+    buf_sep(&b);
+    buf_str(&b, "# rgb\n1.000 rgb/c.png\n1.033 rgb/c.jpg\n");
+    buf_sep(&b);
+    buf_str(&b, "# depth\n1.001 depth/d.png\n1.034 depth/d.png\n");
+    buf_sep(&b);
+    buf_str(&b, traj_text);
+    buf_sep(&b);
+    buf_str(&b, "3 3 1.5 1 5000 0.2624 -0.9531 -0.0054 0.0026 1.1633\n");
+    buf_sep(&b);
+    buf_add(&b, d.p, d.n);
+    buf_sep(&b);
+    buf_add(&b, c.p, c.n);
+    seed("folder", "tum_lens", b.p, b.n, false);
     free(b.p);
     /* TUM without colour or ground truth, skipping bad frames. */
     b = (buf){0};
