@@ -166,10 +166,9 @@ static void seeds_text(void)
 
 /* ------------------------------------------------------------ folders */
 
-static void seeds_folder(void)
+/* TUM: two frames sharing the images, ground truth and camera.txt's line. */
+static void seed_tum(const char *name, const char *camera_line, const buf *d, const buf *c, bool cut)
 {
-    buf d = file_png_u16(), c = file_png_rgb(), j = file_jpeg();
-    /* TUM: two frames sharing the images, ground truth, a camera.txt. */
     buf b = {0};
     buf_str(&b, "tum");
     buf_sep(&b);
@@ -179,32 +178,23 @@ static void seeds_folder(void)
     buf_sep(&b);
     buf_str(&b, traj_text);
     buf_sep(&b);
-    buf_str(&b, "525 525 1.5 1 5000\n");
+    buf_str(&b, camera_line);
     buf_sep(&b);
-    buf_add(&b, d.p, d.n);
+    buf_add(&b, d->p, d->n);
     buf_sep(&b);
-    buf_add(&b, c.p, c.n);
-    seed("folder", "tum", b.p, b.n, true);
+    buf_add(&b, c->p, c->n);
+    seed("folder", name, b.p, b.n, cut);
     free(b.p);
+}
+
+static void seeds_folder(void)
+{
+    buf d = file_png_u16(), c = file_png_rgb(), j = file_jpeg();
+    seed_tum("tum", "525 525 1.5 1 5000\n", &d, &c, true);
     /* The same with a lens in camera.txt: every frame undistorted. */
-    b = (buf){0};
-    buf_str(&b, "tum");
-    buf_sep(&b);
-    buf_str(&b, "# rgb\n1.000 rgb/c.png\n1.033 rgb/c.jpg\n");
-    buf_sep(&b);
-    buf_str(&b, "# depth\n1.001 depth/d.png\n1.034 depth/d.png\n");
-    buf_sep(&b);
-    buf_str(&b, traj_text);
-    buf_sep(&b);
-    buf_str(&b, "3 3 1.5 1 5000 0.2624 -0.9531 -0.0054 0.0026 1.1633\n");
-    buf_sep(&b);
-    buf_add(&b, d.p, d.n);
-    buf_sep(&b);
-    buf_add(&b, c.p, c.n);
-    seed("folder", "tum_lens", b.p, b.n, false);
-    free(b.p);
+    seed_tum("tum_lens", "3 3 1.5 1 5000 0.2624 -0.9531 -0.0054 0.0026 1.1633\n", &d, &c, false);
     /* TUM without colour or ground truth, skipping bad frames. */
-    b = (buf){0};
+    buf b = {0};
     buf_str(&b, "tum skip max2");
     buf_sep(&b);
     buf_sep(&b);
