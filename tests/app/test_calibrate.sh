@@ -135,6 +135,16 @@ c = json.load(open(sys.argv[1]))['config']['calibration']
 f = json.load(open(sys.argv[2]))
 assert c['depth']['fx'] == f['depth']['fx'] and c['T_colour_depth'] == f['T_colour_depth'], c
 " "$T/rp/stats.json" "$T/small.json" || fail "stats.json does not echo --calibration: $(head -c 400 "$T/rp/stats.json")"
+# The file's depth camera, lens included, is the one the folder's depth is
+# read with (a lens the calibration found, or none).
+"$PY" -c "
+import json, sys
+cam = json.load(open(sys.argv[1]))['camera']
+d = json.load(open(sys.argv[2]))['depth']
+assert cam['fx'] == d['fx'] and cam['cy'] == d['cy'], cam
+want = d['dist'] if any(d['dist']) else None
+assert cam['undistorted'] == want, (cam, d['dist'])
+" "$T/rp/stats.json" "$T/small.json" || fail "replay --calibration does not read the depth with the file's depth camera: $(head -c 400 "$T/rp/stats.json")"
 expect 0 "$B" replay --help
 grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
 
