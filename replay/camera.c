@@ -65,10 +65,8 @@ bf_status replay_parse_camera(const char *spec, bf_intrinsics *K)
     double dist[CALIB_DIST_N];
     bf_status s = replay_parse_camera_lens(spec, &k, dist);
     if (s != BF_OK) return s;
-    /* A preset's lens is the replay's business; numbers with one are not a pinhole. */
-    bool is_preset = false;
-    for (size_t i = 0; i < sizeof presets / sizeof presets[0]; i++) is_preset |= !strcmp(spec, presets[i].name);
-    if (!is_preset && calib_has_distortion(dist))
+    /* A preset's lens is dropped; a lens typed in numbers is not a pinhole. */
+    if (strchr(spec, ',') && calib_has_distortion(dist))
         return bf_fail(BF_INVALID_ARG, "--camera '%s': a lens is not applied here (a bitfuse log keeps its "
                                        "frames as recorded; synth renders a pinhole): give fr1, fr2, fr3, icl or "
                                        "fx,fy,cx,cy", spec);
