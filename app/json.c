@@ -224,9 +224,13 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddNumberToObject(rl, "max_keyframes", c->reloc.max_keyframes);
     add_float(rl, "min_inlier_frac", c->reloc.min_inlier_frac);
     add_float(rl, "max_residual_m", c->reloc.max_residual_m);
+    add_float(rl, "max_residual_sigma", c->reloc.max_residual_sigma);
     cJSON_AddNumberToObject(rl, "check_step", c->reloc.check_step);
     add_float(rl, "check_band_m", c->reloc.check_band_m);
     add_float(rl, "max_front_frac", c->reloc.max_front_frac);
+    cJSON_AddNumberToObject(rl, "features", c->reloc.features);
+    cJSON_AddNumberToObject(rl, "feature_candidates", c->reloc.feature_candidates);
+    cJSON_AddNumberToObject(rl, "feature_min_inliers", c->reloc.feature_min_inliers);
     cJSON_AddBoolToObject(l, "has_views", c->has_views);
     json_calibration(o, c);
     cJSON *sm = app_json_object(l, "stream");

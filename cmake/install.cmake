@@ -12,8 +12,8 @@ include(CMakePackageConfigHelpers)
 
 # Modules in link order (a library before the ones it uses; DESIGN.md
 # section 2), the embedded shaders after the modules that run them.
-set(BITFUSE_MODULES recon stream tracking render export fusion store synth eval mesh hostmap replay calib
-    capture gpu core)
+set(BITFUSE_MODULES recon stream tracking render export fusion store synth eval features mesh hostmap replay
+    calib capture gpu core)
 install(TARGETS bitfuse RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 set(bitfuse_targets "")
 foreach(m ${BITFUSE_MODULES})
@@ -38,14 +38,14 @@ install(TARGETS ${bitfuse_targets} EXPORT bitfuseTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
 # bitfuse.pc: the libraries are static, so Libs names everything they use
-# (OpenCV's three calib libraries and meshoptimizer have no usable .pc on
-# Debian; the C++ runtime for calib's one C++ file).
+# (OpenCV's libraries, which calib/ and features/ call, and meshoptimizer
+# have no usable .pc on Debian; the C++ runtime for their C++ files).
 set(pc_libs "")
 foreach(m ${BITFUSE_MODULES})
   string(APPEND pc_libs " -lbf_${m}")
 endforeach()
 string(APPEND pc_libs " -lbf_shaders")
-foreach(m calib3d imgproc core)
+foreach(m calib3d features2d video imgproc core)
   set(lib ${OPENCV_${m}_LIBRARY})
   get_filename_component(dir ${lib} DIRECTORY)
   get_filename_component(name ${lib} NAME_WE)

@@ -1,6 +1,6 @@
 include_guard(GLOBAL)
 # OpenCV for the two C++ files that call it (calib/calib_cv.cpp,
-# eval/motion_cv.cpp). Debian's split packages (libopencv-calib3d-dev,
+# features/features_cv.cpp). Debian's split packages (libopencv-calib3d-dev,
 # -features2d-dev, -imgproc-dev, -core-dev) ship no opencv4.pc: only
 # libopencv-dev has it, and that one pulls every OpenCV module, VTK and Qt.
 # So pkg-config's opencv4 is used where it exists, and otherwise the headers

@@ -1,13 +1,13 @@
 /* The camera's motion between two frames as their colour images show it
- * (eval.h, "motion from colour"): the C side of motion_cv.cpp. */
+ * (eval.h, "motion from colour"), through features/ (ORB and PnP). */
 #include <math.h>
 #include <stdlib.h>
 
 #include "eval.h"
-#include "eval_motion_int.h"
+#include "features/features.h"
 
 struct eval_motion_image {
-    eval__cv_features *f;
+    features_set *f;
     uint32_t w, h;
 };
 
@@ -17,37 +17,19 @@ eval_motion_config eval_motion_config_default(void)
                                 .min_inliers = 50, .min_depth_m = 0.3f, .max_depth_m = 4.0f};
 }
 
-static bf_status cv_status(int rc, const char *what, const char *msg)
-{
-    if (rc == EVAL__CV_ERR_MEMORY) return bf_fail(BF_NO_MEMORY, "%s: %s", what, msg);
-    return bf_fail(BF_NUMERIC, "%s: OpenCV: %s", what, msg);
-}
-
 bf_status eval_motion_image_make(const uint8_t *rgb, uint32_t w, uint32_t h, const eval_motion_config *cfg,
                                  eval_motion_image **out)
 {
     *out = NULL;
     if (!rgb || !w || !h || !cfg || !cfg->n_features)
         return bf_fail(BF_INVALID_ARG, "eval_motion_image_make: no image (%ux%u) or no features asked for", w, h);
-    size_t n = (size_t)w * h;
-    uint8_t *grey = malloc(n);
     eval_motion_image *im = calloc(1, sizeof *im);
-    if (!grey || !im) {
-        free(grey);
+    if (!im) return bf_fail(BF_NO_MEMORY, "eval_motion_image_make: %ux%u", w, h);
+    /* The grey image is kept: each match is placed again by Lucas-Kanade. */
+    bf_status s = features_detect_rgb(rgb, w, h, cfg->n_features, true, &im->f);
+    if (s != BF_OK) {
         free(im);
-        return bf_fail(BF_NO_MEMORY, "eval_motion_image_make: %ux%u", w, h);
-    }
-    /* Luma as BT.601 weighs it, in integers: what ORB sees of a colour image. */
-    for (size_t i = 0; i < n; i++) {
-        const uint8_t *p = rgb + 3 * i;
-        grey[i] = (uint8_t)((77u * p[0] + 150u * p[1] + 29u * p[2] + 128u) >> 8);
-    }
-    char msg[256];
-    int rc = eval__cv_features_make(grey, (int)w, (int)h, (int)cfg->n_features, &im->f, msg, sizeof msg);
-    free(grey);
-    if (rc != EVAL__CV_OK) {
-        free(im);
-        return cv_status(rc, "eval_motion_image_make", msg);
+        return s;
     }
     im->w = w;
     im->h = h;
@@ -58,13 +40,13 @@ bf_status eval_motion_image_make(const uint8_t *rgb, uint32_t w, uint32_t h, con
 void eval_motion_image_free(eval_motion_image *im)
 {
     if (!im) return;
-    eval__cv_features_free(im->f);
+    features_free(im->f);
     free(im);
 }
 
 uint32_t eval_motion_image_features(const eval_motion_image *im)
 {
-    return im ? (uint32_t)eval__cv_features_count(im->f) : 0;
+    return im ? features_count(im->f) : 0;
 }
 
 bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, const bf_intrinsics *K,
@@ -76,32 +58,23 @@ bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, c
     if (a->w != K->width || a->h != K->height || b->w != K->width || b->h != K->height)
         return bf_fail(BF_INVALID_ARG, "eval_motion_pnp: images %ux%u and %ux%u, camera %ux%u", a->w, a->h, b->w, b->h,
                        K->width, K->height);
-    size_t n = (size_t)a->w * a->h;
-    float *z = malloc(n * sizeof *z);
-    if (!z) return bf_fail(BF_NO_MEMORY, "eval_motion_pnp: %ux%u", a->w, a->h);
-    for (size_t i = 0; i < n; i++) {
-        float m = (float)(depth_a[i] / K->depth_scale);
-        z[i] = (m >= cfg->min_depth_m && m <= cfg->max_depth_m) ? m : 0.0f;
-    }
-    const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
-    eval__cv_pnp_result r;
-    char msg[256];
-    int rc = eval__cv_pnp(a->f, z, b->f, (int)a->w, (int)a->h, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, &r,
-                          msg, sizeof msg);
-    free(z);
-    if (rc != EVAL__CV_OK) return cv_status(rc, "eval_motion_pnp", msg);
+    features_set *lifted;
+    bf_status s = features_lift(a->f, depth_a, K, cfg->min_depth_m, cfg->max_depth_m, true, &lifted);
+    if (s != BF_OK) return s;
+    const features_pnp_config pc = {.ransac_px = cfg->ransac_px, .ransac_iterations = cfg->ransac_iterations,
+                                    .min_inliers = cfg->min_inliers};
+    features_pnp_result r;
+    s = features_pnp(lifted, b->f, K, &pc, &r);
+    features_free(lifted);
+    if (s != BF_OK) return s;
     out->n_matches = r.n_matches;
-    out->n_lifted = r.n_lifted;
+    out->n_lifted = r.n_placed;
     out->n_inliers = r.n_inliers;
     out->rms_px = r.rms_px;
-    if (!r.ok || r.n_inliers < cfg->min_inliers) return BF_OK;
-    /* OpenCV's pose takes a's points into b's camera, T_ba; the pose of
-     * camera b in a's frame is its inverse. */
-    bf_se3 T_ba;
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) T_ba.R[i][j] = r.R_ba[3 * i + j];
-    T_ba.t = bf_v3(r.t_ba[0], r.t_ba[1], r.t_ba[2]);
-    out->T_ab = bf_se3_inverse(&T_ba);
+    if (!r.ok) return BF_OK;
+    /* The pose takes a's points into b's camera, T_ba; the pose of camera
+     * b in a's frame is its inverse. */
+    out->T_ab = bf_se3_inverse(&r.T_ba);
     out->ok = true;
     return BF_OK;
 }

@@ -45,7 +45,9 @@ recon_config recon_config_default(void)
          * 5.4% at that wrong one (max_front_frac, docs/tracking.md). */
         .reloc = {.enabled = true, .max_candidates = 4, .max_gate_intervals = 4, .keyframe_m = 0.1f,
                   .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f,
-                  .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f},
+                  .max_residual_sigma = 2.5f,
+                  .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f, .features = 1000,
+                  .feature_candidates = 2, .feature_min_inliers = 20},
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
      * and more accurate than fusion's own default of 1
@@ -118,6 +120,7 @@ const char *recon_reloc_kind_name(recon_reloc_kind k)
     case RECON_RELOC_VELOCITY: return "velocity";
     case RECON_RELOC_TURNED: return "turned";
     case RECON_RELOC_KEYFRAME: return "keyframe";
+    case RECON_RELOC_FEATURES: return "features";
     }
     return "?";
 }
@@ -484,7 +487,7 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
     r->T_first = r->T_last = *T_last;
     r->has_first = true;
     r->good_index = last_index;
-    for (size_t i = 0; traj && r->keyframes && i < traj->n; i++) recon__add_keyframe(r, &traj->T_wc[i]);
+    for (size_t i = 0; traj && r->keyframes && i < traj->n; i++) recon__add_keyframe(r, &traj->T_wc[i], NULL);
     recon_frame_result tmp;
     memset(&tmp, 0, sizeof tmp);
     return recon__cast_reference(r, T_last, &tmp);

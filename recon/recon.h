@@ -47,13 +47,22 @@ typedef struct recon_reloc_config {
     float keyframe_deg;        /* or turned this far, default 10 */
     uint32_t max_keyframes;    /* kept, default 64; beyond, the one nearest to two others is replaced */
     float min_inlier_frac;     /* a candidate is taken only with this inlier fraction, default 0.35 */
-    float max_residual_m;      /* and at most this residual, default 0.018 */
+    float max_residual_m;      /* and at most this residual, default 0.018, */
+    float max_residual_sigma;  /* or its RMS in units of sigma_z(z) at most this, default 2.5 (0: the metric
+                                  bound alone): far views fit to 18-21 mm at 1.9-2.3 sigma (docs/tracking.md) */
     /* The agreement check of a candidate that passed the above (reloc.c): the frame's samples that land
        on reference pixels with depth (covered), compared with that depth. */
     uint32_t check_step;       /* every check_step-th pixel of every check_step-th row, default 2 */
     float check_band_m;        /* a sample within this plus 3 sigma_z of the predicted depth agrees, default 0.02 */
     float max_front_frac;      /* the candidate is taken only when at most this fraction of the covered lies in
                                   front of the predicted surface (where the map holds free space), default 0.03 */
+    /* Candidates from colour (features/): each keyframe keeps the ORB keypoints of its colour image lifted by
+       its depth; a searching frame's keypoints are matched to them and PnP with RANSAC gives a pose wherever
+       the frame sees what a keyframe saw, however far from it. Colour registered to depth only (not with
+       --calibration). */
+    uint32_t features;            /* ORB keypoints per image, default 1000; 0: no colour candidates */
+    uint32_t feature_candidates;  /* the poses of the keyframes with most PnP inliers tried first, default 2 */
+    uint32_t feature_min_inliers; /* a keyframe's pose counts with at least this many inliers, default 20 */
 } recon_reloc_config;
 
 /* track.ref_level for the loop's tracking reference: the coarsest pyramid
@@ -125,9 +134,11 @@ typedef enum recon_reloc_kind {
     RECON_RELOC_VELOCITY, /* the last tracked motion continued over the frames elapsed */
     RECON_RELOC_TURNED,   /* one of those two turned by 10 or 20 degrees (yaw or pitch) */
     RECON_RELOC_KEYFRAME, /* a keyframe's pose */
+    RECON_RELOC_FEATURES, /* the pose PnP found from the colour's keypoints matched to a keyframe's */
 } recon_reloc_kind;
 
-const char *recon_reloc_kind_name(recon_reloc_kind k); /* "", "last", "velocity", "turned", "keyframe" */
+/* "", "last", "velocity", "turned", "keyframe", "features" */
+const char *recon_reloc_kind_name(recon_reloc_kind k);
 
 typedef struct recon_frame_result {
     uint32_t index;          /* the frame's index */

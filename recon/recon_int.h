@@ -2,6 +2,7 @@
 #ifndef BF_RECON_INT_H
 #define BF_RECON_INT_H
 
+#include "features/features.h"
 #include "recon.h"
 
 struct recon {
@@ -31,6 +32,7 @@ struct recon {
     bf_se3 V_step;       /* the motion per frame interval over the last good step (kept while lost) */
     bool has_velocity;   /* V_step was measured */
     bf_se3 *keyframes;   /* reloc.max_keyframes poses, allocated at create */
+    features_set **kf_features; /* each keyframe's lifted ORB keypoints, or NULL (no colour, or none asked) */
     uint32_t n_keyframes; /* held */
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
     float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */
@@ -56,8 +58,9 @@ bf_status recon__set_gate(recon *r, double n);
 void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool may_keyframe);
 /* T becomes a keyframe unless it is within a keyframe spacing of one; once
  * reloc.max_keyframes are held it replaces the one the store misses least
- * (whose two nearest others are nearest together). */
-void recon__add_keyframe(recon *r, const bf_se3 *T);
+ * (whose two nearest others are nearest together). f, the frame seen
+ * there (or NULL), gives the keyframe its colour's keypoints. */
+void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f);
 /* Searches for frame f (its raw depth at slot) from at most
  * reloc.max_candidates candidate poses, n intervals after the last good
  * frame, each with the per-frame motion gate; skip names a candidate already tried from the reference at

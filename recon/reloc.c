@@ -2,9 +2,11 @@
  * depth went away for a while (recon_int.h, DESIGN.md section 6).
  *
  * A frame that cannot be tracked from its guess is tried from a few
- * candidate poses: the last good pose, the last tracked motion continued
- * over the frames elapsed, both turned by 10 or 20 degrees, and keyframes
- * (poses kept while tracking, one per 0.1 m or 10 degrees of the path).
+ * candidate poses: where the colour's keypoints, matched to a keyframe's,
+ * put the camera (PnP with RANSAC), the last good pose, the last tracked
+ * motion continued over the frames elapsed, both turned by 10 or 20
+ * degrees, and keyframes (poses kept while tracking, one per 0.1 m or 10
+ * degrees of the path).
  * Each candidate costs a ray-cast of the map at its pose (the tracking
  * reference, not fused) and an ICP from it; the best one is taken only when
  * it passes the tracker's gates with a margin, agrees with the map where the
@@ -38,16 +40,18 @@ bf_status recon__reloc_create(recon *r)
     if (!c->enabled) return BF_OK;
     if (c->max_candidates < 1 || c->max_keyframes < 1 || !(c->max_gate_intervals >= 1) ||
         !(c->keyframe_m > 0) || !(c->keyframe_deg > 0) || !(c->min_inlier_frac > 0 && c->min_inlier_frac <= 1) ||
-        !(c->max_residual_m > 0) || c->check_step < 1 || !(c->check_band_m >= 0) ||
+        !(c->max_residual_m > 0) || !(c->max_residual_sigma >= 0) || c->check_step < 1 || !(c->check_band_m >= 0) ||
         !(c->max_front_frac >= 0 && c->max_front_frac <= 1))
         return bf_fail(BF_INVALID_ARG,
                        "recon: reloc needs candidates %u >= 1, keyframes %u >= 1, gate intervals %g >= 1, keyframe "
-                       "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0, check step %u >= 1, "
-                       "band %g m >= 0, in front %g in [0, 1]",
+                       "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0 (%g sigma >= 0), check "
+                       "step %u >= 1, band %g m >= 0, in front %g in [0, 1]",
                        c->max_candidates, c->max_keyframes, c->max_gate_intervals, c->keyframe_m, c->keyframe_deg,
-                       c->min_inlier_frac, c->max_residual_m, c->check_step, c->check_band_m, c->max_front_frac);
+                       c->min_inlier_frac, c->max_residual_m, c->max_residual_sigma, c->check_step, c->check_band_m,
+                       c->max_front_frac);
     r->keyframes = calloc(c->max_keyframes, sizeof *r->keyframes);
-    if (!r->keyframes) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);
+    r->kf_features = calloc(c->max_keyframes, sizeof *r->kf_features);
+    if (!r->keyframes || !r->kf_features) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);
     r->ref_host = malloc((size_t)r->K_ref.width * r->K_ref.height * sizeof *r->ref_host);
     if (!r->ref_host) return bf_fail(BF_NO_MEMORY, "recon: the reference's depth on the host");
     return BF_OK;
@@ -55,8 +59,11 @@ bf_status recon__reloc_create(recon *r)
 
 void recon__reloc_destroy(recon *r)
 {
+    for (uint32_t i = 0; r->kf_features && i < r->cfg.reloc.max_keyframes; i++) features_free(r->kf_features[i]);
+    free(r->kf_features);
     free(r->keyframes);
     free(r->ref_host);
+    r->kf_features = NULL;
     r->keyframes = NULL;
     r->ref_host = NULL;
 }
@@ -120,15 +127,35 @@ static uint32_t most_redundant(const recon *r, const bf_se3 *T)
     return best;
 }
 
-void recon__add_keyframe(recon *r, const bf_se3 *T)
+/* Whether frames' colour can give candidates: asked for, and the colour
+ * registered to the depth (a pixel's depth lifts its keypoint). */
+static bool uses_features(const recon *r) { return r->cfg.reloc.features > 0 && !r->cfg.has_calibration; }
+
+/* The lifted keypoints of f's colour, or NULL (no colour, or OpenCV
+ * failed: the keyframe is kept without them, with a warning). */
+static features_set *keyframe_features(recon *r, const bf_frame *f)
+{
+    if (!f || !f->rgb || !f->depth || !uses_features(r)) return NULL;
+    features_set *all = NULL, *lifted = NULL;
+    const bf_sensor *sn = &r->cfg.sensor;
+    bf_status s = features_detect_rgb(f->rgb, f->width, f->height, r->cfg.reloc.features, false, &all);
+    if (s == BF_OK) s = features_lift(all, f->depth, &r->K, 1e-3f, sn->max_depth_m, false, &lifted);
+    features_free(all);
+    if (s != BF_OK) bf_warn("recon: frame %u: a keyframe without colour keypoints: %s", f->index, bf_last_error());
+    return lifted;
+}
+
+void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f)
 {
     for (uint32_t i = 0; i < r->n_keyframes; i++)
         if (is_near(r, &r->keyframes[i], T)) return;
     /* Bounded: once all are held the most redundant one is replaced, so the
      * store keeps its spread over the scan (a search over 64 poses, only
      * when a new one comes). */
-    if (r->n_keyframes < r->cfg.reloc.max_keyframes) r->keyframes[r->n_keyframes++] = *T;
-    else r->keyframes[most_redundant(r, T)] = *T;
+    uint32_t i = r->n_keyframes < r->cfg.reloc.max_keyframes ? r->n_keyframes++ : most_redundant(r, T);
+    r->keyframes[i] = *T;
+    features_free(r->kf_features[i]);
+    r->kf_features[i] = keyframe_features(r, f);
     r->counts.keyframes = r->n_keyframes;
 }
 
@@ -159,7 +186,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
     r->good_index = f->index;
     r->good_t_s = f->t_depth_s;
     r->is_lost = false;
-    if (r->keyframes && may_keyframe) recon__add_keyframe(r, T_new);
+    if (r->keyframes && may_keyframe) recon__add_keyframe(r, T_new, f);
 }
 
 /* The primary candidates, tried on every searching frame: 0 the last good
@@ -262,9 +289,13 @@ static bf_status agreement_of(recon *r, const bf_frame *f, const bf_se3 *T_ref, 
 
 static bool passes(const recon *r, const track_result *t)
 {
-    /* Degenerate systems fit anywhere along their weak directions. */
-    return t->outcome == TRACK_OK && !t->degenerate && t->inlier_frac >= r->cfg.reloc.min_inlier_frac &&
-           t->residual_m <= r->cfg.reloc.max_residual_m;
+    /* Degenerate systems fit anywhere along their weak directions. The
+     * residual as the tracker gates it: metric, or in units of the
+     * sensor's noise, which at 2.5-3.5 m is 10-20 mm alone. */
+    const recon_reloc_config *c = &r->cfg.reloc;
+    bool fits = t->residual_m <= c->max_residual_m ||
+                (c->max_residual_sigma > 0 && t->residual_sigma <= c->max_residual_sigma);
+    return t->outcome == TRACK_OK && !t->degenerate && t->inlier_frac >= c->min_inlier_frac && fits;
 }
 
 /* What a search has seen so far. */
@@ -323,6 +354,74 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
     return BF_OK;
 }
 
+/* A pose from colour: PnP's inliers against keyframe kf. */
+typedef struct feature_pose {
+    uint32_t n_inliers;
+    bf_se3 T_wc;
+} feature_pose;
+
+/* RANSAC for a keyframe's pose: a frame that sees what a keyframe saw
+ * keeps a third or more of its lifted matches as inliers, and 1000
+ * draws find a five-point sample of those with certainty; a 3 px
+ * threshold takes Kinect v1's depth-to-colour offset (7-Scenes registers
+ * neither) and ORB's one-pixel placement. */
+#define FEATURE_RANSAC_PX 3.0
+#define FEATURE_RANSAC_ITERATIONS 1000u
+
+/* The poses where the frame's colour keypoints, matched to each
+ * keyframe's, put the camera: up to reloc.feature_candidates, most
+ * inliers first, none within the ambiguity distance of one before. An
+ * OpenCV failure gives none, with a warning: the other candidates remain. */
+static uint32_t feature_poses(recon *r, const bf_frame *f, feature_pose *best, uint32_t cap)
+{
+    bool any = false;
+    for (uint32_t i = 0; i < r->n_keyframes && !any; i++) any = r->kf_features[i] != NULL;
+    if (!any || !f->rgb || !uses_features(r) || cap == 0) return 0;
+    features_set *frame = NULL;
+    bf_status s = features_detect_rgb(f->rgb, f->width, f->height, r->cfg.reloc.features, false, &frame);
+    const features_pnp_config pc = {.ransac_px = FEATURE_RANSAC_PX, .ransac_iterations = FEATURE_RANSAC_ITERATIONS,
+                                    .min_inliers = r->cfg.reloc.feature_min_inliers};
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < r->n_keyframes && s == BF_OK; i++) {
+        features_pnp_result pr;
+        if (!r->kf_features[i]) continue;
+        if ((s = features_pnp(r->kf_features[i], frame, &r->K, &pc, &pr)) != BF_OK || !pr.ok) continue;
+        /* PnP gives the keyframe's points in the frame's camera, T_ba: the
+         * frame's pose is the keyframe's times its inverse. */
+        bf_se3 T_ab = bf_se3_inverse(&pr.T_ba);
+        feature_pose p = {.n_inliers = pr.n_inliers, .T_wc = bf_se3_mul(&r->keyframes[i], &T_ab)};
+        bf_debug("recon: frame %u: keyframe %u: %u colour matches, %u inliers, %.2f px", f->index, i, pr.n_matches,
+                 pr.n_inliers, pr.rms_px);
+        /* Insert by inliers, dropping a pose near one with more. */
+        uint32_t k = 0;
+        while (k < n && best[k].n_inliers >= p.n_inliers) k++;
+        bool is_repeat = false;
+        for (uint32_t j = 0; j < k && !is_repeat; j++)
+            is_repeat = dist_m(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_M &&
+                        angle_deg(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_DEG;
+        if (is_repeat || k >= cap) continue;
+        memmove(&best[k + 1], &best[k], (n - k - (n == cap)) * sizeof *best);
+        best[k] = p;
+        if (n < cap) n++;
+        /* A pose after it that is now a repeat of this one goes. */
+        for (uint32_t j = k + 1; j < n;) {
+            if (dist_m(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_M &&
+                angle_deg(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_DEG) {
+                memmove(&best[j], &best[j + 1], (n - j - 1) * sizeof *best);
+                n--;
+            } else {
+                j++;
+            }
+        }
+    }
+    features_free(frame);
+    if (s != BF_OK) {
+        bf_warn("recon: frame %u: no candidates from colour: %s", f->index, bf_last_error());
+        return 0;
+    }
+    return n;
+}
+
 bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n, recon_reloc_kind skip,
                         recon_frame_result *out, bool *found)
 {
@@ -335,6 +434,16 @@ bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *sl
      * constrained directions (tests/recon/test_reloc.c: 30 cm along a
      * partly mapped wall, 45% inliers at 14 mm, every candidate agreeing). */
     bf_status s = track_set_motion_scale(r->tracker, 1.0);
+    /* Colour first: where it finds a pose, that pose is wherever the
+     * camera went, which none of the others reaches beyond 20 degrees
+     * or a keyframe's neighbourhood. */
+    feature_pose fp[8];
+    uint32_t cap = r->cfg.reloc.feature_candidates < 8 ? r->cfg.reloc.feature_candidates : 8;
+    uint32_t n_fp = feature_poses(r, f, fp, cap < budget ? cap : budget);
+    for (uint32_t i = 0; i < n_fp && budget > 0 && s == BF_OK && !st.is_no_depth; i++) {
+        s = try_candidate(r, f, slot, &fp[i].T_wc, RECON_RELOC_FEATURES, &st, out);
+        budget--;
+    }
     /* The primaries every time (the likeliest places), then the round
      * robin where the last frame's search stopped: at most max_candidates
      * ray-casts and ICPs per frame, and every entry is reached within

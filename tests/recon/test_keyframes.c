@@ -48,7 +48,7 @@ BF_TEST(a_full_store_keeps_where_a_long_scan_began)
     const uint32_t n = 19;
     for (uint32_t k = 0; k < n; k++) {
         bf_se3 T = at_x(0.11 * k);
-        recon__add_keyframe(r, &T);
+        recon__add_keyframe(r, &T, NULL);
     }
     CHECK_EQ_INT(r->n_keyframes, 6);
     CHECK_EQ_INT(r->counts.keyframes, 6);
@@ -77,14 +77,14 @@ BF_TEST(a_pose_near_a_keyframe_adds_nothing)
     CHECK(r != NULL);
     if (!r) return;
     bf_se3 a = at_x(0), b = at_x(0.5), c = at_x(0.05), d = at_x(1.0);
-    recon__add_keyframe(r, &a);
-    recon__add_keyframe(r, &b);
-    recon__add_keyframe(r, &c);
+    recon__add_keyframe(r, &a, NULL);
+    recon__add_keyframe(r, &b, NULL);
+    recon__add_keyframe(r, &c, NULL);
     CHECK_EQ_INT(r->n_keyframes, 2);
     CHECK(holds_x(r, 0.0) && holds_x(r, 0.5));
     /* Full, a far pose: the one nearest to the others and the newcomer
      * (0.5, between 0 and 1) makes way. */
-    recon__add_keyframe(r, &d);
+    recon__add_keyframe(r, &d, NULL);
     CHECK(holds_x(r, 0.0) && holds_x(r, 1.0));
     store_close(r);
 }

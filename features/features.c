@@ -1,0 +1,79 @@
+/* features: the C side of features_cv.cpp (features.h). */
+#include <stdlib.h>
+
+#include "features.h"
+#include "features_int.h"
+
+static bf_status cv_status(int rc, const char *what, const char *msg)
+{
+    if (rc == FEATURES__ERR_MEMORY) return bf_fail(BF_NO_MEMORY, "%s: %s", what, msg);
+    return bf_fail(BF_NUMERIC, "%s: OpenCV: %s", what, msg);
+}
+
+bf_status features_detect_rgb(const uint8_t *rgb, uint32_t w, uint32_t h, uint32_t n_features, bool keep_image,
+                              features_set **out)
+{
+    if (!out) return bf_fail(BF_INVALID_ARG, "features_detect_rgb: no output");
+    *out = NULL;
+    if (!rgb || !w || !h || !n_features || n_features > (uint32_t)INT32_MAX || w > 65535 || h > 65535)
+        return bf_fail(BF_INVALID_ARG, "features_detect_rgb: no image (%ux%u) or %u features asked for", w, h,
+                       n_features);
+    size_t n = (size_t)w * h;
+    uint8_t *grey = bf_malloc(n);
+    if (!grey) return bf_fail(BF_NO_MEMORY, "features_detect_rgb: %ux%u", w, h);
+    /* Luma as BT.601 weighs it, in integers: what ORB sees of a colour image. */
+    for (size_t i = 0; i < n; i++) {
+        const uint8_t *p = rgb + 3 * i;
+        grey[i] = (uint8_t)((77u * p[0] + 150u * p[1] + 29u * p[2] + 128u) >> 8);
+    }
+    char msg[256];
+    int rc = features__detect(grey, (int)w, (int)h, (int)n_features, keep_image, out, msg, sizeof msg);
+    free(grey);
+    return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_detect_rgb", msg);
+}
+
+void features_free(features_set *f) { features__free(f); }
+
+uint32_t features_count(const features_set *f) { return (uint32_t)features__count(f); }
+
+size_t features_bytes(const features_set *f) { return features__bytes(f); }
+
+bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_intrinsics *K, float min_m,
+                        float max_m, bool keep_image, features_set **out)
+{
+    if (!out) return bf_fail(BF_INVALID_ARG, "features_lift: no output");
+    *out = NULL;
+    if (!f || !depth || !K || !(K->depth_scale > 0) || !(K->fx_px > 0) || !(K->fy_px > 0) || !K->width ||
+        !K->height || K->width > 65535 || K->height > 65535)
+        return bf_fail(BF_INVALID_ARG, "features_lift: missing input or a camera without scale or focal length");
+    const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
+    char msg[256];
+    int rc = features__lift(f, depth, (int)K->width, (int)K->height, K->depth_scale, Kd, min_m, max_m, keep_image,
+                            out, msg, sizeof msg);
+    return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_lift", msg);
+}
+
+bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K,
+                       const features_pnp_config *cfg, features_pnp_result *out)
+{
+    if (!out) return bf_fail(BF_INVALID_ARG, "features_pnp: no output");
+    *out = (features_pnp_result){.ok = false, .T_ba = bf_se3_identity()};
+    if (!a || !b || !K || !cfg || !(K->fx_px > 0) || !(K->fy_px > 0) || !(cfg->ransac_px > 0) ||
+        !cfg->ransac_iterations || cfg->ransac_iterations > (uint32_t)INT32_MAX)
+        return bf_fail(BF_INVALID_ARG, "features_pnp: missing input, a camera without focal length or no RANSAC");
+    const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
+    features__pnp_out r;
+    char msg[256];
+    int rc = features__pnp(a, b, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, &r, msg, sizeof msg);
+    if (rc != FEATURES__OK) return cv_status(rc, "features_pnp", msg);
+    out->n_matches = r.n_matches;
+    out->n_placed = r.n_placed;
+    out->n_inliers = r.n_inliers;
+    out->rms_px = r.rms_px;
+    if (!r.ok || r.n_inliers < cfg->min_inliers) return BF_OK;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) out->T_ba.R[i][j] = r.R_ba[3 * i + j];
+    out->T_ba.t = bf_v3(r.t_ba[0], r.t_ba[1], r.t_ba[2]);
+    out->ok = true;
+    return BF_OK;
+}

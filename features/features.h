@@ -1,0 +1,62 @@
+/* features: ORB keypoints of a colour image, lifted to 3D by its depth, and
+ * the camera pose that puts one image's lifted keypoints where another
+ * image's keypoints are (PnP with RANSAC). OpenCV's features2d, video and
+ * calib3d behind one C++ file (features_cv.cpp): no C++ type or exception
+ * crosses this header.
+ *
+ * Two users: eval's motion from colour (bitfuse eval-motion, a check of
+ * poses that needs no ground truth) and recon's relocalisation (a lost
+ * frame matched to the keyframes' lifted keypoints, docs/tracking.md). */
+#ifndef BF_FEATURES_H
+#define BF_FEATURES_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "core/core.h"
+
+/* One image's keypoints and their binary descriptors; after features_lift,
+ * also each keypoint's point in the camera. Opaque. */
+typedef struct features_set features_set;
+
+/* ORB keypoints (at most n_features) of an 8-bit RGB image (w*h*3), seen
+ * as BT.601 luma. keep_image keeps the grey image, which features_pnp then
+ * uses to place each match again by Lucas-Kanade (costs w*h bytes). */
+bf_status features_detect_rgb(const uint8_t *rgb, uint32_t w, uint32_t h, uint32_t n_features, bool keep_image,
+                              features_set **out);
+void features_free(features_set *f); /* NULL is a no-op */
+uint32_t features_count(const features_set *f);
+/* Bytes the set holds (keypoints, descriptors, points, kept image). */
+size_t features_bytes(const features_set *f);
+
+/* A new set of f's keypoints that have depth in [min_m, max_m] at their
+ * nearest pixel of depth (K's size, raw units: K->depth_scale per metre,
+ * 0 = none), each with its point in the camera (pinhole K). The grey
+ * image comes along when f kept one and keep_image asks for it. */
+bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_intrinsics *K, float min_m,
+                        float max_m, bool keep_image, features_set **out);
+
+typedef struct features_pnp_config {
+    double ransac_px;           /* RANSAC's reprojection threshold [px] */
+    uint32_t ransac_iterations; /* RANSAC's iterations (OpenCV's fixed seed: the same pair gives the same pose) */
+    uint32_t min_inliers;       /* a pose with fewer inliers is not one */
+} features_pnp_config;
+
+typedef struct features_pnp_result {
+    bool ok;            /* a pose was found with at least min_inliers (else the counts say how far it got) */
+    uint32_t n_matches; /* mutual nearest neighbours in Hamming distance */
+    uint32_t n_placed;  /* of them kept after Lucas-Kanade (all of them without images) */
+    uint32_t n_inliers; /* RANSAC's */
+    double rms_px;      /* reprojection RMS of the inliers after refinement */
+    bf_se3 T_ba;        /* a's camera points into b's camera: X_b = T_ba X_a */
+} features_pnp_result;
+
+/* The pose of b's camera against a's lifted points (a from features_lift,
+ * b from features_detect_rgb; one camera K for both): matches, then, when
+ * both kept their images, each match placed again in b by Lucas-Kanade,
+ * then EPnP in RANSAC and Levenberg-Marquardt on the inliers. */
+bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K,
+                       const features_pnp_config *cfg, features_pnp_result *out);
+
+#endif

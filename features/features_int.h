@@ -1,0 +1,47 @@
+/* features: the boundary between features.c and the C++ file that calls
+ * OpenCV (features_cv.cpp). Plain C types only: C++ never sees core.h, and
+ * C never sees an exception. Each int function returns FEATURES__OK or
+ * FEATURES__ERR_* with a message in msg (cap bytes). Not public API. */
+#ifndef BF_FEATURES_INT_H
+#define BF_FEATURES_INT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+enum {
+    FEATURES__OK = 0,
+    FEATURES__ERR_OPENCV = 1, /* a cv::Exception or another failure inside OpenCV */
+    FEATURES__ERR_MEMORY = 2, /* std::bad_alloc */
+};
+
+typedef struct features_set features_set;
+
+int features__detect(const uint8_t *grey, int w, int h, int n_features, int keep_image, features_set **out,
+                     char *msg, size_t cap);
+void features__free(features_set *f);
+int features__count(const features_set *f);
+size_t features__bytes(const features_set *f);
+
+/* K: fx fy cx cy; depth: w*h raw units, scale per metre. */
+int features__lift(const features_set *f, const uint16_t *depth, int w, int h, double scale, const double K[4],
+                   double min_m, double max_m, int keep_image, features_set **out, char *msg, size_t cap);
+
+typedef struct features__pnp_out {
+    int ok;
+    uint32_t n_matches, n_placed, n_inliers;
+    double rms_px;
+    double R_ba[9], t_ba[3]; /* X_b = R X_a + t, row-major, metres */
+} features__pnp_out;
+
+int features__pnp(const features_set *a, const features_set *b, const double K[4], double ransac_px,
+                  int ransac_iterations, features__pnp_out *r, char *msg, size_t cap);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
