@@ -103,7 +103,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 29
+#define LOOP_ROWS 30
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -263,8 +263,13 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "image): skipped, the last pose kept, or tracked and fused like a new one; with skip, a colour "
                 "repeated alone is left out of the photometric term and the map's colour"),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",
-                "look for a lost camera from candidate poses (last pose, continued motion, turns, keyframes) and "
-                "widen the motion gate with the frames since the last good one; off: keep the last pose"),
+                "look for a lost camera from candidate poses (where its colour matched to a keyframe's puts it, "
+                "last pose, continued motion, turns, keyframes) and widen the motion gate with the frames since "
+                "the last good one; off: keep the last pose"),
+        APP_OPT("--reloc-features", APP_OPT_U32, &a->rcfg.reloc.features, "N",
+                "ORB keypoints per keyframe and per searching frame for the candidates from colour (0: none; "
+                "colour registered to depth only, not with --calibration)",
+                .max = 100000),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),

@@ -32,26 +32,34 @@ double rot_dist_deg(const bf_se3 *A, const bf_se3 *B)
 static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
 {
     fixture_render *fr = user;
-    bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, NULL, NULL);
+    bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, fr->rgb, NULL);
     if (s != BF_OK) return s;
     if (fr->mutate) fr->mutate(k, fr->depth);
     *f = (bf_frame){.index = k, .width = W, .height = H, .t_depth_s = 100 + k / 30.0, .depth = fr->depth,
-                    .has_pose = true, .T_wc = bf_se3_mul(&fr->offset, &fr->true_pose[k])};
+                    .rgb = fr->rgb, .has_pose = true, .T_wc = bf_se3_mul(&fr->offset, &fr->true_pose[k])};
     f->t_rgb_s = f->t_depth_s;
     return BF_OK;
 }
 
-bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
-                              mutate_fn mutate, fixture_render *fr, rgbd_source **src)
+static bf_status render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
+                             mutate_fn mutate, bool colour, fixture_render *fr, rgbd_source **src)
 {
     bf_intrinsics K = test_K();
     synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 7};
     *fr = (fixture_render){.true_pose = true_pose, .offset = *offset, .mutate = mutate};
     fr->depth = malloc((size_t)W * H * sizeof *fr->depth);
-    bf_status s = fr->depth ? synth_renderer_create(sc, &rc, &fr->ren) : BF_NO_MEMORY;
+    fr->rgb = colour ? malloc((size_t)W * H * 3) : NULL;
+    bool ok = fr->depth && (!colour || fr->rgb);
+    bf_status s = ok ? synth_renderer_create(sc, &rc, &fr->ren) : BF_NO_MEMORY;
     if (s == BF_OK) s = capture_source_from_fn(&K, n, true, render_frame, fr, src);
     if (s != BF_OK) fixture_render_close(fr, NULL);
     return s;
+}
+
+bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
+                              mutate_fn mutate, fixture_render *fr, rgbd_source **src)
+{
+    return render_open(sc, true_pose, n, offset, mutate, false, fr, src);
 }
 
 void fixture_render_close(fixture_render *fr, rgbd_source *src)
@@ -59,6 +67,7 @@ void fixture_render_close(fixture_render *fr, rgbd_source *src)
     rgbd_source_close(src);
     synth_renderer_destroy(fr->ren);
     free(fr->depth);
+    free(fr->rgb);
     memset(fr, 0, sizeof *fr);
 }
 
@@ -91,8 +100,9 @@ bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_p
     return run_loop_with(ctx, &cfg, sc, true_pose, n, offset, mutate, out);
 }
 
-bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
-                        const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out)
+static bf_status run_loop_impl(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                               const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate,
+                               bool colour, run_out *out)
 {
     /* The frames carry offset * true_pose[k] as ground truth: the loop
      * starts at the first one. */
@@ -100,7 +110,7 @@ bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const syn
     rgbd_source *src = NULL;
     recon_run run;
     memset(&run, 0, sizeof run);
-    bf_status s = fixture_render_open(sc, true_pose, n, offset, mutate, &fr, &src);
+    bf_status s = render_open(sc, true_pose, n, offset, mutate, colour, &fr, &src);
     if (s == BF_OK) s = recon_run_sequence(ctx, src, cfg, keep_result, out, &run);
     if (s == BF_OK) s = fusion_check(run.map);
     if (s == BF_OK) s = fusion_get_stats(run.map, &out->map);
@@ -112,6 +122,18 @@ bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const syn
     recon_run_free(&run);
     if (src) fixture_render_close(&fr, src);
     return s;
+}
+
+bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                        const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out)
+{
+    return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, false, out);
+}
+
+bf_status run_loop_colour(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                          const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out)
+{
+    return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, true, out);
 }
 
 double surface_p90(const synth_scene *sc, const mesh_data *pts)

@@ -42,6 +42,7 @@ typedef struct fixture_render {
     bf_se3 offset;
     mutate_fn mutate;
     uint16_t *depth;
+    uint8_t *rgb; /* the colour too, or NULL (depth only) */
 } fixture_render;
 bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
                               mutate_fn mutate, fixture_render *fr, rgbd_source **src);
@@ -55,6 +56,9 @@ bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_p
 /* The same with the caller's config. */
 bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                         const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
+/* The same with colour (the scene's textures, registered to the depth). */
+bf_status run_loop_colour(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                          const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
 /* 90th percentile of the distance from pts to the scene's mesh [m]. */
 double surface_p90(const synth_scene *sc, const mesh_data *pts);
 

@@ -187,6 +187,84 @@ BF_TEST(a_camera_back_from_elsewhere_is_found_at_a_keyframe)
     gpu_context_destroy(ctx);
 }
 
+/* Carried away: the sweep of the test above, then in one frame the camera
+ * is 0.37 m behind and above the middle of its path, looking down 12
+ * degrees more: 0.36 m or more from every keyframe and the last pose, so
+ * ICP from none of them reaches it (the per-frame gate is 0.15 m), but it
+ * sees what the keyframes saw. The frames carry colour: the lost frame's
+ * ORB keypoints matched to a keyframe's, lifted by its depth, give the
+ * pose by PnP, which ICP then refines. Without colour candidates the
+ * camera stays lost. */
+enum { CA_OUT = 20, CA_AFTER = 6, CA_N = CA_OUT + CA_AFTER };
+
+static void carried_away_truth(const synth_scene *sc, bf_se3 truth[CA_N])
+{
+    for (uint32_t k = 0; k < CA_N; k++) {
+        if (k < CA_OUT) {
+            truth[k] = view_pose(sc, 0.02 * k, 1.5 * k);
+            continue;
+        }
+        bf_se3 mid = view_pose(sc, 0.19 + 0.004 * (k - CA_OUT), 14.0 + 0.3 * (k - CA_OUT));
+        bf_se3 M = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(1, 0, 0), -12.0 * M_PI / 180), bf_v3(0, -0.1, -0.35));
+        truth[k] = bf_se3_mul(&mid, &M);
+    }
+}
+
+BF_TEST(a_camera_carried_away_is_found_from_its_colour)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    synth_scene sc;
+    CHECK_OK(synth_scene_room(NULL, &sc));
+    bf_se3 truth[CA_N];
+    carried_away_truth(&sc, truth);
+    double nearest = INFINITY;
+    for (uint32_t k = 0; k < CA_OUT; k++) {
+        double d = trans_dist(&truth[k], &truth[CA_OUT]);
+        if (d < nearest) nearest = d;
+    }
+    fprintf(stderr, "  the jump: %.0f mm from the nearest pose of the path, %.0f mm and %.1f deg from the last\n",
+            1e3 * nearest, 1e3 * trans_dist(&truth[CA_OUT - 1], &truth[CA_OUT]),
+            rot_dist_deg(&truth[CA_OUT - 1], &truth[CA_OUT]));
+    CHECK(nearest > 0.3); /* beyond ICP's reach from any keyframe */
+    bf_se3 I = bf_se3_identity();
+    static run_out o;
+    for (int with = 0; with < 2; with++) {
+        memset(&o, 0, sizeof o);
+        recon_run_config cfg = fixture_run_config();
+        if (!with) cfg.loop.reloc.features = 0;
+        CHECK_OK(run_loop_colour(ctx, &cfg, &sc, truth, CA_N, &I, NULL, &o));
+        fprintf(stderr, "  colour candidates %s: %u tracked, %u relocalised, %u lost, %u keyframes;",
+                with ? "on" : "off", o.counts.tracked, o.counts.relocalised, o.counts.lost, o.counts.keyframes);
+        for (uint32_t k = CA_OUT; k < CA_N; k++)
+            fprintf(stderr, " %u:%s%s%s (%.0f mm)", k, recon_state_name(o.fr[k].state), o.fr[k].reloc ? "/" : "",
+                    recon_reloc_kind_name(o.fr[k].reloc), 1e3 * trans_dist(&o.est[k], &truth[k]));
+        fprintf(stderr, "\n");
+        for (uint32_t k = 0; k < CA_OUT; k++) CHECK(is_good(&o.fr[k]));
+        if (!with) {
+            /* Beyond the depth-only candidates: lost, and nothing fused. */
+            for (uint32_t k = CA_OUT; k < CA_N; k++) check_lost_frame(&o, k, CA_OUT - 1);
+            mesh_free(&o.points);
+            continue;
+        }
+        /* Found on the first frame after the jump, from colour, then
+         * tracked on within tracking's own bound. */
+        CHECK_EQ_INT(o.fr[CA_OUT].state, RECON_RELOCALISED);
+        CHECK_EQ_INT(o.fr[CA_OUT].reloc, RECON_RELOC_FEATURES);
+        for (uint32_t k = CA_OUT; k < CA_N; k++) {
+            CHECK(is_good(&o.fr[k]));
+            CHECK(o.fr[k].fused);
+            CHECK_LE(trans_dist(&o.est[k], &truth[k]), POSE_TOL_M);
+            CHECK_LE(rot_dist_deg(&o.est[k], &truth[k]), POSE_TOL_DEG);
+        }
+        CHECK_LE(surface_p90(&sc, &o.points), 0.02);
+        mesh_free(&o.points);
+    }
+    synth_scene_free(&sc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 /* A new place: after 12 frames of the sweep the camera turns round to the
  * back of the room, which the map has never seen, and looks about there.
  * Every frame after the jump is lost, says so, and is not fused; the map
