@@ -7,6 +7,7 @@
 static bf_status cv_status(int rc, const char *what, const char *msg)
 {
     if (rc == FEATURES__ERR_MEMORY) return bf_fail(BF_NO_MEMORY, "%s: %s", what, msg);
+    if (rc == FEATURES__ERR_ARG) return bf_fail(BF_INVALID_ARG, "%s: %s", what, msg);
     return bf_fail(BF_NUMERIC, "%s: OpenCV: %s", what, msg);
 }
 
@@ -53,18 +54,29 @@ bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_i
     return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_lift", msg);
 }
 
+bf_status features_match_count(const features_set *a, const features_set *b, uint32_t max_hamming, uint32_t *n)
+{
+    if (!n) return bf_fail(BF_INVALID_ARG, "features_match_count: no output");
+    *n = 0;
+    if (!a || !b) return bf_fail(BF_INVALID_ARG, "features_match_count: missing input");
+    char msg[256];
+    int rc = features__match_count(a, b, max_hamming > 256 ? 256 : (int)max_hamming, n, msg, sizeof msg);
+    return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_match_count", msg);
+}
+
 bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K,
                        const features_pnp_config *cfg, features_pnp_result *out)
 {
     if (!out) return bf_fail(BF_INVALID_ARG, "features_pnp: no output");
     *out = (features_pnp_result){.ok = false, .T_ba = bf_se3_identity()};
     if (!a || !b || !K || !cfg || !(K->fx_px > 0) || !(K->fy_px > 0) || !(cfg->ransac_px > 0) ||
-        !cfg->ransac_iterations || cfg->ransac_iterations > (uint32_t)INT32_MAX)
+        !cfg->ransac_iterations || cfg->ransac_iterations > (uint32_t)INT32_MAX || cfg->max_hamming > 256)
         return bf_fail(BF_INVALID_ARG, "features_pnp: missing input, a camera without focal length or no RANSAC");
     const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
     features__pnp_out r;
     char msg[256];
-    int rc = features__pnp(a, b, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, &r, msg, sizeof msg);
+    int rc = features__pnp(a, b, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, (int)cfg->max_hamming, cfg->fast, &r,
+                           msg, sizeof msg);
     if (rc != FEATURES__OK) return cv_status(rc, "features_pnp", msg);
     out->n_matches = r.n_matches;
     out->n_placed = r.n_placed;

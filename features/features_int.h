@@ -16,6 +16,7 @@ enum {
     FEATURES__OK = 0,
     FEATURES__ERR_OPENCV = 1, /* a cv::Exception or another failure inside OpenCV */
     FEATURES__ERR_MEMORY = 2, /* std::bad_alloc */
+    FEATURES__ERR_ARG = 3,    /* the caller's mistake (a set not lifted where one must be) */
 };
 
 typedef struct features_set features_set;
@@ -37,8 +38,12 @@ typedef struct features__pnp_out {
     double R_ba[9], t_ba[3]; /* X_b = R X_a + t, row-major, metres */
 } features__pnp_out;
 
+/* Mutual nearest neighbours of a's lifted keypoints in b within max_hamming bits (0: any). */
+int features__match_count(const features_set *a, const features_set *b, int max_hamming, uint32_t *n, char *msg,
+                          size_t cap);
+
 int features__pnp(const features_set *a, const features_set *b, const double K[4], double ransac_px,
-                  int ransac_iterations, features__pnp_out *r, char *msg, size_t cap);
+                  int ransac_iterations, int max_hamming, int fast, features__pnp_out *r, char *msg, size_t cap);
 
 #ifdef __cplusplus
 }

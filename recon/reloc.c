@@ -138,10 +138,13 @@ static features_set *keyframe_features(recon *r, const bf_frame *f)
     if (!f || !f->rgb || !f->depth || !uses_features(r)) return NULL;
     features_set *all = NULL, *lifted = NULL;
     const bf_sensor *sn = &r->cfg.sensor;
+    double t0 = bf_time_s();
     bf_status s = features_detect_rgb(f->rgb, f->width, f->height, r->cfg.reloc.features, false, &all);
     if (s == BF_OK) s = features_lift(all, f->depth, &r->K, 1e-3f, sn->max_depth_m, false, &lifted);
     features_free(all);
     if (s != BF_OK) bf_warn("recon: frame %u: a keyframe without colour keypoints: %s", f->index, bf_last_error());
+    else bf_debug("recon: frame %u: keyframe colour: %u keypoints, %zu bytes, %.1f ms", f->index,
+                  features_count(lifted), features_bytes(lifted), 1e3 * (bf_time_s() - t0));
     return lifted;
 }
 
@@ -367,6 +370,13 @@ typedef struct feature_pose {
  * neither) and ORB's one-pixel placement. */
 #define FEATURE_RANSAC_PX 3.0
 #define FEATURE_RANSAC_ITERATIONS 1000u
+/* Matches further apart than 64 of ORB's 256 bits are dropped (ORB-SLAM
+ * takes 50-100): what is left is more often right, so RANSAC's adaptive
+ * count stops sooner. */
+#define FEATURE_MAX_HAMMING 64u
+/* PnP runs on the keyframes with most such matches only, this many per
+ * pose asked for: PnP costs about ten times the matching. */
+#define FEATURE_PNP_PER_CANDIDATE 2u
 
 /* The poses where the frame's colour keypoints, matched to each
  * keyframe's, put the camera: up to reloc.feature_candidates, most
@@ -378,13 +388,31 @@ static uint32_t feature_poses(recon *r, const bf_frame *f, feature_pose *best, u
     for (uint32_t i = 0; i < r->n_keyframes && !any; i++) any = r->kf_features[i] != NULL;
     if (!any || !f->rgb || !uses_features(r) || cap == 0) return 0;
     features_set *frame = NULL;
+    double t0 = bf_time_s();
     bf_status s = features_detect_rgb(f->rgb, f->width, f->height, r->cfg.reloc.features, false, &frame);
     const features_pnp_config pc = {.ransac_px = FEATURE_RANSAC_PX, .ransac_iterations = FEATURE_RANSAC_ITERATIONS,
-                                    .min_inliers = r->cfg.reloc.feature_min_inliers};
-    uint32_t n = 0;
+                                    .min_inliers = r->cfg.reloc.feature_min_inliers,
+                                    .max_hamming = FEATURE_MAX_HAMMING, .fast = true};
+    /* The keyframes ranked by matches, the best few kept (insertion into a
+     * short list, ties to the earlier keyframe). */
+    uint32_t top[2 * 8 * FEATURE_PNP_PER_CANDIDATE], top_m[2 * 8 * FEATURE_PNP_PER_CANDIDATE], n_top = 0;
+    uint32_t top_cap = cap * FEATURE_PNP_PER_CANDIDATE;
     for (uint32_t i = 0; i < r->n_keyframes && s == BF_OK; i++) {
-        features_pnp_result pr;
+        uint32_t m;
         if (!r->kf_features[i]) continue;
+        if ((s = features_match_count(r->kf_features[i], frame, FEATURE_MAX_HAMMING, &m)) != BF_OK) break;
+        if (m < r->cfg.reloc.feature_min_inliers) continue;
+        uint32_t k = n_top < top_cap ? n_top++ : top_cap;
+        while (k > 0 && top_m[k - 1] < m) {
+            if (k < top_cap) top[k] = top[k - 1], top_m[k] = top_m[k - 1];
+            k--;
+        }
+        if (k < top_cap) top[k] = i, top_m[k] = m;
+    }
+    uint32_t n = 0;
+    for (uint32_t t = 0; t < n_top && s == BF_OK; t++) {
+        uint32_t i = top[t];
+        features_pnp_result pr;
         if ((s = features_pnp(r->kf_features[i], frame, &r->K, &pc, &pr)) != BF_OK || !pr.ok) continue;
         /* PnP gives the keyframe's points in the frame's camera, T_ba: the
          * frame's pose is the keyframe's times its inverse. */
@@ -419,6 +447,8 @@ static uint32_t feature_poses(recon *r, const bf_frame *f, feature_pose *best, u
         bf_warn("recon: frame %u: no candidates from colour: %s", f->index, bf_last_error());
         return 0;
     }
+    bf_debug("recon: frame %u: colour against %u keyframes: %u poses, %.1f ms", f->index, r->n_keyframes, n,
+             1e3 * (bf_time_s() - t0));
     return n;
 }
 

@@ -58,6 +58,9 @@ BF_TEST(features_pnp_from_lifted_keypoints_finds_a_pose_far_from_the_keyframe)
     /* No image kept: the keypoints, their descriptors and points only. */
     CHECK(features_bytes(lifted) < 100u * features_count(lifted) + 4096u);
     features_pnp_result r;
+    /* A set that was never lifted has no points for PnP. */
+    CHECK_STATUS(features_pnp(a, b, &box_K, &pnp_cfg, &r), BF_INVALID_ARG);
+    CHECK(!r.ok);
     CHECK_OK(features_pnp(lifted, b, &box_K, &pnp_cfg, &r));
     CHECK(r.ok);
     CHECK_EQ_INT(r.n_placed, r.n_matches); /* no Lucas-Kanade without images: every lifted match is placed */
@@ -80,6 +83,22 @@ BF_TEST(features_pnp_from_lifted_keypoints_finds_a_pose_far_from_the_keyframe)
     CHECK_OK(features_pnp(lifted, b, &box_K, &pnp_cfg, &r2));
     CHECK(memcmp(&r.T_ba, &r2.T_ba, sizeof r.T_ba) == 0);
     CHECK_EQ_INT(r2.n_inliers, r.n_inliers);
+    /* The fast mode (distinctive matches, AP3P samples), recon's: fewer
+     * matches, the same bound. */
+    features_pnp_config fast = pnp_cfg;
+    fast.fast = true;
+    fast.max_hamming = 64;
+    CHECK_OK(features_pnp(lifted, b, &box_K, &fast, &r2));
+    CHECK(r2.ok);
+    CHECK(r2.n_matches < r.n_matches);
+    uint32_t n_distinct;
+    CHECK_OK(features_match_count(lifted, b, 64, &n_distinct));
+    CHECK_EQ_INT(n_distinct, r2.n_matches);
+    pose_error(&Ta, &Tb, &r2.T_ba, &e_m, &e_deg);
+    bf_info("features: fast: %u inliers of %u matches, %.2f px: %.1f mm, %.3f deg off", r2.n_inliers, r2.n_matches,
+            r2.rms_px, 1e3 * e_m, e_deg);
+    CHECK_LE(e_m, 0.02);
+    CHECK_LE(e_deg, 0.3);
     features_free(a), features_free(b), features_free(lifted);
     views_free(&v);
 }
@@ -147,6 +166,9 @@ BF_TEST(features_refuse_bad_input)
     c.ransac_iterations = 0;
     CHECK_STATUS(features_pnp(l, f, &K, &c, &r), BF_INVALID_ARG);
     CHECK(!r.ok);
+    c = pnp_cfg;
+    c.max_hamming = 257;
+    CHECK_STATUS(features_pnp(l, f, &K, &c, &r), BF_INVALID_ARG);
     /* Nothing to match: no pose and no error. */
     CHECK_OK(features_pnp(l, f, &K, &pnp_cfg, &r));
     CHECK(!r.ok);

@@ -41,6 +41,17 @@ static void check_lost_frame(const run_out *o, uint32_t k, uint32_t last_good)
     CHECK_NEAR(trans_dist(&o->est[k], &o->est[last_good]), 0, 1e-12);
 }
 
+/* Frames [from, to) good, fused, and within tracking's own bound of the truth. */
+static void check_found_frames(const run_out *o, const bf_se3 *truth, uint32_t from, uint32_t to)
+{
+    for (uint32_t k = from; k < to; k++) {
+        CHECK(is_good(&o->fr[k]));
+        CHECK(o->fr[k].fused);
+        CHECK_LE(trans_dist(&o->est[k], &truth[k]), POSE_TOL_M);
+        CHECK_LE(rot_dist_deg(&o->est[k], &truth[k]), POSE_TOL_DEG);
+    }
+}
+
 /* Covered lens: 24 frames without depth while the camera keeps turning
  * and sliding, slowing down to half its speed meanwhile (134 mm and 20
  * degrees in the gap): the continued motion overshoots by 44 mm and 6.6
@@ -105,12 +116,7 @@ BF_TEST(covered_lens_while_moving_is_found_again_after_the_gap)
         while (found < COV_N && !is_good(&o.fr[found])) check_lost_frame(&o, found++, COV_BEFORE - 1);
         CHECK_LE(found, back + 1);
         CHECK_EQ_INT(o.fr[found].state, RECON_RELOCALISED);
-        for (uint32_t k = found; k < COV_N; k++) {
-            CHECK(is_good(&o.fr[k]));
-            CHECK(o.fr[k].fused);
-            CHECK_LE(trans_dist(&o.est[k], &truth[k]), POSE_TOL_M);
-            CHECK_LE(rot_dist_deg(&o.est[k], &truth[k]), POSE_TOL_DEG);
-        }
+        check_found_frames(&o, truth, found, COV_N);
         fprintf(stderr, "  after the gap: frame %u off by %.1f mm, %.2f deg; last by %.1f mm\n", found,
                 1e3 * trans_dist(&o.est[found], &truth[found]), rot_dist_deg(&o.est[found], &truth[found]),
                 1e3 * trans_dist(&o.est[COV_N - 1], &truth[COV_N - 1]));
@@ -175,11 +181,7 @@ BF_TEST(a_camera_back_from_elsewhere_is_found_at_a_keyframe)
         fprintf(stderr, "  found at frame %u (%u after the return) off by %.1f mm, %.2f deg\n", found, found - back,
                 1e3 * trans_dist(&o.est[found], &truth[found]), rot_dist_deg(&o.est[found], &truth[found]));
     }
-    for (uint32_t k = found; k < AB_N; k++) {
-        CHECK(is_good(&o.fr[k]));
-        CHECK_LE(trans_dist(&o.est[k], &truth[k]), POSE_TOL_M);
-        CHECK_LE(rot_dist_deg(&o.est[k], &truth[k]), POSE_TOL_DEG);
-    }
+    check_found_frames(&o, truth, found, AB_N);
     CHECK_LE(surface_p90(&sc, &o.points), 0.02);
     mesh_free(&o.points);
     synth_scene_free(&sc);
@@ -251,12 +253,7 @@ BF_TEST(a_camera_carried_away_is_found_from_its_colour)
          * tracked on within tracking's own bound. */
         CHECK_EQ_INT(o.fr[CA_OUT].state, RECON_RELOCALISED);
         CHECK_EQ_INT(o.fr[CA_OUT].reloc, RECON_RELOC_FEATURES);
-        for (uint32_t k = CA_OUT; k < CA_N; k++) {
-            CHECK(is_good(&o.fr[k]));
-            CHECK(o.fr[k].fused);
-            CHECK_LE(trans_dist(&o.est[k], &truth[k]), POSE_TOL_M);
-            CHECK_LE(rot_dist_deg(&o.est[k], &truth[k]), POSE_TOL_DEG);
-        }
+        check_found_frames(&o, truth, CA_OUT, CA_N);
         CHECK_LE(surface_p90(&sc, &o.points), 0.02);
         mesh_free(&o.points);
     }
