@@ -32,6 +32,7 @@ for J in $JUMPS; do
   n=0
   for k in $(seq 0 149) $(seq "$J" $((J + AFTER - 1))); do
     src=$(printf '%s/frame-%06d' "$DATA" "$k") dst=$(printf '%s/frame-%06d' "$seq_dir" "$n")
+    [ -e "$src.depth.png" ] || { echo "reloc_jumps.sh: $src.depth.png: no such frame" >&2; exit 1; }
     for f in "$src".*; do ln -s "$f" "$dst.${f#"$src".}"; done
     n=$((n + 1))
   done
@@ -56,8 +57,9 @@ if found is None:
 else:
     k = int(found['index'])
     after = err[k + 1:]
-    print('| %s | %d | frame %d (%s) | %.0f | %.1f | %.1f | %.1f / %.1f |' % (
-        jump, lost, k, found['reloc_from'], float(found['frame_ms']), err[149], err[k], after.mean(), after.max()))
+    tail = '%.1f / %.1f' % (after.mean(), after.max()) if len(after) else 'none after it'
+    print('| %s | %d | frame %d (%s) | %.0f | %.1f | %.1f | %s |' % (
+        jump, lost, k, found['reloc_from'], float(found['frame_ms']), err[149], err[k], tail))
 PYEOF
 done
 cat "$OUT/reloc_jumps.md"

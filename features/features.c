@@ -58,9 +58,10 @@ bf_status features_match_count(const features_set *a, const features_set *b, uin
 {
     if (!n) return bf_fail(BF_INVALID_ARG, "features_match_count: no output");
     *n = 0;
-    if (!a || !b) return bf_fail(BF_INVALID_ARG, "features_match_count: missing input");
+    if (!a || !b || max_hamming > 256)
+        return bf_fail(BF_INVALID_ARG, "features_match_count: missing input or %u bits of 256", max_hamming);
     char msg[256];
-    int rc = features__match_count(a, b, max_hamming > 256 ? 256 : (int)max_hamming, n, msg, sizeof msg);
+    int rc = features__match_count(a, b, (int)max_hamming, n, msg, sizeof msg);
     return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_match_count", msg);
 }
 

@@ -30,10 +30,13 @@ uint32_t features_count(const features_set *f);
 /* Bytes the set holds (keypoints, descriptors, points, kept image). */
 size_t features_bytes(const features_set *f);
 
-/* A new set of f's keypoints that have depth in [min_m, max_m] at their
- * nearest pixel of depth (K's size, raw units: K->depth_scale per metre,
- * 0 = none), each with its point in the camera (pinhole K). The grey
- * image comes along when f kept one and keep_image asks for it. */
+/* A new set of f's keypoints, each with its point in the camera (pinhole
+ * K) where depth (K's size, raw units: K->depth_scale per metre, 0 =
+ * none) at its nearest pixel lies in [min_m, max_m], and no point where
+ * it does not: those stay for the mutual matching (eval's, which sees
+ * what it saw before lifting) and are left out of PnP and of the
+ * distinctive matching. The grey image comes along when f kept one and
+ * keep_image asks for it. */
 bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_intrinsics *K, float min_m,
                         float max_m, bool keep_image, features_set **out);
 
@@ -51,8 +54,8 @@ typedef struct features_pnp_config {
 
 typedef struct features_pnp_result {
     bool ok;            /* a pose was found with at least min_inliers (else the counts say how far it got) */
-    uint32_t n_matches; /* mutual nearest neighbours in Hamming distance */
-    uint32_t n_placed;  /* of them kept after Lucas-Kanade (all of them without images) */
+    uint32_t n_matches; /* matches (mutual or distinctive, cfg->fast) within max_hamming */
+    uint32_t n_placed;  /* of them with a lifted point, and kept by Lucas-Kanade where both have images */
     uint32_t n_inliers; /* RANSAC's */
     double rms_px;      /* reprojection RMS of the inliers after refinement */
     bf_se3 T_ba;        /* a's camera points into b's camera: X_b = T_ba X_a */

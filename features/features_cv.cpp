@@ -160,7 +160,9 @@ void distinctive(const features_set *a, const features_set *b, int max_hamming, 
 
 #if defined(__x86_64__) || defined(__i386__)
 __attribute__((target("popcnt"))) int popcount_hw(unsigned long long v) { return __builtin_popcountll(v); }
-__attribute__((target("popcnt"))) void distinctive_hw(const features_set *a, const features_set *b, int max_hamming,
+// flatten: the template and its popcounts inlined here, so they are
+// compiled for the popcount instruction too.
+__attribute__((target("popcnt"), flatten)) void distinctive_hw(const features_set *a, const features_set *b, int max_hamming,
                                                        std::vector<cv::DMatch> &out)
 {
     distinctive<popcount_hw>(a, b, max_hamming, out);

@@ -38,7 +38,7 @@ typedef struct features__pnp_out {
     double R_ba[9], t_ba[3]; /* X_b = R X_a + t, row-major, metres */
 } features__pnp_out;
 
-/* Mutual nearest neighbours of a's lifted keypoints in b within max_hamming bits (0: any). */
+/* Distinctive matches of a's lifted keypoints in b (features_match_count). */
 int features__match_count(const features_set *a, const features_set *b, int max_hamming, uint32_t *n, char *msg,
                           size_t cap);
 

@@ -61,6 +61,16 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
  * (whose two nearest others are nearest together). f, the frame seen
  * there (or NULL), gives the keyframe its colour's keypoints. */
 void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f);
+/* A candidate pose from colour (PnP against a keyframe) and its inliers. */
+typedef struct recon__colour_pose {
+    uint32_t n_inliers;
+    bf_se3 T_wc;
+} recon__colour_pose;
+/* best[0..*n) by inliers, most first, no two the same pose (within 5 cm
+ * and 5 degrees), at most cap: p joins unless a pose with as many inliers
+ * repeats it, and the poses with fewer that repeat it leave first, so a
+ * distinct one is never pushed out for a repeat. */
+void recon__keep_pose(recon__colour_pose *best, uint32_t *n, uint32_t cap, const recon__colour_pose *p);
 /* Searches for frame f (its raw depth at slot) from at most
  * reloc.max_candidates candidate poses, n intervals after the last good
  * frame, each with the per-frame motion gate; skip names a candidate already tried from the reference at

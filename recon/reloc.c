@@ -24,6 +24,8 @@
  * same frame is millimetres, so neither is trusted. */
 #define RELOC_AMBIGUOUS_M 0.05
 #define RELOC_AMBIGUOUS_DEG 5.0
+/* reloc.feature_candidates at most: the search's lists are this long. */
+#define FEATURE_MAX_CANDIDATES 8u
 
 /* The turns tried around the last pose and the continued motion: yaw
  * (about the camera's y axis) and pitch (x), 10 degrees first. Hand-held
@@ -41,14 +43,14 @@ bf_status recon__reloc_create(recon *r)
     if (c->max_candidates < 1 || c->max_keyframes < 1 || !(c->max_gate_intervals >= 1) ||
         !(c->keyframe_m > 0) || !(c->keyframe_deg > 0) || !(c->min_inlier_frac > 0 && c->min_inlier_frac <= 1) ||
         !(c->max_residual_m > 0) || !(c->max_residual_sigma >= 0) || c->check_step < 1 || !(c->check_band_m >= 0) ||
-        !(c->max_front_frac >= 0 && c->max_front_frac <= 1))
+        !(c->max_front_frac >= 0 && c->max_front_frac <= 1) || c->feature_candidates > FEATURE_MAX_CANDIDATES)
         return bf_fail(BF_INVALID_ARG,
                        "recon: reloc needs candidates %u >= 1, keyframes %u >= 1, gate intervals %g >= 1, keyframe "
                        "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0 (%g sigma >= 0), check "
-                       "step %u >= 1, band %g m >= 0, in front %g in [0, 1]",
+                       "step %u >= 1, band %g m >= 0, in front %g in [0, 1], colour candidates %u <= 8",
                        c->max_candidates, c->max_keyframes, c->max_gate_intervals, c->keyframe_m, c->keyframe_deg,
                        c->min_inlier_frac, c->max_residual_m, c->max_residual_sigma, c->check_step, c->check_band_m,
-                       c->max_front_frac);
+                       c->max_front_frac, c->feature_candidates);
     r->keyframes = calloc(c->max_keyframes, sizeof *r->keyframes);
     r->kf_features = calloc(c->max_keyframes, sizeof *r->kf_features);
     if (!r->keyframes || !r->kf_features) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);
@@ -129,11 +131,14 @@ static uint32_t most_redundant(const recon *r, const bf_se3 *T)
 
 /* Whether frames' colour can give candidates: asked for, and the colour
  * registered to the depth (a pixel's depth lifts its keypoint). */
-static bool uses_features(const recon *r) { return r->cfg.reloc.features > 0 && !r->cfg.has_calibration; }
+static bool uses_features(const recon *r)
+{
+    return r->cfg.reloc.features > 0 && r->cfg.reloc.feature_candidates > 0 && !r->cfg.has_calibration;
+}
 
 /* The lifted keypoints of f's colour, or NULL (no colour, or OpenCV
  * failed: the keyframe is kept without them, with a warning). */
-static features_set *keyframe_features(recon *r, const bf_frame *f)
+static features_set *keyframe_features(const recon *r, const bf_frame *f)
 {
     if (!f || !f->rgb || !f->depth || !uses_features(r)) return NULL;
     features_set *all = NULL, *lifted = NULL;
@@ -297,7 +302,8 @@ static bool passes(const recon *r, const track_result *t)
      * sensor's noise, which at 2.5-3.5 m is 10-20 mm alone. */
     const recon_reloc_config *c = &r->cfg.reloc;
     bool fits = t->residual_m <= c->max_residual_m ||
-                (c->max_residual_sigma > 0 && t->residual_sigma <= c->max_residual_sigma);
+                (c->max_residual_sigma > 0 && r->cfg.track.max_residual_sigma > 0 &&
+                 t->residual_sigma <= c->max_residual_sigma);
     return t->outcome == TRACK_OK && !t->degenerate && t->inlier_frac >= c->min_inlier_frac && fits;
 }
 
@@ -357,17 +363,11 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
     return BF_OK;
 }
 
-/* A pose from colour: PnP's inliers against keyframe kf. */
-typedef struct feature_pose {
-    uint32_t n_inliers;
-    bf_se3 T_wc;
-} feature_pose;
-
-/* RANSAC for a keyframe's pose: a frame that sees what a keyframe saw
- * keeps a third or more of its lifted matches as inliers, and 1000
- * draws find a five-point sample of those with certainty; a 3 px
- * threshold takes Kinect v1's depth-to-colour offset (7-Scenes registers
- * neither) and ORB's one-pixel placement. */
+/* RANSAC for a keyframe's pose: from the distinctive matches a frame that
+ * sees what a keyframe saw keeps about half as inliers (45-84% measured),
+ * where 1000 draws miss every all-inlier five-point sample with a
+ * probability of 1e-14; a 3 px threshold takes Kinect v1's depth-to-colour
+ * offset (7-Scenes registers neither) and ORB's one-pixel placement. */
 #define FEATURE_RANSAC_PX 3.0
 #define FEATURE_RANSAC_ITERATIONS 1000u
 /* Matches further apart than 64 of ORB's 256 bits are dropped (ORB-SLAM
@@ -378,12 +378,39 @@ typedef struct feature_pose {
  * pose asked for: PnP costs about ten times the matching. */
 #define FEATURE_PNP_PER_CANDIDATE 2u
 
+/* Whether p repeats q: within the distance two passing candidates may end
+ * apart and still be one pose. */
+static bool same_pose(const bf_se3 *p, const bf_se3 *q)
+{
+    return dist_m(p, q) <= RELOC_AMBIGUOUS_M && angle_deg(p, q) <= RELOC_AMBIGUOUS_DEG;
+}
+
+void recon__keep_pose(recon__colour_pose *best, uint32_t *n, uint32_t cap, const recon__colour_pose *p)
+{
+    for (uint32_t j = 0; j < *n; j++)
+        if (best[j].n_inliers >= p->n_inliers && same_pose(&best[j].T_wc, &p->T_wc)) return;
+    uint32_t m = 0;
+    for (uint32_t j = 0; j < *n; j++)
+        if (!same_pose(&best[j].T_wc, &p->T_wc)) best[m++] = best[j];
+    uint32_t k = 0;
+    while (k < m && best[k].n_inliers >= p->n_inliers) k++;
+    if (k >= cap) {
+        *n = m;
+        return;
+    }
+    uint32_t keep = m < cap ? m : cap - 1; /* the poses kept after p's place */
+    memmove(&best[k + 1], &best[k], (keep - k) * sizeof *best);
+    best[k] = *p;
+    *n = keep + 1;
+}
+
 /* The poses where the frame's colour keypoints, matched to each
  * keyframe's, put the camera: up to reloc.feature_candidates, most
  * inliers first, none within the ambiguity distance of one before. An
  * OpenCV failure gives none, with a warning: the other candidates remain. */
-static uint32_t feature_poses(recon *r, const bf_frame *f, feature_pose *best, uint32_t cap)
+static uint32_t colour_poses(const recon *r, const bf_frame *f, recon__colour_pose *best, uint32_t cap)
 {
+    if (cap > FEATURE_MAX_CANDIDATES) cap = FEATURE_MAX_CANDIDATES;
     bool any = false;
     for (uint32_t i = 0; i < r->n_keyframes && !any; i++) any = r->kf_features[i] != NULL;
     if (!any || !f->rgb || !uses_features(r) || cap == 0) return 0;
@@ -395,7 +422,8 @@ static uint32_t feature_poses(recon *r, const bf_frame *f, feature_pose *best, u
                                     .max_hamming = FEATURE_MAX_HAMMING, .fast = true};
     /* The keyframes ranked by matches, the best few kept (insertion into a
      * short list, ties to the earlier keyframe). */
-    uint32_t top[2 * 8 * FEATURE_PNP_PER_CANDIDATE], top_m[2 * 8 * FEATURE_PNP_PER_CANDIDATE], n_top = 0;
+    uint32_t top[FEATURE_MAX_CANDIDATES * FEATURE_PNP_PER_CANDIDATE];
+    uint32_t top_m[FEATURE_MAX_CANDIDATES * FEATURE_PNP_PER_CANDIDATE], n_top = 0;
     uint32_t top_cap = cap * FEATURE_PNP_PER_CANDIDATE;
     for (uint32_t i = 0; i < r->n_keyframes && s == BF_OK; i++) {
         uint32_t m;
@@ -417,30 +445,10 @@ static uint32_t feature_poses(recon *r, const bf_frame *f, feature_pose *best, u
         /* PnP gives the keyframe's points in the frame's camera, T_ba: the
          * frame's pose is the keyframe's times its inverse. */
         bf_se3 T_ab = bf_se3_inverse(&pr.T_ba);
-        feature_pose p = {.n_inliers = pr.n_inliers, .T_wc = bf_se3_mul(&r->keyframes[i], &T_ab)};
+        recon__colour_pose p = {.n_inliers = pr.n_inliers, .T_wc = bf_se3_mul(&r->keyframes[i], &T_ab)};
         bf_debug("recon: frame %u: keyframe %u: %u colour matches, %u inliers, %.2f px", f->index, i, pr.n_matches,
                  pr.n_inliers, pr.rms_px);
-        /* Insert by inliers, dropping a pose near one with more. */
-        uint32_t k = 0;
-        while (k < n && best[k].n_inliers >= p.n_inliers) k++;
-        bool is_repeat = false;
-        for (uint32_t j = 0; j < k && !is_repeat; j++)
-            is_repeat = dist_m(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_M &&
-                        angle_deg(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_DEG;
-        if (is_repeat || k >= cap) continue;
-        memmove(&best[k + 1], &best[k], (n - k - (n == cap)) * sizeof *best);
-        best[k] = p;
-        if (n < cap) n++;
-        /* A pose after it that is now a repeat of this one goes. */
-        for (uint32_t j = k + 1; j < n;) {
-            if (dist_m(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_M &&
-                angle_deg(&best[j].T_wc, &p.T_wc) <= RELOC_AMBIGUOUS_DEG) {
-                memmove(&best[j], &best[j + 1], (n - j - 1) * sizeof *best);
-                n--;
-            } else {
-                j++;
-            }
-        }
+        recon__keep_pose(best, &n, cap, &p);
     }
     features_free(frame);
     if (s != BF_OK) {
@@ -466,18 +474,17 @@ bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *sl
     bf_status s = track_set_motion_scale(r->tracker, 1.0);
     /* Colour first: where it finds a pose, that pose is wherever the
      * camera went, which none of the others reaches beyond 20 degrees
-     * or a keyframe's neighbourhood. */
-    feature_pose fp[8];
-    uint32_t cap = r->cfg.reloc.feature_candidates < 8 ? r->cfg.reloc.feature_candidates : 8;
-    uint32_t n_fp = feature_poses(r, f, fp, cap < budget ? cap : budget);
-    for (uint32_t i = 0; i < n_fp && budget > 0 && s == BF_OK && !st.is_no_depth; i++) {
+     * or a keyframe's neighbourhood. Its candidates come on top of
+     * max_candidates, so the depth-only search below goes on as it
+     * would without them when colour finds wrong poses or none. */
+    recon__colour_pose fp[FEATURE_MAX_CANDIDATES];
+    uint32_t n_fp = s == BF_OK ? colour_poses(r, f, fp, r->cfg.reloc.feature_candidates) : 0;
+    for (uint32_t i = 0; i < n_fp && s == BF_OK && !st.is_no_depth; i++)
         s = try_candidate(r, f, slot, &fp[i].T_wc, RECON_RELOC_FEATURES, &st, out);
-        budget--;
-    }
     /* The primaries every time (the likeliest places), then the round
      * robin where the last frame's search stopped: at most max_candidates
-     * ray-casts and ICPs per frame, and every entry is reached within
-     * n_round / (max_candidates - 2) frames. */
+     * ray-casts and ICPs per frame besides colour's, and every entry is
+     * reached within n_round / (max_candidates - 2) frames. */
     for (uint32_t i = 0; i < n_primary(r) && budget > 0 && s == BF_OK && !st.is_no_depth; i++) {
         recon_reloc_kind kind = i == 0 ? RECON_RELOC_LAST : RECON_RELOC_VELOCITY;
         if (kind == skip) continue;

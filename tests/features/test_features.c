@@ -54,7 +54,7 @@ BF_TEST(features_pnp_from_lifted_keypoints_finds_a_pose_far_from_the_keyframe)
     CHECK_OK(features_detect_rgb(v.rgb_b, BOX_W, BOX_H, 1000, false, &b));
     CHECK(features_count(a) > 500);
     CHECK_OK(features_lift(a, v.da, &box_K, 0.3f, 4.5f, false, &lifted));
-    CHECK_EQ_INT(features_count(lifted), features_count(a));
+    CHECK_EQ_INT(features_count(lifted), features_count(a)); /* every keypoint stays, lifted or not */
     /* No image kept: the keypoints, their descriptors and points only. */
     CHECK(features_bytes(lifted) < 100u * features_count(lifted) + 4096u);
     features_pnp_result r;
@@ -83,8 +83,8 @@ BF_TEST(features_pnp_from_lifted_keypoints_finds_a_pose_far_from_the_keyframe)
     CHECK_OK(features_pnp(lifted, b, &box_K, &pnp_cfg, &r2));
     CHECK(memcmp(&r.T_ba, &r2.T_ba, sizeof r.T_ba) == 0);
     CHECK_EQ_INT(r2.n_inliers, r.n_inliers);
-    /* The fast mode (distinctive matches, AP3P samples), recon's: fewer
-     * matches, the same bound. */
+    /* The fast mode (distinctive matches), recon's: fewer matches, the
+     * same bound. */
     features_pnp_config fast = pnp_cfg;
     fast.fast = true;
     fast.max_hamming = 64;

@@ -88,3 +88,49 @@ BF_TEST(a_pose_near_a_keyframe_adds_nothing)
     CHECK(holds_x(r, 0.0) && holds_x(r, 1.0));
     store_close(r);
 }
+
+static recon__colour_pose colour_pose(uint32_t inliers, double x)
+{
+    return (recon__colour_pose){.n_inliers = inliers, .T_wc = at_x(x)};
+}
+
+/* The colour candidates' list: most inliers first, one entry per pose. */
+BF_TEST(colour_poses_keep_the_best_distinct_ones)
+{
+    recon__colour_pose best[3];
+    uint32_t n = 0;
+    recon__colour_pose a = colour_pose(50, 0.0), b = colour_pose(30, 1.0);
+    recon__keep_pose(best, &n, 2, &a);
+    recon__keep_pose(best, &n, 2, &b);
+    CHECK_EQ_INT(n, 2);
+    /* A repeat of a (2 cm away) with fewer inliers: nothing changes. */
+    recon__colour_pose a_worse = colour_pose(40, 0.02);
+    recon__keep_pose(best, &n, 2, &a_worse);
+    CHECK_EQ_INT(n, 2);
+    CHECK_EQ_INT(best[0].n_inliers, 50);
+    CHECK_EQ_INT(best[1].n_inliers, 30);
+    /* A repeat of a with more inliers takes its place, and b, a distinct
+     * pose, stays although the list was full. */
+    recon__colour_pose a_better = colour_pose(60, 0.02);
+    recon__keep_pose(best, &n, 2, &a_better);
+    CHECK_EQ_INT(n, 2);
+    CHECK_EQ_INT(best[0].n_inliers, 60);
+    CHECK_NEAR(best[0].T_wc.t.x, 0.02, 1e-12);
+    CHECK_EQ_INT(best[1].n_inliers, 30);
+    /* A distinct pose between them pushes the last out of a full list; one
+     * with fewer than the last does not get in. */
+    recon__colour_pose c = colour_pose(45, 2.0), d = colour_pose(10, 3.0);
+    recon__keep_pose(best, &n, 2, &c);
+    recon__keep_pose(best, &n, 2, &d);
+    CHECK_EQ_INT(n, 2);
+    CHECK_EQ_INT(best[0].n_inliers, 60);
+    CHECK_EQ_INT(best[1].n_inliers, 45);
+    /* Turned 10 degrees at the same place is another pose (beyond 5). */
+    bf_quat yaw10 = bf_quat_from_axis_angle(bf_v3(0, 1, 0), 10.0 * M_PI / 180);
+    recon__colour_pose turned = {.n_inliers = 70, .T_wc = bf_se3_from_qt(yaw10, bf_v3(0.02, 0, 0))};
+    recon__keep_pose(best, &n, 3, &turned);
+    CHECK_EQ_INT(n, 3);
+    CHECK_EQ_INT(best[0].n_inliers, 70);
+    CHECK_EQ_INT(best[1].n_inliers, 60);
+    CHECK_EQ_INT(best[2].n_inliers, 45);
+}
