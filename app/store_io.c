@@ -21,6 +21,11 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
          * go on from (at most some chunk files of that write): the scan
          * starts anew into it, as if it had never been saved. */
         if (s == BF_OK && st->meta.has_pose) st->is_resumed = true;
+        /* The keyframes only help to find the camera: without them (an
+         * older store, one killed before its end, a bad file) the scan
+         * resumes from the trajectory's poses as before. */
+        if (s == BF_OK && st->is_resumed && store_keyframes_read(dir, &st->keyframes) != BF_OK)
+            bf_warn("store: %s; the scan resumes with the trajectory's poses as keyframes", bf_last_error());
         if (s == BF_OK && !st->is_resumed) {
             bf_warn("store: %s keeps no last pose (its first write never finished): the scan starts anew into it",
                     dir);
@@ -40,6 +45,7 @@ void app_store_resume_config(app_store *st, recon_resume_state *rs, recon_config
     rs->T_last = st->meta.last_pose;
     rs->t_last_s = st->meta.last_t_s;
     rs->traj = &st->traj;
+    rs->keyframes = &st->keyframes;
     /* The stored map's geometry decides: a chunk edge or a finest level
      * other than the one it was built with cannot hold its bricks. */
     if (loop->fusion.chunk_m != st->meta.chunk_m || loop->fusion.max_level != st->meta.max_level)
@@ -92,7 +98,15 @@ bf_status app_store_finish(app_store *st, recon_run *run)
     bf_status s = run->map ? flush(st, run, t_last) : BF_OK;
     bf_status f = store_writer_finish(st->writer);
     st->stats = store_writer_stats(st->writer);
-    return s == BF_OK ? f : s;
+    if (s == BF_OK) s = f;
+    /* The keyframes once the map is safe: a resumed scan finds the camera
+     * from them wherever they saw. */
+    store_keyframes k = {0};
+    if (s == BF_OK && run->loop) s = recon_keyframes(run->loop, &k);
+    if (s == BF_OK && run->loop) s = store_keyframes_write(st->dir, &k);
+    if (s == BF_OK) st->keyframes_written = k.n;
+    store_keyframes_free(&k);
+    return s;
 }
 
 void app_store_json(cJSON *parent, const app_store *st)
@@ -116,12 +130,14 @@ void app_store_json(cJSON *parent, const app_store *st)
     cJSON_AddNumberToObject(o, "write_ms_max", st->stats.ms_max);
     cJSON_AddNumberToObject(o, "write_ms_mean", st->stats.writes ? st->stats.ms_total / st->stats.writes : NAN);
     cJSON_AddNumberToObject(o, "loop_flush_ms_max", st->ms_flush_max);
+    cJSON_AddNumberToObject(o, "keyframes_written", st->keyframes_written);
     if (st->is_resumed) {
         cJSON *r = app_json_object(o, "reopened");
         cJSON_AddNumberToObject(r, "frames", st->meta.frames);
         cJSON_AddNumberToObject(r, "chunks", st->report.n_chunks);
         cJSON_AddNumberToObject(r, "bricks", st->report.n_bricks);
         cJSON_AddNumberToObject(r, "bad_chunk_files", st->report.n_bad);
+        cJSON_AddNumberToObject(r, "keyframes", st->keyframes.n);
     }
 }
 
@@ -130,5 +146,6 @@ void app_store_close(app_store *st)
     store_writer_close(st->writer);
     hostmap_free(&st->map);
     bf_traj_free(&st->traj);
+    store_keyframes_free(&st->keyframes);
     st->writer = NULL;
 }

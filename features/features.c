@@ -1,4 +1,5 @@
 /* features: the C side of features_cv.cpp (features.h). */
+#include <math.h>
 #include <stdlib.h>
 
 #include "features.h"
@@ -52,6 +53,36 @@ bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_i
     int rc = features__lift(f, depth, (int)K->width, (int)K->height, K->depth_scale, Kd, min_m, max_m, keep_image,
                             out, msg, sizeof msg);
     return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_lift", msg);
+}
+
+bf_status features_export_lifted(const features_set *f, uint32_t *n, uint8_t **desc, float **xyz)
+{
+    if (!f || !n || !desc || !xyz) return bf_fail(BF_INVALID_ARG, "features_export_lifted: missing input or output");
+    *n = 0, *desc = NULL, *xyz = NULL;
+    uint32_t k = (uint32_t)features__lifted_count(f);
+    if (!k) return BF_OK;
+    uint8_t *d = bf_malloc((size_t)k * 32);
+    float *p = bf_malloc((size_t)k * 3 * sizeof *p);
+    if (!d || !p) {
+        free(d), free(p);
+        return bf_fail(BF_NO_MEMORY, "features_export_lifted: %u keypoints", k);
+    }
+    features__lifted_copy(f, d, p);
+    *n = k, *desc = d, *xyz = p;
+    return BF_OK;
+}
+
+bf_status features_import_lifted(uint32_t n, const uint8_t *desc, const float *xyz, features_set **out)
+{
+    if (!out) return bf_fail(BF_INVALID_ARG, "features_import_lifted: no output");
+    *out = NULL;
+    if (n > (uint32_t)INT32_MAX || (n && (!desc || !xyz)))
+        return bf_fail(BF_INVALID_ARG, "features_import_lifted: %u keypoints without arrays", n);
+    for (size_t i = 0; i < 3 * (size_t)n; i++)
+        if (!isfinite(xyz[i])) return bf_fail(BF_INVALID_ARG, "features_import_lifted: point %zu not finite", i / 3);
+    char msg[256];
+    int rc = features__import(n, desc, xyz, out, msg, sizeof msg);
+    return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_import_lifted", msg);
 }
 
 bf_status features_match_count(const features_set *a, const features_set *b, uint32_t max_hamming, uint32_t *n)

@@ -40,6 +40,16 @@ size_t features_bytes(const features_set *f);
 bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_intrinsics *K, float min_m,
                         float max_m, bool keep_image, features_set **out);
 
+/* The keypoints of a lifted set f that have a point, as plain arrays: *n
+ * ORB descriptors of 32 bytes (*desc) and points x y z in the camera
+ * (*xyz, floats), both malloc'd (NULL when none): what a store keeps of
+ * a keyframe. */
+bf_status features_export_lifted(const features_set *f, uint32_t *n, uint8_t **desc, float **xyz);
+/* A lifted set made from such arrays (keyframes read back): a first set
+ * for features_pnp and features_match_count; it has no keypoint
+ * positions and no image, so Lucas-Kanade never runs from it. */
+bf_status features_import_lifted(uint32_t n, const uint8_t *desc, const float *xyz, features_set **out);
+
 typedef struct features_pnp_config {
     double ransac_px;           /* RANSAC's reprojection threshold [px] */
     uint32_t ransac_iterations; /* RANSAC's iterations (OpenCV's fixed seed: the same pair gives the same pose) */

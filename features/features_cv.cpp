@@ -120,6 +120,47 @@ extern "C" int features__lift(const features_set *f, const uint16_t *depth, int 
     });
 }
 
+extern "C" int features__lifted_count(const features_set *f)
+{
+    int n = 0;
+    for (const cv::Point3d &p : f->pts)
+        if (!std::isnan(p.z)) n++;
+    return n;
+}
+
+extern "C" void features__lifted_copy(const features_set *f, uint8_t *desc, float *xyz)
+{
+    size_t k = 0;
+    for (size_t i = 0; i < f->pts.size(); i++) {
+        const cv::Point3d &p = f->pts[i];
+        if (std::isnan(p.z)) continue;
+        std::memcpy(desc + 32 * k, f->desc.ptr<uint8_t>((int)i), 32);
+        xyz[3 * k] = (float)p.x, xyz[3 * k + 1] = (float)p.y, xyz[3 * k + 2] = (float)p.z;
+        k++;
+    }
+}
+
+extern "C" int features__import(uint32_t n, const uint8_t *desc, const float *xyz, features_set **out, char *msg,
+                                size_t cap)
+{
+    *out = nullptr;
+    return guarded(msg, cap, [&]() -> int {
+        features_set *f = new features_set;
+        try {
+            f->keys.resize(n);
+            f->desc = cv::Mat((int)n, 32, CV_8U);
+            if (n) std::memcpy(f->desc.data, desc, (size_t)n * 32);
+            f->pts.reserve(n);
+            for (uint32_t i = 0; i < n; i++) f->pts.emplace_back(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+        } catch (...) {
+            delete f;
+            throw;
+        }
+        *out = f;
+        return FEATURES__OK;
+    });
+}
+
 namespace {
 
 // Bits that differ between two 32-byte ORB descriptors.

@@ -31,6 +31,11 @@ size_t features__bytes(const features_set *f);
 int features__lift(const features_set *f, const uint16_t *depth, int w, int h, double scale, const double K[4],
                    double min_m, double max_m, int keep_image, features_set **out, char *msg, size_t cap);
 
+/* Lifted keypoints with a point: count, then copies into desc (n x 32) and xyz (n x 3). */
+int features__lifted_count(const features_set *f);
+void features__lifted_copy(const features_set *f, uint8_t *desc, float *xyz);
+int features__import(uint32_t n, const uint8_t *desc, const float *xyz, features_set **out, char *msg, size_t cap);
+
 typedef struct features__pnp_out {
     int ok;
     uint32_t n_matches, n_placed, n_inliers;

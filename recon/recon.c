@@ -458,7 +458,14 @@ static bf_status tracker_colour_camera(recon *r)
     return track_set_colour_camera(r->tracker, &Kc, r->cfg.calibration.colour.dist, &T);
 }
 
-bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj)
+bf_status recon_keyframes(const recon *r, store_keyframes *out)
+{
+    if (!r || !out) return bf_fail(BF_INVALID_ARG, "recon_keyframes: no loop or output");
+    return recon__keyframes_export(r, out);
+}
+
+bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj,
+                       const store_keyframes *kf)
 {
     if (!r || !map || !T_last || !bf_se3_is_finite(T_last))
         return bf_fail(BF_INVALID_ARG, "recon_resume: no map or no pose");
@@ -487,6 +494,10 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
     r->T_first = r->T_last = *T_last;
     r->has_first = true;
     r->good_index = last_index;
+    /* The stored keyframes first: with their colour's keypoints they find
+     * a camera resumed anywhere they saw; the trajectory's poses then fill
+     * in where none is near. */
+    recon__keyframes_import(r, kf);
     for (size_t i = 0; traj && r->keyframes && i < traj->n; i++) recon__add_keyframe(r, &traj->T_wc[i], NULL);
     recon_frame_result tmp;
     memset(&tmp, 0, sizeof tmp);

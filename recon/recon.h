@@ -29,6 +29,7 @@
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
 #include "render/render.h"
+#include "store/store.h"
 #include "stream/stream.h"
 #include "tracking/tracking.h"
 
@@ -191,13 +192,19 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0);
 
 /* Continues a stored scan (a reopened scene store, store/): loads its map
  * into the loop's empty map (fusion_load; the map's origin becomes the
- * stored one), makes T_last the last good pose, the poses of traj (may be
- * NULL) keyframes, and the ray-cast of the map at T_last the tracking
+ * stored one), makes T_last the last good pose, the stored keyframes kf
+ * (may be NULL: none kept) and then the poses of traj (may be NULL)
+ * keyframes, and the ray-cast of the map at T_last the tracking
  * reference, so that the next frame is tracked against the stored map
  * rather than fused as a first frame. last_index is the stored scan's last
  * frame index (the motion gate counts frame intervals from it). Before any
  * frame: BF_INVALID_ARG after one; fusion_load's errors. */
-bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj);
+bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj,
+                       const store_keyframes *kf);
+/* The relocalisation keyframes held now, each with its colour's lifted
+ * keypoints (none where colour candidates are off), for the scene store's
+ * keyframes.bin; free *out with store_keyframes_free. */
+bf_status recon_keyframes(const recon *r, store_keyframes *out);
 /* The whole map as a host copy (for export and the scene store): the
  * pools' bricks and those streamed out of them. */
 bf_status recon_snapshot(recon *r, hostmap *out);
@@ -254,6 +261,7 @@ typedef struct recon_resume_state {
     bf_se3 T_last;             /* its last good pose */
     double t_last_s;           /* the depth time of its last frame: the source's frames up to it are skipped */
     const bf_traj *traj;       /* its poses so far: the run's estimates start with them; may be NULL */
+    const store_keyframes *keyframes; /* its relocalisation keyframes (keyframes.bin); may be NULL */
 } recon_resume_state;
 
 typedef struct recon_run_config {

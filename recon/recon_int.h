@@ -61,6 +61,12 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
  * (whose two nearest others are nearest together). f, the frame seen
  * there (or NULL), gives the keyframe its colour's keypoints. */
 void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f);
+/* The keyframes held, with their lifted keypoints, as a store keeps them
+ * (*out freed by store_keyframes_free), and back: stored keyframes join as
+ * keyframes do (one near a held one is left out), their keypoints only
+ * where colour candidates are on. */
+bf_status recon__keyframes_export(const recon *r, store_keyframes *out);
+void recon__keyframes_import(recon *r, const store_keyframes *k);
 /* A candidate pose from colour (PnP against a keyframe) and its inliers. */
 typedef struct recon__colour_pose {
     uint32_t n_inliers;

@@ -153,18 +153,63 @@ static features_set *keyframe_features(const recon *r, const bf_frame *f)
     return lifted;
 }
 
-void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f)
+/* T becomes a keyframe with feat (owned; NULL: none) unless one is near. */
+static void add_keyframe_with(recon *r, const bf_se3 *T, features_set *feat)
 {
     for (uint32_t i = 0; i < r->n_keyframes; i++)
-        if (is_near(r, &r->keyframes[i], T)) return;
+        if (is_near(r, &r->keyframes[i], T)) {
+            features_free(feat);
+            return;
+        }
     /* Bounded: once all are held the most redundant one is replaced, so the
      * store keeps its spread over the scan (a search over 64 poses, only
      * when a new one comes). */
     uint32_t i = r->n_keyframes < r->cfg.reloc.max_keyframes ? r->n_keyframes++ : most_redundant(r, T);
     r->keyframes[i] = *T;
     features_free(r->kf_features[i]);
-    r->kf_features[i] = keyframe_features(r, f);
+    r->kf_features[i] = feat;
     r->counts.keyframes = r->n_keyframes;
+}
+
+void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f)
+{
+    for (uint32_t i = 0; i < r->n_keyframes; i++)
+        if (is_near(r, &r->keyframes[i], T)) return; /* before an ORB pass it would not need */
+    add_keyframe_with(r, T, keyframe_features(r, f));
+}
+
+bf_status recon__keyframes_export(const recon *r, store_keyframes *out)
+{
+    memset(out, 0, sizeof *out);
+    if (!r->keyframes || !r->n_keyframes) return BF_OK;
+    store_keyframes k = {.kf = bf_calloc(r->n_keyframes, sizeof *k.kf)};
+    if (!k.kf) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", r->n_keyframes);
+    bf_status s = BF_OK;
+    for (uint32_t i = 0; i < r->n_keyframes && s == BF_OK; i++) {
+        k.n = i + 1;
+        k.kf[i].T_wc = r->keyframes[i];
+        if (r->kf_features[i])
+            s = features_export_lifted(r->kf_features[i], &k.kf[i].n, &k.kf[i].desc, &k.kf[i].xyz);
+    }
+    if (s != BF_OK) {
+        store_keyframes_free(&k);
+        return s;
+    }
+    *out = k;
+    return BF_OK;
+}
+
+void recon__keyframes_import(recon *r, const store_keyframes *k)
+{
+    for (uint32_t i = 0; r->keyframes && k && i < k->n; i++) {
+        const store_keyframe *f = &k->kf[i];
+        features_set *feat = NULL;
+        if (f->n && uses_features(r) && features_import_lifted(f->n, f->desc, f->xyz, &feat) != BF_OK) {
+            bf_warn("recon: stored keyframe %u without its colour keypoints: %s", i, bf_last_error());
+            feat = NULL;
+        }
+        add_keyframe_with(r, &f->T_wc, feat);
+    }
 }
 
 /* The motion of D spread evenly over n intervals: D^(1/n) (the twist divided). */

@@ -219,7 +219,7 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
         if (cfg->poses == RECON_POSES_KNOWN)
             return bf_fail(BF_INVALID_ARG, "%s: resuming a scan needs the loop (not fusion at known poses)", cfg->name);
         uint32_t last = rs->traj && rs->traj->n ? (uint32_t)rs->traj->n - 1 : 0;
-        s = recon_resume(run->loop, rs->map, &rs->T_last, last, rs->traj);
+        s = recon_resume(run->loop, rs->map, &rs->T_last, last, rs->traj, rs->keyframes);
         run->is_resumed = s == BF_OK;
         for (size_t i = 0; s == BF_OK && rs->traj && i < rs->traj->n; i++)
             s = bf_traj_push(&run->est, rs->traj->t_s[i], &rs->traj->T_wc[i]);

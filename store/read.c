@@ -52,8 +52,8 @@ bool store_exists(const char *dir)
     return is_dir(p);
 }
 
-/* Reads a whole file (at most max bytes). */
-static bf_status read_file(const char *path, size_t max, uint8_t **out, size_t *n)
+/* store_int.h. */
+bf_status store__read_file(const char *path, size_t max, uint8_t **out, size_t *n)
 {
     FILE *f = fopen(path, "rb");
     if (!f) return bf_fail(BF_IO, "%s: cannot open: %s", path, strerror(errno));
@@ -182,7 +182,7 @@ bf_status store__index_read(const char *dir, store_meta *meta, store_entry **e, 
     snprintf(path, sizeof path, "%s/%s", dir, STORE_INDEX_NAME);
     uint8_t *text = NULL;
     size_t len = 0;
-    bf_status s = read_file(path, 1u << 30, &text, &len);
+    bf_status s = store__read_file(path, 1u << 30, &text, &len);
     if (s != BF_OK) return s;
     cJSON *root = cJSON_ParseWithLength((const char *)text, len);
     free(text);
@@ -200,7 +200,7 @@ static bf_status read_traj(const char *dir, bf_traj *out)
     snprintf(path, sizeof path, "%s/%s", dir, STORE_TRAJ_NAME);
     uint8_t *p = NULL;
     size_t len = 0;
-    bf_status s = read_file(path, (size_t)STORE_TRAJ_HEADER + (size_t)STORE_MAX_POSES * 104 + 8, &p, &len);
+    bf_status s = store__read_file(path, (size_t)STORE_TRAJ_HEADER + (size_t)STORE_MAX_POSES * 104 + 8, &p, &len);
     if (s != BF_OK) return s;
     uint32_t v = 0, n = 0;
     if (len >= STORE_TRAJ_HEADER) memcpy(&v, p + 8, 4), memcpy(&n, p + 12, 4);
@@ -301,7 +301,7 @@ static bf_status read_chunk(const char *path, const int32_t key[3], geometry *ge
 {
     uint8_t *p = NULL, *rec = NULL;
     size_t len = 0;
-    bf_status s = read_file(path,
+    bf_status s = store__read_file(path,
                             (size_t)STORE_CHUNK_HEADER +
                                 ZSTD_compressBound((size_t)STORE_MAX_CHUNK_BRICKS * STORE_COLOUR_RECORD_BYTES),
                             &p, &len);

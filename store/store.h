@@ -3,8 +3,8 @@
  *
  * A store is a folder: one zstd-compressed file per world chunk
  * (chunks/c_X_Y_Z.bfc, a versioned header with xxHash checksums of itself
- * and of its payload), the scan's trajectory (trajectory.bin, checksummed)
- * and an index (store.json: the map's geometry, the last pose, the chunks
+ * and of its payload), the scan's trajectory (trajectory.bin, checksummed),
+ * its relocalisation keyframes (keyframes.bin, checksummed) and an index (store.json: the map's geometry, the last pose, the chunks
  * with their content digests). Every file is written atomically: a temp
  * file, fsync, rename, then an fsync of the folder, so a file on disk is
  * always a whole one, from this write or from an earlier one.
@@ -54,6 +54,33 @@ typedef struct store_report {
     uint32_t flush;         /* the index's write count (0 without one) */
     char first_bad[512];    /* the first skipped file's message, "" if none */
 } store_report;
+
+/* The relocalisation keyframes of a scan (keyframes.bin, recon/reloc.c):
+ * each keyframe's pose and the ORB keypoints of its colour that its depth
+ * lifted, as plain arrays, so a resumed scan can find a camera that starts
+ * anywhere a keyframe saw. */
+typedef struct store_keyframe {
+    bf_se3 T_wc;   /* camera to world */
+    uint32_t n;    /* keypoints */
+    uint8_t *desc; /* n ORB descriptors of 32 bytes */
+    float *xyz;    /* n points in the keyframe's camera [m], x y z each */
+} store_keyframe;
+
+typedef struct store_keyframes {
+    uint32_t n;
+    store_keyframe *kf;
+} store_keyframes;
+
+void store_keyframes_free(store_keyframes *k); /* frees the arrays; zeroes *k */
+/* Writes dir/keyframes.bin atomically (a temp file, fsync, rename, the
+ * folder's fsync); an empty set writes a file of none. */
+bf_status store_keyframes_write(const char *dir, const store_keyframes *k);
+/* Reads dir/keyframes.bin into *out: a store without the file (written
+ * before it existed, or killed before its last write) has none, BF_OK.
+ * BF_FORMAT names the file and the reason when it is corrupt or
+ * truncated, BF_UNSUPPORTED a newer version; *out is written only on
+ * success. */
+bf_status store_keyframes_read(const char *dir, store_keyframes *out);
 
 /* True when dir holds a store (its index or its chunks folder). */
 bool store_exists(const char *dir);

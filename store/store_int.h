@@ -43,6 +43,17 @@ _Static_assert(sizeof(store_chunk_header) == STORE_CHUNK_HEADER, "chunk header l
 #define STORE_TRAJ_HEADER 16u
 #define STORE_TRAJ_POSE_DOUBLES 13u
 
+/* Keyframes file: magic, version, count, then per keyframe its pose (12
+ * doubles: R row-major, t), its keypoint count n and a zero word, n ORB
+ * descriptors of 32 bytes and n points of 3 floats, then the XXH3-64 of
+ * everything before it. */
+#define STORE_KEYFRAMES_NAME "keyframes.bin"
+#define STORE_KEYFRAMES_MAGIC "BFKEYF1" /* 8 bytes with its NUL */
+#define STORE_KEYFRAMES_HEADER 16u
+#define STORE_KEYFRAME_HEADER 104u /* 12 doubles, n, zero */
+#define STORE_MAX_KEYFRAMES 4096u
+#define STORE_MAX_KEYPOINTS 100000u
+
 /* One chunk's bricks inside a sorted hostmap: [first, first + n). */
 typedef struct store_group {
     int32_t key[3];
@@ -71,6 +82,10 @@ uint64_t store__hash(const void *p, size_t n);
 bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb);
 /* fsync of a folder. */
 bf_status store__sync_dir(const char *dir);
+/* The whole regular file at path into *out (malloc'd, NUL-terminated, *n
+ * bytes without the NUL): BF_IO when it cannot be opened or read,
+ * BF_FORMAT when it is larger than max. */
+bf_status store__read_file(const char *path, size_t max, uint8_t **out, size_t *n);
 
 /* A chunk the index lists. */
 typedef struct store_entry {

@@ -101,6 +101,31 @@ BF_TEST(features_pnp_from_lifted_keypoints_finds_a_pose_far_from_the_keyframe)
             r2.rms_px, 1e3 * e_m, e_deg);
     CHECK_LE(e_m, 0.02);
     CHECK_LE(e_deg, 0.3);
+    /* Exported as a store keeps a keyframe (the lifted keypoints, float
+     * points) and imported back: the same matches, and the pose within a
+     * millimetre (rounding a point to float moves it under a micrometre). */
+    uint32_t n_exp;
+    uint8_t *desc;
+    float *xyz;
+    CHECK_OK(features_export_lifted(lifted, &n_exp, &desc, &xyz));
+    CHECK(n_exp > 500 && n_exp <= features_count(lifted));
+    features_set *back;
+    CHECK_OK(features_import_lifted(n_exp, desc, xyz, &back));
+    features_pnp_result r3;
+    CHECK_OK(features_pnp(back, b, &box_K, &fast, &r3));
+    CHECK(r3.ok);
+    CHECK_EQ_INT(r3.n_matches, r2.n_matches);
+    double d_m, d_deg;
+    bf_se3 Ti = bf_se3_inverse(&r2.T_ba), D = bf_se3_mul(&Ti, &r3.T_ba);
+    d_m = bf_v3_norm(D.t), d_deg = bf_se3_angle(&D) * 180 / M_PI;
+    CHECK_LE(d_m, 1e-3);
+    CHECK_LE(d_deg, 0.02);
+    xyz[0] = NAN;
+    features_set *bad = (features_set *)1;
+    CHECK_STATUS(features_import_lifted(n_exp, desc, xyz, &bad), BF_INVALID_ARG);
+    CHECK(bad == NULL);
+    free(desc), free(xyz);
+    features_free(back);
     features_free(a), features_free(b), features_free(lifted);
     views_free(&v);
 }

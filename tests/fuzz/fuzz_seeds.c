@@ -379,6 +379,21 @@ static void seeds_store(void)
     seed("store", "store_fix", b.p, b.n, true);
     /* The same without the checksum repair; and chunks alone (no index). */
     seed("store", "store", b.p + 3, b.n - 3, false);
+    /* With keyframes.bin (part 6; part 5 repeats a chunk file): two
+     * keyframes, one with three keypoints, one without. */
+    uint8_t desc[3 * 32];
+    float xyz[9] = {0.1f, 0.2f, 1.5f, -0.3f, 0.0f, 2.0f, 0.0f, -0.1f, 3.2f};
+    for (int i = 0; i < 96; i++) desc[i] = (uint8_t)(37 * i);
+    store_keyframe kfs[2] = {{.T_wc = bf_se3_identity(), .n = 3, .desc = desc, .xyz = xyz}, {.T_wc = T}};
+    store_keyframes kf = {.n = 2, .kf = kfs};
+    check(store_keyframes_write(dir, &kf));
+    buf_sep(&b);
+    snprintf(p, sizeof p, "%s/chunks/c_-1_2_0.bfc", dir);
+    buf_file(&b, p);
+    buf_sep(&b);
+    snprintf(p, sizeof p, "%s/keyframes.bin", dir);
+    buf_file(&b, p);
+    seed("store", "store_keyframes_fix", b.p, b.n, false);
     free(b.p);
     b = (buf){0};
     buf_str(&b, "fix");

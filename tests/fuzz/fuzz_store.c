@@ -1,13 +1,14 @@
 /* Fuzz target: the scene store (store.json, trajectory.bin, chunk files)
- * through store_read, and a chunk file through store_get_chunk (the
- * streaming tier's reader).
+ * through store_read, a chunk file through store_get_chunk (the streaming
+ * tier's reader), and keyframes.bin through store_keyframes_read.
  *
  * The input is FUZZ_SEP-separated parts: 0 options ("fix": recompute the
- * chunk files' header and payload hashes and the trajectory's hash, so that
- * mutations reach the code behind them), 1 store.json, 2 trajectory.bin,
- * 3-5 chunk files. A chunk file is named for the key its header holds
- * (chunks/c_X_Y_Z.bfc), or c_N_0_0.bfc when it is too short to hold one; a
- * part the input does not have is a file that is absent. */
+ * chunk files' header and payload hashes and the trajectory's and the
+ * keyframes' hashes, so that mutations reach the code behind them), 1
+ * store.json, 2 trajectory.bin, 3-5 chunk files, 6 keyframes.bin. A chunk
+ * file is named for the key its header holds (chunks/c_X_Y_Z.bfc), or
+ * c_N_0_0.bfc when it is too short to hold one; a part the input does not
+ * have is a file that is absent. */
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,7 +17,8 @@
 #include "fuzz.h"
 #include "store/store_int.h"
 
-#define STORE_PARTS 6
+#define STORE_PARTS 7
+#define STORE_KEYFRAMES_PART 6
 
 static const char *chunk_name(const fuzz_part *p, int k, char *out, size_t cap)
 {
@@ -41,6 +43,7 @@ static void fix_chunk(uint8_t *b, size_t n)
     memcpy(b + offsetof(store_chunk_header, header_hash), &h, 8);
 }
 
+/* trajectory.bin and keyframes.bin: the XXH3-64 of all before the last 8 bytes. */
 static void fix_traj(uint8_t *b, size_t n)
 {
     if (n < 8) return;
@@ -69,7 +72,10 @@ bf_status fuzz_store(const uint8_t *data, size_t size)
     if (n > 1 && !fuzz_write(dir, STORE_INDEX_NAME, parts[1].p, parts[1].n)) return BF_IO;
     if (n > 2 && !write_part(dir, STORE_TRAJ_NAME, &parts[2], fix, fix_traj)) return BF_IO;
     int32_t first_key[3] = {0, 0, 0};
-    for (int k = 3; k < n; k++) {
+    if (n > STORE_KEYFRAMES_PART &&
+        !write_part(dir, STORE_KEYFRAMES_NAME, &parts[STORE_KEYFRAMES_PART], fix, fix_traj))
+        return BF_IO;
+    for (int k = 3; k < n && k < STORE_KEYFRAMES_PART; k++) {
         char name[160];
         if (!write_part(dir, chunk_name(&parts[k], k - 3, name, sizeof name), &parts[k], fix, fix_chunk))
             return BF_IO;
@@ -95,6 +101,8 @@ bf_status fuzz_store(const uint8_t *data, size_t size)
     uint64_t bytes = 0;
     bf_status s2 = store_get_chunk(dir, first_key, &m, &chunk, &bytes);
     if (s2 == BF_OK) hostmap_free(&chunk);
+    store_keyframes kf;
+    if (store_keyframes_read(dir, &kf) == BF_OK) store_keyframes_free(&kf);
     return s;
 }
 

@@ -2,7 +2,9 @@
  * store that always reopens after a corrupt file, a lost index or a write
  * that failed at any point (injected ENOSPC). */
 #include <dirent.h>
+#include <math.h>
 #include <stdio.h>
+#include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -424,4 +426,95 @@ BF_TEST(store_survives_a_failed_write_at_every_point)
     hostmap_free(&b);
     bf_traj_free(&ta);
     bf_traj_free(&tb);
+}
+
+/* keyframes.bin: k keyframes of random poses and keypoints (keyframe 1 with
+ * none: a keyframe without colour). */
+static bf_status make_keyframes(store_keyframes *k, uint32_t n)
+{
+    memset(k, 0, sizeof *k);
+    k->kf = calloc(n, sizeof *k->kf);
+    if (!k->kf) return BF_NO_MEMORY;
+    k->n = n;
+    for (uint32_t i = 0; i < n; i++) {
+        store_keyframe *f = &k->kf[i];
+        f->T_wc = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), 0.1 * i), bf_v3(0.1 * i, -0.2, 1.5));
+        f->n = i == 1 ? 0 : 50 + 7 * i;
+        if (!f->n) continue;
+        f->desc = malloc((size_t)f->n * 32);
+        f->xyz = malloc((size_t)f->n * 12);
+        if (!f->desc || !f->xyz) return BF_NO_MEMORY;
+        for (uint32_t j = 0; j < f->n * 32; j++) f->desc[j] = (uint8_t)rnd();
+        for (uint32_t j = 0; j < f->n * 3; j++) f->xyz[j] = (float)(rnd() % 4000) * 1e-3f;
+    }
+    return BF_OK;
+}
+
+static bool keyframes_equal(const store_keyframes *a, const store_keyframes *b)
+{
+    if (a->n != b->n) return false;
+    for (uint32_t i = 0; i < a->n; i++) {
+        const store_keyframe *x = &a->kf[i], *y = &b->kf[i];
+        if (memcmp(&x->T_wc, &y->T_wc, sizeof x->T_wc) || x->n != y->n) return false;
+        if (x->n && (memcmp(x->desc, y->desc, (size_t)x->n * 32) || memcmp(x->xyz, y->xyz, (size_t)x->n * 12)))
+            return false;
+    }
+    return true;
+}
+
+BF_TEST(store_keeps_keyframes_bit_for_bit_and_names_a_bad_file)
+{
+    const char *dir = fresh_dir("keyframes");
+    CHECK(mkdir(dir, 0755) == 0);
+    store_keyframes k, back = {0};
+    CHECK_OK(make_keyframes(&k, 5));
+    /* None kept yet: an empty set, no error (an older store). */
+    CHECK_OK(store_keyframes_read(dir, &back));
+    CHECK_EQ_INT(back.n, 0);
+    CHECK_OK(store_keyframes_write(dir, &k));
+    CHECK_OK(store_keyframes_read(dir, &back));
+    CHECK(keyframes_equal(&k, &back));
+    store_keyframes_free(&back);
+    char path[700];
+    snprintf(path, sizeof path, "%s/keyframes.bin", dir);
+    /* A flipped byte anywhere, the file cut short, a newer version: named,
+     * and nothing returned. */
+    CHECK_OK(flip_byte(path, 500));
+    back.n = 77;
+    CHECK_STATUS(store_keyframes_read(dir, &back), BF_FORMAT);
+    CHECK(strstr(bf_last_error(), "keyframes.bin") != NULL);
+    CHECK_EQ_INT(back.n, 77);
+    CHECK_OK(flip_byte(path, 500));
+    CHECK_OK(store_keyframes_read(dir, &back));
+    store_keyframes_free(&back);
+    CHECK(truncate(path, 300) == 0);
+    CHECK_STATUS(store_keyframes_read(dir, &back), BF_FORMAT);
+    CHECK_OK(store_keyframes_write(dir, &k));
+    CHECK_OK(flip_byte(path, 8)); /* the version word's low byte */
+    CHECK_STATUS(store_keyframes_read(dir, &back), BF_UNSUPPORTED);
+    /* An empty set is a file of none; bad input is refused. */
+    store_keyframes none = {0};
+    CHECK_OK(store_keyframes_write(dir, &none));
+    CHECK_OK(store_keyframes_read(dir, &back));
+    CHECK_EQ_INT(back.n, 0);
+    k.kf[0].T_wc.t.x = NAN;
+    CHECK_STATUS(store_keyframes_write(dir, &k), BF_INVALID_ARG);
+    /* A failed write at any point leaves a whole file: the one that was
+     * there, or the new one when only the folder's fsync failed. */
+    k.kf[0].T_wc.t.x = 0;
+    CHECK_OK(store_keyframes_write(dir, &k));
+    store_keyframes k2;
+    CHECK_OK(make_keyframes(&k2, 3));
+    for (uint32_t f = 1; f < 20; f++) {
+        bf_fault_arm(f);
+        bf_status s = store_keyframes_write(dir, &k2);
+        bool fired = bf_fault_arm(0) == 0;
+        CHECK_OK(store_keyframes_read(dir, &back));
+        bool whole = keyframes_equal(&back, &k) || keyframes_equal(&back, &k2);
+        CHECK(fired ? s != BF_OK && whole : s == BF_OK && keyframes_equal(&back, &k2));
+        store_keyframes_free(&back);
+        if (!fired) break;
+    }
+    store_keyframes_free(&k);
+    store_keyframes_free(&k2);
 }
