@@ -100,20 +100,11 @@ bf_status store_keyframes_read(const char *dir, store_keyframes *out)
     fclose(probe);
     uint8_t *p = NULL;
     size_t len = 0;
+    uint32_t n = 0;
     size_t max = STORE_KEYFRAMES_HEADER + 8 + (size_t)STORE_MAX_KEYFRAMES * keyframe_bytes(STORE_MAX_KEYPOINTS);
-    bf_status s = store__read_file(path, max, &p, &len);
+    bf_status s = store__read_binary(path, STORE_KEYFRAMES_MAGIC, "keyframes file", max, &p, &len, &n);
     if (s != BF_OK) return s;
-    uint32_t v = 0, n = 0;
-    if (len >= STORE_KEYFRAMES_HEADER) memcpy(&v, p + 8, 4), memcpy(&n, p + 12, 4);
-    uint64_t h = 0;
-    if (len < STORE_KEYFRAMES_HEADER + 8 || memcmp(p, STORE_KEYFRAMES_MAGIC, 8) != 0)
-        s = bf_fail(BF_FORMAT, "%s: not a bitfuse keyframes file (%zu bytes)", path, len);
-    else if (v > STORE_VERSION)
-        s = bf_fail(BF_UNSUPPORTED, "%s: version %u; this bitfuse reads version %u and older", path, v, STORE_VERSION);
-    else if (memcpy(&h, p + len - 8, 8), h != store__hash(p, len - 8))
-        s = bf_fail(BF_FORMAT, "%s: checksum mismatch (corrupt or truncated)", path);
-    else if (n > STORE_MAX_KEYFRAMES)
-        s = bf_fail(BF_FORMAT, "%s: %u keyframes, more than %u", path, n, STORE_MAX_KEYFRAMES);
+    if (n > STORE_MAX_KEYFRAMES) s = bf_fail(BF_FORMAT, "%s: %u keyframes, more than %u", path, n, STORE_MAX_KEYFRAMES);
     store_keyframes k = {0};
     if (s == BF_OK && n) {
         k.kf = bf_calloc(n, sizeof *k.kf);

@@ -194,26 +194,43 @@ bf_status store__index_read(const char *dir, store_meta *meta, store_entry **e, 
 
 /* ------------------------------------------------------------ trajectory */
 
+bf_status store__read_binary(const char *path, const char *magic, const char *what, size_t max, uint8_t **out,
+                             size_t *len, uint32_t *count)
+{
+    uint8_t *p = NULL;
+    size_t n = 0;
+    bf_status s = store__read_file(path, max, &p, &n);
+    if (s != BF_OK) return s;
+    uint32_t v = 0, c = 0;
+    if (n >= 16) memcpy(&v, p + 8, 4), memcpy(&c, p + 12, 4);
+    uint64_t h = 0;
+    if (n < 16 + 8 || memcmp(p, magic, 8) != 0)
+        s = bf_fail(BF_FORMAT, "%s: not a bitfuse %s (%zu bytes)", path, what, n);
+    else if (v > STORE_VERSION)
+        s = bf_fail(BF_UNSUPPORTED, "%s: version %u; this bitfuse reads version %u and older", path, v, STORE_VERSION);
+    else if (memcpy(&h, p + n - 8, 8), h != store__hash(p, n - 8))
+        s = bf_fail(BF_FORMAT, "%s: checksum mismatch (corrupt or truncated)", path);
+    if (s != BF_OK) {
+        free(p);
+        return s;
+    }
+    *out = p, *len = n, *count = c;
+    return BF_OK;
+}
+
 static bf_status read_traj(const char *dir, bf_traj *out)
 {
     char path[4200];
     snprintf(path, sizeof path, "%s/%s", dir, STORE_TRAJ_NAME);
     uint8_t *p = NULL;
     size_t len = 0;
-    bf_status s = store__read_file(path, (size_t)STORE_TRAJ_HEADER + (size_t)STORE_MAX_POSES * 104 + 8, &p, &len);
+    uint32_t n = 0;
+    bf_status s = store__read_binary(path, STORE_TRAJ_MAGIC, "trajectory",
+                                     (size_t)STORE_TRAJ_HEADER + (size_t)STORE_MAX_POSES * 104 + 8, &p, &len, &n);
     if (s != BF_OK) return s;
-    uint32_t v = 0, n = 0;
-    if (len >= STORE_TRAJ_HEADER) memcpy(&v, p + 8, 4), memcpy(&n, p + 12, 4);
-    uint64_t h = 0;
-    if (len < STORE_TRAJ_HEADER + 8 || memcmp(p, STORE_TRAJ_MAGIC, 8) != 0)
-        s = bf_fail(BF_FORMAT, "%s: not a bitfuse trajectory (%zu bytes)", path, len);
-    else if (v > STORE_VERSION)
-        s = bf_fail(BF_UNSUPPORTED, "%s: version %u; this bitfuse reads version %u and older", path, v, STORE_VERSION);
-    else if (len != STORE_TRAJ_HEADER + (size_t)n * STORE_TRAJ_POSE_DOUBLES * 8 + 8)
-        s = bf_fail(BF_FORMAT, "%s: %zu bytes where %u poses need %zu (truncated?)", path, len, n,
+    if (len != STORE_TRAJ_HEADER + (size_t)n * STORE_TRAJ_POSE_DOUBLES * 8 + 8)
+        s = bf_fail(BF_FORMAT, "%s: %zu bytes where %u poses need %zu", path, len, n,
                     STORE_TRAJ_HEADER + (size_t)n * STORE_TRAJ_POSE_DOUBLES * 8 + 8);
-    else if (memcpy(&h, p + len - 8, 8), h != store__hash(p, len - 8))
-        s = bf_fail(BF_FORMAT, "%s: checksum mismatch (corrupt)", path);
     bf_traj t = {0};
     for (uint32_t i = 0; s == BF_OK && i < n; i++) {
         double d[STORE_TRAJ_POSE_DOUBLES];

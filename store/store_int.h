@@ -86,6 +86,13 @@ bf_status store__sync_dir(const char *dir);
  * bytes without the NUL): BF_IO when it cannot be opened or read,
  * BF_FORMAT when it is larger than max. */
 bf_status store__read_file(const char *path, size_t max, uint8_t **out, size_t *n);
+/* A binary store file (trajectory.bin, keyframes.bin: an 8-byte magic, a
+ * u32 version, a u32 count, ..., the XXH3-64 of all before its last 8
+ * bytes) read and checked: the magic (what names the kind), the version
+ * (BF_UNSUPPORTED when newer) and the checksum (BF_FORMAT). *out
+ * (malloc'd), *len and *count written on success. */
+bf_status store__read_binary(const char *path, const char *magic, const char *what, size_t max, uint8_t **out,
+                             size_t *len, uint32_t *count);
 
 /* A chunk the index lists. */
 typedef struct store_entry {
