@@ -91,6 +91,23 @@ bf_status app_store_frame(app_store *st, recon_run *run, const bf_frame *f)
     return s;
 }
 
+/* The keyframes once the map is safe: a resumed scan finds the camera from
+ * them wherever they saw. Only when the loop held keyframes with colour's
+ * keypoints (relocalisation and colour candidates on): a loop without
+ * them leaves the file an earlier session wrote, which is in the same
+ * map's frame. A failure is a warning: the map is written already. */
+static void write_keyframes(app_store *st, const recon *loop)
+{
+    store_keyframes k = {0};
+    bf_status s = recon_keyframes(loop, &k);
+    bool has_colour = false;
+    for (uint32_t i = 0; s == BF_OK && i < k.n; i++) has_colour |= k.kf[i].n > 0;
+    if (s == BF_OK && has_colour) s = store_keyframes_write(st->dir, &k);
+    if (s == BF_OK && has_colour) st->keyframes_written = k.n;
+    if (s != BF_OK) bf_warn("store: the keyframes were not kept (a resumed scan starts from its poses): %s", bf_last_error());
+    store_keyframes_free(&k);
+}
+
 bf_status app_store_finish(app_store *st, recon_run *run)
 {
     if (!st->writer) return BF_OK;
@@ -99,13 +116,7 @@ bf_status app_store_finish(app_store *st, recon_run *run)
     bf_status f = store_writer_finish(st->writer);
     st->stats = store_writer_stats(st->writer);
     if (s == BF_OK) s = f;
-    /* The keyframes once the map is safe: a resumed scan finds the camera
-     * from them wherever they saw. */
-    store_keyframes k = {0};
-    if (s == BF_OK && run->loop) s = recon_keyframes(run->loop, &k);
-    if (s == BF_OK && run->loop) s = store_keyframes_write(st->dir, &k);
-    if (s == BF_OK) st->keyframes_written = k.n;
-    store_keyframes_free(&k);
+    if (s == BF_OK && run->loop) write_keyframes(st, run->loop);
     return s;
 }
 

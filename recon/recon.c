@@ -494,11 +494,14 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
     r->T_first = r->T_last = *T_last;
     r->has_first = true;
     r->good_index = last_index;
-    /* The stored keyframes first: with their colour's keypoints they find
-     * a camera resumed anywhere they saw; the trajectory's poses then fill
-     * in where none is near. */
-    recon__keyframes_import(r, kf);
-    for (size_t i = 0; traj && r->keyframes && i < traj->n; i++) recon__add_keyframe(r, &traj->T_wc[i], NULL);
+    /* The stored keyframes, with their colour's keypoints, find a camera
+     * resumed anywhere they saw. They were chosen from the same trajectory
+     * by the same rule, so its poses are added only without them: once the
+     * store is full, a pose alone would replace a keyframe that has
+     * keypoints. */
+    if (kf && kf->n) recon__keyframes_import(r, kf);
+    else
+        for (size_t i = 0; traj && r->keyframes && i < traj->n; i++) recon__add_keyframe(r, &traj->T_wc[i], NULL);
     recon_frame_result tmp;
     memset(&tmp, 0, sizeof tmp);
     return recon__cast_reference(r, T_last, &tmp);

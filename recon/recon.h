@@ -193,8 +193,8 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0);
 /* Continues a stored scan (a reopened scene store, store/): loads its map
  * into the loop's empty map (fusion_load; the map's origin becomes the
  * stored one), makes T_last the last good pose, the stored keyframes kf
- * (may be NULL: none kept) and then the poses of traj (may be NULL)
- * keyframes, and the ray-cast of the map at T_last the tracking
+ * keyframes (or, when kf is NULL or empty, the poses of traj, which may
+ * be NULL), and the ray-cast of the map at T_last the tracking
  * reference, so that the next frame is tracked against the stored map
  * rather than fused as a first frame. last_index is the stored scan's last
  * frame index (the motion gate counts frame intervals from it). Before any

@@ -182,14 +182,19 @@ bf_status recon__keyframes_export(const recon *r, store_keyframes *out)
 {
     memset(out, 0, sizeof *out);
     if (!r->keyframes || !r->n_keyframes) return BF_OK;
-    store_keyframes k = {.kf = bf_calloc(r->n_keyframes, sizeof *k.kf)};
-    if (!k.kf) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", r->n_keyframes);
+    /* Within what the file holds: the first STORE_MAX_KEYFRAMES, each with
+     * at most STORE_MAX_KEYPOINTS (ORB may keep a few more than asked when
+     * responses tie). */
+    uint32_t n = r->n_keyframes < STORE_MAX_KEYFRAMES ? r->n_keyframes : STORE_MAX_KEYFRAMES;
+    store_keyframes k = {.kf = bf_calloc(n, sizeof *k.kf)};
+    if (!k.kf) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", n);
     bf_status s = BF_OK;
-    for (uint32_t i = 0; i < r->n_keyframes && s == BF_OK; i++) {
+    for (uint32_t i = 0; i < n && s == BF_OK; i++) {
         k.n = i + 1;
         k.kf[i].T_wc = r->keyframes[i];
         if (r->kf_features[i])
             s = features_export_lifted(r->kf_features[i], &k.kf[i].n, &k.kf[i].desc, &k.kf[i].xyz);
+        if (k.kf[i].n > STORE_MAX_KEYPOINTS) k.kf[i].n = STORE_MAX_KEYPOINTS;
     }
     if (s != BF_OK) {
         store_keyframes_free(&k);

@@ -2,10 +2,12 @@
  * docs/formats.md). Written once a scan ends, read when it resumes: the
  * file is an aid to finding the camera, so a store without it (older, or
  * killed before the end) resumes as before, from the trajectory's poses. */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "store_int.h"
 
@@ -24,19 +26,23 @@ static size_t keyframe_bytes(uint32_t n) { return STORE_KEYFRAME_HEADER + (size_
 
 bf_status store_keyframes_write(const char *dir, const store_keyframes *k)
 {
-    if (!dir || !k || k->n > STORE_MAX_KEYFRAMES || (k->n && !k->kf))
-        return bf_fail(BF_INVALID_ARG, "store_keyframes_write: no folder or keyframes, or more than %u",
-                       STORE_MAX_KEYFRAMES);
+    if (!dir || !k) return bf_fail(BF_INVALID_ARG, "store_keyframes_write: no folder or keyframes");
+    char path[4200];
+    snprintf(path, sizeof path, "%s/%s", dir, STORE_KEYFRAMES_NAME);
+    if (k->n > STORE_MAX_KEYFRAMES || (k->n && !k->kf))
+        return bf_fail(BF_INVALID_ARG, "%s: %u keyframes, at most %u", path, k->n, STORE_MAX_KEYFRAMES);
     size_t bytes = STORE_KEYFRAMES_HEADER + 8;
     for (uint32_t i = 0; i < k->n; i++) {
         const store_keyframe *f = &k->kf[i];
-        if (f->n > STORE_MAX_KEYPOINTS || (f->n && (!f->desc || !f->xyz)) || !bf_se3_is_finite(&f->T_wc))
-            return bf_fail(BF_INVALID_ARG, "store_keyframes_write: keyframe %u: %u keypoints, or a pose not finite", i,
-                           f->n);
+        bool ok = f->n <= STORE_MAX_KEYPOINTS && (!f->n || (f->desc && f->xyz)) && bf_se3_is_finite(&f->T_wc);
+        for (uint32_t j = 0; ok && j < 3 * f->n; j++) ok = isfinite(f->xyz[j]);
+        if (!ok)
+            return bf_fail(BF_INVALID_ARG, "%s: keyframe %u: %u keypoints (at most %u), or a pose or point not finite",
+                           path, i, f->n, STORE_MAX_KEYPOINTS);
         bytes += keyframe_bytes(f->n);
     }
     uint8_t *buf = bf_malloc(bytes), *p = buf;
-    if (!buf) return bf_fail(BF_NO_MEMORY, "store: %u keyframes (%zu bytes)", k->n, bytes);
+    if (!buf) return bf_fail(BF_NO_MEMORY, "%s: %u keyframes (%zu bytes)", path, k->n, bytes);
     uint32_t version = STORE_VERSION;
     memcpy(p, STORE_KEYFRAMES_MAGIC, 8), memcpy(p + 8, &version, 4), memcpy(p + 12, &k->n, 4);
     p += STORE_KEYFRAMES_HEADER;
@@ -53,8 +59,6 @@ bf_status store_keyframes_write(const char *dir, const store_keyframes *k)
     }
     uint64_t h = store__hash(buf, bytes - 8);
     memcpy(p, &h, 8);
-    char path[4200];
-    snprintf(path, sizeof path, "%s/%s", dir, STORE_KEYFRAMES_NAME);
     bf_status s = store__write_atomic(path, buf, bytes, NULL, 0);
     free(buf);
     return s == BF_OK ? store__sync_dir(dir) : s;
@@ -92,12 +96,11 @@ bf_status store_keyframes_read(const char *dir, store_keyframes *out)
     if (!dir || !out) return bf_fail(BF_INVALID_ARG, "store_keyframes_read: no folder or output");
     char path[4200];
     snprintf(path, sizeof path, "%s/%s", dir, STORE_KEYFRAMES_NAME);
-    FILE *probe = fopen(path, "rb");
-    if (!probe) { /* none kept: the trajectory's poses are the keyframes */
+    struct stat st;
+    if (stat(path, &st) != 0 && errno == ENOENT) { /* none kept: the trajectory's poses are the keyframes */
         memset(out, 0, sizeof *out);
         return BF_OK;
     }
-    fclose(probe);
     uint8_t *p = NULL;
     size_t len = 0;
     uint32_t n = 0;

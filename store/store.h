@@ -71,6 +71,9 @@ typedef struct store_keyframes {
     store_keyframe *kf;
 } store_keyframes;
 
+#define STORE_MAX_KEYFRAMES 4096u   /* keyframes a file holds at most */
+#define STORE_MAX_KEYPOINTS 100000u /* keypoints of one keyframe at most */
+
 void store_keyframes_free(store_keyframes *k); /* frees the arrays; zeroes *k */
 /* Writes dir/keyframes.bin atomically (a temp file, fsync, rename, the
  * folder's fsync); an empty set writes a file of none. */

@@ -51,8 +51,6 @@ _Static_assert(sizeof(store_chunk_header) == STORE_CHUNK_HEADER, "chunk header l
 #define STORE_KEYFRAMES_MAGIC "BFKEYF1" /* 8 bytes with its NUL */
 #define STORE_KEYFRAMES_HEADER 16u
 #define STORE_KEYFRAME_HEADER 104u /* 12 doubles, n, zero */
-#define STORE_MAX_KEYFRAMES 4096u
-#define STORE_MAX_KEYPOINTS 100000u
 
 /* One chunk's bricks inside a sorted hostmap: [first, first + n). */
 typedef struct store_group {

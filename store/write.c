@@ -334,8 +334,9 @@ bf_status store_clear(const char *dir)
     snprintf(chunk_dir, sizeof chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
     bf_status s = unlink_suffix(chunk_dir, ".bfc");
     if (s == BF_OK) s = unlink_suffix(chunk_dir, ".tmp");
-    const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME};
-    for (int i = 0; s == BF_OK && i < 2; i++) {
+    /* keyframes.bin too: its poses are in the cleared scan's frame. */
+    const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME, STORE_KEYFRAMES_NAME};
+    for (int i = 0; s == BF_OK && i < 3; i++) {
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
         if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
     }
@@ -359,6 +360,13 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
     snprintf(w->chunk_dir, sizeof w->chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
     bf_status s = bf_mkdir_p(w->chunk_dir);
     if (s == BF_OK) s = store__sync_dir(dir);
+    /* A new scan: a keyframes.bin left in the folder (not a store without
+     * its index or chunks) holds poses of another scan's frame. */
+    if (s == BF_OK && !resume) {
+        char path[4600];
+        snprintf(path, sizeof path, "%s/%s", dir, STORE_KEYFRAMES_NAME);
+        if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
+    }
     /* Temp files a killed writer left (never read: the reader takes *.bfc only). */
     if (s == BF_OK && resume) s = unlink_suffix(w->dir, ".tmp");
     if (s == BF_OK && resume) s = unlink_suffix(w->chunk_dir, ".tmp");

@@ -77,6 +77,12 @@ PY
 expect 0 "$B" replay "$SEQ" --out "$T/n" --no-mesh --store "$T/N" --resume
 [ "$(frame30 "$T/n")" = "lost/" ] || fail "without keyframes.bin: frame 30 is '$(frame30 "$T/n")'"
 
+# A session that holds no colour keypoints (relocalisation off) leaves the
+# file an earlier one wrote.
+cp -r "$T/S" "$T/O"
+expect 0 "$B" replay "$SEQ" --out "$T/o" --no-mesh --store "$T/O" --resume --reloc off
+cmp -s "$T/S/keyframes.bin" "$T/O/keyframes.bin" || fail "a resume with --reloc off rewrote keyframes.bin"
+
 # A corrupt keyframes.bin is named, and the scan resumes without it.
 expect 0 "$B" replay "$SEQ" --out "$T/c" --no-mesh --store "$T/C" --resume
 mentions "keyframes.bin"

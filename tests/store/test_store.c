@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "store/store.h"
+#include "store/store_int.h"
 #include "test.h"
 
 static uint32_t rng_state = 12345u;
@@ -499,8 +500,8 @@ BF_TEST(store_keeps_keyframes_bit_for_bit_and_names_a_bad_file)
     CHECK_EQ_INT(back.n, 0);
     k.kf[0].T_wc.t.x = NAN;
     CHECK_STATUS(store_keyframes_write(dir, &k), BF_INVALID_ARG);
-    /* A failed write at any point leaves a whole file: the one that was
-     * there, or the new one when only the folder's fsync failed. */
+    /* A failed write or allocation at any point leaves the file that was
+     * there. */
     k.kf[0].T_wc.t.x = 0;
     CHECK_OK(store_keyframes_write(dir, &k));
     store_keyframes k2;
@@ -510,11 +511,57 @@ BF_TEST(store_keeps_keyframes_bit_for_bit_and_names_a_bad_file)
         bf_status s = store_keyframes_write(dir, &k2);
         bool fired = bf_fault_arm(0) == 0;
         CHECK_OK(store_keyframes_read(dir, &back));
-        bool whole = keyframes_equal(&back, &k) || keyframes_equal(&back, &k2);
-        CHECK(fired ? s != BF_OK && whole : s == BF_OK && keyframes_equal(&back, &k2));
+        CHECK(fired ? s != BF_OK && keyframes_equal(&back, &k) : s == BF_OK && keyframes_equal(&back, &k2));
         store_keyframes_free(&back);
         if (!fired) break;
     }
+    /* A failed allocation while reading: an error, and nothing returned. */
+    for (uint32_t f = 1; f < 40; f++) {
+        back.n = 77;
+        bf_fault_arm(f);
+        bf_status s = store_keyframes_read(dir, &back);
+        bool fired = bf_fault_arm(0) == 0;
+        if (!fired) {
+            CHECK_OK(s);
+            CHECK(keyframes_equal(&back, &k2));
+            store_keyframes_free(&back);
+            break;
+        }
+        CHECK_STATUS(s, BF_NO_MEMORY);
+        CHECK_EQ_INT(back.n, 77);
+    }
+    /* What only a file with a right checksum reaches: too many keyframes,
+     * a point not finite, bytes after the last keyframe. */
+    uint8_t *raw = NULL;
+    size_t len = 0;
+    uint32_t count;
+    CHECK_OK(store__read_binary(path, STORE_KEYFRAMES_MAGIC, "keyframes file", 1u << 24, &raw, &len, &count));
+    CHECK_EQ_INT(count, 3);
+    uint32_t many = STORE_MAX_KEYFRAMES + 1;
+    float nan_point = NAN;
+    struct {
+        size_t at, n;
+        const void *with;
+        const char *says;
+    } edits[] = {{12, 4, &many, "more than"},
+                 {16 + STORE_KEYFRAME_HEADER + 50 * 32, 4, &nan_point, "not finite"},
+                 {12, 4, &(uint32_t){2}, "after the last keyframe"}};
+    for (size_t e = 0; e < sizeof edits / sizeof *edits; e++) {
+        uint8_t *c = malloc(len);
+        CHECK(c != NULL);
+        if (!c) break;
+        memcpy(c, raw, len);
+        memcpy(c + edits[e].at, edits[e].with, edits[e].n);
+        uint64_t h = store__hash(c, len - 8);
+        memcpy(c + len - 8, &h, 8);
+        FILE *fp = fopen(path, "wb");
+        CHECK(fp && fwrite(c, 1, len, fp) == len);
+        if (fp) fclose(fp);
+        free(c);
+        CHECK_STATUS(store_keyframes_read(dir, &back), BF_FORMAT);
+        CHECK(strstr(bf_last_error(), edits[e].says) != NULL);
+    }
+    free(raw);
     store_keyframes_free(&k);
     store_keyframes_free(&k2);
 }
