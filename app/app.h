@@ -210,7 +210,9 @@ typedef struct app_store {
     bf_traj traj;
     store_report report;
     store_keyframes keyframes;  /* resumed: the relocalisation keyframes read (none when the file is absent or bad) */
-    uint32_t keyframes_written; /* keyframes.bin at the end: keyframes written */
+    uint32_t keyframes_written; /* keyframes in the last set handed to the writer for keyframes.bin */
+    uint64_t kf_generation;     /* the loop's keyframe generation then */
+    bool has_kf_generation;
     uint32_t flushes, skipped;  /* flushes handed to the writer; periods skipped while it was busy */
     double ms_flush_max, ms_submit_max; /* the loop's cost of a flush (snapshot and hand-over) */
     store_write_stats stats;    /* the writer's, at the end */

@@ -55,9 +55,33 @@ void app_store_resume_config(app_store *st, recon_resume_state *rs, recon_config
     loop->fusion.max_level = st->meta.max_level;
 }
 
+/* The loop's keyframes to the writer, with the map about to follow, when
+ * they changed since the last hand-over: a resumed scan finds the camera
+ * from them wherever they saw. Only keyframes with colour's keypoints
+ * (relocalisation and colour candidates on): a loop without them leaves
+ * the file an earlier session wrote, which is in the same map's frame. A
+ * failure is a warning: the map still goes. */
+static void hand_keyframes(app_store *st, const recon *loop)
+{
+    uint64_t gen = recon_keyframes_generation(loop);
+    if (st->has_kf_generation && gen == st->kf_generation) return;
+    store_keyframes k = {0};
+    bf_status s = recon_keyframes(loop, &k);
+    bool has_colour = false;
+    for (uint32_t i = 0; s == BF_OK && i < k.n; i++) has_colour |= k.kf[i].n > 0;
+    if (s == BF_OK && has_colour) {
+        st->keyframes_written = k.n;
+        store_writer_keyframes(st->writer, &k);
+    }
+    if (s != BF_OK) bf_warn("store: the keyframes were not kept (a resumed scan starts from its poses): %s", bf_last_error());
+    st->kf_generation = gen, st->has_kf_generation = true;
+    store_keyframes_free(&k);
+}
+
 /* A snapshot of the run's map and where the scan stands, to the writer. */
 static bf_status flush(app_store *st, recon_run *run, double t_last_s)
 {
+    if (run->loop) hand_keyframes(st, run->loop);
     hostmap snap = {0};
     bf_status s = run->loop ? recon_snapshot(run->loop, &snap) : fusion_snapshot_take(run->map, &snap);
     if (s != BF_OK) return s;
@@ -91,23 +115,6 @@ bf_status app_store_frame(app_store *st, recon_run *run, const bf_frame *f)
     return s;
 }
 
-/* The keyframes once the map is safe: a resumed scan finds the camera from
- * them wherever they saw. Only when the loop held keyframes with colour's
- * keypoints (relocalisation and colour candidates on): a loop without
- * them leaves the file an earlier session wrote, which is in the same
- * map's frame. A failure is a warning: the map is written already. */
-static void write_keyframes(app_store *st, const recon *loop)
-{
-    store_keyframes k = {0};
-    bf_status s = recon_keyframes(loop, &k);
-    bool has_colour = false;
-    for (uint32_t i = 0; s == BF_OK && i < k.n; i++) has_colour |= k.kf[i].n > 0;
-    if (s == BF_OK && has_colour) s = store_keyframes_write(st->dir, &k);
-    if (s == BF_OK && has_colour) st->keyframes_written = k.n;
-    if (s != BF_OK) bf_warn("store: the keyframes were not kept (a resumed scan starts from its poses): %s", bf_last_error());
-    store_keyframes_free(&k);
-}
-
 bf_status app_store_finish(app_store *st, recon_run *run)
 {
     if (!st->writer) return BF_OK;
@@ -116,7 +123,6 @@ bf_status app_store_finish(app_store *st, recon_run *run)
     bf_status f = store_writer_finish(st->writer);
     st->stats = store_writer_stats(st->writer);
     if (s == BF_OK) s = f;
-    if (s == BF_OK && run->loop) write_keyframes(st, run->loop);
     return s;
 }
 

@@ -464,6 +464,8 @@ bf_status recon_keyframes(const recon *r, store_keyframes *out)
     return recon__keyframes_export(r, out);
 }
 
+uint64_t recon_keyframes_generation(const recon *r) { return r ? r->kf_generation : 0; }
+
 bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint32_t last_index, const bf_traj *traj,
                        const store_keyframes *kf)
 {

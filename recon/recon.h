@@ -205,6 +205,9 @@ bf_status recon_resume(recon *r, const hostmap *map, const bf_se3 *T_last, uint3
  * keypoints (none where colour candidates are off), for the scene store's
  * keyframes.bin; free *out with store_keyframes_free. */
 bf_status recon_keyframes(const recon *r, store_keyframes *out);
+/* Changes whenever a keyframe is added or replaced: a caller that keeps
+ * them (the scene store) takes them again only when it moved. */
+uint64_t recon_keyframes_generation(const recon *r);
 /* The whole map as a host copy (for export and the scene store): the
  * pools' bricks and those streamed out of them. */
 bf_status recon_snapshot(recon *r, hostmap *out);

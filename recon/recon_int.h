@@ -33,6 +33,7 @@ struct recon {
     bool has_velocity;   /* V_step was measured */
     bf_se3 *keyframes;   /* reloc.max_keyframes poses, allocated at create */
     features_set **kf_features; /* each keyframe's lifted ORB keypoints, or NULL (no colour, or none asked) */
+    uint64_t kf_generation;      /* counts keyframes added or replaced: the store writes them when it moved */
     uint32_t n_keyframes; /* held */
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
     float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */

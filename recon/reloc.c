@@ -169,6 +169,7 @@ static void add_keyframe_with(recon *r, const bf_se3 *T, features_set *feat)
     features_free(r->kf_features[i]);
     r->kf_features[i] = feat;
     r->counts.keyframes = r->n_keyframes;
+    r->kf_generation++;
 }
 
 void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f)

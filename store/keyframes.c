@@ -1,7 +1,8 @@
 /* The scan's relocalisation keyframes on disk (store.h, keyframes.bin;
- * docs/formats.md). Written once a scan ends, read when it resumes: the
- * file is an aid to finding the camera, so a store without it (older, or
- * killed before the end) resumes as before, from the trajectory's poses. */
+ * docs/formats.md). Written by the store's writer with a map when they
+ * changed, read when a scan resumes: the file is an aid to finding the
+ * camera, so a store without it (older, or killed before its first
+ * flush) resumes as before, from the trajectory's poses. */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>

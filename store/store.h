@@ -137,7 +137,7 @@ typedef struct store_write_stats {
  * another folder). resume true: it must (BF_IO otherwise); the writer then
  * knows the stored chunks' digests and rewrites only what changes. */
 bf_status store_writer_open(const char *dir, bool resume, store_writer **out);
-/* Removes a store's files (chunk files, temp files, trajectory, index) and
+/* Removes a store's files (chunk files, temp files, trajectory, index, keyframes) and
  * keeps the folder: for a store whose first write never finished (chunk
  * files but no pose), which a resumed scan starts anew. */
 bf_status store_clear(const char *dir);
@@ -147,6 +147,11 @@ bf_status store_clear(const char *dir);
  * earlier write comes back here (and from store_writer_finish), and then
  * nothing more is written. */
 bf_status store_writer_submit(store_writer *w, hostmap *map, const store_meta *meta, const bf_traj *traj);
+/* Hands the writer keyframes to write with the next map (taken: *k is
+ * emptied; keyframes handed over before and not yet written are
+ * replaced). keyframes.bin is written after the trajectory and before the
+ * index; a map handed over without new keyframes leaves the file. */
+void store_writer_keyframes(store_writer *w, store_keyframes *k);
 /* True while a write is running: a caller that flushes periodically skips
  * a flush rather than wait. */
 bool store_writer_busy(store_writer *w);

@@ -1,5 +1,6 @@
 /* The store's writer: a thread that writes host copies of the map, one
- * chunk file per changed chunk, then the trajectory and the index. */
+ * chunk file per changed chunk, then the trajectory, the keyframes when
+ * new ones came, and the index. */
 #include <dirent.h>
 #include <errno.h>
 #include <math.h>
@@ -19,6 +20,8 @@ typedef struct store_job {
     hostmap map;
     store_meta meta;
     bf_traj traj;
+    store_keyframes kf;  /* written with the map when has_kf */
+    bool has_kf;
 } store_job;
 
 struct store_writer {
@@ -34,6 +37,8 @@ struct store_writer {
     pthread_cond_t cv;
     bool has_job, running, stop;
     store_job job;
+    store_keyframes pending_kf; /* store_writer_keyframes's, for the next job */
+    bool has_pending_kf;
     bf_status error;        /* the first failed write's status, and its message */
     char message[1024];
     store_write_stats work;  /* the thread's own counts */
@@ -204,6 +209,7 @@ static bf_status write_map(store_writer *w, store_job *job)
     }
     if (s == BF_OK && written) s = store__sync_dir(w->chunk_dir);
     if (s == BF_OK) s = write_traj(w, &job->traj);
+    if (s == BF_OK && job->has_kf) s = store_keyframes_write(w->dir, &job->kf);
     if (s == BF_OK) s = write_index(w, &job->meta, e, n);
     if (s == BF_OK) s = store__sync_dir(w->dir);
     uint64_t removed = 0;
@@ -242,6 +248,7 @@ static void job_free(store_job *j)
 {
     hostmap_free(&j->map);
     bf_traj_free(&j->traj);
+    store_keyframes_free(&j->kf);
     memset(j, 0, sizeof *j);
 }
 
@@ -418,6 +425,9 @@ bf_status store_writer_submit(store_writer *w, hostmap *map, const store_meta *m
     wait_idle(w);
     if (s == BF_OK) s = error_of(w);
     if (s == BF_OK) {
+        job.kf = w->pending_kf, job.has_kf = w->has_pending_kf;
+        memset(&w->pending_kf, 0, sizeof w->pending_kf);
+        w->has_pending_kf = false;
         w->job = job;
         w->has_job = true;
         pthread_cond_broadcast(&w->cv);
@@ -425,6 +435,17 @@ bf_status store_writer_submit(store_writer *w, hostmap *map, const store_meta *m
     pthread_mutex_unlock(&w->mu);
     if (s != BF_OK) job_free(&job);
     return s;
+}
+
+void store_writer_keyframes(store_writer *w, store_keyframes *k)
+{
+    if (!w || !k) return;
+    pthread_mutex_lock(&w->mu);
+    store_keyframes_free(&w->pending_kf);
+    w->pending_kf = *k;
+    w->has_pending_kf = true;
+    pthread_mutex_unlock(&w->mu);
+    memset(k, 0, sizeof *k);
 }
 
 bool store_writer_busy(store_writer *w)
@@ -465,6 +486,7 @@ void store_writer_close(store_writer *w)
         pthread_join(w->thread, NULL);
     }
     job_free(&w->job);
+    store_keyframes_free(&w->pending_kf);
     pthread_mutex_destroy(&w->mu);
     pthread_cond_destroy(&w->cv);
     free(w->entries);

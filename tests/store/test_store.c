@@ -565,3 +565,48 @@ BF_TEST(store_keeps_keyframes_bit_for_bit_and_names_a_bad_file)
     store_keyframes_free(&k);
     store_keyframes_free(&k2);
 }
+
+/* The writer writes keyframes handed to it with the next map, and a map
+ * without new ones leaves the file. */
+BF_TEST(store_writer_writes_keyframes_with_the_next_map)
+{
+    const char *dir = fresh_dir("writer-keyframes");
+    hostmap a, c;
+    CHECK_OK(make_map(&a, 2, 5));
+    bf_traj t;
+    CHECK_OK(make_traj(&t, 3));
+    store_meta meta = meta_of(&a, 3);
+    store_keyframes k, kept, back = {0};
+    CHECK_OK(make_keyframes(&k, 3));
+    CHECK_OK(make_keyframes(&kept, 3));
+    /* make_keyframes draws from one generator: make the copy equal. */
+    for (uint32_t i = 0; i < k.n; i++) {
+        kept.kf[i].T_wc = k.kf[i].T_wc;
+        if (k.kf[i].n) memcpy(kept.kf[i].desc, k.kf[i].desc, (size_t)k.kf[i].n * 32);
+        if (k.kf[i].n) memcpy(kept.kf[i].xyz, k.kf[i].xyz, (size_t)k.kf[i].n * 12);
+    }
+    store_writer *w;
+    CHECK_OK(store_writer_open(dir, false, &w));
+    store_writer_keyframes(w, &k);
+    CHECK_EQ_INT(k.n, 0); /* taken */
+    CHECK_OK(copy_map(&a, &c));
+    CHECK_OK(store_writer_submit(w, &c, &meta, &t));
+    CHECK_OK(store_writer_finish(w));
+    CHECK_OK(store_keyframes_read(dir, &back));
+    CHECK(keyframes_equal(&back, &kept));
+    store_keyframes_free(&back);
+    /* Another map, no new keyframes: the file stays. */
+    CHECK_OK(copy_map(&a, &c));
+    CHECK_OK(store_writer_submit(w, &c, &meta, &t));
+    CHECK_OK(store_writer_finish(w));
+    CHECK_OK(store_keyframes_read(dir, &back));
+    CHECK(keyframes_equal(&back, &kept));
+    store_keyframes_free(&back);
+    /* Keyframes handed over and never followed by a map are freed with the writer. */
+    CHECK_OK(make_keyframes(&k, 2));
+    store_writer_keyframes(w, &k);
+    store_writer_close(w);
+    store_keyframes_free(&kept);
+    hostmap_free(&a);
+    bf_traj_free(&t);
+}
