@@ -137,6 +137,13 @@ int app_info_store(const char *dir, bool json)
         for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], c[k]), hi[k] = fmax(hi[k], c[k] + edge);
     }
     double raw = (double)m.n_bricks * 2 * 64;
+    /* The relocalisation keyframes a resumed scan starts from: a bad file
+     * is damage to report, not a reason to refuse the store. */
+    store_keyframes kf = {0};
+    bool kf_ok = store_keyframes_read(dir, &kf) == BF_OK;
+    if (!kf_ok) bf_warn("info: %s", bf_last_error());
+    uint32_t kf_points = 0;
+    for (uint32_t i = 0; i < kf.n; i++) kf_points += kf.kf[i].n;
     if (json) {
         cJSON *o = cJSON_CreateObject();
         cJSON_AddStringToObject(o, "kind", "bitfuse-store");
@@ -166,6 +173,9 @@ int app_info_store(const char *dir, bool json)
         cJSON_AddNumberToObject(o, "bad_chunk_files", rep.n_bad);
         cJSON_AddNumberToObject(o, "missing_chunks", rep.n_missing);
         cJSON_AddNumberToObject(o, "unindexed_chunks", rep.n_unindexed);
+        cJSON_AddNumberToObject(o, "keyframes", kf.n);
+        cJSON_AddNumberToObject(o, "keyframe_keypoints", kf_points);
+        cJSON_AddBoolToObject(o, "keyframes_ok", kf_ok);
         s = app_json_print(o);
     } else {
         printf("%s: bitfuse scene store, version %u, %u writes\n", dir, STORE_VERSION, rep.flush);
@@ -183,10 +193,15 @@ int app_info_store(const char *dir, bool json)
             printf("  last pose        %.6f %.4f %.4f %.4f %.4f %.4f %.4f %.4f (TUM)\n", meta.last_t_s, meta.last_pose.t.x,
                    meta.last_pose.t.y, meta.last_pose.t.z, q.x, q.y, q.z, q.w);
         }
+        if (kf.n)
+            printf("  keyframes        %u, %u colour keypoints (a resumed scan finds the camera from them)\n", kf.n,
+                   kf_points);
+        if (!kf_ok) printf("  damage           keyframes.bin unreadable (a resumed scan starts from its poses)\n");
         if (!rep.index_ok || !rep.trajectory_ok || rep.n_bad || rep.n_missing)
             printf("  damage           index %s, trajectory %s, %u bad chunk files, %u chunks missing\n",
                    rep.index_ok ? "ok" : "unreadable", rep.trajectory_ok ? "ok" : "unreadable", rep.n_bad, rep.n_missing);
     }
+    store_keyframes_free(&kf);
     hostmap_free(&m);
     bf_traj_free(&traj);
     return s == BF_OK ? APP_EXIT_OK : app_fail("info", s);

@@ -16,7 +16,8 @@ static const char info_usage[] =
     "whose depth or colour repeats the frame before byte for byte (a driver that handed\n"
     "on the last image when a new one was late: no new data, and no motion in it).\n"
     "Of a scene store (replay|live --store): chunks, bricks per level, bytes on disk,\n"
-    "extent, frames, the last pose and any damage found (bad or missing chunk files).\n";
+    "extent, frames, the last pose, the relocalisation keyframes and any damage found\n"
+    "(bad or missing chunk files, an unreadable keyframes.bin).\n";
 
 /* What one pass over the sequence gathers. The depth histogram has one bin
  * per raw value, so the median is exact without keeping any frame. */

@@ -48,6 +48,10 @@ expect 0 "$B" replay "$SEQ" --out "$T/a" --no-mesh --frames 30 --store "$T/S"
 [ -f "$T/S/keyframes.bin" ] || fail "the store keeps no keyframes.bin"
 kf=$(json_get "$T/a/stats.json" "d['store']['keyframes_written']")
 [ "${kf:-0}" -ge 1 ] || fail "stats.json store.keyframes_written is '$kf'"
+expect 0 "$B" info "$T/S" --json
+n=$(json_get "$T/out" "d['keyframes']")
+[ "$n" = "$kf" ] || fail "info: $n keyframes where $kf were written"
+[ "$(json_get "$T/out" "d['keyframe_keypoints'] > 0 and d['keyframes_ok']")" = True ] || fail "info: no keypoints"
 cp -r "$T/S" "$T/N" && rm "$T/N/keyframes.bin"
 cp -r "$T/S" "$T/C"
 printf 'XXXX' | dd of="$T/C/keyframes.bin" bs=1 seek=200 conv=notrunc 2>/dev/null
@@ -84,6 +88,8 @@ expect 0 "$B" replay "$SEQ" --out "$T/o" --no-mesh --store "$T/O" --resume --rel
 cmp -s "$T/S/keyframes.bin" "$T/O/keyframes.bin" || fail "a resume with --reloc off rewrote keyframes.bin"
 
 # A corrupt keyframes.bin is named, and the scan resumes without it.
+expect 0 "$B" info "$T/C"
+grep -q "keyframes.bin unreadable" "$T/out" || fail "info does not report the corrupt keyframes.bin"
 expect 0 "$B" replay "$SEQ" --out "$T/c" --no-mesh --store "$T/C" --resume
 mentions "keyframes.bin"
 [ "$(frame30 "$T/c")" = "lost/" ] || fail "corrupt keyframes.bin: frame 30 is '$(frame30 "$T/c")'"
