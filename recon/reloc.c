@@ -93,6 +93,13 @@ static double angle_deg(const bf_se3 *A, const bf_se3 *B)
 
 static double dist_m(const bf_se3 *A, const bf_se3 *B) { return bf_v3_norm(bf_v3_sub(A->t, B->t)); }
 
+/* Whether p repeats q: within the distance two passing candidates may end
+ * apart and still be one pose (two colour poses that close are one). */
+static bool same_pose(const bf_se3 *p, const bf_se3 *q)
+{
+    return dist_m(p, q) <= RELOC_AMBIGUOUS_M && angle_deg(p, q) <= RELOC_AMBIGUOUS_DEG;
+}
+
 /* Within a keyframe spacing of T: close enough that ICP from one reaches the other. */
 static bool is_near(const recon *r, const bf_se3 *A, const bf_se3 *B)
 {
@@ -403,9 +410,7 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
         out->reloc_rejected++;
         return BF_OK;
     }
-    if (st->has_best && (dist_m(&st->best.T_wc, &t.T_wc) > RELOC_AMBIGUOUS_M ||
-                         angle_deg(&st->best.T_wc, &t.T_wc) > RELOC_AMBIGUOUS_DEG))
-        st->is_ambiguous = true;
+    if (st->has_best && !same_pose(&st->best.T_wc, &t.T_wc)) st->is_ambiguous = true;
     if (!st->has_best || t.inlier_frac > st->best.inlier_frac) {
         st->best = t;
         st->best_kind = kind;
@@ -428,13 +433,6 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
 /* PnP runs on the keyframes with most such matches only, this many per
  * pose asked for: PnP costs about ten times the matching. */
 #define FEATURE_PNP_PER_CANDIDATE 2u
-
-/* Whether p repeats q: within the distance two passing candidates may end
- * apart and still be one pose. */
-static bool same_pose(const bf_se3 *p, const bf_se3 *q)
-{
-    return dist_m(p, q) <= RELOC_AMBIGUOUS_M && angle_deg(p, q) <= RELOC_AMBIGUOUS_DEG;
-}
 
 void recon__keep_pose(recon__colour_pose *best, uint32_t *n, uint32_t cap, const recon__colour_pose *p)
 {

@@ -54,7 +54,7 @@ n=$(json_get "$T/out" "d['keyframes']")
 [ "$(json_get "$T/out" "d['keyframe_keypoints'] > 0 and d['keyframes_ok']")" = True ] || fail "info: no keypoints"
 cp -r "$T/S" "$T/N" && rm "$T/N/keyframes.bin"
 cp -r "$T/S" "$T/C"
-printf 'XXXX' | dd of="$T/C/keyframes.bin" bs=1 seek=200 conv=notrunc 2>/dev/null
+printf '\377\377\377\377' | dd of="$T/C/keyframes.bin" bs=1 seek=200 conv=notrunc 2>/dev/null
 
 # State and source of frame 30, the first of the resumed scan.
 frame30() { awk -F, '$1 == 30 {print $3 "/" $16}' "$1/frames.csv"; }
