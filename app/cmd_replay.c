@@ -103,7 +103,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 30
+#define LOOP_ROWS 31
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -235,6 +235,10 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--photometric", APP_OPT_FLOAT, &tc->photo_weight, "W",
                 "weight of the photometric term in the finest ICP level (the colour of each inlier against the "
                 "reference frame's), relative to a depth residual at 1 m; 0: off"),
+        APP_OPT("--photometric-weak", APP_OPT_FLOAT, &tc->photo_weak_ratio, "R",
+                "the photometric term only in frames whose depth leaves a direction weak (the finest ICP system's "
+                "smallest eigenvalue below R times its largest); 0: in every frame",
+                .max = 1),
         APP_OPT("--photo-sigma", APP_OPT_FLOAT, &tc->photo_sigma, "S",
                 "the photometric term's intensity noise (luma in [0, 1])", .min_open = true, .max = 1),
         APP_OPT("--photo-levels", APP_OPT_U32, &tc->photo_levels, "N",
@@ -653,14 +657,15 @@ static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, cons
 static void csv_frame(bf_out *csv, const bf_frame *f, const recon_frame_result *fr)
 {
     bool ran = recon_state_ran_icp(fr->state);
-    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f,%.3f,%d\n", f->index, f->t_depth_s,
+    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f,%.3f,%d,%d\n", f->index, f->t_depth_s,
             recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
             ran ? fr->track.eig_min / (fr->track.eig_max > 0 ? fr->track.eig_max : 1) : 0.0, fr->ms_frame,
             fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window + fr->fuse.colour, fr->reloc_tried,
             recon_reloc_kind_name(fr->reloc), ran ? fr->track.iterations : 0, ran ? fr->track.residual_sigma : 0.0,
-            fr->ms_stream, ran ? fr->track.photo_sharpness : 0.0, ran ? (int)fr->track.photo_dropped : 0);
+            fr->ms_stream, ran ? fr->track.photo_sharpness : 0.0, ran ? (int)fr->track.photo_dropped : 0,
+            ran ? (int)fr->track.photo_weak : 0);
 }
 
 /* What the replay writes per frame beside the runner's own records. */
@@ -898,7 +903,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (has_csv)
         bf_out_printf(&csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms,"
-                     "photo_sharpness,photo_dropped\n");
+                     "photo_sharpness,photo_dropped,photo_weak\n");
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK && win) s = view_attach(win, ctx);
     if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);

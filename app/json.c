@@ -162,6 +162,7 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     add_float(o, "photo_sigma", c->photo_sigma);
     cJSON_AddNumberToObject(o, "photo_levels", c->photo_levels);
     add_float(o, "photo_sharpness_min", c->photo_sharpness_min);
+    add_float(o, "photo_weak_ratio", c->photo_weak_ratio);
     cJSON_AddNumberToObject(o, "icp_local", c->icp_local);
     cJSON_AddNumberToObject(o, "icp_px_per_thread", c->icp_px_per_thread);
     cJSON_AddBoolToObject(o, "icp_subgroup", c->icp_subgroup);

@@ -310,6 +310,17 @@ static bool photo_dropped(const track_config *c, const icp_sums *s, track_result
     return m > 0 && (ratio < m || ratio * m > 1.0);
 }
 
+/* Whether a frame tracked with photo_weak_ratio needs the term: its
+ * depth-only system leaves a direction weak, and both intensities exist. */
+static bool photo_wanted(const track_tracker *t, const icp_sums *s)
+{
+    if (!(t->cfg.photo_weight > 0) || !t->frame_has_int || !t->ref_has_int) return false;
+    double H[36], g[6], scale[6], w[6], V[36];
+    if (!scaled_system(s, 0, H, g, scale)) return false;
+    bf_sym_eigen(6, H, w, V);
+    return w[5] > 0 && isfinite(w[0]) && w[0] < t->cfg.photo_weak_ratio * w[5];
+}
+
 static double huber_unit_of(const track_config *c, const icp_sums *s)
 {
     double n = s->s[TRACK_SUM_INLIERS], rn = s->s[TRACK_SUM_RN];
@@ -328,9 +339,13 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
     bool have_finest = false;
     double huber_unit = 1.0;
     bool robust = c->huber_k > 0 || c->weight_noise;
-    bool photo = true;
+    /* With a weak ratio the finest level starts on depth alone and the
+     * term comes in only where that leaves a direction weak. */
+    bool weak_only = c->photo_weak_ratio > 0;
+    bool photo = !weak_only, photo_decided = !weak_only;
     res->photo_sharpness = 0;
     res->photo_dropped = false;
+    res->photo_weak = false;
     for (int l = (int)c->levels - 1; l >= 0; l--) {
         double photo_unit = 1.0; /* residuals of a coarser level are smoother */
         for (uint32_t it = 0; it < c->iterations[l]; it++) {
@@ -356,6 +371,15 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
                 }
             }
             res->iterations++;
+            if (!photo_decided && l == 0 && it == 0) {
+                photo_decided = true;
+                if (photo_wanted(t, &sums)) {
+                    photo = true;
+                    res->photo_weak = true;
+                    it--;
+                    continue;
+                }
+            }
             if (photo && l == 0 && it == 0 && photo_dropped(c, &sums, res)) {
                 /* The plain iteration again without the term: its system
                  * also gives the directions the weighted ones keep. */

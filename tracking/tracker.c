@@ -126,6 +126,7 @@ track_config track_config_default(void)
         .photo_sigma = 0.03f,
         .photo_levels = 1,
         .photo_sharpness_min = 0.6f,
+        .photo_weak_ratio = 0.0f,
     };
     return c;
 }
@@ -187,6 +188,8 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (!(c->photo_weight >= 0) || !isfinite(c->photo_weight) || !(c->photo_sigma > 0) || !isfinite(c->photo_sigma))
         return bf_fail(BF_INVALID_ARG, "tracking: photo_weight %g (>= 0) or photo_sigma %g (> 0) out of range",
                        c->photo_weight, c->photo_sigma);
+    if (!(c->photo_weak_ratio >= 0 && c->photo_weak_ratio < 1))
+        return bf_fail(BF_INVALID_ARG, "tracking: photo_weak_ratio %g not in [0, 1)", c->photo_weak_ratio);
     if (!(c->photo_sharpness_min >= 0 && c->photo_sharpness_min <= 1))
         return bf_fail(BF_INVALID_ARG, "tracking: photo_sharpness_min %g (0..1)", c->photo_sharpness_min);
     if (c->photo_levels < 1 || c->photo_levels > TRACK_MAX_LEVELS)

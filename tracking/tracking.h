@@ -106,6 +106,13 @@ typedef struct track_config {
      * two is blurred by the camera's motion and their intensities no longer
      * compare (docs/real_frames.md). Default 0.6; 0: never dropped. */
     float photo_sharpness_min;
+    /* Where the term runs: 0, in every frame; above 0, only in frames whose
+     * geometry leaves a direction weak: the finest level's first system,
+     * solved on depth alone, has its smallest eigenvalue below this times
+     * its largest (the scaled system of icp_subspace). Then that iteration
+     * runs again with the term, and the colour constrains what the depth
+     * cannot (a wall or a floor filling the view). */
+    float photo_weak_ratio;
 } track_config;
 
 track_config track_config_default(void);
@@ -136,6 +143,7 @@ typedef struct track_result {
     double photo_sharpness; /* the frame's intensity gradient energy over the reference's at the photometric
                                term's rows (first finest-level iteration); 0 where the term did not run */
     bool photo_dropped;     /* the term was dropped for this frame (track_config.photo_sharpness_min) */
+    bool photo_weak;        /* the term was brought in for weak geometry (track_config.photo_weak_ratio) */
     uint32_t iterations; /* run in all levels */
     double ms_gpu;       /* GPU time of the tracking (pyramids + ICP), ms */
     double ms_rof;       /* GPU time of the last reference smoothing, ms */
