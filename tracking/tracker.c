@@ -122,11 +122,16 @@ track_config track_config_default(void)
         .icp_subgroup = true,
         /* Level 1's normals at the finest level: less noisy, and as accurate (docs/tracking.md). */
         .parent_normals = true,
-        .photo_weight = 0.0f,
+        /* Kept for frames whose depth leaves a direction weak: there the
+         * colour holds what ICP would leave to the guess, and where the
+         * depth constrains everything the term cost more than it gave
+         * (docs/real_frames.md, "The photometric term where the depth is
+         * weak"). */
+        .photo_weight = 0.3f,
         .photo_sigma = 0.03f,
         .photo_levels = 1,
         .photo_sharpness_min = 0.6f,
-        .photo_weak_ratio = 0.0f,
+        .photo_weak_ratio = 0.01f,
     };
     return c;
 }

@@ -240,9 +240,9 @@ PY
     # colour (an earlier moment's) in the photometric term or the map's colour. With the
     # term on, frames.csv's photo_sharpness is 0 where the term did not run: on that frame
     # (and the next, whose reference it made, if there were one); --repeated track uses it.
-    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgb" $small --photometric 0.3
+    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgb" $small --photometric 0.3 --photometric-weak 0
     grep -q "1 frames repeated only the colour before them" "$T/out" || fail "replay does not report the colour repeat: $(head -c 400 "$T/out")"
-    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgbt" $small --photometric 0.3 --repeated track
+    expect 0 "$B" replay "$T/reprgb" --out "$T/rprgbt" $small --photometric 0.3 --photometric-weak 0 --repeated track
     py - "$T/rprgb" "$T/rprgbt" <<'PY' || fail "replay of a repeated colour"
 import csv, json, sys
 def run(d):
