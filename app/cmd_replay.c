@@ -238,11 +238,13 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--photometric-weak", APP_OPT_FLOAT, &tc->photo_weak_ratio, "R",
                 "the photometric term only in frames whose depth leaves a direction weak (the finest ICP system's "
                 "smallest eigenvalue below R times its largest); 0: in every frame",
-                .max = 1),
+                .max = 0.5),
         APP_OPT("--photo-sigma", APP_OPT_FLOAT, &tc->photo_sigma, "S",
                 "the photometric term's intensity noise (luma in [0, 1])", .min_open = true, .max = 1),
         APP_OPT("--photo-levels", APP_OPT_U32, &tc->photo_levels, "N",
-                "pyramid levels with the photometric term, from the finest (1: the finest only, 3: all)", .min = 1,
+                "pyramid levels with the photometric term, from the finest (1: the finest only, 3: all; with "
+                "--photometric-weak above 0 the finest level decides, so the finest only)",
+                .min = 1,
                 .max = TRACK_MAX_LEVELS),
         APP_OPT("--photo-sharpness", APP_OPT_FLOAT, &tc->photo_sharpness_min, "R",
                 "drop the photometric term for a frame whose intensity gradient energy and the reference's differ "

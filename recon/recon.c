@@ -223,7 +223,7 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     if (s == BF_OK && r->cfg.start_at_frame && (tracked || first)) start_at_frame(r, r->cfg.track.ref_level, &ro);
     if (s == BF_OK) s = fusion_cmd_fuse(r->map, T);
     if (s == BF_OK) s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T, &ro);
-    if (s == BF_OK) s = track_cmd_reference(r->tracker, T);
+    if (s == BF_OK) s = track_cmd_reference(r->tracker, T, true);
     /* The counters fusion copied and the reference's count -> the host. */
     gpu_cmd_barrier(r->ctx, GPU_BARRIER_HOST);
     bf_status sw = gpu_submit_wait(r->ctx);

@@ -287,7 +287,8 @@ static recon_reloc_kind round_entry(const recon *r, uint32_t i, double n, bf_se3
 }
 
 /* The map ray-cast at T_wc as the tracking reference, in a submission of
- * its own (nothing is fused). */
+ * its own (nothing is fused), without a frame's intensity: no frame was
+ * fused there. */
 bf_status recon__cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result *out)
 {
     render_options ro = r->cfg.raycast;
@@ -296,7 +297,7 @@ bf_status recon__cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result
     if (s != BF_OK) return s;
     if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
     s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T_wc, &ro);
-    if (s == BF_OK) s = track_cmd_reference(r->tracker, T_wc);
+    if (s == BF_OK) s = track_cmd_reference(r->tracker, T_wc, false);
     /* The reference's count of valid pixels -> the host. */
     gpu_cmd_barrier(r->ctx, GPU_BARRIER_HOST);
     bf_status sw = gpu_submit_wait(r->ctx);

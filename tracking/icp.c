@@ -343,6 +343,7 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
      * term comes in only where that leaves a direction weak. */
     bool weak_only = c->photo_weak_ratio > 0;
     bool photo = !weak_only, photo_decided = !weak_only;
+    icp_sums plain = {0}; /* the depth-only first finest iteration of a weak frame */
     res->photo_sharpness = 0;
     res->photo_dropped = false;
     res->photo_weak = false;
@@ -374,6 +375,7 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
             if (!photo_decided && l == 0 && it == 0) {
                 photo_decided = true;
                 if (photo_wanted(t, &sums)) {
+                    plain = sums;
                     photo = true;
                     res->photo_weak = true;
                     it--;
@@ -381,12 +383,16 @@ bf_status track__icp_run(track_tracker *t, bf_se3 *T_rc, uint32_t min_valid, tra
                 }
             }
             if (photo && l == 0 && it == 0 && photo_dropped(c, &sums, res)) {
-                /* The plain iteration again without the term: its system
-                 * also gives the directions the weighted ones keep. */
+                /* The plain iteration without the term: its system also
+                 * gives the directions the weighted ones keep. A weak
+                 * frame's was run first and is taken back as it was. */
                 photo = false;
                 res->photo_dropped = true;
-                it--;
-                continue;
+                if (!res->photo_weak) {
+                    it--;
+                    continue;
+                }
+                sums = plain;
             }
             huber_unit = huber_unit_of(c, &sums);
             photo_unit = photo_unit_of(c, &sums);

@@ -359,17 +359,14 @@ static void cmd_reference(track_tracker *t, bool in_place, const bf_se3 *T_wc)
     track__cmd_reference(t, in_place);
 }
 
-bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc)
+bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc, bool with_frame)
 {
     if (!t || !T_wc) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
     bf_status s = check_pose(T_wc);
     if (s != BF_OK) return s;
     cmd_reference(t, true, T_wc);
-    /* The frame just preprocessed is the one the reference is made with
-     * (recon/ fuses it at T_wc and casts there): its intensity is the
-     * reference's. */
-    t->ref_int_pending = t->frame_has_int;
-    if (t->frame_has_int) {
+    t->ref_int_pending = with_frame && t->frame_has_int;
+    if (t->ref_int_pending) {
         /* ICP's reads of both pyramids -> the copy. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
         gpu_cmd_copy(t->ctx, t->frame_int, 0, t->ref_int, 0, (uint64_t)t->geom.n_pix * 4);

@@ -99,7 +99,8 @@ typedef struct track_config {
      * (track_set_frame_colour); 0: off. */
     float photo_weight;
     float photo_sigma;          /* the intensity noise, luma in [0, 1], default 0.03 */
-    uint32_t photo_levels;      /* 1: the finest level only (default), up to levels: all */
+    uint32_t photo_levels;      /* 1: the finest level only (default), up to levels: all; with
+                                   photo_weak_ratio > 0 the finest level decides, so the finest only */
     /* The term is dropped for a frame (its finest level restarted without
      * it) when the frame's intensity gradient energy at the term's rows and
      * the reference's differ by more than this ratio, either way: one of the
@@ -111,7 +112,7 @@ typedef struct track_config {
      * solved on depth alone, has its smallest eigenvalue below this times
      * its largest (the scaled system of icp_subspace). Then that iteration
      * runs again with the term, and the colour constrains what the depth
-     * cannot (a wall or a floor filling the view). */
+     * cannot (a wall or a floor filling the view). Default 0.01. */
     float photo_weak_ratio;
 } track_config;
 
@@ -166,8 +167,14 @@ bf_status track_reference_target(track_tracker *t, gpu_buffer **buf, uint64_t *o
  * commands that wrote the target (they end with a barrier), the reference's
  * preparation seen from T_wc: ROF smoothing on its foreground, then the
  * vertex and normal pyramids. The caller submits, then calls
- * track_finish_reference; until then there is no reference. */
-bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc);
+ * track_finish_reference; until then there is no reference. with_frame:
+ * the frame just preprocessed is the one the reference is made with
+ * (recon/ fuses it at T_wc and casts there), so its intensity becomes the
+ * reference's for the photometric term; false: a reference from the map
+ * alone (a relocalising candidate, a resume) has none: the frame being
+ * searched for would otherwise be compared with its own colour, which fits
+ * at any candidate pose. */
+bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc, bool with_frame);
 /* After the submission holding track_cmd_reference finished: the reference
  * takes effect (its valid pixels counted, its pose kept). */
 bf_status track_finish_reference(track_tracker *t);

@@ -749,7 +749,7 @@ BF_TEST(frame_on_the_gpu_and_reference_in_place_match_the_copying_paths)
     CHECK_OK(gpu_begin(ctx));
     gpu_cmd_copy(ctx, buf, 0, target, target_px * 4, (uint64_t)nh * 4);
     gpu_cmd_barrier(ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    CHECK_OK(track_cmd_reference(t, &T0));
+    CHECK_OK(track_cmd_reference(t, &T0, false));
     gpu_cmd_barrier(ctx, GPU_BARRIER_HOST);
     CHECK_OK(gpu_submit_wait(ctx));
     CHECK_OK(track_finish_reference(t));
@@ -1086,9 +1086,10 @@ static bf_status slot_of(gpu_context *ctx, const uint16_t *depth, const uint8_t 
 
 /* The reference made with frame f (in `slot`) at T, as recon/ makes it:
  * the frame preprocessed, its half-resolution depth standing in for the
- * map's ray-cast, its intensity kept for the photometric term. */
-static bf_status reference_of_slot(gpu_context *ctx, track_tracker *t, gpu_buffer *slot, uint64_t colour_off,
-                                   const bf_se3 *T)
+ * map's ray-cast, its intensity kept for the photometric term unless
+ * with_frame is false (as a relocalising candidate's: no intensity). */
+static bf_status reference_of_slot_as(gpu_context *ctx, track_tracker *t, gpu_buffer *slot, uint64_t colour_off,
+                                      const bf_se3 *T, bool with_frame)
 {
     gpu_buffer *target, *fd;
     uint64_t target_px, fd_px;
@@ -1101,10 +1102,16 @@ static bf_status reference_of_slot(gpu_context *ctx, track_tracker *t, gpu_buffe
     gpu_cmd_barrier(ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_copy(ctx, fd, fd_px * 4, target, target_px * 4, (uint64_t)(K_MID.width / 2) * (K_MID.height / 2) * 4);
     gpu_cmd_barrier(ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    if ((s = track_cmd_reference(t, T)) != BF_OK) return s;
+    if ((s = track_cmd_reference(t, T, with_frame)) != BF_OK) return s;
     gpu_cmd_barrier(ctx, GPU_BARRIER_HOST);
     if ((s = gpu_submit_wait(ctx)) != BF_OK) return s;
     return track_finish_reference(t);
+}
+
+static bf_status reference_of_slot(gpu_context *ctx, track_tracker *t, gpu_buffer *slot, uint64_t colour_off,
+                                   const bf_se3 *T)
+{
+    return reference_of_slot_as(ctx, t, slot, colour_off, T, true);
 }
 
 /* The plane of plane_scene, 8 x 8 m, as a mosaic of 8 cm squares in the
@@ -1195,21 +1202,28 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     CHECK_OK(slot_of(ctx, d0, c0, n, &s0, &off0));
     CHECK_OK(slot_of(ctx, d1, c1, n, &s1, &off1));
     CHECK_OK(slot_of(ctx, d1, cb1, n, &sb1, &offb1));
-    double err[5][2];
-    bf_se3 est[5];
+    enum { N_CASES = 7 };
+    double err[N_CASES][2];
+    bf_se3 est[N_CASES];
     /* Off, on, on through a colour camera that is the depth camera (the
      * distortion path, no distortion): as registered colour, and on with
-     * the second frame's colour blurred: the term is dropped; and only
-     * where the depth leaves a direction weak (photo_weak_ratio), which a
-     * plane does: the term is brought in at the finest level. */
-    for (int photo = 0; photo < 5; photo++) {
+     * the second frame's colour blurred: the term is dropped. Then with the
+     * defaults (weight 0.3, only where the depth leaves a direction weak),
+     * which a plane does: the term is brought in at the finest level; the
+     * same with the frame blurred: brought in, then dropped; and the same
+     * against a reference made without a frame's intensity (a relocalising
+     * candidate's): nothing to compare, so depth alone. */
+    for (int photo = 0; photo < N_CASES; photo++) {
+        bool weak = photo >= 4;
         track_config cfg = test_config(&K_MID);
-        cfg.photo_weight = photo ? 1.0f : 0.0f;
-        cfg.photo_weak_ratio = photo == 4 ? 0.01f : 0.0f;
+        if (!weak) {
+            cfg.photo_weight = photo ? 1.0f : 0.0f;
+            cfg.photo_weak_ratio = 0;
+        }
         /* The drop and the weak test are decided at the finest level
          * (photo_levels 1, the default): coarser levels keep what the term
          * did there. */
-        cfg.photo_levels = photo >= 3 ? 1 : 3;
+        if (!weak) cfg.photo_levels = photo == 3 ? 1 : 3;
         track_tracker *t;
         CHECK_OK(track_create(ctx, &cfg, &K_MID, &t));
         if (photo == 2) {
@@ -1217,9 +1231,10 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
             bf_se3 I = bf_se3_identity();
             CHECK_OK(track_set_colour_camera(t, &K_MID, no_dist, &I));
         }
-        CHECK_OK(reference_of_slot(ctx, t, s0, off0, &T0));
-        gpu_buffer *f1 = photo == 3 ? sb1 : s1;
-        CHECK_OK(track_set_frame_colour(t, f1, photo == 3 ? offb1 : off1));
+        CHECK_OK(reference_of_slot_as(ctx, t, s0, off0, &T0, photo != 6));
+        bool blurred = photo == 3 || photo == 5;
+        gpu_buffer *f1 = blurred ? sb1 : s1;
+        CHECK_OK(track_set_frame_colour(t, f1, blurred ? offb1 : off1));
         track_result r;
         CHECK_OK(track_frame_gpu(t, f1, 0, 1, &T0, &r));
         est[photo] = r.T_wc;
@@ -1230,21 +1245,24 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
         bf_se3_log(&e, xi);
         err[photo][0] = hypot(r.T_wc.t.x - T1.t.x, r.T_wc.t.y - T1.t.y);
         err[photo][1] = fabs(xi[5]) * 180 / M_PI;
-        static const char *what[5] = {"off", "on", "on (colour camera)", "on, frame blurred", "where weak"};
+        static const char *what[N_CASES] = {"off",          "on", "on (colour camera)", "on, frame blurred",
+                                            "where weak", "where weak, frame blurred",
+                                            "where weak, reference without intensity"};
         fprintf(stderr, "  textured floor, photometric %s: %s, degenerate %d, eig ratio %.3g, along the floor %.2f mm, "
                         "about its normal %.3f deg, sharpness %.3f%s%s\n",
                 what[photo], track_outcome_name(r.outcome), r.degenerate, r.eig_min / r.eig_max, 1e3 * err[photo][0],
                 err[photo][1], r.photo_sharpness, r.photo_dropped ? " (term dropped)" : "",
                 r.photo_weak ? " (brought in: weak)" : "");
         CHECK_EQ_INT(r.outcome, TRACK_OK);
-        CHECK_EQ_INT(r.degenerate, photo == 0 || photo == 3);
+        CHECK_EQ_INT(r.degenerate, photo == 0 || photo == 3 || photo == 5 || photo == 6);
         /* The same texture seen 2 cm further: the gradient energies agree
          * (sharpness about 1); a 9-pixel box keeps well under half of the
          * mosaic's edge energy. */
-        CHECK_EQ_INT(r.photo_dropped, photo == 3);
-        CHECK_EQ_INT(r.photo_weak, photo == 4);
+        CHECK_EQ_INT(r.photo_dropped, blurred);
+        CHECK_EQ_INT(r.photo_weak, photo == 4 || photo == 5);
         if (photo == 1 || photo == 2 || photo == 4) CHECK(r.photo_sharpness > 0.8 && r.photo_sharpness < 1.25);
-        if (photo == 3) CHECK(r.photo_sharpness > 0 && r.photo_sharpness < 0.5);
+        if (blurred) CHECK(r.photo_sharpness > 0 && r.photo_sharpness < 0.5);
+        if (photo == 6) CHECK(r.photo_sharpness == 0);
         track_destroy(t);
     }
     /* Off: the guess's 2 cm and 2 degrees stay (degenerate). On: a tenth
@@ -1253,17 +1271,22 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     CHECK(err[0][0] > 0.015 && err[0][1] > 1.5);
     CHECK_LE(err[1][0], 0.0015);
     CHECK_LE(err[1][1], 0.05);
-    /* Brought in at the finest level alone, it reaches the same bounds. */
+    /* Brought in at the finest level alone and at the default weight, it
+     * reaches the same bounds. */
     CHECK_LE(err[4][0], 0.0015);
     CHECK_LE(err[4][1], 0.05);
     double dt, da;
     pose_error(&est[1], &est[2], &dt, &da);
     CHECK_LE(dt, 5e-5);
     CHECK_LE(da, 0.002);
-    /* Dropped, the term leaves the depth-only pose. */
+    /* Dropped, the term leaves the depth-only pose. Brought in and dropped,
+     * or with no intensity to compare, the frame is tracked as without the
+     * term: the same pose, bit for bit. */
     pose_error(&est[0], &est[3], &dt, &da);
     CHECK_LE(dt, 5e-5);
     CHECK_LE(da, 0.002);
+    CHECK(memcmp(&est[0], &est[5], sizeof est[0]) == 0);
+    CHECK(memcmp(&est[0], &est[6], sizeof est[0]) == 0);
     /* Settings out of range are refused at create. */
     track_tracker *bad;
     track_config cb = test_config(&K_MID);
