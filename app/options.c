@@ -372,8 +372,7 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc)
                 "finest octree level (its voxel: the chunk edge / 8 / 2^L, 3.9 mm at level 6 of 2 m chunks)",
                 .max = FUSION_MAX_LEVEL),
         APP_OPT("--colour", APP_OPT_CHOICE, &fc->keep_colour, "on|off",
-                "keep the frames' colour in the map (RGB565 near the surface; coloured mesh, points and views); "
-                "off also leaves the tracker's photometric term without colour"),
+                "keep the frames' colour in the map (RGB565 near the surface; coloured mesh, points and views)"),
         APP_OPT("--colour-frames", APP_OPT_U32, &fc->colour_frames, "N",
                 "frames of each window whose colour is fused", .min = 1, .max = FUSION_COLOUR_MAX_FRAMES),
         APP_OPT_END,

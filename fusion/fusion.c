@@ -122,8 +122,11 @@ bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slo
     uint64_t pixels = (uint64_t)m->K.width * m->K.height;
     memcpy(up + FUSION_FRAME_WORDS * 4, f->depth, pixels * 2);
     if (pixels % 2) memset(up + FUSION_FRAME_WORDS * 4 + pixels * 2, 0, 2);
+    /* The colour goes into the slot whenever the frame has one (the
+     * tracker's photometric term reads it there); it is fused only when the
+     * map keeps colour. */
     m->has_colour_frame = m->cfg.keep_colour && f->rgb;
-    if (m->has_colour_frame) fusion__rgb_to_565(f->rgb, pixels, (uint32_t *)(up + FUSION_FRAME_WORDS * 4 + depth_bytes(m)));
+    if (f->rgb) fusion__rgb_to_565(f->rgb, pixels, (uint32_t *)(up + FUSION_FRAME_WORDS * 4 + depth_bytes(m)));
     bf_status s = gpu_buffer_flush(m->upload);
     if (s != BF_OK) return s;
     m->has_incoming = true;
@@ -132,7 +135,7 @@ bf_status fusion_upload_frame(fusion_map *m, const bf_frame *f, fusion_frame_slo
     if (out)
         *out = (fusion_frame_slot){.depth = m->upload,
                                    .offset = FUSION_FRAME_WORDS * 4,
-                                   .colour = m->has_colour_frame ? m->upload : NULL,
+                                   .colour = f->rgb ? m->upload : NULL,
                                    .colour_offset = FUSION_FRAME_WORDS * 4 + depth_bytes(m)};
     return BF_OK;
 }

@@ -106,9 +106,10 @@ bf_status fusion_add_frame(fusion_map *map, const bf_frame *f, const bf_se3 *T_w
 typedef struct fusion_frame_slot {
     gpu_buffer *depth;
     uint64_t offset;        /* bytes, a multiple of 4 */
-    /* The frame's colour when the map keeps colour and the frame has it:
-     * RGB565 two per word (the lower half first), the depth's size, from
-     * byte colour_offset (a multiple of 4) of colour; else colour is NULL. */
+    /* The frame's colour when it has one (whether or not the map keeps
+     * colour: the tracker's photometric term reads it here too): RGB565 two
+     * per word (the lower half first), the depth's size, from byte
+     * colour_offset (a multiple of 4) of colour; else colour is NULL. */
     gpu_buffer *colour;
     uint64_t colour_offset;
 } fusion_frame_slot;

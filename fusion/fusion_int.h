@@ -52,7 +52,7 @@ struct fusion_map {
     bf_intrinsics Kc;         /* colour camera (when not registered) */
     bf_se3 T_colour_depth;
     double colour_dist[5];    /* its Brown-Conrady distortion, k1 k2 p1 p2 k3 */
-    bool has_colour_frame;    /* the incoming slot holds colour */
+    bool has_colour_frame;    /* the incoming slot's colour is to be fused (the map keeps colour) */
 
     /* Schedule (host side). */
     uint32_t n_frames;        /* frames added */

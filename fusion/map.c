@@ -88,8 +88,8 @@ static bf_status create_buffers(fusion_map *m)
         {&m->counters, "fusion.counters", FUSION_CNT_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
         {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
         {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
-        {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4 * (c->keep_colour ? 2 : 1),
-         GPU_MEMORY_UPLOAD, st},
+        /* Room for the colour whether or not the map keeps it: tracking reads it here. */
+        {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4 * 2, GPU_MEMORY_UPLOAD, st},
         {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + FUSION_MAX_BUCKETS + 1) * 4, GPU_MEMORY_READBACK, st},
         /* Up to 3 band points per pixel wait for a retry pass. */
         {&m->samples, "fusion.retry", (FUSION_QUEUE_ENTRIES + 2 * 3 * pixels) * 4, GPU_MEMORY_DEVICE,
