@@ -354,6 +354,8 @@ static void cmd_reference(track_tracker *t, bool in_place, const bf_se3 *T_wc)
     t->has_ref = false; /* the pyramids are being rewritten */
     t->ref_pending = true;
     t->ref_int_pending = false; /* track_cmd_reference sets it */
+    t->int_kept_pending = t->int_kept; /* and changes what is kept */
+    t->T_int_pending = t->T_int;
     t->ref_first = in_place ? t->cfg.ref_level : 0;
     t->T_wr_pending = *T_wc;
     track__cmd_reference(t, in_place);
@@ -365,8 +367,17 @@ bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc, bool with_fr
     bf_status s = check_pose(T_wc);
     if (s != BF_OK) return s;
     cmd_reference(t, true, T_wc);
-    t->ref_int_pending = with_frame && t->frame_has_int;
+    if (!with_frame) {
+        /* The image kept is what a camera at its pose saw: a reference cast
+         * there again (the last pose, after frames that failed) keeps it;
+         * anywhere else there is nothing to compare with. */
+        t->ref_int_pending = t->int_kept && memcmp(T_wc, &t->T_int, sizeof *T_wc) == 0;
+        return BF_OK;
+    }
+    t->ref_int_pending = t->frame_has_int;
     if (t->ref_int_pending) {
+        t->int_kept_pending = true;
+        t->T_int_pending = *T_wc;
         /* ICP's reads of both pyramids -> the copy. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
         gpu_cmd_copy(t->ctx, t->frame_int, 0, t->ref_int, 0, (uint64_t)t->geom.n_pix * 4);
@@ -390,6 +401,8 @@ bf_status track_finish_reference(track_tracker *t)
     t->has_ref = n >= min_valid(t, t->ref_first);
     t->ref_has_int = t->ref_int_pending;
     t->ref_int_pending = false;
+    t->int_kept = t->int_kept_pending;
+    t->T_int = t->T_int_pending;
     t->T_wr = nearest_rigid(&t->T_wr_pending);
     return BF_OK;
 }

@@ -171,9 +171,10 @@ bf_status track_reference_target(track_tracker *t, gpu_buffer **buf, uint64_t *o
  * the frame just preprocessed is the one the reference is made with
  * (recon/ fuses it at T_wc and casts there), so its intensity becomes the
  * reference's for the photometric term; false: a reference from the map
- * alone (a relocalising candidate, a resume) has none: the frame being
- * searched for would otherwise be compared with its own colour, which fits
- * at any candidate pose. */
+ * alone (a relocalising candidate, a resume) keeps the intensity of the
+ * last frame made one only if T_wc is exactly that frame's pose, and else
+ * has none: the frame being searched for would otherwise be compared with
+ * its own colour (or another pose's), which fits at any candidate pose. */
 bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc, bool with_frame);
 /* After the submission holding track_cmd_reference finished: the reference
  * takes effect (its valid pixels counted, its pose kept). */

@@ -46,6 +46,11 @@ struct track_tracker {
     bf_se3 T_colour_depth;     /* and pose */
     bool frame_has_int;        /* frame_int holds the last preprocessed frame's intensity */
     bool ref_has_int, ref_int_pending; /* ref_int holds the reference frame's (pending: being copied) */
+    /* ref_int's image was seen from T_int (kept while no frame replaces
+     * it): a reference cast from the map alone at exactly that pose keeps
+     * it (track_cmd_reference); pending until the reference finishes. */
+    bool int_kept, int_kept_pending;
+    bf_se3 T_int, T_int_pending;
     gpu_buffer *partials;      /* icp_groups_max * TRACK_PARTIAL_WORDS floats */
 
     gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp, *p_int;

@@ -253,7 +253,13 @@ assert [r["state"] for r in rows] == ["first", "tracked", "tracked"], [r["state"
 assert float(rows[1]["photo_sharpness"]) > 0 and float(rows[2]["photo_sharpness"]) == 0, rows
 t, rows = run(sys.argv[2])
 assert t["colour_repeated"] == 0 and float(rows[2]["photo_sharpness"]) > 0, (t, rows)
+# In every frame (--photometric-weak 0): none is marked as brought in for weak depth.
+assert all(r["photo_weak"] == "0" for r in rows), rows
+assert json.load(open(sys.argv[2] + "/stats.json"))["config"]["track"]["photo_weak_ratio"] == 0
 PY
+    # The weak ratio is a share of the largest eigenvalue: above 0.5 is refused by name.
+    expect 2 "$B" replay "$T/reprgb" --out "$T/rpweak" $small --photometric-weak 0.7
+    mentions "--photometric-weak"
     # fuse at known poses: a repeated depth is not fused (its pose has moved on), unless
     # --repeated fuse; a colour repeated alone is fused without its colour.
     fused_are() { # DIR FRAMES REPEATED COLOUR_REPEATED

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "gpu_fixture.h"
+#include "mosaic_scene.h"
 #include "recon_fixture.h"
 #include "recon/recon.h"
 
@@ -379,6 +380,66 @@ BF_TEST(a_camera_turned_away_in_the_gap_is_never_placed_wrong)
     fprintf(stderr, "  %u good after the gap, %u candidates rejected by the check%s\n", good, rejected,
             rejected ? " (the wrong minimum was reached and turned down)" : "");
     CHECK_LE(surface_p90(&sc, &o.points), 0.02);
+    mesh_free(&o.points);
+    synth_scene_free(&sc);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
+/* Frames 6-10 of the textured floor lose their depth (a covered lens):
+ * six intervals, more than the motion gate's cap of four, so the frame
+ * after the gap is searched for from candidate poses. */
+static void floor_gap(uint32_t k, uint16_t *depth)
+{
+    if (k >= 6 && k <= 10) memset(depth, 0, (size_t)W * H * 2);
+}
+
+/* A candidate is checked against the map cast at its pose. Only at the
+ * last good pose is there an image to compare the frame's colour with (the
+ * last fused frame's, kept with the reference); elsewhere the frame would
+ * be compared with its own colour or another pose's, which fit anywhere
+ * (test_tracking checks that contract). The camera slides along the
+ * textured floor (8 mm a frame), loses its depth for frames 6-10 and stops
+ * at frame 8's pose: the last pose is 24 mm short of it, the
+ * constant-velocity candidate 24 mm past it, and on depth alone every
+ * candidate is degenerate. Without colour candidates (features 0), the
+ * last pose's candidate, compared with the kept colour, finds it. */
+BF_TEST(after_a_gap_on_a_textured_floor_the_last_pose_keeps_its_colour)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    synth_scene sc;
+    bf_se3 T0;
+    CHECK_OK(mosaic_scene(&sc, &T0));
+    enum { N = 16, GAP = 6, AFTER = 11, STOP = 8 };
+    bf_se3 truth[N];
+    for (uint32_t k = 0; k < N; k++) {
+        uint32_t m = k < STOP ? k : STOP;
+        bf_se3 D = bf_se3_from_qt(bf_quat_identity(), bf_v3(0.008 * m, 0, 0));
+        truth[k] = bf_se3_mul(&D, &T0);
+    }
+    recon_run_config cfg = fixture_run_config();
+    cfg.loop.reloc.features = 0;
+    static run_out o;
+    memset(&o, 0, sizeof o);
+    bf_se3 I = bf_se3_identity();
+    CHECK_OK(run_loop_colour(ctx, &cfg, &sc, truth, N, &I, floor_gap, &o));
+    uint32_t tried = 0;
+    fprintf(stderr, "  textured floor after the gap:");
+    for (uint32_t k = AFTER; k < N; k++) {
+        tried += o.fr[k].reloc_tried;
+        fprintf(stderr, " %u:%s%s%s (%.0f mm)", k, recon_state_name(o.fr[k].state), o.fr[k].reloc ? "/" : "",
+                recon_reloc_kind_name(o.fr[k].reloc), 1e3 * trans_dist(&o.est[k], &truth[k]));
+        /* Placed only where it is: within tracking's bound of the truth. */
+        if (is_good(&o.fr[k])) CHECK_LE(trans_dist(&o.est[k], &truth[k]), 0.005);
+    }
+    fprintf(stderr, "; %u candidates tried\n", tried);
+    for (uint32_t k = 0; k < GAP; k++) CHECK(is_good(&o.fr[k]));
+    /* Searched for (the gap is beyond the gate's cap) and found at once. */
+    CHECK(tried >= 1);
+    CHECK_EQ_INT(o.fr[AFTER].state, RECON_RELOCALISED);
+    CHECK_EQ_INT(o.fr[AFTER].reloc, RECON_RELOC_LAST);
+    for (uint32_t k = AFTER; k < N; k++) CHECK(is_good(&o.fr[k]));
     mesh_free(&o.points);
     synth_scene_free(&sc);
     GPU_FIXTURE_CHECK_CLEAN(ctx);

@@ -1168,9 +1168,10 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     CHECK_OK(slot_of(ctx, d0, c0, n, &s0, &off0));
     CHECK_OK(slot_of(ctx, d1, c1, n, &s1, &off1));
     CHECK_OK(slot_of(ctx, d1, cb1, n, &sb1, &offb1));
-    enum { N_CASES = 7 };
+    enum { N_CASES = 9 };
     double err[N_CASES][2];
     bf_se3 est[N_CASES];
+    uint32_t iters[N_CASES];
     /* Off, on, on through a colour camera that is the depth camera (the
      * distortion path, no distortion): as registered colour, and on with
      * the second frame's colour blurred: the term is dropped. Then with the
@@ -1178,7 +1179,10 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
      * which a plane does: the term is brought in at the finest level; the
      * same with the frame blurred: brought in, then dropped; and the same
      * against a reference made without a frame's intensity (a relocalising
-     * candidate's): nothing to compare, so depth alone. */
+     * candidate's): nothing to compare, so depth alone. A reference cast
+     * from the map alone at exactly the pose of the last frame that made
+     * one keeps that frame's intensity (the term comes in); 1 cm away it
+     * has none. */
     for (int photo = 0; photo < N_CASES; photo++) {
         bool weak = photo >= 4;
         track_config cfg = test_config(&K_MID);
@@ -1197,13 +1201,22 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
             bf_se3 I = bf_se3_identity();
             CHECK_OK(track_set_colour_camera(t, &K_MID, no_dist, &I));
         }
-        CHECK_OK(reference_of_slot_as(ctx, t, s0, off0, &T0, photo != 6));
+        if (photo >= 7) {
+            /* The frame fused at T0 first, then the map alone cast again. */
+            CHECK_OK(reference_of_slot(ctx, t, s0, off0, &T0));
+            bf_se3 T_cast = T0;
+            if (photo == 8) T_cast.t.x += 0.01;
+            CHECK_OK(reference_of_slot_as(ctx, t, s0, off0, &T_cast, false));
+        } else {
+            CHECK_OK(reference_of_slot_as(ctx, t, s0, off0, &T0, photo != 6));
+        }
         bool blurred = photo == 3 || photo == 5;
         gpu_buffer *f1 = blurred ? sb1 : s1;
         CHECK_OK(track_set_frame_colour(t, f1, blurred ? offb1 : off1));
         track_result r;
         CHECK_OK(track_frame_gpu(t, f1, 0, 1, &T0, &r));
         est[photo] = r.T_wc;
+        iters[photo] = r.iterations;
         /* The error along the floor (world z is its normal): the camera's
          * position in x, y and its heading about z. */
         bf_se3 T1i = bf_se3_inverse(&T1), e = bf_se3_mul(&r.T_wc, &T1i);
@@ -1213,22 +1226,25 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
         err[photo][1] = fabs(xi[5]) * 180 / M_PI;
         static const char *what[N_CASES] = {"off",          "on", "on (colour camera)", "on, frame blurred",
                                             "where weak", "where weak, frame blurred",
-                                            "where weak, reference without intensity"};
+                                            "where weak, reference without intensity",
+                                            "where weak, cast again at the kept pose",
+                                            "where weak, cast 1 cm from the kept pose"};
         fprintf(stderr, "  textured floor, photometric %s: %s, degenerate %d, eig ratio %.3g, along the floor %.2f mm, "
                         "about its normal %.3f deg, sharpness %.3f%s%s\n",
                 what[photo], track_outcome_name(r.outcome), r.degenerate, r.eig_min / r.eig_max, 1e3 * err[photo][0],
                 err[photo][1], r.photo_sharpness, r.photo_dropped ? " (term dropped)" : "",
                 r.photo_weak ? " (brought in: weak)" : "");
         CHECK_EQ_INT(r.outcome, TRACK_OK);
-        CHECK_EQ_INT(r.degenerate, photo == 0 || photo == 3 || photo == 5 || photo == 6);
+        CHECK_EQ_INT(r.degenerate, photo == 0 || photo == 3 || photo == 5 || photo == 6 || photo == 8);
         /* The same texture seen 2 cm further: the gradient energies agree
          * (sharpness about 1); a 9-pixel box keeps well under half of the
          * mosaic's edge energy. */
         CHECK_EQ_INT(r.photo_dropped, blurred);
-        CHECK_EQ_INT(r.photo_weak, photo == 4 || photo == 5);
-        if (photo == 1 || photo == 2 || photo == 4) CHECK(r.photo_sharpness > 0.8 && r.photo_sharpness < 1.25);
+        CHECK_EQ_INT(r.photo_weak, photo == 4 || photo == 5 || photo == 7);
+        if (photo == 1 || photo == 2 || photo == 4 || photo == 7)
+            CHECK(r.photo_sharpness > 0.8 && r.photo_sharpness < 1.25);
         if (blurred) CHECK(r.photo_sharpness > 0 && r.photo_sharpness < 0.5);
-        if (photo == 6) CHECK(r.photo_sharpness == 0);
+        if (photo == 6 || photo == 8) CHECK(r.photo_sharpness == 0);
         track_destroy(t);
     }
     /* Off: the guess's 2 cm and 2 degrees stay (degenerate). On: a tenth
@@ -1253,6 +1269,11 @@ BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
     CHECK_LE(da, 0.002);
     CHECK(memcmp(&est[0], &est[5], sizeof est[0]) == 0);
     CHECK(memcmp(&est[0], &est[6], sizeof est[0]) == 0);
+    /* Brought in and dropped, the depth-only first iteration is taken back,
+     * not run a third time. */
+    CHECK_EQ_INT(iters[5], iters[0] + 1);
+    /* Cast again at the kept pose: the same as the frame's own reference. */
+    CHECK(memcmp(&est[4], &est[7], sizeof est[0]) == 0);
     /* Settings out of range are refused at create. */
     track_tracker *bad;
     track_config cb = test_config(&K_MID);
