@@ -114,10 +114,10 @@ typedef struct fusion_frame_slot {
     uint64_t colour_offset;
 } fusion_frame_slot;
 
-/* Writes f's depth into the incoming slot (a host copy; no GPU work) and
- * says where it is (out may be NULL). It stays there until the next upload;
- * readers must have finished with it before then. Depth must have K's size
- * (BF_INVALID_ARG). */
+/* Writes f's depth (and its colour, when it has one) into the incoming
+ * slot (a host copy; no GPU work) and says where it is (out may be NULL).
+ * It stays there until the next upload; readers must have finished with it
+ * before then. Depth must have K's size (BF_INVALID_ARG). */
 bf_status fusion_upload_frame(fusion_map *map, const bf_frame *f, fusion_frame_slot *out);
 /* Records, into the context's open command buffer (gpu_begin), the fusion
  * of the uploaded frame seen from T_wc: its copy into the ring, allocation,

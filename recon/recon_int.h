@@ -86,7 +86,9 @@ void recon__keep_pose(recon__colour_pose *best, uint32_t *n, uint32_t cap, const
  * out->track.T_wc is the pose and out->reloc its candidate; else
  * out->track is the best candidate's result (or untouched when none ran). */
 /* The map ray-cast at T_wc as the tracking reference, in a submission of
- * its own (nothing is fused); its time is added to out->ms_raycast. */
+ * its own (nothing is fused); its time is added to out->ms_raycast. It has
+ * the last fused frame's intensity only at exactly that frame's pose
+ * (track_cmd_reference with_frame false). */
 bf_status recon__cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result *out);
 bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n, recon_reloc_kind skip,
                         recon_frame_result *out, bool *found);

@@ -287,8 +287,9 @@ static recon_reloc_kind round_entry(const recon *r, uint32_t i, double n, bf_se3
 }
 
 /* The map ray-cast at T_wc as the tracking reference, in a submission of
- * its own (nothing is fused), without a frame's intensity: no frame was
- * fused there. */
+ * its own (nothing is fused). No frame was fused there: the intensity the
+ * photometric term compares with is kept only at the last fused frame's
+ * own pose (track_cmd_reference). */
 bf_status recon__cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result *out)
 {
     render_options ro = r->cfg.raycast;

@@ -1115,12 +1115,6 @@ static bf_status reference_of_slot(gpu_context *ctx, track_tracker *t, gpu_buffe
     return reference_of_slot_as(ctx, t, slot, colour_off, T, true);
 }
 
-/* A textured floor: its shape leaves the slides along it and the turn about
- * its normal to the guess (the test above); with the photometric term its
- * texture pins them. Every level uses the term here, as the 2 cm step spans
- * 3 pixels at the finest one. (synth's wooden floor has gaps thinner than a
- * pixel, rendered without antialiasing: they flicker from view to view, and
- * the term followed them to a wrong pose.) */
 /* A horizontal box blur of odd length len, RGB8, clamped at the edges. */
 static void box_blur_rows(const uint8_t *src, uint8_t *dst, uint32_t w, uint32_t h, int len)
 {
@@ -1139,6 +1133,13 @@ static void box_blur_rows(const uint8_t *src, uint8_t *dst, uint32_t w, uint32_t
     }
 }
 
+/* A textured floor: its shape leaves the slides along it and the turn about
+ * its normal to the guess (the test above); with the photometric term its
+ * texture pins them. The "on" cases use the term at every level, as the 2 cm
+ * step spans 3 pixels at the finest one; with the defaults the finest level
+ * decides and alone uses it. (synth's wooden floor has gaps thinner than a
+ * pixel, rendered without antialiasing: they flicker from view to view, and
+ * the term followed them to a wrong pose.) */
 BF_TEST(photometric_term_tracks_a_slide_along_a_textured_plane)
 {
     gpu_context *ctx;
