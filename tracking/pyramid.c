@@ -253,6 +253,14 @@ void track__cmd_frame_pyramid(track_tracker *t)
     track__stage_end(t);
 }
 
+/* The intensity levels the term reads: photo_levels, or the finest alone
+ * where the finest level decides (photo_weak_ratio). */
+uint32_t track__int_levels(const track_tracker *t)
+{
+    uint32_t n = t->cfg.photo_weak_ratio > 0 ? 1 : t->cfg.photo_levels;
+    return n < TRACK_LEVELS ? n : TRACK_LEVELS;
+}
+
 void track__cmd_frame_intensity(track_tracker *t)
 {
     track_intensity_push pc = {
@@ -275,7 +283,7 @@ void track__cmd_frame_intensity(track_tracker *t)
     /* The depth pyramid's last barrier made level 0's depth readable. */
     gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE),
                      gpu_groups(pc.height, TRACK_IMAGE_TILE), 1);
-    for (uint32_t l = 1; l < TRACK_LEVELS; l++) {
+    for (uint32_t l = 1; l < track__int_levels(t); l++) {
         /* Level l - 1's writes -> level l's block reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
         pc.mode = TRACK_INT_DOWN;

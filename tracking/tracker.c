@@ -380,7 +380,9 @@ bf_status track_cmd_reference(track_tracker *t, const bf_se3 *T_wc, bool with_fr
         t->T_int_pending = *T_wc;
         /* ICP's reads of both pyramids -> the copy. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
-        gpu_cmd_copy(t->ctx, t->frame_int, 0, t->ref_int, 0, (uint64_t)t->geom.n_pix * 4);
+        uint32_t nl = track__int_levels(t);
+        uint64_t px = (uint64_t)t->geom.off[nl - 1] + (uint64_t)t->geom.w[nl - 1] * t->geom.h[nl - 1];
+        gpu_cmd_copy(t->ctx, t->frame_int, 0, t->ref_int, 0, px * 4);
         /* The copy -> the next frame's ICP. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
     }

@@ -95,6 +95,7 @@ void track__cmd_frame_pyramid(track_tracker *t);
 /* Records the frame's intensity pyramid from its colour (t->colour, bound
  * into b_int by the caller) after its depth pyramid. */
 void track__cmd_frame_intensity(track_tracker *t);
+uint32_t track__int_levels(const track_tracker *t); /* intensity levels made: those the term reads */
 /* Records the reference: the count of its valid pixels cleared, depth
  * conversion from the upload (in_place false: a raw frame) or in place at
  * ref_level (a GPU reference), ROF smoothing (its own timed stage
