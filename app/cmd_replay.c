@@ -591,6 +591,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddNumberToObject(tr, "repeated", c->repeated);
     cJSON_AddNumberToObject(tr, "colour_repeated", c->colour_repeated);
     cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
+    cJSON_AddNumberToObject(tr, "photo_weak", c->photo_weak);
     cJSON_AddNumberToObject(tr, "pool_full", c->pool_full);
     app_json_series(tr, "inlier_fraction", &t->inlier_frac);
     app_json_series(tr, "residual_mm", &t->residual_mm);
@@ -815,6 +816,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (c->colour_repeated)
         printf("  input            %u frames repeated only the colour before them: tracked and fused without it\n",
                c->colour_repeated);
+    if (c->photo_weak)
+        printf("  colour           %u frames whose depth left a direction weak were held by the photometric term\n",
+               c->photo_weak);
     if (r->run.source_status != BF_OK)
         printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
     if (r->has_capture)

@@ -265,6 +265,7 @@ static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_
     recon__good_frame(r, f, T_new, !out->track.degenerate);
     r->counts.tracked++;
     if (state == RECON_RELOCALISED) r->counts.relocalised++;
+    if (out->track.photo_weak) r->counts.photo_weak++;
     return fuse_and_reference(r, f, T_new, true, NULL, out);
 }
 

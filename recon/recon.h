@@ -233,6 +233,8 @@ typedef struct recon_counts {
     uint32_t repeated;    /* frames whose depth repeated the previous one's (skip_repeated) */
     uint32_t colour_repeated; /* frames whose colour alone repeated: tracked and fused on depth alone */
     uint32_t relocalised; /* frames found again by a search (also counted in tracked) */
+    uint32_t photo_weak;  /* good frames whose depth left a direction weak: the photometric term came in
+                             (track_config.photo_weak_ratio) */
     uint32_t keyframes;   /* keyframes held now */
 } recon_counts;
 recon_counts recon_get_counts(const recon *r);

@@ -254,7 +254,7 @@ assert float(rows[1]["photo_sharpness"]) > 0 and float(rows[2]["photo_sharpness"
 t, rows = run(sys.argv[2])
 assert t["colour_repeated"] == 0 and float(rows[2]["photo_sharpness"]) > 0, (t, rows)
 # In every frame (--photometric-weak 0): none is marked as brought in for weak depth.
-assert all(r["photo_weak"] == "0" for r in rows), rows
+assert all(r["photo_weak"] == "0" for r in rows) and t["photo_weak"] == 0, (t, rows)
 assert json.load(open(sys.argv[2] + "/stats.json"))["config"]["track"]["photo_weak_ratio"] == 0
 PY
     # The weak ratio is a share of the largest eigenvalue: above 0.5 is refused by name.

@@ -274,6 +274,8 @@ BF_TEST(a_slide_along_a_textured_floor_is_followed_by_its_colour)
      * none is left degenerate, and the slide is followed to within a few
      * millimetres over 12.8 cm (one pair of frames: 0.45 mm, test_tracking). */
     CHECK_EQ_INT(weak[0], N - 1);
+    CHECK_EQ_INT(o[0].counts.photo_weak, N - 1);
+    CHECK_EQ_INT(o[1].counts.photo_weak, 0);
     CHECK_EQ_INT(o[0].counts.degenerate, 0);
     CHECK_LE(worst[0], 0.005);
     CHECK_LE(rot_dist_deg(&o[0].est[N - 1], &truth[N - 1]), 0.1);
