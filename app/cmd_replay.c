@@ -817,7 +817,7 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
         printf("  input            %u frames repeated only the colour before them: tracked and fused without it\n",
                c->colour_repeated);
     if (c->photo_weak)
-        printf("  colour           %u frames whose depth left a direction weak were held by the photometric term\n",
+        printf("  photometric      %u frames whose depth left a direction weak were held by their colour\n",
                c->photo_weak);
     if (r->run.source_status != BF_OK)
         printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
