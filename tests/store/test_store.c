@@ -589,19 +589,16 @@ BF_TEST(store_writer_writes_keyframes_with_the_next_map)
     CHECK_OK(store_writer_open(dir, false, &w));
     store_writer_keyframes(w, &k);
     CHECK_EQ_INT(k.n, 0); /* taken */
-    CHECK_OK(copy_map(&a, &c));
-    CHECK_OK(store_writer_submit(w, &c, &meta, &t));
-    CHECK_OK(store_writer_finish(w));
-    CHECK_OK(store_keyframes_read(dir, &back));
-    CHECK(keyframes_equal(&back, &kept));
-    store_keyframes_free(&back);
-    /* Another map, no new keyframes: the file stays. */
-    CHECK_OK(copy_map(&a, &c));
-    CHECK_OK(store_writer_submit(w, &c, &meta, &t));
-    CHECK_OK(store_writer_finish(w));
-    CHECK_OK(store_keyframes_read(dir, &back));
-    CHECK(keyframes_equal(&back, &kept));
-    store_keyframes_free(&back);
+    /* The map that takes them, then another map with no new keyframes:
+     * after each the file holds them. */
+    for (int round = 0; round < 2; round++) {
+        CHECK_OK(copy_map(&a, &c));
+        CHECK_OK(store_writer_submit(w, &c, &meta, &t));
+        CHECK_OK(store_writer_finish(w));
+        CHECK_OK(store_keyframes_read(dir, &back));
+        CHECK(keyframes_equal(&back, &kept));
+        store_keyframes_free(&back);
+    }
     /* Keyframes handed over and never followed by a map are freed with the writer. */
     CHECK_OK(make_keyframes(&k, 2));
     store_writer_keyframes(w, &k);
