@@ -155,6 +155,22 @@ void calib_undistort_rgb8(const calib_undistort_map *m, const uint8_t *src, uint
 /* Whether any coefficient is non-zero. */
 bool calib_has_distortion(const double dist[CALIB_DIST_N]);
 
+/* ------------------------------------------------------------ depth seen from the colour camera (register.c) */
+
+/* The depth camera's points as a separate colour camera sees them: for
+ * each pixel of the colour camera's w x h image, the point of depth (Kd;
+ * Kd->depth_scale raw units a metre) that the colour camera sees there,
+ * in the depth camera's frame (x y z floats, NaN where none). Each depth
+ * pixel's point is moved into the colour camera (p_colour =
+ * T_colour_depth p_depth) and projected through its lens
+ * (calib_project); a colour pixel takes, of the points landing within 0.9
+ * pixel of its centre along both axes and not hidden behind the nearest of
+ * them (by 3% of the depth or 1 cm), the one landing nearest its centre.
+ * What is found in the colour camera's own image (ORB keypoints) is then
+ * lifted as if the device had registered the two. xyz: w x h x 3 floats. */
+bf_status calib_points_on_colour(const calib_camera *colour, const bf_se3 *T_colour_depth, const bf_intrinsics *Kd,
+                                 const uint16_t *depth, uint32_t w, uint32_t h, float *xyz);
+
 /* ------------------------------------------------------------ depth correction (depth.c, depth_json.c) */
 
 /* The depth camera's fixed error pattern (vertical bands and a slow bowl of
