@@ -64,7 +64,7 @@ bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, c
     const features_pnp_config pc = {.ransac_px = cfg->ransac_px, .ransac_iterations = cfg->ransac_iterations,
                                     .min_inliers = cfg->min_inliers};
     features_pnp_result r;
-    s = features_pnp(lifted, b->f, K, &pc, &r);
+    s = features_pnp(lifted, b->f, K, NULL, &pc, &r);
     features_free(lifted);
     if (s != BF_OK) return s;
     out->n_matches = r.n_matches;

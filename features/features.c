@@ -55,6 +55,18 @@ bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_i
     return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_lift", msg);
 }
 
+bf_status features_lift_points(const features_set *f, const float *xyz, uint32_t w, uint32_t h, float min_m,
+                               float max_m, bool keep_image, features_set **out)
+{
+    if (!out) return bf_fail(BF_INVALID_ARG, "features_lift_points: no output");
+    *out = NULL;
+    if (!f || !xyz || !w || !h || w > 65535 || h > 65535)
+        return bf_fail(BF_INVALID_ARG, "features_lift_points: missing input or no image (%ux%u)", w, h);
+    char msg[256];
+    int rc = features__lift_points(f, xyz, (int)w, (int)h, min_m, max_m, keep_image, out, msg, sizeof msg);
+    return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_lift_points", msg);
+}
+
 bf_status features_export_lifted(const features_set *f, uint32_t *n, uint8_t **desc, float **xyz)
 {
     if (!f || !n || !desc || !xyz) return bf_fail(BF_INVALID_ARG, "features_export_lifted: missing input or output");
@@ -96,7 +108,7 @@ bf_status features_match_count(const features_set *a, const features_set *b, uin
     return rc == FEATURES__OK ? BF_OK : cv_status(rc, "features_match_count", msg);
 }
 
-bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K,
+bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K, const double *dist,
                        const features_pnp_config *cfg, features_pnp_result *out)
 {
     if (!out) return bf_fail(BF_INVALID_ARG, "features_pnp: no output");
@@ -104,10 +116,12 @@ bf_status features_pnp(const features_set *a, const features_set *b, const bf_in
     if (!a || !b || !K || !cfg || !(K->fx_px > 0) || !(K->fy_px > 0) || !(cfg->ransac_px > 0) ||
         !cfg->ransac_iterations || cfg->ransac_iterations > (uint32_t)INT32_MAX || cfg->max_hamming > 256)
         return bf_fail(BF_INVALID_ARG, "features_pnp: missing input, a camera without focal length or no RANSAC");
+    for (int i = 0; dist && i < 5; i++)
+        if (!isfinite(dist[i])) return bf_fail(BF_INVALID_ARG, "features_pnp: lens coefficient %d not finite", i);
     const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
     features__pnp_out r;
     char msg[256];
-    int rc = features__pnp(a, b, Kd, cfg->ransac_px, (int)cfg->ransac_iterations, (int)cfg->max_hamming, cfg->fast, &r,
+    int rc = features__pnp(a, b, Kd, dist, cfg->ransac_px, (int)cfg->ransac_iterations, (int)cfg->max_hamming, cfg->fast, &r,
                            msg, sizeof msg);
     if (rc != FEATURES__OK) return cv_status(rc, "features_pnp", msg);
     out->n_matches = r.n_matches;

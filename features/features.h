@@ -40,6 +40,14 @@ size_t features_bytes(const features_set *f);
 bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_intrinsics *K, float min_m,
                         float max_m, bool keep_image, features_set **out);
 
+/* The same from points already found for the image's pixels: each
+ * keypoint takes the point xyz holds at its nearest pixel (w x h x 3
+ * floats, NaN: none; calib_points_on_colour's, where the colour camera is
+ * not the depth camera, so the points are in the depth camera's frame)
+ * where that point's z lies in [min_m, max_m]. */
+bf_status features_lift_points(const features_set *f, const float *xyz, uint32_t w, uint32_t h, float min_m,
+                               float max_m, bool keep_image, features_set **out);
+
 /* The keypoints of a lifted set f that have a point, as plain arrays: *n
  * ORB descriptors of 32 bytes (*desc) and points x y z in the camera
  * (*xyz, floats), both malloc'd (NULL when none): what a store keeps of
@@ -79,11 +87,12 @@ typedef struct features_pnp_result {
 bf_status features_match_count(const features_set *a, const features_set *b, uint32_t max_hamming, uint32_t *n);
 
 /* The pose of b's camera against a's lifted points (a from features_lift,
- * b from features_detect_rgb; one camera K for both): matches (cfg->fast
- * says which), then, when both kept their images, each match placed again
- * in b by Lucas-Kanade, then EPnP in RANSAC and Levenberg-Marquardt on
- * the inliers. */
-bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K,
+ * b from features_detect_rgb; b's keypoints seen by camera K with the
+ * lens dist, k1 k2 p1 p2 k3 as OpenCV orders them, NULL: none): matches
+ * (cfg->fast says which), then, when both kept their images, each match
+ * placed again in b by Lucas-Kanade, then EPnP in RANSAC and
+ * Levenberg-Marquardt on the inliers. */
+bf_status features_pnp(const features_set *a, const features_set *b, const bf_intrinsics *K, const double *dist,
                        const features_pnp_config *cfg, features_pnp_result *out);
 
 #endif

@@ -85,37 +85,63 @@ extern "C" size_t features__bytes(const features_set *f)
            f->pts.capacity() * sizeof(cv::Point3d) + f->grey.total() * f->grey.elemSize();
 }
 
+namespace {
+
+// A copy of f (its keypoints, descriptors and, on request, its image)
+// whose keypoints each take the point point_of gives them (NaN: none).
+template <class PointOf> features_set *lifted_copy(const features_set *f, int keep_image, PointOf point_of)
+{
+    features_set *l = new features_set;
+    try {
+        l->keys = f->keys;
+        l->desc = f->desc.clone();
+        if (keep_image) l->grey = f->grey;
+        l->pts.reserve(f->keys.size());
+        for (const cv::KeyPoint &k : f->keys) l->pts.push_back(point_of(k));
+    } catch (...) {
+        delete l;
+        throw;
+    }
+    return l;
+}
+
+const double nan_d = std::numeric_limits<double>::quiet_NaN();
+
+} // namespace
+
 extern "C" int features__lift(const features_set *f, const uint16_t *depth, int w, int h, double scale,
                               const double K[4], double min_m, double max_m, int keep_image, features_set **out,
                               char *msg, size_t cap)
 {
     *out = nullptr;
     return guarded(msg, cap, [&]() -> int {
-        features_set *l = new features_set;
-        try {
-            l->keys = f->keys;
-            l->desc = f->desc.clone();
-            if (keep_image) l->grey = f->grey;
-            const double nan = std::numeric_limits<double>::quiet_NaN();
-            l->pts.reserve(f->keys.size());
-            for (const cv::KeyPoint &k : f->keys) {
-                int u = (int)std::lround(k.pt.x), v = (int)std::lround(k.pt.y);
-                float z = 0.0f;
-                if (u >= 0 && v >= 0 && u < w && v < h) {
-                    float m = (float)(depth[(size_t)v * (size_t)w + (size_t)u] / scale);
-                    if (m >= min_m && m <= max_m) z = m;
-                }
-                if (!(z > 0)) {
-                    l->pts.emplace_back(nan, nan, nan);
-                    continue;
-                }
-                l->pts.emplace_back((k.pt.x - K[2]) * z / K[0], (k.pt.y - K[3]) * z / K[1], z);
+        *out = lifted_copy(f, keep_image, [&](const cv::KeyPoint &k) {
+            int u = (int)std::lround(k.pt.x), v = (int)std::lround(k.pt.y);
+            float z = 0.0f;
+            if (u >= 0 && v >= 0 && u < w && v < h) {
+                float m = (float)(depth[(size_t)v * (size_t)w + (size_t)u] / scale);
+                if (m >= min_m && m <= max_m) z = m;
             }
-        } catch (...) {
-            delete l;
-            throw;
-        }
-        *out = l;
+            if (!(z > 0)) return cv::Point3d(nan_d, nan_d, nan_d);
+            return cv::Point3d((k.pt.x - K[2]) * z / K[0], (k.pt.y - K[3]) * z / K[1], z);
+        });
+        return FEATURES__OK;
+    });
+}
+
+extern "C" int features__lift_points(const features_set *f, const float *xyz, int w, int h, double min_m,
+                                     double max_m, int keep_image, features_set **out, char *msg, size_t cap)
+{
+    *out = nullptr;
+    return guarded(msg, cap, [&]() -> int {
+        *out = lifted_copy(f, keep_image, [&](const cv::KeyPoint &k) {
+            int u = (int)std::lround(k.pt.x), v = (int)std::lround(k.pt.y);
+            if (u < 0 || v < 0 || u >= w || v >= h) return cv::Point3d(nan_d, nan_d, nan_d);
+            const float *p = xyz + 3 * ((size_t)v * (size_t)w + (size_t)u);
+            if (!(p[2] >= min_m && p[2] <= max_m) || !std::isfinite(p[0]) || !std::isfinite(p[1]))
+                return cv::Point3d(nan_d, nan_d, nan_d);
+            return cv::Point3d(p[0], p[1], p[2]);
+        });
         return FEATURES__OK;
     });
 }
@@ -252,9 +278,9 @@ extern "C" int features__match_count(const features_set *a, const features_set *
     });
 }
 
-extern "C" int features__pnp(const features_set *a, const features_set *b, const double K[4], double ransac_px,
-                             int ransac_iterations, int max_hamming, int fast, features__pnp_out *r, char *msg,
-                             size_t cap)
+extern "C" int features__pnp(const features_set *a, const features_set *b, const double K[4], const double *dist,
+                             double ransac_px, int ransac_iterations, int max_hamming, int fast, features__pnp_out *r,
+                             char *msg, size_t cap)
 {
     *r = features__pnp_out{};
     return guarded(msg, cap, [&]() -> int {
@@ -303,12 +329,14 @@ extern "C" int features__pnp(const features_set *a, const features_set *b, const
         r->n_placed = (uint32_t)obj.size();
         if (obj.size() < 6) return FEATURES__OK;
         const cv::Mat Km = (cv::Mat_<double>(3, 3) << K[0], 0, K[2], 0, K[1], K[3], 0, 0, 1);
+        cv::Mat D;
+        if (dist) D = (cv::Mat_<double>(1, 5) << dist[0], dist[1], dist[2], dist[3], dist[4]);
         cv::Mat rv, tv;
         std::vector<int> inl;
         // solvePnPRansac draws from a generator of its own with a fixed seed:
         // the same pairs give the same poses.
-        if (!cv::solvePnPRansac(obj, img, Km, cv::noArray(), rv, tv, false, ransac_iterations, (float)ransac_px, 0.999,
-                                inl, cv::SOLVEPNP_EPNP) ||
+        if (!cv::solvePnPRansac(obj, img, Km, D, rv, tv, false, ransac_iterations, (float)ransac_px, 0.999, inl,
+                                cv::SOLVEPNP_EPNP) ||
             inl.size() < 6)
             return FEATURES__OK;
         std::vector<cv::Point3d> oi;
@@ -317,9 +345,9 @@ extern "C" int features__pnp(const features_set *a, const features_set *b, const
             oi.push_back(obj[(size_t)k]);
             ii.push_back(img[(size_t)k]);
         }
-        cv::solvePnPRefineLM(oi, ii, Km, cv::noArray(), rv, tv);
+        cv::solvePnPRefineLM(oi, ii, Km, D, rv, tv);
         std::vector<cv::Point2d> proj;
-        cv::projectPoints(oi, rv, tv, Km, cv::noArray(), proj);
+        cv::projectPoints(oi, rv, tv, Km, D, proj);
         double ss = 0;
         for (size_t k = 0; k < oi.size(); k++) {
             double dx = proj[k].x - ii[k].x, dy = proj[k].y - ii[k].y;

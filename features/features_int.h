@@ -31,6 +31,10 @@ size_t features__bytes(const features_set *f);
 int features__lift(const features_set *f, const uint16_t *depth, int w, int h, double scale, const double K[4],
                    double min_m, double max_m, int keep_image, features_set **out, char *msg, size_t cap);
 
+/* xyz: w*h*3 floats, NaN where none. */
+int features__lift_points(const features_set *f, const float *xyz, int w, int h, double min_m, double max_m,
+                          int keep_image, features_set **out, char *msg, size_t cap);
+
 /* Lifted keypoints with a point: count, then copies into desc (n x 32) and xyz (n x 3). */
 int features__lifted_count(const features_set *f);
 void features__lifted_copy(const features_set *f, uint8_t *desc, float *xyz);
@@ -47,7 +51,8 @@ typedef struct features__pnp_out {
 int features__match_count(const features_set *a, const features_set *b, int max_hamming, uint32_t *n, char *msg,
                           size_t cap);
 
-int features__pnp(const features_set *a, const features_set *b, const double K[4], double ransac_px,
+/* dist: 5 coefficients or NULL. */
+int features__pnp(const features_set *a, const features_set *b, const double K[4], const double *dist, double ransac_px,
                   int ransac_iterations, int max_hamming, int fast, features__pnp_out *r, char *msg, size_t cap);
 
 #ifdef __cplusplus
