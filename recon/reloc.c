@@ -136,11 +136,46 @@ static uint32_t most_redundant(const recon *r, const bf_se3 *T)
     return best;
 }
 
-/* Whether frames' colour can give candidates: asked for, and the colour
- * registered to the depth (a pixel's depth lifts its keypoint). */
+/* Whether frames' colour gives candidates. */
 static bool uses_features(const recon *r)
 {
-    return r->cfg.reloc.features > 0 && r->cfg.reloc.feature_candidates > 0 && !r->cfg.has_calibration;
+    return r->cfg.reloc.features > 0 && r->cfg.reloc.feature_candidates > 0;
+}
+
+/* Where the frames' colour is a camera of its own (--calibration), its
+ * intrinsics, lens and T_colour_depth (recon.c's colour_camera); false
+ * where the colour is registered to the depth (the format's or the
+ * device's). */
+static bool colour_camera_of(const recon *r, bf_intrinsics *Kc, const double **dist, bf_se3 *T_cd)
+{
+    if (!r->cfg.has_calibration) return false;
+    const calib_result *c = &r->cfg.calibration;
+    *Kc = calib_camera_intrinsics(&c->colour);
+    *dist = c->colour.dist;
+    *T_cd = c->has_depth ? c->T_colour_depth : bf_se3_identity();
+    return true;
+}
+
+/* f's colour keypoints, each with the point the depth puts there, in the
+ * depth camera's frame: read at the keypoint's own pixel where the colour
+ * is registered, else found through the colour camera
+ * (calib_points_on_colour), so the keypoints come from the colour camera's
+ * own image, not a resampling of it. */
+static bf_status lift_keypoints(const recon *r, const bf_frame *f, const features_set *all, features_set **lifted)
+{
+    bf_intrinsics Kc;
+    const double *dist;
+    bf_se3 T_cd;
+    float lo = 1e-3f, hi = r->cfg.sensor.max_depth_m;
+    if (!colour_camera_of(r, &Kc, &dist, &T_cd)) return features_lift(all, f->depth, &r->K, lo, hi, false, lifted);
+    float *xyz = malloc((size_t)f->width * f->height * 3 * sizeof *xyz);
+    if (!xyz) return bf_fail(BF_NO_MEMORY, "recon: frame %u: the depth's points on the colour", f->index);
+    bf_intrinsics Kd = r->K;
+    Kd.width = f->width, Kd.height = f->height;
+    bf_status s = calib_points_on_colour(&r->cfg.calibration.colour, &T_cd, &Kd, f->depth, f->width, f->height, xyz);
+    if (s == BF_OK) s = features_lift_points(all, xyz, f->width, f->height, lo, hi, false, lifted);
+    free(xyz);
+    return s;
 }
 
 /* The lifted keypoints of f's colour, or NULL (no colour, or OpenCV
@@ -149,10 +184,9 @@ static features_set *keyframe_features(const recon *r, const bf_frame *f)
 {
     if (!f || !f->rgb || !f->depth || !uses_features(r)) return NULL;
     features_set *all = NULL, *lifted = NULL;
-    const bf_sensor *sn = &r->cfg.sensor;
     double t0 = bf_time_s();
     bf_status s = features_detect_rgb(f->rgb, f->width, f->height, r->cfg.reloc.features, false, &all);
-    if (s == BF_OK) s = features_lift(all, f->depth, &r->K, 1e-3f, sn->max_depth_m, false, &lifted);
+    if (s == BF_OK) s = lift_keypoints(r, f, all, &lifted);
     features_free(all);
     if (s != BF_OK) bf_warn("recon: frame %u: a keyframe without colour keypoints: %s", f->index, bf_last_error());
     else bf_debug("recon: frame %u: keyframe colour: %u keypoints, %zu bytes, %.1f ms", f->index,
@@ -468,6 +502,14 @@ static uint32_t colour_poses(const recon *r, const bf_frame *f, recon__colour_po
     features_set *frame = NULL;
     double t0 = bf_time_s();
     bf_status s = features_detect_rgb(f->rgb, f->width, f->height, r->cfg.reloc.features, false, &frame);
+    /* The frame's keypoints are where its colour camera saw them: PnP
+     * gives that camera's pose, and the rig takes it to the depth
+     * camera's. */
+    bf_intrinsics K = r->K;
+    const double *dist = NULL;
+    bf_se3 T_cd = bf_se3_identity();
+    colour_camera_of(r, &K, &dist, &T_cd);
+    bf_se3 T_dc = bf_se3_inverse(&T_cd);
     const features_pnp_config pc = {.ransac_px = FEATURE_RANSAC_PX, .ransac_iterations = FEATURE_RANSAC_ITERATIONS,
                                     .min_inliers = r->cfg.reloc.feature_min_inliers,
                                     .max_hamming = FEATURE_MAX_HAMMING, .fast = true};
@@ -492,10 +534,11 @@ static uint32_t colour_poses(const recon *r, const bf_frame *f, recon__colour_po
     for (uint32_t t = 0; t < n_top && s == BF_OK; t++) {
         uint32_t i = top[t];
         features_pnp_result pr;
-        if ((s = features_pnp(r->kf_features[i], frame, &r->K, &pc, &pr)) != BF_OK || !pr.ok) continue;
-        /* PnP gives the keyframe's points in the frame's camera, T_ba: the
-         * frame's pose is the keyframe's times its inverse. */
-        bf_se3 T_ab = bf_se3_inverse(&pr.T_ba);
+        if ((s = features_pnp(r->kf_features[i], frame, &K, dist, &pc, &pr)) != BF_OK || !pr.ok) continue;
+        /* PnP gives the keyframe's points (its depth camera's frame) in the
+         * frame's colour camera, T_ba; in its depth camera they are T_dc
+         * T_ba, and the frame's pose is the keyframe's times the inverse. */
+        bf_se3 T_da = bf_se3_mul(&T_dc, &pr.T_ba), T_ab = bf_se3_inverse(&T_da);
         recon__colour_pose p = {.n_inliers = pr.n_inliers, .T_wc = bf_se3_mul(&r->keyframes[i], &T_ab)};
         bf_debug("recon: frame %u: keyframe %u: %u colour matches, %u inliers, %.2f px", f->index, i, pr.n_matches,
                  pr.n_inliers, pr.rms_px);

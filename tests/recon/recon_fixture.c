@@ -32,7 +32,12 @@ double rot_dist_deg(const bf_se3 *A, const bf_se3 *B)
 static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
 {
     fixture_render *fr = user;
-    bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, fr->rgb, NULL);
+    bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, fr->ren_colour ? NULL : fr->rgb, NULL);
+    if (s == BF_OK && fr->ren_colour) {
+        /* The colour camera's own image, from where it sits on the rig. */
+        bf_se3 Twc = bf_se3_mul(&fr->true_pose[k], &fr->T_depth_colour);
+        s = synth_render(fr->ren_colour, k, &Twc, fr->depth_colour, fr->rgb, NULL);
+    }
     if (s != BF_OK) return s;
     if (fr->mutate) fr->mutate(k, fr->depth);
     *f = (bf_frame){.index = k, .width = W, .height = H, .t_depth_s = 100 + k / 30.0, .depth = fr->depth,
@@ -41,8 +46,24 @@ static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
     return BF_OK;
 }
 
+/* The colour camera of a calibration as a pinhole renderer (the renderer
+ * has no lens), at the frames' size. */
+static bf_status colour_renderer(const synth_scene *sc, const calib_result *cal, fixture_render *fr)
+{
+    const calib_camera *c = &cal->colour;
+    if (calib_has_distortion(c->dist) || c->width != W || c->height != H)
+        return bf_fail(BF_INVALID_ARG, "fixture: the colour camera must be a %ux%u pinhole", W, H);
+    synth_render_config rc = {.K = {W, H, c->fx_px, c->fy_px, c->cx_px, c->cy_px, 5000}, .noise = SYNTH_NOISE_NONE};
+    bf_se3 T_cd = cal->has_depth ? cal->T_colour_depth : bf_se3_identity();
+    fr->T_depth_colour = bf_se3_inverse(&T_cd);
+    fr->depth_colour = malloc((size_t)W * H * sizeof *fr->depth_colour);
+    if (!fr->depth_colour) return BF_NO_MEMORY;
+    return synth_renderer_create(sc, &rc, &fr->ren_colour);
+}
+
 static bf_status render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
-                             mutate_fn mutate, bool colour, fixture_render *fr, rgbd_source **src)
+                             mutate_fn mutate, bool colour, const calib_result *cal, fixture_render *fr,
+                             rgbd_source **src)
 {
     bf_intrinsics K = test_K();
     synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 7};
@@ -51,6 +72,7 @@ static bf_status render_open(const synth_scene *sc, const bf_se3 *true_pose, uin
     fr->rgb = colour ? malloc((size_t)W * H * 3) : NULL;
     bool ok = fr->depth && (!colour || fr->rgb);
     bf_status s = ok ? synth_renderer_create(sc, &rc, &fr->ren) : BF_NO_MEMORY;
+    if (s == BF_OK && colour && cal) s = colour_renderer(sc, cal, fr);
     if (s == BF_OK) s = capture_source_from_fn(&K, n, true, render_frame, fr, src);
     if (s != BF_OK) fixture_render_close(fr, NULL);
     return s;
@@ -59,14 +81,16 @@ static bf_status render_open(const synth_scene *sc, const bf_se3 *true_pose, uin
 bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
                               mutate_fn mutate, fixture_render *fr, rgbd_source **src)
 {
-    return render_open(sc, true_pose, n, offset, mutate, false, fr, src);
+    return render_open(sc, true_pose, n, offset, mutate, false, NULL, fr, src);
 }
 
 void fixture_render_close(fixture_render *fr, rgbd_source *src)
 {
     rgbd_source_close(src);
     synth_renderer_destroy(fr->ren);
+    synth_renderer_destroy(fr->ren_colour);
     free(fr->depth);
+    free(fr->depth_colour);
     free(fr->rgb);
     memset(fr, 0, sizeof *fr);
 }
@@ -110,7 +134,9 @@ static bf_status run_loop_impl(gpu_context *ctx, const recon_run_config *cfg, co
     rgbd_source *src = NULL;
     recon_run run;
     memset(&run, 0, sizeof run);
-    bf_status s = render_open(sc, true_pose, n, offset, mutate, colour, &fr, &src);
+    /* With a calibration the colour is the colour camera's own image. */
+    const calib_result *cal = cfg->loop.has_calibration ? &cfg->loop.calibration : NULL;
+    bf_status s = render_open(sc, true_pose, n, offset, mutate, colour, cal, &fr, &src);
     if (s == BF_OK) s = recon_run_sequence(ctx, src, cfg, keep_result, out, &run);
     if (s == BF_OK) s = fusion_check(run.map);
     if (s == BF_OK) s = fusion_get_stats(run.map, &out->map);
