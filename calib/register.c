@@ -23,52 +23,94 @@
  * pixel alone (the same camera twice gives each pixel its own point). */
 #define COVER_PX 0.9
 
-/* Where depth pixel i's point lands in the colour image: its position
- * (u, v; NaN: nowhere), its point in the depth camera (p) and its depth
- * along the colour camera's axis. */
+/* Where a depth pixel's point lands in the colour image, worked out once
+ * for the two passes over the points. */
+typedef struct landing {
+    float u, v;     /* its place in the colour image */
+    float z;        /* its depth along the colour camera's axis */
+    float z_hidden; /* a nearer surface at a pixel it covers hides it when nearer than this */
+    int32_t x0, y0; /* the first pixel it covers; x0 < 0: it lands nowhere */
+    uint8_t nx, ny; /* how many it covers along x and y (1 or 2) */
+} landing;
+
+/* The pixels [lo, hi] along one axis that a landing at a covers, clipped
+ * to [0, n): count 0 when none. COVER_PX < 1, so at most two; a > -1. */
+static inline void cover_axis(float a, uint32_t n, int32_t *lo, uint8_t *count)
+{
+    /* ceil(a - COVER_PX) and floor(a + COVER_PX), by truncating
+     * non-negative values rather than calling floor and ceil. */
+    float b = a - COVER_PX + 2, c = a + COVER_PX + 2;
+    int32_t first = (int32_t)b - 2 + ((float)(int32_t)b < b), last = (int32_t)c - 2;
+    if (first < 0) first = 0;
+    if (last > (int32_t)n - 1) last = (int32_t)n - 1;
+    *lo = first;
+    *count = last >= first ? (uint8_t)(last - first + 1) : 0;
+}
+
+/* Each depth pixel's landing and its point in the depth camera (p). */
 static void land(const calib_camera *c, const bf_se3 *T_cd, const bf_intrinsics *Kd, const uint16_t *depth,
-                 float *uv, float *p, float *zc)
+                 uint32_t w, uint32_t h, landing *l, float *p)
 {
     for (uint32_t v = 0; v < Kd->height; v++)
         for (uint32_t u = 0; u < Kd->width; u++) {
             size_t i = (size_t)v * Kd->width + u;
-            uv[2 * i] = NAN;
+            l[i].x0 = -1;
             if (!depth[i]) continue;
             double z = depth[i] / Kd->depth_scale;
             bf_vec3 pd = bf_v3(z * (u - Kd->cx_px) / Kd->fx_px, z * (v - Kd->cy_px) / Kd->fy_px, z);
             bf_vec3 q = bf_se3_apply(T_cd, pd);
             double uc, vc;
-            if (!calib_project(c, q, &uc, &vc) || !(uc > -1 && vc > -1) || !(uc < 1e6 && vc < 1e6)) continue;
-            uv[2 * i] = (float)uc, uv[2 * i + 1] = (float)vc;
+            if (!calib_project(c, q, &uc, &vc) || !(uc > -1 && vc > -1) || !(uc < w + 1.0 && vc < h + 1.0)) continue;
+            landing *a = &l[i];
+            a->u = (float)uc, a->v = (float)vc, a->z = (float)q.z;
+            a->z_hidden = (float)(q.z - fmax(OCCLUSION_MIN_M, OCCLUSION_REL * q.z));
+            int32_t x0, y0;
+            cover_axis(a->u, w, &x0, &a->nx);
+            cover_axis(a->v, h, &y0, &a->ny);
+            if (!a->nx || !a->ny) continue;
+            a->x0 = x0, a->y0 = y0;
             p[3 * i] = (float)pd.x, p[3 * i + 1] = (float)pd.y, p[3 * i + 2] = (float)pd.z;
-            zc[i] = (float)q.z;
         }
-}
-
-/* The colour pixels point i covers: [x0, x1] x [y0, y1], clipped. */
-static bool cover(const float *uv, size_t i, uint32_t w, uint32_t h, uint32_t *x0, uint32_t *x1, uint32_t *y0,
-                  uint32_t *y1)
-{
-    if (isnan(uv[2 * i])) return false;
-    double a0 = fmax(ceil(uv[2 * i] - COVER_PX), 0), a1 = fmin(floor(uv[2 * i] + COVER_PX), w - 1.0);
-    double b0 = fmax(ceil(uv[2 * i + 1] - COVER_PX), 0), b1 = fmin(floor(uv[2 * i + 1] + COVER_PX), h - 1.0);
-    if (a0 > a1 || b0 > b1) return false;
-    *x0 = (uint32_t)a0, *x1 = (uint32_t)a1, *y0 = (uint32_t)b0, *y1 = (uint32_t)b1;
-    return true;
 }
 
 /* The nearest depth the colour camera sees at each of its pixels, from
  * the points' covers. */
-static void nearest_seen(const float *uv, const float *zc, size_t n, uint32_t w, uint32_t h, float *zbuf)
+static void nearest_seen(const landing *l, size_t n, uint32_t w, uint32_t h, float *zbuf)
 {
     for (size_t j = 0; j < (size_t)w * h; j++) zbuf[j] = INFINITY;
-    uint32_t x0, x1, y0, y1;
     for (size_t i = 0; i < n; i++) {
-        if (!cover(uv, i, w, h, &x0, &x1, &y0, &y1)) continue;
-        for (uint32_t y = y0; y <= y1; y++)
-            for (uint32_t x = x0; x <= x1; x++) {
-                float *b = &zbuf[(size_t)y * w + x];
-                if (zc[i] < *b) *b = zc[i];
+        const landing *a = &l[i];
+        if (a->x0 < 0) continue;
+        for (uint32_t y = 0; y < a->ny; y++)
+            for (uint32_t x = 0; x < a->nx; x++) {
+                float *b = &zbuf[(size_t)(a->y0 + y) * w + (size_t)(a->x0 + x)];
+                if (a->z < *b) *b = a->z;
+            }
+    }
+}
+
+/* Of the points on the surface the colour camera sees at a pixel (within
+ * the occlusion margin of the nearest), the one landing nearest the
+ * pixel's centre: its point goes to xyz (NaN where none). */
+static void pick_points(const landing *l, const float *p, size_t n, const float *zbuf, uint32_t w, uint32_t h,
+                        float *best_d2, float *xyz)
+{
+    for (size_t j = 0; j < (size_t)w * h; j++) {
+        best_d2[j] = INFINITY;
+        xyz[3 * j] = xyz[3 * j + 1] = xyz[3 * j + 2] = NAN;
+    }
+    for (size_t i = 0; i < n; i++) {
+        const landing *a = &l[i];
+        if (a->x0 < 0) continue;
+        for (uint32_t y = 0; y < a->ny; y++)
+            for (uint32_t x = 0; x < a->nx; x++) {
+                int32_t px = a->x0 + (int32_t)x, py = a->y0 + (int32_t)y;
+                size_t j = (size_t)py * w + (size_t)px;
+                if (a->z_hidden > zbuf[j]) continue;
+                float du = a->u - (float)px, dv = a->v - (float)py, d2 = du * du + dv * dv;
+                if (d2 >= best_d2[j]) continue;
+                best_d2[j] = d2;
+                memcpy(xyz + 3 * j, p + 3 * i, 3 * sizeof *p);
             }
     }
 }
@@ -77,36 +119,19 @@ bf_status calib_points_on_colour(const calib_camera *colour, const bf_se3 *T_col
                                  const uint16_t *depth, uint32_t w, uint32_t h, float *xyz)
 {
     if (!colour || !T_colour_depth || !Kd || !depth || !xyz || !w || !h || !Kd->width || !Kd->height ||
-        !(Kd->depth_scale > 0) || !(Kd->fx_px != 0) || !(Kd->fy_px != 0))
+        !(Kd->depth_scale > 0) || !(Kd->fx_px != 0) || !(Kd->fy_px != 0) || w > INT32_MAX / 2 || h > INT32_MAX / 2)
         return bf_fail(BF_INVALID_ARG, "calib_points_on_colour: a NULL argument, an empty image or no depth scale");
     size_t n = (size_t)Kd->width * Kd->height, m = (size_t)w * h;
-    float *uv = malloc(2 * n * sizeof *uv), *p = malloc(3 * n * sizeof *p), *zc = malloc(n * sizeof *zc);
-    float *zbuf = malloc(m * sizeof *zbuf), *best = malloc(m * sizeof *best);
-    if (!uv || !p || !zc || !zbuf || !best) {
-        free(uv), free(p), free(zc), free(zbuf), free(best);
-        return bf_fail(BF_NO_MEMORY, "calib_points_on_colour: %ux%u colour for %ux%u depth", w, h, Kd->width,
-                       Kd->height);
+    landing *l = malloc(n * sizeof *l);
+    float *p = malloc(3 * n * sizeof *p), *zbuf = malloc(m * sizeof *zbuf), *best_d2 = malloc(m * sizeof *best_d2);
+    bf_status s = BF_OK;
+    if (l && p && zbuf && best_d2) {
+        land(colour, T_colour_depth, Kd, depth, w, h, l, p);
+        nearest_seen(l, n, w, h, zbuf);
+        pick_points(l, p, n, zbuf, w, h, best_d2, xyz);
+    } else {
+        s = bf_fail(BF_NO_MEMORY, "calib_points_on_colour: %ux%u colour for %ux%u depth", w, h, Kd->width, Kd->height);
     }
-    land(colour, T_colour_depth, Kd, depth, uv, p, zc);
-    nearest_seen(uv, zc, n, w, h, zbuf);
-    /* Of the points on the surface the colour camera sees at a pixel
-     * (within the occlusion margin of the nearest), the one that lands
-     * nearest the pixel's centre. */
-    const float nan = NAN;
-    for (size_t j = 0; j < m; j++) best[j] = INFINITY, xyz[3 * j] = xyz[3 * j + 1] = xyz[3 * j + 2] = nan;
-    uint32_t x0, x1, y0, y1;
-    for (size_t i = 0; i < n; i++) {
-        if (!cover(uv, i, w, h, &x0, &x1, &y0, &y1)) continue;
-        for (uint32_t y = y0; y <= y1; y++)
-            for (uint32_t x = x0; x <= x1; x++) {
-                size_t j = (size_t)y * w + x;
-                if (zc[i] > zbuf[j] + (float)fmax(OCCLUSION_MIN_M, OCCLUSION_REL * zc[i])) continue;
-                float du = uv[2 * i] - (float)x, dv = uv[2 * i + 1] - (float)y, d = du * du + dv * dv;
-                if (d >= best[j]) continue;
-                best[j] = d;
-                memcpy(xyz + 3 * j, p + 3 * i, 3 * sizeof *p);
-            }
-    }
-    free(uv), free(p), free(zc), free(zbuf), free(best);
-    return BF_OK;
+    free(l), free(p), free(zbuf), free(best_d2);
+    return s;
 }

@@ -121,8 +121,8 @@ bf_status features_pnp(const features_set *a, const features_set *b, const bf_in
     const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
     features__pnp_out r;
     char msg[256];
-    int rc = features__pnp(a, b, Kd, dist, cfg->ransac_px, (int)cfg->ransac_iterations, (int)cfg->max_hamming, cfg->fast, &r,
-                           msg, sizeof msg);
+    int rc = features__pnp(a, b, Kd, dist, cfg->ransac_px, (int)cfg->ransac_iterations, (int)cfg->max_hamming,
+                           cfg->fast, &r, msg, sizeof msg);
     if (rc != FEATURES__OK) return cv_status(rc, "features_pnp", msg);
     out->n_matches = r.n_matches;
     out->n_placed = r.n_placed;

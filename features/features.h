@@ -44,7 +44,10 @@ bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_i
  * keypoint takes the point xyz holds at its nearest pixel (w x h x 3
  * floats, NaN: none; calib_points_on_colour's, where the colour camera is
  * not the depth camera, so the points are in the depth camera's frame)
- * where that point's z lies in [min_m, max_m]. */
+ * where that point's z lies in [min_m, max_m]. The point is its pixel's,
+ * not placed at the keypoint's sub-pixel position as features_lift's:
+ * with calib_points_on_colour's landing, up to 1.4 pixels across (a few
+ * millimetres at 2-4 m; ORB places a keypoint to about a pixel). */
 bf_status features_lift_points(const features_set *f, const float *xyz, uint32_t w, uint32_t h, float min_m,
                                float max_m, bool keep_image, features_set **out);
 
@@ -87,7 +90,8 @@ typedef struct features_pnp_result {
 bf_status features_match_count(const features_set *a, const features_set *b, uint32_t max_hamming, uint32_t *n);
 
 /* The pose of b's camera against a's lifted points (a from features_lift,
- * b from features_detect_rgb; b's keypoints seen by camera K with the
+ * features_lift_points or features_import_lifted; b from
+ * features_detect_rgb; b's keypoints seen by camera K with the
  * lens dist, k1 k2 p1 p2 k3 as OpenCV orders them, NULL: none): matches
  * (cfg->fast says which), then, when both kept their images, each match
  * placed again in b by Lucas-Kanade, then EPnP in RANSAC and

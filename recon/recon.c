@@ -429,15 +429,21 @@ bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
     return BF_OK;
 }
 
-/* The colour camera of --calibration: intrinsics and T_colour_depth.
- * Without the depth camera the file gives no transform: the colour
- * camera's own intrinsics at the depth camera's place. */
+const calib_camera *recon__colour_rig(const recon_config *cfg, bf_se3 *T_colour_depth)
+{
+    if (!cfg->has_calibration) return NULL; /* registered: the format's or the device's */
+    /* Without the depth camera the file gives no transform: the colour
+     * camera's own intrinsics at the depth camera's place. */
+    *T_colour_depth = cfg->calibration.has_depth ? cfg->calibration.T_colour_depth : bf_se3_identity();
+    return &cfg->calibration.colour;
+}
+
+/* The colour camera of --calibration: intrinsics and T_colour_depth. */
 static void colour_camera(const recon_config *cfg, bf_intrinsics *Kc, bf_se3 *T)
 {
-    const calib_camera *c = &cfg->calibration.colour;
+    const calib_camera *c = recon__colour_rig(cfg, T);
     *Kc = (bf_intrinsics){.width = c->width, .height = c->height, .fx_px = c->fx_px, .fy_px = c->fy_px,
                           .cx_px = c->cx_px, .cy_px = c->cy_px, .depth_scale = 1};
-    *T = cfg->calibration.has_depth ? cfg->calibration.T_colour_depth : bf_se3_identity();
 }
 
 bf_status recon_set_colour_camera(fusion_map *map, const recon_config *cfg)

@@ -59,8 +59,9 @@ typedef struct recon_reloc_config {
                                   front of the predicted surface (where the map holds free space), default 0.03 */
     /* Candidates from colour (features/): each keyframe keeps the ORB keypoints of its colour image lifted by
        its depth; a searching frame's keypoints are matched to them and PnP with RANSAC gives a pose wherever
-       the frame sees what a keyframe saw, however far from it. Colour registered to depth only (none with
-       has_calibration). These candidates come on top of max_candidates. */
+       the frame sees what a keyframe saw, however far from it. With has_calibration the keypoints are the
+       colour camera's own, lifted by the depth that camera sees (calib_points_on_colour). These candidates
+       come on top of max_candidates. */
     uint32_t features;            /* ORB keypoints per image, default 1000; 0: no colour candidates */
     uint32_t feature_candidates;  /* the poses of the keyframes with most PnP inliers tried first, default 2 */
     uint32_t feature_min_inliers; /* a keyframe's pose counts with at least this many inliers, default 20 */

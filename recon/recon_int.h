@@ -45,6 +45,9 @@ struct recon {
 /* reloc.c */
 /* T_last moved on by n frame intervals of V_step. */
 bf_se3 recon__velocity_pose(const recon *r, double n);
+/* The colour camera of --calibration and T_colour_depth; NULL where the
+ * colour is registered to the depth (no calibration). */
+const calib_camera *recon__colour_rig(const recon_config *cfg, bf_se3 *T_colour_depth);
 bf_status recon__reloc_create(recon *r);  /* the keyframe store; checks cfg.reloc */
 void recon__reloc_destroy(recon *r);
 /* Frame intervals from the last good frame to f: by the depth timestamps

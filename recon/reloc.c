@@ -142,20 +142,6 @@ static bool uses_features(const recon *r)
     return r->cfg.reloc.features > 0 && r->cfg.reloc.feature_candidates > 0;
 }
 
-/* Where the frames' colour is a camera of its own (--calibration), its
- * intrinsics, lens and T_colour_depth (recon.c's colour_camera); false
- * where the colour is registered to the depth (the format's or the
- * device's). */
-static bool colour_camera_of(const recon *r, bf_intrinsics *Kc, const double **dist, bf_se3 *T_cd)
-{
-    if (!r->cfg.has_calibration) return false;
-    const calib_result *c = &r->cfg.calibration;
-    *Kc = calib_camera_intrinsics(&c->colour);
-    *dist = c->colour.dist;
-    *T_cd = c->has_depth ? c->T_colour_depth : bf_se3_identity();
-    return true;
-}
-
 /* f's colour keypoints, each with the point the depth puts there, in the
  * depth camera's frame: read at the keypoint's own pixel where the colour
  * is registered, else found through the colour camera
@@ -163,16 +149,13 @@ static bool colour_camera_of(const recon *r, bf_intrinsics *Kc, const double **d
  * own image, not a resampling of it. */
 static bf_status lift_keypoints(const recon *r, const bf_frame *f, const features_set *all, features_set **lifted)
 {
-    bf_intrinsics Kc;
-    const double *dist;
     bf_se3 T_cd;
+    const calib_camera *cam = recon__colour_rig(&r->cfg, &T_cd);
     float lo = 1e-3f, hi = r->cfg.sensor.max_depth_m;
-    if (!colour_camera_of(r, &Kc, &dist, &T_cd)) return features_lift(all, f->depth, &r->K, lo, hi, false, lifted);
+    if (!cam) return features_lift(all, f->depth, &r->K, lo, hi, false, lifted);
     float *xyz = malloc((size_t)f->width * f->height * 3 * sizeof *xyz);
     if (!xyz) return bf_fail(BF_NO_MEMORY, "recon: frame %u: the depth's points on the colour", f->index);
-    bf_intrinsics Kd = r->K;
-    Kd.width = f->width, Kd.height = f->height;
-    bf_status s = calib_points_on_colour(&r->cfg.calibration.colour, &T_cd, &Kd, f->depth, f->width, f->height, xyz);
+    bf_status s = calib_points_on_colour(cam, &T_cd, &r->K, f->depth, f->width, f->height, xyz);
     if (s == BF_OK) s = features_lift_points(all, xyz, f->width, f->height, lo, hi, false, lifted);
     free(xyz);
     return s;
@@ -505,10 +488,9 @@ static uint32_t colour_poses(const recon *r, const bf_frame *f, recon__colour_po
     /* The frame's keypoints are where its colour camera saw them: PnP
      * gives that camera's pose, and the rig takes it to the depth
      * camera's. */
-    bf_intrinsics K = r->K;
-    const double *dist = NULL;
     bf_se3 T_cd = bf_se3_identity();
-    colour_camera_of(r, &K, &dist, &T_cd);
+    const calib_camera *cam = recon__colour_rig(&r->cfg, &T_cd);
+    bf_intrinsics K = cam ? calib_camera_intrinsics(cam) : r->K;
     bf_se3 T_dc = bf_se3_inverse(&T_cd);
     const features_pnp_config pc = {.ransac_px = FEATURE_RANSAC_PX, .ransac_iterations = FEATURE_RANSAC_ITERATIONS,
                                     .min_inliers = r->cfg.reloc.feature_min_inliers,
@@ -534,6 +516,7 @@ static uint32_t colour_poses(const recon *r, const bf_frame *f, recon__colour_po
     for (uint32_t t = 0; t < n_top && s == BF_OK; t++) {
         uint32_t i = top[t];
         features_pnp_result pr;
+        const double *dist = cam ? cam->dist : NULL;
         if ((s = features_pnp(r->kf_features[i], frame, &K, dist, &pc, &pr)) != BF_OK || !pr.ok) continue;
         /* PnP gives the keyframe's points (its depth camera's frame) in the
          * frame's colour camera, T_ba; in its depth camera they are T_dc

@@ -48,9 +48,10 @@ static int cmp_d(const void *a, const void *b)
 /* A tilted plane seen through the lens: each colour pixel's point lies on
  * the plane (to the depth's 0.1 mm steps), lands within 0.9 pixel of the
  * pixel's centre along both axes through calib_project, and under half a
- * pixel at the median (the nearest landing of about one point a pixel). Every colour pixel whose own ray (calib_unproject: the lens's
- * inverse, another path) meets the plane where the depth camera sees it
- * has a point; the lens's corners and the shift leave some without. */
+ * pixel at the median (the nearest landing of about one point a pixel).
+ * Every colour pixel whose own ray (calib_unproject: the lens's inverse,
+ * another path) meets the plane where the depth camera sees it has a
+ * point; the lens's corners and the shift leave some without. */
 BF_TEST(each_colour_pixel_gets_the_depth_point_seen_there)
 {
     bf_intrinsics Kd = depth_K();
@@ -96,16 +97,18 @@ BF_TEST(each_colour_pixel_gets_the_depth_point_seen_there)
             worst_off = fmax(worst_off, o);
             off[n_pt++] = o;
         }
+    CHECK(n_pt > 0);
     qsort(off, n_pt, sizeof *off, cmp_d);
+    double median = n_pt ? off[n_pt / 2] : INFINITY;
     printf("  %u colour pixels with a point (%u of %u the plane is seen at missing); off the plane up to %.3f mm; "
            "landing off the centre: median %.3f px, at most %.3f px\n",
-           n_pt, n_missing, n_should, 1e3 * worst_plane, off[n_pt / 2], worst_off);
+           n_pt, n_missing, n_should, 1e3 * worst_plane, median, worst_off);
     CHECK(n_should > n / 2);
     CHECK_EQ_INT(n_missing, 0);
     CHECK(n_pt < n); /* the lens's corners and the shift */
     CHECK_LE(worst_plane, 1e-4);
     CHECK_LE(worst_off, 0.9);
-    CHECK_LE(off[n_pt / 2], 0.45); /* a nearest pixel's is under 0.5, about 0.35 at the median */
+    CHECK_LE(median, 0.45); /* 0.40 measured; a nearest pixel's own rounding is under 0.5 */
     free(depth);
     free(xyz);
     free(off);

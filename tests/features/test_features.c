@@ -195,7 +195,7 @@ static void distort_image(const uint8_t *rgb, const double dist[5], uint8_t *out
 }
 
 /* The frame seen through a barrel lens as wide colour cameras have (k1
- * -0.2, k2 0.1: the corners 25 pixels in): PnP told of the lens finds the
+ * -0.2, k2 0.1: the corners 33 pixels in): PnP told of the lens finds the
  * pose within the pinhole case's bound (8.9 mm and 0.14 degrees measured,
  * 10.0 and 0.14 on the same pair without a lens); told nothing, it keeps
  * fewer inliers and is several times further off (102 mm). And a keyframe

@@ -29,14 +29,37 @@ double rot_dist_deg(const bf_se3 *A, const bf_se3 *B)
     return acos(c > 1 ? 1 : (c < -1 ? -1 : c)) * 180 / M_PI;
 }
 
+/* The pinhole image rgb as the colour camera's lens shows it: each pixel
+ * takes it where its ray (calib_undistort, the lens's inverse) meets the
+ * pinhole's image plane, bilinearly; black outside. */
+static void through_lens(const calib_camera *c, const uint8_t *rgb, uint8_t *out)
+{
+    for (uint32_t v = 0; v < H; v++)
+        for (uint32_t u = 0; u < W; u++) {
+            uint8_t *o = out + 3 * ((size_t)v * W + u);
+            double x, y;
+            memset(o, 0, 3);
+            if (!calib_undistort(c->dist, (u - c->cx_px) / c->fx_px, (v - c->cy_px) / c->fy_px, &x, &y)) continue;
+            double su = c->fx_px * x + c->cx_px, sv = c->fy_px * y + c->cy_px, fu = floor(su), fv = floor(sv);
+            if (!(fu >= 0 && fv >= 0 && fu + 1 < W && fv + 1 < H)) continue;
+            double a = su - fu, b = sv - fv;
+            const uint8_t *p = rgb + 3 * ((size_t)fv * W + (size_t)fu);
+            for (int k = 0; k < 3; k++)
+                o[k] = (uint8_t)lround((1 - b) * ((1 - a) * p[k] + a * p[3 + k]) +
+                                       b * ((1 - a) * p[3 * W + k] + a * p[3 * W + 3 + k]));
+        }
+}
+
 static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
 {
     fixture_render *fr = user;
     bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, fr->ren_colour ? NULL : fr->rgb, NULL);
     if (s == BF_OK && fr->ren_colour) {
-        /* The colour camera's own image, from where it sits on the rig. */
+        /* The colour camera's own image, from where it sits on the rig,
+         * through its lens. */
         bf_se3 Twc = bf_se3_mul(&fr->true_pose[k], &fr->T_depth_colour);
-        s = synth_render(fr->ren_colour, k, &Twc, fr->depth_colour, fr->rgb, NULL);
+        s = synth_render(fr->ren_colour, k, &Twc, fr->depth_colour, fr->rgb_pinhole, NULL);
+        if (s == BF_OK) through_lens(&fr->colour, fr->rgb_pinhole, fr->rgb);
     }
     if (s != BF_OK) return s;
     if (fr->mutate) fr->mutate(k, fr->depth);
@@ -46,18 +69,20 @@ static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
     return BF_OK;
 }
 
-/* The colour camera of a calibration as a pinhole renderer (the renderer
- * has no lens), at the frames' size. */
+/* The colour camera of a calibration: a pinhole renderer (the renderer has
+ * no lens; through_lens adds it), at the frames' size. */
 static bf_status colour_renderer(const synth_scene *sc, const calib_result *cal, fixture_render *fr)
 {
     const calib_camera *c = &cal->colour;
-    if (calib_has_distortion(c->dist) || c->width != W || c->height != H)
-        return bf_fail(BF_INVALID_ARG, "fixture: the colour camera must be a %ux%u pinhole", W, H);
+    if (c->width != W || c->height != H)
+        return bf_fail(BF_INVALID_ARG, "fixture: the colour camera must be %ux%u", W, H);
     synth_render_config rc = {.K = {W, H, c->fx_px, c->fy_px, c->cx_px, c->cy_px, 5000}, .noise = SYNTH_NOISE_NONE};
     bf_se3 T_cd = cal->has_depth ? cal->T_colour_depth : bf_se3_identity();
+    fr->colour = *c;
     fr->T_depth_colour = bf_se3_inverse(&T_cd);
     fr->depth_colour = malloc((size_t)W * H * sizeof *fr->depth_colour);
-    if (!fr->depth_colour) return BF_NO_MEMORY;
+    fr->rgb_pinhole = malloc((size_t)W * H * 3);
+    if (!fr->depth_colour || !fr->rgb_pinhole) return BF_NO_MEMORY;
     return synth_renderer_create(sc, &rc, &fr->ren_colour);
 }
 
@@ -91,6 +116,7 @@ void fixture_render_close(fixture_render *fr, rgbd_source *src)
     synth_renderer_destroy(fr->ren_colour);
     free(fr->depth);
     free(fr->depth_colour);
+    free(fr->rgb_pinhole);
     free(fr->rgb);
     memset(fr, 0, sizeof *fr);
 }

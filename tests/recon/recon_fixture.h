@@ -44,11 +44,14 @@ typedef struct fixture_render {
     uint16_t *depth;
     uint8_t *rgb; /* the colour too, or NULL (depth only) */
     /* With a calibration (run_loop_colour with cfg->loop.has_calibration):
-     * the colour camera's renderer, its pose on the rig and its depth
-     * (unused); else NULL and the colour is the depth camera's own view. */
+     * the colour camera, its renderer, its pose on the rig, its depth
+     * (unused) and its image before the lens; else ren_colour is NULL and
+     * the colour is the depth camera's own view. */
+    calib_camera colour;
     synth_renderer *ren_colour;
     bf_se3 T_depth_colour;
     uint16_t *depth_colour;
+    uint8_t *rgb_pinhole;
 } fixture_render;
 bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
                               mutate_fn mutate, fixture_render *fr, rgbd_source **src);
@@ -63,8 +66,8 @@ bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_p
 bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                         const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
 /* The same with colour: the scene's textures, registered to the depth, or
- * with cfg->loop.has_calibration seen by its colour camera (a pinhole of
- * the frames' size) from where T_colour_depth puts it. */
+ * with cfg->loop.has_calibration seen by its colour camera (the frames'
+ * size; its lens too) from where T_colour_depth puts it. */
 bf_status run_loop_colour(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                           const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
 /* 90th percentile of the distance from pts to the scene's mesh [m]. */
