@@ -274,7 +274,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "the last good one; off: keep the last pose"),
         APP_OPT("--reloc-features", APP_OPT_U32, &a->rcfg.reloc.features, "N",
                 "ORB keypoints per keyframe and per searching frame for the candidates from colour (0: none; "
-                "colour registered to depth only, not with --calibration)",
+                "with --calibration found in the colour camera's own image)",
                 .max = 100000),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
