@@ -91,14 +91,11 @@ static void nearest_seen(const landing *l, size_t n, uint32_t w, uint32_t h, flo
 
 /* Of the points on the surface the colour camera sees at a pixel (within
  * the occlusion margin of the nearest), the one landing nearest the
- * pixel's centre: its point goes to xyz (NaN where none). */
-static void pick_points(const landing *l, const float *p, size_t n, const float *zbuf, uint32_t w, uint32_t h,
-                        float *best_d2, float *xyz)
+ * pixel's centre: best[j], -1 where none. */
+static void pick_points(const landing *l, size_t n, const float *zbuf, uint32_t w, uint32_t h, float *best_d2,
+                        int32_t *best)
 {
-    for (size_t j = 0; j < (size_t)w * h; j++) {
-        best_d2[j] = INFINITY;
-        xyz[3 * j] = xyz[3 * j + 1] = xyz[3 * j + 2] = NAN;
-    }
+    for (size_t j = 0; j < (size_t)w * h; j++) best_d2[j] = INFINITY, best[j] = -1;
     for (size_t i = 0; i < n; i++) {
         const landing *a = &l[i];
         if (a->x0 < 0) continue;
@@ -110,9 +107,35 @@ static void pick_points(const landing *l, const float *p, size_t n, const float 
                 float du = a->u - (float)px, dv = a->v - (float)py, d2 = du * du + dv * dv;
                 if (d2 >= best_d2[j]) continue;
                 best_d2[j] = d2;
-                memcpy(xyz + 3 * j, p + 3 * i, 3 * sizeof *p);
+                best[j] = (int32_t)i;
             }
     }
+}
+
+/* Each pixel's point, moved across the colour camera's view from where
+ * it landed to the ray through the pixel's centre, at its depth: so a
+ * keypoint between pixels can be lifted by interpolating its neighbours
+ * (features_lift_points). To first order: the move takes the pinhole's
+ * scale, which the lens changes by a few per cent, so a point half a
+ * pixel off is left within a few hundredths of a pixel. NaN where none. */
+static void place_points(const calib_camera *c, const bf_se3 *T_cd, const landing *l, const float *p,
+                         const int32_t *best, uint32_t w, uint32_t h, float *xyz)
+{
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            size_t j = (size_t)y * w + x;
+            float *o = xyz + 3 * j;
+            if (best[j] < 0) {
+                o[0] = o[1] = o[2] = NAN;
+                continue;
+            }
+            const landing *a = &l[best[j]];
+            const float *q = p + 3 * (size_t)best[j];
+            /* The move in the colour camera's frame, then in the depth
+             * camera's: R_cd^T times it. */
+            double mx = -(a->u - (double)x) * a->z / c->fx_px, my = -(a->v - (double)y) * a->z / c->fy_px;
+            for (int k = 0; k < 3; k++) o[k] = (float)(q[k] + T_cd->R[0][k] * mx + T_cd->R[1][k] * my);
+        }
 }
 
 bf_status calib_points_on_colour(const calib_camera *colour, const bf_se3 *T_colour_depth, const bf_intrinsics *Kd,
@@ -124,14 +147,16 @@ bf_status calib_points_on_colour(const calib_camera *colour, const bf_se3 *T_col
     size_t n = (size_t)Kd->width * Kd->height, m = (size_t)w * h;
     landing *l = malloc(n * sizeof *l);
     float *p = malloc(3 * n * sizeof *p), *zbuf = malloc(m * sizeof *zbuf), *best_d2 = malloc(m * sizeof *best_d2);
+    int32_t *best = malloc(m * sizeof *best);
     bf_status s = BF_OK;
-    if (l && p && zbuf && best_d2) {
+    if (l && p && zbuf && best_d2 && best) {
         land(colour, T_colour_depth, Kd, depth, w, h, l, p);
         nearest_seen(l, n, w, h, zbuf);
-        pick_points(l, p, n, zbuf, w, h, best_d2, xyz);
+        pick_points(l, n, zbuf, w, h, best_d2, best);
+        place_points(colour, T_colour_depth, l, p, best, w, h, xyz);
     } else {
         s = bf_fail(BF_NO_MEMORY, "calib_points_on_colour: %ux%u colour for %ux%u depth", w, h, Kd->width, Kd->height);
     }
-    free(l), free(p), free(zbuf), free(best_d2);
+    free(l), free(p), free(zbuf), free(best_d2), free(best);
     return s;
 }

@@ -40,14 +40,14 @@ size_t features_bytes(const features_set *f);
 bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_intrinsics *K, float min_m,
                         float max_m, bool keep_image, features_set **out);
 
-/* The same from points already found for the image's pixels: each
- * keypoint takes the point xyz holds at its nearest pixel (w x h x 3
+/* The same from points already found for the image's pixels (w x h x 3
  * floats, NaN: none; calib_points_on_colour's, where the colour camera is
- * not the depth camera, so the points are in the depth camera's frame)
- * where that point's z lies in [min_m, max_m]. The point is its pixel's,
- * not placed at the keypoint's sub-pixel position as features_lift's:
- * with calib_points_on_colour's landing, up to 1.4 pixels across (a few
- * millimetres at 2-4 m; ORB places a keypoint to about a pixel). */
+ * not the depth camera, so the points are in the depth camera's frame),
+ * each on the ray through its pixel's centre: a keypoint takes the point
+ * at its sub-pixel place, bilinearly between its four pixels' points
+ * where all four lie within 3% of the nearest pixel's depth (one smooth
+ * surface), else the nearest pixel's (a depth edge), where that point's z
+ * lies in [min_m, max_m]. */
 bf_status features_lift_points(const features_set *f, const float *xyz, uint32_t w, uint32_t h, float min_m,
                                float max_m, bool keep_image, features_set **out);
 

@@ -107,6 +107,27 @@ template <class PointOf> features_set *lifted_copy(const features_set *f, int ke
 
 const double nan_d = std::numeric_limits<double>::quiet_NaN();
 
+// The point at (x, y) between four pixels' points, bilinearly, where all
+// four have one within 3% of z (the nearest pixel's depth): one smooth
+// surface, whose points lie on the rays through their pixels' centres
+// (calib_points_on_colour places them so). Across a depth edge it would
+// be a point of neither surface: false, and the nearest pixel's is taken.
+bool between(const float *xyz, int w, int h, double x, double y, float z, cv::Point3d &out)
+{
+    int x0 = (int)std::floor(x), y0 = (int)std::floor(y);
+    if (x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h) return false;
+    double a = x - x0, b = y - y0, wt[4] = {(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b};
+    const float *p[4] = {xyz + 3 * ((size_t)y0 * (size_t)w + (size_t)x0), nullptr, nullptr, nullptr};
+    p[1] = p[0] + 3, p[2] = p[0] + 3 * (size_t)w, p[3] = p[2] + 3;
+    double s[3] = {0, 0, 0};
+    for (int i = 0; i < 4; i++) {
+        if (!(std::fabs(p[i][2] - z) <= 0.03f * z) || !std::isfinite(p[i][0]) || !std::isfinite(p[i][1])) return false;
+        for (int c = 0; c < 3; c++) s[c] += wt[i] * p[i][c];
+    }
+    out = cv::Point3d(s[0], s[1], s[2]);
+    return true;
+}
+
 } // namespace
 
 extern "C" int features__lift(const features_set *f, const uint16_t *depth, int w, int h, double scale,
@@ -140,6 +161,8 @@ extern "C" int features__lift_points(const features_set *f, const float *xyz, in
             const float *p = xyz + 3 * ((size_t)v * (size_t)w + (size_t)u);
             if (!(p[2] >= min_m && p[2] <= max_m) || !std::isfinite(p[0]) || !std::isfinite(p[1]))
                 return cv::Point3d(nan_d, nan_d, nan_d);
+            cv::Point3d q;
+            if (between(xyz, w, h, k.pt.x, k.pt.y, p[2], q)) return q;
             return cv::Point3d(p[0], p[1], p[2]);
         });
         return FEATURES__OK;
