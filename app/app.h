@@ -334,6 +334,25 @@ int cmd_view(int argc, char **argv);
 struct replay_options;
 bf_status app_open_device(const char *uri, const struct replay_options *ropt, bool realtime, uint32_t queue,
                           bool *is_live, rgbd_source **out);
+/* --calibration (calibration.c), for the commands that read a sequence
+ * through it: the file, and where it has the depth camera and the sequence
+ * is a folder, that camera as --camera's nine numbers for replay_open
+ * (ropt_camera; NULL otherwise). The colour is then the colour camera's
+ * own image: the caller sets replay_options.raw_colour. */
+typedef struct app_calibration {
+    const char *path;          /* NULL: no --calibration */
+    calib_result cal;
+    const char *ropt_camera;   /* depth_camera, or NULL */
+    char depth_camera[512];
+} app_calibration;
+/* Reads and checks path before any device opens or output is made: exit 3
+ * naming the file and field, else APP_EXIT_OK. is_device: seq is a live
+ * URI, not a file or folder. */
+int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device, app_calibration *out);
+/* After the sequence opened: the file's depth camera replaces the
+ * intrinsics a log or a device gave (the sizes must agree: BF_FORMAT). */
+bf_status app_calibration_apply(const app_calibration *c, const char *seq, rgbd_source *src);
+
 /* The lens taken out of src's frames: replay_undistortion, or for the
  * recording app_open_device last wrapped as a camera, that recording's. */
 bool app_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double *shift_px);

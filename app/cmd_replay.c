@@ -6,7 +6,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "app.h"
@@ -63,7 +62,7 @@ typedef struct replay_args {
     const char *record_path; /* live: also record into this log */
     int init;                /* 0: the first frame's ground truth, 1: identity */
     replay_options ropt;
-    char depth_camera[512]; /* --calibration's depth camera as --camera's nine numbers */
+    app_calibration cal;    /* --calibration, read by parse_args */
     recon_config rcfg;
     uint32_t view_every;
     bool no_mesh;
@@ -426,25 +425,18 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
     if (!rc && a->calibration) {
         /* Read and checked here, before any device opens or output is made. */
-        bf_status s = calib_read(a->calibration, &a->rcfg.calibration);
-        if (s != BF_OK) return app_fail(cmd, s);
-        a->rcfg.has_calibration = true;
-        if (a->rcfg.calibration.has_depth && a->ropt.camera)
+        rc = app_calibration_read(cmd, a->calibration, a->seq, a->is_live_cmd, &a->cal);
+        if (rc) return rc;
+        if (a->cal.cal.has_depth && a->ropt.camera)
             return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
                                    a->calibration);
+        a->rcfg.calibration = a->cal.cal;
+        a->rcfg.has_calibration = true;
         /* The colour is the colour camera's own image, registered through
          * the file: the depth camera's lens must not resample it. The file's
          * depth camera, lens included, is the one the frames are read with. */
         a->ropt.raw_colour = true;
-        struct stat st;
-        bool is_folder = !a->is_live_cmd && stat(a->seq, &st) == 0 && S_ISDIR(st.st_mode); /* not a log */
-        if (a->rcfg.calibration.has_depth && is_folder) {
-            const calib_camera *d = &a->rcfg.calibration.depth;
-            snprintf(a->depth_camera, sizeof a->depth_camera, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
-                     d->fx_px, d->fy_px, d->cx_px, d->cy_px, d->dist[0], d->dist[1], d->dist[2], d->dist[3],
-                     d->dist[4]);
-            a->ropt.camera = a->depth_camera;
-        }
+        if (a->cal.ropt_camera) a->ropt.camera = a->cal.ropt_camera;
     }
     if (!rc && a->depth_correction) {
         bf_status s = calib_depth_read(a->depth_correction, &replay_depth_fix);
@@ -476,26 +468,6 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         }
     }
     return rc;
-}
-
-/* --calibration's depth camera is the one the sequence was opened with
- * (its lens taken out of the depth on reading); a device gives its own
- * intrinsics, which the file's replace here. The sizes must agree. */
-static bf_status apply_calibration(const replay_args *a, rgbd_source *src)
-{
-    const calib_result *c = &a->rcfg.calibration;
-    if (!a->rcfg.has_calibration || !c->has_depth) return BF_OK;
-    bf_intrinsics *K = &src->intrinsics;
-    if (c->depth.width != K->width || c->depth.height != K->height)
-        return bf_fail(BF_FORMAT, "%s: the depth camera is %ux%u, the depth images of %s are %ux%u", a->calibration,
-                       c->depth.width, c->depth.height, a->seq, K->width, K->height);
-    K->fx_px = c->depth.fx_px, K->fy_px = c->depth.fy_px, K->cx_px = c->depth.cx_px, K->cy_px = c->depth.cy_px;
-    double dist[CALIB_DIST_N];
-    if (calib_has_distortion(c->depth.dist) && !replay_undistortion(src, dist, NULL))
-        bf_warn("%s: the depth camera's distortion is not applied to %s (a device or a log gives its frames as "
-                "they are)",
-                a->calibration, a->seq);
-    return BF_OK;
 }
 
 typedef struct replay_result {
@@ -880,7 +852,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     } else {
         s = replay_open(a.seq, &a.ropt, &src);
     }
-    if (s == BF_OK) s = apply_calibration(&a, src);
+    if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
     /* The window before any output: no display leaves no folder behind. */
     gpu_config gcfg = {0};
     if (s == BF_OK && a.view) {

@@ -1,0 +1,49 @@
+/* --calibration for the commands that read a sequence through it (replay,
+ * live, eval-motion): the file read and checked before anything opens, and
+ * the depth camera it gives applied to the sequence (app.h). */
+#include <stdio.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "app.h"
+#include "calib/calib.h"
+#include "replay/replay.h"
+
+int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device, app_calibration *out)
+{
+    memset(out, 0, sizeof *out);
+    bf_status s = calib_read(path, &out->cal);
+    if (s != BF_OK) return app_fail(cmd, s);
+    out->path = path;
+    out->ropt_camera = NULL;
+    if (!out->cal.has_depth) return APP_EXIT_OK;
+    /* A folder is read with the file's depth camera (its lens taken out of
+     * the depth as --camera's would be); a log or a device gives its own
+     * intrinsics, which app_calibration_apply replaces. */
+    struct stat st;
+    bool is_folder = !is_device && seq && stat(seq, &st) == 0 && S_ISDIR(st.st_mode);
+    if (is_folder) {
+        const calib_camera *d = &out->cal.depth;
+        snprintf(out->depth_camera, sizeof out->depth_camera, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
+                 d->fx_px, d->fy_px, d->cx_px, d->cy_px, d->dist[0], d->dist[1], d->dist[2], d->dist[3], d->dist[4]);
+        out->ropt_camera = out->depth_camera;
+    }
+    return APP_EXIT_OK;
+}
+
+bf_status app_calibration_apply(const app_calibration *c, const char *seq, rgbd_source *src)
+{
+    if (!c->path || !c->cal.has_depth) return BF_OK;
+    bf_intrinsics *K = &src->intrinsics;
+    const calib_camera *d = &c->cal.depth;
+    if (d->width != K->width || d->height != K->height)
+        return bf_fail(BF_FORMAT, "%s: the depth camera is %ux%u, the depth images of %s are %ux%u", c->path, d->width,
+                       d->height, seq, K->width, K->height);
+    K->fx_px = d->fx_px, K->fy_px = d->fy_px, K->cx_px = d->cx_px, K->cy_px = d->cy_px;
+    double dist[CALIB_DIST_N];
+    if (calib_has_distortion(d->dist) && !replay_undistortion(src, dist, NULL))
+        bf_warn("%s: the depth camera's distortion is not applied to %s (a device or a log gives its frames as "
+                "they are)",
+                c->path, seq);
+    return BF_OK;
+}
