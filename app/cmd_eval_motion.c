@@ -26,7 +26,8 @@ static const char usage_text[] =
     "trajectory.txt) or 'groundtruth' (the frames' own poses). The motion is the one\n"
     "between the two colour images' timestamps, and every TRAJ is interpolated there (in\n"
     "TUM sequences a colour image is up to 20 ms from its depth). The colour is taken as\n"
-    "registered to the depth (TUM, 7-Scenes folders, bitfuse logs); pairs are compared\n"
+    "registered to the depth (TUM, 7-Scenes folders, bitfuse logs) unless --calibration\n"
+    "gives its own camera (bitfuse calibrate's calib.json); pairs are compared\n"
     "where the colour gives a motion and every TRAJ has a pose at both colour times (a\n"
     "time outside a trajectory's span has none). A pair with a frame whose depth or\n"
     "colour repeats the frame before byte for byte (a driver handing on its last image:\n"
@@ -60,6 +61,9 @@ typedef struct motion_args {
     const char *csv;
     bool json;
     replay_options ropt;
+    const char *calibration;
+    app_calibration cal;
+    eval_motion_rig rig; /* with --calibration */
 } motion_args;
 
 typedef struct pairs {
@@ -151,7 +155,9 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         if (!fa->im || fa->index != f.index - a->span) continue; /* a skipped or depthless first frame */
         pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_rgb_s,
                       .has_gt = fa->has_pose && f.has_pose, .repeat = fa->repeat || repeat};
-        if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, slot->im, &a->cfg, &r.m)) != BF_OK) break;
+        if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, a->calibration ? &a->rig : NULL, slot->im, &a->cfg,
+                                              &r.m)) != BF_OK)
+            break;
         if ((s = pairs_push(out, &r)) != BF_OK) break;
     }
     bf_progress_end(&prog, seen);
@@ -298,6 +304,8 @@ static cJSON *result_json(const motion_args *a, const pairs *p, const traj_resul
     cJSON_AddNumberToObject(k, "min_inliers", a->cfg.min_inliers);
     cJSON_AddNumberToObject(k, "min_depth_m", a->cfg.min_depth_m);
     cJSON_AddNumberToObject(k, "max_depth_m", a->cfg.max_depth_m);
+    if (a->calibration) cJSON_AddStringToObject(k, "calibration", a->calibration);
+    else cJSON_AddNullToObject(k, "calibration");
     cJSON_AddNumberToObject(o, "frames", n_frames);
     cJSON_AddNumberToObject(o, "pairs", p->n);
     uint32_t n_ok = 0, n_rep = 0;
@@ -338,6 +346,7 @@ static void print_result(const motion_args *a, const pairs *p, const traj_result
     uint32_t n_ok = 0, n_rep = 0;
     for (uint32_t i = 0; i < p->n; i++) n_ok += p->v[i].m.ok, n_rep += p->v[i].repeat;
     printf("bitfuse eval-motion: %s, pairs %u frames apart, one every %u frames\n", a->paths[0], a->span, a->every);
+    if (a->calibration) printf("  colour camera    of its own: %s\n", a->calibration);
     printf("  pairs            %u, %u of them with a repeated frame (left out); the colour gave a motion in %u\n"
            "                   (at least %u inliers), %u compared\n",
            p->n, n_rep, n_ok, a->cfg.min_inliers, n_common);
@@ -380,6 +389,11 @@ int cmd_eval_motion(int argc, char **argv)
         APP_OPT("--csv", APP_OPT_STRING, &a.csv, "FILE",
                 "one line per pair: the colour's motion, inliers and each trajectory's errors"),
         APP_OPT("--json", APP_OPT_FLAG, &a.json, NULL, "print the result as JSON instead of the summary"),
+        APP_OPT("--calibration", APP_OPT_STRING, &a.calibration, "FILE",
+                "calib.json of bitfuse calibrate: the colour is its colour camera's own image, its features "
+                "lifted by the depth that camera sees and placed through its lens; the motion is the depth "
+                "camera's (docs/eval.md)",
+                .no_default = true),
         APP_OPT_END,
     };
     app_option sq[APP_SEQUENCE_ROWS];
@@ -395,6 +409,17 @@ int cmd_eval_motion(int argc, char **argv)
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (a.calibration) {
+        /* Read and checked before the sequence opens. */
+        if ((rc = app_calibration_read(cmd, a.calibration, a.paths[0], false, &a.cal))) return rc;
+        if (a.cal.cal.has_depth && a.ropt.camera)
+            return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
+                                   a.calibration);
+        a.ropt.raw_colour = true;
+        if (a.cal.ropt_camera) a.ropt.camera = a.cal.ropt_camera;
+        a.rig.colour = &a.cal.cal.colour;
+        a.rig.T_colour_depth = a.cal.cal.has_depth ? a.cal.cal.T_colour_depth : bf_se3_identity();
+    }
 
     double t0 = bf_time_s();
     int n_t = 0;
@@ -412,6 +437,7 @@ int cmd_eval_motion(int argc, char **argv)
         if (!t[k].is_gt) s = replay_traj_read_tum(t[k].name, &t[k].traj);
     }
     if (s == BF_OK) s = replay_open(a.paths[0], &a.ropt, &src);
+    if (s == BF_OK) s = app_calibration_apply(&a.cal, a.paths[0], src);
     for (int k = 0; k < n_t && s == BF_OK; k++)
         if (t[k].is_gt && !src->has_groundtruth)
             s = bf_fail(BF_FORMAT, "%s: 'groundtruth', but the sequence has no ground truth", a.paths[0]);

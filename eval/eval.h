@@ -5,6 +5,7 @@
 #ifndef BF_EVAL_H
 #define BF_EVAL_H
 
+#include "calib/calib.h"
 #include "core/core.h"
 #include "mesh/mesh.h"
 
@@ -150,8 +151,9 @@ double eval_colour_psnr(const eval_colour_sums *s);
  * (calib3d) gives the second camera's pose in the first's frame. The
  * colour carries neither the depth camera's fixed error pattern nor
  * anything of a tracker, so a trajectory, or a ground truth, can be
- * checked against it (bitfuse eval-motion). The colour is taken as
- * registered to the depth (TUM, 7-Scenes, bitfuse logs). */
+ * checked against it (bitfuse eval-motion). The colour is registered to
+ * the depth (TUM, bitfuse logs), taken as registered (7-Scenes), or a
+ * camera of its own on a calibrated rig (eval_motion_rig). */
 
 typedef struct eval_motion_config {
     uint32_t n_features;        /* ORB features per image, default 4000 */
@@ -182,12 +184,25 @@ typedef struct eval_motion_pair {
     double rms_px;           /* their reprojection RMS after the refinement */
 } eval_motion_pair;
 
+/* A colour camera of its own (calib.json): its intrinsics and lens, and
+ * where it sits against the depth camera (p_colour = T_colour_depth
+ * p_depth). */
+typedef struct eval_motion_rig {
+    const calib_camera *colour;
+    bf_se3 T_colour_depth;
+} eval_motion_rig;
+
 /* The motion from a to b: a's features lifted by depth_a (raw units,
- * K->depth_scale per metre, 0 = none; K is a's and b's camera), matched to
- * b's. Too few inliers is not an error: out->ok is false and the counts say
- * how far it got. BF_INVALID_ARG for images of another size than K's. */
+ * K->depth_scale per metre, 0 = none; K is the depth camera), matched to
+ * b's. rig NULL: the colour is registered to the depth (K is a's and b's
+ * colour camera too). With a rig the features are the colour camera's own,
+ * lifted by the depth it sees (calib_points_on_colour), PnP runs through
+ * its lens, and the motion is the depth camera's, as the trajectories
+ * are. Too few inliers is not an error: out->ok is false and the counts
+ * say how far it got. BF_INVALID_ARG for images of another size than K's. */
 bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, const bf_intrinsics *K,
-                          const eval_motion_image *b, const eval_motion_config *cfg, eval_motion_pair *out);
+                          const eval_motion_rig *rig, const eval_motion_image *b, const eval_motion_config *cfg,
+                          eval_motion_pair *out);
 
 /* A trajectory's relative pose over a pair (T_wa, T_wb: its poses of the
  * pair's two frames) against the colour's T_ab. */

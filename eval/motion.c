@@ -49,22 +49,38 @@ uint32_t eval_motion_image_features(const eval_motion_image *im)
     return im ? features_count(im->f) : 0;
 }
 
+/* a's features with their points in a's depth camera: lifted by depth_a
+ * at their own pixels, or through the rig's colour camera. */
+static bf_status lift(const eval_motion_image *a, const uint16_t *depth_a, const bf_intrinsics *K,
+                      const eval_motion_rig *rig, const eval_motion_config *cfg, features_set **out)
+{
+    if (!rig) return features_lift(a->f, depth_a, K, cfg->min_depth_m, cfg->max_depth_m, true, out);
+    float *xyz = malloc((size_t)a->w * a->h * 3 * sizeof *xyz);
+    if (!xyz) return bf_fail(BF_NO_MEMORY, "eval_motion_pnp: %ux%u points", a->w, a->h);
+    bf_status s = calib_points_on_colour(rig->colour, &rig->T_colour_depth, K, depth_a, a->w, a->h, xyz);
+    if (s == BF_OK) s = features_lift_points(a->f, xyz, a->w, a->h, cfg->min_depth_m, cfg->max_depth_m, true, out);
+    free(xyz);
+    return s;
+}
+
 bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, const bf_intrinsics *K,
-                          const eval_motion_image *b, const eval_motion_config *cfg, eval_motion_pair *out)
+                          const eval_motion_rig *rig, const eval_motion_image *b, const eval_motion_config *cfg,
+                          eval_motion_pair *out)
 {
     *out = (eval_motion_pair){.ok = false, .T_ab = bf_se3_identity()};
-    if (!a || !b || !depth_a || !K || !cfg || !(K->depth_scale > 0))
+    if (!a || !b || !depth_a || !K || !cfg || !(K->depth_scale > 0) || (rig && !rig->colour))
         return bf_fail(BF_INVALID_ARG, "eval_motion_pnp: missing input");
     if (a->w != K->width || a->h != K->height || b->w != K->width || b->h != K->height)
         return bf_fail(BF_INVALID_ARG, "eval_motion_pnp: images %ux%u and %ux%u, camera %ux%u", a->w, a->h, b->w, b->h,
                        K->width, K->height);
     features_set *lifted;
-    bf_status s = features_lift(a->f, depth_a, K, cfg->min_depth_m, cfg->max_depth_m, true, &lifted);
+    bf_status s = lift(a, depth_a, K, rig, cfg, &lifted);
     if (s != BF_OK) return s;
     const features_pnp_config pc = {.ransac_px = cfg->ransac_px, .ransac_iterations = cfg->ransac_iterations,
                                     .min_inliers = cfg->min_inliers};
+    bf_intrinsics Kb = rig ? calib_camera_intrinsics(rig->colour) : *K;
     features_pnp_result r;
-    s = features_pnp(lifted, b->f, K, NULL, &pc, &r);
+    s = features_pnp(lifted, b->f, &Kb, rig ? rig->colour->dist : NULL, &pc, &r);
     features_free(lifted);
     if (s != BF_OK) return s;
     out->n_matches = r.n_matches;
@@ -72,9 +88,15 @@ bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, c
     out->n_inliers = r.n_inliers;
     out->rms_px = r.rms_px;
     if (!r.ok) return BF_OK;
-    /* The pose takes a's points into b's camera, T_ba; the pose of camera
-     * b in a's frame is its inverse. */
-    out->T_ab = bf_se3_inverse(&r.T_ba);
+    /* The pose takes a's points into b's camera, T_ba (with a rig: into b's
+     * colour camera, and T_dc T_ba into its depth camera); the pose of
+     * camera b in a's frame is its inverse. */
+    bf_se3 T_ba = r.T_ba;
+    if (rig) {
+        bf_se3 T_dc = bf_se3_inverse(&rig->T_colour_depth);
+        T_ba = bf_se3_mul(&T_dc, &r.T_ba);
+    }
+    out->T_ab = bf_se3_inverse(&T_ba);
     out->ok = true;
     return BF_OK;
 }

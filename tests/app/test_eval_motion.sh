@@ -6,7 +6,9 @@
 # the ground truth closest in every pair); the CSV has a line per pair; a
 # sequence alone, a missing trajectory and 'groundtruth' for a sequence
 # without it are refused with the exit codes the help states; with a colour
-# stream 11 ms late, the ground truth is read at the colour's moments.
+# stream 11 ms late, the ground truth is read at the colour's moments; a
+# calibration's colour camera gives what the registered colour gives when
+# it is the depth camera, and a bad file or one with --camera is refused.
 # Usage: test_eval_motion.sh path/to/bitfuse
 set -u
 B=$1
@@ -129,6 +131,36 @@ assert gt["trans_err_m"]["median"] < 0.005 and gtfile["trans_err_m"]["median"] <
 first = [l.split(",") for l in open(sys.argv[2]) if not l.startswith("#")][0]
 assert first[:4] == ["0", "10", "0.011111", "0.344444"], first
 PY
+
+# --calibration: a colour camera of its own. Here it is the depth camera
+# itself (synth registers the two: its colour camera, no lens, no offset),
+# so the features go through calib_points_on_colour and the rig and must
+# give what the registered run gave; the file is echoed.
+cat >"$T/calib.json" <<'JSON'
+{"format": "bitfuse-calibration", "version": 1,
+ "colour": {"width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5,
+            "dist": [0, 0, 0, 0, 0], "rms_px": 0},
+ "depth": {"width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5,
+           "dist": [0, 0, 0, 0, 0], "rms_px": 0},
+ "T_colour_depth": {"R": [1, 0, 0, 0, 1, 0, 0, 0, 1], "t": [0, 0, 0]}, "rms_px": 0, "views": 0}
+JSON
+expect 0 "$B" eval-motion "$T/seq" groundtruth "$T/short.txt" --json --calibration "$T/calib.json"
+py - "$T/out" "$T/result.json" "$T/calib.json" <<'PY' || fail "eval-motion through a calibration's colour camera differs"
+import json, sys
+d, r = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+assert d["config"]["calibration"] == sys.argv[3] and r["config"]["calibration"] is None, (d["config"], r["config"])
+assert d["pairs_compared"] == r["pairs_compared"] == 6, d
+for a, b in zip(d["trajectories"], r["trajectories"]):
+    # The same motion to a millimetre: each feature between its pixels' points
+    # where the registered run takes its nearest pixel's depth.
+    assert abs(a["trans_err_m"]["median"] - b["trans_err_m"]["median"]) < 1e-3, (a, b)
+    assert abs(a["length_ratio"] - b["length_ratio"]) < 0.01, (a, b)
+PY
+echo '{"format": "bitfuse-calibration", "version": 1}' >"$T/bad.json"
+expect 3 "$B" eval-motion "$T/seq" groundtruth --calibration "$T/bad.json"
+mentions "bad.json"
+expect 2 "$B" eval-motion "$T/seq" groundtruth --calibration "$T/calib.json" --camera 500,500,320,240
+mentions "keep one"
 
 # Refusals.
 expect 2 "$B" eval-motion "$T/seq"

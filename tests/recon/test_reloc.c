@@ -277,7 +277,7 @@ BF_TEST(a_camera_carried_away_is_found_from_its_colour)
  * Kinect's 2.5 cm, so that a colour pose taken for the depth camera's,
  * keypoints lifted as if the colour were registered, or PnP run with the
  * depth camera's intrinsics all leave the candidate beyond ICP's reach
- * (each of the three makes the camera stay lost for three frames or more).
+ * (each of the three makes the camera stay lost for two frames or more).
  * The keyframes' keypoints are found in the colour camera's own image and
  * lifted by the depth it sees (calib_points_on_colour); PnP gives the
  * colour camera's pose, and the rig the depth camera's. (PnP without the
