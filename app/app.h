@@ -350,8 +350,10 @@ typedef struct app_calibration {
  * URI, not a file or folder. */
 int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device, app_calibration *out);
 /* After the sequence opened: the file's depth camera replaces the
- * intrinsics a log or a device gave (the sizes must agree: BF_FORMAT). */
-bf_status app_calibration_apply(const app_calibration *c, const char *seq, rgbd_source *src);
+ * intrinsics a log or a device gave (the sizes must agree: BF_FORMAT), and
+ * a colour camera calibrated at another size than the frames' is scaled to
+ * it (c->cal.colour changes: callers copy it after). */
+bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source *src);
 
 /* The lens taken out of src's frames: replay_undistortion, or for the
  * recording app_open_device last wrapped as a camera, that recording's. */

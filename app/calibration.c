@@ -31,10 +31,30 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
     return APP_EXIT_OK;
 }
 
-bf_status app_calibration_apply(const app_calibration *c, const char *seq, rgbd_source *src)
+/* The colour camera at the frames' size: a source gives its colour at the
+ * depth's size (a folder must; a V4L2 camera's is resized to it), so a
+ * file calibrated at the colour camera's own size (1280x960 where the
+ * frames are 640x480) is scaled, each axis by its own ratio, pixel
+ * centres kept. The lens's coefficients are in the normalised plane and
+ * stay. */
+static void colour_to_frame_size(app_calibration *c, const bf_intrinsics *K)
 {
-    if (!c->path || !c->cal.has_depth) return BF_OK;
+    calib_camera *cc = &c->cal.colour;
+    if (cc->width == K->width && cc->height == K->height) return;
+    double sx = (double)K->width / cc->width, sy = (double)K->height / cc->height;
+    bf_info("%s: the colour camera is %ux%u, the frames' colour %ux%u: its intrinsics scaled to them", c->path,
+            cc->width, cc->height, K->width, K->height);
+    cc->fx_px *= sx, cc->fy_px *= sy;
+    cc->cx_px = (cc->cx_px + 0.5) * sx - 0.5, cc->cy_px = (cc->cy_px + 0.5) * sy - 0.5;
+    cc->width = K->width, cc->height = K->height;
+}
+
+bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source *src)
+{
+    if (!c->path) return BF_OK;
     bf_intrinsics *K = &src->intrinsics;
+    colour_to_frame_size(c, K);
+    if (!c->cal.has_depth) return BF_OK;
     const calib_camera *d = &c->cal.depth;
     if (d->width != K->width || d->height != K->height)
         return bf_fail(BF_FORMAT, "%s: the depth camera is %ux%u, the depth images of %s are %ux%u", c->path, d->width,

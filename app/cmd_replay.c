@@ -853,6 +853,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = replay_open(a.seq, &a.ropt, &src);
     }
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
+    if (s == BF_OK && a.cal.path) a.rcfg.calibration = a.cal.cal; /* the colour camera at the frames' size */
     /* The window before any output: no display leaves no folder behind. */
     gpu_config gcfg = {0};
     if (s == BF_OK && a.view) {
