@@ -165,9 +165,13 @@ bool calib_has_distortion(const double dist[CALIB_DIST_N]);
  * T_colour_depth p_depth) and projected through its lens
  * (calib_project); a colour pixel takes, of the points landing within 0.9
  * pixel of its centre along both axes and not hidden behind the nearest of
- * them (by 3% of the depth or 1 cm), the one landing nearest its centre.
- * What is found in the colour camera's own image (ORB keypoints) is then
- * lifted as if the device had registered the two. xyz: w x h x 3 floats. */
+ * them (by 3% of the depth or 1 cm), the one landing nearest its centre,
+ * moved at its depth (along the colour camera's axis) onto the ray through
+ * the pixel's centre (to first order: the pinhole's scale, which the lens
+ * changes by a few per cent). What is found in the colour camera's own
+ * image (ORB keypoints) is then lifted as if the device had registered the
+ * two, between pixels where they lie on one surface (features_lift_points).
+ * xyz: w x h x 3 floats. */
 bf_status calib_points_on_colour(const calib_camera *colour, const bf_se3 *T_colour_depth, const bf_intrinsics *Kd,
                                  const uint16_t *depth, uint32_t w, uint32_t h, float *xyz);
 

@@ -107,12 +107,20 @@ template <class PointOf> features_set *lifted_copy(const features_set *f, int ke
 
 const double nan_d = std::numeric_limits<double>::quiet_NaN();
 
+// Four pixels' points whose depths (the depth camera's z) lie within
+// this share of the nearest one's are taken for one smooth surface: a few
+// times Kinect v1's noise at 1-4 m (the occlusion margin of
+// calib_points_on_colour is the same 3%).
+const float SMOOTH_REL = 0.03f;
+
 // The point at (x, y) between four pixels' points, bilinearly, where all
-// four have one within 3% of z (the nearest pixel's depth): one smooth
-// surface, whose points lie on the rays through their pixels' centres
-// (calib_points_on_colour places them so). Across a depth edge it would
-// be a point of neither surface: false, and the nearest pixel's is taken.
-bool between(const float *xyz, int w, int h, double x, double y, float z, cv::Point3d &out)
+// four have one within SMOOTH_REL of z (the nearest pixel's depth) and in
+// [min_m, max_m]: one smooth surface, whose points lie on the rays through
+// their pixels' centres (calib_points_on_colour places them so). Across a
+// depth edge it would be a point of neither surface: false, and the
+// nearest pixel's is taken.
+bool between(const float *xyz, int w, int h, double x, double y, float z, double min_m, double max_m,
+             cv::Point3d &out)
 {
     int x0 = (int)std::floor(x), y0 = (int)std::floor(y);
     if (x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h) return false;
@@ -121,7 +129,8 @@ bool between(const float *xyz, int w, int h, double x, double y, float z, cv::Po
     p[1] = p[0] + 3, p[2] = p[0] + 3 * (size_t)w, p[3] = p[2] + 3;
     double s[3] = {0, 0, 0};
     for (int i = 0; i < 4; i++) {
-        if (!(std::fabs(p[i][2] - z) <= 0.03f * z) || !std::isfinite(p[i][0]) || !std::isfinite(p[i][1])) return false;
+        bool ok = std::fabs(p[i][2] - z) <= SMOOTH_REL * z && p[i][2] >= min_m && p[i][2] <= max_m;
+        if (!ok || !std::isfinite(p[i][0]) || !std::isfinite(p[i][1])) return false;
         for (int c = 0; c < 3; c++) s[c] += wt[i] * p[i][c];
     }
     out = cv::Point3d(s[0], s[1], s[2]);
@@ -162,7 +171,7 @@ extern "C" int features__lift_points(const features_set *f, const float *xyz, in
             if (!(p[2] >= min_m && p[2] <= max_m) || !std::isfinite(p[0]) || !std::isfinite(p[1]))
                 return cv::Point3d(nan_d, nan_d, nan_d);
             cv::Point3d q;
-            if (between(xyz, w, h, k.pt.x, k.pt.y, p[2], q)) return q;
+            if (between(xyz, w, h, k.pt.x, k.pt.y, p[2], min_m, max_m, q)) return q;
             return cv::Point3d(p[0], p[1], p[2]);
         });
         return FEATURES__OK;

@@ -252,6 +252,29 @@ BF_TEST(features_pnp_through_a_lens_and_from_points_of_the_pixels)
     CHECK_OK(features_pnp(from_pts, b, &box_K, lens, &pnp_cfg, &r1));
     CHECK(r1.ok);
     CHECK_EQ_INT(r1.n_placed, r0.n_placed); /* the same keypoints lifted */
+    /* Each lifted point against the keypoint's own ray (features_lift's
+     * points lie on it, at the nearest pixel's depth: the same keypoints in
+     * the same order) and the room's wall there. Between four pixels on one
+     * wall the point is on the ray to a few thousandths of a pixel (1e-5 in
+     * the normalised plane) and on the wall to the depth's 0.2 mm steps;
+     * the nearest pixel's point would be up to half a pixel (1e-3) off the
+     * ray. Where the four span two walls or one is missing it is the
+     * nearest pixel's. */
+    uint32_t n_pts, n_ref, n_exact = 0;
+    uint8_t *pdesc, *rdesc;
+    float *pxyz, *rxyz;
+    CHECK_OK(features_export_lifted(from_pts, &n_pts, &pdesc, &pxyz));
+    CHECK_OK(features_export_lifted(lifted, &n_ref, &rdesc, &rxyz));
+    CHECK_EQ_INT(n_pts, n_ref);
+    for (uint32_t k = 0; k < n_pts && n_pts == n_ref; k++) {
+        const float *p = pxyz + 3 * k, *q = rxyz + 3 * k;
+        double ray_err = fmax(fabs(p[0] / p[2] - q[0] / q[2]), fabs(p[1] / p[2] - q[1] / q[2]));
+        bf_vec3 d = bf_se3_rotate(&Ta, bf_v3(q[0] / q[2], q[1] / q[2], 1.0));
+        n_exact += ray_err <= 1e-5 && fabs(p[2] - box_hit(Ta.t, d)) <= 0.3e-3;
+    }
+    bf_info("features: %u lifted points, %.1f%% on the keypoint's ray and its wall", n_pts, 100.0 * n_exact / n_pts);
+    CHECK(n_exact >= 0.95 * n_pts);
+    free(pdesc), free(pxyz), free(rdesc), free(rxyz);
     pose_error(&Ta, &Tb, &r1.T_ba, &e_m, &e_deg);
     bf_info("features: from the pixels' points: %u inliers, %.2f px, %.1f mm, %.3f deg off", r1.n_inliers, r1.rms_px,
             1e3 * e_m, e_deg);
