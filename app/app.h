@@ -335,20 +335,21 @@ struct replay_options;
 bf_status app_open_device(const char *uri, const struct replay_options *ropt, bool realtime, uint32_t queue,
                           bool *is_live, rgbd_source **out);
 /* --calibration (calibration.c), for the commands that read a sequence
- * through it: the file, and where it has the depth camera and the sequence
- * is a folder, that camera as --camera's nine numbers for replay_open
- * (ropt_camera; NULL otherwise). The colour is then the colour camera's
- * own image: the caller sets replay_options.raw_colour. */
+ * through it (replay, live, eval-motion, eval-colour). */
 typedef struct app_calibration {
     const char *path;          /* NULL: no --calibration */
-    calib_result cal;
-    const char *ropt_camera;   /* depth_camera, or NULL */
-    char depth_camera[512];
+    calib_result cal;          /* as read; after app_calibration_apply, its colour camera at the frames' size */
+    char depth_camera[512];    /* the depth camera as --camera's nine numbers (a folder's replay_options.camera) */
 } app_calibration;
-/* Reads and checks path before any device opens or output is made: exit 3
- * naming the file and field, else APP_EXIT_OK. is_device: seq is a live
- * URI, not a file or folder. */
-int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device, app_calibration *out);
+/* Reads and checks path before any device opens or output is made (exit 3
+ * naming the file and field; exit 2 when ropt already has a --camera and
+ * the file a depth camera), then sets ropt for it: the colour is the colour
+ * camera's own image (raw_colour), and a folder is read with the file's
+ * depth camera, lens included. is_device: seq is a live URI, not a file or
+ * folder. APP_EXIT_OK on success. */
+struct replay_options;
+int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device,
+                         struct replay_options *ropt, app_calibration *out);
 /* After the sequence opened: the file's depth camera replaces the
  * intrinsics a log or a device gave (the sizes must agree: BF_FORMAT), and
  * a colour camera calibrated at another size than the frames' is scaled to

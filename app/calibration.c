@@ -9,13 +9,18 @@
 #include "calib/calib.h"
 #include "replay/replay.h"
 
-int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device, app_calibration *out)
+int app_calibration_read(const char *cmd, const char *path, const char *seq, bool is_device, replay_options *ropt,
+                         app_calibration *out)
 {
     memset(out, 0, sizeof *out);
     bf_status s = calib_read(path, &out->cal);
     if (s != BF_OK) return app_fail(cmd, s);
     out->path = path;
-    out->ropt_camera = NULL;
+    if (out->cal.has_depth && ropt->camera)
+        return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one", path);
+    /* The colour is the colour camera's own image, registered through the
+     * file: the depth camera's lens must not resample it. */
+    ropt->raw_colour = true;
     if (!out->cal.has_depth) return APP_EXIT_OK;
     /* A folder is read with the file's depth camera (its lens taken out of
      * the depth as --camera's would be); a log or a device gives its own
@@ -26,7 +31,7 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
         const calib_camera *d = &out->cal.depth;
         snprintf(out->depth_camera, sizeof out->depth_camera, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
                  d->fx_px, d->fy_px, d->cx_px, d->cy_px, d->dist[0], d->dist[1], d->dist[2], d->dist[3], d->dist[4]);
-        out->ropt_camera = out->depth_camera;
+        ropt->camera = out->depth_camera;
     }
     return APP_EXIT_OK;
 }
@@ -35,8 +40,10 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
  * depth's size (a folder must; a V4L2 camera's is resized to it), so a
  * file calibrated at the colour camera's own size (1280x960 where the
  * frames are 640x480) is scaled, each axis by its own ratio, pixel
- * centres kept. The lens's coefficients are in the normalised plane and
- * stay. */
+ * centres kept as an area resize keeps them (capture's nearest-pixel
+ * resize reads a pixel up to half a source pixel off that: a quarter of
+ * a pixel at half size). The lens's coefficients are in the normalised
+ * plane and stay. */
 static void colour_to_frame_size(app_calibration *c, const bf_intrinsics *K)
 {
     calib_camera *cc = &c->cal.colour;
@@ -53,12 +60,12 @@ bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source
 {
     if (!c->path) return BF_OK;
     bf_intrinsics *K = &src->intrinsics;
-    colour_to_frame_size(c, K);
-    if (!c->cal.has_depth) return BF_OK;
     const calib_camera *d = &c->cal.depth;
-    if (d->width != K->width || d->height != K->height)
+    if (c->cal.has_depth && (d->width != K->width || d->height != K->height))
         return bf_fail(BF_FORMAT, "%s: the depth camera is %ux%u, the depth images of %s are %ux%u", c->path, d->width,
                        d->height, seq, K->width, K->height);
+    colour_to_frame_size(c, K);
+    if (!c->cal.has_depth) return BF_OK;
     K->fx_px = d->fx_px, K->fy_px = d->fy_px, K->cx_px = d->cx_px, K->cy_px = d->cy_px;
     double dist[CALIB_DIST_N];
     if (calib_has_distortion(d->dist) && !replay_undistortion(src, dist, NULL))

@@ -80,18 +80,21 @@ int cmd_eval_colour(int argc, char **argv)
     mesh_data m = {0};
     mesh_bvh *bvh = NULL;
     bf_traj tr = {0};
-    calib_result cal;
+    /* With a calibration the colour is the colour camera's own image, never
+     * resampled by the depth camera's lens (a TUM folder's preset). */
+    app_calibration cal = {0};
+    replay_options ropt = {0};
+    rc = calib_path ? app_calibration_read(cmd, calib_path, paths[1], false, &ropt, &cal) : APP_EXIT_OK;
+    if (rc) return rc;
     rgbd_source *src = NULL;
     bf_status s = mesh_read_ply(paths[0], &m);
     if (s == BF_OK && (!m.rgb || m.n_tris == 0))
         s = bf_fail(BF_FORMAT, "%s: a mesh with vertex colour is needed", paths[0]);
     if (s == BF_OK) s = replay_traj_read_tum(traj_path, &tr);
-    if (s == BF_OK && calib_path) s = calib_read(calib_path, &cal);
-    /* With a calibration the colour is the colour camera's own image: the
-     * depth camera's lens (a TUM folder's preset) must not resample it. */
-    replay_options ropt = {.raw_colour = calib_path != NULL};
     if (s == BF_OK) s = replay_open(paths[1], &ropt, &src);
+    if (s == BF_OK) s = app_calibration_apply(&cal, paths[1], src); /* the colour camera at the frames' size */
     if (s != BF_OK) {
+        rgbd_source_close(src);
         mesh_free(&m);
         bf_traj_free(&tr);
         return app_fail(cmd, s);
@@ -99,8 +102,9 @@ int cmd_eval_colour(int argc, char **argv)
     bf_intrinsics K = *rgbd_source_intrinsics(src);
     bf_se3 T_dc = bf_se3_identity(); /* colour camera to depth camera */
     if (calib_path) {
-        K.fx_px = cal.colour.fx_px, K.fy_px = cal.colour.fy_px, K.cx_px = cal.colour.cx_px, K.cy_px = cal.colour.cy_px;
-        if (cal.has_depth) T_dc = bf_se3_inverse(&cal.T_colour_depth);
+        const calib_camera *c = &cal.cal.colour;
+        K.fx_px = c->fx_px, K.fy_px = c->fy_px, K.cx_px = c->cx_px, K.cy_px = c->cy_px;
+        if (cal.cal.has_depth) T_dc = bf_se3_inverse(&cal.cal.T_colour_depth);
     }
     if ((s = mesh_bvh_build(&m, &bvh)) != BF_OK) goto done;
     size_t n_px = (size_t)K.width * K.height;

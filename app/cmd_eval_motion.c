@@ -117,6 +117,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
 {
     const char *seq = a->paths[0];
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    const eval_motion_rig *rig = a->calibration ? &a->rig : NULL;
     uint32_t ring_n = a->span + 1;
     kept_frame *ring = calloc(ring_n, sizeof *ring);
     if (!ring) return bf_fail(BF_NO_MEMORY, "eval-motion: %u frames", ring_n);
@@ -155,9 +156,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         if (!fa->im || fa->index != f.index - a->span) continue; /* a skipped or depthless first frame */
         pair_rec r = {.a = fa->index, .b = f.index, .t_a = fa->t_s, .t_b = f.t_rgb_s,
                       .has_gt = fa->has_pose && f.has_pose, .repeat = fa->repeat || repeat};
-        if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, a->calibration ? &a->rig : NULL, slot->im, &a->cfg,
-                                              &r.m)) != BF_OK)
-            break;
+        if (!r.repeat && (s = eval_motion_pnp(fa->im, fa->depth, K, rig, slot->im, &a->cfg, &r.m)) != BF_OK) break;
         if ((s = pairs_push(out, &r)) != BF_OK) break;
     }
     bf_progress_end(&prog, seen);
@@ -402,22 +401,18 @@ int cmd_eval_motion(int argc, char **argv)
     app_command_spec spec = {
         .name = cmd, .usage = usage_text, .tables = tables, .positional = a.paths, .min_positional = 2,
         .max_positional = 1 + MAX_TRAJ, .positional_missing = "needs a sequence and at least one trajectory",
-        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 bad input (an unreadable frame or trajectory, a frame\n"
-                  "without colour, 'groundtruth' for a sequence without it, no pair the colour gives a motion\n"
-                  "for), 5 the CSV could not be written\n"
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage (--camera with a --calibration that has a depth camera),\n"
+                  "3 bad input (an unreadable frame, trajectory or --calibration file, a frame without colour,\n"
+                  "'groundtruth' for a sequence without it, a calibration's depth camera of another size, no\n"
+                  "pair the colour gives a motion for), 5 the CSV could not be written\n"
                   "\nSee docs/eval.md.\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (a.calibration) {
         /* Read and checked before the sequence opens. */
-        if ((rc = app_calibration_read(cmd, a.calibration, a.paths[0], false, &a.cal))) return rc;
-        if (a.cal.cal.has_depth && a.ropt.camera)
-            return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
-                                   a.calibration);
-        a.ropt.raw_colour = true;
-        if (a.cal.ropt_camera) a.ropt.camera = a.cal.ropt_camera;
-        a.rig.colour = &a.cal.cal.colour;
+        if ((rc = app_calibration_read(cmd, a.calibration, a.paths[0], false, &a.ropt, &a.cal))) return rc;
+        a.rig.colour = &a.cal.cal.colour; /* scaled to the frames' size by app_calibration_apply */
         a.rig.T_colour_depth = a.cal.cal.has_depth ? a.cal.cal.T_colour_depth : bf_se3_identity();
     }
 

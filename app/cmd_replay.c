@@ -74,7 +74,7 @@ typedef struct replay_args {
     double gpu_budget_mib;   /* the pools' bytes (0: --bricks decides) */
     double cache_budget_mib; /* the streaming cache's bytes */
     bool auto_budget;        /* neither --gpu-budget nor --bricks: the device decides */
-    const char *calibration; /* calib.json: read into rcfg.calibration by parse_args */
+    const char *calibration; /* calib.json: read into cal by parse_args */
     const char *depth_correction; /* depth_correction.json: read into replay_depth_fix by parse_args */
     bool view;               /* show the map in a window as the scan goes (view/) */
     const char *screenshot;  /* with view: the window's last frame, after exit_after frames */
@@ -425,18 +425,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
     if (!rc && a->calibration) {
         /* Read and checked here, before any device opens or output is made. */
-        rc = app_calibration_read(cmd, a->calibration, a->seq, a->is_live_cmd, &a->cal);
+        rc = app_calibration_read(cmd, a->calibration, a->seq, a->is_live_cmd, &a->ropt, &a->cal);
         if (rc) return rc;
-        if (a->cal.cal.has_depth && a->ropt.camera)
-            return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one",
-                                   a->calibration);
-        a->rcfg.calibration = a->cal.cal;
-        a->rcfg.has_calibration = true;
-        /* The colour is the colour camera's own image, registered through
-         * the file: the depth camera's lens must not resample it. The file's
-         * depth camera, lens included, is the one the frames are read with. */
-        a->ropt.raw_colour = true;
-        if (a->cal.ropt_camera) a->ropt.camera = a->cal.ropt_camera;
     }
     if (!rc && a->depth_correction) {
         bf_status s = calib_depth_read(a->depth_correction, &replay_depth_fix);
@@ -853,7 +843,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = replay_open(a.seq, &a.ropt, &src);
     }
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
-    if (s == BF_OK && a.cal.path) a.rcfg.calibration = a.cal.cal; /* the colour camera at the frames' size */
+    if (s == BF_OK && a.cal.path) {
+        a.rcfg.calibration = a.cal.cal; /* its colour camera at the frames' size */
+        a.rcfg.has_calibration = true;
+    }
     /* The window before any output: no display leaves no folder behind. */
     gpu_config gcfg = {0};
     if (s == BF_OK && a.view) {

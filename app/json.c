@@ -170,8 +170,10 @@ static void json_track_config(cJSON *parent, const char *name, const track_confi
     cJSON_AddBoolToObject(o, "profile", c->profile);
 }
 
-/* --calibration's file as read (calib.json's own layout, raw: cJSON would
- * print its numbers again with 15 digits), or null. */
+/* --calibration's file as the loop used it, its colour camera scaled to
+ * the frames' size where it was calibrated at another (calib.json's own
+ * layout, raw: cJSON would print its numbers again with 15 digits), or
+ * null. */
 static void json_calibration(cJSON *o, const recon_config *c)
 {
     char *text = NULL;
