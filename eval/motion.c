@@ -73,6 +73,9 @@ bf_status eval_motion_pnp(const eval_motion_image *a, const uint16_t *depth_a, c
     if (a->w != K->width || a->h != K->height || b->w != K->width || b->h != K->height)
         return bf_fail(BF_INVALID_ARG, "eval_motion_pnp: images %ux%u and %ux%u, camera %ux%u", a->w, a->h, b->w, b->h,
                        K->width, K->height);
+    if (rig && (rig->colour->width != a->w || rig->colour->height != a->h))
+        return bf_fail(BF_INVALID_ARG, "eval_motion_pnp: images %ux%u, the colour camera %ux%u", a->w, a->h,
+                       rig->colour->width, rig->colour->height);
     features_set *lifted;
     bf_status s = lift(a, depth_a, K, rig, cfg, &lifted);
     if (s != BF_OK) return s;

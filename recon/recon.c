@@ -129,6 +129,13 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
                        recon **out)
 {
     if (!ctx || !cfg || !K || !T_wc0 || !out) return bf_fail(BF_INVALID_ARG, "recon_create: NULL argument");
+    /* Fusion, the photometric term and relocalisation read the frames'
+     * colour through this camera pixel for pixel: it must be at their size
+     * (app_calibration_apply scales a file's). */
+    const calib_camera *cc = &cfg->calibration.colour;
+    if (cfg->has_calibration && (cc->width != K->width || cc->height != K->height))
+        return bf_fail(BF_INVALID_ARG, "recon_create: the colour camera is %ux%u, the frames %ux%u", cc->width,
+                       cc->height, K->width, K->height);
     recon *r = calloc(1, sizeof *r);
     if (!r) return bf_fail(BF_NO_MEMORY, "recon_create");
     r->ctx = ctx;

@@ -87,7 +87,10 @@ BF_TEST(motion_pnp_through_a_colour_camera_of_its_own_gives_the_depth_cameras_mo
            "%.2f mm, %.3f deg\n",
            p.n_inliers, p.rms_px, 1e3 * e.trans_m, e.rot_deg, q.n_inliers, q.rms_px, 1e3 * f.trans_m, f.rot_deg);
     CHECK(p.n_inliers > 1000);
-    CHECK_LE(e.trans_m, 2e-3);
+    /* 1 mm: the registered case's own bias (0.84 mm, above) with the
+     * lifting exact between pixels; features at their nearest pixel's
+     * point, half a pixel off, gave 1.81 mm. */
+    CHECK_LE(e.trans_m, 1e-3);
     CHECK_LE(e.rot_deg, 0.05);
     CHECK(f.trans_m > 10e-3);
     eval_motion_rig bad = {.colour = NULL};
