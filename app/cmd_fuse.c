@@ -27,7 +27,8 @@ static const char fuse_usage[] =
     "               stage, map bytes by part, bricks per level, surface voxels, bits per voxel\n";
 
 typedef struct fuse_args {
-    const char *seq, *poses, *out, *depth_correction;
+    const char *seq, *poses, *out, *depth_correction, *calibration;
+    app_calibration cal; /* --calibration, read by parse_args */
     replay_options ropt;
     fusion_config fcfg;
     bool skip_repeated;
@@ -54,6 +55,11 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
                 "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
                 "out of every frame before fusion (docs/calibration.md)", .no_default = true),
+        APP_OPT("--calibration", APP_OPT_STRING, &a->calibration, "FILE",
+                "calib.json of bitfuse calibrate: the colour is its colour camera's own image, fused into the map "
+                "through it; its depth camera, lens included, is the one the depth is read with "
+                "(docs/calibration.md)",
+                .no_default = true),
         APP_OPT_END,
     };
     app_option map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], msh[APP_MESH_ROWS];
@@ -64,12 +70,15 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     app_command_spec spec = {
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
-        .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage, 3 bad input (a corrupt frame\n"
-                  "mid-sequence: the frames before it are still fused and written), 4 no Vulkan device,\n"
+        .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage (--camera with a --calibration that has\n"
+                  "a depth camera), 3 bad input (a corrupt frame mid-sequence: the frames before it are still\n"
+                  "fused and written; a bad --calibration file, or its depth camera of another size than the\n"
+                  "depth images), 4 no Vulkan device,\n"
                   "5 an output could not be written (disk full, I/O error: the file is named; every\n"
                   "file in DIR is whole or absent)\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
+    if (!rc && a->calibration) rc = app_calibration_read("fuse", a->calibration, a->seq, false, &a->ropt, &a->cal);
     return rc ? rc : app_check_map_options("fuse", &a->fcfg);
 }
 
@@ -94,6 +103,10 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_fusion_config(o, "config", &a->fcfg);
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &fuse_depth_fix : NULL);
+    char *cal_text = NULL;
+    cJSON *cal = a->calibration && calib_to_text(&a->cal.cal, &cal_text) == BF_OK ? cJSON_CreateRaw(cal_text) : NULL;
+    free(cal_text);
+    cJSON_AddItemToObject(o, "calibration", cal ? cal : cJSON_CreateNull());
     cJSON_AddNumberToObject(o, "frames", r->run.n_fused);
     cJSON_AddBoolToObject(o, "skip_repeated", a->skip_repeated);
     cJSON_AddNumberToObject(o, "repeated", r->run.counts.repeated);
@@ -131,6 +144,7 @@ int cmd_fuse(int argc, char **argv)
     bf_status s = use_traj ? replay_traj_read_tum(a.poses, &traj) : BF_OK;
     if (s == BF_OK && a.depth_correction) s = calib_depth_read(a.depth_correction, &fuse_depth_fix);
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
+    if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
     bool made_out = !bf_file_exists(a.out);
@@ -148,6 +162,8 @@ int cmd_fuse(int argc, char **argv)
         rcfg.poses = RECON_POSES_KNOWN;
         rcfg.known = use_traj ? &traj : NULL;
         rcfg.depth_correction = a.depth_correction ? &fuse_depth_fix : NULL;
+        rcfg.loop.has_calibration = a.calibration != NULL;
+        if (a.calibration) rcfg.loop.calibration = a.cal.cal; /* its colour camera at the frames' size */
         rcfg.name = a.seq;
         rcfg.label = cmd;
         /* A corrupt frame mid-sequence ends the run, and the frames fused

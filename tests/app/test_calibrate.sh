@@ -5,7 +5,8 @@
 # lengths within 0.5%, principal points within 2 px, the transform within
 # 2 mm and 0.2 degrees); images without a board, a wrong command line and
 # malformed calibration files are refused with the right exit code and
-# the file named, before any output is made.
+# the file named, before any output is made; replay and fuse read a folder
+# with the file's depth camera and scale its colour camera to the frames.
 # Usage: test_calibrate.sh path/to/bitfuse path/to/calib_compare.py
 set -u
 B=$1
@@ -165,6 +166,19 @@ for k, v in want.items():
 assert (c['width'], c['height']) == (160, 120), c
 " "$T/rp_mixed/stats.json" ||
     fail "replay does not scale a colour camera of another size: $(head -c 600 "$T/rp_mixed/stats.json")"
+# fuse takes the file as replay does: the same checks, the colour camera
+# scaled, the file echoed.
+expect 3 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fu_size" --calibration "$T/calib.json"
+mentions "the depth camera is 640x480, the depth images of $T/seq are 160x120"
+[ ! -e "$T/fu_size" ] || fail "fuse with a calibration of another size made the output folder"
+expect 2 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fu_x" --calibration "$T/small.json" --camera fr1
+mentions "both give the depth camera"
+expect 0 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fu" --calibration "$T/mixed.json" --no-mesh
+"$PY" -c "
+import json, sys
+c = json.load(open(sys.argv[1]))['calibration']
+assert (c['colour']['width'], c['colour']['height']) == (160, 120) and abs(c['colour']['fy'] - 510.0 / 3) < 1e-9, c
+" "$T/fu/stats.json" || fail "fuse does not take --calibration: $(head -c 600 "$T/fu/stats.json")"
 expect 0 "$B" replay --help
 grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
 
