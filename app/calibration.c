@@ -1,6 +1,6 @@
 /* --calibration for the commands that read a sequence through it (replay,
- * live, eval-motion): the file read and checked before anything opens, and
- * the depth camera it gives applied to the sequence (app.h). */
+ * live, fuse, eval-motion, eval-colour): the file read and checked before
+ * anything opens, and the cameras it gives applied to the sequence (app.h). */
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>

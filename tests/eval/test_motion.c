@@ -11,20 +11,32 @@
 #include "eval/eval.h"
 #include "test.h"
 
+/* A hand-held step of 10 frames: 8 cm and 4 degrees. */
+static void hand_held_step(bf_se3 *Ta, bf_se3 *Tb)
+{
+    *Ta = box_pose(0.05, -0.1, 0.02, 0.1, 0.2, 0.3);
+    *Tb = box_pose(0.05 + 0.03, -0.1 + 0.05, 0.02 - 0.02, 0.1 + 0.06, 0.2 - 0.03, 0.3 + 0.04);
+}
+
+static void make_images(const uint8_t *rgb_a, const uint8_t *rgb_b, const eval_motion_config *cfg,
+                        eval_motion_image **a, eval_motion_image **b)
+{
+    CHECK_OK(eval_motion_image_make(rgb_a, BOX_W, BOX_H, cfg, a));
+    CHECK_OK(eval_motion_image_make(rgb_b, BOX_W, BOX_H, cfg, b));
+}
+
 BF_TEST(motion_pnp_finds_the_motion_between_two_rendered_views)
 {
     uint8_t *rgb_a = malloc(BOX_W * BOX_H * 3), *rgb_b = malloc(BOX_W * BOX_H * 3);
     uint16_t *da = malloc(BOX_W * BOX_H * 2), *db = malloc(BOX_W * BOX_H * 2);
     CHECK(rgb_a && rgb_b && da && db);
-    /* A hand-held step of 10 frames: 8 cm and 4 degrees. */
-    bf_se3 Ta = box_pose(0.05, -0.1, 0.02, 0.1, 0.2, 0.3);
-    bf_se3 Tb = box_pose(0.05 + 0.03, -0.1 + 0.05, 0.02 - 0.02, 0.1 + 0.06, 0.2 - 0.03, 0.3 + 0.04);
+    bf_se3 Ta, Tb;
+    hand_held_step(&Ta, &Tb);
     box_render(&Ta, rgb_a, da);
     box_render(&Tb, rgb_b, db);
     eval_motion_config cfg = eval_motion_config_default();
     eval_motion_image *a, *b;
-    CHECK_OK(eval_motion_image_make(rgb_a, BOX_W, BOX_H, &cfg, &a));
-    CHECK_OK(eval_motion_image_make(rgb_b, BOX_W, BOX_H, &cfg, &b));
+    make_images(rgb_a, rgb_b, &cfg, &a, &b);
     CHECK(eval_motion_image_features(a) > 1000);
     eval_motion_pair p;
     CHECK_OK(eval_motion_pnp(a, da, &box_K, NULL, b, &cfg, &p));
@@ -60,8 +72,8 @@ BF_TEST(motion_pnp_through_a_colour_camera_of_its_own_gives_the_depth_cameras_mo
     uint8_t *rgb_a = malloc(3 * n), *rgb_b = malloc(3 * n), *scratch_rgb = malloc(3 * n);
     uint16_t *da = malloc(2 * n), *scratch = malloc(2 * n);
     CHECK(rgb_a && rgb_b && scratch_rgb && da && scratch);
-    bf_se3 Ta = box_pose(0.05, -0.1, 0.02, 0.1, 0.2, 0.3);
-    bf_se3 Tb = box_pose(0.05 + 0.03, -0.1 + 0.05, 0.02 - 0.02, 0.1 + 0.06, 0.2 - 0.03, 0.3 + 0.04);
+    bf_se3 Ta, Tb;
+    hand_held_step(&Ta, &Tb);
     calib_camera cam = {.width = BOX_W, .height = BOX_H, .fx_px = box_K.fx_px, .fy_px = box_K.fy_px,
                         .cx_px = box_K.cx_px, .cy_px = box_K.cy_px};
     eval_motion_rig rig = {.colour = &cam,
@@ -74,8 +86,7 @@ BF_TEST(motion_pnp_through_a_colour_camera_of_its_own_gives_the_depth_cameras_mo
     box_render(&Tcb, rgb_b, scratch);
     eval_motion_config cfg = eval_motion_config_default();
     eval_motion_image *a, *b;
-    CHECK_OK(eval_motion_image_make(rgb_a, BOX_W, BOX_H, &cfg, &a));
-    CHECK_OK(eval_motion_image_make(rgb_b, BOX_W, BOX_H, &cfg, &b));
+    make_images(rgb_a, rgb_b, &cfg, &a, &b);
     eval_motion_pair p, q;
     CHECK_OK(eval_motion_pnp(a, da, &box_K, &rig, b, &cfg, &p));
     CHECK_OK(eval_motion_pnp(a, da, &box_K, NULL, b, &cfg, &q));
