@@ -82,10 +82,10 @@ void capture__uyvy_to_rgb(const uint8_t *src, size_t src_stride, uint32_t w, uin
 void capture__bgr_to_rgb(const uint8_t *src, size_t src_stride, uint32_t w, uint32_t h, uint8_t *rgb);
 /* Copies rows of w*bpp bytes from a strided source into a packed buffer. */
 void capture__copy_rows(const uint8_t *src, size_t src_stride, size_t row_bytes, uint32_t h, uint8_t *dst);
-/* Nearest-neighbour resize of RGB8 (an unregistered colour image of another
- * size onto the depth grid). */
-void capture__resize_rgb_nearest(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw,
-                                 uint32_t dh);
+/* Resize of RGB8 (an unregistered colour image of another size onto the
+ * depth grid) that keeps pixel centres: an area average where it shrinks,
+ * bilinear where it grows. BF_NO_MEMORY for its tap tables only. */
+bf_status capture__resize_rgb(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw, uint32_t dh);
 
 /* Extends a wrapping 32-bit device counter to 64 bits: keeps the last raw
  * value and the number of wraps. A counter that steps back by more than half

@@ -302,18 +302,77 @@ void capture__copy_rows(const uint8_t *src, size_t src_stride, size_t row_bytes,
     for (uint32_t y = 0; y < h; y++) memcpy(dst + y * row_bytes, src + y * src_stride, row_bytes);
 }
 
-void capture__resize_rgb_nearest(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw,
-                                 uint32_t dh)
+/* One axis of the resize: for each destination pixel, up to k source
+ * taps and their weights. Shrinking averages the source pixels the
+ * destination pixel covers, each by the length it covers (an area resize);
+ * growing interpolates between the two nearest source centres. Either way
+ * a destination pixel's centre x + 0.5 sits at (x + 0.5) * s / d in the
+ * source, which is what a colour camera scaled to the new size assumes
+ * (app/calibration.c): taking the nearest source pixel instead put a half
+ * size image a quarter of a pixel off. */
+static void resize_taps(uint32_t s, uint32_t d, uint32_t k, uint32_t *idx, float *w)
 {
-    for (uint32_t y = 0; y < dh; y++) {
-        uint32_t sy = (uint32_t)(((uint64_t)y * sh + sh / 2) / dh);
-        if (sy >= sh) sy = sh - 1;
-        for (uint32_t x = 0; x < dw; x++) {
-            uint32_t sx = (uint32_t)(((uint64_t)x * sw + sw / 2) / dw);
-            if (sx >= sw) sx = sw - 1;
-            memcpy(dst + ((size_t)y * dw + x) * 3, src + ((size_t)sy * sw + sx) * 3, 3);
+    double r = (double)s / d;
+    for (uint32_t x = 0; x < d; x++) {
+        uint32_t *ix = idx + (size_t)x * k;
+        float *wx = w + (size_t)x * k;
+        for (uint32_t j = 0; j < k; j++) ix[j] = 0, wx[j] = 0.0f;
+        if (r >= 1.0) {
+            double a = x * r, b = (x + 1) * r;
+            uint32_t j = 0;
+            for (uint32_t i = (uint32_t)a; i < s && i < b && j < k; i++, j++) {
+                double lo = i > a ? i : a, hi = i + 1.0 < b ? i + 1.0 : b;
+                ix[j] = i;
+                wx[j] = (float)((hi - lo) / r);
+            }
+        } else {
+            double c = (x + 0.5) * r - 0.5;
+            if (c < 0) c = 0;
+            if (c > s - 1) c = s - 1;
+            uint32_t i = (uint32_t)c;
+            ix[0] = i;
+            ix[1] = i + 1 < s ? i + 1 : i;
+            wx[1] = (float)(c - i);
+            wx[0] = 1.0f - wx[1];
         }
     }
+}
+
+/* Taps one axis needs at most: a shrink by r covers ceil(r) + 1 pixels. */
+static uint32_t resize_tap_count(uint32_t s, uint32_t d) { return s >= d ? (s + d - 1) / d + 1 : 2u; }
+
+bf_status capture__resize_rgb(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw, uint32_t dh)
+{
+    uint32_t kx = resize_tap_count(sw, dw), ky = resize_tap_count(sh, dh);
+    uint32_t *ix = malloc((size_t)dw * kx * sizeof *ix), *iy = malloc((size_t)dh * ky * sizeof *iy);
+    float *wx = malloc((size_t)dw * kx * sizeof *wx), *wy = malloc((size_t)dh * ky * sizeof *wy);
+    bf_status s = BF_OK;
+    if (!ix || !iy || !wx || !wy) {
+        s = bf_fail(BF_NO_MEMORY, "colour resize %ux%u -> %ux%u: out of memory", sw, sh, dw, dh);
+        goto done;
+    }
+    resize_taps(sw, dw, kx, ix, wx);
+    resize_taps(sh, dh, ky, iy, wy);
+    for (uint32_t y = 0; y < dh; y++) {
+        for (uint32_t x = 0; x < dw; x++) {
+            float acc[3] = {0, 0, 0};
+            for (uint32_t b = 0; b < ky; b++) {
+                float vy = wy[(size_t)y * ky + b];
+                if (vy == 0.0f) continue;
+                const uint8_t *row = src + (size_t)iy[(size_t)y * ky + b] * sw * 3;
+                for (uint32_t a = 0; a < kx; a++) {
+                    float v = vy * wx[(size_t)x * kx + a];
+                    const uint8_t *p = row + (size_t)ix[(size_t)x * kx + a] * 3;
+                    acc[0] += v * p[0], acc[1] += v * p[1], acc[2] += v * p[2];
+                }
+            }
+            uint8_t *q = dst + ((size_t)y * dw + x) * 3;
+            for (int c = 0; c < 3; c++) q[c] = (uint8_t)(acc[c] > 255.0f ? 255 : acc[c] + 0.5f);
+        }
+    }
+done:
+    free(ix), free(iy), free(wx), free(wy);
+    return s;
 }
 
 uint64_t capture__unwrap32_push(capture__unwrap32 *u, uint32_t raw)

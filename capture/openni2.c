@@ -152,7 +152,7 @@ static bf_status oni_colour_update(oni_source *s)
         bool same = s->cw == s->w && s->ch == s->h;
         bf_status st = capture__oni_colour_to_rgb(s->colour_fmt, f->data, (size_t)f->stride, s->cw, s->ch,
                                                   same ? s->rgb_px : s->rgb_native);
-        if (!st && !same) capture__resize_rgb_nearest(s->rgb_native, s->cw, s->ch, s->rgb_px, s->w, s->h);
+        if (!st && !same) st = capture__resize_rgb(s->rgb_native, s->cw, s->ch, s->rgb_px, s->w, s->h);
         if (!st) {
             s->has_rgb_frame = true;
             s->t_rgb_s = (double)f->timestamp * 1e-6;

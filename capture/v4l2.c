@@ -313,7 +313,9 @@ static bf_status colour_take(v4l2_source *s, const struct v4l2_buffer *b)
     if (n->pixfmt == V4L2_PIX_FMT_YUYV) capture__yuyv_to_rgb(p, n->stride, n->width, n->height, dst);
     else if (n->pixfmt == V4L2_PIX_FMT_BGR24) capture__bgr_to_rgb(p, n->stride, n->width, n->height, dst);
     else capture__copy_rows(p, n->stride, (size_t)n->width * 3, n->height, dst);
-    if (!same_size) capture__resize_rgb_nearest(dst, n->width, n->height, s->rgb_px, s->depth.width, s->depth.height);
+    bf_status st = same_size ? BF_OK
+                             : capture__resize_rgb(dst, n->width, n->height, s->rgb_px, s->depth.width, s->depth.height);
+    if (st != BF_OK) return st;
     s->has_rgb_frame = true;
     s->t_rgb_s = buffer_time_s(b);
     return BF_OK;

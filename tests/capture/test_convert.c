@@ -3,6 +3,9 @@
 #include "capture/live_int.h"
 #include "test.h"
 
+#include <stdlib.h>
+#include <string.h>
+
 BF_TEST(yuyv_grey_and_colours)
 {
     /* Y=128 with neutral chroma is grey (128-16)*1.164 = 130.4; pure BT.601
@@ -35,15 +38,61 @@ BF_TEST(strided_rows_and_bgr)
     CHECK(!memcmp(packed, bgr, 6) && !memcmp(packed + 6, bgr + 8, 6));
 }
 
-BF_TEST(nearest_resize_maps_corners)
+/* A ramp v = a + b * (source pixel centre) resized: where the resize keeps
+ * pixel centres (destination x + 0.5 at (x + 0.5) * s / d in the source)
+ * every destination pixel holds the ramp at its own centre, since an area
+ * average and a linear interpolation of a linear function both give its
+ * value at the centre. A fractional shrink averages whole pixels, whose
+ * covered centroid is up to off_px from the centre (1/12 px at 3:2, 1/24 at
+ * 8:3, none at whole ratios). Nearest-pixel resizing is half a source pixel
+ * off at 2:1 (a level off on this ramp). */
+static void ramp_case(uint32_t sw, uint32_t dw, double slope, double off_px)
 {
-    uint8_t src[2 * 2 * 3] = {10, 10, 10, 20, 20, 20, 30, 30, 30, 40, 40, 40};
-    uint8_t dst[4 * 4 * 3];
-    capture__resize_rgb_nearest(src, 2, 2, dst, 4, 4);
-    CHECK_EQ_INT(dst[0], 10);
-    CHECK_EQ_INT(dst[(0 * 4 + 3) * 3], 20);
-    CHECK_EQ_INT(dst[(3 * 4 + 0) * 3], 30);
-    CHECK_EQ_INT(dst[(3 * 4 + 3) * 3], 40);
+    double tol = 0.5 + slope * off_px + 1e-3; /* rounding, and off_px below */
+    const uint32_t sh = 2, dh = 2;
+    uint8_t *src = malloc((size_t)sw * sh * 3), *dst = malloc((size_t)dw * dh * 3);
+    for (uint32_t y = 0; y < sh; y++)
+        for (uint32_t x = 0; x < sw; x++)
+            for (int c = 0; c < 3; c++) src[((size_t)y * sw + x) * 3 + c] = (uint8_t)(20 + slope * x + 0.5);
+    CHECK_EQ_INT(capture__resize_rgb(src, sw, sh, dst, dw, dh), BF_OK);
+    double r = (double)sw / dw;
+    for (uint32_t x = 0; x < dw; x++) {
+        double centre = (x + 0.5) * r - 0.5;
+        if (centre < 0) centre = 0; /* growing clamps at the border */
+        if (centre > sw - 1) centre = sw - 1;
+        double want = 20 + slope * centre;
+        for (uint32_t y = 0; y < dh; y++)
+            for (int c = 0; c < 3; c++) CHECK_NEAR(dst[((size_t)y * dw + x) * 3 + c], want, tol);
+    }
+    free(src);
+    free(dst);
+}
+
+BF_TEST(resize_keeps_pixel_centres)
+{
+    ramp_case(64, 32, 2.0, 0.0);         /* 2:1, an area average of pixel pairs */
+    ramp_case(60, 40, 3.0, 1.0 / 12.0);  /* 3:2, fractional coverage */
+    ramp_case(64, 24, 3.0, 1.0 / 24.0);  /* 8:3, three or four pixels each */
+    ramp_case(20, 40, 10.0, 0.0);        /* 1:2, bilinear */
+}
+
+BF_TEST(resize_by_two_averages_blocks_and_keeps_corners)
+{
+    /* 4x2 -> 2x1: each output is the rounded mean of its 2x2 block. */
+    const uint8_t src[4 * 2 * 3] = {0, 0, 0, 10, 20, 30, 100, 100, 100, 200, 200, 200,
+                                    2, 4, 6, 12, 24, 36, 101, 101, 101, 255, 255, 255};
+    uint8_t dst[2 * 3];
+    CHECK_EQ_INT(capture__resize_rgb(src, 4, 2, dst, 2, 1), BF_OK);
+    const uint8_t want[6] = {6, 12, 18, 164, 164, 164};
+    CHECK(!memcmp(dst, want, 6));
+    /* Growing 2x2 -> 4x4: the corners are the source corners. */
+    const uint8_t small[2 * 2 * 3] = {10, 10, 10, 20, 20, 20, 30, 30, 30, 40, 40, 40};
+    uint8_t big[4 * 4 * 3];
+    CHECK_EQ_INT(capture__resize_rgb(small, 2, 2, big, 4, 4), BF_OK);
+    CHECK_EQ_INT(big[0], 10);
+    CHECK_EQ_INT(big[(0 * 4 + 3) * 3], 20);
+    CHECK_EQ_INT(big[(3 * 4 + 0) * 3], 30);
+    CHECK_EQ_INT(big[(3 * 4 + 3) * 3], 40);
 }
 
 BF_TEST(clock_unwrap_crosses_the_32_bit_wrap)
