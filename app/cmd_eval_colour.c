@@ -21,7 +21,8 @@ static const char usage_text[] =
     "run's own trajectory.txt, in whose frame the mesh is) and compares the rendering\n"
     "with the frame's colour image where the mesh is hit: PSNR per frame and over all.\n"
     "Without a calibration the colour image is taken as registered to depth (the\n"
-    "depth camera renders); with one, the colour camera renders from T_colour_depth.\n";
+    "depth camera renders); with one, the colour camera renders from T_colour_depth,\n"
+    "through its lens.\n";
 
 /* The pose of timestamp t in tr (nearest within 0.02 s). */
 static bool pose_at(const bf_traj *tr, double t, bf_se3 *out)
@@ -101,9 +102,11 @@ int cmd_eval_colour(int argc, char **argv)
     }
     bf_intrinsics K = *rgbd_source_intrinsics(src);
     bf_se3 T_dc = bf_se3_identity(); /* colour camera to depth camera */
+    const double *dist = NULL;       /* its lens */
     if (calib_path) {
         const calib_camera *c = &cal.cal.colour;
         K.fx_px = c->fx_px, K.fy_px = c->fy_px, K.cx_px = c->cx_px, K.cy_px = c->cy_px;
+        dist = c->dist;
         if (cal.cal.has_depth) T_dc = bf_se3_inverse(&cal.cal.T_colour_depth);
     }
     if ((s = mesh_bvh_build(&m, &bvh)) != BF_OK) goto done;
@@ -122,7 +125,7 @@ int cmd_eval_colour(int argc, char **argv)
             continue;
         }
         bf_se3 T_wcol = bf_se3_mul(&T_wc, &T_dc);
-        if ((s = eval_colour_render(&m, bvh, &K, &T_wcol, img, hit)) != BF_OK) break;
+        if ((s = eval_colour_render(&m, bvh, &K, dist, &T_wcol, img, hit)) != BF_OK) break;
         eval_colour_sums one = {0};
         eval_colour_compare(img, f.rgb, hit, n_px, &one);
         if (save && (s = save_pair(save, f.index, &K, img, f.rgb)) != BF_OK) break;

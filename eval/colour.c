@@ -12,6 +12,7 @@ typedef struct render_job {
     const mesh_data *m;
     const mesh_bvh *bvh;
     const bf_intrinsics *K;
+    const double *dist; /* the camera's lens (CALIB_DIST_N), NULL: a pinhole */
     bf_se3 T;          /* camera to the mesh's local frame */
     uint8_t *rgb, *hit;
 } render_job;
@@ -22,10 +23,13 @@ static void render_row(void *ctx, size_t v)
     const bf_intrinsics *K = j->K;
     for (uint32_t u = 0; u < K->width; u++) {
         size_t i = v * K->width + u;
-        bf_vec3 d = bf_se3_rotate(&j->T, bf_v3((u - K->cx_px) / K->fx_px, ((double)v - K->cy_px) / K->fy_px, 1.0));
+        double x = (u - K->cx_px) / K->fx_px, y = ((double)v - K->cy_px) / K->fy_px;
         mesh_hit h;
         j->hit[i] = 0;
         memset(j->rgb + 3 * i, 0, 3);
+        /* Through a lens the pixel sees along its undistorted ray. */
+        if (j->dist && !calib_undistort(j->dist, x, y, &x, &y)) continue;
+        bf_vec3 d = bf_se3_rotate(&j->T, bf_v3(x, y, 1.0));
         if (!mesh_bvh_raycast(j->bvh, j->T.t, d, 1e-3, INFINITY, &h)) continue;
         const uint32_t *t = j->m->tri + 3 * (size_t)h.tri;
         double w[3] = {1 - h.u - h.v, h.u, h.v};
@@ -38,13 +42,13 @@ static void render_row(void *ctx, size_t v)
     }
 }
 
-bf_status eval_colour_render(const mesh_data *m, const mesh_bvh *bvh, const bf_intrinsics *K, const bf_se3 *T_wc,
-                             uint8_t *rgb_out, uint8_t *hit_out)
+bf_status eval_colour_render(const mesh_data *m, const mesh_bvh *bvh, const bf_intrinsics *K, const double *dist,
+                             const bf_se3 *T_wc, uint8_t *rgb_out, uint8_t *hit_out)
 {
     if (!m || !bvh || !K || !T_wc || !rgb_out || !hit_out)
         return bf_fail(BF_INVALID_ARG, "eval_colour_render: NULL argument");
     if (!m->rgb) return bf_fail(BF_INVALID_ARG, "eval: the mesh has no vertex colour");
-    render_job j = {m, bvh, K, *T_wc, rgb_out, hit_out};
+    render_job j = {m, bvh, K, dist, *T_wc, rgb_out, hit_out};
     j.T.t = bf_v3_sub(T_wc->t, m->origin); /* the BVH holds the local positions */
     bf_parallel_for(K->height, render_row, &j);
     return BF_OK;

@@ -128,11 +128,12 @@ bf_status eval_mesh_sample_area(const mesh_data *m, double samples_per_m2, uint6
 /* ------------------------------------------------------------ colour */
 
 /* Renders the coloured mesh m (bvh built over it; vertices relative to
- * m->origin) seen by camera K from T_wc (world): per pixel the colour
- * interpolated at the nearest hit (rgb_out, w*h*3) and whether there is one
- * (hit_out, w*h). BF_INVALID_ARG without vertex colour. */
-bf_status eval_colour_render(const mesh_data *m, const mesh_bvh *bvh, const bf_intrinsics *K, const bf_se3 *T_wc,
-                             uint8_t *rgb_out, uint8_t *hit_out);
+ * m->origin) seen by camera K through its lens dist (CALIB_DIST_N
+ * Brown-Conrady coefficients; NULL: a pinhole) from T_wc (world): per pixel
+ * the colour interpolated at the nearest hit (rgb_out, w*h*3) and whether
+ * there is one (hit_out, w*h). BF_INVALID_ARG without vertex colour. */
+bf_status eval_colour_render(const mesh_data *m, const mesh_bvh *bvh, const bf_intrinsics *K, const double *dist,
+                             const bf_se3 *T_wc, uint8_t *rgb_out, uint8_t *hit_out);
 /* Squared 8-bit errors summed over channels and pixels. */
 typedef struct eval_colour_sums {
     double sse;

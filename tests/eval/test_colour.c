@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "calib/calib.h"
 #include "eval/eval.h"
 #include "mesh/mesh.h"
 #include "test.h"
@@ -23,7 +24,10 @@ static void quad(mesh_data *m, bf_vec3 origin)
     m->origin = origin;
 }
 
-BF_TEST(colour_render_interpolates_the_vertex_colours)
+/* Renders the quad through dist (NULL: a pinhole) and checks every pixel
+ * away from its edge against the point where the pixel's ray meets z = 2:
+ * hit or not, and the barycentric colour there. *n_hit: the pixels hit. */
+static void check_quad(const double *dist, uint32_t *n_out)
 {
     mesh_data m;
     bf_vec3 origin = bf_v3(10000.0, -2000.0, 50.0);
@@ -34,12 +38,15 @@ BF_TEST(colour_render_interpolates_the_vertex_colours)
     bf_se3 T = bf_se3_identity();
     T.t = origin; /* the camera at the quad's local origin */
     uint8_t rgb[64 * 48 * 3], hit[64 * 48];
-    CHECK_OK(eval_colour_render(&m, bvh, &K, &T, rgb, hit));
-    /* The quad spans x, y in [-1, 1] at z = 2: pixels within 20 px of the centre. */
+    CHECK_OK(eval_colour_render(&m, bvh, &K, dist, &T, rgb, hit));
+    /* The quad spans x, y in [-1, 1] at z = 2. */
     uint32_t n_hit = 0;
+    *n_out = 0;
     for (uint32_t v = 0; v < 48; v++)
         for (uint32_t u = 0; u < 64; u++) {
-            double x = (u - 31.5) / 40.0 * 2, y = (v - 23.5) / 40.0 * 2;
+            double x = (u - 31.5) / 40.0, y = (v - 23.5) / 40.0;
+            if (dist) CHECK(calib_undistort(dist, x, y, &x, &y));
+            x *= 2, y *= 2;
             bool inside = fabs(x) < 0.999 && fabs(y) < 0.999;
             size_t i = (size_t)v * 64 + u;
             if (fabs(x) < 1.001 && fabs(y) < 1.001 && !inside) continue; /* the edge itself */
@@ -57,8 +64,28 @@ BF_TEST(colour_render_interpolates_the_vertex_colours)
                 CHECK(fabs(rgb[3 * i + c] - want) <= 0.5 + 1e-3); /* rounding to 8 bits */
             }
         }
-    CHECK(n_hit > 600);
     mesh_bvh_destroy(bvh);
+    *n_out = n_hit;
+}
+
+BF_TEST(colour_render_interpolates_the_vertex_colours)
+{
+    uint32_t n;
+    check_quad(NULL, &n);
+    CHECK(n > 600); /* pixels within 20 px of the centre */
+}
+
+BF_TEST(colour_render_sees_through_the_lens)
+{
+    /* A pincushion lens (k1 > 0) pushes the image outward: the quad
+     * covers more pixels than through the pinhole, and every pixel must
+     * show what its own undistorted ray meets (a renderer that ignored the
+     * lens would show the pinhole's colours, off by up to 2 px here). */
+    const double dist[CALIB_DIST_N] = {0.2, 0.05, 0.001, -0.002, 0};
+    uint32_t pinhole, lens;
+    check_quad(NULL, &pinhole);
+    check_quad(dist, &lens);
+    CHECK(lens > pinhole + 100);
 }
 
 BF_TEST(psnr_is_the_mean_squared_error_in_decibels)
