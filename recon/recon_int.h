@@ -71,6 +71,20 @@ void recon__add_keyframe(recon *r, const bf_se3 *T, const bf_frame *f);
  * where colour candidates are on. */
 bf_status recon__keyframes_export(const recon *r, store_keyframes *out);
 void recon__keyframes_import(recon *r, const store_keyframes *k);
+/* The agreement check's verdict on one frame sample landing at (x, y) of
+ * the reference depth ref (w x h, metres, 0: none) with depth z in the
+ * reference camera: off the reference or where it has no depth, within
+ * band_m + 3 sigma_z of the surface there, in front of it or behind it,
+ * judged against the nearest and the farthest of the four reference
+ * pixels around (x, y). */
+typedef enum recon__agreement_class {
+    RECON_SAMPLE_OFF,
+    RECON_SAMPLE_AGREE,
+    RECON_SAMPLE_FRONT,
+    RECON_SAMPLE_BEHIND
+} recon__agreement_class;
+recon__agreement_class recon__classify_sample(const float *ref, uint32_t w, uint32_t h, double x, double y,
+                                              double z, const bf_sensor *sn, double band_m);
 /* A candidate pose from colour (PnP against a keyframe) and its inliers. */
 typedef struct recon__colour_pose {
     uint32_t n_inliers;

@@ -1,10 +1,12 @@
-/* The relocalisation keyframe store (recon/reloc.c) on the host: what it
- * keeps once it is full. No GPU: the store is poses only. */
+/* The relocalisation's host parts (recon/reloc.c): what the keyframe store
+ * keeps once it is full, the colour poses kept, and the agreement check's
+ * verdict on one sample. No GPU: poses and arrays only. */
 #include <math.h>
 #include <stdlib.h>
 
 #include "test.h"
 #include "recon/recon_int.h"
+#include "shaders/bf_common.glsl.h"
 
 /* A loop whose store holds at most n keyframes, spaced 0.1 m or 10 degrees. */
 static recon *store_open(uint32_t n)
@@ -133,4 +135,33 @@ BF_TEST(colour_poses_keep_the_best_distinct_ones)
     CHECK_EQ_INT(best[0].n_inliers, 70);
     CHECK_EQ_INT(best[1].n_inliers, 60);
     CHECK_EQ_INT(best[2].n_inliers, 45);
+}
+
+/* The agreement check's verdict on one sample at a silhouette of the
+ * reference: a 1 m foreground (columns 0-3) before a 3 m wall (4-7). A
+ * sample of the foreground landing just past the edge, where the nearest
+ * reference pixel is the wall, belongs to the foreground beside it, so it
+ * is not "in front of the map" (the nearest pixel alone said it was); two
+ * pixels into the wall it is. Likewise a wall sample just before the edge
+ * is not "behind". */
+BF_TEST(agreement_judges_a_silhouette_by_the_pixels_around)
+{
+    float ref[8 * 4];
+    for (int v = 0; v < 4; v++)
+        for (int u = 0; u < 8; u++) ref[v * 8 + u] = u < 4 ? 1.0f : 3.0f;
+    ref[1 * 8 + 6] = 0.0f; /* a hole in the wall */
+    const bf_sensor sn = recon_config_default().sensor;
+    const double band = 0.02;
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 3.6, 1.2, 1.0, &sn, band), RECON_SAMPLE_AGREE);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 5.4, 2.2, 1.0, &sn, band), RECON_SAMPLE_FRONT);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 3.4, 1.2, 3.0, &sn, band), RECON_SAMPLE_AGREE);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 1.2, 1.2, 3.0, &sn, band), RECON_SAMPLE_BEHIND);
+    /* Off the image, or the nearest pixel without depth: not covered. */
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, -0.6, 1.0, 1.0, &sn, band), RECON_SAMPLE_OFF);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 7.6, 1.0, 1.0, &sn, band), RECON_SAMPLE_OFF);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 6.2, 0.8, 3.0, &sn, band), RECON_SAMPLE_OFF);
+    /* The band: 2 cm + 3 sigma_z of the deeper of the two depths. */
+    double edge = band + 3.0 * bf_sensor_sigma(1.0f, sn.sigma_a, sn.sigma_b, sn.sigma_c);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 1.0, 1.0, 1.0 - edge + 1e-4, &sn, band), RECON_SAMPLE_AGREE);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 1.0, 1.0, 1.0 - edge - 1e-4, &sn, band), RECON_SAMPLE_FRONT);
 }
