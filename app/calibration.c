@@ -37,13 +37,11 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
 }
 
 /* The colour camera at the frames' size: a source gives its colour at the
- * depth's size (a folder must; a V4L2 camera's is resized to it), so a
- * file calibrated at the colour camera's own size (1280x960 where the
- * frames are 640x480) is scaled, each axis by its own ratio, pixel
- * centres kept as an area resize keeps them (capture's nearest-pixel
- * resize reads a pixel up to half a source pixel off that: a quarter of
- * a pixel at half size). The lens's coefficients are in the normalised
- * plane and stay. */
+ * depth's size (a folder must; V4L2 and OpenNI2 cameras' is resized to it
+ * by capture__resize_rgb), so a file calibrated at the colour camera's own
+ * size (1280x960 where the frames are 640x480) is scaled, each axis by its
+ * own ratio, pixel centres kept as that resize keeps them. The lens's
+ * coefficients are in the normalised plane and stay. */
 static void colour_to_frame_size(app_calibration *c, const bf_intrinsics *K)
 {
     calib_camera *cc = &c->cal.colour;

@@ -84,7 +84,8 @@ void capture__bgr_to_rgb(const uint8_t *src, size_t src_stride, uint32_t w, uint
 void capture__copy_rows(const uint8_t *src, size_t src_stride, size_t row_bytes, uint32_t h, uint8_t *dst);
 /* Resize of RGB8 (an unregistered colour image of another size onto the
  * depth grid) that keeps pixel centres: an area average where it shrinks,
- * bilinear where it grows. BF_NO_MEMORY for its tap tables only. */
+ * bilinear where it grows. BF_INVALID_ARG for an empty image, BF_NO_MEMORY
+ * for its tap tables. */
 bf_status capture__resize_rgb(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw, uint32_t dh);
 
 /* Extends a wrapping 32-bit device counter to 64 bits: keeps the last raw

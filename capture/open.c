@@ -343,6 +343,8 @@ static uint32_t resize_tap_count(uint32_t s, uint32_t d) { return s >= d ? (s + 
 
 bf_status capture__resize_rgb(const uint8_t *src, uint32_t sw, uint32_t sh, uint8_t *dst, uint32_t dw, uint32_t dh)
 {
+    if (!src || !dst || !sw || !sh || !dw || !dh)
+        return bf_fail(BF_INVALID_ARG, "colour resize %ux%u -> %ux%u: an empty image", sw, sh, dw, dh);
     uint32_t kx = resize_tap_count(sw, dw), ky = resize_tap_count(sh, dh);
     uint32_t *ix = malloc((size_t)dw * kx * sizeof *ix), *iy = malloc((size_t)dh * ky * sizeof *iy);
     float *wx = malloc((size_t)dw * kx * sizeof *wx), *wy = malloc((size_t)dh * ky * sizeof *wy);
@@ -355,19 +357,19 @@ bf_status capture__resize_rgb(const uint8_t *src, uint32_t sw, uint32_t sh, uint
     resize_taps(sh, dh, ky, iy, wy);
     for (uint32_t y = 0; y < dh; y++) {
         for (uint32_t x = 0; x < dw; x++) {
-            float acc[3] = {0, 0, 0};
+            double acc[3] = {0, 0, 0};
             for (uint32_t b = 0; b < ky; b++) {
-                float vy = wy[(size_t)y * ky + b];
-                if (vy == 0.0f) continue;
+                double vy = wy[(size_t)y * ky + b];
+                if (vy == 0.0) continue;
                 const uint8_t *row = src + (size_t)iy[(size_t)y * ky + b] * sw * 3;
                 for (uint32_t a = 0; a < kx; a++) {
-                    float v = vy * wx[(size_t)x * kx + a];
+                    double v = vy * wx[(size_t)x * kx + a];
                     const uint8_t *p = row + (size_t)ix[(size_t)x * kx + a] * 3;
                     acc[0] += v * p[0], acc[1] += v * p[1], acc[2] += v * p[2];
                 }
             }
             uint8_t *q = dst + ((size_t)y * dw + x) * 3;
-            for (int c = 0; c < 3; c++) q[c] = (uint8_t)(acc[c] > 255.0f ? 255 : acc[c] + 0.5f);
+            for (int c = 0; c < 3; c++) q[c] = (uint8_t)(acc[c] > 255.0 ? 255 : acc[c] + 0.5);
         }
     }
 done:

@@ -348,17 +348,19 @@ recon__agreement_class recon__classify_sample(const float *ref, uint32_t w, uint
     if (!(x > -0.5 && y > -0.5 && x < w - 0.5 && y < h - 0.5)) return RECON_SAMPLE_OFF;
     float zq = ref[(size_t)(uint32_t)(y + 0.5) * w + (uint32_t)(x + 0.5)];
     if (!(zq > 0)) return RECON_SAMPLE_OFF;
-    /* The four reference pixels around the landing point, the nearest
-     * surface and the farthest among them: at a silhouette of the
-     * reference (a quarter of the frame's resolution, so a reference
-     * pixel spans 4 x 4 of the frame's) the nearest pixel may be the
-     * background beside the foreground the sample belongs to. Right poses
-     * put 0.5-1.7% of their samples in front by the nearest pixel alone
-     * on the synthetic room and 4-7% on fr1/rpy's far floor; free space
-     * where a wrong pose puts the frame is wider than a pixel
-     * (docs/tracking.md, the agreement check). */
-    uint32_t x0 = x < 0 ? 0 : (uint32_t)x, y0 = y < 0 ? 0 : (uint32_t)y;
-    uint32_t x1 = x0 + 1 < w ? x0 + 1 : x0, y1 = y0 + 1 < h ? y0 + 1 : y0;
+    /* The four reference pixels around the landing point (fewer at the
+     * border), the nearest surface and the farthest among them: at a
+     * silhouette of the reference (at the default track.ref_level a
+     * quarter of the frame's resolution, so a reference pixel spans 4 x 4
+     * of the frame's) the nearest pixel may be the background beside the
+     * foreground the sample belongs to. Right poses put 0.5-1.7% of their
+     * samples in front by the nearest pixel alone on the synthetic room
+     * and 3.4-7.2% on fr1/rpy's far floor; free space where a wrong pose
+     * puts the frame is wider than a pixel (docs/tracking.md, the
+     * agreement check). */
+    double fx = floor(x), fy = floor(y); /* -1 left of the first pixel's centre */
+    uint32_t x0 = fx < 0 ? 0 : (uint32_t)fx, y0 = fy < 0 ? 0 : (uint32_t)fy;
+    uint32_t x1 = fx >= 0 && x0 + 1 < w ? x0 + 1 : x0, y1 = fy >= 0 && y0 + 1 < h ? y0 + 1 : y0;
     const float around[4] = {ref[(size_t)y0 * w + x0], ref[(size_t)y0 * w + x1], ref[(size_t)y1 * w + x0],
                              ref[(size_t)y1 * w + x1]};
     float z_near = zq, z_far = zq;

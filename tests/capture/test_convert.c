@@ -38,42 +38,67 @@ BF_TEST(strided_rows_and_bgr)
     CHECK(!memcmp(packed, bgr, 6) && !memcmp(packed + 6, bgr + 8, 6));
 }
 
-/* A ramp v = a + b * (source pixel centre) resized: where the resize keeps
- * pixel centres (destination x + 0.5 at (x + 0.5) * s / d in the source)
- * every destination pixel holds the ramp at its own centre, since an area
- * average and a linear interpolation of a linear function both give its
- * value at the centre. A fractional shrink averages whole pixels, whose
- * covered centroid is up to off_px from the centre (1/12 px at 3:2, 1/24 at
- * 8:3, none at whole ratios). Nearest-pixel resizing is half a source pixel
- * off at 2:1 (a level off on this ramp). */
-static void ramp_case(uint32_t sw, uint32_t dw, double slope, double off_px)
+/* A ramp v = 20 + gx * x + gy * y over the source's pixel centres,
+ * resized: where the resize keeps pixel centres (destination x + 0.5 at
+ * (x + 0.5) * s / d in the source, each axis on its own) every destination
+ * pixel holds the ramp at its own centre, since an area average and a
+ * linear interpolation of a linear function both give its value at the
+ * centre. A fractional shrink averages whole pixels, whose covered centroid
+ * is up to off_x / off_y px from the centre (1/12 px at 3:2, 1/24 at 8:3,
+ * none at whole ratios or growing). Nearest-pixel resizing is half a source
+ * pixel off at 2:1 (a level off on these ramps). */
+typedef struct ramp_axis {
+    uint32_t s, d;
+    double slope, off_px;
+} ramp_axis;
+
+static double ramp_centre(const ramp_axis *a, uint32_t x)
 {
-    double tol = 0.5 + slope * off_px + 1e-3; /* rounding, and off_px below */
-    const uint32_t sh = 2, dh = 2;
-    uint8_t *src = malloc((size_t)sw * sh * 3), *dst = malloc((size_t)dw * dh * 3);
-    for (uint32_t y = 0; y < sh; y++)
-        for (uint32_t x = 0; x < sw; x++)
-            for (int c = 0; c < 3; c++) src[((size_t)y * sw + x) * 3 + c] = (uint8_t)(20 + slope * x + 0.5);
-    CHECK_EQ_INT(capture__resize_rgb(src, sw, sh, dst, dw, dh), BF_OK);
-    double r = (double)sw / dw;
-    for (uint32_t x = 0; x < dw; x++) {
-        double centre = (x + 0.5) * r - 0.5;
-        if (centre < 0) centre = 0; /* growing clamps at the border */
-        if (centre > sw - 1) centre = sw - 1;
-        double want = 20 + slope * centre;
-        for (uint32_t y = 0; y < dh; y++)
-            for (int c = 0; c < 3; c++) CHECK_NEAR(dst[((size_t)y * dw + x) * 3 + c], want, tol);
-    }
+    double c = (x + 0.5) * a->s / a->d - 0.5;
+    return c < 0 ? 0 : c > a->s - 1 ? a->s - 1 : c; /* growing clamps at the border */
+}
+
+static void ramp_case(ramp_axis ax, ramp_axis ay)
+{
+    double tol = 0.5 + ax.slope * ax.off_px + ay.slope * ay.off_px + 1e-3; /* rounding, and the offsets */
+    uint8_t *src = malloc((size_t)ax.s * ay.s * 3), *dst = malloc((size_t)ax.d * ay.d * 3);
+    CHECK(src && dst);
+    if (!src || !dst) goto done;
+    for (uint32_t y = 0; y < ay.s; y++)
+        for (uint32_t x = 0; x < ax.s; x++)
+            for (int c = 0; c < 3; c++)
+                src[((size_t)y * ax.s + x) * 3 + c] = (uint8_t)(20 + ax.slope * x + ay.slope * y + 0.5);
+    CHECK_EQ_INT(capture__resize_rgb(src, ax.s, ay.s, dst, ax.d, ay.d), BF_OK);
+    for (uint32_t y = 0; y < ay.d; y++)
+        for (uint32_t x = 0; x < ax.d; x++) {
+            double want = 20 + ax.slope * ramp_centre(&ax, x) + ay.slope * ramp_centre(&ay, y);
+            for (int c = 0; c < 3; c++) CHECK_NEAR(dst[((size_t)y * ax.d + x) * 3 + c], want, tol);
+        }
+done:
     free(src);
     free(dst);
 }
 
 BF_TEST(resize_keeps_pixel_centres)
 {
-    ramp_case(64, 32, 2.0, 0.0);         /* 2:1, an area average of pixel pairs */
-    ramp_case(60, 40, 3.0, 1.0 / 12.0);  /* 3:2, fractional coverage */
-    ramp_case(64, 24, 3.0, 1.0 / 24.0);  /* 8:3, three or four pixels each */
-    ramp_case(20, 40, 10.0, 0.0);        /* 1:2, bilinear */
+    const ramp_axis flat = {2, 2, 0.0, 0.0};
+    ramp_case((ramp_axis){64, 32, 2.0, 0.0}, flat);        /* 2:1, an area average of pixel pairs */
+    ramp_case((ramp_axis){60, 40, 3.0, 1.0 / 12.0}, flat); /* 3:2, fractional coverage */
+    ramp_case((ramp_axis){64, 24, 3.0, 1.0 / 24.0}, flat); /* 8:3, three or four pixels each */
+    ramp_case((ramp_axis){20, 40, 10.0, 0.0}, flat);       /* 1:2, bilinear */
+    ramp_case((ramp_axis){20, 30, 10.0, 0.0}, flat);       /* 2:3, bilinear between centres */
+    ramp_case((ramp_axis){200, 4, 1.0, 0.0}, flat);        /* 50:1 */
+    /* Each axis by its own ratio: x shrinks 2:1 while y grows 1:2, and the
+     * other way round. */
+    ramp_case((ramp_axis){32, 16, 4.0, 0.0}, (ramp_axis){12, 24, 8.0, 0.0});
+    ramp_case((ramp_axis){12, 24, 8.0, 0.0}, (ramp_axis){48, 32, 3.0, 1.0 / 12.0});
+}
+
+BF_TEST(resize_refuses_an_empty_image)
+{
+    uint8_t px[3] = {1, 2, 3}, out[3];
+    CHECK_EQ_INT(capture__resize_rgb(px, 0, 1, out, 1, 1), BF_INVALID_ARG);
+    CHECK_EQ_INT(capture__resize_rgb(px, 1, 1, out, 1, 0), BF_INVALID_ARG);
 }
 
 BF_TEST(resize_by_two_averages_blocks_and_keeps_corners)

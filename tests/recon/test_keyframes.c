@@ -156,6 +156,14 @@ BF_TEST(agreement_judges_a_silhouette_by_the_pixels_around)
     CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 5.4, 2.2, 1.0, &sn, band), RECON_SAMPLE_FRONT);
     CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 3.4, 1.2, 3.0, &sn, band), RECON_SAMPLE_AGREE);
     CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 1.2, 1.2, 3.0, &sn, band), RECON_SAMPLE_BEHIND);
+    /* At the border only the pixels that exist count: left of the first
+     * column's centre the first column alone, not the second one beside
+     * it; right of the last column's centre the last. */
+    ref[2 * 8 + 0] = ref[3 * 8 + 0] = 3.0f; /* rows 2-3: column 0 wall, column 1 foreground */
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, -0.3, 2.0, 1.0, &sn, band), RECON_SAMPLE_FRONT);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 0.3, 2.0, 1.0, &sn, band), RECON_SAMPLE_AGREE);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 7.3, 3.3, 1.0, &sn, band), RECON_SAMPLE_FRONT);
+    CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 7.3, 3.3, 3.0, &sn, band), RECON_SAMPLE_AGREE);
     /* Off the image, or the nearest pixel without depth: not covered. */
     CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, -0.6, 1.0, 1.0, &sn, band), RECON_SAMPLE_OFF);
     CHECK_EQ_INT(recon__classify_sample(ref, 8, 4, 7.6, 1.0, 1.0, &sn, band), RECON_SAMPLE_OFF);
