@@ -340,6 +340,8 @@ typedef struct app_calibration {
     const char *path;          /* NULL: no --calibration */
     calib_result cal;          /* as read; after app_calibration_apply, its colour camera at the frames' size */
     char depth_camera[512];    /* the depth camera as --camera's nine numbers (a folder's replay_options.camera) */
+    bool is_lens_left;         /* app_calibration_apply: the source gives its depth through the depth camera's
+                                  lens (a device, a log), which the reader of the frames takes out */
 } app_calibration;
 /* Reads and checks path before any device opens or output is made (exit 3
  * naming the file and field; exit 2 when ropt already has a --camera and
@@ -355,6 +357,10 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
  * a colour camera calibrated at another size than the frames' is scaled to
  * it (c->cal.colour changes: callers copy it after). */
 bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source *src);
+/* The depth camera whose lens the frames' reader takes out of each depth
+ * image (recon_run_config.depth_lens, eval-motion), or NULL: none, or the
+ * source took it out. */
+const calib_camera *app_calibration_depth_lens(const app_calibration *c);
 
 /* The lens taken out of src's frames: replay_undistortion, or for the
  * recording app_open_device last wrapped as a camera, that recording's. */

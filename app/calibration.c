@@ -65,10 +65,14 @@ bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source
     colour_to_frame_size(c, K);
     if (!c->cal.has_depth) return BF_OK;
     K->fx_px = d->fx_px, K->fy_px = d->fy_px, K->cx_px = d->cx_px, K->cy_px = d->cy_px;
+    /* A folder was opened with the file's lens (app_calibration_read); a
+     * device or a log gives its depth as the lens made it. */
     double dist[CALIB_DIST_N];
-    if (calib_has_distortion(d->dist) && !replay_undistortion(src, dist, NULL))
-        bf_warn("%s: the depth camera's distortion is not applied to %s (a device or a log gives its frames as "
-                "they are)",
-                c->path, seq);
+    c->is_lens_left = calib_has_distortion(d->dist) && !app_undistortion(src, dist, NULL);
     return BF_OK;
+}
+
+const calib_camera *app_calibration_depth_lens(const app_calibration *c)
+{
+    return c && c->path && c->is_lens_left ? &c->cal.depth : NULL;
 }

@@ -95,8 +95,10 @@ static bf_status pairs_push(pairs *p, const pair_rec *r)
 static bool is_first(const motion_args *a, uint32_t i) { return i % a->every == 0; }
 static bool is_second(const motion_args *a, uint32_t i) { return i >= a->span && is_first(a, i - a->span); }
 
-/* Keeps frame f (its features and depth) in the ring slot of its index. */
-static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_config *cfg)
+/* Keeps frame f (its features and depth, through lens when not NULL) in
+ * the ring slot of its index. */
+static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_config *cfg,
+                      const calib_undistort_map *lens)
 {
     kept_free(slot);
     size_t n = (size_t)f->width * f->height;
@@ -104,7 +106,8 @@ static bf_status keep(kept_frame *slot, const bf_frame *f, const eval_motion_con
     if (s != BF_OK) return s;
     slot->depth = malloc(n * sizeof *slot->depth);
     if (!slot->depth) return bf_fail(BF_NO_MEMORY, "eval-motion: frame %u", f->index);
-    memcpy(slot->depth, f->depth, n * sizeof *slot->depth);
+    if (lens) calib_undistort_u16(lens, f->depth, slot->depth);
+    else memcpy(slot->depth, f->depth, n * sizeof *slot->depth);
     slot->index = f->index;
     slot->t_s = f->t_rgb_s;
     slot->has_pose = f->has_pose;
@@ -119,12 +122,19 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
     const eval_motion_rig *rig = a->calibration ? &a->rig : NULL;
     uint32_t ring_n = a->span + 1;
+    /* A device's or a log's depth still holds the calibration's lens. */
+    const calib_camera *lens_cam = app_calibration_depth_lens(&a->cal);
+    calib_undistort_map lens = {0};
+    bf_status s = lens_cam ? calib_undistort_map_make(lens_cam, &lens) : BF_OK;
+    if (s != BF_OK) return s;
     kept_frame *ring = calloc(ring_n, sizeof *ring);
-    if (!ring) return bf_fail(BF_NO_MEMORY, "eval-motion: %u frames", ring_n);
+    if (!ring) {
+        calib_undistort_map_free(&lens);
+        return bf_fail(BF_NO_MEMORY, "eval-motion: %u frames", ring_n);
+    }
     bf_progress prog;
     bf_progress_begin(&prog, "eval-motion", src->n_frames);
     bf_frame f;
-    bf_status s;
     uint32_t seen = 0;
     bf_repeats prev = {0}; /* a pair with a repeated frame is left out */
     while ((s = rgbd_source_next(src, &f)) == BF_OK) {
@@ -149,7 +159,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
         }
         if (!f.depth) continue;
         kept_frame *slot = &ring[f.index % ring_n];
-        if ((s = keep(slot, &f, &a->cfg)) != BF_OK) break;
+        if ((s = keep(slot, &f, &a->cfg, lens_cam ? &lens : NULL)) != BF_OK) break;
         slot->repeat = repeat;
         if (!second) continue;
         const kept_frame *fa = &ring[(f.index - a->span) % ring_n];
@@ -163,6 +173,7 @@ static bf_status read_pairs(const motion_args *a, rgbd_source *src, pairs *out, 
     bf_repeats_free(&prev);
     for (uint32_t i = 0; i < ring_n; i++) kept_free(&ring[i]);
     free(ring);
+    calib_undistort_map_free(&lens);
     *n_frames = seen;
     return s == BF_END ? BF_OK : s;
 }

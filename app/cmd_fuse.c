@@ -162,6 +162,7 @@ int cmd_fuse(int argc, char **argv)
         rcfg.poses = RECON_POSES_KNOWN;
         rcfg.known = use_traj ? &traj : NULL;
         rcfg.depth_correction = a.depth_correction ? &fuse_depth_fix : NULL;
+        rcfg.depth_lens = app_calibration_depth_lens(&a.cal);
         rcfg.loop.has_calibration = a.calibration != NULL;
         if (a.calibration) rcfg.loop.calibration = a.cal.cal; /* its colour camera at the frames' size */
         rcfg.name = a.seq;

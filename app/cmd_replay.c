@@ -891,6 +891,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
              * reconstructed before it; the exit code still reports it. */
             .init_identity = a.init == 1, .keep_on_source_error = true, .name = a.seq,
             .label = cmd, .stop = stop, .depth_correction = a.depth_correction ? &replay_depth_fix : NULL,
+            .depth_lens = app_calibration_depth_lens(&a.cal),
         };
         recon_resume_state rs;
         if (r.store.is_resumed) {

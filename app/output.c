@@ -233,6 +233,9 @@ void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)
     if (app_undistortion(src, dist, &shift)) {
         app_json_numbers(cam, "undistorted", dist, CALIB_DIST_N);
         cJSON_AddNumberToObject(cam, "undistort_max_shift_px", shift);
+    } else if (run->has_depth_lens) { /* a calibration's depth lens, taken out by the runner */
+        app_json_numbers(cam, "undistorted", run->depth_lens_dist, CALIB_DIST_N);
+        cJSON_AddNumberToObject(cam, "undistort_max_shift_px", run->depth_lens_shift_px);
     } else {
         cJSON_AddNullToObject(cam, "undistorted");
         cJSON_AddNullToObject(cam, "undistort_max_shift_px");

@@ -287,6 +287,12 @@ typedef struct recon_run_config {
      * anything reads it (calib_depth_correction, --depth-correction); its size
      * must be the source's. NULL: the depth as the source gives it. Borrowed. */
     const calib_depth_correction *depth_correction;
+    /* The depth camera whose lens is taken out of every frame's depth first
+     * (calib_undistort_map, nearest pixel), for a source that gives its
+     * frames as the lens made them (a device, a log) while a calibration
+     * has the depth camera's distortion; a folder takes out its own. Its
+     * size must be the source's. NULL, or no distortion: none. Borrowed. */
+    const calib_camera *depth_lens;
 } recon_run_config;
 
 /* recon_config_default(), tracking, first pose from ground truth. */
@@ -310,6 +316,9 @@ typedef struct recon_run {
     uint32_t n_resume_skipped; /* frames of the source the resumed scan had handled already */
     bf_repeats repeats;  /* RECON_POSES_KNOWN with skip_repeated: the last images (the loop keeps its own) */
     bool is_resumed;     /* the run continues a stored scan (recon_run_config.resume) */
+    bool has_depth_lens; /* the runner took recon_run_config.depth_lens's lens out of each frame's depth: */
+    double depth_lens_dist[CALIB_DIST_N]; /* its coefficients */
+    double depth_lens_shift_px;           /* the largest distance a pixel moved */
     bf_traj est;         /* one pose per frame handled: tracked, the last good one, or the known one */
     bf_traj gt;          /* the frames' ground truth, where they have it */
     recon_run_series series;
@@ -326,7 +335,9 @@ typedef struct recon_run {
 /* Called after every frame the run handles (frames skipped for want of a
  * known pose excepted); a status other than BF_OK ends the run with it.
  * With known poses fr->state is RECON_FIRST, RECON_TRACKED or (a repeated
- * depth, not fused) RECON_REPEATED, and fr->T_wc the known pose. */
+ * depth, not fused) RECON_REPEATED, and fr->T_wc the known pose. f is
+ * the frame as the source gave it, before the run's depth_lens and
+ * depth_correction (what live --record keeps). */
 typedef bf_status (*recon_frame_fn)(void *user, recon_run *run, const bf_frame *f, const recon_frame_result *fr);
 
 /* Runs every frame of src (borrowed) through the loop and flushes the map.

@@ -150,8 +150,10 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
 
 /* One frame: loop or known pose, then the series, trajectories and the
  * caller's callback. */
-static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, recon_frame_fn on_frame, void *user,
-                           recon_run *run)
+/* f: the frame the loop reads; as_read: the same frame as the source gave
+ * it, before its depth was fixed (depth_fix), for on_frame. */
+static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, const bf_frame *as_read,
+                           recon_frame_fn on_frame, void *user, recon_run *run)
 {
     recon_frame_result fr;
     bf_status s;
@@ -179,7 +181,7 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, recon
     if (s == BF_OK) s = push_series(&run->series, &fr, run->loop != NULL);
     if (s == BF_OK) s = bf_traj_push(&run->est, f->t_depth_s, &fr.T_wc);
     if (s == BF_OK && f->has_pose) s = bf_traj_push(&run->gt, f->t_depth_s, &f->T_wc);
-    if (s == BF_OK && on_frame) s = on_frame(user, run, f, &fr);
+    if (s == BF_OK && on_frame) s = on_frame(user, run, as_read, &fr);
     return s;
 }
 
@@ -228,50 +230,79 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
     return s;
 }
 
-/* The depth correction's multiplier per pixel and the corrected frame the
- * loop reads instead of the source's. */
+/* What the runner does to each frame's depth before the loop reads it:
+ * the depth camera's lens taken out (a device's or a log's frames; a
+ * folder takes out its own), then the camera's fixed pattern. */
 typedef struct depth_fix {
-    float *map;
-    uint16_t *depth;
+    calib_undistort_map lens;
+    uint16_t *undistorted; /* the frame's depth through the lens, or NULL: no lens */
+    float *map;            /* the correction's multipliers, or NULL: none */
+    uint16_t *depth;       /* the corrected depth */
     uint32_t width, height;
 } depth_fix;
 
-static bf_status depth_fix_begin(depth_fix *d, const calib_depth_correction *c, const rgbd_source *src,
-                                 const char *name)
-{
-    const bf_intrinsics *K = rgbd_source_intrinsics(src);
-    if (c->width != K->width || c->height != K->height)
-        return bf_fail(BF_FORMAT, "%s: the depth correction is for %ux%u depth images, the sequence's are %ux%u", name,
-                       c->width, c->height, K->width, K->height);
-    size_t n = (size_t)c->width * c->height;
-    d->map = malloc(n * sizeof *d->map);
-    d->depth = malloc(n * sizeof *d->depth);
-    if (!d->map || !d->depth) {
-        free(d->map);
-        free(d->depth);
-        return bf_fail(BF_NO_MEMORY, "%s: depth correction of %ux%u", name, c->width, c->height);
-    }
-    calib_depth_map(c, d->map);
-    d->width = c->width, d->height = c->height;
-    return BF_OK;
-}
-
-static bf_status depth_fix_frame(depth_fix *d, bf_frame *f, const char *name)
-{
-    if (!d->map || !f->depth) return BF_OK;
-    if (f->width != d->width || f->height != d->height)
-        return bf_fail(BF_FORMAT, "%s: frame %u is %ux%u, the depth correction's images %ux%u", name, f->index,
-                       f->width, f->height, d->width, d->height);
-    calib_depth_apply(d->map, f->depth, d->depth, (size_t)d->width * d->height);
-    f->depth = d->depth;
-    return BF_OK;
-}
-
 static void depth_fix_end(depth_fix *d)
 {
+    calib_undistort_map_free(&d->lens);
+    free(d->undistorted);
     free(d->map);
     free(d->depth);
     memset(d, 0, sizeof *d);
+}
+
+static bf_status depth_fix_begin(depth_fix *d, const recon_run_config *cfg, const rgbd_source *src)
+{
+    const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    const calib_camera *lens = cfg->depth_lens;
+    const calib_depth_correction *c = cfg->depth_correction;
+    size_t n = (size_t)K->width * K->height;
+    d->width = K->width, d->height = K->height;
+    bf_status s = BF_OK;
+    if (lens && calib_has_distortion(lens->dist)) {
+        if (lens->width != K->width || lens->height != K->height)
+            return bf_fail(BF_FORMAT, "%s: the depth camera's lens is for %ux%u depth images, the sequence's are %ux%u",
+                           cfg->name, lens->width, lens->height, K->width, K->height);
+        if ((s = calib_undistort_map_make(lens, &d->lens)) != BF_OK) return s;
+        if (!(d->undistorted = malloc(n * sizeof *d->undistorted))) {
+            depth_fix_end(d);
+            return bf_fail(BF_NO_MEMORY, "%s: undistorting %ux%u depth", cfg->name, K->width, K->height);
+        }
+        bf_info("%s: the depth camera's lens is taken out of each frame's depth (up to %.1f px)", cfg->name,
+                d->lens.max_shift_px);
+    }
+    if (!c) return BF_OK;
+    if (c->width != K->width || c->height != K->height) {
+        depth_fix_end(d);
+        return bf_fail(BF_FORMAT, "%s: the depth correction is for %ux%u depth images, the sequence's are %ux%u",
+                       cfg->name, c->width, c->height, K->width, K->height);
+    }
+    d->map = malloc(n * sizeof *d->map);
+    d->depth = malloc(n * sizeof *d->depth);
+    if (!d->map || !d->depth) {
+        depth_fix_end(d);
+        return bf_fail(BF_NO_MEMORY, "%s: depth correction of %ux%u", cfg->name, c->width, c->height);
+    }
+    calib_depth_map(c, d->map);
+    return BF_OK;
+}
+
+/* f's depth replaced by the fixed one (buffers of d, valid until the next
+ * frame). */
+static bf_status depth_fix_frame(depth_fix *d, bf_frame *f, const char *name)
+{
+    if ((!d->undistorted && !d->map) || !f->depth) return BF_OK;
+    if (f->width != d->width || f->height != d->height)
+        return bf_fail(BF_FORMAT, "%s: frame %u is %ux%u, the sequence's depth camera %ux%u", name, f->index, f->width,
+                       f->height, d->width, d->height);
+    if (d->undistorted) {
+        calib_undistort_u16(&d->lens, f->depth, d->undistorted);
+        f->depth = d->undistorted;
+    }
+    if (d->map) {
+        calib_depth_apply(d->map, f->depth, d->depth, (size_t)d->width * d->height);
+        f->depth = d->depth;
+    }
+    return BF_OK;
 }
 
 bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run_config *cfg_in,
@@ -288,13 +319,19 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
     bf_status s = prepare(ctx, src, &cfg, out);
     if (s != BF_OK) return s;
     depth_fix fix = {0};
-    if (cfg.depth_correction && (s = depth_fix_begin(&fix, cfg.depth_correction, src, cfg.name)) != BF_OK) return s;
+    if ((s = depth_fix_begin(&fix, &cfg, src)) != BF_OK) return s;
+    if (fix.undistorted) {
+        out->has_depth_lens = true;
+        memcpy(out->depth_lens_dist, cfg.depth_lens->dist, sizeof out->depth_lens_dist);
+        out->depth_lens_shift_px = fix.lens.max_shift_px;
+    }
     bf_progress prog;
     bf_progress_begin(&prog, cfg.label, src->n_frames);
     bf_frame f;
     uint32_t seen = 0;
     while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
+        const bf_frame as_read = f; /* what on_frame sees (live --record keeps the camera's frames) */
         bf_status sf = depth_fix_frame(&fix, &f, cfg.name);
         if (sf != BF_OK) {
             bf_progress_end(&prog, seen);
@@ -306,7 +343,7 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
             out->n_resume_skipped++;
             sf = f.has_pose ? bf_traj_push(&out->gt, f.t_depth_s, &f.T_wc) : BF_OK;
         } else {
-            sf = run_frame(&cfg, &f, on_frame, user, out);
+            sf = run_frame(&cfg, &f, &as_read, on_frame, user, out);
         }
         if (sf != BF_OK) {
             bf_progress_end(&prog, seen);

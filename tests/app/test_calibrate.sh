@@ -6,7 +6,8 @@
 # 2 mm and 0.2 degrees); images without a board, a wrong command line and
 # malformed calibration files are refused with the right exit code and
 # the file named, before any output is made; replay and fuse read a folder
-# with the file's depth camera and scale its colour camera to the frames.
+# with the file's depth camera and scale its colour camera to the frames,
+# and a log through the file's depth lens as a folder is read.
 # Usage: test_calibrate.sh path/to/bitfuse path/to/calib_compare.py
 set -u
 B=$1
@@ -179,6 +180,41 @@ import json, sys
 c = json.load(open(sys.argv[1]))['calibration']
 assert (c['colour']['width'], c['colour']['height']) == (160, 120) and abs(c['colour']['fy'] - 510.0 / 3) < 1e-9, c
 " "$T/fu/stats.json" || fail "fuse does not take --calibration: $(head -c 600 "$T/fu/stats.json")"
+# A log gives its depth as the camera's lens made it (a folder is read
+# through the file's lens): the loop takes the lens out itself, so the log
+# and the folder give the same map, bit for bit, and without the lens a
+# different one. live --record keeps the frames as the camera gave them:
+# its log, replayed through the lens, gives that map again.
+"$PY" -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+d['depth']['dist'] = [0.15, -0.1, 0.0, 0.0, 0.0]
+json.dump(d, open(sys.argv[2], 'w'))
+d['depth']['dist'] = [0.0] * 5
+json.dump(d, open(sys.argv[3], 'w'))" "$T/small.json" "$T/lens.json" "$T/nolens.json"
+expect 0 "$B" convert "$T/seq" --out "$T/seq.bflog"
+expect 0 "$B" replay "$T/seq" --out "$T/lf" --calibration "$T/lens.json" --no-mesh
+expect 0 "$B" replay "$T/seq.bflog" --out "$T/ll" --calibration "$T/lens.json" --no-mesh
+mentions "the depth camera's lens is taken out of each frame's depth"
+expect 0 "$B" replay "$T/seq.bflog" --out "$T/ln" --calibration "$T/nolens.json" --no-mesh
+expect 0 "$B" live --device "$T/seq.bflog" --out "$T/lv" --calibration "$T/lens.json" --no-mesh --record "$T/rec.bflog"
+# (The recording's colour is JPEG: its map is compared without colour.)
+expect 0 "$B" replay "$T/rec.bflog" --out "$T/lr" --calibration "$T/lens.json" --no-mesh --colour off
+expect 0 "$B" replay "$T/seq" --out "$T/lfg" --calibration "$T/lens.json" --no-mesh --colour off
+"$PY" -c "
+import json, sys
+dig = [json.load(open(p + '/stats.json'))['map_digest'] for p in sys.argv[1:]]
+folder, log, nolens, live, recorded, folder_geometry = dig
+assert log == folder, ('log through the lens', log, folder)
+assert nolens != folder, ('the lens changes nothing', nolens)
+assert live == folder, ('live', live, folder)
+assert recorded == folder_geometry, ('its recording', recorded, folder_geometry)
+# stats.json says which lens was taken out, whoever took it.
+for p in sys.argv[1:3]:
+    cam = json.load(open(p + '/stats.json'))['camera']
+    assert cam['undistorted'] == [0.15, -0.1, 0.0, 0.0, 0.0] and cam['undistort_max_shift_px'] > 0, (p, cam)
+" "$T/lf" "$T/ll" "$T/ln" "$T/lv" "$T/lr" "$T/lfg" ||
+    fail "a log's depth is not read through the calibration's lens as a folder's is"
 expect 0 "$B" replay --help
 grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
 
