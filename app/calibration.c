@@ -22,6 +22,16 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
      * file: the depth camera's lens must not resample it. */
     ropt->raw_colour = true;
     if (!out->cal.has_depth) return APP_EXIT_OK;
+    /* Whether the depth lens describes one (calib_read does not ask), for a
+     * folder, a log or a device alike, before anything opens. */
+    calib_undistort_map m = {0};
+    s = calib_has_distortion(out->cal.depth.dist) ? calib_undistort_map_make(&out->cal.depth, &m) : BF_OK;
+    calib_undistort_map_free(&m);
+    if (s != BF_OK) {
+        char why[512];
+        snprintf(why, sizeof why, "%s", bf_last_error());
+        return app_fail(cmd, bf_fail(BF_FORMAT, "%s: the depth camera's lens: %s", path, why));
+    }
     /* A folder is read with the file's depth camera (its lens taken out of
      * the depth as --camera's would be); a log or a device gives its own
      * intrinsics, which app_calibration_apply replaces. */

@@ -372,7 +372,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         APP_OPT("--calibration", APP_OPT_STRING, &a->calibration, "FILE",
                 "calib.json of bitfuse calibrate: the colour camera and T_colour_depth for registering colour to "
                 "depth; when it has the depth camera, its fx, fy, cx, cy replace the sequence's (camera.txt, the "
-                "format's or the device's; its distortion is not applied)", .no_default = true),
+                "format's or the device's) and its lens is taken out of the depth", .no_default = true),
         APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
                 "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
                 "out of every frame before tracking and fusion (docs/calibration.md)", .no_default = true),
@@ -425,7 +425,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (!rc && a->resume && a->fuse_at_gt) return app_usage_error(cmd, "--resume does not go with --fuse-at-groundtruth");
     if (!rc && a->calibration) {
         /* Read and checked here, before any device opens or output is made. */
-        rc = app_calibration_read(cmd, a->calibration, a->seq, a->is_live_cmd, &a->ropt, &a->cal);
+        /* live on a recording standing in for a camera reads it as replay
+         * would: a folder through the file's depth lens. */
+        bool is_device = a->is_live_cmd && capture_is_device_uri(a->seq);
+        rc = app_calibration_read(cmd, a->calibration, a->seq, is_device, &a->ropt, &a->cal);
         if (rc) return rc;
     }
     if (!rc && a->depth_correction) {

@@ -198,9 +198,11 @@ expect 0 "$B" replay "$T/seq.bflog" --out "$T/ll" --calibration "$T/lens.json" -
 mentions "the depth camera's lens is taken out of each frame's depth"
 expect 0 "$B" replay "$T/seq.bflog" --out "$T/ln" --calibration "$T/nolens.json" --no-mesh
 expect 0 "$B" live --device "$T/seq.bflog" --out "$T/lv" --calibration "$T/lens.json" --no-mesh --record "$T/rec.bflog"
-# (The recording's colour is JPEG: its map is compared without colour.)
-expect 0 "$B" replay "$T/rec.bflog" --out "$T/lr" --calibration "$T/lens.json" --no-mesh --colour off
-expect 0 "$B" replay "$T/seq" --out "$T/lfg" --calibration "$T/lens.json" --no-mesh --colour off
+# (The recording's colour is JPEG: its map is compared without colour,
+# and tracked without it.)
+nocolour="--colour off --photometric 0 --reloc-features 0"
+expect 0 "$B" replay "$T/rec.bflog" --out "$T/lr" --calibration "$T/lens.json" --no-mesh $nocolour
+expect 0 "$B" replay "$T/seq" --out "$T/lfg" --calibration "$T/lens.json" --no-mesh $nocolour
 "$PY" -c "
 import json, sys
 dig = [json.load(open(p + '/stats.json'))['map_digest'] for p in sys.argv[1:]]
@@ -210,11 +212,37 @@ assert nolens != folder, ('the lens changes nothing', nolens)
 assert live == folder, ('live', live, folder)
 assert recorded == folder_geometry, ('its recording', recorded, folder_geometry)
 # stats.json says which lens was taken out, whoever took it.
-for p in sys.argv[1:3]:
+for p in sys.argv[1:3] + sys.argv[4:5]:
     cam = json.load(open(p + '/stats.json'))['camera']
     assert cam['undistorted'] == [0.15, -0.1, 0.0, 0.0, 0.0] and cam['undistort_max_shift_px'] > 0, (p, cam)
 " "$T/lf" "$T/ll" "$T/ln" "$T/lv" "$T/lr" "$T/lfg" ||
     fail "a log's depth is not read through the calibration's lens as a folder's is"
+# fuse and eval-motion read a log through the lens too: the same map, the
+# same motion as from the folder.
+expect 0 "$B" fuse "$T/seq" --poses groundtruth --out "$T/ff" --calibration "$T/lens.json" --no-mesh
+expect 0 "$B" fuse "$T/seq.bflog" --poses groundtruth --out "$T/fl" --calibration "$T/lens.json" --no-mesh
+expect 0 "$B" eval-motion "$T/seq" groundtruth --span 1 --calibration "$T/lens.json" --json
+cp "$T/out" "$T/em_folder.json"
+expect 0 "$B" eval-motion "$T/seq.bflog" groundtruth --span 1 --calibration "$T/lens.json" --json
+"$PY" -c "
+import json, sys
+a, b = (json.load(open(p + '/stats.json'))['map_digest'] for p in sys.argv[1:3])
+assert a == b, ('fuse', a, b)
+m, n = (json.load(open(p)) for p in sys.argv[3:5])
+assert m['pairs'] == n['pairs'] and m['trajectories'] == n['trajectories'], (m, n)
+" "$T/ff" "$T/fl" "$T/em_folder.json" "$T/out" || fail "fuse or eval-motion does not read a log through the lens"
+# A lens that folds the image over itself within its corners is refused
+# before any output, for a log as for a folder (exit 3, the file named).
+"$PY" -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+d['depth']['dist'] = [-1.0, 0.0, 0.0, 0.0, 0.0]
+json.dump(d, open(sys.argv[2], 'w'))" "$T/small.json" "$T/fold.json"
+for seq in "$T/seq" "$T/seq.bflog"; do
+    expect 3 "$B" replay "$seq" --out "$T/rp_fold" --calibration "$T/fold.json"
+    mentions "fold.json"
+    [ ! -e "$T/rp_fold" ] || fail "replay of $seq with a folding lens made the output folder"
+done
 expect 0 "$B" replay --help
 grep -qF -- "--calibration FILE" "$T/out" || fail "replay --help does not show --calibration"
 

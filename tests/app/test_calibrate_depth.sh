@@ -3,7 +3,8 @@
 # noise, no fixed pattern) calibrated from its ground truth gives
 # multipliers within the noise of 1; one spoiled by a known pattern fixed in
 # the image (bands along x) gives that pattern's inverse; replay and fuse
-# take the file (stats.json echoes it); a missing trajectory, a malformed
+# take the file (stats.json echoes it), live --record keeps the frames
+# uncorrected; a missing trajectory, a malformed
 # file and one for another image size are refused with the exit code and
 # the file named, before any output is made.
 # Usage: test_calibrate_depth.sh path/to/bitfuse
@@ -118,6 +119,18 @@ import json, sys
 c = json.load(open(sys.argv[1]))['depth_correction']
 assert c['file'] == sys.argv[2] and c['grid_w'] == 20 and c['min_multiplier'] < 0.995 < 1.005 < c['max_multiplier'], c
 " "$T/rp/stats.json" "$T/bands.json" || fail "replay's stats.json does not echo --depth-correction"
+# live --record keeps the frames as the camera gave them, not corrected: its
+# log replayed with the same file gives live's map (corrected twice, it
+# would not). The recording's colour is JPEG, so both leave colour out.
+nocolour="--colour off --photometric 0 --reloc-features 0"
+expect 0 "$B" live --device "$T/spoiled" --out "$T/lv" --depth-correction "$T/bands.json" --no-mesh --frames 10 \
+    --record "$T/rec.bflog" $nocolour
+expect 0 "$B" replay "$T/rec.bflog" --out "$T/lvr" --depth-correction "$T/bands.json" --no-mesh $nocolour
+py -c "
+import json, sys
+a, b = (json.load(open(p + '/stats.json'))['map_digest'] for p in sys.argv[1:3])
+assert a == b, (a, b)
+" "$T/lv" "$T/lvr" || fail "live --record does not keep the camera's frames: its log replayed with the file differs"
 # With the file the noise weight's exponent defaults to 2.5 (its far samples are corrected);
 # without it, 3; a given --noise-exp stays what it says either way.
 noise_exp_is() { # DIR E
