@@ -361,6 +361,13 @@ bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source
  * image (recon_run_config.depth_lens, eval-motion), or NULL: none, or the
  * source took it out. */
 const calib_camera *app_calibration_depth_lens(const app_calibration *c);
+/* Whether --depth-correction's file (path, read into c) was made in the
+ * pixels src's frames are read in: through the lens its reader takes out,
+ * or cal's the loop takes out (calib_depth_same_lens). BF_FORMAT naming
+ * both lenses otherwise. cal may be NULL. */
+struct calib_depth_correction;
+bf_status app_depth_correction_check(const char *path, const struct calib_depth_correction *c,
+                                     const rgbd_source *src, const app_calibration *cal, const char *seq);
 
 /* The lens taken out of src's frames: replay_undistortion, or for the
  * recording app_open_device last wrapped as a camera, that recording's. */

@@ -86,3 +86,26 @@ const calib_camera *app_calibration_depth_lens(const app_calibration *c)
 {
     return c && c->path && c->is_lens_left ? &c->cal.depth : NULL;
 }
+
+/* "the lens (k1 k2 p1 p2 k3)" or "no lens". */
+static void lens_words(const double *d, char *buf, size_t n)
+{
+    if (!d || !calib_has_distortion(d)) snprintf(buf, n, "no lens");
+    else snprintf(buf, n, "the lens (%.6g %.6g %.6g %.6g %.6g)", d[0], d[1], d[2], d[3], d[4]);
+}
+
+bf_status app_depth_correction_check(const char *path, const calib_depth_correction *c, const rgbd_source *src,
+                                     const app_calibration *cal, const char *seq)
+{
+    double dist[CALIB_DIST_N];
+    const calib_camera *left = app_calibration_depth_lens(cal);
+    const double *frames = app_undistortion(src, dist, NULL) ? dist : left ? left->dist : NULL;
+    if (calib_depth_same_lens(c, frames)) return BF_OK;
+    char made[128], now[128];
+    lens_words(c->lens, made, sizeof made);
+    lens_words(frames, now, sizeof now);
+    return bf_fail(BF_FORMAT,
+                   "%s: made from frames read through %s, but %s's are read through %s: the pattern lies in other "
+                   "pixels (make the file again from these frames with bitfuse calibrate-depth)",
+                   path, made, seq, now);
+}

@@ -200,7 +200,12 @@ int cmd_calibrate_depth(int argc, char **argv)
             bf_fail(BF_FORMAT, "%s: %s", seq, why);
         }
     }
-    if (s == BF_OK) s = calib_depth_write(out, c);
+    if (s == BF_OK) {
+        /* The pixels the pattern was found in: the lens taken out of the frames. */
+        c->is_lens_known = true;
+        if (!app_undistortion(src, c->lens, NULL)) memset(c->lens, 0, sizeof c->lens);
+        s = calib_depth_write(out, c);
+    }
     if (s == BF_OK) {
         double secs = bf_time_s() - t0;
         if (json) {

@@ -145,6 +145,8 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK && a.depth_correction) s = calib_depth_read(a.depth_correction, &fuse_depth_fix);
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
+    if (s == BF_OK && a.depth_correction)
+        s = app_depth_correction_check(a.depth_correction, &fuse_depth_fix, src, &a.cal, a.seq);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
     bool made_out = !bf_file_exists(a.out);

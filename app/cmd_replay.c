@@ -846,6 +846,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = replay_open(a.seq, &a.ropt, &src);
     }
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
+    if (s == BF_OK && a.depth_correction)
+        s = app_depth_correction_check(a.depth_correction, &replay_depth_fix, src, &a.cal, a.seq);
     if (s == BF_OK && a.cal.path) {
         a.rcfg.calibration = a.cal.cal; /* its colour camera at the frames' size */
         a.rcfg.has_calibration = true;

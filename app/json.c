@@ -200,6 +200,10 @@ void app_json_depth_correction(cJSON *parent, const char *path, const struct cal
     add_float(o, "max_multiplier", hi);
     cJSON_AddNumberToObject(o, "rms_before", c->rms_before);
     cJSON_AddNumberToObject(o, "rms_after", c->rms_after);
+    /* The lens of the frames it was made from, as the file says (absent:
+     * it does not say). */
+    if (c->is_lens_known && calib_has_distortion(c->lens)) app_json_numbers(o, "undistorted", c->lens, CALIB_DIST_N);
+    else if (c->is_lens_known) cJSON_AddNullToObject(o, "undistorted");
 }
 
 void app_json_recon_config(cJSON *parent, const char *name, const recon_config *c)

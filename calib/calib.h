@@ -199,7 +199,16 @@ typedef struct calib_depth_correction {
      * pattern measured before the first pass and after the last. */
     uint32_t n_frames, n_pairs, n_cells_measured;
     double rms_before, rms_after;
+    /* The lens taken out of the frames it was made from (all 0: read as a
+     * pinhole), when is_lens_known: the pattern lies in those frames'
+     * pixels, so frames read through another lens must not take it
+     * (calib_depth_same_lens). Files written before the field: unknown. */
+    bool is_lens_known;
+    double lens[CALIB_DIST_N];
 } calib_depth_correction;
+/* Whether frames read through lens dist (NULL or all 0: a pinhole) are in
+ * the pixels c was made in; true when c does not say. */
+bool calib_depth_same_lens(const calib_depth_correction *c, const double *dist);
 
 typedef struct calib_depth_config {
     uint32_t cell_px;       /* 16 */

@@ -35,6 +35,14 @@ bf_status calib_depth_write(const char *path, const calib_depth_correction *c)
     cJSON_AddNumberToObject(root, "cells_measured", c->n_cells_measured);
     cJSON_AddItemToObject(root, "rms_before", json_float(c->rms_before, "%.6g"));
     cJSON_AddItemToObject(root, "rms_after", json_float(c->rms_after, "%.6g"));
+    /* The pixels the pattern lies in: the lens taken out of the frames
+     * (null: none), %.17g so a double reads back as written. */
+    if (c->is_lens_known && calib_has_distortion(c->lens)) {
+        cJSON *l = cJSON_AddArrayToObject(root, "undistorted");
+        for (int i = 0; l && i < CALIB_DIST_N; i++) cJSON_AddItemToArray(l, json_float(c->lens[i], "%.17g"));
+    } else if (c->is_lens_known) {
+        cJSON_AddNullToObject(root, "undistorted");
+    }
     /* One row of the grid per line: the file reads as the image does. */
     cJSON *rows = cJSON_AddArrayToObject(root, "multipliers");
     for (uint32_t y = 0; rows && y < c->grid_h; y++) {
@@ -92,6 +100,35 @@ static bf_status get_real(const char *path, const cJSON *o, const char *name, do
     return BF_OK;
 }
 
+/* "undistorted": absent (a file from before it: unknown), null (frames
+ * read as a pinhole) or the lens's CALIB_DIST_N coefficients. */
+static bf_status get_lens(const char *path, const cJSON *root, calib_depth_correction *c)
+{
+    const cJSON *x = cJSON_GetObjectItemCaseSensitive(root, "undistorted");
+    if (!x) return BF_OK;
+    c->is_lens_known = true;
+    if (cJSON_IsNull(x)) return BF_OK;
+    if (!cJSON_IsArray(x) || cJSON_GetArraySize(x) != CALIB_DIST_N)
+        return bf_fail(BF_FORMAT, "%s: undistorted: not null or a list of %d numbers", path, CALIB_DIST_N);
+    for (int i = 0; i < CALIB_DIST_N; i++) {
+        const cJSON *v = cJSON_GetArrayItem(x, i);
+        if (!cJSON_IsNumber(v) || !isfinite(v->valuedouble))
+            return bf_fail(BF_FORMAT, "%s: undistorted[%d]: not a finite number", path, i);
+        c->lens[i] = v->valuedouble;
+    }
+    return BF_OK;
+}
+
+bool calib_depth_same_lens(const calib_depth_correction *c, const double *dist)
+{
+    if (!c->is_lens_known) return true;
+    for (int i = 0; i < CALIB_DIST_N; i++) {
+        double a = c->lens[i], b = dist ? dist[i] : 0.0;
+        if (fabs(a - b) > 1e-12 * (1.0 + fabs(a))) return false;
+    }
+    return true;
+}
+
 static bf_status parse_root(const char *path, const cJSON *root, calib_depth_correction *c)
 {
     if (!cJSON_IsObject(root)) return bf_fail(BF_FORMAT, "%s: not a JSON object", path);
@@ -116,6 +153,7 @@ static bf_status parse_root(const char *path, const cJSON *root, calib_depth_cor
         (s = get_count(path, root, "cells_measured", 0, 4e9, false, &c->n_cells_measured)) ||
         (s = get_real(path, root, "rms_before", &c->rms_before)) || (s = get_real(path, root, "rms_after", &c->rms_after)))
         return s;
+    if ((s = get_lens(path, root, c)) != BF_OK) return s;
     if (c->grid_w != (c->width + c->cell_px - 1) / c->cell_px || c->grid_h != (c->height + c->cell_px - 1) / c->cell_px)
         return bf_fail(BF_FORMAT, "%s: grid %ux%u does not cover %ux%u pixels in cells of %u", path, c->grid_w,
                        c->grid_h, c->width, c->height, c->cell_px);

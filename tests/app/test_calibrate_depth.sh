@@ -119,6 +119,25 @@ import json, sys
 c = json.load(open(sys.argv[1]))['depth_correction']
 assert c['file'] == sys.argv[2] and c['grid_w'] == 20 and c['min_multiplier'] < 0.995 < 1.005 < c['max_multiplier'], c
 " "$T/rp/stats.json" "$T/bands.json" || fail "replay's stats.json does not echo --depth-correction"
+# The file says where its pattern lies: in frames read as a pinhole
+# ("undistorted": null). The same frames read through a lens put that
+# pattern in other pixels: refused before any output (exit 3), the lenses
+# named. A file that does not say (written before the field) is taken.
+py -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert 'undistorted' in d and d['undistorted'] is None, d.get('undistorted', 'absent')
+del d['undistorted']
+json.dump(d, open(sys.argv[2], 'w'))" "$T/bands.json" "$T/unsaid.json" || fail "calibrate-depth does not say which lens its frames had"
+expect 3 "$B" replay "$T/spoiled" --out "$T/rp_lens" --depth-correction "$T/bands.json" --no-mesh --frames 3 \
+    --camera 131.25,131.25,79.5,59.5,0.05,0,0,0,0
+mentions "the pattern lies in other pixels"
+[ ! -e "$T/rp_lens" ] || fail "replay with a depth correction made for other pixels left an output folder"
+expect 3 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu_lens" --depth-correction "$T/bands.json" --no-mesh \
+    --camera 131.25,131.25,79.5,59.5,0.05,0,0,0,0
+mentions "made from frames read through no lens"
+expect 0 "$B" replay "$T/spoiled" --out "$T/rp_unsaid" --depth-correction "$T/unsaid.json" --no-mesh --frames 3 \
+    --camera 131.25,131.25,79.5,59.5,0.05,0,0,0,0
 # live --record keeps the frames as the camera gave them, not corrected: its
 # log replayed with the same file gives live's map (corrected twice, it
 # would not). The recording's colour is JPEG, so both leave colour out.

@@ -192,8 +192,45 @@ BF_TEST(depth_correction_file_round_trip_is_exact)
     CHECK_EQ_INT(back->grid_w, 40);
     CHECK_EQ_INT(back->n_pairs, 319);
     CHECK(fabs(back->rms_before - 0.0026) < 1e-9);
+    /* Where the pattern lies: a lens, bit for bit; none; or (not written)
+     * unknown. */
+    const double fr1[CALIB_DIST_N] = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633};
+    c->is_lens_known = true;
+    memcpy(c->lens, fr1, sizeof fr1);
+    CHECK_OK(calib_depth_write(path, c));
+    CHECK_OK(calib_depth_read(path, back));
+    CHECK(back->is_lens_known && memcmp(back->lens, fr1, sizeof fr1) == 0);
+    memset(c->lens, 0, sizeof c->lens);
+    CHECK_OK(calib_depth_write(path, c));
+    CHECK_OK(calib_depth_read(path, back));
+    CHECK(back->is_lens_known && !calib_has_distortion(back->lens));
+    c->is_lens_known = false;
+    CHECK_OK(calib_depth_write(path, c));
+    CHECK_OK(calib_depth_read(path, back));
+    CHECK(!back->is_lens_known);
     free(c);
     free(back);
+}
+
+BF_TEST(depth_correction_knows_the_pixels_it_was_made_in)
+{
+    const double fr1[CALIB_DIST_N] = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633}, none[CALIB_DIST_N] = {0};
+    calib_depth_correction *c = calloc(1, sizeof *c);
+    /* A file that does not say fits any frames. */
+    CHECK(calib_depth_same_lens(c, fr1) && calib_depth_same_lens(c, NULL));
+    /* Made as a pinhole: frames read as a pinhole only. */
+    c->is_lens_known = true;
+    CHECK(calib_depth_same_lens(c, NULL) && calib_depth_same_lens(c, none));
+    CHECK(!calib_depth_same_lens(c, fr1));
+    /* Made through fr1's lens: that lens only. */
+    memcpy(c->lens, fr1, sizeof fr1);
+    CHECK(calib_depth_same_lens(c, fr1));
+    CHECK(!calib_depth_same_lens(c, NULL));
+    double other[CALIB_DIST_N];
+    memcpy(other, fr1, sizeof fr1);
+    other[0] += 1e-6;
+    CHECK(!calib_depth_same_lens(c, other));
+    free(c);
 }
 
 BF_TEST(depth_correction_malformed_files_are_named)
@@ -220,6 +257,12 @@ BF_TEST(depth_correction_malformed_files_are_named)
         {"{\"format\": \"bitfuse-depth-correction\", \"version\": 1, \"width\": 16, \"height\": 8, \"cell_px\": 8, "
          "\"grid_w\": 2, \"grid_h\": 1, \"multipliers\": [[1, 1]], \"pairs\": -1}",
          "pairs", BF_FORMAT},
+        {"{\"format\": \"bitfuse-depth-correction\", \"version\": 1, \"width\": 16, \"height\": 8, \"cell_px\": 8, "
+         "\"grid_w\": 2, \"grid_h\": 1, \"multipliers\": [[1, 1]], \"undistorted\": [0.1, 0]}",
+         "undistorted: not null or a list of 5", BF_FORMAT},
+        {"{\"format\": \"bitfuse-depth-correction\", \"version\": 1, \"width\": 16, \"height\": 8, \"cell_px\": 8, "
+         "\"grid_w\": 2, \"grid_h\": 1, \"multipliers\": [[1, 1]], \"undistorted\": [0.1, 0, 0, \"x\", 0]}",
+         "undistorted[3]", BF_FORMAT},
     };
     calib_depth_correction *c = malloc(sizeof *c);
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {

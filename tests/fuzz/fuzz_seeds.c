@@ -444,6 +444,16 @@ static void seeds_depthcorr(void)
     buf_file(&b, tmp("depth_correction.json"));
     seed("depthcorr", "grid_4x3.json", b.p, b.n, true);
     free(b.p);
+    /* The same, saying it was made through a lens (TUM fr1's). */
+    calib_depth_correction l = c;
+    const double fr1[CALIB_DIST_N] = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633};
+    l.is_lens_known = true;
+    memcpy(l.lens, fr1, sizeof fr1);
+    check(calib_depth_write(tmp("depth_correction.json"), &l));
+    buf c2 = {0};
+    buf_file(&c2, tmp("depth_correction.json"));
+    seed("depthcorr", "grid_4x3_lens.json", c2.p, c2.n, false);
+    free(c2.p);
 }
 
 /* ------------------------------------------------------------ a V4L2 camera */
