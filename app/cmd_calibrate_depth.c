@@ -41,7 +41,9 @@ static void frames_free(depth_frames *d)
     memset(d, 0, sizeof *d);
 }
 
-static bf_status frames_push(depth_frames *d, const bf_frame *f, const bf_se3 *T)
+/* Keeps f's depth (through lens when not NULL: a log's or a device's frames
+ * and a calibration's depth lens) and its pose. */
+static bf_status frames_push(depth_frames *d, const bf_frame *f, const bf_se3 *T, const calib_undistort_map *lens)
 {
     if (d->n == d->cap) {
         uint32_t cap = d->cap ? 2 * d->cap : 64;
@@ -57,7 +59,8 @@ static bf_status frames_push(depth_frames *d, const bf_frame *f, const bf_se3 *T
     size_t n = (size_t)f->width * f->height;
     uint16_t *copy = malloc(n * sizeof *copy);
     if (!copy) return bf_fail(BF_NO_MEMORY, "calibrate-depth: frame %u", f->index);
-    memcpy(copy, f->depth, n * sizeof *copy);
+    if (lens) calib_undistort_u16(lens, f->depth, copy);
+    else memcpy(copy, f->depth, n * sizeof *copy);
     d->depth[d->n] = copy;
     d->index[d->n] = f->index;
     d->T_wc[d->n] = *T;
@@ -77,8 +80,8 @@ static bool frame_needed(const calib_depth_config *c, uint32_t i)
 
 /* Reads the frames the pairs need, each with its pose (the ground truth or
  * traj's at its depth time); frames without one are counted in *n_no_pose. */
-static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_depth_config *c, depth_frames *d,
-                             uint32_t *n_no_pose, const char *seq)
+static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_depth_config *c,
+                             const calib_undistort_map *lens, depth_frames *d, uint32_t *n_no_pose, const char *seq)
 {
     bf_frame f;
     bf_status s;
@@ -101,7 +104,7 @@ static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_
             (*n_no_pose)++;
             continue;
         }
-        if ((s = frames_push(d, &f, &T)) != BF_OK) break;
+        if ((s = frames_push(d, &f, &T, lens)) != BF_OK) break;
     }
     bf_progress_end(&prog, seen);
     if (s == BF_END) s = BF_OK;
@@ -138,7 +141,7 @@ static cJSON *result_json(const char *seq, const char *out, const calib_depth_co
 
 int cmd_calibrate_depth(int argc, char **argv)
 {
-    const char *cmd = "calibrate-depth", *seq = NULL, *poses = NULL, *out = NULL;
+    const char *cmd = "calibrate-depth", *seq = NULL, *poses = NULL, *out = NULL, *calibration = NULL;
     calib_depth_config cfg = calib_depth_config_default();
     replay_options ropt;
     memset(&ropt, 0, sizeof ropt);
@@ -156,6 +159,10 @@ int cmd_calibrate_depth(int argc, char **argv)
                 .max = 1000),
         APP_OPT("--max-depth", APP_OPT_FLOAT, &cfg.max_depth_m, "M", "samples beyond are not used", .min = 0.3,
                 .max = 20),
+        APP_OPT("--calibration", APP_OPT_STRING, &calibration, "FILE",
+                "calib.json: the depth read with its depth camera, lens taken out, as replay --calibration reads "
+                "it (the file made then fits those runs)",
+                .no_default = true),
         APP_OPT("--json", APP_OPT_FLAG, &json, NULL, "print the result as JSON instead of the summary"),
         APP_OPT_END,
     };
@@ -173,6 +180,8 @@ int cmd_calibrate_depth(int argc, char **argv)
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (cfg.gaps[0] % cfg.stride || cfg.gaps[1] % cfg.stride)
         return app_usage_error(cmd, "--stride %u must divide the gaps %u and %u", cfg.stride, cfg.gaps[0], cfg.gaps[1]);
+    app_calibration cal = {0};
+    if (calibration && (rc = app_calibration_read(cmd, calibration, seq, false, &ropt, &cal)) != APP_EXIT_OK) return rc;
 
     double t0 = bf_time_s();
     bool use_traj = strcmp(poses, "groundtruth") != 0;
@@ -184,9 +193,14 @@ int cmd_calibrate_depth(int argc, char **argv)
     bf_status s = c ? BF_OK : bf_fail(BF_NO_MEMORY, "calibrate-depth");
     if (s == BF_OK && use_traj) s = replay_traj_read_tum(poses, &traj);
     if (s == BF_OK) s = replay_open(seq, &ropt, &src);
+    if (s == BF_OK) s = app_calibration_apply(&cal, seq, src);
+    /* A log gives its depth through the lens: taken out here as the loop does. */
+    const calib_camera *lens_cam = app_calibration_depth_lens(&cal);
+    calib_undistort_map lens = {0};
+    if (s == BF_OK && lens_cam) s = calib_undistort_map_make(lens_cam, &lens);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", seq);
-    if (s == BF_OK) s = read_frames(src, use_traj ? &traj : NULL, &cfg, &d, &n_no_pose, seq);
+    if (s == BF_OK) s = read_frames(src, use_traj ? &traj : NULL, &cfg, lens_cam ? &lens : NULL, &d, &n_no_pose, seq);
     if (s == BF_OK) {
         d.in = (calib_depth_frames){.n = d.n, .depth = (const uint16_t *const *)d.depth, .index = d.index,
                                     .T_wc = d.T_wc, .K = *rgbd_source_intrinsics(src)};
@@ -203,7 +217,8 @@ int cmd_calibrate_depth(int argc, char **argv)
     if (s == BF_OK) {
         /* The pixels the pattern was found in: the lens taken out of the frames. */
         c->is_lens_known = true;
-        if (!app_undistortion(src, c->lens, NULL)) memset(c->lens, 0, sizeof c->lens);
+        if (lens_cam) memcpy(c->lens, lens_cam->dist, sizeof c->lens);
+        else if (!app_undistortion(src, c->lens, NULL)) memset(c->lens, 0, sizeof c->lens);
         s = calib_depth_write(out, c);
     }
     if (s == BF_OK) {
@@ -223,6 +238,7 @@ int cmd_calibrate_depth(int argc, char **argv)
         }
     }
     frames_free(&d);
+    calib_undistort_map_free(&lens);
     rgbd_source_close(src);
     bf_traj_free(&traj);
     free(c);

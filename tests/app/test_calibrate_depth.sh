@@ -138,6 +138,33 @@ expect 3 "$B" fuse "$T/spoiled" --poses groundtruth --out "$T/fu_lens" --depth-c
 mentions "made from frames read through no lens"
 expect 0 "$B" replay "$T/spoiled" --out "$T/rp_unsaid" --depth-correction "$T/unsaid.json" --no-mesh --frames 3 \
     --camera 131.25,131.25,79.5,59.5,0.05,0,0,0,0
+# With --calibration the depth is read through the file's depth camera, its
+# lens taken out, as replay --calibration reads it; a log's lens is taken
+# out by the command itself, so a folder and its log give the same file,
+# bit for bit, which says the lens. replay of the log through that
+# calibration takes it, and refuses the file made without the lens.
+py -c "
+import json, sys
+cam = dict(width=160, height=120, fx=131.25, fy=131.25, cx=79.5, cy=59.5, rms_px=0)
+json.dump({'format': 'bitfuse-calibration', 'version': 1, 'colour': dict(cam, dist=[0] * 5),
+           'depth': dict(cam, dist=[0.05, 0, 0, 0, 0]),
+           'T_colour_depth': {'R': [1, 0, 0, 0, 1, 0, 0, 0, 1], 't': [0, 0, 0]}, 'rms_px': 0, 'views': 0},
+          open(sys.argv[1], 'w'))" "$T/lensd.json"
+expect 0 "$B" convert "$T/spoiled" --out "$T/spoiled.bflog"
+expect 0 "$B" calibrate-depth "$T/spoiled" --poses groundtruth --cell 8 --calibration "$T/lensd.json" --out "$T/lf.json"
+expect 0 "$B" calibrate-depth "$T/spoiled.bflog" --poses groundtruth --cell 8 --calibration "$T/lensd.json" \
+    --out "$T/ll.json"
+py -c "
+import json, sys
+f, l = (json.load(open(p)) for p in sys.argv[1:3])
+assert f['undistorted'] == [0.05, 0, 0, 0, 0] and l['undistorted'] == f['undistorted'], (f['undistorted'], l['undistorted'])
+assert f['multipliers'] == l['multipliers'], 'the log and the folder through the lens give other patterns'
+" "$T/lf.json" "$T/ll.json" || fail "calibrate-depth --calibration does not read a log through the lens as a folder"
+expect 0 "$B" replay "$T/spoiled.bflog" --out "$T/rp_ll" --calibration "$T/lensd.json" --depth-correction "$T/ll.json" \
+    --no-mesh --frames 3
+expect 3 "$B" replay "$T/spoiled.bflog" --out "$T/rp_lb" --calibration "$T/lensd.json" \
+    --depth-correction "$T/bands.json" --no-mesh --frames 3
+mentions "the pattern lies in other pixels"
 # live --record keeps the frames as the camera gave them, not corrected: its
 # log replayed with the same file gives live's map (corrected twice, it
 # would not). The recording's colour is JPEG, so both leave colour out.
