@@ -361,6 +361,10 @@ bf_status app_calibration_apply(app_calibration *c, const char *seq, rgbd_source
  * image (recon_run_config.depth_lens, eval-motion), or NULL: none, or the
  * source took it out. */
 const calib_camera *app_calibration_depth_lens(const app_calibration *c);
+/* The lens taken out of src's depth, by its reader or (cal's depth lens)
+ * by whoever reads its frames: dist filled and returned, or cal's
+ * coefficients, or NULL for none. cal may be NULL. */
+const double *app_frames_lens(const rgbd_source *src, const app_calibration *cal, double dist[CALIB_DIST_N]);
 /* Whether --depth-correction's file (path, read into c) was made in the
  * pixels src's frames are read in: through the lens its reader takes out,
  * or cal's the loop takes out (calib_depth_same_lens). BF_FORMAT naming

@@ -87,6 +87,13 @@ const calib_camera *app_calibration_depth_lens(const app_calibration *c)
     return c && c->path && c->is_lens_left ? &c->cal.depth : NULL;
 }
 
+const double *app_frames_lens(const rgbd_source *src, const app_calibration *cal, double dist[CALIB_DIST_N])
+{
+    if (app_undistortion(src, dist, NULL)) return dist;
+    const calib_camera *left = app_calibration_depth_lens(cal);
+    return left ? left->dist : NULL;
+}
+
 /* "the lens (k1 k2 p1 p2 k3)" or "no lens". */
 static void lens_words(const double *d, char *buf, size_t n)
 {
@@ -98,8 +105,7 @@ bf_status app_depth_correction_check(const char *path, const calib_depth_correct
                                      const app_calibration *cal, const char *seq)
 {
     double dist[CALIB_DIST_N];
-    const calib_camera *left = app_calibration_depth_lens(cal);
-    const double *frames = app_undistortion(src, dist, NULL) ? dist : left ? left->dist : NULL;
+    const double *frames = app_frames_lens(src, cal, dist);
     if (calib_depth_same_lens(c, frames)) return BF_OK;
     char made[128], now[128];
     lens_words(c->lens, made, sizeof made);

@@ -216,9 +216,11 @@ int cmd_calibrate_depth(int argc, char **argv)
     }
     if (s == BF_OK) {
         /* The pixels the pattern was found in: the lens taken out of the frames. */
+        double dist[CALIB_DIST_N];
+        const double *l = app_frames_lens(src, &cal, dist);
         c->is_lens_known = true;
-        if (lens_cam) memcpy(c->lens, lens_cam->dist, sizeof c->lens);
-        else if (!app_undistortion(src, c->lens, NULL)) memset(c->lens, 0, sizeof c->lens);
+        if (l) memcpy(c->lens, l, sizeof c->lens);
+        else memset(c->lens, 0, sizeof c->lens);
         s = calib_depth_write(out, c);
     }
     if (s == BF_OK) {
