@@ -102,7 +102,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 31
+#define LOOP_ROWS 32
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -275,6 +275,11 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "ORB keypoints per keyframe and per searching frame for the candidates from colour (0: none; "
                 "with --calibration found in the colour camera's own image)",
                 .max = 100000),
+        APP_OPT("--last-frame", APP_OPT_CHOICE, &a->rcfg.reloc.last_frame, "on|off",
+                "with --reloc: a frame right after a good one whose fit to the map is weak (fewer inliers than a "
+                "relocalised pose needs) or that no candidate finds is tracked against that frame's depth, and "
+                "takes that pose when it fits with more inliers (a fast turn into what the map has barely "
+                "seen); off: the map alone"),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),
@@ -545,6 +550,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddNumberToObject(tr, "tracked", c->tracked);
     cJSON_AddNumberToObject(tr, "lost", c->lost);
     cJSON_AddNumberToObject(tr, "relocalised", c->relocalised);
+    cJSON_AddNumberToObject(tr, "last_frame", c->last_frame);
     cJSON_AddNumberToObject(tr, "keyframes", c->keyframes);
     /* The tracking reference's size (auto resolves per camera). */
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
@@ -773,6 +779,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     printf("bitfuse %s: %u frames on %s: %u tracked (%u relocalised), %u lost, %u without depth (%u degenerate)\n",
            a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->relocalised, c->lost, c->no_depth,
            c->degenerate);
+    if (c->last_frame)
+        printf("  tracking         %u frames fitted the map weakly or not at all and were tracked against the "
+               "frame before them\n", c->last_frame);
     if (replay_skipped_frames(src))
         printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
     if (c->repeated)

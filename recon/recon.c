@@ -47,7 +47,7 @@ recon_config recon_config_default(void)
                   .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f,
                   .max_residual_sigma = 2.5f,
                   .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f, .features = 1000,
-                  .feature_candidates = 2, .feature_min_inliers = 20},
+                  .feature_candidates = 2, .feature_min_inliers = 20, .last_frame = true},
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
      * and more accurate than fusion's own default of 1
@@ -121,6 +121,7 @@ const char *recon_reloc_kind_name(recon_reloc_kind k)
     case RECON_RELOC_TURNED: return "turned";
     case RECON_RELOC_KEYFRAME: return "keyframe";
     case RECON_RELOC_FEATURES: return "features";
+    case RECON_RELOC_FRAME: return "frame";
     }
     return "?";
 }
@@ -272,6 +273,7 @@ static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_
     recon__good_frame(r, f, T_new, !out->track.degenerate);
     r->counts.tracked++;
     if (state == RECON_RELOCALISED) r->counts.relocalised++;
+    if (out->reloc == RECON_RELOC_FRAME) r->counts.last_frame++;
     if (out->track.photo_weak) r->counts.photo_weak++;
     return fuse_and_reference(r, f, T_new, true, NULL, out);
 }
@@ -327,7 +329,21 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
         if (ok && out->track.degenerate) r->counts.degenerate++;
         /* Valid raw samples, but none the tracker can use (all beyond range). */
         if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
-        if (ok && (r->cfg.fuse_degenerate || !out->track.degenerate)) return accept(r, f, known, RECON_TRACKED, out);
+        if (ok && (r->cfg.fuse_degenerate || !out->track.degenerate)) {
+            /* A weak fit to the map (fewer inliers than a candidate needs)
+             * next to the frame before: that frame decides when it fits
+             * the new one with more. */
+            if (reloc && out->track.inlier_frac < r->cfg.reloc.min_inlier_frac) {
+                track_result map_fit = out->track;
+                bool found;
+                if ((s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;
+                if (found && out->track.inlier_frac <= map_fit.inlier_frac) {
+                    out->track = map_fit;
+                    out->reloc = RECON_RELOC_NONE;
+                }
+            }
+            return accept(r, f, known, RECON_TRACKED, out);
+        }
         if (!reloc) return lose(r, f, known, out);
     }
     /* The guess from the last pose was just tried against its reference. */
@@ -336,6 +352,8 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     if ((s = recon__search(r, f, &slot, n, skip, out, &found)) != BF_OK) return s;
     if (found) return accept(r, f, NULL, RECON_RELOCALISED, out);
     if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
+    if ((s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;
+    if (found) return accept(r, f, NULL, RECON_TRACKED, out);
     return lose(r, f, known, out);
 }
 

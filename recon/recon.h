@@ -65,6 +65,11 @@ typedef struct recon_reloc_config {
     uint32_t features;            /* ORB keypoints per image, default 1000; 0: no colour candidates */
     uint32_t feature_candidates;  /* the poses of the keyframes with most PnP inliers tried first, default 2 */
     uint32_t feature_min_inliers; /* a keyframe's pose counts with at least this many inliers, default 20 */
+    bool last_frame;              /* a frame right after a good one whose fit to the map is weak (inliers below
+                                     min_inlier_frac) or that no candidate finds is tracked against that frame's
+                                     own depth from its pose (a fast turn into what the map has barely seen), and
+                                     takes that pose when it passes the candidates' gates with more inliers;
+                                     default true */
 } recon_reloc_config;
 
 /* track.ref_level for the loop's tracking reference: the coarsest pyramid
@@ -137,9 +142,10 @@ typedef enum recon_reloc_kind {
     RECON_RELOC_TURNED,   /* one of those two turned by 10 or 20 degrees (yaw or pitch) */
     RECON_RELOC_KEYFRAME, /* a keyframe's pose */
     RECON_RELOC_FEATURES, /* the pose PnP found from the colour's keypoints matched to a keyframe's */
+    RECON_RELOC_FRAME,    /* tracked against the previous good frame's depth (reloc.last_frame) */
 } recon_reloc_kind;
 
-/* "", "last", "velocity", "turned", "keyframe", "features" */
+/* "", "last", "velocity", "turned", "keyframe", "features", "frame" */
 const char *recon_reloc_kind_name(recon_reloc_kind k);
 
 typedef struct recon_frame_result {
@@ -234,6 +240,8 @@ typedef struct recon_counts {
     uint32_t repeated;    /* frames whose depth repeated the previous one's (skip_repeated) */
     uint32_t colour_repeated; /* frames whose colour alone repeated: tracked and fused on depth alone */
     uint32_t relocalised; /* frames found again by a search (also counted in tracked) */
+    uint32_t last_frame;  /* frames tracked against the last good frame's depth (reloc.last_frame; also counted
+                             in tracked) */
     uint32_t photo_weak;  /* good frames whose depth left a direction weak: the photometric term came in
                              (track_config.photo_weak_ratio) */
     uint32_t keyframes;   /* keyframes held now */

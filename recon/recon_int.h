@@ -37,6 +37,9 @@ struct recon {
     uint32_t n_keyframes; /* held */
     uint32_t reloc_cursor; /* the round robin's next entry (reloc.c) */
     float *ref_host;       /* K_ref's pixels: a candidate's reference depth read back for its check */
+    uint16_t *good_depth;  /* reloc.last_frame: the last good frame's depth (K's size), the reference a frame
+                              right after it is tracked against when the map's candidates fail */
+    bool has_good_depth;
 
     /* skip_repeated: the last images, to find the frames that repeat them. */
     bf_repeats repeats;
@@ -45,6 +48,11 @@ struct recon {
 /* reloc.c */
 /* T_last moved on by n frame intervals of V_step. */
 bf_se3 recon__velocity_pose(const recon *r, double n);
+/* reloc.last_frame: a frame right after a good one, tracked against that
+ * frame's depth from its pose with the candidates' gates; *found when it
+ * passes (out->track is then its result). */
+bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n,
+                                  recon_frame_result *out, bool *found);
 /* The colour camera of --calibration and T_colour_depth; NULL where the
  * colour is registered to the depth (no calibration). */
 const calib_camera *recon__colour_rig(const recon_config *cfg, bf_se3 *T_colour_depth);

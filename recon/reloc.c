@@ -56,6 +56,8 @@ bf_status recon__reloc_create(recon *r)
     if (!r->keyframes || !r->kf_features) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);
     r->ref_host = malloc((size_t)r->K_ref.width * r->K_ref.height * sizeof *r->ref_host);
     if (!r->ref_host) return bf_fail(BF_NO_MEMORY, "recon: the reference's depth on the host");
+    if (c->last_frame && !(r->good_depth = malloc((size_t)r->K.width * r->K.height * sizeof *r->good_depth)))
+        return bf_fail(BF_NO_MEMORY, "recon: the last good frame's depth");
     return BF_OK;
 }
 
@@ -65,6 +67,8 @@ void recon__reloc_destroy(recon *r)
     free(r->kf_features);
     free(r->keyframes);
     free(r->ref_host);
+    free(r->good_depth);
+    r->good_depth = NULL;
     r->kf_features = NULL;
     r->keyframes = NULL;
     r->ref_host = NULL;
@@ -270,6 +274,8 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
     r->good_t_s = f->t_depth_s;
     r->is_lost = false;
     if (r->keyframes && may_keyframe) recon__add_keyframe(r, T_new, f);
+    if (r->good_depth) memcpy(r->good_depth, f->depth, (size_t)f->width * f->height * sizeof *r->good_depth);
+    r->has_good_depth = r->good_depth != NULL;
 }
 
 /* The primary candidates, tried on every searching frame: 0 the last good
@@ -619,5 +625,34 @@ bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *sl
     } else if (st.has_any) {
         out->track = st.any;
     }
+    return BF_OK;
+}
+
+/* Frame-to-frame where the map is thin: a camera turning fast into what the
+ * map has barely seen (TUM fr1/rpy's frames 39-59: most of the view at
+ * 2.5-4.5 m, 13-23% of it associating with the map's ray-cast) fails
+ * against the map from every candidate, while the frame before it, one
+ * interval away, sees most of the same. Its pose is then the last good
+ * one, its depth the reference, and the candidates' gates decide. Not after
+ * a loss or a gap: the frame kept is then not the camera's last view. */
+bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n,
+                                  recon_frame_result *out, bool *found)
+{
+    *found = false;
+    if (!r->has_good_depth || r->is_lost || n > 1.5) return BF_OK;
+    bf_frame g = {.index = r->good_index, .width = r->K.width, .height = r->K.height, .t_depth_s = r->good_t_s,
+                  .t_rgb_s = r->good_t_s, .depth = r->good_depth};
+    track_result t;
+    bf_status s = track_set_reference_frame(r->tracker, &g, &r->T_last);
+    if (s == BF_OK) s = track_frame_gpu(r->tracker, slot->depth, slot->offset, f->index, &r->T_last, &t);
+    if (s != BF_OK) return s;
+    out->reloc_tried++;
+    out->ms_track += t.ms_gpu;
+    bf_debug("recon: frame %u: against frame %u: %s, inliers %.1f%%, residual %.1f mm", f->index, r->good_index,
+             track_outcome_name(t.outcome), 100 * t.inlier_frac, 1e3 * t.residual_m);
+    if (!passes(r, &t)) return BF_OK;
+    out->track = t;
+    out->reloc = RECON_RELOC_FRAME;
+    *found = true;
     return BF_OK;
 }
