@@ -276,10 +276,10 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "with --calibration found in the colour camera's own image)",
                 .max = 100000),
         APP_OPT("--last-frame", APP_OPT_CHOICE, &a->rcfg.reloc.last_frame, "on|off",
-                "with --reloc: a frame right after a good one whose fit to the map is weak (fewer inliers than a "
-                "relocalised pose needs) or that no candidate finds is tracked against that frame's depth, and "
-                "takes that pose when it fits with more inliers (a fast turn into what the map has barely "
-                "seen); off: the map alone"),
+                "with --reloc: a frame right after a good one whose fit to the map is weak (under half of its "
+                "samples inliers) or that no candidate finds is tracked against that frame's depth, and takes "
+                "that pose when it fits with more inliers (a fast turn into what the map has barely seen); off: "
+                "the map alone"),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),

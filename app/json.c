@@ -239,6 +239,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddNumberToObject(rl, "feature_candidates", c->reloc.feature_candidates);
     cJSON_AddNumberToObject(rl, "feature_min_inliers", c->reloc.feature_min_inliers);
     cJSON_AddBoolToObject(rl, "last_frame", c->reloc.last_frame);
+    add_float(rl, "last_frame_below", c->reloc.last_frame_below);
     cJSON_AddBoolToObject(l, "has_views", c->has_views);
     json_calibration(o, c);
     cJSON *sm = app_json_object(l, "stream");

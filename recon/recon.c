@@ -47,7 +47,8 @@ recon_config recon_config_default(void)
                   .keyframe_deg = 10.0f, .max_keyframes = 64, .min_inlier_frac = 0.35f, .max_residual_m = 0.018f,
                   .max_residual_sigma = 2.5f,
                   .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f, .features = 1000,
-                  .feature_candidates = 2, .feature_min_inliers = 20, .last_frame = true},
+                  .feature_candidates = 2, .feature_min_inliers = 20, .last_frame = true,
+                  .last_frame_below = 0.5f},
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
      * and more accurate than fusion's own default of 1
@@ -330,10 +331,9 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
         /* Valid raw samples, but none the tracker can use (all beyond range). */
         if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
         if (ok && (r->cfg.fuse_degenerate || !out->track.degenerate)) {
-            /* A weak fit to the map (fewer inliers than a candidate needs)
-             * next to the frame before: that frame decides when it fits
-             * the new one with more. */
-            if (reloc && out->track.inlier_frac < r->cfg.reloc.min_inlier_frac) {
+            /* A weak fit to the map next to the frame before: that frame
+             * decides when it fits the new one with more inliers. */
+            if (reloc && out->track.inlier_frac < r->cfg.reloc.last_frame_below) {
                 track_result map_fit = out->track;
                 bool found;
                 if ((s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;

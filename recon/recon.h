@@ -66,10 +66,13 @@ typedef struct recon_reloc_config {
     uint32_t feature_candidates;  /* the poses of the keyframes with most PnP inliers tried first, default 2 */
     uint32_t feature_min_inliers; /* a keyframe's pose counts with at least this many inliers, default 20 */
     bool last_frame;              /* a frame right after a good one whose fit to the map is weak (inliers below
-                                     min_inlier_frac) or that no candidate finds is tracked against that frame's
+                                     last_frame_below) or that no candidate finds is tracked against that frame's
                                      own depth from its pose (a fast turn into what the map has barely seen), and
                                      takes that pose when it passes the candidates' gates with more inliers;
                                      default true */
+    float last_frame_below;       /* default 0.5: TUM fr1/rpy's four starts 12.8 mm mean ATE against 13.6 at 0.35
+                                     and 12.9 at 0.6, 15.7 at 0.7; no 7-Scenes dev frame fits the map below 0.5
+                                     (docs/tracking.md) */
 } recon_reloc_config;
 
 /* track.ref_level for the loop's tracking reference: the coarsest pyramid

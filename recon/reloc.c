@@ -43,14 +43,16 @@ bf_status recon__reloc_create(recon *r)
     if (c->max_candidates < 1 || c->max_keyframes < 1 || !(c->max_gate_intervals >= 1) ||
         !(c->keyframe_m > 0) || !(c->keyframe_deg > 0) || !(c->min_inlier_frac > 0 && c->min_inlier_frac <= 1) ||
         !(c->max_residual_m > 0) || !(c->max_residual_sigma >= 0) || c->check_step < 1 || !(c->check_band_m >= 0) ||
-        !(c->max_front_frac >= 0 && c->max_front_frac <= 1) || c->feature_candidates > FEATURE_MAX_CANDIDATES)
+        !(c->max_front_frac >= 0 && c->max_front_frac <= 1) || c->feature_candidates > FEATURE_MAX_CANDIDATES ||
+        !(c->last_frame_below >= 0 && c->last_frame_below <= 1))
         return bf_fail(BF_INVALID_ARG,
                        "recon: reloc needs candidates %u >= 1, keyframes %u >= 1, gate intervals %g >= 1, keyframe "
                        "spacing %g m / %g deg > 0, inliers %g in (0, 1], residual %g m > 0 (%g sigma >= 0), check "
-                       "step %u >= 1, band %g m >= 0, in front %g in [0, 1], colour candidates %u <= 8",
+                       "step %u >= 1, band %g m >= 0, in front %g in [0, 1], colour candidates %u <= 8, weak fit "
+                       "below %g in [0, 1]",
                        c->max_candidates, c->max_keyframes, c->max_gate_intervals, c->keyframe_m, c->keyframe_deg,
                        c->min_inlier_frac, c->max_residual_m, c->max_residual_sigma, c->check_step, c->check_band_m,
-                       c->max_front_frac, c->feature_candidates);
+                       c->max_front_frac, c->feature_candidates, c->last_frame_below);
     r->keyframes = calloc(c->max_keyframes, sizeof *r->keyframes);
     r->kf_features = calloc(c->max_keyframes, sizeof *r->kf_features);
     if (!r->keyframes || !r->kf_features) return bf_fail(BF_NO_MEMORY, "recon: %u keyframes", c->max_keyframes);

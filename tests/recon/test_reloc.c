@@ -541,3 +541,24 @@ BF_TEST(a_frame_the_map_barely_covers_is_tracked_against_the_frame_before)
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
 }
+
+/* The weak fit's bound is a fraction: outside [0, 1], or NaN, the loop is
+ * refused with the reloc settings named, before anything is made. */
+BF_TEST(a_weak_fit_bound_outside_0_to_1_is_refused)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    bf_intrinsics K = {W, H, 260, 260, W / 2.0, H / 2.0, 1000};
+    bf_se3 I = bf_se3_identity();
+    const float bad[] = {-0.1f, 1.5f, NAN};
+    for (int i = 0; i < 3; i++) {
+        recon_config cfg = recon_config_default();
+        cfg.reloc.last_frame_below = bad[i];
+        recon *r = NULL;
+        CHECK_STATUS(recon_create(ctx, &cfg, &K, &I, &r), BF_INVALID_ARG);
+        CHECK(r == NULL);
+        CHECK(strstr(bf_last_error(), "weak fit below") != NULL);
+    }
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
