@@ -331,15 +331,18 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
         /* Valid raw samples, but none the tracker can use (all beyond range). */
         if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
         if (ok && (r->cfg.fuse_degenerate || !out->track.degenerate)) {
-            /* A weak fit to the map next to the frame before: that frame
-             * decides when it fits the new one with more inliers. */
+            /* A weak fit to the map: the frame before's pose replaces it
+             * when it passes the candidates' gates with more inliers. */
             if (reloc && out->track.inlier_frac < r->cfg.reloc.last_frame_below) {
                 track_result map_fit = out->track;
                 bool found;
                 if ((s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;
-                if (found && out->track.inlier_frac <= map_fit.inlier_frac) {
+                if (found && out->track.inlier_frac <= map_fit.inlier_frac) found = false;
+                if (!found) {
+                    /* The map's fit stands; the attempt's time stays counted. */
                     out->track = map_fit;
                     out->reloc = RECON_RELOC_NONE;
+                    out->reloc_tried = 0;
                 }
             }
             return accept(r, f, known, RECON_TRACKED, out);

@@ -156,8 +156,10 @@ typedef struct recon_frame_result {
     recon_frame_state state;
     bf_se3 T_wc;             /* the frame's pose: tracked, or the last good one */
     track_result track;      /* valid where recon_state_ran_icp: a search's best candidate */
-    uint32_t reloc_tried;    /* candidate poses tried by a relocalising search this frame */
-    recon_reloc_kind reloc;  /* RECON_RELOCALISED: the candidate the pose was found from */
+    uint32_t reloc_tried;    /* candidate poses tried by a relocalising search this frame, the frame before
+                                (reloc.last_frame) among them when tried after the search or taken */
+    recon_reloc_kind reloc;  /* RECON_RELOCALISED: the candidate the pose was found from; RECON_TRACKED:
+                                RECON_RELOC_FRAME when tracked against the frame before, else none */
     uint32_t reloc_rejected; /* candidates that passed the tracker's gates but disagreed with the map */
     bool fused;
     bool colour_repeated;    /* the colour repeated the previous frame's (skip_repeated): left out */

@@ -48,9 +48,11 @@ struct recon {
 /* reloc.c */
 /* T_last moved on by n frame intervals of V_step. */
 bf_se3 recon__velocity_pose(const recon *r, double n);
-/* reloc.last_frame: a frame right after a good one, tracked against that
- * frame's depth from its pose with the candidates' gates; *found when it
- * passes (out->track is then its result). */
+/* reloc.last_frame: a frame right after a good one (one interval, not
+ * lost), tracked against that frame's depth from its pose with the
+ * candidates' gates, when its fit to the map is weak or no candidate found
+ * it; *found when it passes (out->track is then its result, out->reloc
+ * RECON_RELOC_FRAME). */
 bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n,
                                   recon_frame_result *out, bool *found);
 /* The colour camera of --calibration and T_colour_depth; NULL where the

@@ -649,7 +649,7 @@ bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_fram
     if (s == BF_OK) s = track_frame_gpu(r->tracker, slot->depth, slot->offset, f->index, &r->T_last, &t);
     if (s != BF_OK) return s;
     out->reloc_tried++;
-    out->ms_track += t.ms_gpu;
+    out->ms_track += t.ms_gpu + t.ms_ref; /* the frame before made into a reference, then the ICP */
     bf_debug("recon: frame %u: against frame %u: %s, inliers %.1f%%, residual %.1f mm", f->index, r->good_index,
              track_outcome_name(t.outcome), 100 * t.inlier_frac, 1e3 * t.residual_m);
     if (!passes(r, &t)) return BF_OK;
