@@ -260,6 +260,7 @@ static bf_status no_depth(recon *r, recon_frame_result *out)
 {
     out->state = RECON_NO_DEPTH;
     r->counts.no_depth++;
+    r->depthless_since_good = true;
     return BF_OK;
 }
 

@@ -40,6 +40,8 @@ struct recon {
     uint16_t *good_depth;  /* reloc.last_frame: the last good frame's depth (K's size), the reference a frame
                               right after it is tracked against when the map's candidates fail */
     bool has_good_depth;
+    bool depthless_since_good; /* a frame without depth came after the last good one: its view is not the
+                                  camera's last */
 
     /* skip_repeated: the last images, to find the frames that repeat them. */
     bf_repeats repeats;
@@ -48,11 +50,12 @@ struct recon {
 /* reloc.c */
 /* T_last moved on by n frame intervals of V_step. */
 bf_se3 recon__velocity_pose(const recon *r, double n);
-/* reloc.last_frame: a frame right after a good one (one interval, not
- * lost), tracked against that frame's depth from its pose with the
- * candidates' gates, when its fit to the map is weak or no candidate found
- * it; *found when it passes (out->track is then its result, out->reloc
- * RECON_RELOC_FRAME). */
+/* reloc.last_frame: a frame right after a good one (nothing lost or
+ * without depth between them, frames a live queue dropped allowed up to
+ * the gate's cap), tracked against that frame's depth from its pose with
+ * the candidates' gates, when its fit to the map is weak or no candidate
+ * found it; *found when it passes (out->track is then its result,
+ * out->reloc RECON_RELOC_FRAME). */
 bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n,
                                   recon_frame_result *out, bool *found);
 /* The colour camera of --calibration and T_colour_depth; NULL where the

@@ -275,6 +275,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
     r->good_index = f->index;
     r->good_t_s = f->t_depth_s;
     r->is_lost = false;
+    r->depthless_since_good = false;
     if (r->keyframes && may_keyframe) recon__add_keyframe(r, T_new, f);
     if (r->good_depth) memcpy(r->good_depth, f->depth, (size_t)f->width * f->height * sizeof *r->good_depth);
     r->has_good_depth = r->good_depth != NULL;
@@ -632,20 +633,25 @@ bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *sl
 
 /* Frame-to-frame where the map is thin: a camera turning fast into what the
  * map has barely seen (TUM fr1/rpy's frames 39-59: most of the view at
- * 2.5-4.5 m, 13-23% of it associating with the map's ray-cast) fails
+ * 2.5-4.5 m, 13-30% of it associating with the map's ray-cast) fails
  * against the map from every candidate, while the frame before it, one
  * interval away, sees most of the same. Its pose is then the last good
- * one, its depth the reference, and the candidates' gates decide. Not after
- * a loss or a gap: the frame kept is then not the camera's last view. */
+ * one, its depth the reference, and the candidates' gates decide, with the
+ * motion gate of the intervals between them: a live queue on lavapipe
+ * drops two or three frames between the ones the loop takes. Not after a
+ * loss, a frame without depth or a gap beyond the gate's cap: the frame
+ * kept is then not the camera's last view. */
 bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n,
                                   recon_frame_result *out, bool *found)
 {
     *found = false;
-    if (!r->has_good_depth || r->is_lost || n > 1.5) return BF_OK;
+    if (!r->has_good_depth || r->is_lost || r->depthless_since_good || n > r->cfg.reloc.max_gate_intervals)
+        return BF_OK;
     bf_frame g = {.index = r->good_index, .width = r->K.width, .height = r->K.height, .t_depth_s = r->good_t_s,
                   .t_rgb_s = r->good_t_s, .depth = r->good_depth};
     track_result t;
-    bf_status s = track_set_reference_frame(r->tracker, &g, &r->T_last);
+    bf_status s = recon__set_gate(r, n); /* a search before this left it at one interval's */
+    if (s == BF_OK) s = track_set_reference_frame(r->tracker, &g, &r->T_last);
     if (s == BF_OK) s = track_frame_gpu(r->tracker, slot->depth, slot->offset, f->index, &r->T_last, &t);
     if (s != BF_OK) return s;
     out->reloc_tried++;

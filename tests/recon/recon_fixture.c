@@ -50,9 +50,14 @@ static void through_lens(const calib_camera *c, const uint8_t *rgb, uint8_t *out
         }
 }
 
-static bf_status render_frame(void *user, uint32_t k, bf_frame *f)
+static bf_status render_frame(void *user, uint32_t i, bf_frame *f)
 {
     fixture_render *fr = user;
+    (void)i; /* the source's count; frame k is the next one not dropped */
+    uint32_t k = fr->next_k;
+    while (fr->dropped && k < fr->n && fr->dropped[k]) k++;
+    if (k >= fr->n) return BF_END;
+    fr->next_k = k + 1;
     bf_status s = synth_render(fr->ren, k, &fr->true_pose[k], fr->depth, fr->ren_colour ? NULL : fr->rgb, NULL);
     if (s == BF_OK && fr->ren_colour) {
         /* The colour camera's own image, from where it sits on the rig,
@@ -92,7 +97,7 @@ static bf_status render_open(const synth_scene *sc, const bf_se3 *true_pose, uin
 {
     bf_intrinsics K = test_K();
     synth_render_config rc = {.K = K, .noise = SYNTH_NOISE_KINECT1, .seed = 7};
-    *fr = (fixture_render){.true_pose = true_pose, .offset = *offset, .mutate = mutate};
+    *fr = (fixture_render){.true_pose = true_pose, .offset = *offset, .mutate = mutate, .n = n};
     fr->depth = malloc((size_t)W * H * sizeof *fr->depth);
     fr->rgb = colour ? malloc((size_t)W * H * 3) : NULL;
     bool ok = fr->depth && (!colour || fr->rgb);
@@ -152,7 +157,7 @@ bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_p
 
 static bf_status run_loop_impl(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                                const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate,
-                               bool colour, run_out *out)
+                               bool colour, const bool *dropped, run_out *out)
 {
     /* The frames carry offset * true_pose[k] as ground truth: the loop
      * starts at the first one. */
@@ -163,6 +168,7 @@ static bf_status run_loop_impl(gpu_context *ctx, const recon_run_config *cfg, co
     /* With a calibration the colour is the colour camera's own image. */
     const calib_result *cal = cfg->loop.has_calibration ? &cfg->loop.calibration : NULL;
     bf_status s = render_open(sc, true_pose, n, offset, mutate, colour, cal, &fr, &src);
+    fr.dropped = dropped;
     if (s == BF_OK) s = recon_run_sequence(ctx, src, cfg, keep_result, out, &run);
     if (s == BF_OK) s = fusion_check(run.map);
     if (s == BF_OK) s = fusion_get_stats(run.map, &out->map);
@@ -179,13 +185,20 @@ static bf_status run_loop_impl(gpu_context *ctx, const recon_run_config *cfg, co
 bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                         const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out)
 {
-    return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, false, out);
+    return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, false, NULL, out);
+}
+
+bf_status run_loop_dropping(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                            const bf_se3 *true_pose, uint32_t n, const bool *dropped, run_out *out)
+{
+    bf_se3 I = bf_se3_identity();
+    return run_loop_impl(ctx, cfg, sc, true_pose, n, &I, NULL, false, dropped, out);
 }
 
 bf_status run_loop_colour(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                           const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out)
 {
-    return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, true, out);
+    return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, true, NULL, out);
 }
 
 double surface_p90(const synth_scene *sc, const mesh_data *pts)

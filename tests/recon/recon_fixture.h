@@ -52,6 +52,10 @@ typedef struct fixture_render {
     bf_se3 T_depth_colour;
     uint16_t *depth_colour;
     uint8_t *rgb_pinhole;
+    /* Frames the source never delivers (a live queue dropping them), or
+     * NULL; the next one after them keeps its own index and time. */
+    const bool *dropped;
+    uint32_t n, next_k;
 } fixture_render;
 bf_status fixture_render_open(const synth_scene *sc, const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset,
                               mutate_fn mutate, fixture_render *fr, rgbd_source **src);
@@ -65,6 +69,9 @@ bf_status run_loop(gpu_context *ctx, const synth_scene *sc, const bf_se3 *true_p
 /* The same with the caller's config. */
 bf_status run_loop_with(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                         const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
+/* The same with the frames marked in dropped[0, n) never delivered. */
+bf_status run_loop_dropping(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
+                            const bf_se3 *true_pose, uint32_t n, const bool *dropped, run_out *out);
 /* The same with colour: the scene's textures, registered to the depth, or
  * with cfg->loop.has_calibration seen by its colour camera (the frames'
  * size; its lens too) from where T_colour_depth puts it. */

@@ -492,7 +492,9 @@ BF_TEST(after_a_gap_on_a_textured_floor_the_last_pose_keeps_its_colour)
  * tracker's gates and slide along what little it holds (21-152 mm off by
  * frame 7), then the camera is lost. With reloc.last_frame every frame is
  * tracked against the one before it and keeps tracking's own bound (the
- * steps' errors add up: 12 mm by frame 19). */
+ * steps' errors add up: 12 mm by frame 19), also across frames a live
+ * queue dropped (two intervals apart), but not across a frame without
+ * depth. */
 enum { THIN_N = 20, THIN_GAP = 10 };
 
 /* A frame of the thin run without depth: the frame after it is two
@@ -513,23 +515,29 @@ BF_TEST(a_frame_the_map_barely_covers_is_tracked_against_the_frame_before)
     for (uint32_t k = 0; k < THIN_N; k++) truth[k] = view_pose(&sc, 0.006 * k, -1.5 * k);
     bf_se3 I = bf_se3_identity();
     static run_out o;
-    for (int with = 0; with < 3; with++) {
+    /* A live queue dropping every other frame over frames 7-13. */
+    bool dropped[THIN_N] = {false};
+    for (uint32_t k = 7; k <= 13; k += 2) dropped[k] = true;
+    for (int with = 0; with < 4; with++) {
         memset(&o, 0, sizeof o);
         recon_run_config cfg = fixture_run_config();
         cfg.loop.raycast.far_m = THIN_FAR_M;
         cfg.loop.reloc.last_frame = with >= 1;
-        CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, THIN_N, &I, with == 2 ? thin_gap : NULL, &o));
+        if (with == 3) CHECK_OK(run_loop_dropping(ctx, &cfg, &sc, truth, THIN_N, dropped, &o));
+        else CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, THIN_N, &I, with == 2 ? thin_gap : NULL, &o));
         fprintf(stderr, "  last frame %s: %u tracked (%u on the frame before), %u lost:",
-                with == 2 ? "on, a frame without depth" : with ? "on" : "off",
+                with == 3 ? "on, frames dropped" : with == 2 ? "on, a frame without depth" : with ? "on" : "off",
                 o.counts.tracked, o.counts.last_frame, o.counts.lost);
-        for (uint32_t k = 1; k < THIN_N; k++)
+        for (uint32_t k = 1; k < THIN_N; k++) {
+            if (with == 3 && dropped[k]) continue;
             fprintf(stderr, " %u:%s%s%s %.0f%% (%.1f mm)", k, recon_state_name(o.fr[k].state), o.fr[k].reloc ? "/" : "",
                     recon_reloc_kind_name(o.fr[k].reloc), 100 * o.fr[k].track.inlier_frac,
                     1e3 * trans_dist(&o.est[k], &truth[k]));
+        }
         fprintf(stderr, "\n");
-        uint32_t right = 0;
+        uint32_t right = 0, n_dropped = with == 3 ? 4 : 0;
         for (uint32_t k = 1; k < THIN_N; k++)
-            right += is_good(&o.fr[k]) && trans_dist(&o.est[k], &truth[k]) <= POSE_TOL_M &&
+            right += (with != 3 || !dropped[k]) && is_good(&o.fr[k]) && trans_dist(&o.est[k], &truth[k]) <= POSE_TOL_M &&
                      rot_dist_deg(&o.est[k], &truth[k]) <= POSE_TOL_DEG;
         if (!with) {
             /* Beyond the map alone: placed wrong, or lost. */
@@ -546,10 +554,15 @@ BF_TEST(a_frame_the_map_barely_covers_is_tracked_against_the_frame_before)
             mesh_free(&o.points);
             continue;
         }
-        CHECK_EQ_INT(right, THIN_N - 1);
+        CHECK_EQ_INT(right, THIN_N - 1 - n_dropped);
         CHECK_EQ_INT(o.counts.lost, 0);
         CHECK(o.counts.last_frame >= THIN_N / 2);
-        for (uint32_t k = 1; k < THIN_N; k++) CHECK(o.fr[k].fused);
+        for (uint32_t k = 1; k < THIN_N; k++)
+            if (with != 3 || !dropped[k]) CHECK(o.fr[k].fused);
+        /* Two intervals after the frame before, with nothing lost between:
+         * still tracked against it. */
+        if (with == 3)
+            for (uint32_t k = 8; k <= 14; k += 2) CHECK_EQ_INT(o.fr[k].reloc, RECON_RELOC_FRAME);
         mesh_free(&o.points);
     }
     synth_scene_free(&sc);
