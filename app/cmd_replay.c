@@ -276,7 +276,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "with --calibration found in the colour camera's own image)",
                 .max = 100000),
         APP_OPT("--last-frame", APP_OPT_CHOICE, &a->rcfg.reloc.last_frame, "on|off",
-                "with --reloc: a frame right after a good one whose fit to the map is weak (under half of its "
+                "with --reloc: a frame right after a good one whose fit to the map is weak (under 45% of its "
                 "samples inliers) or that no candidate finds is tracked against that frame's depth, and takes "
                 "that pose when it fits with more inliers (a fast turn into what the map has barely seen); off: "
                 "the map alone"),

@@ -48,7 +48,7 @@ recon_config recon_config_default(void)
                   .max_residual_sigma = 2.5f,
                   .check_step = 2, .check_band_m = 0.02f, .max_front_frac = 0.03f, .features = 1000,
                   .feature_candidates = 2, .feature_min_inliers = 20, .last_frame = true,
-                  .last_frame_below = 0.5f},
+                  .last_frame_below = 0.45f},
     };
     /* Voxels of twice the pixel footprint: in the loop this is both faster
      * and more accurate than fusion's own default of 1
