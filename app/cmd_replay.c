@@ -102,7 +102,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 32
+#define LOOP_ROWS 34
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -280,6 +280,15 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "samples inliers) or that no candidate finds is tracked against that frame's depth, and takes "
                 "that pose when it fits with more inliers (a fast turn into what the map has barely seen); off: "
                 "the map alone"),
+        APP_OPT("--fuse-every", APP_OPT_U32, &a->rcfg.fuse_every, "N",
+                "fuse every N-th tracked frame; the others are tracked only, against the reference the last "
+                "fused frame left (frames found by a search or on the frame before are always fused)",
+                .min = 1, .max = RECON_MAX_FUSE_EVERY),
+        APP_OPT("--fuse-every-behind", APP_OPT_U32, &a->rcfg.fuse_every_behind, "N",
+                "the same while frames wait in a camera's queue (bitfuse live: a device, or a recording with --realtime): the loop is behind the "
+                "camera and tracks more of its frames by fusing fewer (the larger of the two applies; 1: fuse "
+                "every frame and let the queue drop them)",
+                .min = 1, .max = RECON_MAX_FUSE_EVERY),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),
         APP_OPT("--rof-iters", APP_OPT_U32, &tc->rof_iterations, "N", "ROF iterations on the reference (0: off)"),
@@ -551,6 +560,8 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddNumberToObject(tr, "lost", c->lost);
     cJSON_AddNumberToObject(tr, "relocalised", c->relocalised);
     cJSON_AddNumberToObject(tr, "last_frame", c->last_frame);
+    cJSON_AddNumberToObject(tr, "unfused", c->unfused);
+    cJSON_AddNumberToObject(tr, "behind", c->behind);
     cJSON_AddNumberToObject(tr, "keyframes", c->keyframes);
     /* The tracking reference's size (auto resolves per camera). */
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
@@ -631,7 +642,7 @@ static bf_status write_view(recon *rc, const char *out_dir, uint32_t index, cons
 static void csv_frame(bf_out *csv, const bf_frame *f, const recon_frame_result *fr)
 {
     bool ran = recon_state_ran_icp(fr->state);
-    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f,%.3f,%d,%d\n", f->index, f->t_depth_s,
+    bf_out_printf(csv, "%u,%.6f,%s,%s,%d,%u,%u,%.4f,%.3f,%.3g,%.3f,%.3f,%.3f,%.3f,%u,%s,%u,%.3f,%.3f,%.3f,%d,%d,%d\n", f->index, f->t_depth_s,
             recon_state_name(fr->state), ran ? track_outcome_name(fr->track.outcome) : "",
             ran ? (int)fr->track.degenerate : 0, fr->n_valid, ran ? fr->track.n_inliers : 0,
             ran ? fr->track.inlier_frac : 0.0, ran ? 1e3 * fr->track.residual_m : 0.0,
@@ -639,7 +650,7 @@ static void csv_frame(bf_out *csv, const bf_frame *f, const recon_frame_result *
             fr->ms_track, fr->ms_raycast, fr->fuse.alloc + fr->fuse.subcache + fr->fuse.window + fr->fuse.colour, fr->reloc_tried,
             recon_reloc_kind_name(fr->reloc), ran ? fr->track.iterations : 0, ran ? fr->track.residual_sigma : 0.0,
             fr->ms_stream, ran ? fr->track.photo_sharpness : 0.0, ran ? (int)fr->track.photo_dropped : 0,
-            ran ? (int)fr->track.photo_weak : 0);
+            ran ? (int)fr->track.photo_weak : 0, (int)fr->fused);
 }
 
 /* What the replay writes per frame beside the runner's own records. */
@@ -782,6 +793,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (c->last_frame)
         printf("  tracking         %u frames fitted the map weakly or not at all and were tracked against the "
                "frame before them\n", c->last_frame);
+    if (c->unfused)
+        printf("  tracking         %u frames tracked only, not fused (--fuse-every%s; %u frames came while the "
+               "loop was behind the camera)\n", c->unfused, c->behind ? "-behind" : "", c->behind);
     if (replay_skipped_frames(src))
         printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
     if (c->repeated)
@@ -889,7 +903,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (has_csv)
         bf_out_printf(&csv, "index,t_depth_s,state,icp,degenerate,valid,inliers,inlier_frac,residual_mm,eig_ratio,"
                      "frame_ms,track_ms,raycast_ms,fuse_ms,reloc_tried,reloc_from,icp_iterations,residual_sigma,stream_ms,"
-                     "photo_sharpness,photo_dropped,photo_weak\n");
+                     "photo_sharpness,photo_dropped,photo_weak,fused\n");
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK && win) s = view_attach(win, ctx);
     if (s == BF_OK && a.auto_budget) auto_budget(&a, ctx);

@@ -221,6 +221,8 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
     cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
     cJSON_AddBoolToObject(l, "skip_repeated", c->skip_repeated);
+    cJSON_AddNumberToObject(l, "fuse_every", c->fuse_every);
+    cJSON_AddNumberToObject(l, "fuse_every_behind", c->fuse_every_behind);
     cJSON_AddBoolToObject(l, "start_at_frame", c->start_at_frame);
     cJSON *rl = app_json_object(l, "reloc");
     cJSON_AddBoolToObject(rl, "enabled", c->reloc.enabled);

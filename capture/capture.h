@@ -68,6 +68,8 @@ typedef struct capture_thread_stats {
     uint64_t dropped;   /* oldest queued frames overwritten by newer ones */
     uint32_t queued;    /* frames waiting in the queue now */
     bool is_ended;      /* the thread stopped taking frames (end, error or stop) */
+    bool drops;         /* a full queue drops its oldest frame (capture_threaded), not waits (_lossless): frames
+                           queued then mean the consumer is behind a camera */
 } capture_thread_stats;
 
 /* Wraps src in a capture thread with a queue of capacity frames (>= 1),

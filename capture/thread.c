@@ -332,6 +332,7 @@ capture_thread_stats capture_threaded_stats(const rgbd_source *src)
     st.queued = ct->q_len;
     st.is_ended = ct->is_done;
     pthread_mutex_unlock(&ct->lock);
+    st.drops = ct->drop_when_full;
     st.captured = atomic_load(&ct->n_captured);
     return st;
 }

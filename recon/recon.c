@@ -26,6 +26,12 @@ recon_config recon_config_default(void)
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
         .skip_repeated = true,
+        .fuse_every = 1,
+        /* Behind a camera, a quarter of the frames fused: on lavapipe a
+         * tracked-only frame costs about half a fused one, and fr1/rpy
+         * tracked at every frame with every fourth fused lost none, where
+         * every fourth frame alone lost 155 of 181 (docs/tracking.md). */
+        .fuse_every_behind = 4,
         .start_at_frame = true,
         .stream = stream_config_default(),
         /* Four candidates a lost frame: the last pose, the continued motion
@@ -138,6 +144,10 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     if (cfg->has_calibration && (cc->width != K->width || cc->height != K->height))
         return bf_fail(BF_INVALID_ARG, "recon_create: the colour camera is %ux%u, the frames %ux%u", cc->width,
                        cc->height, K->width, K->height);
+    if (!cfg->fuse_every || !cfg->fuse_every_behind || cfg->fuse_every > RECON_MAX_FUSE_EVERY ||
+        cfg->fuse_every_behind > RECON_MAX_FUSE_EVERY)
+        return bf_fail(BF_INVALID_ARG, "recon_create: fuse_every %u and fuse_every_behind %u must be 1..%u",
+                       cfg->fuse_every, cfg->fuse_every_behind, RECON_MAX_FUSE_EVERY);
     recon *r = calloc(1, sizeof *r);
     if (!r) return bf_fail(BF_NO_MEMORY, "recon_create");
     r->ctx = ctx;
@@ -240,6 +250,8 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
     if (s != BF_OK) return s;
     r->frame_fused = true;
     r->T_frame = *T;
+    r->ref_is_map = true;
+    r->since_fused = 0;
     s = fusion_finish_frame(r->map);
     out->fuse = fusion_last_stage_ms(r->map);
     out->fuse_status = s;
@@ -264,8 +276,23 @@ static bf_status no_depth(recon *r, recon_frame_result *out)
     return BF_OK;
 }
 
+/* fuse_every: whether a good frame is tracked only. Only a plain tracked
+ * frame, against the map's ray-cast at the last fused pose: a frame found
+ * by a search or on the frame before, or after a frame that left another
+ * reference, is fused so that the next one has the map at a pose near its
+ * own. With known poses every frame is fused (the tracker's one-step error
+ * is measured against the map at the true poses). */
+static bool tracks_only(const recon *r, const bf_se3 *known, recon_frame_state state, const recon_frame_result *out)
+{
+    uint32_t every = r->cfg.fuse_every;
+    if (r->is_behind && r->cfg.fuse_every_behind > every) every = r->cfg.fuse_every_behind;
+    return every > 1 && !known && state == RECON_TRACKED && out->reloc == RECON_RELOC_NONE && r->ref_is_map &&
+           r->since_fused + 1 < every;
+}
+
 /* A good frame (tracked or relocalised): fused at its pose, or at *known
- * (recon_add_frame_known), which becomes the last pose. */
+ * (recon_add_frame_known), which becomes the last pose; with fuse_every
+ * some are tracked only, the reference staying the last fused frame's. */
 static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_frame_state state,
                         recon_frame_result *out)
 {
@@ -277,6 +304,11 @@ static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_
     if (state == RECON_RELOCALISED) r->counts.relocalised++;
     if (out->reloc == RECON_RELOC_FRAME) r->counts.last_frame++;
     if (out->track.photo_weak) r->counts.photo_weak++;
+    if (tracks_only(r, known, state, out)) {
+        r->since_fused++;
+        r->counts.unfused++;
+        return BF_OK;
+    }
     return fuse_and_reference(r, f, T_new, true, NULL, out);
 }
 
@@ -409,6 +441,7 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     out->T_wc = r->T_last;
     out->n_valid = count_valid(f);
     r->counts.frames++;
+    if (r->is_behind) r->counts.behind++;
     /* Every frame's images count, a skipped one's too: the next frame's
      * colour may be that one's (core.h, "Repeated frames"). A repeated
      * depth is an earlier moment's: neither tracked nor fused, with known
@@ -447,6 +480,11 @@ bf_status recon_add_frame_known(recon *r, const bf_frame *f, const bf_se3 *T_kno
 }
 
 bf_status recon_flush(recon *r) { return fusion_flush(r->map); }
+
+void recon_set_behind(recon *r, bool behind)
+{
+    if (r) r->is_behind = behind;
+}
 
 bf_status recon_set_first_pose(recon *r, const bf_se3 *T_wc0)
 {

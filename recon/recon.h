@@ -82,6 +82,10 @@ typedef struct recon_reloc_config {
 #define RECON_REF_LEVEL_AUTO UINT32_MAX
 #define RECON_REF_MIN_WIDTH 160u
 
+/* fuse_every's bound: beyond, the reference a frame is tracked against
+ * would be seconds old at a camera's rate. */
+#define RECON_MAX_FUSE_EVERY 64u
+
 typedef struct recon_config {
     bf_sensor sensor;         /* the depth sensor, default Kinect v1: recon_create hands it to fusion and
                                  tracking (the sensor fields of .fusion and .track are not read) */
@@ -99,6 +103,17 @@ typedef struct recon_config {
                                  neither tracked nor fused and keeps the last pose, with known poses too; one
                                  whose colour alone repeats is tracked and fused without it (core.h,
                                  bf_repeats); default true */
+    /* Tracking every frame, fusing fewer (recon.c, accept): a tracked frame is fused only when it is the
+       fuse_every-th since the last fused one; the others are tracked against the reference the last fused
+       frame left and only move the pose on. Frames found by a search or on the frame before, frames fused
+       at known poses, and any frame after something else became the reference, are always fused. Small
+       steps are what ICP tracks: a camera behind which a slow machine drops three of every four frames
+       loses a fast turn that the same frames all tracked, a quarter of them fused, hold (docs/tracking.md,
+       "Tracking every frame, fusing fewer"). */
+    uint32_t fuse_every;        /* default 1: every tracked frame fused */
+    uint32_t fuse_every_behind; /* the same while frames wait in a queue that drops (a camera the loop is behind:
+                                   recon_set_behind, set by the runner per frame); the larger of the two applies;
+                                   default 4; 1: the loop keeps fusing every frame and the queue drops them */
     recon_reloc_config reloc;
     stream_config stream;     /* chunks out of the GPU pools and back (stream.h): on by default; far chunks leave
                                  only beyond its radius or when the pools fill */
@@ -126,7 +141,7 @@ uint32_t recon_ref_level(const bf_intrinsics *K, const track_config *tc);
 /* What happened to one frame. */
 typedef enum recon_frame_state {
     RECON_FIRST = 0,  /* the first frame: fused at the initial pose */
-    RECON_TRACKED,    /* tracked and fused */
+    RECON_TRACKED,    /* tracked and fused (with fuse_every or behind a camera, some tracked only: fused false) */
     RECON_NO_DEPTH,   /* too few valid depth samples: skipped */
     RECON_LOST,       /* tracking failed (result.track.outcome says why): not fused */
     RECON_RELOCALISED, /* lost (or after a gap), found again from a candidate pose: fused */
@@ -135,6 +150,11 @@ typedef enum recon_frame_state {
 } recon_frame_state;
 
 const char *recon_state_name(recon_frame_state s);
+/* Says whether newer frames already wait for the loop in a queue that drops
+ * (a camera it is behind): the frames added from now on are fused at the
+ * cadence of fuse_every_behind instead of fuse_every. The runner sets it
+ * before each frame from its capture thread's queue. */
+void recon_set_behind(recon *r, bool behind);
 /* True for the states where ICP ran (tracked, lost, relocalised). */
 bool recon_state_ran_icp(recon_frame_state s);
 
@@ -248,6 +268,8 @@ typedef struct recon_counts {
     uint32_t relocalised; /* frames found again by a search (also counted in tracked) */
     uint32_t last_frame;  /* frames tracked against the last good frame's depth (reloc.last_frame; also counted
                              in tracked) */
+    uint32_t unfused;     /* good frames tracked but not fused (fuse_every, fuse_every_behind; also in tracked) */
+    uint32_t behind;      /* frames added while the loop was behind a camera (recon_set_behind) */
     uint32_t photo_weak;  /* good frames whose depth left a direction weak: the photometric term came in
                              (track_config.photo_weak_ratio) */
     uint32_t keyframes;   /* keyframes held now */

@@ -16,6 +16,10 @@ struct recon {
     bool frame_fused;    /* the tracker's frame (this add_frame's) was fused at T_frame: a view at that
                             pose starts its rays at the frame's depth, as the reference does */
     bf_se3 T_frame;
+    bool ref_is_map;     /* the tracking reference is the map's ray-cast at the last fused pose (fuse_and_reference),
+                            not a candidate's or the frame before's: a frame may be tracked only against it */
+    uint32_t since_fused; /* good frames tracked only since the last fused one (fuse_every) */
+    bool is_behind;      /* recon_set_behind */
     bf_intrinsics K_ref; /* the tracking reference's camera: K at track.ref_level */
     render_caster *ref_caster; /* the reference's ray-casts, K_ref's size */
     render_caster *caster;     /* views at K's size: ref_caster when they agree, else made at create (has_views)

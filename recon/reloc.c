@@ -323,6 +323,7 @@ bf_status recon__cast_reference(recon *r, const bf_se3 *T_wc, recon_frame_result
     bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
     if (s != BF_OK) return s;
     if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
+    r->ref_is_map = false; /* a candidate's view, not the last fused pose's */
     s = render_cmd_raycast(r->ref_caster, r->map, &r->K_ref, T_wc, &ro);
     if (s == BF_OK) s = track_cmd_reference(r->tracker, T_wc, false);
     /* The reference's count of valid pixels -> the host. */
@@ -651,6 +652,7 @@ bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_fram
                   .t_rgb_s = r->good_t_s, .depth = r->good_depth};
     track_result t;
     bf_status s = recon__set_gate(r, n); /* a search before this left it at one interval's */
+    r->ref_is_map = false;
     if (s == BF_OK) s = track_set_reference_frame(r->tracker, &g, &r->T_last);
     if (s == BF_OK) s = track_frame_gpu(r->tracker, slot->depth, slot->offset, f->index, &r->T_last, &t);
     if (s != BF_OK) return s;

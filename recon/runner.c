@@ -331,6 +331,10 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
     uint32_t seen = 0;
     while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
+        /* Frames already waiting behind this one in a queue that drops: the
+         * loop is behind the camera and fuses fewer frames to keep up. */
+        capture_thread_stats cs = capture_threaded_stats(src);
+        recon_set_behind(out->loop, cs.drops && cs.queued > 0);
         const bf_frame as_read = f; /* what on_frame sees (live --record keeps the camera's frames) */
         bf_status sf = depth_fix_frame(&fix, &f, cfg.name);
         if (sf != BF_OK) {
