@@ -236,6 +236,21 @@ rows = list(csv.DictReader(open(sys.argv[1] + "/frames.csv")))
 assert d["config"]["loop"]["skip_repeated"] is False and d["tracking"]["repeated"] == 0, d["tracking"]
 assert [r["state"] for r in rows] == ["first", "tracked", "tracked"], [r["state"] for r in rows]
 PY
+    # Every frame tracked, every second one fused (--fuse-every): frames.csv says which,
+    # stats.json counts the others and echoes the cadence; 0 is refused by name.
+    expect 0 "$B" replay "$T/seq" --out "$T/rpfe" $small --fuse-every 2
+    grep -q "1 frames tracked only, not fused" "$T/out" || fail "replay --fuse-every: no summary line: $(head -c 400 "$T/out")"
+    python3 - "$T/rpfe" <<'PY' || fail "replay --fuse-every 2"
+import csv, json, sys
+d = json.load(open(sys.argv[1] + "/stats.json"))
+rows = list(csv.DictReader(open(sys.argv[1] + "/frames.csv")))
+assert d["config"]["loop"]["fuse_every"] == 2 and d["config"]["loop"]["fuse_every_behind"] == 4, d["config"]["loop"]
+assert d["tracking"]["unfused"] == 1 and d["tracking"]["behind"] == 0 and d["tracking"]["tracked"] == 3, d["tracking"]
+assert [r["state"] for r in rows] == ["first", "tracked", "tracked"], [r["state"] for r in rows]
+assert [r["fused"] for r in rows] == ["1", "0", "1"], [r["fused"] for r in rows]
+PY
+    expect 2 "$B" replay "$T/seq" --out "$T/rpfe0" $small --fuse-every 0
+    mentions "--fuse-every"
     # A colour repeated alone: the frame's depth is new, so it is tracked, without the
     # colour (an earlier moment's) in the photometric term or the map's colour. With the
     # term on, frames.csv's photo_sharpness is 0 where the term did not run: on that frame
