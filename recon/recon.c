@@ -344,22 +344,13 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     fusion_frame_slot slot;
     bool reloc = r->cfg.reloc.enabled && !known;
     /* Beyond the gate's cap the camera may be anywhere the gate no longer
-     * bounds (a covered lens): the frame is searched for like a lost one.
-     * Not while the loop is behind a camera with depth in every frame it
-     * took since the last good one: the queue dropped the frames between,
-     * the camera moved on as it does between any two, and the frame is
-     * tracked from the guess with the gate at its cap first. A search costs
-     * several ray-casts and ICPs (300-450 ms on lavapipe), behind which the
-     * queue drops a dozen frames more, so that every frame after became a
-     * search (docs/tracking.md, "Tracking every frame, fusing fewer"). */
+     * bounds (a covered lens): the frame is searched for like a lost one. */
     double n = recon__intervals(r, f);
-    bool dropped_between = r->is_behind && !r->depthless_since_good;
-    bool search_first = reloc && (r->is_lost || (n > r->cfg.reloc.max_gate_intervals && !dropped_between));
+    bool search_first = reloc && (r->is_lost || n > r->cfg.reloc.max_gate_intervals);
     bf_status s = fusion_upload_frame(r->map, f, &slot);
     if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
     if (s == BF_OK && reloc) s = recon__set_gate(r, n);
     if (s != BF_OK) return s;
-    bool tried_frame = false; /* the frame before, already (behind a camera) */
     if (!search_first) {
         /* The reference is the ray-cast at the last good pose; a loss
          * leaves the motion unknown. */
@@ -390,14 +381,6 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
             return accept(r, f, known, RECON_TRACKED, out);
         }
         if (!reloc) return lose(r, f, known, out);
-        /* Behind a camera the frame before goes first: one ICP, where the
-         * search's several cost the frames the queue drops meanwhile. */
-        if (r->is_behind) {
-            bool found;
-            tried_frame = true;
-            if ((s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;
-            if (found) return accept(r, f, NULL, RECON_TRACKED, out);
-        }
     }
     /* The guess from the last pose was just tried against its reference. */
     recon_reloc_kind skip = !search_first && !r->cfg.constant_velocity ? RECON_RELOC_LAST : RECON_RELOC_NONE;
@@ -405,8 +388,8 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     if ((s = recon__search(r, f, &slot, n, skip, out, &found)) != BF_OK) return s;
     if (found) return accept(r, f, NULL, RECON_RELOCALISED, out);
     if (out->track.outcome == TRACK_NO_DEPTH) return no_depth(r, out);
-    if (!tried_frame && (s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;
-    if (!tried_frame && found) return accept(r, f, NULL, RECON_TRACKED, out);
+    if ((s = recon__track_last_frame(r, f, &slot, n, out, &found)) != BF_OK) return s;
+    if (found) return accept(r, f, NULL, RECON_TRACKED, out);
     return lose(r, f, known, out);
 }
 

@@ -641,15 +641,12 @@ bf_status recon__search(recon *r, const bf_frame *f, const fusion_frame_slot *sl
  * motion gate of the intervals between them: a live queue on lavapipe
  * drops two or three frames between the ones the loop takes. Not after a
  * loss, a frame without depth or a gap beyond the gate's cap: the frame
- * kept is then not the camera's last view, unless the loop is behind a
- * camera (recon_set_behind), whose queue dropped the frames between: the
- * gate at its cap then. */
+ * kept is then not the camera's last view. */
 bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_frame_slot *slot, double n,
                                   recon_frame_result *out, bool *found)
 {
     *found = false;
-    if (!r->has_good_depth || r->is_lost || r->depthless_since_good ||
-        (n > r->cfg.reloc.max_gate_intervals && !r->is_behind))
+    if (!r->has_good_depth || r->is_lost || r->depthless_since_good || n > r->cfg.reloc.max_gate_intervals)
         return BF_OK;
     bf_frame g = {.index = r->good_index, .width = r->K.width, .height = r->K.height, .t_depth_s = r->good_t_s,
                   .t_rgb_s = r->good_t_s, .depth = r->good_depth};
