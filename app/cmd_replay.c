@@ -794,8 +794,8 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
         printf("  tracking         %u frames fitted the map weakly or not at all and were tracked against the "
                "frame before them\n", c->last_frame);
     if (c->unfused)
-        printf("  tracking         %u frames tracked only, not fused (--fuse-every%s; %u frames came while the "
-               "loop was behind the camera)\n", c->unfused, c->behind ? "-behind" : "", c->behind);
+        printf("  tracking         %u frames tracked only, not fused (--fuse-every, --fuse-every-behind; %u "
+               "frames came while the loop was behind the camera)\n", c->unfused, c->behind);
     if (replay_skipped_frames(src))
         printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
     if (c->repeated)

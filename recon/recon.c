@@ -28,7 +28,8 @@ recon_config recon_config_default(void)
         .skip_repeated = true,
         .fuse_every = 1,
         /* Behind a camera, a quarter of the frames fused: on lavapipe a
-         * tracked-only frame costs about half a fused one, and fr1/rpy
+         * tracked-only frame costs a quarter to a third of a fused one,
+         * and fr1/rpy
          * tracked at every frame with every fourth fused lost none, where
          * every fourth frame alone lost 155 of 181 (docs/tracking.md). */
         .fuse_every_behind = 4,
@@ -307,6 +308,10 @@ static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_
     if (tracks_only(r, known, state, out)) {
         r->since_fused++;
         r->counts.unfused++;
+        /* The tracker's frame depth is this frame's, at its pose: a view
+         * there starts its rays in front of it as after a fused frame. */
+        r->frame_fused = true;
+        r->T_frame = *T_new;
         return BF_OK;
     }
     return fuse_and_reference(r, f, T_new, true, NULL, out);
@@ -319,6 +324,7 @@ static bf_status lose(recon *r, const bf_frame *f, const bf_se3 *known, recon_fr
     out->state = RECON_LOST;
     r->counts.lost++;
     r->is_lost = true;
+    r->ref_is_map = false; /* the next good frame is fused, the reference made at its pose */
     if (!known) return BF_OK;
     /* The last pose is this frame's now: the next step is from here. */
     r->T_last = *known;
@@ -351,6 +357,9 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
     if (s == BF_OK && reloc) s = recon__set_gate(r, n);
     if (s != BF_OK) return s;
+    /* The reference was cast at the last good pose: tracking from there
+     * tries that candidate (after frames tracked only it is older). */
+    bool ref_at_last = r->ref_is_map && r->since_fused == 0;
     if (!search_first) {
         /* The reference is the ray-cast at the last good pose; a loss
          * leaves the motion unknown. */
@@ -382,8 +391,11 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
         }
         if (!reloc) return lose(r, f, known, out);
     }
-    /* The guess from the last pose was just tried against its reference. */
-    recon_reloc_kind skip = !search_first && !r->cfg.constant_velocity ? RECON_RELOC_LAST : RECON_RELOC_NONE;
+    /* The guess from the last pose was just tried against the reference
+     * cast there; after frames tracked only that one is an older pose's,
+     * and the last pose is a candidate again. */
+    recon_reloc_kind skip =
+        !search_first && !r->cfg.constant_velocity && ref_at_last ? RECON_RELOC_LAST : RECON_RELOC_NONE;
     bool found;
     if ((s = recon__search(r, f, &slot, n, skip, out, &found)) != BF_OK) return s;
     if (found) return accept(r, f, NULL, RECON_RELOCALISED, out);

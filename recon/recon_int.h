@@ -13,8 +13,8 @@ struct recon {
     bf_se3 T_last;       /* last good pose */
     fusion_map *map;     /* made at create, at T_first's origin */
     bool has_first;      /* the first frame with depth has been fused */
-    bool frame_fused;    /* the tracker's frame (this add_frame's) was fused at T_frame: a view at that
-                            pose starts its rays at the frame's depth, as the reference does */
+    bool frame_fused;    /* the tracker's frame (this add_frame's) was fused, or tracked only, at T_frame: a
+                            view at that pose starts its rays at the frame's depth, as the reference does */
     bf_se3 T_frame;
     bool ref_is_map;     /* the tracking reference is the map's ray-cast at the last fused pose (fuse_and_reference),
                             not a candidate's or the frame before's: a frame may be tracked only against it */
