@@ -201,6 +201,13 @@ bf_status run_loop_colour(gpu_context *ctx, const recon_run_config *cfg, const s
     return run_loop_impl(ctx, cfg, sc, true_pose, n, offset, mutate, true, NULL, out);
 }
 
+double run_rms_error(const run_out *o, const bf_se3 *true_pose, uint32_t n)
+{
+    double sum = 0;
+    for (uint32_t k = 0; k < n; k++) sum += pow(trans_dist(&o->est[k], &true_pose[k]), 2);
+    return sqrt(sum / n);
+}
+
 double surface_p90(const synth_scene *sc, const mesh_data *pts)
 {
     eval_surface_config ec = eval_surface_config_default();

@@ -77,6 +77,8 @@ bf_status run_loop_dropping(gpu_context *ctx, const recon_run_config *cfg, const
  * size; its lens too) from where T_colour_depth puts it. */
 bf_status run_loop_colour(gpu_context *ctx, const recon_run_config *cfg, const synth_scene *sc,
                           const bf_se3 *true_pose, uint32_t n, const bf_se3 *offset, mutate_fn mutate, run_out *out);
+/* RMS of the position error of a run's first n poses against true_pose [m]. */
+double run_rms_error(const run_out *o, const bf_se3 *true_pose, uint32_t n);
 /* 90th percentile of the distance from pts to the scene's mesh [m]. */
 double surface_p90(const synth_scene *sc, const mesh_data *pts);
 

@@ -14,13 +14,6 @@
 
 #define N_ROOM 40
 
-static double rms_error(const run_out *o, const bf_se3 *truth, uint32_t n)
-{
-    double sum = 0;
-    for (uint32_t k = 0; k < n; k++) sum += pow(trans_dist(&o->est[k], &truth[k]), 2);
-    return sqrt(sum / n);
-}
-
 BF_TEST(every_third_frame_fused_and_every_frame_tracked_within_a_centimetre)
 {
     gpu_context *ctx;
@@ -37,7 +30,7 @@ BF_TEST(every_third_frame_fused_and_every_frame_tracked_within_a_centimetre)
     CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N_ROOM, &I, NULL, &all));
     cfg.loop.fuse_every = 3;
     CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, N_ROOM, &I, NULL, &o));
-    double rms = rms_error(&o, truth, N_ROOM), rms_all = rms_error(&all, truth, N_ROOM);
+    double rms = run_rms_error(&o, truth, N_ROOM), rms_all = run_rms_error(&all, truth, N_ROOM);
     fprintf(stderr, "  fuse every 3rd: %u tracked, %u tracked only, %u lost, trajectory RMS %.2f mm (every frame fused: "
             "%.2f mm)\n", o.counts.tracked, o.counts.unfused, o.counts.lost, 1e3 * rms, 1e3 * rms_all);
     CHECK_EQ_INT(o.counts.tracked, N_ROOM);

@@ -15,13 +15,6 @@
 #include "replay/replay.h"
 #include "export/export.h"
 
-static double rms_error(const run_out *o, const bf_se3 *true_pose, uint32_t n)
-{
-    double sum = 0;
-    for (uint32_t k = 0; k < n; k++) sum += pow(trans_dist(&o->est[k], &true_pose[k]), 2);
-    return sqrt(sum / n);
-}
-
 #define N_ROOM 40
 
 BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
@@ -37,7 +30,7 @@ BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
     memset(&b, 0, sizeof b);
     bf_se3 I = bf_se3_identity();
     CHECK_OK(run_loop(ctx, &sc, truth, N_ROOM, &I, NULL, &a));
-    double rms = rms_error(&a, truth, N_ROOM);
+    double rms = run_rms_error(&a, truth, N_ROOM);
     fprintf(stderr, "  room: %u tracked, %u lost, trajectory RMS %.2f mm, end %.2f mm / %.3f deg\n", a.counts.tracked,
             a.counts.lost, 1e3 * rms, 1e3 * trans_dist(&a.est[N_ROOM - 1], &truth[N_ROOM - 1]),
             rot_dist_deg(&a.est[N_ROOM - 1], &truth[N_ROOM - 1]));
