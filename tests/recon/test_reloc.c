@@ -42,15 +42,23 @@ static void check_lost_frame(const run_out *o, uint32_t k, uint32_t last_good)
     CHECK_NEAR(trans_dist(&o->est[k], &o->est[last_good]), 0, 1e-12);
 }
 
-/* Frames [from, to) good, fused, and within tracking's own bound of the truth. */
-static void check_found_frames(const run_out *o, const bf_se3 *truth, uint32_t from, uint32_t to)
+/* Frames [from, to) good, fused at the cadence every (from fused, then
+ * every every-th: recon_config.fuse_every), and within tracking's own
+ * bound of the truth. */
+static void check_found_frames_every(const run_out *o, const bf_se3 *truth, uint32_t from, uint32_t to,
+                                     uint32_t every)
 {
     for (uint32_t k = from; k < to; k++) {
         CHECK(is_good(&o->fr[k]));
-        CHECK(o->fr[k].fused);
+        CHECK_EQ_INT(o->fr[k].fused, (k - from) % every == 0);
         CHECK_LE(trans_dist(&o->est[k], &truth[k]), POSE_TOL_M);
         CHECK_LE(rot_dist_deg(&o->est[k], &truth[k]), POSE_TOL_DEG);
     }
+}
+
+static void check_found_frames(const run_out *o, const bf_se3 *truth, uint32_t from, uint32_t to)
+{
+    check_found_frames_every(o, truth, from, to, 1);
 }
 
 /* Covered lens: 24 frames without depth while the camera keeps turning
@@ -92,13 +100,17 @@ BF_TEST(covered_lens_while_moving_is_found_again_after_the_gap)
             rot_dist_deg(&truth[COV_BEFORE - 1], &truth[back]));
     bf_se3 I = bf_se3_identity();
     static run_out o;
-    for (int with = 0; with < 2; with++) {
+    /* with: 0 reloc off, 1 on, 2 on with every third frame fused
+     * (recon_config.fuse_every): the frame a search finds is fused. */
+    for (int with = 0; with < 3; with++) {
         memset(&o, 0, sizeof o);
         recon_run_config cfg = fixture_run_config();
-        cfg.loop.reloc.enabled = with == 1;
+        cfg.loop.reloc.enabled = with >= 1;
+        cfg.loop.fuse_every = with == 2 ? 3 : 1;
         CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, COV_N, &I, cover_lens, &o));
-        fprintf(stderr, "  reloc %s: %u tracked, %u relocalised, %u lost;", with ? "on" : "off", o.counts.tracked,
-                o.counts.relocalised, o.counts.lost);
+        fprintf(stderr, "  reloc %s%s: %u tracked (%u only), %u relocalised, %u lost;", with ? "on" : "off",
+                with == 2 ? ", every 3rd fused" : "", o.counts.tracked, o.counts.unfused, o.counts.relocalised,
+                o.counts.lost);
         for (uint32_t k = back; k < COV_N; k++)
             fprintf(stderr, " %u:%s%s%s (%.0f mm)", k, recon_state_name(o.fr[k].state), o.fr[k].reloc ? "/" : "",
                     recon_reloc_kind_name(o.fr[k].reloc), 1e3 * trans_dist(&o.est[k], &truth[k]));
@@ -117,7 +129,8 @@ BF_TEST(covered_lens_while_moving_is_found_again_after_the_gap)
         while (found < COV_N && !is_good(&o.fr[found])) check_lost_frame(&o, found++, COV_BEFORE - 1);
         CHECK_LE(found, back + 1);
         CHECK_EQ_INT(o.fr[found].state, RECON_RELOCALISED);
-        check_found_frames(&o, truth, found, COV_N);
+        if (with == 2) CHECK(o.counts.unfused > 0);
+        check_found_frames_every(&o, truth, found, COV_N, cfg.loop.fuse_every);
         fprintf(stderr, "  after the gap: frame %u off by %.1f mm, %.2f deg; last by %.1f mm\n", found,
                 1e3 * trans_dist(&o.est[found], &truth[found]), rot_dist_deg(&o.est[found], &truth[found]),
                 1e3 * trans_dist(&o.est[COV_N - 1], &truth[COV_N - 1]));
