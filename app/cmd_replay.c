@@ -285,9 +285,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "fused frame left (frames found by a search or on the frame before are always fused)",
                 .min = 1, .max = RECON_MAX_FUSE_EVERY),
         APP_OPT("--fuse-every-behind", APP_OPT_U32, &a->rcfg.fuse_every_behind, "N",
-                "the same while frames wait in a camera's queue (bitfuse live: a device, or a recording with --realtime): the loop is behind the "
-                "camera and tracks more of its frames by fusing fewer (the larger of the two applies; 1: fuse "
-                "every frame and let the queue drop them)",
+                "the same while frames wait in a camera's queue (bitfuse live: a device, or a recording with "
+                "--realtime): the loop is behind the camera and tracks more of its frames by fusing fewer (the "
+                "larger of the two applies; 1: fuse every frame and let the queue drop them)",
                 .min = 1, .max = RECON_MAX_FUSE_EVERY),
         APP_OPT("--ray-start", APP_OPT_CHOICE, &a->rcfg.start_at_frame, "frame|near",
                 "the reference's rays start just in front of the tracked frame's depth or at the near plane"),

@@ -29,9 +29,9 @@ recon_config recon_config_default(void)
         .fuse_every = 1,
         /* Behind a camera, a quarter of the frames fused: on lavapipe a
          * tracked-only frame costs a quarter to a third of a fused one,
-         * and fr1/rpy
-         * tracked at every frame with every fourth fused lost none, where
-         * every fourth frame alone lost 155 of 181 (docs/tracking.md). */
+         * and fr1/rpy tracked at every frame with every fourth fused lost
+         * none, where every fourth frame alone lost 155 of 181
+         * (docs/tracking.md). */
         .fuse_every_behind = 4,
         .start_at_frame = true,
         .stream = stream_config_default(),

@@ -506,8 +506,8 @@ BF_TEST(after_a_gap_on_a_textured_floor_the_last_pose_keeps_its_colour)
  * frame 7), then the camera is lost. With reloc.last_frame every frame is
  * tracked against the one before it and keeps tracking's own bound (the
  * steps' errors add up: 12 mm by frame 19), also across frames a live
- * queue dropped (two intervals apart), but not across a frame without
- * depth. */
+ * queue dropped (two intervals apart) and with every third frame fused,
+ * but not across a frame without depth. */
 enum { THIN_N = 20, THIN_GAP = 10 };
 
 /* A frame of the thin run without depth: the frame after it is two
@@ -531,15 +531,22 @@ BF_TEST(a_frame_the_map_barely_covers_is_tracked_against_the_frame_before)
     /* A live queue dropping every other frame over frames 7-13. */
     bool dropped[THIN_N] = {false};
     for (uint32_t k = 7; k <= 13; k += 2) dropped[k] = true;
-    for (int with = 0; with < 4; with++) {
+    for (int with = 0; with < 5; with++) {
         memset(&o, 0, sizeof o);
         recon_run_config cfg = fixture_run_config();
         cfg.loop.raycast.far_m = THIN_FAR_M;
         cfg.loop.reloc.last_frame = with >= 1;
+        /* Every third frame fused: a frame found on the frame before is
+         * fused all the same, so the next one's map holds what it saw. */
+        if (with == 4) cfg.loop.fuse_every = 3;
         if (with == 3) CHECK_OK(run_loop_dropping(ctx, &cfg, &sc, truth, THIN_N, dropped, &o));
         else CHECK_OK(run_loop_with(ctx, &cfg, &sc, truth, THIN_N, &I, with == 2 ? thin_gap : NULL, &o));
         fprintf(stderr, "  last frame %s: %u tracked (%u on the frame before), %u lost:",
-                with == 3 ? "on, frames dropped" : with == 2 ? "on, a frame without depth" : with ? "on" : "off",
+                with == 4   ? "on, every third fused"
+                : with == 3 ? "on, frames dropped"
+                : with == 2 ? "on, a frame without depth"
+                : with      ? "on"
+                            : "off",
                 o.counts.tracked, o.counts.last_frame, o.counts.lost);
         for (uint32_t k = 1; k < THIN_N; k++) {
             if (with == 3 && dropped[k]) continue;
