@@ -26,6 +26,12 @@ recon_config recon_config_default(void)
         .min_valid_pixels = 0, /* 0: 1% of the image, set at create */
         .fuse_degenerate = true,
         .skip_repeated = true,
+        /* The last motion continued: the same as the last pose on every
+         * frame of the real sequences (the finest level's iterations reach
+         * the same pose), and tracks the frames a loop behind its camera
+         * gets every few intervals: fr1/rpy every 4th frame 181 tracked
+         * where the last pose lost 155 (docs/tracking.md, the guess). */
+        .constant_velocity = true,
         .fuse_every = 1,
         /* Behind a camera, a quarter of the frames fused: on lavapipe a
          * tracked-only frame costs a quarter to a third of a fused one,
@@ -335,12 +341,11 @@ static bf_status lose(recon *r, const bf_frame *f, const bf_se3 *known, recon_fr
 
 /* A frame once the map exists. The frame goes up once, into fusion's
  * incoming slot: the tracker reads it there, fusing copies it into the
- * ring. The guess is the last pose (DESIGN.md section 6: no motion model),
- * or with constant_velocity the last motion per frame interval continued
- * over the intervals since the last good frame (a skipped or dropped frame
- * between them makes it the longer step it is), which catches steps
- * beyond max_motion_m from the last pose; on the real frames it moved
- * nothing (docs/real_frames.md), so it is off by default. With reloc, the
+ * ring. The guess is the last motion per frame interval continued over
+ * the intervals since the last good frame (constant_velocity, the
+ * default: a skipped or dropped frame between them makes it the longer
+ * step it is, which catches turns and steps beyond the ICP's reach from
+ * the last pose), or the last pose; while lost, the last pose. With reloc, the
  * motion gate grows with the frames elapsed since the last good one, and a
  * frame that fails from its guess, comes while the camera is lost or after
  * a gap longer than the gate's cap is searched for from candidate poses
