@@ -355,9 +355,17 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     fusion_frame_slot slot;
     bool reloc = r->cfg.reloc.enabled && !known;
     /* Beyond the gate's cap the camera may be anywhere the gate no longer
-     * bounds (a covered lens): the frame is searched for like a lost one. */
+     * bounds (a covered lens): the frame is searched for like a lost one.
+     * Not while the loop is behind a camera that gave depth in every frame
+     * it took since the last good one: the queue dropped the frames
+     * between, the camera moved on as between any two, and the frame is
+     * tracked from the continued motion with the gate at its cap first. A
+     * search costs several ray-casts and ICPs (400-600 ms on lavapipe),
+     * behind which the queue drops a dozen frames more, so every frame
+     * after one was a search (docs/tracking.md, the guess). */
     double n = recon__intervals(r, f);
-    bool search_first = reloc && (r->is_lost || n > r->cfg.reloc.max_gate_intervals);
+    bool dropped_between = r->is_behind && !r->depthless_since_good;
+    bool search_first = reloc && (r->is_lost || (n > r->cfg.reloc.max_gate_intervals && !dropped_between));
     bf_status s = fusion_upload_frame(r->map, f, &slot);
     if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
     if (s == BF_OK && reloc) s = recon__set_gate(r, n);
