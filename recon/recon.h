@@ -43,7 +43,10 @@ typedef struct recon_reloc_config {
     uint32_t max_candidates;   /* candidate poses tried per frame (a ray-cast and an ICP each), default 4 */
     float max_gate_intervals;  /* the motion gate grows with the frame intervals since the last good frame,
                                   up to this many times the per-frame gate, default 4; after a longer gap
-                                  the frame is searched for as if lost */
+                                  the frame is searched for as if lost, unless the loop is behind a camera
+                                  (recon_set_behind) that gave depth in every frame since: then it is
+                                  tracked from the guess with the gate at its cap first, and searched for
+                                  when that fit fails a candidate's test */
     float keyframe_m;          /* a good frame this far from every keyframe becomes one, default 0.1 */
     float keyframe_deg;        /* or turned this far, default 10 */
     uint32_t max_keyframes;    /* kept, default 64; beyond, the one nearest to two others is replaced */
@@ -152,8 +155,10 @@ typedef enum recon_frame_state {
 const char *recon_state_name(recon_frame_state s);
 /* Says whether newer frames already wait for the loop in a queue that drops
  * (a camera it is behind): the frames added from now on are fused at the
- * cadence of fuse_every_behind instead of fuse_every. The runner sets it
- * before each frame from its capture thread's queue. */
+ * cadence of fuse_every_behind instead of fuse_every, and a gap beyond
+ * reloc.max_gate_intervals is tracked before it is searched for (the queue
+ * dropped the frames between). The runner sets it before each frame from
+ * its capture thread's queue. */
 void recon_set_behind(recon *r, bool behind);
 /* True for the states where ICP ran (tracked, lost, relocalised). */
 bool recon_state_ran_icp(recon_frame_state s);

@@ -55,6 +55,10 @@ struct recon {
 /* reloc.c */
 /* T_last moved on by n frame intervals of V_step. */
 bf_se3 recon__velocity_pose(const recon *r, double n);
+/* Whether a fit passes what a search's candidate must: no degeneracy, at
+ * least reloc.min_inlier_frac inliers, the residual within
+ * reloc.max_residual_m (or max_residual_sigma). */
+bool recon__passes(const recon *r, const track_result *t);
 /* reloc.last_frame: a frame right after a good one (nothing lost or
  * without depth between them, frames a live queue dropped allowed up to
  * the gate's cap), tracked against that frame's depth from its pose with

@@ -413,7 +413,7 @@ static bf_status agreement_of(recon *r, const bf_frame *f, const bf_se3 *T_ref, 
     return BF_OK;
 }
 
-static bool passes(const recon *r, const track_result *t)
+bool recon__passes(const recon *r, const track_result *t)
 {
     /* Degenerate systems fit anywhere along their weak directions. The
      * residual as the tracker gates it: metric, or in units of the
@@ -449,7 +449,7 @@ static bf_status try_candidate(recon *r, const bf_frame *f, const fusion_frame_s
              recon_reloc_kind_name(kind), track_outcome_name(t.outcome), 100 * t.inlier_frac, 1e3 * t.residual_m);
     if (!st->has_any || t.inlier_frac > st->any.inlier_frac) st->any = t;
     st->has_any = true;
-    if (!passes(r, &t)) return BF_OK;
+    if (!recon__passes(r, &t)) return BF_OK;
     /* The tracker's gates passed: the candidate is checked against the
      * map's prediction before it may count. */
     agreement a;
@@ -660,7 +660,7 @@ bf_status recon__track_last_frame(recon *r, const bf_frame *f, const fusion_fram
     out->ms_track += t.ms_gpu + t.ms_ref; /* the frame before made into a reference, then the ICP */
     bf_debug("recon: frame %u: against frame %u: %s, inliers %.1f%%, residual %.1f mm", f->index, r->good_index,
              track_outcome_name(t.outcome), 100 * t.inlier_frac, 1e3 * t.residual_m);
-    if (!passes(r, &t)) return BF_OK;
+    if (!recon__passes(r, &t)) return BF_OK;
     out->track = t;
     out->reloc = RECON_RELOC_FRAME;
     *found = true;
