@@ -256,9 +256,13 @@ static void check_carried_away(gpu_context *ctx, const synth_scene *sc, const bf
         for (uint32_t k = CA_OUT; k < CA_N; k++) check_lost_frame(&o, k, CA_OUT - 1);
     } else {
         /* Found on the first frame after the jump, from colour, then
-         * tracked on within tracking's own bound. */
+         * tracked on within tracking's own bound; the jump is no motion
+         * to continue, so the next frame is tracked from the found pose
+         * without a search. */
         CHECK_EQ_INT(o.fr[CA_OUT].state, RECON_RELOCALISED);
         CHECK_EQ_INT(o.fr[CA_OUT].reloc, RECON_RELOC_FEATURES);
+        CHECK_EQ_INT(o.fr[CA_OUT + 1].state, RECON_TRACKED);
+        CHECK_EQ_INT(o.fr[CA_OUT + 1].reloc, RECON_RELOC_NONE);
         check_found_frames(&o, truth, CA_OUT, CA_N);
     }
     CHECK_LE(surface_p90(sc, &o.points), 0.02);
