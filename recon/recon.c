@@ -307,6 +307,13 @@ static bf_status accept(recon *r, const bf_frame *f, const bf_se3 *known, recon_
     out->T_wc = out->track.T_wc;
     const bf_se3 *T_new = known ? known : &out->track.T_wc;
     recon__good_frame(r, f, T_new, !out->track.degenerate);
+    /* A search's find may be a jump (a camera carried off): a step per
+     * interval beyond the tracker's per-frame gate is no motion a camera
+     * keeps up, and the next guess is the found pose, not another jump. A
+     * tracked step was checked against its guess and is continued. */
+    if (state == RECON_RELOCALISED && (bf_v3_norm(r->V_step.t) > r->cfg.track.max_motion_m ||
+                                       bf_se3_angle(&r->V_step) * 180.0 / M_PI > r->cfg.track.max_motion_deg))
+        r->has_velocity = false;
     r->counts.tracked++;
     if (state == RECON_RELOCALISED) r->counts.relocalised++;
     if (out->reloc == RECON_RELOC_FRAME) r->counts.last_frame++;

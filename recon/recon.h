@@ -101,7 +101,7 @@ typedef struct recon_config {
     bool constant_velocity;   /* the tracker's guess is the last pose moved on by the last motion per frame
                                  interval over the intervals since the last good frame, not the last pose
                                  (docs/tracking.md, the guess); default true. A step per interval beyond
-                                 the tracker's per-frame gate (a jump a search found) is not continued */
+                                 the tracker's per-frame gate found by a search (a jump) is not continued */
     bool skip_repeated;       /* a frame whose depth is the last depth's byte for byte (a driver that handed on
                                  its last image when a new one was late: 47 of 7-Scenes' 500 dev frames) is
                                  neither tracked nor fused and keeps the last pose, with known poses too; one

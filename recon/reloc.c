@@ -264,11 +264,7 @@ void recon__good_frame(recon *r, const bf_frame *f, const bf_se3 *T_new, bool ma
         double n = recon__intervals(r, f);
         bf_se3 Li = bf_se3_inverse(&r->T_last), D = bf_se3_mul(&Li, T_new);
         r->V_step = per_interval(&D, n);
-        /* A step per interval beyond the tracker's per-frame gate is no
-         * motion a camera keeps up (a search found it after a jump): the
-         * next guess is the new pose, not another such jump. */
-        r->has_velocity = bf_v3_norm(r->V_step.t) <= r->cfg.track.max_motion_m &&
-                          bf_se3_angle(&r->V_step) * 180.0 / M_PI <= r->cfg.track.max_motion_deg;
+        r->has_velocity = true;
         if (f->index == r->good_index + 1 && f->t_depth_s > r->good_t_s) {
             /* An average over a few steps: one step's jitter is a few ms. */
             double dt = f->t_depth_s - r->good_t_s;
