@@ -372,8 +372,9 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
      * behind which the queue drops a dozen frames more, so every frame
      * after one was a search (docs/tracking.md, the guess). */
     double n = recon__intervals(r, f);
+    bool past_cap = n > r->cfg.reloc.max_gate_intervals;
     bool dropped_between = r->is_behind && !r->depthless_since_good;
-    bool search_first = reloc && (r->is_lost || (n > r->cfg.reloc.max_gate_intervals && !dropped_between));
+    bool search_first = reloc && (r->is_lost || (past_cap && !dropped_between));
     bf_status s = fusion_upload_frame(r->map, f, &slot);
     if (s == BF_OK) s = track_set_frame_colour(r->tracker, slot.colour, slot.colour_offset);
     if (s == BF_OK && reloc) s = recon__set_gate(r, n);
@@ -381,8 +382,7 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
     /* The reference was cast at the last good pose: tracking from there
      * tries that candidate (after frames tracked only it is older). */
     bool ref_at_last = r->ref_is_map && r->since_fused == 0;
-    /* The reference is the ray-cast at the last good pose; a loss leaves
-     * the motion unknown. */
+    /* A loss leaves the motion unknown: the guess is then the last pose. */
     bool cv = r->cfg.constant_velocity && r->has_velocity && !r->is_lost;
     if (!search_first) {
         bf_se3 guess = cv ? recon__velocity_pose(r, n) : r->T_last;
@@ -398,7 +398,7 @@ static bf_status track_and_fuse(recon *r, const bf_frame *f, const bf_se3 *known
          * must, else the frame is searched for. Live fr1/rpy's slides
          * there had 27-29% inliers, fr1/xyz's a 19.9 mm residual at 9.5
          * sigma (docs/tracking.md, the guess). */
-        if (ok && reloc && n > r->cfg.reloc.max_gate_intervals && !recon__passes(r, &out->track)) ok = false;
+        if (ok && reloc && past_cap && !recon__passes(r, &out->track)) ok = false;
         if (ok && (r->cfg.fuse_degenerate || !out->track.degenerate)) {
             /* A weak fit to the map: the frame before's pose replaces it
              * when it passes the candidates' gates with more inliers. */

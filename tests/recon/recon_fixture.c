@@ -20,6 +20,12 @@ bf_se3 sweep_pose(const synth_scene *sc, uint32_t k)
     return bf_se3_mul(&sc->T_wc_view, &M);
 }
 
+bf_se3 panned(const bf_se3 *T, double deg)
+{
+    bf_se3 turn = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), deg * M_PI / 180), bf_v3(0, 0, 0));
+    return bf_se3_mul(T, &turn);
+}
+
 double trans_dist(const bf_se3 *A, const bf_se3 *B) { return bf_v3_norm(bf_v3_sub(A->t, B->t)); }
 
 double rot_dist_deg(const bf_se3 *A, const bf_se3 *B)

@@ -512,8 +512,7 @@ BF_TEST(a_turn_across_dropped_frames_is_tracked_from_the_continued_motion)
     bool dropped[TURN_N];
     uint32_t delivered = 0;
     for (uint32_t k = 0; k < TURN_N; k++) {
-        bf_se3 turn = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), -TURN_DEG * k * M_PI / 180), bf_v3(0, 0, 0));
-        truth[k] = bf_se3_mul(&T0, &turn);
+        truth[k] = panned(&T0, -TURN_DEG * k);
         dropped[k] = k > 3 && (k + 1) % TURN_EVERY != 0;
         delivered += k > 0 && !dropped[k];
     }
