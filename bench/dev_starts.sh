@@ -74,6 +74,7 @@ done
 for p in "${pids[@]}"; do wait "$p" || fails=$((fails + 1)); done
 [ "$fails" -eq 0 ] || { echo "dev_starts.sh: $fails of the starts failed" >&2; exit 1; }
 
+# shellcheck disable=SC2086 # STARTS is a list of words
 "$PY" - "$OUT" "$*" $STARTS <<'PYEOF'
 import json, sys
 import numpy as np
