@@ -102,7 +102,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 34
+#define LOOP_ROWS 35
 #define LIVE_ROWS 5
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -260,6 +260,10 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "resolution of the tracking reference's ray-cast: 0 full, 1 half, 2 quarter; auto: the coarsest "
                 "of 1 and 2 that keeps 160 pixels a row (a quarter of 640x480)",
                 .codes = ref_level_codes),
+        APP_OPT("--ref-voxels", APP_OPT_CHOICE, &a->rcfg.reference_confident, "confident|all",
+                "the tracking reference's ray-cast: once the first fusion window has closed, the confident "
+                "voxels only (those a window saw often enough), or every sign bit (the quick signs of surfaces "
+                "seen in the last frames too)"),
         APP_OPT("--guess", APP_OPT_CHOICE, &a->rcfg.constant_velocity, "velocity|last",
                 "the tracker's first guess: the last pose moved on by the last motion per frame interval over "
                 "the intervals since the last good frame, or the last pose"),

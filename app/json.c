@@ -220,6 +220,7 @@ void app_json_recon_config(cJSON *parent, const char *name, const recon_config *
     cJSON_AddNumberToObject(l, "min_valid_pixels", c->min_valid_pixels);
     cJSON_AddBoolToObject(l, "fuse_degenerate", c->fuse_degenerate);
     cJSON_AddBoolToObject(l, "constant_velocity", c->constant_velocity);
+    cJSON_AddBoolToObject(l, "reference_confident", c->reference_confident);
     cJSON_AddBoolToObject(l, "skip_repeated", c->skip_repeated);
     cJSON_AddNumberToObject(l, "fuse_every", c->fuse_every);
     cJSON_AddNumberToObject(l, "fuse_every_behind", c->fuse_every_behind);

@@ -32,6 +32,7 @@ recon_config recon_config_default(void)
          * gets every few intervals: fr1/rpy every 4th frame 181 tracked
          * where the last pose lost 155 (docs/tracking.md, the guess). */
         .constant_velocity = true,
+        .reference_confident = true,
         .fuse_every = 1,
         /* Behind a camera, a quarter of the frames fused: on lavapipe a
          * tracked-only frame costs a quarter to a third of a fused one,
@@ -241,6 +242,13 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
 {
     render_options ro = r->cfg.raycast;
     ro.no_shade = true; /* tracking takes its normals from the depth */
+    /* The sign bits a window has not yet judged (the sub-cache's quick
+     * signs, the fringes a window saw too seldom) are left out of the
+     * reference once the map has confident ones: the fit is to the
+     * surfaces the windows agreed on. Before the first window nothing is
+     * confident, and a reference from confident voxels alone would be
+     * empty (docs/tracking.md, "The confident map as the reference"). */
+    if (r->cfg.reference_confident && fusion_windows_done(r->map) > 0) ro.confident_only = true;
     bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
     if (s != BF_OK) return s;
     if ((s = gpu_begin(r->ctx)) != BF_OK) return s;
