@@ -32,7 +32,7 @@ recon_config recon_config_default(void)
          * gets every few intervals: fr1/rpy every 4th frame 181 tracked
          * where the last pose lost 155 (docs/tracking.md, the guess). */
         .constant_velocity = true,
-        .reference_confident = true,
+        .reference_confident = false,
         .fuse_every = 1,
         /* Behind a camera, a quarter of the frames fused: on lavapipe a
          * tracked-only frame costs a quarter to a third of a fused one,

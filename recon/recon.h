@@ -99,10 +99,11 @@ typedef struct recon_config {
     bool reference_confident; /* once the map's first fusion window has closed, the tracking reference is
                                  cast from confident voxels only (raycast.confident_only then), the way the
                                  views show the map; before it, from every sign bit. The relocalising search's
-                                 casts keep every sign bit. Default true: the real dev frames' four starts give a
-                                 mean ATE of 22.9 against 27.2 mm (the colour's motion agrees), fr1/rpy the same,
-                                 fr1/xyz 11.7 against 10.9 and the synthetic room 1.3 against 1.1 (docs/tracking.md,
-                                 "The confident map as the reference") */
+                                 casts keep every sign bit. Default false: the real dev frames' four starts give a
+                                 mean ATE of 22.9 against 27.2 mm with it (the colour's motion agrees), fr1/rpy the
+                                 same, but fr1/xyz 11.7 against 10.9, the synthetic room 1.3 against 1.1, and a
+                                 thin first window (short windows) loses frames (docs/tracking.md, "The confident
+                                 map as the reference") */
     render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */

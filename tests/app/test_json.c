@@ -61,7 +61,7 @@ BF_TEST(json_config_echoes_every_field_as_it_was_set)
     CHECK_EQ_INT(cJSON_GetArraySize(t), 35);  /* every field of track_config */
     CHECK_EQ_INT(cJSON_GetArraySize(cJSON_GetObjectItem(cfg, "sensor")), 4); /* bf_sensor */
     cJSON *l = cJSON_GetObjectItem(cfg, "loop");
-    CHECK_EQ_INT(cJSON_GetArraySize(l), 12); /* recon_config's own fields: 8 scalars, raycast, caster, reloc, stream */
+    CHECK_EQ_INT(cJSON_GetArraySize(l), 13); /* recon_config's own fields: 9 scalars, raycast, caster, reloc, stream */
     CHECK_EQ_INT(cJSON_GetArraySize(cJSON_GetObjectItem(l, "reloc")), 17); /* every field of recon_reloc_config */
     CHECK_EQ_INT(cJSON_GetArraySize(cJSON_GetObjectItem(l, "stream")), 7); /* every field of stream_config */
     CHECK(cJSON_GetObjectItem(f, "sensor") && cJSON_GetObjectItem(t, "sensor"));
