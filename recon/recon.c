@@ -242,12 +242,12 @@ static bf_status fuse_and_reference(recon *r, const bf_frame *f, const bf_se3 *T
 {
     render_options ro = r->cfg.raycast;
     ro.no_shade = true; /* tracking takes its normals from the depth */
-    /* The sign bits a window has not yet judged (the sub-cache's quick
-     * signs, the fringes a window saw too seldom) are left out of the
-     * reference once the map has confident ones: the fit is to the
-     * surfaces the windows agreed on. Before the first window nothing is
-     * confident, and a reference from confident voxels alone would be
-     * empty (docs/tracking.md, "The confident map as the reference"). */
+    /* reference_confident: the sign bits no window has judged yet (the
+     * sub-cache's quick signs, the fringes a window saw too seldom) stay
+     * out of the reference once the map has confident ones. Before the
+     * first window nothing is confident, and a reference from confident
+     * voxels alone would be empty (docs/tracking.md, "The confident map
+     * as the reference"). */
     if (r->cfg.reference_confident && fusion_windows_done(r->map) > 0) ro.confident_only = true;
     bf_status s = track_reference_target(r->tracker, &ro.depth_out, &ro.depth_offset);
     if (s != BF_OK) return s;

@@ -78,7 +78,6 @@ BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
     gpu_context_destroy(ctx);
 }
 
-
 /* The tracking reference (recon_config.reference_confident): every sign
  * bit until the map's first window has been integrated, the confident
  * voxels alone after it. With the fixture's window of 10 the first window
