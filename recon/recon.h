@@ -94,16 +94,16 @@ typedef struct recon_config {
                                  tracking (the sensor fields of .fusion and .track are not read) */
     fusion_config fusion;     /* fusion's defaults but voxel_ratio 2 (docs/bench_replay_sweep.md) */
     track_config track;       /* its ref_level may be RECON_REF_LEVEL_AUTO (the default): see there */
-    render_options raycast;   /* the tracking reference's ray-cast: every sign bit, refined (but see
-                                 reference_confident) */
+    render_options raycast;   /* the tracking reference's ray-cast: refined, from the voxels
+                                 reference_confident says */
     bool reference_confident; /* once the map's first fusion window has closed, the tracking reference is
                                  cast from confident voxels only (raycast.confident_only then), the way the
                                  views show the map; before it, from every sign bit. The relocalising search's
-                                 casts keep every sign bit. Default false: the real dev frames' four starts give a
+                                 casts keep every sign bit. Default true: the real dev frames' four starts give a
                                  mean ATE of 22.9 against 27.2 mm with it (the colour's motion agrees), fr1/rpy the
-                                 same, but fr1/xyz 11.7 against 10.9, the synthetic room 1.3 against 1.1, and a
-                                 thin first window (short windows) loses frames (docs/tracking.md, "The confident
-                                 map as the reference") */
+                                 same; it costs fr1/xyz 11.7 against 10.9, the synthetic room 1.3 against 1.1, and
+                                 short windows (a thin first window) a frame found by a search (docs/tracking.md,
+                                 "The confident map as the reference") */
     render_config caster;     /* how the loop's casters are built (render's defaults) */
     uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */

@@ -62,12 +62,15 @@ PY
 
 # A doctored baseline: another digest, 3 lost frames, a surface 1 m off. The
 # ATE and the tracked count would move too on these 4 frames, so they are
-# left out: exactly digest, lost and surface must be named, with values.
+# left out, and the relocalised count is the 4 frames' own (none; the 14
+# frames' short windows may need a search after the first window, docs/
+# tracking.md): exactly digest, lost and surface must be named, with values.
 py - "$T/a/stats.json" "$T/bad.json" <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
 d["map_digest"] = "xxh3:0123456789abcdef"
 d["tracking"]["lost"] = 3
+d["tracking"]["relocalised"] = 0
 d["surface_m"]["median"] = 1.0
 json.dump(d, open(sys.argv[2], "w"))
 PY
