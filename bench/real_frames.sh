@@ -27,7 +27,7 @@ BIN=${BIN:-build/app/bitfuse}
 DATA=${DATA:-/work/bench-data/7scenes-dev}
 # name|options; empty options: the plain loop again (replay is deterministic since the sixth
 # session, so a second plain run should match the first byte for byte)
-PROBES=${PROBES-"ratio3|--ratio 3;ratio1|--ratio 1;level8|--max-level 8;window20|--window 20;rof10|--rof-iters 10;photo|--photometric-weak 0;nophoto|--photometric 0;last|--guess last;repeats|--repeated track;confident|--ref-voxels confident"}
+PROBES=${PROBES-"ratio3|--ratio 3;ratio1|--ratio 1;level8|--max-level 8;window20|--window 20;rof10|--rof-iters 10;photo|--photometric-weak 0;nophoto|--photometric 0;last|--guess last;repeats|--repeated track;all|--ref-voxels all"}
 REUSE=${REUSE:-0}
 JOBS=${JOBS:-1}
 PY=python3
