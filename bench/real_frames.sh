@@ -19,7 +19,7 @@
 #   REUSE=1 bench/real_frames.sh /tmp/rf                (keep runs whose stats.json exists)
 #
 # Each replay takes 30-80 s on the 2-core machine with lavapipe from Mesa 25 (54-157 ms a frame);
-# the ten of the default 7.5 minutes, the tables after them about two more.
+# the twelve of the default about 13 minutes with the tables (2026-12-06).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-/tmp/bitfuse-real-frames}

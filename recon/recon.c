@@ -32,10 +32,11 @@ recon_config recon_config_default(void)
          * gets every few intervals: fr1/rpy every 4th frame 181 tracked
          * where the last pose lost 155 (docs/tracking.md, the guess). */
         .constant_velocity = true,
-        /* The fringes and newest surfaces no window has judged are where
-         * Kinect v1 reads worst: the real frames track better without
-         * them, synthetic ones a little worse (docs/tracking.md, "The
-         * confident map as the reference"). */
+        /* The fringes a window saw too seldom (where Kinect v1 reads
+         * worst) and the newest surfaces no window has judged both cost
+         * the 7-Scenes dev frames; synthetic frames track a little worse
+         * without them (docs/tracking.md, "The confident map as the
+         * reference"). */
         .reference_confident = true,
         .fuse_every = 1,
         /* Behind a camera, a quarter of the frames fused: on lavapipe a

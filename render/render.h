@@ -38,7 +38,8 @@ typedef struct render_config {
 render_config render_config_default(void);
 
 typedef struct render_options {
-    bool confident_only; /* display: only confident voxels are surface; tracking: every sign bit */
+    bool confident_only; /* only confident voxels are surface (display; recon/'s tracking reference once a
+                            window has closed, recon_config.reference_confident); false: every sign bit */
     bool refine;         /* sub-voxel hit: zero of the smoothed sign field on the ray (docs/render.md) */
     float near_m, far_m; /* ray range along the optical axis, default 0.2 / 6 */
     /* Optional start depths (NULL: none): float camera depth per pixel of
