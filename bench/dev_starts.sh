@@ -17,11 +17,11 @@ cd "$(dirname "$0")/.."
 [ $# -ge 2 ] || { echo "usage: bench/dev_starts.sh DEV OUT [replay options]" >&2; exit 2; }
 DEV=$(cd "$1" && pwd) OUT=$2
 shift 2
-BIN=${BIN:-build/app/bitfuse}
 STARTS=${STARTS:-dev rev from100 from200}
 JOBS=${JOBS:-2}
-PY=python3
-[ -x /usr/bin/python3 ] && PY=/usr/bin/python3
+OPTS=("$@")
+# shellcheck source=bench/common.sh
+. bench/common.sh
 [ -f "$DEV/frame-000000.pose.txt" ] || { echo "dev_starts.sh: $DEV: no frame-000000.pose.txt (a pose-per-frame folder)" >&2; exit 1; }
 n=$(find "$DEV" -maxdepth 1 -name 'frame-*.depth.png' | wc -l)
 export BITFUSE_VALIDATION=0 BITFUSE_PROGRESS=0
@@ -55,24 +55,14 @@ run_start() {
   d=$(make_start "$1")
   r=$OUT/run_$1
   rm -rf "$r"
-  if ! "$BIN" replay "$d" --out "$r" --no-mesh "${@:2}" >"$r.log" 2>&1; then
+  if ! "$BIN" replay "$d" --out "$r" --no-mesh "${OPTS[@]}" >"$r.log" 2>&1; then
     echo "dev_starts.sh: replay of $1 failed: $(tail -n 2 "$r.log")" >&2
     return 1
   fi
 }
 
-# JOBS at a time, oldest first; every start's status is collected.
-pids=() fails=0
-for s in $STARTS; do
-  run_start "$s" "$@" &
-  pids+=($!)
-  if [ "${#pids[@]}" -ge "$JOBS" ]; then
-    wait "${pids[0]}" || fails=$((fails + 1))
-    pids=("${pids[@]:1}")
-  fi
-done
-for p in "${pids[@]}"; do wait "$p" || fails=$((fails + 1)); done
-[ "$fails" -eq 0 ] || { echo "dev_starts.sh: $fails of the starts failed" >&2; exit 1; }
+# shellcheck disable=SC2086 # STARTS is a list of words
+bench_each "$JOBS" run_start $STARTS || exit 1
 
 # shellcheck disable=SC2086 # STARTS is a list of words
 "$PY" - "$OUT" "$*" $STARTS <<'PYEOF'

@@ -14,11 +14,11 @@ cd "$(dirname "$0")/.."
 [ $# -ge 2 ] || { echo "usage: bench/tum_starts.sh SEQ OUT [replay options]" >&2; exit 2; }
 SEQ=$(cd "$1" && pwd) OUT=$2
 shift 2
-BIN=${BIN:-build/app/bitfuse}
 STARTS=${STARTS:-0 100 200 300}
 JOBS=${JOBS:-2}
-PY=python3
-[ -x /usr/bin/python3 ] && PY=/usr/bin/python3
+OPTS=("$@")
+# shellcheck source=bench/common.sh
+. bench/common.sh
 for f in depth.txt rgb.txt groundtruth.txt; do
   [ -f "$SEQ/$f" ] || { echo "tum_starts.sh: $SEQ: no $f (a TUM RGB-D folder with ground truth)" >&2; exit 1; }
 done
@@ -43,26 +43,17 @@ run_start() {
   d=$(make_start "$1")
   r=$OUT/run_from$1
   rm -rf "$r"
-  if ! "$BIN" replay "$d" --out "$r" --no-mesh "${@:2}" >"$r.log" 2>&1; then
+  if ! "$BIN" replay "$d" --out "$r" --no-mesh "${OPTS[@]}" >"$r.log" 2>&1; then
     echo "tum_starts.sh: replay from frame $1 failed: $(tail -n 2 "$r.log")" >&2
     return 1
   fi
   "$BIN" eval-traj "$SEQ/groundtruth.txt" "$r/trajectory.txt" --json >"$r/eval.json" 2>"$r/eval.log"
 }
 
-# JOBS at a time, oldest first; every start's status is collected.
-pids=() fails=0
-for s in $STARTS; do
-  run_start "$s" "$@" &
-  pids+=($!)
-  if [ "${#pids[@]}" -ge "$JOBS" ]; then
-    wait "${pids[0]}" || fails=$((fails + 1))
-    pids=("${pids[@]:1}")
-  fi
-done
-for p in "${pids[@]}"; do wait "$p" || fails=$((fails + 1)); done
-[ "$fails" -eq 0 ] || { echo "tum_starts.sh: $fails of the starts failed" >&2; exit 1; }
+# shellcheck disable=SC2086 # STARTS is a list of words
+bench_each "$JOBS" run_start $STARTS || exit 1
 
+# shellcheck disable=SC2086 # STARTS is a list of words
 "$PY" - "$OUT" "$SEQ/groundtruth.txt" "$*" $STARTS <<'PYEOF'
 import json, sys
 import numpy as np
