@@ -293,6 +293,21 @@ const char *app_check_pose(const char *name, const char *v);
 const char *app_check_size(const char *name, const char *v);
 const char *app_check_camera(const char *name, const char *v);
 const char *app_check_png(const char *name, const char *v);
+/* What render and view draw, as the command line asked for it. */
+typedef struct app_scene_args {
+    const char *map, *particles, *mesh, *mesh_pose;
+    double radius_m, cell_m;
+    bool particle_lod, mesh_lod;
+} app_scene_args;
+#define APP_SCENE_ROWS 9
+/* The options render and view share: --map, --particles and theirs, --mesh
+ * and theirs, with each command's own help for --mesh and --mesh-lod (view
+ * voxelises at its first pose's detail); sets *a's defaults. */
+void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const char *mesh_help,
+                       const char *mesh_lod_help);
+/* The usage errors both refuse (app_usage_error's code), 0 when none;
+ * verb names what the command does ("render", "show"). */
+int app_scene_check(const char *cmd, const char *verb, const app_scene_args *a);
 /* The map of a scene store, or of DIR/store (BF_FORMAT: neither, or no
  * brick); meta_out (may be NULL) gets the store's meta. */
 bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out);

@@ -38,33 +38,16 @@ static const char render_epilog[] =
     "map, mesh or particle file, 4 no usable Vulkan device, 5 an image could not be written\n";
 
 typedef struct render_args {
-    const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *out, *depth;
-    double radius_m, cell_m, far_m;
+    app_scene_args scene;
+    const char *pose, *camera, *size, *out, *depth;
+    double far_m;
     uint32_t repeat;
-    bool particle_lod, mesh_lod, json;
+    bool json;
 } render_args;
 
 static int parse_args(int argc, char **argv, render_args *a)
 {
     const app_option rows[] = {
-        APP_OPT("--map", APP_OPT_STRING, &a->map, "STORE", "the map: a scene store, or a folder holding one as DIR/store"),
-        APP_OPT("--particles", APP_OPT_STRING, &a->particles, "FILE", "particles: a PLY with vertex x y z [m]"),
-        APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
-                .min = 0, .min_open = true, .max = 10),
-        APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
-                "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
-                .max = 20, .no_default = true),
-        APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
-                "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
-                "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
-                "cell puts it)"),
-        APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
-                "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks"),
-        APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
-                "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
-        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off",
-                "level of detail within the mesh: each part at the level its pixel footprint needs (off: the "
-                "nearest point's level everywhere)"),
         APP_OPT("--pose", APP_OPT_STRING, &a->pose, "\"tx ty tz qx qy qz qw\"",
                 "camera to world (TUM: looks along +z, y down)", .required = true, .check = app_check_pose),
         APP_OPT("--camera", APP_OPT_STRING, &a->camera, "fx,fy,cx,cy",
@@ -81,7 +64,11 @@ static int parse_args(int argc, char **argv, render_args *a)
         APP_OPT("--json", APP_OPT_FLAG, &a->json, NULL, "machine-readable output on stdout instead of the lines"),
         APP_OPT_END,
     };
-    const app_option *tables[] = {rows, NULL};
+    app_option scene[APP_SCENE_ROWS];
+    app_scene_options(scene, &a->scene, "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks",
+                      "level of detail within the mesh: each part at the level its pixel footprint needs (off: "
+                      "the nearest point's level everywhere)");
+    const app_option *tables[] = {scene, rows, NULL};
     app_command_spec spec = {.name = "render", .usage = render_usage, .tables = tables, .epilog = render_epilog};
     return app_options_parse(&spec, argc, argv);
 }
@@ -137,15 +124,15 @@ static cJSON *render_json(const render_report *r)
     cJSON_AddStringToObject(o, "out", a->out);
     if (a->depth) cJSON_AddStringToObject(o, "depth", a->depth);
     cJSON_AddNumberToObject(o, "hit_fraction", r->hit_frac);
-    if (a->map) {
+    if (a->scene.map) {
         cJSON *m = app_json_object(o, "map");
-        cJSON_AddStringToObject(m, "path", a->map);
+        cJSON_AddStringToObject(m, "path", a->scene.map);
         cJSON_AddNumberToObject(m, "bricks", r->n_map_bricks);
     }
-    if (a->mesh) {
+    if (a->scene.mesh) {
         const render_voxelise_stats *v = r->vst;
         cJSON *m = app_json_object(o, "mesh");
-        cJSON_AddStringToObject(m, "path", a->mesh);
+        cJSON_AddStringToObject(m, "path", a->scene.mesh);
         cJSON_AddNumberToObject(m, "triangles", r->n_tris);
         cJSON_AddNumberToObject(m, "level_coarse", v->level_coarse);
         cJSON_AddNumberToObject(m, "level_fine", v->level_fine);
@@ -166,16 +153,16 @@ static cJSON *render_json(const render_report *r)
         cJSON_AddNumberToObject(m, "gpu_pass_seconds", v->seconds_gpu);
         cJSON_AddNumberToObject(m, "triangles_per_second", v->seconds > 0 ? r->n_tris / v->seconds : 0.0);
     }
-    if (a->map || a->mesh) cJSON_AddNumberToObject(o, "bricks", r->n_bricks);
+    if (a->scene.map || a->scene.mesh) cJSON_AddNumberToObject(o, "bricks", r->n_bricks);
     if (r->pst) {
         const render_particles_stats *st = r->pst;
         cJSON *p = app_json_object(o, "particles");
-        cJSON_AddStringToObject(p, "path", a->particles);
+        cJSON_AddStringToObject(p, "path", a->scene.particles);
         cJSON_AddNumberToObject(p, "count", (double)st->n_particles);
-        cJSON_AddNumberToObject(p, "radius_m", a->radius_m);
+        cJSON_AddNumberToObject(p, "radius_m", a->scene.radius_m);
         cJSON_AddNumberToObject(p, "cell_m", st->cell_m);
         cJSON_AddNumberToObject(p, "level", st->level);
-        cJSON_AddBoolToObject(p, "lod", a->particle_lod);
+        cJSON_AddBoolToObject(p, "lod", a->scene.particle_lod);
         cJSON_AddNumberToObject(p, "cells", (double)st->n_cells);
         cJSON_AddNumberToObject(p, "bricks", st->n_bricks);
         cJSON_AddNumberToObject(p, "coarse_bricks", st->n_coarse_bricks);
@@ -191,21 +178,18 @@ static cJSON *render_json(const render_report *r)
     cJSON *c = app_json_object(o, "raycast_ms");
     cJSON_AddNumberToObject(c, "median", r->ms[a->repeat / 2]);
     app_json_numbers(c, "sorted", r->ms, a->repeat);
-    if (r->pst && (a->map || a->mesh)) cJSON_AddNumberToObject(c, "particles_median", r->ms_p[a->repeat / 2]);
+    if (r->pst && (a->scene.map || a->scene.mesh))
+        cJSON_AddNumberToObject(c, "particles_median", r->ms_p[a->repeat / 2]);
     return o;
 }
 
 int cmd_render(int argc, char **argv)
 {
     const char *cmd = "render";
-    render_args a = {.radius_m = 0.01, .far_m = 13.1, .repeat = 1, .mesh_lod = true, .particle_lod = true};
+    render_args a = {.far_m = 13.1, .repeat = 1};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
-    if (!a.map && !a.particles && !a.mesh)
-        return app_usage_error(cmd, "nothing to render: give --map, --mesh, --particles or any of them");
-    if (a.cell_m > 2 * a.radius_m)
-        return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a.cell_m, 2 * a.radius_m);
+    if ((rc = app_scene_check(cmd, "render", &a.scene)) != 0) return rc;
     uint32_t W = 0, H = 0;
     app_parse_size(a.size, &W, &H);
     bf_se3 T_wc;
@@ -219,13 +203,15 @@ int cmd_render(int argc, char **argv)
     float *xyz = NULL;
     uint32_t n_particles = 0;
     bf_status s = BF_OK;
-    if (a.map && !bf_file_exists(a.map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a.map);
-    if (s == BF_OK && a.particles) s = app_scene_read_particles(a.particles, &xyz, &n_particles);
+    if (a.scene.map && !bf_file_exists(a.scene.map))
+        s = bf_fail(BF_IO, "%s: no such map (store or folder)", a.scene.map);
+    if (s == BF_OK && a.scene.particles) s = app_scene_read_particles(a.scene.particles, &xyz, &n_particles);
     mesh_data mesh = {0};
     bf_se3 T_wm = bf_se3_identity();
-    if (a.mesh_pose) app_parse_pose(a.mesh_pose, &T_wm, msg, sizeof msg);
-    if (s == BF_OK && a.mesh) s = mesh_read(a.mesh, &mesh);
-    if (s == BF_OK && a.mesh && mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a.mesh);
+    if (a.scene.mesh_pose) app_parse_pose(a.scene.mesh_pose, &T_wm, msg, sizeof msg);
+    if (s == BF_OK && a.scene.mesh) s = mesh_read(a.scene.mesh, &mesh);
+    if (s == BF_OK && a.scene.mesh && mesh.n_tris == 0)
+        s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a.scene.mesh);
     gpu_context *ctx = NULL;
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
@@ -235,40 +221,41 @@ int cmd_render(int argc, char **argv)
     uint32_t n_bricks = 0, n_map_bricks = 0;
     hostmap hm = {0};
     render_voxelise_stats vst = {0};
-    if (s == BF_OK && a.map) s = app_scene_read_map(a.map, &hm, NULL);
+    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, NULL);
     n_map_bricks = hm.n_bricks;
-    if (s == BF_OK && a.mesh) {
+    if (s == BF_OK && a.scene.mesh) {
         /* On the map's grid when there is one, so both are one ray-cast. */
-        render_voxelise_config vc = app_scene_mesh_config(&mesh, &T_wm, &T_wc, &K, a.map ? &hm : NULL, a.mesh_lod);
+        render_voxelise_config vc =
+            app_scene_mesh_config(&mesh, &T_wm, &T_wc, &K, a.scene.map ? &hm : NULL, a.scene.mesh_lod);
         hostmap mh;
         s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
         if (s == BF_INVALID_ARG) {
             snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a.mesh, msg);
+            s = bf_fail(BF_FORMAT, "%s: %s", a.scene.mesh, msg);
         }
-        if (s == BF_OK && a.map) s = render_hostmap_merge(&hm, &mh);
+        if (s == BF_OK && a.scene.map) s = render_hostmap_merge(&hm, &mh);
         else if (s == BF_OK) hm = mh;
     }
-    if (s == BF_OK && (a.map || a.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
+    if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);
-    if (s == BF_OK && a.particles) {
+    if (s == BF_OK && a.scene.particles) {
         render_particles_config pc = render_particles_config_default();
-        pc.radius_m = (float)a.radius_m;
-        pc.cell_m = (float)a.cell_m;
-        pc.lod = a.particle_lod;
+        pc.radius_m = (float)a.scene.radius_m;
+        pc.cell_m = (float)a.scene.cell_m;
+        pc.lod = a.scene.particle_lod;
         s = render_particles_create(ctx, &pc, xyz, n_particles, &ps);
         /* A position the grid cannot hold is the file's fault. */
         if (s == BF_INVALID_ARG) {
             snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a.particles, msg);
+            s = bf_fail(BF_FORMAT, "%s: %s", a.scene.particles, msg);
         }
     }
     if (s == BF_OK) s = render_create(ctx, NULL, W, H, &caster);
     render_options opt = render_options_display();
     opt.far_m = (float)a.far_m;
     /* A mesh's outline: pass by the hits that graze a voxel's corner (docs/render.md). */
-    opt.no_graze = a.mesh != NULL;
+    opt.no_graze = a.scene.mesh != NULL;
     double *ms = calloc(a.repeat, sizeof *ms), *ms_p = calloc(a.repeat, sizeof *ms_p);
     if (s == BF_OK && (!ms || !ms_p)) s = bf_fail(BF_NO_MEMORY, "render: timings");
     for (uint32_t i = 0; s == BF_OK && i < a.repeat; i++) {
@@ -294,19 +281,19 @@ int cmd_render(int argc, char **argv)
         for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
         printf("bitfuse render: %ux%u on %s -> %s%s%s: %.1f%% of the pixels hit\n", W, H, gpu_device_name(ctx), a.out,
                a.depth ? ", " : "", a.depth ? a.depth : "", 100.0 * (double)n_hit / ((double)W * H));
-        if (a.map) printf("  map              %s: %u bricks\n", a.map, n_map_bricks);
-        bool one_level = !a.mesh_lod || vst.level_coarse == vst.level_fine;
-        if (a.mesh && one_level)
+        if (a.scene.map) printf("  map              %s: %u bricks\n", a.scene.map, n_map_bricks);
+        bool one_level = !a.scene.mesh_lod || vst.level_coarse == vst.level_fine;
+        if (a.scene.mesh && one_level)
             printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
                    "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks "
                    "with crossings to test)\n",
-                   a.mesh, mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
+                   a.scene.mesh, mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
                    vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu,
                    vst.n_gpu_bricks);
-        if (a.mesh && !one_level) {
+        if (a.scene.mesh && !one_level) {
             printf("  mesh             %s: %u triangles at levels %u-%u (level of detail, %u columns along %c): %u "
                    "bricks (",
-                   a.mesh, mesh.n_tris, vst.level_coarse, vst.level_fine, vst.n_columns, "xyz"[vst.column_axis],
+                   a.scene.mesh, mesh.n_tris, vst.level_coarse, vst.level_fine, vst.n_columns, "xyz"[vst.column_axis],
                    vst.n_bricks);
             for (uint32_t l = vst.level_coarse; l <= vst.level_fine; l++)
                 printf("%s%u at %u", l > vst.level_coarse ? ", " : "", vst.bricks_at_level[l], l);
@@ -315,12 +302,12 @@ int cmd_render(int argc, char **argv)
                    vst.seconds, vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin,
                    vst.seconds_gpu, vst.n_gpu_bricks);
         }
-        if (a.map && a.mesh) printf("  together         %u bricks\n", n_bricks);
+        if (a.scene.map && a.scene.mesh) printf("  together         %u bricks\n", n_bricks);
         if (ps) {
             const render_particles_stats *st = render_particles_get_stats(ps);
             printf("  particles        %s: %llu, radius %.4g m, cell %.4g m (level %u): %llu cells, %u bricks "
                    "(+%u coarse)\n",
-                   a.particles, (unsigned long long)st->n_particles, a.radius_m, st->cell_m, st->level,
+                   a.scene.particles, (unsigned long long)st->n_particles, a.scene.radius_m, st->cell_m, st->level,
                    (unsigned long long)st->n_cells, st->n_bricks, st->n_coarse_bricks);
             printf("  binning          %.1f ms on the host (%.2f M particles/s; %.1f ms CPU), %.1f ms into the GPU "
                    "pools (made in %.1f ms)\n",

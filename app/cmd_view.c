@@ -33,9 +33,9 @@ static const char view_epilog[] =
     "cannot present to the window, 5 the screenshot could not be written\n";
 
 typedef struct view_args {
-    const char *map, *particles, *mesh, *mesh_pose, *pose, *camera, *size, *screenshot;
-    double radius_m, cell_m, far_m;
-    bool particle_lod, mesh_lod;
+    app_scene_args scene;
+    const char *pose, *camera, *size, *screenshot;
+    double far_m;
     uint32_t exit_after;
     bool overlay;
 } view_args;
@@ -43,25 +43,6 @@ typedef struct view_args {
 static int parse_args(int argc, char **argv, view_args *a)
 {
     const app_option rows[] = {
-        APP_OPT("--map", APP_OPT_STRING, &a->map, "STORE", "the map: a scene store, or a folder holding one as DIR/store"),
-        APP_OPT("--particles", APP_OPT_STRING, &a->particles, "FILE", "particles: a PLY with vertex x y z [m]"),
-        APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
-                .min = 0, .min_open = true, .max = 10),
-        APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
-                "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for that; at most 2 radii)", .min = 1e-5,
-                .max = 20, .no_default = true),
-        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off",
-                "level of detail within the mesh, from the first camera (--pose or the store's): each part at the "
-                "level its pixel footprint needs there (off: the nearest point's level everywhere)"),
-        APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
-                "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
-                "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
-                "cell puts it)"),
-        APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE",
-                "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks at the first pose's "
-                "detail"),
-        APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
-                "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
         APP_OPT("--pose", APP_OPT_STRING, &a->pose, "\"tx ty tz qx qy qz qw\"",
                 "the first camera, camera to world (TUM: looks along +z, y down); default the store's last pose, "
                 "else the whole scene", .no_default = true, .check = app_check_pose),
@@ -79,7 +60,13 @@ static int parse_args(int argc, char **argv, view_args *a)
                 .min = 1, .no_default = true),
         APP_OPT_END,
     };
-    const app_option *tables[] = {rows, NULL};
+    app_option scene[APP_SCENE_ROWS];
+    app_scene_options(scene, &a->scene,
+                      "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks at the first "
+                      "pose's detail",
+                      "level of detail within the mesh, from the first camera (--pose or the store's): each part at "
+                      "the level its pixel footprint needs there (off: the nearest point's level everywhere)");
+    const app_option *tables[] = {scene, rows, NULL};
     app_command_spec spec = {.name = "view", .usage = view_usage, .tables = tables, .epilog = view_epilog};
     return app_options_parse(&spec, argc, argv);
 }
@@ -112,12 +99,14 @@ static bf_status read_files(const view_args *a, view_files *f)
 {
     char msg[512];
     f->T_wm = bf_se3_identity();
-    if (a->mesh_pose) app_parse_pose(a->mesh_pose, &f->T_wm, msg, sizeof msg);
+    if (a->scene.mesh_pose) app_parse_pose(a->scene.mesh_pose, &f->T_wm, msg, sizeof msg);
     bf_status s = BF_OK;
-    if (a->map && !bf_file_exists(a->map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a->map);
-    if (s == BF_OK && a->particles) s = app_scene_read_particles(a->particles, &f->xyz, &f->n_particles);
-    if (s == BF_OK && a->mesh) s = mesh_read(a->mesh, &f->mesh);
-    if (s == BF_OK && a->mesh && f->mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a->mesh);
+    if (a->scene.map && !bf_file_exists(a->scene.map))
+        s = bf_fail(BF_IO, "%s: no such map (store or folder)", a->scene.map);
+    if (s == BF_OK && a->scene.particles) s = app_scene_read_particles(a->scene.particles, &f->xyz, &f->n_particles);
+    if (s == BF_OK && a->scene.mesh) s = mesh_read(a->scene.mesh, &f->mesh);
+    if (s == BF_OK && a->scene.mesh && f->mesh.n_tris == 0)
+        s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a->scene.mesh);
     return s;
 }
 
@@ -132,37 +121,37 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, view_files *f,
     bf_status s = BF_OK;
     sc->lo_w = bf_v3(INFINITY, INFINITY, INFINITY);
     sc->hi_w = bf_v3(-INFINITY, -INFINITY, -INFINITY);
-    if (a->map) s = app_scene_read_map(a->map, &hm, &meta);
-    sc->has_pose = s == BF_OK && a->map && meta.has_pose;
+    if (a->scene.map) s = app_scene_read_map(a->scene.map, &hm, &meta);
+    sc->has_pose = s == BF_OK && a->scene.map && meta.has_pose;
     sc->last_pose = meta.last_pose;
-    if (s == BF_OK && a->mesh) {
+    if (s == BF_OK && a->scene.mesh) {
         bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
         /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
            camera the whole-scene view is made later: one level). */
-        render_voxelise_config vc = app_scene_mesh_config(&f->mesh, &f->T_wm, &T_first, K, a->map ? &hm : NULL,
-                                                          a->mesh_lod && (T_wc || sc->has_pose));
+        render_voxelise_config vc = app_scene_mesh_config(&f->mesh, &f->T_wm, &T_first, K, a->scene.map ? &hm : NULL,
+                                                          a->scene.mesh_lod && (T_wc || sc->has_pose));
         hostmap mh;
         s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, NULL);
         if (s == BF_INVALID_ARG) {
             snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a->mesh, msg);
+            s = bf_fail(BF_FORMAT, "%s: %s", a->scene.mesh, msg);
         }
-        if (s == BF_OK && a->map) s = render_hostmap_merge(&hm, &mh);
+        if (s == BF_OK && a->scene.map) s = render_hostmap_merge(&hm, &mh);
         else if (s == BF_OK) hm = mh;
     }
     for (uint32_t i = 0; s == BF_OK && i < hm.n_bricks; i++) grow(sc, hostmap_voxel_center_w(&hm, &hm.bricks[i], 4, 4, 4));
-    if (s == BF_OK && (a->map || a->mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);
+    if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);
     sc->n_bricks = hm.n_bricks;
     hostmap_free(&hm);
-    if (s == BF_OK && a->particles) {
+    if (s == BF_OK && a->scene.particles) {
         render_particles_config pc = render_particles_config_default();
-        pc.radius_m = (float)a->radius_m;
-        pc.cell_m = (float)a->cell_m;
-        pc.lod = a->particle_lod;
+        pc.radius_m = (float)a->scene.radius_m;
+        pc.cell_m = (float)a->scene.cell_m;
+        pc.lod = a->scene.particle_lod;
         s = render_particles_create(ctx, &pc, f->xyz, f->n_particles, &sc->ps);
         if (s == BF_INVALID_ARG) { /* a position the grid cannot hold is the file's fault */
             snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a->particles, msg);
+            s = bf_fail(BF_FORMAT, "%s: %s", a->scene.particles, msg);
         }
         for (uint32_t i = 0; s == BF_OK && i < f->n_particles; i++)
             grow(sc, bf_v3(f->xyz[3 * i], f->xyz[3 * i + 1], f->xyz[3 * i + 2]));
@@ -232,7 +221,7 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 {
     render_options opt = render_options_display();
     opt.far_m = (float)a->far_m;
-    opt.no_graze = a->mesh != NULL; /* a mesh's outline, as bitfuse render draws it (docs/render.md) */
+    opt.no_graze = a->scene.mesh != NULL; /* a mesh's outline, as bitfuse render draws it (docs/render.md) */
     uint32_t cw = 0, ch = 0, shown = 0;
     bf_se3 T_last;
     memset(&T_last, 0, sizeof T_last);
@@ -292,15 +281,10 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 int cmd_view(int argc, char **argv)
 {
     const char *cmd = "view";
-    view_args a = {.size = "640x480", .radius_m = 0.01, .far_m = 13.1, .overlay = true, .particle_lod = true,
-                   .mesh_lod = true};
+    view_args a = {.size = "640x480", .far_m = 13.1, .overlay = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    if (a.mesh_pose && !a.mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
-    if (!a.map && !a.particles && !a.mesh)
-        return app_usage_error(cmd, "nothing to show: give --map, --mesh, --particles or any of them");
-    if (a.cell_m > 2 * a.radius_m)
-        return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a.cell_m, 2 * a.radius_m);
+    if ((rc = app_scene_check(cmd, "show", &a.scene)) != 0) return rc;
     if (a.screenshot && !a.exit_after)
         return app_usage_error(cmd, "--screenshot needs --exit-after N (the frame it saves)");
     uint32_t W = 640, H = 480;

@@ -13,6 +13,43 @@
 
 /* ------------------------------------------------------------ options render and view share */
 
+void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const char *mesh_help,
+                       const char *mesh_lod_help)
+{
+    *a = (app_scene_args){.radius_m = 0.01, .particle_lod = true, .mesh_lod = true};
+    const app_option r[APP_SCENE_ROWS] = {
+        APP_OPT("--map", APP_OPT_STRING, &a->map, "STORE",
+                "the map: a scene store, or a folder holding one as DIR/store"),
+        APP_OPT("--particles", APP_OPT_STRING, &a->particles, "FILE", "particles: a PLY with vertex x y z [m]"),
+        APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
+                .min = 0, .min_open = true, .max = 10),
+        APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
+                "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for "
+                "that; at most 2 radii)",
+                .min = 1e-5, .max = 20, .no_default = true),
+        APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
+                "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
+                "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
+                "cell puts it)"),
+        APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE", mesh_help),
+        APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
+                "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
+        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off", mesh_lod_help),
+        APP_OPT_END,
+    };
+    memcpy(rows, r, sizeof r);
+}
+
+int app_scene_check(const char *cmd, const char *verb, const app_scene_args *a)
+{
+    if (a->mesh_pose && !a->mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
+    if (!a->map && !a->particles && !a->mesh)
+        return app_usage_error(cmd, "nothing to %s: give --map, --mesh, --particles or any of them", verb);
+    if (a->cell_m > 2 * a->radius_m)
+        return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a->cell_m, 2 * a->radius_m);
+    return 0;
+}
+
 /* "tx ty tz qx qy qz qw" -> T_wc; false with the reason in msg. */
 bool app_parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
 {
