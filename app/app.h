@@ -308,6 +308,20 @@ void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const
 /* The usage errors both refuse (app_usage_error's code), 0 when none;
  * verb names what the command does ("render", "show"). */
 int app_scene_check(const char *cmd, const char *verb, const app_scene_args *a);
+/* The files a scene is drawn from, read before the GPU starts so that a
+ * missing or bad one is named first. */
+typedef struct app_scene_files {
+    float *xyz; /* particle centres, malloc'd */
+    uint32_t n_particles;
+    mesh_data mesh;
+    bf_se3 T_wm; /* --mesh-pose, else the identity */
+} app_scene_files;
+bf_status app_scene_read_files(const app_scene_args *a, app_scene_files *f);
+void app_scene_files_free(app_scene_files *f);
+/* The particles of f on the GPU as a asks (a position the grid cannot
+ * hold is the file's fault: BF_FORMAT naming it). */
+bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f,
+                                   render_particles **out);
 /* The map of a scene store, or of DIR/store (BF_FORMAT: neither, or no
  * brick); meta_out (may be NULL) gets the store's meta. */
 bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out);

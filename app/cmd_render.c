@@ -200,18 +200,8 @@ int cmd_render(int argc, char **argv)
     bf_intrinsics K = {W, H, k[0], k[1], k[2], k[3], 5000};
 
     /* The inputs before the device: a missing file is named before anything starts. */
-    float *xyz = NULL;
-    uint32_t n_particles = 0;
-    bf_status s = BF_OK;
-    if (a.scene.map && !bf_file_exists(a.scene.map))
-        s = bf_fail(BF_IO, "%s: no such map (store or folder)", a.scene.map);
-    if (s == BF_OK && a.scene.particles) s = app_scene_read_particles(a.scene.particles, &xyz, &n_particles);
-    mesh_data mesh = {0};
-    bf_se3 T_wm = bf_se3_identity();
-    if (a.scene.mesh_pose) app_parse_pose(a.scene.mesh_pose, &T_wm, msg, sizeof msg);
-    if (s == BF_OK && a.scene.mesh) s = mesh_read(a.scene.mesh, &mesh);
-    if (s == BF_OK && a.scene.mesh && mesh.n_tris == 0)
-        s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a.scene.mesh);
+    app_scene_files f = {0};
+    bf_status s = app_scene_read_files(&a.scene, &f);
     gpu_context *ctx = NULL;
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
@@ -226,9 +216,9 @@ int cmd_render(int argc, char **argv)
     if (s == BF_OK && a.scene.mesh) {
         /* On the map's grid when there is one, so both are one ray-cast. */
         render_voxelise_config vc =
-            app_scene_mesh_config(&mesh, &T_wm, &T_wc, &K, a.scene.map ? &hm : NULL, a.scene.mesh_lod);
+            app_scene_mesh_config(&f.mesh, &f.T_wm, &T_wc, &K, a.scene.map ? &hm : NULL, a.scene.mesh_lod);
         hostmap mh;
-        s = render_voxelise_mesh(ctx, &mesh, &T_wm, &vc, &mh, &vst);
+        s = render_voxelise_mesh(ctx, &f.mesh, &f.T_wm, &vc, &mh, &vst);
         if (s == BF_INVALID_ARG) {
             snprintf(msg, sizeof msg, "%s", bf_last_error());
             s = bf_fail(BF_FORMAT, "%s: %s", a.scene.mesh, msg);
@@ -239,18 +229,7 @@ int cmd_render(int argc, char **argv)
     if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);
-    if (s == BF_OK && a.scene.particles) {
-        render_particles_config pc = render_particles_config_default();
-        pc.radius_m = (float)a.scene.radius_m;
-        pc.cell_m = (float)a.scene.cell_m;
-        pc.lod = a.scene.particle_lod;
-        s = render_particles_create(ctx, &pc, xyz, n_particles, &ps);
-        /* A position the grid cannot hold is the file's fault. */
-        if (s == BF_INVALID_ARG) {
-            snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a.scene.particles, msg);
-        }
-    }
+    if (s == BF_OK && a.scene.particles) s = app_scene_make_particles(ctx, &a.scene, &f, &ps);
     if (s == BF_OK) s = render_create(ctx, NULL, W, H, &caster);
     render_options opt = render_options_display();
     opt.far_m = (float)a.far_m;
@@ -274,7 +253,7 @@ int cmd_render(int argc, char **argv)
         uint64_t n_hit = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
         render_report r = {&a, W, H, gpu_device_name(ctx), gpu_device(ctx)->driver_info, (double)n_hit / ((double)W * H), n_map_bricks, n_bricks,
-                           mesh.n_tris, &vst, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
+                           f.mesh.n_tris, &vst, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
         s = app_json_print(render_json(&r));
     } else if (s == BF_OK) {
         uint64_t n_hit = 0;
@@ -287,19 +266,19 @@ int cmd_render(int argc, char **argv)
             printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
                    "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks "
                    "with crossings to test)\n",
-                   a.scene.mesh, mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
-                   vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu,
+                   a.scene.mesh, f.mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
+                   vst.seconds > 0 ? 1e-6 * f.mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu,
                    vst.n_gpu_bricks);
         if (a.scene.mesh && !one_level) {
             printf("  mesh             %s: %u triangles at levels %u-%u (level of detail, %u columns along %c): %u "
                    "bricks (",
-                   a.scene.mesh, mesh.n_tris, vst.level_coarse, vst.level_fine, vst.n_columns, "xyz"[vst.column_axis],
+                   a.scene.mesh, f.mesh.n_tris, vst.level_coarse, vst.level_fine, vst.n_columns, "xyz"[vst.column_axis],
                    vst.n_bricks);
             for (uint32_t l = vst.level_coarse; l <= vst.level_fine; l++)
                 printf("%s%u at %u", l > vst.level_coarse ? ", " : "", vst.bricks_at_level[l], l);
             printf("), voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks with "
                    "crossings to test)\n",
-                   vst.seconds, vst.seconds > 0 ? 1e-6 * mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin,
+                   vst.seconds, vst.seconds > 0 ? 1e-6 * f.mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin,
                    vst.seconds_gpu, vst.n_gpu_bricks);
         }
         if (a.scene.map && a.scene.mesh) printf("  together         %u bricks\n", n_bricks);
@@ -326,7 +305,6 @@ int cmd_render(int argc, char **argv)
     render_particles_destroy(ps);
     fusion_destroy(map);
     gpu_context_destroy(ctx);
-    free(xyz);
-    mesh_free(&mesh);
+    app_scene_files_free(&f);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -87,32 +87,9 @@ static void grow(view_scene *sc, bf_vec3 p)
     sc->hi_w = bf_v3(fmax(sc->hi_w.x, p.x), fmax(sc->hi_w.y, p.y), fmax(sc->hi_w.z, p.z));
 }
 
-/* The files first (bitfuse render's order: a missing one is named before the GPU starts). */
-typedef struct view_files {
-    float *xyz;
-    uint32_t n_particles;
-    mesh_data mesh;
-    bf_se3 T_wm;
-} view_files;
-
-static bf_status read_files(const view_args *a, view_files *f)
-{
-    char msg[512];
-    f->T_wm = bf_se3_identity();
-    if (a->scene.mesh_pose) app_parse_pose(a->scene.mesh_pose, &f->T_wm, msg, sizeof msg);
-    bf_status s = BF_OK;
-    if (a->scene.map && !bf_file_exists(a->scene.map))
-        s = bf_fail(BF_IO, "%s: no such map (store or folder)", a->scene.map);
-    if (s == BF_OK && a->scene.particles) s = app_scene_read_particles(a->scene.particles, &f->xyz, &f->n_particles);
-    if (s == BF_OK && a->scene.mesh) s = mesh_read(a->scene.mesh, &f->mesh);
-    if (s == BF_OK && a->scene.mesh && f->mesh.n_tris == 0)
-        s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a->scene.mesh);
-    return s;
-}
-
 /* The scene on the GPU as bitfuse render loads it; the mesh at the detail
  * of the first camera (T_wc; NULL: the store's last pose, else 1 m away). */
-static bf_status load_scene(gpu_context *ctx, const view_args *a, view_files *f, const bf_intrinsics *K,
+static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_files *f, const bf_intrinsics *K,
                             const bf_se3 *T_wc, view_scene *sc)
 {
     char msg[512];
@@ -144,15 +121,7 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, view_files *f,
     sc->n_bricks = hm.n_bricks;
     hostmap_free(&hm);
     if (s == BF_OK && a->scene.particles) {
-        render_particles_config pc = render_particles_config_default();
-        pc.radius_m = (float)a->scene.radius_m;
-        pc.cell_m = (float)a->scene.cell_m;
-        pc.lod = a->scene.particle_lod;
-        s = render_particles_create(ctx, &pc, f->xyz, f->n_particles, &sc->ps);
-        if (s == BF_INVALID_ARG) { /* a position the grid cannot hold is the file's fault */
-            snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a->scene.particles, msg);
-        }
+        s = app_scene_make_particles(ctx, &a->scene, f, &sc->ps);
         for (uint32_t i = 0; s == BF_OK && i < f->n_particles; i++)
             grow(sc, bf_v3(f->xyz[3 * i], f->xyz[3 * i + 1], f->xyz[3 * i + 2]));
         if (s == BF_OK) sc->n_bricks += render_particles_get_stats(sc->ps)->n_bricks;
@@ -297,8 +266,8 @@ int cmd_view(int argc, char **argv)
     if (a.pose) app_parse_pose(a.pose, &T_wc, msg, sizeof msg);
 
     /* The files before the window: a bad path is named first. */
-    view_files f = {0};
-    bf_status s = read_files(&a, &f);
+    app_scene_files f = {0};
+    bf_status s = app_scene_read_files(&a.scene, &f);
     view_config vc = view_config_default();
     vc.width = W, vc.height = H;
     vc.title = "bitfuse view";
@@ -324,7 +293,6 @@ int cmd_view(int argc, char **argv)
     gpu_context_destroy(L.ctx);
     view_destroy(L.win);
     free(L.rgb);
-    free(f.xyz);
-    mesh_free(&f.mesh);
+    app_scene_files_free(&f);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -50,6 +50,42 @@ int app_scene_check(const char *cmd, const char *verb, const app_scene_args *a)
     return 0;
 }
 
+bf_status app_scene_read_files(const app_scene_args *a, app_scene_files *f)
+{
+    char msg[512];
+    f->T_wm = bf_se3_identity();
+    if (a->mesh_pose) app_parse_pose(a->mesh_pose, &f->T_wm, msg, sizeof msg); /* checked when parsed */
+    bf_status s = BF_OK;
+    if (a->map && !bf_file_exists(a->map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a->map);
+    if (s == BF_OK && a->particles) s = app_scene_read_particles(a->particles, &f->xyz, &f->n_particles);
+    if (s == BF_OK && a->mesh) s = mesh_read(a->mesh, &f->mesh);
+    if (s == BF_OK && a->mesh && f->mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a->mesh);
+    return s;
+}
+
+void app_scene_files_free(app_scene_files *f)
+{
+    free(f->xyz);
+    mesh_free(&f->mesh);
+    memset(f, 0, sizeof *f);
+}
+
+bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f,
+                                   render_particles **out)
+{
+    render_particles_config pc = render_particles_config_default();
+    pc.radius_m = (float)a->radius_m;
+    pc.cell_m = (float)a->cell_m;
+    pc.lod = a->particle_lod;
+    bf_status s = render_particles_create(ctx, &pc, f->xyz, f->n_particles, out);
+    if (s == BF_INVALID_ARG) {
+        char msg[512];
+        snprintf(msg, sizeof msg, "%s", bf_last_error());
+        s = bf_fail(BF_FORMAT, "%s: %s", a->particles, msg);
+    }
+    return s;
+}
+
 /* "tx ty tz qx qy qz qw" -> T_wc; false with the reason in msg. */
 bool app_parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
 {
