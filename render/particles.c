@@ -22,9 +22,8 @@
 
 #include "bf_shaders_spv.h"
 #include "particles_bin.h"
-#include "render.h"
+#include "render_int.h"
 #include "shaders/fusion.glsl.h"
-#include "shaders/render.glsl.h"
 
 struct render_particles {
     gpu_context *ctx;
@@ -445,27 +444,15 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         ps->resume = nb, ps->lists = nl;
     }
     fusion_gpu_view v = fusion_gpu_view_get(ps->map);
-    bf_se3 T_mc = fusion_camera_to_map(ps->map, T_wc);
     render_particles_push pc = {
-        .fx = (float)K->fx_px,
-        .fy = (float)K->fy_px,
-        .cx = (float)K->cx_px,
-        .cy = (float)K->cy_px,
-        .width = K->width,
-        .height = K->height,
-        .near_m = opt->near_m,
-        .far_m = opt->far_m,
-        .chunk_m = v.chunk_m,
-        .n_buckets = v.n_buckets,
-        .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
-        .max_level = ps->stats.level - PARTICLES_COARSE_LEVELS, /* the walk's: the coarse level */
         .radius_m = ps->cfg.radius_m,
         .flags = (keep_nearer ? RENDER_PARTICLES_FLAG_KEEP_NEARER : 0u) | (ps->cfg.lod ? RENDER_PARTICLES_FLAG_LOD : 0u),
         .rgb = ps->cfg.rgb,
         .limits = ps->cells_per_pass | ps->work_budget << RENDER_PARTICLES_LIMIT_CELL_BITS,
     };
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_mc.R[r][c];
+    /* The walk's deepest level is the coarse one. */
+    render__view_push(&pc.view, ps->map, &v, K, T_wc, opt->near_m, opt->far_m,
+                      ps->stats.level - PARTICLES_COARSE_LEVELS);
     /* The box in the map frame grown by the radius and a cell (rounding):
      * every sphere lies in it. Empty set: a box no ray enters. */
     const render_particles_stats *st = &ps->stats;
@@ -476,7 +463,6 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
         if (l < pc.box_lo) pc.box_lo = l;
     }
     for (int a = 0; a < 3; a++) pc.box_hi[a] = st->n_particles ? (float)(ps->box_w[1][a] - o[a] + grow) : -2.0f;
-    pc.t[0] = (float)T_mc.t.x, pc.t[1] = (float)T_mc.t.y, pc.t[2] = (float)T_mc.t.z;
     /* The images' earlier writes (the map's ray-cast and shading) -> this
      * pass's reads and writes of them. */
     gpu_cmd_barrier(ps->ctx, GPU_BARRIER_COMPUTE);

@@ -7,9 +7,8 @@
 #include <string.h>
 
 #include "bf_shaders_spv.h"
-#include "render.h"
+#include "render_int.h"
 #include "shaders/fusion.glsl.h"
-#include "shaders/render.glsl.h"
 
 struct render_caster {
     gpu_context *ctx;
@@ -187,22 +186,7 @@ bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrin
         rc->bound_depth = depth;
     }
 
-    /* The map-relative pose: the GPU's floats stay small however far the
-     * map is from the world origin (DESIGN.md section 10). */
-    bf_se3 T_mc = fusion_camera_to_map(map, T_wc);
     render_push pc = {
-        .fx = (float)K->fx_px,
-        .fy = (float)K->fy_px,
-        .cx = (float)K->cx_px,
-        .cy = (float)K->cy_px,
-        .width = K->width,
-        .height = K->height,
-        .near_m = opt->near_m,
-        .far_m = opt->far_m,
-        .chunk_m = v.chunk_m,
-        .n_buckets = v.n_buckets,
-        .n_overflow = v.n_entries - v.n_buckets * FUSION_BUCKET_SLOTS,
-        .max_level = v.max_level,
         .flags = (opt->confident_only ? RENDER_FLAG_CONFIDENT_ONLY : 0u) | (opt->refine ? RENDER_FLAG_REFINE : 0u) |
                  (opt->start_depth ? RENDER_FLAG_START : 0u) | (!opt->no_shade && v.has_colour ? RENDER_FLAG_COLOUR : 0u) |
                  (opt->no_graze ? RENDER_FLAG_NO_GRAZE : 0u),
@@ -211,9 +195,7 @@ bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrin
         .start_off = (uint32_t)opt->start_offset,
         .depth_off = opt->depth_out ? (uint32_t)opt->depth_offset : 0u,
     };
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) pc.R[3 * r + c] = (float)T_mc.R[r][c];
-    pc.t[0] = (float)T_mc.t.x, pc.t[1] = (float)T_mc.t.y, pc.t[2] = (float)T_mc.t.z;
+    render__view_push(&pc.view, map, &v, K, T_wc, opt->near_m, opt->far_m, v.max_level);
 
     uint32_t gx = gpu_groups(K->width, rc->local_x), gy = gpu_groups(K->height, rc->local_y);
     /* The map's writes recorded before (fusion) and the earlier readers of
@@ -230,6 +212,29 @@ bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrin
     /* The images -> the readers recorded next (the tracking reference). */
     gpu_cmd_barrier(rc->ctx, GPU_BARRIER_COMPUTE);
     return BF_OK;
+}
+
+void render__view_push(render_view_push *p, const fusion_map *map, const fusion_gpu_view *v, const bf_intrinsics *K,
+                       const bf_se3 *T_wc, float near_m, float far_m, uint32_t max_level)
+{
+    bf_se3 T_mc = fusion_camera_to_map(map, T_wc);
+    *p = (render_view_push){
+        .fx = (float)K->fx_px,
+        .fy = (float)K->fy_px,
+        .cx = (float)K->cx_px,
+        .cy = (float)K->cy_px,
+        .width = K->width,
+        .height = K->height,
+        .near_m = near_m,
+        .far_m = far_m,
+        .chunk_m = v->chunk_m,
+        .n_buckets = v->n_buckets,
+        .n_overflow = v->n_entries - v->n_buckets * FUSION_BUCKET_SLOTS,
+        .max_level = max_level,
+    };
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) p->R[3 * r + c] = (float)T_mc.R[r][c];
+    p->t[0] = (float)T_mc.t.x, p->t[1] = (float)T_mc.t.y, p->t[2] = (float)T_mc.t.z;
 }
 
 void render_finish_raycast(render_caster *rc) { rc->last_ms = gpu_stage_ms(rc->ctx, "render.raycast"); }

@@ -78,8 +78,10 @@
 #define RENDER_SUBVOXEL_MAX_STEP 1.0f
 #define RENDER_SUBVOXEL_MAX_MOVE 3.0f
 
-/* Push constants of render_raycast.comp and render_shade.comp. */
-struct render_push {
+/* The camera and the map's hash as a ray-casting pass sees them: the first
+ * words of render_push and render_particles_push, filled once for both
+ * (render/render_int.h). */
+struct render_view_push {
     bf_f32 R[9];             /* camera to map rotation, row-major */
     bf_f32 t[3];             /* camera centre in the map frame [m] */
     bf_f32 fx, fy, cx, cy;   /* pixels */
@@ -88,7 +90,17 @@ struct render_push {
     bf_f32 chunk_m;
     bf_u32 n_buckets;        /* fusion_hash's modulus */
     bf_u32 n_overflow;       /* overflow entries after the buckets' slots */
-    bf_u32 max_level;
+    bf_u32 max_level;        /* the walk's deepest level */
+};
+#define RENDER_VIEW_PUSH_WORDS 24u
+#ifndef BF_GLSL
+typedef struct render_view_push render_view_push;
+_Static_assert(sizeof(render_view_push) == RENDER_VIEW_PUSH_WORDS * 4, "render_view_push must match std430");
+#endif
+
+/* Push constants of render_raycast.comp and render_shade.comp. */
+struct render_push {
+    render_view_push view;
     bf_u32 flags;            /* RENDER_FLAG_* */
     /* RENDER_FLAG_START: a ray whose pixel has depth z > 0 in the start
      * image (binding 6, floats from start_off) begins at max(near_m, z -
@@ -103,9 +115,9 @@ struct render_push {
 #ifndef BF_GLSL
 typedef struct render_push render_push;
 _Static_assert(sizeof(render_push) == RENDER_PUSH_WORDS * 4, "render_push must match std430");
-_Static_assert(__builtin_offsetof(render_push, fx) == 48, "render_push.fx");
-_Static_assert(__builtin_offsetof(render_push, width) == 64, "render_push.width");
-_Static_assert(__builtin_offsetof(render_push, chunk_m) == 80, "render_push.chunk_m");
+_Static_assert(__builtin_offsetof(render_push, view.fx) == 48, "render_push.view.fx");
+_Static_assert(__builtin_offsetof(render_push, view.width) == 64, "render_push.view.width");
+_Static_assert(__builtin_offsetof(render_push, view.chunk_m) == 80, "render_push.view.chunk_m");
 _Static_assert(__builtin_offsetof(render_push, flags) == 96, "render_push.flags");
 #endif
 
@@ -214,13 +226,7 @@ BF_FN bool render_edge_owns(bf_f32 ax, bf_f32 ay, bf_f32 bx, bf_f32 by)
  * bits (sign word << 5 | bit), the brick itself not read. */
 #define RENDER_PARTICLES_INDEX_ONE 0x80000000u
 struct render_particles_push {
-    bf_f32 R[9];             /* camera to particle-map rotation, row-major */
-    bf_f32 t[3];             /* camera centre in the particle map's frame [m] */
-    bf_f32 fx, fy, cx, cy;   /* pixels */
-    bf_u32 width, height;
-    bf_f32 near_m, far_m;
-    bf_f32 chunk_m;
-    bf_u32 n_buckets, n_overflow, max_level;
+    render_view_push view;   /* the particle map's; max_level the walk's (the coarse level) */
     bf_f32 radius_m;         /* every particle's sphere */
     bf_u32 flags;            /* RENDER_PARTICLES_FLAG_*, the dispatch's index << RENDER_PARTICLES_PASS_SHIFT */
     bf_u32 rgb;              /* the particles' colour, R in the low byte */
@@ -233,7 +239,8 @@ struct render_particles_push {
 #ifndef BF_GLSL
 typedef struct render_particles_push render_particles_push;
 _Static_assert(sizeof(render_particles_push) == RENDER_PARTICLES_PUSH_WORDS * 4, "render_particles_push must match std430");
-_Static_assert(__builtin_offsetof(render_particles_push, chunk_m) == 80, "render_particles_push.chunk_m");
+_Static_assert(__builtin_offsetof(render_particles_push, view.chunk_m) == 80, "render_particles_push.view.chunk_m");
+_Static_assert(__builtin_offsetof(render_particles_push, radius_m) == 96, "render_particles_push.radius_m");
 _Static_assert(__builtin_offsetof(render_particles_push, rgb) == 104, "render_particles_push.rgb");
 #endif
 

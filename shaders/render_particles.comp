@@ -52,7 +52,7 @@ uint render_particles_index_word(uint i) { return cindex.w[i]; }
 float render_particle_radius_m() { return pc.radius_m; }
 render_walk_map render_particle_map()
 {
-    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow,
+    return render_walk_map(pc.view.chunk_m, pc.view.max_level, pc.view.n_buckets, pc.view.n_overflow,
                            pc.limits & ((1u << RENDER_PARTICLES_LIMIT_CELL_BITS) - 1u));
 }
 uint render_particles_budget() { return pc.limits >> RENDER_PARTICLES_LIMIT_CELL_BITS; }
@@ -64,10 +64,10 @@ uint render_particles_budget() { return pc.limits >> RENDER_PARTICLES_LIMIT_CELL
 float render_particles_lod_k()
 {
     if ((pc.flags & RENDER_PARTICLES_FLAG_LOD) == 0u) return 3.0e38;
-    float ax = max(pc.cx + 0.5, float(pc.width) - 0.5 - pc.cx) / pc.fx;
-    float ay = max(pc.cy + 0.5, float(pc.height) - 0.5 - pc.cy) / pc.fy;
+    float ax = max(pc.view.cx + 0.5, float(pc.view.width) - 0.5 - pc.view.cx) / pc.view.fx;
+    float ay = max(pc.view.cy + 0.5, float(pc.view.height) - 0.5 - pc.view.cy) / pc.view.fy;
     float cos_max = inversesqrt(1.0 + ax * ax + ay * ay);
-    return sqrt(3.0) * max(pc.fx, pc.fy) / cos_max;
+    return sqrt(3.0) * max(pc.view.fx, pc.view.fy) / cos_max;
 }
 
 #define RENDER_TRAVERSE_PARTICLES
@@ -77,7 +77,7 @@ float render_particles_lod_k()
  * runs a workgroup per workgroup size of them. */
 void append(uint pixel)
 {
-    uint k = pc.flags >> RENDER_PARTICLES_PASS_SHIFT, n_px = pc.width * pc.height;
+    uint k = pc.flags >> RENDER_PARTICLES_PASS_SHIFT, n_px = pc.view.width * pc.view.height;
     uint a = k * RENDER_PARTICLES_ARGS_WORDS;
     uint i = atomicAdd(args.v[a + 3u], 1u);
     lists.v[(k & 1u) * n_px + i] = pixel;
@@ -91,21 +91,21 @@ void main()
     uint pixel;
     uvec2 px;
     if ((pc.flags & RENDER_PARTICLES_FLAG_LIST) != 0u) {
-        uint k = pc.flags >> RENDER_PARTICLES_PASS_SHIFT, n_px = pc.width * pc.height;
+        uint k = pc.flags >> RENDER_PARTICLES_PASS_SHIFT, n_px = pc.view.width * pc.view.height;
         uint i = gl_WorkGroupID.x * (gl_WorkGroupSize.x * gl_WorkGroupSize.y) + gl_LocalInvocationIndex;
         if (i >= args.v[(k - 1u) * RENDER_PARTICLES_ARGS_WORDS + 3u]) return;
         pixel = lists.v[((k - 1u) & 1u) * n_px + i];
-        px = uvec2(pixel % pc.width, pixel / pc.width);
+        px = uvec2(pixel % pc.view.width, pixel / pc.view.width);
     } else {
         px = gl_GlobalInvocationID.xy;
-        if (px.x >= pc.width || px.y >= pc.height) return;
-        pixel = px.y * pc.width + px.x;
+        if (px.x >= pc.view.width || px.y >= pc.view.height) return;
+        pixel = px.y * pc.view.width + px.x;
     }
-    float s = (pc.flags & RENDER_PARTICLES_FLAG_FIRST) != 0u ? pc.near_m : resume.v[pixel];
+    float s = (pc.flags & RENDER_PARTICLES_FLAG_FIRST) != 0u ? pc.view.near_m : resume.v[pixel];
     if (s < 0.0) return; /* done in an earlier dispatch */
-    render_ray ray = render_pixel_ray(px, pc.R, pc.t, pc.fx, pc.fy, pc.cx, pc.cy);
+    render_ray ray = render_pixel_ray(px, pc.view.R, pc.view.t, pc.view.fx, pc.view.fy, pc.view.cx, pc.view.cy);
     bool keep = (pc.flags & RENDER_PARTICLES_FLAG_KEEP_NEARER) != 0u;
-    float far_m = pc.far_m;
+    float far_m = pc.view.far_m;
     if (keep) {
         float z = depth_io.v[pixel];
         if (z > 0.0) far_m = min(far_m, z);
@@ -136,9 +136,9 @@ void main()
     if (hit) {
         /* The normal in camera coordinates: R^T n (R takes camera to map). */
         vec3 n = tr.hit_normal;
-        vec3 nc = vec3(pc.R[0] * n.x + pc.R[3] * n.y + pc.R[6] * n.z, pc.R[1] * n.x + pc.R[4] * n.y + pc.R[7] * n.z,
-                       pc.R[2] * n.x + pc.R[5] * n.y + pc.R[8] * n.z);
-        vec3 view = normalize(vec3((float(px.x) - pc.cx) / pc.fx, (float(px.y) - pc.cy) / pc.fy, 1.0));
+        vec3 nc = vec3(pc.view.R[0] * n.x + pc.view.R[3] * n.y + pc.view.R[6] * n.z, pc.view.R[1] * n.x + pc.view.R[4] * n.y + pc.view.R[7] * n.z,
+                       pc.view.R[2] * n.x + pc.view.R[5] * n.y + pc.view.R[8] * n.z);
+        vec3 view = normalize(vec3((float(px.x) - pc.view.cx) / pc.view.fx, (float(px.y) - pc.view.cy) / pc.view.fy, 1.0));
         depth_io.v[pixel] = tr.hit_depth;
         level_out.v[pixel] = tr.hit_level;
         normal_out.v[pixel] = vec4(nc, 0.0);

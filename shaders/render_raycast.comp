@@ -36,7 +36,7 @@ uint render_node_word(uint i) { return nodes.w[i]; }
 
 render_walk_map walk_map()
 {
-    return render_walk_map(pc.chunk_m, pc.max_level, pc.n_buckets, pc.n_overflow, RENDER_MAX_CELLS);
+    return render_walk_map(pc.view.chunk_m, pc.view.max_level, pc.view.n_buckets, pc.view.n_overflow, RENDER_MAX_CELLS);
 }
 
 /* ---------------------------------------------------- sub-voxel refinement
@@ -106,7 +106,7 @@ void gather_block(ivec3 B, uint level, uint hit_slot, ivec3 hit_brick, bool conf
  * the same level next to it; 0 without colour. */
 uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
 {
-    float v = fusion_voxel_m(pc.chunk_m, level);
+    float v = fusion_voxel_m(pc.view.chunk_m, level);
     ivec3 G = ivec3(floor(p / v)), nb = G >> 3;
     if (nb != brick) slot = render_brick_at(walk_map(), nb, level);
     if (slot == FUSION_NONE) return 0u;
@@ -131,7 +131,7 @@ uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
  * grazing ray can cross beside the voxel it hits). */
 uint hit_colour(render_ray ray, render_trace tr)
 {
-    float v = fusion_voxel_m(pc.chunk_m, tr.hit_level);
+    float v = fusion_voxel_m(pc.view.chunk_m, tr.hit_level);
     vec3 p = ray.o + tr.hit_depth * ray.dir;
     vec3 dir = normalize(ray.dir);
     uint c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p);
@@ -153,7 +153,7 @@ uint hit_colour(render_ray ray, render_trace tr)
 float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s0, bool confident_only, bool want_f,
                      out float f_end)
 {
-    float v = fusion_voxel_m(pc.chunk_m, level), inv_v = 1.0 / v;
+    float v = fusion_voxel_m(pc.view.chunk_m, level), inv_v = 1.0 / v;
     float step_max = RENDER_SUBVOXEL_MAX_STEP * v / length(ray.dir);
     float lo = s0 - RENDER_SUBVOXEL_MAX_MOVE * step_max, hi = s0 + RENDER_SUBVOXEL_MAX_MOVE * step_max;
     float s = s0;
@@ -202,9 +202,9 @@ float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s
 void main()
 {
     uvec2 px = gl_GlobalInvocationID.xy;
-    if (px.x >= pc.width || px.y >= pc.height) return;
-    uint pixel = px.y * pc.width + px.x;
-    render_ray ray = render_pixel_ray(px, pc.R, pc.t, pc.fx, pc.fy, pc.cx, pc.cy);
+    if (px.x >= pc.view.width || px.y >= pc.view.height) return;
+    uint pixel = px.y * pc.view.width + px.x;
+    render_ray ray = render_pixel_ray(px, pc.view.R, pc.view.t, pc.view.fx, pc.view.fy, pc.view.cx, pc.view.cy);
 
     render_trace tr;
     tr.has_front = 0u;
@@ -212,7 +212,7 @@ void main()
     tr.hit_depth = 0.0;
     tr.hit_level = FUSION_NONE;
 
-    float s = pc.near_m;
+    float s = pc.view.near_m;
     if ((pc.flags & RENDER_FLAG_START) != 0u) {
         /* Skip the free space in front of a surface the caller knows (the
          * frame just fused at this pose): the walk's per-cell cost is what
@@ -220,7 +220,7 @@ void main()
         float z0 = start_in.v[pc.start_off + pixel];
         if (z0 > 0.0) s = max(s, z0 - (pc.start_margin_m + pc.start_margin_z2 * z0 * z0));
     }
-    bool hit = render_walk(walk_map(), ray, s, pc.far_m, pc.flags, tr), refined = false;
+    bool hit = render_walk(walk_map(), ray, s, pc.view.far_m, pc.flags, tr), refined = false;
     /* no_graze: a hit whose refined depth stays in front of the smoothed
      * surface grazed a behind voxel's corner; the walk goes on behind it, as
      * from unknown space. */
@@ -234,7 +234,7 @@ void main()
             break;
         }
         tr.has_front = 0u;
-        hit = render_walk(walk_map(), ray, tr.hit_s_exit + RENDER_NUDGE, pc.far_m, pc.flags, tr);
+        hit = render_walk(walk_map(), ray, tr.hit_s_exit + RENDER_NUDGE, pc.view.far_m, pc.flags, tr);
     }
     float f_unused;
     if (hit && !refined && (pc.flags & RENDER_FLAG_REFINE) != 0u)

@@ -38,14 +38,14 @@ layout(push_constant) uniform Push { render_push pc; };
 #define RENDER_NORMAL_MAX_PX 4
 #define RENDER_EDGE_REL 0.02
 
-vec3 back_project(int u, int v, float z) { return z * vec3((float(u) - pc.cx) / pc.fx, (float(v) - pc.cy) / pc.fy, 1.0); }
+vec3 back_project(int u, int v, float z) { return z * vec3((float(u) - pc.view.cx) / pc.view.fx, (float(v) - pc.view.cy) / pc.view.fy, 1.0); }
 
 /* Depth of pixel (u, v) if it is usable as a neighbour of a pixel at depth
  * z with edge threshold thr, else 0. */
 float neighbour(int u, int v, float z, float thr)
 {
-    if (u < 0 || v < 0 || u >= int(pc.width) || v >= int(pc.height)) return 0.0;
-    float d = depth_in.v[uint(v) * pc.width + uint(u)];
+    if (u < 0 || v < 0 || u >= int(pc.view.width) || v >= int(pc.view.height)) return 0.0;
+    float d = depth_in.v[uint(v) * pc.view.width + uint(u)];
     return (d > 0.0 && abs(d - z) <= thr) ? d : 0.0;
 }
 
@@ -65,8 +65,8 @@ bool tangent(int u, int v, int du, int dv, float z, float thr, out vec3 t)
 void main()
 {
     uvec2 px = gl_GlobalInvocationID.xy;
-    if (px.x >= pc.width || px.y >= pc.height) return;
-    uint pixel = px.y * pc.width + px.x;
+    if (px.x >= pc.view.width || px.y >= pc.view.height) return;
+    uint pixel = px.y * pc.view.width + px.x;
     float z = depth_in.v[pixel];
     if (!(z > 0.0)) {
         normal_out.v[pixel] = vec4(0.0);
@@ -74,13 +74,13 @@ void main()
         return;
     }
     uint level = level_in.v[pixel];
-    float thr = RENDER_EDGE_VOXELS * fusion_voxel_m(pc.chunk_m, min(level, FUSION_MAX_LEVEL)) + RENDER_EDGE_REL * z;
+    float thr = RENDER_EDGE_VOXELS * fusion_voxel_m(pc.view.chunk_m, min(level, FUSION_MAX_LEVEL)) + RENDER_EDGE_REL * z;
 
     int u = int(px.x), v = int(px.y);
     vec3 p = back_project(u, v, z);
     vec3 view = normalize(p);
-    float voxel = fusion_voxel_m(pc.chunk_m, min(level, FUSION_MAX_LEVEL));
-    int k = clamp(int(RENDER_NORMAL_VOXELS * voxel * pc.fx / z + 0.5), 1, RENDER_NORMAL_MAX_PX);
+    float voxel = fusion_voxel_m(pc.view.chunk_m, min(level, FUSION_MAX_LEVEL));
+    int k = clamp(int(RENDER_NORMAL_VOXELS * voxel * pc.view.fx / z + 0.5), 1, RENDER_NORMAL_MAX_PX);
     float thr_k = thr * float(k);
     vec3 tx, ty, n;
     if (tangent(u, v, k, 0, z, thr_k, tx) && tangent(u, v, 0, k, z, thr_k, ty)) {
