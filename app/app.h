@@ -327,13 +327,13 @@ bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, co
 bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out);
 /* A host map into a GPU map of its own size (hash, nodes, colour units). */
 bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);
-/* How to voxelise a mesh seen by camera T_wc (K), on the grid of map m
- * (NULL: its own): with lod, each column at the level its pixel footprint
- * needs, no finer than fusion's finest; without, all of it at the level
- * whose voxel is a third of the footprint at its nearest vertex in front
- * of the camera. */
-render_voxelise_config app_scene_mesh_config(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc,
-                                             const bf_intrinsics *K, const hostmap *m, bool lod);
+/* f's mesh voxelised as camera T_wc (K) sees it (lod: each column at the
+ * level its pixel footprint needs; else all at one level from its nearest
+ * vertex) into *hm: merged on the grid of the map read there when a has
+ * one, else *hm becomes the mesh's own. A mesh the grid cannot hold is
+ * BF_FORMAT naming the file. vst (may be NULL) gets the voxeliser's stats. */
+bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
+                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst);
 /* The vertices of a PLY as particle centres (world floats, malloc'd). */
 bf_status app_scene_read_particles(const char *path, float **xyz, uint32_t *n);
 

@@ -213,19 +213,7 @@ int cmd_render(int argc, char **argv)
     render_voxelise_stats vst = {0};
     if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, NULL);
     n_map_bricks = hm.n_bricks;
-    if (s == BF_OK && a.scene.mesh) {
-        /* On the map's grid when there is one, so both are one ray-cast. */
-        render_voxelise_config vc =
-            app_scene_mesh_config(&f.mesh, &f.T_wm, &T_wc, &K, a.scene.map ? &hm : NULL, a.scene.mesh_lod);
-        hostmap mh;
-        s = render_voxelise_mesh(ctx, &f.mesh, &f.T_wm, &vc, &mh, &vst);
-        if (s == BF_INVALID_ARG) {
-            snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a.scene.mesh, msg);
-        }
-        if (s == BF_OK && a.scene.map) s = render_hostmap_merge(&hm, &mh);
-        else if (s == BF_OK) hm = mh;
-    }
+    if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, &hm, &vst);
     if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);

@@ -92,7 +92,6 @@ static void grow(view_scene *sc, bf_vec3 p)
 static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_files *f, const bf_intrinsics *K,
                             const bf_se3 *T_wc, view_scene *sc)
 {
-    char msg[512];
     hostmap hm = {0};
     store_meta meta = {0};
     bf_status s = BF_OK;
@@ -105,16 +104,7 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_file
         bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
         /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
            camera the whole-scene view is made later: one level). */
-        render_voxelise_config vc = app_scene_mesh_config(&f->mesh, &f->T_wm, &T_first, K, a->scene.map ? &hm : NULL,
-                                                          a->scene.mesh_lod && (T_wc || sc->has_pose));
-        hostmap mh;
-        s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, NULL);
-        if (s == BF_INVALID_ARG) {
-            snprintf(msg, sizeof msg, "%s", bf_last_error());
-            s = bf_fail(BF_FORMAT, "%s: %s", a->scene.mesh, msg);
-        }
-        if (s == BF_OK && a->scene.map) s = render_hostmap_merge(&hm, &mh);
-        else if (s == BF_OK) hm = mh;
+        s = app_scene_add_mesh(ctx, &a->scene, f, &T_first, K, a->scene.mesh_lod && (T_wc || sc->has_pose), &hm, NULL);
     }
     for (uint32_t i = 0; s == BF_OK && i < hm.n_bricks; i++) grow(sc, hostmap_voxel_center_w(&hm, &hm.bricks[i], 4, 4, 4));
     if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);

@@ -273,8 +273,13 @@ static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_s
     return render_level_for_footprint(chunk_m, z_min, K->fx_px > K->fy_px ? K->fx_px : K->fy_px, max_level);
 }
 
-render_voxelise_config app_scene_mesh_config(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc,
-                                             const bf_intrinsics *K, const hostmap *m, bool lod)
+/* How to voxelise a mesh seen by camera T_wc (K), on the grid of map m
+ * (NULL: its own): with lod, each column at the level its pixel footprint
+ * needs, no finer than fusion's finest; without, all of it at the level
+ * whose voxel is a third of the footprint at its nearest vertex in front
+ * of the camera. */
+static render_voxelise_config mesh_config(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc,
+                                          const bf_intrinsics *K, const hostmap *m, bool lod)
 {
     const float near_m = 0.05f;
     render_voxelise_config vc = render_voxelise_config_default();
@@ -285,6 +290,29 @@ render_voxelise_config app_scene_mesh_config(const mesh_data *mesh, const bf_se3
     else
         vc.level = mesh_level(mesh, T_wm, T_wc, K, vc.chunk_m, finest, near_m);
     return vc;
+}
+
+bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
+                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst)
+{
+    /* On the map's grid when there is one, so both are one ray-cast. */
+    render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod);
+    hostmap mh;
+    bf_status s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);
+    if (s == BF_INVALID_ARG) {
+        /* What the mesh asks that the grid cannot hold is the file's fault. */
+        char msg[512];
+        snprintf(msg, sizeof msg, "%s", bf_last_error());
+        return bf_fail(BF_FORMAT, "%s: %s", a->mesh, msg);
+    }
+    if (s != BF_OK) return s;
+    if (!a->map) {
+        *hm = mh;
+        return BF_OK;
+    }
+    s = render_hostmap_merge(hm, &mh);
+    hostmap_free(&mh); /* emptied when merged; left whole when not */
+    return s;
 }
 
 /* The particles of a PLY (vertex x y z) into world floats. */
