@@ -20,6 +20,13 @@ bf_se3 sweep_pose(const synth_scene *sc, uint32_t k)
     return bf_se3_mul(&sc->T_wc_view, &M);
 }
 
+bf_status room_sweep(synth_scene *sc, bf_se3 *truth, uint32_t n)
+{
+    bf_status s = synth_scene_room(NULL, sc);
+    for (uint32_t k = 0; s == BF_OK && k < n; k++) truth[k] = sweep_pose(sc, k);
+    return s;
+}
+
 bf_se3 panned(const bf_se3 *T, double deg)
 {
     bf_se3 turn = bf_se3_from_qt(bf_quat_from_axis_angle(bf_v3(0, 1, 0), deg * M_PI / 180), bf_v3(0, 0, 0));

@@ -16,6 +16,8 @@ bf_intrinsics test_K(void);
 /* A hand-held sideways sweep with a little yaw and bob at 30 Hz, relative
  * to the scene's first view. */
 bf_se3 sweep_pose(const synth_scene *sc, uint32_t k);
+/* The synthetic room and its sweep's first n poses. */
+bf_status room_sweep(synth_scene *sc, bf_se3 *truth, uint32_t n);
 /* T turned by deg about its own y axis (a pan). */
 bf_se3 panned(const bf_se3 *T, double deg);
 double trans_dist(const bf_se3 *A, const bf_se3 *B);

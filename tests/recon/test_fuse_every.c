@@ -19,9 +19,8 @@ BF_TEST(every_third_frame_fused_and_every_frame_tracked_within_a_centimetre)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
     bf_se3 truth[N_ROOM];
-    for (uint32_t k = 0; k < N_ROOM; k++) truth[k] = sweep_pose(&sc, k);
+    CHECK_OK(room_sweep(&sc, truth, N_ROOM));
     static run_out o, all;
     memset(&o, 0, sizeof o);
     memset(&all, 0, sizeof all);
@@ -110,9 +109,8 @@ BF_TEST(frames_waiting_in_a_queue_that_drops_are_fused_every_fourth)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
     bf_se3 truth[N_QUEUED];
-    for (uint32_t k = 0; k < N_QUEUED; k++) truth[k] = sweep_pose(&sc, k);
+    CHECK_OK(room_sweep(&sc, truth, N_QUEUED));
     static run_out o;
     /* A camera's queue (drops when full): frames 0-10 come with frames
      * behind them, so after the first, every fourth is fused (4, 8); the

@@ -31,10 +31,9 @@ BF_TEST(frames_without_depth_are_skipped_and_tracking_resumes)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
     enum { N = 20 };
     bf_se3 truth[N];
-    for (uint32_t k = 0; k < N; k++) truth[k] = sweep_pose(&sc, k);
+    CHECK_OK(room_sweep(&sc, truth, N));
     static run_out o;
     memset(&o, 0, sizeof o);
     bf_se3 I = bf_se3_identity();
@@ -73,10 +72,9 @@ BF_TEST(a_repeated_depth_frame_is_skipped_and_keeps_the_last_pose)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
     enum { N = 14 };
     bf_se3 truth[N];
-    for (uint32_t k = 0; k < N; k++) truth[k] = sweep_pose(&sc, k);
+    CHECK_OK(room_sweep(&sc, truth, N));
     static run_out o;
     memset(&o, 0, sizeof o);
     bf_se3 I = bf_se3_identity();

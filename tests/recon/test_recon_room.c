@@ -22,9 +22,8 @@ BF_TEST(room_is_tracked_within_a_centimetre_and_10km_away_alike)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
     bf_se3 truth[N_ROOM];
-    for (uint32_t k = 0; k < N_ROOM; k++) truth[k] = sweep_pose(&sc, k);
+    CHECK_OK(room_sweep(&sc, truth, N_ROOM));
     static run_out a, b;
     memset(&a, 0, sizeof a);
     memset(&b, 0, sizeof b);
@@ -89,10 +88,9 @@ BF_TEST(the_reference_is_the_confident_map_once_a_window_has_closed)
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
     synth_scene sc;
-    CHECK_OK(synth_scene_room(NULL, &sc));
     enum { N = 30 };
     bf_se3 truth[N];
-    for (uint32_t k = 0; k < N; k++) truth[k] = sweep_pose(&sc, k);
+    CHECK_OK(room_sweep(&sc, truth, N));
     static run_out conf, all;
     bf_se3 I = bf_se3_identity();
     for (int with = 0; with < 2; with++) {
