@@ -71,6 +71,9 @@ typedef struct app_option {
     bool no_default;   /* the help states no default (it depends on the input) */
     /* More checks on the value text: NULL, or the whole message. */
     const char *(*check)(const char *name, const char *value);
+    /* An option that means nothing without another ("--view"): given
+     * alone, it is a usage error rather than silently ignored. */
+    const char *needs;
 } app_option;
 
 /* A row: the first five fields in order, then any others by name. */
@@ -265,6 +268,10 @@ void app_json_log_stats(cJSON *o, const struct replay_log_config *lcfg, const st
 
 /* --out / --record checks: the path must end in .bflog. */
 const char *app_check_log_path(const char *name, const char *value);
+/* A usage error (app_usage_error's code) when opt's path out is the file
+ * or folder in, which is being read: writing would destroy what it reads.
+ * 0 when they differ or either does not exist yet. */
+int app_check_not_input(const char *cmd, const char *opt, const char *out, const char *in);
 /* The log's codec options record and convert share (--colour, --jpeg-quality,
  * --zstd-level), applied to a replay_log_config after parsing. */
 typedef struct app_log_codec {
@@ -396,8 +403,8 @@ const calib_camera *app_calibration_depth_lens(const app_calibration *c);
 const double *app_frames_lens(const rgbd_source *src, const app_calibration *cal, double dist[CALIB_DIST_N]);
 /* Whether --depth-correction's file (path, read into c) was made in the
  * pixels src's frames are read in: through the lens its reader takes out,
- * or cal's the loop takes out (calib_depth_same_lens). BF_FORMAT naming
- * both lenses otherwise. cal may be NULL. */
+ * or cal's the loop takes out (calib_depth_same_lens), and for their size.
+ * BF_FORMAT naming both sizes or both lenses otherwise. cal may be NULL. */
 struct calib_depth_correction;
 bf_status app_depth_correction_check(const char *path, const struct calib_depth_correction *c,
                                      const rgbd_source *src, const app_calibration *cal, const char *seq);

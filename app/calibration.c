@@ -104,6 +104,10 @@ static void lens_words(const double *d, char *buf, size_t n)
 bf_status app_depth_correction_check(const char *path, const calib_depth_correction *c, const rgbd_source *src,
                                      const app_calibration *cal, const char *seq)
 {
+    const bf_intrinsics *K = rgbd_source_intrinsics(src);
+    if (c->width != K->width || c->height != K->height)
+        return bf_fail(BF_FORMAT, "%s: the depth correction is for %ux%u depth images, the sequence's are %ux%u (%s)",
+                       path, c->width, c->height, K->width, K->height, seq);
     double dist[CALIB_DIST_N];
     const double *frames = app_frames_lens(src, cal, dist);
     if (calib_depth_same_lens(c, frames)) return BF_OK;

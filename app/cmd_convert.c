@@ -44,7 +44,9 @@ static int parse_args(int argc, char **argv, convert_args *a)
     int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
     if (rc) return rc;
     a->to_log = replay_is_log_path(a->out);
-    return 0;
+    /* A failed or cut conversion leaves a log already at DEST as it was. */
+    a->lcfg.replace_when_finished = true;
+    return app_check_not_input("convert", "--out", a->out, a->in);
 }
 
 /* The frames of src into the log or TUM writer (exactly one is set). */

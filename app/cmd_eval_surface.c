@@ -144,15 +144,17 @@ int cmd_eval_surface(int argc, char **argv)
         APP_OPT("--depth", APP_OPT_STRING, &dp.seq, "SEQUENCE",
                 "the reconstruction is SEQUENCE's depth, back-projected at --poses (see above)", .no_default = true),
         APP_OPT("--poses", APP_OPT_STRING, &dp.poses, "P",
-                "with --depth: 'groundtruth' (the sequence's own) or a TUM trajectory file"),
+                "with --depth: 'groundtruth' (the sequence's own) or a TUM trajectory file", .needs = "--depth"),
         APP_OPT("--depth-correction", APP_OPT_STRING, &dp.correction, "FILE",
                 "with --depth: the depth multiplied by this depth_correction.json first (as replay "
-                "--depth-correction has it)", .no_default = true),
-        APP_OPT("--every", APP_OPT_U32, &dp.every, "K", "with --depth: every K-th frame", .min = 1),
+                "--depth-correction has it)", .no_default = true, .needs = "--depth"),
+        APP_OPT("--every", APP_OPT_U32, &dp.every, "K", "with --depth: every K-th frame", .min = 1,
+                .needs = "--depth"),
         APP_OPT("--pixel-step", APP_OPT_U32, &dp.pixel_step, "S", "with --depth: every S-th pixel in x and y",
-                .min = 1, .max = 64),
+                .min = 1, .max = 64, .needs = "--depth"),
         APP_OPT("--max-depth", APP_OPT_DOUBLE, &dp.max_depth_m, "M",
-                "with --depth: samples beyond M metres are left out (the loop's sensor range)", .min_open = true),
+                "with --depth: samples beyond M metres are left out (the loop's sensor range)", .min_open = true,
+                .needs = "--depth"),
         APP_OPT("--visible", APP_OPT_STRING, &vis_path, "SEEN.ply",
                 "completeness over these observed reference points instead of samples of the whole reference"),
         APP_OPT("--threshold", APP_OPT_DOUBLE, &cfg.threshold_m, "M", "completeness / precision threshold, metres",
@@ -174,7 +176,6 @@ int cmd_eval_surface(int argc, char **argv)
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (!rec_path == !dp.seq) return app_usage_error(cmd, "give exactly one of --reconstruction and --depth");
-    if (dp.correction && !dp.seq) return app_usage_error(cmd, "--depth-correction goes with --depth");
     if (dp.seq) rec_path = dp.seq;
 
     mesh_data ref = {0}, rec = {0}, vis = {0};

@@ -79,7 +79,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->calibration) rc = app_calibration_read("fuse", a->calibration, a->seq, false, &a->ropt, &a->cal);
-    return rc ? rc : app_check_map_options("fuse", &a->fcfg);
+    if (!rc) rc = app_check_map_options("fuse", &a->fcfg);
+    return rc ? rc : app_check_not_input("fuse", "--out", a->out, a->seq);
 }
 
 /* --depth-correction's multipliers (19 KB: not on the stack). */

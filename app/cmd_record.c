@@ -52,7 +52,8 @@ static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
                   "or device error mid-recording (the log keeps the frames before it), 4 no device,\n"
                   "5 the log could not be written (disk full, I/O error)\n",
     };
-    return app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
+    int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
+    return rc ? rc : app_check_not_input(cmd, "--out", a->out, a->device);
 }
 
 /* What a recording did, for the summary and stats.json. */

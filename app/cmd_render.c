@@ -202,17 +202,16 @@ int cmd_render(int argc, char **argv)
     /* The inputs before the device: a missing file is named before anything starts. */
     app_scene_files f = {0};
     bf_status s = app_scene_read_files(&a.scene, &f);
+    hostmap hm = {0};
+    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, NULL);
+    uint32_t n_bricks = 0, n_map_bricks = hm.n_bricks;
     gpu_context *ctx = NULL;
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     fusion_map *map = NULL;
     render_particles *ps = NULL;
     render_caster *caster = NULL;
-    uint32_t n_bricks = 0, n_map_bricks = 0;
-    hostmap hm = {0};
     render_voxelise_stats vst = {0};
-    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, NULL);
-    n_map_bricks = hm.n_bricks;
     if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, &hm, &vst);
     if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;

@@ -127,14 +127,16 @@ static void view_options(app_option rows[VIEW_ROWS], replay_args *a)
         APP_OPT("--view-period", APP_OPT_DOUBLE, &a->view_period_s, "S",
                 "with --view: seconds between the window's ray-casts while it follows the scan, and at most a fifth "
                 "of the loop's time (each is a cast of the map at the frame's size: 0.3-1 s at 640x480 on "
-                "lavapipe); a camera moved by hand is cast every frame", .max = 3600),
+                "lavapipe); a camera moved by hand is cast every frame", .max = 3600, .needs = "--view"),
         APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
-                "with --view: the frame, tracking state and bricks also over the image's corner (always in the title)"),
+                "with --view: the frame, tracking state and bricks also over the image's corner (always in the title)",
+                .needs = "--view"),
         APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
-                "with --view and --exit-after: the window's last frame, read back from the window", .check = check_png),
+                "with --view and --exit-after: the window's last frame, read back from the window", .check = check_png,
+                .needs = "--exit-after"),
         APP_OPT("--exit-after", APP_OPT_U32, &a->exit_after, "N",
                 "with --view: end the scan after N frames shown, as closing the window does (scripts)", .min = 1,
-                .no_default = true),
+                .no_default = true, .needs = "--view"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);
@@ -183,10 +185,10 @@ static void store_options(app_option rows[STORE_ROWS], replay_args *a)
                 "seconds and at the end or at Ctrl-C", .no_default = true),
         APP_OPT("--resume", APP_OPT_FLAG, &a->resume, NULL,
                 "reopen --store and continue its scan from its last pose and trajectory (frames of SEQUENCE up to "
-                "its last time are skipped)"),
+                "its last time are skipped)", .needs = "--store"),
         APP_OPT("--store-every", APP_OPT_DOUBLE, &a->store_every_s, "S",
                 "seconds between flushes of the map into --store (0: only at the end); a kill loses at most the "
-                "work since the last one", .max = 3600),
+                "work since the last one", .max = 3600, .needs = "--store"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);
@@ -212,7 +214,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--init", APP_OPT_ENUM, &a->init, "groundtruth|identity",
                 "first pose: the first frame's ground truth (when it has one) or the identity"),
         APP_OPT("--icp-iters", APP_OPT_LIST, tc->iterations, "A,B,C",
-                "ICP iterations per pyramid level, finest first", .max = 1000, .count = &tc->levels,
+                "ICP iterations per pyramid level, finest first (1 to 3 values: as many levels)", .max = 1000, .count = &tc->levels,
                 .max_n = TRACK_MAX_LEVELS),
         APP_OPT("--huber", APP_OPT_FLOAT, &tc->huber_k, "K",
                 "ICP Huber threshold in units of the sensor noise sigma_z(z) (0: plain least squares)"),
@@ -408,12 +410,12 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
                 .no_default = true),
         APP_OPT("--visible", APP_OPT_STRING, &a->vis_path, "SEEN.ply",
                 "with --reference: completeness over these observed reference points (synth's seen.ply)",
-                .no_default = true),
+                .no_default = true, .needs = "--reference"),
         APP_OPT("--tolerance", APP_OPT_STRING, &a->tolerance, "NAME=V,...",
                 "with --expect: tolerances replacing the defaults ate=0.001 (m, ATE RMSE), surface=0.001 (m, "
                 "median), tracked=0, lost=0, relocalised=0 (frames), digest (exact); time=F gates the median "
                 "frame time at F times slower (0.2: 20%); NAME=off leaves a measure out",
-                .check = app_check_tolerance, .no_default = true),
+                .check = app_check_tolerance, .no_default = true, .needs = "--expect"),
         APP_OPT_END,
     };
     const app_option *replay_tables[] = {own, vw, msh, fuse_gt, cal, gate, sto, stm, map, seq, NULL};
@@ -430,11 +432,6 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (isnan(a->rcfg.track.noise_weight_exp))
         a->rcfg.track.noise_weight_exp = a->depth_correction ? REPLAY_NOISE_EXP_CORRECTED
                                                              : recon_config_default().track.noise_weight_exp;
-    if (!rc && a->resume && !a->store) return app_usage_error(cmd, "--resume needs --store STORE");
-    if (!rc && (a->screenshot || a->exit_after) && !a->view)
-        return app_usage_error(cmd, "%s needs --view", a->screenshot ? "--screenshot" : "--exit-after");
-    if (!rc && a->screenshot && !a->exit_after)
-        return app_usage_error(cmd, "--screenshot needs --exit-after N (the frame it saves)");
     a->auto_budget = !rc && a->gpu_budget_mib <= 0 && a->rcfg.fusion.brick_cap == fusion_config_default().brick_cap;
     if (!rc && a->gpu_budget_mib > 0 && floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK) < 1024)
         return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
@@ -453,9 +450,16 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         bf_status s = calib_depth_read(a->depth_correction, &replay_depth_fix);
         if (s != BF_OK) return app_fail(cmd, s);
     }
-    if (!rc && a->tolerance && !a->expect_path) return app_usage_error(cmd, "--tolerance needs --expect BASELINE.json");
-    if (!rc && a->vis_path && !a->ref_path) return app_usage_error(cmd, "--visible needs --reference MESH");
     if (!rc) rc = app_check_map_options(cmd, &a->rcfg.fusion);
+    if (!rc) {
+        /* The tracker's values, before the GPU starts (the reference's
+         * level is the loop's to choose when auto). */
+        track_config tc = a->rcfg.track;
+        if (tc.ref_level == RECON_REF_LEVEL_AUTO) tc.ref_level = 0;
+        if (track_config_check(&tc) != BF_OK) return app_usage_error(cmd, "%s", bf_last_error());
+    }
+    if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->seq);
+    if (!rc) rc = app_check_not_input(cmd, "--record", a->record_path, a->seq);
     if (!rc && a->ref_path) {
         bf_status s = mesh_read(a->ref_path, &a->ref);
         if (s == BF_OK && a->ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", a->ref_path);
@@ -875,6 +879,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
     if (s == BF_OK && a.depth_correction)
         s = app_depth_correction_check(a.depth_correction, &replay_depth_fix, src, &a.cal, a.seq);
+    if (s == BF_OK && a.fuse_at_gt && !src->has_groundtruth)
+        s = bf_fail(BF_FORMAT, "%s: --fuse-at-groundtruth, but the sequence has no ground truth", a.seq);
     if (s == BF_OK && a.cal.path) {
         a.rcfg.calibration = a.cal.cal; /* its colour camera at the frames' size */
         a.rcfg.has_calibration = true;

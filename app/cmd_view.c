@@ -55,7 +55,7 @@ static int parse_args(int argc, char **argv, view_args *a)
                 "the scene's size also over the image's corner (always in the title)"),
         APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
                 "with --exit-after: the window's last frame, read back from the window (RGB PNG)",
-                .check = app_check_png),
+                .check = app_check_png, .needs = "--exit-after"),
         APP_OPT("--exit-after", APP_OPT_U32, &a->exit_after, "N", "close the window after N frames shown (scripts)",
                 .min = 1, .no_default = true),
         APP_OPT_END,
@@ -244,8 +244,6 @@ int cmd_view(int argc, char **argv)
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if ((rc = app_scene_check(cmd, "show", &a.scene)) != 0) return rc;
-    if (a.screenshot && !a.exit_after)
-        return app_usage_error(cmd, "--screenshot needs --exit-after N (the frame it saves)");
     uint32_t W = 640, H = 480;
     app_parse_size(a.size, &W, &H);
     double k[4] = {525.0 * W / 640.0, 525.0 * W / 640.0, (W - 1) / 2.0, (H - 1) / 2.0};

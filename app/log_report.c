@@ -2,6 +2,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "app.h"
 #include "replay/replay.h"
@@ -34,6 +35,14 @@ const char *app_check_log_path(const char *name, const char *v)
     if (replay_is_log_path(v)) return NULL;
     snprintf(msg, sizeof msg, "%s must name a .bflog file, not '%.400s'", name, v);
     return msg;
+}
+
+int app_check_not_input(const char *cmd, const char *opt, const char *out, const char *in)
+{
+    struct stat so, si;
+    if (!out || !in || stat(out, &so) != 0 || stat(in, &si) != 0) return 0;
+    if (so.st_dev != si.st_dev || so.st_ino != si.st_ino) return 0;
+    return app_usage_error(cmd, "%s %s is %s, which is being read: writing it would destroy its frames", opt, out, in);
 }
 
 static const int colour_codes[] = {REPLAY_LOG_COLOUR_JPEG, REPLAY_LOG_COLOUR_ZSTD, REPLAY_LOG_COLOUR_NONE};

@@ -113,9 +113,14 @@ static int parse_list(const char *cmd, const app_option *row, const char *v)
 {
     uint32_t vals[APP_OPT_LIST_MAX], n = 0;
     char buf[256];
+    /* Every value between commas: an empty one (",", "1,,3") is refused,
+     * not skipped. */
+    if (!v[0] || strlen(v) >= sizeof buf || strstr(v, ",,") || v[0] == ',' || v[strlen(v) - 1] == ',')
+        return usage(cmd, "%s: '%.200s' is not a list A,B,...", row->name, v);
     snprintf(buf, sizeof buf, "%s", v);
-    char *save = NULL;
-    for (char *tok = strtok_r(buf, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+    for (char *tok = buf, *next; tok; tok = next) {
+        next = strchr(tok, ',');
+        if (next) *next++ = '\0';
         double x;
         if (n == row->max_n || n == APP_OPT_LIST_MAX)
             return usage(cmd, "%s: '%s' has more than %u values", row->name, v, row->max_n);
@@ -123,7 +128,6 @@ static int parse_list(const char *cmd, const app_option *row, const char *v)
         if (rc) return rc;
         vals[n++] = (uint32_t)x;
     }
-    if (n == 0 || v[strlen(v) - 1] == ',') return usage(cmd, "%s: '%s' is not a list A,B,...", row->name, v);
     memcpy(row->dest, vals, n * sizeof *vals);
     *row->count = n;
     return 0;
@@ -194,6 +198,25 @@ static const app_option *find_row(const app_command_spec *spec, int argc, char *
     return NULL;
 }
 
+/* Whether the option called name (or an alias: a row with its
+ * destination) was given; *row gets its row. */
+static bool given(const app_command_spec *spec, const bool *seen, const char *name, const app_option **row)
+{
+    *row = NULL;
+    for (const app_option *const *t = spec->tables; *t && !*row; t++)
+        for (const app_option *r = *t; r->name; r++)
+            if (!strcmp(r->name, name)) {
+                *row = r;
+                break;
+            }
+    if (!*row) return false;
+    size_t k = 0;
+    for (const app_option *const *t = spec->tables; *t; t++)
+        for (const app_option *r = *t; r->name; r++, k++)
+            if (k < APP_OPT_ROWS_MAX && seen[k] && r->dest == (*row)->dest) return true;
+    return false;
+}
+
 int app_options_parse(const app_command_spec *spec, int argc, char **argv)
 {
     for (int i = 1; i < argc; i++)
@@ -231,6 +254,16 @@ int app_options_parse(const app_command_spec *spec, int argc, char **argv)
         for (const app_option *row = *t; row->name; row++, k++)
             if (row->required && !(k < APP_OPT_ROWS_MAX && seen[k]))
                 return usage(spec->name, "%s is required", row->name);
+    k = 0;
+    for (const app_option *const *t = spec->tables; *t; t++)
+        for (const app_option *row = *t; row->name; row++, k++) {
+            if (!row->needs || !(k < APP_OPT_ROWS_MAX && seen[k])) continue;
+            const app_option *need = NULL;
+            if (!given(spec, seen, row->needs, &need))
+                return usage(spec->name, "%s needs %s%s%s", row->name, row->needs,
+                             need && need->meta && need->kind != APP_OPT_FLAG ? " " : "",
+                             need && need->meta && need->kind != APP_OPT_FLAG ? need->meta : "");
+        }
     if (n_pos < spec->min_positional) return usage(spec->name, "%s", spec->positional_missing);
     return 0;
 }

@@ -16,8 +16,9 @@
 #include <zstd.h>
 
 struct replay_log_writer {
-    char *path;
-    int fd; /* -1: closed */
+    char *path;      /* the log's name, in messages */
+    char *disk_path; /* what is open: path, or path.partial until finish renames it */
+    int fd;          /* -1: closed */
     bf_intrinsics K;
     replay_log_config cfg;
     size_t n_px;
@@ -41,7 +42,7 @@ static void break_log(replay_log_writer *w)
     if (w->st.n_frames == 0 && w->fd >= 0) {
         close(w->fd);
         w->fd = -1;
-        remove(w->path);
+        remove(w->disk_path);
     }
 }
 
@@ -96,13 +97,16 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     if (!w->cfg.zstd_level) w->cfg.zstd_level = 1;
     w->n_px = (size_t)K->width * K->height;
     w->path = strdup(path);
+    size_t plen = strlen(path);
+    w->disk_path = bf_malloc(plen + sizeof ".partial");
+    if (w->disk_path) snprintf(w->disk_path, plen + sizeof ".partial", "%s%s", path, cfg->replace_when_finished ? ".partial" : "");
     w->zc = ZSTD_createCCtx();
     uint16_t probe = 1;
     bool is_le = *(uint8_t *)&probe == 1;
     w->swapped = is_le ? NULL : bf_malloc(2 * w->n_px);
     w->depth_buf = bf_malloc(log__depth_bound(w->n_px));
     w->rgb_buf = cfg->colour ? bf_malloc(log__rgb_bound(w->n_px)) : NULL;
-    if (!w->path || !w->zc || (!is_le && !w->swapped) || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
+    if (!w->path || !w->disk_path || !w->zc || (!is_le && !w->swapped) || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
         s = bf_fail(BF_NO_MEMORY, "%s: log writer buffers for %ux%u frames", path, K->width, K->height);
         goto fail;
     }
@@ -110,9 +114,9 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
         s = bf_fail(BF_INVALID_ARG, "%s: zstd refuses level %d", path, w->cfg.zstd_level);
         goto fail;
     }
-    w->fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    w->fd = open(w->disk_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (w->fd < 0) {
-        s = bf_fail(BF_WRITE, "%s: cannot create: %s", path, strerror(errno));
+        s = bf_fail(BF_WRITE, "%s: cannot create: %s", w->disk_path, strerror(errno));
         goto fail;
     }
     uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
@@ -142,7 +146,7 @@ fail:
     if (w->fd >= 0) {
         close(w->fd);
         w->fd = -1;
-        remove(path); /* a header that never made it is no log */
+        remove(w->disk_path); /* a header that never made it is no log */
     }
     replay_log_writer_destroy(w);
     return s;
@@ -251,7 +255,14 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
     w->fd = -1;
     if (bad) {
         bf_status s = bf_fail(BF_WRITE, "%s: cannot finish the log: %s", w->path, strerror(err));
-        if (w->st.n_frames == 0) remove(w->path);
+        if (w->st.n_frames == 0 || w->cfg.replace_when_finished) remove(w->disk_path);
+        w->is_broken = true;
+        return s;
+    }
+    if (w->cfg.replace_when_finished && rename(w->disk_path, w->path) != 0) {
+        bf_status s = bf_fail(BF_WRITE, "%s: cannot put the finished log in place (from %s): %s", w->path,
+                              w->disk_path, strerror(errno));
+        remove(w->disk_path);
         w->is_broken = true;
         return s;
     }
@@ -266,11 +277,14 @@ void replay_log_writer_destroy(replay_log_writer *w)
 {
     if (!w) return;
     if (w->fd >= 0) close(w->fd);
+    /* A conversion that did not finish is no result: what was at path stays. */
+    if (!w->is_finished && w->cfg.replace_when_finished && w->disk_path) remove(w->disk_path);
     ZSTD_freeCCtx(w->zc);
     free(w->swapped);
     free(w->depth_buf);
     free(w->rgb_buf);
     free(w->index);
     free(w->path);
+    free(w->disk_path);
     free(w);
 }

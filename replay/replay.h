@@ -109,6 +109,12 @@ typedef struct replay_log_config {
     int zstd_level;           /* 1..19, 0 = 1 (fast enough for 30 Hz on one core) */
     const char *device;       /* recorded in the header ("freenect:0", a path), borrowed; may be NULL */
     bool has_groundtruth;     /* recorded in the header: frames carry poses */
+    /* Written under a temporary name beside path (path.partial) and renamed
+     * over path by a successful finish; destroyed unfinished, the temporary
+     * goes and a file already at path stays as it was. For a conversion,
+     * whose input is still there to start again from; a recording is
+     * written in place instead, so that a crash leaves it replayable. */
+    bool replace_when_finished;
 } replay_log_config;
 
 /* Byte counts so far (the raw sizes are what the frames would take
@@ -124,8 +130,9 @@ typedef struct replay_log_writer replay_log_writer;
 
 /* Creates (or truncates) the log at path and writes its header. K gives the
  * frame size (width/height must be set) and the camera. The file is written
- * in place, not through a temporary name: a recording cut off by a crash
- * must stay on disk, and it replays up to its last whole frame. */
+ * in place, not through a temporary name (unless cfg->replace_when_finished):
+ * a recording cut off by a crash must stay on disk, and it replays up to its
+ * last whole frame. */
 bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, const replay_log_config *cfg,
                                    replay_log_writer **out);
 /* Appends one frame (compressed, checksummed, flushed to the OS). A frame of

@@ -159,8 +159,9 @@ void track__level_intrinsics(const bf_intrinsics *K, uint32_t l, float *fx, floa
     *cy = (float)L.cy_px;
 }
 
-static bf_status check_config(const track_config *c, const bf_intrinsics *K)
+bf_status track_config_check(const track_config *c)
 {
+    if (!c) return bf_fail(BF_INVALID_ARG, "tracking: NULL config");
     if (c->levels < 1 || c->levels > TRACK_MAX_LEVELS)
         return bf_fail(BF_INVALID_ARG, "tracking: %u levels (1..%u)", c->levels, TRACK_MAX_LEVELS);
     if (!(c->fine_angle_deg >= 0 && c->fine_angle_deg <= 180))
@@ -202,6 +203,13 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (!(c->rof_lambda0 > 0)) return bf_fail(BF_INVALID_ARG, "tracking: rof_lambda0 %g must be positive", c->rof_lambda0);
     if (!(c->degenerate_ratio >= 0 && c->degenerate_ratio < 1))
         return bf_fail(BF_INVALID_ARG, "tracking: degenerate_ratio %g not in [0, 1)", c->degenerate_ratio);
+    return BF_OK;
+}
+
+static bf_status check_config(const track_config *c, const bf_intrinsics *K)
+{
+    bf_status s = track_config_check(c);
+    if (s != BF_OK) return s;
     if (K->width < (1u << (c->levels + 1)) || K->height < (1u << (c->levels + 1)))
         return bf_fail(BF_INVALID_ARG, "tracking: %ux%u is too small for %u levels", K->width, K->height, c->levels);
     if (!(K->fx_px > 0) || !(K->fy_px > 0) || !(K->depth_scale > 0) || !isfinite(K->depth_scale))

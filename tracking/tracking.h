@@ -153,6 +153,10 @@ typedef struct track_result {
     double ms_ref;       /* GPU time of the last reference preparation (ROF, pyramids, normals), ms */
 } track_result;
 
+/* BF_INVALID_ARG naming the first value of c out of its range (what does
+ * not depend on the camera; track_create checks the rest), so a command
+ * line can be refused before any device opens. */
+bf_status track_config_check(const track_config *c);
 /* ctx is borrowed. Frames and references have K's size. */
 bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out);
 void track_destroy(track_tracker *t); /* NULL is a no-op */

@@ -466,7 +466,8 @@ gt, est = rows[:len(rows) // 2], rows[len(rows) // 2:]
 assert max(abs(a - b) for a, b in zip(gt[0][1:], est[0][1:])) < 1e-6, (gt[0], est[0])
 PYEOF
 expect 3 "$B" replay "$T/int.bflog" --out "$T/rpgt2" --fuse-at-groundtruth
-mentions "no ground-truth pose"
+mentions "--fuse-at-groundtruth, but the sequence has no ground truth"
+[ -e "$T/rpgt2" ] && fail "replay --fuse-at-groundtruth without ground truth made its output folder"
 expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ray-start middle
 expect 2 "$B" replay "$T/seq" --out "$T/rp4" --huber -1
 expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ref-level 3
@@ -496,6 +497,33 @@ expect 3 "$B" record --device "$T/missing" --out "$T/x.bflog"
 mentions "$T/missing"
 expect 4 "$B" record --device "v4l2:$T/no-such-video" --out "$T/x.bflog"
 mentions "$T/no-such-video"
+# Writing over what is being read is refused before anything is opened, and
+# a conversion that fails leaves the log already at its --out as it was.
+cp "$T/rec.bflog" "$T/self.bflog"
+sum0=$(md5sum <"$T/self.bflog")
+expect 2 "$B" convert "$T/self.bflog" --out "$T/self.bflog"
+mentions "which is being read"
+expect 2 "$B" record --device "$T/self.bflog" --out "$T/self.bflog"
+mentions "which is being read"
+expect 2 "$B" live --device "$T/self.bflog" --out "$T/selflive" --record "$T/self.bflog"
+mentions "which is being read"
+[ "$(md5sum <"$T/self.bflog")" = "$sum0" ] || fail "a log written over itself changed"
+expect 2 "$B" convert "$T/seq" --out "$T/seq/"
+mentions "which is being read"
+expect 2 "$B" replay "$T/seq" --out "$T/seq"
+mentions "which is being read"
+expect 3 "$B" convert "$T/cut" --out "$T/self.bflog"
+mentions "$(ls "$T/cut/depth" | head -n 2 | tail -n 1)"
+[ "$(md5sum <"$T/self.bflog")" = "$sum0" ] || fail "a failed conversion replaced the log at its --out"
+[ -e "$T/self.bflog.partial" ] && fail "a failed conversion left its partial log"
+# An option that means nothing without another is refused, not ignored.
+expect 2 "$B" replay "$T/seq" --out "$T/x" --view-period 0
+mentions "--view-period needs --view"
+expect 2 "$B" replay "$T/seq" --out "$T/x" --store-every 5
+mentions "--store-every needs --store STORE"
+expect 2 "$B" eval-surface --reference "$T/seq/scene.ply" --reconstruction "$T/seq/scene.ply" --every 2
+mentions "--every needs --depth SEQUENCE"
+[ -e "$T/x" ] && fail "a usage error made the output folder"
 for c in demo synth replay fuse info record convert live eval-traj eval-surface devices render; do
     expect 0 "$B" $c --help
     grep -q "^usage: bitfuse $c" "$T/out" || fail "$c --help: no usage line"

@@ -14,7 +14,7 @@ typedef struct demo_args {
     bool json;
     replay_options ropt;
     fusion_config fc;
-    uint32_t iters[4], levels;
+    uint32_t iters[4], levels, indent;
     bool noise;
     int init;
 } demo_args;
@@ -30,6 +30,7 @@ static int parse(int argc, char **argv, demo_args *a)
     const app_option own[] = {
         APP_OPT("--out", APP_OPT_STRING, &a->out, "DIR", "output folder", .required = true),
         APP_OPT("--json", APP_OPT_FLAG, &a->json, NULL, "JSON on stdout"),
+        APP_OPT("--indent", APP_OPT_U32, &a->indent, "N", "with --json: spaces per level", .needs = "--json"),
         APP_OPT("--icp-iters", APP_OPT_LIST, a->iters, "A,B", "iterations per level", .max = 1000, .count = &a->levels,
                 .max_n = 3),
         APP_OPT("--noise-weights", APP_OPT_CHOICE, &a->noise, "on|off", "weight by the noise"),
@@ -74,7 +75,8 @@ BF_TEST(options_reject_bad_values_with_a_message_and_write_nothing)
         {"--frames", "-3", "-3"},             {"--frames", "2.5", "2.5"},          {"--frames=", NULL, "''"},
         {"--ratio", "-1", "--ratio"},         {"--ratio", "100", "above 64"},      {"--window", "7", "even"},
         {"--window", "1000", "above 256"},    {"--icp-iters", "10,x", "'x'"},      {"--icp-iters", "1,2,3,4", "more"},
-        {"--icp-iters", "1,", "1,"},          {"--noise-weights", "yes", "on or off"},
+        {"--icp-iters", "1,", "1,"},          {"--icp-iters", "1,,3", "'1,,3'"},    {"--icp-iters", ",1", "',1'"},
+        {"--noise-weights", "yes", "on or off"},
         {"--init", "zero", "groundtruth or identity"},                              {"--json=1", NULL, "no value"},
         {"--cameras", "x", "unknown option '--cameras'"},
         /* The next option is not a value ("--name=--x" is the way to give one). */
@@ -111,6 +113,22 @@ BF_TEST(options_want_required_options_and_positionals)
     CHECK_EQ_INT(parse(8, sub, &a), 0);
     CHECK_EQ_INT(app_check_map_options("cmd", &a.fc), APP_EXIT_USAGE);
     CHECK_ERROR_MENTIONS("--subcache 50");
+}
+
+/* An option that means nothing without another is refused alone, in
+ * either order with it. */
+BF_TEST(options_that_need_another_are_refused_without_it)
+{
+    demo_args a;
+    char *alone[] = {"cmd", "seq", "--out", "o", "--indent", "2"};
+    CHECK_EQ_INT(parse(6, alone, &a), APP_EXIT_USAGE);
+    CHECK_ERROR_MENTIONS("--indent needs --json");
+    char *after[] = {"cmd", "seq", "--indent", "2", "--out", "o", "--json"};
+    CHECK_EQ_INT(parse(7, after, &a), 0);
+    CHECK(a.json && a.indent == 2);
+    char *before[] = {"cmd", "seq", "--json", "--indent=3", "--out", "o"};
+    CHECK_EQ_INT(parse(6, before, &a), 0);
+    CHECK_EQ_INT(a.indent, 3);
 }
 
 BF_TEST(help_is_generated_from_the_rows_with_their_defaults)
