@@ -321,9 +321,13 @@ int cmd_demo(int argc, char **argv)
         APP_OPT_END,
     };
     const app_option *tables[] = {own, NULL};
-    app_command_spec spec = {.name = cmd, .usage = demo_usage, .tables = tables};
+    app_command_spec spec = {.name = cmd, .usage = demo_usage, .tables = tables,
+                             .epilog = "exit codes: 0 ok (with no Vulkan device the reconstruction is skipped and said "
+                                       "so), 1 failure,\n2 usage, 3 a mesh in --data unreadable, 5 an output could not "
+                                       "be written\n"};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (data_dir && !bf_file_exists(data_dir)) return app_usage_error(cmd, "--data: folder '%s' does not exist", data_dir);
     bool use_gpu = !no_gpu;
     if (!data_dir) data_dir = app_default_data_dir();
 

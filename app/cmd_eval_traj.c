@@ -61,6 +61,8 @@ int cmd_eval_traj(int argc, char **argv)
     app_command_spec spec = {
         .name = cmd, .usage = usage_text, .tables = tables, .positional = paths, .min_positional = 2,
         .max_positional = 2, .positional_missing = "needs GT and EST trajectory files",
+        .epilog = "exit codes: 0 ok, 2 usage, 3 a trajectory unreadable or malformed, or too few poses matched in "
+                  "time\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;

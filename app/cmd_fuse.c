@@ -112,6 +112,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddBoolToObject(o, "skip_repeated", a->skip_repeated);
     cJSON_AddNumberToObject(o, "repeated", r->run.counts.repeated);
     cJSON_AddNumberToObject(o, "colour_repeated", r->run.counts.colour_repeated);
+    cJSON_AddNumberToObject(o, "no_depth", r->run.counts.no_depth);
     /* Skipped: unreadable (--skip-bad-frames) or without a pose. */
     cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped + r->n_unreadable);
     cJSON_AddNumberToObject(o, "frames_without_pose", r->run.n_skipped);
@@ -192,6 +193,8 @@ int cmd_fuse(int argc, char **argv)
         if (r.run.counts.repeated)
             printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
                    r.run.counts.repeated);
+        if (r.run.counts.no_depth)
+            printf("  input            %u frames without a depth sample: not fused\n", r.run.counts.no_depth);
         if (r.run.counts.colour_repeated)
             printf("  input            %u frames repeated only the colour before them: fused without it\n",
                    r.run.counts.colour_repeated);

@@ -135,7 +135,9 @@ static int cmd_synth_board(int argc, char **argv)
     const app_option *tables[] = {own, NULL};
     app_command_spec spec = {.name = cmd, .usage = board_usage, .tables = tables,
                              .epilog = "The colour camera sits 25 mm to the IR camera's right, turned 0.5 degrees "
-                                       "(truth.json has it exactly).\nSee docs/calibration.md.\n"};
+                                       "(truth.json has it exactly).\nSee docs/calibration.md.\n"
+                                       "exit codes: 0 ok, 2 usage (also a board that does not fit the images: "
+                                       "nothing is written), 5 an output could not be written\n"};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     calib_parse_board(board, &cfg.board); /* checked above */
@@ -188,7 +190,9 @@ int cmd_synth(int argc, char **argv)
     };
     const app_option *tables[] = {own, NULL};
     app_command_spec spec = {.name = cmd, .usage = synth_usage, .tables = tables,
-                             .epilog = "Threads: BITFUSE_THREADS (default: all cores). See docs/synth.md.\n"};
+                             .epilog = "Threads: BITFUSE_THREADS (default: all cores). See docs/synth.md.\n"
+                                       "exit codes: 0 ok, 1 failure, 2 usage, 3 a mesh, trajectory or particle file "
+                                       "unreadable, 5 an output\ncould not be written\n"};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     cfg.noise = (synth_noise)noise;

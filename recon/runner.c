@@ -90,6 +90,15 @@ static bf_status fuse_known(const bf_frame *f, const bf_se3 *T_wc, bool stale_de
         run->counts.repeated++;
         return BF_OK;
     }
+    /* A frame without one depth sample adds nothing (a covered lens, a
+     * camera starting up): skipped and said so, as the loop does. */
+    bool any_depth = false;
+    for (size_t i = 0, n = (size_t)f->width * f->height; i < n && !any_depth; i++) any_depth = f->depth[i] != 0;
+    if (!any_depth) {
+        fr->state = RECON_NO_DEPTH;
+        run->counts.no_depth++;
+        return BF_OK;
+    }
     bf_frame g = *f;
     if (stale_rgb) {
         g.rgb = NULL;
@@ -171,6 +180,8 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, const
             return BF_OK;
         }
         s = fuse_known(f, &T_wc, stale_depth, stale_rgb, run, &fr);
+        if (s == BF_OK && fr.state == RECON_NO_DEPTH)
+            bf_warn("%s: frame %u (t = %.6f): no valid depth sample: skipped", cfg->label, f->index, f->t_depth_s);
     } else {
         s = track_frame_in_loop(cfg, f, run, &fr);
     }
@@ -198,7 +209,7 @@ static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run
     if (s != BF_END) return s;
     if (!has_fused(run))
         return bf_fail(BF_FORMAT, "%s: no frame with %s", cfg->name,
-                       cfg->poses == RECON_POSES_KNOWN ? "a pose" : "depth");
+                       cfg->poses == RECON_POSES_KNOWN && !run->counts.no_depth ? "a pose" : "depth");
     return run->loop ? recon_flush(run->loop) : fusion_flush(run->map);
 }
 

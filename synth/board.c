@@ -263,8 +263,12 @@ bf_status synth_board_run(const synth_board_config *cfg, synth_board_result *out
         if ((size_t)cams[i]->width * cams[i]->height > max_px) max_px = (size_t)cams[i]->width * cams[i]->height;
     char path[4200];
     uint8_t *grey = malloc(max_px), *rgb = malloc(3 * max_px);
+    bf_se3 *T_cbs = malloc(cfg->n_views * sizeof *T_cbs);
     bf_traj poses = {0};
-    bf_status s = grey && rgb ? BF_OK : bf_fail(BF_NO_MEMORY, "synth: board images");
+    bf_status s = grey && rgb && T_cbs ? BF_OK : bf_fail(BF_NO_MEMORY, "synth: board images");
+    /* Every view's pose before any folder is made: a board that does not
+     * fit leaves nothing behind. */
+    for (uint32_t k = 0; k < cfg->n_views && s == BF_OK; k++) s = synth_board_pose(cfg, k, &T_cbs[k]);
     static const char *const subs[2] = {"colour", "ir"};
     for (int i = 0; i < 2 && s == BF_OK; i++) {
         snprintf(path, sizeof path, "%s/%s", cfg->out_dir, subs[i]);
@@ -272,8 +276,7 @@ bf_status synth_board_run(const synth_board_config *cfg, synth_board_result *out
     }
     bf_se3 T_dc = bf_se3_inverse(&cfg->T_colour_depth);
     for (uint32_t k = 0; k < cfg->n_views && s == BF_OK; k++) {
-        bf_se3 T_cb, T_db, T_bc;
-        if ((s = synth_board_pose(cfg, k, &T_cb)) != BF_OK) break;
+        bf_se3 T_cb = T_cbs[k], T_db, T_bc;
         T_db = bf_se3_mul(&T_dc, &T_cb);
         T_bc = bf_se3_inverse(&T_cb);
         if ((s = bf_traj_push(&poses, k, &T_bc)) != BF_OK) break;
@@ -296,6 +299,7 @@ bf_status synth_board_run(const synth_board_config *cfg, synth_board_result *out
         s = replay_traj_write_tum(path, &poses);
     }
     bf_traj_free(&poses);
+    free(T_cbs);
     free(grey);
     free(rgb);
     if (s == BF_OK) {

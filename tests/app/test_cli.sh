@@ -210,6 +210,30 @@ if [ $SANITIZED = 0 ]; then
     expect 3 "$B" fuse "$T/cut0" --poses groundtruth --out "$T/fucut0" $small
     mentions "frame 0"
     [ ! -e "$T/fucut0" ] || fail "fuse stopped by a corrupt first frame left $T/fucut0 behind"
+    # Frames without a depth sample are skipped and counted; with none that has
+    # one, fuse says so as replay does (exit 3) and leaves no folder.
+    cp -r "$T/seq" "$T/zd"
+    py - "$T/zd/depth" <<'PY'
+import os, struct, sys, zlib
+chunk = lambda t, x: struct.pack(">I", len(x)) + t + x + struct.pack(">I", zlib.crc32(t + x) & 0xffffffff)
+for name in sorted(os.listdir(sys.argv[1]))[1:]:
+    p = os.path.join(sys.argv[1], name)
+    w, h = struct.unpack(">II", open(p, "rb").read()[16:24])
+    raw = b"".join(b"\0" + bytes(2 * w) for _ in range(h))
+    open(p, "wb").write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0))
+                        + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+PY
+    expect 0 "$B" fuse "$T/zd" --poses groundtruth --out "$T/fuzd" $small
+    grep -q "2 frames without a depth sample: not fused" "$T/out" || fail "fuse: frames without depth not counted: $(head -c 400 "$T/out")"
+    mentions "no valid depth sample: skipped"
+    f1=$(ls "$T/zd/depth" | head -n 1)
+    py - "$T/zd/depth/$f1" "$T/zd/depth/$(ls "$T/zd/depth" | tail -n 1)" <<'PY'
+import shutil, sys
+shutil.copy(sys.argv[2], sys.argv[1])
+PY
+    expect 3 "$B" fuse "$T/zd" --poses groundtruth --out "$T/fuzd0" $small
+    mentions "no frame with depth"
+    [ ! -e "$T/fuzd0" ] || fail "fuse of frames without depth left $T/fuzd0 behind"
     expect 3 "$B" replay "$T/cut" --out "$T/rpcut" $small
     mentions "frame 1"
     [ "$(grep -vc '^#' "$T/rpcut/trajectory.txt")" = 1 ] || fail "replay stopped by a corrupt frame: no trajectory of the frame before it"
