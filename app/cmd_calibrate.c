@@ -99,6 +99,9 @@ static bf_status too_few(const camera_images *c)
         snprintf(list + used, sizeof list - used, "%s%s", shown ? ", " : "", c->paths[k]);
         shown++;
     }
+    if (!shown) /* found in every image, but too few were given */
+        return bf_fail(BF_FORMAT, "the board was found in all %u %s images, and at least %d are needed", c->n, c->name,
+                       CALIB_MIN_VIEWS);
     return bf_fail(BF_FORMAT, "the board was found in %u of %u %s images (at least %d needed); not in: %s", c->n_found,
                    c->n, c->name, CALIB_MIN_VIEWS, list);
 }

@@ -25,13 +25,14 @@ static const char export_epilog[] =
     "2 usage, 3 no readable store, 5 FILE could not be written (disk full, I/O error, no such\n"
     "folder: nothing is left behind, an earlier FILE stays as it was)\n";
 
-/* Reads a store, warning about what it left out. */
-static bf_status read_store(const char *dir, hostmap *m, store_meta *meta, bf_traj *traj, store_report *rep)
+/* Reads a store, warning about what it left out (cmd: whose warning). */
+static bf_status read_store(const char *cmd, const char *dir, hostmap *m, store_meta *meta, bf_traj *traj,
+                            store_report *rep)
 {
     bf_status s = store_read(dir, m, meta, traj, rep);
     if (s == BF_IO && !store_exists(dir)) s = BF_FORMAT; /* not a store: bad input, not an I/O failure */
     if (s == BF_OK && rep->n_bad)
-        bf_warn("export: %s: %u chunk file(s) left out, the first: %s", dir, rep->n_bad, rep->first_bad);
+        bf_warn("%s: %s: %u chunk file(s) left out, the first: %s", cmd, dir, rep->n_bad, rep->first_bad);
     return s;
 }
 
@@ -74,7 +75,7 @@ int cmd_export(int argc, char **argv)
     mesh_data data = {0};
     export_stats st = {0};
     mesh_simplify_stats ss = {0};
-    bf_status s = read_store(dir, &m, &meta, NULL, &rep);
+    bf_status s = read_store(cmd, dir, &m, &meta, NULL, &rep);
     if (s == BF_OK && points) {
         s = export_points(&m, &data, &st);
     } else if (s == BF_OK) {
@@ -123,7 +124,7 @@ int app_info_store(const char *dir, bool json)
     store_meta meta;
     store_report rep;
     bf_traj traj = {0};
-    bf_status s = read_store(dir, &m, &meta, &traj, &rep);
+    bf_status s = read_store("info", dir, &m, &meta, &traj, &rep);
     if (s != BF_OK) return app_fail("info", s);
     uint32_t per_level[9] = {0};
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};

@@ -76,7 +76,14 @@ static cJSON *stats_json(const record_args *a, const char *log_path, const recor
     cJSON_AddNumberToObject(o, "captured", (double)r->cap.captured);
     cJSON_AddNumberToObject(o, "dropped", (double)r->cap.dropped);
     cJSON_AddBoolToObject(o, "interrupted", r->is_interrupted);
-    cJSON_AddStringToObject(o, "status", s == BF_OK ? "ok" : bf_status_name(s));
+    /* What ended the recording, in the exit code's words, and the message. */
+    cJSON_AddStringToObject(o, "status", s == BF_OK ? "ok"
+                                         : s == BF_FORMAT || s == BF_IO ? "input_error"
+                                         : s == BF_WRITE ? "write_error"
+                                         : s == BF_VULKAN || s == BF_NO_DEVICE ? "device_error"
+                                                                                : "failure");
+    if (s != BF_OK) cJSON_AddStringToObject(o, "error", bf_last_error());
+    else cJSON_AddNullToObject(o, "error");
     app_json_log_stats(o, &a->lcfg, L, r->seconds);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
     cJSON_AddNumberToObject(o, "fps", r->seconds > 0 ? L->n_frames / r->seconds : NAN);
@@ -167,8 +174,9 @@ int cmd_record(int argc, char **argv)
            r.is_interrupted ? " (stopped by a signal; the log is complete up to there)" : "");
     printf("  capture   %llu captured, %llu dropped by the queue of %u\n", (unsigned long long)r.cap.captured,
            (unsigned long long)r.cap.dropped, a.queue);
-    printf("  depth     %.2f MB raw -> %.2f MB (%.2fx, zstd)\n", L->depth_raw_bytes / 1e6, L->depth_bytes / 1e6,
-           app_ratio(L->depth_raw_bytes, L->depth_bytes));
+    if (L->depth_raw_bytes) /* no frame: no ratio to give */
+        printf("  depth     %.2f MB raw -> %.2f MB (%.2fx, zstd)\n", L->depth_raw_bytes / 1e6, L->depth_bytes / 1e6,
+               app_ratio(L->depth_raw_bytes, L->depth_bytes));
     if (L->rgb_raw_bytes)
         printf("  colour    %.2f MB raw -> %.2f MB (%.2fx, %s)\n", L->rgb_raw_bytes / 1e6, L->rgb_bytes / 1e6,
                app_ratio(L->rgb_raw_bytes, L->rgb_bytes), app_colour_name(a.lcfg.colour));

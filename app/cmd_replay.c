@@ -821,13 +821,16 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
         printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
                r->run.is_interrupted ? " (stopped by a signal)" : "");
-    printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
-           "                   alloc %.1f, sub-cache %.1f, window %.1f, colour %.1f ms)\n",
-           bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
-           bf_stats_percentile(&t->track_ms, 50), bf_stats_percentile(&t->rof_ms, 50),
-           bf_stats_percentile(&t->raycast_ms, 50), bf_stats_percentile(&t->alloc_ms, 50),
-           bf_stats_percentile(&t->subcache_ms, 50), bf_stats_percentile(&t->window_ms, 50),
-           bf_stats_percentile(&t->colour_ms, 50));
+    if (t->frame_ms.n == 0) /* a resumed scan with no new frame */
+        printf("  time per frame   no frame processed\n");
+    else
+        printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
+               "                   alloc %.1f, sub-cache %.1f, window %.1f, colour %.1f ms)\n",
+               bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
+               bf_stats_percentile(&t->track_ms, 50), bf_stats_percentile(&t->rof_ms, 50),
+               bf_stats_percentile(&t->raycast_ms, 50), bf_stats_percentile(&t->alloc_ms, 50),
+               bf_stats_percentile(&t->subcache_ms, 50), bf_stats_percentile(&t->window_ms, 50),
+               bf_stats_percentile(&t->colour_ms, 50));
     if (r->has_ate)
         printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu poses\n", r->ate.trans.rmse,
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
@@ -922,6 +925,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         snprintf(r.device_driver, sizeof r.device_driver, "%s", gpu_device(ctx)->driver_info);
         r.cache_loaded_bytes = gpu_pipeline_cache_loaded_bytes(ctx);
     }
+    recon_resume_state rs;
+    /* The stored map's geometry, in the config stats.json echoes too. */
+    if (s == BF_OK && r.store.is_resumed) app_store_resume_config(&r.store, &rs, &a.rcfg);
     if (s == BF_OK) {
         recon_run_config rcfg = {
             .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,
@@ -931,11 +937,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             .label = cmd, .stop = stop, .depth_correction = a.depth_correction ? &replay_depth_fix : NULL,
             .depth_lens = app_calibration_depth_lens(&a.cal),
         };
-        recon_resume_state rs;
-        if (r.store.is_resumed) {
-            app_store_resume_config(&r.store, &rs, &rcfg.loop);
-            rcfg.resume = &rs;
-        }
+        if (r.store.is_resumed) rcfg.resume = &rs;
         replay_sink sink = {.a = &a, .csv = &csv, .log = log, .r = &r, .win = win,
                             .stop = (volatile sig_atomic_t *)stop};
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);

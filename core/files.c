@@ -208,6 +208,9 @@ bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name)
 bool bf_parse_double(const char *s, double *out)
 {
     if (!s || !*s) return false;
+    /* Decimal only: strtod would also read hexadecimal ("0x10"), which no
+     * file or option of ours means. */
+    if (strchr(s, 'x') || strchr(s, 'X')) return false;
     char *end;
     errno = 0;
     double v = strtod(s, &end);

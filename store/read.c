@@ -468,7 +468,9 @@ static void bad_file(store_report *rep)
 bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *traj, store_report *rep_out)
 {
     if (!dir || !map || !meta) return bf_fail(BF_INVALID_ARG, "store_read: NULL argument");
-    if (!is_dir(dir)) return bf_fail(BF_IO, "%s: no such folder", dir);
+    if (!is_dir(dir))
+        return bf_fail(BF_IO, "%s: %s", dir,
+                       bf_file_exists(dir) ? "a file, not a folder (a scene store is a folder)" : "no such folder");
     if (!store_exists(dir)) return bf_fail(BF_IO, "%s: not a scene store (no %s, no %s/)", dir, STORE_INDEX_NAME,
                                            STORE_CHUNK_DIR);
     store_report rep;
