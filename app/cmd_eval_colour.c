@@ -70,7 +70,10 @@ int cmd_eval_colour(int argc, char **argv)
                 "write each compared frame's rendering and input side by side (DIR/colour_N.png)", .no_default = true),
         APP_OPT_END,
     };
-    const app_option *tables[] = {own, NULL};
+    replay_options ropt = {0};
+    app_option seq[APP_SEQUENCE_ROWS];
+    app_sequence_options(seq, &ropt);
+    const app_option *tables[] = {own, seq, NULL};
     app_command_spec spec = {
         .name = cmd, .usage = usage_text, .tables = tables, .positional = paths, .min_positional = 2,
         .max_positional = 2, .positional_missing = "needs MESH and SEQ",
@@ -86,7 +89,6 @@ int cmd_eval_colour(int argc, char **argv)
     /* With a calibration the colour is the colour camera's own image, never
      * resampled by the depth camera's lens (a TUM folder's preset). */
     app_calibration cal = {0};
-    replay_options ropt = {0};
     rc = calib_path ? app_calibration_read(cmd, calib_path, paths[1], false, &ropt, &cal) : APP_EXIT_OK;
     if (rc) return rc;
     rgbd_source *src = NULL;

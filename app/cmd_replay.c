@@ -342,8 +342,9 @@ static void set_budget(replay_args *a, double mib)
 }
 
 /* Without --gpu-budget or --bricks the budget comes from the device: on a
- * CPU device (lavapipe: the pools are the process's memory) 64 MiB, 381,300
- * bricks, 14 times what 500 real frames of a room need (26,700 bricks; with
+ * CPU device (lavapipe: the pools are the process's memory) 64 MiB, 135,300
+ * bricks with colour (381,300 without), 5 times what 500 real frames of a
+ * room need (26,700 bricks; with
  * 1 M bricks the pools were 176 MiB of the 466 MiB the real run held
  * resident, docs/streaming.md); on a GPU a quarter of its largest
  * device-local heap, at least 64 MiB and at most 2 GiB. The stream makes
