@@ -393,6 +393,50 @@ BF_TEST(writer_that_never_finished_leaves_a_log_that_replays)
     synth_free(&q);
 }
 
+/* replace_when_finished (a conversion): until finish the log is
+ * path.partial and an earlier log at path is untouched; unfinished, the
+ * partial goes; finished, it takes path's place. */
+BF_TEST(a_log_written_to_replace_one_leaves_it_whole_until_finished)
+{
+    synth_seq q;
+    CHECK(synth_make(&q, LN, LW, LH));
+    const char *path = tmp_path("replaced.bflog");
+    char partial[1100];
+    snprintf(partial, sizeof partial, "%s.partial", path);
+    CHECK_OK(write_log(path, &q, REPLAY_LOG_COLOUR_NONE, true));
+    char *before;
+    size_t n_before;
+    CHECK_OK(bf_read_file(path, &before, &n_before));
+    replay_log_config cfg = {.colour = REPLAY_LOG_COLOUR_ZSTD, .replace_when_finished = true};
+    replay_log_writer *w;
+    CHECK_OK(replay_log_writer_create(path, &synth_K, &cfg, &w));
+    CHECK_OK(replay_log_writer_add(w, &q.f[0]));
+    CHECK(bf_file_exists(partial));
+    CHECK_EQ_INT(file_size(path), n_before);
+    replay_log_writer_destroy(w); /* unfinished: a failed conversion */
+    CHECK(!bf_file_exists(partial));
+    char *after;
+    size_t n_after;
+    CHECK_OK(bf_read_file(path, &after, &n_after));
+    CHECK(n_after == n_before && memcmp(after, before, n_before) == 0);
+    free(after);
+    CHECK_OK(replay_log_writer_create(path, &synth_K, &cfg, &w));
+    for (uint32_t k = 0; k < LN; k++) CHECK_OK(replay_log_writer_add(w, &q.f[k]));
+    CHECK_OK(replay_log_writer_finish(w));
+    replay_log_writer_destroy(w);
+    CHECK(!bf_file_exists(partial));
+    rgbd_source *src;
+    CHECK_OK(replay_open(path, NULL, &src));
+    bf_frame f;
+    for (uint32_t k = 0; k < LN; k++) {
+        CHECK_OK(rgbd_source_next(src, &f));
+        CHECK(frame_equals(&f, &q, k, 0)); /* the new log's colour, which the old one had not */
+    }
+    rgbd_source_close(src);
+    free(before);
+    synth_free(&q);
+}
+
 BF_TEST(damaged_index_or_footer_falls_back_to_reading_in_order)
 {
     synth_seq q;
