@@ -81,6 +81,7 @@ static cJSON *stats_json(const record_args *a, const char *log_path, const recor
                                          : s == BF_FORMAT || s == BF_IO ? "input_error"
                                          : s == BF_WRITE ? "write_error"
                                          : s == BF_VULKAN || s == BF_NO_DEVICE ? "device_error"
+                                         : s == BF_INVALID_ARG                 ? "usage"
                                                                                 : "failure");
     if (s != BF_OK) cJSON_AddStringToObject(o, "error", bf_last_error());
     else cJSON_AddNullToObject(o, "error");

@@ -209,7 +209,9 @@ static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run
     if (s != BF_END) return s;
     if (!has_fused(run))
         return bf_fail(BF_FORMAT, "%s: no frame with %s", cfg->name,
-                       cfg->poses == RECON_POSES_KNOWN && !run->counts.no_depth ? "a pose" : "depth");
+                       cfg->poses != RECON_POSES_KNOWN ? "depth"
+                       : run->counts.no_depth          ? "a pose and depth"
+                                                       : "a pose");
     return run->loop ? recon_flush(run->loop) : fusion_flush(run->map);
 }
 

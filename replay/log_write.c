@@ -31,6 +31,7 @@ struct replay_log_writer {
     uint64_t offset;       /* bytes written so far = next record's offset */
     replay_log_stats st;
     bool is_finished, is_broken;
+    bool is_opened; /* disk_path is ours: created by this writer */
 };
 
 /* After a failed write: a log that holds no whole frame is no log (it
@@ -119,6 +120,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
         s = bf_fail(BF_WRITE, "%s: cannot create: %s", w->disk_path, strerror(errno));
         goto fail;
     }
+    w->is_opened = true;
     uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
     memset(hdr, 0, sizeof hdr);
     memcpy(hdr, LOG_MAGIC, LOG_MAGIC_LEN);
@@ -259,12 +261,14 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
         w->is_broken = true;
         return s;
     }
-    if (w->cfg.replace_when_finished && rename(w->disk_path, w->path) != 0) {
-        bf_status s = bf_fail(BF_WRITE, "%s: cannot put the finished log in place (from %s): %s", w->path,
-                              w->disk_path, strerror(errno));
-        remove(w->disk_path);
-        w->is_broken = true;
-        return s;
+    if (w->cfg.replace_when_finished) {
+        if (rename(w->disk_path, w->path) != 0) {
+            bf_status s = bf_fail(BF_WRITE, "%s: cannot put the finished log in place (from %s): %s", w->path,
+                                  w->disk_path, strerror(errno));
+            remove(w->disk_path);
+            w->is_broken = true;
+            return s;
+        }
     }
     w->st.file_bytes = w->offset;
     w->is_finished = true;
@@ -278,7 +282,7 @@ void replay_log_writer_destroy(replay_log_writer *w)
     if (!w) return;
     if (w->fd >= 0) close(w->fd);
     /* A conversion that did not finish is no result: what was at path stays. */
-    if (!w->is_finished && w->cfg.replace_when_finished && w->disk_path) remove(w->disk_path);
+    if (!w->is_finished && w->cfg.replace_when_finished && w->is_opened) remove(w->disk_path);
     ZSTD_freeCCtx(w->zc);
     free(w->swapped);
     free(w->depth_buf);

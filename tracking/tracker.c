@@ -171,7 +171,8 @@ bf_status track_config_check(const track_config *c)
         return bf_fail(BF_INVALID_ARG,
                        "tracking: gates and sensor must be positive (dist %g m, angle %g deg, depth %g m, sigma %g)",
                        c->dist_m, c->angle_deg, c->sensor.max_depth_m, c->sensor.sigma_a);
-    if (c->rof_level > 1 || c->rof_level >= c->levels)
+    /* ROF's level matters only when it runs (off by default). */
+    if (c->rof_iterations > 0 && (c->rof_level > 1 || c->rof_level >= c->levels))
         return bf_fail(BF_INVALID_ARG, "tracking: rof_level %u (0 or 1, below levels %u)", c->rof_level, c->levels);
     if (!(c->max_residual_sigma >= 0))
         return bf_fail(BF_INVALID_ARG, "tracking: max_residual_sigma %g (0 or more)", c->max_residual_sigma);

@@ -232,7 +232,7 @@ import shutil, sys
 shutil.copy(sys.argv[2], sys.argv[1])
 PY
     expect 3 "$B" fuse "$T/zd" --poses groundtruth --out "$T/fuzd0" $small
-    mentions "no frame with depth"
+    mentions "no frame with a pose and depth"
     [ ! -e "$T/fuzd0" ] || fail "fuse of frames without depth left $T/fuzd0 behind"
     expect 3 "$B" replay "$T/cut" --out "$T/rpcut" $small
     mentions "frame 1"
