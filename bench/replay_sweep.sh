@@ -54,7 +54,7 @@ path, commit, frames = sys.argv[1:4]
 rows = read_rows(path)
 write_table("docs/bench_replay_sweep.md", "Full loop: speed against error",
             f"`bench/replay_sweep.sh {frames}`, commit {commit}: `bitfuse replay` (ICP tracking against the "
-            "ROF-smoothed ray-cast, fusion, ray-cast) on a synthetic room (640x480, Kinect v1 noise, seed 1) "
+            "ray-cast of the confident map, fusion, ray-cast) on a synthetic room (640x480, Kinect v1 noise, seed 1) "
             "along the real fr1_xyz trajectory, started at the first true pose; lavapipe on 2 cores. "
             "ATE RMSE as TUM's evaluate_ate.py; surface error of `mesh.ply` against `scene.ply`, completeness "
             "over `seen.ply` within 1 cm. Stage times are GPU timestamps (medians); frame_ms is wall time.", rows)

@@ -138,13 +138,18 @@ static bf_status uri_option(const char *uri, const char *key, size_t key_len, co
     v[val_len] = 0;
     if (key_len == 6 && !strncmp(key, "camera", 6)) {
         double k[4];
-        char *p = v;
+        char w[sizeof v];
+        memcpy(w, v, sizeof w);
+        char *p = w; /* cut at the commas; v stays whole for the messages */
         for (int i = 0; i < 4; i++) {
-            char *end = NULL;
-            k[i] = strtod(p, &end);
-            if (end == p || !isfinite(k[i]) || (i < 3 ? *end != ',' : *end != 0))
+            char *end = strchr(p, ',');
+            if ((i < 3) != (end != NULL))
                 return bf_fail(BF_INVALID_ARG, "%s: camera=%s: expected fx,fy,cx,cy in pixels", uri, v);
-            p = end + 1;
+            if (end) *end = 0;
+            /* Decimal numbers, as every option takes them. */
+            if (!bf_parse_double(p, &k[i]))
+                return bf_fail(BF_INVALID_ARG, "%s: camera=%s: expected fx,fy,cx,cy in pixels", uri, v);
+            p = end ? end + 1 : p;
         }
         if (k[0] <= 0 || k[1] == 0)
             return bf_fail(BF_INVALID_ARG, "%s: camera=%s: focal lengths must be non-zero (fx > 0)", uri, v);

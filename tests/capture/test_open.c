@@ -90,6 +90,14 @@ BF_TEST(uri_options_parse_and_apply)
     CHECK_STATUS(capture__uri_split("v4l2:x?camera=1,2,3", "x?camera=1,2,3", target, sizeof target, &o),
                  BF_INVALID_ARG);
     CHECK_ERROR_MENTIONS("fx,fy,cx,cy");
+    /* Decimal only, every value whole, the message naming all of it. */
+    CHECK_STATUS(capture__uri_split("v4l2:x?camera=0x10,2,3,4", "x?camera=0x10,2,3,4", target, sizeof target, &o),
+                 BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("camera=0x10,2,3,4");
+    CHECK_STATUS(capture__uri_split("v4l2:x?camera=1,2,3,4,5", "x?camera=1,2,3,4,5", target, sizeof target, &o),
+                 BF_INVALID_ARG);
+    CHECK_STATUS(capture__uri_split("v4l2:x?camera=1,,3,4", "x?camera=1,,3,4", target, sizeof target, &o),
+                 BF_INVALID_ARG);
     CHECK_STATUS(capture__uri_split("v4l2:x?depth_scale=-1", "x?depth_scale=-1", target, sizeof target, &o),
                  BF_INVALID_ARG);
     CHECK_STATUS(capture__uri_split("v4l2:x?depth", "x?depth", target, sizeof target, &o), BF_INVALID_ARG);
