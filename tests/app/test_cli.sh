@@ -540,6 +540,13 @@ expect 3 "$B" convert "$T/cut" --out "$T/self.bflog"
 mentions "$(ls "$T/cut/depth" | head -n 2 | tail -n 1)"
 [ "$(md5sum <"$T/self.bflog")" = "$sum0" ] || fail "a failed conversion replaced the log at its --out"
 [ -e "$T/self.bflog.partial" ] && fail "a failed conversion left its partial log"
+# A board that does not fit, or shared data that is not there: exit 2, no folder.
+expect 2 "$B" synth --board 64x64 --views 2 --size 160x120 --out "$T/bigboard"
+mentions "does not fit"
+[ -e "$T/bigboard" ] && fail "synth --board that does not fit left its folder"
+expect 2 "$B" demo --data "$T/no-such-data" --no-gpu --out "$T/demo-nodata"
+mentions "$T/no-such-data"
+[ -e "$T/demo-nodata" ] && fail "demo with a missing --data made its folder"
 # An option that means nothing without another is refused, not ignored.
 expect 2 "$B" replay "$T/seq" --out "$T/x" --view-period 0
 mentions "--view-period needs --view"
