@@ -42,7 +42,7 @@ int app_check_not_input(const char *cmd, const char *opt, const char *out, const
     struct stat so, si;
     if (!out || !in || stat(out, &so) != 0 || stat(in, &si) != 0) return 0;
     if (so.st_dev != si.st_dev || so.st_ino != si.st_ino) return 0;
-    return app_usage_error(cmd, "%s %s is %s, which is being read: writing it would destroy its frames", opt, out, in);
+    return app_usage_error(cmd, "%s %s is %s, which is being read: writing there would overwrite it", opt, out, in);
 }
 
 static const int colour_codes[] = {REPLAY_LOG_COLOUR_JPEG, REPLAY_LOG_COLOUR_ZSTD, REPLAY_LOG_COLOUR_NONE};

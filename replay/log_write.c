@@ -98,16 +98,17 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     if (!w->cfg.zstd_level) w->cfg.zstd_level = 1;
     w->n_px = (size_t)K->width * K->height;
     w->path = strdup(path);
-    size_t plen = strlen(path);
-    w->disk_path = bf_malloc(plen + sizeof ".partial");
-    if (w->disk_path) snprintf(w->disk_path, plen + sizeof ".partial", "%s%s", path, cfg->replace_when_finished ? ".partial" : "");
+    size_t disk_len = strlen(path) + sizeof ".partial";
+    w->disk_path = bf_malloc(disk_len);
+    if (w->disk_path) snprintf(w->disk_path, disk_len, "%s%s", path, cfg->replace_when_finished ? ".partial" : "");
     w->zc = ZSTD_createCCtx();
     uint16_t probe = 1;
     bool is_le = *(uint8_t *)&probe == 1;
     w->swapped = is_le ? NULL : bf_malloc(2 * w->n_px);
     w->depth_buf = bf_malloc(log__depth_bound(w->n_px));
     w->rgb_buf = cfg->colour ? bf_malloc(log__rgb_bound(w->n_px)) : NULL;
-    if (!w->path || !w->disk_path || !w->zc || (!is_le && !w->swapped) || !w->depth_buf || (cfg->colour && !w->rgb_buf)) {
+    if (!w->path || !w->disk_path || !w->zc || (!is_le && !w->swapped) || !w->depth_buf ||
+        (cfg->colour && !w->rgb_buf)) {
         s = bf_fail(BF_NO_MEMORY, "%s: log writer buffers for %ux%u frames", path, K->width, K->height);
         goto fail;
     }
