@@ -47,12 +47,16 @@ void app_store_resume_config(app_store *st, recon_resume_state *rs, recon_config
     rs->traj = &st->traj;
     rs->keyframes = &st->keyframes;
     /* The stored map's geometry decides: a chunk edge or a finest level
-     * other than the one it was built with cannot hold its bricks. */
-    if (loop->fusion.chunk_m != st->meta.chunk_m || loop->fusion.max_level != st->meta.max_level)
-        bf_info("store: %s: resuming with its chunk edge %g m and finest level %u", st->dir, st->meta.chunk_m,
-                st->meta.max_level);
+     * other than the one it was built with cannot hold its bricks. A store
+     * read without its index knows only the finest level its bricks hold:
+     * the loop's own level stands unless those bricks are finer. */
+    uint32_t level = st->meta.max_level;
+    if (!st->report.index_ok && loop->fusion.max_level > level) level = loop->fusion.max_level;
+    if (loop->fusion.chunk_m != st->meta.chunk_m || loop->fusion.max_level != level)
+        bf_info("store: %s: resuming with its chunk edge %g m and finest level %u%s", st->dir, st->meta.chunk_m, level,
+                st->report.index_ok ? "" : " (the finest its bricks hold; its index is lost)");
     loop->fusion.chunk_m = st->meta.chunk_m;
-    loop->fusion.max_level = st->meta.max_level;
+    loop->fusion.max_level = level;
 }
 
 /* The loop's keyframes to the writer, with the map about to follow, when

@@ -548,6 +548,11 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
     if (s == BF_OK && !rep.index_ok) {
         m.chunk_m = geo.known ? geo.chunk_m : 2.0f;
         m.origin_w = (bf_vec3){geo.origin[0], geo.origin[1], geo.origin[2]};
+        /* The level the map was built with is in the index only: the
+         * finest level its bricks hold is what the map is known to need. */
+        m.max_level = 0;
+        for (uint32_t i = 0; i < l.n; i++)
+            if (l.b[i].level > m.max_level) m.max_level = l.b[i].level;
     }
     if (s != BF_OK) {
         free(l.b);

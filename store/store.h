@@ -32,7 +32,7 @@
 /* The map's geometry and where the scan stands. */
 typedef struct store_meta {
     float chunk_m;          /* chunk edge [m] */
-    uint32_t max_level;     /* finest octree level the map may hold */
+    uint32_t max_level;     /* finest octree level the map may hold (read without the index: the finest its bricks hold) */
     bf_vec3 origin_w;       /* world point of chunk (0,0,0)'s corner */
     uint32_t frames;        /* frames the scan has handled (the trajectory's poses) */
     bool has_pose;          /* last_pose is known */

@@ -81,6 +81,23 @@ print("ATE uninterrupted %.4f m, two halves %.4f m" % (a, b))
 sys.exit(0 if ok else 1)
 PY
 
+# A store whose index is lost resumes at the loop's finest level (6 by
+# default), which its bricks fit, not at the deepest the format allows; a
+# --max-level coarser than its bricks is raised to theirs (these 160x120
+# frames make bricks to level 4 or so).
+expect 0 "$B" replay "$SEQ" --out "$T/n1" --no-mesh --frames 30 --store "$T/N"
+rm "$T/N/store.json"
+cp -r "$T/N" "$T/Nc"
+expect 0 "$B" replay "$SEQ" --out "$T/n2" --no-mesh --store "$T/N" --resume
+level=$(json_get "$T/n2/stats.json" "d['config']['fusion']['max_level']")
+[ "$level" = 6 ] || fail "a store without its index resumed at level $level"
+expect 0 "$B" info "$T/Nc" --json
+finest=$(json_get "$T/out" "max(l for l, n in enumerate(d['bricks_per_level']) if n)")
+expect 0 "$B" replay "$SEQ" --out "$T/n3" --no-mesh --store "$T/Nc" --resume --max-level $((finest - 1))
+mentions "index is lost"
+level=$(json_get "$T/n3/stats.json" "d['config']['fusion']['max_level']")
+[ "$level" = "$finest" ] || fail "--max-level $((finest - 1)) over a store of level-$finest bricks resumed at $level"
+
 # kill -9 at random moments of a scan with --store: every time the store
 # reopens (info), exports, and the next run resumes it; at the end one run
 # finishes the scan.

@@ -357,6 +357,28 @@ BF_TEST(store_opens_without_its_index)
     CHECK(meta2.has_pose && meta2.frames == 12);
     CHECK(memcmp(&meta2.last_pose, &t.T_wc[11], sizeof(bf_se3)) == 0);
     CHECK(meta2.origin_w.z == 1000.125 && meta2.chunk_m == 2.0f);
+    /* The finest level comes from the bricks: make_map's reach level 8;
+     * a map whose bricks stop at level 6 reads back as level 6. */
+    CHECK_EQ_INT(meta2.max_level, 8);
+    for (uint32_t i = 0; i < m.n_bricks; i++)
+        if (m.bricks[i].level > 6) m.bricks[i].level = 6;
+    CHECK_OK(hostmap_sort(&m)); /* cells may repeat now: keep one of each */
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m.n_bricks; i++)
+        if (!n || memcmp(m.bricks[n - 1].key, m.bricks[i].key, sizeof m.bricks[i].key) ||
+            m.bricks[n - 1].level != m.bricks[i].level || memcmp(m.bricks[n - 1].cell, m.bricks[i].cell, sizeof m.bricks[i].cell))
+            m.bricks[n++] = m.bricks[i];
+    m.n_bricks = n;
+    const char *dir6 = fresh_dir("noindex6");
+    meta.max_level = 6;
+    CHECK_OK(write_store(dir6, false, &m, &meta, &t, NULL));
+    snprintf(p, sizeof p, "%s/store.json", dir6);
+    CHECK(remove(p) == 0);
+    hostmap_free(&back);
+    CHECK_OK(store_read(dir6, &back, &meta2, NULL, &rep));
+    CHECK(!rep.index_ok);
+    CHECK_EQ_INT(meta2.max_level, 6);
+    CHECK_EQ_INT(back.n_bricks, n);
     /* A newer version is refused, not misread. */
     f = fopen(p, "w");
     fputs("{\"format\": \"bitfuse-store\", \"version\": 99}", f);
