@@ -175,7 +175,33 @@ bf_status bf_out_commit(bf_out *o)
         unlink(o->tmp);
         return bf_fail(BF_WRITE, "%s: cannot rename into place: %s", o->path, strerror(e));
     }
+    /* The file is whole and in place: a folder that will not sync leaves
+     * only the new name's durability in doubt, a warning, not a failure. */
+    if (bf_sync_parent(o->path) != BF_OK) bf_warn("%s", bf_last_error());
     return BF_OK;
+}
+
+bf_status bf_sync_dir(const char *dir)
+{
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0) return bf_fail(BF_WRITE, "%s: cannot open the folder: %s", dir, strerror(errno));
+    bf_status s = BF_OK;
+    if (fsync(fd) != 0 && errno != EINVAL)
+        s = bf_fail(BF_WRITE, "%s: fsync of the folder failed: %s", dir, strerror(errno));
+    close(fd);
+    return s;
+}
+
+bf_status bf_sync_parent(const char *path)
+{
+    char dir[4096];
+    const char *slash = strrchr(path, '/');
+    if (!slash) return bf_sync_dir(".");
+    size_t n = slash == path ? 1 : (size_t)(slash - path);
+    if (n >= sizeof dir) return bf_fail(BF_INVALID_ARG, "%s: path too long", path);
+    memcpy(dir, path, n);
+    dir[n] = 0;
+    return bf_sync_dir(dir);
 }
 
 bf_status bf_write_file_atomic(const char *path, const void *data, size_t size)

@@ -270,6 +270,9 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
             w->is_broken = true;
             return s;
         }
+        /* The log is whole and in place: only the rename's durability is
+         * in doubt if the folder's fsync fails, so that is a warning. */
+        if (bf_sync_parent(w->path) != BF_OK) bf_warn("%s", bf_last_error());
     }
     w->st.file_bytes = w->offset;
     w->is_finished = true;

@@ -161,12 +161,3 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
     if (s != BF_OK) unlink(tmp); /* the earlier version of path, if any, stays whole */
     return s;
 }
-
-bf_status store__sync_dir(const char *dir)
-{
-    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0) return bf_fail(BF_WRITE, "%s: cannot open the folder: %s", dir, strerror(errno));
-    bf_status s = fsync(fd) == 0 ? BF_OK : bf_fail(BF_WRITE, "%s: fsync of the folder failed: %s", dir, strerror(errno));
-    close(fd);
-    return s;
-}

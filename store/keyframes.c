@@ -62,7 +62,7 @@ bf_status store_keyframes_write(const char *dir, const store_keyframes *k)
     memcpy(p, &h, 8);
     bf_status s = store__write_atomic(path, buf, bytes, NULL, 0);
     free(buf);
-    return s == BF_OK ? store__sync_dir(dir) : s;
+    return s == BF_OK ? bf_sync_dir(dir) : s;
 }
 
 /* Keyframe i of the file at *at (len bytes left): its arrays copied. */

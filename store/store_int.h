@@ -78,8 +78,6 @@ uint64_t store__hash(const void *p, size_t n);
 /* Writes path atomically: path.tmp, fsync, rename (the folder's fsync is
  * the caller's). An injected fault (bf_fault_now) fails as ENOSPC. */
 bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb);
-/* fsync of a folder. */
-bf_status store__sync_dir(const char *dir);
 /* The whole regular file at path into *out (malloc'd, NUL-terminated, *n
  * bytes without the NUL): BF_IO when it cannot be opened or read,
  * BF_FORMAT when it is larger than max. */

@@ -207,11 +207,11 @@ static bf_status write_map(store_writer *w, store_job *job)
         s = write_chunk(w->chunk_dir, &job->map, &g[i], &job->meta, &e[i].file_bytes);
         if (s == BF_OK) written++, w->work.bytes_written += e[i].file_bytes;
     }
-    if (s == BF_OK && written) s = store__sync_dir(w->chunk_dir);
+    if (s == BF_OK && written) s = bf_sync_dir(w->chunk_dir);
     if (s == BF_OK) s = write_traj(w, &job->traj);
     if (s == BF_OK && job->has_kf) s = store_keyframes_write(w->dir, &job->kf);
     if (s == BF_OK) s = write_index(w, &job->meta, e, n);
-    if (s == BF_OK) s = store__sync_dir(w->dir);
+    if (s == BF_OK) s = bf_sync_dir(w->dir);
     uint64_t removed = 0;
     for (uint32_t i = 0; s == BF_OK && i < w->n_entries; i++) {
         if (n && bsearch(&w->entries[i], e, n, sizeof *e, store__entry_cmp)) continue;
@@ -220,7 +220,7 @@ static bf_status write_map(store_writer *w, store_job *job)
         snprintf(path, sizeof path, "%s/%s", w->chunk_dir, name);
         if (unlink(path) == 0) removed++;
     }
-    if (s == BF_OK && removed) store__sync_dir(w->chunk_dir);
+    if (s == BF_OK && removed) bf_sync_dir(w->chunk_dir);
     free(g);
     if (s != BF_OK) {
         free(e);
@@ -347,7 +347,7 @@ bf_status store_clear(const char *dir)
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
         if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
     }
-    return s == BF_OK ? store__sync_dir(dir) : s;
+    return s == BF_OK ? bf_sync_dir(dir) : s;
 }
 
 bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
@@ -366,7 +366,7 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
     }
     snprintf(w->chunk_dir, sizeof w->chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
     bf_status s = bf_mkdir_p(w->chunk_dir);
-    if (s == BF_OK) s = store__sync_dir(dir);
+    if (s == BF_OK) s = bf_sync_dir(dir);
     /* A new scan: a keyframes.bin left in the folder (not a store without
      * its index or chunks) holds poses of another scan's frame. */
     if (s == BF_OK && !resume) {
