@@ -125,7 +125,7 @@ static bf_se3 overview_pose(const view_scene *sc, const bf_intrinsics *K)
 {
     bf_vec3 c = bf_v3_scale(bf_v3_add(sc->lo_w, sc->hi_w), 0.5), h = bf_v3_scale(bf_v3_sub(sc->hi_w, sc->lo_w), 0.5);
     double r = sqrt(h.x * h.x + h.y * h.y + h.z * h.z);
-    double half_fov = atan(0.5 * K->height / K->fy_px);
+    double half_fov = atan(0.5 * K->height / fabs(K->fy_px)); /* ICL-NUIM's fy is negative */
     bf_se3 T = bf_se3_identity();
     T.t = bf_v3_sub(c, bf_v3(0, 0, fmax(r / sin(half_fov), 0.5)));
     return T;

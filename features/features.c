@@ -45,7 +45,7 @@ bf_status features_lift(const features_set *f, const uint16_t *depth, const bf_i
 {
     if (!out) return bf_fail(BF_INVALID_ARG, "features_lift: no output");
     *out = NULL;
-    if (!f || !depth || !K || !(K->depth_scale > 0) || !(K->fx_px > 0) || !(K->fy_px > 0) || !K->width ||
+    if (!f || !depth || !K || !(K->depth_scale > 0) || !(K->fx_px > 0) || !(fabs(K->fy_px) > 0) || !K->width ||
         !K->height || K->width > 65535 || K->height > 65535)
         return bf_fail(BF_INVALID_ARG, "features_lift: missing input or a camera without scale or focal length");
     const double Kd[4] = {K->fx_px, K->fy_px, K->cx_px, K->cy_px};
@@ -113,7 +113,7 @@ bf_status features_pnp(const features_set *a, const features_set *b, const bf_in
 {
     if (!out) return bf_fail(BF_INVALID_ARG, "features_pnp: no output");
     *out = (features_pnp_result){.ok = false, .T_ba = bf_se3_identity()};
-    if (!a || !b || !K || !cfg || !(K->fx_px > 0) || !(K->fy_px > 0) || !(cfg->ransac_px > 0) ||
+    if (!a || !b || !K || !cfg || !(K->fx_px > 0) || !(fabs(K->fy_px) > 0) || !(cfg->ransac_px > 0) ||
         !cfg->ransac_iterations || cfg->ransac_iterations > (uint32_t)INT32_MAX || cfg->max_hamming > 256)
         return bf_fail(BF_INVALID_ARG, "features_pnp: missing input, a camera without focal length or no RANSAC");
     for (int i = 0; dist && i < 5; i++)

@@ -402,7 +402,7 @@ bf_status render_cmd_particles(render_caster *rc, render_particles *ps, const bf
     if (K->width != tg->width || K->height != tg->height)
         return bf_fail(BF_INVALID_ARG, "render: intrinsics are %ux%u, the caster's images %ux%u", K->width,
                        K->height, tg->width, tg->height);
-    if (!(K->fx_px > 0) || !(K->fy_px > 0) || !isfinite(K->cx_px) || !isfinite(K->cy_px))
+    if (!(K->fx_px > 0) || !(fabs(K->fy_px) > 0) || !isfinite(K->fy_px) || !isfinite(K->cx_px) || !isfinite(K->cy_px))
         return bf_fail(BF_INVALID_ARG, "render: intrinsics fx %g fy %g cx %g cy %g", K->fx_px, K->fy_px, K->cx_px,
                        K->cy_px);
     if (!bf_se3_is_finite(T_wc)) return bf_fail(BF_INVALID_ARG, "render: camera pose is not finite");

@@ -213,8 +213,12 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
     if (s != BF_OK) return s;
     if (K->width < (1u << (c->levels + 1)) || K->height < (1u << (c->levels + 1)))
         return bf_fail(BF_INVALID_ARG, "tracking: %ux%u is too small for %u levels", K->width, K->height, c->levels);
-    if (!(K->fx_px > 0) || !(K->fy_px > 0) || !(K->depth_scale > 0) || !isfinite(K->depth_scale))
-        return bf_fail(BF_INVALID_ARG, "tracking: intrinsics need positive fx, fy and depth_scale (%g, %g, %g)",
+    /* A negative fy (ICL-NUIM's y-up camera) is a camera like any other:
+     * projection, back-projection and the normals' orientation toward the
+     * camera all hold with it. */
+    if (!(K->fx_px > 0) || !(fabs(K->fy_px) > 0) || !isfinite(K->fy_px) || !(K->depth_scale > 0) ||
+        !isfinite(K->depth_scale))
+        return bf_fail(BF_INVALID_ARG, "tracking: intrinsics need a positive fx and depth_scale and a non-zero fy (%g, %g, %g)",
                        K->fx_px, K->fy_px, K->depth_scale);
     return BF_OK;
 }
@@ -493,7 +497,7 @@ bf_status track_set_colour_camera(track_tracker *t, const bf_intrinsics *Kc, con
         return BF_OK;
     }
     bool ok = T_colour_depth && bf_se3_is_finite(T_colour_depth) && det3(T_colour_depth->R) > 0 && Kc->fx_px > 0 &&
-              Kc->fy_px > 0 && isfinite(Kc->fx_px) && isfinite(Kc->fy_px) && isfinite(Kc->cx_px) && isfinite(Kc->cy_px);
+              fabs(Kc->fy_px) > 0 && isfinite(Kc->fx_px) && isfinite(Kc->fy_px) && isfinite(Kc->cx_px) && isfinite(Kc->cy_px);
     for (int i = 0; dist && i < 5; i++) ok = ok && isfinite(dist[i]);
     if (!ok) return bf_fail(BF_INVALID_ARG, "tracking: colour camera (fx %g, fy %g), its distortion or T_colour_depth is not usable",
                             Kc->fx_px, Kc->fy_px);

@@ -8,7 +8,15 @@
 
 #include "export/export.h"
 
-bf_intrinsics test_K(void) { return (bf_intrinsics){W, H, 262.5, 262.5, 159.5, 119.5, 5000}; }
+static bool y_up;
+void fixture_set_y_up(bool on) { y_up = on; }
+
+/* y up: the image's rows run the other way, so cy mirrors too (H - 1 - cy). */
+bf_intrinsics test_K(void)
+{
+    return y_up ? (bf_intrinsics){W, H, 262.5, -262.5, 159.5, H - 1 - 119.5, 5000}
+                : (bf_intrinsics){W, H, 262.5, 262.5, 159.5, 119.5, 5000};
+}
 
 /* A hand-held sideways sweep with a little yaw and bob at 30 Hz, relative
  * to the scene's first view (the motion of tests/fusion's room test). */

@@ -13,6 +13,9 @@
 #define H 240
 
 bf_intrinsics test_K(void);
+/* With on, test_K and the frames are ICL-NUIM's kind of camera: y up, a
+ * negative fy (the same rays, the image's rows flipped). */
+void fixture_set_y_up(bool on);
 /* A hand-held sideways sweep with a little yaw and bob at 30 Hz, relative
  * to the scene's first view. */
 bf_se3 sweep_pose(const synth_scene *sc, uint32_t k);
