@@ -272,6 +272,10 @@ const char *app_check_log_path(const char *name, const char *value);
  * or folder in, which is being read: writing would destroy what it reads.
  * 0 when they differ or either does not exist yet. */
 int app_check_not_input(const char *cmd, const char *opt, const char *out, const char *in);
+/* A usage error when opt's recording path exists and overwrite is not
+ * given: a camera's recording cannot be made again, and a recording that
+ * fails part-way would leave fewer frames than the log it replaced. */
+int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite);
 /* The log's codec options record and convert share (--colour, --jpeg-quality,
  * --zstd-level), applied to a replay_log_config after parsing. */
 typedef struct app_log_codec {

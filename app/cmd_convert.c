@@ -14,7 +14,8 @@
 static const char convert_usage[] =
     "usage: bitfuse convert SEQUENCE --out DEST [options]\n\n"
     "Reads SEQUENCE (a TUM, ICL-NUIM or pose-per-frame folder, or a .bflog) and writes it\n"
-    "as a bitfuse log when DEST ends in .bflog, else as a TUM folder (docs/formats.md).\n"
+    "as a bitfuse log when DEST ends in .bflog (replacing one there once it is whole), else\n"
+    "as a TUM folder (docs/formats.md), which must not hold a sequence already.\n"
     "Depth, timestamps and poses carry over exactly; colour too, except with --colour jpeg.\n"
     "Writes DEST's stats (frames, bytes, compression ratio, fps) to X.stats.json beside\n"
     "X.bflog, or to DEST/stats.json for a folder.\n";
@@ -26,6 +27,23 @@ typedef struct convert_args {
     app_log_codec codec;
     bool to_log;
 } convert_args;
+
+/* A folder that holds a sequence already is not converted into: its images
+ * would be overwritten one by one, and a conversion failing part-way would
+ * leave two sequences mixed under the old index (a log is replaced whole
+ * instead). */
+static int check_new_folder(const char *dir)
+{
+    static const char *const held[] = {"depth.txt", "rgb.txt", "groundtruth.txt", "depth", "rgb"};
+    for (size_t i = 0; i < sizeof held / sizeof *held; i++) {
+        char p[4200];
+        snprintf(p, sizeof p, "%s/%s", dir, held[i]);
+        if (bf_file_exists(p))
+            return app_usage_error("convert", "--out %s holds a sequence already (%s): give a new folder, or "
+                                              "remove it first", dir, held[i]);
+    }
+    return 0;
+}
 
 static int parse_args(int argc, char **argv, convert_args *a)
 {
@@ -46,7 +64,8 @@ static int parse_args(int argc, char **argv, convert_args *a)
     a->to_log = replay_is_log_path(a->out);
     /* A failed or cut conversion leaves a log already at DEST as it was. */
     a->lcfg.replace_when_finished = true;
-    return app_check_not_input("convert", "--out", a->out, a->in);
+    rc = app_check_not_input("convert", "--out", a->out, a->in);
+    return rc || a->to_log ? rc : check_new_folder(a->out);
 }
 
 /* The frames of src into the log or TUM writer (exactly one is set). */

@@ -24,7 +24,7 @@ typedef struct record_args {
     replay_log_config lcfg;
     app_log_codec codec;
     uint32_t queue;
-    bool realtime;
+    bool realtime, overwrite;
 } record_args;
 
 static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
@@ -38,8 +38,10 @@ static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
                 "standing in for a camera: a TUM, ICL-NUIM or pose-per-frame folder or a .bflog (read whole, nothing "
                 "dropped, unless --realtime)",
                 .required = true),
-        APP_OPT("--out", APP_OPT_STRING, &a->out, "FILE.bflog", "the log to write (replaced if it exists)",
+        APP_OPT("--out", APP_OPT_STRING, &a->out, "FILE.bflog",
+                "the log to write (refused if it exists, unless --overwrite: a recording cannot be made again)",
                 .required = true, .check = app_check_log_path),
+        APP_OPT("--overwrite", APP_OPT_FLAG, &a->overwrite, NULL, "replace FILE.bflog if it exists"),
         APP_OPT("--queue", APP_OPT_U32, &a->queue, "N", "capture queue length in frames", .min = 1, .max = 1024),
         APP_OPT("--realtime", APP_OPT_FLAG, &a->realtime, NULL,
                 "deliver a recorded sequence at its own frame rate, as a camera would (frames are dropped when "
@@ -53,7 +55,8 @@ static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
                   "5 the log could not be written (disk full, I/O error)\n",
     };
     int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
-    return rc ? rc : app_check_not_input(cmd, "--out", a->out, a->device);
+    if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->device);
+    return rc ? rc : app_check_new_recording(cmd, "--out", a->out, a->overwrite);
 }
 
 /* What a recording did, for the summary and stats.json. */

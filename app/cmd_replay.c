@@ -60,6 +60,7 @@ typedef struct replay_args {
     bool is_live_cmd, realtime;
     uint32_t queue;
     const char *record_path; /* live: also record into this log */
+    bool overwrite;          /* live: --record may replace an existing log */
     int init;                /* 0: the first frame's ground truth, 1: identity */
     replay_options ropt;
     app_calibration cal;    /* --calibration, read by parse_args */
@@ -103,7 +104,7 @@ typedef struct replay_args {
 static calib_depth_correction replay_depth_fix;
 
 #define LOOP_ROWS 35
-#define LIVE_ROWS 5
+#define LIVE_ROWS 6
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
 #define VIEW_ROWS 6
@@ -324,7 +325,10 @@ static void live_options(app_option rows[LIVE_ROWS], replay_args *a)
                 "play a recorded sequence at its own frame rate, as a camera would"),
         APP_OPT("--queue", APP_OPT_U32, &a->queue, "N", "capture queue length in frames", .min = 1, .max = 1024),
         APP_OPT("--record", APP_OPT_STRING, &a->record_path, "FILE",
-                "also record the frames the loop consumed into a bitfuse log", .check = app_check_log_path),
+                "also record the frames the loop consumed into a bitfuse log (refused if FILE exists, "
+                "unless --overwrite)", .check = app_check_log_path),
+        APP_OPT("--overwrite", APP_OPT_FLAG, &a->overwrite, NULL, "let --record replace an existing log",
+                .needs = "--record"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);
@@ -461,6 +465,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     }
     if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->seq);
     if (!rc) rc = app_check_not_input(cmd, "--record", a->record_path, a->seq);
+    if (!rc) rc = app_check_new_recording(cmd, "--record", a->record_path, a->overwrite);
     if (!rc && a->ref_path) {
         bf_status s = mesh_read(a->ref_path, &a->ref);
         if (s == BF_OK && a->ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", a->ref_path);

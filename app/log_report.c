@@ -45,6 +45,14 @@ int app_check_not_input(const char *cmd, const char *opt, const char *out, const
     return app_usage_error(cmd, "%s %s is %s, which is being read: writing there would overwrite it", opt, out, in);
 }
 
+int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite)
+{
+    struct stat st;
+    if (!path || overwrite || lstat(path, &st) != 0) return 0;
+    return app_usage_error(cmd, "%s %s exists: a recording is not written over it (give --overwrite to replace it, or "
+                                "another name)", opt, path);
+}
+
 static const int colour_codes[] = {REPLAY_LOG_COLOUR_JPEG, REPLAY_LOG_COLOUR_ZSTD, REPLAY_LOG_COLOUR_NONE};
 
 void app_log_codec_options(app_option rows[APP_LOG_ROWS], app_log_codec *c)

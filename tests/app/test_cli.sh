@@ -540,6 +540,28 @@ expect 3 "$B" convert "$T/cut" --out "$T/self.bflog"
 mentions "$(ls "$T/cut/depth" | head -n 2 | tail -n 1)"
 [ "$(md5sum <"$T/self.bflog")" = "$sum0" ] || fail "a failed conversion replaced the log at its --out"
 [ -e "$T/self.bflog.partial" ] && fail "a failed conversion left its partial log"
+# A recording is not written over unless asked (one that fails part-way
+# would replace it with fewer frames), and a folder holding a sequence is
+# not converted into (a failure part-way would mix two).
+expect 2 "$B" record --device "$T/seq" --out "$T/self.bflog"
+mentions "--overwrite"
+expect 2 "$B" live --device "$T/seq" --out "$T/lvx" --record "$T/self.bflog"
+mentions "--overwrite"
+[ "$(md5sum <"$T/self.bflog")" = "$sum0" ] || fail "a refused recording changed the log at its --out"
+expect 2 "$B" live --device "$T/seq" --out "$T/x" --overwrite
+mentions "--overwrite needs --record"
+expect 0 "$B" record --device "$T/seq" --out "$T/self.bflog" --overwrite --frames 2
+[ "$(md5sum <"$T/self.bflog")" = "$sum0" ] && fail "record --overwrite did not replace the log"
+expect 0 "$B" convert "$T/seq" --out "$T/tumcopy"
+sum1=$(md5sum <"$T/tumcopy/depth.txt")
+for f in depth.txt rgb; do
+    mkdir -p "$T/tumpart" && : >"$T/tumpart/$f"
+    expect 2 "$B" convert "$T/self.bflog" --out "$T/tumpart"
+    mentions "holds a sequence already ($f)"
+    rm -rf "$T/tumpart"
+done
+expect 2 "$B" convert "$T/self.bflog" --out "$T/tumcopy"
+[ "$(md5sum <"$T/tumcopy/depth.txt")" = "$sum1" ] || fail "a refused conversion changed the folder at its --out"
 # A board that does not fit, or shared data that is not there: exit 2, no folder.
 expect 2 "$B" synth --board 64x64 --views 2 --size 160x120 --out "$T/bigboard"
 mentions "does not fit"
