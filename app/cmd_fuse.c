@@ -194,7 +194,7 @@ int cmd_fuse(int argc, char **argv)
             printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
                    r.run.counts.repeated);
         if (r.run.counts.no_depth)
-            printf("  input            %u frames without a depth sample: not fused\n", r.run.counts.no_depth);
+            printf("  input            %u frames without a depth sample in the sensor's range: not fused\n", r.run.counts.no_depth);
         if (r.run.counts.colour_repeated)
             printf("  input            %u frames repeated only the colour before them: fused without it\n",
                    r.run.counts.colour_repeated);

@@ -829,14 +829,19 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                r->run.is_interrupted ? " (stopped by a signal)" : "");
     if (t->frame_ms.n == 0) /* a resumed scan with no new frame */
         printf("  time per frame   no frame processed\n");
-    else
-        printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %.1f, ROF %.1f, ray-cast %.1f,\n"
-               "                   alloc %.1f, sub-cache %.1f, window %.1f, colour %.1f ms)\n",
-               bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95),
-               bf_stats_percentile(&t->track_ms, 50), bf_stats_percentile(&t->rof_ms, 50),
-               bf_stats_percentile(&t->raycast_ms, 50), bf_stats_percentile(&t->alloc_ms, 50),
-               bf_stats_percentile(&t->subcache_ms, 50), bf_stats_percentile(&t->window_ms, 50),
-               bf_stats_percentile(&t->colour_ms, 50));
+    else {
+        /* A stage that never ran (no frame tracked after the first) has no median: "-". */
+        char m[7][16];
+        const bf_stats *st[7] = {&t->track_ms, &t->rof_ms, &t->raycast_ms, &t->alloc_ms, &t->subcache_ms,
+                                 &t->window_ms, &t->colour_ms};
+        for (int i = 0; i < 7; i++)
+            if (st[i]->n) snprintf(m[i], sizeof m[i], "%.1f", bf_stats_percentile(st[i], 50));
+            else snprintf(m[i], sizeof m[i], "-");
+        printf("  time per frame   median %.1f ms, p95 %.1f ms (GPU median: track %s, ROF %s, ray-cast %s,\n"
+               "                   alloc %s, sub-cache %s, window %s, colour %s ms)\n",
+               bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95), m[0], m[1], m[2], m[3],
+               m[4], m[5], m[6]);
+    }
     if (r->has_ate)
         printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu poses\n", r->ate.trans.rmse,
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);

@@ -214,11 +214,17 @@ fusion_map *recon_map(recon *r) { return r->map; }
 render_caster *recon_caster(recon *r) { return view_caster(r) == BF_OK ? r->caster : NULL; }
 recon_counts recon_get_counts(const recon *r) { return r->counts; }
 
-static uint32_t count_valid(const bf_frame *f)
+/* Samples the loop can use: a reading within the sensor's range. A frame
+ * of readings all beyond it (a saturated 65535, a flat 6 m) holds no more
+ * than an empty one: counted as none, it is skipped as one, not made the
+ * first frame of a map it cannot start. */
+uint32_t recon__depth_in_range(const bf_frame *f, double depth_scale, float max_depth_m)
 {
+    double max_raw = (double)max_depth_m * depth_scale;
+    uint32_t top = max_raw >= 65535.0 ? 65535u : (uint32_t)max_raw;
     uint32_t n = 0;
     size_t np = (size_t)f->width * f->height;
-    for (size_t i = 0; i < np; i++) n += f->depth[i] != 0;
+    for (size_t i = 0; i < np; i++) n += f->depth[i] != 0 && f->depth[i] <= top;
     return n;
 }
 
@@ -491,7 +497,7 @@ static bf_status add_frame(recon *r, const bf_frame *f, const bf_se3 *known, rec
     r->frame_fused = false; /* the tracker's frame depth is about to be this frame's */
     out->index = f->index;
     out->T_wc = r->T_last;
-    out->n_valid = count_valid(f);
+    out->n_valid = recon__depth_in_range(f, r->K.depth_scale, r->cfg.sensor.max_depth_m);
     r->counts.frames++;
     if (r->is_behind) r->counts.behind++;
     /* Every frame's images count, a skipped one's too: the next frame's

@@ -105,7 +105,7 @@ typedef struct recon_config {
                                  short windows (a thin first window) a frame found by a search (docs/tracking.md,
                                  "The confident map as the reference") */
     render_config caster;     /* how the loop's casters are built (render's defaults) */
-    uint32_t min_valid_pixels; /* a frame with fewer valid depth samples is skipped, default 1% of the image */
+    uint32_t min_valid_pixels; /* a frame with fewer valid depth samples (within the sensor's range) is skipped, default 1% of the image */
     bool fuse_degenerate;     /* fuse frames tracked with a degenerate system (weak directions kept), default true */
     bool constant_velocity;   /* the tracker's guess is the last pose moved on by the last motion per frame
                                  interval over the intervals since the last good frame, not the last pose
@@ -200,7 +200,7 @@ typedef struct recon_frame_result {
     bool fused;
     bool colour_repeated;    /* the colour repeated the previous frame's (skip_repeated): left out */
     bf_status fuse_status;   /* BF_POOL_FULL is reported here and the loop goes on */
-    uint32_t n_valid;        /* valid depth samples */
+    uint32_t n_valid;        /* valid depth samples: a reading within the sensor's range */
     /* Times [ms]: wall clock of the whole frame and GPU time per stage. */
     double ms_frame;
     double ms_track, ms_rof, ms_raycast;
@@ -364,6 +364,7 @@ typedef struct recon_run {
     fusion_map *map;     /* the map: the loop's, or the run's own with known poses; made before the first frame */
     recon_counts counts; /* the loop's counts; with known poses frames, pool_full, repeated and colour_repeated */
     uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
+    double depth_scale;  /* the source's raw depth units per metre */
     uint32_t n_resume_skipped; /* frames of the source the resumed scan had handled already */
     bf_repeats repeats;  /* RECON_POSES_KNOWN with skip_repeated: the last images (the loop keeps its own) */
     bool is_resumed;     /* the run continues a stored scan (recon_run_config.resume) */

@@ -55,6 +55,9 @@ struct recon {
 /* reloc.c */
 /* T_last moved on by n frame intervals of V_step. */
 bf_se3 recon__velocity_pose(const recon *r, double n);
+/* f's depth samples the loop can use: a reading within max_depth_m
+ * (depth_scale raw units a metre). */
+uint32_t recon__depth_in_range(const bf_frame *f, double depth_scale, float max_depth_m);
 /* Whether a fit passes what a search's candidate must: no degeneracy, at
  * least reloc.min_inlier_frac inliers, the residual within
  * reloc.max_residual_m (or max_residual_sigma). */

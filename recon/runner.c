@@ -1,6 +1,6 @@
 /* recon: one sequence through the loop, with the policies every caller
  * shares (recon.h, "the runner"). */
-#include "recon.h"
+#include "recon_int.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -76,8 +76,8 @@ static bool has_fused(const recon_run *run)
  * its origin at the first posed frame. A repeated depth is not fused (its
  * pose has moved on from the moment it shows), a colour repeated alone
  * leaves the depth to fuse without it (core.h, "Repeated frames"). */
-static bf_status fuse_known(const bf_frame *f, const bf_se3 *T_wc, bool stale_depth, bool stale_rgb, recon_run *run,
-                            recon_frame_result *fr)
+static bf_status fuse_known(const recon_run_config *cfg, const bf_frame *f, const bf_se3 *T_wc, bool stale_depth,
+                            bool stale_rgb, recon_run *run, recon_frame_result *fr)
 {
     double t0 = bf_time_s();
     memset(fr, 0, sizeof *fr);
@@ -90,11 +90,11 @@ static bf_status fuse_known(const bf_frame *f, const bf_se3 *T_wc, bool stale_de
         run->counts.repeated++;
         return BF_OK;
     }
-    /* A frame without one depth sample adds nothing (a covered lens, a
-     * camera starting up): skipped and said so, as the loop does. */
-    bool any_depth = false;
-    for (size_t i = 0, n = (size_t)f->width * f->height; i < n && !any_depth; i++) any_depth = f->depth[i] != 0;
-    if (!any_depth) {
+    /* A frame without one depth sample in the sensor's range adds nothing
+     * (a covered lens, a camera starting up, a saturated image): skipped
+     * and said so, as the loop does. */
+    fr->n_valid = recon__depth_in_range(f, run->depth_scale, cfg->loop.sensor.max_depth_m);
+    if (!fr->n_valid) {
         fr->state = RECON_NO_DEPTH;
         run->counts.no_depth++;
         return BF_OK;
@@ -123,7 +123,9 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
                                      recon_frame_result *fr)
 {
     bf_status s;
-    if (run->counts.frames == 0 && !cfg->init_identity && !cfg->resume && f->has_pose &&
+    /* Until a frame starts the map (frames without depth before it are
+     * skipped), each frame's ground truth is where the loop starts. */
+    if (run->counts.tracked == 0 && !cfg->init_identity && !cfg->resume && f->has_pose &&
         (s = recon_set_first_pose(run->loop, &f->T_wc)) != BF_OK)
         return s;
     if (cfg->poses == RECON_POSES_TRACK_FUSE_GT) {
@@ -151,8 +153,8 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
                 cfg->label, f->index, f->t_depth_s, recon_reloc_kind_name(fr->reloc), fr->reloc_tried,
                 100 * fr->track.inlier_frac, 1e3 * fr->track.residual_m);
     } else if (fr->state == RECON_NO_DEPTH) {
-        bf_warn("%s: frame %u (t = %.6f): %u valid depth samples: skipped", cfg->label, f->index, f->t_depth_s,
-                fr->n_valid);
+        bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m: skipped", cfg->label, f->index,
+                f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m);
     }
     return BF_OK;
 }
@@ -179,9 +181,10 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, const
             bf_warn("%s: frame %u (t = %.6f): no pose, skipped", cfg->label, f->index, f->t_depth_s);
             return BF_OK;
         }
-        s = fuse_known(f, &T_wc, stale_depth, stale_rgb, run, &fr);
+        s = fuse_known(cfg, f, &T_wc, stale_depth, stale_rgb, run, &fr);
         if (s == BF_OK && fr.state == RECON_NO_DEPTH)
-            bf_warn("%s: frame %u (t = %.6f): no valid depth sample: skipped", cfg->label, f->index, f->t_depth_s);
+            bf_warn("%s: frame %u (t = %.6f): no depth sample within the sensor's %.1f m: skipped", cfg->label,
+                    f->index, f->t_depth_s, cfg->loop.sensor.max_depth_m);
     } else {
         s = track_frame_in_loop(cfg, f, run, &fr);
     }
@@ -208,10 +211,11 @@ static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run
     }
     if (s != BF_END) return s;
     if (!has_fused(run))
-        return bf_fail(BF_FORMAT, "%s: no frame with %s", cfg->name,
+        return bf_fail(BF_FORMAT, "%s: no frame with %s%s", cfg->name,
                        cfg->poses != RECON_POSES_KNOWN ? "depth"
                        : run->counts.no_depth          ? "a pose and depth"
-                                                       : "a pose");
+                                                       : "a pose",
+                       run->counts.no_depth ? " within the sensor's range" : "");
     return run->loop ? recon_flush(run->loop) : fusion_flush(run->map);
 }
 
@@ -239,6 +243,7 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
         for (size_t i = 0; s == BF_OK && rs->traj && i < rs->traj->n; i++)
             s = bf_traj_push(&run->est, rs->traj->t_s[i], &rs->traj->T_wc[i]);
     }
+    run->depth_scale = rgbd_source_intrinsics(src)->depth_scale;
     run->t_ready_s = bf_time_s();
     return s;
 }

@@ -19,9 +19,16 @@
 
 /* Frames 8-10 lose their depth: 8 is all zero, 9 keeps a handful of
  * samples (below the loop's 1% floor), 10 has only samples beyond the
- * sensor's range (65535 raw = 13 m). */
+ * sensor's range (65535 raw = 13 m). Frames 0 and 1, before any map, read
+ * a flat 6 m (30000 raw) and nothing: beyond the range, the first is no
+ * frame to start the map from (until the thirty-fifth session it was, and
+ * every frame after it was lost). */
 static void drop_depth(uint32_t k, uint16_t *depth)
 {
+    if (k < 2) {
+        for (uint32_t i = 0; i < W * H; i++) depth[i] = k == 0 ? 30000 : 0;
+        return;
+    }
     if (k < 8 || k > 10) return;
     for (uint32_t i = 0; i < W * H; i++) depth[i] = k == 10 ? 65535 : (k == 9 && i % 4096 == 0 ? 9000 : 0);
 }
@@ -38,13 +45,18 @@ BF_TEST(frames_without_depth_are_skipped_and_tracking_resumes)
     memset(&o, 0, sizeof o);
     bf_se3 I = bf_se3_identity();
     CHECK_OK(run_loop(ctx, &sc, truth, N, &I, drop_depth, &o));
+    /* The map starts at frame 2, at its own true pose. */
+    CHECK_EQ_INT(o.fr[0].state, RECON_NO_DEPTH);
+    CHECK_EQ_INT(o.fr[1].state, RECON_NO_DEPTH);
+    CHECK_EQ_INT(o.fr[2].state, RECON_FIRST);
+    CHECK_NEAR(trans_dist(&o.est[2], &truth[2]), 0, 1e-9);
     for (uint32_t k = 8; k <= 10; k++) {
         CHECK_EQ_INT(o.fr[k].state, RECON_NO_DEPTH);
         CHECK(!o.fr[k].fused);
         /* The pose of a skipped frame is the last good one. */
         CHECK_NEAR(trans_dist(&o.est[k], &o.est[7]), 0, 1e-12);
     }
-    CHECK_EQ_INT(o.counts.no_depth, 3);
+    CHECK_EQ_INT(o.counts.no_depth, 5);
     CHECK_EQ_INT(o.counts.lost, 0);
     for (uint32_t k = 11; k < N; k++) {
         CHECK_EQ_INT(o.fr[k].state, RECON_TRACKED);
