@@ -85,6 +85,19 @@ bf_status replay__pose_from_fields(replay__text *t, char **f, bf_se3 *T_wc)
     if (!(norm2 >= 4 * DBL_EPSILON))
         return bf_fail(BF_FORMAT, "%s:%u: quaternion (%g %g %g %g) is zero: no rotation", t->path, t->line, q.x, q.y,
                        q.z, q.w);
+    if (!isfinite(norm2)) {
+        /* Squares of huge components overflow, and q / inf is no
+         * rotation: scaled by the largest component first. */
+        double m = fmax(fmax(fabs(q.w), fabs(q.x)), fmax(fabs(q.y), fabs(q.z)));
+        q = (bf_quat){q.w / m, q.x / m, q.y / m, q.z / m};
+        double n1 = sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+        q = (bf_quat){q.w / n1, q.x / n1, q.y / n1, q.z / n1};
+        norm2 = 1.0;
+        if (t->n_normalised++ == 0) {
+            t->normalised_line = t->line;
+            t->normalised_norm = m * n1;
+        }
+    }
     double norm = sqrt(norm2);
     if (fabs(norm - 1.0) > 1e-3 && t->n_normalised++ == 0) {
         t->normalised_line = t->line;

@@ -135,11 +135,12 @@ BF_TEST(traj_keeps_first_of_repeated_stamp_and_normalises_quaternions)
                                                "2 9 0 0 0 0 0 1\n"
                                                "3 3 0 0 0 0 0.6 1.6\n"
                                                "3 9 0 0 0 0 0 1\n"
-                                               "4 4 0 0 0 0 0 1.002\n");
+                                               "4 4 0 0 0 0 0 1.002\n"
+                                               "5 5 0 0 0 0 6e200 1.6e201\n");
     CHECK_OK(replay_traj_read_tum(p, &tr));
-    CHECK_EQ_INT(tr.n, 4);
-    const double t_want[4] = {1, 2, 3, 4}, x_want[4] = {0, 1, 3, 4};
-    for (size_t i = 0; i < 4; i++) {
+    CHECK_EQ_INT(tr.n, 5);
+    const double t_want[5] = {1, 2, 3, 4, 5}, x_want[5] = {0, 1, 3, 4, 5};
+    for (size_t i = 0; i < 5; i++) {
         CHECK(tr.t_s[i] == t_want[i]);
         CHECK(tr.T_wc[i].t.x == x_want[i]);
     }
@@ -151,5 +152,11 @@ BF_TEST(traj_keeps_first_of_repeated_stamp_and_normalises_quaternions)
     CHECK_NEAR(fabs(q.w), 1.6 / n, 1e-12);
     CHECK_NEAR(fabs(q.z), 0.6 / n, 1e-12);
     CHECK_NEAR(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z, 1, 1e-12);
+    /* The same rotation written with components whose squares overflow
+     * (until the thirty-fifth session read as no rotation). */
+    bf_quat q5;
+    bf_se3_to_qt(&tr.T_wc[4], &q5, &t);
+    CHECK_NEAR(fabs(q5.w), 1.6 / n, 1e-12);
+    CHECK_NEAR(fabs(q5.z), 0.6 / n, 1e-12);
     bf_traj_free(&tr);
 }
