@@ -240,7 +240,8 @@ bf_status calib_read(const char *path, calib_result *out)
     size_t len;
     bf_status s = bf_read_file(path, &text, &len);
     if (s != BF_OK) return s;
-    s = calib_parse(path, text, len, out);
+    size_t bom = bf_bom_bytes(text, len);
+    s = calib_parse(path, text + bom, len - bom, out);
     free(text);
     return s;
 }

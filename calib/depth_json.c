@@ -200,7 +200,8 @@ bf_status calib_depth_read(const char *path, calib_depth_correction *out)
     size_t len;
     bf_status s = bf_read_file(path, &text, &len);
     if (s != BF_OK) return s;
-    s = calib_depth_parse(path, text, len, out);
+    size_t bom = bf_bom_bytes(text, len);
+    s = calib_depth_parse(path, text + bom, len - bom, out);
     free(text);
     return s;
 }

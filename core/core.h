@@ -252,6 +252,10 @@ void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx);
 
 /* Reads a whole file; *data is malloc'd and NUL-terminated (size excludes it). */
 bf_status bf_read_file(const char *path, char **data, size_t *size);
+/* The number of bytes of a UTF-8 byte order mark at the start of text
+ * (NUL-terminated or at least len bytes long): 3 or 0. Editors on Windows
+ * write one; it is no part of a file's first field. */
+size_t bf_bom_bytes(const char *text, size_t len);
 /* Creates a directory and its parents (mkdir -p). */
 bf_status bf_mkdir_p(const char *path);
 /* Writes data to path atomically: temporary file, fsync, rename (a bf_out

@@ -214,6 +214,14 @@ bf_status bf_write_file_atomic(const char *path, const void *data, size_t size)
     return bf_out_commit(&o);
 }
 
+size_t bf_bom_bytes(const char *text, size_t len)
+{
+    return len >= 3 && (unsigned char)text[0] == 0xEF && (unsigned char)text[1] == 0xBB &&
+                   (unsigned char)text[2] == 0xBF
+               ? 3
+               : 0;
+}
+
 bool bf_file_exists(const char *path)
 {
     struct stat st;

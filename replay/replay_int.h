@@ -36,6 +36,10 @@ typedef struct replay__text {
 
 /* BF_IO naming the file if it cannot be read. */
 bf_status replay__text_open(replay__text *t, const char *path);
+/* Starts t on text (NUL-terminated, edited in place; path names it in
+ * messages): a UTF-8 byte order mark skipped, lone CRs read as line ends.
+ * replay__text_open does this on the file it reads. */
+void replay__text_begin(replay__text *t, const char *path, char *text);
 void replay__text_close(replay__text *t);
 /* Splits the next content line into at most cap fields (modifying the
  * buffer). Returns the number of fields on the line (which may exceed cap;

@@ -9,14 +9,25 @@
 #include <string.h>
 #include <sys/stat.h>
 
+void replay__text_begin(replay__text *t, const char *path, char *text)
+{
+    /* An editor's UTF-8 byte order mark is no part of the first field, and
+     * a line ended by a lone CR (classic Mac) is a line. */
+    text += bf_bom_bytes(text, strlen(text));
+    for (char *c = text; *c; c++)
+        if (*c == '\r' && c[1] != '\n') *c = '\n';
+    t->path = path;
+    t->p = text;
+    t->line = 0;
+}
+
 bf_status replay__text_open(replay__text *t, const char *path)
 {
     char *buf;
     bf_status s = bf_read_file(path, &buf, NULL);
     if (s != BF_OK) return s;
-    t->path = path;
-    t->buf = t->p = buf;
-    t->line = 0;
+    t->buf = buf;
+    replay__text_begin(t, path, buf);
     t->n_normalised = t->normalised_line = t->n_repeats = t->repeat_line = 0;
     t->normalised_norm = 0;
     return BF_OK;

@@ -127,6 +127,24 @@ BF_TEST(traj_malformed_files_name_file_and_line)
 /* What TUM's scripts read is read: the published ground truth of
  * rgbd_dataset_freiburg2_desk repeats a stamp, and quaternions a little off
  * unit length are normalised (evaluate_rpe.py's transform44). */
+/* A file an editor saved with a UTF-8 byte order mark, and one whose lines
+ * end in a lone CR, read as any other (the mark was read as part of the
+ * first timestamp; CR-only lines as one line). */
+BF_TEST(traj_reads_a_byte_order_mark_and_cr_line_ends)
+{
+    bf_traj tr = {0};
+    CHECK_OK(replay_traj_read_tum(write_text("traj_bom.txt", "\xEF\xBB\xBF" "1 0 0 0 0 0 0 1\n2 1 0 0 0 0 0 1\n"), &tr));
+    CHECK_EQ_INT(tr.n, 2);
+    CHECK(tr.t_s[0] == 1 && tr.T_wc[1].t.x == 1);
+    bf_traj_free(&tr);
+    const char *p = write_text("traj_cr.txt", "\xEF\xBB\xBF# t x y z qx qy qz qw\r1 0 0 0 0 0 0 1\r2 1 0 0 0 0 0 1\r"
+                                              "3 2 0 0 0 0 0 1\r\n4 3 0 0 0 0 0 1");
+    CHECK_OK(replay_traj_read_tum(p, &tr));
+    CHECK_EQ_INT(tr.n, 4);
+    CHECK(tr.t_s[3] == 4 && tr.T_wc[3].t.x == 3);
+    bf_traj_free(&tr);
+}
+
 BF_TEST(traj_keeps_first_of_repeated_stamp_and_normalises_quaternions)
 {
     bf_traj tr = {0};
