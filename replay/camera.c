@@ -92,12 +92,16 @@ bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K, double dis
     }
     for (int k = 0; k < n; k++)
         if ((s = replay__text_double(&t, f[k], names[k], &v[k]))) goto done;
-    if (v[0] == 0 || v[1] == 0) {
-        s = bf_fail(BF_FORMAT, "%s:%u: focal lengths must not be zero", path, t.line);
+    /* A negative fy is a y-up camera (ICL-NUIM's); a negative fx would
+     * mirror the image, which no camera does. */
+    if (!(v[0] > 0) || v[1] == 0) {
+        s = bf_fail(BF_FORMAT, "%s:%u: fx must be positive and fy not zero (fx %g, fy %g)", path, t.line, v[0], v[1]);
         goto done;
     }
-    if (n >= 5 && !(v[4] > 0)) {
-        s = bf_fail(BF_FORMAT, "%s:%u: depth_scale must be positive", path, t.line);
+    /* The range --depth-scale takes: 1 raw unit a metre (a depth in metres
+     * as integers) to 1e6 (micrometres). */
+    if (n >= 5 && !(v[4] >= 1 && v[4] <= 1e6)) {
+        s = bf_fail(BF_FORMAT, "%s:%u: depth_scale %g is not between 1 and 1e6 raw units per metre", path, t.line, v[4]);
         goto done;
     }
     if (replay__text_next(&t, f, MAX_FIELDS + 1) >= 0) {

@@ -59,7 +59,9 @@ static bf_status intrinsics_read(const char *path, bf_intrinsics *K)
     if (fabs(M[0][1]) > 1e-9) bf_warn("%s: skew %g ignored", path, M[0][1]);
     K->fx_px = M[0][0], K->fy_px = M[1][1], K->cx_px = M[0][2], K->cy_px = M[1][2];
 check:
-    if (K->fx_px == 0 || K->fy_px == 0) s = bf_fail(BF_FORMAT, "%s: focal lengths must not be zero", path);
+    /* fy < 0 is a y-up camera; fx < 0 would mirror the image. */
+    if (!(K->fx_px > 0) || K->fy_px == 0)
+        s = bf_fail(BF_FORMAT, "%s: fx must be positive and fy not zero (fx %g, fy %g)", path, K->fx_px, K->fy_px);
 done:
     replay__text_close(&t);
     return s;

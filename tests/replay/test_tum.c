@@ -211,6 +211,18 @@ BF_TEST(tum_camera_precedence_options_over_camera_txt_over_default)
     CHECK(rt_write_text(rt_join(d, "camera.txt"), "500 0 300.5 200 5000\n"));
     CHECK_STATUS(replay_open(d, NULL, &src), BF_FORMAT);
     CHECK_ERROR_MENTIONS("camera.txt:1");
+    /* A mirrored image (fx < 0) and a depth scale beyond --depth-scale's
+     * range are refused by the file's name; a y-up camera (fy < 0) is not. */
+    CHECK(rt_write_text(rt_join(d, "camera.txt"), "-500 501 300.5 200 5000\n"));
+    CHECK_STATUS(replay_open(d, NULL, &src), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("camera.txt:1: fx must be positive");
+    CHECK(rt_write_text(rt_join(d, "camera.txt"), "500 501 300.5 200 1e-30\n"));
+    CHECK_STATUS(replay_open(d, NULL, &src), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("depth_scale 1e-30 is not between 1 and 1e6");
+    CHECK(rt_write_text(rt_join(d, "camera.txt"), "500 -501 300.5 200 5000\n"));
+    CHECK_OK(replay_open(d, NULL, &src));
+    CHECK(rgbd_source_intrinsics(src)->fy_px == -501);
+    rgbd_source_close(src);
 }
 
 /* A lens's distortion in the camera (TUM's fr2 preset, or the five numbers
