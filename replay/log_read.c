@@ -389,9 +389,9 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
      * taken any lens out): a preset gives its four numbers, a lens typed in
      * numbers is refused. */
     if (opt->camera && (s = replay_parse_camera(opt->camera, &K))) goto fail;
-    if (opt->camera && !(K.cx_px >= 0 && K.cx_px <= K.width && K.cy_px >= 0 && K.cy_px <= K.height))
-        bf_warn("%s: --camera's principal point (%g, %g) lies outside the log's %ux%u images: is it for another "
-                "image size?",
+    if (opt->camera && replay__principal_point_is_off(&K, K.width, K.height))
+        bf_warn("%s: --camera's principal point (%g, %g) lies far from the centre of the log's %ux%u images: is it "
+                "for another image size?",
                 path, K.cx_px, K.cy_px, K.width, K.height);
     if (opt->depth_scale > 0) K.depth_scale = opt->depth_scale;
     ls->skip_bad = opt->skip_bad_frames;

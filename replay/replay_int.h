@@ -40,6 +40,10 @@ bf_status replay__text_open(replay__text *t, const char *path);
  * messages): a UTF-8 byte order mark skipped, lone CRs read as line ends.
  * replay__text_open does this on the file it reads. */
 void replay__text_begin(replay__text *t, const char *path, char *text);
+/* Whether K's principal point lies more than a quarter of the image from
+ * the centre of w x h images (real cameras keep it within a few per cent):
+ * a camera for another image size. */
+bool replay__principal_point_is_off(const bf_intrinsics *K, uint32_t w, uint32_t h);
 void replay__text_close(replay__text *t);
 /* Splits the next content line into at most cap fields (modifying the
  * buffer). Returns the number of fields on the line (which may exceed cap;

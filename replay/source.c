@@ -220,12 +220,12 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
                  kind, src->lens.max_shift_px, src->lens.n_outside);
     bf_debug("%s: %u frames, %ux%u, camera from %s", kind, src->base.n_frames, w, h,
              cam->origin ? cam->origin : "defaults");
-    /* A principal point outside the image is a camera for another image
-     * size (a 640x480 preset on smaller frames): said, not refused. */
+    /* A principal point far from the image's centre is a camera for another
+     * image size (a 640x480 preset on smaller frames): said, not refused. */
     const bf_intrinsics *K = &src->base.intrinsics;
-    if (!(K->cx_px >= 0 && K->cx_px <= w && K->cy_px >= 0 && K->cy_px <= h))
-        bf_warn("%s: the camera's principal point (%g, %g) lies outside the %ux%u images (camera from %s): is it "
-                "for another image size?",
+    if (replay__principal_point_is_off(K, w, h))
+        bf_warn("%s: the camera's principal point (%g, %g) lies far from the centre of the %ux%u images (camera "
+                "from %s): is it for another image size?",
                 kind, K->cx_px, K->cy_px, w, h, cam->origin ? cam->origin : "defaults");
     *out = &src->base;
     return BF_OK;

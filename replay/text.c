@@ -74,7 +74,9 @@ bf_status replay__text_double(const replay__text *t, const char *s, const char *
     char *end;
     errno = 0;
     double v = strtod(s, &end);
-    if (end == s || *end != '\0' || errno == ERANGE)
+    /* Decimal only: strtod also reads C's hex floats (0x1p-3), which no
+     * dataset writes and TUM's tools refuse. */
+    if (end == s || *end != '\0' || errno == ERANGE || strpbrk(s, "xX"))
         return bf_fail(BF_FORMAT, "%s:%u: %s '%s' is not a number", t->path, t->line, what, s);
     if (!isfinite(v))
         return bf_fail(BF_FORMAT, "%s:%u: %s '%s' is not a finite number", t->path, t->line, what, s);
@@ -133,6 +135,11 @@ void replay__text_warn(const replay__text *t)
     if (t->n_normalised)
         bf_warn("%s:%u: quaternion norm is %.6g, not 1: normalised (%u such line%s in the file)", t->path,
                 t->normalised_line, t->normalised_norm, t->n_normalised, t->n_normalised == 1 ? "" : "s");
+}
+
+bool replay__principal_point_is_off(const bf_intrinsics *K, uint32_t w, uint32_t h)
+{
+    return !(fabs(K->cx_px - 0.5 * (w - 1.0)) <= 0.25 * w && fabs(K->cy_px - 0.5 * (h - 1.0)) <= 0.25 * h);
 }
 
 bf_status replay__fail_frame(bf_status s, uint32_t frame)

@@ -73,6 +73,16 @@ mentions "camera.txt"
 mentions "folds"
 expect 2 "$B" info "$T/seq" --camera "$fx,$fy,$cx,$cy,-0.9,0,0,0,0"
 mentions "--camera"
+# A camera for images twice the size (its principal point at the corner of
+# these) is warned about; a hex float in a pose is refused by file and line.
+py -c "import sys; fx, fy, cx, cy = map(float, sys.argv[1:5]); print(2 * fx, 2 * fy, 2 * cx + 0.5, 2 * cy + 0.5, 5000)" \
+    "$fx" "$fy" "$cx" "$cy" >"$T/lens/camera.txt"
+expect 0 "$B" info "$T/lens"
+mentions "far from the centre of the 160x120 images"
+cp "$T/seq/camera.txt" "$T/lens/camera.txt"
+awk 'NR == 4 && !/^#/ { $2 = "0x1p-3" } { print }' "$T/seq/groundtruth.txt" >"$T/lens/groundtruth.txt"
+expect 3 "$B" info "$T/lens"
+mentions "groundtruth.txt:4: tx '0x1p-3' is not a number"
 expect 0 "$B" info "$T/seq" --json # $T/out again: the plain sequence's, for the checks below
 
 # info: a depth image handed on twice (a driver's late frame) counts as a
@@ -224,8 +234,8 @@ for name in sorted(os.listdir(sys.argv[1]))[1:]:
                         + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
 PY
     expect 0 "$B" fuse "$T/zd" --poses groundtruth --out "$T/fuzd" $small
-    grep -q "2 frames without a depth sample: not fused" "$T/out" || fail "fuse: frames without depth not counted: $(head -c 400 "$T/out")"
-    mentions "no valid depth sample: skipped"
+    grep -q "2 frames without a depth sample in the sensor's range: not fused" "$T/out" || fail "fuse: frames without depth not counted: $(head -c 400 "$T/out")"
+    mentions "no depth sample within the sensor's 4.5 m: skipped"
     f1=$(ls "$T/zd/depth" | head -n 1)
     py - "$T/zd/depth/$f1" "$T/zd/depth/$(ls "$T/zd/depth" | tail -n 1)" <<'PY'
 import shutil, sys
