@@ -10,6 +10,11 @@
 
 /* ------------------------------------------------------------ meshes */
 
+/* The largest vertex coordinate the readers take: a float's steps there are
+ * 64 units, so no scene lies beyond, and a value past it (1e30 in a cut or
+ * corrupt file) would stall every distance query that meets it. */
+#define MESH_MAX_COORD 1e9
+
 /* A triangle mesh or point cloud (n_tris == 0), flat arrays. Vertex i lies
  * at world point origin + xyz[i]: floats keep about 7 digits, so a mesh far
  * from the world origin (10 km: 1 mm steps) keeps its vertices relative to

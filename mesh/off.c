@@ -108,6 +108,9 @@ bf_status mesh_read_off(const char *path, mesh_data *out)
     for (uint32_t i = 0; s == BF_OK && i < 3 * nv; i++) {
         double v = 0;
         s = read_double(&r, "a vertex coordinate", &v);
+        if (s == BF_OK && fabs(v) > MESH_MAX_COORD)
+            s = bf_fail(BF_FORMAT, "%s: line %u: vertex coordinate %g is beyond 1e9 (no scene's coordinate)", path,
+                        r.line, v);
         out->xyz[i] = (float)v;
     }
     out->n_verts = nv;

@@ -297,13 +297,13 @@ static bf_status ply_read_vertices(ply_reader *rd, const ply_element *el, mesh_d
             case ROLE_NZ: {
                 bool is_pos = pr->role <= ROLE_Z;
                 float f = (float)v;
-                if (!isfinite(f)) {
+                if (!isfinite(f) || (is_pos && fabsf(f) > MESH_MAX_COORD)) {
+                    const char *why = isfinite(f) ? "beyond 1e9 (no scene's coordinate)" : "not finite";
                     if (rd->format == PLY_ASCII)
-                        return bf_fail(BF_FORMAT, "%s: line %zu: vertex %llu: %s is not finite (%g)",
-                                       rd->path, rd->line, (unsigned long long)i,
-                                       is_pos ? "position" : "normal", v);
-                    return bf_fail(BF_FORMAT, "%s: vertex %llu: %s is not finite (%g)", rd->path,
-                                   (unsigned long long)i, is_pos ? "position" : "normal", v);
+                        return bf_fail(BF_FORMAT, "%s: line %zu: vertex %llu: %s is %s (%g)", rd->path, rd->line,
+                                       (unsigned long long)i, is_pos ? "position" : "normal", why, v);
+                    return bf_fail(BF_FORMAT, "%s: vertex %llu: %s is %s (%g)", rd->path, (unsigned long long)i,
+                                   is_pos ? "position" : "normal", why, v);
                 }
                 if (is_pos)
                     m->xyz[3 * i + (pr->role - ROLE_X)] = f;

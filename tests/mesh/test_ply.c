@@ -320,6 +320,19 @@ BF_TEST(ply_nan_or_inf_positions_are_format_errors)
     write_bytes(path, buf, n + sizeof v);
     CHECK_STATUS(mesh_read_ply(path, &m), BF_FORMAT);
     CHECK_ERROR_MENTIONS("vertex 0");
+    /* A finite float no scene has (a stray 1e30 stalled eval-surface's
+     * distance queries for minutes): refused; 1e8 (100,000 km) is read. */
+    v[1] = 1e30;
+    memcpy(buf + n, v, sizeof v);
+    write_bytes(path, buf, n + sizeof v);
+    CHECK_STATUS(mesh_read_ply(path, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("beyond 1e9");
+    v[1] = -1e8;
+    memcpy(buf + n, v, sizeof v);
+    write_bytes(path, buf, n + sizeof v);
+    CHECK_OK(mesh_read_ply(path, &m));
+    CHECK(m.xyz[1] == -1e8f);
+    mesh_free(&m);
 }
 
 BF_TEST(ply_bad_headers_are_format_errors)
