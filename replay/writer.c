@@ -99,11 +99,14 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f)
      * differ in the first 6 decimals for names and index lines to be unique. */
     if (!isfinite(f->t_depth_s) || !isfinite(f->t_rgb_s) ||
         (w->n_frames > 0 && !(f->t_depth_s >= w->t_last_s + 1e-6)))
-        return bf_fail(BF_INVALID_ARG, "%s: frame %u: time %.6f s is not after the previous frame's", w->dir,
-                       f->index, f->t_depth_s);
+        return bf_fail(BF_INVALID_ARG,
+                       "%s: frame %u: time %.7f s is not 1 us or more after the previous frame's %.7f s (a TUM "
+                       "folder names its images by their time to 6 decimals)",
+                       w->dir, f->index, f->t_depth_s, w->t_last_s);
     if (f->rgb && w->n_rgb > 0 && !(f->t_rgb_s >= w->t_last_rgb_s + 1e-6))
-        return bf_fail(BF_INVALID_ARG, "%s: frame %u: colour time %.6f s is not after the previous colour image's",
-                       w->dir, f->index, f->t_rgb_s);
+        return bf_fail(BF_INVALID_ARG,
+                       "%s: frame %u: colour time %.7f s is not 1 us or more after the previous colour image's %.7f s",
+                       w->dir, f->index, f->t_rgb_s, w->t_last_rgb_s);
     if (f->has_pose && !bf_se3_is_finite(&f->T_wc))
         return bf_fail(BF_INVALID_ARG, "%s: frame %u: pose is not finite", w->dir, f->index);
     /* A failure part-way leaves the index lines as they were (the contract:
