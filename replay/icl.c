@@ -69,7 +69,9 @@ bf_status replay__icl_list(const char *dir, const replay_options *opt, replay__l
             break;
         }
         if (n_poses >= list->n) {
-            s = bf_fail(BF_FORMAT, "%s:%u: more poses than the %u depth images", path, t.line, list->n);
+            /* The frames end at the first missing depth image: name it. */
+            s = bf_fail(BF_FORMAT, "%s:%u: more poses than the %u depth images (depth/%u.png is missing)", path,
+                        t.line, list->n, first + list->n);
             break;
         }
         replay__frame_ref *fr = &list->v[n_poses];
