@@ -176,6 +176,14 @@ int cmd_fuse(int argc, char **argv)
         rcfg.keep_on_source_error = true;
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
         r.n_unreadable = replay_skipped_frames(src);
+        /* No frame within the file's time span: say which two spans missed. */
+        if (s == BF_FORMAT && use_traj && traj.n && r.run.n_fused == 0 && r.run.n_skipped > 0 &&
+            r.run.n_skipped == r.run.counts.frames) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", bf_last_error());
+            s = bf_fail(BF_FORMAT, "%s: %s's poses span t = %.6f to %.6f s, which no frame's time falls in", msg,
+                        a.poses, traj.t_s[0], traj.t_s[traj.n - 1]);
+        }
     }
     /* An output that cannot be written does not stop the others. */
     app_write_failure wf = {0};
