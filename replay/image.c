@@ -22,7 +22,7 @@
 /* Images larger than this are refused as malformed headers. */
 #define REPLAY_MAX_SIDE 16384u
 
-typedef enum image_kind { IMAGE_PNG, IMAGE_JPEG, IMAGE_OTHER } image_kind;
+typedef enum image_kind { IMAGE_PNG, IMAGE_JPEG, IMAGE_OTHER, IMAGE_EMPTY } image_kind;
 
 /* Opens path and sniffs its first bytes; the stream is rewound. */
 static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
@@ -36,6 +36,8 @@ static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
         *kind = IMAGE_PNG;
     else if (n >= 3 && sig[0] == 0xFF && sig[1] == 0xD8 && sig[2] == 0xFF)
         *kind = IMAGE_JPEG;
+    else if (n == 0)
+        *kind = IMAGE_EMPTY;
     else
         *kind = IMAGE_OTHER;
     *fp = f;
@@ -266,6 +268,10 @@ static bf_status image_read(const char *path, png_want want, void *buf, size_t c
         s = png_decode(f, path, want, buf, cap_px, alloc, exp_w, exp_h, w, h);
     else if (kind == IMAGE_JPEG && want != PNG_WANT_U16)
         s = jpeg_decode(f, path, want == PNG_WANT_HEADER, buf, cap_px, alloc, exp_w, exp_h, w, h);
+    else if (kind == IMAGE_EMPTY)
+        s = bf_fail(BF_FORMAT, "%s: empty file (0 bytes)", path);
+    else if (kind == IMAGE_JPEG)
+        s = bf_fail(BF_FORMAT, "%s: depth image is a JPEG, not a 16-bit PNG (JPEG cannot hold depth)", path);
     else if (want == PNG_WANT_U16)
         s = bf_fail(BF_FORMAT, "%s: depth image is not a PNG", path);
     else

@@ -212,9 +212,18 @@ BF_TEST(depth_must_be_png_and_colour_png_or_jpeg_by_content)
     uint32_t w, h;
     /* A JPEG is colour, never depth. */
     CHECK_STATUS(replay_png_read_u16(pj, &d, &w, &h), BF_FORMAT);
-    CHECK_ERROR_MENTIONS("depth image is not a PNG");
+    CHECK_ERROR_MENTIONS("depth image is a JPEG, not a 16-bit PNG");
     const char *pt = rt_tmp("colour_as.txt");
     CHECK(rt_write_text(pt, "not an image\n"));
     CHECK_STATUS(replay_image_read_rgb8(pt, &rgb, &w, &h), BF_FORMAT);
     CHECK_ERROR_MENTIONS("not a PNG or JPEG file");
+    CHECK_STATUS(replay_png_read_u16(pt, &d, &w, &h), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("depth image is not a PNG");
+    /* A file cut to nothing says so, as depth and as colour. */
+    const char *pe = rt_tmp("empty.png");
+    CHECK(rt_write_text(pe, ""));
+    CHECK_STATUS(replay_png_read_u16(pe, &d, &w, &h), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("empty file (0 bytes)");
+    CHECK_STATUS(replay_image_read_rgb8(pe, &rgb, &w, &h), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("empty file (0 bytes)");
 }
