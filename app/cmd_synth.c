@@ -27,13 +27,14 @@ static const char board_usage[] =
     "an edge crosses are averaged over a grid of samples. Writes into DIR: colour/NNN.png,\n"
     "ir/NNN.png (8-bit grey), truth.json (the calibration that made them, calib.json's\n"
     "format) and board_poses.txt (TUM: view index, colour camera to board).\n";
-/* --camera: a preset or fx,fy,cx,cy, with positive focal lengths. */
+/* --camera: a preset or fx,fy,cx,cy: fx positive, fy not zero (negative:
+ * a y-up camera, as ICL-NUIM's, which the renderer draws as it is). */
 static const char *check_camera(const char *name, const char *v)
 {
     static char msg[512];
     bf_intrinsics K = {0};
     if (replay_parse_camera(v, &K) != BF_OK) snprintf(msg, sizeof msg, "%s: %s", name, bf_last_error());
-    else if (!(K.fx_px > 0) || !(K.fy_px > 0)) snprintf(msg, sizeof msg, "%s: focal lengths must be positive", name);
+    else if (!(K.fx_px > 0) || K.fy_px == 0) snprintf(msg, sizeof msg, "%s: fx must be positive and fy not zero", name);
     else return NULL;
     return msg;
 }

@@ -221,7 +221,7 @@ static bf_status check_input(const calib_depth_config *cfg, const calib_depth_fr
     if (!cfg || !in || !in->depth || !in->T_wc || !in->index)
         return bf_fail(BF_INVALID_ARG, "calib_depth_estimate: NULL argument");
     const bf_intrinsics *K = &in->K;
-    if (K->width == 0 || K->height == 0 || !(K->fx_px > 0) || !(K->fy_px > 0) || !(K->depth_scale > 0))
+    if (K->width == 0 || K->height == 0 || !(K->fx_px > 0) || K->fy_px == 0 || !(K->depth_scale > 0))
         return bf_fail(BF_INVALID_ARG, "calib_depth_estimate: bad intrinsics");
     if (cfg->cell_px < 4 || cfg->stride == 0 || cfg->iterations == 0 || !(cfg->agree > 0) || !(cfg->max_depth_m > 0))
         return bf_fail(BF_INVALID_ARG, "calib_depth_estimate: bad configuration");

@@ -265,8 +265,9 @@ bf_status bf_write_file_atomic(const char *path, const void *data, size_t size);
 /* An output file that appears whole or not at all (every file bitfuse
  * writes goes through one, or through bf_write_file_atomic): the bytes go
  * through a buffer into PATH.tmp.PID with write(2), and bf_out_commit
- * flushes, fsyncs, closes and renames it into place, then fsyncs the folder
- * (a warning if that fails: the file is whole and in place). A short write is
+ * flushes, fsyncs, closes and renames it into place (the folder is not
+ * fsync'd: an output that must survive a power loss by name calls
+ * bf_sync_parent, once per folder). A short write is
  * continued; a failed one (disk full, I/O error) is sticky: later writes do
  * nothing and commit reports it as BF_WRITE, "PATH: write failed: REASON",
  * after removing the temporary file, so PATH keeps its earlier contents (or
@@ -292,9 +293,9 @@ void bf_out_printf(bf_out *o, const char *fmt, ...) __attribute__((format(printf
 void bf_out_flush(bf_out *o);
 bf_status bf_out_commit(bf_out *o);
 void bf_out_abort(bf_out *o);
-/* fsyncs the folder path is in, so a rename into it survives a power
- * loss (the file's own fsync does not make its new name durable). A file
- * system that cannot sync folders (EINVAL) is not an error. */
+/* fsyncs the folder path is in, so a new name in it survives a power loss
+ * (the file's own fsync does not make its name durable). A file system
+ * that cannot sync folders (EINVAL, ENOTSUP, EROFS) is not an error. */
 bf_status bf_sync_parent(const char *path);
 /* fsyncs the folder dir itself, as above. */
 bf_status bf_sync_dir(const char *dir);

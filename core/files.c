@@ -175,9 +175,6 @@ bf_status bf_out_commit(bf_out *o)
         unlink(o->tmp);
         return bf_fail(BF_WRITE, "%s: cannot rename into place: %s", o->path, strerror(e));
     }
-    /* The file is whole and in place: a folder that will not sync leaves
-     * only the new name's durability in doubt, a warning, not a failure. */
-    if (bf_sync_parent(o->path) != BF_OK) bf_warn("%s", bf_last_error());
     return BF_OK;
 }
 
@@ -186,7 +183,9 @@ bf_status bf_sync_dir(const char *dir)
     int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (fd < 0) return bf_fail(BF_WRITE, "%s: cannot open the folder: %s", dir, strerror(errno));
     bf_status s = BF_OK;
-    if (fsync(fd) != 0 && errno != EINVAL)
+    /* A file system that cannot sync a folder says so (EINVAL, ENOTSUP):
+     * nothing to do there. */
+    if (fsync(fd) != 0 && errno != EINVAL && errno != ENOTSUP && errno != EROFS)
         s = bf_fail(BF_WRITE, "%s: fsync of the folder failed: %s", dir, strerror(errno));
     close(fd);
     return s;

@@ -49,8 +49,9 @@ bf_status replay_parse_camera_lens(const char *spec, bf_intrinsics *K, double di
         n++;
     }
     if (n != 4 && n != 4 + CALIB_DIST_N) return bf_fail(BF_INVALID_ARG, "--camera '%s': " CAMERA_EXPECTED, spec);
-    if (v[0] == 0 || v[1] == 0)
-        return bf_fail(BF_INVALID_ARG, "--camera '%s': focal lengths must not be zero", spec);
+    /* fy < 0 is a y-up camera (ICL-NUIM's); fx < 0 would mirror the image. */
+    if (!(v[0] > 0) || v[1] == 0)
+        return bf_fail(BF_INVALID_ARG, "--camera '%s': fx must be positive and fy not zero", spec);
     K->fx_px = v[0];
     K->fy_px = v[1];
     K->cx_px = v[2];

@@ -142,6 +142,10 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     if (dev_len) memcpy(hdr + LOG_HEADER_FIXED, cfg->device, dev_len);
     log__put_u32(hdr + LOG_HEADER_FIXED + dev_len, log__crc32(0, hdr, LOG_HEADER_FIXED + dev_len));
     if ((s = write_bytes(w, hdr, hdr_size))) goto fail;
+    /* A recording written in place keeps its name through a power loss
+     * from the start, so a crash-cut log is still there to replay (a
+     * warning if the folder will not sync: the frames still go). */
+    if (!cfg->replace_when_finished && bf_sync_parent(w->disk_path) != BF_OK) bf_warn("%s", bf_last_error());
     w->st.file_bytes = w->offset;
     *out = w;
     return BF_OK;
