@@ -40,7 +40,7 @@ static int check_new_folder(const char *dir)
         snprintf(p, sizeof p, "%s/%s", dir, held[i]);
         if (bf_file_exists(p))
             return app_usage_error("convert", "--out %s holds a sequence already (%s): give a new folder, or "
-                                              "remove it first", dir, held[i]);
+                                              "remove it first (a conversion that failed left it too)", dir, held[i]);
     }
     return 0;
 }

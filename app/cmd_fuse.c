@@ -176,7 +176,7 @@ int cmd_fuse(int argc, char **argv)
         rcfg.keep_on_source_error = true;
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
         r.n_unreadable = replay_skipped_frames(src);
-        /* No frame within the file's time span: say which two spans missed. */
+        /* No frame within the file's time span: give the span. */
         if (s == BF_FORMAT && use_traj && traj.n && r.run.n_fused == 0 && r.run.n_skipped > 0 &&
             r.run.n_skipped == r.run.counts.frames) {
             char msg[1024];

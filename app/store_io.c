@@ -52,9 +52,10 @@ void app_store_resume_config(app_store *st, recon_resume_state *rs, recon_config
      * the loop's own level stands unless those bricks are finer. */
     uint32_t level = st->meta.max_level;
     if (!st->report.index_ok && loop->fusion.max_level > level) level = loop->fusion.max_level;
+    bool from_bricks = !st->report.index_ok && level > loop->fusion.max_level;
     if (loop->fusion.chunk_m != st->meta.chunk_m || loop->fusion.max_level != level)
         bf_info("store: %s: resuming with its chunk edge %g m and finest level %u%s", st->dir, st->meta.chunk_m, level,
-                st->report.index_ok ? "" : " (the finest its bricks hold; its index is lost)");
+                from_bricks ? " (the finest its bricks hold; its index is lost)" : "");
     loop->fusion.chunk_m = st->meta.chunk_m;
     loop->fusion.max_level = level;
 }

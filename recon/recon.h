@@ -294,8 +294,9 @@ recon_counts recon_get_counts(const recon *r);
 /* ------------------------------------------------------------ the runner
  * One sequence through the loop (recon/runner.c), with the policies in one
  * place:
- * - first pose: the first frame's ground truth when it has one (else the
- *   identity), or the identity with init_identity;
+ * - first pose: the ground truth of the frame that starts the map (the
+ *   first with depth in range) when it has one (else the identity), or
+ *   the identity with init_identity;
  * - pose source: track (the loop), track but fuse at the frames' ground
  *   truth (recon_add_frame_known), or fuse at known poses without tracking;
  * - a source that fails mid-sequence (a device unplugged) ends the run like

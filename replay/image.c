@@ -31,6 +31,11 @@ static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
     if (!f) return bf_fail(BF_IO, "%s: cannot open: %s", path, strerror(errno));
     unsigned char sig[8] = {0};
     size_t n = fread(sig, 1, sizeof sig, f);
+    if (n < sizeof sig && ferror(f)) { /* EIO, or a folder: not an empty file */
+        int e = errno;
+        fclose(f);
+        return bf_fail(BF_IO, "%s: cannot read: %s", path, strerror(e));
+    }
     rewind(f);
     if (n >= 8 && png_sig_cmp(sig, 0, 8) == 0)
         *kind = IMAGE_PNG;

@@ -62,7 +62,8 @@ static bf_status tum_index_read(const char *dir, const char *name, replay__list 
             x.path = np;
         }
         if (bf_path_join(joined, sizeof joined, dir, f[1]) != BF_OK) {
-            s = bf_fail(BF_FORMAT, "%s:%u: the image path (%zu characters) is too long", file, t.line, strlen(f[1]));
+            s = bf_fail(BF_FORMAT, "%s:%u: the image path (%zu characters with the folder) is longer than %zu", file,
+                        t.line, strlen(dir) + 1 + strlen(f[1]), sizeof joined - 1);
             goto fail;
         }
         const char *p = replay__list_str(list, joined);

@@ -97,8 +97,10 @@ bf_status replay_tum_writer_add(replay_tum_writer *w, const bf_frame *f)
     }
     /* File names carry the time with 6 decimals, as TUM's do, so times must
      * differ in the first 6 decimals for names and index lines to be unique. */
-    if (!isfinite(f->t_depth_s) || !isfinite(f->t_rgb_s) ||
-        (w->n_frames > 0 && !(f->t_depth_s >= w->t_last_s + 1e-6)))
+    if (!isfinite(f->t_depth_s) || !isfinite(f->t_rgb_s))
+        return bf_fail(BF_INVALID_ARG, "%s: frame %u: its time (depth %g s, colour %g s) is not a finite number", w->dir,
+                       f->index, f->t_depth_s, f->t_rgb_s);
+    if (w->n_frames > 0 && !(f->t_depth_s >= w->t_last_s + 1e-6))
         return bf_fail(BF_INVALID_ARG,
                        "%s: frame %u: time %.7f s is not 1 us or more after the previous frame's %.7f s (a TUM "
                        "folder names its images by their time to 6 decimals)",
