@@ -100,6 +100,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     const recon_run_series *t = &r->run.series;
     cJSON *o = app_json_stats("fuse");
     cJSON_AddStringToObject(o, "sequence", a->seq);
+    cJSON_AddStringToObject(o, "poses", a->poses); /* "groundtruth" or the file: the run can be repeated */
     cJSON_AddStringToObject(o, "device", r->device);
     cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_fusion_config(o, "config", &a->fcfg);
@@ -194,7 +195,8 @@ int cmd_fuse(int argc, char **argv)
         if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
         s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
     }
-    if (s == BF_OK) s = app_write_status(&wf);
+    /* The summary also when an output could not be written (its file is
+     * left out of the list); the exit code says so after it. */
     if (s == BF_OK) {
         printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
                r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
@@ -212,6 +214,7 @@ int cmd_fuse(int argc, char **argv)
         printf("  wrote            %s/{%s%spoints.ply,stats.json} in %.1f s\n", a.out, r.out.mesh_file,
                r.out.mesh_file[0] ? "," : "", r.seconds);
     }
+    if (s == BF_OK) s = app_write_status(&wf);
     bf_status s_input = r.run.source_status;
     if (s == BF_OK && s_input != BF_OK) {
         printf("  stopped early    %s: the frames before it were fused and written\n", r.run.source_error);

@@ -19,10 +19,10 @@ static const char replay_usage[] =
     "usage: bitfuse replay SEQUENCE --out DIR [options]\n"
     "\n"
     "Runs the full loop on every frame of SEQUENCE (DESIGN.md section 1): ICP against the\n"
-    "ROF-smoothed ray-cast of the map, fusion at the pose found, ray-cast at that pose.\n"
+    "ray-cast of the map's confident voxels, fusion at the pose found, ray-cast at that pose.\n"
     "Frames without depth are skipped; frames tracked badly are not fused and keep the\n"
     "last good pose while candidate poses are tried (--reloc). Writes into DIR:\n"
-    "  trajectory.txt  TUM format, one line per input frame at its depth timestamp\n"
+    "  trajectory.txt  TUM format, one line per frame read at its depth timestamp\n"
     "                  (camera to world, like groundtruth.txt)\n"
     "  frames.csv      per frame: state, ICP outcome, inliers, residual, times, the\n"
     "                  relocalising search's candidates tried and the one taken\n"
@@ -848,7 +848,8 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
     if (r->has_surface)
-        printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of it within 1 cm\n",
+        printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of that surface within 1 cm of the "
+               "map\n",
                1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness);
     app_print_map(&r->out, a->rcfg.fusion.max_level);
     printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
@@ -1016,7 +1017,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* A run that wrote nothing (no device, a failure at start-up) leaves
      * no empty folder it made behind; rmdir takes only an empty one. */
     if (s != BF_OK && made_out) (void)rmdir(a.out);
-    if (s == BF_OK && has_map && wf.s == BF_OK && s_loop == BF_OK) print_summary(&a, &r, src);
+    /* An output that could not be written leaves the run's results to say
+     * (the summary's list of files written leaves that one out). */
+    if (s == BF_OK && has_map && s_loop == BF_OK) print_summary(&a, &r, src);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);

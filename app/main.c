@@ -40,7 +40,8 @@ static void usage(FILE *f)
     fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error (or no display),\n"
                "            5 an output could not be written (disk full, I/O error)\n"
                "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"
-               "             BITFUSE_THREADS (CPU threads), BITFUSE_VALIDATION=1 (Vulkan validation)\n");
+               "             BITFUSE_THREADS (CPU threads), BITFUSE_VALIDATION=1 (Vulkan validation),\n"
+               "             BITFUSE_PROGRESS=1|0 (the status line), BITFUSE_CACHE_DIR (pipeline cache)\n");
 }
 
 int app_fail(const char *cmd, bf_status s)

@@ -114,8 +114,13 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
         if (s == BF_WRITE) {
             snprintf(mesh_error, sizeof mesh_error, "%s", bf_last_error());
             bf_warn("%s; the points are still written", mesh_error);
+            /* No file: stats.json says so, with the mesh's own size. */
+            snprintf(r->mesh_error, sizeof r->mesh_error, "%s", mesh_error);
+            r->mesh_file[0] = '\0';
             s = BF_OK;
         }
+    } else {
+        r->mesh_skipped = true;
     }
     if (s == BF_OK) s = export_points(&snap, &pts, &r->points);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
@@ -173,6 +178,10 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
                            .origin = r->mesh_origin};
         app_json_mesh_file(mesh, r->mesh_file, (mesh_format)r->mesh_out.format, &r->mesh_out, &shape, &r->simplify);
     } else {
+        /* No file: skipped (--no-mesh), or made and not written. */
+        cJSON_AddNullToObject(mesh, "file");
+        if (r->mesh_skipped) cJSON_AddTrueToObject(mesh, "skipped");
+        if (r->mesh_error[0]) cJSON_AddStringToObject(mesh, "error", r->mesh_error);
         cJSON_AddNumberToObject(mesh, "vertices", (double)r->mesh.n_vertices);
         cJSON_AddNumberToObject(mesh, "triangles", (double)r->mesh.n_triangles);
     }
@@ -192,8 +201,11 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
     printf("  bricks per level");
     for (uint32_t l = 0; l <= max_level && l < 16; l++)
         if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);
-    printf("\n  surface          %llu voxels, mesh %llu triangles", (unsigned long long)r->points.n_points,
-           (unsigned long long)r->mesh.n_triangles);
+    if (r->mesh_skipped)
+        printf("\n  surface          %llu voxels, mesh skipped (--no-mesh)", (unsigned long long)r->points.n_points);
+    else
+        printf("\n  surface          %llu voxels, mesh %llu triangles%s", (unsigned long long)r->points.n_points,
+               (unsigned long long)r->mesh.n_triangles, r->mesh_error[0] ? " (not written)" : "");
     if (r->mesh_file[0] && r->simplify.tris_after != r->simplify.tris_before)
         printf(", %s simplified to %llu (meshoptimizer's error estimate %.2f mm)", r->mesh_file,
                (unsigned long long)r->simplify.tris_after, 1e3 * r->simplify.error_m);
