@@ -177,7 +177,8 @@ int cmd_synth(int argc, char **argv)
         APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "S", "noise seed"),
         APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
         APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
-                "intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5",
+                "intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5 at 640x480 (at another "
+                "--size the same field of view: f = 525 W / 640, the principal point at the centre)",
                 .check = check_camera),
         APP_OPT("--size", APP_OPT_STRING, &size, "WxH", "image size, default 640x480", .check = check_size),
         APP_OPT("--data", APP_OPT_STRING, &data_dir, "DIR",

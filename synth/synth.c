@@ -321,7 +321,8 @@ bf_status synth_run(const synth_config *cfg, synth_result *out)
     if (K.width == 0) K.width = 640;
     if (K.height == 0) K.height = 480;
     if (K.fx_px == 0) {
-        K.fx_px = K.fy_px = 525.0;
+        /* 640x480's field of view at any size, as render and view take it. */
+        K.fx_px = K.fy_px = 525.0 * K.width / 640.0;
         K.cx_px = (K.width - 1) / 2.0;
         K.cy_px = (K.height - 1) / 2.0;
     }

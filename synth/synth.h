@@ -130,7 +130,7 @@ typedef struct synth_config {
     double rate_hz;         /* 0 = 30 */
     synth_noise noise;
     uint64_t seed;
-    bf_intrinsics K;        /* size 0 = 640x480; fx 0 = 525, 525, (w-1)/2, (h-1)/2;
+    bf_intrinsics K;        /* size 0 = 640x480; fx 0 = 525 w / 640 for fx and fy, (w-1)/2, (h-1)/2;
                                depth_scale 0 = 5000 */
     const char *out_dir;
     double seen_cell_m;     /* seen.ply grid; 0 = 0.005 */
