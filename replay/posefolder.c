@@ -93,6 +93,10 @@ bf_status replay__pose_matrix_read(const char *path, bf_se3 *T_wc)
         rows++;
     }
     if (rows < 3) return bf_fail(BF_FORMAT, "%s: expected a 4x4 pose matrix, found %d rows", path, rows);
+    for (int i = 0; i < 3; i++)
+        if (fabs(M[i][3]) > REPLAY_MAX_POSITION_M)
+            return bf_fail(BF_FORMAT, "%s:%d: translation %g m is beyond 1e9 m (no camera's position)", path, i + 1,
+                           M[i][3]);
     if (rows == 4 && (fabs(M[3][0]) > 1e-6 || fabs(M[3][1]) > 1e-6 || fabs(M[3][2]) > 1e-6 ||
                       fabs(M[3][3] - 1) > 1e-6))
         return bf_fail(BF_FORMAT, "%s:4: last row of a rigid transform must be 0 0 0 1", path);

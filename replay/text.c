@@ -91,6 +91,11 @@ bf_status replay__pose_from_fields(replay__text *t, char **f, bf_se3 *T_wc)
     for (int k = 0; k < 7; k++) {
         bf_status s = replay__text_double(t, f[k], names[k], &v[k]);
         if (s != BF_OK) return s;
+        /* No camera is a million kilometres out: such a value is corrupt,
+         * and its square overflows every error measure. */
+        if (k < 3 && fabs(v[k]) > REPLAY_MAX_POSITION_M)
+            return bf_fail(BF_FORMAT, "%s:%u: %s %g m is beyond 1e9 m (no camera's position)", t->path, t->line,
+                           names[k], v[k]);
     }
     bf_quat q = {v[6], v[3], v[4], v[5]};
     double norm2 = q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z;

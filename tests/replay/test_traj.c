@@ -145,6 +145,19 @@ BF_TEST(traj_reads_a_byte_order_mark_and_cr_line_ends)
     bf_traj_free(&tr);
 }
 
+/* A position no camera has (its square overflowed eval-traj's error to inf,
+ * exit 0) is refused by file and line; 1e8 m is read. */
+BF_TEST(traj_refuses_a_position_beyond_1e9_m)
+{
+    bf_traj tr = {0};
+    CHECK_STATUS(replay_traj_read_tum(write_text("traj_far.txt", "1 0 0 0 0 0 0 1\n2 0 1e300 0 0 0 0 1\n"), &tr),
+                 BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_far.txt:2: ty 1e+300 m is beyond 1e9 m");
+    CHECK_OK(replay_traj_read_tum(write_text("traj_far8.txt", "1 0 0 0 0 0 0 1\n2 0 -1e8 0 0 0 0 1\n"), &tr));
+    CHECK(tr.T_wc[1].t.y == -1e8);
+    bf_traj_free(&tr);
+}
+
 BF_TEST(traj_keeps_first_of_repeated_stamp_and_normalises_quaternions)
 {
     bf_traj tr = {0};
