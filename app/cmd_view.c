@@ -87,19 +87,19 @@ static void grow(view_scene *sc, bf_vec3 p)
     sc->hi_w = bf_v3(fmax(sc->hi_w.x, p.x), fmax(sc->hi_w.y, p.y), fmax(sc->hi_w.z, p.z));
 }
 
-/* The scene on the GPU as bitfuse render loads it; the mesh at the detail
- * of the first camera (T_wc; NULL: the store's last pose, else 1 m away). */
-static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_files *f, const bf_intrinsics *K,
-                            const bf_se3 *T_wc, view_scene *sc)
+/* The scene on the GPU as bitfuse render loads it: the map read already
+ * (hm, emptied here; meta its store's), the mesh at the detail of the
+ * first camera (T_wc; NULL: the store's last pose, else 1 m away). */
+static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_files *f, hostmap *map_read,
+                            const store_meta *meta, const bf_intrinsics *K, const bf_se3 *T_wc, view_scene *sc)
 {
-    hostmap hm = {0};
-    store_meta meta = {0};
+    hostmap hm = *map_read;
+    *map_read = (hostmap){0};
     bf_status s = BF_OK;
     sc->lo_w = bf_v3(INFINITY, INFINITY, INFINITY);
     sc->hi_w = bf_v3(-INFINITY, -INFINITY, -INFINITY);
-    if (a->scene.map) s = app_scene_read_map(a->scene.map, &hm, &meta);
-    sc->has_pose = s == BF_OK && a->scene.map && meta.has_pose;
-    sc->last_pose = meta.last_pose;
+    sc->has_pose = a->scene.map && meta->has_pose;
+    sc->last_pose = meta->last_pose;
     if (s == BF_OK && a->scene.mesh) {
         bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
         /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
@@ -253,9 +253,13 @@ int cmd_view(int argc, char **argv)
     char msg[512];
     if (a.pose) app_parse_pose(a.pose, &T_wc, msg, sizeof msg);
 
-    /* The files before the window: a bad path is named first. */
+    /* The files and the map before the window: a bad path or map is named
+     * first, also where no window can open. */
     app_scene_files f = {0};
     bf_status s = app_scene_read_files(&a.scene, &f);
+    hostmap hm = {0};
+    store_meta meta = {0};
+    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, &meta);
     view_config vc = view_config_default();
     vc.width = W, vc.height = H;
     vc.title = "bitfuse view";
@@ -266,7 +270,7 @@ int cmd_view(int argc, char **argv)
     view_scene sc = {0};
     if (s == BF_OK) s = view_open(&vc, &gcfg, &L.win);
     if (s == BF_OK) s = gpu_context_create(&gcfg, &L.ctx);
-    if (s == BF_OK) s = load_scene(L.ctx, &a, &f, &K, a.pose ? &T_wc : NULL, &sc);
+    if (s == BF_OK) s = load_scene(L.ctx, &a, &f, &hm, &meta, &K, a.pose ? &T_wc : NULL, &sc);
     if (s == BF_OK) s = view_attach(L.win, L.ctx);
     if (s == BF_OK) {
         if (!a.pose) T_wc = sc.has_pose ? sc.last_pose : overview_pose(&sc, &K);
@@ -281,6 +285,7 @@ int cmd_view(int argc, char **argv)
     gpu_context_destroy(L.ctx);
     view_destroy(L.win);
     free(L.rgb);
+    hostmap_free(&hm);
     app_scene_files_free(&f);
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }
