@@ -244,6 +244,10 @@ PY
     expect 3 "$B" fuse "$T/zd" --poses groundtruth --out "$T/fuzd0" $small
     mentions "no frame with a pose and depth"
     [ ! -e "$T/fuzd0" ] || fail "fuse of frames without depth left $T/fuzd0 behind"
+    # A poses file that no frame's time falls in: its span is named.
+    awk '!/^#/ { $1 = sprintf("%.6f", $1 + 1000) } { print }' "$T/seq/groundtruth.txt" >"$T/late.txt"
+    expect 3 "$B" fuse "$T/seq" --poses "$T/late.txt" --out "$T/fulate" $small
+    mentions "late.txt's poses span t ="
     expect 3 "$B" replay "$T/cut" --out "$T/rpcut" $small
     mentions "frame 1"
     [ "$(grep -vc '^#' "$T/rpcut/trajectory.txt")" = 1 ] || fail "replay stopped by a corrupt frame: no trajectory of the frame before it"

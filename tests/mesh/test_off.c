@@ -51,6 +51,9 @@ BF_TEST(off_refusals_name_the_line)
     p = write_file("nan.off", "OFF\n1 0 0\n0 nan 0\n");
     CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
     CHECK_ERROR_MENTIONS("not a finite number");
+    p = write_file("far.off", "OFF\n1 0 0\n0 1e30 0\n");
+    CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("line 3: vertex coordinate 1e+30 is beyond 1e9");
     p = write_file("not.off", "ply\nformat ascii 1.0\n");
     CHECK_STATUS(mesh_read_off(p, &m), BF_FORMAT);
     CHECK_ERROR_MENTIONS("not an OFF file");
