@@ -154,7 +154,7 @@ typedef struct app_map_report {
     mesh_simplify_stats simplify; /* of the mesh written */
     char mesh_file[16];           /* "mesh.ply", "mesh.obj" or "mesh.glb"; "" without a mesh */
     bool mesh_skipped;            /* --no-mesh: none was made */
-    char mesh_error[256];         /* why the mesh could not be written ("" if it was, or none was asked) */
+    char mesh_error[1024];        /* why the mesh could not be written ("" if it was, or none was asked) */
     bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
     uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */
 } app_map_report;

@@ -359,8 +359,8 @@ int cmd_demo(int argc, char **argv)
         printf("  time per frame         %.0f ms median, %.0f p95 (track + fuse + ray-cast of the reference)\n",
                r.fuse_ms_median, r.fuse_ms_p95);
         printf("  map                    %.2f MiB, %u bricks\n", r.map.bytes_total / 1048576.0, r.map.n_bricks);
-        printf("  fused surface voxels   median %.1f mm, p90 %.1f mm from the surface; %.1f%% of the surface within "
-               "1 cm of them\n",
+        printf("  fused surface voxels   median %.1f mm, p90 %.1f mm from the surface; %.1f%% of the seen "
+               "surface within 1 cm of them\n",
                1e3 * r.fused_surf.accuracy.median, 1e3 * r.fused_surf.accuracy.p90, 100 * r.fused_surf.completeness);
     }
     printf("  wrote                  %s/{seq/,raw_points.ply,%sstats.json} in %.1f s\n", out_dir,

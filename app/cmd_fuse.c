@@ -195,8 +195,8 @@ int cmd_fuse(int argc, char **argv)
         if (wf.s != BF_OK) cJSON_AddStringToObject(o, "output_error", wf.message);
         s = app_note_write(&wf, cmd, app_json_write_in(a.out, "stats.json", o));
     }
-    /* The summary also when an output could not be written (its file is
-     * left out of the list); the exit code says so after it. */
+    /* The summary also when an output could not be written (the failure
+     * named instead of the files written); the exit code says so after it. */
     if (s == BF_OK) {
         printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
                r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
@@ -211,8 +211,11 @@ int cmd_fuse(int argc, char **argv)
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);
-        printf("  wrote            %s/{%s%spoints.ply,stats.json} in %.1f s\n", a.out, r.out.mesh_file,
-               r.out.mesh_file[0] ? "," : "", r.seconds);
+        if (wf.s != BF_OK)
+            printf("  not written      %s (the other outputs are written) in %.1f s\n", wf.message, r.seconds);
+        else
+            printf("  wrote            %s/{%s%spoints.ply,stats.json} in %.1f s\n", a.out, r.out.mesh_file,
+                   r.out.mesh_file[0] ? "," : "", r.seconds);
     }
     if (s == BF_OK) s = app_write_status(&wf);
     bf_status s_input = r.run.source_status;

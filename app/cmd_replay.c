@@ -797,7 +797,8 @@ static bf_status eval_fused_surface(const replay_args *a, replay_result *r)
     return s;
 }
 
-static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src)
+static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src,
+                          const char *output_error)
 {
     const recon_counts *c = &r->run.counts;
     const recon_run_series *t = &r->run.series;
@@ -848,12 +849,17 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
     if (r->has_surface)
-        printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of that surface within 1 cm of the "
-               "map\n",
-               1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness);
+        printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of the %s surface within 1 cm of "
+               "the map\n",
+               1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness,
+               r->surf.used_visible ? "seen" : "whole");
     app_print_map(&r->out, a->rcfg.fusion.max_level);
-    printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
-           r->out.mesh_file[0] ? r->out.mesh_file : "", r->out.mesh_file[0] ? "," : "", r->seconds);
+    /* After a failed output the list would claim it: the failure instead. */
+    if (output_error)
+        printf("  not written      %s (the other outputs are written) in %.1f s\n", output_error, r->seconds);
+    else
+        printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
+               r->out.mesh_file[0] ? r->out.mesh_file : "", r->out.mesh_file[0] ? "," : "", r->seconds);
 }
 
 int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
@@ -1018,8 +1024,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
      * no empty folder it made behind; rmdir takes only an empty one. */
     if (s != BF_OK && made_out) (void)rmdir(a.out);
     /* An output that could not be written leaves the run's results to say
-     * (the summary's list of files written leaves that one out). */
-    if (s == BF_OK && has_map && s_loop == BF_OK) print_summary(&a, &r, src);
+     * (the summary names the failure instead of the files written). */
+    if (s == BF_OK && has_map && s_loop == BF_OK) print_summary(&a, &r, src, wf.s != BF_OK ? wf.message : NULL);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);

@@ -81,6 +81,7 @@ bf_status replay__pose_matrix_read(const char *path, bf_se3 *T_wc)
     replay__text t = {.buf = NULL};
     replay__text_begin(&t, path, buf);
     double M[4][4] = {{0}};
+    uint32_t row_line[4] = {0}; /* each row's line in the file (comments may come between) */
     int rows = 0, n;
     char *f[5];
     while ((n = replay__text_next(&t, f, 5)) >= 0) {
@@ -90,13 +91,13 @@ bf_status replay__pose_matrix_read(const char *path, bf_se3 *T_wc)
             bf_status s = replay__text_double(&t, f[k], "pose entry", &M[rows][k]);
             if (s != BF_OK) return s;
         }
-        rows++;
+        row_line[rows++] = t.line;
     }
     if (rows < 3) return bf_fail(BF_FORMAT, "%s: expected a 4x4 pose matrix, found %d rows", path, rows);
     for (int i = 0; i < 3; i++)
         if (fabs(M[i][3]) > REPLAY_MAX_POSITION_M)
-            return bf_fail(BF_FORMAT, "%s:%d: translation %g m is beyond 1e9 m (no camera's position)", path, i + 1,
-                           M[i][3]);
+            return bf_fail(BF_FORMAT, "%s:%u: translation %g m is beyond 1e9 m (no camera's position)", path,
+                           row_line[i], M[i][3]);
     if (rows == 4 && (fabs(M[3][0]) > 1e-6 || fabs(M[3][1]) > 1e-6 || fabs(M[3][2]) > 1e-6 ||
                       fabs(M[3][3] - 1) > 1e-6))
         return bf_fail(BF_FORMAT, "%s:4: last row of a rigid transform must be 0 0 0 1", path);

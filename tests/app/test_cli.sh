@@ -234,6 +234,8 @@ for name in sorted(os.listdir(sys.argv[1]))[1:]:
                         + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
 PY
     expect 0 "$B" fuse "$T/zd" --poses groundtruth --out "$T/fuzd" $small
+    py -c "import json,sys; m = json.load(open(sys.argv[1]))['mesh']; assert m['file'] is None and m['skipped'], m" \
+        "$T/fuzd/stats.json" || fail "fuse --no-mesh: stats.json's mesh does not say skipped"
     grep -q "2 frames without a depth sample in the sensor's range: not fused" "$T/out" || fail "fuse: frames without depth not counted: $(head -c 400 "$T/out")"
     mentions "no depth sample within the sensor's 4.5 m: skipped"
     f1=$(ls "$T/zd/depth" | head -n 1)
@@ -576,6 +578,24 @@ for f in depth.txt rgb; do
 done
 expect 2 "$B" convert "$T/self.bflog" --out "$T/tumcopy"
 [ "$(md5sum <"$T/tumcopy/depth.txt")" = "$sum1" ] || fail "a refused conversion changed the folder at its --out"
+# A mesh that cannot be written (a folder in its place): exit 5, the summary
+# names the failure instead of claiming the file, stats.json says so.
+mkdir -p "$T/meshfail/mesh.ply/x"
+expect 5 "$B" replay "$T/seq" --out "$T/meshfail" --frames 5
+grep -q "not written      .*mesh.ply" "$T/out" || fail "replay with an unwritable mesh: no summary naming it: $(head -c 400 "$T/out")"
+grep -q "^  wrote" "$T/out" && fail "replay with an unwritable mesh claims it wrote its files"
+py -c "import json,sys; m = json.load(open(sys.argv[1]))['mesh']; assert m['file'] is None and 'mesh.ply' in m['error'], m" \
+    "$T/meshfail/stats.json" || fail "replay with an unwritable mesh: stats.json's mesh does not say so"
+# synth at another size keeps 640x480's field of view by default, as render does.
+expect 0 "$B" synth --trajectory "$T/seq/groundtruth.txt" --frames 2 --size 160x120 --noise none --data "$T/nodata" \
+    --out "$T/synth160"
+[ "$(cat "$T/synth160/camera.txt")" = "131.25 131.25 79.5 59.5 5000" ] ||
+    fail "synth --size 160x120's default camera: $(cat "$T/synth160/camera.txt")"
+# view names a folder that is no store before it looks for a window.
+mkdir -p "$T/notastore/x"
+env -u DISPLAY "$B" view --map "$T/notastore" --exit-after 1 >"$T/out" 2>"$T/err"
+[ $? = 3 ] || fail "view of a folder that is no store: not exit 3"
+mentions "not a scene store"
 # A board that does not fit, or shared data that is not there: exit 2, no folder.
 expect 2 "$B" synth --board 64x64 --views 2 --size 160x120 --out "$T/bigboard"
 mentions "does not fit"

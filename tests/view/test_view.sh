@@ -100,10 +100,4 @@ expect 2 "$B" replay "$T/seq" --out "$T/r2" --exit-after 3
 mentions "--exit-after needs --view"
 expect 3 "$B" view --map "$T/nothing" --exit-after 1
 mentions "$T/nothing"
-# A folder that is no store is named before the window, also without a display.
-mkdir -p "$T/notastore/x"
-env -u DISPLAY "$B" view --map "$T/notastore" --exit-after 1 >"$T/out" 2>"$T/err"
-rc=$?
-[ $rc = 3 ] || fail "view of a folder that is no store without DISPLAY: exit $rc, expected 3"
-mentions "not a scene store"
 finish test_view
