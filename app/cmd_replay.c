@@ -568,6 +568,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     app_json_recon_config(o, "config", &a->rcfg);
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &replay_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", c->frames);
+    cJSON_AddBoolToObject(o, "interrupted", r->run.is_interrupted); /* Ctrl-C, SIGTERM, the window closed */
     app_json_input(o, &r->run, src);
     cJSON *tr = app_json_object(o, "tracking");
     cJSON_AddNumberToObject(tr, "tracked", c->tracked);
@@ -824,6 +825,8 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                c->photo_weak);
     if (r->run.source_status != BF_OK)
         printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
+    if (!r->has_capture && r->run.is_interrupted)
+        printf("  stopped          by a signal or the window: the frames before it are written\n");
     if (r->has_capture)
         printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
@@ -896,7 +899,11 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         if (s == BF_OK) stop = app_stop_begin(src);
     } else {
         s = replay_open(a.seq, &a.ropt, &src);
+        /* Ctrl-C or SIGTERM ends a replay's scan as a live one's: the
+         * frames done are written, the store flushed, the spill removed. */
+        if (s == BF_OK) stop = app_stop_begin(NULL);
     }
+    bool signals_on = stop != NULL;
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
     if (s == BF_OK && a.depth_correction)
         s = app_depth_correction_check(a.depth_correction, &replay_depth_fix, src, &a.cal, a.seq);
@@ -975,10 +982,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             s = BF_OK;
         }
     }
-    if (r.has_capture) {
-        r.cap = capture_threaded_stats(src);
-        app_stop_end();
-    }
+    if (r.has_capture) r.cap = capture_threaded_stats(src);
+    if (signals_on) app_stop_end();
     if (log) {
         bf_status s_log = replay_log_writer_finish(log);
         if (s == BF_OK) s = app_note_write(&wf, cmd, s_log);

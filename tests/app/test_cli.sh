@@ -462,6 +462,27 @@ grep -q "stopped by a signal" "$T/out" || fail "record did not say it was stoppe
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['interrupted'] and 1 <= d['frames'] < 90, d" \
     "$T/int.stats.json" || fail "interrupted record: stats.json"
 expect 0 "$B" info "$T/int.bflog"
+# Ctrl-C during a replay ends the scan, not the program: exit 0, the frames
+# before it written (stats.json says interrupted), the store flushed. The
+# signal lands half-way through a run as long as an uninterrupted one here.
+t0=$(date +%s.%N)
+expect 0 "$B" replay "$T/long" --out "$T/rlong" --no-mesh
+half=$(python3 -c "import sys; print(max(0.2, (float(sys.argv[2]) - float(sys.argv[1])) / 2))" "$t0" "$(date +%s.%N)")
+"$B" replay "$T/long" --out "$T/rint" --no-mesh --store "$T/rintS" >"$T/out" 2>"$T/err" &
+pid=$!
+sleep "$half"
+if kill -INT $pid 2>/dev/null; then
+    wait $pid
+    rc=$?
+    [ $rc = 0 ] || fail "replay stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
+    if python3 -c "import json,sys; sys.exit(0 if json.load(open(sys.argv[1]))['interrupted'] else 1)" "$T/rint/stats.json"; then
+        grep -q "stopped          by a signal" "$T/out" || fail "replay did not say it was stopped: $(cat "$T/out")"
+        [ -s "$T/rint/trajectory.txt" ] && [ -s "$T/rint/points.ply" ] || fail "interrupted replay: outputs missing"
+        expect 0 "$B" info "$T/rintS"
+    fi
+else
+    wait $pid
+fi
 
 # replay: the full loop; one trajectory line per input frame, stats.json
 # with tracking counts and the ATE against the sequence's ground truth.
