@@ -278,6 +278,13 @@ int app_check_not_input(const char *cmd, const char *opt, const char *out, const
  * given: a camera's recording cannot be made again, and a recording that
  * fails part-way would leave fewer frames than the log it replaced. */
 int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite);
+/* A usage error when opt's file out exists inside the folder dir, which is
+ * being read (a sequence's index or image): writing would overwrite it. */
+int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir);
+/* A usage error when opt's file path exists and does not begin as a JSON
+ * object does: a JSON writer's --out that names an image or an index by
+ * mistake (--out written before a glob) is not written over. */
+int app_check_json_out(const char *cmd, const char *opt, const char *path);
 /* The log's codec options record and convert share (--colour, --jpeg-quality,
  * --zstd-level), applied to a replay_log_config after parsing. */
 typedef struct app_log_codec {

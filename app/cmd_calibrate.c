@@ -221,6 +221,12 @@ int cmd_calibrate(int argc, char **argv)
                              cams[0].n);
         goto done;
     }
+    /* Not over an image it reads, nor over one --out names by mistake
+     * (--out written before the shell's glob takes the first image). */
+    for (int i = 0; i < (has_depth ? 2 : 1) && !rc; i++)
+        for (uint32_t k = 0; k < cams[i].n && !rc; k++) rc = app_check_not_input(cmd, "--out", out, cams[i].paths[k]);
+    if (!rc) rc = app_check_json_out(cmd, "--out", out);
+    if (rc) goto done;
     calib_board board;
     calib_parse_board(board_text, &board); /* checked above */
     board.square_m = square_m;

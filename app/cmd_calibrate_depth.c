@@ -178,6 +178,12 @@ int cmd_calibrate_depth(int argc, char **argv)
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    /* Not over what is read: the poses, or a file of the sequence (its
+     * index files sit in it). */
+    if (strcmp(poses, "groundtruth") != 0 && (rc = app_check_not_input(cmd, "--out", out, poses)) != 0) return rc;
+    if ((rc = app_check_not_input(cmd, "--out", out, seq)) != 0) return rc;
+    if ((rc = app_check_not_inside(cmd, "--out", out, seq)) != 0) return rc;
+    if ((rc = app_check_json_out(cmd, "--out", out)) != 0) return rc;
     if (cfg.gaps[0] % cfg.stride || cfg.gaps[1] % cfg.stride)
         return app_usage_error(cmd, "--stride %u must divide the gaps %u and %u", cfg.stride, cfg.gaps[0], cfg.gaps[1]);
     app_calibration cal = {0};

@@ -1,6 +1,8 @@
 /* What record and convert report about a bitfuse log they wrote. */
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
@@ -43,6 +45,32 @@ int app_check_not_input(const char *cmd, const char *opt, const char *out, const
     if (!out || !in || stat(out, &so) != 0 || stat(in, &si) != 0) return 0;
     if (so.st_dev != si.st_dev || so.st_ino != si.st_ino) return 0;
     return app_usage_error(cmd, "%s %s is %s, which is being read: writing there would overwrite it", opt, out, in);
+}
+
+int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir)
+{
+    char ro[PATH_MAX], rd[PATH_MAX];
+    if (!out || !dir || !realpath(out, ro) || !realpath(dir, rd)) return 0; /* a new file: nothing to overwrite */
+    size_t n = strlen(rd);
+    if (strncmp(ro, rd, n) != 0 || ro[n] != '/') return 0;
+    return app_usage_error(cmd, "%s %s is inside %s, which is being read: writing there would overwrite its file", opt,
+                           out, dir);
+}
+
+int app_check_json_out(const char *cmd, const char *opt, const char *path)
+{
+    struct stat st;
+    /* Only a regular file is opened (a pipe would block; the writer refuses
+     * what is not a regular file). */
+    if (!path || stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return 0;
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    int c;
+    while ((c = fgetc(f)) == ' ' || c == '\t' || c == '\n' || c == '\r') {}
+    fclose(f);
+    if (c == '{' || c == EOF) return 0; /* a JSON object, or empty */
+    return app_usage_error(cmd, "%s %s exists and is not a JSON file: it is not written over (an image or index "
+                                "named by mistake?)", opt, path);
 }
 
 int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite)

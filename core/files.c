@@ -76,6 +76,12 @@ bf_status bf_out_open(bf_out *o, const char *path)
     if (snprintf(o->path, sizeof o->path, "%s", path) >= (int)sizeof o->path ||
         snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%d", path, (int)getpid()) >= (int)sizeof o->tmp)
         return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
+    /* The rename would replace what is there: a device node, a pipe or a
+     * socket (an --out of /dev/null, a FIFO) is no file to write over. */
+    struct stat st;
+    if (stat(path, &st) == 0 && !S_ISREG(st.st_mode))
+        return bf_fail(BF_WRITE, "%s: exists and is not a regular file (%s)", path,
+                       S_ISDIR(st.st_mode) ? "a folder" : "a device, pipe or socket");
     o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (o->fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(errno));
     return BF_OK;

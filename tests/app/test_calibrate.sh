@@ -42,6 +42,12 @@ cmp -s "$T/calib.json" "$T/c2.json" || fail "the same views in another argument 
 
 # Colour alone: no depth camera, no transform in the file.
 expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --out "$T/colour.json"
+# --out written before the glob names the first image: refused, the image kept.
+first=$(ls "$T"/b/colour/*.png | head -n 1)
+sum0=$(md5sum <"$first")
+expect 2 "$B" calibrate --board 9x6 --square 0.04 --out "$T"/b/colour/*.png
+mentions "is not a JSON file"
+[ "$(md5sum <"$first")" = "$sum0" ] || fail "calibrate wrote over an image it read"
 "$PY" -c "import json,sys; d=json.load(open(sys.argv[1])); assert 'depth' not in d and 'T_colour_depth' not in d" \
     "$T/colour.json" || fail "a colour-only calibration has a depth camera"
 

@@ -34,6 +34,18 @@ expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 61 --size 160x120 --came
 # From the ground truth: no pattern to find, multipliers near 1.
 expect 0 "$B" calibrate-depth "$T/seq" --poses groundtruth --cell 8 --out "$T/flat.json"
 grep -qF "pairs" "$T/out" || fail "the summary does not count pairs: $(cat "$T/out")"
+# Not over what it reads: a file of the sequence, the poses, or a pipe.
+sum0=$(md5sum <"$T/seq/depth.txt")
+expect 2 "$B" calibrate-depth "$T/seq" --poses groundtruth --out "$T/seq/depth.txt"
+mentions "which is being read"
+[ "$(md5sum <"$T/seq/depth.txt")" = "$sum0" ] || fail "calibrate-depth wrote over the sequence's depth.txt"
+cp "$T/seq/groundtruth.txt" "$T/gt.txt"
+expect 2 "$B" calibrate-depth "$T/seq" --poses "$T/gt.txt" --out "$T/gt.txt"
+mentions "which is being read"
+mkfifo "$T/pipe.json"
+expect 5 "$B" calibrate-depth "$T/seq" --poses groundtruth --out "$T/pipe.json"
+mentions "not a regular file"
+[ -p "$T/pipe.json" ] || fail "calibrate-depth replaced a pipe at its --out"
 py - "$T/flat.json" <<'PY' || fail "calibrate-depth of unspoiled depth is not flat"
 import json, sys
 d = json.load(open(sys.argv[1]))
