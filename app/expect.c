@@ -122,7 +122,15 @@ bf_status app_expect_load(app_expect *e, const char *path, const char *tolerance
         snprintf(why_read, sizeof why_read, "%s", bf_last_error()); /* bf_fail writes the same buffer */
         return bf_fail(s, "--expect: %s", why_read);
     }
-    e->baseline = cJSON_ParseWithLength(text, n);
+    const char *end = NULL;
+    e->baseline = cJSON_ParseWithLengthOpts(text, n, &end, false);
+    size_t tail = e->baseline ? bf_trailing_text(text, n, end) : n;
+    if (tail < n) {
+        cJSON_Delete(e->baseline);
+        e->baseline = NULL;
+        free(text);
+        return bf_fail(BF_FORMAT, "%s: --expect: text after the JSON value at byte %zu", path, tail);
+    }
     if (!e->baseline) {
         const char *err = cJSON_GetErrorPtr();
         size_t off = err && err >= text && err <= text + n ? (size_t)(err - text) : n;

@@ -221,11 +221,17 @@ static bf_status parse_root(const char *path, const cJSON *root, calib_result *r
 
 bf_status calib_parse(const char *path, const char *text, size_t len, calib_result *out)
 {
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    const char *end = NULL;
+    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, false);
     if (!root) {
         const char *at = cJSON_GetErrorPtr();
         size_t off = at && at >= text && at <= text + len ? (size_t)(at - text) : 0;
         return bf_fail(BF_FORMAT, "%s: not JSON (near byte %zu)", path, off);
+    }
+    size_t tail = bf_trailing_text(text, len, end);
+    if (tail < len) {
+        cJSON_Delete(root);
+        return bf_fail(BF_FORMAT, "%s: text after the JSON value at byte %zu", path, tail);
     }
     calib_result r;
     bf_status s = parse_root(path, root, &r);

@@ -180,8 +180,14 @@ static bf_status parse_root(const char *path, const cJSON *root, calib_depth_cor
 
 bf_status calib_depth_parse(const char *path, const char *text, size_t len, calib_depth_correction *out)
 {
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    const char *end = NULL;
+    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, false);
     if (!root) return bf_fail(BF_FORMAT, "%s: not JSON", path);
+    size_t tail = bf_trailing_text(text, len, end);
+    if (tail < len) {
+        cJSON_Delete(root);
+        return bf_fail(BF_FORMAT, "%s: text after the JSON value at byte %zu", path, tail);
+    }
     calib_depth_correction *c = malloc(sizeof *c);
     if (!c) {
         cJSON_Delete(root);

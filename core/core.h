@@ -256,6 +256,10 @@ bf_status bf_read_file(const char *path, char **data, size_t *size);
  * (NUL-terminated or at least len bytes long): 3 or 0. Editors on Windows
  * write one; it is no part of a file's first field. */
 size_t bf_bom_bytes(const char *text, size_t len);
+/* The offset of the first byte after end (within text's len bytes) that is
+ * not white space or NUL, or len if none is: what a parser that stopped at
+ * end left over (a JSON file with text after its value, a bad merge). */
+size_t bf_trailing_text(const char *text, size_t len, const char *end);
 /* Creates a directory and its parents (mkdir -p). */
 bf_status bf_mkdir_p(const char *path);
 /* Writes data to path atomically: temporary file, fsync, rename (a bf_out

@@ -227,6 +227,13 @@ size_t bf_bom_bytes(const char *text, size_t len)
                : 0;
 }
 
+size_t bf_trailing_text(const char *text, size_t len, const char *end)
+{
+    size_t i = end && end >= text && end <= text + len ? (size_t)(end - text) : 0;
+    while (i < len && (text[i] == ' ' || text[i] == '\t' || text[i] == '\n' || text[i] == '\r' || text[i] == '\0')) i++;
+    return i;
+}
+
 bool bf_file_exists(const char *path)
 {
     struct stat st;

@@ -184,8 +184,14 @@ bf_status store__index_read(const char *dir, store_meta *meta, store_entry **e, 
     size_t len = 0;
     bf_status s = store__read_file(path, 1u << 30, &text, &len);
     if (s != BF_OK) return s;
-    cJSON *root = cJSON_ParseWithLength((const char *)text, len);
+    const char *end = NULL;
+    cJSON *root = cJSON_ParseWithLengthOpts((const char *)text, len, &end, false);
+    size_t tail = root ? bf_trailing_text((const char *)text, len, end) : len;
     free(text);
+    if (root && tail < len) {
+        cJSON_Delete(root);
+        return bf_fail(BF_FORMAT, "%s: text after the JSON value at byte %zu", path, tail);
+    }
     if (!root) return bf_fail(BF_FORMAT, "%s: not valid JSON", path);
     s = parse_index(path, root, meta, e, n, flush);
     cJSON_Delete(root);

@@ -69,6 +69,7 @@ BF_TEST(calib_malformed_fields_are_named)
     } cases[] = {
         {"{\"colour\": {", "not JSON", BF_FORMAT},
         {"[1, 2]", "not a JSON object", BF_FORMAT},
+        {"{\"version\": 1}\n<<<<<<< HEAD", "text after the JSON value at byte 15", BF_FORMAT},
         {"{\"depth\": {}}", "colour: missing", BF_FORMAT},
         {"{\"colour\": {\"width\": 640, \"height\": 480, \"fy\": 525, \"cx\": 319.5, \"cy\": 239.5}}", "colour.fx: missing",
          BF_FORMAT},

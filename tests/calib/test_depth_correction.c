@@ -240,6 +240,7 @@ BF_TEST(depth_correction_malformed_files_are_named)
         bf_status want;
     } cases[] = {
         {"{", "not JSON", BF_FORMAT},
+        {"{} {}", "text after the JSON value at byte 3", BF_FORMAT},
         {"{\"format\": \"bitfuse-calibration\", \"version\": 1}", "format", BF_FORMAT},
         {"{\"format\": \"bitfuse-depth-correction\", \"version\": 9}", "newer", BF_UNSUPPORTED},
         {"{\"format\": \"bitfuse-depth-correction\", \"version\": 1, \"width\": 16, \"height\": 8, \"cell_px\": 8, "

@@ -373,6 +373,14 @@ BF_TEST(store_opens_without_its_index)
     meta.max_level = 6;
     CHECK_OK(write_store(dir6, false, &m, &meta, &t, NULL));
     snprintf(p, sizeof p, "%s/store.json", dir6);
+    /* An index with text after it (a bad merge, two writes run together) is no index. */
+    f = fopen(p, "a");
+    CHECK(f != NULL);
+    fputs("\n}{", f);
+    fclose(f);
+    hostmap_free(&back);
+    CHECK_OK(store_read(dir6, &back, &meta2, NULL, &rep));
+    CHECK(!rep.index_ok);
     CHECK(remove(p) == 0);
     hostmap_free(&back);
     CHECK_OK(store_read(dir6, &back, &meta2, NULL, &rep));
