@@ -51,6 +51,19 @@ fail:
     return s;
 }
 
+/* The fewest decimals, 6 to 9, that read back as the same double: a TUM
+ * time of 1305031102.6659 prints as .665900, not as the .665899992 its
+ * double holds at nine; a time no such form reproduces keeps nine. */
+static int time_decimals(double t)
+{
+    char s[64];
+    for (int p = 6; p < 9; p++) {
+        snprintf(s, sizeof s, "%.*f", p, t);
+        if (strtod(s, NULL) == t) return p;
+    }
+    return 9;
+}
+
 bf_status replay_traj_write_tum(const char *path, const bf_traj *traj)
 {
     /* One line is at most 8 numbers of ~30 characters. */
@@ -67,8 +80,8 @@ bf_status replay_traj_write_tum(const char *path, const bf_traj *traj)
         bf_vec3 t;
         bf_se3_to_qt(&traj->T_wc[i], &q, &t);
         if (q.w < 0) q = (bf_quat){-q.w, -q.x, -q.y, -q.z};
-        int n = snprintf(buf + len, cap - len, "%.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", traj->t_s[i], t.x, t.y,
-                         t.z, q.x, q.y, q.z, q.w);
+        int n = snprintf(buf + len, cap - len, "%.*f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", time_decimals(traj->t_s[i]),
+                         traj->t_s[i], t.x, t.y, t.z, q.x, q.y, q.z, q.w);
         if (n < 0 || (size_t)n >= cap - len) {
             free(buf);
             return bf_fail(BF_INVALID_ARG, "%s: pose %zu does not fit the line format", path, i);

@@ -47,6 +47,18 @@ BF_TEST(traj_write_read_round_trip)
     }
     free(text);
     CHECK_EQ_INT(bad, 0);
+    /* A TUM time is written with the fewest decimals that read back as its
+     * double (.665900, not the .665899992 its double holds at nine). */
+    bf_traj one = {0};
+    CHECK_OK(bf_traj_push(&one, 1305031102.6659, &tr.T_wc[0]));
+    CHECK_OK(replay_traj_write_tum(path, &one));
+    CHECK_OK(bf_read_file(path, &text, NULL));
+    CHECK(strstr(text, "\n1305031102.665900 ") != NULL);
+    free(text);
+    bf_traj_free(&back);
+    CHECK_OK(replay_traj_read_tum(path, &back));
+    CHECK(back.n == 1 && back.t_s[0] == 1305031102.6659);
+    bf_traj_free(&one);
     bf_traj_free(&tr);
     bf_traj_free(&back);
 }
