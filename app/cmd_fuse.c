@@ -119,12 +119,13 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddNumberToObject(o, "frames_without_pose", r->run.n_skipped);
     app_json_input(o, &r->run, src);
     app_json_series(o, "frame_ms", &t->frame_ms);
-    cJSON *g = app_json_object(o, "gpu_stage_ms_median");
-    cJSON_AddNumberToObject(g, "upload", bf_stats_percentile(&t->upload_ms, 50));
-    cJSON_AddNumberToObject(g, "alloc", bf_stats_percentile(&t->alloc_ms, 50));
-    cJSON_AddNumberToObject(g, "subcache", bf_stats_percentile(&t->subcache_ms, 50));
-    cJSON_AddNumberToObject(g, "window", bf_stats_percentile(&t->window_ms, 50));
-    cJSON_AddNumberToObject(g, "colour", bf_stats_percentile(&t->colour_ms, 50));
+    /* Named and shaped as replay's (gpu_stage_ms.STAGE.median), so one script reads both. */
+    cJSON *g = app_json_object(o, "gpu_stage_ms");
+    app_json_series(g, "upload", &t->upload_ms);
+    app_json_series(g, "alloc", &t->alloc_ms);
+    app_json_series(g, "subcache", &t->subcache_ms);
+    app_json_series(g, "window", &t->window_ms);
+    app_json_series(g, "colour", &t->colour_ms);
     app_json_map(o, &r->out, a->fcfg.max_level);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
     return o;

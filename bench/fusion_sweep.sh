@@ -31,7 +31,7 @@ sys.path.insert(0, "bench")
 from benchlib import run_outputs
 run, ratio, window = sys.argv[1:4]
 s, e = run_outputs(run)
-g = s["gpu_stage_ms_median"]
+g = {k: v["median"] for k, v in s["gpu_stage_ms"].items()}
 acc = e["accuracy"]
 print("\t".join(str(x) for x in [ratio, window, round(s["frame_ms"]["median"], 1), round(s["frame_ms"]["p95"], 1),
       round(g["alloc"], 1), round(g["subcache"], 1), round(g["window"], 1),
