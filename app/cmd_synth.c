@@ -39,11 +39,12 @@ static const char *check_camera(const char *name, const char *v)
     return msg;
 }
 
-/* --size: WxH, each 1..8192. */
+/* --size: WxH, each 16..8192: the tracker's three-level pyramid needs
+ * 16 px a side (a 1x1 sequence was written that nothing could replay). */
 static bool parse_size(const char *v, unsigned *w, unsigned *h)
 {
     char tail;
-    return sscanf(v, "%ux%u%c", w, h, &tail) == 2 && *w > 0 && *h > 0 && *w <= 8192 && *h <= 8192;
+    return sscanf(v, "%ux%u%c", w, h, &tail) == 2 && *w >= 16 && *h >= 16 && *w <= 8192 && *h <= 8192;
 }
 
 static const char *check_size(const char *name, const char *v)
@@ -51,7 +52,7 @@ static const char *check_size(const char *name, const char *v)
     static char msg[512];
     unsigned w, h;
     if (parse_size(v, &w, &h)) return NULL;
-    snprintf(msg, sizeof msg, "%s wants WxH (e.g. 640x480), not '%.400s'", name, v);
+    snprintf(msg, sizeof msg, "%s wants WxH, 16x16 to 8192x8192 (e.g. 640x480), not '%.400s'", name, v);
     return msg;
 }
 
