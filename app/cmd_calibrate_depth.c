@@ -78,10 +78,31 @@ static bool frame_needed(const calib_depth_config *c, uint32_t i)
     return false;
 }
 
+/* A replay writes a lost frame's pose as the last good one: a pose the
+ * same to the bit as the one before it says nothing of where that frame's
+ * depth was taken, and one interpolated next to it little more. True for a
+ * time on such an entry or between it and a neighbour. */
+static bool pose_is_held(const bf_traj *t, double t_s)
+{
+    if (t->n < 2 || !(t_s >= t->t_s[0])) return false;
+    size_t lo = 0, hi = t->n; /* the last entry at or before t_s */
+    while (hi - lo > 1) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (t->t_s[mid] <= t_s) lo = mid;
+        else hi = mid;
+    }
+    bool same_before = lo > 0 && !memcmp(&t->T_wc[lo], &t->T_wc[lo - 1], sizeof(bf_se3));
+    if (t->t_s[lo] == t_s) return same_before;
+    bool same_after = lo + 1 < t->n && !memcmp(&t->T_wc[lo + 1], &t->T_wc[lo], sizeof(bf_se3));
+    return same_before || same_after;
+}
+
 /* Reads the frames the pairs need, each with its pose (the ground truth or
- * traj's at its depth time); frames without one are counted in *n_no_pose. */
+ * traj's at its depth time); frames without one are counted in *n_no_pose,
+ * frames whose trajectory pose is held (pose_is_held) in *n_held. */
 static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_depth_config *c,
-                             const calib_undistort_map *lens, depth_frames *d, uint32_t *n_no_pose, const char *seq)
+                             const calib_undistort_map *lens, depth_frames *d, uint32_t *n_no_pose, uint32_t *n_held,
+                             const char *seq)
 {
     bf_frame f;
     bf_status s;
@@ -104,16 +125,23 @@ static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_
             (*n_no_pose)++;
             continue;
         }
+        if (traj && pose_is_held(traj, f.t_depth_s)) {
+            (*n_held)++;
+            continue;
+        }
         if ((s = frames_push(d, &f, &T, lens)) != BF_OK) break;
     }
     bf_progress_end(&prog, seen);
     if (s == BF_END) s = BF_OK;
+    if (s == BF_OK && *n_held)
+        bf_warn("calibrate-depth: %u frames left out: their pose repeats the one before to the bit (a replay's lost "
+                "frames keep the last good pose)", *n_held);
     if (s == BF_OK && d->n < 2) s = bf_fail(BF_FORMAT, "%s: %u frames with a pose: too few for pairs", seq, d->n);
     return s;
 }
 
 static cJSON *result_json(const char *seq, const char *out, const calib_depth_config *cfg,
-                          const calib_depth_correction *c, uint32_t n_no_pose, double seconds)
+                          const calib_depth_correction *c, uint32_t n_no_pose, uint32_t n_held, double seconds)
 {
     cJSON *o = app_json_stats("calibrate-depth");
     cJSON_AddStringToObject(o, "sequence", seq);
@@ -129,6 +157,7 @@ static cJSON *result_json(const char *seq, const char *out, const calib_depth_co
     cJSON_AddNumberToObject(k, "min_samples", cfg->min_samples);
     cJSON_AddNumberToObject(o, "frames", c->n_frames);
     cJSON_AddNumberToObject(o, "frames_without_pose", n_no_pose);
+    cJSON_AddNumberToObject(o, "frames_held_pose", n_held);
     cJSON_AddNumberToObject(o, "pairs", c->n_pairs);
     cJSON_AddNumberToObject(o, "cells", c->grid_w * c->grid_h);
     cJSON_AddNumberToObject(o, "cells_measured", c->n_cells_measured);
@@ -194,7 +223,7 @@ int cmd_calibrate_depth(int argc, char **argv)
     bf_traj traj = {0};
     rgbd_source *src = NULL;
     depth_frames d = {0};
-    uint32_t n_no_pose = 0;
+    uint32_t n_no_pose = 0, n_held = 0;
     calib_depth_correction *c = malloc(sizeof *c);
     bf_status s = c ? BF_OK : bf_fail(BF_NO_MEMORY, "calibrate-depth");
     if (s == BF_OK && use_traj) s = replay_traj_read_tum(poses, &traj);
@@ -206,7 +235,7 @@ int cmd_calibrate_depth(int argc, char **argv)
     if (s == BF_OK && lens_cam) s = calib_undistort_map_make(lens_cam, &lens);
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", seq);
-    if (s == BF_OK) s = read_frames(src, use_traj ? &traj : NULL, &cfg, lens_cam ? &lens : NULL, &d, &n_no_pose, seq);
+    if (s == BF_OK) s = read_frames(src, use_traj ? &traj : NULL, &cfg, lens_cam ? &lens : NULL, &d, &n_no_pose, &n_held, seq);
     if (s == BF_OK) {
         d.in = (calib_depth_frames){.n = d.n, .depth = (const uint16_t *const *)d.depth, .index = d.index,
                                     .T_wc = d.T_wc, .K = *rgbd_source_intrinsics(src)};
@@ -232,12 +261,13 @@ int cmd_calibrate_depth(int argc, char **argv)
     if (s == BF_OK) {
         double secs = bf_time_s() - t0;
         if (json) {
-            s = app_json_print(result_json(seq, out, &cfg, c, n_no_pose, secs));
+            s = app_json_print(result_json(seq, out, &cfg, c, n_no_pose, n_held, secs));
         } else {
             float lo, hi;
             calib_depth_range(c, &lo, &hi);
             printf("bitfuse calibrate-depth: %s -> %s\n", seq, out);
-            printf("  frames           %u with a pose (%u without), %u pairs\n", c->n_frames, n_no_pose, c->n_pairs);
+            printf("  frames           %u with a pose (%u without, %u with a held pose left out), %u pairs\n",
+                   c->n_frames, n_no_pose, n_held, c->n_pairs);
             printf("  cells            %ux%u of %u px, %u measured\n", c->grid_w, c->grid_h, c->cell_px,
                    c->n_cells_measured);
             printf("  pattern          RMS %.2f per mille before, %.2f after; multipliers %.4f..%.4f\n",

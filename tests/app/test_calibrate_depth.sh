@@ -46,6 +46,19 @@ mkfifo "$T/pipe.json"
 expect 5 "$B" calibrate-depth "$T/seq" --poses groundtruth --out "$T/pipe.json"
 mentions "not a regular file"
 [ -p "$T/pipe.json" ] || fail "calibrate-depth replaced a pipe at its --out"
+# A replay's lost frames keep the last good pose: frames 20-29 held at frame
+# 19's are no measurement of where their depth was taken, and are left out.
+py - "$T/seq/groundtruth.txt" "$T/held.txt" <<'PY'
+import sys
+rows = [l.split() for l in open(sys.argv[1]) if l.strip() and not l.startswith("#")]
+for i in range(20, 30):
+    rows[i][1:] = rows[19][1:]
+open(sys.argv[2], "w").write("".join(" ".join(r) + "\n" for r in rows))
+PY
+expect 0 "$B" calibrate-depth "$T/seq" --poses "$T/held.txt" --cell 8 --out "$T/held.json" --json
+mentions "frames left out: their pose repeats the one before"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames_held_pose'] > 0 and d['pairs'] < 27, d" \
+    "$T/out" || fail "calibrate-depth used held poses: $(head -c 300 "$T/out")"
 py - "$T/flat.json" <<'PY' || fail "calibrate-depth of unspoiled depth is not flat"
 import json, sys
 d = json.load(open(sys.argv[1]))
