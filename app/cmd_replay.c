@@ -437,7 +437,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (isnan(a->rcfg.track.noise_weight_exp))
         a->rcfg.track.noise_weight_exp = a->depth_correction ? REPLAY_NOISE_EXP_CORRECTED
                                                              : recon_config_default().track.noise_weight_exp;
-    a->auto_budget = !rc && a->gpu_budget_mib <= 0 && a->rcfg.fusion.brick_cap == fusion_config_default().brick_cap;
+    bool bricks_given = a->rcfg.fusion.brick_cap != fusion_config_default().brick_cap;
+    a->auto_budget = !rc && a->gpu_budget_mib <= 0 && !bricks_given;
+    if (!rc && a->gpu_budget_mib > 0 && bricks_given)
+        return app_usage_error(cmd, "--bricks and --gpu-budget both size the map's pools: give one");
     if (!rc && a->gpu_budget_mib > 0 && floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK) < 1024)
         return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);
     if (!rc && a->gpu_budget_mib > 0) set_budget(a, a->gpu_budget_mib);
@@ -887,6 +890,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     view_window *win = NULL;
     app_write_failure wf = {0};  /* outputs that failed: the others are still written */
     bf_status s_loop = BF_OK;    /* the loop failed mid-scan: the work done is still written */
+    bool stopped_empty = false;  /* stopped before any frame with depth: nothing written */
     char loop_error[1024] = "";
     bool has_map = true;
     /* The input first: a missing one leaves no empty output folder. */
@@ -966,6 +970,13 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         replay_sink sink = {.a = &a, .csv = &csv, .log = log, .r = &r, .win = win,
                             .stop = (volatile sig_atomic_t *)stop};
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
+        /* Ctrl-C before any frame with depth came (a live camera still
+         * warming up): nothing to write, and no failure. BF_END skips the
+         * outputs below and removes the folder this run made. */
+        if (s == BF_FORMAT && r.run.is_interrupted && !r.store.is_resumed && r.run.counts.tracked == 0) {
+            stopped_empty = true;
+            s = BF_END;
+        }
         if (sink.wf.s != BF_OK) {
             wf = sink.wf;
             r.run.is_interrupted = false; /* the stop was ours, not a signal's */
@@ -987,6 +998,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (log) {
         bf_status s_log = replay_log_writer_finish(log);
         if (s == BF_OK) s = app_note_write(&wf, cmd, s_log);
+        else if (stopped_empty && s_log != BF_OK) stopped_empty = false, s = s_log;
     }
     /* The trajectory first: it is what a crashed export must not lose. */
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, a.out, "trajectory.txt")) == BF_OK)
@@ -1045,6 +1057,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     mesh_free(&a.vis);
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
+    if (stopped_empty) {
+        printf("bitfuse %s: stopped before any frame with depth: nothing written\n", cmd);
+        return APP_EXIT_OK;
+    }
     if (s == BF_OK && s_loop != BF_OK) s = bf_fail(s_loop, "%s", loop_error);
     else if (s == BF_OK) s = app_write_status(&wf);
     if (s == BF_OK && s_dev != BF_OK) return app_fail(cmd, s_dev);

@@ -399,7 +399,7 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc)
         APP_OPT("--subcache", APP_OPT_U32, &fc->subcache, "N", "frames of the new-brick pass (at most the window)",
                 .min = 1, .max = 256),
         APP_OPT("--bricks", APP_OPT_U32, &fc->brick_cap, "N",
-                "brick pool size (default: replay and live size it from --gpu-budget or the device, docs/cli.md "
+                "brick pool size, instead of --gpu-budget (default: replay and live size it from --gpu-budget or the device, docs/cli.md "
                 "\"Streaming\"; fuse 1048576)",
                 .min = 1, .no_default = true),
         APP_OPT("--chunk", APP_OPT_FLOAT, &fc->chunk_m, "M", "chunk edge in metres", .min = 0.01, .max = 64,

@@ -198,6 +198,14 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
         printf("  colour           %llu voxels, %u units, %.2f MiB (%.2f bits per allocated voxel)\n",
                (unsigned long long)m->n_coloured_voxels, m->n_colour_units, m->bytes_colour / 1048576.0,
                m->n_bricks ? 8.0 * m->bytes_colour / (512.0 * m->n_bricks) : 0.0);
+    /* A full pool drops what did not fit and the scan goes on (fusion_finish_frame): the per-frame
+     * warnings scroll by, so the summary says what the map lacks. */
+    if (m->fail_nodes || m->fail_bricks || m->fail_hash)
+        printf("  pools full       requests for %u bricks, %u nodes and %u chunks were dropped: the map lacks\n"
+               "                   what they would have added (a larger --gpu-budget or --bricks)\n",
+               m->fail_bricks, m->fail_nodes, m->fail_hash);
+    if (m->fail_colour)
+        printf("  colour pool full %u times: those bricks' new colours were not kept\n", m->fail_colour);
     printf("  bricks per level");
     for (uint32_t l = 0; l <= max_level && l < 16; l++)
         if (m->bricks_per_level[l]) printf("  L%u:%u", l, m->bricks_per_level[l]);

@@ -181,6 +181,8 @@ expect 2 "$B" eval-surface rec.ply
 mentions "unknown argument 'rec.ply'"
 expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 1 --out "$T/x" --verbose
 mentions "unknown option '--verbose'"
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 1 --out "$T/x" --size 8x8
+mentions "16x16 to 8192x8192"
 
 # Bad input: exit 3 and the message names the file (and line or frame).
 expect 3 "$B" info "$T/missing"
@@ -484,6 +486,36 @@ else
     wait $pid
 fi
 
+# Ctrl-C before any frame with depth came (a camera still dark, 10 s of
+# frames without depth at 30 Hz): exit 0 as any Ctrl-C, nothing written,
+# no folder left (it exited 3, "no frame with depth").
+mkdir "$T/dark" "$T/dark/depth"
+ln -s "$T/seq/rgb" "$T/dark/rgb"
+cp "$T/seq/camera.txt" "$T/dark/"
+python3 - "$T/seq" "$T/dark" <<'PY'
+import struct, sys, zlib
+first = [l.split()[1] for l in open(sys.argv[1] + "/depth.txt") if l.strip() and not l.startswith("#")][0]
+w, h = struct.unpack(">II", open(sys.argv[1] + "/" + first, "rb").read()[16:24])
+chunk = lambda t, d: struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+with open(sys.argv[2] + "/depth/0.png", "wb") as f:  # 16-bit grey, every pixel 0: no depth
+    f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"".join(b"\0" + bytes(2 * w) for _ in range(h)))) + chunk(b"IEND", b""))
+rgb = [l.split()[1] for l in open(sys.argv[1] + "/rgb.txt") if l.strip() and not l.startswith("#")]
+with open(sys.argv[2] + "/depth.txt", "w") as d, open(sys.argv[2] + "/rgb.txt", "w") as c:
+    for i in range(300):
+        d.write("%.6f depth/0.png\n" % (1000 + i / 30.0))
+        c.write("%.6f %s\n" % (1000.001 + i / 30.0, rgb[i % len(rgb)]))
+PY
+"$B" live --device "$T/dark" --realtime --out "$T/ldark" --no-mesh >"$T/out" 2>"$T/err" &
+pid=$!
+sleep 1.5
+kill -INT $pid
+wait $pid
+rc=$?
+[ $rc = 0 ] || fail "live stopped by SIGINT before any depth: exit $rc, expected 0 ($(tail -c 300 "$T/err"))"
+grep -q "stopped before any frame with depth: nothing written" "$T/out" || fail "live stopped early: $(cat "$T/out")"
+[ ! -e "$T/ldark" ] || fail "live stopped before any depth left its output folder"
+
 # replay: the full loop; one trajectory line per input frame, stats.json
 # with tracking counts and the ATE against the sequence's ground truth.
 expect 0 "$B" replay "$T/seq" --out "$T/rp" --view-every 2
@@ -496,6 +528,14 @@ expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/rp/trajectory.txt" --json
 expect 2 "$B" replay "$T/seq"
 mentions "--out is required"
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
+expect 2 "$B" replay "$T/seq" --out "$T/rp2" --gpu-budget 8 --bricks 5000
+mentions "give one"
+# Pools too small for the scene: the scan goes on, and the summary says what
+# the map lacks (the per-frame warnings alone scrolled by).
+expect 0 "$B" replay "$T/seq" --out "$T/rpfull" --bricks 64 --stream off --no-mesh
+grep -q "pools full       requests for .* were dropped: the map lacks$" "$T/out" || fail "pools full: no summary line: $(cat "$T/out")"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['tracking']['pool_full'] > 0 and sum(d['pool_full_drops'].values()) > 0, d['pool_full_drops']" \
+    "$T/rpfull/stats.json" || fail "pools full: stats.json"
 expect 3 "$B" replay "$T/missing" --out "$T/rp3"
 mentions "$T/missing"
 [ ! -e "$T/rp3" ] || fail "replay on a missing input created its output folder"
