@@ -389,6 +389,7 @@ typedef struct app_calibration {
     const char *path;          /* NULL: no --calibration */
     calib_result cal;          /* as read; after app_calibration_apply, its colour camera at the frames' size */
     char depth_camera[512];    /* the depth camera as --camera's nine numbers (a folder's replay_options.camera) */
+    char depth_camera_origin[4200]; /* "the depth camera of PATH", for replay's messages */
     bool is_lens_left;         /* app_calibration_apply: the source gives its depth through the depth camera's
                                   lens (a device, a log), which the reader of the frames takes out */
 } app_calibration;

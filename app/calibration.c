@@ -42,6 +42,8 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
         snprintf(out->depth_camera, sizeof out->depth_camera, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
                  d->fx_px, d->fy_px, d->cx_px, d->cy_px, d->dist[0], d->dist[1], d->dist[2], d->dist[3], d->dist[4]);
         ropt->camera = out->depth_camera;
+        snprintf(out->depth_camera_origin, sizeof out->depth_camera_origin, "the depth camera of %s", path);
+        ropt->camera_origin = out->depth_camera_origin;
     }
     return APP_EXIT_OK;
 }

@@ -136,7 +136,7 @@ bf_status replay__camera_resolve(const char *dir, const replay_options *opt, rep
     }
     if (opt->camera) {
         if ((s = replay_parse_camera_lens(opt->camera, &cam->K, cam->dist))) return s;
-        cam->origin = "--camera";
+        cam->origin = opt->camera_origin ? opt->camera_origin : "--camera";
         cam->is_from_option = true;
         cam->is_from_name = false;
     }

@@ -15,6 +15,7 @@
 typedef struct replay_options {
     const char *camera;   /* NULL (format default / camera.txt), "fr1", "fr2",
                              "fr3", "icl" or "fx,fy,cx,cy"; borrowed */
+    const char *camera_origin; /* what camera came from, for messages (NULL: "--camera"); borrowed */
     double depth_scale;   /* raw units per metre; 0 = format default */
     uint32_t max_frames;  /* only the first N frames; 0 = all */
     bool skip_bad_frames; /* skip an unreadable frame with a warning */

@@ -128,6 +128,7 @@ expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 2 --size 160x120 --camer
     --data "$T/nodata" --out "$T/seq"
 expect 3 "$B" replay "$T/seq" --out "$T/rp_size" --calibration "$T/calib.json"
 mentions "the depth camera is 640x480, the depth images of $T/seq are 160x120"
+mentions "(camera from the depth camera of $T/calib.json)"
 [ ! -e "$T/rp_size" ] || fail "replay with a calibration of another size made the output folder"
 "$PY" -c "
 import json, sys
