@@ -69,10 +69,41 @@ bf_status bf_mkdir_p(const char *path)
 
 /* ------------------------------------------------------------ outputs */
 
-bf_status bf_out_open(bf_out *o, const char *path)
+bf_status bf_link_target(const char *path, char *out, size_t cap)
+{
+    struct stat st;
+    if (lstat(path, &st) != 0 || !S_ISLNK(st.st_mode)) {
+        if (snprintf(out, cap, "%s", path) >= (int)cap) return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
+        return BF_OK;
+    }
+    char *real = realpath(path, NULL);
+    if (real) {
+        int n = snprintf(out, cap, "%s", real);
+        free(real);
+        if (n >= (int)cap) return bf_fail(BF_INVALID_ARG, "%s: the link's target's path is too long", path);
+        return BF_OK;
+    }
+    /* A link to a file not made yet: its target, relative to the link's folder. */
+    char target[4096];
+    ssize_t n = readlink(path, target, sizeof target - 1);
+    if (n < 0) return bf_fail(BF_WRITE, "%s: cannot read the link: %s", path, strerror(errno));
+    target[n] = '\0';
+    const char *slash = strrchr(path, '/');
+    int dir = target[0] == '/' || !slash ? 0 : (int)(slash - path + 1);
+    if (snprintf(out, cap, "%.*s%s", dir, path, target) >= (int)cap)
+        return bf_fail(BF_INVALID_ARG, "%s: the link's target's path is too long", path);
+    return BF_OK;
+}
+
+bf_status bf_out_open(bf_out *o, const char *path_given)
 {
     memset(o, 0, sizeof *o);
     o->fd = -1;
+    /* A symbolic link is written through, as open() would: the rename
+     * replaces the file it names, not the link. */
+    char path[sizeof o->path];
+    bf_status sl = bf_link_target(path_given, path, sizeof path);
+    if (sl != BF_OK) return sl;
     if (snprintf(o->path, sizeof o->path, "%s", path) >= (int)sizeof o->path ||
         snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%d", path, (int)getpid()) >= (int)sizeof o->tmp)
         return bf_fail(BF_INVALID_ARG, "path too long: %s", path);

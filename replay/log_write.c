@@ -87,6 +87,12 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     size_t dev_len = cfg->device ? strlen(cfg->device) : 0;
     if (dev_len > LOG_DEVICE_MAX) dev_len = LOG_DEVICE_MAX; /* a label: cut, not refused */
 
+    /* A symbolic link is written through (bf_link_target): the finished
+     * log's rename replaces the file it names, not the link. */
+    char target[4096];
+    bf_status sl = bf_link_target(path, target, sizeof target);
+    if (sl != BF_OK) return sl;
+    path = target;
     replay_log_writer *w = bf_calloc(1, sizeof *w);
     if (!w) return bf_fail(BF_NO_MEMORY, "%s: log writer", path);
     w->fd = -1;

@@ -414,6 +414,10 @@ python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['kind'] ==
     "$T/out" || fail "info on a recorded log: wrong kind or frame count"
 expect 0 "$B" convert "$T/seq" --out "$T/conv.bflog" --colour jpeg --jpeg-quality 80
 is_json "$T/conv.stats.json"
+# Through a symbolic link the log goes to the file it names; the link stays.
+ln -s conv_target.bflog "$T/conv_link.bflog"
+expect 0 "$B" convert "$T/seq" --out "$T/conv_link.bflog"
+[ -L "$T/conv_link.bflog" ] && [ -s "$T/conv_target.bflog" ] || fail "convert through a link replaced the link"
 
 # A log cut off mid-frame (a crash) still replays its whole frames.
 size=$(wc -c <"$T/rec.bflog")

@@ -2,6 +2,8 @@
 #include <dirent.h>
 #include <signal.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "core/core.h"
 #include "test.h"
@@ -285,6 +287,37 @@ BF_TEST(output_file_is_whole_or_absent)
     CHECK_ERROR_MENTIONS("/nonexistent/dir/h.bin");
     CHECK_STATUS(bf_write_file_atomic("/nonexistent/dir/h.bin", "x", 1), BF_WRITE);
     free(ref);
+}
+
+/* A write to a symbolic link goes to the file it names, which it replaces
+ * (a rename onto the link replaced the link and left the target stale);
+ * a link to a file not there yet makes that file, relative to the link. */
+BF_TEST(output_through_a_link_writes_its_target)
+{
+    char dir[512], target[600], link[600], later[600], link2[600];
+    CHECK_OK(bf_path_join(dir, sizeof dir, bf_test_tmpdir(), "links"));
+    CHECK_OK(bf_mkdir_p(dir));
+    snprintf(target, sizeof target, "%s/target.txt", dir);
+    snprintf(link, sizeof link, "%s/link.txt", dir);
+    snprintf(later, sizeof later, "%s/later.txt", dir);
+    snprintf(link2, sizeof link2, "%s/link2.txt", dir);
+    CHECK_OK(bf_write_file_atomic(target, "old", 3));
+    CHECK(symlink("target.txt", link) == 0);
+    CHECK_OK(bf_write_file_atomic(link, "new!", 4));
+    struct stat st;
+    CHECK(lstat(link, &st) == 0 && S_ISLNK(st.st_mode));
+    char *data;
+    size_t n;
+    CHECK_OK(bf_read_file(target, &data, &n));
+    CHECK(n == 4 && !strcmp(data, "new!"));
+    free(data);
+    CHECK(symlink("later.txt", link2) == 0); /* dangling until written */
+    CHECK_OK(bf_write_file_atomic(link2, "made", 4));
+    CHECK(lstat(link2, &st) == 0 && S_ISLNK(st.st_mode));
+    CHECK_OK(bf_read_file(later, &data, &n));
+    CHECK(n == 4 && !strcmp(data, "made"));
+    free(data);
+    CHECK_EQ_INT(count_tmp_files(dir), 0);
 }
 
 BF_TEST(status_table_names_every_code)
