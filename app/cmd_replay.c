@@ -560,6 +560,14 @@ static void json_stream(cJSON *o, const replay_args *a, const replay_result *r)
     cJSON_AddNumberToObject(s, "move_ms_total", st.ms_total);
 }
 
+/* Frames the capture thread took that the loop never read: those queued
+ * (or being queued) when the scan stopped. */
+static uint64_t capture_unread(const capture_thread_stats *c)
+{
+    uint64_t used = c->delivered + c->dropped;
+    return c->captured > used ? c->captured - used : 0;
+}
+
 static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgbd_source *src)
 {
     const recon_run_series *t = &r->run.series;
@@ -630,6 +638,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
         cJSON_AddNumberToObject(cap, "captured", (double)r->cap.captured);
         cJSON_AddNumberToObject(cap, "delivered", (double)r->cap.delivered);
         cJSON_AddNumberToObject(cap, "dropped", (double)r->cap.dropped);
+        cJSON_AddNumberToObject(cap, "unread_at_stop", (double)capture_unread(&r->cap));
         cJSON_AddBoolToObject(cap, "interrupted", r->run.is_interrupted);
         cJSON_AddNumberToObject(cap, "recorded", r->n_recorded);
     }
@@ -831,9 +840,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (!r->has_capture && r->run.is_interrupted)
         printf("  stopped          by a signal or the window: the frames before it are written\n");
     if (r->has_capture)
-        printf("  capture          %llu captured, %llu dropped by the queue of %u%s\n",
+        printf("  capture          %llu captured, %llu dropped by the queue of %u, %llu unread at the end%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
-               r->run.is_interrupted ? " (stopped by a signal)" : "");
+               (unsigned long long)capture_unread(&r->cap), r->run.is_interrupted ? " (stopped by a signal)" : "");
     if (t->frame_ms.n == 0) /* a resumed scan with no new frame */
         printf("  time per frame   no frame processed\n");
     else {

@@ -581,7 +581,7 @@ expect 2 "$B" replay "$T/seq" --out "$T/rp4" --ref-level 3
 # recording what it consumed on the side.
 expect 0 "$B" live --device "$T/seq" --out "$T/live" --record "$T/live.bflog"
 is_json "$T/live/stats.json"
-python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['command'] == 'live' and d['capture']['captured'] == 3 and d['capture']['recorded'] == 3, d" \
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); c=d['capture']; assert d['command'] == 'live' and c['captured'] == 3 and c['recorded'] == 3 and c['unread_at_stop'] == 0, d" \
     "$T/live/stats.json" || fail "live stats.json: capture counts"
 python3 -c "import json,sys; s=json.load(open(sys.argv[1]))['startup']; assert 0 < s['ready_s'] <= s['first_frame_done_s'] and s['first_frame_ms'] > 0, s" \
     "$T/live/stats.json" || fail "live stats.json: start-up times"
