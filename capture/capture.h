@@ -17,6 +17,12 @@ typedef struct rgbd_source_ops {
     bf_status (*next)(rgbd_source *src, bf_frame *out);
     /* Releases everything the source holds, including src itself. */
     void (*close)(rgbd_source *src);
+    /* Optional (NULL: not offered). When the next frame's depth time is at or
+     * before t_s, passes over it without reading its images: *out gets its
+     * index, times and pose (no images) and BF_OK. Else, or when the frame
+     * cannot be looked at without reading it, BF_END, and it stays the next
+     * frame for next(). A resumed scan passes over the frames it stored. */
+    bf_status (*pass)(rgbd_source *src, double t_s, bf_frame *out);
 } rgbd_source_ops;
 
 struct rgbd_source {
@@ -30,6 +36,11 @@ struct rgbd_source {
 static inline bf_status rgbd_source_next(rgbd_source *src, bf_frame *out)
 {
     return src->ops->next(src, out);
+}
+/* BF_UNSUPPORTED when the source offers no pass (rgbd_source_ops). */
+static inline bf_status rgbd_source_pass(rgbd_source *src, double t_s, bf_frame *out)
+{
+    return src->ops->pass ? src->ops->pass(src, t_s, out) : BF_UNSUPPORTED;
 }
 /* NULL is a no-op. */
 static inline void rgbd_source_close(rgbd_source *src)

@@ -21,7 +21,7 @@ static bf_status fn_next(rgbd_source *base, bf_frame *out)
 
 static void fn_close(rgbd_source *base) { free(base); }
 
-static const rgbd_source_ops fn_ops = {fn_next, fn_close};
+static const rgbd_source_ops fn_ops = {.next = fn_next, .close = fn_close};
 
 bf_status capture_source_from_fn(const bf_intrinsics *K, uint32_t n_frames, bool has_groundtruth, rgbd_frame_fn fn,
                                  void *user, rgbd_source **out)

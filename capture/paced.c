@@ -41,7 +41,7 @@ static void paced_close(rgbd_source *base)
     free(p);
 }
 
-static const rgbd_source_ops paced_ops = {paced_next, paced_close};
+static const rgbd_source_ops paced_ops = {.next = paced_next, .close = paced_close};
 
 bf_status capture_paced(rgbd_source *inner, rgbd_source **out)
 {

@@ -260,7 +260,7 @@ static void capture_close(rgbd_source *base)
     free(ct);
 }
 
-static const rgbd_source_ops capture_thread_ops = {capture_next, capture_close};
+static const rgbd_source_ops capture_thread_ops = {.next = capture_next, .close = capture_close};
 
 static bf_status capture_create(rgbd_source *src, uint32_t capacity, bool drop_when_full, rgbd_source **out)
 {

@@ -349,6 +349,19 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
     bf_progress_begin(&prog, cfg.label, src->n_frames);
     bf_frame f;
     uint32_t seen = 0;
+    /* A resumed scan passes over the frames it stored without reading their
+     * images, where the source can (a folder, a log); from another source
+     * the loop below reads them and leaves them out. */
+    while (cfg.resume && !(cfg.stop && *cfg.stop) && rgbd_source_pass(src, cfg.resume->t_last_s, &f) == BF_OK) {
+        seen++;
+        out->n_resume_skipped++;
+        if (f.has_pose && (s = bf_traj_push(&out->gt, f.t_depth_s, &f.T_wc)) != BF_OK) {
+            bf_progress_end(&prog, seen);
+            depth_fix_end(&fix);
+            return s;
+        }
+        bf_progress_update(&prog, seen);
+    }
     while (!(cfg.stop && *cfg.stop) && (s = rgbd_source_next(src, &f)) == BF_OK) {
         seen++;
         /* Frames already waiting behind this one in a queue that drops: the

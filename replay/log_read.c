@@ -329,6 +329,26 @@ static bf_status log_next(rgbd_source *base, bf_frame *out)
     return BF_END;
 }
 
+/* The record's header holds its times and pose: the payload is not read.
+ * A header that does not read leaves the frame to next(), which reports it. */
+static bf_status log_pass(rgbd_source *base, double t_s, bf_frame *out)
+{
+    log__source *ls = (log__source *)base;
+    if (ls->pos >= ls->base.n_frames) return BF_END;
+    uint8_t b[LOG_FRAME_HEADER];
+    size_t got = 0;
+    log__frame_header h;
+    if (read_at(ls, ls->offsets[ls->pos], b, sizeof b, &got) != BF_OK || got < LOG_FRAME_HEADER ||
+        !log__frame_header_unpack(b, &h) || !(h.t_depth_s <= t_s))
+        return BF_END;
+    ls->pos++;
+    bool has_pose = h.flags & LOG_FRAME_HAS_POSE;
+    *out = (bf_frame){.index = h.index, .width = ls->hdr.K.width, .height = ls->hdr.K.height,
+                      .t_depth_s = h.t_depth_s, .t_rgb_s = h.t_rgb_s, .has_pose = has_pose,
+                      .T_wc = has_pose ? h.T_wc : bf_se3_identity()};
+    return BF_OK;
+}
+
 static void log_close(rgbd_source *base)
 {
     log__source *ls = (log__source *)base;
@@ -344,7 +364,7 @@ static void log_close(rgbd_source *base)
     free(ls);
 }
 
-static const rgbd_source_ops log__ops = {log_next, log_close};
+static const rgbd_source_ops log__ops = {log_next, log_close, log_pass};
 
 bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_source **out)
 {

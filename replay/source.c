@@ -133,6 +133,25 @@ static bf_status source_next(rgbd_source *base, bf_frame *out)
     return BF_END;
 }
 
+/* The list holds each frame's times and pose (a pose-per-frame folder's
+ * file is read here, the images are not). */
+static bf_status source_pass(rgbd_source *base, double t_s, bf_frame *out)
+{
+    replay__source *src = (replay__source *)base;
+    if (src->next_idx >= src->list.n) return BF_END;
+    uint32_t idx = src->next_idx;
+    const replay__frame_ref *f = &src->list.v[idx];
+    if (!(f->t_depth_s <= t_s)) return BF_END;
+    bool has_pose = f->has_pose;
+    bf_se3 T_wc = f->T_wc;
+    if (f->pose_path && replay__pose_matrix_read(f->pose_path, &T_wc) == BF_OK) has_pose = true;
+    src->next_idx++;
+    *out = (bf_frame){.index = idx, .width = base->intrinsics.width, .height = base->intrinsics.height,
+                      .t_depth_s = f->t_depth_s, .t_rgb_s = f->t_rgb_s, .has_pose = has_pose,
+                      .T_wc = has_pose ? T_wc : bf_se3_identity()};
+    return BF_OK;
+}
+
 static void source_close(rgbd_source *base)
 {
     replay__source *src = (replay__source *)base;
@@ -146,7 +165,7 @@ static void source_close(rgbd_source *base)
     free(src);
 }
 
-static const rgbd_source_ops replay__ops = {source_next, source_close};
+static const rgbd_source_ops replay__ops = {source_next, source_close, source_pass};
 
 bf_status replay__source_create(const char *kind, replay__list *list, const replay__camera *cam,
                                 const replay_options *opt, rgbd_source **out)

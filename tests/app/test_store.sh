@@ -65,9 +65,13 @@ expect 0 "$B" export "$T/C" --out "$T/c.ply" --points
 mentions "$f"
 
 # Resume: the scan in two halves ends within tracking tolerance of the
-# uninterrupted one (both start at the true pose; noise-free frames).
-expect 0 "$B" replay "$SEQ" --out "$T/h1" --no-mesh --frames 30 --store "$T/H"
-expect 0 "$B" replay "$SEQ" --out "$T/h2" --no-mesh --store "$T/H" --resume
+# uninterrupted one (both start at the true pose; noise-free frames). The
+# resumed scan passes over the stored frames without reading their images:
+# one damaged since (frame 10's depth here) does not stop it.
+cp -r "$SEQ" "$T/seqh"
+expect 0 "$B" replay "$T/seqh" --out "$T/h1" --no-mesh --frames 30 --store "$T/H"
+printf 'not a PNG' >"$T/seqh/$(awk '!/^#/ {i++; if (i == 11) print $2}' "$T/seqh/depth.txt")"
+expect 0 "$B" replay "$T/seqh" --out "$T/h2" --no-mesh --store "$T/H" --resume
 [ "$(grep -vc '^#' "$T/h2/trajectory.txt")" = 60 ] || fail "the resumed scan's trajectory has not 60 poses"
 [ "$(json_get "$T/h2/stats.json" "d['frames']")" = 30 ] || fail "the resumed scan did not skip the 30 stored frames"
 py - "$T/full/stats.json" "$T/h2/stats.json" <<'PY' || fail "resumed ATE too far from the uninterrupted one"

@@ -50,7 +50,7 @@ static void fake_close(rgbd_source *base)
     free(fs);
 }
 
-static const rgbd_source_ops fake_ops = {fake_next, fake_close};
+static const rgbd_source_ops fake_ops = {.next = fake_next, .close = fake_close};
 
 static fake_source *fake_create(uint32_t n)
 {
