@@ -456,12 +456,19 @@ for name in ("depth.txt", "rgb.txt"):
         for i in range(90):
             f.write("%.6f %s\n" % (1000 + i / 30.0 + (0.001 if name == "rgb.txt" else 0), rows[i % 3][1]))
 PY
-"$B" record --device "$T/long" --out "$T/int.bflog" --realtime >"$T/out" 2>"$T/err" &
-pid=$!
-sleep 1
-kill -INT $pid
-wait $pid
-rc=$?
+# interrupt_after S CMD...: CMD in the background (stdout to $T/out, stderr
+# to $T/err), SIGINT after S seconds; its exit code in rc.
+interrupt_after() {
+    local s=$1
+    shift
+    "$@" >"$T/out" 2>"$T/err" &
+    local pid=$!
+    sleep "$s"
+    kill -INT $pid
+    wait $pid
+    rc=$?
+}
+interrupt_after 1 "$B" record --device "$T/long" --out "$T/int.bflog" --realtime
 [ $rc = 0 ] || fail "record stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
 grep -q "stopped by a signal" "$T/out" || fail "record did not say it was stopped: $(cat "$T/out")"
 [ "$(tail -c 8 "$T/int.bflog")" = "BFLOGEND" ] || fail "interrupted log has no footer (not finished)"
@@ -510,12 +517,7 @@ with open(sys.argv[2] + "/depth.txt", "w") as d, open(sys.argv[2] + "/rgb.txt", 
         d.write("%.6f depth/0.png\n" % (1000 + i / 30.0))
         c.write("%.6f %s\n" % (1000.001 + i / 30.0, rgb[i % len(rgb)]))
 PY
-"$B" live --device "$T/dark" --realtime --out "$T/ldark" --no-mesh >"$T/out" 2>"$T/err" &
-pid=$!
-sleep 1.5
-kill -INT $pid
-wait $pid
-rc=$?
+interrupt_after 1.5 "$B" live --device "$T/dark" --realtime --out "$T/ldark" --no-mesh
 [ $rc = 0 ] || fail "live stopped by SIGINT before any depth: exit $rc, expected 0 ($(tail -c 300 "$T/err"))"
 grep -q "stopped before any frame with depth: nothing written" "$T/out" || fail "live stopped early: $(cat "$T/out")"
 [ ! -e "$T/ldark" ] || fail "live stopped before any depth left its output folder"
