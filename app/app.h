@@ -194,6 +194,9 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
  * ended the run early, what was fused before it kept; null when none). */
 struct recon_run;
 void app_json_input(cJSON *o, const struct recon_run *run, const rgbd_source *src);
+/* stats.json's gpu_stage_ms: STAGE -> {median, p95, mean} of the run's
+ * series, the tracking stages (track, rof, raycast) when with_tracking. */
+void app_json_gpu_stages(cJSON *o, const struct recon_run *run, bool with_tracking);
 /* A run's status s, but when it failed after every frame src delivered was
  * skipped as unreadable, the message says so ("no frame could be read (N
  * skipped)") rather than blaming the frames' content. */

@@ -119,13 +119,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddNumberToObject(o, "frames_without_pose", r->run.n_skipped);
     app_json_input(o, &r->run, src);
     app_json_series(o, "frame_ms", &t->frame_ms);
-    /* Named and shaped as replay's (gpu_stage_ms.STAGE.median), so one script reads both. */
-    cJSON *g = app_json_object(o, "gpu_stage_ms");
-    app_json_series(g, "upload", &t->upload_ms);
-    app_json_series(g, "alloc", &t->alloc_ms);
-    app_json_series(g, "subcache", &t->subcache_ms);
-    app_json_series(g, "window", &t->window_ms);
-    app_json_series(g, "colour", &t->colour_ms);
+    app_json_gpu_stages(o, &r->run, false); /* as replay's, so one script reads both */
     app_json_map(o, &r->out, a->fcfg.max_level);
     cJSON_AddNumberToObject(o, "seconds", r->seconds);
     return o;

@@ -624,15 +624,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
         cJSON_AddNumberToObject(sf, "points", (double)r->surf.n_rec_vertices);
     }
     app_json_series(o, "frame_ms", &t->frame_ms);
-    cJSON *g = app_json_object(o, "gpu_stage_ms");
-    app_json_series(g, "track", &t->track_ms);
-    app_json_series(g, "rof", &t->rof_ms);
-    app_json_series(g, "raycast", &t->raycast_ms);
-    app_json_series(g, "upload", &t->upload_ms);
-    app_json_series(g, "alloc", &t->alloc_ms);
-    app_json_series(g, "subcache", &t->subcache_ms);
-    app_json_series(g, "window", &t->window_ms);
-    app_json_series(g, "colour", &t->colour_ms);
+    app_json_gpu_stages(o, &r->run, true);
     if (r->has_capture) {
         cJSON *cap = app_json_object(o, "capture");
         cJSON_AddNumberToObject(cap, "captured", (double)r->cap.captured);

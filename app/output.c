@@ -237,6 +237,22 @@ bf_status app_write_status(const app_write_failure *w)
     return w->s == BF_OK ? BF_OK : bf_fail(w->s, "%s", w->message);
 }
 
+void app_json_gpu_stages(cJSON *o, const recon_run *run, bool with_tracking)
+{
+    const recon_run_series *t = &run->series;
+    cJSON *g = app_json_object(o, "gpu_stage_ms");
+    if (with_tracking) {
+        app_json_series(g, "track", &t->track_ms);
+        app_json_series(g, "rof", &t->rof_ms);
+        app_json_series(g, "raycast", &t->raycast_ms);
+    }
+    app_json_series(g, "upload", &t->upload_ms);
+    app_json_series(g, "alloc", &t->alloc_ms);
+    app_json_series(g, "subcache", &t->subcache_ms);
+    app_json_series(g, "window", &t->window_ms);
+    app_json_series(g, "colour", &t->colour_ms);
+}
+
 void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)
 {
     /* The camera the frames were read with, and the lens taken out of them. */
