@@ -78,6 +78,23 @@ static bool frame_needed(const calib_depth_config *c, uint32_t i)
     return false;
 }
 
+static bool same_pose(const bf_traj *t, size_t a, size_t b)
+{
+    return !memcmp(&t->T_wc[a], &t->T_wc[b], sizeof(bf_se3));
+}
+
+/* Whether entry i repeats an earlier good pose: it equals the one before,
+ * and its run of equal poses does not start at the first entry (frames
+ * before the first with depth all hold the starting pose, the first good
+ * one among them too). */
+static bool held_at(const bf_traj *t, size_t i)
+{
+    if (i == 0 || !same_pose(t, i, i - 1)) return false;
+    size_t j = i;
+    while (j > 0 && same_pose(t, j, j - 1)) j--;
+    return j > 0;
+}
+
 /* A replay writes a lost frame's pose as the last good one: a pose the
  * same to the bit as the one before it says nothing of where that frame's
  * depth was taken, and one interpolated next to it little more. True for a
@@ -91,10 +108,8 @@ static bool pose_is_held(const bf_traj *t, double t_s)
         if (t->t_s[mid] <= t_s) lo = mid;
         else hi = mid;
     }
-    bool same_before = lo > 0 && !memcmp(&t->T_wc[lo], &t->T_wc[lo - 1], sizeof(bf_se3));
-    if (t->t_s[lo] == t_s) return same_before;
-    bool same_after = lo + 1 < t->n && !memcmp(&t->T_wc[lo + 1], &t->T_wc[lo], sizeof(bf_se3));
-    return same_before || same_after;
+    if (t->t_s[lo] == t_s) return held_at(t, lo);
+    return held_at(t, lo) || (lo + 1 < t->n && held_at(t, lo + 1));
 }
 
 /* Reads the frames the pairs need, each with its pose (the ground truth or

@@ -972,9 +972,11 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
                             .stop = (volatile sig_atomic_t *)stop};
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
         /* Ctrl-C before any frame with depth came (a live camera still
-         * warming up): nothing to write, and no failure. BF_END skips the
-         * outputs below and removes the folder this run made. */
-        if (s == BF_FORMAT && r.run.is_interrupted && !r.store.is_resumed && r.run.counts.tracked == 0) {
+         * warming up): no trajectory or map to write, and no failure (an
+         * output that failed is one). BF_END skips the outputs below and
+         * removes the folder this run made when nothing went into it. */
+        if (s == BF_FORMAT && r.run.is_interrupted && sink.wf.s == BF_OK && !r.store.is_resumed &&
+            r.run.counts.tracked == 0) {
             stopped_empty = true;
             s = BF_END;
         }
@@ -1059,7 +1061,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (stopped_empty) {
-        printf("bitfuse %s: stopped before any frame with depth: nothing written\n", cmd);
+        printf("bitfuse %s: stopped before any frame with depth: no trajectory or map written\n", cmd);
         return APP_EXIT_OK;
     }
     if (s == BF_OK && s_loop != BF_OK) s = bf_fail(s_loop, "%s", loop_error);

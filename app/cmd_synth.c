@@ -40,7 +40,7 @@ static const char *check_camera(const char *name, const char *v)
 }
 
 /* --size: WxH, each 16..8192: the tracker's three-level pyramid needs
- * 16 px a side (a 1x1 sequence was written that nothing could replay). */
+ * 16 px a side, and a sequence is made to be replayed. */
 static bool parse_size(const char *v, unsigned *w, unsigned *h)
 {
     char tail;

@@ -110,6 +110,9 @@ static bf_status flush(app_store *st, recon_run *run, double t_last_s)
 bf_status app_store_frame(app_store *st, recon_run *run, const bf_frame *f)
 {
     if (!st->writer || st->every_s <= 0 || bf_time_s() - st->last_s < st->every_s) return BF_OK;
+    /* Nothing fused yet (a camera still dark): a pose without a map would
+     * resume as a scan of nothing. */
+    if (!run->is_resumed && (run->loop ? run->counts.tracked : run->n_fused) == 0) return BF_OK;
     if (store_writer_busy(st->writer)) {
         st->skipped++; /* the last write is still going: the next frame tries again */
         return BF_OK;

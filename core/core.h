@@ -290,8 +290,10 @@ typedef struct bf_out {
 #define BF_OUT_BUFFER (1u << 20)
 bf_status bf_out_open(bf_out *o, const char *path);
 /* The file a write to path lands in: path, or for a symbolic link the file
- * it names (its target joined to the link's folder when it does not exist
- * yet), so that a write by rename replaces that file and keeps the link. */
+ * it names, link by link (a target that does not exist yet joined to its
+ * link's folder), so that a write by rename replaces that file and keeps
+ * the link. A link another user owns in a sticky, world-writable folder is
+ * refused (BF_WRITE), as the kernel's protected_symlinks refuses it. */
 bf_status bf_link_target(const char *path, char *out, size_t cap);
 void bf_out_write(bf_out *o, const void *p, size_t n);
 void bf_out_printf(bf_out *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));

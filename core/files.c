@@ -69,29 +69,46 @@ bf_status bf_mkdir_p(const char *path)
 
 /* ------------------------------------------------------------ outputs */
 
+/* The kernel's protected_symlinks rule: in a sticky, world-writable folder
+ * (/tmp) a link is followed only when the follower or the folder's owner
+ * owns it. Resolving a link and renaming onto its target would otherwise
+ * let another user's planted link choose what is replaced. */
+static bool link_may_be_followed(const char *link, const struct stat *ls)
+{
+    char dir[4096];
+    const char *slash = strrchr(link, '/');
+    if (!slash) snprintf(dir, sizeof dir, ".");
+    else snprintf(dir, sizeof dir, "%.*s", slash == link ? 1 : (int)(slash - link), link);
+    struct stat ds;
+    if (stat(dir, &ds) != 0) return false;
+    bool shared = (ds.st_mode & S_ISVTX) && (ds.st_mode & S_IWOTH);
+    return !shared || ls->st_uid == geteuid() || ls->st_uid == ds.st_uid;
+}
+
 bf_status bf_link_target(const char *path, char *out, size_t cap)
 {
-    struct stat st;
-    if (lstat(path, &st) != 0 || !S_ISLNK(st.st_mode)) {
-        if (snprintf(out, cap, "%s", path) >= (int)cap) return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
-        return BF_OK;
+    char cur[4096];
+    if (snprintf(cur, sizeof cur, "%s", path) >= (int)sizeof cur) return bf_fail(BF_INVALID_ARG, "path too long: %s", path);
+    /* Link by link (at most 40, the kernel's own bound): a chain whose last
+     * target does not exist yet ends at that target's name. */
+    for (int hop = 0;; hop++) {
+        struct stat st;
+        if (lstat(cur, &st) != 0 || !S_ISLNK(st.st_mode)) break;
+        if (hop == 40) return bf_fail(BF_WRITE, "%s: too many levels of symbolic links", path);
+        if (!link_may_be_followed(cur, &st))
+            return bf_fail(BF_WRITE, "%s: a symbolic link another user owns in a shared folder: not followed", cur);
+        char target[4096];
+        ssize_t n = readlink(cur, target, sizeof target - 1);
+        if (n < 0) return bf_fail(BF_WRITE, "%s: cannot read the link: %s", cur, strerror(errno));
+        target[n] = '\0';
+        const char *slash = strrchr(cur, '/');
+        int dir = target[0] == '/' || !slash ? 0 : (int)(slash - cur + 1);
+        char next[4096];
+        if (snprintf(next, sizeof next, "%.*s%s", dir, cur, target) >= (int)sizeof next)
+            return bf_fail(BF_INVALID_ARG, "%s: the link's target's path is too long", path);
+        memcpy(cur, next, sizeof cur);
     }
-    char *real = realpath(path, NULL);
-    if (real) {
-        int n = snprintf(out, cap, "%s", real);
-        free(real);
-        if (n >= (int)cap) return bf_fail(BF_INVALID_ARG, "%s: the link's target's path is too long", path);
-        return BF_OK;
-    }
-    /* A link to a file not made yet: its target, relative to the link's folder. */
-    char target[4096];
-    ssize_t n = readlink(path, target, sizeof target - 1);
-    if (n < 0) return bf_fail(BF_WRITE, "%s: cannot read the link: %s", path, strerror(errno));
-    target[n] = '\0';
-    const char *slash = strrchr(path, '/');
-    int dir = target[0] == '/' || !slash ? 0 : (int)(slash - path + 1);
-    if (snprintf(out, cap, "%.*s%s", dir, path, target) >= (int)cap)
-        return bf_fail(BF_INVALID_ARG, "%s: the link's target's path is too long", path);
+    if (snprintf(out, cap, "%s", cur) >= (int)cap) return bf_fail(BF_INVALID_ARG, "%s: the link's target's path is too long", path);
     return BF_OK;
 }
 
@@ -110,11 +127,15 @@ bf_status bf_out_open(bf_out *o, const char *path_given)
     /* The rename would replace what is there: a device node, a pipe or a
      * socket (an --out of /dev/null, a FIFO) is no file to write over. */
     struct stat st;
-    if (stat(path, &st) == 0 && !S_ISREG(st.st_mode))
+    bool exists = stat(path, &st) == 0;
+    if (exists && !S_ISREG(st.st_mode))
         return bf_fail(BF_WRITE, "%s: exists and is not a regular file (%s)", path,
                        S_ISDIR(st.st_mode) ? "a folder" : "a device, pipe or socket");
     o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (o->fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(errno));
+    /* The file replaced keeps its permission bits (best effort: the new
+     * file is the writer's, as any file it makes). */
+    if (exists) (void)fchmod(o->fd, st.st_mode & 07777);
     return BF_OK;
 }
 

@@ -148,7 +148,7 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
         bf_warn("%s: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm%s): %s", cfg->label,
                 f->index, f->t_depth_s, track_outcome_name(fr->track.outcome), 100 * fr->track.inlier_frac,
                 1e3 * fr->track.residual_m, tried,
-                cfg->poses == RECON_POSES_TRACK_FUSE_GT ? "fused at its true pose" : "not fused");
+                fr->fused ? "fused at its true pose" : "not fused");
     } else if (fr->state == RECON_RELOCALISED) {
         bf_info("%s: frame %u (t = %.6f): found again from the %s candidate (%u tried; inliers %.0f%%, "
                 "residual %.1f mm)",

@@ -364,7 +364,7 @@ static void log_close(rgbd_source *base)
     free(ls);
 }
 
-static const rgbd_source_ops log__ops = {log_next, log_close, log_pass};
+static const rgbd_source_ops log__ops = {.next = log_next, .close = log_close, .pass = log_pass};
 
 bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_source **out)
 {

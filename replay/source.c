@@ -144,7 +144,11 @@ static bf_status source_pass(rgbd_source *base, double t_s, bf_frame *out)
     if (!(f->t_depth_s <= t_s)) return BF_END;
     bool has_pose = f->has_pose;
     bf_se3 T_wc = f->T_wc;
-    if (f->pose_path && replay__pose_matrix_read(f->pose_path, &T_wc) == BF_OK) has_pose = true;
+    if (f->pose_path) {
+        /* A pose file that does not read is left to next(), which reports it. */
+        if (replay__pose_matrix_read(f->pose_path, &T_wc) != BF_OK) return BF_END;
+        has_pose = true;
+    }
     src->next_idx++;
     *out = (bf_frame){.index = idx, .width = base->intrinsics.width, .height = base->intrinsics.height,
                       .t_depth_s = f->t_depth_s, .t_rgb_s = f->t_rgb_s, .has_pose = has_pose,
@@ -165,7 +169,7 @@ static void source_close(rgbd_source *base)
     free(src);
 }
 
-static const rgbd_source_ops replay__ops = {source_next, source_close, source_pass};
+static const rgbd_source_ops replay__ops = {.next = source_next, .close = source_close, .pass = source_pass};
 
 bf_status replay__source_create(const char *kind, replay__list *list, const replay__camera *cam,
                                 const replay_options *opt, rgbd_source **out)

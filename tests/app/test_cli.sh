@@ -499,7 +499,7 @@ fi
 
 # Ctrl-C before any frame with depth came (a camera still dark, 10 s of
 # frames without depth at 30 Hz): exit 0 as any Ctrl-C, nothing written,
-# no folder left (it exited 3, "no frame with depth").
+# no folder left.
 mkdir "$T/dark" "$T/dark/depth"
 ln -s "$T/seq/rgb" "$T/dark/rgb"
 cp "$T/seq/camera.txt" "$T/dark/"
@@ -519,7 +519,7 @@ with open(sys.argv[2] + "/depth.txt", "w") as d, open(sys.argv[2] + "/rgb.txt", 
 PY
 interrupt_after 1.5 "$B" live --device "$T/dark" --realtime --out "$T/ldark" --no-mesh
 [ $rc = 0 ] || fail "live stopped by SIGINT before any depth: exit $rc, expected 0 ($(tail -c 300 "$T/err"))"
-grep -q "stopped before any frame with depth: nothing written" "$T/out" || fail "live stopped early: $(cat "$T/out")"
+grep -q "stopped before any frame with depth: no trajectory or map written" "$T/out" || fail "live stopped early: $(cat "$T/out")"
 [ ! -e "$T/ldark" ] || fail "live stopped before any depth left its output folder"
 
 # replay: the full loop; one trajectory line per input frame, stats.json

@@ -98,7 +98,7 @@ BF_TEST(expect_refuses_bad_tolerances_and_baselines)
     CHECK_STATUS(app_expect_load(&e, path, NULL), BF_FORMAT);
     CHECK_ERROR_MENTIONS("not JSON");
     snprintf(path, sizeof path, "%s/two.json", bf_test_tmpdir());
-    CHECK_OK(bf_write_file_atomic(path, "{\"ate_m\": {}} x", 16));
+    CHECK_OK(bf_write_file_atomic(path, "{\"ate_m\": {}} x", 15));
     CHECK_STATUS(app_expect_load(&e, path, NULL), BF_FORMAT);
     CHECK_ERROR_MENTIONS("text after the JSON value at byte 14");
     snprintf(path, sizeof path, "%s/other.json", bf_test_tmpdir());

@@ -317,7 +317,34 @@ BF_TEST(output_through_a_link_writes_its_target)
     CHECK_OK(bf_read_file(later, &data, &n));
     CHECK(n == 4 && !strcmp(data, "made"));
     free(data);
+    /* A chain of links to a file not made yet makes it; every link stays. */
+    char l3[600], l4[600], last[600];
+    snprintf(l3, sizeof l3, "%s/l3", dir);
+    snprintf(l4, sizeof l4, "%s/l4", dir);
+    snprintf(last, sizeof last, "%s/last.txt", dir);
+    CHECK(symlink("l4", l3) == 0 && symlink("last.txt", l4) == 0);
+    CHECK_OK(bf_write_file_atomic(l3, "end", 3));
+    CHECK(lstat(l3, &st) == 0 && S_ISLNK(st.st_mode) && lstat(l4, &st) == 0 && S_ISLNK(st.st_mode));
+    CHECK(stat(last, &st) == 0 && st.st_size == 3);
+    /* The file replaced keeps its permission bits. */
+    CHECK(chmod(target, 0600) == 0);
+    CHECK_OK(bf_write_file_atomic(link, "again", 5));
+    CHECK(stat(target, &st) == 0 && (st.st_mode & 0777) == 0600);
     CHECK_EQ_INT(count_tmp_files(dir), 0);
+    /* Another user's link in a sticky, world-writable folder (/tmp's kind)
+     * is not followed (root can make one; others skip this part). */
+    if (geteuid() == 0) {
+        char shared[620], planted[640];
+        snprintf(shared, sizeof shared, "%s/shared", dir);
+        snprintf(planted, sizeof planted, "%s/stats.json", shared);
+        CHECK(mkdir(shared, 0777) == 0 && chmod(shared, 01777) == 0);
+        CHECK(symlink(target, planted) == 0 && lchown(planted, 4321, 4321) == 0);
+        CHECK_STATUS(bf_write_file_atomic(planted, "x", 1), BF_WRITE);
+        CHECK_ERROR_MENTIONS("another user owns in a shared folder");
+        CHECK_OK(bf_read_file(target, &data, &n));
+        CHECK(n == 5 && !strcmp(data, "again"));
+        free(data);
+    }
 }
 
 BF_TEST(status_table_names_every_code)
