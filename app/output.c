@@ -202,7 +202,8 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
      * warnings scroll by, so the summary says what the map lacks. */
     if (m->fail_nodes || m->fail_bricks || m->fail_hash)
         printf("  pools full       requests for %u bricks, %u nodes and %u chunks were dropped: the map lacks\n"
-               "                   what they would have added (a larger --gpu-budget or --bricks)\n",
+               "                   what they would have added (larger pools: --bricks, or replay's and live's\n"
+               "                   --gpu-budget)\n",
                m->fail_bricks, m->fail_nodes, m->fail_hash);
     if (m->fail_colour)
         printf("  colour pool full %u times: those bricks' new colours were not kept\n", m->fail_colour);
