@@ -171,6 +171,8 @@ int cmd_eval_surface(int argc, char **argv)
     };
     app_option seq[APP_SEQUENCE_ROWS];
     app_sequence_options(seq, &dp.ropt);
+    /* They read --depth's sequence: without it they would mean nothing. */
+    for (size_t i = 0; seq[i].name; i++) seq[i].needs = "--depth";
     const app_option *tables[] = {own, seq, NULL};
     app_command_spec spec = {.name = cmd, .usage = usage_text, .tables = tables,
                              .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 a mesh, sequence or trajectory "
@@ -178,6 +180,10 @@ int cmd_eval_surface(int argc, char **argv)
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (!rec_path == !dp.seq) return app_usage_error(cmd, "give exactly one of --reconstruction and --depth");
+    /* A point between the two would be left out as beyond --max-dist yet
+     * counted as not within --threshold: the share would be wrong. */
+    if (cfg.max_dist_m < cfg.threshold_m)
+        return app_usage_error(cmd, "--max-dist %g is below --threshold %g", cfg.max_dist_m, cfg.threshold_m);
     if (dp.seq) rec_path = dp.seq;
 
     mesh_data ref = {0}, rec = {0}, vis = {0};

@@ -108,11 +108,17 @@ int cmd_info(int argc, char **argv)
     app_command_spec spec = {
         .name = "info", .usage = info_usage, .tables = tables, .positional = &path, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
-        .epilog = "exit codes: 0 ok, 2 usage, 3 unreadable or malformed input\n",
+        .epilog = "exit codes: 0 ok, 1 a store of a newer version, 2 usage, 3 unreadable or malformed input\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    if (store_exists(path)) return app_info_store(path, is_json);
+    if (store_exists(path)) {
+        /* A store holds no frames: the sequence options would mean nothing. */
+        if (opt.camera || opt.depth_scale > 0 || opt.max_frames || opt.skip_bad_frames)
+            return app_usage_error("info", "%s is a scene store: --camera, --depth-scale, --frames and "
+                                           "--skip-bad-frames are for a sequence", path);
+        return app_info_store(path, is_json);
+    }
 
     rgbd_source *src = NULL;
     info_stats st = {0};

@@ -1,4 +1,5 @@
 /* bitfuse: real-time RGB-D reconstruction with a sign-bit map. */
+#include <errno.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -68,6 +69,17 @@ const char *app_default_data_dir(void)
     return NULL;
 }
 
+/* What a command printed must have reached its reader: `--json >
+ * results.json` on a full disk exited 0 with the file cut short. A failed
+ * command keeps its own exit code. */
+static int stdout_status(int rc)
+{
+    errno = 0;
+    if (fflush(stdout) == 0 && !ferror(stdout)) return rc;
+    fprintf(stderr, "bitfuse: standard output: write failed: %s\n", errno ? strerror(errno) : "I/O error");
+    return rc == APP_EXIT_OK ? APP_EXIT_WRITE : rc;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 2) {
@@ -76,11 +88,11 @@ int main(int argc, char **argv)
     }
     if (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help")) {
         usage(stdout);
-        return APP_EXIT_OK;
+        return stdout_status(APP_EXIT_OK);
     }
     if (!strcmp(argv[1], "--version")) {
         printf("bitfuse %s\n", BF_VERSION);
-        return APP_EXIT_OK;
+        return stdout_status(APP_EXIT_OK);
     }
     if (argv[1][0] == '-') {
         fprintf(stderr, "bitfuse: unknown option '%s' (options follow the command)\n", argv[1]);
@@ -88,7 +100,7 @@ int main(int argc, char **argv)
         return APP_EXIT_USAGE;
     }
     for (size_t i = 0; i < N_COMMANDS; i++)
-        if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+        if (!strcmp(argv[1], commands[i].name)) return stdout_status(commands[i].run(argc - 1, argv + 1));
     fprintf(stderr, "bitfuse: unknown command '%s'\n", argv[1]);
     usage(stderr);
     return APP_EXIT_USAGE;

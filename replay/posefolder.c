@@ -78,6 +78,8 @@ bf_status replay__pose_matrix_read(const char *path, bf_se3 *T_wc)
     fclose(fp);
     if (too_long) return bf_fail(BF_FORMAT, "%s: too long for a 4x4 pose matrix", path);
     buf[len] = '\0';
+    bf_status sn = replay__text_nul(path, buf, len);
+    if (sn != BF_OK) return sn;
     replay__text t = {.buf = NULL};
     replay__text_begin(&t, path, buf);
     double M[4][4] = {{0}};

@@ -34,7 +34,8 @@ typedef struct replay__text {
     double normalised_norm;
 } replay__text;
 
-/* BF_IO naming the file if it cannot be read. */
+/* BF_IO naming the file if it cannot be read; BF_FORMAT naming the line
+ * of a NUL byte (replay__text_nul). */
 /* The largest position a pose file may give [m]: a value beyond is corrupt
  * (its square overflows the error measures). */
 #define REPLAY_MAX_POSITION_M 1e9
@@ -43,6 +44,10 @@ bf_status replay__text_open(replay__text *t, const char *path);
  * messages): a UTF-8 byte order mark skipped, lone CRs read as line ends.
  * replay__text_open does this on the file it reads. */
 void replay__text_begin(replay__text *t, const char *path, char *text);
+/* BF_FORMAT naming path and line when text's len bytes hold a NUL: a text
+ * file never does, and the readers would stop there (a file padded with
+ * zeros after a crash read as its first part alone). */
+bf_status replay__text_nul(const char *path, const char *text, size_t len);
 /* Whether K's principal point lies more than a quarter of the image from
  * the centre of w x h images (real cameras keep it within a few per cent):
  * a camera for another image size. */

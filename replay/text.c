@@ -21,11 +21,26 @@ void replay__text_begin(replay__text *t, const char *path, char *text)
     t->line = 0;
 }
 
+bf_status replay__text_nul(const char *path, const char *text, size_t len)
+{
+    const char *nul = memchr(text, '\0', len);
+    if (!nul) return BF_OK;
+    unsigned line = 1;
+    for (const char *c = text; c < nul; c++) line += *c == '\n';
+    return bf_fail(BF_FORMAT, "%s:%u: a NUL byte (byte %zu): not a text file, or one damaged", path, line,
+                   (size_t)(nul - text));
+}
+
 bf_status replay__text_open(replay__text *t, const char *path)
 {
     char *buf;
-    bf_status s = bf_read_file(path, &buf, NULL);
+    size_t len;
+    bf_status s = bf_read_file(path, &buf, &len);
     if (s != BF_OK) return s;
+    if ((s = replay__text_nul(path, buf, len)) != BF_OK) {
+        free(buf);
+        return s;
+    }
     t->buf = buf;
     replay__text_begin(t, path, buf);
     t->n_normalised = t->normalised_line = t->n_repeats = t->repeat_line = 0;

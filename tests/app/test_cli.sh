@@ -154,6 +154,14 @@ expect 3 "$B" synth --trajectory "$T/tum_zero.txt" --frames 4 --size 32x24 --cam
 mentions "$T/tum_zero.txt:3: quaternion"
 mentions "is zero"
 
+# What a command prints must reach its reader: a full disk under
+# `--json > FILE` is exit 5, named (it was exit 0 with the file cut short).
+if [ -w /dev/full ]; then
+    "$B" eval-traj "$T/seq/groundtruth.txt" "$T/seq/groundtruth.txt" --json >/dev/full 2>"$T/err"
+    rc=$?
+    [ $rc = 5 ] || fail "eval-traj --json to a full disk: exit $rc, expected 5"
+    mentions "standard output: write failed"
+fi
 # --version: the program's and each command's; unknown options named as such.
 expect 0 "$B" --version
 grep -qE "^bitfuse [0-9]+\.[0-9]+\.[0-9]+$" "$T/out" || fail "bitfuse --version: $(cat "$T/out")"
@@ -179,6 +187,10 @@ mentions "--out needs a value"
 expect 2 "$B" info
 expect 2 "$B" eval-surface rec.ply
 mentions "unknown argument 'rec.ply'"
+expect 2 "$B" eval-surface --reference a.ply --reconstruction b.ply --frames 3
+mentions "--frames needs --depth"
+expect 2 "$B" eval-surface --reference a.ply --reconstruction b.ply --max-dist 0.001
+mentions "--max-dist 0.001 is below --threshold 0.01"
 expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 1 --out "$T/x" --verbose
 mentions "unknown option '--verbose'"
 expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 1 --out "$T/x" --size 8x8

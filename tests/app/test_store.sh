@@ -37,6 +37,8 @@ mapb=$(json_get "$T/full/stats.json" "d['bricks']")
 [ "$bricks" = "$mapb" ] || fail "the store holds $bricks bricks, the scan's map $mapb"
 expect 0 "$B" info "$T/S"
 grep -q "last pose" "$T/out" || fail "info does not print the last pose"
+expect 2 "$B" info "$T/S" --frames 3
+mentions "is a scene store"
 
 # export: a mesh and the points, without the loop.
 expect 0 "$B" export "$T/S" --out "$T/m.ply"

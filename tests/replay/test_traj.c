@@ -157,6 +157,19 @@ BF_TEST(traj_reads_a_byte_order_mark_and_cr_line_ends)
     bf_traj_free(&tr);
 }
 
+/* A NUL byte (a file padded with zeros after a crash) is refused by line:
+ * the reader stopped there and took the first part alone, exit 0. */
+BF_TEST(traj_refuses_a_nul_byte)
+{
+    static const char text[] = "1 0 0 0 0 0 0 1\n2 1 0 0 0 0 0 1\n\0\0003 2 0 0 0 0 0 1\n";
+    const char *p = rt_tmp("traj_nul.txt");
+    CHECK_OK(bf_write_file_atomic(p, text, sizeof text - 1));
+    bf_traj tr = {0};
+    CHECK_STATUS(replay_traj_read_tum(p, &tr), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("traj_nul.txt:3: a NUL byte (byte 32)");
+    CHECK_EQ_INT(tr.n, 0);
+}
+
 /* A position no camera has (its square overflowed eval-traj's error to inf,
  * exit 0) is refused by file and line; 1e8 m is read. */
 BF_TEST(traj_refuses_a_position_beyond_1e9_m)
