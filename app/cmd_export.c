@@ -31,8 +31,18 @@ static bf_status read_store(const char *cmd, const char *dir, hostmap *m, store_
 {
     bf_status s = store_read(dir, m, meta, traj, rep);
     if (s == BF_IO && !store_exists(dir)) s = BF_FORMAT; /* not a store: bad input, not an I/O failure */
+    /* A store.json that does not read, and nothing else: a folder that only
+     * looks like a store (one killed before its first write has no index). */
+    char index[4200];
+    snprintf(index, sizeof index, "%s/store.json", dir);
+    if (s == BF_OK && !rep->index_ok && !rep->trajectory_ok && rep->n_chunks == 0 && rep->n_bad == 0 &&
+        bf_file_exists(index))
+        s = bf_fail(BF_FORMAT, "%s: store.json does not read and there is no chunk file: not a scene store", dir);
     if (s == BF_OK && rep->n_bad)
         bf_warn("%s: %s: %u chunk file(s) left out, the first: %s", cmd, dir, rep->n_bad, rep->first_bad);
+    if (s == BF_OK && rep->n_missing)
+        bf_warn("%s: %s: %u chunk(s) the index lists were not loaded (a file missing or bad): the export lacks them",
+                cmd, dir, rep->n_missing);
     return s;
 }
 
@@ -68,6 +78,9 @@ int cmd_export(int argc, char **argv)
                                out);
     if (points && (mo.max_triangles || mo.max_error_m > 0))
         return app_usage_error(cmd, "--max-triangles and --max-error simplify a mesh, not --points");
+    if (points && level != UINT32_MAX) return app_usage_error(cmd, "--mesh-level is the mesh's, not --points'");
+    /* Not into the store it reads (an --out of STORE/store.json replaced its index). */
+    if ((rc = app_check_not_inside(cmd, "--out", out, dir)) != 0) return rc;
     double t0 = bf_time_s();
     hostmap m = {0};
     store_meta meta;
@@ -94,6 +107,7 @@ int cmd_export(int argc, char **argv)
         cJSON_AddNumberToObject(o, "chunks", rep.n_chunks);
         cJSON_AddNumberToObject(o, "bricks", rep.n_bricks);
         cJSON_AddNumberToObject(o, "chunk_files_left_out", rep.n_bad);
+        cJSON_AddNumberToObject(o, "chunks_missing", rep.n_missing);
         app_json_mesh_file(o, out, fmt, &mo, &data, &ss);
         cJSON_AddNumberToObject(o, "export_seconds", st.seconds);
         cJSON_AddNumberToObject(o, "write_seconds", bf_time_s() - t_write - ss.seconds);
@@ -101,7 +115,7 @@ int cmd_export(int argc, char **argv)
         s = app_json_print(o);
     } else if (s == BF_OK) {
         printf("bitfuse export: %s (%u chunks, %u bricks%s) -> %s (%s): %llu %s in %.1f s\n", dir, rep.n_chunks,
-               rep.n_bricks, rep.n_bad ? ", some chunk files left out" : "", out, mesh_format_name(fmt),
+               rep.n_bricks, rep.n_bad || rep.n_missing ? ", some chunk files left out" : "", out, mesh_format_name(fmt),
                (unsigned long long)(points ? data.n_verts : data.n_tris), points ? "points" : "triangles", secs);
         if (ss.tris_after != ss.tris_before)
             printf("  simplified from %llu triangles in %.1f s (meshoptimizer's error estimate %.2f mm%s)\n",

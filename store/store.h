@@ -45,7 +45,7 @@ typedef struct store_report {
     uint32_t n_chunks;      /* chunk files loaded */
     uint32_t n_bricks;
     uint32_t n_bad;         /* chunk files skipped: corrupt, truncated, unreadable, inconsistent */
-    uint32_t n_missing;     /* chunks the index lists with no valid file (n_bad counts those with a bad one) */
+    uint32_t n_missing;     /* chunks the index lists with no valid file: absent or bad (a bad one is in n_bad too) */
     uint32_t n_unindexed;   /* valid chunk files the index does not list (written after it) */
     bool index_ok;          /* store.json read and consistent */
     bool trajectory_ok;     /* trajectory.bin read and its checksum right */

@@ -65,6 +65,19 @@ mentions "$f"
 [ "$(json_get "$T/out" "d['chunks']")" = $((chunks - 1)) ] || fail "info: the other chunks were not loaded"
 expect 0 "$B" export "$T/C" --out "$T/c.ply" --points
 mentions "$f"
+# A chunk the index lists whose file is gone is counted with the bad one
+# as not loaded.
+rm "$T/C/chunks/$(ls "$T/C/chunks" | tail -n 1)"
+expect 0 "$B" export "$T/C" --out "$T/c2.ply" --json
+mentions "the index lists were not loaded"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['chunks_missing'] == 2 and d['chunk_files_left_out'] == 1, d" \
+    "$T/out" || fail "export: a missing chunk file not counted"
+# Not over the store it reads; not from a folder that only looks like one.
+expect 2 "$B" export "$T/C" --out "$T/C/store.json" --format ply
+mentions "which is being read"
+mkdir "$T/fake" && echo hi >"$T/fake/store.json"
+expect 3 "$B" export "$T/fake" --out "$T/fake.ply"
+mentions "not a scene store"
 
 # Resume: the scan in two halves ends within tracking tolerance of the
 # uninterrupted one (both start at the true pose; noise-free frames). The
