@@ -615,8 +615,14 @@ static bf_status lod_make_plan(const render_voxelise_config *c, uint32_t axis, b
     p->coarse = lod_level_at(c, cos_max, f_px, z_max, 0, c->level);
     for (;;) {
         double cell = 8 * hostmap_level_voxel_m(c->chunk_m, p->coarse);
-        p->x0 = (int64_t)floor(lo[0] / cell), p->y0 = (int64_t)floor(lo[1] / cell);
-        uint64_t nx = (uint64_t)((int64_t)floor(hi[0] / cell) - p->x0 + 1), ny = (uint64_t)((int64_t)floor(hi[1] / cell) - p->y0 + 1);
+        /* The columns cover the triangles' boxes as the binning grows them
+         * (half a voxel, tri_bricks; the coarse level's is the widest): a
+         * column cut off there dropped the free bricks beside a face that
+         * lies on a brick boundary, and a box drawn from them vanished. */
+        double g = cell / 16 * 1.001;
+        p->x0 = (int64_t)floor((lo[0] - g) / cell), p->y0 = (int64_t)floor((lo[1] - g) / cell);
+        uint64_t nx = (uint64_t)((int64_t)floor((hi[0] + g) / cell) - p->x0 + 1),
+                 ny = (uint64_t)((int64_t)floor((hi[1] + g) / cell) - p->y0 + 1);
         if (nx * ny <= (1u << 20) || p->coarse == 0) {
             p->nx = (uint32_t)nx, p->ny = (uint32_t)ny;
             break;

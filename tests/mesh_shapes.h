@@ -29,4 +29,23 @@ static inline mesh_data test_torus(double R, double r, uint32_t nu, uint32_t nv)
     return m;
 }
 
+/* A closed axis-aligned box [lo, hi] (12 triangles, outward normals); free
+ * with mesh_free. */
+static inline mesh_data test_box(const double lo[3], const double hi[3])
+{
+    static const uint32_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    mesh_data m = {0};
+    m.n_verts = 8, m.n_tris = 12;
+    m.xyz = malloc(8 * 12);
+    m.tri = malloc(12 * 12);
+    for (uint32_t k = 0; k < 8; k++) /* corner k: x from bit 2, y from bit 1, z from bit 0 */
+        for (int a = 0; a < 3; a++) m.xyz[3 * k + a] = (float)((k >> (2 - a) & 1) ? hi[a] : lo[a]);
+    for (uint32_t f = 0; f < 6; f++) {
+        const uint32_t *q = quads[f];
+        uint32_t *t = m.tri + 6 * f;
+        t[0] = q[0], t[1] = q[1], t[2] = q[2], t[3] = q[0], t[4] = q[2], t[5] = q[3];
+    }
+    return m;
+}
+
 #endif

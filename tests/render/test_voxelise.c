@@ -250,6 +250,46 @@ BF_TEST(level_of_detail_follows_the_pixel_footprint)
     gpu_context_destroy(ctx);
 }
 
+/* A box whose faces lie on the voxel grid, all of it at one level of
+ * detail: the columns of the plan cover the bricks the binning grows the
+ * faces into (they stopped at the box and dropped the free bricks beside
+ * its sides: nothing was drawn), and it is drawn as without the plan. */
+BF_TEST(level_of_detail_draws_a_box_on_the_grid)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    const double lo[3] = {-0.25, -0.1875, 1.0}, hi[3] = {0.25, 0.1875, 1.5}; /* whole level-5 voxels (7.8125 mm) */
+    mesh_data m = test_box(lo, hi);
+    bf_se3 T = bf_se3_identity();
+    render_voxelise_config vc = render_voxelise_config_default();
+    vc.level = 5; /* finer than the footprint wants everywhere: one level */
+    vc.lod = true, vc.lod_T_wc = T, vc.lod_K = K_VIEW;
+    hostmap hm;
+    render_voxelise_stats st;
+    CHECK_OK(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, &st));
+    CHECK_EQ_INT(st.level_coarse, 5);
+    CHECK_EQ_INT(st.level_fine, 5);
+    fusion_config fc = fusion_config_default();
+    fc.brick_cap = hm.n_bricks + 64;
+    fc.node_cap = 16 * hm.n_bricks + 1024;
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &fc, &K_VIEW, hm.origin_w, &map));
+    CHECK_OK(fusion_load(map, &hm));
+    mesh_bvh *bvh;
+    CHECK_OK(mesh_bvh_build(&m, &bvh));
+    view_result r = {0};
+    compare_view(ctx, map, bvh, &T, st.voxel_m, true, &r);
+    fprintf(stderr, "  box at one level of detail: %u bricks, IoU %.4f (%u pixels hit)\n", st.n_bricks, r.iou, r.n_truth);
+    CHECK(r.n_truth > K_VIEW.width * K_VIEW.height / 10);
+    CHECK(r.iou >= 0.97);
+    mesh_bvh_destroy(bvh);
+    fusion_destroy(map);
+    hostmap_free(&hm);
+    mesh_free(&m);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 BF_TEST(voxelise_refuses_bad_meshes)
 {
     gpu_context *ctx;
