@@ -93,17 +93,17 @@ bool app_parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
     int used = 0;
     if (sscanf(v, "%lf %lf %lf %lf %lf %lf %lf %n", &a[0], &a[1], &a[2], &a[3], &a[4], &a[5], &a[6], &used) != 7 ||
         v[used] != '\0') {
-        snprintf(msg, n, "--pose \"%s\": expected 7 numbers \"tx ty tz qx qy qz qw\"", v);
+        snprintf(msg, n, "\"%s\": expected 7 numbers \"tx ty tz qx qy qz qw\"", v);
         return false;
     }
     for (int i = 0; i < 7; i++)
         if (!isfinite(a[i])) {
-            snprintf(msg, n, "--pose \"%s\": not finite", v);
+            snprintf(msg, n, "\"%s\": not finite", v);
             return false;
         }
     double qn = sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6]);
     if (fabs(qn - 1) > 1e-3) {
-        snprintf(msg, n, "--pose \"%s\": the quaternion's norm is %g, not 1", v, qn);
+        snprintf(msg, n, "\"%s\": the quaternion's norm is %g, not 1", v, qn);
         return false;
     }
     bf_quat q = bf_quat_normalize((bf_quat){.w = a[6], .x = a[3], .y = a[4], .z = a[5]});
@@ -113,10 +113,12 @@ bool app_parse_pose(const char *v, bf_se3 *T, char *msg, size_t n)
 
 const char *app_check_pose(const char *name, const char *v)
 {
-    static char msg[512];
+    static char msg[640];
+    char why[512];
     bf_se3 T;
-    (void)name;
-    return app_parse_pose(v, &T, msg, sizeof msg) ? NULL : msg;
+    if (app_parse_pose(v, &T, why, sizeof why)) return NULL;
+    snprintf(msg, sizeof msg, "%s %s", name, why); /* --pose or --mesh-pose, whichever it was */
+    return msg;
 }
 
 /* "WxH" within 1..8192 each. */

@@ -429,13 +429,19 @@ const char *gpu__wanted_device(const gpu_config *cfg)
 
 uint32_t gpu__choose_device(const gpu_device_info *infos, uint32_t n, const char *want)
 {
-    /* A number is an index when it is one ("1"), else part of a name ("1080"). */
+    /* A number below GPU_MAX_DEVICES is an index and only that ("1" was
+     * matched against "LLVM 15.0.6" when there was no device 1); a larger
+     * one is part of a name ("1080"). */
     uint32_t index;
     bool is_index = want && bf_parse_u32(want, &index);
     if (is_index && index < n) {
         if (infos[index].is_usable) return index;
         bf_fail(BF_NO_DEVICE, "device %u (%s) is not usable: bitfuse needs Vulkan 1.2 and a compute queue", index,
                 infos[index].name);
+        return UINT32_MAX;
+    }
+    if (is_index && index < GPU_MAX_DEVICES) {
+        bf_fail(BF_NO_DEVICE, "no device %u: %u found (bitfuse devices lists them)", index, n);
         return UINT32_MAX;
     }
     uint32_t best = UINT32_MAX;

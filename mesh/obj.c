@@ -62,11 +62,6 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
     const char *mtl_name = NULL;
     if ((s = obj_mtl_path(path, mtl_path, sizeof mtl_path, &mtl_name)) != BF_OK) return s;
     bool is_mesh = m->n_tris > 0;
-    if (is_mesh) {
-        static const char mtl[] = "# written by bitfuse: a white matte material; the colour is per vertex\n"
-                                  "newmtl bitfuse\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n";
-        if ((s = bf_write_file_atomic(mtl_path, mtl, sizeof mtl - 1)) != BF_OK) return s;
-    }
     bf_out o;
     if ((s = bf_out_open(&o, path)) != BF_OK) return s;
     bf_out_printf(&o, "# written by bitfuse: %u vertices, %u triangles%s\n", m->n_verts, m->n_tris,
@@ -108,5 +103,10 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
         *p++ = '\n';
         bf_out_write(&o, line, (size_t)(p - line));
     }
-    return bf_out_commit(&o);
+    /* The material after the mesh: an OBJ that could not be written leaves
+     * an earlier .mtl as it was and makes none. */
+    if ((s = bf_out_commit(&o)) != BF_OK || !is_mesh) return s;
+    static const char mtl[] = "# written by bitfuse: a white matte material; the colour is per vertex\n"
+                              "newmtl bitfuse\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n";
+    return bf_write_file_atomic(mtl_path, mtl, sizeof mtl - 1);
 }

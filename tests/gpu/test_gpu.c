@@ -179,6 +179,12 @@ BF_TEST(missing_device_or_loader_gives_no_device)
     cfg.device = "99";
     CHECK_STATUS(gpu_context_create(&cfg, &ctx), BF_NO_DEVICE);
     CHECK_ERROR_MENTIONS("no such index");
+    /* A small number is an index only, never part of a name ("15" in "LLVM 15.0.6"). */
+    char past[16];
+    snprintf(past, sizeof past, "%u", n);
+    cfg.device = past;
+    CHECK_STATUS(gpu_context_create(&cfg, &ctx), BF_NO_DEVICE);
+    CHECK_ERROR_MENTIONS("no device");
     cfg.device = "0"; /* an index */
     OPEN_CTX(ctx, &cfg);
     CHECK(!strcmp(gpu_device_name(ctx), list[0].name));

@@ -384,6 +384,9 @@ BF_TEST(failed_write_keeps_the_old_file_and_leaves_no_temporary)
         CHECK_EQ_INT(count_temp_files(dir), 0);
     }
     signal(SIGXFSZ, old_handler);
+    /* The failed OBJ made no material beside it (it was written first). */
+    snprintf(path, sizeof path, "%s/m.mtl", dir);
+    CHECK(!file_exists(path));
     /* A folder that does not exist: BF_WRITE naming it, nothing made. */
     snprintf(path, sizeof path, "%s/no/such/dir/m.glb", dir);
     CHECK_STATUS(mesh_write_glb(path, &m), BF_WRITE);
