@@ -189,6 +189,9 @@ void app_expect_free(app_expect *e);
 uint32_t app_expect_check(const app_expect *e, cJSON *stats, char *why, size_t cap);
 /* The map's part of stats.json ("map_bytes" .. "mesh") into o. */
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level);
+/* The mesh's files for a summary's list, each followed by a comma:
+ * "mesh.ply,", "mesh.obj,mesh.mtl," or "" when none was written. */
+void app_mesh_file_list(const app_map_report *r, char *out, size_t cap);
 /* The input's part of stats.json: "frames_unreadable" (frames src skipped
  * under --skip-bad-frames) and "input_error" (the failure of a frame that
  * ended the run early, what was fused before it kept; null when none). */

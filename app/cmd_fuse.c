@@ -208,9 +208,11 @@ int cmd_fuse(int argc, char **argv)
         app_print_map(&r.out, a.fcfg.max_level);
         if (wf.s != BF_OK)
             printf("  not written      %s (the other outputs are written) in %.1f s\n", wf.message, r.seconds);
-        else
-            printf("  wrote            %s/{%s%spoints.ply,stats.json} in %.1f s\n", a.out, r.out.mesh_file,
-                   r.out.mesh_file[0] ? "," : "", r.seconds);
+        else {
+            char files[128];
+            app_mesh_file_list(&r.out, files, sizeof files);
+            printf("  wrote            %s/{%spoints.ply,stats.json} in %.1f s\n", a.out, files, r.seconds);
+        }
     }
     if (s == BF_OK) s = app_write_status(&wf);
     bf_status s_input = r.run.source_status;

@@ -864,9 +864,12 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     /* After a failed output the list would claim it: the failure instead. */
     if (output_error)
         printf("  not written      %s (the other outputs are written) in %.1f s\n", output_error, r->seconds);
-    else
-        printf("  wrote            %s/{trajectory.txt,frames.csv,%s%spoints.ply,stats.json} in %.1f s\n", a->out,
-               r->out.mesh_file[0] ? r->out.mesh_file : "", r->out.mesh_file[0] ? "," : "", r->seconds);
+    else {
+        char files[128];
+        app_mesh_file_list(&r->out, files, sizeof files);
+        printf("  wrote            %s/{trajectory.txt,frames.csv,%spoints.ply,stats.json} in %.1f s\n", a->out, files,
+               r->seconds);
+    }
 }
 
 int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)

@@ -125,11 +125,23 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
     if (s == BF_OK) s = export_points(&snap, &pts, &r->points);
     if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, "points.ply")) == BF_OK)
         s = mesh_write_ply(path, &pts);
+    /* The first failure is the one named: the mesh's, when the points failed too. */
     if (s == BF_OK && mesh_error[0]) s = bf_fail(BF_WRITE, "%s", mesh_error);
+    else if (s == BF_WRITE && mesh_error[0]) s = bf_fail(BF_WRITE, "%s; points.ply neither", mesh_error);
     mesh_free(&mesh);
     mesh_free(&pts);
     hostmap_free(&snap);
     return s;
+}
+
+void app_mesh_file_list(const app_map_report *r, char *out, size_t cap)
+{
+    if (!r->mesh_file[0]) {
+        snprintf(out, cap, "%s", "");
+        return;
+    }
+    bool obj = r->mesh_out.format == MESH_FORMAT_OBJ;
+    snprintf(out, cap, "%s,%s", r->mesh_file, obj ? "mesh.mtl," : "");
 }
 
 void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
