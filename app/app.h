@@ -310,7 +310,7 @@ int app_parse_log_command(app_command_spec *spec, const app_option *own, app_log
 /* "tx ty tz qx qy qz qw" (camera or mesh to world, TUM; a unit quaternion
  * within 1e-3) -> T; false with the reason in msg. */
 bool app_parse_pose(const char *v, bf_se3 *T, char *msg, size_t n);
-/* "WxH", each 1..8192. */
+/* "WxH", each 2..8192. */
 bool app_parse_size(const char *v, uint32_t *w, uint32_t *h);
 /* "fx,fy,cx,cy" in pixels, focal lengths above 0. */
 bool app_parse_camera(const char *v, double k[4]);

@@ -1,6 +1,7 @@
 /* What bitfuse render and bitfuse view draw: a saved map (a scene store),
  * a mesh voxelised into its bricks, particles; read from files and loaded
  * into the GPU the same way for both. */
+#include <ctype.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -121,12 +122,15 @@ const char *app_check_pose(const char *name, const char *v)
     return msg;
 }
 
-/* "WxH" within 1..8192 each. */
+/* "WxH" within 2..8192 each. */
 bool app_parse_size(const char *v, uint32_t *w, uint32_t *h)
 {
     unsigned a, b;
     int used = 0;
-    if (sscanf(v, "%ux%u%n", &a, &b, &used) != 2 || v[used] != '\0' || a < 1 || b < 1 || a > 8192 || b > 8192)
+    /* 2 at least: a 1x1 view reached the ray-cast's own check ("fusion: bad
+     * intrinsics"); and no leading blank (sscanf skips one). */
+    if (!isdigit((unsigned char)v[0]) || sscanf(v, "%ux%u%n", &a, &b, &used) != 2 || v[used] != '\0' || a < 2 ||
+        b < 2 || a > 8192 || b > 8192)
         return false;
     *w = a, *h = b;
     return true;
@@ -137,7 +141,7 @@ const char *app_check_size(const char *name, const char *v)
     static char msg[256];
     uint32_t w, h;
     if (app_parse_size(v, &w, &h)) return NULL;
-    snprintf(msg, sizeof msg, "%s \"%s\": expected WxH, each 1..8192", name, v);
+    snprintf(msg, sizeof msg, "%s \"%s\": expected WxH, each 2..8192", name, v);
     return msg;
 }
 
