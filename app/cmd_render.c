@@ -189,6 +189,10 @@ int cmd_render(int argc, char **argv)
     render_args a = {.far_m = 13.1, .repeat = 1};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    /* The depth would replace the image it was written beside. */
+    if (a.depth && !strcmp(a.depth, a.out))
+        return app_usage_error(cmd, "--depth %s is --out's file: give each its own", a.depth);
+    if (a.depth && (rc = app_check_not_input(cmd, "--depth", a.depth, a.out)) != 0) return rc; /* a link to it */
     if ((rc = app_scene_check(cmd, "render", &a.scene)) != 0) return rc;
     uint32_t W = 0, H = 0;
     app_parse_size(a.size, &W, &H);
