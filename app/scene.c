@@ -78,6 +78,12 @@ bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, co
     pc.radius_m = (float)a->radius_m;
     pc.cell_m = (float)a->cell_m;
     pc.lod = a->particle_lod;
+    /* A radius or cell the map cannot hold is the options' fault, not the file's. */
+    if (render_particles_check_config(&pc) != BF_OK) {
+        char msg[512];
+        snprintf(msg, sizeof msg, "%s", bf_last_error());
+        return bf_fail(BF_INVALID_ARG, "--particle-radius %g / --particle-cell: %s", a->radius_m, msg);
+    }
     bf_status s = render_particles_create(ctx, &pc, f->xyz, f->n_particles, out);
     if (s == BF_INVALID_ARG) {
         char msg[512];

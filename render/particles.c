@@ -74,6 +74,12 @@ static bf_status check_config(const render_particles_config *in, render_particle
     if (!(c.cell_m >= 1e-5f) || !(c.cell_m <= 2 * c.radius_m))
         return bf_fail(BF_INVALID_ARG, "render: particle cell %g m (10 um .. 2 radii = %g m)", c.cell_m,
                        2 * c.radius_m);
+    /* The map's chunk is 8 cells times the level's bricks per edge: fusion
+     * takes chunks of at most 64 m. */
+    double chunk = c.cell_m * 8.0 * (double)(1u << bin_level(c.cell_m));
+    if (chunk > 64)
+        return bf_fail(BF_INVALID_ARG, "render: particle cell %g m makes the map's chunks %g m, beyond 64 m: a smaller "
+                       "radius or cell", c.cell_m, chunk);
     if (c.work_budget > RENDER_PARTICLES_WORK_BUDGET)
         return bf_fail(BF_INVALID_ARG, "render: particle work budget %u (at most %u)", c.work_budget,
                        RENDER_PARTICLES_WORK_BUDGET);
@@ -288,6 +294,12 @@ static bf_status set_cell(render_particles *ps, const render_particles_config *c
         ps->map = NULL;
     }
     return bin_and_load(ps, xyz, n, 1.0);
+}
+
+bf_status render_particles_check_config(const render_particles_config *cfg)
+{
+    render_particles_config c;
+    return check_config(cfg, &c);
 }
 
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,

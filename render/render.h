@@ -234,6 +234,10 @@ typedef struct render_particles_stats {
  * empty set: nothing is hit). */
 bf_status render_particles_create(gpu_context *ctx, const render_particles_config *cfg, const float *xyz, uint64_t n,
                                   render_particles **out);
+/* The radius and cell of cfg checked alone, as render_particles_create
+ * checks them before it looks at the particles (BF_INVALID_ARG saying
+ * which): a caller tells a bad option from a bad particle file. */
+bf_status render_particles_check_config(const render_particles_config *cfg);
 /* A moving set's next time step: the n particles xyz binned anew into the
  * same set (radius and cell kept), its GPU pools and pipeline reused, made
  * larger only when the set outgrows them (then with a quarter to spare).

@@ -172,6 +172,9 @@ expect 0 "$B" render --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE
 # The sheet covers about (0.28 * 131 / 0.6)^2 = 3700 pixels (a fifth).
 hits=$(py "$T/png.py" "$T/p_d.png" hits)
 py -c "import sys; sys.exit(0 if 0.15 <= $hits <= 0.25 else 1)" || fail "particles alone hit $hits of the pixels"
+# A radius whose cells would make chunks the map cannot hold is the option's fault (exit 2), not the file's.
+expect 2 "$B" render --particles "$T/p.ply" --particle-radius 5 --pose "$POSE" --size 160x120 --out "$T/p5.png"
+mentions "beyond 64 m"
 # Together: each pixel the nearer of the two alone (to the PNG's 0.2 mm);
 # the sheet lies in front of the map wherever both are.
 read -r bad in_front < <(py "$T/png.py" "$T/both_d.png" nearest "$T/p_d.png" "$T/map_d.png")
