@@ -152,6 +152,10 @@ int cmd_eval_colour(int argc, char **argv)
     free(hit);
     if (s == BF_OK && n_frames == 0)
         s = bf_fail(BF_FORMAT, "%s: no frame every %u has a pose in %s", paths[1], every, traj_path);
+    /* Nothing compared is no score (PSNR nan, exit 0): poses or units wrong. */
+    if (s == BF_OK && all.n == 0)
+        s = bf_fail(BF_FORMAT, "%s: the mesh is seen in none of the %u frames compared: do the poses of %s and the "
+                    "mesh's units (metres) fit?", paths[0], n_frames, traj_path);
     if (s == BF_OK) {
         if (frames) {
             cJSON *o = cJSON_CreateObject();

@@ -543,6 +543,13 @@ is_json "$T/rp/stats.json"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); t=d['tracking']; assert d['frames'] == 3 and t['tracked'] + t['lost'] + t['no_depth'] == 3 and d['ate_m'] is not None, d" \
     "$T/rp/stats.json" || fail "replay stats.json: frames/tracking/ate"
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/rp/trajectory.txt" --json
+# eval-colour: the mesh seen from the run's poses; from poses 100 m away it
+# is seen in no frame, which is no score (it printed PSNR nan, exit 0).
+expect 0 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/rp/trajectory.txt"
+grep -q "^PSNR [0-9]" "$T/out" || fail "eval-colour: no PSNR: $(cat "$T/out")"
+awk '/^#/ {print; next} {$2 += 100; print}' "$T/rp/trajectory.txt" >"$T/away.txt"
+expect 3 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/away.txt"
+mentions "is seen in none of the"
 expect 2 "$B" replay "$T/seq"
 mentions "--out is required"
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
