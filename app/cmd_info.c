@@ -145,7 +145,9 @@ int cmd_info(int argc, char **argv)
         d_med = 0.5 * (hist_rank(st.hist, (st.n_valid - 1) / 2) + hist_rank(st.hist, st.n_valid / 2)) / scale;
     }
     double valid_share = st.n_pixels ? (double)st.n_valid / (double)st.n_pixels : NAN;
-    double span = st.n_frames ? st.t_last_s - st.t_first_s : NAN;
+    /* To the microsecond, the stamps' own resolution: the difference of two
+     * times near 1.3e9 s carries the doubles' 2.4e-7 s steps (1.2999999523). */
+    double span = st.n_frames ? round((st.t_last_s - st.t_first_s) * 1e6) / 1e6 : NAN;
     uint32_t skipped = replay_skipped_frames(src);
     double lens[CALIB_DIST_N], lens_shift = 0;
     bool has_lens = replay_undistortion(src, lens, &lens_shift);
@@ -189,6 +191,9 @@ int cmd_info(int argc, char **argv)
         uint32_t k = st.n_depth_repeats < INFO_REPEATS_LISTED ? st.n_depth_repeats : INFO_REPEATS_LISTED;
         for (uint32_t i = 0; i < k; i++) first[i] = st.depth_repeats[i];
         app_json_numbers(o, "repeated_depth_first", first, k);
+        k = st.n_rgb_repeats < INFO_REPEATS_LISTED ? st.n_rgb_repeats : INFO_REPEATS_LISTED;
+        for (uint32_t i = 0; i < k; i++) first[i] = st.rgb_repeats[i];
+        app_json_numbers(o, "repeated_colour_first", first, k);
         s = app_json_print(o);
     } else {
         printf("sequence      %s\n", path);

@@ -104,6 +104,8 @@ cp -r "$T/seq" "$T/reprgb"
 repeat_frame "$T/reprgb" rgb 2
 expect 0 "$B" info "$T/reprgb" --json
 repeats_are 0 1 "[]" || fail "info does not find frame 2's colour repeating frame 1's: $(cat "$T/out")"
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_colour_first'] == [2], d" "$T/out" ||
+    fail "info --json does not list the repeated colour frames"
 
 # eval-traj: a sequence shorter than the RPE delta still gets its ATE.
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/seq/groundtruth.txt" --json
