@@ -77,8 +77,9 @@ int cmd_eval_colour(int argc, char **argv)
     app_command_spec spec = {
         .name = cmd, .usage = usage_text, .tables = tables, .positional = paths, .min_positional = 2,
         .max_positional = 2, .positional_missing = "needs MESH and SEQ",
-        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 the mesh or sequence unreadable or malformed, 5 --save's "
-                  "images\ncould not be written\n",
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 the mesh or sequence unreadable or malformed, or the\n"
+                  "mesh seen in none of the frames compared (poses or units wrong), 5 --save's images could not be\n"
+                  "written\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;

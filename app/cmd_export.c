@@ -41,8 +41,8 @@ static bf_status read_store(const char *cmd, const char *dir, hostmap *m, store_
     if (s == BF_OK && rep->n_bad)
         bf_warn("%s: %s: %u chunk file(s) left out, the first: %s", cmd, dir, rep->n_bad, rep->first_bad);
     if (s == BF_OK && rep->n_missing)
-        bf_warn("%s: %s: %u chunk(s) the index lists were not loaded (a file missing or bad): the export lacks them",
-                cmd, dir, rep->n_missing);
+        bf_warn("%s: %s: %u chunk(s) the index lists were not loaded (a file missing or bad): left out", cmd, dir,
+                rep->n_missing);
     return s;
 }
 

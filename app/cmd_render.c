@@ -192,7 +192,6 @@ int cmd_render(int argc, char **argv)
     /* The depth would replace the image it was written beside. */
     if (a.depth && !strcmp(a.depth, a.out))
         return app_usage_error(cmd, "--depth %s is --out's file: give each its own", a.depth);
-    if (a.depth && (rc = app_check_not_input(cmd, "--depth", a.depth, a.out)) != 0) return rc; /* a link to it */
     if ((rc = app_scene_check(cmd, "render", &a.scene)) != 0) return rc;
     uint32_t W = 0, H = 0;
     app_parse_size(a.size, &W, &H);

@@ -140,7 +140,7 @@ void app_mesh_file_list(const app_map_report *r, char *out, size_t cap)
         snprintf(out, cap, "%s", "");
         return;
     }
-    bool obj = r->mesh_out.format == MESH_FORMAT_OBJ;
+    bool obj = r->mesh_out.format == MESH_FORMAT_OBJ && r->simplify.tris_after > 0; /* no .mtl for no triangle */
     snprintf(out, cap, "%s,%s", r->mesh_file, obj ? "mesh.mtl," : "");
 }
 

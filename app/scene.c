@@ -46,8 +46,15 @@ int app_scene_check(const char *cmd, const char *verb, const app_scene_args *a)
     if (a->mesh_pose && !a->mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
     if (!a->map && !a->particles && !a->mesh)
         return app_usage_error(cmd, "nothing to %s: give --map, --mesh, --particles or any of them", verb);
-    if (a->cell_m > 2 * a->radius_m)
-        return app_usage_error(cmd, "--particle-cell %g m is above 2 radii (%g m)", a->cell_m, 2 * a->radius_m);
+    /* The radius and cell as the particle set takes them (a cell of at most
+     * 2 radii, chunks of at most 64 m), before any file is read or device opened. */
+    if (a->particles) {
+        render_particles_config pc = render_particles_config_default();
+        pc.radius_m = (float)a->radius_m;
+        pc.cell_m = (float)a->cell_m;
+        if (render_particles_check_config(&pc) != BF_OK)
+            return app_usage_error(cmd, "--particle-radius %g / --particle-cell: %s", a->radius_m, bf_last_error());
+    }
     return 0;
 }
 
@@ -78,12 +85,6 @@ bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, co
     pc.radius_m = (float)a->radius_m;
     pc.cell_m = (float)a->cell_m;
     pc.lod = a->particle_lod;
-    /* A radius or cell the map cannot hold is the options' fault, not the file's. */
-    if (render_particles_check_config(&pc) != BF_OK) {
-        char msg[512];
-        snprintf(msg, sizeof msg, "%s", bf_last_error());
-        return bf_fail(BF_INVALID_ARG, "--particle-radius %g / --particle-cell: %s", a->radius_m, msg);
-    }
     bf_status s = render_particles_create(ctx, &pc, f->xyz, f->n_particles, out);
     if (s == BF_INVALID_ARG) {
         char msg[512];
@@ -134,8 +135,10 @@ bool app_parse_size(const char *v, uint32_t *w, uint32_t *h)
     unsigned a, b;
     int used = 0;
     /* 2 at least: a 1x1 view reached the ray-cast's own check ("fusion: bad
-     * intrinsics"); and no leading blank (sscanf skips one). */
-    if (!isdigit((unsigned char)v[0]) || sscanf(v, "%ux%u%n", &a, &b, &used) != 2 || v[used] != '\0' || a < 2 ||
+     * intrinsics"); digits and one x only (sscanf skips blanks and signs). */
+    size_t nd = strspn(v, "0123456789");
+    if (!nd || v[nd] != 'x' || !isdigit((unsigned char)v[nd + 1]) || strspn(v + nd + 1, "0123456789") != strlen(v + nd + 1) ||
+        sscanf(v, "%ux%u%n", &a, &b, &used) != 2 || v[used] != '\0' || a < 2 ||
         b < 2 || a > 8192 || b > 8192)
         return false;
     *w = a, *h = b;

@@ -320,8 +320,11 @@ bf_status render_particles_create(gpu_context *ctx, const render_particles_confi
      * bricks fit, else a quarter (sparse sets of many particles: a sphere
      * reaches 27 bricks of eighth-radius cells, 8 of quarter-radius ones). */
     bool auto_cell = !(cfg ? cfg : &def)->cell_m;
-    if (s == BF_NO_MEMORY && ps->too_many && auto_cell) {
-        c.cell_m = c.radius_m / 4.0f;
+    render_particles_config quarter = c;
+    quarter.cell_m = c.radius_m / 4.0f;
+    render_particles_config unused;
+    if (s == BF_NO_MEMORY && ps->too_many && auto_cell && check_config(&quarter, &unused) == BF_OK) {
+        c = quarter; /* only where its chunks fit the map (64 m): else the eighth's failure stands */
         s = set_cell(ps, &c, xyz, n);
     }
     gpu_pipeline_desc pd = {

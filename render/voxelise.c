@@ -619,7 +619,7 @@ static bf_status lod_make_plan(const render_voxelise_config *c, uint32_t axis, b
          * (half a voxel, tri_bricks; the coarse level's is the widest): a
          * column cut off there dropped the free bricks beside a face that
          * lies on a brick boundary, and a box drawn from them vanished. */
-        double g = cell / 16 * 1.001;
+        double g = cell / 8; /* a whole voxel: more than any level's grow, whatever the rounding */
         p->x0 = (int64_t)floor((lo[0] - g) / cell), p->y0 = (int64_t)floor((lo[1] - g) / cell);
         uint64_t nx = (uint64_t)((int64_t)floor((hi[0] + g) / cell) - p->x0 + 1),
                  ny = (uint64_t)((int64_t)floor((hi[1] + g) / cell) - p->y0 + 1);

@@ -26,7 +26,7 @@ bf_status replay__text_nul(const char *path, const char *text, size_t len)
     const char *nul = memchr(text, '\0', len);
     if (!nul) return BF_OK;
     unsigned line = 1;
-    for (const char *c = text; c < nul; c++) line += *c == '\n';
+    for (const char *c = text; c < nul; c++) line += *c == '\n' || (*c == '\r' && c + 1 < nul && c[1] != '\n');
     return bf_fail(BF_FORMAT, "%s:%u: a NUL byte (byte %zu): not a text file, or one damaged", path, line,
                    (size_t)(nul - text));
 }

@@ -33,7 +33,7 @@ static inline mesh_data test_torus(double R, double r, uint32_t nu, uint32_t nv)
  * with mesh_free. */
 static inline mesh_data test_box(const double lo[3], const double hi[3])
 {
-    static const uint32_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    static const uint32_t quads[6][4] = {{0, 1, 3, 2}, {4, 6, 7, 5}, {0, 4, 5, 1}, {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 5, 7, 3}};
     mesh_data m = {0};
     m.n_verts = 8, m.n_tris = 12;
     m.xyz = malloc(8 * 12);

@@ -69,7 +69,7 @@ mentions "$f"
 # as not loaded.
 rm "$T/C/chunks/$(ls "$T/C/chunks" | tail -n 1)"
 expect 0 "$B" export "$T/C" --out "$T/c2.ply" --json
-mentions "the index lists were not loaded"
+mentions "the index lists were not loaded (a file missing or bad): left out"
 py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['chunks_missing'] == 2 and d['chunk_files_left_out'] == 1, d" \
     "$T/out" || fail "export: a missing chunk file not counted"
 # Not over the store it reads; not from a folder that only looks like one.

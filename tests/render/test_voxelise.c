@@ -262,7 +262,7 @@ BF_TEST(level_of_detail_draws_a_box_on_the_grid)
     mesh_data m = test_box(lo, hi);
     bf_se3 T = bf_se3_identity();
     render_voxelise_config vc = render_voxelise_config_default();
-    vc.level = 5; /* finer than the footprint wants everywhere: one level */
+    vc.level = 5; /* the finest allowed, coarser than the footprint wants everywhere: one level */
     vc.lod = true, vc.lod_T_wc = T, vc.lod_K = K_VIEW;
     hostmap hm;
     render_voxelise_stats st;
