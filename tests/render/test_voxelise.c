@@ -88,6 +88,21 @@ static void compare_view(gpu_context *ctx, fusion_map *map, const mesh_bvh *bvh,
     *out = r;
 }
 
+/* hm loaded into a map of its own size (sparse bricks: a node path each); NULL on failure. */
+static fusion_map *load_map(gpu_context *ctx, const hostmap *hm)
+{
+    fusion_config fc = fusion_config_default();
+    fc.brick_cap = hm->n_bricks + 64;
+    fc.node_cap = 16 * hm->n_bricks + 1024;
+    fusion_map *map = NULL;
+    if (fusion_create(ctx, &fc, &K_VIEW, hm->origin_w, &map) != BF_OK) return NULL;
+    if (fusion_load(map, hm) != BF_OK) {
+        fusion_destroy(map);
+        return NULL;
+    }
+    return map;
+}
+
 /* Voxelises m at level, loads it and checks three views of it. */
 static void check_mesh(gpu_context *ctx, const mesh_data *m, uint32_t level, const char *name)
 {
@@ -97,12 +112,8 @@ static void check_mesh(gpu_context *ctx, const mesh_data *m, uint32_t level, con
     render_voxelise_stats st;
     CHECK_OK(render_voxelise_mesh(ctx, m, NULL, &vc, &hm, &st));
     CHECK(hm.n_bricks > 0);
-    fusion_config fc = fusion_config_default();
-    fc.brick_cap = hm.n_bricks + 64;
-    fc.node_cap = 16 * hm.n_bricks + 1024; /* sparse bricks: a node path each */
-    fusion_map *map;
-    CHECK_OK(fusion_create(ctx, &fc, &K_VIEW, hm.origin_w, &map));
-    CHECK_OK(fusion_load(map, &hm));
+    fusion_map *map = load_map(ctx, &hm);
+    CHECK(map != NULL);
     mesh_bvh *bvh;
     CHECK_OK(mesh_bvh_build(m, &bvh));
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -223,12 +234,8 @@ BF_TEST(level_of_detail_follows_the_pixel_footprint)
     fprintf(stderr, "  one level: %u bricks at level 8\n", st1.n_bricks);
     CHECK(2 * st.n_bricks < st1.n_bricks);
     hostmap_free(&h1);
-    fusion_config fc = fusion_config_default();
-    fc.brick_cap = hm.n_bricks + 64;
-    fc.node_cap = 16 * hm.n_bricks + 1024;
-    fusion_map *map;
-    CHECK_OK(fusion_create(ctx, &fc, &K_VIEW, hm.origin_w, &map));
-    CHECK_OK(fusion_load(map, &hm));
+    fusion_map *map = load_map(ctx, &hm);
+    CHECK(map != NULL);
     mesh_bvh *bvh;
     CHECK_OK(mesh_bvh_build(&m, &bvh));
     view_result r = {0};
@@ -269,12 +276,8 @@ BF_TEST(level_of_detail_draws_a_box_on_the_grid)
     CHECK_OK(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, &st));
     CHECK_EQ_INT(st.level_coarse, 5);
     CHECK_EQ_INT(st.level_fine, 5);
-    fusion_config fc = fusion_config_default();
-    fc.brick_cap = hm.n_bricks + 64;
-    fc.node_cap = 16 * hm.n_bricks + 1024;
-    fusion_map *map;
-    CHECK_OK(fusion_create(ctx, &fc, &K_VIEW, hm.origin_w, &map));
-    CHECK_OK(fusion_load(map, &hm));
+    fusion_map *map = load_map(ctx, &hm);
+    CHECK(map != NULL);
     mesh_bvh *bvh;
     CHECK_OK(mesh_bvh_build(&m, &bvh));
     view_result r = {0};
