@@ -302,6 +302,10 @@ void bf_out_printf(bf_out *o, const char *fmt, ...) __attribute__((format(printf
  * above. */
 void bf_out_flush(bf_out *o);
 bf_status bf_out_commit(bf_out *o);
+/* Two files that belong together (an OBJ and its .mtl): both flushed,
+ * fsync'd and closed before either is renamed, then first, then second;
+ * a failure before the renames leaves both paths as they were. */
+bf_status bf_out_commit_both(bf_out *first, bf_out *second);
 void bf_out_abort(bf_out *o);
 /* fsyncs the folder path is in, so a new name in it survives a power loss
  * (the file's own fsync does not make its name durable). A file system

@@ -213,9 +213,9 @@ void bf_out_abort(bf_out *o)
     o->buf = NULL;
 }
 
-bf_status bf_out_commit(bf_out *o)
+/* Flush, fsync and close: the temporary file whole on disk, or o->err. */
+static void out_finish(bf_out *o)
 {
-    if (o->fd < 0) return bf_fail(BF_WRITE, "%s: the output was not opened", o->path);
     bf_out_flush(o);
     if (!o->err && fsync(o->fd) != 0) o->err = errno, o->op = "fsync";
     /* Close even after a failure, or the descriptor leaks; a failed close
@@ -224,16 +224,55 @@ bf_status bf_out_commit(bf_out *o)
     o->fd = -1;
     free(o->buf);
     o->buf = NULL;
-    if (o->err) {
-        unlink(o->tmp);
-        return bf_fail(BF_WRITE, "%s: %s failed: %s", o->path, o->op, strerror(o->err));
-    }
+}
+
+static bf_status out_failed(bf_out *o)
+{
+    return bf_fail(BF_WRITE, "%s: %s failed: %s", o->path, o->op, strerror(o->err));
+}
+
+static bf_status out_rename(bf_out *o)
+{
     if (rename(o->tmp, o->path) != 0) {
         int e = errno;
         unlink(o->tmp);
         return bf_fail(BF_WRITE, "%s: cannot rename into place: %s", o->path, strerror(e));
     }
     return BF_OK;
+}
+
+bf_status bf_out_commit_both(bf_out *first, bf_out *second)
+{
+    if (first->fd < 0 || second->fd < 0) {
+        bf_out *closed = first->fd < 0 ? first : second;
+        bf_out_abort(first);
+        bf_out_abort(second);
+        return bf_fail(BF_WRITE, "%s: the output was not opened", closed->path);
+    }
+    out_finish(first);
+    out_finish(second);
+    if (first->err || second->err) {
+        unlink(first->tmp);
+        unlink(second->tmp);
+        return out_failed(first->err ? first : second);
+    }
+    bf_status s = out_rename(first);
+    if (s != BF_OK) {
+        unlink(second->tmp);
+        return s;
+    }
+    return out_rename(second);
+}
+
+bf_status bf_out_commit(bf_out *o)
+{
+    if (o->fd < 0) return bf_fail(BF_WRITE, "%s: the output was not opened", o->path);
+    out_finish(o);
+    if (o->err) {
+        unlink(o->tmp);
+        return out_failed(o);
+    }
+    return out_rename(o);
 }
 
 bf_status bf_sync_dir(const char *dir)

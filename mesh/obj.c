@@ -103,13 +103,17 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
         *p++ = '\n';
         bf_out_write(&o, line, (size_t)(p - line));
     }
-    /* The material after the mesh: an OBJ that could not be written makes
-     * no .mtl. One that cannot be written after it is warned about: the OBJ
-     * is whole and loads without it (readers warn, keep the vertex colours). */
-    if ((s = bf_out_commit(&o)) != BF_OK || !is_mesh) return s;
+    if (!is_mesh) return bf_out_commit(&o);
+    /* The material with the mesh: both written and synced before either is
+     * renamed, so a failure leaves the earlier pair as it was (a failed OBJ
+     * replaced the .mtl, or left one behind). */
     static const char mtl[] = "# written by bitfuse: a white matte material; the colour is per vertex\n"
                               "newmtl bitfuse\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n";
-    if (bf_write_file_atomic(mtl_path, mtl, sizeof mtl - 1) != BF_OK)
-        bf_warn("%s; %s is written without its material", bf_last_error(), path);
-    return BF_OK;
+    bf_out om;
+    if ((s = bf_out_open(&om, mtl_path)) != BF_OK) {
+        bf_out_abort(&o);
+        return s;
+    }
+    bf_out_write(&om, mtl, sizeof mtl - 1);
+    return bf_out_commit_both(&om, &o);
 }

@@ -384,7 +384,7 @@ BF_TEST(failed_write_keeps_the_old_file_and_leaves_no_temporary)
         CHECK_EQ_INT(count_temp_files(dir), 0);
     }
     signal(SIGXFSZ, old_handler);
-    /* The failed OBJ made no material beside it (it was written first). */
+    /* The failed OBJ made no material beside it (the two are renamed together). */
     snprintf(path, sizeof path, "%s/m.mtl", dir);
     CHECK(!file_exists(path));
     /* A folder that does not exist: BF_WRITE naming it, nothing made. */
