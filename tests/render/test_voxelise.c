@@ -259,8 +259,9 @@ BF_TEST(level_of_detail_follows_the_pixel_footprint)
 
 /* A box whose faces lie on the voxel grid, all of it at one level of
  * detail: the columns of the plan cover the bricks the binning grows the
- * faces into (they stopped at the box and dropped the free bricks beside
- * its sides: nothing was drawn), and it is drawn as without the plan. */
+ * faces into (they stopped at the box and dropped the free bricks in front
+ * of the face the camera sees: its first known voxels were inside, nothing
+ * was drawn), and it is drawn as without the plan. */
 BF_TEST(level_of_detail_draws_a_box_on_the_grid)
 {
     gpu_context *ctx;
