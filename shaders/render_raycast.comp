@@ -234,7 +234,7 @@ void main()
             break;
         }
         tr.has_front = 0u;
-        hit = render_walk(walk_map(), ray, tr.hit_s_exit + RENDER_NUDGE, pc.view.far_m, pc.flags, tr);
+        hit = render_walk(walk_map(), ray, render_nudged(tr.hit_s_exit), pc.view.far_m, pc.flags, tr);
     }
     float f_unused;
     if (hit && !refined && (pc.flags & RENDER_FLAG_REFINE) != 0u)

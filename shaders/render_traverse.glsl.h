@@ -49,7 +49,7 @@
 bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_lo, float voxel_m, render_ray ray,
                      float s_in, float s_out, uint flags, inout render_trace tr)
 {
-    vec3 p = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
+    vec3 p = ray.o + render_nudged(s_in) * ray.dir;
     ivec3 idx = clamp(ivec3(floor((p - brick_lo) * (1.0 / voxel_m))), ivec3(0), ivec3(7));
     ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
     vec3 face = brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m;
@@ -369,7 +369,7 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
      * sphere can reach into the coarse cell: centre (i + 0.5) within rc of
      * [0, 8]. */
     int lo_off = int(ceil(-rc - 0.5)), hi_off = int(floor(8.0 + rc - 0.5));
-    vec3 p0 = ray.o + (s_in + RENDER_NUDGE) * ray.dir;
+    vec3 p0 = ray.o + render_nudged(s_in) * ray.dir;
     ivec3 idx = clamp(ivec3(floor((p0 - brick_lo) * inv_v)), ivec3(0), ivec3(7));
     ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
     vec3 s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
@@ -407,7 +407,7 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
             render_pchain = false;
             if (s_q >= s_out) break;
             s_enter = s_q;
-            vec3 pq = ray.o + (s_q + RENDER_NUDGE) * ray.dir;
+            vec3 pq = ray.o + render_nudged(s_q) * ray.dir;
             idx = ivec3(floor((pq - brick_lo) * inv_v));
             if (any(lessThan(idx, ivec3(0))) || any(greaterThan(idx, ivec3(7)))) break;
             s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;

@@ -72,6 +72,16 @@ struct render_walk_map {
  * (metres of camera depth: 10 um, a hundredth of the finest voxel). */
 #define RENDER_NUDGE 1.0e-5
 
+/* Depth s nudged: s + RENDER_NUDGE, and at least the next float above s.
+ * From 256 m on a float's step is over twice the nudge, which then rounded
+ * away: a ray walking toward lower coordinates stayed on its cell's face
+ * until its cells ran out and missed a mesh seen from 300 m. Below 256 m
+ * the two are the same. */
+float render_nudged(float s)
+{
+    return max(s + RENDER_NUDGE, uintBitsToFloat(floatBitsToUint(max(s, 0.0)) + 1u));
+}
+
 /* The brick traverser: true when the ray hits inside [s_in, s_out) of the
  * brick (slot, level) whose corner is brick_lo (map frame), then
  * tr.hit_depth and tr.hit_level are set. node is the brick's octree node
@@ -154,7 +164,7 @@ bool render_walk_from(render_walk_map m, render_ray ray, inout float s, float s_
     int deep = -1, lo = 0;
     uvec3 g_prev = uvec3(0u);
     for (uint iter = 0u; iter < m.max_cells && s < s_far; iter++) {
-        float sp = s + RENDER_NUDGE;
+        float sp = render_nudged(s);
         vec3 p = ray.o + sp * ray.dir;
         ivec3 key = ivec3(floor(p * inv_chunk));
         if (!have_key || key != cur_key) {

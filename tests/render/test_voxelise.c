@@ -294,6 +294,56 @@ BF_TEST(level_of_detail_draws_a_box_on_the_grid)
     gpu_context_destroy(ctx);
 }
 
+/* A mesh 300 m away is walked to in every direction: from 256 m on, a
+ * float's step is over twice the walk's nudge, which rounded away, and a
+ * ray going toward lower coordinates stayed on its cell's face (only the
+ * quadrant of rays with positive x and y hit). The 50 m face at 275 m
+ * covers 170 px x 25 / 275 = 15.5 px each side of the centre: about 31 x 31
+ * pixels, a quarter of them in each quadrant, at 275 m. */
+BF_TEST(a_mesh_300_m_away_is_hit_in_every_direction)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    const double lo[3] = {-25, -25, 275}, hi[3] = {25, 25, 325};
+    mesh_data m = test_box(lo, hi);
+    render_voxelise_config vc = render_voxelise_config_default();
+    vc.level = 0; /* 0.25 m voxels: a third of the footprint there */
+    hostmap hm;
+    render_voxelise_stats st;
+    CHECK_OK(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, &st));
+    fusion_map *map = load_map(ctx, &hm);
+    CHECK(map != NULL);
+    render_caster *rc;
+    CHECK_OK(render_create(ctx, NULL, K_VIEW.width, K_VIEW.height, &rc));
+    render_options ro = render_options_display();
+    ro.far_m = 1000;
+    bf_se3 T = bf_se3_identity();
+    CHECK_OK(render_raycast(rc, map, &K_VIEW, &T, &ro));
+    render_images im;
+    CHECK_OK(render_download(rc, &im));
+    uint32_t quadrant[4] = {0}, n_hit = 0, n_near = 0;
+    for (uint32_t v = 0; v < K_VIEW.height; v++)
+        for (uint32_t u = 0; u < K_VIEW.width; u++) {
+            float d = im.depth[v * K_VIEW.width + u];
+            if (!(d > 0)) continue;
+            n_hit++;
+            n_near += fabs(d - 275.0) <= 0.25;
+            quadrant[(u > K_VIEW.cx_px) + 2 * (v > K_VIEW.cy_px)]++;
+        }
+    fprintf(stderr, "  box at 275 m: %u pixels hit (%u within a voxel of 275 m), quadrants %u %u %u %u\n", n_hit, n_near,
+            quadrant[0], quadrant[1], quadrant[2], quadrant[3]);
+    CHECK(n_hit >= 850 && n_hit <= 1100);
+    CHECK(n_near >= n_hit * 9 / 10);
+    for (int q = 0; q < 4; q++) CHECK(quadrant[q] >= n_hit / 5);
+    render_images_free(&im);
+    render_destroy(rc);
+    fusion_destroy(map);
+    hostmap_free(&hm);
+    mesh_free(&m);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 BF_TEST(voxelise_refuses_bad_meshes)
 {
     gpu_context *ctx;
