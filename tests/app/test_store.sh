@@ -92,7 +92,7 @@ expect 0 "$B" replay "$T/seqh" --out "$T/h2" --no-mesh --store "$T/H" --resume
 expect 0 "$B" convert "$SEQ" --out "$T/seq.bflog"
 expect 0 "$B" replay "$T/seq.bflog" --out "$T/l1" --no-mesh --frames 30 --store "$T/L"
 size=$(wc -c <"$T/seq.bflog")
-printf 'XXXX' | dd of="$T/seq.bflog" bs=1 seek=$((size / 4)) conv=notrunc 2>/dev/null
+printf '\377\377\377\377' | dd of="$T/seq.bflog" bs=1 seek=$((size / 4)) conv=notrunc 2>/dev/null
 expect 3 "$B" info "$T/seq.bflog" --frames 30
 expect 0 "$B" replay "$T/seq.bflog" --out "$T/l2" --no-mesh --store "$T/L" --resume
 [ "$(json_get "$T/l2/stats.json" "d['frames']")" = 30 ] || fail "the resumed scan of a log did not pass over the 30 stored frames"
