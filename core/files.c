@@ -116,7 +116,7 @@ bf_status bf_out_open(bf_out *o, const char *path_given)
 {
     memset(o, 0, sizeof *o);
     o->fd = -1;
-    /* A symbolic link is written through, as open() would: the rename
+    /* A symbolic link is written through (bf_link_target): the rename
      * replaces the file it names, not the link. */
     char path[sizeof o->path];
     bf_status sl = bf_link_target(path_given, path, sizeof path);

@@ -201,6 +201,14 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, const
     return s;
 }
 
+/* A frame the resumed scan stored: its pose is in the estimates already,
+ * its ground truth (for the ATE) joins the run's. */
+static bf_status note_stored(recon_run *out, const bf_frame *f)
+{
+    out->n_resume_skipped++;
+    return f->has_pose ? bf_traj_push(&out->gt, f->t_depth_s, &f->T_wc) : BF_OK;
+}
+
 /* The end of the frames: BF_END, a stop, or a source failure the run keeps. */
 static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run)
 {
@@ -354,8 +362,7 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
      * the loop below reads them and leaves them out. */
     while (cfg.resume && !(cfg.stop && *cfg.stop) && rgbd_source_pass(src, cfg.resume->t_last_s, &f) == BF_OK) {
         seen++;
-        out->n_resume_skipped++;
-        if (f.has_pose && (s = bf_traj_push(&out->gt, f.t_depth_s, &f.T_wc)) != BF_OK) {
+        if ((s = note_stored(out, &f)) != BF_OK) {
             bf_progress_end(&prog, seen);
             depth_fix_end(&fix);
             return s;
@@ -376,9 +383,7 @@ bf_status recon_run_sequence(gpu_context *ctx, rgbd_source *src, const recon_run
             return sf;
         }
         if (cfg.resume && f.t_depth_s <= cfg.resume->t_last_s) {
-            /* The stored scan handled it: its pose is in the estimates already. */
-            out->n_resume_skipped++;
-            sf = f.has_pose ? bf_traj_push(&out->gt, f.t_depth_s, &f.T_wc) : BF_OK;
+            sf = note_stored(out, &f);
         } else {
             sf = run_frame(&cfg, &f, &as_read, on_frame, user, out);
         }

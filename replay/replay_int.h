@@ -34,11 +34,11 @@ typedef struct replay__text {
     double normalised_norm;
 } replay__text;
 
-/* BF_IO naming the file if it cannot be read; BF_FORMAT naming the line
- * of a NUL byte (replay__text_nul). */
 /* The largest position a pose file may give [m]: a value beyond is corrupt
  * (its square overflows the error measures). */
 #define REPLAY_MAX_POSITION_M 1e9
+/* BF_IO naming the file if it cannot be read; BF_FORMAT naming the line
+ * of a NUL byte (replay__text_nul). */
 bf_status replay__text_open(replay__text *t, const char *path);
 /* Starts t on text (NUL-terminated, edited in place; path names it in
  * messages): a UTF-8 byte order mark skipped, lone CRs read as line ends.
