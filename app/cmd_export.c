@@ -11,14 +11,15 @@
 static const char export_usage[] =
     "usage: bitfuse export STORE --out FILE [--format ply|obj|glb] [--max-triangles N]\n"
     "                      [--max-error M] [--points] [--mesh-level L] [--json]\n\n"
-    "Reads the scene store STORE (bitfuse replay|live --store) and writes the triangle\n"
-    "mesh of its confident surface (marching cubes, as replay's mesh.ply) or, with\n"
-    "--points, its surface voxel centres with normals (as points.ply). The format comes\n"
-    "from FILE's extension or --format: binary PLY, Wavefront OBJ (+ FILE's .mtl) or glTF\n"
-    "binary (.glb). --max-triangles and --max-error simplify the mesh (meshoptimizer).\n"
-    "A map beyond 1 km from the world origin is written relative to a local origin, which\n"
-    "the file records (docs/export.md). A corrupt chunk file is reported by name and left\n"
-    "out; the rest is exported.\n";
+    "Reads the scene store STORE (bitfuse replay|live --store; or a folder holding one\n"
+    "as STORE/store) and writes the triangle mesh of its confident surface (marching\n"
+    "cubes, as replay's mesh.ply) or, with --points, its surface voxel centres with\n"
+    "normals (as points.ply). The format comes from FILE's extension or --format: binary\n"
+    "PLY, Wavefront OBJ (+ FILE's .mtl) or glTF binary (.glb). --max-triangles and\n"
+    "--max-error simplify the mesh (meshoptimizer). A map beyond 1 km from the world\n"
+    "origin is written relative to a local origin, which the file records\n"
+    "(docs/export.md). A corrupt chunk file is reported by name and left out; the rest\n"
+    "is exported.\n";
 
 static const char export_epilog[] =
     "exit codes: 0 ok (also with chunk files left out: they are warned about), 1 failure,\n"
@@ -79,6 +80,11 @@ int cmd_export(int argc, char **argv)
     if (points && (mo.max_triangles || mo.max_error_m > 0))
         return app_usage_error(cmd, "--max-triangles and --max-error simplify a mesh, not --points");
     if (points && level != UINT32_MAX) return app_usage_error(cmd, "--mesh-level is the mesh's, not --points'");
+    /* A run's folder holding its store as DIR/store (replay --out DIR --store
+     * DIR/store), as render and view take it. */
+    char sub[4096];
+    if (!store_exists(dir) && snprintf(sub, sizeof sub, "%s/store", dir) < (int)sizeof sub && store_exists(sub))
+        dir = sub;
     /* Not into the store it reads (an --out of STORE/store.json replaced its index). */
     if ((rc = app_check_not_inside(cmd, "--out", out, dir)) != 0) return rc;
     double t0 = bf_time_s();

@@ -47,6 +47,11 @@ expect 0 "$B" export "$T/S" --out "$T/p.ply" --points --json
 pts=$(json_get "$T/out" "d['vertices']")
 ref=$(head -c 300 "$T/full/points.ply" | awk '/element vertex/ {print $3}')
 [ "$pts" = "$ref" ] || fail "export --points wrote $pts points, replay's points.ply $ref"
+# A run's folder holding its store as DIR/store, as render and view take it.
+mkdir "$T/run" && cp -r "$T/S" "$T/run/store"
+expect 0 "$B" export "$T/run" --out "$T/p2.ply" --points --json
+[ "$(json_get "$T/out" "d['vertices']")" = "$ref" ] || fail "export of DIR holding DIR/store wrote another point set"
+[ "$(json_get "$T/out" "d['store']")" = "$T/run/store" ] || fail "export of DIR: the store is not named DIR/store"
 
 # Usage: a second scan into a used store, --resume without --store, no store at all.
 expect 2 "$B" replay "$SEQ" --out "$T/x" --store "$T/S"
