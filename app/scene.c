@@ -68,6 +68,12 @@ bf_status app_scene_read_files(const app_scene_args *a, app_scene_files *f)
     if (s == BF_OK && a->particles) s = app_scene_read_particles(a->particles, &f->xyz, &f->n_particles);
     if (s == BF_OK && a->mesh) s = mesh_read(a->mesh, &f->mesh);
     if (s == BF_OK && a->mesh && f->mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a->mesh);
+    uint64_t open = 0;
+    if (s == BF_OK && a->mesh) s = mesh_open_edges(&f->mesh, &open);
+    if (s == BF_OK && open)
+        bf_warn("%s: the mesh is not closed (%llu edges on the rim of a hole): the voxeliser tells inside from outside "
+                "by crossings, so parts of it may be missing or filled in (docs/render.md)",
+                a->mesh, (unsigned long long)open);
     return s;
 }
 

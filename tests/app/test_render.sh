@@ -110,6 +110,19 @@ read -r hits < <(py "$T/png.py" "$T/sphere_d.png" hits)
 py -c "import sys; sys.exit(0 if 0.109 <= $hits <= 0.126 else 1)" || fail "sphere: $hits of the pixels hit, not 0.109-0.126"
 read -r centre < <(py "$T/png.py" "$T/sphere_d.png" at 80 60)
 py -c "import sys; sys.exit(0 if abs($centre - 2000) <= 5 else 1)" || fail "sphere: centre depth $centre / 5000 m, not 0.4 m within 1 mm"
+! grep -q "not closed" "$T/err" || fail "the closed sphere was warned about as open"
+# The sphere less its first face: warned about (its rim of 3 edges), drawn all the same.
+py - "$T/sphere.off" "$T/open.off" <<'PYEOF'
+import sys
+lines = open(sys.argv[1]).read().split("\n")
+nv, nf, ne = map(int, lines[1].split())
+lines[1] = "%d %d %d" % (nv, nf - 1, ne)
+del lines[2 + nv]
+open(sys.argv[2], "w").write("\n".join(lines))
+PYEOF
+expect 0 "$B" render --mesh "$T/open.off" --mesh-pose "0 0 0.5 0 0 0 1" --pose "0 0 0 0 0 0 1" --camera $CAM \
+    --size 40x30 --out "$T/open.png"
+mentions "$T/open.off: the mesh is not closed (3 edges on the rim of a hole)"
 
 # The map from the frame's pose: its depth is the frame's (noise-free, the
 # fused surface within a few voxels of 1-2 cm at these depths).

@@ -1,5 +1,6 @@
 /* mesh: the OFF reader against a file written here (a quad fanned into two
  * triangles, comments, a face colour), and its refusals naming the line. */
+#include <math.h>
 #include <stdio.h>
 
 #include "mesh/mesh.h"
@@ -59,4 +60,36 @@ BF_TEST(off_refusals_name_the_line)
     CHECK_ERROR_MENTIONS("not an OFF file");
     CHECK_STATUS(mesh_read_off("/nonexistent/x.off", &m), BF_IO);
     CHECK_ERROR_MENTIONS("/nonexistent/x.off");
+}
+
+/* A tetrahedron closes (every edge shared by two faces); without a face it
+ * has a hole whose rim is 3 edges; written face by face (each face its own
+ * vertices, as STL-like exports do) it still closes, equal positions being
+ * one vertex. */
+BF_TEST(open_edges_count_the_rims_of_holes)
+{
+    static const char *const text[3] = {
+        "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n",
+        "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n",
+        "OFF\n12 4 0\n0 0 0\n0 1 0\n1 0 0\n0 0 0\n1 0 0\n0 0 1\n1 0 0\n0 1 0\n0 0 1\n0 0 0\n0 0 1\n0 1 0\n"
+        "3 0 1 2\n3 3 4 5\n3 6 7 8\n3 9 10 11\n",
+    };
+    static const uint64_t want[3] = {0, 3, 0};
+    mesh_data m;
+    uint64_t n;
+    for (int i = 0; i < 3; i++) {
+        CHECK_OK(mesh_read(write_file("tet.off", text[i]), &m));
+        CHECK_OK(mesh_open_edges(&m, &n));
+        CHECK_EQ_INT(n, want[i]);
+        if (i < 2) mesh_free(&m);
+    }
+    CHECK_EQ_INT(m.n_verts, 12);
+    /* A soup vertex moved by a float's step no longer meets its partners:
+     * the two edges through it and their two partners become rims. */
+    m.xyz[3 * 5 + 2] = nextafterf(1.0f, 2.0f);
+    CHECK_OK(mesh_open_edges(&m, &n));
+    CHECK_EQ_INT(n, 4);
+    m.tri[0] = 12;
+    CHECK_STATUS(mesh_open_edges(&m, &n), BF_INVALID_ARG);
+    mesh_free(&m);
 }
