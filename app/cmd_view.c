@@ -16,7 +16,7 @@
 
 static const char view_usage[] =
     "usage: bitfuse view [--map STORE|DIR] [--mesh FILE [--mesh-pose P] [--mesh-lod on|off]] [--particles FILE]\n"
-    "                    [--pose \"tx ty tz qx qy qz qw\"] [--camera fx,fy,cx,cy] [--size WxH]\n"
+    "                    [--pose \"tx ty tz qx qy qz qw\"] [--camera fx,fy,cx,cy] [--size WxH] [--near M] [--far M]\n"
     "                    [--screenshot IMAGE.png --exit-after N]\n\n"
     "Shows what bitfuse render draws, in a window: a saved map (a scene store, bitfuse\n"
     "replay|live --store; or a folder holding one as DIR/store), a closed mesh voxelised\n"
@@ -35,7 +35,7 @@ static const char view_epilog[] =
 typedef struct view_args {
     app_scene_args scene;
     const char *pose, *camera, *size, *screenshot;
-    double far_m;
+    double near_m, far_m;
     uint32_t exit_after;
     bool overlay;
 } view_args;
@@ -50,6 +50,8 @@ static int parse_args(int argc, char **argv, view_args *a)
                 "intrinsics in pixels at --size (default: 525 * W / 640, the image's centre); a resized window "
                 "scales them", .no_default = true, .check = app_check_camera),
         APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "the window's size", .check = app_check_size),
+        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a Kinect sees nothing nearer "
+                "than 0.2 m; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
                 "the scene's size also over the image's corner (always in the title)"),
@@ -179,6 +181,7 @@ static bf_status resize(view_loop *L, const view_args *a, uint32_t w, uint32_t h
 static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, const double k[4], uint32_t W0, uint32_t H0)
 {
     render_options opt = render_options_display();
+    opt.near_m = (float)a->near_m;
     opt.far_m = (float)a->far_m;
     opt.no_graze = a->scene.mesh != NULL; /* a mesh's outline, as bitfuse render draws it (docs/render.md) */
     uint32_t cw = 0, ch = 0, shown = 0;
@@ -240,9 +243,10 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 int cmd_view(int argc, char **argv)
 {
     const char *cmd = "view";
-    view_args a = {.size = "640x480", .far_m = 13.1, .overlay = true};
+    view_args a = {.size = "640x480", .near_m = 0.2, .far_m = 13.1, .overlay = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    if (!(a.near_m < a.far_m)) return app_usage_error(cmd, "--near %g is not nearer than --far %g", a.near_m, a.far_m);
     if ((rc = app_scene_check(cmd, "show", &a.scene)) != 0) return rc;
     uint32_t W = 640, H = 480;
     app_parse_size(a.size, &W, &H);

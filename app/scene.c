@@ -320,7 +320,20 @@ bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const ap
     render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod);
     hostmap mh;
     bf_status s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);
-    if (s == BF_INVALID_ARG) {
+    /* A mesh too large for the device at the levels the view asks (a mesh
+     * in millimetres read as metres, a camera inside a building): drawn
+     * coarser, a level at a time, and said so. */
+    uint32_t asked = vc.level;
+    while (s == BF_POOL_FULL && vc.level > 0) {
+        vc.level--;
+        s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);
+    }
+    if (s == BF_OK && vc.level < asked)
+        bf_warn("%s: too large for this device at level %u (%.2f mm voxels): drawn no finer than level %u (%.1f mm); "
+                "is it in metres?",
+                a->mesh, asked, 1e3 * hostmap_level_voxel_m(vc.chunk_m, asked), vc.level,
+                1e3 * hostmap_level_voxel_m(vc.chunk_m, vc.level));
+    if (s == BF_INVALID_ARG || s == BF_POOL_FULL) {
         /* What the mesh asks that the grid cannot hold is the file's fault. */
         char msg[512];
         snprintf(msg, sizeof msg, "%s", bf_last_error());

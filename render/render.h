@@ -164,8 +164,10 @@ render_voxelise_config render_voxelise_config_default(void);
 /* Voxelises mesh (placed in the world by T_world_mesh, NULL: identity) into
  * out (its origin_w: cfg's, or the mesh's low corner less a brick). st may
  * be NULL.
- * BF_INVALID_ARG for a vertex that is not finite, an index out of range, a
- * level above 12 or a mesh that needs more than max_pairs pairs. */
+ * BF_INVALID_ARG for a vertex that is not finite, an index out of range or a
+ * level above 12; BF_POOL_FULL for a mesh that needs more than max_pairs
+ * pairs, or more pairs or bricks than one binding of the device holds, at
+ * these levels (a coarser level may fit). */
 bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf_se3 *T_world_mesh,
                                const render_voxelise_config *cfg, hostmap *out, render_voxelise_stats *st);
 /* The level whose voxel is at most a third of the pixel footprint at depth

@@ -294,7 +294,7 @@ static void bin_half_run(void *ctx, size_t which)
             if (x0 <= x1 && y0 <= y1) n += (uint64_t)(x1 - x0 + 1) * (uint64_t)(y1 - y0 + 1) * (uint64_t)(p1[2] - p0[2] + 1);
         }
         if (hf->n_pairs + n > hf->max_pairs || n > UINT32_MAX) {
-            s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u "
+            s = bf_fail(BF_POOL_FULL, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u "
                         "(triangle %u spans %llu bricks): choose a coarser level",
                         (unsigned long long)hf->max_pairs, hf->level, t, (unsigned long long)n);
             break;
@@ -362,7 +362,7 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
         if (hf[k].s != BF_OK) s = bf_fail(hf[k].s, "%s", hf[k].msg);
     uint64_t n_pairs = hf[0].n_pairs + hf[1].n_pairs;
     if (s == BF_OK && n_pairs > max_pairs)
-        s = bf_fail(BF_INVALID_ARG, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u: "
+        s = bf_fail(BF_POOL_FULL, "render: the mesh needs more than %llu (brick, triangle) pairs at level %u: "
                     "choose a coarser level", (unsigned long long)max_pairs, level);
     /* The second half's bricks into the first's hash (remap: its indices to the merged ones). */
     brick_hash *h = &hf[0].h;
@@ -791,7 +791,11 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     bf_status s = c.lod ? lod_make_plan(&c, axis, out->origin_w, v, mesh->n_verts, &plan) : BF_OK;
     uint32_t l_lo = c.lod ? plan.coarse : c.level, l_hi = c.lod ? plan.finest : c.level;
     level_bins lb = {0};
-    uint64_t max_pairs = c.max_pairs;
+    /* The GPU pass binds the pairs and the bricks whole: beyond the
+     * device's largest binding the level is too fine for it (and binning
+     * further would only cost time). */
+    uint64_t range = gpu_device_limits(ctx)->max_storage_buffer_range;
+    uint64_t max_pairs = c.max_pairs < range / 4 ? c.max_pairs : range / 4;
     for (uint32_t l = l_lo; s == BF_OK && l <= l_hi; l++) {
         bins *bn = &lb.b[l];
         s = bin_triangles(v, mesh, c.lod ? &plan : NULL, l, 8 * hostmap_level_voxel_m(c.chunk_m, l), max_pairs, bn);
@@ -804,6 +808,9 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
         n_bricks += lb.b[l].n_bricks, n_pairs += lb.b[l].n_pairs;
     }
     lb.first_brick[13] = n_bricks, lb.first_pair[13] = n_pairs;
+    if (s == BF_OK && (uint64_t)n_bricks * RENDER_VOX_OUT_WORDS * 4 > range)
+        s = bf_fail(BF_POOL_FULL, "render: the mesh needs %u bricks at level %u, more than one binding of the device "
+                    "holds (%llu MiB): choose a coarser level", n_bricks, l_hi, (unsigned long long)(range >> 20));
     uint32_t *brick_words = NULL, *gpu_out = NULL, *tri_ids = NULL, *gpu_slot = NULL;
     if (s == BF_OK) {
         brick_words = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_BRICK_WORDS * 4);

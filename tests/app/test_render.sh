@@ -123,6 +123,39 @@ PYEOF
 expect 0 "$B" render --mesh "$T/open.off" --mesh-pose "0 0 0.5 0 0 0 1" --pose "0 0 0 0 0 0 1" --camera $CAM \
     --size 40x30 --out "$T/open.png"
 mentions "$T/open.off: the mesh is not closed (3 edges on the rim of a hole)"
+# A slab 20 m wide seen from 0.3 m at one level (--mesh-lod off): 1.95 mm
+# voxels would need 3.3 M bricks, beyond lavapipe's 128 MiB binding: drawn
+# a level coarser, and said so (a device whose bindings hold it draws it at
+# level 7). A slab 1 m wide seen from 0.1 m: the default near plane (0.2 m, a
+# Kinect's) leaves it unseen; --near 0.05 sees it.
+slab() { # EDGE: a closed box EDGE x EDGE x 0.2 m, its low face on z = 0
+    py - "$1" <<'PYEOF'
+import sys
+h = float(sys.argv[1]) / 2
+v = [(-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0), (-h, -h, 0.2), (h, -h, 0.2), (h, h, 0.2), (-h, h, 0.2)]
+f = [(0, 2, 1), (0, 3, 2), (4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5), (2, 3, 7), (2, 7, 6),
+     (3, 0, 4), (3, 4, 7)]
+print("\n".join(["OFF", "8 12 0"] + ["%g %g %g" % p for p in v] + ["3 %d %d %d" % t for t in f]))
+PYEOF
+}
+slab 20 >"$T/slab.off"
+expect 0 "$B" render --mesh "$T/slab.off" --mesh-lod off --pose "0 0 -0.3 0 0 0 1" --size 40x30 --out "$T/slab.png" --json
+py - "$T/out" "$T/err" <<'PYEOF' || fail "the 20 m slab from 0.3 m: $(head -c 300 "$T/out") $(head -c 300 "$T/err")"
+import json, sys
+d = json.load(open(sys.argv[1]))
+warned = "too large for this device at level 7" in open(sys.argv[2]).read()
+assert d["hit_fraction"] == 1, d
+assert d["mesh"]["level_fine"] <= 6 if warned else d["mesh"]["level_fine"] == 7, (warned, d)
+PYEOF
+slab 1 >"$T/slab1.off"
+expect 0 "$B" render --mesh "$T/slab1.off" --pose "0 0 -0.1 0 0 0 1" --size 40x30 --out "$T/slab.png" --json
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['hit_fraction'] == 0, d" "$T/out" ||
+    fail "the slab 0.1 m away was seen inside the 0.2 m near plane"
+expect 0 "$B" render --mesh "$T/slab1.off" --pose "0 0 -0.1 0 0 0 1" --size 40x30 --out "$T/slab.png" --json --near 0.05
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['hit_fraction'] == 1, d" "$T/out" ||
+    fail "--near 0.05: the slab 0.1 m away not seen"
+expect 2 "$B" render --mesh "$T/slab1.off" --pose "0 0 -0.1 0 0 0 1" --size 40x30 --out "$T/slab.png" --near 5 --far 4
+mentions "--near 5 is not nearer than --far 4"
 
 # The map from the frame's pose: its depth is the frame's (noise-free, the
 # fused surface within a few voxels of 1-2 cm at these depths).

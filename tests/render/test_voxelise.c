@@ -360,7 +360,7 @@ BF_TEST(voxelise_refuses_bad_meshes)
     m.xyz[4] = 0;
     render_voxelise_config vc = render_voxelise_config_default();
     vc.max_pairs = 10;
-    CHECK_STATUS(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, NULL), BF_INVALID_ARG);
+    CHECK_STATUS(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, NULL), BF_POOL_FULL);
     CHECK_ERROR_MENTIONS("coarser level");
     mesh_free(&m);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
