@@ -287,6 +287,10 @@ int app_check_new_recording(const char *cmd, const char *opt, const char *path, 
 /* A usage error when opt's file out exists inside the folder dir, which is
  * being read (a sequence's index or image): writing would overwrite it. */
 int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir);
+/* A usage error when the output folder out is a scene store, or the store
+ * the same run writes (store, NULL: none): the run's outputs would go in
+ * among the store's files. */
+int app_check_out_not_store(const char *cmd, const char *out, const char *store);
 /* A usage error when opt's file path exists and does not begin as a JSON
  * object does: a JSON writer's --out that names an image or an index by
  * mistake (--out written before a glob) is not written over. */
@@ -355,11 +359,14 @@ bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out)
 bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);
 /* f's mesh voxelised as camera T_wc (K) sees it (lod: each column at the
  * level its pixel footprint needs; else all at one level from its nearest
- * vertex) into *hm: merged on the grid of the map read there when a has
- * one, else *hm becomes the mesh's own. A mesh the grid cannot hold is
- * BF_FORMAT naming the file. vst (may be NULL) gets the voxeliser's stats. */
+ * vertex; nothing nearer than near_m, the rays' near plane, counts) into
+ * *hm: merged on the grid of the map read there when a has one, else *hm
+ * becomes the mesh's own. A mesh too large for the device at those levels
+ * is voxelised a level coarser at a time, with a warning; one the grid
+ * cannot hold even so is BF_FORMAT naming the file. vst (may be NULL) gets
+ * the voxeliser's stats. */
 bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
-                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst);
+                             const bf_intrinsics *K, bool lod, float near_m, hostmap *hm, render_voxelise_stats *vst);
 /* The vertices of a PLY as particle centres (world floats, malloc'd). */
 bf_status app_scene_read_particles(const char *path, float **xyz, uint32_t *n);
 

@@ -85,6 +85,9 @@ int cmd_export(int argc, char **argv)
     char sub[4096];
     if (!store_exists(dir) && snprintf(sub, sizeof sub, "%s/store", dir) < (int)sizeof sub && store_exists(sub))
         dir = sub;
+    else if (!store_exists(dir) && bf_file_exists(dir))
+        return app_fail(cmd, bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder "
+                                                "holding one as store/", dir));
     /* Not into the store it reads (an --out of STORE/store.json replaced its index). */
     if ((rc = app_check_not_inside(cmd, "--out", out, dir)) != 0) return rc;
     double t0 = bf_time_s();

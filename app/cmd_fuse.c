@@ -80,7 +80,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->calibration) rc = app_calibration_read("fuse", a->calibration, a->seq, false, &a->ropt, &a->cal);
     if (!rc) rc = app_check_map_options("fuse", &a->fcfg);
-    return rc ? rc : app_check_not_input("fuse", "--out", a->out, a->seq);
+    if (!rc) rc = app_check_not_input("fuse", "--out", a->out, a->seq);
+    return rc ? rc : app_check_out_not_store("fuse", a->out, NULL);
 }
 
 /* --depth-correction's multipliers (19 KB: not on the stack). */

@@ -58,8 +58,8 @@ static int parse_args(int argc, char **argv, render_args *a)
                 .check = app_check_png),
         APP_OPT("--depth", APP_OPT_STRING, &a->depth, "DEPTH.png", "the depth (16-bit PNG, 5000 per metre, 0: none)",
                 .check = app_check_png),
-        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a Kinect sees nothing nearer "
-                "than 0.2 m; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
+        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera holds "
+                "nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--repeat", APP_OPT_U32, &a->repeat, "N", "ray-cast the view N times and report the median GPU time",
                 .min = 1, .max = 1000),
@@ -218,7 +218,7 @@ int cmd_render(int argc, char **argv)
     render_particles *ps = NULL;
     render_caster *caster = NULL;
     render_voxelise_stats vst = {0};
-    if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, &hm, &vst);
+    if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, (float)a.near_m, &hm, &vst);
     if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);
@@ -257,7 +257,7 @@ int cmd_render(int argc, char **argv)
         if (a.scene.map) printf("  map              %s: %u bricks\n", a.scene.map, n_map_bricks);
         bool one_level = !a.scene.mesh_lod || vst.level_coarse == vst.level_fine;
         if (a.scene.mesh && one_level)
-            printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels, a third of a pixel at its nearest): "
+            printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels): "
                    "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks "
                    "with crossings to test)\n",
                    a.scene.mesh, f.mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,

@@ -50,8 +50,8 @@ static int parse_args(int argc, char **argv, view_args *a)
                 "intrinsics in pixels at --size (default: 525 * W / 640, the image's centre); a resized window "
                 "scales them", .no_default = true, .check = app_check_camera),
         APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "the window's size", .check = app_check_size),
-        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a Kinect sees nothing nearer "
-                "than 0.2 m; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
+        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera holds "
+                "nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
                 "the scene's size also over the image's corner (always in the title)"),
@@ -106,7 +106,8 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_file
         bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
         /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
            camera the whole-scene view is made later: one level). */
-        s = app_scene_add_mesh(ctx, &a->scene, f, &T_first, K, a->scene.mesh_lod && (T_wc || sc->has_pose), &hm, NULL);
+        s = app_scene_add_mesh(ctx, &a->scene, f, &T_first, K, a->scene.mesh_lod && (T_wc || sc->has_pose),
+                               (float)a->near_m, &hm, NULL);
     }
     for (uint32_t i = 0; s == BF_OK && i < hm.n_bricks; i++) grow(sc, hostmap_voxel_center_w(&hm, &hm.bricks[i], 4, 4, 4));
     if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);

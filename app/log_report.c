@@ -8,6 +8,7 @@
 
 #include "app.h"
 #include "replay/replay.h"
+#include "store/store.h"
 
 double app_ratio(uint64_t raw, uint64_t packed) { return packed ? (double)raw / (double)packed : NAN; }
 
@@ -55,6 +56,20 @@ int app_check_not_inside(const char *cmd, const char *opt, const char *out, cons
     if (strncmp(ro, rd, n) != 0 || ro[n] != '/') return 0;
     return app_usage_error(cmd, "%s %s is inside %s, which is being read: writing there would overwrite its file", opt,
                            out, dir);
+}
+
+int app_check_out_not_store(const char *cmd, const char *out, const char *store)
+{
+    if (!out) return 0;
+    if (store_exists(out))
+        return app_usage_error(cmd, "--out %s is a scene store: the outputs would go in among its files; give another "
+                               "folder (a store may live inside it, as --store DIR/store)", out);
+    char ro[PATH_MAX], rs[PATH_MAX];
+    bool same = store && (!strcmp(out, store) || (realpath(out, ro) && realpath(store, rs) && !strcmp(ro, rs)));
+    if (same)
+        return app_usage_error(cmd, "--out %s is --store's folder: the outputs would go in among the store's files; "
+                               "give the store its own folder (--store %s/store)", out, out);
+    return 0;
 }
 
 int app_check_json_out(const char *cmd, const char *opt, const char *path)

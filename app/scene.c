@@ -71,8 +71,9 @@ bf_status app_scene_read_files(const app_scene_args *a, app_scene_files *f)
     uint64_t open = 0;
     if (s == BF_OK && a->mesh) s = mesh_open_edges(&f->mesh, &open);
     if (s == BF_OK && open)
-        bf_warn("%s: the mesh is not closed (%llu edges on the rim of a hole): the voxeliser tells inside from outside "
-                "by crossings, so parts of it may be missing or filled in (docs/render.md)",
+        bf_warn("%s: the mesh may not be closed (%llu edges that an odd number of triangles share: holes' rims, or "
+                "T-junctions): the voxeliser tells inside from outside by crossings, so parts of it may be missing or "
+                "filled in (docs/render.md)",
                 a->mesh, (unsigned long long)open);
     return s;
 }
@@ -298,11 +299,11 @@ static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_s
  * (NULL: its own): with lod, each column at the level its pixel footprint
  * needs, no finer than fusion's finest; without, all of it at the level
  * whose voxel is a third of the footprint at its nearest vertex in front
- * of the camera. */
+ * of the camera. Depths nearer than near_m (the rays' near plane) count as
+ * near_m: no ray sees them. */
 static render_voxelise_config mesh_config(const mesh_data *mesh, const bf_se3 *T_wm, const bf_se3 *T_wc,
-                                          const bf_intrinsics *K, const hostmap *m, bool lod)
+                                          const bf_intrinsics *K, const hostmap *m, bool lod, float near_m)
 {
-    const float near_m = 0.05f;
     render_voxelise_config vc = render_voxelise_config_default();
     if (m) vc.chunk_m = m->chunk_m, vc.has_origin = true, vc.origin_w = m->origin_w;
     uint32_t finest = fusion_config_default().max_level;
@@ -314,26 +315,36 @@ static render_voxelise_config mesh_config(const mesh_data *mesh, const bf_se3 *T
 }
 
 bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
-                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst)
+                             const bf_intrinsics *K, bool lod, float near_m, hostmap *hm, render_voxelise_stats *vst)
 {
     /* On the map's grid when there is one, so both are one ray-cast. */
-    render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod);
+    render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod, near_m);
+    /* The map it is drawn from holds its bricks and the store's in one
+     * sign pool (a binding of the device). */
+    uint64_t pool = gpu_device_limits(ctx)->max_storage_buffer_range / (BRICK_WORDS * 4);
+    uint64_t held = (a->map ? hm->n_bricks : 0) + 1;
+    vc.max_bricks = pool > held ? (uint32_t)(pool - held < vc.max_bricks ? pool - held : vc.max_bricks) : 0;
+    render_voxelise_stats own;
+    if (!vst) vst = &own;
     hostmap mh;
     bf_status s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);
     /* A mesh too large for the device at the levels the view asks (a mesh
      * in millimetres read as metres, a camera inside a building): drawn
-     * coarser, a level at a time, and said so. */
-    uint32_t asked = vc.level;
-    while (s == BF_POOL_FULL && vc.level > 0) {
-        vc.level--;
+     * coarser, a level below the finest tried at a time, and said so. */
+    uint32_t asked = vst->level_fine;
+    while (s == BF_POOL_FULL && vst->level_fine > 0) {
+        vc.level = vst->level_fine - 1;
         s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);
     }
-    if (s == BF_OK && vc.level < asked)
-        bf_warn("%s: too large for this device at level %u (%.2f mm voxels): drawn no finer than level %u (%.1f mm); "
+    if (s == BF_OK && vst->level_fine < asked)
+        bf_warn("%s: too large for this device at level %u (%.2f mm voxels): drawn no finer than level %u (%.2f mm); "
                 "is it in metres?",
-                a->mesh, asked, 1e3 * hostmap_level_voxel_m(vc.chunk_m, asked), vc.level,
-                1e3 * hostmap_level_voxel_m(vc.chunk_m, vc.level));
-    if (s == BF_INVALID_ARG || s == BF_POOL_FULL) {
+                a->mesh, asked, 1e3 * hostmap_level_voxel_m(vc.chunk_m, asked), vst->level_fine,
+                1e3 * hostmap_level_voxel_m(vc.chunk_m, vst->level_fine));
+    if (s == BF_POOL_FULL)
+        return bf_fail(BF_FORMAT, "%s: too large for this device even at level 0 (%.0f mm voxels; %s): is it in metres?",
+                       a->mesh, 1e3 * hostmap_level_voxel_m(vc.chunk_m, 0), bf_last_error());
+    if (s == BF_INVALID_ARG) {
         /* What the mesh asks that the grid cannot hold is the file's fault. */
         char msg[512];
         snprintf(msg, sizeof msg, "%s", bf_last_error());

@@ -48,10 +48,11 @@ void mesh_free(mesh_data *m);
  * local frame: src's world points T * (src.origin + xyz) minus dst.origin
  * (an empty dst takes src's origin). */
 bf_status mesh_append(mesh_data *dst, const mesh_data *src, const bf_se3 *T);
-/* The edges of m (vertices at equal positions taken as one) that an odd
- * number of triangles share: 0 for a closed surface, the length of its
- * holes' rims in edges otherwise (mesh/topology.c). BF_INVALID_ARG for an
- * index out of range. */
+/* The edges of m (vertices at equal positions, bit for bit, taken as one)
+ * that an odd number of triangles share: 0 for a closed surface; otherwise
+ * the rims of its holes, edges where three faces meet, and T-junctions (a
+ * vertex on another triangle's edge) (mesh/topology.c). BF_INVALID_ARG for
+ * an index out of range. */
 bf_status mesh_open_edges(const mesh_data *m, uint64_t *out);
 
 /* ------------------------------------------------------------ writing (mesh/ply.c, obj.c, gltf.c) */

@@ -19,7 +19,7 @@ bf_status mesh_open_edges(const mesh_data *m, uint64_t *out)
     if (m->n_tris == 0) return BF_OK;
     /* Vertices at the same position are one (a mesh written face by face
      * repeats them): meshoptimizer's remap welds equal positions. */
-    unsigned int *remap = malloc((size_t)m->n_verts * sizeof *remap);
+    unsigned int *remap = malloc((size_t)(m->n_verts ? m->n_verts : 1) * sizeof *remap);
     uint64_t *edges = malloc((size_t)m->n_tris * 3 * sizeof *edges);
     if (!remap || !edges) {
         free(remap), free(edges);

@@ -140,6 +140,8 @@ typedef struct render_voxelise_config {
     bf_intrinsics lod_K; /* its intrinsics: focal length and image size */
     float lod_near_m;    /* depths nearer than this count as this, 0 (default): 0.05 m */
     uint64_t max_pairs; /* refuse meshes needing more (brick, triangle) pairs, default 2^28 */
+    uint32_t max_bricks; /* refuse meshes needing more bricks (the map they go into holds them; with another map
+                            merged in, less its bricks), default UINT32_MAX - 1 */
     bool has_origin;    /* the bricks on the grid of a map with this origin (to merge them into it); default
                            false: the mesh's low corner less a brick */
     bf_vec3 origin_w;
@@ -166,8 +168,10 @@ render_voxelise_config render_voxelise_config_default(void);
  * be NULL.
  * BF_INVALID_ARG for a vertex that is not finite, an index out of range or a
  * level above 12; BF_POOL_FULL for a mesh that needs more than max_pairs
- * pairs, or more pairs or bricks than one binding of the device holds, at
- * these levels (a coarser level may fit). */
+ * pairs or max_bricks bricks, or more pairs, bricks (72 bytes each, a map's
+ * sign pool 64) or listed triangles than one binding of the device holds,
+ * at these levels (a coarser level may fit); st's level_coarse and
+ * level_fine then say which levels were tried. */
 bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf_se3 *T_world_mesh,
                                const render_voxelise_config *cfg, hostmap *out, render_voxelise_stats *st);
 /* The level whose voxel is at most a third of the pixel footprint at depth

@@ -262,6 +262,7 @@ typedef struct bin_half {
     uint32_t level, t0, t1;
     double brick_m;
     uint64_t max_pairs;
+    uint32_t max_bricks; /* each half's bricks, like the whole's */
     uint32_t *tri_pairs; /* shared: [t0, t1) written here */
     brick_hash h;
     uint32_t *count, count_cap;
@@ -311,6 +312,12 @@ static void bin_half_run(void *ctx, size_t which)
                         uint64_t key = brick_key(x, y, z);
                         uint32_t i = key == last_key ? last_i : hash_get(&hf->h, key, true, &s);
                         if (s != BF_OK) break;
+                        if (hf->h.n > hf->max_bricks) {
+                            /* Faces along the columns add bricks without pairs: caught here, early. */
+                            s = bf_fail(BF_POOL_FULL, "render: the mesh needs more than %u bricks at level %u: choose "
+                                        "a coarser level", hf->max_bricks, hf->level);
+                            break;
+                        }
                         last_key = key, last_i = i;
                         if (i >= hf->count_cap) {
                             uint32_t cap = hf->count_cap ? 2 * hf->count_cap : 4096;
@@ -346,7 +353,7 @@ static void bin_half_free(bin_half *hf)
  * pass 2 only scatters the remembered pairs into the bins, triangles in
  * mesh order. */
 static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_plan *plan, uint32_t level,
-                               double brick_m, uint64_t max_pairs, bins *out)
+                               double brick_m, uint64_t max_pairs, uint32_t max_bricks, bins *out)
 {
     memset(out, 0, sizeof *out);
     uint32_t *tri_pairs = bf_malloc((size_t)(mesh->n_tris ? mesh->n_tris : 1) * 4);
@@ -354,7 +361,7 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
     bin_half hf[2];
     for (int k = 0; k < 2; k++)
         hf[k] = (bin_half){.v = v, .mesh = mesh, .plan = plan, .level = level, .brick_m = brick_m,
-                           .max_pairs = max_pairs, .tri_pairs = tri_pairs,
+                           .max_pairs = max_pairs, .max_bricks = max_bricks, .tri_pairs = tri_pairs,
                            .t0 = k ? mesh->n_tris / 2 : 0, .t1 = k ? mesh->n_tris : mesh->n_tris / 2};
     bf_parallel_for(2, bin_half_run, hf);
     bf_status s = BF_OK;
@@ -372,6 +379,9 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
     for (uint32_t j = 0; s == BF_OK && j < hf[1].h.cap; j++)
         if (hf[1].h.keys[j]) remap[hf[1].h.idx[j]] = hash_get(h, hf[1].h.keys[j], true, &s);
     uint32_t nb = h->n;
+    if (s == BF_OK && nb > max_bricks)
+        s = bf_fail(BF_POOL_FULL, "render: the mesh needs %u bricks at level %u, more than %u: choose a coarser level",
+                    nb, level, max_bricks);
     uint32_t *count = NULL, *fill = NULL;
     if (s == BF_OK) {
         count = bf_calloc(nb ? nb : 1, 4);
@@ -420,7 +430,7 @@ static bf_status bin_triangles(const float *v, const mesh_data *mesh, const lod_
 
 render_voxelise_config render_voxelise_config_default(void)
 {
-    return (render_voxelise_config){.chunk_m = 2.0f, .level = 7, .max_pairs = 1ull << 28};
+    return (render_voxelise_config){.chunk_m = 2.0f, .level = 7, .max_pairs = 1ull << 28, .max_bricks = UINT32_MAX - 1};
 }
 
 /* The GPU pass over the bricks: out gets RENDER_VOX_OUT_WORDS per brick.
@@ -796,10 +806,14 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
      * further would only cost time). */
     uint64_t range = gpu_device_limits(ctx)->max_storage_buffer_range;
     uint64_t max_pairs = c.max_pairs < range / 4 ? c.max_pairs : range / 4;
+    uint64_t brick_bytes = RENDER_VOX_OUT_WORDS * 4;
+    uint32_t max_bricks = c.max_bricks < range / brick_bytes ? c.max_bricks : (uint32_t)(range / brick_bytes);
+    if (st) st->level_coarse = l_lo, st->level_fine = l_hi; /* also when it fails: the levels tried */
     for (uint32_t l = l_lo; s == BF_OK && l <= l_hi; l++) {
         bins *bn = &lb.b[l];
-        s = bin_triangles(v, mesh, c.lod ? &plan : NULL, l, 8 * hostmap_level_voxel_m(c.chunk_m, l), max_pairs, bn);
-        if (s == BF_OK) max_pairs -= bn->n_pairs;
+        s = bin_triangles(v, mesh, c.lod ? &plan : NULL, l, 8 * hostmap_level_voxel_m(c.chunk_m, l), max_pairs,
+                          max_bricks, bn);
+        if (s == BF_OK) max_pairs -= bn->n_pairs, max_bricks -= bn->n_bricks;
     }
     uint32_t n_bricks = 0;
     uint64_t n_pairs = 0;
@@ -808,9 +822,6 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
         n_bricks += lb.b[l].n_bricks, n_pairs += lb.b[l].n_pairs;
     }
     lb.first_brick[13] = n_bricks, lb.first_pair[13] = n_pairs;
-    if (s == BF_OK && (uint64_t)n_bricks * RENDER_VOX_OUT_WORDS * 4 > range)
-        s = bf_fail(BF_POOL_FULL, "render: the mesh needs %u bricks at level %u, more than one binding of the device "
-                    "holds (%llu MiB): choose a coarser level", n_bricks, l_hi, (unsigned long long)(range >> 20));
     uint32_t *brick_words = NULL, *gpu_out = NULL, *tri_ids = NULL, *gpu_slot = NULL;
     if (s == BF_OK) {
         brick_words = bf_malloc((size_t)(n_bricks ? n_bricks : 1) * RENDER_VOX_BRICK_WORDS * 4);
@@ -840,6 +851,9 @@ bf_status render_voxelise_mesh(gpu_context *ctx, const mesh_data *mesh, const bf
     float *tri_xyz = NULL;
     uint32_t n_used = 0;
     if (s == BF_OK) s = pack_listed_triangles(v, mesh, tri_ids, n_pairs, &tri_xyz, &n_used);
+    if (s == BF_OK && (uint64_t)n_used * 36 > range)
+        s = bf_fail(BF_POOL_FULL, "render: the mesh lists %u triangles at level %u, more than one binding of the "
+                    "device holds (%llu MiB): choose a coarser level", n_used, l_hi, (unsigned long long)(range >> 20));
     double t1 = bf_time_s();
     if (s == BF_OK) s = run_pass(ctx, tri_xyz, n_used, brick_words, n_gpu, tri_ids, n_pairs, c.chunk_m, gpu_out);
     free(tri_xyz);

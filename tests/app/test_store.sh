@@ -58,6 +58,14 @@ expect 2 "$B" replay "$SEQ" --out "$T/x" --store "$T/S"
 mentions "--resume"
 expect 2 "$B" replay "$SEQ" --out "$T/x" --resume
 expect 3 "$B" export "$T/nothing" --out "$T/x.ply"
+# A run's outputs never go in among a store's files.
+expect 2 "$B" replay "$SEQ" --out "$T/S" --no-mesh
+mentions "is a scene store"
+expect 2 "$B" fuse "$SEQ" --out "$T/S" --poses groundtruth
+mentions "is a scene store"
+expect 2 "$B" replay "$SEQ" --out "$T/same" --store "$T/same" --no-mesh
+mentions "is --store's folder"
+[ ! -e "$T/same" ] || fail "a refused run made its folder"
 expect 2 "$B" export "$T/S"
 
 # A corrupt chunk file is named, left out, and the rest still exports.

@@ -362,6 +362,23 @@ BF_TEST(voxelise_refuses_bad_meshes)
     vc.max_pairs = 10;
     CHECK_STATUS(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, NULL), BF_POOL_FULL);
     CHECK_ERROR_MENTIONS("coarser level");
+    /* Too many bricks (faces along the columns add bricks without pairs):
+     * refused while binning, with the levels tried in the stats; a level
+     * coarser fits (render's retry). */
+    render_voxelise_stats st;
+    vc = render_voxelise_config_default();
+    CHECK_OK(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, &st));
+    uint32_t need = hm.n_bricks;
+    hostmap_free(&hm);
+    CHECK(need > 8);
+    vc.max_bricks = need - 1;
+    CHECK_STATUS(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, &st), BF_POOL_FULL);
+    CHECK_ERROR_MENTIONS("bricks at level 7");
+    CHECK_EQ_INT(st.level_fine, 7);
+    vc.level = st.level_fine - 1;
+    CHECK_OK(render_voxelise_mesh(ctx, &m, NULL, &vc, &hm, &st));
+    CHECK(hm.n_bricks <= need - 1);
+    hostmap_free(&hm);
     mesh_free(&m);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
