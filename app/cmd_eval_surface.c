@@ -33,8 +33,28 @@ typedef struct depth_points_args {
     const char *correction;  /* depth_correction.json applied to the depth, or NULL */
     uint32_t every, pixel_step;
     double max_depth_m;
+    double max_gap_s; /* --poses TRAJ: a frame between two poses further apart is left out */
     replay_options ropt;
 } depth_points_args;
+
+/* The pose of a trajectory at t, interpolated only between neighbours at
+ * most max_gap_s apart (a pose within a millisecond of t is taken as it
+ * is): across a wider gap (frames a tracker lost or did not write) the
+ * straight line between its ends is no measurement. *gap: refused so. */
+static bool pose_at(const bf_traj *traj, double t, double max_gap_s, bf_se3 *T, bool *gap)
+{
+    *gap = false;
+    if (!bf_traj_interpolate(traj, t, T)) return false;
+    size_t lo = 0, hi = traj->n - 1;
+    while (hi - lo > 1) {
+        size_t mid = (lo + hi) / 2;
+        if (traj->t_s[mid] <= t) lo = mid;
+        else hi = mid;
+    }
+    if (fabs(traj->t_s[lo] - t) <= 1e-3 || fabs(traj->t_s[hi] - t) <= 1e-3) return true;
+    *gap = traj->t_s[hi] - traj->t_s[lo] > max_gap_s;
+    return !*gap;
+}
 
 /* Back-projects the valid depth of every a->every-th frame, every
  * a->pixel_step-th pixel in x and y, at the frame's pose into pts (a point
@@ -63,13 +83,15 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
     }
     size_t cap = 0, n = 0;
     float *xyz = NULL;
-    uint32_t used = 0, no_pose = 0;
+    uint32_t used = 0, no_pose = 0, in_gap = 0;
     bf_frame f;
     while (s == BF_OK && (s = rgbd_source_next(src, &f)) == BF_OK) {
         if (f.index % a->every) continue;
         bf_se3 T;
-        if (use_traj ? !bf_traj_interpolate(&traj, f.t_depth_s, &T) : !f.has_pose) {
-            no_pose++;
+        bool gap = false;
+        if (use_traj ? !pose_at(&traj, f.t_depth_s, a->max_gap_s, &T, &gap) : !f.has_pose) {
+            if (gap) in_gap++;
+            else no_pose++;
             continue;
         }
         if (!use_traj) T = f.T_wc;
@@ -107,6 +129,9 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
         return s;
     }
     if (no_pose) bf_warn("eval-surface: %u frames without a pose left out", no_pose);
+    if (in_gap)
+        bf_warn("eval-surface: %u frames in gaps of %s wider than --max-gap %g s left out", in_gap, a->poses,
+                a->max_gap_s);
     bf_info("eval-surface: %zu depth samples from %u frames of %s", n, used, a->seq);
     *pts = (mesh_data){.n_verts = (uint32_t)n, .xyz = xyz};
     *n_frames = used;
@@ -136,7 +161,7 @@ int cmd_eval_surface(int argc, char **argv)
     const char *cmd = "eval-surface", *ref_path = NULL, *rec_path = NULL, *vis_path = NULL;
     bool json = false;
     eval_surface_config cfg = eval_surface_config_default();
-    depth_points_args dp = {.poses = "groundtruth", .every = 10, .pixel_step = 4, .max_depth_m = 4.5};
+    depth_points_args dp = {.poses = "groundtruth", .every = 10, .pixel_step = 4, .max_depth_m = 4.5, .max_gap_s = 0.1};
     const app_option own[] = {
         APP_OPT("--reference", APP_OPT_STRING, &ref_path, "MESH", "the reference mesh (PLY)", .required = true),
         APP_OPT("--reconstruction", APP_OPT_STRING, &rec_path, "PLY",
@@ -145,6 +170,10 @@ int cmd_eval_surface(int argc, char **argv)
                 "the reconstruction is SEQUENCE's depth, back-projected at --poses (see above)", .no_default = true),
         APP_OPT("--poses", APP_OPT_STRING, &dp.poses, "P",
                 "with --depth: 'groundtruth' (the sequence's own) or a TUM trajectory file", .needs = "--depth"),
+        APP_OPT("--max-gap", APP_OPT_DOUBLE, &dp.max_gap_s, "S",
+                "with --poses TRAJ: a frame is placed by interpolating TRAJ only between poses at most S seconds "
+                "apart (or at a pose's own time); frames in wider gaps are left out and counted",
+                .min_open = true, .needs = "--poses"),
         APP_OPT("--depth-correction", APP_OPT_STRING, &dp.correction, "FILE",
                 "with --depth: the depth multiplied by this depth_correction.json first (as replay "
                 "--depth-correction has it)", .no_default = true, .needs = "--depth"),

@@ -129,6 +129,17 @@ awk '!/^#/ {$2 += 0.03; $3 += 0.03; $4 += 0.03} {print}' "$T/clean/groundtruth.t
 expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --every 1 --poses "$T/shifted.txt" --json
 python3 -c "import json,sys; a=json.load(open(sys.argv[1]))['accuracy']; assert a['median_m'] > 1e-2 and a['within_threshold'] < 0.5, a" \
     "$T/out" || fail "eval-surface --depth: poses 3 cm off still fit: $(head -c 400 "$T/out")"
+# A trajectory without the middle frame's pose: the frame is interpolated across the one-frame
+# gap (1/15 s), and left out, counted, where --max-gap is narrower.
+awk '!/^#/ {n++; if (n == 2) next} {print}' "$T/clean/groundtruth.txt" >"$T/holed.txt"
+expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --every 1 --poses "$T/holed.txt" --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['depth']['frames'] == 3, d" "$T/out" ||
+    fail "eval-surface: the frame in a one-frame gap not interpolated: $(head -c 300 "$T/out")"
+expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --every 1 --poses "$T/holed.txt" \
+    --max-gap 0.05 --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['depth']['frames'] == 2, d" "$T/out" ||
+    fail "eval-surface --max-gap: the frame in the gap was placed: $(head -c 300 "$T/out")"
+mentions "1 frames in gaps of $T/holed.txt wider than --max-gap 0.05 s left out"
 expect 2 "$B" eval-surface --reference "$T/clean/scene.ply"
 mentions "exactly one of --reconstruction and --depth"
 
