@@ -52,6 +52,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
                 "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
                 "image, an earlier moment than its pose): skipped, or fused like a new one; with skip, a colour "
                 "repeated alone is left out of the map's colour"),
+        APP_OPT("--max-depth", APP_OPT_FLOAT, &a->fcfg.sensor.max_depth_m, "M",
+                "the sensor's range: depth samples beyond M metres are not fused", .min = 0.5, .max = 20),
         APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
                 "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
                 "out of every frame before fusion (docs/calibration.md)", .no_default = true),
@@ -159,6 +161,7 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) {
         recon_run_config rcfg = recon_run_config_default();
         rcfg.loop.fusion = a.fcfg;
+        rcfg.loop.sensor = a.fcfg.sensor; /* the loop hands its sensor to fusion */
         rcfg.loop.skip_repeated = a.skip_repeated;
         rcfg.poses = RECON_POSES_KNOWN;
         rcfg.known = use_traj ? &traj : NULL;

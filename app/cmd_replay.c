@@ -103,7 +103,7 @@ typedef struct replay_args {
  * replay_args, which is copied). */
 static calib_depth_correction replay_depth_fix;
 
-#define LOOP_ROWS 35
+#define LOOP_ROWS 36
 #define LIVE_ROWS 6
 #define STORE_ROWS 4
 #define STREAM_ROWS 5
@@ -274,6 +274,9 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "a frame whose depth repeats the previous frame's byte for byte (a driver handing on its last "
                 "image): skipped, the last pose kept, or tracked and fused like a new one; with skip, a colour "
                 "repeated alone is left out of the photometric term and the map's colour"),
+        APP_OPT("--max-depth", APP_OPT_FLOAT, &a->rcfg.sensor.max_depth_m, "M",
+                "the sensor's range: depth samples beyond M metres are neither tracked nor fused (Kinect v1's "
+                "noise grows with the square of the depth)", .min = 0.5, .max = 20),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",
                 "look for a lost camera from candidate poses (where its colour matched to a keyframe's puts it, "
                 "last pose, continued motion, turns, keyframes) and widen the motion gate with the frames since "

@@ -318,6 +318,18 @@ assert [r["fused"] for r in rows] == ["1", "0", "1"], [r["fused"] for r in rows]
 PY
     expect 2 "$B" replay "$T/seq" --out "$T/rpfe0" $small --fuse-every 0
     mentions "--fuse-every"
+    # The sensor's range (--max-depth): the room lies beyond 0.5 m, so no frame has depth
+    # there (exit 3, nothing written); 4 m keeps it and is echoed; 0.1 m is refused.
+    expect 3 "$B" replay "$T/seq" --out "$T/rpmd" $small --max-depth 0.5
+    mentions "within the sensor's 0.5 m: skipped"
+    [ ! -e "$T/rpmd" ] || fail "replay --max-depth 0.5 left $T/rpmd behind"
+    expect 0 "$B" replay "$T/seq" --out "$T/rpmd4" $small --max-depth 4
+    py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['config']['sensor']['max_depth_m'] == 4, d['config']['sensor']" \
+        "$T/rpmd4/stats.json" || fail "replay --max-depth 4 not echoed in stats.json"
+    expect 2 "$B" replay "$T/seq" --out "$T/rpmd0" $small --max-depth 0.1
+    mentions "--max-depth"
+    expect 3 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fumd" $small --max-depth 0.5
+    mentions "no frame with a pose and depth"
     # A colour repeated alone: the frame's depth is new, so it is tracked, without the
     # colour (an earlier moment's) in the photometric term or the map's colour. With the
     # term on, frames.csv's photo_sharpness is 0 where the term did not run: on that frame
