@@ -33,14 +33,16 @@ typedef struct depth_points_args {
     const char *correction;  /* depth_correction.json applied to the depth, or NULL */
     uint32_t every, pixel_step;
     double max_depth_m;
-    double max_gap_s; /* --poses TRAJ: a frame between two poses further apart is left out */
+    double max_gap_s; /* --poses TRAJ: a frame between two poses further apart is left out; < 0: not given (0.1) */
+    uint32_t in_gap;  /* out: frames left out so */
     replay_options ropt;
 } depth_points_args;
 
 /* The pose of a trajectory at t, interpolated only between neighbours at
- * most max_gap_s apart (a pose within a millisecond of t is taken as it
- * is): across a wider gap (frames a tracker lost or did not write) the
- * straight line between its ends is no measurement. *gap: refused so. */
+ * most max_gap_s apart (a microsecond's slack: 0.1 s is three frames at 30
+ * Hz, and TUM's times round either side of it); across a wider gap (frames
+ * a tracker lost or did not write) the straight line between its ends is
+ * no measurement. *gap: refused so. */
 static bool pose_at(const bf_traj *traj, double t, double max_gap_s, bf_se3 *T, bool *gap)
 {
     *gap = false;
@@ -51,15 +53,15 @@ static bool pose_at(const bf_traj *traj, double t, double max_gap_s, bf_se3 *T, 
         if (traj->t_s[mid] <= t) lo = mid;
         else hi = mid;
     }
-    if (fabs(traj->t_s[lo] - t) <= 1e-3 || fabs(traj->t_s[hi] - t) <= 1e-3) return true;
-    *gap = traj->t_s[hi] - traj->t_s[lo] > max_gap_s;
+    if (traj->t_s[lo] == t || traj->t_s[hi] == t) return true; /* a pose of its own */
+    *gap = traj->t_s[hi] - traj->t_s[lo] > max_gap_s + 1e-6;
     return !*gap;
 }
 
 /* Back-projects the valid depth of every a->every-th frame, every
  * a->pixel_step-th pixel in x and y, at the frame's pose into pts (a point
  * set: no triangles). Frames without a pose are skipped and counted. */
-static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32_t *n_frames)
+static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32_t *n_frames, uint32_t *in_gap_out)
 {
     rgbd_source *src = NULL;
     bf_traj traj = {0};
@@ -132,6 +134,7 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
     if (in_gap)
         bf_warn("eval-surface: %u frames in gaps of %s wider than --max-gap %g s left out", in_gap, a->poses,
                 a->max_gap_s);
+    *in_gap_out = in_gap;
     bf_info("eval-surface: %zu depth samples from %u frames of %s", n, used, a->seq);
     *pts = (mesh_data){.n_verts = (uint32_t)n, .xyz = xyz};
     *n_frames = used;
@@ -161,7 +164,7 @@ int cmd_eval_surface(int argc, char **argv)
     const char *cmd = "eval-surface", *ref_path = NULL, *rec_path = NULL, *vis_path = NULL;
     bool json = false;
     eval_surface_config cfg = eval_surface_config_default();
-    depth_points_args dp = {.poses = "groundtruth", .every = 10, .pixel_step = 4, .max_depth_m = 4.5, .max_gap_s = 0.1};
+    depth_points_args dp = {.poses = "groundtruth", .every = 10, .pixel_step = 4, .max_depth_m = 4.5, .max_gap_s = -1};
     const app_option own[] = {
         APP_OPT("--reference", APP_OPT_STRING, &ref_path, "MESH", "the reference mesh (PLY)", .required = true),
         APP_OPT("--reconstruction", APP_OPT_STRING, &rec_path, "PLY",
@@ -172,8 +175,8 @@ int cmd_eval_surface(int argc, char **argv)
                 "with --depth: 'groundtruth' (the sequence's own) or a TUM trajectory file", .needs = "--depth"),
         APP_OPT("--max-gap", APP_OPT_DOUBLE, &dp.max_gap_s, "S",
                 "with --poses TRAJ: a frame is placed by interpolating TRAJ only between poses at most S seconds "
-                "apart (or at a pose's own time); frames in wider gaps are left out and counted",
-                .min_open = true, .needs = "--poses"),
+                "apart (or at a pose's own time); frames in wider gaps are left out and counted (default 0.1)",
+                .min_open = true, .needs = "--poses", .no_default = true),
         APP_OPT("--depth-correction", APP_OPT_STRING, &dp.correction, "FILE",
                 "with --depth: the depth multiplied by this depth_correction.json first (as replay "
                 "--depth-correction has it)", .no_default = true, .needs = "--depth"),
@@ -213,13 +216,18 @@ int cmd_eval_surface(int argc, char **argv)
      * counted as not within --threshold: the share would be wrong. */
     if (cfg.max_dist_m < cfg.threshold_m)
         return app_usage_error(cmd, "--max-dist %g is below --threshold %g", cfg.max_dist_m, cfg.threshold_m);
+    /* The sequence's own poses are each frame's: there is no gap to bridge. */
+    if (dp.max_gap_s >= 0 && !strcmp(dp.poses, "groundtruth"))
+        return app_usage_error(cmd, "--max-gap bridges gaps of a --poses TRAJ file, not the sequence's own poses");
+    if (dp.max_gap_s < 0) dp.max_gap_s = 0.1;
     if (dp.seq) rec_path = dp.seq;
 
     mesh_data ref = {0}, rec = {0}, vis = {0};
     eval_surface_result r;
     uint32_t depth_frames = 0;
     bf_status s = mesh_read_ply(ref_path, &ref);
-    if (!s) s = dp.seq ? depth_points(&dp, &rec, &depth_frames) : mesh_read_ply(rec_path, &rec);
+    uint32_t in_gap = 0;
+    if (!s) s = dp.seq ? depth_points(&dp, &rec, &depth_frames, &in_gap) : mesh_read_ply(rec_path, &rec);
     if (!s && vis_path) s = mesh_read_ply(vis_path, &vis);
     if (!s && ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", ref_path);
     if (!s && rec.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reconstruction has no vertices", rec_path);
@@ -250,6 +258,10 @@ int cmd_eval_surface(int argc, char **argv)
             cJSON_AddNumberToObject(d, "every", dp.every);
             cJSON_AddNumberToObject(d, "pixel_step", dp.pixel_step);
             cJSON_AddNumberToObject(d, "max_depth_m", dp.max_depth_m);
+            if (strcmp(dp.poses, "groundtruth") != 0) {
+                cJSON_AddNumberToObject(d, "max_gap_s", dp.max_gap_s);
+                cJSON_AddNumberToObject(d, "frames_in_gaps", in_gap);
+            }
         }
         if (vis_path) cJSON_AddStringToObject(o, "visible", vis_path);
         else cJSON_AddNullToObject(o, "visible");

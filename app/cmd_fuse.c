@@ -53,7 +53,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
                 "image, an earlier moment than its pose): skipped, or fused like a new one; with skip, a colour "
                 "repeated alone is left out of the map's colour"),
         APP_OPT("--max-depth", APP_OPT_FLOAT, &a->fcfg.sensor.max_depth_m, "M",
-                "the sensor's range: depth samples beyond M metres are not fused", .min = 0.5, .max = 20),
+                "the sensor's range: depth samples beyond M metres are not fused; at most 6, as replay's",
+                .min = 0.5, .max = 6),
         APP_OPT("--depth-correction", APP_OPT_STRING, &a->depth_correction, "FILE",
                 "depth_correction.json of bitfuse calibrate-depth: the depth camera's fixed error pattern, taken "
                 "out of every frame before fusion (docs/calibration.md)", .no_default = true),

@@ -276,7 +276,8 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "repeated alone is left out of the photometric term and the map's colour"),
         APP_OPT("--max-depth", APP_OPT_FLOAT, &a->rcfg.sensor.max_depth_m, "M",
                 "the sensor's range: depth samples beyond M metres are neither tracked nor fused (Kinect v1's "
-                "noise grows with the square of the depth)", .min = 0.5, .max = 20),
+                "noise grows with the square of the depth); at most 6, the tracking reference's far plane",
+                .min = 0.5, .max = 6),
         APP_OPT("--reloc", APP_OPT_CHOICE, &a->rcfg.reloc.enabled, "on|off",
                 "look for a lost camera from candidate poses (where its colour matched to a keyframe's puts it, "
                 "last pose, continued motion, turns, keyframes) and widen the motion gate with the frames since "

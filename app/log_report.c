@@ -58,6 +58,28 @@ int app_check_not_inside(const char *cmd, const char *opt, const char *out, cons
                            out, dir);
 }
 
+/* path made absolute and plain (no "." or "..", no trailing or doubled
+ * slash): realpath where it exists, else its folder's realpath and its
+ * name (a folder a run is about to make); false where neither resolves. */
+static bool canonical(const char *path, char out[PATH_MAX])
+{
+    if (realpath(path, out)) return true;
+    char copy[PATH_MAX];
+    size_t n = strlen(path);
+    if (n == 0 || n >= sizeof copy) return false;
+    memcpy(copy, path, n + 1);
+    while (n > 1 && copy[n - 1] == '/') copy[--n] = '\0';
+    char *slash = strrchr(copy, '/');
+    const char *name = slash ? slash + 1 : copy;
+    char dir[PATH_MAX];
+    if (slash == copy) snprintf(dir, sizeof dir, "/");
+    else if (slash) *slash = '\0', snprintf(dir, sizeof dir, "%s", copy);
+    else snprintf(dir, sizeof dir, ".");
+    if (!strcmp(name, ".") || !strcmp(name, "..") || !realpath(dir, out)) return false;
+    size_t m = strlen(out);
+    return snprintf(out + m, PATH_MAX - m, "%s%s", m > 1 ? "/" : "", name) < (int)(PATH_MAX - m);
+}
+
 int app_check_out_not_store(const char *cmd, const char *out, const char *store)
 {
     if (!out) return 0;
@@ -65,7 +87,7 @@ int app_check_out_not_store(const char *cmd, const char *out, const char *store)
         return app_usage_error(cmd, "--out %s is a scene store: the outputs would go in among its files; give another "
                                "folder (a store may live inside it, as --store DIR/store)", out);
     char ro[PATH_MAX], rs[PATH_MAX];
-    bool same = store && (!strcmp(out, store) || (realpath(out, ro) && realpath(store, rs) && !strcmp(ro, rs)));
+    bool same = store && canonical(out, ro) && canonical(store, rs) && !strcmp(ro, rs);
     if (same)
         return app_usage_error(cmd, "--out %s is --store's folder: the outputs would go in among the store's files; "
                                "give the store its own folder (--store %s/store)", out, out);

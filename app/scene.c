@@ -289,7 +289,8 @@ static uint32_t mesh_level(const mesh_data *mesh, const bf_se3 *T_wm, const bf_s
         bf_vec3 p = bf_v3(mesh->origin.x + mesh->xyz[3 * i], mesh->origin.y + mesh->xyz[3 * i + 1],
                           mesh->origin.z + mesh->xyz[3 * i + 2]);
         bf_vec3 c = bf_se3_apply(&T_cw, bf_se3_apply(T_wm, p));
-        if (c.z > near_m && c.z < z_min) z_min = c.z;
+        double z = c.z > near_m ? c.z : near_m; /* nearer than the rays start: seen no closer than there */
+        if (c.z > 0 && z < z_min) z_min = z;
     }
     if (!isfinite(z_min)) z_min = 1.0; /* all behind the camera: any level shows nothing */
     return render_level_for_footprint(chunk_m, z_min, K->fx_px > K->fy_px ? K->fx_px : K->fy_px, max_level);
@@ -323,8 +324,11 @@ bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const ap
      * sign pool (a binding of the device). */
     uint64_t pool = gpu_device_limits(ctx)->max_storage_buffer_range / (BRICK_WORDS * 4);
     uint64_t held = (a->map ? hm->n_bricks : 0) + 1;
-    vc.max_bricks = pool > held ? (uint32_t)(pool - held < vc.max_bricks ? pool - held : vc.max_bricks) : 0;
-    render_voxelise_stats own;
+    if (pool <= held)
+        return bf_fail(BF_FORMAT, "%s: the map %s fills the device's largest binding (%llu bricks): no room for the "
+                       "mesh's bricks", a->mesh, a->map, (unsigned long long)pool);
+    vc.max_bricks = (uint32_t)(pool - held < vc.max_bricks ? pool - held : vc.max_bricks);
+    render_voxelise_stats own = {0};
     if (!vst) vst = &own;
     hostmap mh;
     bf_status s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);
@@ -342,7 +346,8 @@ bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const ap
                 a->mesh, asked, 1e3 * hostmap_level_voxel_m(vc.chunk_m, asked), vst->level_fine,
                 1e3 * hostmap_level_voxel_m(vc.chunk_m, vst->level_fine));
     if (s == BF_POOL_FULL)
-        return bf_fail(BF_FORMAT, "%s: too large for this device even at level 0 (%.0f mm voxels; %s): is it in metres?",
+        return bf_fail(BF_FORMAT, "%s: too large for this device even at level 0 (%.0f mm voxels; %s): is it in "
+                       "metres, and are its triangles as many as it needs?",
                        a->mesh, 1e3 * hostmap_level_voxel_m(vc.chunk_m, 0), bf_last_error());
     if (s == BF_INVALID_ARG) {
         /* What the mesh asks that the grid cannot hold is the file's fault. */

@@ -140,6 +140,10 @@ expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" -
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['depth']['frames'] == 2, d" "$T/out" ||
     fail "eval-surface --max-gap: the frame in the gap was placed: $(head -c 300 "$T/out")"
 mentions "1 frames in gaps of $T/holed.txt wider than --max-gap 0.05 s left out"
+python3 -c "import json,sys; d=json.load(open(sys.argv[1]))['depth']; assert d['frames_in_gaps'] == 1 and d['max_gap_s'] == 0.05, d" \
+    "$T/out" || fail "eval-surface --max-gap: frames_in_gaps not in the JSON"
+expect 2 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --poses groundtruth --max-gap 0.05
+mentions "--max-gap bridges gaps of a --poses TRAJ file"
 expect 2 "$B" eval-surface --reference "$T/clean/scene.ply"
 mentions "exactly one of --reconstruction and --depth"
 

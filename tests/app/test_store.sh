@@ -66,6 +66,11 @@ mentions "is a scene store"
 expect 2 "$B" replay "$SEQ" --out "$T/same" --store "$T/same" --no-mesh
 mentions "is --store's folder"
 [ ! -e "$T/same" ] || fail "a refused run made its folder"
+expect 2 "$B" replay "$SEQ" --out "$T/./same2" --store "$T/same2/" --no-mesh
+mentions "is --store's folder"
+mkdir "$T/plain"
+expect 3 "$B" export "$T/plain" --out "$T/x.ply"
+mentions "$T/plain: not a scene store (bitfuse replay|live --store), nor a folder holding one as store/"
 expect 2 "$B" export "$T/S"
 
 # A corrupt chunk file is named, left out, and the rest still exports.
