@@ -141,6 +141,17 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
     return BF_OK;
 }
 
+/* The diagonal of a mesh's bounding box [its units]. */
+static double span_m(const mesh_data *m)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < 3 * (size_t)m->n_verts; i++) {
+        lo[i % 3] = fmin(lo[i % 3], m->xyz[i]);
+        hi[i % 3] = fmax(hi[i % 3], m->xyz[i]);
+    }
+    return m->n_verts ? sqrt(pow(hi[0] - lo[0], 2) + pow(hi[1] - lo[1], 2) + pow(hi[2] - lo[2], 2)) : 0;
+}
+
 static void json_dist(cJSON *o, const eval_dist_stats *d)
 {
     cJSON_AddNumberToObject(o, "mean_m", d->mean);
@@ -232,6 +243,13 @@ int cmd_eval_surface(int argc, char **argv)
     if (!s && ref.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reference has no vertices", ref_path);
     if (!s && rec.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: the reconstruction has no vertices", rec_path);
     if (!s && vis_path && vis.n_verts == 0) s = bf_fail(BF_FORMAT, "%s: no visible points", vis_path);
+    double span_ref = 0, span_rec = 0;
+    if (!s) span_ref = span_m(&ref), span_rec = span_m(&rec);
+    /* Far apart in size, one is likely in other units (a mesh in millimetres): its distances are then
+       all beyond any threshold, which reads as a bad reconstruction. */
+    if (!s && span_ref > 0 && span_rec > 0 && (span_ref > 20 * span_rec || span_rec > 20 * span_ref))
+        bf_warn("eval-surface: the reference spans %.3g m and the reconstruction %.3g m: are both in metres?", span_ref,
+                span_rec);
     if (!s) {
         bf_info("eval-surface: reference %u vertices / %u triangles, reconstruction %u vertices / %u "
                 "triangles%s",

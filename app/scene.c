@@ -66,6 +66,9 @@ bf_status app_scene_read_files(const app_scene_args *a, app_scene_files *f)
     bf_status s = BF_OK;
     if (a->map && !bf_file_exists(a->map)) s = bf_fail(BF_IO, "%s: no such map (store or folder)", a->map);
     if (s == BF_OK && a->particles) s = app_scene_read_particles(a->particles, &f->xyz, &f->n_particles);
+    /* A simulation's dump may hold none yet (an emitter not started): drawn as nothing, but said. */
+    if (s == BF_OK && a->particles && f->n_particles == 0)
+        bf_warn("%s: no particles (the PLY has no vertex): nothing of them is drawn", a->particles);
     if (s == BF_OK && a->mesh) s = mesh_read(a->mesh, &f->mesh);
     if (s == BF_OK && a->mesh && f->mesh.n_tris == 0) s = bf_fail(BF_FORMAT, "%s: the mesh has no triangle", a->mesh);
     uint64_t open = 0;

@@ -117,6 +117,24 @@ is_json "$T/out"
 expect 0 "$B" eval-surface --reference "$T/seq/scene.ply" --reconstruction "$T/seq/seen.ply" --max-samples 2000 --json
 is_json "$T/out"
 
+# eval-surface: a reconstruction in millimetres against a reference in metres is warned about
+# (every distance would be beyond the threshold); the same units are not.
+for scale in 1 1000; do
+    py - "$T/tet$scale.ply" "$scale" <<'PY'
+import sys
+s = float(sys.argv[2])
+v = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)]
+f = [(0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)]
+open(sys.argv[1], "w").write("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+    "property float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n"
+    + "".join("%g %g %g\n" % tuple(s * c for c in p) for p in v) + "".join("3 %d %d %d\n" % t for t in f))
+PY
+done
+expect 0 "$B" eval-surface --reference "$T/tet1.ply" --reconstruction "$T/tet1000.ply" --max-samples 500
+mentions "the reference spans 1.73 m and the reconstruction 1.73e+03 m: are both in metres?"
+expect 0 "$B" eval-surface --reference "$T/tet1.ply" --reconstruction "$T/tet1.ply" --max-samples 500
+! grep -q "are both in metres" "$T/err" || fail "eval-surface warned about units of the same mesh"
+
 # eval-surface --depth: noiseless depth at its true poses lies on the scene (within the 0.2 mm
 # depth unit and the scene's triangles); the same depth at poses shifted 3 cm along each axis
 # (off every wall of the room) does not.

@@ -259,6 +259,11 @@ expect 3 "$B" render --map "$T/nodata" --pose "$POSE" --size 160x120 --out "$T/x
 mentions "$T/nodata"
 expect 3 "$B" render --particles "$T/nope.ply" --pose "$POSE" --size 160x120 --out "$T/x.png"
 mentions "$T/nope.ply"
+# An empty particle set (a simulation's first dump may hold none): drawn as nothing, said so.
+printf 'ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n' \
+    >"$T/none.ply"
+expect 0 "$B" render --particles "$T/none.ply" --pose "$POSE" --size 40x30 --out "$T/none.png"
+mentions "$T/none.ply: no particles (the PLY has no vertex)"
 head -c 100 "$T/p.ply" >"$T/cut.ply"
 expect 3 "$B" render --particles "$T/cut.ply" --pose "$POSE" --size 160x120 --out "$T/x.png"
 mentions "$T/cut.ply"
