@@ -88,6 +88,14 @@ static void compare_view(gpu_context *ctx, fusion_map *map, const mesh_bvh *bvh,
     *out = r;
 }
 
+/* What a view comparison drew from: the mesh's BVH, the map and its host copy. */
+static void free_drawn(mesh_bvh *bvh, fusion_map *map, hostmap *hm)
+{
+    mesh_bvh_destroy(bvh);
+    fusion_destroy(map);
+    hostmap_free(hm);
+}
+
 /* hm loaded into a map of its own size (sparse bricks: a node path each); NULL on failure. */
 static fusion_map *load_map(gpu_context *ctx, const hostmap *hm)
 {
@@ -144,9 +152,7 @@ static void check_mesh(gpu_context *ctx, const mesh_data *m, uint32_t level, con
         CHECK_LE(r.depth_p50, 0.25);
         CHECK_LE(r.depth_p95, 1.0);
     }
-    mesh_bvh_destroy(bvh);
-    fusion_destroy(map);
-    hostmap_free(&hm);
+    free_drawn(bvh, map, &hm);
 }
 
 BF_TEST(voxelised_torus_renders_like_the_mesh)
@@ -249,9 +255,7 @@ BF_TEST(level_of_detail_follows_the_pixel_footprint)
     CHECK(r.iou >= 0.99);
     CHECK_LE(r.depth_p50, 0.25);
     CHECK_LE(r.depth_p95, 1.0);
-    mesh_bvh_destroy(bvh);
-    fusion_destroy(map);
-    hostmap_free(&hm);
+    free_drawn(bvh, map, &hm);
     mesh_free(&m);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
@@ -286,9 +290,7 @@ BF_TEST(level_of_detail_draws_a_box_on_the_grid)
     fprintf(stderr, "  box at one level of detail: %u bricks, IoU %.4f (%u pixels hit)\n", st.n_bricks, r.iou, r.n_truth);
     CHECK(r.n_truth > K_VIEW.width * K_VIEW.height / 10);
     CHECK(r.iou >= 0.97);
-    mesh_bvh_destroy(bvh);
-    fusion_destroy(map);
-    hostmap_free(&hm);
+    free_drawn(bvh, map, &hm);
     mesh_free(&m);
     GPU_FIXTURE_CHECK_CLEAN(ctx);
     gpu_context_destroy(ctx);
