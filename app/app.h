@@ -327,9 +327,10 @@ const char *app_check_png(const char *name, const char *v);
 typedef struct app_scene_args {
     const char *map, *particles, *mesh, *mesh_pose;
     double radius_m, cell_m;
+    double near_m, far_m; /* the rays' depth range */
     bool particle_lod, mesh_lod;
 } app_scene_args;
-#define APP_SCENE_ROWS 9
+#define APP_SCENE_ROWS 11
 /* The options render and view share: --map, --particles and theirs, --mesh
  * and theirs, with each command's own help for --mesh and --mesh-lod (view
  * voxelises at its first pose's detail); sets *a's defaults. */
@@ -359,14 +360,14 @@ bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out)
 bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);
 /* f's mesh voxelised as camera T_wc (K) sees it (lod: each column at the
  * level its pixel footprint needs; else all at one level from its nearest
- * vertex; nothing nearer than near_m, the rays' near plane, counts) into
+ * vertex; nothing nearer than a's near plane counts) into
  * *hm: merged on the grid of the map read there when a has one, else *hm
  * becomes the mesh's own. A mesh too large for the device at those levels
  * is voxelised a level coarser at a time, with a warning; one the grid
  * cannot hold even so is BF_FORMAT naming the file. vst (may be NULL) gets
  * the voxeliser's stats. */
 bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
-                             const bf_intrinsics *K, bool lod, float near_m, hostmap *hm, render_voxelise_stats *vst);
+                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst);
 /* The vertices of a PLY as particle centres (world floats, malloc'd). */
 bf_status app_scene_read_particles(const char *path, float **xyz, uint32_t *n);
 

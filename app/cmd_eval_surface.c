@@ -34,7 +34,6 @@ typedef struct depth_points_args {
     uint32_t every, pixel_step;
     double max_depth_m;
     double max_gap_s; /* --poses TRAJ: a frame between two poses further apart is left out; < 0: not given (0.1) */
-    uint32_t in_gap;  /* out: frames left out so */
     replay_options ropt;
 } depth_points_args;
 

@@ -40,7 +40,6 @@ static const char render_epilog[] =
 typedef struct render_args {
     app_scene_args scene;
     const char *pose, *camera, *size, *out, *depth;
-    double near_m, far_m;
     uint32_t repeat;
     bool json;
 } render_args;
@@ -58,9 +57,6 @@ static int parse_args(int argc, char **argv, render_args *a)
                 .check = app_check_png),
         APP_OPT("--depth", APP_OPT_STRING, &a->depth, "DEPTH.png", "the depth (16-bit PNG, 5000 per metre, 0: none)",
                 .check = app_check_png),
-        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera holds "
-                "nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
-        APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--repeat", APP_OPT_U32, &a->repeat, "N", "ray-cast the view N times and report the median GPU time",
                 .min = 1, .max = 1000),
         APP_OPT("--json", APP_OPT_FLAG, &a->json, NULL, "machine-readable output on stdout instead of the lines"),
@@ -188,13 +184,12 @@ static cJSON *render_json(const render_report *r)
 int cmd_render(int argc, char **argv)
 {
     const char *cmd = "render";
-    render_args a = {.near_m = 0.2, .far_m = 13.1, .repeat = 1};
+    render_args a = {.repeat = 1};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     /* The depth would replace the image it was written beside. */
     if (a.depth && !strcmp(a.depth, a.out))
         return app_usage_error(cmd, "--depth %s is --out's file: give each its own", a.depth);
-    if (!(a.near_m < a.far_m)) return app_usage_error(cmd, "--near %g is not nearer than --far %g", a.near_m, a.far_m);
     if ((rc = app_scene_check(cmd, "render", &a.scene)) != 0) return rc;
     uint32_t W = 0, H = 0;
     app_parse_size(a.size, &W, &H);
@@ -218,15 +213,15 @@ int cmd_render(int argc, char **argv)
     render_particles *ps = NULL;
     render_caster *caster = NULL;
     render_voxelise_stats vst = {0};
-    if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, (float)a.near_m, &hm, &vst);
+    if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, &hm, &vst);
     if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);
     if (s == BF_OK && a.scene.particles) s = app_scene_make_particles(ctx, &a.scene, &f, &ps);
     if (s == BF_OK) s = render_create(ctx, NULL, W, H, &caster);
     render_options opt = render_options_display();
-    opt.near_m = (float)a.near_m;
-    opt.far_m = (float)a.far_m;
+    opt.near_m = (float)a.scene.near_m;
+    opt.far_m = (float)a.scene.far_m;
     /* A mesh's outline: pass by the hits that graze a voxel's corner (docs/render.md). */
     opt.no_graze = a.scene.mesh != NULL;
     double *ms = calloc(a.repeat, sizeof *ms), *ms_p = calloc(a.repeat, sizeof *ms_p);

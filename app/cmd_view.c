@@ -35,7 +35,6 @@ static const char view_epilog[] =
 typedef struct view_args {
     app_scene_args scene;
     const char *pose, *camera, *size, *screenshot;
-    double near_m, far_m;
     uint32_t exit_after;
     bool overlay;
 } view_args;
@@ -50,9 +49,6 @@ static int parse_args(int argc, char **argv, view_args *a)
                 "intrinsics in pixels at --size (default: 525 * W / 640, the image's centre); a resized window "
                 "scales them", .no_default = true, .check = app_check_camera),
         APP_OPT("--size", APP_OPT_STRING, &a->size, "WxH", "the window's size", .check = app_check_size),
-        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera holds "
-                "nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
-        APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT("--overlay", APP_OPT_CHOICE, &a->overlay, "on|off",
                 "the scene's size also over the image's corner (always in the title)"),
         APP_OPT("--screenshot", APP_OPT_STRING, &a->screenshot, "IMAGE.png",
@@ -106,8 +102,7 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_file
         bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
         /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
            camera the whole-scene view is made later: one level). */
-        s = app_scene_add_mesh(ctx, &a->scene, f, &T_first, K, a->scene.mesh_lod && (T_wc || sc->has_pose),
-                               (float)a->near_m, &hm, NULL);
+        s = app_scene_add_mesh(ctx, &a->scene, f, &T_first, K, a->scene.mesh_lod && (T_wc || sc->has_pose), &hm, NULL);
     }
     for (uint32_t i = 0; s == BF_OK && i < hm.n_bricks; i++) grow(sc, hostmap_voxel_center_w(&hm, &hm.bricks[i], 4, 4, 4));
     if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);
@@ -182,8 +177,8 @@ static bf_status resize(view_loop *L, const view_args *a, uint32_t w, uint32_t h
 static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, const double k[4], uint32_t W0, uint32_t H0)
 {
     render_options opt = render_options_display();
-    opt.near_m = (float)a->near_m;
-    opt.far_m = (float)a->far_m;
+    opt.near_m = (float)a->scene.near_m;
+    opt.far_m = (float)a->scene.far_m;
     opt.no_graze = a->scene.mesh != NULL; /* a mesh's outline, as bitfuse render draws it (docs/render.md) */
     uint32_t cw = 0, ch = 0, shown = 0;
     bf_se3 T_last;
@@ -244,10 +239,9 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 int cmd_view(int argc, char **argv)
 {
     const char *cmd = "view";
-    view_args a = {.size = "640x480", .near_m = 0.2, .far_m = 13.1, .overlay = true};
+    view_args a = {.size = "640x480", .overlay = true};
     int rc = parse_args(argc, argv, &a);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    if (!(a.near_m < a.far_m)) return app_usage_error(cmd, "--near %g is not nearer than --far %g", a.near_m, a.far_m);
     if ((rc = app_scene_check(cmd, "show", &a.scene)) != 0) return rc;
     uint32_t W = 640, H = 480;
     app_parse_size(a.size, &W, &H);

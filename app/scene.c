@@ -17,7 +17,7 @@
 void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const char *mesh_help,
                        const char *mesh_lod_help)
 {
-    *a = (app_scene_args){.radius_m = 0.01, .particle_lod = true, .mesh_lod = true};
+    *a = (app_scene_args){.radius_m = 0.01, .near_m = 0.2, .far_m = 13.1, .particle_lod = true, .mesh_lod = true};
     const app_option r[APP_SCENE_ROWS] = {
         APP_OPT("--map", APP_OPT_STRING, &a->map, "STORE",
                 "the map: a scene store, or a folder holding one as DIR/store"),
@@ -36,6 +36,9 @@ void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const
         APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
                 "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
         APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off", mesh_lod_help),
+        APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera "
+                "holds nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
+        APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);
@@ -44,6 +47,7 @@ void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const
 int app_scene_check(const char *cmd, const char *verb, const app_scene_args *a)
 {
     if (a->mesh_pose && !a->mesh) return app_usage_error(cmd, "--mesh-pose without --mesh");
+    if (!(a->near_m < a->far_m)) return app_usage_error(cmd, "--near %g is not nearer than --far %g", a->near_m, a->far_m);
     if (!a->map && !a->particles && !a->mesh)
         return app_usage_error(cmd, "nothing to %s: give --map, --mesh, --particles or any of them", verb);
     /* The radius and cell as the particle set takes them (a cell of at most
@@ -319,10 +323,10 @@ static render_voxelise_config mesh_config(const mesh_data *mesh, const bf_se3 *T
 }
 
 bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
-                             const bf_intrinsics *K, bool lod, float near_m, hostmap *hm, render_voxelise_stats *vst)
+                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst)
 {
     /* On the map's grid when there is one, so both are one ray-cast. */
-    render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod, near_m);
+    render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod, (float)a->near_m);
     /* The map it is drawn from holds its bricks and the store's in one
      * sign pool (a binding of the device). */
     uint64_t pool = gpu_device_limits(ctx)->max_storage_buffer_range / (BRICK_WORDS * 4);
