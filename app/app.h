@@ -138,7 +138,7 @@ void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mes
  * decides the exit code (5), each is warned about, and the work done is
  * written wherever it still can be (docs/faults.md). */
 typedef struct app_write_failure {
-    bf_status s; /* BF_OK, or BF_WRITE once an output failed */
+    bf_status s; /* BF_OK, or BF_WRITE once an output failed (BF_INVALID_ARG: app_note_mesh_refused) */
     char message[1024];
 } app_write_failure;
 /* s, or BF_OK when s is BF_WRITE (then noted in w and warned about). */
@@ -155,6 +155,7 @@ typedef struct app_map_report {
     char mesh_file[16];           /* "mesh.ply", "mesh.obj" or "mesh.glb"; "" without a mesh */
     bool mesh_skipped;            /* --no-mesh: none was made */
     char mesh_error[1024];        /* why the mesh could not be written ("" if it was, or none was asked) */
+    bf_status mesh_refused;       /* BF_INVALID_ARG: simplified to nothing (the cap), the rest written */
     bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
     uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */
 } app_map_report;
@@ -166,6 +167,9 @@ uint32_t app_mesh_level(const hostmap *snap);
  * recon_snapshot) or, when whole is NULL, of the pools' snapshot. */
 bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, const app_mesh_out *mo,
                          app_map_report *r);
+/* A mesh that app_export_map refused to simplify to nothing (r->mesh_refused)
+ * is noted in w as a failure of its own status (exit 2 after the outputs). */
+void app_note_mesh_refused(app_write_failure *w, const app_map_report *r);
 /* expect.c: replay --expect BASELINE.json --tolerance NAME=VALUE,...: the
  * new stats.json's measures (ATE, surface error, map digest, tracked, lost
  * and relocalised counts; time only when its tolerance is given) against a

@@ -189,6 +189,7 @@ int cmd_fuse(int argc, char **argv)
     /* An output that cannot be written does not stop the others. */
     app_write_failure wf = {0};
     if (s == BF_OK) s = app_note_write(&wf, cmd, app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out));
+    app_note_mesh_refused(&wf, &r.out);
     r.seconds = bf_time_s() - t_start;
     if (s == BF_OK) {
         cJSON *o = stats_json(&a, &r, src);

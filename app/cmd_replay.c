@@ -1023,6 +1023,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = app_note_write(&wf, cmd,
                            app_export_map(r.run.map, r.run.loop ? &whole : NULL, a.out, a.no_mesh ? NULL : &a.mesh_out,
                                           &r.out));
+    app_note_mesh_refused(&wf, &r.out);
     hostmap_free(&whole);
     if (s_loop != BF_OK && s != BF_OK) {
         /* The device did not answer for the map: the trajectory stays. */

@@ -111,6 +111,15 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
         if (s == BF_OK && (s = bf_path_join(path, sizeof path, out_dir, r->mesh_file)) == BF_OK)
             s = app_mesh_write(path, (mesh_format)mo->format, mo, &mesh, &r->simplify);
         r->mesh_origin = mesh.origin;
+        /* Simplified to nothing (a cap below what clustering keeps): the
+         * points are still written, the caller notes it for the exit code. */
+        if (s == BF_INVALID_ARG) {
+            bf_warn("%s: no mesh written; the points are", bf_last_error());
+            snprintf(r->mesh_error, sizeof r->mesh_error, "%s", bf_last_error());
+            r->mesh_refused = s;
+            r->mesh_file[0] = '\0';
+            s = BF_OK;
+        }
         if (s == BF_WRITE) {
             snprintf(mesh_error, sizeof mesh_error, "%s", bf_last_error());
             bf_warn("%s; the points are still written", mesh_error);
@@ -243,6 +252,13 @@ bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s)
         snprintf(w->message, sizeof w->message, "%s", bf_last_error());
     }
     return BF_OK;
+}
+
+void app_note_mesh_refused(app_write_failure *w, const app_map_report *r)
+{
+    if (r->mesh_refused == BF_OK || w->s != BF_OK) return;
+    w->s = r->mesh_refused;
+    snprintf(w->message, sizeof w->message, "%s", r->mesh_error);
 }
 
 bf_status app_write_status(const app_write_failure *w)

@@ -53,6 +53,17 @@ static bf_status compact(mesh_data *m, uint32_t *idx, size_t n_idx)
     return BF_OK;
 }
 
+/* The fewest triangles meshopt_simplifySloppy keeps of m, searched by
+ * doubling the target from one that kept none (tmp: room for m's indices). */
+static size_t smallest_clustering(uint32_t *tmp, const mesh_data *m, size_t target)
+{
+    size_t n_idx = 3 * (size_t)m->n_tris, n = 0;
+    float err;
+    for (size_t t = target < 3 ? 6 : 2 * target; n == 0 && t < n_idx; t *= 2)
+        n = meshopt_simplifySloppy(tmp, m->tri, n_idx, m->xyz, m->n_verts, 3 * sizeof(float), t, FLT_MAX, &err);
+    return n ? n / 3 : m->n_tris;
+}
+
 bf_status mesh_simplify(mesh_data *m, const mesh_simplify_config *cfg, mesh_simplify_stats *st)
 {
     double t0 = bf_time_s();
@@ -95,6 +106,17 @@ bf_status mesh_simplify(mesh_data *m, const mesh_simplify_config *cfg, mesh_simp
         n = n2;
         sx.error_m += err * scale;
         sx.used_sloppy = true;
+    }
+    /* A cap below what clustering keeps would write an empty mesh: refused,
+     * naming the smallest cap that keeps some. (The collapses alone keep a
+     * closed mesh's topology: an error bound does not empty it.) */
+    if (n == 0 && target > 0) {
+        size_t fewest = smallest_clustering(tmp, m, target);
+        free(tmp), free(idx);
+        return bf_fail(BF_INVALID_ARG,
+                       "simplify: a cap of %llu triangles leaves none of the mesh's %u (the coarsest vertex clustering "
+                       "that keeps any has %zu): choose a larger cap",
+                       (unsigned long long)cfg->max_triangles, m->n_tris, fewest);
     }
     free(tmp);
     bf_status s = compact(m, idx, n);

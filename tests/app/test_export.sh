@@ -87,6 +87,15 @@ mentions ".ply, .obj, .glb"
 expect 2 "$B" export "$T/S" --out "$T/x.ply" --format fbx
 mentions "--format"
 expect 2 "$B" export "$T/S" --out "$T/x.ply" --points --max-triangles 100
+# A cap that leaves no triangle: refused by name, not an empty mesh.
+expect 2 "$B" export "$T/S" --out "$T/x.ply" --max-triangles 1
+mentions "leaves none"
+[ -e "$T/x.ply" ] && fail "a cap of 1 triangle wrote x.ply"
+expect 2 "$B" replay "$T/seq" --out "$T/r3" --max-triangles 1
+mentions "leaves none"
+[ -e "$T/r3/mesh.ply" ] && fail "replay --max-triangles 1 wrote a mesh"
+for f in trajectory.txt points.ply stats.json; do [ -s "$T/r3/$f" ] || fail "replay --max-triangles 1 left out $f"; done
+json_get "$T/r3/stats.json" "d['mesh']['error']" | grep -q "leaves none" || fail "stats.json's mesh.error does not say why"
 expect 2 "$B" replay "$T/seq" --out "$T/r2" --mesh-format stl
 [ -e "$T/r2" ] && fail "a refused replay made its folder"
 expect 5 "$B" export "$T/S" --out "$T/no/such/dir/x.glb"

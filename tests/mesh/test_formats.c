@@ -520,6 +520,32 @@ BF_TEST(simplify_to_an_error_bound_stays_within_it)
     mesh_free(&m);
 }
 
+BF_TEST(simplify_refuses_a_cap_that_leaves_no_triangle)
+{
+    mesh_data m;
+    fx_uv_sphere(&m, 1.0, bf_v3(0, 0, 0), 40, 80);
+    uint32_t n0 = m.n_tris;
+    float *xyz = m.xyz;
+    /* One triangle: vertex clustering keeps none of a closed sphere (a
+     * cell holding a whole triangle's corners drops it); refused, the mesh
+     * as it was, the smallest cap that keeps some named. */
+    mesh_simplify_config cfg = {.max_triangles = 1};
+    CHECK_STATUS(mesh_simplify(&m, &cfg, NULL), BF_INVALID_ARG);
+    CHECK(strstr(bf_last_error(), "leaves none") != NULL);
+    CHECK(strstr(bf_last_error(), "keeps any has") != NULL);
+    CHECK_EQ_INT(m.n_tris, n0);
+    CHECK(m.xyz == xyz);
+    /* The count it names is a cap that works. */
+    unsigned long long fewest = 0;
+    const char *at = strstr(bf_last_error(), "keeps any has ");
+    CHECK(at && sscanf(at, "keeps any has %llu", &fewest) == 1);
+    CHECK(fewest > 1 && fewest < n0);
+    cfg.max_triangles = fewest;
+    CHECK_OK(mesh_simplify(&m, &cfg, NULL));
+    CHECK(m.n_tris > 0 && m.n_tris <= fewest);
+    mesh_free(&m);
+}
+
 /* One simplification for the fault walk: on failure the mesh must be as it
  * was (all or nothing); a changed mesh is reported as BF_NUMERIC, which
  * the walk refuses. */
