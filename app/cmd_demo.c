@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "app.h"
 #include "eval/eval.h"
@@ -260,7 +261,14 @@ static bf_status demo_run(gpu_context *ctx, const char *out_dir, uint32_t n_fram
         .noise = SYNTH_NOISE_KINECT1, .seed = seed, .out_dir = seq, .version = BF_VERSION,
     };
     bf_info("rendering %u frames of the synthetic room into %s", n_frames, seq);
-    if ((s = synth_run(&cfg, &r->synth)) != BF_OK) goto done;
+    if ((s = synth_run(&cfg, &r->synth)) != BF_OK) {
+        /* A mesh in --data that does not read: nothing rendered, and the
+         * trajectory written for it goes too (rmdir takes only an empty
+         * folder: an earlier run's frames stay). */
+        (void)unlink(path);
+        (void)rmdir(seq);
+        goto done;
+    }
 
     /* 3. Replay it and back-project the depth with the true poses. */
     mesh_data raw = {0};
@@ -331,12 +339,14 @@ int cmd_demo(int argc, char **argv)
     bool use_gpu = !no_gpu;
     if (!data_dir) data_dir = app_default_data_dir();
 
+    bool made_out = !bf_file_exists(out_dir);
     demo_report r;
     memset(&r, 0, sizeof r);
     double t0 = bf_time_s();
     gpu_context *ctx = demo_device(use_gpu, &r);
     bf_status s = demo_run(ctx, out_dir, n_frames, seed, data_dir, &r);
     gpu_context_destroy(ctx);
+    if (s != BF_OK && made_out) (void)rmdir(out_dir); /* only if it is empty */
     if (s != BF_OK) return app_fail(cmd, s);
     r.seconds = bf_time_s() - t0;
 

@@ -736,6 +736,11 @@ mentions "does not fit"
 expect 2 "$B" demo --data "$T/no-such-data" --no-gpu --out "$T/demo-nodata"
 mentions "$T/no-such-data"
 [ -e "$T/demo-nodata" ] && fail "demo with a missing --data made its folder"
+# A mesh there that does not read: exit 3 naming it, and nothing left behind.
+mkdir -p "$T/baddata/meshes" && echo junk >"$T/baddata/meshes/bunny.ply"
+expect 3 "$B" demo --data "$T/baddata" --no-gpu --out "$T/demo-baddata"
+mentions "bunny.ply"
+[ -e "$T/demo-baddata" ] && fail "demo with an unreadable mesh in --data left $(ls "$T/demo-baddata")"
 # An option that means nothing without another is refused, not ignored.
 expect 2 "$B" replay "$T/seq" --out "$T/x" --view-period 0
 mentions "--view-period needs --view"
