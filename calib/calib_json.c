@@ -221,8 +221,10 @@ static bf_status parse_root(const char *path, const cJSON *root, calib_result *r
 
 bf_status calib_parse(const char *path, const char *text, size_t len, calib_result *out)
 {
+    /* A byte-order mark is skipped here, so the offsets named are the file's. */
+    size_t bom = bf_bom_bytes(text, len);
     const char *end = NULL;
-    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, false);
+    cJSON *root = cJSON_ParseWithLengthOpts(text + bom, len - bom, &end, false);
     if (!root) {
         const char *at = cJSON_GetErrorPtr();
         size_t off = at && at >= text && at <= text + len ? (size_t)(at - text) : 0;
@@ -246,8 +248,7 @@ bf_status calib_read(const char *path, calib_result *out)
     size_t len;
     bf_status s = bf_read_file(path, &text, &len);
     if (s != BF_OK) return s;
-    size_t bom = bf_bom_bytes(text, len);
-    s = calib_parse(path, text + bom, len - bom, out);
+    s = calib_parse(path, text, len, out);
     free(text);
     return s;
 }

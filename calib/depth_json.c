@@ -180,9 +180,15 @@ static bf_status parse_root(const char *path, const cJSON *root, calib_depth_cor
 
 bf_status calib_depth_parse(const char *path, const char *text, size_t len, calib_depth_correction *out)
 {
+    /* A byte-order mark is skipped here, so the offsets named are the file's. */
+    size_t bom = bf_bom_bytes(text, len);
     const char *end = NULL;
-    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, false);
-    if (!root) return bf_fail(BF_FORMAT, "%s: not JSON", path);
+    cJSON *root = cJSON_ParseWithLengthOpts(text + bom, len - bom, &end, false);
+    if (!root) {
+        const char *at = cJSON_GetErrorPtr();
+        size_t off = at && at >= text && at <= text + len ? (size_t)(at - text) : 0;
+        return bf_fail(BF_FORMAT, "%s: not JSON (near byte %zu)", path, off);
+    }
     size_t tail = bf_trailing_text(text, len, end);
     if (tail < len) {
         cJSON_Delete(root);
@@ -206,8 +212,7 @@ bf_status calib_depth_read(const char *path, calib_depth_correction *out)
     size_t len;
     bf_status s = bf_read_file(path, &text, &len);
     if (s != BF_OK) return s;
-    size_t bom = bf_bom_bytes(text, len);
-    s = calib_depth_parse(path, text + bom, len - bom, out);
+    s = calib_depth_parse(path, text, len, out);
     free(text);
     return s;
 }

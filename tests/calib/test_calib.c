@@ -70,6 +70,9 @@ BF_TEST(calib_malformed_fields_are_named)
         {"{\"colour\": {", "not JSON", BF_FORMAT},
         {"[1, 2]", "not a JSON object", BF_FORMAT},
         {"{\"version\": 1}\n<<<<<<< HEAD", "text after the JSON value at byte 15", BF_FORMAT},
+        /* Behind a byte-order mark the bytes named are still the file's. */
+        {"\xEF\xBB\xBF{\"version\": 1}\n<<<<<<< HEAD", "text after the JSON value at byte 18", BF_FORMAT},
+        {"\xEF\xBB\xBF{\"version\": 1,}", "not JSON (near byte 17)", BF_FORMAT},
         {"{\"depth\": {}}", "colour: missing", BF_FORMAT},
         {"{\"colour\": {\"width\": 640, \"height\": 480, \"fy\": 525, \"cx\": 319.5, \"cy\": 239.5}}", "colour.fx: missing",
          BF_FORMAT},

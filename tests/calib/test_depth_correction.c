@@ -264,6 +264,9 @@ BF_TEST(depth_correction_malformed_files_are_named)
         {"{\"format\": \"bitfuse-depth-correction\", \"version\": 1, \"width\": 16, \"height\": 8, \"cell_px\": 8, "
          "\"grid_w\": 2, \"grid_h\": 1, \"multipliers\": [[1, 1]], \"undistorted\": [0.1, 0, 0, \"x\", 0]}",
          "undistorted[3]", BF_FORMAT},
+        /* Behind a byte-order mark the bytes named are still the file's. */
+        {"\xEF\xBB\xBF{\"format\": 1} x", "text after the JSON value at byte 17", BF_FORMAT},
+        {"\xEF\xBB\xBF{\"format\": }", "not JSON (near byte 14)", BF_FORMAT},
     };
     calib_depth_correction *c = malloc(sizeof *c);
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
