@@ -74,6 +74,9 @@ typedef struct app_option {
     /* An option that means nothing without another ("--view"): given
      * alone, it is a usage error rather than silently ignored. */
     const char *needs;
+    /* NULL, or set true when the option is given (a default's value given
+     * on purpose is then told from the default). */
+    bool *given;
 } app_option;
 
 /* A row: the first five fields in order, then any others by name. */
@@ -105,7 +108,8 @@ struct replay_options;
 #define APP_SEQUENCE_ROWS 5
 #define APP_MAP_ROWS 10
 void app_sequence_options(app_option rows[APP_SEQUENCE_ROWS], struct replay_options *o);
-void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc);
+/* bricks_given (NULL: not asked): set true when --bricks is given. */
+void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bricks_given);
 /* What the map rows cannot check alone (the sub-cache within the window):
  * 0 or the usage exit code, the message printed. */
 int app_check_map_options(const char *cmd, const fusion_config *fc);
@@ -332,6 +336,7 @@ typedef struct app_scene_args {
     const char *map, *particles, *mesh, *mesh_pose;
     double radius_m, cell_m;
     double near_m, far_m; /* the rays' depth range */
+    bool far_given;       /* --far given (view's whole-scene camera otherwise reaches past the scene) */
     bool particle_lod, mesh_lod;
 } app_scene_args;
 #define APP_SCENE_ROWS 11

@@ -67,7 +67,7 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     };
     app_option map[APP_MAP_ROWS], seq[APP_SEQUENCE_ROWS], msh[APP_MESH_ROWS];
     app_mesh_options(msh, &a->mesh_out, false);
-    app_map_options(map, &a->fcfg);
+    app_map_options(map, &a->fcfg, NULL);
     app_sequence_options(seq, &a->ropt);
     const app_option *tables[] = {own, msh, map, seq, NULL};
     app_command_spec spec = {

@@ -75,6 +75,7 @@ typedef struct replay_args {
     double gpu_budget_mib;   /* the pools' bytes (0: --bricks decides) */
     double cache_budget_mib; /* the streaming cache's bytes */
     bool auto_budget;        /* neither --gpu-budget nor --bricks: the device decides */
+    bool bricks_given;       /* --bricks, even at fusion's default value */
     const char *calibration; /* calib.json: read into cal by parse_args */
     const char *depth_correction; /* depth_correction.json: read into replay_depth_fix by parse_args */
     bool view;               /* show the map in a window as the scan goes (view/) */
@@ -391,7 +392,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     };
     loop_options(own, a);
     live_options(dev, a);
-    app_map_options(map, &a->rcfg.fusion);
+    app_map_options(map, &a->rcfg.fusion, &a->bricks_given);
     app_sequence_options(seq, &a->ropt);
     store_options(sto, a);
     stream_options(stm, a);
@@ -441,9 +442,8 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     if (isnan(a->rcfg.track.noise_weight_exp))
         a->rcfg.track.noise_weight_exp = a->depth_correction ? REPLAY_NOISE_EXP_CORRECTED
                                                              : recon_config_default().track.noise_weight_exp;
-    bool bricks_given = a->rcfg.fusion.brick_cap != fusion_config_default().brick_cap;
-    a->auto_budget = !rc && a->gpu_budget_mib <= 0 && !bricks_given;
-    if (!rc && a->gpu_budget_mib > 0 && bricks_given)
+    a->auto_budget = !rc && a->gpu_budget_mib <= 0 && !a->bricks_given;
+    if (!rc && a->gpu_budget_mib > 0 && a->bricks_given)
         return app_usage_error(cmd, "--bricks and --gpu-budget both size the map's pools: give one");
     if (!rc && a->gpu_budget_mib > 0 && floor(a->gpu_budget_mib * 1048576.0 / BYTES_PER_BRICK) < 1024)
         return app_usage_error(cmd, "--gpu-budget %g MiB holds fewer than 1024 bricks", a->gpu_budget_mib);

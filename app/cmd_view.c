@@ -62,7 +62,7 @@ static int parse_args(int argc, char **argv, view_args *a)
     app_scene_options(scene, &a->scene,
                       "a closed triangle mesh (PLY or OFF, metres), voxelised into the map's bricks at the first "
                       "pose's detail",
-                      "level of detail within the mesh, from the first camera (--pose or the store's): each part at "
+                      "level of detail within the mesh, from the first camera (--pose, the store's, else the whole scene's): each part at "
                       "the level its pixel footprint needs there (off: the nearest point's level everywhere)");
     const app_option *tables[] = {scene, rows, NULL};
     app_command_spec spec = {.name = "view", .usage = view_usage, .tables = tables, .epilog = view_epilog};
@@ -76,45 +76,14 @@ typedef struct view_scene {
     uint64_t n_bricks;        /* the map's bricks and the particles' */
     bool has_pose;
     bf_se3 last_pose;         /* the store's last camera pose */
-    bf_vec3 lo_w, hi_w;       /* the bounding box of brick centres and particles */
+    bf_vec3 lo_w, hi_w;       /* the bounding box of brick centres, mesh vertices and particles */
+    double far_m;             /* the rays' far plane */
 } view_scene;
 
 static void grow(view_scene *sc, bf_vec3 p)
 {
     sc->lo_w = bf_v3(fmin(sc->lo_w.x, p.x), fmin(sc->lo_w.y, p.y), fmin(sc->lo_w.z, p.z));
     sc->hi_w = bf_v3(fmax(sc->hi_w.x, p.x), fmax(sc->hi_w.y, p.y), fmax(sc->hi_w.z, p.z));
-}
-
-/* The scene on the GPU as bitfuse render loads it: the map read already
- * (hm, emptied here; meta its store's), the mesh at the detail of the
- * first camera (T_wc; NULL: the store's last pose, else 1 m away). */
-static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_files *f, hostmap *map_read,
-                            const store_meta *meta, const bf_intrinsics *K, const bf_se3 *T_wc, view_scene *sc)
-{
-    hostmap hm = *map_read;
-    *map_read = (hostmap){0};
-    bf_status s = BF_OK;
-    sc->lo_w = bf_v3(INFINITY, INFINITY, INFINITY);
-    sc->hi_w = bf_v3(-INFINITY, -INFINITY, -INFINITY);
-    sc->has_pose = a->scene.map && meta->has_pose;
-    sc->last_pose = meta->last_pose;
-    if (s == BF_OK && a->scene.mesh) {
-        bf_se3 T_first = T_wc ? *T_wc : sc->has_pose ? sc->last_pose : bf_se3_identity();
-        /* Level of detail from the first camera, as bitfuse render does from its pose (with no first
-           camera the whole-scene view is made later: one level). */
-        s = app_scene_add_mesh(ctx, &a->scene, f, &T_first, K, a->scene.mesh_lod && (T_wc || sc->has_pose), &hm, NULL);
-    }
-    for (uint32_t i = 0; s == BF_OK && i < hm.n_bricks; i++) grow(sc, hostmap_voxel_center_w(&hm, &hm.bricks[i], 4, 4, 4));
-    if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);
-    sc->n_bricks = hm.n_bricks;
-    hostmap_free(&hm);
-    if (s == BF_OK && a->scene.particles) {
-        s = app_scene_make_particles(ctx, &a->scene, f, &sc->ps);
-        for (uint32_t i = 0; s == BF_OK && i < f->n_particles; i++)
-            grow(sc, bf_v3(f->xyz[3 * i], f->xyz[3 * i + 1], f->xyz[3 * i + 2]));
-        if (s == BF_OK) sc->n_bricks += render_particles_get_stats(sc->ps)->n_bricks;
-    }
-    return s;
 }
 
 /* Without --pose or a stored pose: the camera back from the scene's centre
@@ -127,6 +96,58 @@ static bf_se3 overview_pose(const view_scene *sc, const bf_intrinsics *K)
     bf_se3 T = bf_se3_identity();
     T.t = bf_v3_sub(c, bf_v3(0, 0, fmax(r / sin(half_fov), 0.5)));
     return T;
+}
+
+/* The scene's box: the map's brick centres, the mesh's vertices where
+ * --mesh-pose puts them, the particles. */
+static void scene_box(view_scene *sc, const app_scene_files *f, const hostmap *hm)
+{
+    sc->lo_w = bf_v3(INFINITY, INFINITY, INFINITY);
+    sc->hi_w = bf_v3(-INFINITY, -INFINITY, -INFINITY);
+    for (uint32_t i = 0; i < hm->n_bricks; i++) grow(sc, hostmap_voxel_center_w(hm, &hm->bricks[i], 4, 4, 4));
+    const mesh_data *m = &f->mesh;
+    for (uint32_t i = 0; i < m->n_verts; i++)
+        grow(sc, bf_se3_apply(&f->T_wm, bf_v3(m->origin.x + m->xyz[3 * i], m->origin.y + m->xyz[3 * i + 1],
+                                              m->origin.z + m->xyz[3 * i + 2])));
+    for (uint32_t i = 0; i < f->n_particles; i++)
+        grow(sc, bf_v3(f->xyz[3 * i], f->xyz[3 * i + 1], f->xyz[3 * i + 2]));
+}
+
+/* The scene on the GPU as bitfuse render loads it: the map read already
+ * (hm, emptied here; meta its store's), the mesh at the detail of the
+ * first camera, *T_wc: --pose (has_pose), else the store's last pose,
+ * else the view of the whole scene (set here). */
+static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_files *f, hostmap *map_read,
+                            const store_meta *meta, const bf_intrinsics *K, bf_se3 *T_wc, bool has_pose,
+                            view_scene *sc)
+{
+    hostmap hm = *map_read;
+    *map_read = (hostmap){0};
+    bf_status s = BF_OK;
+    sc->has_pose = a->scene.map && meta->has_pose;
+    sc->last_pose = meta->last_pose;
+    scene_box(sc, f, &hm);
+    sc->far_m = a->scene.far_m;
+    if (!has_pose && !sc->has_pose) {
+        *T_wc = overview_pose(sc, K);
+        /* Back far enough to see all of it: the rays reach its far side
+         * too, unless --far says otherwise (a 20 m slab's view is 34 m back). */
+        bf_vec3 h = bf_v3_scale(bf_v3_sub(sc->hi_w, sc->lo_w), 0.5);
+        double reach = sc->hi_w.z - T_wc->t.z + sqrt(h.x * h.x + h.y * h.y);
+        if (!a->scene.far_given && isfinite(reach) && reach > sc->far_m) sc->far_m = fmin(reach, 1000.0);
+    } else if (!has_pose) {
+        *T_wc = sc->last_pose;
+    }
+    /* Level of detail from the first camera, as bitfuse render does from its pose. */
+    if (a->scene.mesh) s = app_scene_add_mesh(ctx, &a->scene, f, T_wc, K, a->scene.mesh_lod, &hm, NULL);
+    if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);
+    sc->n_bricks = hm.n_bricks;
+    hostmap_free(&hm);
+    if (s == BF_OK && a->scene.particles) {
+        s = app_scene_make_particles(ctx, &a->scene, f, &sc->ps);
+        if (s == BF_OK) sc->n_bricks += render_particles_get_stats(sc->ps)->n_bricks;
+    }
+    return s;
 }
 
 /* The pivot: the scene's centre's depth ahead of the camera, at least 0.3 m. */
@@ -178,7 +199,7 @@ static bf_status run_window(view_loop *L, view_scene *sc, const view_args *a, co
 {
     render_options opt = render_options_display();
     opt.near_m = (float)a->scene.near_m;
-    opt.far_m = (float)a->scene.far_m;
+    opt.far_m = (float)sc->far_m;
     opt.no_graze = a->scene.mesh != NULL; /* a mesh's outline, as bitfuse render draws it (docs/render.md) */
     uint32_t cw = 0, ch = 0, shown = 0;
     bf_se3 T_last;
@@ -269,10 +290,9 @@ int cmd_view(int argc, char **argv)
     view_scene sc = {0};
     if (s == BF_OK) s = view_open(&vc, &gcfg, &L.win);
     if (s == BF_OK) s = gpu_context_create(&gcfg, &L.ctx);
-    if (s == BF_OK) s = load_scene(L.ctx, &a, &f, &hm, &meta, &K, a.pose ? &T_wc : NULL, &sc);
+    if (s == BF_OK) s = load_scene(L.ctx, &a, &f, &hm, &meta, &K, &T_wc, a.pose != NULL, &sc);
     if (s == BF_OK) s = view_attach(L.win, L.ctx);
     if (s == BF_OK) {
-        if (!a.pose) T_wc = sc.has_pose ? sc.last_pose : overview_pose(&sc, &K);
         view_set_pose(L.win, &T_wc, pivot_m(&sc, &T_wc));
         s = run_window(&L, &sc, &a, k, W, H);
     }

@@ -239,6 +239,7 @@ int app_options_parse(const app_command_spec *spec, int argc, char **argv)
             int rc = set_value(spec->name, row, v);
             if (rc) return rc;
             if (k < APP_OPT_ROWS_MAX) seen[k] = true;
+            if (row->given) *row->given = true;
         } else if (a[0] == '-' && a[1]) {
             return usage(spec->name, "unknown option '%s'", a);
         } else if (n_pos < spec->max_positional) {
@@ -385,7 +386,7 @@ static const char *check_even(const char *name, const char *v)
     return msg;
 }
 
-void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc)
+void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bricks_given)
 {
     const app_option r[APP_MAP_ROWS] = {
         APP_OPT("--ratio", APP_OPT_FLOAT, &fc->voxel_ratio, "R", "voxel-to-pixel ratio of the level rule", .min = 0.05,
@@ -401,7 +402,7 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc)
         APP_OPT("--bricks", APP_OPT_U32, &fc->brick_cap, "N",
                 "brick pool size, instead of --gpu-budget (default: replay and live size it from --gpu-budget or the device, docs/cli.md "
                 "\"Streaming\"; fuse 1048576)",
-                .min = 1, .no_default = true),
+                .min = 1, .no_default = true, .given = bricks_given),
         APP_OPT("--chunk", APP_OPT_FLOAT, &fc->chunk_m, "M", "chunk edge in metres", .min = 0.01, .max = 64,
                 .min_open = true),
         APP_OPT("--max-level", APP_OPT_U32, &fc->max_level, "L",

@@ -38,7 +38,8 @@ void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const
         APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off", mesh_lod_help),
         APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera "
                 "holds nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
-        APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000),
+        APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000,
+                .given = &a->far_given),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);

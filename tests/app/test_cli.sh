@@ -602,6 +602,9 @@ mentions "--out is required"
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --gpu-budget 8 --bricks 5000
 mentions "give one"
+# --bricks at fusion's own default value is still given.
+expect 2 "$B" replay "$T/seq" --out "$T/rp2" --gpu-budget 8 --bricks 1048576
+mentions "give one"
 # Pools too small for the scene: the scan goes on, and the summary says what
 # the map lacks (the per-frame warnings alone scrolled by).
 expect 0 "$B" replay "$T/seq" --out "$T/rpfull" --bricks 64 --stream off --no-mesh

@@ -39,7 +39,7 @@ static int parse(int argc, char **argv, demo_args *a)
     };
     app_option seq[APP_SEQUENCE_ROWS], map[APP_MAP_ROWS];
     app_sequence_options(seq, &a->ropt);
-    app_map_options(map, &a->fc);
+    app_map_options(map, &a->fc, NULL);
     const app_option *tables[] = {own, map, seq, NULL};
     app_command_spec spec = {.name = "test", .usage = "usage: test SEQ --out DIR\n", .tables = tables,
                              .positional = &a->seq, .min_positional = 1, .max_positional = 1,

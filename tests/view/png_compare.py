@@ -4,7 +4,8 @@ library among the test machine's packages).
 Usage: png_compare.py A.png B.png MAX_DIFF MAX_FRACTION
 Passes (exit 0) when the images have the same size and at most
 MAX_FRACTION of the pixels differ by more than MAX_DIFF in any channel, and
-A is not all black; prints the counts either way."""
+A is not all black; prints the counts either way. read_png is also
+imported by the tests that look at one image."""
 import struct
 import sys
 import zlib
@@ -52,15 +53,20 @@ def read_png(path):
     return w, h, b"".join(rows)
 
 
-(wa, ha, a), (wb, hb, b) = read_png(sys.argv[1]), read_png(sys.argv[2])
-max_diff, max_frac = int(sys.argv[3]), float(sys.argv[4])
-if (wa, ha) != (wb, hb):
-    sys.exit("sizes differ: %dx%d and %dx%d" % (wa, ha, wb, hb))
-n, bad, worst, lit = wa * ha, 0, 0, 0
-for i in range(n):
-    d = max(abs(a[3 * i + k] - b[3 * i + k]) for k in range(3))
-    worst = max(worst, d)
-    bad += d > max_diff
-    lit += max(a[3 * i:3 * i + 3]) > 0
-print("%d of %d pixels differ by more than %d (max %d); %d lit" % (bad, n, max_diff, worst, lit))
-sys.exit(0 if bad <= max_frac * n and lit > 0 else 1)
+def main():
+    (wa, ha, a), (wb, hb, b) = read_png(sys.argv[1]), read_png(sys.argv[2])
+    max_diff, max_frac = int(sys.argv[3]), float(sys.argv[4])
+    if (wa, ha) != (wb, hb):
+        sys.exit("sizes differ: %dx%d and %dx%d" % (wa, ha, wb, hb))
+    n, bad, worst, lit = wa * ha, 0, 0, 0
+    for i in range(n):
+        d = max(abs(a[3 * i + k] - b[3 * i + k]) for k in range(3))
+        worst = max(worst, d)
+        bad += d > max_diff
+        lit += max(a[3 * i:3 * i + 3]) > 0
+    print("%d of %d pixels differ by more than %d (max %d); %d lit" % (bad, n, max_diff, worst, lit))
+    sys.exit(0 if bad <= max_frac * n and lit > 0 else 1)
+
+
+if __name__ == "__main__":
+    main()

@@ -84,6 +84,33 @@ rc=$?
 grep -q "vulkan validation" "$T/err" && fail "view: validation messages: $(grep -m1 'vulkan validation' "$T/err")"
 py "$CMP" "$T/shot_view.png" "$T/render.png" 0 0 || fail "view's screenshot differs from bitfuse render's image"
 
+# 2b. No pose: the whole scene, its detail from that view. A box 20 x 20 x 8 m
+# is seen from 31 m back along -z (the rays reach past the 13.1 m default
+# far plane), its near face a centred square of 21 px at 40x30 (a third of
+# the image), drawn at the level that view needs (not "too large" from a
+# camera at the origin, which sat on its face: level 7 on lavapipe).
+py - >"$T/box.off" <<'PY'
+h, t = 10.0, 8.0
+v = [(-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0), (-h, -h, t), (h, -h, t), (h, h, t), (-h, h, t)]
+f = [(0, 2, 1), (0, 3, 2), (4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5), (2, 3, 7), (2, 7, 6),
+     (3, 0, 4), (3, 4, 7)]
+print("\n".join(["OFF", "8 12 0"] + ["%g %g %g" % p for p in v] + ["3 %d %d %d" % t for t in f]))
+PY
+"$B" view --mesh "$T/box.off" --size 40x30 --overlay off --exit-after 1 --screenshot "$T/box.png" >"$T/out" 2>"$T/err" ||
+    fail "view of a 20 m box without --pose: $(head -c 600 "$T/err")"
+grep -q "too large" "$T/err" && fail "view of a 20 m box without --pose: $(grep -m1 'too large' "$T/err")"
+py - "$CMP" "$T/box.png" <<'PY' || fail "view of a 20 m box without --pose: not a centred third of the image"
+import os, sys
+sys.path.insert(0, os.path.dirname(sys.argv[1]))
+from png_compare import read_png
+w, h, rgb = read_png(sys.argv[2])
+lit = [(i % w, i // w) for i in range(w * h) if max(rgb[3 * i:3 * i + 3]) > 0]
+xs, ys = [p[0] for p in lit], [p[1] for p in lit]
+share = len(lit) / (w * h)
+assert 0.25 <= share <= 0.42, share
+assert abs((min(xs) + max(xs)) / 2 - (w - 1) / 2) <= 1 and abs((min(ys) + max(ys)) / 2 - (h - 1) / 2) <= 1, (xs, ys)
+PY
+
 # 3. Refusals: no display (exit 4, said so; replay makes no output folder),
 # --screenshot without --exit-after, --exit-after without --view, a missing map.
 env -u DISPLAY "$B" view --map "$T/rep" --exit-after 1 >"$T/out" 2>"$T/err"
