@@ -36,6 +36,7 @@ static cJSON *rpe_json(const char *unit, double delta, const eval_rpe_result *r)
     cJSON_AddStringToObject(o, "unit", unit);
     cJSON_AddNumberToObject(o, "delta", delta);
     cJSON_AddNumberToObject(o, "pairs", (double)r->n_pairs);
+    cJSON_AddNumberToObject(o, "max_dt_s", r->max_dt_s);
     json_err_stats(o, "trans_m", &r->trans);
     json_err_stats(o, "rot_deg", &r->rot);
     return o;
@@ -133,9 +134,9 @@ int cmd_eval_traj(int argc, char **argv)
         if ((k == 0 && !do_s) || (k == 1 && !do_f)) continue;
         const eval_rpe_result *r = k == 0 ? &rpe_s : &rpe_f;
         if (k == 0)
-            printf("RPE per %g s (%zu pairs)\n", delta_s, r->n_pairs);
+            printf("RPE per %g s (%zu pairs, |dt| <= %g s)\n", delta_s, r->n_pairs, r->max_dt_s);
         else
-            printf("RPE per frame (%zu pairs)\n", r->n_pairs);
+            printf("RPE per frame (%zu pairs, |dt| <= %g s)\n", r->n_pairs, r->max_dt_s);
         printf("  trans rmse %.6f m  mean %.6f  median %.6f  std %.6f  min %.6f  max %.6f\n", r->trans.rmse,
                r->trans.mean, r->trans.median, r->trans.std, r->trans.min, r->trans.max);
         printf("  rot   rmse %.4f deg  mean %.4f  median %.4f  std %.4f  min %.4f  max %.4f\n", r->rot.rmse,

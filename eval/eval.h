@@ -30,6 +30,7 @@ bf_status eval_ate(const bf_traj *gt, const bf_traj *est, double max_dt_s,
 
 typedef struct eval_rpe_result {
     size_t n_pairs;
+    double max_dt_s;       /* the association tolerance used (|dt| <= it): the caller's, else TUM's default */
     eval_err_stats trans;  /* metres per delta */
     eval_err_stats rot;    /* degrees per delta */
 } eval_rpe_result;

@@ -265,7 +265,7 @@ bf_status eval_rpe(const bf_traj *gt, const bf_traj *est, double max_dt_s, bool 
                     n_pairs, per_frame ? "one frame" : "delta", max_dt);
         goto done;
     }
-    eval_rpe_result r = {.n_pairs = n_pairs};
+    eval_rpe_result r = {.n_pairs = n_pairs, .max_dt_s = max_dt};
     if (!(s = eval_err_stats_compute(e_t, n_pairs, &r.trans)) &&
         !(s = eval_err_stats_compute(e_r, n_pairs, &r.rot)))
         *out = r;

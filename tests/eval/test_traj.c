@@ -281,6 +281,7 @@ BF_TEST(rpe_of_a_constant_drift_is_the_drift_per_delta)
     /* TUM's pair rule: j = pose nearest t_i + 1 s, dropped when j is the
      * last pose, so i = 0..269 (j = i + 30 <= 299): 270 pairs. */
     CHECK_EQ_INT(r.n_pairs, 270);
+    CHECK_NEAR(r.max_dt_s, 2 / 30.0, 1e-9); /* TUM's default: twice the median ground-truth interval */
     CHECK_NEAR(r.trans.mean, 0.02, 1e-12);
     CHECK_NEAR(r.trans.max, 0.02, 1e-12);
     CHECK_NEAR(r.rot.max, 0, 1e-12);
@@ -289,6 +290,8 @@ BF_TEST(rpe_of_a_constant_drift_is_the_drift_per_delta)
      * 299 pairs of 1/30 s, error 0.02/30 m each. */
     CHECK_EQ_INT(r.n_pairs, 299);
     CHECK_NEAR(r.trans.median, 0.02 / 30, 1e-12);
+    CHECK_OK(eval_rpe(&gt, &est, 0.01, true, 0, &r));
+    CHECK(r.max_dt_s == 0.01); /* the caller's */
 
     /* Rotation drift over 2 s: 6 deg; pairs i = 0..239 (j = i + 60 < 300). */
     bf_traj still = {0};
