@@ -187,7 +187,8 @@ typedef struct traj_result {
     eval_err_stats trans, rot;
     double p90_trans, p90_rot;
     double length_ratio;    /* least squares: its steps as a multiple of the colour's */
-    uint32_t n_closest;
+    uint32_t n_closest;     /* pairs where it alone is the closest */
+    uint32_t n_tied;        /* pairs where it ties another for the closest (the same poses there) */
 } traj_result;
 
 /* A trajectory's pose at a pair's colour moment; 'groundtruth' is the
@@ -233,10 +234,14 @@ static bf_status compare(const pairs *p, traj_result *t, int n_t, bool *common, 
             m++;
             num += e->along_m * e->colour_m;
             den += e->colour_m * e->colour_m;
-            bool closest = true;
-            for (int j = 0; j < n_t; j++)
+            bool closest = true, tied = false;
+            for (int j = 0; j < n_t; j++) {
                 if (j != k && t[j].err[i].trans_m < e->trans_m) closest = false;
-            t[k].n_closest += closest;
+                if (j != k && t[j].err[i].trans_m == e->trans_m) tied = true;
+            }
+            /* A tie is no trajectory's win: the shares of wins add up to at most 100%. */
+            t[k].n_closest += closest && !tied;
+            t[k].n_tied += closest && tied;
         }
         eval_err_stats_compute(tr, m, &t[k].trans);
         eval_err_stats_compute(ro, m, &t[k].rot);
@@ -344,6 +349,7 @@ static cJSON *result_json(const motion_args *a, const pairs *p, const traj_resul
         cJSON_AddNumberToObject(ro, "max", t[i].rot.max);
         cJSON_AddNumberToObject(e, "length_ratio", t[i].length_ratio);
         cJSON_AddNumberToObject(e, "closest_pairs", t[i].n_closest);
+        cJSON_AddNumberToObject(e, "tied_pairs", t[i].n_tied);
         cJSON_AddItemToArray(arr, e);
     }
     cJSON_AddNumberToObject(o, "seconds", secs);
@@ -369,10 +375,12 @@ static void print_result(const motion_args *a, const pairs *p, const traj_result
         char nm[32];
         size_t L = strlen(t[i].name);
         snprintf(nm, sizeof nm, "%s%s", L > 28 ? "..." : "", L > 28 ? t[i].name + L - 25 : t[i].name);
-        printf("  %-28s %8.2f %8.2f %8.2f %8.2f  %6.3f %6.3f %6.3f  %7.3f  %.0f%%\n", nm,
+        char tie[48] = "";
+        if (t[i].n_tied) snprintf(tie, sizeof tie, " (+%.0f%% tied)", n_common ? 100.0 * t[i].n_tied / n_common : 0.0);
+        printf("  %-28s %8.2f %8.2f %8.2f %8.2f  %6.3f %6.3f %6.3f  %7.3f  %.0f%%%s\n", nm,
                1e3 * t[i].trans.median, 1e3 * t[i].trans.mean, 1e3 * t[i].p90_trans, 1e3 * t[i].trans.rmse,
                t[i].rot.median, t[i].p90_rot, t[i].rot.max, t[i].length_ratio,
-               n_common ? 100.0 * t[i].n_closest / n_common : 0.0);
+               n_common ? 100.0 * t[i].n_closest / n_common : 0.0, tie);
     }
     printf("  time             %.1f s\n", secs);
 }

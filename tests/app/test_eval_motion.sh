@@ -88,6 +88,17 @@ rep = sorted(l.split(",")[:2] for l in open(sys.argv[2]) if not l.startswith("#"
 assert rep == [["15", "25"], ["5", "15"]], rep
 PY
 
+# Two trajectories with the same poses tie in every pair: a win for neither
+# (the shares of wins add up to at most 100%), tied for both.
+expect 0 "$B" eval-motion "$T/seq" "$T/short.txt" "$T/short.txt" --json
+py - "$T/out" <<'PY' || fail "eval-motion counts a tie as a win: $(head -c 600 "$T/out")"
+import json, sys
+a, b = json.load(open(sys.argv[1]))["trajectories"]
+assert a["closest_pairs"] == b["closest_pairs"] == 0 and a["tied_pairs"] == b["tied_pairs"] == 6, (a, b)
+PY
+expect 0 "$B" eval-motion "$T/seq" "$T/short.txt" "$T/short.txt"
+grep -q "0% (+100% tied)" "$T/out" || fail "the summary does not say the tie: $(cat "$T/out")"
+
 # The summary names both trajectories.
 expect 0 "$B" eval-motion "$T/seq" groundtruth --span 5 --every 5
 grep -q "groundtruth" "$T/out" || fail "the summary does not name the trajectory: $(cat "$T/out")"
