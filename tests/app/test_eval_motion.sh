@@ -156,8 +156,7 @@ cat >"$T/calib.json" <<'JSON'
  "T_colour_depth": {"R": [1, 0, 0, 0, 1, 0, 0, 0, 1], "t": [0, 0, 0]}, "rms_px": 0, "views": 0}
 JSON
 expect 0 "$B" eval-motion "$T/seq" groundtruth "$T/short.txt" --json --calibration "$T/calib.json"
-py - "$T/out" "$T/result.json" "$T/calib.json" <<'PY' ||
-    fail "eval-motion through a calibration's colour camera differs"
+py - "$T/out" "$T/result.json" "$T/calib.json" <<'PY' || fail "eval-motion through a calibration's colour camera differs"
 import json, sys
 d, r = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
 assert d["config"]["calibration"] == sys.argv[3] and r["config"]["calibration"] is None, (d["config"], r["config"])
