@@ -374,9 +374,11 @@ bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrin
  * becomes the mesh's own. A mesh too large for the device at those levels
  * is voxelised a level coarser at a time, with a warning; one the grid
  * cannot hold even so is BF_FORMAT naming the file. vst (may be NULL) gets
- * the voxeliser's stats. */
+ * the voxeliser's stats, *level_asked (may be NULL) the finest level the
+ * view asked for (above vst's level_fine after such a fallback). */
 bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
-                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst);
+                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst,
+                             uint32_t *level_asked);
 /* The vertices of a PLY as particle centres (world floats, malloc'd). */
 bf_status app_scene_read_particles(const char *path, float **xyz, uint32_t *n);
 

@@ -101,6 +101,7 @@ typedef struct render_report {
     double hit_frac;
     uint32_t n_map_bricks, n_bricks, n_tris;
     const render_voxelise_stats *vst;
+    uint32_t level_asked;              /* the finest level the view asked (above vst's when the device held less) */
     const render_particles_stats *pst; /* NULL without particles */
     const double *ms, *ms_p;           /* sorted */
 } render_report;
@@ -134,6 +135,7 @@ static cJSON *render_json(const render_report *r)
         cJSON_AddNumberToObject(m, "triangles", r->n_tris);
         cJSON_AddNumberToObject(m, "level_coarse", v->level_coarse);
         cJSON_AddNumberToObject(m, "level_fine", v->level_fine);
+        cJSON_AddNumberToObject(m, "level_asked", r->level_asked);
         cJSON_AddNumberToObject(m, "voxel_m", v->voxel_m);
         cJSON_AddNumberToObject(m, "bricks", v->n_bricks);
         if (v->level_coarse != v->level_fine) { /* level of detail: the bricks per level and the columns */
@@ -213,7 +215,9 @@ int cmd_render(int argc, char **argv)
     render_particles *ps = NULL;
     render_caster *caster = NULL;
     render_voxelise_stats vst = {0};
-    if (s == BF_OK && a.scene.mesh) s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, &hm, &vst);
+    uint32_t level_asked = 0;
+    if (s == BF_OK && a.scene.mesh)
+        s = app_scene_add_mesh(ctx, &a.scene, &f, &T_wc, &K, a.scene.mesh_lod, &hm, &vst, &level_asked);
     if (s == BF_OK && (a.scene.map || a.scene.mesh)) s = app_scene_load_map(ctx, &hm, &K, &map);
     n_bricks = hm.n_bricks;
     hostmap_free(&hm);
@@ -242,7 +246,7 @@ int cmd_render(int argc, char **argv)
         uint64_t n_hit = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
         render_report r = {&a, W, H, gpu_device_name(ctx), gpu_device(ctx)->driver_info, (double)n_hit / ((double)W * H), n_map_bricks, n_bricks,
-                           f.mesh.n_tris, &vst, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
+                           f.mesh.n_tris, &vst, level_asked, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
         s = app_json_print(render_json(&r));
     } else if (s == BF_OK) {
         uint64_t n_hit = 0;
@@ -270,6 +274,8 @@ int cmd_render(int argc, char **argv)
                    vst.seconds, vst.seconds > 0 ? 1e-6 * f.mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin,
                    vst.seconds_gpu, vst.n_gpu_bricks);
         }
+        if (a.scene.mesh && level_asked > vst.level_fine)
+            printf("                   (the view asked for level %u: too large for this device there)\n", level_asked);
         if (a.scene.map && a.scene.mesh) printf("  together         %u bricks\n", n_bricks);
         if (ps) {
             const render_particles_stats *st = render_particles_get_stats(ps);

@@ -139,7 +139,7 @@ static bf_status load_scene(gpu_context *ctx, const view_args *a, app_scene_file
         *T_wc = sc->last_pose;
     }
     /* Level of detail from the first camera, as bitfuse render does from its pose. */
-    if (a->scene.mesh) s = app_scene_add_mesh(ctx, &a->scene, f, T_wc, K, a->scene.mesh_lod, &hm, NULL);
+    if (a->scene.mesh) s = app_scene_add_mesh(ctx, &a->scene, f, T_wc, K, a->scene.mesh_lod, &hm, NULL, NULL);
     if (s == BF_OK && (a->scene.map || a->scene.mesh)) s = app_scene_load_map(ctx, &hm, K, &sc->map);
     sc->n_bricks = hm.n_bricks;
     hostmap_free(&hm);

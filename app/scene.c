@@ -324,7 +324,8 @@ static render_voxelise_config mesh_config(const mesh_data *mesh, const bf_se3 *T
 }
 
 bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f, const bf_se3 *T_wc,
-                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst)
+                             const bf_intrinsics *K, bool lod, hostmap *hm, render_voxelise_stats *vst,
+                             uint32_t *level_asked)
 {
     /* On the map's grid when there is one, so both are one ray-cast. */
     render_voxelise_config vc = mesh_config(&f->mesh, &f->T_wm, T_wc, K, a->map ? hm : NULL, lod, (float)a->near_m);
@@ -344,6 +345,7 @@ bf_status app_scene_add_mesh(gpu_context *ctx, const app_scene_args *a, const ap
      * in millimetres read as metres, a camera inside a building): drawn
      * coarser, a level below the finest tried at a time, and said so. */
     uint32_t asked = vst->level_fine;
+    if (level_asked) *level_asked = asked;
     while (s == BF_POOL_FULL && vst->level_fine > 0) {
         vc.level = vst->level_fine - 1;
         s = render_voxelise_mesh(ctx, &f->mesh, &f->T_wm, &vc, &mh, vst);

@@ -146,6 +146,7 @@ d = json.load(open(sys.argv[1]))
 warned = "too large for this device at level 7" in open(sys.argv[2]).read()
 assert d["hit_fraction"] == 1, d
 assert d["mesh"]["level_fine"] <= 6 if warned else d["mesh"]["level_fine"] == 7, (warned, d)
+assert d["mesh"]["level_asked"] == 7, d
 PYEOF
 slab 1 >"$T/slab1.off"
 expect 0 "$B" render --mesh "$T/slab1.off" --pose "0 0 -0.1 0 0 0 1" --size 40x30 --out "$T/slab.png" --json
