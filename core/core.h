@@ -135,6 +135,8 @@ bf_se3 bf_se3_interpolate(const bf_se3 *A, const bf_se3 *B, double s);
 /* Row-major 4x4 float for the GPU (only for chunk-relative transforms). */
 void bf_se3_to_mat4f(const bf_se3 *T, float out[16]);
 bool bf_se3_is_finite(const bf_se3 *T);
+/* Finite, and R a rotation: R R^T within tol of the identity (each entry), det R > 0. */
+bool bf_se3_is_rigid(const bf_se3 *T, double tol);
 
 /* Symmetric eigen-decomposition by cyclic Jacobi (n <= 6): A is destroyed,
  * eigenvalues ascending in w, eigenvectors in the columns of V. */

@@ -290,6 +290,21 @@ bool bf_se3_is_finite(const bf_se3 *T)
     return isfinite(T->t.x) && isfinite(T->t.y) && isfinite(T->t.z);
 }
 
+bool bf_se3_is_rigid(const bf_se3 *T, double tol)
+{
+    if (!bf_se3_is_finite(T)) return false;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double d = 0;
+            for (int k = 0; k < 3; k++) d += T->R[i][k] * T->R[j][k];
+            if (!(fabs(d - (i == j)) <= tol)) return false;
+        }
+    double det = T->R[0][0] * (T->R[1][1] * T->R[2][2] - T->R[1][2] * T->R[2][1]) -
+                 T->R[0][1] * (T->R[1][0] * T->R[2][2] - T->R[1][2] * T->R[2][0]) +
+                 T->R[0][2] * (T->R[1][0] * T->R[2][1] - T->R[1][1] * T->R[2][0]);
+    return det > 0;
+}
+
 void bf_sym_eigen(int n, double *A, double *w, double *V)
 {
     BF_ASSERT(n > 0 && n <= 6);

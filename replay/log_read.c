@@ -37,6 +37,7 @@ typedef struct log__source {
     uint32_t pos;         /* next frame to deliver */
     bool skip_bad;
     uint32_t n_skipped;
+    double last_t_s;      /* the depth time of the last frame delivered (-inf before the first) */
     size_t n_px;
     ZSTD_DCtx *zd;
     uint8_t *depth_payload, *rgb_payload;
@@ -238,6 +239,21 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
     log__frame_header h;
     if (!log__frame_header_unpack(b, &h))
         return frame_fail(ls, k, at, "corrupt record header (bad magic or header checksum)");
+    /* What the checksum cannot vouch for (a writer that took them as given):
+     * times and poses as the TUM reader checks them. A rotation stored in
+     * doubles is orthonormal to 1e-12; 1e-3 leaves room for poses read from
+     * six-decimal text. */
+    if (!isfinite(h.t_depth_s) || !isfinite(h.t_rgb_s)) {
+        snprintf(why, sizeof why, "its times (depth %g s, colour %g s) are not finite", h.t_depth_s, h.t_rgb_s);
+        return frame_fail(ls, k, at, why);
+    }
+    if (!(h.t_depth_s > ls->last_t_s)) {
+        snprintf(why, sizeof why, "its time %.6f s is not after the frame before's (%.6f s); times must increase",
+                 h.t_depth_s, ls->last_t_s);
+        return frame_fail(ls, k, at, why);
+    }
+    if ((h.flags & LOG_FRAME_HAS_POSE) && !bf_se3_is_rigid(&h.T_wc, 1e-3))
+        return frame_fail(ls, k, at, "its pose is not a rigid motion (not finite, or not a rotation)");
     uint32_t W = ls->hdr.K.width, H = ls->hdr.K.height;
     if (h.depth_size > log__depth_bound(ls->n_px) || h.rgb_size > log__rgb_bound(ls->n_px)) {
         snprintf(why, sizeof why, "payload sizes %u + %u exceed the bounds for %ux%u frames", h.depth_size,
@@ -306,6 +322,7 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
         .has_pose = has_pose,
         .T_wc = has_pose ? h.T_wc : bf_se3_identity(),
     };
+    ls->last_t_s = h.t_depth_s;
     return BF_OK;
 }
 
@@ -374,6 +391,7 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
     if (!ls) return bf_fail(BF_NO_MEMORY, "%s: log source", path);
     bf_status s = BF_OK;
     ls->tail_status = BF_END;
+    ls->last_t_s = -INFINITY;
     if (!(ls->path = strdup(path))) {
         s = bf_fail(BF_NO_MEMORY, "%s: log source", path);
         goto fail;
@@ -450,6 +468,7 @@ bf_status replay_log_seek(rgbd_source *src, uint32_t pos)
         return bf_fail(BF_INVALID_ARG, "%s: cannot seek to frame %u; the log has %u frames", ls->path, pos,
                        ls->base.n_frames);
     ls->pos = pos;
+    ls->last_t_s = -INFINITY; /* the order is checked from here on */
     return BF_OK;
 }
 

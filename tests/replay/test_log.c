@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "capture/capture.h"
+#include "replay/log_int.h"
 #include "replay/replay.h"
 #include "replay_test.h"
 #include "test.h"
@@ -311,6 +312,91 @@ BF_TEST(corrupt_frame_is_named_and_the_frames_before_it_replay)
 BF_TEST(corrupt_frame_in_a_log_without_index_is_named_too)
 {
     check_corrupt_frame(false);
+}
+
+/* Rewrites frame k's record header through fn, with a valid header CRC:
+ * what the checksum cannot catch (a writer that took bad values as given). */
+static bool rewrite_header(const char *path, uint64_t at, void (*fn)(log__frame_header *))
+{
+    FILE *f = fopen(path, "r+b");
+    uint8_t b[LOG_FRAME_HEADER];
+    log__frame_header h;
+    bool ok = f && fseek(f, (long)at, SEEK_SET) == 0 && fread(b, 1, sizeof b, f) == sizeof b &&
+              log__frame_header_unpack(b, &h);
+    if (ok) {
+        fn(&h);
+        log__frame_header_pack(&h, b);
+        ok = fseek(f, (long)at, SEEK_SET) == 0 && fwrite(b, 1, sizeof b, f) == sizeof b;
+    }
+    if (f) ok = fclose(f) == 0 && ok;
+    return ok;
+}
+
+static void time_nan(log__frame_header *h) { h->t_depth_s = NAN; }
+static void time_back(log__frame_header *h) { h->t_depth_s -= 1.0; }
+static double g_t_before; /* the time of the frame before the one rewritten */
+static void time_same(log__frame_header *h) { h->t_depth_s = g_t_before; }
+static void pose_nan(log__frame_header *h) { h->flags |= LOG_FRAME_HAS_POSE, h->T_wc.t.y = NAN; }
+static void pose_scaled(log__frame_header *h)
+{
+    h->flags |= LOG_FRAME_HAS_POSE;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) h->T_wc.R[i][j] *= 2;
+}
+
+BF_TEST(times_and_poses_a_checksum_cannot_vouch_for_are_refused_by_frame)
+{
+    synth_seq q;
+    CHECK(synth_make(&q, LN, LW, LH));
+    const char *good = tmp_path("hdr_good.bflog"), *bad = tmp_path("hdr_bad.bflog");
+    CHECK_OK(write_log(good, &q, REPLAY_LOG_COLOUR_ZSTD, true));
+    uint64_t off[8], index_at;
+    CHECK_EQ_INT(log_offsets(good, off, 8, &index_at), LN);
+    struct {
+        void (*fn)(log__frame_header *);
+        const char *mention;
+    } cases[] = {
+        {time_nan, "are not finite"},
+        {time_back, "is not after the frame before's"},
+        {pose_nan, "not a rigid motion"},
+        {pose_scaled, "not a rigid motion"},
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        CHECK(copy_prefix(good, bad, SIZE_MAX));
+        CHECK(rewrite_header(bad, off[2], cases[c].fn));
+        rgbd_source *src;
+        CHECK_OK(replay_open(bad, NULL, &src));
+        bf_frame f;
+        CHECK_OK(rgbd_source_next(src, &f));
+        CHECK_OK(rgbd_source_next(src, &f));
+        bf_clear_error();
+        bf_status s = rgbd_source_next(src, &f);
+        if (s != BF_FORMAT) fprintf(stderr, "  case %zu (%s)\n", c, cases[c].mention);
+        CHECK_STATUS(s, BF_FORMAT);
+        CHECK_ERROR_MENTIONS("frame 2 (byte");
+        CHECK_ERROR_MENTIONS(cases[c].mention);
+        CHECK_OK(rgbd_source_next(src, &f)); /* the rest still reads */
+        CHECK(frame_equals(&f, &q, 3, 0));
+        rgbd_source_close(src);
+    }
+    /* The same time as the frame before (frame 2 given frame 1's): refused
+     * too, and skipped under --skip-bad-frames. */
+    g_t_before = q.f[1].t_depth_s;
+    CHECK(copy_prefix(good, bad, SIZE_MAX));
+    CHECK(rewrite_header(bad, off[2], time_same));
+    rgbd_source *src;
+    replay_options opt = {.skip_bad_frames = true};
+    CHECK_OK(replay_open(bad, &opt, &src));
+    bf_frame f;
+    bf_log_level old = bf_log_get_level();
+    bf_log_set_level(BF_LOG_ERROR);
+    uint32_t n = 0;
+    while (rgbd_source_next(src, &f) == BF_OK) n++;
+    bf_log_set_level(old);
+    CHECK_EQ_INT(n, LN - 1);
+    CHECK_EQ_INT(replay_skipped_frames(src), 1);
+    rgbd_source_close(src);
+    synth_free(&q);
 }
 
 BF_TEST(skip_bad_frames_steps_over_a_corrupt_payload)
