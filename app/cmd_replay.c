@@ -582,6 +582,14 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddStringToObject(o, "device", r->device);
     cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_recon_config(o, "config", &a->rcfg);
+    /* What the run was asked besides the loop's configuration: a
+     * --fuse-at-groundtruth ATE is the tracker's one-step error, not the loop's. */
+    cJSON *cf = cJSON_GetObjectItemCaseSensitive(o, "config");
+    if (cf) {
+        cJSON_AddStringToObject(cf, "poses", a->fuse_at_gt ? "track, fused at the ground truth" : "track");
+        cJSON_AddStringToObject(cf, "init", a->init == 1 ? "identity" : "groundtruth");
+        cJSON_AddBoolToObject(cf, "resume", a->resume);
+    }
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &replay_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", c->frames);
     cJSON_AddBoolToObject(o, "interrupted", r->run.is_interrupted); /* Ctrl-C, SIGTERM, the window closed */
@@ -601,6 +609,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->width >> rl));
     cJSON_AddItemToArray(ref, cJSON_CreateNumber(K->height >> rl));
     cJSON_AddNumberToObject(tr, "no_depth", c->no_depth);
+    cJSON_AddNumberToObject(tr, "without_groundtruth", r->run.n_skipped); /* --fuse-at-groundtruth: skipped */
     cJSON_AddNumberToObject(tr, "repeated", c->repeated);
     cJSON_AddNumberToObject(tr, "colour_repeated", c->colour_repeated);
     cJSON_AddNumberToObject(tr, "degenerate", c->degenerate);
@@ -823,6 +832,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                "frames came while the loop was behind the camera)\n", c->unfused, c->behind);
     if (replay_skipped_frames(src))
         printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
+    if (r->run.n_skipped)
+        printf("  input            %u frames without a ground-truth pose skipped (--fuse-at-groundtruth)\n",
+               r->run.n_skipped);
     if (c->repeated)
         printf("  input            %u frames repeated the depth before them byte for byte: skipped, pose kept\n",
                c->repeated);

@@ -364,7 +364,7 @@ typedef struct recon_run {
     recon *loop;         /* the loop; NULL with RECON_POSES_KNOWN */
     fusion_map *map;     /* the map: the loop's, or the run's own with known poses; made before the first frame */
     recon_counts counts; /* the loop's counts; with known poses frames, pool_full, repeated and colour_repeated */
-    uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused, frames without a pose */
+    uint32_t n_fused, n_skipped; /* RECON_POSES_KNOWN: frames fused; both known-pose modes: frames without a pose */
     double depth_scale;  /* the source's raw depth units per metre */
     uint32_t n_resume_skipped; /* frames of the source the resumed scan had handled already */
     bf_repeats repeats;  /* RECON_POSES_KNOWN with skip_repeated: the last images (the loop keeps its own) */

@@ -129,9 +129,6 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
         (s = recon_set_first_pose(run->loop, &f->T_wc)) != BF_OK)
         return s;
     if (cfg->poses == RECON_POSES_TRACK_FUSE_GT) {
-        if (!f->has_pose)
-            return bf_fail(BF_FORMAT, "%s: frame %u (t = %.6f) has no ground-truth pose (--fuse-at-groundtruth)",
-                           cfg->name, f->index, f->t_depth_s);
         s = recon_add_frame_known(run->loop, f, &f->T_wc, fr);
     } else {
         s = recon_add_frame(run->loop, f, fr);
@@ -187,6 +184,13 @@ static bf_status run_frame(const recon_run_config *cfg, const bf_frame *f, const
         if (s == BF_OK && fr.state == RECON_NO_DEPTH)
             bf_warn("%s: frame %u (t = %.6f): no depth sample within the sensor's %.1f m: skipped", cfg->label,
                     f->index, f->t_depth_s, cfg->loop.sensor.max_depth_m);
+    } else if (cfg->poses == RECON_POSES_TRACK_FUSE_GT && !f->has_pose) {
+        /* Nowhere to fuse it: passed over as a known-pose run passes a
+         * frame without one (the loop never sees it), not the end of the run. */
+        run->n_skipped++;
+        bf_warn("%s: frame %u (t = %.6f): no ground-truth pose (--fuse-at-groundtruth): skipped", cfg->label,
+                f->index, f->t_depth_s);
+        return BF_OK;
     } else {
         s = track_frame_in_loop(cfg, f, run, &fr);
     }

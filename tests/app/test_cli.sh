@@ -641,6 +641,22 @@ rows = [[float(x) for x in l.split()] for f in sys.argv[1:] for l in open(f) if 
 gt, est = rows[:len(rows) // 2], rows[len(rows) // 2:]
 assert max(abs(a - b) for a, b in zip(gt[0][1:], est[0][1:])) < 1e-6, (gt[0], est[0])
 PYEOF
+# A frame past the ground truth's end is skipped and counted, not the end of
+# the run; stats.json says how the run was made.
+cp -r "$T/seq" "$T/seqgt2"
+python3 - "$T/seqgt2" <<'PYEOF'
+import sys
+d = sys.argv[1]
+t1 = float([l for l in open(d + "/depth.txt") if l.strip() and l[0] != "#"][1].split()[0])
+rows = [l for l in open(d + "/groundtruth.txt") if l.strip() and l[0] != "#" and float(l.split()[0]) <= t1 + 1e-4]
+open(d + "/groundtruth.txt", "w").writelines(rows)
+PYEOF
+expect 0 "$B" replay "$T/seqgt2" --out "$T/rpgt3" --fuse-at-groundtruth --no-mesh
+mentions "no ground-truth pose (--fuse-at-groundtruth): skipped"
+[ "$(grep -vc '^#' "$T/rpgt3/trajectory.txt")" = 2 ] || fail "replay --fuse-at-groundtruth past the ground truth: not 2 poses"
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['tracking']['without_groundtruth'] == 1 and \
+    d['config']['poses'] == 'track, fused at the ground truth' and d['config']['init'] == 'groundtruth', d['config']" \
+    "$T/rpgt3/stats.json" || fail "replay --fuse-at-groundtruth past the ground truth: stats.json"
 expect 3 "$B" replay "$T/int.bflog" --out "$T/rpgt2" --fuse-at-groundtruth
 mentions "--fuse-at-groundtruth, but the sequence has no ground truth"
 [ -e "$T/rpgt2" ] && fail "replay --fuse-at-groundtruth without ground truth made its output folder"
