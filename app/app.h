@@ -293,8 +293,10 @@ int app_check_not_input(const char *cmd, const char *opt, const char *out, const
  * fails part-way would leave fewer frames than the log it replaced. */
 int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite);
 /* A usage error when opt's file out exists inside the folder dir, which is
- * being read (a sequence's index or image): writing would overwrite it. */
-int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir);
+ * being read (a sequence's index or image): writing would overwrite it;
+ * with new_too also a file not there yet (a store reads any chunk file in
+ * its folder as one of its own). */
+int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir, bool new_too);
 /* A usage error when the output folder out is a scene store, or the store
  * the same run writes (store, NULL: none): the run's outputs would go in
  * among the store's files. */

@@ -226,7 +226,7 @@ int cmd_calibrate_depth(int argc, char **argv)
      * index files sit in it). */
     if (strcmp(poses, "groundtruth") != 0 && (rc = app_check_not_input(cmd, "--out", out, poses)) != 0) return rc;
     if ((rc = app_check_not_input(cmd, "--out", out, seq)) != 0) return rc;
-    if ((rc = app_check_not_inside(cmd, "--out", out, seq)) != 0) return rc;
+    if ((rc = app_check_not_inside(cmd, "--out", out, seq, false)) != 0) return rc;
     if ((rc = app_check_json_out(cmd, "--out", out)) != 0) return rc;
     if (cfg.gaps[0] % cfg.stride || cfg.gaps[1] % cfg.stride)
         return app_usage_error(cmd, "--stride %u must divide the gaps %u and %u", cfg.stride, cfg.gaps[0], cfg.gaps[1]);

@@ -26,19 +26,18 @@ static const char export_epilog[] =
     "2 usage, 3 no readable store, 5 FILE could not be written (disk full, I/O error, no such\n"
     "folder: nothing is left behind, an earlier FILE stays as it was)\n";
 
-/* Reads a store, warning about what it left out (cmd: whose warning). */
+/* Reads a store, warning about what it left out (cmd: whose warning);
+ * with refuse_empty, one that holds nothing at all is BF_FORMAT. */
 static bf_status read_store(const char *cmd, const char *dir, hostmap *m, store_meta *meta, bf_traj *traj,
-                            store_report *rep)
+                            store_report *rep, bool refuse_empty)
 {
     bf_status s = store_read(dir, m, meta, traj, rep);
     if (s == BF_IO && !store_exists(dir)) s = BF_FORMAT; /* not a store: bad input, not an I/O failure */
-    /* A store.json that does not read, and nothing else: a folder that only
-     * looks like a store (one killed before its first write has no index). */
-    char index[4200];
-    snprintf(index, sizeof index, "%s/store.json", dir);
-    if (s == BF_OK && !rep->index_ok && !rep->trajectory_ok && rep->n_chunks == 0 && rep->n_bad == 0 &&
-        bf_file_exists(index))
-        s = bf_fail(BF_FORMAT, "%s: store.json does not read and there is no chunk file: not a scene store", dir);
+    /* No readable store.json, no trajectory, no chunk file: a folder that only
+     * looks like a store (one killed before its first write finished). */
+    if (s == BF_OK && refuse_empty && !rep->index_ok && !rep->trajectory_ok && rep->n_chunks == 0 && rep->n_bad == 0)
+        s = bf_fail(BF_FORMAT, "%s: holds no chunk file, no readable store.json and no trajectory: not a scene store "
+                    "(or one stopped before its first write)", dir);
     if (s == BF_OK && rep->n_bad)
         bf_warn("%s: %s: %u chunk file(s) left out, the first: %s", cmd, dir, rep->n_bad, rep->first_bad);
     if (s == BF_OK && rep->n_missing)
@@ -89,7 +88,7 @@ int cmd_export(int argc, char **argv)
         return app_fail(cmd, bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder "
                                                 "holding one as store/", dir));
     /* Not into the store it reads (an --out of STORE/store.json replaced its index). */
-    if ((rc = app_check_not_inside(cmd, "--out", out, dir)) != 0) return rc;
+    if ((rc = app_check_not_inside(cmd, "--out", out, dir, true)) != 0) return rc;
     double t0 = bf_time_s();
     hostmap m = {0};
     store_meta meta;
@@ -97,7 +96,7 @@ int cmd_export(int argc, char **argv)
     mesh_data data = {0};
     export_stats st = {0};
     mesh_simplify_stats ss = {0};
-    bf_status s = read_store(cmd, dir, &m, &meta, NULL, &rep);
+    bf_status s = read_store(cmd, dir, &m, &meta, NULL, &rep, true);
     if (s == BF_OK && points) {
         s = export_points(&m, &data, &st);
     } else if (s == BF_OK) {
@@ -147,7 +146,7 @@ int app_info_store(const char *dir, bool json)
     store_meta meta;
     store_report rep;
     bf_traj traj = {0};
-    bf_status s = read_store("info", dir, &m, &meta, &traj, &rep);
+    bf_status s = read_store("info", dir, &m, &meta, &traj, &rep, false);
     if (s != BF_OK) return app_fail("info", s);
     uint32_t per_level[9] = {0};
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};

@@ -472,6 +472,9 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
     }
     if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->seq);
     if (!rc) rc = app_check_out_not_store(cmd, a->out, a->store);
+    if (!rc && a->store && !a->store[0]) rc = app_usage_error(cmd, "--store needs a folder, not ''");
+    /* The store's files among the sequence's: the folder would read as a store. */
+    if (!rc) rc = app_check_not_input(cmd, "--store", a->store, a->seq);
     if (!rc) rc = app_check_not_input(cmd, "--record", a->record_path, a->seq);
     if (!rc) rc = app_check_new_recording(cmd, "--record", a->record_path, a->overwrite);
     if (!rc && a->ref_path) {
@@ -953,6 +956,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     replay_stop = 0;
     if (!stop) stop = &replay_stop;
     /* The store is read (to resume) or claimed before anything is made. */
+    bool made_store = a.store && !bf_file_exists(a.store);
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
     bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
@@ -1082,6 +1086,12 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (stopped_empty) {
+        /* A new store that never got a write leaves no empty chunks/ behind
+         * (it would read as a store: a new run would be refused). */
+        char chunks[4200];
+        if (a.store && !a.resume && snprintf(chunks, sizeof chunks, "%s/chunks", a.store) < (int)sizeof chunks &&
+            rmdir(chunks) == 0 && made_store)
+            (void)rmdir(a.store);
         printf("bitfuse %s: stopped before any frame with depth: no trajectory or map written\n", cmd);
         return APP_EXIT_OK;
     }

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "app.h"
 #include "replay/replay.h"
@@ -48,36 +49,64 @@ int app_check_not_input(const char *cmd, const char *opt, const char *out, const
     return app_usage_error(cmd, "%s %s is %s, which is being read: writing there would overwrite it", opt, out, in);
 }
 
-int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir)
+static bool canonical(const char *path, char out[PATH_MAX]);
+
+int app_check_not_inside(const char *cmd, const char *opt, const char *out, const char *dir, bool new_too)
 {
     char ro[PATH_MAX], rd[PATH_MAX];
-    if (!out || !dir || !realpath(out, ro) || !realpath(dir, rd)) return 0; /* a new file: nothing to overwrite */
+    if (!out || !dir || !(new_too ? canonical(out, ro) : realpath(out, ro) != NULL) || !realpath(dir, rd)) return 0;
     size_t n = strlen(rd);
     if (strncmp(ro, rd, n) != 0 || ro[n] != '/') return 0;
-    return app_usage_error(cmd, "%s %s is inside %s, which is being read: writing there would overwrite its file", opt,
-                           out, dir);
+    return app_usage_error(cmd, "%s %s is inside %s, which is being read: writing there would overwrite or add to its "
+                           "files", opt, out, dir);
 }
 
 /* path made absolute and plain (no "." or "..", no trailing or doubled
- * slash): realpath where it exists, else its folder's realpath and its
- * name (a folder a run is about to make); false where neither resolves. */
+ * slash): realpath of its longest leading part that exists, then the rest's
+ * names ("." dropped, ".." taking the name before it), so a file or folder
+ * a run is about to make compares as what it will be; false where it
+ * cannot (too long, no working folder). */
 static bool canonical(const char *path, char out[PATH_MAX])
 {
+    if (!path || !path[0]) return false;
     if (realpath(path, out)) return true;
-    char copy[PATH_MAX];
-    size_t n = strlen(path);
-    if (n == 0 || n >= sizeof copy) return false;
-    memcpy(copy, path, n + 1);
-    while (n > 1 && copy[n - 1] == '/') copy[--n] = '\0';
-    char *slash = strrchr(copy, '/');
-    const char *name = slash ? slash + 1 : copy;
-    char dir[PATH_MAX];
-    if (slash == copy) snprintf(dir, sizeof dir, "/");
-    else if (slash) *slash = '\0', snprintf(dir, sizeof dir, "%s", copy);
-    else snprintf(dir, sizeof dir, ".");
-    if (!strcmp(name, ".") || !strcmp(name, "..") || !realpath(dir, out)) return false;
-    size_t m = strlen(out);
-    return snprintf(out + m, PATH_MAX - m, "%s%s", m > 1 ? "/" : "", name) < (int)(PATH_MAX - m);
+    char abs[PATH_MAX];
+    if (path[0] == '/') {
+        if (snprintf(abs, sizeof abs, "%s", path) >= (int)sizeof abs) return false;
+    } else {
+        char cwd[PATH_MAX];
+        if (!getcwd(cwd, sizeof cwd) || snprintf(abs, sizeof abs, "%s/%s", cwd, path) >= (int)sizeof abs) return false;
+    }
+    /* The longest leading part that resolves: cut at each slash from the end. */
+    size_t cut = strlen(abs);
+    for (;;) {
+        while (cut > 0 && abs[cut] != '/') cut--;
+        char c = abs[cut];
+        abs[cut] = '\0';
+        bool ok = realpath(cut ? abs : "/", out) != NULL;
+        abs[cut] = c;
+        if (ok) break;
+        if (cut == 0) return false;
+        cut--;
+    }
+    /* The names after it. */
+    for (char *name = abs + cut; *name;) {
+        while (*name == '/') name++;
+        size_t len = strcspn(name, "/");
+        if (len == 0) break;
+        size_t m = strlen(out);
+        if (len == 1 && name[0] == '.') {
+            /* nothing */
+        } else if (len == 2 && name[0] == '.' && name[1] == '.') {
+            char *last = strrchr(out, '/');
+            if (last && last != out) *last = '\0';
+            else snprintf(out, PATH_MAX, "/");
+        } else if (snprintf(out + m, PATH_MAX - m, "%s%.*s", m > 1 ? "/" : "", (int)len, name) >= (int)(PATH_MAX - m)) {
+            return false;
+        }
+        name += len;
+    }
+    return true;
 }
 
 int app_check_out_not_store(const char *cmd, const char *out, const char *store)

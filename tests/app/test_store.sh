@@ -68,6 +68,16 @@ mentions "is --store's folder"
 [ ! -e "$T/same" ] || fail "a refused run made its folder"
 expect 2 "$B" replay "$SEQ" --out "$T/./same2" --store "$T/same2/" --no-mesh
 mentions "is --store's folder"
+expect 2 "$B" replay "$SEQ" --out "$T/same3" --store "$T/same3/." --no-mesh
+mentions "is --store's folder"
+expect 2 "$B" replay "$SEQ" --out "$T/same4" --store "$T/x/../same4" --no-mesh
+mentions "is --store's folder"
+# Nor a store's files among the sequence's (it would then read as a store).
+expect 2 "$B" replay "$SEQ" --out "$T/seqstore" --store "$SEQ" --no-mesh
+mentions "which is being read"
+[ -e "$SEQ/chunks" ] && fail "a refused run wrote a store into the sequence"
+expect 2 "$B" replay "$SEQ" --out "$T/seqstore" --store "" --no-mesh
+mentions "--store needs a folder"
 mkdir "$T/plain"
 expect 3 "$B" export "$T/plain" --out "$T/x.ply"
 mentions "$T/plain: not a scene store (bitfuse replay|live --store), nor a folder holding one as store/"
@@ -96,6 +106,15 @@ mentions "which is being read"
 mkdir "$T/fake" && echo hi >"$T/fake/store.json"
 expect 3 "$B" export "$T/fake" --out "$T/fake.ply"
 mentions "not a scene store"
+# Not a new file among the store's either (a chunk file there is read as the store's).
+expect 2 "$B" export "$T/C" --out "$T/C/chunks/c_9_9_9.bfc" --format ply
+mentions "which is being read"
+[ -e "$T/C/chunks/c_9_9_9.bfc" ] && fail "export wrote a new file into the store's chunks"
+# A store stopped before its first write: an empty chunks/ and nothing else.
+mkdir -p "$T/unwritten/chunks"
+expect 3 "$B" export "$T/unwritten" --out "$T/unwritten.ply"
+mentions "not a scene store (or one stopped before its first write)"
+[ -e "$T/unwritten.ply" ] && fail "export of a store never written wrote a mesh"
 
 # Resume: the scan in two halves ends within tracking tolerance of the
 # uninterrupted one (both start at the true pose; noise-free frames). The
@@ -176,7 +195,14 @@ for i in $(seq 1 80); do
     if [ -f "$T/out" ] && ! json_get "$T/out" "d['bad_chunk_files']" | grep -qx 0; then
         fail "kill $i: the store has bad chunk files"
     fi
-    expect 0 "$B" export "$K" --out "$T/k.ply" --points
+    # A store killed before its first write holds nothing to export: said so.
+    if json_get "$T/out" "int(d['chunks'] + d['bad_chunk_files'] + d['index_ok'] + d['trajectory_ok'])" 2>/dev/null |
+        grep -qx 0; then
+        expect 3 "$B" export "$K" --out "$T/k.ply" --points
+        mentions "stopped before its first write"
+    else
+        expect 0 "$B" export "$K" --out "$T/k.ply" --points
+    fi
 done
 [ "$kills" -ge 20 ] || fail "only $kills of the runs were killed mid-scan (the scan is too short?)"
 [ -d "$K" ] || expect 0 "$B" replay "$SEQ" --out "$T/kstart" --no-mesh --frames 10 --store "$K"
