@@ -169,7 +169,8 @@ bf_status replay_tum_writer_finish(replay_tum_writer *w)
     bf_status s;
     /* depth.txt last: a reader detects the folder by it. */
     if ((s = write_index(w, "camera.txt", &cam_buf))) return s;
-    if ((s = write_index(w, "rgb.txt", &w->rgb_txt))) return s;
+    /* No colour at all: no rgb.txt (the reader takes a depth-only folder, not an empty index). */
+    if (w->n_rgb > 0 && (s = write_index(w, "rgb.txt", &w->rgb_txt))) return s;
     if (w->n_poses > 0 && (s = write_index(w, "groundtruth.txt", &w->gt_txt))) return s;
     if ((s = write_index(w, "depth.txt", &w->depth_txt))) return s;
     w->is_finished = true;

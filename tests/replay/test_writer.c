@@ -45,6 +45,38 @@ BF_TEST(writer_writes_index_files_only_at_finish)
     replay_tum_writer_destroy(NULL);
 }
 
+BF_TEST(a_depth_only_folder_reads_back)
+{
+    /* No frame with colour: no rgb.txt, and the folder reads as depth only
+     * (an empty rgb.txt is refused by the reader, "no frames listed"). */
+    const char *dir = rt_fresh_dir("writer_depth_only");
+    CHECK(dir);
+    bf_intrinsics K = {4, 3, 500, 500, 1.5, 1, 5000};
+    replay_tum_writer *w;
+    CHECK_OK(replay_tum_writer_create(dir, &K, &w));
+    uint16_t d[4 * 3] = {1000, 2000, 3000};
+    for (int k = 0; k < 2; k++) {
+        bf_frame f = {.index = (uint32_t)k, .width = 4, .height = 3, .t_depth_s = 1.0 + k, .t_rgb_s = 1.0 + k, .depth = d};
+        CHECK_OK(replay_tum_writer_add(w, &f));
+    }
+    CHECK_OK(replay_tum_writer_finish(w));
+    replay_tum_writer_destroy(w);
+    char p[1024];
+    snprintf(p, sizeof p, "%s/rgb.txt", dir);
+    CHECK(!bf_file_exists(p));
+    rgbd_source *src;
+    CHECK_OK(replay_open(dir, NULL, &src));
+    bf_frame f;
+    uint32_t n = 0;
+    while (rgbd_source_next(src, &f) == BF_OK) {
+        CHECK(f.rgb == NULL);
+        CHECK(f.depth[1] == 2000);
+        n++;
+    }
+    CHECK_EQ_INT(n, 2);
+    rgbd_source_close(src);
+}
+
 BF_TEST(writer_then_reader_round_trip_is_bit_exact)
 {
     const char *data = bf_test_data("tum/frames");
