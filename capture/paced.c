@@ -25,9 +25,15 @@ static bf_status paced_next(rgbd_source *base, bf_frame *out)
         p->t0_wall_s = bf_time_s();
         p->t0_frame_s = out->t_depth_s;
     }
-    double wait = (out->t_depth_s - p->t0_frame_s) - (bf_time_s() - p->t0_wall_s);
-    /* A gap of more than 10 s is a break in the recording, not a pace. */
-    if (wait > 0 && wait < 10) {
+    double now = bf_time_s();
+    double wait = (out->t_depth_s - p->t0_frame_s) - (now - p->t0_wall_s);
+    /* A gap of more than 10 s is a break in the recording, not a pace: the
+     * frame comes now, and the pace goes on from it (not a burst of every
+     * later frame, each as far behind its time). */
+    if (wait >= 10) {
+        p->t0_wall_s = now;
+        p->t0_frame_s = out->t_depth_s;
+    } else if (wait > 0) {
         struct timespec ts = {(time_t)wait, (long)((wait - floor(wait)) * 1e9)};
         nanosleep(&ts, NULL);
     }

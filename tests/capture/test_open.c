@@ -178,6 +178,40 @@ static bf_status open_three(void *user, const char *path, rgbd_source **out)
     return capture_source_from_fn(user, 3, false, three_frames, NULL, out);
 }
 
+/* Five frames at 20 Hz with an hour's break after the second. */
+static bf_status five_with_a_break(void *user, uint32_t k, bf_frame *f)
+{
+    (void)user;
+    static uint16_t depth[64];
+    *f = (bf_frame){.index = k, .width = 8, .height = 8, .t_depth_s = 7 + 0.05 * k + (k >= 2 ? 3600 : 0), .depth = depth};
+    return BF_OK;
+}
+
+static bf_status open_five(void *user, const char *path, rgbd_source **out)
+{
+    (void)path;
+    return capture_source_from_fn(user, 5, false, five_with_a_break, NULL, out);
+}
+
+BF_TEST(a_paced_recording_goes_on_at_its_pace_after_a_break)
+{
+    /* The break is not waited for (over 10 s), and the frames after it keep
+     * their 50 ms steps: 50 ms before it and 100 ms after it, not a burst. */
+    bf_intrinsics K = {8, 8, 10, 10, 3.5, 3.5, 1000};
+    rgbd_source *src = NULL;
+    bool is_live = true;
+    double t0 = bf_time_s();
+    CHECK_OK(capture_open_device("five", open_five, &K, true, 4, &is_live, &src));
+    bf_frame f;
+    uint32_t n = 0;
+    while (rgbd_source_next(src, &f) == BF_OK) n++;
+    double dt = bf_time_s() - t0;
+    rgbd_source_close(src);
+    CHECK_EQ_INT(n, 5);
+    CHECK(dt >= 0.145);
+    CHECK(dt < 5);
+}
+
 BF_TEST(a_paced_recording_arrives_at_its_own_frame_rate)
 {
     bf_intrinsics K = {8, 8, 10, 10, 3.5, 3.5, 1000};
