@@ -30,7 +30,7 @@ typedef struct record_args {
 static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
 {
     memset(a, 0, sizeof *a);
-    a->codec = (app_log_codec){REPLAY_LOG_COLOUR_JPEG, 90, 1};
+    a->codec = (app_log_codec){.colour = REPLAY_LOG_COLOUR_JPEG, .jpeg_quality = 90, .zstd_level = 1};
     a->queue = 8;
     const app_option own[] = {
         APP_OPT("--device", APP_OPT_STRING, &a->device, "URI",
@@ -84,7 +84,6 @@ static cJSON *stats_json(const record_args *a, const char *log_path, const recor
                                          : s == BF_FORMAT || s == BF_IO ? "input_error"
                                          : s == BF_WRITE ? "write_error"
                                          : s == BF_VULKAN || s == BF_NO_DEVICE ? "device_error"
-                                         : s == BF_INVALID_ARG                 ? "usage"
                                                                                 : "failure");
     if (s != BF_OK) cJSON_AddStringToObject(o, "error", bf_last_error());
     else cJSON_AddNullToObject(o, "error");
@@ -155,6 +154,10 @@ int cmd_record(int argc, char **argv)
     if (s) return app_fail(cmd, s);
     a.lcfg.device = a.device;
     a.lcfg.has_groundtruth = src->has_groundtruth;
+    /* Over an earlier log (--overwrite): written aside and put in place once
+     * finished, so a recording that fails before its first frame leaves it. */
+    bool replaces = bf_file_exists(log_path);
+    a.lcfg.replace_when_finished = replaces;
     if ((s = replay_log_writer_create(log_path, rgbd_source_intrinsics(src), &a.lcfg, &w))) {
         rgbd_source_close(src);
         return app_fail(cmd, s);
@@ -164,15 +167,23 @@ int cmd_record(int argc, char **argv)
     char dev_err[1024] = "";
     if (s_dev) snprintf(dev_err, sizeof dev_err, "%s", bf_last_error());
     rgbd_source_close(src);
-    /* Finish even after a device error: every frame before it is kept. */
-    bf_status s_fin = replay_log_writer_finish(w);
+    /* Finish even after a device error: every frame before it is kept. A
+     * failure before the first frame leaves no log (an earlier one stays). */
+    bool none = s_dev && replay_log_writer_stats(w).n_frames == 0;
+    bf_status s_fin = none ? BF_OK : replay_log_writer_finish(w);
     r.log = replay_log_writer_stats(w);
     r.seconds = bf_time_s() - t0;
     replay_log_writer_destroy(w);
+    if (none && !replaces) (void)remove(log_path);
     s = s_dev ? s_dev : s_fin;
     if (s_dev && dev_err[0]) bf_fail(s_dev, "%s", dev_err);
+    /* The recording's own failure is the one named, not a later stats.json's. */
+    char err[1024] = "";
+    if (s) snprintf(err, sizeof err, "%s", bf_last_error());
 
     bf_status s_json = app_json_write(json_path, stats_json(&a, log_path, &r, s));
+    char json_err[1024] = "";
+    if (s_json) snprintf(json_err, sizeof json_err, "%s", bf_last_error());
     const replay_log_stats *L = &r.log;
     printf("bitfuse %s: %u frames from %s to %s%s\n", cmd, L->n_frames, a.device, log_path,
            r.is_interrupted ? " (stopped by a signal; the log is complete up to there)" : "");
@@ -184,11 +195,12 @@ int cmd_record(int argc, char **argv)
     if (L->rgb_raw_bytes)
         printf("  colour    %.2f MB raw -> %.2f MB (%.2fx, %s)\n", L->rgb_raw_bytes / 1e6, L->rgb_bytes / 1e6,
                app_ratio(L->rgb_raw_bytes, L->rgb_bytes), app_colour_name(a.lcfg.colour));
-    printf("  file      %.2f MB in %.2f s: %.1f frames/s, %.1f MB/s; stats in %s\n", L->file_bytes / 1e6, r.seconds,
+    printf("  file      %.2f MB in %.2f s: %.1f frames/s, %.1f MB/s; stats %s %s\n", L->file_bytes / 1e6, r.seconds,
            r.seconds > 0 ? L->n_frames / r.seconds : 0.0, r.seconds > 0 ? L->file_bytes / 1e6 / r.seconds : 0.0,
-           json_path);
-    if (s) return app_fail(cmd, s);
-    if (s_json != BF_OK) return app_fail(cmd, s_json);
+           s_json ? "not written to" : "in", json_path);
+    if (s && s_json) bf_warn("%s", json_err);
+    if (s) return app_fail(cmd, bf_fail(s, "%s", err));
+    if (s_json != BF_OK) return app_fail(cmd, bf_fail(s_json, "%s", json_err));
     return APP_EXIT_OK;
 }
 
