@@ -310,6 +310,7 @@ int app_check_json_out(const char *cmd, const char *opt, const char *path);
 typedef struct app_log_codec {
     int colour; /* a replay_log_colour */
     uint32_t jpeg_quality, zstd_level;
+    bool colour_given, quality_given, level_given; /* on the command line (set by the parser) */
 } app_log_codec;
 #define APP_LOG_ROWS 5
 void app_log_codec_options(app_option rows[APP_LOG_ROWS], app_log_codec *c);

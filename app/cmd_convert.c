@@ -48,7 +48,7 @@ static int check_new_folder(const char *dir)
 static int parse_args(int argc, char **argv, convert_args *a)
 {
     memset(a, 0, sizeof *a);
-    a->codec = (app_log_codec){REPLAY_LOG_COLOUR_ZSTD, 90, 1};
+    a->codec = (app_log_codec){.colour = REPLAY_LOG_COLOUR_ZSTD, .jpeg_quality = 90, .zstd_level = 1};
     const app_option own[] = {
         APP_OPT("--out", APP_OPT_STRING, &a->out, "DEST", "X.bflog or a folder (created)", .required = true),
         APP_OPT_END,
@@ -62,6 +62,10 @@ static int parse_args(int argc, char **argv, convert_args *a)
     int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
     if (rc) return rc;
     a->to_log = replay_is_log_path(a->out);
+    /* A folder keeps PNG images: the log's codecs would be ignored. */
+    if (!a->to_log && (a->codec.colour_given || a->codec.quality_given || a->codec.level_given))
+        return app_usage_error("convert", "--colour, --jpeg-quality and --zstd-level are a .bflog's codecs; a TUM "
+                                          "folder keeps PNG images");
     /* A failed or cut conversion leaves a log already at DEST as it was. */
     a->lcfg.replace_when_finished = true;
     rc = app_check_not_input("convert", "--out", a->out, a->in);
@@ -83,6 +87,15 @@ static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_
     }
     bf_progress_end(&prog, n);
     *n_out = n;
+    /* A bad input frame ends a folder with the frames before it indexed, so
+     * they read (a log keeps an earlier log at DEST as it was instead). */
+    if (tw && n > 0 && (s == BF_FORMAT || s == BF_IO)) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", bf_last_error());
+        if (replay_tum_writer_finish(tw) == BF_OK)
+            return bf_fail(s, "%s (the %u frames before it are in the folder)", msg, n);
+        return bf_fail(s, "%s", msg);
+    }
     if (s != BF_END) return s;
     if (n == 0) return bf_fail(BF_FORMAT, "no frame could be read");
     return lw ? replay_log_writer_finish(lw) : replay_tum_writer_finish(tw);

@@ -153,11 +153,13 @@ void app_log_codec_options(app_option rows[APP_LOG_ROWS], app_log_codec *c)
 {
     const app_option r[APP_LOG_ROWS] = {
         APP_OPT("--colour", APP_OPT_ENUM, &c->colour, "jpeg|zstd|none", "colour codec (zstd is lossless)",
-                .codes = colour_codes),
-        APP_OPT("--color", APP_OPT_ENUM, &c->colour, "jpeg|zstd|none", NULL, .codes = colour_codes),
-        APP_OPT("--jpeg-quality", APP_OPT_U32, &c->jpeg_quality, "Q", "JPEG quality", .min = 1, .max = 100),
+                .codes = colour_codes, .given = &c->colour_given),
+        APP_OPT("--color", APP_OPT_ENUM, &c->colour, "jpeg|zstd|none", NULL, .codes = colour_codes,
+                .given = &c->colour_given),
+        APP_OPT("--jpeg-quality", APP_OPT_U32, &c->jpeg_quality, "Q", "JPEG quality (with --colour jpeg)", .min = 1,
+                .max = 100, .given = &c->quality_given),
         APP_OPT("--zstd-level", APP_OPT_U32, &c->zstd_level, "L", "zstd level for depth (and zstd colour)", .min = 1,
-                .max = 19),
+                .max = 19, .given = &c->level_given),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);
@@ -180,6 +182,9 @@ int app_parse_log_command(app_command_spec *spec, const app_option *own, app_log
     spec->tables = tables;
     int rc = app_options_parse(spec, argc, argv);
     spec->tables = NULL; /* they live on this stack */
+    /* A quality no codec uses is refused, not ignored. */
+    if (rc == 0 && codec->quality_given && codec->colour != REPLAY_LOG_COLOUR_JPEG)
+        return app_usage_error(spec->name, "--jpeg-quality is JPEG's: it needs --colour jpeg");
     if (rc == 0) app_log_codec_apply(codec, lcfg);
     return rc;
 }

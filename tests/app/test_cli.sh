@@ -498,6 +498,18 @@ PY
 expect 3 "$B" info "$T/flip.bflog"
 mentions "$T/flip.bflog: frame 2"
 mentions "checksum"
+# Converted to a folder, the frames before the bad one are indexed and read.
+expect 3 "$B" convert "$T/flip.bflog" --out "$T/flipdir"
+mentions "the 2 frames before it are in the folder"
+expect 0 "$B" info "$T/flipdir" --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] == 2, d" "$T/out" ||
+    fail "the frames before a bad one are not a readable folder"
+# Codec options that would be ignored are refused.
+expect 2 "$B" convert "$T/seq" --out "$T/codecdir" --colour jpeg
+mentions "a TUM folder keeps PNG images"
+[ -e "$T/codecdir" ] && fail "a refused convert made its folder"
+expect 2 "$B" record --device "$T/seq" --out "$T/q.bflog" --colour zstd --jpeg-quality 50
+mentions "needs --colour jpeg"
 printf 'not a log' >"$T/text.bflog"
 expect 3 "$B" info "$T/text.bflog"
 mentions "not a bitfuse log"
