@@ -217,7 +217,7 @@ int cmd_calibrate_depth(int argc, char **argv)
         .name = cmd, .usage = usage_text, .tables = tables, .positional = &seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
         .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 bad input (an unreadable frame or trajectory, too few\n"
-                  "frames with a pose, no pair of frames at the gaps), 5 the output could not be written\n"
+                  "frames with a pose, no pair of frames at the gaps, no cell measured), 5 the output could not be written\n"
                   "\nSee docs/calibration.md.\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
@@ -264,6 +264,11 @@ int cmd_calibrate_depth(int argc, char **argv)
             bf_fail(BF_FORMAT, "%s: %s", seq, why);
         }
     }
+    /* No cell measured (no depth within the range at the pairs' pixels): an
+     * all-ones file would read as a camera without a pattern. */
+    if (s == BF_OK && c->n_cells_measured == 0)
+        s = bf_fail(BF_FORMAT, "%s: no cell of the %ux%u grid was measured (depth within %.2f m where pairs overlap): "
+                    "no correction written", seq, c->grid_w, c->grid_h, cfg.max_depth_m);
     if (s == BF_OK) {
         /* The pixels the pattern was found in: the lens taken out of the frames. */
         double dist[CALIB_DIST_N];
