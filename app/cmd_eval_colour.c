@@ -120,10 +120,14 @@ int cmd_eval_colour(int argc, char **argv)
     if (!img || !hit) s = bf_fail(BF_NO_MEMORY, "eval-colour: images");
     eval_colour_sums all = {0};
     cJSON *frames = json ? cJSON_CreateArray() : NULL;
-    uint32_t n_frames = 0, n_skipped = 0;
+    uint32_t n_frames = 0, n_skipped = 0, n_no_colour = 0, n_unseen = 0;
     bf_frame f;
     while (s == BF_OK && (s = rgbd_source_next(src, &f)) == BF_OK) {
-        if (f.index % every || !f.rgb) continue;
+        if (f.index % every) continue;
+        if (!f.rgb) {
+            n_no_colour++;
+            continue;
+        }
         bf_se3 T_wc;
         if (!pose_at(&tr, f.t_depth_s, &T_wc)) {
             n_skipped++;
@@ -136,6 +140,7 @@ int cmd_eval_colour(int argc, char **argv)
         if (save && (s = save_pair(save, f.index, &K, img, f.rgb)) != BF_OK) break;
         all.sse += one.sse, all.n += one.n;
         n_frames++;
+        n_unseen += one.n == 0; /* no pixel of it: in no score */
         double cover = (double)one.n / 3.0 / (double)n_px;
         if (frames) {
             cJSON *o = cJSON_CreateObject();
@@ -151,8 +156,10 @@ int cmd_eval_colour(int argc, char **argv)
     if (s == BF_END) s = BF_OK;
     free(img);
     free(hit);
-    if (s == BF_OK && n_frames == 0)
-        s = bf_fail(BF_FORMAT, "%s: no frame every %u has a pose in %s", paths[1], every, traj_path);
+    if (s == BF_OK && n_frames == 0 && n_skipped == 0 && n_no_colour)
+        s = bf_fail(BF_FORMAT, "%s: no frame every %u has colour", paths[1], every);
+    else if (s == BF_OK && n_frames == 0)
+        s = bf_fail(BF_FORMAT, "%s: no frame every %u with colour has a pose in %s", paths[1], every, traj_path);
     /* Nothing compared is no score (PSNR nan, exit 0): poses or units wrong. */
     if (s == BF_OK && all.n == 0)
         s = bf_fail(BF_FORMAT, "%s: the mesh is seen in none of the %u frames compared: do the poses of %s and the "
@@ -162,15 +169,18 @@ int cmd_eval_colour(int argc, char **argv)
             cJSON *o = cJSON_CreateObject();
             cJSON_AddStringToObject(o, "mesh", paths[0]);
             cJSON_AddStringToObject(o, "sequence", paths[1]);
-            cJSON_AddNumberToObject(o, "frames", n_frames);
+            cJSON_AddNumberToObject(o, "frames", n_frames - n_unseen); /* those in the score */
+            cJSON_AddNumberToObject(o, "frames_mesh_unseen", n_unseen);
             cJSON_AddNumberToObject(o, "frames_without_pose", n_skipped);
+            cJSON_AddNumberToObject(o, "frames_without_colour", n_no_colour);
             cJSON_AddNumberToObject(o, "psnr_db", eval_colour_psnr(&all));
             cJSON_AddItemToObject(o, "per_frame", frames);
             frames = NULL;
             s = app_json_print(o);
         } else {
-            printf("PSNR %.2f dB over %u frames (every %u; %u without a pose)\n", eval_colour_psnr(&all), n_frames,
-                   every, n_skipped);
+            printf("PSNR %.2f dB over %u frames (every %u; %u without a pose, %u without colour, %u where the mesh "
+                   "is not seen)\n", eval_colour_psnr(&all), n_frames - n_unseen, every, n_skipped, n_no_colour,
+                   n_unseen);
         }
     }
     cJSON_Delete(frames);

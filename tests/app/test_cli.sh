@@ -607,6 +607,12 @@ expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/rp/trajectory.txt" --json
 expect 0 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/rp/trajectory.txt"
 grep -q "^PSNR [0-9]" "$T/out" || fail "eval-colour: no PSNR: $(cat "$T/out")"
 awk '/^#/ {print; next} {$2 += 100; print}' "$T/rp/trajectory.txt" >"$T/away.txt"
+# Only the frames where the mesh is seen are in the score's count.
+awk '/^#/ {print; next} NR > 2 {$2 += 100} {print}' "$T/rp/trajectory.txt" >"$T/partaway.txt"
+expect 0 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/partaway.txt" --every 1 --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] >= 1 and d['frames_mesh_unseen'] >= 1 \
+    and d['frames'] + d['frames_mesh_unseen'] == len(d['per_frame']), d" "$T/out" ||
+    fail "eval-colour counts frames where the mesh is not seen: $(head -c 400 "$T/out")"
 expect 3 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/away.txt"
 mentions "is seen in none of the"
 expect 2 "$B" replay "$T/seq"
