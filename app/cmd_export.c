@@ -96,12 +96,22 @@ int cmd_export(int argc, char **argv)
     mesh_data data = {0};
     export_stats st = {0};
     mesh_simplify_stats ss = {0};
+    uint32_t mesh_level = 0;
     bf_status s = read_store(cmd, dir, &m, &meta, NULL, &rep, true);
     if (s == BF_OK && points) {
         s = export_points(&m, &data, &st);
     } else if (s == BF_OK) {
         export_mesh_config mc = export_mesh_config_default();
         mc.max_level = level != UINT32_MAX ? level : app_mesh_level(&m);
+        /* A lattice finer than every brick: the mesh is the finest bricks' own. */
+        uint32_t finest = 0;
+        for (uint32_t i = 0; i < m.n_bricks; i++) finest = m.bricks[i].level > finest ? m.bricks[i].level : finest;
+        if (level != UINT32_MAX && level > finest && m.n_bricks) {
+            bf_warn("export: --mesh-level %u: the store's finest bricks are at level %u: the mesh is level %u's", level,
+                    finest, finest);
+            mc.max_level = finest;
+        }
+        mesh_level = mc.max_level;
         s = export_mesh(&m, &mc, &data, &st);
     }
     double t_write = bf_time_s();
@@ -116,6 +126,7 @@ int cmd_export(int argc, char **argv)
         cJSON_AddNumberToObject(o, "bricks", rep.n_bricks);
         cJSON_AddNumberToObject(o, "chunk_files_left_out", rep.n_bad);
         cJSON_AddNumberToObject(o, "chunks_missing", rep.n_missing);
+        if (!points) cJSON_AddNumberToObject(o, "mesh_level", mesh_level); /* the lattice's octree level */
         app_json_mesh_file(o, out, fmt, &mo, &data, &ss);
         cJSON_AddNumberToObject(o, "export_seconds", st.seconds);
         cJSON_AddNumberToObject(o, "write_seconds", bf_time_s() - t_write - ss.seconds);

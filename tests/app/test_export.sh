@@ -59,6 +59,13 @@ validate "$T/m.glb"
 expect 0 "$B" export "$T/S" --out "$T/m.bin" --format glb
 cmp -s "$T/m.bin" "$T/m.glb" || fail "--format glb --out m.bin differs from m.glb"
 
+# A lattice finer than every brick is the finest bricks' own, said so.
+expect 0 "$B" export "$T/S" --out "$T/l8.ply" --mesh-level 8 --json
+mentions "the store's finest bricks are at level"
+lv=$(json_get "$T/out" "d['mesh_level']")
+[ "$lv" -lt 8 ] && [ "$(json_get "$T/out" "d['triangles']")" = "$nfull" ] ||
+    fail "--mesh-level 8 over coarser bricks: level $lv, $(json_get "$T/out" "d['triangles']") triangles, not $nfull"
+
 # Detail: a cap, an error bound.
 expect 0 "$B" export "$T/S" --out "$T/c.glb" --max-triangles 2000 --json
 n=$(json_get "$T/out" "d['triangles']")
