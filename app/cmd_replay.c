@@ -958,6 +958,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* The store is read (to resume) or claimed before anything is made. */
     bool made_store = a.store && !bf_file_exists(a.store);
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
+    /* A map without colour written over one with: its colour gone for good. */
+    if (s == BF_OK && r.store.is_resumed && r.store.map.rgb565 && !a.rcfg.fusion.keep_colour)
+        s = bf_fail(BF_INVALID_ARG, "%s: the store holds colour, which --colour off would drop for good: resume it "
+                    "with colour", a.store);
     bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && a.record_path) {
@@ -1008,6 +1012,12 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             wf = sink.wf;
             r.run.is_interrupted = false; /* the stop was ours, not a signal's */
         }
+        /* Every frame at or before the stored scan's end: nothing new (another
+         * sequence than the store's, or one it has scanned to its end). */
+        if (s == BF_OK && r.store.is_resumed && r.run.counts.frames == 0 && r.run.n_resume_skipped > 0)
+            bf_warn("%s: all %u frames of %s are at or before the stored scan's last time (t = %.6f s): nothing new "
+                    "to scan (the sequence the store was made from, scanned to its end?)", cmd,
+                    r.run.n_resume_skipped, a.seq, rs.t_last_s);
         /* The loop failing mid-scan (a lost device, out of memory, the
          * stream's spill folder not writable): the trajectory so far is
          * host data and is written, the map too when it can still be read

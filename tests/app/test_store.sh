@@ -123,7 +123,15 @@ mentions "not a scene store (or one stopped before its first write)"
 cp -r "$SEQ" "$T/seqh"
 expect 0 "$B" replay "$T/seqh" --out "$T/h1" --no-mesh --frames 30 --store "$T/H"
 printf 'not a PNG' >"$T/seqh/$(awk '!/^#/ {i++; if (i == 11) print $2}' "$T/seqh/depth.txt")"
+# Not without colour over a store with colour (it would drop it for good).
+expect 2 "$B" replay "$T/seqh" --out "$T/h2off" --no-mesh --store "$T/H" --resume --colour off
+mentions "the store holds colour"
+[ -e "$T/h2off" ] && fail "a refused resume made its output folder"
 expect 0 "$B" replay "$T/seqh" --out "$T/h2" --no-mesh --store "$T/H" --resume
+# Resumed again: every frame is the store's already, and that is said.
+cp -r "$T/H" "$T/H3"
+expect 0 "$B" replay "$T/seqh" --out "$T/h3" --no-mesh --store "$T/H3" --resume
+mentions "are at or before the stored scan's last time"
 # The same from a log: the stored records' headers are read, not their
 # payloads (one spoilt here, a quarter of the way in, past its header).
 expect 0 "$B" convert "$SEQ" --out "$T/seq.bflog"
