@@ -108,6 +108,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddStringToObject(o, "device", r->device);
     cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_fusion_config(o, "config", &a->fcfg);
+    cJSON_AddBoolToObject(o, "interrupted", r->run.is_interrupted); /* Ctrl-C, SIGTERM */
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &fuse_depth_fix : NULL);
     char *cal_text = NULL;
     cJSON *cal = a->calibration && calib_to_text(&a->cal.cal, &cal_text) == BF_OK ? cJSON_CreateRaw(cal_text) : NULL;
@@ -175,7 +176,11 @@ int cmd_fuse(int argc, char **argv)
         /* A corrupt frame mid-sequence ends the run, and the frames fused
          * before it are written; the exit code still says the input was bad. */
         rcfg.keep_on_source_error = true;
+        /* Ctrl-C or SIGTERM ends the run as a replay's: the frames fused
+         * so far are written (a second one kills the program). */
+        rcfg.stop = app_stop_begin(NULL);
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
+        app_stop_end();
         r.n_unreadable = replay_skipped_frames(src);
         /* No frame within the file's time span: give the span. */
         if (s == BF_FORMAT && use_traj && traj.n && r.run.n_fused == 0 && r.run.n_skipped > 0 &&
@@ -201,6 +206,8 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK) {
         printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
                r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
+        if (r.run.is_interrupted)
+            printf("  stopped          by a signal (Ctrl-C): the frames before it are fused and written\n");
         if (r.run.counts.repeated)
             printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
                    r.run.counts.repeated);

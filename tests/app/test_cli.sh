@@ -568,6 +568,27 @@ else
     wait $pid
 fi
 
+# fuse too: the frames fused before the signal are written.
+python3 -c "
+for i in range(90): print('%.6f 0 0 0 0 0 0 1' % (1000 + i / 30.0))" >"$T/long_poses.txt"
+t0=$(date +%s.%N)
+expect 0 "$B" fuse "$T/long" --poses "$T/long_poses.txt" --out "$T/flong" --no-mesh
+half=$(python3 -c "import sys; print(max(0.2, (float(sys.argv[2]) - float(sys.argv[1])) / 2))" "$t0" "$(date +%s.%N)")
+"$B" fuse "$T/long" --poses "$T/long_poses.txt" --out "$T/fint" --no-mesh >"$T/out" 2>"$T/err" &
+pid=$!
+sleep "$half"
+if kill -INT $pid 2>/dev/null; then
+    wait $pid
+    rc=$?
+    [ $rc = 0 ] || fail "fuse stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
+    if python3 -c "import json,sys; sys.exit(0 if json.load(open(sys.argv[1]))['interrupted'] else 1)" "$T/fint/stats.json"; then
+        grep -q "stopped          by a signal" "$T/out" || fail "fuse did not say it was stopped: $(cat "$T/out")"
+        [ -s "$T/fint/points.ply" ] || fail "interrupted fuse: points.ply missing"
+    fi
+else
+    wait $pid
+fi
+
 # Ctrl-C before any frame with depth came (a camera still dark, 10 s of
 # frames without depth at 30 Hz): exit 0 as any Ctrl-C, nothing written,
 # no folder left.
