@@ -72,21 +72,24 @@ static int parse_args(int argc, char **argv, convert_args *a)
     return rc || a->to_log ? rc : check_new_folder(a->out);
 }
 
-/* The frames of src into the log or TUM writer (exactly one is set). */
-static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_tum_writer *tw, uint32_t *n_out)
+/* The frames of src into the log or TUM writer (exactly one is set), until
+ * the source ends or *stop is set (Ctrl-C: what was converted is kept). */
+static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_tum_writer *tw,
+                                const volatile sig_atomic_t *stop, uint32_t *n_out)
 {
     bf_progress prog;
     bf_progress_begin(&prog, "convert", src->n_frames);
     bf_frame f;
     bf_status s;
     uint32_t n = 0;
-    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+    while (!*stop && (s = rgbd_source_next(src, &f)) == BF_OK) {
         s = lw ? replay_log_writer_add(lw, &f) : replay_tum_writer_add(tw, &f);
         if (s) break;
         bf_progress_update(&prog, ++n);
     }
     bf_progress_end(&prog, n);
     *n_out = n;
+    if (*stop && s == BF_OK) s = BF_END;
     /* A bad input frame ends a folder with the frames before it indexed, so
      * they read (a log keeps an earlier log at DEST as it was instead). */
     if (tw && n > 0 && (s == BF_FORMAT || s == BF_IO)) {
@@ -122,7 +125,11 @@ int cmd_convert(int argc, char **argv)
     s = a.to_log ? replay_log_writer_create(a.out, rgbd_source_intrinsics(src), &a.lcfg, &lw)
                  : replay_tum_writer_create(a.out, rgbd_source_intrinsics(src), &tw);
     uint32_t n = 0;
-    if (s == BF_OK) s = convert_frames(src, lw, tw, &n);
+    /* Ctrl-C or SIGTERM ends the conversion as it ends a recording: the
+     * frames converted so far are written, whole (a second one kills). */
+    const volatile sig_atomic_t *stop = app_stop_begin(NULL);
+    if (s == BF_OK) s = convert_frames(src, lw, tw, stop, &n);
+    bool interrupted = app_stop_end();
     uint32_t skipped = replay_skipped_frames(dev);
     replay_log_stats L = {0};
     if (lw) L = replay_log_writer_stats(lw);
@@ -145,13 +152,14 @@ int cmd_convert(int argc, char **argv)
     cJSON_AddNumberToObject(o, "frames", n);
     cJSON_AddNumberToObject(o, "skipped", skipped);
     cJSON_AddNumberToObject(o, "dropped", 0);
+    cJSON_AddBoolToObject(o, "interrupted", interrupted);
     if (a.to_log) app_json_log_stats(o, &a.lcfg, &L, seconds);
     cJSON_AddNumberToObject(o, "seconds", seconds);
     cJSON_AddNumberToObject(o, "fps", seconds > 0 ? n / seconds : NAN);
     if ((s = app_json_write(json_path, o)) != BF_OK) return app_fail(cmd, s);
 
-    printf("bitfuse convert: %u frames (%u skipped) from %s to %s (%s)\n", n, skipped, a.in, a.out,
-           a.to_log ? "bitfuse log" : "TUM folder");
+    printf("bitfuse convert: %u frames (%u skipped) from %s to %s (%s)%s\n", n, skipped, a.in, a.out,
+           a.to_log ? "bitfuse log" : "TUM folder", interrupted ? " (stopped by a signal; complete up to there)" : "");
     if (a.to_log) {
         printf("  depth     %.2f MB raw -> %.2f MB (%.2fx)\n", L.depth_raw_bytes / 1e6, L.depth_bytes / 1e6,
                app_ratio(L.depth_raw_bytes, L.depth_bytes));

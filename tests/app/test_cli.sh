@@ -546,6 +546,20 @@ grep -q "stopped by a signal" "$T/out" || fail "record did not say it was stoppe
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['interrupted'] and 1 <= d['frames'] < 90, d" \
     "$T/int.stats.json" || fail "interrupted record: stats.json"
 expect 0 "$B" info "$T/int.bflog"
+# convert too: a complete log of the frames converted (when the signal
+# lands before the end: 90 frames convert in about a second here).
+"$B" convert "$T/long" --out "$T/cint.bflog" >"$T/out" 2>"$T/err" &
+pid=$!
+sleep 0.3
+if kill -INT $pid 2>/dev/null; then
+    wait $pid
+    rc=$?
+    [ $rc = 0 ] || fail "convert stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
+    [ -e "$T/cint.bflog.partial" ] && fail "convert stopped by SIGINT left its .partial"
+    expect 0 "$B" info "$T/cint.bflog"
+else
+    wait $pid
+fi
 # Ctrl-C during a replay ends the scan, not the program: exit 0, the frames
 # before it written (stats.json says interrupted), the store flushed. The
 # signal lands half-way through a run as long as an uninterrupted one here.
