@@ -84,6 +84,35 @@ static bf_status find_all(const calib_board *b, camera_images *c, bool is_quiet)
     return BF_OK;
 }
 
+/* A view whose corners all lie within half a pixel of an earlier one's (the
+ * same image given twice, a camera left still) adds no constraint: it is
+ * left out of the count of views, warned about; too few distinct views are
+ * too few views (calibrateCamera fits the noise of repeated ones). */
+static bf_status distinct_views(const calib_board *b, camera_images *c)
+{
+    size_t nc = (size_t)b->cols * b->rows;
+    uint32_t n_same = 0;
+    for (uint32_t k = 1; k < c->n; k++) {
+        if (!c->is_found[k]) continue;
+        for (uint32_t j = 0; j < k; j++) {
+            if (!c->is_found[j]) continue;
+            double worst = 0;
+            for (size_t i = 0; i < 2 * nc; i++)
+                worst = fmax(worst, fabs(c->corners[k * nc * 2 + i] - c->corners[j * nc * 2 + i]));
+            if (worst < 0.5) {
+                bf_warn("calibrate: %s %s shows the board where %s does (every corner within 0.5 px): it adds "
+                        "nothing", c->name, c->paths[k], c->paths[j]);
+                n_same++;
+                break;
+            }
+        }
+    }
+    if (c->n_found - n_same < CALIB_MIN_VIEWS)
+        return bf_fail(BF_FORMAT, "%u %s views show the board at %u different places (at least %d needed): move the "
+                       "board or the camera between images", c->n_found, c->name, c->n_found - n_same, CALIB_MIN_VIEWS);
+    return BF_OK;
+}
+
 /* Too few views: the message names the images without the board. */
 static bf_status too_few(const camera_images *c)
 {
@@ -235,6 +264,7 @@ int cmd_calibrate(int argc, char **argv)
     for (int i = 0; i < n_cams && s == BF_OK; i++) s = find_all(&board, &cams[i], false);
     for (int i = 0; i < n_cams && s == BF_OK; i++)
         if (cams[i].n_found < CALIB_MIN_VIEWS) s = too_few(&cams[i]);
+    for (int i = 0; i < n_cams && s == BF_OK; i++) s = distinct_views(&board, &cams[i]);
     calib_result r;
     if (s == BF_OK) {
         calib_views cv = {.n_views = cams[0].n, .width = cams[0].width, .height = cams[0].height,
@@ -243,6 +273,12 @@ int cmd_calibrate(int argc, char **argv)
                           .corners_px = cams[1].corners, .is_found = cams[1].is_found};
         s = calib_estimate(&board, &cv, has_depth ? &dv : NULL, &r);
     }
+    /* The pair fitting far worse than each camera alone: views that do not
+     * pair up (--depth in another order than IMAGES), or a camera moved. */
+    if (s == BF_OK && has_depth && r.rms_px > 1.0 && r.rms_px > 5 * fmax(r.colour.rms_px, r.depth.rms_px))
+        bf_warn("calibrate: the pair's reprojection RMS %.2f px is %.0f times the cameras' own (%.2f, %.2f px): are "
+                "the --depth images in the same order as the colour ones, and did the rig hold still in each view?",
+                r.rms_px, r.rms_px / fmax(r.colour.rms_px, r.depth.rms_px), r.colour.rms_px, r.depth.rms_px);
     if (s == BF_OK) s = calib_write(out, &r);
     if (s == BF_OK) {
         if (json) s = print_json(&r, cams, n_cams, out);

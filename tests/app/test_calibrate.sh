@@ -45,6 +45,16 @@ expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --out "$T/
 # --out written before the glob names the first image: refused, the image kept.
 first=$(ls "$T"/b/colour/*.png | head -n 1)
 sum0=$(md5sum <"$first")
+# The same image three times is one view, not three: refused, each repeat named.
+expect 3 "$B" calibrate --board 9x6 --square 0.04 "$T/b/colour/000.png" "$T/b/colour/000.png" "$T/b/colour/000.png" \
+    --out "$T/same.json"
+mentions "at 1 different places"
+mentions "shows the board where $T/b/colour/000.png does"
+[ -e "$T/same.json" ] && fail "calibrate from one view repeated wrote a file"
+# Depth views in another order than the colour ones: written, but warned.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/00[0-3].png \
+    --depth "$T/b/ir/001.png" "$T/b/ir/000.png" "$T/b/ir/003.png" "$T/b/ir/002.png" --out "$T/swapped.json"
+mentions "are the --depth images in the same order as the colour ones"
 expect 2 "$B" calibrate --board 9x6 --square 0.04 --out "$T"/b/colour/*.png
 mentions "is not a JSON file"
 [ "$(md5sum <"$first")" = "$sum0" ] || fail "calibrate wrote over an image it read"
