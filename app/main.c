@@ -1,6 +1,7 @@
 /* bitfuse: real-time RGB-D reconstruction with a sign-bit map. */
 #include <errno.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "app.h"
@@ -80,8 +81,24 @@ static int stdout_status(int rc)
     return rc == APP_EXIT_OK ? APP_EXIT_WRITE : rc;
 }
 
+/* An environment setting that is not one of its values is said, not
+ * silently read as the default. */
+static void check_environment(void)
+{
+    const char *log = getenv("BITFUSE_LOG");
+    if (log && strcmp(log, "debug") && strcmp(log, "info") && strcmp(log, "warn") && strcmp(log, "error") &&
+        strcmp(log, "silent"))
+        fprintf(stderr, "bitfuse: warning: BITFUSE_LOG='%s' is not debug, info, warn, error or silent: info\n", log);
+    const char *threads = getenv("BITFUSE_THREADS");
+    uint32_t n;
+    if (threads && (!bf_parse_u32(threads, &n) || n < 1 || n > 64))
+        fprintf(stderr, "bitfuse: warning: BITFUSE_THREADS='%s' is not a count of 1 to 64 threads: %d used\n",
+                threads, bf_thread_count());
+}
+
 int main(int argc, char **argv)
 {
+    check_environment();
     if (argc < 2) {
         usage(stderr);
         return APP_EXIT_USAGE;

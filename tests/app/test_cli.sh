@@ -813,6 +813,10 @@ mkdir -p "$T/baddata/meshes" && echo junk >"$T/baddata/meshes/bunny.ply"
 expect 3 "$B" demo --data "$T/baddata" --no-gpu --out "$T/demo-baddata"
 mentions "bunny.ply"
 [ -e "$T/demo-baddata" ] && fail "demo with an unreadable mesh in --data left $(ls "$T/demo-baddata")"
+# An environment setting that is no value of its own is warned about.
+BITFUSE_LOG=loud BITFUSE_THREADS=many "$B" --version >"$T/out" 2>"$T/err" || fail "--version with bad settings failed"
+mentions "BITFUSE_LOG='loud' is not"
+mentions "BITFUSE_THREADS='many' is not"
 # An option that means nothing without another is refused, not ignored.
 expect 2 "$B" replay "$T/seq" --out "$T/x" --view-period 0
 mentions "--view-period needs --view"
