@@ -190,7 +190,14 @@ static bf_status scan(log__source *ls)
         if (s != BF_OK) return s;
         /* The index chunk of a log whose footer is missing or damaged: the
          * frames end here. */
-        if (got >= 4 && log__get_u32(b) == LOG_INDEX_MAGIC) break;
+        if (got >= 4 && log__get_u32(b) == LOG_INDEX_MAGIC) {
+            /* Whole frames and an index, but no footer at the end to point at
+             * it: cut inside the footer, or bytes appended after it. */
+            bf_warn("%s: the log's index starts at byte %llu but its footer is not at the end of the file (cut off, "
+                    "or bytes appended after it): %u frames found by reading them in order",
+                    ls->path, (unsigned long long)at, ls->n);
+            break;
+        }
         log__frame_header h;
         if (got < LOG_FRAME_HEADER) {
             bf_warn("%s: the log ends inside frame %u's record header (byte %llu of %llu): the recording was cut "

@@ -485,6 +485,11 @@ expect 0 "$B" info "$T/cut.bflog" --json
 mentions "recording was cut off"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert 1 <= d['frames'] < 3, d" "$T/out" ||
     fail "cut log: expected 1 or 2 whole frames"
+# Bytes appended after a whole log (or its footer cut off): every frame
+# reads, and the missing footer is said.
+{ cat "$T/rec.bflog"; echo garbage; } >"$T/appended.bflog"
+expect 0 "$B" info "$T/appended.bflog"
+mentions "its footer is not at the end of the file"
 # A flipped byte in the last frame: named by file and frame, exit 3.
 cp "$T/rec.bflog" "$T/flip.bflog"
 python3 - "$T/flip.bflog" <<'PY'
