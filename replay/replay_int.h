@@ -135,8 +135,9 @@ bf_status replay__camera_resolve(const char *dir, const replay_options *opt, rep
 bf_status replay__camera_txt_read(const char *path, bf_intrinsics *K, double dist[CALIB_DIST_N]);
 
 /* Builds the source from a frame list (taking ownership of it, also on
- * failure), probing the first readable frame for the image size. */
-bf_status replay__source_create(const char *kind, replay__list *list, const replay__camera *cam,
+ * failure), probing the first readable frame for the image size; path
+ * names the sequence in warnings, kind its layout ("tum", ...). */
+bf_status replay__source_create(const char *path, const char *kind, replay__list *list, const replay__camera *cam,
                                 const replay_options *opt, rgbd_source **out);
 
 /* The format readers: each fills a frame list and a camera. */

@@ -171,7 +171,7 @@ static void source_close(rgbd_source *base)
 
 static const rgbd_source_ops replay__ops = {.next = source_next, .close = source_close, .pass = source_pass};
 
-bf_status replay__source_create(const char *kind, replay__list *list, const replay__camera *cam,
+bf_status replay__source_create(const char *path, const char *kind, replay__list *list, const replay__camera *cam,
                                 const replay_options *opt, rgbd_source **out)
 {
     bf_status s = BF_OK;
@@ -249,7 +249,7 @@ bf_status replay__source_create(const char *kind, replay__list *list, const repl
     if (replay__principal_point_is_off(K, w, h))
         bf_warn("%s: the camera's principal point (%g, %g) lies far from the centre of the %ux%u images (camera "
                 "from %s): is it for another image size?",
-                kind, K->cx_px, K->cy_px, w, h, cam->origin ? cam->origin : "defaults");
+                path, K->cx_px, K->cy_px, w, h, cam->origin ? cam->origin : "defaults");
     *out = &src->base;
     return BF_OK;
 fail:
@@ -324,5 +324,5 @@ bf_status replay_open(const char *path, const replay_options *opt, rgbd_source *
         replay__list_free(&list);
         return s;
     }
-    return replay__source_create(kind, &list, &cam, opt, out);
+    return replay__source_create(path, kind, &list, &cam, opt, out);
 }

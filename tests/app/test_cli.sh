@@ -79,6 +79,7 @@ py -c "import sys; fx, fy, cx, cy = map(float, sys.argv[1:5]); print(2 * fx, 2 *
     "$fx" "$fy" "$cx" "$cy" >"$T/lens/camera.txt"
 expect 0 "$B" info "$T/lens"
 mentions "far from the centre of the 160x120 images"
+mentions "$T/lens: the camera's principal point"
 cp "$T/seq/camera.txt" "$T/lens/camera.txt"
 awk 'NR == 4 && !/^#/ { $2 = "0x1p-3" } { print }' "$T/seq/groundtruth.txt" >"$T/lens/groundtruth.txt"
 expect 3 "$B" info "$T/lens"
