@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "app.h"
 #include "capture/capture.h"
@@ -62,6 +63,11 @@ static int parse_args(int argc, char **argv, convert_args *a)
     int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
     if (rc) return rc;
     a->to_log = replay_is_log_path(a->out);
+    if (!a->out[0]) return app_usage_error("convert", "--out needs a .bflog file or a folder, not ''");
+    /* Checked before the work: the finished log could not be put there. */
+    struct stat st;
+    if (a->to_log && stat(a->out, &st) == 0 && S_ISDIR(st.st_mode))
+        return app_usage_error("convert", "--out %s is a folder: a log needs a file's name", a->out);
     /* A folder keeps PNG images: the log's codecs would be ignored. */
     if (!a->to_log && (a->codec.colour_given || a->codec.quality_given || a->codec.level_given))
         return app_usage_error("convert", "--colour, --jpeg-quality and --zstd-level are a .bflog's codecs; a TUM "

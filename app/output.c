@@ -122,7 +122,7 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
         }
         if (s == BF_WRITE) {
             snprintf(mesh_error, sizeof mesh_error, "%s", bf_last_error());
-            bf_warn("%s; the points are still written", mesh_error);
+            bf_warn("%s; going on with the other outputs", mesh_error);
             /* No file: stats.json says so, with the mesh's own size. */
             snprintf(r->mesh_error, sizeof r->mesh_error, "%s", mesh_error);
             r->mesh_file[0] = '\0';

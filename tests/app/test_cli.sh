@@ -510,6 +510,10 @@ mentions "the 2 frames before it are in the folder"
 expect 0 "$B" info "$T/flipdir" --json
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] == 2, d" "$T/out" ||
     fail "the frames before a bad one are not a readable folder"
+# A log's name that is a folder is refused before the work.
+mkdir "$T/adir.bflog"
+expect 2 "$B" convert "$T/seq" --out "$T/adir.bflog"
+mentions "is a folder"
 # Codec options that would be ignored are refused.
 expect 2 "$B" convert "$T/seq" --out "$T/codecdir" --colour jpeg
 mentions "a TUM folder keeps PNG images"
