@@ -76,6 +76,7 @@ faulted() {
     fired=$(sed -n 's/^fired //p' "$T/$name.rep")
     [ -n "$fired" ] || { fail "$name: fault point $n never reached"; return; }
     case "$fired" in */bitfuse-spill-*/chunks/c_*.bfc*) ;; *) fail "$name: fired outside the spill folder: $fired" ;; esac
+    fired=${fired%.tmp} # messages name the chunk file, not its temporary name
     # One warning, naming the chunk file and the reason.
     [ "$(grep -c "spill folder is not used again" "$T/$name.err")" = 1 ] ||
         fail "$name: expected one warning about the spill folder: $(grep -i spill "$T/$name.err" | head -3)"
