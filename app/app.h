@@ -171,6 +171,10 @@ uint32_t app_mesh_level(const hostmap *snap);
  * recon_snapshot) or, when whole is NULL, of the pools' snapshot. */
 bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, const app_mesh_out *mo,
                          app_map_report *r);
+/* A warning when the output folder out holds an earlier run's stats.json:
+ * its files this run does not write (another mesh format, views past this
+ * run's) stay beside the new ones. */
+void app_warn_earlier_run(const char *cmd, const char *out);
 /* A mesh that app_export_map refused to simplify to nothing (r->mesh_refused)
  * is noted in w as a failure of its own status (exit 2 after the outputs). */
 void app_note_mesh_refused(app_write_failure *w, const app_map_report *r);

@@ -153,6 +153,7 @@ int cmd_fuse(int argc, char **argv)
     if (s == BF_OK && !use_traj && !src->has_groundtruth)
         s = bf_fail(BF_FORMAT, "%s: --poses groundtruth, but the sequence has no ground truth", a.seq);
     bool made_out = !bf_file_exists(a.out);
+    if (s == BF_OK && !made_out) app_warn_earlier_run(cmd, a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);

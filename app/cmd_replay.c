@@ -963,6 +963,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         s = bf_fail(BF_INVALID_ARG, "%s: the store holds colour, which --colour off would drop for good: resume it "
                     "with colour", a.store);
     bool made_out = !bf_file_exists(a.out);
+    if (s == BF_OK && !made_out) app_warn_earlier_run(cmd, a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,

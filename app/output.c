@@ -254,6 +254,14 @@ bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s)
     return BF_OK;
 }
 
+void app_warn_earlier_run(const char *cmd, const char *out)
+{
+    char path[4200];
+    if (bf_path_join(path, sizeof path, out, "stats.json") == BF_OK && bf_file_exists(path))
+        bf_warn("%s: --out %s holds an earlier run's outputs: the files this run does not write (another mesh "
+                "format, more views) stay beside its own", cmd, out);
+}
+
 void app_note_mesh_refused(app_write_failure *w, const app_map_report *r)
 {
     if (r->mesh_refused == BF_OK || w->s != BF_OK) return;

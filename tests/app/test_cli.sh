@@ -647,6 +647,10 @@ is_json "$T/rp/stats.json"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); t=d['tracking']; assert d['frames'] == 3 and t['tracked'] + t['lost'] + t['no_depth'] == 3 and d['ate_m'] is not None, d" \
     "$T/rp/stats.json" || fail "replay stats.json: frames/tracking/ate"
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/rp/trajectory.txt" --json
+# A second run into the same folder says the first one's files stay.
+expect 0 "$B" fuse "$T/seq" --poses groundtruth --out "$T/twice" --no-mesh
+expect 0 "$B" fuse "$T/seq" --poses groundtruth --out "$T/twice" --no-mesh
+mentions "holds an earlier run's outputs"
 # eval-colour: the mesh seen from the run's poses; from poses 100 m away it
 # is seen in no frame, which is no score (it printed PSNR nan, exit 0).
 expect 0 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/rp/trajectory.txt"
