@@ -606,7 +606,8 @@ struct particles_binner {
     uint64_t all_cap;
     uint32_t *index;      /* the centres' index (particles_binned.index) */
     uint64_t index_cap;
-    uint64_t *cpairs;     /* the coarse bricks' Morton codes << 32 | their place, sorted */
+    uint64_t *cpairs;     /* the coarse bricks' (Morton code, place) pairs, sorted by code: the code
+                             alone takes 63 bits in a set wide against its cells */
     uint64_t cpairs_cap;
 };
 
@@ -878,7 +879,7 @@ static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_
 {
     uint64_t words = PARTICLES_INDEX_HEADER + 16 * n_coarse + n_fine;
     if (!reserve((void **)&w->index, &w->index_cap, words, 4) ||
-        !reserve((void **)&w->cpairs, &w->cpairs_cap, n_coarse + 1, 8))
+        !reserve((void **)&w->cpairs, &w->cpairs_cap, 2 * (n_coarse + 1), 8))
         return bf_fail(BF_NO_MEMORY, "render: the particles' index");
     const hostmap_brick *coarse = w->all + n_fine;
     uint32_t *ix = w->index, *first = ix + PARTICLES_INDEX_HEADER, *slots;
@@ -892,12 +893,12 @@ static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_
         for (int k = 0; k < 16; k++) first[16 * j + k] = at, at += (uint32_t)__builtin_popcount(coarse[j].sign[k]);
         int64_t g[3];
         brick_coord(&coarse[j], g);
-        w->cpairs[j] = morton3(g) << 32 | j;
+        w->cpairs[2 * j] = morton3(g), w->cpairs[2 * j + 1] = j;
     }
     if (at != n_fine)
         return bf_fail(BF_NUMERIC, "render: %u coarse cells hold centres, %llu bricks of centres", at,
                        (unsigned long long)n_fine);
-    qsort(w->cpairs, n_coarse, 8, cmp_u64);
+    qsort(w->cpairs, n_coarse, 16, cmp_u64); /* by the first of each pair: the code */
     /* Each brick of centres at its coarse cell's entry (a coarse brick's
      * bricks of centres are consecutive). */
     uint64_t last = UINT64_MAX, j = 0;
@@ -907,12 +908,12 @@ static bf_status centres_index(particles_binner *w, uint64_t n_fine, uint64_t n_
             uint64_t lo = 0, hi = n_coarse;
             while (lo < hi) {
                 uint64_t mid = (lo + hi) / 2;
-                if (w->cpairs[mid] >> 32 < code) lo = mid + 1;
+                if (w->cpairs[2 * mid] < code) lo = mid + 1;
                 else hi = mid;
             }
-            if (lo == n_coarse || w->cpairs[lo] >> 32 != code)
+            if (lo == n_coarse || w->cpairs[2 * lo] != code)
                 return bf_fail(BF_NUMERIC, "render: a brick of centres without its coarse brick");
-            j = w->cpairs[lo] & 0xffffffffu, last = code;
+            j = w->cpairs[2 * lo + 1], last = code;
         }
         uint32_t l = (uint32_t)(w->ckeys[i] & 511), x = l & 7, y = l >> 3 & 7, z = l >> 6;
         uint32_t wd = brick_word(x, y, z), bit = brick_bit(x, y, z), sw = coarse[j].sign[wd];
@@ -944,6 +945,14 @@ bf_status particles_bin(particles_binner *w, const float *xyz, uint64_t n, bf_ve
     int64_t lo[3], hi[3];
     bf_status s = sorted_cells(w, xyz, n, origin, cell_m, &n_cells, lo, hi);
     if (s != BF_OK) return s;
+    /* A cell key is a brick's Morton code (18 bits an axis) and its cell in
+     * the brick (9 bits) in one 64-bit word: a set wider than 2^21 cells
+     * along an axis does not fit. */
+    for (int a = 0; a < 3; a++)
+        if (lo[a] < 0 || hi[a] >= (int64_t)1 << 18)
+            return bf_fail(BF_INVALID_ARG, "render: the particles span %.4g m along %c, over 2^21 cells of %.3g mm: "
+                           "give them larger cells (a larger radius or cell size)",
+                           (double)(hi[a] - lo[a] + 1) * 8 * cell_m, "xyz"[a], 1e3 * cell_m);
     /* The centres: no reach (the cells are in tmp; the keys buffer takes
      * the brick codes after). */
     level_binned fine, coarse;

@@ -219,6 +219,13 @@ expect 0 "$B" render --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE
 # The sheet covers about (0.28 * 131 / 0.6)^2 = 3700 pixels (a fifth).
 hits=$(py "$T/png.py" "$T/p_d.png" hits)
 py -c "import sys; sys.exit(0 if 0.15 <= $hits <= 0.25 else 1)" || fail "particles alone hit $hits of the pixels"
+# Two particles 283 m apart at 1.25 mm cells: 3500 coarse bricks along an
+# axis (a Morton code of over 32 bits; it stopped with an internal error).
+printf 'ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 2\n200 200 2\n' \
+    >"$T/far2.ply"
+expect 0 "$B" render --particles "$T/far2.ply" --pose "0 0 1.5 0 0 0 1" --size 160x120 --out "$T/far2.png" --json
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['hit_fraction'] > 0 and d['particles']['cells'] == 2, d" \
+    "$T/out" || fail "two particles far apart: $(head -c 300 "$T/out")"
 # A radius whose cells would make chunks the map cannot hold is the option's fault (exit 2), not the file's.
 expect 2 "$B" render --particles "$T/p.ply" --particle-radius 5 --pose "$POSE" --size 160x120 --out "$T/p5.png"
 mentions "beyond 64 m"
