@@ -73,7 +73,10 @@ typedef struct buf_plan {
 static bf_status create_buffers(fusion_map *m)
 {
     const fusion_config *c = &m->cfg;
-    uint64_t pixels = (uint64_t)m->K.width * m->K.height;
+    /* A map made for loaded bricks takes no frame (fusion_add_frame refuses
+     * one): its per-pixel buffers hold one pixel, so a large view's camera
+     * does not size them past a binding. */
+    uint64_t pixels = c->load_only ? 1 : (uint64_t)m->K.width * m->K.height;
     uint64_t depth_words = (pixels + 1) / 2;
     uint32_t st = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER;
     buf_plan plan[] = {

@@ -51,6 +51,15 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
 {
     if (!ctx || !out || width == 0 || height == 0 || width > 16384 || height > 16384)
         return bf_fail(BF_INVALID_ARG, "render: image size %ux%u (1..16384 each)", width, height);
+    /* The largest per-pixel target (the normals, 16 bytes) is one binding. */
+    uint64_t range = gpu_device_limits(ctx)->max_storage_buffer_range, most = range / 16;
+    if ((uint64_t)width * height > most) {
+        double k = sqrt((double)most / ((double)width * height));
+        return bf_fail(BF_INVALID_ARG, "render: a %ux%u image needs %llu bytes of normals, above this device's "
+                       "%llu-byte storage binding: at most %llu pixels (%ux%u at this aspect)",
+                       width, height, 16ull * width * height, (unsigned long long)range, (unsigned long long)most,
+                       (uint32_t)(k * width), (uint32_t)(k * height));
+    }
     render_config c = cfg ? *cfg : render_config_default();
     uint32_t wx = c.local_x, wy = c.local_y;
     if (wx < 1 || wy < 1 || wx * wy > 256 || wx * wy % 8)

@@ -219,6 +219,18 @@ expect 0 "$B" render --particles "$T/p.ply" --particle-radius 0.02 --pose "$POSE
 # The sheet covers about (0.28 * 131 / 0.6)^2 = 3700 pixels (a fifth).
 hits=$(py "$T/png.py" "$T/p_d.png" hits)
 py -c "import sys; sys.exit(0 if 0.15 <= $hits <= 0.25 else 1)" || fail "particles alone hit $hits of the pixels"
+# A large image: the map drawn needs no per-pixel buffers of its own (a
+# map made for frames did: 6 M pixels passed lavapipe's binding); beyond
+# what the normals' binding holds, the size is refused naming the most.
+expect 0 "$B" render --map "$T/S" --pose "$POSE" --size 3000x2000 --out "$T/large.png"
+range=$("$B" devices --json 2>/dev/null |
+    py -c "import json,sys; print([d for d in json.load(sys.stdin)['devices'] if d['is_chosen']][0]['limits']['max_storage_buffer_range'])")
+side=$(py -c "import math,sys; print(math.isqrt(int(sys.argv[1]) // 16) + 1)" "$range")
+if [ "$side" -le 8192 ]; then # a device whose binding holds 8192x8192 has no size to refuse
+    expect 2 "$B" render --map "$T/S" --pose "$POSE" --size "${side}x$side" --out "$T/huge.png"
+    mentions "at most"
+    [ -e "$T/huge.png" ] && fail "a refused size wrote its image"
+fi
 # Two particles 283 m apart at 1.25 mm cells: 3500 coarse bricks along an
 # axis (a Morton code of over 32 bits; it stopped with an internal error).
 printf 'ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 2\n200 200 2\n' \
