@@ -23,19 +23,20 @@ void app_scene_options(app_option rows[APP_SCENE_ROWS], app_scene_args *a, const
                 "the map: a scene store, or a folder holding one as DIR/store"),
         APP_OPT("--particles", APP_OPT_STRING, &a->particles, "FILE", "particles: a PLY with vertex x y z [m]"),
         APP_OPT("--particle-radius", APP_OPT_DOUBLE, &a->radius_m, "M", "every particle's sphere radius [m]",
-                .min = 0, .min_open = true, .max = 10),
+                .min = 0, .min_open = true, .max = 10, .needs = "--particles"),
         APP_OPT("--particle-cell", APP_OPT_DOUBLE, &a->cell_m, "M",
                 "the particles' grid cell [m] (default: an eighth of the radius, a quarter for sets too large for "
                 "that; at most 2 radii)",
-                .min = 1e-5, .max = 20, .no_default = true),
+                .min = 1e-5, .max = 20, .no_default = true, .needs = "--particles"),
         APP_OPT("--particle-lod", APP_OPT_CHOICE, &a->particle_lod, "on|off",
                 "level of detail: where a pixel spans twice a coarse cell's half-diagonal (8 x 8 x 8 cells), each "
                 "coarse cell holding particles is drawn as one sphere at its centre (off: every sphere where its "
-                "cell puts it)"),
+                "cell puts it)",
+                .needs = "--particles"),
         APP_OPT("--mesh", APP_OPT_STRING, &a->mesh, "FILE", mesh_help),
         APP_OPT("--mesh-pose", APP_OPT_STRING, &a->mesh_pose, "\"tx ty tz qx qy qz qw\"",
                 "the mesh's pose: mesh to world (default: identity)", .check = app_check_pose),
-        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off", mesh_lod_help),
+        APP_OPT("--mesh-lod", APP_OPT_CHOICE, &a->mesh_lod, "on|off", mesh_lod_help, .needs = "--mesh"),
         APP_OPT("--near", APP_OPT_DOUBLE, &a->near_m, "M", "nearest depth a ray looks [m] (a map from a depth camera "
                 "holds nothing nearer; a mesh or particles seen from closer need less)", .min = 0.01, .max = 100),
         APP_OPT("--far", APP_OPT_DOUBLE, &a->far_m, "M", "farthest depth a ray looks [m]", .min = 0.3, .max = 1000,

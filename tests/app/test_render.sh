@@ -231,6 +231,11 @@ if [ "$side" -le 8192 ]; then # a device whose binding holds 8192x8192 has no si
     mentions "at most"
     [ -e "$T/huge.png" ] && fail "a refused size wrote its image"
 fi
+# Options for what is not drawn are refused, not ignored.
+expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 40x30 --out "$T/x.png" --mesh-lod off
+mentions "--mesh-lod needs --mesh"
+expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 40x30 --out "$T/x.png" --particle-radius 0.1
+mentions "--particle-radius needs --particles"
 # Two particles 283 m apart at 1.25 mm cells: 3500 coarse bricks along an
 # axis (a Morton code of over 32 bits; it stopped with an internal error).
 printf 'ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 2\n200 200 2\n' \
