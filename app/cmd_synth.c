@@ -100,8 +100,25 @@ static void board_camera(calib_camera *c, const char *camera, const char *size, 
     unsigned w, h;
     if (camera && replay_parse_camera(camera, &K) == BF_OK)
         c->fx_px = K.fx_px, c->fy_px = K.fy_px, c->cx_px = K.cx_px, c->cy_px = K.cy_px;
-    if (size && parse_size(size, &w, &h)) c->width = w, c->height = h;
+    if (size && parse_size(size, &w, &h)) {
+        /* The default camera at another size: the same field of view, its
+         * principal point where it was in the image (as trajectory mode). */
+        if (!camera) {
+            double k = (double)w / c->width;
+            c->fx_px *= k, c->fy_px *= k;
+            c->cx_px = (c->cx_px + 0.5) * k - 0.5, c->cy_px = (c->cy_px + 0.5) * (double)h / c->height - 0.5;
+        }
+        c->width = w, c->height = h;
+    }
     if (dist) parse_dist(dist, c->dist);
+}
+
+/* A principal point outside the image: a camera for another image size. */
+static void warn_principal_point(const char *what, double cx, double cy, uint32_t w, uint32_t h)
+{
+    if (!(cx >= 0 && cx <= w && cy >= 0 && cy <= h))
+        bf_warn("synth: the %s%scamera's principal point (%g, %g) lies outside its %ux%u images: is it for another "
+                "image size?", what, what[0] ? " " : "", cx, cy, w, h);
 }
 
 static int cmd_synth_board(int argc, char **argv)
@@ -118,12 +135,15 @@ static int cmd_synth_board(int argc, char **argv)
         APP_OPT("--views", APP_OPT_U32, &cfg.n_views, "N", "views to render", .min = 1, .max = 1000),
         APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
         APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
-                "colour intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5 (at any --size)",
+                "colour intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5 at 640x480 (at another "
+                "--size the same field of view)",
                 .check = check_camera),
         APP_OPT("--size", APP_OPT_STRING, &size, "WxH", "colour image size, default 640x480", .check = check_size),
         APP_OPT("--distortion", APP_OPT_STRING, &dist, "K1,K2,P1,P2,K3",
                 "colour lens distortion (OpenCV's model; missing ones 0), default none", .check = check_dist),
-        APP_OPT("--depth-camera", APP_OPT_STRING, &dcamera, "C", "IR intrinsics, default 580,580,314.5,242.5",
+        APP_OPT("--depth-camera", APP_OPT_STRING, &dcamera, "C",
+                "IR intrinsics, default 580,580,314.5,242.5 at 640x480 (at another --depth-size the same field of "
+                "view)",
                 .check = check_camera),
         APP_OPT("--depth-size", APP_OPT_STRING, &dsize, "WxH", "IR image size, default 640x480", .check = check_size),
         APP_OPT("--depth-distortion", APP_OPT_STRING, &ddist, "K1,K2,P1,P2,K3", "IR lens distortion, default none",
@@ -146,6 +166,8 @@ static int cmd_synth_board(int argc, char **argv)
     calib_parse_board(board, &cfg.board); /* checked above */
     board_camera(&cfg.colour, camera, size, dist);
     board_camera(&cfg.depth, dcamera, dsize, ddist);
+    warn_principal_point("colour", cfg.colour.cx_px, cfg.colour.cy_px, cfg.colour.width, cfg.colour.height);
+    warn_principal_point("depth", cfg.depth.cx_px, cfg.depth.cy_px, cfg.depth.width, cfg.depth.height);
     synth_board_result res;
     bf_status s = synth_board_run(&cfg, &res);
     if (s) return app_fail(cmd, s);
@@ -162,6 +184,7 @@ int cmd_synth(int argc, char **argv)
                         .mesh_scale = 1, .version = BF_VERSION};
     const char *data_dir = NULL, *camera = NULL, *size = NULL;
     int noise = SYNTH_NOISE_KINECT1;
+    bool scale_given = false, seed_given = false;
     for (int i = 1; i < argc; i++)
         if (!strcmp(argv[i], "--board") || !strncmp(argv[i], "--board=", 8)) return cmd_synth_board(argc, argv);
     const app_option own[] = {
@@ -176,7 +199,7 @@ int cmd_synth(int argc, char **argv)
                 .min_open = true),
         APP_OPT("--noise", APP_OPT_ENUM, &noise, "kinect1|none", "depth noise model (Nguyen et al. 2012)",
                 .codes = noise_codes),
-        APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "S", "noise seed"),
+        APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "S", "noise seed", .given = &seed_given),
         APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
         APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
                 "intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5 at 640x480 (at another "
@@ -188,7 +211,7 @@ int cmd_synth(int argc, char **argv)
                 "current folder"),
         APP_OPT("--scale", APP_OPT_DOUBLE, &cfg.mesh_scale, "S",
                 "multiply a MESH.ply scene's coordinates by S (to metres)",
-                .min_open = true),
+                .min_open = true, .given = &scale_given),
         APP_OPT("--seen-cell", APP_OPT_DOUBLE, &cfg.seen_cell_m, "M", "grid of seen.ply in metres", .min_open = true),
         APP_OPT_END,
     };
@@ -200,9 +223,18 @@ int cmd_synth(int argc, char **argv)
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     cfg.noise = (synth_noise)noise;
+    /* Options that would change nothing are refused, not ignored. */
+    bool procedural = !strcmp(cfg.scene, "room") || !strncmp(cfg.scene, "rooms:", 6);
+    if (scale_given && procedural)
+        return app_usage_error(cmd, "--scale scales a MESH.ply scene's coordinates, not the procedural %s", cfg.scene);
+    if (seed_given && cfg.noise == SYNTH_NOISE_NONE)
+        return app_usage_error(cmd, "--seed seeds the noise: not with --noise none");
     if (camera) replay_parse_camera(camera, &cfg.K); /* checked above */
     unsigned w, h;
     if (size && parse_size(size, &w, &h)) cfg.K.width = w, cfg.K.height = h;
+    if (camera)
+        warn_principal_point("", cfg.K.cx_px, cfg.K.cy_px, cfg.K.width ? cfg.K.width : 640,
+                             cfg.K.height ? cfg.K.height : 480);
     if (!strcmp(cfg.scene, "room")) {
         if (data_dir && !bf_file_exists(data_dir))
             return app_usage_error(cmd, "--data: folder '%s' does not exist", data_dir);

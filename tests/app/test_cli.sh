@@ -815,6 +815,13 @@ mkdir -p "$T/notastore/x"
 env -u DISPLAY "$B" view --map "$T/notastore" --exit-after 1 >"$T/out" 2>"$T/err"
 [ $? = 3 ] || fail "view of a folder that is no store: not exit 3"
 mentions "not a scene store"
+# At another size the board's default cameras keep their field of view (a
+# 9x6 board at 160x120 "did not fit"); options that change nothing are refused.
+expect 0 "$B" synth --board 9x6 --views 2 --size 160x120 --depth-size 160x120 --out "$T/smallboard"
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --scale 2 --out "$T/scaled"
+mentions "--scale scales a MESH.ply scene"
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --noise none --seed 5 --out "$T/seeded"
+mentions "--seed seeds the noise"
 # A board that does not fit, or shared data that is not there: exit 2, no folder.
 expect 2 "$B" synth --board 64x64 --views 2 --size 160x120 --out "$T/bigboard"
 mentions "does not fit"
