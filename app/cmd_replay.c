@@ -854,7 +854,10 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (r->has_capture)
         printf("  capture          %llu captured, %llu dropped by the queue of %u, %llu unread at the end%s\n",
                (unsigned long long)r->cap.captured, (unsigned long long)r->cap.dropped, a->queue,
-               (unsigned long long)capture_unread(&r->cap), r->run.is_interrupted ? " (stopped by a signal)" : "");
+               (unsigned long long)capture_unread(&r->cap),
+               !r->run.is_interrupted ? ""
+               : a->view                ? " (stopped by a signal, the window or --exit-after)"
+                                        : " (stopped by a signal)");
     if (t->frame_ms.n == 0) /* a resumed scan with no new frame */
         printf("  time per frame   no frame processed\n");
     else {

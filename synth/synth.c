@@ -349,11 +349,12 @@ bf_status synth_run(const synth_config *cfg, synth_result *out)
         bf_warn("synth: %s spans %.3f s: only %u of %u frames at %g Hz fit, stopping there", cfg->traj_path,
                 t_end - t0, n_frames, cfg->n_frames, rate);
 
-    unsigned n_rooms = 0;
-    int used = 0;
+    uint32_t n_rooms = 0;
     if (!strcmp(cfg->scene, "room"))
         s = synth_scene_room(cfg->data_dir, &scene);
-    else if (sscanf(cfg->scene, "rooms:%u%n", &n_rooms, &used) == 1 && cfg->scene[used] == 0)
+    else if (!strncmp(cfg->scene, "rooms:", 6) && !bf_parse_u32(cfg->scene + 6, &n_rooms))
+        s = bf_fail(BF_INVALID_ARG, "synth: %s: rooms:N takes a count of 1 to 64 rooms", cfg->scene);
+    else if (!strncmp(cfg->scene, "rooms:", 6))
         s = synth_scene_rooms(n_rooms, &scene);
     else
         s = synth_scene_from_ply(cfg->scene, cfg->mesh_scale > 0 ? cfg->mesh_scale : 1.0, &scene);

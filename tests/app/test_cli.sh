@@ -822,6 +822,13 @@ expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --scale 2 --out "$T/sc
 mentions "--scale scales a MESH.ply scene"
 expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --noise none --seed 5 --out "$T/seeded"
 mentions "--seed seeds the noise"
+# Not over a sequence (its frames past the new count would stay, unlisted),
+# and rooms:N takes a count.
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --out "$T/seq"
+mentions "holds a sequence already"
+expect 2 "$B" synth --scene rooms:-1 --trajectory "$T/traj.txt" --frames 1 --size 32x24 --out "$T/rooms_neg"
+mentions "rooms:N takes a count"
+[ -e "$T/rooms_neg/depth.txt" ] && fail "synth rooms:-1 wrote a sequence"
 # A board that does not fit, or shared data that is not there: exit 2, no folder.
 expect 2 "$B" synth --board 64x64 --views 2 --size 160x120 --out "$T/bigboard"
 mentions "does not fit"
