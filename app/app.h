@@ -370,8 +370,9 @@ void app_scene_files_free(app_scene_files *f);
 bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, const app_scene_files *f,
                                    render_particles **out);
 /* The map of a scene store, or of DIR/store (BF_FORMAT: neither, or no
- * brick); meta_out (may be NULL) gets the store's meta. */
-bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out);
+ * brick); meta_out and rep_out (each may be NULL) get its meta and what was
+ * left out of it (warned about). */
+bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out, store_report *rep_out);
 /* A host map into a GPU map of its own size (hash, nodes, colour units). */
 bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);
 /* f's mesh voxelised as camera T_wc (K) sees it (lod: each column at the

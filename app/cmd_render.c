@@ -100,6 +100,7 @@ typedef struct render_report {
     const char *device, *device_driver;
     double hit_frac;
     uint32_t n_map_bricks, n_bricks, n_tris;
+    const store_report *map_rep;       /* the store's damage: chunk files left out, chunks missing */
     const render_voxelise_stats *vst;
     uint32_t level_asked;              /* the finest level the view asked (above vst's when the device held less) */
     const render_particles_stats *pst; /* NULL without particles */
@@ -127,6 +128,8 @@ static cJSON *render_json(const render_report *r)
         cJSON *m = app_json_object(o, "map");
         cJSON_AddStringToObject(m, "path", a->scene.map);
         cJSON_AddNumberToObject(m, "bricks", r->n_map_bricks);
+        cJSON_AddNumberToObject(m, "chunk_files_left_out", r->map_rep->n_bad);
+        cJSON_AddNumberToObject(m, "chunks_missing", r->map_rep->n_missing);
     }
     if (a->scene.mesh) {
         const render_voxelise_stats *v = r->vst;
@@ -206,7 +209,8 @@ int cmd_render(int argc, char **argv)
     app_scene_files f = {0};
     bf_status s = app_scene_read_files(&a.scene, &f);
     hostmap hm = {0};
-    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, NULL);
+    store_report map_rep = {0};
+    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, NULL, &map_rep);
     uint32_t n_bricks = 0, n_map_bricks = hm.n_bricks;
     gpu_context *ctx = NULL;
     gpu_config gcfg = {0};
@@ -246,7 +250,7 @@ int cmd_render(int argc, char **argv)
         uint64_t n_hit = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) n_hit += im.depth[i] > 0;
         render_report r = {&a, W, H, gpu_device_name(ctx), gpu_device(ctx)->driver_info, (double)n_hit / ((double)W * H), n_map_bricks, n_bricks,
-                           f.mesh.n_tris, &vst, level_asked, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
+                           f.mesh.n_tris, &map_rep, &vst, level_asked, ps ? render_particles_get_stats(ps) : NULL, ms, ms_p};
         s = app_json_print(render_json(&r));
     } else if (s == BF_OK) {
         uint64_t n_hit = 0;

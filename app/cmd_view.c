@@ -279,7 +279,7 @@ int cmd_view(int argc, char **argv)
     bf_status s = app_scene_read_files(&a.scene, &f);
     hostmap hm = {0};
     store_meta meta = {0};
-    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, &meta);
+    if (s == BF_OK && a.scene.map) s = app_scene_read_map(a.scene.map, &hm, &meta, NULL);
     view_config vc = view_config_default();
     vc.width = W, vc.height = H;
     vc.title = "bitfuse view";

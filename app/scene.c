@@ -217,7 +217,7 @@ static uint32_t count_chunks(const hostmap *m)
 }
 
 /* The map of a store (or DIR/store) on the host. */
-bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out)
+bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out, store_report *rep_out)
 {
     char sub[4096];
     const char *dir = path;
@@ -233,8 +233,12 @@ bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out)
     store_report rep;
     bf_status s = store_read(dir, m, &meta, NULL, &rep);
     if (s == BF_OK && meta_out) *meta_out = meta;
+    if (s == BF_OK && rep_out) *rep_out = rep;
     if (s == BF_OK && rep.n_bad)
         bf_warn("%s: %u chunk file(s) left out, the first: %s", dir, rep.n_bad, rep.first_bad);
+    if (s == BF_OK && rep.n_missing)
+        bf_warn("%s: %u chunk(s) the index lists were not loaded (a file missing or bad): left out", dir,
+                rep.n_missing);
     if (s == BF_OK && m->n_bricks == 0) s = bf_fail(BF_FORMAT, "%s: the store holds no brick", dir);
     if (s != BF_OK) hostmap_free(m);
     return s;

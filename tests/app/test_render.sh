@@ -231,6 +231,13 @@ if [ "$side" -le 8192 ]; then # a device whose binding holds 8192x8192 has no si
     mentions "at most"
     [ -e "$T/huge.png" ] && fail "a refused size wrote its image"
 fi
+# A store with a chunk file gone renders what is left, and says so (stderr, --json).
+cp -r "$T/S" "$T/Sdmg"
+rm "$(ls "$T"/Sdmg/chunks/*.bfc | head -n 1)"
+expect 0 "$B" render --map "$T/Sdmg" --pose "$POSE" --size 40x30 --out "$T/dmg.png" --json
+mentions "were not loaded"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['map']['chunks_missing'] == 1 and d['map']['chunk_files_left_out'] == 0, d['map']" \
+    "$T/out" || fail "render of a damaged store: $(head -c 300 "$T/out")"
 # Options for what is not drawn are refused, not ignored.
 expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 40x30 --out "$T/x.png" --mesh-lod off
 mentions "--mesh-lod needs --mesh"
