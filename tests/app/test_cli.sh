@@ -570,47 +570,46 @@ if kill -INT $pid 2>/dev/null; then
 else
     wait $pid
 fi
+# interrupt_half NAME OUT STORE CMD...: CMD once to its end (into OUT.full),
+# then again into OUT (with --store STORE unless STORE is '') with SIGINT
+# half that time in; rc its exit code, stopped true when the signal landed
+# (the run had not ended) and stats.json says interrupted.
+interrupt_half() {
+    local name=$1 out=$2 store=$3 t0 half pid
+    shift 3
+    t0=$(date +%s.%N)
+    expect 0 "$@" --out "$out.full"
+    half=$(python3 -c "import sys; print(max(0.2, (float(sys.argv[2]) - float(sys.argv[1])) / 2))" "$t0" "$(date +%s.%N)")
+    "$@" --out "$out" ${store:+--store "$store"} >"$T/out" 2>"$T/err" &
+    pid=$!
+    sleep "$half"
+    stopped=false
+    if kill -INT $pid 2>/dev/null; then
+        wait $pid
+        rc=$?
+        [ $rc = 0 ] || fail "$name stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
+        if python3 -c "import json,sys; sys.exit(0 if json.load(open(sys.argv[1]))['interrupted'] else 1)" "$out/stats.json"; then
+            stopped=true
+            grep -q "stopped          by a signal" "$T/out" || fail "$name did not say it was stopped: $(cat "$T/out")"
+        fi
+    else
+        wait $pid
+    fi
+}
 # Ctrl-C during a replay ends the scan, not the program: exit 0, the frames
 # before it written (stats.json says interrupted), the store flushed. The
 # signal lands half-way through a run as long as an uninterrupted one here.
-t0=$(date +%s.%N)
-expect 0 "$B" replay "$T/long" --out "$T/rlong" --no-mesh
-half=$(python3 -c "import sys; print(max(0.2, (float(sys.argv[2]) - float(sys.argv[1])) / 2))" "$t0" "$(date +%s.%N)")
-"$B" replay "$T/long" --out "$T/rint" --no-mesh --store "$T/rintS" >"$T/out" 2>"$T/err" &
-pid=$!
-sleep "$half"
-if kill -INT $pid 2>/dev/null; then
-    wait $pid
-    rc=$?
-    [ $rc = 0 ] || fail "replay stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
-    if python3 -c "import json,sys; sys.exit(0 if json.load(open(sys.argv[1]))['interrupted'] else 1)" "$T/rint/stats.json"; then
-        grep -q "stopped          by a signal" "$T/out" || fail "replay did not say it was stopped: $(cat "$T/out")"
-        [ -s "$T/rint/trajectory.txt" ] && [ -s "$T/rint/points.ply" ] || fail "interrupted replay: outputs missing"
-        expect 0 "$B" info "$T/rintS"
-    fi
-else
-    wait $pid
+interrupt_half replay "$T/rint" "$T/rintS" "$B" replay "$T/long" --no-mesh
+if $stopped; then
+    [ -s "$T/rint/trajectory.txt" ] && [ -s "$T/rint/points.ply" ] || fail "interrupted replay: outputs missing"
+    expect 0 "$B" info "$T/rintS"
 fi
-
 # fuse too: the frames fused before the signal are written.
 python3 -c "
 for i in range(90): print('%.6f 0 0 0 0 0 0 1' % (1000 + i / 30.0))" >"$T/long_poses.txt"
-t0=$(date +%s.%N)
-expect 0 "$B" fuse "$T/long" --poses "$T/long_poses.txt" --out "$T/flong" --no-mesh
-half=$(python3 -c "import sys; print(max(0.2, (float(sys.argv[2]) - float(sys.argv[1])) / 2))" "$t0" "$(date +%s.%N)")
-"$B" fuse "$T/long" --poses "$T/long_poses.txt" --out "$T/fint" --no-mesh >"$T/out" 2>"$T/err" &
-pid=$!
-sleep "$half"
-if kill -INT $pid 2>/dev/null; then
-    wait $pid
-    rc=$?
-    [ $rc = 0 ] || fail "fuse stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
-    if python3 -c "import json,sys; sys.exit(0 if json.load(open(sys.argv[1]))['interrupted'] else 1)" "$T/fint/stats.json"; then
-        grep -q "stopped          by a signal" "$T/out" || fail "fuse did not say it was stopped: $(cat "$T/out")"
-        [ -s "$T/fint/points.ply" ] || fail "interrupted fuse: points.ply missing"
-    fi
-else
-    wait $pid
+interrupt_half fuse "$T/fint" "" "$B" fuse "$T/long" --poses "$T/long_poses.txt" --no-mesh
+if $stopped; then
+    [ -s "$T/fint/points.ply" ] || fail "interrupted fuse: points.ply missing"
 fi
 
 # Ctrl-C before any frame with depth came (a camera still dark, 10 s of

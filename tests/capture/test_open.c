@@ -193,20 +193,29 @@ static bf_status open_five(void *user, const char *path, rgbd_source **out)
     return capture_source_from_fn(user, 5, false, five_with_a_break, NULL, out);
 }
 
+/* A recording opened through capture_open_device with --realtime, read to
+ * its end: the frames delivered and the seconds it took. */
+static double paced_read(const char *uri, capture_open_fn open, uint32_t *n, bool *is_live)
+{
+    bf_intrinsics K = {8, 8, 10, 10, 3.5, 3.5, 1000};
+    rgbd_source *src = NULL;
+    double t0 = bf_time_s();
+    *n = 0;
+    if (capture_open_device(uri, open, &K, true, 4, is_live, &src) != BF_OK) return -1;
+    bf_frame f;
+    while (rgbd_source_next(src, &f) == BF_OK) ++*n;
+    double dt = bf_time_s() - t0;
+    rgbd_source_close(src);
+    return dt;
+}
+
 BF_TEST(a_paced_recording_goes_on_at_its_pace_after_a_break)
 {
     /* The break is not waited for (over 10 s), and the frames after it keep
      * their 50 ms steps: 50 ms before it and 100 ms after it, not a burst. */
-    bf_intrinsics K = {8, 8, 10, 10, 3.5, 3.5, 1000};
-    rgbd_source *src = NULL;
+    uint32_t n;
     bool is_live = true;
-    double t0 = bf_time_s();
-    CHECK_OK(capture_open_device("five", open_five, &K, true, 4, &is_live, &src));
-    bf_frame f;
-    uint32_t n = 0;
-    while (rgbd_source_next(src, &f) == BF_OK) n++;
-    double dt = bf_time_s() - t0;
-    rgbd_source_close(src);
+    double dt = paced_read("five", open_five, &n, &is_live);
     CHECK_EQ_INT(n, 5);
     CHECK(dt >= 0.145);
     CHECK(dt < 5);
@@ -214,17 +223,10 @@ BF_TEST(a_paced_recording_goes_on_at_its_pace_after_a_break)
 
 BF_TEST(a_paced_recording_arrives_at_its_own_frame_rate)
 {
-    bf_intrinsics K = {8, 8, 10, 10, 3.5, 3.5, 1000};
-    rgbd_source *src = NULL;
+    uint32_t n;
     bool is_live = true;
-    double t0 = bf_time_s();
-    CHECK_OK(capture_open_device("three", open_three, &K, true, 4, &is_live, &src));
+    double dt = paced_read("three", open_three, &n, &is_live);
     CHECK(!is_live);
-    bf_frame f;
-    uint32_t n = 0;
-    while (rgbd_source_next(src, &f) == BF_OK) n++;
-    double dt = bf_time_s() - t0;
-    rgbd_source_close(src);
     CHECK_EQ_INT(n, 3);
     CHECK(dt >= 0.095); /* the last frame is 100 ms after the first */
 }
