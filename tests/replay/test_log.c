@@ -344,14 +344,21 @@ static void pose_scaled(log__frame_header *h)
         for (int j = 0; j < 3; j++) h->T_wc.R[i][j] *= 2;
 }
 
+/* LN synthetic frames in a finished log at tmp_path(name) (zstd colour):
+ * the frames in q, the records' offsets in off, the index's in *index_at. */
+static void good_log(synth_seq *q, const char *name, uint64_t off[8], uint64_t *index_at)
+{
+    CHECK(synth_make(q, LN, LW, LH));
+    CHECK_OK(write_log(tmp_path(name), q, REPLAY_LOG_COLOUR_ZSTD, true));
+    CHECK_EQ_INT(log_offsets(tmp_path(name), off, 8, index_at), LN);
+}
+
 BF_TEST(times_and_poses_a_checksum_cannot_vouch_for_are_refused_by_frame)
 {
     synth_seq q;
-    CHECK(synth_make(&q, LN, LW, LH));
-    const char *good = tmp_path("hdr_good.bflog"), *bad = tmp_path("hdr_bad.bflog");
-    CHECK_OK(write_log(good, &q, REPLAY_LOG_COLOUR_ZSTD, true));
     uint64_t off[8], index_at;
-    CHECK_EQ_INT(log_offsets(good, off, 8, &index_at), LN);
+    good_log(&q, "hdr_good.bflog", off, &index_at);
+    const char *good = tmp_path("hdr_good.bflog"), *bad = tmp_path("hdr_bad.bflog");
     struct {
         void (*fn)(log__frame_header *);
         const char *mention;
@@ -526,11 +533,9 @@ BF_TEST(a_log_written_to_replace_one_leaves_it_whole_until_finished)
 BF_TEST(damaged_index_or_footer_falls_back_to_reading_in_order)
 {
     synth_seq q;
-    CHECK(synth_make(&q, LN, LW, LH));
-    const char *good = tmp_path("idx_good.bflog"), *bad = tmp_path("idx_bad.bflog");
-    CHECK_OK(write_log(good, &q, REPLAY_LOG_COLOUR_ZSTD, true));
     uint64_t off[8], index_at;
-    CHECK_EQ_INT(log_offsets(good, off, 8, &index_at), LN);
+    good_log(&q, "idx_good.bflog", off, &index_at);
+    const char *good = tmp_path("idx_good.bflog"), *bad = tmp_path("idx_bad.bflog");
     size_t size = file_size(good);
     /* An index offset, the index CRC, the footer's offset, its CRC. */
     size_t places[] = {index_at + 8 + 16 * 2 + 1, size - 24 - 2, size - 24, size - 24 + 13};
