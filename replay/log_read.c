@@ -254,11 +254,6 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
         snprintf(why, sizeof why, "its times (depth %g s, colour %g s) are not finite", h.t_depth_s, h.t_rgb_s);
         return frame_fail(ls, k, at, why);
     }
-    if (!(h.t_depth_s > ls->last_t_s)) {
-        snprintf(why, sizeof why, "its time %.6f s is not after the frame before's (%.6f s); times must increase",
-                 h.t_depth_s, ls->last_t_s);
-        return frame_fail(ls, k, at, why);
-    }
     if ((h.flags & LOG_FRAME_HAS_POSE) && !bf_se3_is_rigid(&h.T_wc, 1e-3))
         return frame_fail(ls, k, at, "its pose is not a rigid motion (not finite, or not a rotation)");
     uint32_t W = ls->hdr.K.width, H = ls->hdr.K.height;
@@ -329,7 +324,6 @@ static bf_status frame_load(log__source *ls, uint32_t k, bf_frame *out)
         .has_pose = has_pose,
         .T_wc = has_pose ? h.T_wc : bf_se3_identity(),
     };
-    ls->last_t_s = h.t_depth_s;
     return BF_OK;
 }
 
@@ -339,6 +333,17 @@ static bf_status log_next(rgbd_source *base, bf_frame *out)
     while (ls->pos < ls->base.n_frames) {
         uint32_t k = ls->pos++;
         bf_status s = frame_load(ls, k, out);
+        /* A time that does not increase (a camera clock that repeated or
+         * stepped back while recording) is dropped with a warning, as the
+         * TUM reader drops a repeated line: the loop's steps need time to
+         * go on, and a log a device wrote that way still reads. */
+        if (s == BF_OK && !(out->t_depth_s > ls->last_t_s)) {
+            bf_warn("%s: frame %u (byte %llu): its time %.6f s is not after the frame before's (%.6f s): skipped",
+                    ls->path, k, (unsigned long long)ls->offsets[k], out->t_depth_s, ls->last_t_s);
+            ls->n_skipped++;
+            continue;
+        }
+        if (s == BF_OK) ls->last_t_s = out->t_depth_s;
         if (s == BF_OK) return BF_OK;
         if (!ls->skip_bad || (s != BF_IO && s != BF_FORMAT)) return s;
         bf_warn("skipping frame %u: %s", k, bf_last_error());
