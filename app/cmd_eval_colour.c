@@ -147,6 +147,7 @@ int cmd_eval_colour(int argc, char **argv)
             cJSON_AddNumberToObject(o, "frame", f.index);
             cJSON_AddNumberToObject(o, "psnr_db", eval_colour_psnr(&one));
             cJSON_AddNumberToObject(o, "coverage", cover);
+            cJSON_AddBoolToObject(o, "in_score", one.n > 0); /* a frame where the mesh is not seen is not */
             cJSON_AddItemToArray(frames, o);
         } else {
             printf("  frame %5u  PSNR %6.2f dB  (%.1f%% of the pixels hit)\n", f.index, eval_colour_psnr(&one),

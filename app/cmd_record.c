@@ -105,7 +105,7 @@ static bf_status stats_path(const char *log_path, char *out, size_t cap)
 /* Records until the device ends, --frames is reached, or Ctrl-C. A device
  * error keeps the log (finished, with the frames before it) and is
  * returned; a writer error leaves the log as a crash would. */
-static bf_status record_frames(const record_args *a, rgbd_source *src, replay_log_writer *w, record_result *r)
+static bf_status record_frames(const record_args *a, rgbd_source *src, replay_log_writer **w, record_result *r)
 {
     app_stop_begin(src);
     uint32_t limit = a->ropt.max_frames;
@@ -117,7 +117,10 @@ static bf_status record_frames(const record_args *a, rgbd_source *src, replay_lo
     bf_status s;
     uint32_t n = 0;
     while ((s = rgbd_source_next(src, &f)) == BF_OK) {
-        if ((s = replay_log_writer_add(w, &f))) break;
+        /* Over an earlier log, the log is made at the first frame: a device
+         * that fails before it leaves the earlier one as it was. */
+        if (!*w && (s = replay_log_writer_create(a->out, rgbd_source_intrinsics(src), &a->lcfg, w))) break;
+        if ((s = replay_log_writer_add(*w, &f))) break;
         n++;
         if (r->is_live || a->realtime)
             snprintf(label, sizeof label, "record (%llu dropped)",
@@ -154,34 +157,37 @@ int cmd_record(int argc, char **argv)
     if (s) return app_fail(cmd, s);
     a.lcfg.device = a.device;
     a.lcfg.has_groundtruth = src->has_groundtruth;
-    /* Over an earlier log (--overwrite): written aside and put in place once
-     * finished, so a recording that fails before its first frame leaves it. */
+    /* Written in place, as a crash-cut log must still replay. A new log is
+     * made now (a folder that is not there fails before the device is read);
+     * over an earlier one (--overwrite), at the first frame. */
     bool replaces = bf_file_exists(log_path);
-    a.lcfg.replace_when_finished = replaces;
-    if ((s = replay_log_writer_create(log_path, rgbd_source_intrinsics(src), &a.lcfg, &w))) {
+    if (!replaces && (s = replay_log_writer_create(log_path, rgbd_source_intrinsics(src), &a.lcfg, &w))) {
         rgbd_source_close(src);
         return app_fail(cmd, s);
     }
-    bf_status rs = record_frames(&a, src, w, &r);
+    bf_status rs = record_frames(&a, src, &w, &r);
     bf_status s_dev = rs == BF_END ? BF_OK : rs;
     char dev_err[1024] = "";
     if (s_dev) snprintf(dev_err, sizeof dev_err, "%s", bf_last_error());
     rgbd_source_close(src);
     /* Finish even after a device error: every frame before it is kept. A
      * failure before the first frame leaves no log (an earlier one stays). */
-    bool none = s_dev && replay_log_writer_stats(w).n_frames == 0;
-    bf_status s_fin = none ? BF_OK : replay_log_writer_finish(w);
-    r.log = replay_log_writer_stats(w);
+    bool none = s_dev && (!w || replay_log_writer_stats(w).n_frames == 0);
+    bf_status s_fin = none || !w ? BF_OK : replay_log_writer_finish(w);
+    if (w) r.log = replay_log_writer_stats(w);
     r.seconds = bf_time_s() - t0;
     replay_log_writer_destroy(w);
     if (none && !replaces) (void)remove(log_path);
+    /* Nothing recorded over an earlier log: its stats.json stays too. */
+    bool keep_stats = replaces && !w;
     s = s_dev ? s_dev : s_fin;
     if (s_dev && dev_err[0]) bf_fail(s_dev, "%s", dev_err);
     /* The recording's own failure is the one named, not a later stats.json's. */
     char err[1024] = "";
     if (s) snprintf(err, sizeof err, "%s", bf_last_error());
 
-    bf_status s_json = app_json_write(json_path, stats_json(&a, log_path, &r, s));
+    bf_status s_json = BF_OK;
+    if (!keep_stats) s_json = app_json_write(json_path, stats_json(&a, log_path, &r, s));
     char json_err[1024] = "";
     if (s_json) snprintf(json_err, sizeof json_err, "%s", bf_last_error());
     const replay_log_stats *L = &r.log;
@@ -197,7 +203,7 @@ int cmd_record(int argc, char **argv)
                app_ratio(L->rgb_raw_bytes, L->rgb_bytes), app_colour_name(a.lcfg.colour));
     printf("  file      %.2f MB in %.2f s: %.1f frames/s, %.1f MB/s; stats %s %s\n", L->file_bytes / 1e6, r.seconds,
            r.seconds > 0 ? L->n_frames / r.seconds : 0.0, r.seconds > 0 ? L->file_bytes / 1e6 / r.seconds : 0.0,
-           s_json ? "not written to" : "in", json_path);
+           keep_stats ? "(the earlier ones) in" : s_json ? "not written to" : "in", json_path);
     if (s && s_json) bf_warn("%s", json_err);
     if (s) return app_fail(cmd, bf_fail(s, "%s", err));
     if (s_json != BF_OK) return app_fail(cmd, bf_fail(s_json, "%s", json_err));

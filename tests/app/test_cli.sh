@@ -659,7 +659,8 @@ awk '/^#/ {print; next} {$2 += 100; print}' "$T/rp/trajectory.txt" >"$T/away.txt
 awk '/^#/ {print; next} NR > 2 {$2 += 100} {print}' "$T/rp/trajectory.txt" >"$T/partaway.txt"
 expect 0 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/partaway.txt" --every 1 --json
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] >= 1 and d['frames_mesh_unseen'] >= 1 \
-    and d['frames'] + d['frames_mesh_unseen'] == len(d['per_frame']), d" "$T/out" ||
+    and d['frames'] + d['frames_mesh_unseen'] == len(d['per_frame']) \
+    and sum(p['in_score'] for p in d['per_frame']) == d['frames'], d" "$T/out" ||
     fail "eval-colour counts frames where the mesh is not seen: $(head -c 400 "$T/out")"
 expect 3 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/away.txt"
 mentions "is seen in none of the"
@@ -786,6 +787,16 @@ expect 2 "$B" live --device "$T/seq" --out "$T/x" --overwrite
 mentions "--overwrite needs --record"
 expect 0 "$B" record --device "$T/seq" --out "$T/self.bflog" --overwrite --frames 2
 [ "$(md5sum <"$T/self.bflog")" = "$sum0" ] && fail "record --overwrite did not replace the log"
+# Over an earlier log, a recording that fails before its first frame leaves
+# it and its stats.json as they were.
+sum2=$(md5sum <"$T/self.bflog")
+st2=$(md5sum <"$T/self.stats.json")
+cp -r "$T/seq" "$T/cut0"
+first=$(awk '!/^#/ {print $2; exit}' "$T/cut0/depth.txt")
+head -c 300 "$T/seq/$first" >"$T/cut0/$first"
+expect 3 "$B" record --device "$T/cut0" --out "$T/self.bflog" --overwrite
+[ "$(md5sum <"$T/self.bflog")" = "$sum2" ] || fail "a recording that failed at its first frame replaced the log"
+[ "$(md5sum <"$T/self.stats.json")" = "$st2" ] || fail "a recording that failed at its first frame replaced stats.json"
 expect 0 "$B" convert "$T/seq" --out "$T/tumcopy"
 sum1=$(md5sum <"$T/tumcopy/depth.txt")
 for f in depth.txt rgb; do
