@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "app.h"
 #include "capture/capture.h"
@@ -86,7 +87,7 @@ static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_
     bf_progress prog;
     bf_progress_begin(&prog, "convert", src->n_frames);
     bf_frame f;
-    bf_status s;
+    bf_status s = BF_END;
     uint32_t n = 0;
     while (!*stop && (s = rgbd_source_next(src, &f)) == BF_OK) {
         s = lw ? replay_log_writer_add(lw, &f) : replay_tum_writer_add(tw, &f);
@@ -96,6 +97,7 @@ static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_
     bf_progress_end(&prog, n);
     *n_out = n;
     if (*stop && s == BF_OK) s = BF_END;
+    if (*stop && n == 0) return BF_END; /* stopped before any frame: nothing to finish */
     /* A bad input frame ends a folder with the frames before it indexed, so
      * they read (a log keeps an earlier log at DEST as it was instead). */
     if (tw && n > 0 && (s == BF_FORMAT || s == BF_IO)) {
@@ -128,12 +130,13 @@ int cmd_convert(int argc, char **argv)
     }
     a.lcfg.device = a.in;
     a.lcfg.has_groundtruth = src->has_groundtruth;
+    /* Ctrl-C or SIGTERM ends the conversion as it ends a recording: the
+     * frames converted so far are written, whole (a second one kills).
+     * Caught before the writer exists, so no signal leaves its .partial. */
+    const volatile sig_atomic_t *stop = app_stop_begin(NULL);
     s = a.to_log ? replay_log_writer_create(a.out, rgbd_source_intrinsics(src), &a.lcfg, &lw)
                  : replay_tum_writer_create(a.out, rgbd_source_intrinsics(src), &tw);
     uint32_t n = 0;
-    /* Ctrl-C or SIGTERM ends the conversion as it ends a recording: the
-     * frames converted so far are written, whole (a second one kills). */
-    const volatile sig_atomic_t *stop = app_stop_begin(NULL);
     if (s == BF_OK) s = convert_frames(src, lw, tw, stop, &n);
     bool interrupted = app_stop_end();
     uint32_t skipped = replay_skipped_frames(dev);
@@ -143,6 +146,14 @@ int cmd_convert(int argc, char **argv)
     rgbd_source_close(src);
     replay_log_writer_destroy(lw);
     replay_tum_writer_destroy(tw);
+    if (s == BF_END) { /* stopped before any frame: the writers left nothing (an earlier log stays) */
+        char p[4200];
+        for (int i = 0; !a.to_log && i < 2; i++) /* a folder's empty image folders (rmdir takes only empty ones) */
+            if (snprintf(p, sizeof p, "%s/%s", a.out, i ? "rgb" : "depth") < (int)sizeof p) (void)rmdir(p);
+        if (!a.to_log) (void)rmdir(a.out);
+        printf("bitfuse convert: stopped by a signal before any frame: nothing written\n");
+        return APP_EXIT_OK;
+    }
     if (s) return app_fail(cmd, s);
 
     char json_path[4200];

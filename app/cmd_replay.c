@@ -960,6 +960,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (!stop) stop = &replay_stop;
     /* The store is read (to resume) or claimed before anything is made. */
     bool made_store = a.store && !bf_file_exists(a.store);
+    bool had_out = bf_file_exists(a.out); /* before a store inside it (--store DIR/store) makes it */
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
     /* A map without colour written over one with: its colour gone for good. */
     if (s == BF_OK && r.store.is_resumed && r.store.map.rgb565 && !a.rcfg.fusion.keep_colour)
@@ -1018,7 +1019,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         }
         /* Every frame at or before the stored scan's end: nothing new (another
          * sequence than the store's, or one it has scanned to its end). */
-        if (s == BF_OK && r.store.is_resumed && r.run.counts.frames == 0 && r.run.n_resume_skipped > 0)
+        if (s == BF_OK && r.store.is_resumed && r.run.counts.frames == 0 && r.run.n_resume_skipped > 0 &&
+            r.run.n_skipped == 0)
             bf_warn("%s: all %u frames of %s are at or before the stored scan's last time (t = %.6f s): nothing new "
                     "to scan (the sequence the store was made from, scanned to its end?)", cmd,
                     r.run.n_resume_skipped, a.seq, rs.t_last_s);
@@ -1104,8 +1106,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
          * (it would read as a store: a new run would be refused). */
         char chunks[4200];
         if (a.store && !a.resume && snprintf(chunks, sizeof chunks, "%s/chunks", a.store) < (int)sizeof chunks &&
-            rmdir(chunks) == 0 && made_store)
-            (void)rmdir(a.store);
+            rmdir(chunks) == 0 && made_store && rmdir(a.store) == 0 && !had_out)
+            (void)rmdir(a.out); /* only if nothing else went into it */
         printf("bitfuse %s: stopped before any frame with depth: no trajectory or map written\n", cmd);
         return APP_EXIT_OK;
     }

@@ -105,7 +105,9 @@ static int parse_number(const char *cmd, const app_option *row, const char *v, d
     if (is_whole ? !bf_parse_u32(v, &u) : !bf_parse_double(v, x)) {
         /* Digits alone that do not fit: a whole number, too large. */
         bool digits = v[0] != '\0' && strspn(v, "0123456789") == strlen(v);
-        if (is_whole && digits) return usage(cmd, "%s: %s is too large (at most %u)", row->name, v, UINT32_MAX);
+        if (is_whole && digits)
+            return usage(cmd, "%s: %s is too large (at most %.0f)", row->name, v,
+                         row->max > row->min ? row->max : (double)UINT32_MAX);
         return usage(cmd, "%s: '%s' is not %s", row->name, v, is_whole ? "a whole number" : "a number");
     }
     if (is_whole) *x = u;

@@ -226,9 +226,10 @@ static bf_status finish(const recon_run_config *cfg, bf_status s, recon_run *run
     if (s != BF_END) return s;
     if (!has_fused(run))
         return bf_fail(BF_FORMAT, "%s: no frame with %s%s", cfg->name,
-                       cfg->poses != RECON_POSES_KNOWN ? "depth"
-                       : run->counts.no_depth          ? "a pose and depth"
-                                                       : "a pose",
+                       cfg->poses == RECON_POSES_TRACK_FUSE_GT && run->n_skipped ? "a ground-truth pose and depth"
+                       : cfg->poses != RECON_POSES_KNOWN                        ? "depth"
+                       : run->counts.no_depth                                   ? "a pose and depth"
+                                                                                : "a pose",
                        run->counts.no_depth ? " within the sensor's range" : "");
     return run->loop ? recon_flush(run->loop) : fusion_flush(run->map);
 }
