@@ -5,13 +5,23 @@
 #include "replay_test.h"
 #include "test.h"
 
+/* A TUM writer (*w) into a fresh folder named name (its path in *dir) for
+ * K's camera; the checks fail the test otherwise. */
+static void fresh_writer(const char *name, const bf_intrinsics *K, const char **dir, replay_tum_writer **w)
+{
+    *w = NULL;
+    *dir = rt_fresh_dir(name);
+    CHECK(*dir);
+    CHECK_OK(replay_tum_writer_create(*dir, K, w));
+}
+
 BF_TEST(writer_writes_index_files_only_at_finish)
 {
-    const char *dir = rt_fresh_dir("writer_atomic");
-    CHECK(dir);
+    const char *dir;
     bf_intrinsics K = {0, 0, 500, 500, 3.5, 2.5, 5000};
     replay_tum_writer *w;
-    CHECK_OK(replay_tum_writer_create(dir, &K, &w));
+    fresh_writer("writer_atomic", &K, &dir, &w);
+    CHECK(w);
     uint16_t d[4 * 3] = {1, 2, 3};
     uint8_t c[4 * 3 * 3] = {9};
     bf_frame f = {.index = 0, .width = 4, .height = 3, .t_depth_s = 1.0, .t_rgb_s = 1.01, .depth = d, .rgb = c};
@@ -49,11 +59,11 @@ BF_TEST(a_depth_only_folder_reads_back)
 {
     /* No frame with colour: no rgb.txt, and the folder reads as depth only
      * (an empty rgb.txt is refused by the reader, "no frames listed"). */
-    const char *dir = rt_fresh_dir("writer_depth_only");
-    CHECK(dir);
+    const char *dir;
     bf_intrinsics K = {4, 3, 500, 500, 1.5, 1, 5000};
     replay_tum_writer *w;
-    CHECK_OK(replay_tum_writer_create(dir, &K, &w));
+    fresh_writer("writer_depth_only", &K, &dir, &w);
+    CHECK(w);
     uint16_t d[4 * 3] = {1000, 2000, 3000};
     for (int k = 0; k < 2; k++) {
         bf_frame f = {.index = (uint32_t)k, .width = 4, .height = 3, .t_depth_s = 1.0 + k, .t_rgb_s = 1.0 + k, .depth = d};
@@ -140,11 +150,11 @@ BF_TEST(writer_then_reader_round_trip_is_bit_exact)
 
 BF_TEST(writer_failed_add_leaves_the_index_files_as_they_were)
 {
-    const char *dir = rt_fresh_dir("writer_failed_add");
-    CHECK(dir);
+    const char *dir;
     bf_intrinsics K = {0, 0, 500, 500, 3.5, 2.5, 5000};
     replay_tum_writer *w;
-    CHECK_OK(replay_tum_writer_create(dir, &K, &w));
+    fresh_writer("writer_failed_add", &K, &dir, &w);
+    CHECK(w);
     uint16_t d[4 * 3] = {1, 2, 3};
     uint8_t c[4 * 3 * 3] = {9};
     bf_frame f = {.index = 0, .width = 4, .height = 3, .t_depth_s = 1.0, .t_rgb_s = 1.0, .depth = d, .rgb = c,
