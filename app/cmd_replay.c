@@ -162,7 +162,7 @@ static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
     stream_config *sc = &a->rcfg.stream;
     const app_option r[STREAM_ROWS] = {
         APP_OPT("--gpu-budget", APP_OPT_DOUBLE, &a->gpu_budget_mib, "MIB",
-                "bytes of the GPU map pools in MiB (bricks, nodes, records, colour; 176 bytes a brick, 512 with "
+                "bytes of the GPU map pools in MiB (bricks, nodes, records, colour; 176 bytes a brick, 496 with "
                 "colour); chunks beyond it "
                 "stream out (default: --bricks when given, else from the device: 64 on a CPU device, a quarter of a "
                 "GPU's memory up to 2048)", .min = 0.1, .no_default = true),
@@ -262,7 +262,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
                 "the sensor's noise at their depths; 0: over 2 cm is lost"),
         APP_OPT("--ref-level", APP_OPT_ENUM, (int *)&tc->ref_level, "auto|0|1|2",
                 "resolution of the tracking reference's ray-cast: 0 full, 1 half, 2 quarter; auto: the coarsest "
-                "of 1 and 2 that keeps 160 pixels a row (a quarter of 640x480)",
+                "of 0, 1 and 2 that keeps at least 160 pixels a row (a quarter of 640x480, full 160x120)",
                 .codes = ref_level_codes),
         APP_OPT("--ref-voxels", APP_OPT_CHOICE, &a->rcfg.reference_confident, "confident|all",
                 "the tracking reference's ray-cast: once the first fusion window has closed, the confident "

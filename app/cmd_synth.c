@@ -135,7 +135,7 @@ static int cmd_synth_board(int argc, char **argv)
         APP_OPT("--views", APP_OPT_U32, &cfg.n_views, "N", "views to render", .min = 1, .max = 1000),
         APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
         APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
-                "colour intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5 at 640x480 (at another "
+                "colour intrinsics fx,fy,cx,cy or fr1|fr2|fr3|icl, default 525,525,319.5,239.5 at 640x480 (at another "
                 "--size the same field of view)",
                 .check = check_camera),
         APP_OPT("--size", APP_OPT_STRING, &size, "WxH", "colour image size, default 640x480", .check = check_size),
@@ -202,7 +202,7 @@ int cmd_synth(int argc, char **argv)
         APP_OPT("--seed", APP_OPT_U64, &cfg.seed, "S", "noise seed", .given = &seed_given),
         APP_OPT("--out", APP_OPT_STRING, &cfg.out_dir, "DIR", "output folder", .required = true),
         APP_OPT("--camera", APP_OPT_STRING, &camera, "C",
-                "intrinsics fx,fy,cx,cy or fr1|fr2|fr3, default 525,525,319.5,239.5 at 640x480 (at another "
+                "intrinsics fx,fy,cx,cy or fr1|fr2|fr3|icl, default 525,525,319.5,239.5 at 640x480 (at another "
                 "--size the same field of view: f = 525 W / 640, the principal point at the centre)",
                 .check = check_camera),
         APP_OPT("--size", APP_OPT_STRING, &size, "WxH", "image size, default 640x480", .check = check_size),

@@ -17,6 +17,7 @@
 static const char view_usage[] =
     "usage: bitfuse view [--map STORE|DIR] [--mesh FILE [--mesh-pose P] [--mesh-lod on|off]] [--particles FILE]\n"
     "                    [--pose \"tx ty tz qx qy qz qw\"] [--camera fx,fy,cx,cy] [--size WxH] [--near M] [--far M]\n"
+    "                    [--particle-radius M] [--particle-cell M] [--particle-lod on|off] [--overlay on|off]\n"
     "                    [--screenshot IMAGE.png --exit-after N]\n\n"
     "Shows what bitfuse render draws, in a window: a saved map (a scene store, bitfuse\n"
     "replay|live --store; or a folder holding one as DIR/store), a closed mesh voxelised\n"

@@ -12,7 +12,10 @@
 int bf_thread_count(void)
 {
     const char *e = getenv("BITFUSE_THREADS");
-    long n = e ? atol(e) : sysconf(_SC_NPROCESSORS_ONLN);
+    char *end = NULL;
+    long n = e ? strtol(e, &end, 10) : 0;
+    /* Not a number (main warns): all cores, as when unset. */
+    if (!e || end == e || *end) n = sysconf(_SC_NPROCESSORS_ONLN);
     if (n < 1) n = 1;
     if (n > BF_MAX_THREADS) n = BF_MAX_THREADS;
     return (int)n;

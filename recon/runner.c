@@ -142,7 +142,7 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
             snprintf(tried, sizeof tried, "; %u candidate poses tried, %u of them disagreeing with the map",
                      fr->reloc_tried, fr->reloc_rejected);
         /* --fuse-at-groundtruth fuses every frame at its true pose, lost or not. */
-        bf_warn("%s: frame %u (t = %.6f): tracking %s (inliers %.0f%%, residual %.1f mm%s): %s", cfg->label,
+        bf_warn("%s: frame %u (t = %.6f): lost (ICP %s, inliers %.0f%%, residual %.1f mm%s): %s", cfg->label,
                 f->index, f->t_depth_s, track_outcome_name(fr->track.outcome), 100 * fr->track.inlier_frac,
                 1e3 * fr->track.residual_m, tried,
                 fr->fused ? "fused at its true pose" : "not fused");

@@ -187,8 +187,14 @@ bf_status replay__source_create(const char *path, const char *kind, replay__list
     for (uint32_t i = 0; i < list->n; i++) {
         s = replay__image_size(list->v[i].depth_path, &w, &h);
         if (s == BF_OK) break;
-        if (!opt->skip_bad_frames || i + 1 == list->n) {
+        if (!opt->skip_bad_frames) {
             s = replay__fail_frame(s, i);
+            goto fail;
+        }
+        if (i + 1 == list->n) { /* every one skipped: say so, with the last reason */
+            char last[512];
+            snprintf(last, sizeof last, "%s", bf_last_error());
+            s = bf_fail(s, "%s sequence: no frame could be read (%u skipped; the last: %s)", kind, list->n, last);
             goto fail;
         }
     }

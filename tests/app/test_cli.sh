@@ -408,6 +408,11 @@ cp -r "$T/seq" "$T/allcut"
 for g in "$T/allcut"/depth/*.png; do head -c 200 "$T/seq/depth/$(basename "$g")" >"$g"; done
 expect 3 "$B" info "$T/allcut" --skip-bad-frames
 mentions "no frame could be read (3 skipped)"
+# Not even a header reads: the same, with the last reason (not that file's error alone).
+cp -r "$T/seq" "$T/allbad"
+for g in "$T/allbad"/depth/*.png; do echo junk >"$g"; done
+expect 3 "$B" info "$T/allbad" --skip-bad-frames
+mentions "no frame could be read (3 skipped; the last: "
 if [ $SANITIZED = 0 ]; then
     expect 3 "$B" fuse "$T/allcut" --poses groundtruth --out "$T/fuall" $small --skip-bad-frames
     mentions "no frame could be read (3 skipped)"
@@ -855,6 +860,7 @@ mentions "bunny.ply"
 BITFUSE_LOG=loud BITFUSE_THREADS=many "$B" --version >"$T/out" 2>"$T/err" || fail "--version with bad settings failed"
 mentions "BITFUSE_LOG='loud' is not"
 mentions "BITFUSE_THREADS='many' is not"
+mentions "threads: $(($(nproc) < 64 ? $(nproc) : 64)) used" # not a number: all cores, as unset
 # An option that means nothing without another is refused, not ignored.
 expect 2 "$B" replay "$T/seq" --out "$T/x" --view-period 0
 mentions "--view-period needs --view"
