@@ -85,6 +85,10 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
     size_t cap = 0, n = 0;
     float *xyz = NULL;
     uint32_t used = 0, no_pose = 0, in_gap = 0;
+    /* The points relative to the first camera's place (to the metre), so a
+     * scan far from the world origin keeps its millimetres in float. */
+    bf_vec3 origin = bf_v3(0, 0, 0);
+    bool has_origin = false;
     bf_frame f;
     while (s == BF_OK && (s = rgbd_source_next(src, &f)) == BF_OK) {
         if (f.index % a->every) continue;
@@ -96,6 +100,7 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
             continue;
         }
         if (!use_traj) T = f.T_wc;
+        if (!has_origin) origin = bf_v3(round(T.t.x), round(T.t.y), round(T.t.z)), has_origin = true;
         const bf_intrinsics *K = &src->intrinsics;
         size_t need = n + ((size_t)f.width / a->pixel_step + 1) * ((size_t)f.height / a->pixel_step + 1);
         if (need > cap) {
@@ -114,7 +119,7 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
                            K->depth_scale;
                 if (!(z > 0) || z > a->max_depth_m) continue;
                 bf_vec3 p = bf_v3((x - K->cx_px) * z / K->fx_px, (y - K->cy_px) * z / K->fy_px, z);
-                p = bf_se3_apply(&T, p);
+                p = bf_v3_sub(bf_se3_apply(&T, p), origin);
                 xyz[3 * n] = (float)p.x, xyz[3 * n + 1] = (float)p.y, xyz[3 * n + 2] = (float)p.z;
                 n++;
             }
@@ -135,7 +140,7 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
                 a->max_gap_s);
     *in_gap_out = in_gap;
     bf_info("eval-surface: %zu depth samples from %u frames of %s", n, used, a->seq);
-    *pts = (mesh_data){.n_verts = (uint32_t)n, .xyz = xyz};
+    *pts = (mesh_data){.n_verts = (uint32_t)n, .xyz = xyz, .origin = origin};
     *n_frames = used;
     return BF_OK;
 }
@@ -163,6 +168,10 @@ static void json_dist(cJSON *o, const eval_dist_stats *d)
 
 static void print_dist_text(const eval_dist_stats *d)
 {
+    if (d->n == 0) { /* the statistics are NaN: say why instead */
+        printf("  no point within --max-dist (all %zu beyond it)\n", d->n_beyond);
+        return;
+    }
     printf("  mean %.6f m  median %.6f  p90 %.6f  rmse %.6f  max %.6f", d->mean, d->median, d->p90, d->rmse,
            d->max);
     if (d->n_beyond) printf("  (%zu beyond --max-dist, left out)", d->n_beyond);

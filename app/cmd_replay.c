@@ -878,7 +878,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
-    if (r->has_surface)
+    if (r->has_surface && r->surf.accuracy.n == 0)
+        printf("  true surface     no surface voxel of the map within 0.5 m of %s\n", a->ref_path);
+    else if (r->has_surface)
         printf("  true surface     map median %.1f mm, p90 %.1f mm from %s; %.1f%% of the %s surface within 1 cm of "
                "the map\n",
                1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness,

@@ -222,8 +222,59 @@ static bf_status dist_stats(const double *d, size_t n, double threshold, double 
 
 /* ------------------------------------------------------------ evaluation */
 
+static bf_status surface_local(const mesh_data *ref, const mesh_data *rec, const mesh_data *visible,
+                               const eval_surface_config *cfg_in, eval_surface_result *out);
+
+static bool same_origin(const mesh_data *a, const mesh_data *b)
+{
+    return a->origin.x == b->origin.x && a->origin.y == b->origin.y && a->origin.z == b->origin.z;
+}
+
+/* A copy of m's vertices and triangles relative to `origin`, in double
+ * (no normals or colours: the measure reads neither): meshes far from the
+ * world origin keep a local one of their own (mesh_data.origin, a PLY's
+ * "origin_w" comment), and distances are only meaningful in one frame. */
+static bf_status rebase(const mesh_data *m, bf_vec3 origin, mesh_data *out)
+{
+    memset(out, 0, sizeof *out);
+    out->xyz = bf_malloc(((size_t)m->n_verts * 3 + 1) * sizeof *out->xyz);
+    out->tri = bf_malloc(((size_t)m->n_tris * 3 + 1) * sizeof *out->tri);
+    if (!out->xyz || !out->tri) {
+        mesh_free(out);
+        return bf_fail(BF_NO_MEMORY, "surface error: out of memory for %u vertices", m->n_verts);
+    }
+    const double o[3] = {m->origin.x - origin.x, m->origin.y - origin.y, m->origin.z - origin.z};
+    for (size_t i = 0; i < 3 * (size_t)m->n_verts; i++) out->xyz[i] = (float)(o[i % 3] + (double)m->xyz[i]);
+    if (m->n_tris) memcpy(out->tri, m->tri, (size_t)m->n_tris * 3 * sizeof *out->tri);
+    out->n_verts = m->n_verts;
+    out->n_tris = m->n_tris;
+    out->origin = origin;
+    return BF_OK;
+}
+
 bf_status eval_surface(const mesh_data *ref, const mesh_data *rec, const mesh_data *visible,
                        const eval_surface_config *cfg_in, eval_surface_result *out)
+{
+    if (!ref || !rec || (same_origin(ref, rec) && (!visible || same_origin(ref, visible))))
+        return surface_local(ref, rec, visible, cfg_in, out);
+    /* One frame for all three: the reference's local origin, or the
+     * reconstruction's when the reference has none (a mesh bitfuse wrote
+     * far out against a reference in world coordinates). */
+    bool ref_has = ref->origin.x != 0 || ref->origin.y != 0 || ref->origin.z != 0;
+    bf_vec3 o = ref_has ? ref->origin : rec->origin;
+    mesh_data a = {0}, b = {0}, c = {0};
+    bf_status s = rebase(ref, o, &a);
+    if (s == BF_OK) s = rebase(rec, o, &b);
+    if (s == BF_OK && visible) s = rebase(visible, o, &c);
+    if (s == BF_OK) s = surface_local(&a, &b, visible ? &c : NULL, cfg_in, out);
+    mesh_free(&a);
+    mesh_free(&b);
+    mesh_free(&c);
+    return s;
+}
+
+static bf_status surface_local(const mesh_data *ref, const mesh_data *rec, const mesh_data *visible,
+                               const eval_surface_config *cfg_in, eval_surface_result *out)
 {
     eval_surface_config cfg = cfg_in ? *cfg_in : eval_surface_config_default();
     if (!ref || ref->n_verts == 0) return bf_fail(BF_INVALID_ARG, "surface error: the reference is empty");

@@ -270,7 +270,15 @@ static bf_status ply_tris_push(ply_tris *t, uint32_t a, uint32_t b, uint32_t c)
     return BF_OK;
 }
 
-static bf_status ply_read_vertices(ply_reader *rd, const ply_element *el, mesh_data *m)
+/* Double positions beyond this many metres from the file's origin keep
+ * their precision through a local origin (float steps there: 0.12 mm). */
+#define PLY_FAR_M 1024.0
+
+/* Reads the vertices. Positions stored as double far from the origin are
+ * kept relative to the first vertex's (rounded to the metre), which
+ * shift[] returns, to be added to the mesh's origin: as floats they would
+ * lose their millimetres (1 m steps at 1e7 m). */
+static bf_status ply_read_vertices(ply_reader *rd, const ply_element *el, mesh_data *m, double shift[3])
 {
     for (uint64_t i = 0; i < el->count; i++) {
         for (int k = 0; k < el->n_props; k++) {
@@ -296,8 +304,10 @@ static bf_status ply_read_vertices(ply_reader *rd, const ply_element *el, mesh_d
             case ROLE_NY:
             case ROLE_NZ: {
                 bool is_pos = pr->role <= ROLE_Z;
-                float f = (float)v;
-                if (!isfinite(f) || (is_pos && fabsf(f) > MESH_MAX_COORD)) {
+                if (is_pos && i == 0 && pr->type == PLY_F64 && fabs(v) > PLY_FAR_M && fabs(v) <= MESH_MAX_COORD)
+                    shift[pr->role - ROLE_X] = round(v);
+                float f = (float)(is_pos ? v - shift[pr->role - ROLE_X] : v);
+                if (!isfinite(f) || (is_pos && fabs(v) > MESH_MAX_COORD)) {
                     const char *why = isfinite(f) ? "beyond 1e9 (no scene's coordinate)" : "not finite";
                     if (rd->format == PLY_ASCII)
                         return bf_fail(BF_FORMAT, "%s: line %zu: vertex %llu: %s is %s (%g)", rd->path, rd->line,
@@ -593,10 +603,11 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
 
     ply_reader rd = {.path = path, .base = (const uint8_t *)data, .p = body, .end = (const uint8_t *)data + size, .format = fmt,
                      .line = body_line};
+    double shift[3] = {0, 0, 0};
     for (int e = 0; e < n_els; e++) {
         const ply_element *el = &els[e];
         if (el->is_vertex)
-            s = ply_read_vertices(&rd, el, &m);
+            s = ply_read_vertices(&rd, el, &m, shift);
         else if (el->is_face)
             s = ply_read_faces(&rd, el, &tris);
         else
@@ -615,6 +626,7 @@ bf_status mesh_read_ply(const char *path, mesh_data *out)
     }
     m.n_tris = (uint32_t)tris.n;
     m.tri = tris.v; /* NULL when there are no triangles */
+    m.origin = bf_v3(m.origin.x + shift[0], m.origin.y + shift[1], m.origin.z + shift[2]);
     free(els);
     free(data);
     *out = m;

@@ -284,6 +284,36 @@ BF_TEST(surface_box_offset_by_d_gives_accuracy_d_and_sharp_completeness)
     mesh_free(&box);
 }
 
+/* Meshes with local origins of their own (a scan far from the world
+ * origin, mesh_data.origin) are measured in one frame: the same box and
+ * samples 2 mm off it, the samples kept relative to an origin 1e7 m away
+ * and the box in world coordinates there, or the other way round. */
+BF_TEST(surface_of_meshes_with_different_local_origins_is_measured_in_one_frame)
+{
+    const double d = 0.002;
+    mesh_data box = make_box(0.4, 0.3, 0.2);
+    mesh_data rec = displaced_samples(&box, 2e4, d, bf_v3(0.2, 0.15, 0.1), 7);
+    const bf_vec3 far = bf_v3(1.0e7, -2.0e7, 3.0e6);
+    rec.origin = far; /* the samples at far + xyz */
+    mesh_data box_far = {0};
+    bf_se3 T = bf_se3_identity();
+    T.t = far;
+    CHECK_OK(mesh_append(&box_far, &box, &T)); /* the box at far, with far as its origin */
+    box_far.origin = bf_v3(far.x + 0.5, far.y - 0.25, far.z); /* its vertices shifted to another origin */
+    for (uint32_t i = 0; i < box_far.n_verts; i++) box_far.xyz[3 * i] -= 0.5f, box_far.xyz[3 * i + 1] += 0.25f;
+    eval_surface_config cfg = eval_surface_config_default();
+    eval_surface_result r;
+    CHECK_OK(eval_surface(&box_far, &rec, NULL, &cfg, &r));
+    CHECK_NEAR(r.accuracy.median, d, 1e-5);
+    CHECK_NEAR(r.accuracy.max, d, 1e-5);
+    CHECK_OK(eval_surface(&rec, &box_far, NULL, &cfg, &r)); /* the other way: completeness to the points */
+    CHECK(r.completeness_dist.n > 0);
+    CHECK_LE(r.accuracy.median, 0.02);
+    mesh_free(&box_far);
+    mesh_free(&rec);
+    mesh_free(&box);
+}
+
 /* Reference: a unit lat-long sphere mesh (inscribed polyhedron); the
  * reconstruction: 20,000 points of the sphere of radius 1 + d (Fibonacci
  * lattice). Every mesh point lies in the unit ball, so a distance is at

@@ -181,6 +181,35 @@ static uint8_t *put_be_f32(uint8_t *p, float f)
     return put_be32(p, b);
 }
 
+/* Double positions far from the origin keep their millimetres: the mesh
+ * takes a local origin (the first vertex's, to the metre) on top of the
+ * file's own, where floats would step by a metre at 1e7 m. */
+BF_TEST(ply_far_double_positions_keep_their_precision_through_a_local_origin)
+{
+    char path[512];
+    tmp_path(path, sizeof path, "far.ply");
+    write_text(path, "ply\nformat ascii 1.0\ncomment origin_w 0.5 0 0\nelement vertex 3\n"
+                     "property double x\nproperty double y\nproperty double z\n"
+                     "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                     "10000000.3 -20000000.7 1.25\n10000000.6 -20000000.7 1.25\n10000000.3 -19999999.7 1.25\n3 0 1 2\n");
+    mesh_data m;
+    CHECK_OK(mesh_read_ply(path, &m));
+    CHECK(m.origin.x == 10000000.5 && m.origin.y == -20000001.0 && m.origin.z == 0.0);
+    double x[3] = {10000000.3, 10000000.6, 10000000.3}, y[3] = {-20000000.7, -20000000.7, -19999999.7};
+    for (int i = 0; i < 3; i++) {
+        CHECK_NEAR(m.origin.x + m.xyz[3 * i] - 0.5, x[i], 1e-6);
+        CHECK_NEAR(m.origin.y + m.xyz[3 * i + 1], y[i], 1e-6);
+        CHECK_NEAR(m.origin.z + m.xyz[3 * i + 2], 1.25, 0);
+    }
+    mesh_free(&m);
+    /* Near the origin nothing changes. */
+    write_text(path, "ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\n"
+                     "property double z\nend_header\n1000.25 -3 4\n");
+    CHECK_OK(mesh_read_ply(path, &m));
+    CHECK(m.origin.x == 0 && m.origin.y == 0 && m.origin.z == 0 && m.xyz[0] == 1000.25f);
+    mesh_free(&m);
+}
+
 BF_TEST(ply_binary_big_endian_with_normals_and_int_counts)
 {
     char path[512];
@@ -331,7 +360,7 @@ BF_TEST(ply_nan_or_inf_positions_are_format_errors)
     memcpy(buf + n, v, sizeof v);
     write_bytes(path, buf, n + sizeof v);
     CHECK_OK(mesh_read_ply(path, &m));
-    CHECK(m.xyz[1] == -1e8f);
+    CHECK(m.origin.y + m.xyz[1] == -1e8); /* a double that far: through a local origin */
     mesh_free(&m);
 }
 
