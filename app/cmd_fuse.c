@@ -229,6 +229,14 @@ int cmd_fuse(int argc, char **argv)
         }
     }
     if (s == BF_OK) s = app_write_status(&wf);
+    /* Frames fused and still no surface (every sample too near, or taken
+     * off the image by the lens): the input's fault, as a replay whose
+     * every frame lacks usable depth; the outputs are written. */
+    if (s == BF_OK && r.run.n_fused > 0 && r.out.map.n_surface_voxels == 0) {
+        printf("  no surface       the %u frames fused gave the map no surface (depth too near, or taken off the "
+               "image by the lens?)\n", r.run.n_fused);
+        s = bf_fail(BF_FORMAT, "%s: the %u frames fused gave the map no surface", a.seq, r.run.n_fused);
+    }
     bf_status s_input = r.run.source_status;
     if (s == BF_OK && s_input != BF_OK) {
         printf("  stopped early    %s: the frames before it were fused and written\n", r.run.source_error);

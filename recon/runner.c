@@ -151,9 +151,16 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
                 "residual %.1f mm)",
                 cfg->label, f->index, f->t_depth_s, recon_reloc_kind_name(fr->reloc), fr->reloc_tried,
                 100 * fr->track.inlier_frac, 1e3 * fr->track.residual_m);
+    } else if (fr->state == RECON_NO_DEPTH && fr->track.outcome == TRACK_NO_DEPTH) {
+        /* Enough samples in range, too few the tracker can use. */
+        bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m, too few of them with "
+                "neighbours to give a surface normal (isolated samples, spikes): skipped",
+                cfg->label, f->index, f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m);
     } else if (fr->state == RECON_NO_DEPTH) {
-        bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m: skipped", cfg->label, f->index,
-                f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m);
+        uint32_t need = cfg->loop.min_valid_pixels ? cfg->loop.min_valid_pixels : f->width * f->height / 100 + 1;
+        bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m, fewer than the %u a frame "
+                "needs: skipped",
+                cfg->label, f->index, f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m, need);
     }
     return BF_OK;
 }
@@ -244,8 +251,15 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
         s = fusion_create(ctx, &fc, rgbd_source_intrinsics(src), bf_v3(0, 0, 0), &run->map);
         if (s == BF_OK) s = recon_set_colour_camera(run->map, &cfg->loop);
     } else {
+        /* Images the tracker's pyramid cannot halve often enough are the
+         * sequence's fault (exit 3, naming it), not a usage error. */
+        const bf_intrinsics *K = rgbd_source_intrinsics(src);
+        uint32_t min_side = 1u << (cfg->loop.track.levels + 1);
+        if (K->width < min_side || K->height < min_side)
+            return bf_fail(BF_FORMAT, "%s: images of %ux%u are too small to track (%u pyramid levels need at least %ux%u)",
+                           cfg->name, K->width, K->height, cfg->loop.track.levels, min_side, min_side);
         bf_se3 I = bf_se3_identity();
-        s = recon_create(ctx, &cfg->loop, rgbd_source_intrinsics(src), &I, &run->loop);
+        s = recon_create(ctx, &cfg->loop, K, &I, &run->loop);
         if (s == BF_OK) run->map = recon_map(run->loop);
     }
     const recon_resume_state *rs = cfg->resume;

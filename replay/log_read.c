@@ -439,6 +439,9 @@ bf_status replay__log_open(const char *path, const replay_options *opt, rgbd_sou
      * taken any lens out): a preset gives its four numbers, a lens typed in
      * numbers is refused. */
     if (opt->camera && (s = replay_parse_camera(opt->camera, &K))) goto fail;
+    if ((s = replay__camera_fits(&K, K.width, K.height, path, opt->camera ? "--camera" : "the log's header",
+                                 opt->camera != NULL)))
+        goto fail;
     if (opt->camera && replay__principal_point_is_off(&K, K.width, K.height))
         bf_warn("%s: --camera's principal point (%g, %g) lies far from the centre of the log's %ux%u images: is it "
                 "for another image size?",

@@ -198,6 +198,9 @@ bf_status replay__source_create(const char *path, const char *kind, replay__list
             goto fail;
         }
     }
+    /* Numbers no depth camera has for these images: refused before any work. */
+    if ((s = replay__camera_fits(&cam->K, w, h, path, cam->origin ? cam->origin : "defaults", cam->is_from_option)))
+        goto fail;
     src = bf_calloc(1, sizeof *src);
     if (!src) {
         s = bf_fail(BF_NO_MEMORY, "%s source", kind);
@@ -250,7 +253,8 @@ bf_status replay__source_create(const char *path, const char *kind, replay__list
     bf_debug("%s: %u frames, %ux%u, camera from %s", kind, src->base.n_frames, w, h,
              cam->origin ? cam->origin : "defaults");
     /* A principal point far from the image's centre is a camera for another
-     * image size (a 640x480 preset on smaller frames): said, not refused. */
+     * image size (a 640x480 preset on smaller frames): said, not refused;
+     * numbers no depth camera has are refused. */
     const bf_intrinsics *K = &src->base.intrinsics;
     if (replay__principal_point_is_off(K, w, h))
         bf_warn("%s: the camera's principal point (%g, %g) lies far from the centre of the %ux%u images (camera "

@@ -73,6 +73,34 @@ mentions "camera.txt"
 mentions "folds"
 expect 2 "$B" info "$T/seq" --camera "$fx,$fy,$cx,$cy,-0.9,0,0,0,0"
 mentions "--camera"
+# Numbers no depth camera has for these images (they spread a map over
+# thousands of chunks at seconds a frame): typed, a usage error; in
+# camera.txt, bad input naming the folder and the file.
+expect 2 "$B" info "$T/seq" --camera 0.001,0.001,79.5,59.5
+mentions "field of view outside 0.1 to 170 degrees"
+expect 2 "$B" info "$T/seq" --camera "$fx,$fy,1e6,-1e6"
+mentions "principal point (1e+06, -1e+06, from --camera)"
+echo "0.001 0.001 $cx $cy ${sc:-5000}" > "$T/lens/camera.txt"
+expect 3 "$B" info "$T/lens"
+mentions "from camera.txt"
+# Images of 15x15 (a 16-bit PNG written by hand) with their own camera:
+# read, but too small for the tracker's pyramid: bad input naming the folder.
+mkdir -p "$T/tiny/depth"
+py - "$T/tiny" <<'PY'
+import struct, sys, zlib
+def chunk(t, d): return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+w = h = 15
+raw = b"".join(b"\0" + struct.pack(">%dH" % w, *([6000] * w)) for _ in range(h))
+png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0)) + \
+      chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+with open(sys.argv[1] + "/depth.txt", "w") as f:
+    for i in range(3):
+        open(sys.argv[1] + "/depth/%d.png" % i, "wb").write(png)
+        f.write("%.6f depth/%d.png\n" % (1 + i / 30, i))
+open(sys.argv[1] + "/camera.txt", "w").write("12 12 7 7 5000\n")
+PY
+expect 0 "$B" info "$T/tiny"
+grep -q "15x15" "$T/out" || fail "info of 15x15 images: $(cat "$T/out")"
 # A camera for images twice the size (its principal point at the corner of
 # these) is warned about; a hex float in a pose is refused by file and line.
 py -c "import sys; fx, fy, cx, cy = map(float, sys.argv[1:5]); print(2 * fx, 2 * fy, 2 * cx + 0.5, 2 * cy + 0.5, 5000)" \
@@ -344,7 +372,7 @@ PY
     # The sensor's range (--max-depth): the room lies beyond 0.5 m, so no frame has depth
     # there (exit 3, nothing written); 4 m keeps it and is echoed; 0.1 m is refused.
     expect 3 "$B" replay "$T/seq" --out "$T/rpmd" $small --max-depth 0.5
-    mentions "within the sensor's 0.5 m: skipped"
+    mentions "within the sensor's 0.5 m, fewer than the 193 a frame needs: skipped"
     [ ! -e "$T/rpmd" ] || fail "replay --max-depth 0.5 left $T/rpmd behind"
     expect 0 "$B" replay "$T/seq" --out "$T/rpmd4" $small --max-depth 4
     py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['config']['sensor']['max_depth_m'] == 4, d['config']['sensor']" \
@@ -402,6 +430,17 @@ PY
     expect 0 "$B" fuse "$T/nopose" --poses groundtruth --out "$T/funopose" $small
     py -c "import json,sys; d=json.load(open(sys.argv[1]+'/stats.json')); assert (d['frames'], d['frames_without_pose'], d['colour_repeated']) == (2, 1, 1), d" \
         "$T/funopose" || fail "fuse: a pose-less frame's colour handed on to the next was not found stale"
+fi
+# Images too small to track: bad input (3) naming the folder, nothing left behind.
+expect 3 "$B" replay "$T/tiny" --out "$T/rtiny"
+mentions "tiny: images of 15x15 are too small to track"
+[ -e "$T/rtiny" ] && fail "replay of images too small to track left $T/rtiny"
+# A lens that takes every pixel off the image: fuse writes its outputs and
+# says the map has no surface, exit 3 (a replay finds no frame with depth).
+if [ $SANITIZED = 0 ]; then
+    expect 3 "$B" fuse "$T/seq" --poses groundtruth --camera "$fx,$fy,$cx,$cy,1e6,0,0,0,0" --out "$T/fnear" $small
+    mentions "the 3 frames fused gave the map no surface"
+    [ -f "$T/fnear/stats.json" ] || fail "fuse with no surface wrote no stats.json"
 fi
 # Every frame unreadable: skipping them all is not a success.
 cp -r "$T/seq" "$T/allcut"
