@@ -77,9 +77,11 @@ mentions "--camera"
 # thousands of chunks at seconds a frame): typed, a usage error; in
 # camera.txt, bad input naming the folder and the file.
 expect 2 "$B" info "$T/seq" --camera 0.001,0.001,79.5,59.5
-mentions "field of view outside 0.1 to 170 degrees"
+mentions "more than 85 degrees off its axis"
 expect 2 "$B" info "$T/seq" --camera "$fx,$fy,1e6,-1e6"
-mentions "principal point (1e+06, -1e+06, from --camera)"
+mentions "cx 1e+06, cy -1e+06 px, from --camera"
+expect 2 "$B" info "$T/seq" --camera 1e7,1e7,79.5,59.5
+mentions "field of view under 0.1 degree"
 echo "0.001 0.001 $cx $cy ${sc:-5000}" > "$T/lens/camera.txt"
 expect 3 "$B" info "$T/lens"
 mentions "from camera.txt"
