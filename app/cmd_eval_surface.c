@@ -270,7 +270,7 @@ int cmd_eval_surface(int argc, char **argv)
     mesh_free(&vis);
     if (s) return app_fail(cmd, s);
 
-    const char *source = r.used_visible ? "visible" : ref_t ? "samples" : "vertices";
+    const char *source = r.used_visible ? "visible" : r.used_ref_vertices ? "vertices" : "samples";
     if (json) {
         cJSON *o = cJSON_CreateObject();
         cJSON_AddStringToObject(o, "reference", ref_path);
@@ -323,7 +323,7 @@ int cmd_eval_surface(int argc, char **argv)
     print_dist_text(&r.accuracy);
     printf("  within %g m: %.2f%%\n", cfg.threshold_m, 100 * r.precision);
     printf("completeness: %.2f%% of %zu reference %s within %g m of the reconstruction\n", 100 * r.completeness,
-           r.n_ref_points, r.used_visible ? "points (visibility mask)" : ref_t ? "area samples" : "vertices",
+           r.n_ref_points, r.used_visible ? "points (visibility mask)" : r.used_ref_vertices ? "vertices" : "area samples",
            cfg.threshold_m);
     print_dist_text(&r.completeness_dist);
     printf("time %.2f s on %d threads\n", r.seconds, bf_thread_count());

@@ -106,6 +106,7 @@ typedef struct eval_surface_result {
     double precision;        /* accuracy.n_within / all reconstruction points */
     size_t n_ref_points;
     bool used_visible;       /* completeness over the visibility mask */
+    bool used_ref_vertices;  /* ... over the reference's vertices (a point cloud, or triangles without area) */
     double seconds;          /* wall time of the evaluation */
 } eval_surface_result;
 

@@ -388,6 +388,7 @@ static bf_status surface_local(const mesh_data *ref, const mesh_data *rec, const
     r.n_rec_samples = n_rec_samples;
     r.n_ref_points = n_comp;
     r.used_visible = visible != NULL;
+    r.used_ref_vertices = !visible && comp_pts == ref->xyz;
     r.completeness = (double)r.completeness_dist.n_within / (double)n_comp;
     r.precision = (double)r.accuracy.n_within / (double)n_acc;
     r.seconds = bf_time_s() - t0;

@@ -268,6 +268,7 @@ BF_TEST(surface_box_offset_by_d_gives_accuracy_d_and_sharp_completeness)
     CHECK_EQ_INT(r.n_rec_vertices, rec.n_verts);
     CHECK_EQ_INT(r.n_rec_samples, 0);
     CHECK_EQ_INT(r.n_ref_points, 104000); /* 0.52 m^2 * 2e5 */
+    CHECK(!r.used_ref_vertices);
     CHECK_NEAR(r.accuracy.median, d, 1e-6);
     CHECK_NEAR(r.accuracy.mean, d, 1e-6);
     CHECK_NEAR(r.accuracy.p90, d, 1e-6);
@@ -509,6 +510,24 @@ BF_TEST(surface_point_cloud_reference_is_measured_point_to_point)
     CHECK_NEAR(r.accuracy.mean, 0.003, 1e-7);
     CHECK_NEAR(r.completeness_dist.median, 0.003, 1e-7);
     CHECK_NEAR(r.completeness, 1.0, 0);
+    CHECK(r.used_ref_vertices);
+    mesh_free(&ref);
+    mesh_free(&rec);
+}
+
+/* Triangles without area (collinear corners) have no area to sample:
+ * completeness is over their vertices, and the result says so. */
+BF_TEST(surface_reference_without_area_is_measured_at_its_vertices)
+{
+    mesh_data ref = mesh_alloc(3, 1), rec = mesh_alloc(3, 0);
+    for (uint32_t i = 0; i < 3; i++) set_v(&ref, i, 0.1 * i, 0, 0), set_v(&rec, i, 0.1 * i, 0, 0.002);
+    ref.tri[0] = 0, ref.tri[1] = 1, ref.tri[2] = 2;
+    eval_surface_config cfg = eval_surface_config_default();
+    eval_surface_result r;
+    CHECK_OK(eval_surface(&ref, &rec, NULL, &cfg, &r));
+    CHECK(r.used_ref_vertices);
+    CHECK_EQ_INT(r.n_ref_points, 3);
+    CHECK_NEAR(r.completeness_dist.max, 0.002, 1e-7);
     mesh_free(&ref);
     mesh_free(&rec);
 }
