@@ -99,6 +99,12 @@ typedef struct fuse_result {
     char device_driver[256]; /* the driver's own words, e.g. Mesa's version */
 } fuse_result;
 
+/* Frames fused and still no surface voxel (points.ply empty: every sample
+ * too near or too sparse, or taken off the image by the lens): the input's
+ * fault, as a replay whose every frame lacks usable depth (exit 3, the
+ * outputs written, stats.json's `no_surface`). */
+static bool no_surface(const fuse_result *r) { return r->run.n_fused > 0 && r->out.points.n_points == 0; }
+
 static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_source *src)
 {
     const recon_run_series *t = &r->run.series;
@@ -109,6 +115,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddStringToObject(o, "device_driver", r->device_driver);
     app_json_fusion_config(o, "config", &a->fcfg);
     cJSON_AddBoolToObject(o, "interrupted", r->run.is_interrupted); /* Ctrl-C, SIGTERM */
+    cJSON_AddBoolToObject(o, "no_surface", no_surface(r));
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &fuse_depth_fix : NULL);
     char *cal_text = NULL;
     cJSON *cal = a->calibration && calib_to_text(&a->cal.cal, &cal_text) == BF_OK ? cJSON_CreateRaw(cal_text) : NULL;
@@ -229,19 +236,16 @@ int cmd_fuse(int argc, char **argv)
         }
     }
     if (s == BF_OK) s = app_write_status(&wf);
-    /* Frames fused and still no surface (every sample too near, or taken
-     * off the image by the lens): the input's fault, as a replay whose
-     * every frame lacks usable depth; the outputs are written. */
-    if (s == BF_OK && r.run.n_fused > 0 && r.out.map.n_surface_voxels == 0) {
-        printf("  no surface       the %u frames fused gave the map no surface (depth too near, or taken off the "
-               "image by the lens?)\n", r.run.n_fused);
-        s = bf_fail(BF_FORMAT, "%s: the %u frames fused gave the map no surface", a.seq, r.run.n_fused);
-    }
     bf_status s_input = r.run.source_status;
     if (s == BF_OK && s_input != BF_OK) {
         printf("  stopped early    %s: the frames before it were fused and written\n", r.run.source_error);
         bf_fail(s_input, "%s", r.run.source_error);
         s = s_input;
+    }
+    if (s == BF_OK && no_surface(&r)) {
+        printf("  no surface       the %u frames fused gave the map no surface voxel (depth too near or too sparse, "
+               "or taken off the image by the lens?)\n", r.run.n_fused);
+        s = bf_fail(BF_FORMAT, "%s: the %u frames fused gave the map no surface voxel", a.seq, r.run.n_fused);
     }
     /* A run that wrote nothing (a corrupt first frame, no device) leaves no
      * empty folder it made behind; rmdir takes only an empty one. */

@@ -153,8 +153,8 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
                 100 * fr->track.inlier_frac, 1e3 * fr->track.residual_m);
     } else if (fr->state == RECON_NO_DEPTH && fr->track.outcome == TRACK_NO_DEPTH) {
         /* Enough samples in range, too few the tracker can use. */
-        bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m, too few of them with "
-                "neighbours to give a surface normal (isolated samples, spikes): skipped",
+        bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m, too few of them the "
+                "tracker could use (without neighbours for a surface normal, or nothing to match): skipped",
                 cfg->label, f->index, f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m);
     } else if (fr->state == RECON_NO_DEPTH) {
         uint32_t need = cfg->loop.min_valid_pixels ? cfg->loop.min_valid_pixels : f->width * f->height / 100 + 1;

@@ -168,15 +168,16 @@ bf_status replay__camera_fits(const bf_intrinsics *K, uint32_t w, uint32_t h, co
     bf_status s = from_option ? BF_INVALID_ARG : BF_FORMAT;
     if (w < 2 || h < 2 || w > 8192 || h > 8192)
         return bf_fail(BF_FORMAT, "%s: images of %ux%u: bitfuse takes 2 to 8192 pixels a side", path, w, h);
-    /* Every pixel's ray within 85 degrees of the optical axis: the image's
-     * edges at most tan(85) |f| from the principal point (a field of view
+    /* The rays of the image's edges within 85 degrees of the optical axis
+     * along either image axis: the edges at most tan(85) |f| from the
+     * principal point (a field of view
      * over 170 degrees, or a principal point so far out that the rays graze
      * the image plane, spread the map over thousands of chunks). */
     const double tan_wide = tan(85.0 * M_PI / 180.0), tan_narrow = tan(0.05 * M_PI / 180.0);
     double fx = fabs(K->fx_px), fy = fabs(K->fy_px);
     double ox = fmax(fabs(K->cx_px + 0.5), fabs(K->cx_px + 0.5 - w)), oy = fmax(fabs(K->cy_px + 0.5), fabs(K->cy_px + 0.5 - h));
     if (!(ox <= tan_wide * fx && oy <= tan_wide * fy))
-        return bf_fail(s, "%s: the camera (fx %g, fy %g, cx %g, cy %g px, from %s) sees some pixels of its %ux%u images "
+        return bf_fail(s, "%s: the camera (fx %g, fy %g, cx %g, cy %g px, from %s) sees the edges of its %ux%u images "
                           "more than 85 degrees off its axis: not a depth camera for them",
                        path, K->fx_px, K->fy_px, K->cx_px, K->cy_px, from, w, h);
     /* A field of view under 0.1 degree across the image: no depth camera's. */

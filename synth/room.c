@@ -507,7 +507,11 @@ bf_status synth_scene_from_ply(const char *path, double scale, synth_scene *out)
         return bf_fail(BF_FORMAT, "%s: no triangles to render", path);
     }
     bf_vec3 lo = bf_v3(INFINITY, INFINITY, INFINITY), hi = bf_v3(-INFINITY, -INFINITY, -INFINITY);
-    for (uint32_t i = 0; i < 3 * m.n_verts; i++) m.xyz[i] = (float)(m.xyz[i] * scale);
+    /* The mesh's local origin (a far PLY's, mesh_read_ply) folded in: the
+     * scene is the file's points times the scale. */
+    const double o[3] = {m.origin.x, m.origin.y, m.origin.z};
+    for (uint32_t i = 0; i < 3 * m.n_verts; i++) m.xyz[i] = (float)((o[i % 3] + (double)m.xyz[i]) * scale);
+    m.origin = bf_v3(0, 0, 0);
     for (uint32_t i = 0; i < m.n_verts; i++) {
         const float *p = m.xyz + 3 * (size_t)i;
         lo = bf_v3(fmin(lo.x, p[0]), fmin(lo.y, p[1]), fmin(lo.z, p[2]));

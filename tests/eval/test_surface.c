@@ -310,6 +310,22 @@ BF_TEST(surface_of_meshes_with_different_local_origins_is_measured_in_one_frame)
     CHECK_OK(eval_surface(&rec, &box_far, NULL, &cfg, &r)); /* the other way: completeness to the points */
     CHECK(r.completeness_dist.n > 0);
     CHECK_LE(r.accuracy.median, 0.02);
+    /* A reference in world coordinates (no origin of its own; near enough
+     * for float) against the samples kept relative to an origin: the
+     * reconstruction's origin is the common frame. */
+    const bf_vec3 near = bf_v3(100.0, 200.0, 50.0);
+    mesh_data box_world = {0};
+    T.t = near;
+    CHECK_OK(mesh_append(&box_world, &box, &T));
+    for (uint32_t i = 0; i < box_world.n_verts; i++) {
+        box_world.xyz[3 * i] += (float)near.x, box_world.xyz[3 * i + 1] += (float)near.y;
+        box_world.xyz[3 * i + 2] += (float)near.z;
+    }
+    box_world.origin = bf_v3(0, 0, 0);
+    rec.origin = near;
+    CHECK_OK(eval_surface(&box_world, &rec, NULL, &cfg, &r));
+    CHECK_NEAR(r.accuracy.median, d, 2e-5);
+    mesh_free(&box_world);
     mesh_free(&box_far);
     mesh_free(&rec);
     mesh_free(&box);

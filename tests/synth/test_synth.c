@@ -456,6 +456,32 @@ BF_TEST(mesh_scene_view_frames_the_mesh)
     CHECK_STATUS(synth_scene_from_ply(path, -1, &sc), BF_INVALID_ARG);
 }
 
+/* A mesh in millimetres stored as doubles far from its origin (read
+ * relative to a local origin, mesh_read_ply): the scene is the file's
+ * points times the scale, the local origin folded in, so the scene, its
+ * camera and the frames stay in one frame. */
+BF_TEST(mesh_scene_of_far_double_millimetres_keeps_its_place)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/far_mm.ply", bf_test_tmpdir());
+    FILE *f = fopen(path, "w");
+    CHECK(f != NULL);
+    if (!f) return;
+    fprintf(f, "ply\nformat ascii 1.0\nelement vertex 4\nproperty double x\nproperty double y\nproperty double z\n"
+               "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+               "1200.25 1300.5 1100.75\n1800.25 1300.5 1100.75\n1800.25 1900.5 1100.75\n1200.25 1900.5 1300.75\n"
+               "3 0 1 2\n3 0 2 3\n");
+    fclose(f);
+    synth_scene sc;
+    CHECK_OK(synth_scene_from_ply(path, 0.001, &sc));
+    CHECK(sc.mesh.origin.x == 0 && sc.mesh.origin.y == 0 && sc.mesh.origin.z == 0);
+    CHECK_NEAR(sc.mesh.xyz[0], 1.20025, 1e-6);
+    CHECK_NEAR(sc.mesh.xyz[1], 1.3005, 1e-6);
+    CHECK_NEAR(sc.mesh.xyz[2], 1.10075, 1e-6);
+    CHECK_NEAR(sc.mesh.xyz[3 * 3 + 2], 1.30075, 1e-6);
+    synth_scene_free(&sc);
+}
+
 BF_TEST(room_sequence_along_fr1_xyz_reads_back)
 {
     const char *gt = bf_test_data("tum/fr1_xyz/groundtruth.txt");
