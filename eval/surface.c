@@ -230,11 +230,11 @@ static bool same_origin(const mesh_data *a, const mesh_data *b)
     return a->origin.x == b->origin.x && a->origin.y == b->origin.y && a->origin.z == b->origin.z;
 }
 
-/* A copy of m's vertices and triangles relative to `origin` (the shift
- * computed in double, stored as float; no normals or colours: the measure
- * reads neither): meshes far from the
- * world origin keep a local one of their own (mesh_data.origin, a PLY's
- * "origin_w" comment), and distances are only meaningful in one frame. */
+/* A copy of m's vertices and triangles relative to `origin` (the shift in
+ * double, stored as float; no normals or colours: the measure reads
+ * neither). Meshes far from the world origin keep a local one of their own
+ * (mesh_data.origin, a PLY's "origin_w" comment), and distances are only
+ * meaningful in one frame. */
 static bf_status rebase(const mesh_data *m, bf_vec3 origin, mesh_data *out)
 {
     memset(out, 0, sizeof *out);

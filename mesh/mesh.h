@@ -34,12 +34,11 @@ typedef struct mesh_data {
  * (float or double), optional nx ny nz, red green blue (uchar), and faces
  * as lists of int/uint indices (polygons are fanned into triangles). Other
  * properties are skipped; a header comment "origin_w X Y Z" (as
- * mesh_write_ply writes it) sets out->origin. Index out of range,
- * truncation, NaN: BF_FORMAT. */
+ * mesh_write_ply writes it) sets out->origin; double positions beyond 1024
+ * (the file's units) are kept relative to the first vertex's position,
+ * rounded, which is added to out->origin (a reader adds origin to xyz).
+ * Index out of range, truncation, NaN: BF_FORMAT. */
 bf_status mesh_read_ply(const char *path, mesh_data *out);
-/* (Double positions beyond 1024 from the file's origin are kept relative
- * to a local origin, the first vertex's position rounded, added to
- * out->origin: a reader of mesh_data must add origin to xyz.) */
 /* Reads an OFF mesh (Geomview's format: "OFF", counts, x y z lines, faces as
  * "n i0 .. i(n-1)", polygons fanned into triangles, '#' comments, a face's
  * colour skipped). A bad count, index or number: BF_FORMAT naming the line. */

@@ -270,8 +270,9 @@ static bf_status ply_tris_push(ply_tris *t, uint32_t a, uint32_t b, uint32_t c)
     return BF_OK;
 }
 
-/* Double positions beyond this many metres from the file's origin keep
- * their precision through a local origin (float steps there: 0.12 mm). */
+/* Double positions beyond this far from the file's origin (in its units,
+ * metres for a scene: float steps there 0.12 mm) keep their precision
+ * through a local origin. */
 #define PLY_FAR_M 1024.0
 
 /* Reads the vertices. Positions stored as double far from the origin are

@@ -98,6 +98,11 @@ recon_config recon_config_default(void)
     return c;
 }
 
+uint32_t recon_min_valid_pixels(const recon_config *cfg, uint32_t width, uint32_t height)
+{
+    return cfg->min_valid_pixels ? cfg->min_valid_pixels : width * height / 100 + 1;
+}
+
 uint32_t recon_ref_level(const bf_intrinsics *K, const track_config *tc)
 {
     if (tc->ref_level != RECON_REF_LEVEL_AUTO) return tc->ref_level;
@@ -170,7 +175,7 @@ bf_status recon_create(gpu_context *ctx, const recon_config *cfg, const bf_intri
     r->T_last = *T_wc0;
     r->cfg.fusion = recon_fusion_config(cfg);
     r->cfg.track.sensor = r->cfg.sensor;
-    if (!r->cfg.min_valid_pixels) r->cfg.min_valid_pixels = K->width * K->height / 100 + 1;
+    r->cfg.min_valid_pixels = recon_min_valid_pixels(cfg, K->width, K->height);
     /* The reference at track.ref_level (recon_config_default: a quarter of
      * the resolution): the ray-cast is the loop's largest cost per ray.
      * track_create checks the level. */

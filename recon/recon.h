@@ -150,6 +150,9 @@ fusion_config recon_fusion_config(const recon_config *cfg);
 /* The loop's tracking reference level for this camera: tc->ref_level, or
  * what RECON_REF_LEVEL_AUTO resolves to. */
 uint32_t recon_ref_level(const bf_intrinsics *K, const track_config *tc);
+/* The depth samples a frame of a w x h camera needs to be tracked
+ * (cfg->min_valid_pixels, or its default: 1% of the image). */
+uint32_t recon_min_valid_pixels(const recon_config *cfg, uint32_t width, uint32_t height);
 
 /* What happened to one frame. */
 typedef enum recon_frame_state {

@@ -157,7 +157,7 @@ static bf_status track_frame_in_loop(const recon_run_config *cfg, const bf_frame
                 "tracker could use (without neighbours for a surface normal, or nothing to match): skipped",
                 cfg->label, f->index, f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m);
     } else if (fr->state == RECON_NO_DEPTH) {
-        uint32_t need = cfg->loop.min_valid_pixels ? cfg->loop.min_valid_pixels : f->width * f->height / 100 + 1;
+        uint32_t need = recon_min_valid_pixels(&cfg->loop, f->width, f->height);
         bf_warn("%s: frame %u (t = %.6f): %u depth samples within the sensor's %.1f m, fewer than the %u a frame "
                 "needs: skipped",
                 cfg->label, f->index, f->t_depth_s, fr->n_valid, cfg->loop.sensor.max_depth_m, need);
@@ -254,7 +254,7 @@ static bf_status prepare(gpu_context *ctx, rgbd_source *src, const recon_run_con
         /* Images the tracker's pyramid cannot halve often enough are the
          * sequence's fault (exit 3, naming it), not a usage error. */
         const bf_intrinsics *K = rgbd_source_intrinsics(src);
-        uint32_t min_side = 1u << (cfg->loop.track.levels + 1);
+        uint32_t min_side = track_min_image_side(&cfg->loop.track);
         if (K->width < min_side || K->height < min_side)
             return bf_fail(BF_FORMAT, "%s: images of %ux%u are too small to track (%u pyramid levels need at least %ux%u)",
                            cfg->name, K->width, K->height, cfg->loop.track.levels, min_side, min_side);

@@ -52,13 +52,14 @@ bf_status replay__text_nul(const char *path, const char *text, size_t len);
  * the centre of w x h images (real cameras keep it within a few per cent):
  * a camera for another image size. */
 bool replay__principal_point_is_off(const bf_intrinsics *K, uint32_t w, uint32_t h);
-/* Refuses a camera no depth camera has for w x h images: a size outside
- * 2..8192 per side (the map's limit), image edges whose rays lie more than
- * 85 degrees off the axis along either image axis (a field of view over
- * 170 degrees, a principal point far out), or a field of view under 0.1 degree (a camera for
- * larger images is only warned about) (such numbers made the map spread over thousands of
- * chunks at seconds a frame). BF_INVALID_ARG when the numbers came from
- * an option (`from_option`), BF_FORMAT naming `path` and `from` otherwise. */
+/* Refuses a camera no depth camera has for w x h images (such numbers made
+ * the map spread over thousands of chunks at seconds a frame): image edges
+ * whose rays lie more than 85 degrees off the axis along either image axis
+ * (a field of view over 170 degrees, a principal point far out), or a
+ * field of view under 0.1 degree; BF_INVALID_ARG when the numbers came from
+ * an option (`from_option`), BF_FORMAT naming `path` and `from` otherwise.
+ * A size outside 2..8192 a side (the map's limit) is always BF_FORMAT. A
+ * camera for larger images is only warned about (above). */
 bf_status replay__camera_fits(const bf_intrinsics *K, uint32_t w, uint32_t h, const char *path, const char *from,
                               bool from_option);
 void replay__text_close(replay__text *t);

@@ -170,9 +170,9 @@ bf_status replay__camera_fits(const bf_intrinsics *K, uint32_t w, uint32_t h, co
         return bf_fail(BF_FORMAT, "%s: images of %ux%u: bitfuse takes 2 to 8192 pixels a side", path, w, h);
     /* The rays of the image's edges within 85 degrees of the optical axis
      * along either image axis: the edges at most tan(85) |f| from the
-     * principal point (a field of view
-     * over 170 degrees, or a principal point so far out that the rays graze
-     * the image plane, spread the map over thousands of chunks). */
+     * principal point (a field of view over 170 degrees, or a principal
+     * point so far out that the rays graze the image plane, spread the map
+     * over thousands of chunks). */
     const double tan_wide = tan(85.0 * M_PI / 180.0), tan_narrow = tan(0.05 * M_PI / 180.0);
     double fx = fabs(K->fx_px), fy = fabs(K->fy_px);
     double ox = fmax(fabs(K->cx_px + 0.5), fabs(K->cx_px + 0.5 - w)), oy = fmax(fabs(K->cy_px + 0.5), fabs(K->cy_px + 0.5 - h));

@@ -211,9 +211,10 @@ static bf_status check_config(const track_config *c, const bf_intrinsics *K)
 {
     bf_status s = track_config_check(c);
     if (s != BF_OK) return s;
-    if (K->width < (1u << (c->levels + 1)) || K->height < (1u << (c->levels + 1)))
+    uint32_t min_side = track_min_image_side(c);
+    if (K->width < min_side || K->height < min_side)
         return bf_fail(BF_INVALID_ARG, "tracking: images of %ux%u are too small for %u pyramid levels (at least %ux%u)",
-                       K->width, K->height, c->levels, 1u << (c->levels + 1), 1u << (c->levels + 1));
+                       K->width, K->height, c->levels, min_side, min_side);
     /* A negative fy (ICL-NUIM's y-up camera) is a camera like any other:
      * projection, back-projection and the normals' orientation toward the
      * camera all hold with it. */

@@ -157,6 +157,9 @@ typedef struct track_result {
  * not depend on the camera; track_create checks the rest), so a command
  * line can be refused before any device opens. */
 bf_status track_config_check(const track_config *c);
+/* The smallest image side the tracker takes: its pyramid halves the image
+ * c->levels times and needs two pixels a side at the coarsest. */
+static inline uint32_t track_min_image_side(const track_config *c) { return 1u << (c->levels + 1); }
 /* ctx is borrowed. Frames and references have K's size. */
 bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out);
 void track_destroy(track_tracker *t); /* NULL is a no-op */
