@@ -167,7 +167,7 @@ static void *capture_main(void *arg)
 static bf_status start_thread(capture_thread *ct)
 {
     if (ct->is_started) return BF_OK;
-    int rc = pthread_create(&ct->thread, NULL, capture_main, ct);
+    int rc = bf_thread_start(&ct->thread, capture_main, ct);
     if (rc != 0) return bf_fail(BF_NO_MEMORY, "capture thread: cannot start a thread: %s", strerror(rc));
     ct->is_started = true;
     return BF_OK;

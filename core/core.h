@@ -11,6 +11,7 @@
 #ifndef BF_CORE_H
 #define BF_CORE_H
 
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdbool.h>
 #include <stddef.h>
@@ -249,6 +250,11 @@ int bf_thread_count(void);
  * handing out indices dynamically; returns when all are done. fn must be
  * thread-safe. Falls back to the calling thread if threads cannot start. */
 void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx);
+/* pthread_create with SIGINT and SIGTERM blocked in the new thread, so a
+ * Ctrl-C always reaches the main thread's handler and never interrupts a
+ * worker's blocking call (a capture thread's open of a pipe or a device
+ * read would fail with EINTR). Returns pthread_create's result. */
+int bf_thread_start(pthread_t *th, void *(*fn)(void *), void *arg);
 
 /* ---------------------------------------------------------------- files */
 

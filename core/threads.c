@@ -3,6 +3,7 @@
 #include "core.h"
 
 #include <pthread.h>
+#include <signal.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -48,9 +49,22 @@ void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx)
     pthread_t th[BF_MAX_THREADS];
     int started = 0;
     for (int k = 1; k < nt; k++) {
-        if (pthread_create(&th[started], NULL, pfor_worker, &job) != 0) break;
+        if (bf_thread_start(&th[started], pfor_worker, &job) != 0) break;
         started++;
     }
     pfor_worker(&job); /* the caller works too */
     for (int k = 0; k < started; k++) pthread_join(th[k], NULL);
+}
+
+int bf_thread_start(pthread_t *th, void *(*fn)(void *), void *arg)
+{
+    /* The new thread inherits the creator's mask: block around the create. */
+    sigset_t stop, old;
+    sigemptyset(&stop);
+    sigaddset(&stop, SIGINT);
+    sigaddset(&stop, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &stop, &old);
+    int rc = pthread_create(th, NULL, fn, arg);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    return rc;
 }

@@ -289,9 +289,10 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     if ((s = create_buffers(m)) != BF_OK) goto fail;
     reset_job job = {.m = m, .s = BF_OK};
     pthread_t filler;
-    bool threaded = reset_is_host_only(m) && pthread_create(&filler, NULL, reset_main, &job) == 0;
+    bool threaded = reset_is_host_only(m) && bf_thread_start(&filler, reset_main, &job) == 0;
     if (!threaded) job.s = fusion__reset(m, true);
-    s = job.s != BF_OK ? job.s : c.load_only ? BF_OK : create_pipelines(m);
+    /* The filler's status is read only after the join (it writes it). */
+    s = !threaded && job.s != BF_OK ? job.s : c.load_only ? BF_OK : create_pipelines(m);
     if (threaded) {
         pthread_join(filler, NULL);
         /* The message was recorded on the filler's thread: again on this one. */

@@ -76,7 +76,7 @@ typedef void *(*bin_fn)(void *);
 static void run_two(bin_fn fn, void *a0, void *a1)
 {
     pthread_t th;
-    bool threaded = BIN_THREADS > 1 && pthread_create(&th, NULL, fn, a1) == 0;
+    bool threaded = BIN_THREADS > 1 && bf_thread_start(&th, fn, a1) == 0;
     fn(a0);
     if (threaded) pthread_join(th, NULL);
     else fn(a1);

@@ -388,7 +388,7 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
     }
     pthread_mutex_init(&w->mu, NULL);
     pthread_cond_init(&w->cv, NULL);
-    if (s == BF_OK && pthread_create(&w->thread, NULL, writer_main, w) != 0)
+    if (s == BF_OK && bf_thread_start(&w->thread, writer_main, w) != 0)
         s = bf_fail(BF_NO_MEMORY, "store: cannot start the writer's thread");
     if (s != BF_OK) {
         pthread_mutex_destroy(&w->mu);

@@ -155,7 +155,7 @@ static void png_stage_start(png_stage *st, replay_tum_writer *w)
         pthread_mutex_destroy(&st->mu);
         return;
     }
-    st->is_threaded = pthread_create(&st->thread, NULL, png_stage_main, st) == 0;
+    st->is_threaded = bf_thread_start(&st->thread, png_stage_main, st) == 0;
     if (!st->is_threaded) {
         pthread_cond_destroy(&st->cv);
         pthread_mutex_destroy(&st->mu);

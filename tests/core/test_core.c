@@ -195,6 +195,30 @@ BF_TEST(parallel_for_visits_every_index_once)
     for (int i = 0; i < 1000; i++) CHECK_NEAR(v[i], (double)i * i, 0);
 }
 
+static void *report_mask(void *arg)
+{
+    pthread_sigmask(SIG_BLOCK, NULL, (sigset_t *)arg);
+    return NULL;
+}
+
+/* A Ctrl-C must reach the main thread's handler, never a worker's blocking
+ * call: workers start with SIGINT and SIGTERM blocked, the caller's mask
+ * unchanged. */
+BF_TEST(threads_start_with_the_stop_signals_blocked)
+{
+    sigset_t before, after, worker;
+    pthread_sigmask(SIG_BLOCK, NULL, &before);
+    CHECK(!sigismember(&before, SIGINT) && !sigismember(&before, SIGTERM));
+    pthread_t th;
+    CHECK(bf_thread_start(&th, report_mask, &worker) == 0);
+    pthread_join(th, NULL);
+    CHECK(sigismember(&worker, SIGINT));
+    CHECK(sigismember(&worker, SIGTERM));
+    CHECK(!sigismember(&worker, SIGUSR1));
+    pthread_sigmask(SIG_BLOCK, NULL, &after);
+    CHECK(!sigismember(&after, SIGINT) && !sigismember(&after, SIGTERM));
+}
+
 BF_TEST(atomic_write_replaces_file_and_reads_back)
 {
     char path[512];
