@@ -24,7 +24,9 @@
 
 typedef enum image_kind { IMAGE_PNG, IMAGE_JPEG, IMAGE_OTHER, IMAGE_EMPTY } image_kind;
 
-/* Opens path and sniffs its first bytes; the stream is rewound. */
+/* Opens path and sniffs its first bytes. A PNG's stream is left after its
+ * 8-byte signature, which the decoder is told it has seen, so a depth image
+ * may come through a pipe (no seek); any other stream is rewound. */
 static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
 {
     FILE *f = fopen(path, "rb");
@@ -36,7 +38,6 @@ static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
         fclose(f);
         return bf_fail(BF_IO, "%s: cannot read: %s", path, strerror(e));
     }
-    rewind(f);
     if (n >= 8 && png_sig_cmp(sig, 0, 8) == 0)
         *kind = IMAGE_PNG;
     else if (n >= 3 && sig[0] == 0xFF && sig[1] == 0xD8 && sig[2] == 0xFF)
@@ -45,6 +46,7 @@ static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
         *kind = IMAGE_EMPTY;
     else
         *kind = IMAGE_OTHER;
+    if (*kind != IMAGE_PNG) rewind(f);
     *fp = f;
     return BF_OK;
 }
@@ -147,6 +149,7 @@ static bf_status png_decode(FILE *f, const char *path, png_want want, void *buf,
         return bf_fail(BF_FORMAT, "%s: corrupt PNG (%s)", path, err.msg);
     }
     png_init_io(png, f);
+    png_set_sig_bytes(png, 8); /* image_open read them */
     uint32_t w = 0, h = 0;
     bf_status s = png_decode_body(png, info, path, want, buf, cap_px, &owned, alloc != NULL, exp_w, exp_h, &w, &h);
     png_destroy_read_struct(&png, &info, NULL);

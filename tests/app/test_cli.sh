@@ -603,61 +603,75 @@ grep -q "stopped by a signal" "$T/out" || fail "record did not say it was stoppe
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['interrupted'] and 1 <= d['frames'] < 90, d" \
     "$T/int.stats.json" || fail "interrupted record: stats.json"
 expect 0 "$B" info "$T/int.bflog"
-# convert too: a complete log of the frames converted (when the signal
-# lands before the end: 90 frames convert in about a second here).
-"$B" convert "$T/long" --out "$T/cint.bflog" >"$T/out" 2>"$T/err" &
-pid=$!
-sleep 0.3
-if kill -INT $pid 2>/dev/null; then
+# The Ctrl-C checks of convert, replay and fuse must see the signal land
+# mid-run on any machine, however fast: $T/gated is $T/long with frame 45's
+# depth a named pipe. The command blocks there reading it; the signal comes
+# once it has opened the pipe (so long after start-up), then the pipe gets
+# the image and the command goes on, sees the stop and ends.
+mkdir "$T/gated" "$T/gated/gate"
+for f in depth rgb camera.txt rgb.txt; do ln -s "$T/long/$f" "$T/gated/$f"; done
+awk '!/^#/ { n++; if (n == 46) $2 = "gate/d.png" } { print }' "$T/long/depth.txt" >"$T/gated/depth.txt"
+gate_png=$T/seq/$(awk '!/^#/ {print $2; exit}' "$T/seq/depth.txt")
+# interrupt_at_gate CMD...: CMD in the background (stdout $T/out, stderr
+# $T/err), SIGINT once it reads the gate, then the gate's image; rc its exit.
+interrupt_at_gate() {
+    rm -f "$T/gated/gate/d.png"
+    mkfifo "$T/gated/gate/d.png"
+    "$@" >"$T/out" 2>"$T/err" &
+    local pid=$!
+    python3 - "$T/gated/gate/d.png" "$pid" "$gate_png" <<'PY' || { kill -9 $pid 2>/dev/null; fail "gate: $(tail -c 300 "$T/err")"; }
+import errno, os, signal, sys, time
+gate, pid, png = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+deadline = time.time() + 300
+while True:  # a writer's open without blocking succeeds once a reader has the pipe open
+    try:
+        fd = os.open(gate, os.O_WRONLY | os.O_NONBLOCK)
+        break
+    except OSError as e:
+        if e.errno != errno.ENXIO:
+            raise
+    try:  # the command is the shell's child: ended, it is a zombie until waited for
+        ended = open("/proc/%d/stat" % pid).read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        ended = True
+    if ended:
+        sys.exit("the command ended before it read the gate")
+    if time.time() > deadline:
+        sys.exit("the command did not read the gate in 300 s")
+    time.sleep(0.01)
+os.kill(pid, signal.SIGINT)
+os.set_blocking(fd, True)
+os.write(fd, open(png, "rb").read())
+os.close(fd)
+PY
     wait $pid
     rc=$?
-    [ $rc = 0 ] || fail "convert stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
-    [ -e "$T/cint.bflog.partial" ] && fail "convert stopped by SIGINT left its .partial"
-    expect 0 "$B" info "$T/cint.bflog"
-else
-    wait $pid
-fi
-# interrupt_half NAME OUT STORE CMD...: CMD once to its end (into OUT.full),
-# then again into OUT (with --store STORE unless STORE is '') with SIGINT
-# half that time in; rc its exit code, stopped true when the signal landed
-# (the run had not ended) and stats.json says interrupted.
-interrupt_half() {
-    local name=$1 out=$2 store=$3 t0 half pid
-    shift 3
-    t0=$(date +%s.%N)
-    expect 0 "$@" --out "$out.full"
-    half=$(python3 -c "import sys; print(max(0.2, (float(sys.argv[2]) - float(sys.argv[1])) / 2))" "$t0" "$(date +%s.%N)")
-    "$@" --out "$out" ${store:+--store "$store"} >"$T/out" 2>"$T/err" &
-    pid=$!
-    sleep "$half"
-    stopped=false
-    if kill -INT $pid 2>/dev/null; then
-        wait $pid
-        rc=$?
-        [ $rc = 0 ] || fail "$name stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
-        if python3 -c "import json,sys; sys.exit(0 if json.load(open(sys.argv[1]))['interrupted'] else 1)" "$out/stats.json"; then
-            stopped=true
-            grep -q "stopped          by a signal" "$T/out" || fail "$name did not say it was stopped: $(cat "$T/out")"
-        fi
-    else
-        wait $pid
-    fi
 }
+# interrupted NAME STATS: the run says it was stopped (stdout and
+# stats.json) and ended before the frames after the gate.
+interrupted() {
+    [ $rc = 0 ] || fail "$1 stopped by SIGINT: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
+    grep -q "by a signal" "$T/out" || fail "$1 did not say it was stopped: $(cat "$T/out")"
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['interrupted'] and 1 <= d['frames'] <= 46, d" \
+        "$2" || fail "$1 stopped by SIGINT: stats.json"
+}
+# convert too: a complete log of the frames converted.
+interrupt_at_gate "$B" convert "$T/gated" --out "$T/cint.bflog"
+interrupted convert "$T/cint.stats.json"
+[ -e "$T/cint.bflog.partial" ] && fail "convert stopped by SIGINT left its .partial"
+expect 0 "$B" info "$T/cint.bflog"
 # Ctrl-C during a replay ends the scan, not the program: exit 0, the frames
-# before it written (stats.json says interrupted), the store flushed. The
-# signal lands half-way through a run as long as an uninterrupted one here.
-interrupt_half replay "$T/rint" "$T/rintS" "$B" replay "$T/long" --no-mesh
-if $stopped; then
-    [ -s "$T/rint/trajectory.txt" ] && [ -s "$T/rint/points.ply" ] || fail "interrupted replay: outputs missing"
-    expect 0 "$B" info "$T/rintS"
-fi
+# before it written (stats.json says interrupted), the store flushed.
+interrupt_at_gate "$B" replay "$T/gated" --no-mesh --out "$T/rint" --store "$T/rintS"
+interrupted replay "$T/rint/stats.json"
+[ -s "$T/rint/trajectory.txt" ] && [ -s "$T/rint/points.ply" ] || fail "interrupted replay: outputs missing"
+expect 0 "$B" info "$T/rintS"
 # fuse too: the frames fused before the signal are written.
 python3 -c "
 for i in range(90): print('%.6f 0 0 0 0 0 0 1' % (1000 + i / 30.0))" >"$T/long_poses.txt"
-interrupt_half fuse "$T/fint" "" "$B" fuse "$T/long" --poses "$T/long_poses.txt" --no-mesh
-if $stopped; then
-    [ -s "$T/fint/points.ply" ] || fail "interrupted fuse: points.ply missing"
-fi
+interrupt_at_gate "$B" fuse "$T/gated" --poses "$T/long_poses.txt" --no-mesh --out "$T/fint"
+interrupted fuse "$T/fint/stats.json"
+[ -s "$T/fint/points.ply" ] || fail "interrupted fuse: points.ply missing"
 
 # Ctrl-C before any frame with depth came (a camera still dark, 10 s of
 # frames without depth at 30 Hz): exit 0 as any Ctrl-C, nothing written,
