@@ -1,6 +1,7 @@
 /* calib: the C side of the estimate: boards, the views each camera found,
  * and the calls into calib_cv.cpp with OpenCV's failures turned into
  * statuses. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -57,19 +58,48 @@ static uint32_t pack(const calib_views *v, const bool *use, size_t n_corners, do
     return n;
 }
 
-/* One camera alone from every view it found. */
-static bf_status calibrate_one(const calib_board *b, const double *obj, const calib_views *v, const char *name,
-                               double *buf, calib_camera *c)
+calib_config calib_config_default(void) { return (calib_config){.radial_terms = 3}; }
+
+/* calib_camera.coverage of n views' corners (buf, packed). */
+static double coverage(const calib_camera *c, const double *buf, size_t n_points)
 {
-    size_t n_corners = (size_t)b->cols * b->rows;
-    uint32_t n = pack(v, v->is_found, n_corners, buf);
-    if (n < CALIB_MIN_VIEWS)
-        return bf_fail(BF_FORMAT, "calib: the board was found in %u of the %u %s images; calibration needs %d", n,
-                       v->n_views, name, CALIB_MIN_VIEWS);
+    double far = 0, reach = 0;
+    for (int k = 0; k < 4; k++) {
+        double x = ((k & 1) ? c->width - 0.5 : -0.5) - c->cx_px, y = ((k & 2) ? c->height - 0.5 : -0.5) - c->cy_px;
+        far = fmax(far, hypot(x / c->fx_px, y / c->fy_px));
+    }
+    for (size_t i = 0; i < n_points; i++)
+        reach = fmax(reach, hypot((buf[2 * i] - c->cx_px) / c->fx_px, (buf[2 * i + 1] - c->cy_px) / c->fy_px));
+    return far > 0 ? fmin(1.0, reach / far) : 0.0;
+}
+
+/* calib_camera.extrapolation_px between fits a and b: the rays through the
+ * image's corners and edge centres by a's pinhole, each projected through
+ * both fits. Forward only, so a wild fit cannot fail to invert. */
+static double extrapolation(const calib_camera *a, const calib_camera *b)
+{
+    double worst = 0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            if (i == 1 && j == 1) continue;
+            double u = -0.5 + 0.5 * i * a->width, v = -0.5 + 0.5 * j * a->height;
+            bf_vec3 ray = bf_v3((u - a->cx_px) / a->fx_px, (v - a->cy_px) / a->fy_px, 1);
+            double ua, va, ub, vb;
+            calib_project(a, ray, &ua, &va);
+            calib_project(b, ray, &ub, &vb);
+            double d = hypot(ua - ub, va - vb);
+            worst = isfinite(d) ? fmax(worst, d) : 1e9;
+        }
+    return worst;
+}
+
+static bf_status fit(const calib_views *v, const double *obj, const double *buf, uint32_t n, size_t n_corners,
+                     bool fix_k3, const char *name, calib_camera *c)
+{
     double K[4], rms;
     char msg[512] = "";
-    int rc = calib__cv_calibrate((int)n, (int)n_corners, obj, buf, (int)v->width, (int)v->height, K, c->dist, &rms,
-                                 msg, sizeof msg);
+    int rc = calib__cv_calibrate((int)n, (int)n_corners, obj, buf, (int)v->width, (int)v->height, fix_k3, K, c->dist,
+                                 &rms, msg, sizeof msg);
     if (rc) return cv_status(rc, name, msg);
     c->width = v->width, c->height = v->height;
     c->fx_px = K[0], c->fy_px = K[1], c->cx_px = K[2], c->cy_px = K[3];
@@ -77,9 +107,32 @@ static bf_status calibrate_one(const calib_board *b, const double *obj, const ca
     return BF_OK;
 }
 
-bf_status calib_estimate(const calib_board *b, const calib_views *colour, const calib_views *depth,
-                         calib_result *out)
+/* One camera alone from every view it found. */
+static bf_status calibrate_one(const calib_board *b, const calib_config *cfg, const double *obj,
+                               const calib_views *v, const char *name, double *buf, calib_camera *c)
 {
+    size_t n_corners = (size_t)b->cols * b->rows;
+    uint32_t n = pack(v, v->is_found, n_corners, buf);
+    if (n < CALIB_MIN_VIEWS)
+        return bf_fail(BF_FORMAT, "calib: the board was found in %u of the %u %s images; calibration needs %d", n,
+                       v->n_views, name, CALIB_MIN_VIEWS);
+    bf_status s = fit(v, obj, buf, n, n_corners, cfg->radial_terms < 3, name, c);
+    if (s != BF_OK) return s;
+    c->coverage = coverage(c, buf, (size_t)n * n_corners);
+    c->extrapolation_px = 0;
+    if (c->coverage < 1) {
+        calib_camera other;
+        if ((s = fit(v, obj, buf, n, n_corners, cfg->radial_terms >= 3, name, &other)) != BF_OK) return s;
+        c->extrapolation_px = extrapolation(c, &other);
+    }
+    return BF_OK;
+}
+
+bf_status calib_estimate(const calib_board *b, const calib_config *cfg, const calib_views *colour,
+                         const calib_views *depth, calib_result *out)
+{
+    if (cfg->radial_terms < 2 || cfg->radial_terms > 3)
+        return bf_fail(BF_INVALID_ARG, "calib: %u radial distortion terms (2 or 3)", cfg->radial_terms);
     size_t n_corners = (size_t)b->cols * b->rows;
     if (n_corners > CALIB_MAX_CORNERS || !(b->square_m > 0))
         return bf_fail(BF_INVALID_ARG, "calib: board %ux%u of %g m squares", b->cols, b->rows, b->square_m);
@@ -98,11 +151,11 @@ bf_status calib_estimate(const calib_board *b, const calib_views *colour, const 
         goto fail;
     }
     object_points(b, obj);
-    if ((s = calibrate_one(b, obj, colour, "colour", buf, &r.colour)) != BF_OK) goto fail;
+    if ((s = calibrate_one(b, cfg, obj, colour, "colour", buf, &r.colour)) != BF_OK) goto fail;
     r.rms_px = r.colour.rms_px;
     r.n_views = pack(colour, colour->is_found, n_corners, buf);
     if (depth) {
-        if ((s = calibrate_one(b, obj, depth, "depth", buf, &r.depth)) != BF_OK) goto fail;
+        if ((s = calibrate_one(b, cfg, obj, depth, "depth", buf, &r.depth)) != BF_OK) goto fail;
         for (uint32_t k = 0; k < colour->n_views; k++) both[k] = colour->is_found[k] && depth->is_found[k];
         uint32_t n = pack(depth, both, n_corners, buf);
         pack(colour, both, n_corners, buf2);

@@ -25,6 +25,16 @@ typedef struct calib_camera {
     double fx_px, fy_px, cx_px, cy_px;
     double dist[CALIB_DIST_N];
     double rms_px;            /* reprojection RMS of its own calibration (0: not measured) */
+    /* How far out the board's corners reached: the largest distance of a
+     * found corner from the principal point over that of the farthest image
+     * corner, in normalised image coordinates (1: the image's corners;
+     * 0: not measured). The distortion beyond it is extrapolated. */
+    double coverage;
+    /* How uncertain that extrapolation is: where coverage < 1, the fit with
+     * the other number of radial terms (two or three), which agrees with
+     * this one within the boards, differs from it by this much at the
+     * farthest image corner or edge centre (pixels; 0: not measured). */
+    double extrapolation_px;
 } calib_camera;
 
 /* What a calibration file holds. T_colour_depth takes points of the depth
@@ -74,16 +84,30 @@ typedef struct calib_views {
     const bool *is_found;
 } calib_views;
 
-/* Calibrates the colour camera from its views (calibrateCamera, all five
- * distortion coefficients) and, when depth is not NULL, the depth camera
- * from its views and the pair from the views both found (stereoCalibrate
+/* What calib_estimate fits. */
+typedef struct calib_config {
+    /* Radial distortion terms, 3 (k1 k2 k3, OpenCV's default) or 2 (k3 held
+     * at 0, MATLAB's and ROS's default). Neither extrapolates well past the
+     * boards: on boards that reached half-way to the corners, a mild lens
+     * (k1 0.1, k2 -0.2) fitted with three terms was 27 px off at the image's
+     * corners and 0.2 px with two, and TUM's fr1 lens (k3 1.16) 4-34 px
+     * with three and 59 px with two (docs/calibration.md). Hence
+     * calib_camera.extrapolation_px. */
+    uint32_t radial_terms;
+} calib_config;
+
+calib_config calib_config_default(void);
+
+/* Calibrates the colour camera from its views (calibrateCamera: k1 k2, k3
+ * with cfg->radial_terms 3, p1 p2) and, when depth is not NULL, the depth
+ * camera from its views and the pair from the views both found (stereoCalibrate
  * with the two cameras' intrinsics fixed: each camera is best measured
  * alone, and the pair's views then only carry the six unknowns of the
  * transform). depth's views pair with colour's by index. Fewer than
  * CALIB_MIN_VIEWS usable views is BF_FORMAT; OpenCV's failure BF_NUMERIC.
  * *out is written only on success. */
-bf_status calib_estimate(const calib_board *b, const calib_views *colour, const calib_views *depth,
-                         calib_result *out);
+bf_status calib_estimate(const calib_board *b, const calib_config *cfg, const calib_views *colour,
+                         const calib_views *depth, calib_result *out);
 
 /* ------------------------------------------------------------ calib.json */
 

@@ -109,13 +109,13 @@ extern "C" int calib__cv_find_corners(const uint8_t *grey, int w, int h, int col
 }
 
 extern "C" int calib__cv_calibrate(int n, int n_corners, const double *obj, const double *img, int w, int h,
-                                   double K[4], double dist[5], double *rms, char *msg, size_t cap)
+                                   int fix_k3, double K[4], double dist[5], double *rms, char *msg, size_t cap)
 {
     return guarded(msg, cap, [&] {
         std::vector<std::vector<cv::Point3f>> o((size_t)n, object_points(n_corners, obj));
         std::vector<std::vector<cv::Point2f>> p = image_points(n, n_corners, img);
         cv::Mat Km, d, rv, tv;
-        double e = cv::calibrateCamera(o, p, cv::Size(w, h), Km, d, rv, tv, 0,
+        double e = cv::calibrateCamera(o, p, cv::Size(w, h), Km, d, rv, tv, fix_k3 ? cv::CALIB_FIX_K3 : 0,
                                        cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12));
         K[0] = Km.at<double>(0, 0), K[1] = Km.at<double>(1, 1), K[2] = Km.at<double>(0, 2), K[3] = Km.at<double>(1, 2);
         for (int i = 0; i < 5; i++) dist[i] = i < (int)d.total() ? d.at<double>(i) : 0.0;

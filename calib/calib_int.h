@@ -23,11 +23,12 @@ int calib__cv_find_corners(const uint8_t *grey, int w, int h, int cols, int rows
                            char *msg, size_t cap);
 
 /* calibrateCamera on n views of n_corners object points each (obj: x, y
- * per corner, z = 0; img: corners of view k at img + 2 * n_corners * k).
+ * per corner, z = 0; img: corners of view k at img + 2 * n_corners * k);
+ * fix_k3: k3 held at 0 (CALIB_FIX_K3).
  * K: fx fy cx cy; dist: k1 k2 p1 p2 k3; *rms: OpenCV's RMS reprojection
  * error in pixels. */
-int calib__cv_calibrate(int n, int n_corners, const double *obj, const double *img, int w, int h, double K[4],
-                        double dist[5], double *rms, char *msg, size_t cap);
+int calib__cv_calibrate(int n, int n_corners, const double *obj, const double *img, int w, int h, int fix_k3,
+                        double K[4], double dist[5], double *rms, char *msg, size_t cap);
 
 /* stereoCalibrate with both intrinsics fixed: camera 1 is the depth
  * camera, 2 the colour camera, so (R, t) takes depth points to colour

@@ -40,6 +40,8 @@ static cJSON *json_camera(const calib_camera *c)
     cJSON_AddItemToObject(o, "cy", json_exact(c->cy_px));
     cJSON_AddItemToObject(o, "dist", json_numbers(c->dist, CALIB_DIST_N));
     cJSON_AddItemToObject(o, "rms_px", json_exact(c->rms_px));
+    cJSON_AddItemToObject(o, "coverage", json_exact(c->coverage));
+    cJSON_AddItemToObject(o, "extrapolation_px", json_exact(c->extrapolation_px));
     return o;
 }
 
@@ -154,6 +156,12 @@ static bf_status parse_camera(const char *path, const char *obj, const cJSON *o,
         (s = get_numbers(path, obj, o, "dist", c->dist, CALIB_DIST_N)) != BF_OK)
         return s;
     if (cJSON_GetObjectItemCaseSensitive(o, "rms_px") && (s = get_number(path, obj, o, "rms_px", &c->rms_px)) != BF_OK)
+        return s;
+    if (cJSON_GetObjectItemCaseSensitive(o, "coverage") &&
+        (s = get_number(path, obj, o, "coverage", &c->coverage)) != BF_OK)
+        return s;
+    if (cJSON_GetObjectItemCaseSensitive(o, "extrapolation_px") &&
+        (s = get_number(path, obj, o, "extrapolation_px", &c->extrapolation_px)) != BF_OK)
         return s;
     return BF_OK;
 }

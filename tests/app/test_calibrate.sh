@@ -29,6 +29,24 @@ mentions "colour 12/12"
 mentions "board found"
 grep -qF "T_colour_depth" "$T/out" || fail "the summary has no T_colour_depth: $(head -c 400 "$T/out")"
 "$PY" "$CMP" "$T/calib.json" "$T/b/truth.json" --check >"$T/cmp" 2>&1 || fail "calibration off the truth: $(cat "$T/cmp")"
+# synth's boards stay within the middle half of the image: the lens beyond
+# them is extrapolated, and the warning says by how much it is uncertain.
+mentions "colour: the boards reached"
+mentions "beyond them the lens is a guess"
+"$PY" -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+for cam in ('colour', 'depth'):
+    c = d[cam]
+    assert 0.3 < c['coverage'] < 0.8 and c['extrapolation_px'] > 1 and c['dist'][4] != 0, c
+" "$T/calib.json" || fail "calib.json's coverage: $(head -c 600 "$T/calib.json")"
+# Two radial terms: k3 held at 0, the truth still met within the boards.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --depth "$T"/b/ir/*.png --radial 2 --out "$T/r2.json"
+"$PY" "$CMP" "$T/r2.json" "$T/b/truth.json" --check >"$T/cmp" 2>&1 || fail "--radial 2 off the truth: $(cat "$T/cmp")"
+"$PY" -c "import json, sys; d = json.load(open(sys.argv[1])); assert d['colour']['dist'][4] == 0 == d['depth']['dist'][4]" \
+    "$T/r2.json" || fail "--radial 2 fitted k3"
+expect 2 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/*.png --radial 4 --out "$T/r4.json"
+mentions "--radial"
 
 # --depth first and the colour images after '--'; --json: the calibration and every image.
 expect 0 "$B" calibrate --board 9x6 --square 0.04 --depth "$T"/b/ir/*.png -- "$T"/b/colour/*.png --out "$T/c2.json" --json

@@ -181,6 +181,22 @@ static void project_board(const calib_board *b, const calib_camera *c, const bf_
         }
 }
 
+/* The corners of view k of n as the two cameras see them: the board's
+ * centre 0.8-1 m ahead, tilted 20-41 degrees about a turning axis. */
+static void board_view(const calib_board *b, const calib_result *truth, uint32_t k, uint32_t n, double *cc,
+                       double *dc)
+{
+    double a = 2 * M_PI * k / n;
+    bf_quat q = bf_quat_from_axis_angle(bf_v3(cos(a), sin(a), 0), (20 + 3 * k) * M_PI / 180);
+    bf_se3 T_cb = bf_se3_from_qt(q, bf_v3(0, 0, 0));
+    bf_vec3 centre_b = bf_v3(4 * b->square_m, 2.5 * b->square_m, 0);
+    T_cb.t = bf_v3_sub(bf_v3(0.02 * k - 0.07, 0.01 * (k % 3), 0.8 + 0.025 * k), bf_se3_apply(&T_cb, centre_b));
+    bf_se3 T_dc = bf_se3_inverse(&truth->T_colour_depth);
+    bf_se3 T_db = bf_se3_mul(&T_dc, &T_cb);
+    project_board(b, &truth->colour, &T_cb, cc);
+    project_board(b, &truth->depth, &T_db, dc);
+}
+
 /* Exact corners give back the cameras and the transform: what is left is
  * OpenCV's float corners (2^-24 relative: 4e-5 px at 640) and its
  * stopping rule, far below the 0.5% and 2 mm the images are held to. */
@@ -193,31 +209,44 @@ BF_TEST(calib_estimate_recovers_exact_corners)
     size_t nc = b.cols * b.rows;
     double *cc = calloc(n * nc * 2, sizeof *cc), *dc = calloc(n * nc * 2, sizeof *dc);
     bool found[8], not_found[8] = {false};
-    bf_se3 T_dc = bf_se3_inverse(&truth.T_colour_depth);
     for (uint32_t k = 0; k < n; k++) {
-        double a = 2 * M_PI * k / n;
-        bf_quat q = bf_quat_from_axis_angle(bf_v3(cos(a), sin(a), 0), (20 + 3 * k) * M_PI / 180);
-        bf_se3 R = bf_se3_from_qt(q, bf_v3(0, 0, 0));
-        /* The board's centre 0.8-1 m ahead, tilted 20-41 degrees about a turning axis. */
-        bf_vec3 centre_b = bf_v3(4 * b.square_m, 2.5 * b.square_m, 0);
-        bf_vec3 t = bf_v3_sub(bf_v3(0.02 * k - 0.07, 0.01 * (k % 3), 0.8 + 0.025 * k), bf_se3_apply(&R, centre_b));
-        bf_se3 T_cb = R;
-        T_cb.t = t;
-        bf_se3 T_db = bf_se3_mul(&T_dc, &T_cb);
-        project_board(&b, &truth.colour, &T_cb, cc + 2 * nc * k);
-        project_board(&b, &truth.depth, &T_db, dc + 2 * nc * k);
+        board_view(&b, &truth, k, n, cc + 2 * nc * k, dc + 2 * nc * k);
         found[k] = true;
     }
     calib_views cv = {.n_views = n, .width = 640, .height = 480, .corners_px = cc, .is_found = found};
     calib_views dv = {.n_views = n, .width = 640, .height = 480, .corners_px = dc, .is_found = found};
-    calib_result r;
-    bf_status s = calib_estimate(&b, &cv, &dv, &r);
-    calib_views none = {.n_views = n, .width = 640, .height = 480, .corners_px = cc, .is_found = not_found};
+    calib_result r, r_two;
+    calib_config cfg = calib_config_default(), cfg2 = cfg;
+    cfg2.radial_terms = 2;
+    bf_status s = calib_estimate(&b, &cfg, &cv, &dv, &r);
+    bf_status s_two = calib_estimate(&b, &cfg2, &cv, NULL, &r_two);
     calib_result r2;
-    bf_status s2 = calib_estimate(&b, &none, NULL, &r2);
+    cfg2.radial_terms = 4;
+    bf_status s4 = calib_estimate(&b, &cfg2, &cv, NULL, &r2);
+    calib_views none = {.n_views = n, .width = 640, .height = 480, .corners_px = cc, .is_found = not_found};
+    bf_status s2 = calib_estimate(&b, &cfg, &none, NULL, &r2); /* its message is checked last */
+    /* How far out the corners reached, from the truth's camera. */
+    double far = 0, reach = 0;
+    for (int k = 0; k < 4; k++)
+        far = fmax(far, hypot((((k & 1) ? 639.5 : -0.5) - truth.colour.cx_px) / truth.colour.fx_px,
+                              (((k & 2) ? 479.5 : -0.5) - truth.colour.cy_px) / truth.colour.fy_px));
+    for (size_t i = 0; i < n * nc; i++)
+        reach = fmax(reach, hypot((cc[2 * i] - truth.colour.cx_px) / truth.colour.fx_px,
+                                  (cc[2 * i + 1] - truth.colour.cy_px) / truth.colour.fy_px));
     free(cc);
     free(dc);
     CHECK_OK(s);
+    /* Three radial terms by default; two hold k3 at 0. */
+    CHECK_OK(s_two);
+    CHECK(r_two.colour.dist[4] == 0);
+    CHECK_NEAR(r_two.colour.dist[0], truth.colour.dist[0], 1e-4);
+    /* Exact corners of a lens with k3 = 0: both fits are the truth, at the
+     * image's edge too. */
+    CHECK_LE(r.colour.extrapolation_px, 0.01);
+    CHECK_LE(r_two.colour.extrapolation_px, 0.01);
+    CHECK_STATUS(s4, BF_INVALID_ARG);
+    CHECK_NEAR(r.colour.coverage, reach / far, 1e-3);
+    CHECK(r.colour.coverage > 0.2 && r.colour.coverage < 1);
     CHECK(r.has_depth);
     CHECK_EQ_INT(r.n_views, n);
     CHECK_NEAR(r.colour.fx_px, truth.colour.fx_px, 0.01);
@@ -235,6 +264,42 @@ BF_TEST(calib_estimate_recovers_exact_corners)
     /* No board anywhere: refused, saying how many were found. */
     CHECK_STATUS(s2, BF_FORMAT);
     CHECK_ERROR_MENTIONS("found in 0 of the 8 colour images");
+}
+
+/* TUM's fr1 lens (k3 1.16) seen by boards that stay in the middle of the
+ * image: three radial terms give it back from exact corners, two cannot,
+ * and the two fits, alike within the boards, part by pixels at the image's
+ * edge: extrapolation_px says so, for either fit. */
+BF_TEST(calib_estimate_says_how_uncertain_the_lens_is_beyond_the_boards)
+{
+    const calib_board b = {.cols = 9, .rows = 6, .square_m = 0.04};
+    calib_result truth = sample_result();
+    truth.colour = (calib_camera){.width = 640, .height = 480, .fx_px = 517.3, .fy_px = 516.5, .cx_px = 318.6,
+                                  .cy_px = 255.3, .dist = {0.2624, -0.9531, 0, 0, 1.1633}};
+    enum { N = 10 };
+    size_t nc = b.cols * b.rows;
+    double *cc = calloc(N * nc * 2, sizeof *cc), *dc = calloc(N * nc * 2, sizeof *dc);
+    bool found[N];
+    for (uint32_t k = 0; k < N; k++) {
+        board_view(&b, &truth, k, N, cc + 2 * nc * k, dc + 2 * nc * k);
+        found[k] = true;
+    }
+    calib_views cv = {.n_views = N, .width = 640, .height = 480, .corners_px = cc, .is_found = found};
+    calib_config cfg = calib_config_default(), cfg2 = cfg;
+    cfg2.radial_terms = 2;
+    calib_result r3, r2;
+    bf_status s3 = calib_estimate(&b, &cfg, &cv, NULL, &r3), s2 = calib_estimate(&b, &cfg2, &cv, NULL, &r2);
+    free(cc);
+    free(dc);
+    CHECK_OK(s3);
+    CHECK_OK(s2);
+    CHECK_LE(r3.colour.rms_px, 1e-3);
+    CHECK_NEAR(r3.colour.dist[4], truth.colour.dist[4], 1e-3);
+    CHECK_LE(r3.colour.coverage, 0.7);
+    CHECK_LE(1.0, r3.colour.extrapolation_px);
+    CHECK_NEAR(r2.colour.extrapolation_px, r3.colour.extrapolation_px, 0.5);
+    printf("  coverage %.2f, two and three terms differ by %.1f px at the edge\n", r3.colour.coverage,
+           r3.colour.extrapolation_px);
 }
 
 /* A board rendered by synth (box-filtered, 1 grey level of noise) turned
