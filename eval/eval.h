@@ -1,7 +1,8 @@
 /* eval: measures that check the reconstruction, independent of the GPU code
  * they check (DESIGN.md section 8): trajectory error (ATE, RPE as the TUM
- * benchmark tools define them) and surface error against a reference mesh.
- * Depends on core and mesh. See docs/eval.md. */
+ * benchmark tools define them), surface error against a reference mesh, the
+ * motion the colour images show and the colour of a coloured mesh (PSNR).
+ * Depends on core, mesh, features and calib. See docs/eval.md. */
 #ifndef BF_EVAL_H
 #define BF_EVAL_H
 

@@ -48,7 +48,8 @@ typedef struct fusion_config {
     uint32_t integrate_vpt; /* voxels per invocation, a power of two up to 64 */
     uint32_t integrate_bpg; /* list entries (bricks) per workgroup, 1..1024 */
     /* Colour (DESIGN.md section 3): RGB565 of the confident voxels near the
-       surface, in blocks of 32 per sub-brick. */
+       surface, addressed by popcount: a mask word per sub-brick, and per brick a
+       chain of colour units of 14 colours each (docs/colour.md, "Layout"). */
     bool keep_colour;       /* default true */
     uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 4 */
     uint32_t colour_unit_cap; /* colour units (32 bytes, 14 colours each) allocated at create, default

@@ -1,7 +1,8 @@
 /* recon: the full reconstruction loop of one sequence (DESIGN.md section 1):
- * track the frame against the smoothed ray-cast of the map, fuse it at the
- * pose found, ray-cast the map at that pose, smooth it as the next frame's
- * reference. recon_run_sequence runs it over a whole source with the
+ * track the frame against the ray-cast of the map, fuse it at the pose
+ * found, ray-cast the map at that pose as the next frame's reference (ROF
+ * smoothing of it is off by default: track_config.rof_iterations 0).
+ * recon_run_sequence runs it over a whole source with the
  * policies every caller shares (first pose, pose source, failures, Ctrl-C);
  * `bitfuse replay`, `live`, `fuse`, `demo`, the tests and the soak
  * benchmark all go through it.
@@ -9,7 +10,8 @@
  * Per frame the host waits once per ICP iteration and once for the rest:
  * the frame goes up once (fusion's incoming slot, read by tracking), and
  * fusion, the ray-cast (written straight into the tracking reference) and
- * the reference's smoothing share one submission (DESIGN.md section 1).
+ * the reference's pyramids (and its ROF, when on) share one submission
+ * (DESIGN.md section 1).
  *
  * Frames tracked badly are not fused (the map stays as it was) and the
  * camera keeps its last good pose; frames without depth are skipped. Both

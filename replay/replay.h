@@ -1,8 +1,10 @@
 /* replay: file sources behind the rgbd_source interface (TUM RGB-D folders,
- * ICL-NUIM, pose-per-frame folders), the options they take (what
- * bitfuse's --camera, --depth-scale, --frames and --skip-bad-frames set), image codecs (PNG, JPEG), TUM trajectory files and the
- * TUM-folder writer used by `bitfuse synth`.
- * Depends on core and capture (the interface only). See docs/formats.md. */
+ * ICL-NUIM, pose-per-frame folders, the project's own log), the options they
+ * take (what bitfuse's --camera, --depth-scale, --frames and
+ * --skip-bad-frames set), image codecs (PNG, JPEG), TUM trajectory files, the
+ * TUM-folder writer used by `bitfuse synth` and the log writer.
+ * Depends on core, capture (the interface only) and calib (the lens model and
+ * its undistortion map). See docs/formats.md. */
 #ifndef BF_REPLAY_H
 #define BF_REPLAY_H
 

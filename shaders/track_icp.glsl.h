@@ -154,11 +154,11 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     if (dot(mr, n) < pc.cos_angle) return;
     float r = dot(n, d);
     /* Weighted least squares (IRLS): with noise weights each residual counts
-     * by the sensor's depth noise relative to 1 m to the power noise_exp, 2
-     * by default: the inverse variance (bf_sensor_sigma; Kinect v1's grows
-     * with z^2: a sample at 3 m weighs ~50 times less than one at 1 m, where
-     * the map is finer and the frame less noisy; docs/real_frames.md has
-     * other powers on real frames), and
+     * by the sensor's depth noise relative to 1 m to the power noise_exp, 3
+     * by default (2 is the inverse variance; bf_sensor_sigma: Kinect v1's
+     * grows with z^2: with 3 a sample at 3 m weighs ~400 times less than one
+     * at 1 m (~50 with 2), where the map is finer and the frame less noisy;
+     * docs/real_frames.md has other powers on real frames), and
      * Huber's weight on the residual in units of that noise bounds the pull
      * of the few associations that land on a wrong surface (silhouettes,
      * surfaces the map has not seen yet) without a hard gate that could
