@@ -16,6 +16,15 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
     bf_status s = calib_read(path, &out->cal);
     if (s != BF_OK) return app_fail(cmd, s);
     out->path = path;
+    /* Frames are undistorted to their corners: a lens the boards did not
+     * measure there (bitfuse calibrate's extrapolation_px) is worth a word. */
+    for (int i = 0; i < (out->cal.has_depth ? 2 : 1); i++) {
+        const calib_camera *c = i ? &out->cal.depth : &out->cal.colour;
+        if (c->extrapolation_px > 1)
+            bf_warn("%s: %s: the %s camera's lens is uncertain by %.1f px at the image's edge (its boards reached "
+                    "%.0f%% of the way to the corners): frames there may be undistorted wrongly", cmd, path,
+                    i ? "depth" : "colour", c->extrapolation_px, 100 * c->coverage);
+    }
     if (out->cal.has_depth && ropt->camera)
         return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one", path);
     /* The colour is the colour camera's own image, registered through the

@@ -166,6 +166,7 @@ for cam in ('colour', 'depth'):
     c.update(width=160, height=120, fx=c['fx'] / 4, fy=c['fy'] / 4, cx=(c['cx'] + 0.5) / 4 - 0.5, cy=(c['cy'] + 0.5) / 4 - 0.5)
 json.dump(d, open(sys.argv[2], 'w'))" "$T/calib.json" "$T/small.json"
 expect 0 "$B" replay "$T/seq" --out "$T/rp" --calibration "$T/small.json" --no-mesh
+mentions "small.json: the colour camera's lens is uncertain by" # calibrate's warning, kept with the file
 "$PY" -c "
 import json, sys
 c = json.load(open(sys.argv[1]))['config']['calibration']
