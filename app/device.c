@@ -62,8 +62,10 @@ static void on_stop_signal(int sig)
 
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)
 {
-    /* SA_RESETHAND: a second Ctrl-C kills the program (the default action). */
-    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND};
+    /* SA_RESETHAND: a second Ctrl-C kills the program (the default action).
+     * SA_RESTART: a read the signal lands in goes on (a file on a slow disk
+     * or a pipe must not fail its frame); the loop sees the flag after it. */
+    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND | SA_RESTART};
     sigemptyset(&sa.sa_mask);
     g_stop_src = src;
     g_stopped = 0;
