@@ -138,15 +138,24 @@ repeats_are 0 1 "[]" || fail "info does not find frame 2's colour repeating fram
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['repeated_colour_first'] == [2], d" "$T/out" ||
     fail "info --json does not list the repeated colour frames"
 
-# eval-traj: a sequence shorter than the RPE delta still gets its ATE.
+# eval-traj: a sequence shorter than the RPE delta still gets its ATE (all 3
+# poses, of a trajectory against itself: 0), its RPE left out; the 1.5 s
+# trajectory gets both RPEs.
+# ate_is PAIRS RPE_UNITS: eval-traj --json's ATE pairs, zero error, the RPE kept.
+ate_is() {
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); a=d['ate']; assert a['pairs'] == int(sys.argv[2]) and a['trans_m']['rmse'] == 0 and [r['unit'] for r in d['rpe']] == json.loads(sys.argv[3]), d" \
+        "$T/out" "$1" "$2"
+}
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/seq/groundtruth.txt" --json
-is_json "$T/out"
+ate_is 3 "[]" || fail "eval-traj of 3 poses against themselves: $(head -c 400 "$T/out")"
 expect 0 "$B" eval-traj "$T/traj.txt" "$T/traj.txt" --json
-is_json "$T/out"
+ate_is 46 '["s", "frame"]' || fail "eval-traj of 46 poses against themselves: $(head -c 400 "$T/out")"
 
-# eval-surface: the seen points lie on the reference.
+# eval-surface: the seen points lie on the reference (closer than 1 mm, all
+# within the 1 cm threshold).
 expect 0 "$B" eval-surface --reference "$T/seq/scene.ply" --reconstruction "$T/seq/seen.ply" --max-samples 2000 --json
-is_json "$T/out"
+python3 -c "import json,sys; a=json.load(open(sys.argv[1]))['accuracy']; assert a['points'] > 0 and a['median_m'] < 1e-3 and a['within_threshold'] > 0.99, a" \
+    "$T/out" || fail "eval-surface: the seen points are off the reference: $(head -c 400 "$T/out")"
 
 # eval-surface: a reconstruction in millimetres against a reference in metres is warned about
 # (every distance would be beyond the threshold); the same units are not.

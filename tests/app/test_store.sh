@@ -34,7 +34,8 @@ json_get "$T/out" "d['frames']" | grep -qx 60 || fail "info: frames is not 60: $
 chunks=$(json_get "$T/out" "d['chunks']")
 bricks=$(json_get "$T/out" "d['bricks']")
 mapb=$(json_get "$T/full/stats.json" "d['bricks']")
-[ "$bricks" = "$mapb" ] || fail "the store holds $bricks bricks, the scan's map $mapb"
+# (each compare also needs its lookups to have found a number: "" = "" is no match)
+[ -n "$bricks" ] && [ "$bricks" = "$mapb" ] || fail "the store holds '$bricks' bricks, the scan's map '$mapb'"
 expect 0 "$B" info "$T/S"
 grep -q "last pose" "$T/out" || fail "info does not print the last pose"
 expect 2 "$B" info "$T/S" --frames 3
@@ -46,11 +47,12 @@ head -c 400 "$T/m.ply" | grep -aq "element face [1-9]" || fail "export wrote no 
 expect 0 "$B" export "$T/S" --out "$T/p.ply" --points --json
 pts=$(json_get "$T/out" "d['vertices']")
 ref=$(head -c 300 "$T/full/points.ply" | awk '/element vertex/ {print $3}')
-[ "$pts" = "$ref" ] || fail "export --points wrote $pts points, replay's points.ply $ref"
+[ -n "$pts" ] && [ "$pts" = "$ref" ] || fail "export --points wrote '$pts' points, replay's points.ply '$ref'"
 # A run's folder holding its store as DIR/store, as render and view take it.
 mkdir "$T/run" && cp -r "$T/S" "$T/run/store"
 expect 0 "$B" export "$T/run" --out "$T/p2.ply" --points --json
-[ "$(json_get "$T/out" "d['vertices']")" = "$ref" ] || fail "export of DIR holding DIR/store wrote another point set"
+pts=$(json_get "$T/out" "d['vertices']")
+[ -n "$pts" ] && [ "$pts" = "$ref" ] || fail "export of DIR holding DIR/store wrote '$pts' points, not '$ref'"
 [ "$(json_get "$T/out" "d['store']")" = "$T/run/store" ] || fail "export of DIR: the store is not named DIR/store"
 
 # Usage: a second scan into a used store, --resume without --store, no store at all.
@@ -169,7 +171,7 @@ finest=$(json_get "$T/out" "max(l for l, n in enumerate(d['bricks_per_level']) i
 expect 0 "$B" replay "$SEQ" --out "$T/n3" --no-mesh --store "$T/Nc" --resume --max-level $((finest - 1))
 mentions "index is lost"
 level=$(json_get "$T/n3/stats.json" "d['config']['fusion']['max_level']")
-[ "$level" = "$finest" ] || fail "--max-level $((finest - 1)) over a store of level-$finest bricks resumed at $level"
+[ -n "$level" ] && [ "$level" = "$finest" ] || fail "--max-level $((finest - 1)) over a store of level-'$finest' bricks resumed at '$level'"
 
 # kill -9 at random moments of a scan with --store: every time the store
 # reopens (info), exports, and the next run resumes it; at the end one run
