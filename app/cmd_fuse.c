@@ -126,6 +126,7 @@ static cJSON *stats_json(const fuse_args *a, const fuse_result *r, const rgbd_so
     cJSON_AddNumberToObject(o, "repeated", r->run.counts.repeated);
     cJSON_AddNumberToObject(o, "colour_repeated", r->run.counts.colour_repeated);
     cJSON_AddNumberToObject(o, "no_depth", r->run.counts.no_depth);
+    cJSON_AddNumberToObject(o, "pool_full", r->run.counts.pool_full); /* frames whose requests a full pool dropped */
     /* Skipped: unreadable (--skip-bad-frames) or without a pose. */
     cJSON_AddNumberToObject(o, "frames_skipped", r->run.n_skipped + r->n_unreadable);
     cJSON_AddNumberToObject(o, "frames_without_pose", r->run.n_skipped);

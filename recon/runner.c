@@ -109,7 +109,13 @@ static bf_status fuse_known(const recon_run_config *cfg, const bf_frame *f, cons
     if (s == BF_OK) s = fusion_add_frame(run->map, &g, T_wc);
     fr->fuse = fusion_last_stage_ms(run->map);
     fr->fuse_status = s;
-    if (s == BF_POOL_FULL) run->counts.pool_full++;
+    if (s == BF_POOL_FULL) {
+        /* As in the loop: the map stays consistent, what did not fit is
+         * dropped and counted, and the frames fused so far are kept. */
+        run->counts.pool_full++;
+        bf_warn("recon: frame %u: %s", f->index, bf_last_error());
+        s = BF_OK;
+    }
     if (s != BF_OK) return s;
     fr->fused = true;
     fr->ms_frame = 1e3 * (bf_time_s() - t0);

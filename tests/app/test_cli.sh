@@ -748,6 +748,13 @@ expect 0 "$B" replay "$T/seq" --out "$T/rpfull" --bricks 64 --stream off --no-me
 grep -q "pools full       requests for .* were dropped: the map lacks$" "$T/out" || fail "pools full: no summary line: $(cat "$T/out")"
 py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['tracking']['pool_full'] > 0 and sum(d['pool_full_drops'].values()) > 0, d['pool_full_drops']" \
     "$T/rpfull/stats.json" || fail "pools full: stats.json"
+# fuse too (it has no streaming): the frames fused are kept and written (it
+# ended exit 1 with nothing written at the first full pool).
+expect 0 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fufull" --bricks 64 --no-mesh
+grep -q "pools full       requests for .* were dropped: the map lacks$" "$T/out" || fail "fuse pools full: no summary line: $(cat "$T/out")"
+[ -s "$T/fufull/points.ply" ] || fail "fuse with full pools wrote no points.ply"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['pool_full'] > 0 and sum(d['pool_full_drops'].values()) > 0, d" \
+    "$T/fufull/stats.json" || fail "fuse pools full: stats.json"
 expect 3 "$B" replay "$T/missing" --out "$T/rp3"
 mentions "$T/missing"
 [ ! -e "$T/rp3" ] || fail "replay on a missing input created its output folder"
