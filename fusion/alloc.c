@@ -86,7 +86,7 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
         pc.pass = p;
         /* The previous pass's queue writes -> the args pass reading the count. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
-        gpu_cmd_dispatch(m->ctx, m->p_alloc_args, m->b_alloc_args, &pc, lock_groups, 1, 1);
+        gpu_cmd_dispatch_linear(m->ctx, m->p_alloc_args, m->b_alloc_args, &pc, lock_groups);
         /* Group counts and cleared locks -> the indirect retry pass. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_INDIRECT);
         uint32_t q_in = (p - 1) % 2;

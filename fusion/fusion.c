@@ -80,14 +80,14 @@ static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
     gpu_cmd_fill(m->ctx, m->window_slices, 0, GPU_WHOLE_SIZE, 0);
     /* The cleared counts -> the counting pass. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, groups, 1, 1);
+    gpu_cmd_dispatch_linear(m->ctx, m->p_window_list, m->b_window_list, &pc, groups);
     /* Counts -> their prefix sums -> the scatter. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
     pc.pass = FUSION_GATHER_PREFIX;
     gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, 1, 1, 1);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
     pc.pass = FUSION_GATHER_SCATTER;
-    gpu_cmd_dispatch(m->ctx, m->p_window_list, m->b_window_list, &pc, groups, 1, 1);
+    gpu_cmd_dispatch_linear(m->ctx, m->p_window_list, m->b_window_list, &pc, groups);
 }
 
 /* The frame record: T_cm takes map points (world minus the map origin) to
@@ -171,7 +171,7 @@ static void cmd_window_slice(fusion_map *m, bool colour_now)
         /* The slice's new bit planes -> the removal pass reading them. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         fusion_remove_push pc = {first, per, m->window_end - 1, m->cfg.keep_colour ? 1u : 0u};
-        gpu_cmd_dispatch(m->ctx, m->p_remove, m->b_remove, &pc, gpu_groups(per, 64), 1, 1);
+        gpu_cmd_dispatch_linear(m->ctx, m->p_remove, m->b_remove, &pc, gpu_groups(per, 64));
         /* Removal's reads of the list and the pools -> the next slice's args
          * pass writing the list header and its integration; its pushes of
          * colour blocks -> the colour pass's pops. */

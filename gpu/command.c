@@ -53,6 +53,14 @@ void gpu_cmd_dispatch(gpu_context *ctx, const gpu_pipeline *p, const gpu_binding
     ctx->inst.vk.CmdDispatch(ctx->cmd, gx, gy, gz);
 }
 
+void gpu_cmd_dispatch_linear(gpu_context *ctx, const gpu_pipeline *p, const gpu_bindings *b, const void *push,
+                             uint32_t n_groups)
+{
+    uint32_t max_x = ctx->info.limits.max_compute_workgroup_count[0];
+    uint32_t gx = n_groups < max_x ? n_groups : max_x;
+    gpu_cmd_dispatch(ctx, p, b, push, gx, gx ? (n_groups + gx - 1) / gx : 0, 1);
+}
+
 void gpu_cmd_dispatch_indirect(gpu_context *ctx, const gpu_pipeline *p, const gpu_bindings *b, const void *push,
                                const gpu_buffer *args, uint64_t offset)
 {

@@ -311,6 +311,12 @@ bf_status gpu_begin(gpu_context *ctx);
  * Group counts must be within maxComputeWorkGroupCount (asserted). */
 void gpu_cmd_dispatch(gpu_context *ctx, const gpu_pipeline *pipe, const gpu_bindings *b,
                       const void *push, uint32_t groups_x, uint32_t groups_y, uint32_t groups_z);
+/* A one-dimensional dispatch of n_groups groups, spread over x and y when x
+ * alone cannot hold them (the shader reads its place as BF_LINEAR_INDEX,
+ * shaders/bf_common.glsl.h, and bounds it: the last row may hold more
+ * groups than n_groups). */
+void gpu_cmd_dispatch_linear(gpu_context *ctx, const gpu_pipeline *pipe, const gpu_bindings *b, const void *push,
+                             uint32_t n_groups);
 /* The group counts are three uint32 at offset in args (GPU_USAGE_INDIRECT),
  * typically written by an earlier dispatch: put GPU_BARRIER_INDIRECT between. */
 void gpu_cmd_dispatch_indirect(gpu_context *ctx, const gpu_pipeline *pipe, const gpu_bindings *b,

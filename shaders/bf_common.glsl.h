@@ -41,6 +41,11 @@ typedef float bf_f32;
 #ifdef BF_GLSL
 #  define BF_LOCAL_SIZE_FROM_SPEC \
     layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z_id = 2) in;
+/* An invocation's place along a one-dimensional dispatch of
+ * gpu_cmd_dispatch_linear, which spreads its groups over x and y: a device
+ * allows only so many along x (65535 on Mesa's drivers). */
+#  define BF_LINEAR_INDEX \
+    ((gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationID.x)
 #endif
 
 /* ------------------------------------------------------------ the sensor */

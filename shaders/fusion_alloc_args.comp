@@ -14,7 +14,7 @@ layout(push_constant) uniform Push { fusion_alloc_push pc; };
 
 void main()
 {
-    uint i = gl_GlobalInvocationID.x;
+    uint i = BF_LINEAR_INDEX;
     if (i < pc.n_buckets) locks.w[i] = 0u;
     if (i != 0u || pc.pass == 0u) return;
     uint q_in = (pc.pass - 1u) % 2u, q_out = pc.pass % 2u;

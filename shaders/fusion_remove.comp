@@ -28,8 +28,8 @@ layout(push_constant) uniform Push { fusion_remove_push pc; };
 
 void main()
 {
-    uint i = pc.first + gl_GlobalInvocationID.x;
-    if (gl_GlobalInvocationID.x >= pc.max_count || i >= list.w[FUSION_LIST_COUNT]) return;
+    uint i = pc.first + BF_LINEAR_INDEX;
+    if (BF_LINEAR_INDEX >= pc.max_count || i >= list.w[FUSION_LIST_COUNT]) return;
     uint b = list.w[FUSION_LIST_HEADER + i];
     if (info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] == FUSION_NONE) return;
     uint s = stamp.w[b];

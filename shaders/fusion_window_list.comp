@@ -26,7 +26,7 @@ void main()
 {
     uint n_buckets = clamp(pc.n_buckets, 1u, FUSION_MAX_BUCKETS);
     if (pc.pass == FUSION_GATHER_PREFIX) {
-        if (gl_GlobalInvocationID.x != 0u) return;
+        if (BF_LINEAR_INDEX != 0u) return;
         uint sum = 0u;
         for (uint s = 0u; s < n_buckets; s++) {
             slices.w[FUSION_SLICE_STARTS + s] = sum;
@@ -37,7 +37,7 @@ void main()
         list.w[FUSION_LIST_COUNT] = sum;
         return;
     }
-    uint b = gl_GlobalInvocationID.x;
+    uint b = BF_LINEAR_INDEX;
     if (b >= pc.brick_cap) return;
     uint chunk = info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
     if (chunk >= pc.n_entries) return; /* free slot */

@@ -519,6 +519,50 @@ BF_TEST(indirect_dispatch_runs_shader_written_group_count)
     CLOSE_CTX_CLEAN(ctx, v0);
 }
 
+/* More groups than the device allows along x (lavapipe: 65535) go out as
+ * rows of x and y, and every place is run once (the fusion passes sized by
+ * the pools use it: an AMD or Intel GPU's default pools need it). */
+BF_TEST(linear_dispatch_beyond_the_x_limit_runs_every_place_once)
+{
+    uint32_t v0 = gpu_validation_message_total();
+    gpu_config cfg = test_config();
+    gpu_context *ctx = NULL;
+    OPEN_CTX(ctx, &cfg);
+    uint32_t max_x = gpu_device_limits(ctx)->max_compute_workgroup_count[0];
+    if (max_x > (1u << 20)) printf("  this device takes 2^20+ groups along x: one row only\n");
+    const uint32_t local = 4, n_groups = (max_x > (1u << 20) ? 1000 : max_x + 3);
+    const uint32_t n = n_groups * local - 2; /* the last group's last places are out of range */
+    gpu_pipeline *p = NULL;
+    gpu_buffer *marks = NULL;
+    gpu_bindings *b = NULL;
+    gpu_pipeline_desc d = desc_of("test.linear", SPV(gpu_test_linear), 1, sizeof(struct gpu_test_count), local);
+    CHECK_OK(gpu_pipeline_create(ctx, &d, &p));
+    gpu_buffer_desc md = {.name = "test.marks", .size_bytes = (uint64_t)(n + 8) * 4};
+    CHECK_OK(gpu_buffer_create(ctx, &md, &marks));
+    CHECK_OK(gpu_bindings_create(ctx, 1, "test.linear_bindings", &b));
+    CHECK_OK(gpu_bindings_set(b, 0, marks, 0, GPU_WHOLE_SIZE));
+    struct gpu_test_count pc = {.n = n};
+    CHECK_OK(gpu_begin(ctx));
+    gpu_cmd_fill(ctx, marks, 0, GPU_WHOLE_SIZE, 0);
+    /* The zero fill -> the marks' stores. */
+    gpu_cmd_barrier(ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    gpu_cmd_dispatch_linear(ctx, p, b, &pc, n_groups);
+    CHECK_OK(gpu_submit_wait(ctx));
+    uint32_t *m = malloc((size_t)(n + 8) * 4);
+    CHECK(m != NULL);
+    if (m) {
+        CHECK_OK(gpu_buffer_download(marks, 0, m, (uint64_t)(n + 8) * 4));
+        uint32_t wrong = 0;
+        for (uint32_t i = 0; i < n + 8; i++) wrong += m[i] != (i < n ? i + 1 : 0);
+        CHECK_EQ_INT(wrong, 0);
+        free(m);
+    }
+    gpu_bindings_destroy(b);
+    gpu_buffer_destroy(marks);
+    gpu_pipeline_destroy(p);
+    CLOSE_CTX_CLEAN(ctx, v0);
+}
+
 BF_TEST(timestamps_are_monotonic_and_nonzero)
 {
     uint32_t v0 = gpu_validation_message_total();
