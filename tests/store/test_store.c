@@ -346,6 +346,39 @@ BF_TEST(store_opens_without_its_index)
     CHECK_OK(write_store(dir, false, &m, &meta, &t, NULL));
     char p[600];
     snprintf(p, sizeof p, "%s/store.json", dir);
+    /* An index whose last pose's time reads as inf (1e999: a resume would
+     * take every frame as stored) or whose R is no rotation is no index:
+     * the trajectory gives the pose. */
+    for (int k = 0; k < 2; k++) {
+        char *text = NULL;
+        size_t len = 0;
+        CHECK_OK(bf_read_file(p, &text, &len));
+        /* The value after the key (the index is written with cJSON_Print). */
+        char *at = text ? strstr(text, k ? "\"R\":" : "\"t_s\":") : NULL;
+        CHECK(at != NULL);
+        if (!at) break;
+        at = strchr(at, ':') + 1;
+        while (*at == ' ' || *at == '\t' || *at == '\n') at++;
+        FILE *g = fopen(p, "w");
+        CHECK(g != NULL);
+        if (k == 0) { /* the time: 1e999 */
+            char *end = at;
+            while (*end && *end != ',' && *end != '}' && *end != '\n') end++;
+            fprintf(g, "%.*s1e999%s", (int)(at - text), text, end);
+        } else { /* R's first entry 2: no rotation */
+            char *end = strchr(at, ',');
+            fprintf(g, "%.*s[2%s", (int)(at - text), text, end ? end : "");
+        }
+        fclose(g);
+        store_report r0;
+        hostmap_free(&back);
+        CHECK_OK(store_read(dir, &back, &meta2, NULL, &r0));
+        CHECK(!r0.index_ok);
+        CHECK(meta2.has_pose && isfinite(meta2.last_t_s));
+        CHECK(memcmp(&meta2.last_pose, &t.T_wc[11], sizeof(bf_se3)) == 0);
+        CHECK_OK(bf_write_file_atomic(p, text, len)); /* the index back for the next case */
+        free(text);
+    }
     FILE *f = fopen(p, "w");
     CHECK(f != NULL);
     fputs("{\"format\": \"bitfuse-st", f); /* cut short */
