@@ -128,9 +128,16 @@ static bf_status build(gpu_swapchain *sc, uint32_t width, uint32_t height)
     release_images(sc);
     sc->swapchain = made;
     gpu__name(ctx, VK_OBJECT_TYPE_SWAPCHAIN_KHR, (uint64_t)made, "gpu.swapchain");
-    uint32_t n = GPU__MAX_IMAGES;
-    r = vk->GetSwapchainImagesKHR(ctx->device, made, &n, sc->images);
-    if (r != VK_SUCCESS && r != VK_INCOMPLETE) GPU__CHECK_RESULT(r, "vkGetSwapchainImagesKHR", "gpu.swapchain");
+    /* The driver may make more images than asked for: every one of them can
+     * be acquired, so each needs its place here. */
+    uint32_t n = 0;
+    GPU__CHECK(vk->GetSwapchainImagesKHR(ctx->device, made, &n, NULL), "gpu.swapchain");
+    if (n > GPU__MAX_IMAGES) {
+        status = bf_fail(BF_UNSUPPORTED, "gpu.swapchain: the driver made %u images, more than the %d kept", n,
+                         GPU__MAX_IMAGES);
+        goto fail;
+    }
+    GPU__CHECK(vk->GetSwapchainImagesKHR(ctx->device, made, &n, sc->images), "gpu.swapchain");
     VkSemaphoreCreateInfo si = {.sType = VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
     for (uint32_t i = 0; i < n; i++) {
         GPU__CHECK(vk->CreateSemaphore(ctx->device, &si, NULL, &sc->done[i]), "gpu.swapchain.done");
@@ -218,6 +225,10 @@ bf_status gpu_swapchain_acquire(gpu_swapchain *sc, bool *is_stale)
     }
     if (r != VK_SUBOPTIMAL_KHR) GPU__CHECK_RESULT(r, "vkAcquireNextImageKHR", "gpu.swapchain");
     GPU__CHECK(vk->WaitForFences(ctx->device, 1, &sc->acquired, VK_TRUE, UINT64_MAX), "gpu.swapchain.acquired");
+    if (index >= sc->n_images) {
+        status = bf_fail(BF_VULKAN, "gpu.swapchain: the driver handed image %u of %u", index, sc->n_images);
+        goto fail;
+    }
     sc->index = index;
 fail:
     return status;
