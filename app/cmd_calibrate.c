@@ -12,7 +12,8 @@
 #include "replay/replay.h"
 
 static const char calibrate_usage[] =
-    "usage: bitfuse calibrate --board COLSxROWS --square M [--depth IMAGES...] IMAGES... --out calib.json [--json]\n"
+    "usage: bitfuse calibrate --board COLSxROWS --square M [--depth IMAGES...] IMAGES... --out calib.json\n"
+    "                         [--radial 2|3] [--json]\n"
     "\n"
     "Finds the checkerboard's inner corners in each colour image (IMAGES, PNG or JPEG) and\n"
     "calibrates the colour camera: fx, fy, cx, cy and the distortion k1 k2 p1 p2 k3\n"

@@ -73,12 +73,12 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     app_command_spec spec = {
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
-        .epilog = "exit codes: 0 ok, 1 failure (e.g. pool full), 2 usage (--camera with a --calibration that has\n"
-                  "a depth camera), 3 bad input (a corrupt frame mid-sequence: the frames before it are still\n"
-                  "fused and written; a bad --calibration file, or its depth camera of another size than the\n"
-                  "depth images), 4 no Vulkan device,\n"
-                  "5 an output could not be written (disk full, I/O error: the file is named; every\n"
-                  "file in DIR is whole or absent)\n",
+        .epilog = "exit codes: 0 ok (also with pools too small: what did not fit is dropped and counted,\n"
+                  "or stopped by Ctrl-C), 1 failure, 2 usage (--camera with a --calibration that has a depth\n"
+                  "camera), 3 bad input (a corrupt frame mid-sequence: the frames before it are still fused\n"
+                  "and written; a bad --calibration file, or its depth camera of another size than the depth\n"
+                  "images), 4 no Vulkan device, 5 an output could not be written (disk full, I/O error: the\n"
+                  "file is named; every file in DIR is whole or absent)\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->calibration) rc = app_calibration_read("fuse", a->calibration, a->seq, false, &a->ropt, &a->cal);
@@ -155,6 +155,11 @@ int cmd_fuse(int argc, char **argv)
     bf_status s = use_traj ? replay_traj_read_tum(a.poses, &traj) : BF_OK;
     if (s == BF_OK && a.depth_correction) s = calib_depth_read(a.depth_correction, &fuse_depth_fix);
     if (s == BF_OK) s = replay_open(a.seq, &a.ropt, &src);
+    /* Ctrl-C or SIGTERM ends the run as a replay's: the frames fused so far
+     * are written (a second one kills the program). From here on, so one
+     * during start-up (the GPU's pipelines) ends it cleanly too. */
+    const volatile sig_atomic_t *stop = s == BF_OK ? app_stop_begin(NULL) : NULL;
+    bool stopped_empty = false; /* stopped before any frame was fused: nothing to write */
     if (s == BF_OK) s = app_calibration_apply(&a.cal, a.seq, src);
     if (s == BF_OK && a.depth_correction)
         s = app_depth_correction_check(a.depth_correction, &fuse_depth_fix, src, &a.cal, a.seq);
@@ -185,11 +190,12 @@ int cmd_fuse(int argc, char **argv)
         /* A corrupt frame mid-sequence ends the run, and the frames fused
          * before it are written; the exit code still says the input was bad. */
         rcfg.keep_on_source_error = true;
-        /* Ctrl-C or SIGTERM ends the run as a replay's: the frames fused
-         * so far are written (a second one kills the program). */
-        rcfg.stop = app_stop_begin(NULL);
+        rcfg.stop = stop;
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
-        app_stop_end();
+        /* Stopped before any frame was fused (during start-up, or while the
+         * first frames were being read): nothing to write, and no failure. */
+        if ((s == BF_OK || s == BF_FORMAT) && r.run.is_interrupted && r.run.n_fused == 0)
+            stopped_empty = true, s = BF_END;
         r.n_unreadable = replay_skipped_frames(src);
         /* No frame within the file's time span: give the span. */
         if (s == BF_FORMAT && use_traj && traj.n && r.run.n_fused == 0 && r.run.n_skipped > 0 &&
@@ -200,6 +206,7 @@ int cmd_fuse(int argc, char **argv)
                         a.poses, traj.t_s[0], traj.t_s[traj.n - 1]);
         }
     }
+    if (stop) app_stop_end();
     /* An output that cannot be written does not stop the others. */
     app_write_failure wf = {0};
     if (s == BF_OK) s = app_note_write(&wf, cmd, app_export_map(r.run.map, NULL, a.out, a.no_mesh ? NULL : &a.mesh_out, &r.out));
@@ -216,7 +223,7 @@ int cmd_fuse(int argc, char **argv)
         printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
                r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
         if (r.run.is_interrupted)
-            printf("  stopped          by a signal (Ctrl-C): the frames before it are fused and written\n");
+            printf("  stopped          by a signal: the frames before it are fused and written\n");
         if (r.run.counts.repeated)
             printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
                    r.run.counts.repeated);
@@ -243,7 +250,13 @@ int cmd_fuse(int argc, char **argv)
         bf_fail(s_input, "%s", r.run.source_error);
         s = s_input;
     }
-    if (s == BF_OK && no_surface(&r)) {
+    if (s == BF_OK && no_surface(&r) && r.run.counts.pool_full) {
+        /* The input may be fine: the pools held none of what it gave. */
+        printf("  no surface       the %u frames fused gave the map no surface voxel: the pools dropped what did "
+               "not fit (--bricks %u too small?)\n", r.run.n_fused, a.fcfg.brick_cap);
+        s = bf_fail(BF_POOL_FULL, "%s: the %u frames fused gave the map no surface voxel: the pools (--bricks %u) "
+                    "held none of it", a.seq, r.run.n_fused, a.fcfg.brick_cap);
+    } else if (s == BF_OK && no_surface(&r)) {
         printf("  no surface       the %u frames fused gave the map no surface voxel (depth too near or too sparse, "
                "or taken off the image by the lens?)\n", r.run.n_fused);
         s = bf_fail(BF_FORMAT, "%s: the %u frames fused gave the map no surface voxel", a.seq, r.run.n_fused);
@@ -255,5 +268,9 @@ int cmd_fuse(int argc, char **argv)
     gpu_context_destroy(ctx);
     rgbd_source_close(src);
     bf_traj_free(&traj);
+    if (stopped_empty) {
+        printf("bitfuse %s: stopped before any frame was fused: no map written\n", cmd);
+        return APP_EXIT_OK;
+    }
     return s == BF_OK ? APP_EXIT_OK : app_fail(cmd, s);
 }

@@ -406,8 +406,8 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
         APP_OPT("--subcache", APP_OPT_U32, &fc->subcache, "N", "frames of the new-brick pass (at most the window)",
                 .min = 1, .max = 256),
         APP_OPT("--bricks", APP_OPT_U32, &fc->brick_cap, "N",
-                "brick pool size, instead of --gpu-budget (default: replay and live size it from --gpu-budget or the device, docs/cli.md "
-                "\"Streaming\"; fuse 1048576)",
+                "brick pool size (replay and live: instead of --gpu-budget, which with the device sizes it by "
+                "default, docs/cli.md \"Streaming\"; fuse: 1048576 by default)",
                 .min = 1, .no_default = true, .given = bricks_given),
         APP_OPT("--chunk", APP_OPT_FLOAT, &fc->chunk_m, "M", "chunk edge in metres", .min = 0.01, .max = 64,
                 .min_open = true),

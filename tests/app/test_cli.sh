@@ -681,6 +681,15 @@ for i in range(90): print('%.6f 0 0 0 0 0 0 1' % (1000 + i / 30.0))" >"$T/long_p
 interrupt_at_gate "$B" fuse "$T/gated" --poses "$T/long_poses.txt" --no-mesh --out "$T/fint"
 interrupted fuse "$T/fint/stats.json"
 [ -s "$T/fint/points.ply" ] || fail "interrupted fuse: points.ply missing"
+# Stopped before any frame was fused (the frames up to the gate have no
+# pose): nothing to write and no failure, and no folder left (it said "no
+# frame with a pose", exit 3, or died during start-up leaving the folder).
+python3 -c "
+for i in range(46, 90): print('%.6f 0 0 0 0 0 0 1' % (1000 + i / 30.0))" >"$T/late_poses.txt"
+interrupt_at_gate "$B" fuse "$T/gated" --poses "$T/late_poses.txt" --no-mesh --out "$T/fint0"
+[ $rc = 0 ] || fail "fuse stopped before any frame: exit $rc, expected 0 ($(head -c 300 "$T/err"))"
+grep -q "stopped before any frame was fused: no map written" "$T/out" || fail "fuse stopped early: $(cat "$T/out")"
+[ ! -e "$T/fint0" ] || fail "fuse stopped before any frame left its output folder"
 
 # Ctrl-C before any frame with depth came (a camera still dark, 10 s of
 # frames without depth at 30 Hz): exit 0 as any Ctrl-C, nothing written,
@@ -755,6 +764,10 @@ grep -q "pools full       requests for .* were dropped: the map lacks$" "$T/out"
 [ -s "$T/fufull/points.ply" ] || fail "fuse with full pools wrote no points.ply"
 py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['pool_full'] > 0 and sum(d['pool_full_drops'].values()) > 0, d" \
     "$T/fufull/stats.json" || fail "fuse pools full: stats.json"
+# Pools that hold nothing: no surface, blamed on the pools, not the input.
+expect 1 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fuone" --bricks 1 --no-mesh
+grep -q "no surface .*the pools dropped what did not fit (--bricks 1 too small?)" "$T/out" || fail "fuse --bricks 1: $(cat "$T/out")"
+mentions "held none of it"
 expect 3 "$B" replay "$T/missing" --out "$T/rp3"
 mentions "$T/missing"
 [ ! -e "$T/rp3" ] || fail "replay on a missing input created its output folder"
