@@ -21,9 +21,10 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
     for (int i = 0; i < (out->cal.has_depth ? 2 : 1); i++) {
         const calib_camera *c = i ? &out->cal.depth : &out->cal.colour;
         if (c->extrapolation_px > 1)
-            bf_warn("%s: %s: the %s camera's lens is uncertain by %.1f px at the image's edge (its boards reached "
-                    "%.0f%% of the way to the corners): frames there may be undistorted wrongly", cmd, path,
-                    i ? "depth" : "colour", c->extrapolation_px, 100 * c->coverage);
+            bf_warn("%s: %s: the %s camera's lens is uncertain by %.3g px of its %ux%u images at their edge (its "
+                    "boards reached %.0f%% of the way to the corners): %s there may be off", cmd, path,
+                    i ? "depth" : "colour", c->extrapolation_px, c->width, c->height, 100 * c->coverage,
+                    i ? "the depth, undistorted," : "the colour looked up through it");
     }
     if (out->cal.has_depth && ropt->camera)
         return app_usage_error(cmd, "--camera and --calibration %s both give the depth camera: keep one", path);

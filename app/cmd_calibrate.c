@@ -49,6 +49,7 @@ typedef struct camera_images {
     uint32_t width, height;    /* of the first image; the others must match */
     double *corners;           /* n * cols * rows * 2 */
     bool *is_found;
+    bool *is_used;             /* found and not a repeat of an earlier view: what the fit takes */
     uint32_t n_found;
 } camera_images;
 
@@ -59,7 +60,9 @@ static bf_status find_all(const calib_board *b, camera_images *c, bool is_quiet)
     size_t nc = (size_t)b->cols * b->rows;
     c->corners = calloc(c->n * nc * 2 + 1, sizeof *c->corners);
     c->is_found = calloc(c->n + 1, sizeof *c->is_found);
-    if (!c->corners || !c->is_found) return bf_fail(BF_NO_MEMORY, "calibrate: corners of %u images", c->n);
+    c->is_used = calloc(c->n + 1, sizeof *c->is_used);
+    if (!c->corners || !c->is_found || !c->is_used)
+        return bf_fail(BF_NO_MEMORY, "calibrate: corners of %u images", c->n);
     for (uint32_t k = 0; k < c->n; k++) {
         uint8_t *rgb = NULL;
         uint32_t w, h;
@@ -87,12 +90,14 @@ static bf_status find_all(const calib_board *b, camera_images *c, bool is_quiet)
 
 /* A view whose corners all lie within half a pixel of an earlier one's (the
  * same image given twice, a camera left still) adds no constraint: it is
- * left out of the count of views, warned about; too few distinct views are
- * too few views (calibrateCamera fits the noise of repeated ones). */
+ * left out of the fit (which would weigh that view twice) and the count of
+ * views, warned about; too few distinct views are too few views
+ * (calibrateCamera fits the noise of repeated ones). */
 static bf_status distinct_views(const calib_board *b, camera_images *c)
 {
     size_t nc = (size_t)b->cols * b->rows;
     uint32_t n_same = 0;
+    for (uint32_t k = 0; k < c->n; k++) c->is_used[k] = c->is_found[k];
     for (uint32_t k = 1; k < c->n; k++) {
         if (!c->is_found[k]) continue;
         for (uint32_t j = 0; j < k; j++) {
@@ -102,7 +107,8 @@ static bf_status distinct_views(const calib_board *b, camera_images *c)
                 worst = fmax(worst, fabs(c->corners[k * nc * 2 + i] - c->corners[j * nc * 2 + i]));
             if (worst < 0.5) {
                 bf_warn("calibrate: %s %s shows the board where %s does (every corner within 0.5 px): it adds "
-                        "nothing", c->name, c->paths[k], c->paths[j]);
+                        "nothing and is left out", c->name, c->paths[k], c->paths[j]);
+                c->is_used[k] = false; /* it would weigh that view twice */
                 n_same++;
                 break;
             }
@@ -143,7 +149,7 @@ static void print_camera(const char *name, const calib_camera *c)
     printf("          distortion k1 %.5f k2 %.5f p1 %.6f p2 %.6f k3 %.5f\n", c->dist[0], c->dist[1], c->dist[2],
            c->dist[3], c->dist[4]);
     printf("          the boards reached %.0f%% of the way to the image's corners", 100 * c->coverage);
-    if (c->coverage < 1) printf("; beyond, two and three radial terms differ by up to %.1f px", c->extrapolation_px);
+    if (c->coverage < 1) printf("; beyond, two and three radial terms differ by up to %.3g px", c->extrapolation_px);
     printf("\n");
 }
 
@@ -277,9 +283,9 @@ int cmd_calibrate(int argc, char **argv)
     calib_result r;
     if (s == BF_OK) {
         calib_views cv = {.n_views = cams[0].n, .width = cams[0].width, .height = cams[0].height,
-                          .corners_px = cams[0].corners, .is_found = cams[0].is_found};
+                          .corners_px = cams[0].corners, .is_found = cams[0].is_used};
         calib_views dv = {.n_views = cams[1].n, .width = cams[1].width, .height = cams[1].height,
-                          .corners_px = cams[1].corners, .is_found = cams[1].is_found};
+                          .corners_px = cams[1].corners, .is_found = cams[1].is_used};
         s = calib_estimate(&board, &cfg, &cv, has_depth ? &dv : NULL, &r);
     }
     /* The pair fitting far worse than each camera alone: views that do not
@@ -295,7 +301,7 @@ int cmd_calibrate(int argc, char **argv)
         const calib_camera *c = i ? &r.depth : &r.colour;
         if (c->extrapolation_px > 1)
             bf_warn("calibrate: %s: the boards reached %.0f%% of the way to the image's corners, and beyond them the "
-                    "lens is a guess: fits with two and three radial terms, alike within the boards, differ by %.1f px "
+                    "lens is a guess: fits with two and three radial terms, alike within the boards, differ by %.3g px "
                     "at the image's edge; add views with the board near the image's corners and edges",
                     cams[i].name, 100 * c->coverage, c->extrapolation_px);
     }
@@ -309,6 +315,7 @@ done:
     for (int i = 0; i < 2; i++) {
         free(cams[i].corners);
         free(cams[i].is_found);
+        free(cams[i].is_used);
     }
     free(rest);
     free(depth);

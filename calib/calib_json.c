@@ -160,9 +160,13 @@ static bf_status parse_camera(const char *path, const char *obj, const cJSON *o,
     if (cJSON_GetObjectItemCaseSensitive(o, "coverage") &&
         (s = get_number(path, obj, o, "coverage", &c->coverage)) != BF_OK)
         return s;
+    if (!(c->coverage >= 0 && c->coverage <= 1))
+        return bf_fail(BF_FORMAT, "%s: %s.coverage: %g is not a fraction in 0..1", path, obj, c->coverage);
     if (cJSON_GetObjectItemCaseSensitive(o, "extrapolation_px") &&
         (s = get_number(path, obj, o, "extrapolation_px", &c->extrapolation_px)) != BF_OK)
         return s;
+    if (!(c->extrapolation_px >= 0))
+        return bf_fail(BF_FORMAT, "%s: %s.extrapolation_px: %g is negative", path, obj, c->extrapolation_px);
     return BF_OK;
 }
 

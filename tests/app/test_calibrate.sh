@@ -69,6 +69,12 @@ expect 3 "$B" calibrate --board 9x6 --square 0.04 "$T/b/colour/000.png" "$T/b/co
 mentions "at 1 different places"
 mentions "shows the board where $T/b/colour/000.png does"
 [ -e "$T/same.json" ] && fail "calibrate from one view repeated wrote a file"
+# A repeat among distinct views is left out of the fit: the calibration of
+# 000 000 001 002 is that of 000 001 002, and it counts 3 views.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/00[0-2].png --out "$T/three.json"
+expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T/b/colour/000.png" "$T"/b/colour/00[0-2].png --out "$T/rep.json"
+mentions "it adds nothing and is left out"
+cmp -s "$T/three.json" "$T/rep.json" || fail "a repeated view changed the calibration (weighed twice)"
 # Depth views in another order than the colour ones: written, but warned.
 expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/00[0-3].png \
     --depth "$T/b/ir/001.png" "$T/b/ir/000.png" "$T/b/ir/003.png" "$T/b/ir/002.png" --out "$T/swapped.json"

@@ -91,6 +91,12 @@ BF_TEST(calib_malformed_fields_are_named)
         {"{\"colour\": {\"width\": 640, \"height\": 480, \"fx\": 525, \"fy\": 525, \"cx\": 319.5, \"cy\": 239.5, "
          "\"dist\": [0.1, 0, 0, 0]}}",
          "colour.dist: not a list of 5 numbers", BF_FORMAT},
+        {"{\"colour\": {\"width\": 640, \"height\": 480, \"fx\": 525, \"fy\": 525, \"cx\": 319.5, \"cy\": 239.5, "
+         "\"coverage\": 2}}",
+         "colour.coverage: 2 is not a fraction in 0..1", BF_FORMAT},
+        {"{\"colour\": {\"width\": 640, \"height\": 480, \"fx\": 525, \"fy\": 525, \"cx\": 319.5, \"cy\": 239.5, "
+         "\"extrapolation_px\": -5}}",
+         "colour.extrapolation_px: -5 is negative", BF_FORMAT},
         {NULL, "T_colour_depth: missing", BF_FORMAT},   /* depth without T */
         {NULL, "depth: missing", BF_FORMAT},            /* T without depth */
         {NULL, "T_colour_depth.R: not a rotation", BF_FORMAT},
