@@ -257,16 +257,17 @@ static void start_window(fusion_map *m, uint32_t last)
 
 /* Reports requests dropped for a full pool since the last frame (the map
  * stays consistent: a dropped request changes nothing), from the counters
- * the frame's submission copied into the readback buffer. */
-static bf_status check_pools(fusion_map *m, const uint32_t *cnt, uint32_t index)
+ * the frame's submission copied into the readback buffer. The caller names
+ * the frame (its own index, which fusion's count of frames is not). */
+static bf_status check_pools(fusion_map *m, const uint32_t *cnt)
 {
     uint32_t fails = cnt[FUSION_CNT_FAIL_NODES] + cnt[FUSION_CNT_FAIL_BRICKS] + cnt[FUSION_CNT_FAIL_HASH];
     if (fails == m->fails_seen) return BF_OK;
     m->fails_seen = fails;
     return bf_fail(BF_POOL_FULL,
-                   "fusion: frame %u: map pools full, requests dropped so far: %u nodes (cap %u), %u bricks "
+                   "fusion: map pools full, requests dropped in all so far: %u nodes (cap %u), %u bricks "
                    "(cap %u), %u chunks (overflow cap %u)",
-                   index, cnt[FUSION_CNT_FAIL_NODES], m->cfg.node_cap, cnt[FUSION_CNT_FAIL_BRICKS], m->cfg.brick_cap,
+                   cnt[FUSION_CNT_FAIL_NODES], m->cfg.node_cap, cnt[FUSION_CNT_FAIL_BRICKS], m->cfg.brick_cap,
                    cnt[FUSION_CNT_FAIL_HASH], m->cfg.hash_overflow);
 }
 
@@ -346,8 +347,8 @@ bf_status fusion_finish_frame(fusion_map *m)
     m->use.bricks = rb[FUSION_CNT_BRICKS];
     m->use.nodes = rb[FUSION_CNT_NODES];
     m->use.overflow = rb[FUSION_CNT_OVERFLOW];
-    uint32_t index = m->n_frames++;
-    return check_pools(m, rb, index);
+    m->n_frames++;
+    return check_pools(m, rb);
 }
 
 bf_status fusion_add_frame(fusion_map *m, const bf_frame *f, const bf_se3 *T_wc)

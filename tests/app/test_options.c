@@ -73,7 +73,7 @@ BF_TEST(options_reject_bad_values_with_a_message_and_write_nothing)
         {"--camera", NULL, "needs a value"},  {"--depth-scale", "0", "'0'"},       {"--depth-scale", "-5", "-5"},
         {"--depth-scale", "inf", "inf"},      {"--depth-scale", "5000x", "5000x"}, {"--depth-scale", "0x10", "'0x10'"},
         {"--depth-scale", "1e-300", "below 1"}, {"--depth-scale", "2e6", "above"}, {"--frames", "0", "'0'"},
-        {"--frames", "-3", "-3"},             {"--frames", "2.5", "2.5"},          {"--frames=", NULL, "''"},
+        {"--frames", "-3", "'-3' is below 1"}, {"--frames", "2.5", "2.5"},          {"--frames=", NULL, "''"},
         {"--frames", "99999999999", "too large"},
         {"--ratio", "-1", "--ratio"},         {"--ratio", "100", "above 64"},      {"--window", "7", "even"},
         {"--window", "1000", "above 256"},    {"--icp-iters", "10,x", "'x'"},      {"--icp-iters", "1,2,3,4", "more"},
