@@ -183,6 +183,7 @@ static bf_status print_json(const calib_result *r, const camera_images *cams, in
             cJSON_AddStringToObject(o, "camera", cams[i].name);
             cJSON_AddStringToObject(o, "path", cams[i].paths[k]);
             cJSON_AddBoolToObject(o, "found", cams[i].is_found[k]);
+            cJSON_AddBoolToObject(o, "used", cams[i].is_used[k]); /* found and not a repeat of an earlier view */
             cJSON_AddItemToArray(images, o);
         }
     return app_json_print(root);

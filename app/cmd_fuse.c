@@ -74,7 +74,8 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         .name = "fuse", .usage = fuse_usage, .tables = tables, .positional = &a->seq, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
         .epilog = "exit codes: 0 ok (also with pools too small: what did not fit is dropped and counted,\n"
-                  "or stopped by Ctrl-C), 1 failure, 2 usage (--camera with a --calibration that has a depth\n"
+                  "or stopped by Ctrl-C), 1 failure (also: the pools held none of the surface, --bricks too\n"
+                  "small), 2 usage (--camera with a --calibration that has a depth\n"
                   "camera), 3 bad input (a corrupt frame mid-sequence: the frames before it are still fused\n"
                   "and written; a bad --calibration file, or its depth camera of another size than the depth\n"
                   "images), 4 no Vulkan device, 5 an output could not be written (disk full, I/O error: the\n"

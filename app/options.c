@@ -109,7 +109,8 @@ static int parse_number(const char *cmd, const app_option *row, const char *v, d
             return usage(cmd, "%s: %s is too large (at most %.0f)", row->name, v,
                          row->max > row->min ? row->max : (double)UINT32_MAX);
         /* A negative whole number: below the least, not "not whole". */
-        if (is_whole && v[0] == '-' && v[1] && strspn(v + 1, "0123456789") == strlen(v + 1))
+        if (is_whole && v[0] == '-' && v[1] && strspn(v + 1, "0123456789") == strlen(v + 1) &&
+            strspn(v + 1, "0") != strlen(v + 1))
             return usage(cmd, "%s: '%s' is below %g", row->name, v, row->min);
         return usage(cmd, "%s: '%s' is not %s", row->name, v, is_whole ? "a whole number" : "a number");
     }

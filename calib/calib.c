@@ -121,9 +121,13 @@ static bf_status calibrate_one(const calib_board *b, const calib_config *cfg, co
     c->coverage = coverage(c, buf, (size_t)n * n_corners);
     c->extrapolation_px = 0;
     if (c->coverage < 1) {
+        /* A diagnostic only: its failure loses the figure, not the fit. */
         calib_camera other;
-        if ((s = fit(v, obj, buf, n, n_corners, cfg->radial_terms >= 3, name, &other)) != BF_OK) return s;
-        c->extrapolation_px = extrapolation(c, &other);
+        if (fit(v, obj, buf, n, n_corners, cfg->radial_terms >= 3, name, &other) == BF_OK)
+            c->extrapolation_px = extrapolation(c, &other);
+        else
+            bf_warn("calib: %s: the fit with the other number of radial terms failed (%s): how uncertain the lens "
+                    "is beyond the boards is not measured", name, bf_last_error());
     }
     return BF_OK;
 }

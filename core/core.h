@@ -251,7 +251,7 @@ int bf_thread_count(void);
  * thread-safe. Falls back to the calling thread if threads cannot start. */
 void bf_parallel_for(size_t n, void (*fn)(void *ctx, size_t i), void *ctx);
 /* pthread_create with SIGINT and SIGTERM blocked in the new thread, so a
- * Ctrl-C always reaches the main thread's handler and never interrupts a
+ * Ctrl-C never lands in a thread bitfuse starts and never interrupts a
  * worker's blocking call (a capture thread's open of a pipe or a device
  * read would fail with EINTR). Returns pthread_create's result. */
 int bf_thread_start(pthread_t *th, void *(*fn)(void *), void *arg);

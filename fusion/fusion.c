@@ -363,7 +363,12 @@ bf_status fusion_add_frame(fusion_map *m, const bf_frame *f, const bf_se3 *T_wc)
     if (s == BF_OK) s = sw;
     if (s != BF_OK) {
         m->fuse_pending = false;
-        return s;
+        /* BF_POOL_FULL is the pools' drops alone (callers go on after it):
+         * any other pool that ran out here failed the frame. */
+        if (s != BF_POOL_FULL) return s;
+        char why[512];
+        snprintf(why, sizeof why, "%s", bf_last_error());
+        return bf_fail(BF_VULKAN, "fusion: frame %u not fused: %s", f->index, why);
     }
     return fusion_finish_frame(m);
 }

@@ -87,8 +87,9 @@ bf_status fusion_set_colour_camera(fusion_map *map, const bf_intrinsics *Kc, con
 /* Adds one frame seen from T_wc (camera to world): uploads it to the frame
  * ring, allocates bricks, integrates (sub-cache and the current window
  * slice), in one submission that it waits for. Depth must have K's size.
- * BF_POOL_FULL when a pool ran out: the requests that did not fit are
- * dropped and counted, the map stays consistent (fusion_check passes).
+ * BF_POOL_FULL when a pool ran out, and only then: the frame is fused, the
+ * requests that did not fit are dropped and counted, the map stays
+ * consistent (fusion_check passes).
  * The same as fusion_upload_frame, then fusion_cmd_fuse in a submission of
  * its own, then fusion_finish_frame. */
 bf_status fusion_add_frame(fusion_map *map, const bf_frame *f, const bf_se3 *T_wc);

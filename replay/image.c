@@ -25,8 +25,9 @@
 typedef enum image_kind { IMAGE_PNG, IMAGE_JPEG, IMAGE_OTHER, IMAGE_EMPTY } image_kind;
 
 /* Opens path and sniffs its first bytes. A PNG's stream is left after its
- * 8-byte signature, which the decoder is told it has seen, so a depth image
- * may come through a pipe (no seek); any other stream is rewound. */
+ * 8-byte signature, which the decoder is told it has seen, so a PNG may come
+ * through a pipe (no seek); any other stream is rewound, which a pipe
+ * cannot be: refused, said so. */
 static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
 {
     FILE *f = fopen(path, "rb");
@@ -46,7 +47,12 @@ static bf_status image_open(const char *path, FILE **fp, image_kind *kind)
         *kind = IMAGE_EMPTY;
     else
         *kind = IMAGE_OTHER;
-    if (*kind != IMAGE_PNG) rewind(f);
+    if (*kind != IMAGE_PNG && fseek(f, 0, SEEK_SET) != 0) {
+        int e = errno;
+        fclose(f);
+        return bf_fail(BF_IO, "%s: cannot seek back after its first bytes (%s): only a PNG may come through a pipe",
+                       path, strerror(e));
+    }
     *fp = f;
     return BF_OK;
 }

@@ -141,8 +141,8 @@ static bf_status parse_index(const char *path, const cJSON *root, store_meta *me
         m.last_pose.t = (bf_vec3){t[0], t[1], t[2]};
         /* cJSON reads 1e999 as inf: a resume from that time would take every
          * frame as stored already. */
-        if (!isfinite(m.last_t_s) || !bf_se3_is_rigid(&m.last_pose, 1e-6))
-            return bf_fail(BF_FORMAT, "%s: last_pose: its time is not finite or R is not a rotation", path);
+        if (!isfinite(m.last_t_s)) return bf_fail(BF_FORMAT, "%s: last_pose.t_s: not finite", path);
+        if (!bf_se3_is_rigid(&m.last_pose, 1e-6)) return bf_fail(BF_FORMAT, "%s: last_pose.R: not a rotation", path);
     }
     const cJSON *chunks = cJSON_GetObjectItemCaseSensitive(root, "chunks");
     if (!cJSON_IsArray(chunks)) return bf_fail(BF_FORMAT, "%s: no chunks list", path);

@@ -75,6 +75,10 @@ expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/00[0-2].png --ou
 expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T/b/colour/000.png" "$T"/b/colour/00[0-2].png --out "$T/rep.json"
 mentions "it adds nothing and is left out"
 cmp -s "$T/three.json" "$T/rep.json" || fail "a repeated view changed the calibration (weighed twice)"
+# PNG images through pipes (no seeking back) give the same calibration.
+expect 0 "$B" calibrate --board 9x6 --square 0.04 <(cat "$T/b/colour/000.png") <(cat "$T/b/colour/001.png") \
+    <(cat "$T/b/colour/002.png") --out "$T/piped.json"
+cmp -s "$T/three.json" "$T/piped.json" || fail "images through pipes gave another calibration"
 # Depth views in another order than the colour ones: written, but warned.
 expect 0 "$B" calibrate --board 9x6 --square 0.04 "$T"/b/colour/00[0-3].png \
     --depth "$T/b/ir/001.png" "$T/b/ir/000.png" "$T/b/ir/003.png" "$T/b/ir/002.png" --out "$T/swapped.json"

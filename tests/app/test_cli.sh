@@ -764,10 +764,17 @@ grep -q "pools full       requests for .* were dropped: the map lacks$" "$T/out"
 [ -s "$T/fufull/points.ply" ] || fail "fuse with full pools wrote no points.ply"
 py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['pool_full'] > 0 and sum(d['pool_full_drops'].values()) > 0, d" \
     "$T/fufull/stats.json" || fail "fuse pools full: stats.json"
-# Pools that hold nothing: no surface, blamed on the pools, not the input.
-expect 1 "$B" fuse "$T/seq" --poses groundtruth --out "$T/fuone" --bricks 1 --no-mesh
-grep -q "no surface .*the pools dropped what did not fit (--bricks 1 too small?)" "$T/out" || fail "fuse --bricks 1: $(cat "$T/out")"
-mentions "held none of it"
+# A pool of one brick: which request wins it is the GPU's atomics' choice,
+# so the map holds a little surface (exit 0) or none, and then the pools,
+# not the input, are blamed (exit 1).
+"$B" fuse "$T/seq" --poses groundtruth --out "$T/fuone" --bricks 1 --no-mesh >"$T/out" 2>"$T/err"
+case $? in
+0) grep -q "pools full" "$T/out" || fail "fuse --bricks 1 (surface kept): no pools line: $(cat "$T/out")" ;;
+1) grep -q "no surface .*the pools dropped what did not fit (--bricks 1 too small?)" "$T/out" ||
+       fail "fuse --bricks 1: $(cat "$T/out")"
+   mentions "held none of it" ;;
+*) fail "fuse --bricks 1: exit $?, expected 0 or 1 ($(head -c 300 "$T/err"))" ;;
+esac
 expect 3 "$B" replay "$T/missing" --out "$T/rp3"
 mentions "$T/missing"
 [ ! -e "$T/rp3" ] || fail "replay on a missing input created its output folder"

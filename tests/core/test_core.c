@@ -206,7 +206,11 @@ static void *report_mask(void *arg)
  * unchanged. */
 BF_TEST(threads_start_with_the_stop_signals_blocked)
 {
-    sigset_t before, after, worker;
+    sigset_t stop, before, after, worker;
+    sigemptyset(&stop);
+    sigaddset(&stop, SIGINT);
+    sigaddset(&stop, SIGTERM);
+    pthread_sigmask(SIG_UNBLOCK, &stop, NULL); /* a runner may have started the test with them blocked */
     pthread_sigmask(SIG_BLOCK, NULL, &before);
     CHECK(!sigismember(&before, SIGINT) && !sigismember(&before, SIGTERM));
     pthread_t th;
