@@ -379,6 +379,7 @@ BF_TEST(store_opens_without_its_index)
         CHECK_OK(bf_write_file_atomic(p, text, len)); /* the index back for the next case */
         free(text);
     }
+    hostmap_free(&back);
     FILE *f = fopen(p, "w");
     CHECK(f != NULL);
     fputs("{\"format\": \"bitfuse-st", f); /* cut short */
