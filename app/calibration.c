@@ -20,7 +20,7 @@ int app_calibration_read(const char *cmd, const char *path, const char *seq, boo
      * measure there (bitfuse calibrate's extrapolation_px) is worth a word. */
     for (int i = 0; i < (out->cal.has_depth ? 2 : 1); i++) {
         const calib_camera *c = i ? &out->cal.depth : &out->cal.colour;
-        if (c->extrapolation_px > 1)
+        if (c->extrapolation_px > CALIB_EXTRAPOLATION_WARN_PX)
             bf_warn("%s: %s: the %s camera's lens is uncertain by %.3g px of its %ux%u images at their edge (its "
                     "boards reached %.0f%% of the way to the corners): %s there may be off", cmd, path,
                     i ? "depth" : "colour", c->extrapolation_px, c->width, c->height, 100 * c->coverage,

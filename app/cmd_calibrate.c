@@ -296,11 +296,10 @@ int cmd_calibrate(int argc, char **argv)
                 "the --depth images in the same order as the colour ones, and did the rig hold still in each view?",
                 r.rms_px, r.rms_px / fmax(r.colour.rms_px, r.depth.rms_px), r.colour.rms_px, r.depth.rms_px);
     /* Frames are undistorted to their corners (--calibration): a lens that
-     * is a guess there is worth a word. 1 px: what the corner finder's 0.05
-     * px and the rest of the calibration leave far below. */
+     * is a guess there is worth a word. */
     for (int i = 0; i < n_cams && s == BF_OK; i++) {
         const calib_camera *c = i ? &r.depth : &r.colour;
-        if (c->extrapolation_px > 1)
+        if (c->extrapolation_px > CALIB_EXTRAPOLATION_WARN_PX)
             bf_warn("calibrate: %s: the boards reached %.0f%% of the way to the image's corners, and beyond them the "
                     "lens is a guess: fits with two and three radial terms, alike within the boards, differ by %.3g px "
                     "at the image's edge; add views with the board near the image's corners and edges",

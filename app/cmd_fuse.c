@@ -75,11 +75,11 @@ static int parse_args(int argc, char **argv, fuse_args *a)
         .max_positional = 1, .positional_missing = "no sequence given",
         .epilog = "exit codes: 0 ok (also with pools too small: what did not fit is dropped and counted,\n"
                   "or stopped by Ctrl-C), 1 failure (also: the pools held none of the surface, --bricks too\n"
-                  "small), 2 usage (--camera with a --calibration that has a depth\n"
-                  "camera), 3 bad input (a corrupt frame mid-sequence: the frames before it are still fused\n"
-                  "and written; a bad --calibration file, or its depth camera of another size than the depth\n"
-                  "images), 4 no Vulkan device, 5 an output could not be written (disk full, I/O error: the\n"
-                  "file is named; every file in DIR is whole or absent)\n",
+                  "small), 2 usage (--camera with a --calibration that has a depth camera), 3 bad input (a\n"
+                  "corrupt frame mid-sequence: the frames before it are still fused and written; a bad\n"
+                  "--calibration file, or its depth camera of another size than the depth images), 4 no\n"
+                  "Vulkan device, 5 an output could not be written (disk full, I/O error: the file is named;\n"
+                  "every file in DIR is whole or absent)\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (!rc && a->calibration) rc = app_calibration_read("fuse", a->calibration, a->seq, false, &a->ropt, &a->cal);

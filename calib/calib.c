@@ -88,7 +88,7 @@ static double extrapolation(const calib_camera *a, const calib_camera *b)
             calib_project(a, ray, &ua, &va);
             calib_project(b, ray, &ub, &vb);
             double d = hypot(ua - ub, va - vb);
-            worst = isfinite(d) ? fmax(worst, d) : 1e9;
+            worst = isfinite(d) ? fmax(worst, d) : 1e9; /* a fit that throws the ray off: as far apart as it gets */
         }
     return worst;
 }

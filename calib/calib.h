@@ -37,6 +37,11 @@ typedef struct calib_camera {
     double extrapolation_px;
 } calib_camera;
 
+/* Above this extrapolation_px (pixels) calibrate and the readers of a
+ * calib.json warn: the corner finder's 0.05 px and the fit's other errors
+ * stay far below it. */
+#define CALIB_EXTRAPOLATION_WARN_PX 1.0
+
 /* What a calibration file holds. T_colour_depth takes points of the depth
  * camera's frame to the colour camera's: p_colour = T_colour_depth * p_depth. */
 typedef struct calib_result {
