@@ -459,8 +459,14 @@ bf_status app_depth_correction_check(const char *path, const struct calib_depth_
 /* The lens taken out of src's frames: replay_undistortion, or for the
  * recording app_open_device last wrapped as a camera, that recording's. */
 bool app_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double *shift_px);
+/* Ctrl-C, SIGTERM and SIGHUP end the program as their default action does
+ * (killed by that signal), after removing the temporary files it has open
+ * (bf_pending_remove_all): every output is whole or absent. main calls this
+ * first. */
+void app_signals_init(void);
 /* Until app_stop_end, Ctrl-C and SIGTERM stop src's capture thread and set
- * the returned flag instead of ending the program; a second one ends it. */
+ * the returned flag instead of ending the program; a second one ends it as
+ * app_signals_init's handler does. */
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src);
 /* Stops the scan as Ctrl-C does, from the program (a viewer window
  * closed): sets flag (the run's stop flag) and stops the capture thread

@@ -53,19 +53,44 @@ static rgbd_source *volatile g_stop_src;
 static volatile sig_atomic_t g_stopped;
 static struct sigaction g_old_int, g_old_term;
 
+/* Only async-signal-safe calls: unlink, signal, raise. The signal is
+ * blocked while its handler runs, so the raised one is taken, with the
+ * default action, as the handler returns: the shell sees the program
+ * killed by it, as before. */
+static void on_fatal_signal(int sig)
+{
+    bf_pending_remove_all();
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+void app_signals_init(void)
+{
+    struct sigaction sa = {.sa_handler = on_fatal_signal}, old;
+    sigemptyset(&sa.sa_mask);
+    /* A signal ignored from the start (nohup, a script's background job)
+     * stays ignored. */
+    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
+    for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++)
+        if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler != SIG_IGN) sigaction(sigs[i], &sa, NULL);
+}
+
 static void on_stop_signal(int sig)
 {
-    (void)sig;
+    if (g_stopped) { /* the second: the user means it */
+        on_fatal_signal(sig);
+        return;
+    }
     g_stopped = 1;
     capture_threaded_stop(g_stop_src); /* sets an atomic flag: async-signal-safe */
 }
 
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)
 {
-    /* SA_RESETHAND: a second Ctrl-C kills the program (the default action).
-     * SA_RESTART: a read the signal lands in goes on (a file on a slow disk
-     * or a pipe must not fail its frame); the loop sees the flag after it. */
-    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESETHAND | SA_RESTART};
+    /* SA_RESTART: a read the signal lands in goes on (a file on a slow disk
+     * or a pipe must not fail its frame); the loop sees the flag after it.
+     * A second Ctrl-C ends the program (on_stop_signal). */
+    struct sigaction sa = {.sa_handler = on_stop_signal, .sa_flags = SA_RESTART};
     sigemptyset(&sa.sa_mask);
     g_stop_src = src;
     g_stopped = 0;

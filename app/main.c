@@ -98,6 +98,7 @@ static void check_environment(void)
 
 int main(int argc, char **argv)
 {
+    app_signals_init();
     check_environment();
     if (argc < 2) {
         usage(stderr);

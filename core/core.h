@@ -294,6 +294,7 @@ typedef struct bf_out {
     char *buf;     /* BF_OUT_BUFFER bytes, at the first bf_out_write */
     size_t n;      /* bytes buffered */
     uint64_t bytes; /* bytes handed over so far */
+    int pending;    /* its slot among the pending files (bf_pending_add), or -1 */
 } bf_out;
 #define BF_OUT_BUFFER (1u << 20)
 bf_status bf_out_open(bf_out *o, const char *path);
@@ -315,6 +316,18 @@ bf_status bf_out_commit(bf_out *o);
  * a failure before the renames leaves both paths as they were. */
 bf_status bf_out_commit_both(bf_out *first, bf_out *second);
 void bf_out_abort(bf_out *o);
+/* Files that exist only until the program finishes them (bf_out's temporary
+ * files, a log's .partial): a program killed by a signal removes them in its
+ * handler (bf_pending_remove_all), so a second Ctrl-C leaves no half-written
+ * file beside the outputs. bf_pending_add copies the path into one of
+ * BF_PENDING_MAX slots and returns it, or -1 when all are taken (the file is
+ * then not removed on a signal); bf_pending_forget(slot) before the file is
+ * renamed or removed (-1: nothing). bf_pending_remove_all unlinks every
+ * registered path and is async-signal-safe; any thread may add and forget. */
+#define BF_PENDING_MAX 16
+int bf_pending_add(const char *path);
+void bf_pending_forget(int slot);
+void bf_pending_remove_all(void);
 /* fsyncs the folder path is in, so a new name in it survives a power loss
  * (the file's own fsync does not make its name durable). A file system
  * that cannot sync folders (EINVAL, ENOTSUP, EROFS) is not an error. */

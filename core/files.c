@@ -5,6 +5,7 @@
 #include <fcntl.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -112,10 +113,46 @@ bf_status bf_link_target(const char *path, char *out, size_t cap)
     return BF_OK;
 }
 
+/* A slot is claimed (FREE -> FILLING) by one thread, filled, then published
+ * (READY); the signal handler unlinks READY slots only, so it never reads a
+ * path being written. Forgetting marks the slot FREE before the file is
+ * renamed or removed: a signal between the two leaves that one file. */
+enum { PENDING_FREE, PENDING_FILLING, PENDING_READY };
+static struct {
+    atomic_int state;
+    char path[4128];
+} g_pending[BF_PENDING_MAX];
+
+int bf_pending_add(const char *path)
+{
+    size_t n = strlen(path);
+    if (n >= sizeof g_pending[0].path) return -1;
+    for (int i = 0; i < BF_PENDING_MAX; i++) {
+        int want = PENDING_FREE;
+        if (!atomic_compare_exchange_strong(&g_pending[i].state, &want, PENDING_FILLING)) continue;
+        memcpy(g_pending[i].path, path, n + 1);
+        atomic_store(&g_pending[i].state, PENDING_READY);
+        return i;
+    }
+    return -1;
+}
+
+void bf_pending_forget(int slot)
+{
+    if (slot >= 0 && slot < BF_PENDING_MAX) atomic_store(&g_pending[slot].state, PENDING_FREE);
+}
+
+void bf_pending_remove_all(void)
+{
+    for (int i = 0; i < BF_PENDING_MAX; i++)
+        if (atomic_load(&g_pending[i].state) == PENDING_READY) unlink(g_pending[i].path);
+}
+
 bf_status bf_out_open(bf_out *o, const char *path_given)
 {
     memset(o, 0, sizeof *o);
     o->fd = -1;
+    o->pending = -1;
     /* A symbolic link is written through (bf_link_target): the rename
      * replaces the file it names, not the link. */
     char path[sizeof o->path];
@@ -133,6 +170,7 @@ bf_status bf_out_open(bf_out *o, const char *path_given)
                        S_ISDIR(st.st_mode) ? "a folder" : "a device, pipe or socket");
     o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (o->fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(errno));
+    o->pending = bf_pending_add(o->tmp);
     /* The file replaced keeps its permission bits (best effort: the new
      * file is the writer's, as any file it makes). */
     if (exists) (void)fchmod(o->fd, st.st_mode & 07777);
@@ -202,10 +240,19 @@ void bf_out_printf(bf_out *o, const char *fmt, ...)
     free(big);
 }
 
+/* The temporary file is about to be renamed or removed: no longer the
+ * signal handler's to remove. */
+static void out_forget(bf_out *o)
+{
+    bf_pending_forget(o->pending);
+    o->pending = -1;
+}
+
 void bf_out_abort(bf_out *o)
 {
     if (o->fd >= 0) {
         close(o->fd);
+        out_forget(o);
         unlink(o->tmp);
     }
     o->fd = -1;
@@ -233,6 +280,7 @@ static bf_status out_failed(bf_out *o)
 
 static bf_status out_rename(bf_out *o)
 {
+    out_forget(o);
     if (rename(o->tmp, o->path) != 0) {
         int e = errno;
         unlink(o->tmp);
@@ -252,12 +300,15 @@ bf_status bf_out_commit_both(bf_out *first, bf_out *second)
     out_finish(first);
     out_finish(second);
     if (first->err || second->err) {
+        out_forget(first);
+        out_forget(second);
         unlink(first->tmp);
         unlink(second->tmp);
         return out_failed(first->err ? first : second);
     }
     bf_status s = out_rename(first);
     if (s != BF_OK) {
+        out_forget(second);
         unlink(second->tmp);
         return s;
     }
@@ -269,6 +320,7 @@ bf_status bf_out_commit(bf_out *o)
     if (o->fd < 0) return bf_fail(BF_WRITE, "%s: the output was not opened", o->path);
     out_finish(o);
     if (o->err) {
+        out_forget(o);
         unlink(o->tmp);
         return out_failed(o);
     }

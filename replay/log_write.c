@@ -32,7 +32,17 @@ struct replay_log_writer {
     replay_log_stats st;
     bool is_finished, is_broken;
     bool is_opened; /* disk_path is ours: created by this writer */
+    int pending;    /* the .partial's slot among the files a signal removes (bf_pending_add), or -1 */
 };
+
+/* The file on disk goes (a log without a whole frame, an unfinished
+ * .partial): no longer for a signal's handler to remove. */
+static void remove_disk_file(replay_log_writer *w)
+{
+    bf_pending_forget(w->pending);
+    w->pending = -1;
+    remove(w->disk_path);
+}
 
 /* After a failed write: a log that holds no whole frame is no log (it
  * would only fail to open), so it goes; one with frames stays, readable up
@@ -43,7 +53,7 @@ static void break_log(replay_log_writer *w)
     if (w->st.n_frames == 0 && w->fd >= 0) {
         close(w->fd);
         w->fd = -1;
-        remove(w->disk_path);
+        remove_disk_file(w);
     }
 }
 
@@ -96,6 +106,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     replay_log_writer *w = bf_calloc(1, sizeof *w);
     if (!w) return bf_fail(BF_NO_MEMORY, "%s: log writer", path);
     w->fd = -1;
+    w->pending = -1;
     bf_status s = BF_OK;
     w->K = *K;
     w->cfg = *cfg;
@@ -128,6 +139,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
         goto fail;
     }
     w->is_opened = true;
+    if (cfg->replace_when_finished) w->pending = bf_pending_add(w->disk_path);
     uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
     memset(hdr, 0, sizeof hdr);
     memcpy(hdr, LOG_MAGIC, LOG_MAGIC_LEN);
@@ -159,7 +171,7 @@ fail:
     if (w->fd >= 0) {
         close(w->fd);
         w->fd = -1;
-        remove(w->disk_path); /* a header that never made it is no log */
+        remove_disk_file(w); /* a header that never made it is no log */
     }
     replay_log_writer_destroy(w);
     return s;
@@ -268,15 +280,17 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
     w->fd = -1;
     if (bad) {
         bf_status s = bf_fail(BF_WRITE, "%s: cannot finish the log: %s", w->path, strerror(err));
-        if (w->st.n_frames == 0 || w->cfg.replace_when_finished) remove(w->disk_path);
+        if (w->st.n_frames == 0 || w->cfg.replace_when_finished) remove_disk_file(w);
         w->is_broken = true;
         return s;
     }
     if (w->cfg.replace_when_finished) {
+        bf_pending_forget(w->pending);
+        w->pending = -1;
         if (rename(w->disk_path, w->path) != 0) {
             bf_status s = bf_fail(BF_WRITE, "%s: cannot put the finished log in place (from %s): %s", w->path,
                                   w->disk_path, strerror(errno));
-            remove(w->disk_path);
+            remove_disk_file(w);
             w->is_broken = true;
             return s;
         }
@@ -296,7 +310,7 @@ void replay_log_writer_destroy(replay_log_writer *w)
     if (!w) return;
     if (w->fd >= 0) close(w->fd);
     /* A conversion that did not finish is no result: what was at path stays. */
-    if (!w->is_finished && w->cfg.replace_when_finished && w->is_opened) remove(w->disk_path);
+    if (!w->is_finished && w->cfg.replace_when_finished && w->is_opened) remove_disk_file(w);
     ZSTD_freeCCtx(w->zc);
     free(w->swapped);
     free(w->depth_buf);

@@ -623,14 +623,15 @@ awk '!/^#/ { n++; if (n == 46) $2 = "gate/d.png" } { print }' "$T/long/depth.txt
 gate_png=$T/seq/$(awk '!/^#/ {print $2; exit}' "$T/seq/depth.txt")
 # interrupt_at_gate CMD...: CMD in the background (stdout $T/out, stderr
 # $T/err), SIGINT once it reads the gate, then the gate's image; rc its exit.
+# With TWICE=1: a second SIGINT once the first was taken, and no image.
 interrupt_at_gate() {
     rm -f "$T/gated/gate/d.png"
     mkfifo "$T/gated/gate/d.png"
     "$@" >"$T/out" 2>"$T/err" &
     local pid=$!
-    python3 - "$T/gated/gate/d.png" "$pid" "$gate_png" <<'PY' || { kill -9 $pid 2>/dev/null; fail "gate: $(tail -c 300 "$T/err")"; }
+    python3 - "$T/gated/gate/d.png" "$pid" "$gate_png" "${TWICE:-0}" <<'PY' || { kill -9 $pid 2>/dev/null; fail "gate: $(tail -c 300 "$T/err")"; }
 import errno, os, signal, sys, time
-gate, pid, png = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+gate, pid, png, twice = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4] == "1"
 deadline = time.time() + 300
 while True:  # a writer's open without blocking succeeds once a reader has the pipe open
     try:
@@ -649,6 +650,15 @@ while True:  # a writer's open without blocking succeeds once a reader has the p
         sys.exit("the command did not read the gate in 300 s")
     time.sleep(0.01)
 os.kill(pid, signal.SIGINT)
+if twice:  # signals do not queue: the second after the first left the pending sets
+    def pending():
+        st = dict(l.split(":", 1) for l in open("/proc/%d/status" % pid) if ":" in l)
+        return any(int(st[k], 16) & (1 << (signal.SIGINT - 1)) for k in ("SigPnd", "ShdPnd"))
+    while pending() and time.time() < deadline:
+        time.sleep(0.01)
+    os.kill(pid, signal.SIGINT)
+    os.close(fd)
+    sys.exit(0)
 os.set_blocking(fd, True)
 os.write(fd, open(png, "rb").read())
 os.close(fd)
@@ -675,6 +685,17 @@ interrupt_at_gate "$B" replay "$T/gated" --no-mesh --out "$T/rint" --store "$T/r
 interrupted replay "$T/rint/stats.json"
 [ -s "$T/rint/trajectory.txt" ] && [ -s "$T/rint/points.ply" ] || fail "interrupted replay: outputs missing"
 expect 0 "$B" info "$T/rintS"
+# A second Ctrl-C ends the program there and then (killed by SIGINT, as the
+# default action), and removes the temporary files it had open: replay's
+# frames.csv being written, convert's .partial.
+TWICE=1 interrupt_at_gate "$B" replay "$T/gated" --no-mesh --out "$T/rint2"
+[ $rc = 130 ] || fail "replay after two SIGINTs: exit $rc, expected 130 (killed by SIGINT) ($(tail -c 300 "$T/err"))"
+[ -d "$T/rint2" ] || fail "replay after two SIGINTs: no output folder (the test's premise)"
+left=$(ls -A "$T/rint2")
+[ -z "$left" ] || fail "replay after two SIGINTs left: $left"
+TWICE=1 interrupt_at_gate "$B" convert "$T/gated" --out "$T/cint2.bflog"
+[ $rc = 130 ] || fail "convert after two SIGINTs: exit $rc, expected 130 ($(tail -c 300 "$T/err"))"
+[ ! -e "$T/cint2.bflog.partial" ] && [ ! -e "$T/cint2.bflog" ] || fail "convert after two SIGINTs left $(ls "$T"/cint2*)"
 # fuse too: the frames fused before the signal are written.
 python3 -c "
 for i in range(90): print('%.6f 0 0 0 0 0 0 1' % (1000 + i / 30.0))" >"$T/long_poses.txt"

@@ -317,6 +317,51 @@ BF_TEST(output_file_is_whole_or_absent)
     free(ref);
 }
 
+/* The files a fatal signal's handler removes (bf_pending_*): an open
+ * bf_out's temporary file is one until commit or abort, the committed file
+ * never is; with every slot taken a file is simply not registered; the
+ * slots come back when forgotten. */
+BF_TEST(pending_files_are_the_open_temporaries)
+{
+    char dir[512], a[600], b[600], extra[600];
+    CHECK_OK(bf_path_join(dir, sizeof dir, bf_test_tmpdir(), "pending"));
+    CHECK_OK(bf_mkdir_p(dir));
+    CHECK_OK(bf_path_join(a, sizeof a, dir, "a.txt"));
+    CHECK_OK(bf_path_join(b, sizeof b, dir, "b.txt"));
+    bf_out oa, ob;
+    CHECK_OK(bf_out_open(&oa, a));
+    bf_out_printf(&oa, "committed\n");
+    CHECK_OK(bf_out_commit(&oa));
+    CHECK_OK(bf_out_open(&ob, b));
+    CHECK(ob.pending >= 0);
+    bf_out_printf(&ob, "half");
+    bf_out_flush(&ob);
+    CHECK_EQ_INT(count_tmp_files(dir), 1);
+    bf_pending_remove_all(); /* what the signal handler does */
+    CHECK_EQ_INT(count_tmp_files(dir), 0);
+    CHECK(bf_file_exists(a)); /* committed: not a pending file */
+    bf_out_abort(&ob);        /* the file already gone: no harm */
+    CHECK(!bf_file_exists(b));
+    /* Every slot taken: the next file is not registered, nothing breaks. */
+    int slots[BF_PENDING_MAX];
+    for (int i = 0; i < BF_PENDING_MAX; i++) {
+        snprintf(extra, sizeof extra, "%s/none-%d", dir, i);
+        slots[i] = bf_pending_add(extra);
+        CHECK(slots[i] >= 0);
+    }
+    CHECK_OK(bf_out_open(&ob, b));
+    CHECK_EQ_INT(ob.pending, -1);
+    bf_out_printf(&ob, "kept");
+    CHECK_OK(bf_out_commit(&ob));
+    for (int i = 0; i < BF_PENDING_MAX; i++) bf_pending_forget(slots[i]);
+    bf_pending_forget(-1);
+    int again = bf_pending_add(extra);
+    CHECK(again >= 0);
+    bf_pending_forget(again);
+    bf_pending_remove_all(); /* nothing registered: removes nothing */
+    CHECK(bf_file_exists(a) && bf_file_exists(b));
+}
+
 /* A write to a symbolic link goes to the file it names, which it replaces
  * (a rename onto the link replaced the link and left the target stale);
  * a link to a file not there yet makes that file, relative to the link. */
