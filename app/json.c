@@ -121,6 +121,7 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     add_float(o, "band_sigmas", c->band_sigmas);
     cJSON_AddNumberToObject(o, "integrate_vpt", c->integrate_vpt);
     cJSON_AddNumberToObject(o, "integrate_bpg", c->integrate_bpg);
+    cJSON_AddNumberToObject(o, "max_groups_x", c->max_groups_x);
     cJSON_AddBoolToObject(o, "keep_colour", c->keep_colour);
     cJSON_AddNumberToObject(o, "colour_frames", c->colour_frames);
     cJSON_AddNumberToObject(o, "colour_unit_cap", c->colour_unit_cap);

@@ -72,6 +72,7 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
         .sigma_b = m->cfg.sensor.sigma_b,
         .sigma_c = m->cfg.sensor.sigma_c,
         .voxel_sigmas = m->cfg.voxel_sigmas,
+        .max_groups_x = fusion__max_groups_x(m),
     };
     uint32_t lock_groups = gpu_groups(m->cfg.hash_buckets, 64);
     /* Empty retry queues and the frame's new-brick list; clear the locks. */

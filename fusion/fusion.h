@@ -47,6 +47,10 @@ typedef struct fusion_config {
        tests; every choice gives the same bits. 0: chosen by device type (the default). */
     uint32_t integrate_vpt; /* voxels per invocation, a power of two up to 64 */
     uint32_t integrate_bpg; /* list entries (bricks) per workgroup, 1..1024 */
+    /* Workgroups per row of the grids the GPU sizes itself (the integration's and the
+       allocation retries' indirect dispatches): 0 (default) the device's limit, at most
+       65535 (Mesa allows no more along x); tests set a few to run the rows past the first. */
+    uint32_t max_groups_x;
     /* Colour (DESIGN.md section 3): RGB565 of the confident voxels near the
        surface, addressed by popcount: a mask word per sub-brick, and per brick a
        chain of colour units of 14 colours each (docs/colour.md, "Layout"). */

@@ -171,6 +171,8 @@ bf_status fusion__colour_release(fusion_map *m, fusion__colour_host *h, uint32_t
 
 /* The push constants fusion__cmd_integrate records for a pass (the
  * oracle takes the same block). */
+/* Workgroups per row of an indirect grid: fusion_config.max_groups_x. */
+uint32_t fusion__max_groups_x(const fusion_map *map);
 fusion_integrate_push fusion__integrate_params(const fusion_map *map, uint32_t first, uint32_t max_count,
                                                uint32_t frame_first, uint32_t n_frames, bool set_confidence);
 

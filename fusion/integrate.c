@@ -99,10 +99,16 @@ void fusion__integrate_destroy(fusion_map *m)
     m->p_integrate_args = m->p_integrate = NULL;
 }
 
+uint32_t fusion__max_groups_x(const fusion_map *m)
+{
+    uint32_t max_x = gpu_device_limits(m->ctx)->max_compute_workgroup_count[0];
+    if (max_x > 65535u) max_x = 65535u;
+    return m->cfg.max_groups_x && m->cfg.max_groups_x < max_x ? m->cfg.max_groups_x : max_x;
+}
+
 fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t first, uint32_t max_count,
                                                uint32_t frame_first, uint32_t n_frames, bool set_confidence)
 {
-    uint32_t max_x = gpu_device_limits(m->ctx)->max_compute_workgroup_count[0];
     fusion_integrate_push pc = {
         .first = first,
         .max_count = max_count,
@@ -111,7 +117,7 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         .ring_slots = m->ring_slots,
         .depth_words = (uint32_t)(((uint64_t)m->K.width * m->K.height + 1) / 2),
         .set_confidence = set_confidence ? 1u : 0u,
-        .max_groups_x = max_x < 65535u ? max_x : 65535u,
+        .max_groups_x = fusion__max_groups_x(m),
         .chunk_m = m->cfg.chunk_m,
         /* A window shorter than the threshold (a sequence of fewer frames)
          * can still make a voxel confident: seen in every one of its frames. */

@@ -172,10 +172,11 @@ struct fusion_alloc_push {
     bf_f32 max_depth_m;
     bf_f32 sigma_a, sigma_b, sigma_c;
     bf_f32 voxel_sigmas;  /* the level rule's voxel is at least this many sigma(z) (0: the footprint alone) */
+    bf_u32 max_groups_x;  /* args pass: workgroups per row of the retry pass's grid */
 };
 #ifndef BF_GLSL
 typedef struct fusion_alloc_push fusion_alloc_push;
-_Static_assert(sizeof(fusion_alloc_push) == 64, "fusion_alloc_push must match std430");
+_Static_assert(sizeof(fusion_alloc_push) == 68, "fusion_alloc_push must match std430");
 #endif
 
 /* Push constants of fusion_window_list.comp. */

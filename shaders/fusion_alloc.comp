@@ -304,7 +304,7 @@ void main()
     load_camera(fr);
     if (pc.pass > 0u) {
         uint q = (pc.pass - 1u) % 2u;
-        uint i = gl_GlobalInvocationID.x;
+        uint i = BF_LINEAR_INDEX;
         if (i >= min(queue.w[4u * q], pc.queue_cap)) return;
         uint item = queue.w[FUSION_QUEUE_ENTRIES + q * pc.queue_cap + i];
         uint pixel = item / 4u, k = item % 4u;

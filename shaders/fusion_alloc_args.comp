@@ -19,8 +19,12 @@ void main()
     if (i != 0u || pc.pass == 0u) return;
     uint q_in = (pc.pass - 1u) % 2u, q_out = pc.pass % 2u;
     uint n = min(queue.w[4u * q_in], pc.queue_cap);
-    queue.w[4u * q_in + 1u] = (n + FUSION_ALLOC_LOCAL - 1u) / FUSION_ALLOC_LOCAL;
-    queue.w[4u * q_in + 2u] = 1u;
+    /* Rows of at most max_groups_x groups (the retry pass reads its place
+     * with BF_LINEAR_INDEX): a depth image over about 1.4 MP queues more than
+     * 65535 groups of points, Mesa's limit along x. */
+    uint groups = (n + FUSION_ALLOC_LOCAL - 1u) / FUSION_ALLOC_LOCAL;
+    queue.w[4u * q_in + 1u] = min(groups, pc.max_groups_x);
+    queue.w[4u * q_in + 2u] = (groups + pc.max_groups_x - 1u) / pc.max_groups_x;
     queue.w[4u * q_in + 3u] = 1u;
     queue.w[4u * q_out] = 0u;
 }

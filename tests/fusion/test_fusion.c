@@ -25,9 +25,13 @@ static bf_frame make_frame(const bf_intrinsics *K, const uint16_t *depth, uint32
     return f;
 }
 
+/* fusion_config.max_groups_x of the maps made next (0: the device's). */
+static uint32_t s_max_groups_x;
+
 static fusion_config small_config(void)
 {
     fusion_config c = fusion_config_default();
+    c.max_groups_x = s_max_groups_x;
     c.brick_cap = 1u << 15;
     c.hash_buckets = 64;
     c.hash_overflow = 64;
@@ -207,6 +211,20 @@ BF_TEST(plane_allocates_exactly_the_band_bricks)
     /* A width whose tiles do not fill the last workgroup. */
     bf_intrinsics K = {164, 118, 130.0, 130.0, 81.5, 58.5, 5000};
     check_plane_allocation(&K, bf_v3(0, 0, 0), bf_se3_identity(), 0.8);
+}
+
+/* The allocation's retry passes size their own grid on the GPU, in rows of
+ * at most max_groups_x groups (65535 on Mesa's drivers: a depth image over
+ * about 1.4 MP queues more). Rows of one, two and three groups place every
+ * queued point once: exactly the oracle's bricks, as in one row. */
+BF_TEST(allocation_retries_in_many_rows_give_the_band_bricks)
+{
+    static const uint32_t rows_of[] = {1, 2, 3};
+    for (size_t k = 0; k < sizeof rows_of / sizeof rows_of[0] && !bf__test_failed_now; k++) {
+        s_max_groups_x = rows_of[k];
+        check_plane_allocation(&K_TEST, bf_v3(0, 0, 0), bf_se3_identity(), 1.3);
+    }
+    s_max_groups_x = 0;
 }
 
 BF_TEST(noise_sized_voxels_put_a_far_plane_on_a_coarser_level)

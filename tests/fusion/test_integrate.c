@@ -324,8 +324,9 @@ static bf_intrinsics test_K(void)
         CHECK_STATUS(_st, BF_OK);                                                    \
     } while (0)
 
-/* fusion_config.integrate_vpt of the scenes opened next (0: by device). */
-static uint32_t s_integrate_vpt;
+/* fusion_config.integrate_vpt and max_groups_x of the scenes opened next
+ * (0: by device). */
+static uint32_t s_integrate_vpt, s_max_groups_x;
 
 static bf_status scene_open(scene *s)
 {
@@ -344,6 +345,7 @@ static bf_status scene_open(scene *s)
     cfg.hash_overflow = 64;
     cfg.sensor.sigma_a = 0.008f; /* a sigma band of about a voxel, so ramps matter */
     cfg.integrate_vpt = s_integrate_vpt;
+    cfg.max_groups_x = s_max_groups_x;
     bf_intrinsics K = test_K();
     st = fusion_create(s->ctx, &cfg, &K, bf_v3(0, 0, 0), &s->map);
     if (st != BF_OK) return st;
@@ -539,6 +541,20 @@ BF_TEST(gpu_equals_cpu_at_every_workgroup_size)
         fprintf(stderr, "  %u voxels per invocation\n", vpt[k]);
         run_surface_case(surf_sphere, 4, 0.05);
         s_integrate_vpt = 0;
+        if (bf__test_failed_now) return;
+    }
+}
+
+/* The kernel's indirect grid in rows of one and of three groups (a list
+ * past 65535 groups runs so on Mesa): the same bits. */
+BF_TEST(gpu_equals_cpu_with_the_grid_in_rows)
+{
+    static const uint32_t rows_of[] = {1, 3};
+    for (size_t k = 0; k < sizeof rows_of / sizeof rows_of[0]; k++) {
+        s_max_groups_x = rows_of[k];
+        fprintf(stderr, "  rows of %u groups\n", rows_of[k]);
+        run_surface_case(surf_sphere, 4, 0.05);
+        s_max_groups_x = 0;
         if (bf__test_failed_now) return;
     }
 }
