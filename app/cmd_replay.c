@@ -897,6 +897,17 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     }
 }
 
+/* rmdir takes only empty folders, so whatever was written stays: the
+ * store's chunks/, the store if this run made it, then --out if the store
+ * was made inside an --out this run made. */
+static void remove_unwritten_store(const char *store, bool made_store, bool had_out, const char *out)
+{
+    char chunks[4200];
+    if (snprintf(chunks, sizeof chunks, "%s/chunks", store) < (int)sizeof chunks && rmdir(chunks) == 0 &&
+        made_store && rmdir(store) == 0 && !had_out)
+        (void)rmdir(out);
+}
+
 int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
 {
     replay_args a;
@@ -1101,15 +1112,14 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     app_expect_free(&a.expect);
     mesh_free(&a.ref);
     mesh_free(&a.vis);
+    /* A run that failed or was stopped before its new store got a write (a
+     * corrupt first frame, a failure at start-up) leaves no empty store
+     * behind: a bare chunks/ reads as a store, and the next run would be
+     * refused ("already holds a scene store: resume it"). */
+    if ((s != BF_OK || stopped_empty) && a.store && !a.resume) remove_unwritten_store(a.store, made_store, had_out, a.out);
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (stopped_empty) {
-        /* A new store that never got a write leaves no empty chunks/ behind
-         * (it would read as a store: a new run would be refused). */
-        char chunks[4200];
-        if (a.store && !a.resume && snprintf(chunks, sizeof chunks, "%s/chunks", a.store) < (int)sizeof chunks &&
-            rmdir(chunks) == 0 && made_store && rmdir(a.store) == 0 && !had_out)
-            (void)rmdir(a.out); /* only if nothing else went into it */
         printf("bitfuse %s: stopped before any frame with depth: no trajectory or map written\n", cmd);
         return APP_EXIT_OK;
     }

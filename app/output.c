@@ -18,6 +18,7 @@
 uint32_t app_mesh_level(const hostmap *snap)
 {
     uint32_t per_level[32] = {0};
+    if (!snap->n_bricks) return 0; /* no brick: not level 31 */
     for (uint32_t i = 0; i < snap->n_bricks; i++) per_level[snap->bricks[i].level & 31]++;
     uint64_t at_or_above = 0;
     for (int l = 31; l >= 0; l--) {

@@ -490,6 +490,11 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
     store_entry *idx = NULL;
     uint32_t n_idx = 0;
     geometry geo = {0};
+    char found[4200];
+    rep.index_found = snprintf(found, sizeof found, "%s/%s", dir, STORE_INDEX_NAME) < (int)sizeof found &&
+                      bf_file_exists(found);
+    rep.trajectory_found = snprintf(found, sizeof found, "%s/%s", dir, STORE_TRAJ_NAME) < (int)sizeof found &&
+                           bf_file_exists(found);
     bf_status s = store__index_read(dir, &m, &idx, &n_idx, &rep.flush);
     if (s == BF_UNSUPPORTED) return s;
     if (s == BF_OK) {

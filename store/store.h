@@ -49,6 +49,8 @@ typedef struct store_report {
     uint32_t n_unindexed;   /* valid chunk files the index does not list (written after it) */
     bool index_ok;          /* store.json read and consistent */
     bool trajectory_ok;     /* trajectory.bin read and its checksum right */
+    bool index_found;       /* store.json is there, read or not (written whole, after the chunks) */
+    bool trajectory_found;  /* trajectory.bin is there, read or not */
     uint64_t bytes_files;   /* bytes of the chunk files loaded */
     uint64_t bytes_raw;     /* their payloads uncompressed */
     uint32_t flush;         /* the index's write count (0 without one) */

@@ -102,6 +102,49 @@ expect 0 "$B" export "$T/C" --out "$T/c2.ply" --json
 mentions "the index lists were not loaded (a file missing or bad): left out"
 py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['chunks_missing'] == 2 and d['chunk_files_left_out'] == 1, d" \
     "$T/out" || fail "export: a missing chunk file not counted"
+# Resuming such a store is refused, naming the bad file, and no chunk
+# file is touched: the resumed scan's first write would have replaced or
+# removed every chunk the index lists that did not load.
+before=$(cd "$T/C/chunks" && md5sum * | md5sum)
+expect 3 "$B" replay "$SEQ" --out "$T/cres" --no-mesh --store "$T/C" --resume
+mentions "resuming would replace or remove them"
+mentions "$f"
+[ "$(cd "$T/C/chunks" && md5sum * | md5sum)" = "$before" ] || fail "a refused resume changed the chunk files"
+# store.json has no checksum: one wrong level makes every chunk file
+# inconsistent with it. Resume is refused with every file kept; export
+# says there is nothing to export instead of writing an empty mesh.
+cp -r "$T/S" "$T/M"
+py - "$T/M/store.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["max_level"] = 2
+json.dump(d, open(sys.argv[1], "w"))
+PY
+before=$(cd "$T/M/chunks" && md5sum * | md5sum)
+expect 3 "$B" replay "$SEQ" --out "$T/mres" --no-mesh --store "$T/M" --resume
+mentions "resuming would replace or remove them"
+[ "$(cd "$T/M/chunks" && md5sum * | md5sum)" = "$before" ] || fail "a refused resume over a wrong index changed the chunk files"
+expect 3 "$B" export "$T/M" --out "$T/mlevel.ply"
+mentions "no chunk could be loaded"
+[ -e "$T/mlevel.ply" ] && fail "export of a store with no loadable chunk wrote a file"
+# Index and trajectory both damaged: a store that was written (not one
+# killed before its first write, which starts anew), so not cleared.
+cp -r "$T/S" "$T/D"
+head -c 40 "$T/S/store.json" >"$T/D/store.json"
+printf 'X' | dd of="$T/D/trajectory.bin" bs=1 seek=40 conv=notrunc 2>/dev/null
+before=$(cd "$T/D" && find . -type f | sort | xargs md5sum | md5sum)
+expect 3 "$B" replay "$SEQ" --out "$T/dres" --no-mesh --store "$T/D" --resume
+mentions "no last pose to resume from"
+[ "$(cd "$T/D" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a store with a damaged index and trajectory was changed"
+# A new store whose scan fails before its first write (a corrupt first
+# frame) is not left behind as an empty store the next run would refuse.
+cp -r "$SEQ" "$T/badfirst"
+first=$(awk '!/^#/ {print $2; exit}' "$T/badfirst/depth.txt")
+rm "$T/badfirst/$first" && echo "not a png" >"$T/badfirst/$first"
+expect 3 "$B" replay "$T/badfirst" --out "$T/bf" --no-mesh --store "$T/bf/store"
+[ -e "$T/bf" ] && fail "a failed scan left its new output folder and store: $(find "$T/bf")"
+expect 0 "$B" replay "$SEQ" --out "$T/bf" --no-mesh --frames 5 --store "$T/bf/store"
+
 # Not over the store it reads; not from a folder that only looks like one.
 expect 2 "$B" export "$T/C" --out "$T/C/store.json" --format ply
 mentions "which is being read"
