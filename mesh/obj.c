@@ -1,7 +1,8 @@
 /* Wavefront OBJ and its material file (MTL), as MeshLab, Blender and Open3D
  * read them. Colour per vertex is the common "v x y z r g b" extension
  * (MeshLab's and Blender's importers read it); the material is a plain
- * white matte one, so the vertex colours show as they are. */
+ * white matte one, so the vertex colours show as they are. A point cloud is
+ * its v lines and p elements naming them, no material. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -103,7 +104,20 @@ bf_status mesh_write_obj(const char *path, const mesh_data *m)
         *p++ = '\n';
         bf_out_write(&o, line, (size_t)(p - line));
     }
-    if (!is_mesh) return bf_out_commit(&o);
+    if (!is_mesh) {
+        /* A point cloud's vertices as point elements: readers that build
+         * geometry from elements (assimp, Blender's importer, tinyobjloader)
+         * drop vertices no element uses, and read a file of bare v lines
+         * as empty. 16 points a line. */
+        for (uint32_t i = 0; i < m->n_verts; i += 16) {
+            char *p = line;
+            *p++ = 'p';
+            for (uint32_t k = i; k < m->n_verts && k < i + 16; k++) *p++ = ' ', p = obj_u32(p, k + 1);
+            *p++ = '\n';
+            bf_out_write(&o, line, (size_t)(p - line));
+        }
+        return bf_out_commit(&o);
+    }
     /* The material with the mesh: both written and synced before either is
      * renamed, so a failure leaves the earlier pair as it was (a failed OBJ
      * replaced the .mtl, or left one behind). */

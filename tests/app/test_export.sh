@@ -97,6 +97,9 @@ expect 0 "$B" export "$T/S" --out "$T/p.glb" --points
 validate "$T/p.glb"
 expect 0 "$B" export "$T/S" --out "$T/p.obj" --points
 grep -q "^f " "$T/p.obj" && fail "a point cloud OBJ has faces"
+# Point elements name every vertex once (assimp and Blender read no vertex without an element).
+[ "$(awk '/^p /{n += NF - 1} END {print n + 0}' "$T/p.obj")" = "$(grep -c '^v ' "$T/p.obj")" ] ||
+    fail "p.obj: its p elements do not name every vertex"
 
 # Refusals: nothing written, the message says why.
 expect 2 "$B" export "$T/S" --out "$T/x.stl"

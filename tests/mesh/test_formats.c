@@ -73,7 +73,7 @@ BF_TEST(ply_round_trip_keeps_positions_normals_colours_and_origin)
 /* ------------------------------------------------------------ OBJ */
 
 typedef struct obj_read {
-    uint32_t n_v, n_vn, n_f;
+    uint32_t n_v, n_vn, n_f, n_p; /* n_p: the vertices p elements name, each in order */
     float *v;    /* 6 per vertex: x y z r g b (colour -1 when absent) */
     float *vn;   /* 3 per normal */
     uint32_t *f; /* 6 per face: v, vn of each corner (1-based, vn 0 when absent) */
@@ -82,7 +82,7 @@ typedef struct obj_read {
     double origin[3];
 } obj_read;
 
-/* A reader for exactly what mesh_write_obj writes (v, vn, f a//a, mtllib,
+/* A reader for exactly what mesh_write_obj writes (v, vn, f a//a, p, mtllib,
  * usemtl, comments), kept apart from the writer so the two check each
  * other. */
 static bool obj_parse(const char *path, obj_read *o)
@@ -111,6 +111,15 @@ static bool obj_parse(const char *path, obj_read *o)
             memset(f, 0, 6 * sizeof *f);
             if (sscanf(l + 2, "%u//%u %u//%u %u//%u", &f[0], &f[1], &f[2], &f[3], &f[4], &f[5]) != 6)
                 ok = sscanf(l + 2, "%u %u %u", &f[0], &f[2], &f[4]) == 3;
+        } else if (!strncmp(l, "p ", 2)) {
+            /* Point elements: every index the next vertex in order. */
+            for (char *q = l + 1; ok && *q;) {
+                char *end;
+                unsigned long k = strtoul(q, &end, 10);
+                if (end == q) break;
+                ok = k == o->n_p + 1;
+                o->n_p++, q = end;
+            }
         } else if (!strncmp(l, "mtllib ", 7)) {
             snprintf(o->mtllib, sizeof o->mtllib, "%s", l + 7);
         } else if (!strncmp(l, "# origin_w ", 11)) {
@@ -156,7 +165,8 @@ BF_TEST(obj_round_trip_keeps_positions_colours_normals_faces_and_names_its_mater
         }
     obj_free(&o);
 
-    /* A point cloud: vertices only, no material. */
+    /* A point cloud: vertices and the point elements naming each once, no
+     * material. */
     mesh_data p = {.n_verts = m.n_verts, .xyz = m.xyz};
     tmp_path(path, sizeof path, "pts.obj");
     tmp_path(mtl, sizeof mtl, "pts.mtl");
@@ -165,6 +175,7 @@ BF_TEST(obj_round_trip_keeps_positions_colours_normals_faces_and_names_its_mater
     CHECK(obj_parse(path, &o));
     CHECK_EQ_INT(o.n_v, m.n_verts);
     CHECK_EQ_INT(o.n_vn + o.n_f, 0);
+    CHECK_EQ_INT(o.n_p, m.n_verts);
     CHECK(o.v[3] == -1); /* no colour */
     obj_free(&o);
     mesh_free(&m);
