@@ -372,6 +372,10 @@ bf_status app_scene_make_particles(gpu_context *ctx, const app_scene_args *a, co
 /* The map of a scene store, or of DIR/store (BF_FORMAT: neither, or no
  * brick); meta_out and rep_out (each may be NULL) get its meta and what was
  * left out of it (warned about). */
+/* The scene store PATH names: PATH itself, or a run's folder holding it as
+ * PATH/store (replay --out DIR --store DIR/store), written into buf; NULL
+ * when neither is a store. */
+const char *app_store_dir(const char *path, char *buf, size_t cap);
 bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out, store_report *rep_out);
 /* A host map into a GPU map of its own size (hash, nodes, colour units). */
 bf_status app_scene_load_map(gpu_context *ctx, const hostmap *m, const bf_intrinsics *K, fusion_map **out);

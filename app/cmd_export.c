@@ -82,9 +82,9 @@ int cmd_export(int argc, char **argv)
     /* A run's folder holding its store as DIR/store (replay --out DIR --store
      * DIR/store), as render and view take it. */
     char sub[4096];
-    if (!store_exists(dir) && snprintf(sub, sizeof sub, "%s/store", dir) < (int)sizeof sub && store_exists(sub))
-        dir = sub;
-    else if (!store_exists(dir) && bf_file_exists(dir))
+    const char *found = app_store_dir(dir, sub, sizeof sub);
+    if (found) dir = found;
+    else if (bf_file_exists(dir))
         return app_fail(cmd, bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder "
                                                 "holding one as store/", dir));
     /* Not into the store it reads (an --out of STORE/store.json replaced its index). */

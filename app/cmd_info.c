@@ -15,9 +15,10 @@ static const char info_usage[] =
     "depth range (min/median/max, metres), ground truth, skipped frames, and the frames\n"
     "whose depth or colour repeats the frame before byte for byte (a driver that handed\n"
     "on the last image when a new one was late: no new data, and no motion in it).\n"
-    "Of a scene store (replay|live --store): chunks, bricks per level, bytes on disk,\n"
-    "extent, frames, the last pose, the relocalisation keyframes and any damage found\n"
-    "(bad or missing chunk files, an unreadable keyframes.bin).\n";
+    "Of a scene store (replay|live --store; or a folder holding one as STORE/store):\n"
+    "chunks, bricks per level, bytes on disk, extent, frames, the last pose, the\n"
+    "relocalisation keyframes and any damage found (bad or missing chunk files, an\n"
+    "unreadable keyframes.bin).\n";
 
 /* What one pass over the sequence gathers. The depth histogram has one bin
  * per raw value, so the median is exact without keeping any frame. */
@@ -112,6 +113,12 @@ int cmd_info(int argc, char **argv)
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
+    /* A run's folder holding its store as DIR/store (replay --out DIR
+     * --store DIR/store), as export, render and view take it, unless DIR is
+     * itself a sequence (its index files decide). */
+    char sub[4096];
+    const char *store = app_store_dir(path, sub, sizeof sub);
+    if (store && store != path && !replay_is_sequence_dir(path)) path = store;
     if (store_exists(path)) {
         /* A store holds no frames: the sequence options would mean nothing. */
         if (opt.camera || opt.depth_scale > 0 || opt.max_frames || opt.skip_bad_frames)

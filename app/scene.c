@@ -216,18 +216,21 @@ static uint32_t count_chunks(const hostmap *m)
     return n;
 }
 
+const char *app_store_dir(const char *path, char *buf, size_t cap)
+{
+    if (store_exists(path)) return path;
+    if (snprintf(buf, cap, "%s/store", path) < (int)cap && store_exists(buf)) return buf;
+    return NULL;
+}
+
 /* The map of a store (or DIR/store) on the host. */
 bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out, store_report *rep_out)
 {
     char sub[4096];
-    const char *dir = path;
-    if (!store_exists(path)) {
-        snprintf(sub, sizeof sub, "%s/store", path);
-        if (!store_exists(sub))
-            return bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder holding one "
-                                      "as store/", path);
-        dir = sub;
-    }
+    const char *dir = app_store_dir(path, sub, sizeof sub);
+    if (!dir)
+        return bf_fail(BF_FORMAT, "%s: not a scene store (bitfuse replay|live --store), nor a folder holding one "
+                                  "as store/", path);
     memset(m, 0, sizeof *m);
     store_meta meta;
     store_report rep;

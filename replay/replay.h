@@ -158,5 +158,9 @@ void replay_log_writer_destroy(replay_log_writer *w);
 bf_status replay_log_seek(rgbd_source *src, uint32_t pos);
 /* True if path names a log by its extension (".bflog"). */
 bool replay_is_log_path(const char *path);
+/* Whether folder path holds a sequence replay_open recognises by its index
+ * files (TUM's depth.txt or rgb.txt, ICL-NUIM's depth/N.png, a pose-per-frame
+ * folder's frame-000000.depth.png); nothing is read. */
+bool replay_is_sequence_dir(const char *path);
 
 #endif

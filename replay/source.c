@@ -301,6 +301,13 @@ static bool has_file(const char *dir, const char *name)
     return bf_path_join(p, sizeof p, dir, name) == BF_OK && bf_file_exists(p);
 }
 
+bool replay_is_sequence_dir(const char *path)
+{
+    return replay__is_dir(path) && (has_file(path, "depth.txt") || has_file(path, "rgb.txt") ||
+                                    has_file(path, "depth/1.png") || has_file(path, "depth/0.png") ||
+                                    has_file(path, "frame-000000.depth.png"));
+}
+
 bf_status replay_open(const char *path, const replay_options *opt, rgbd_source **out)
 {
     replay_options defaults = {0};

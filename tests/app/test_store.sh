@@ -40,6 +40,15 @@ expect 0 "$B" info "$T/S"
 grep -q "last pose" "$T/out" || fail "info does not print the last pose"
 expect 2 "$B" info "$T/S" --frames 3
 mentions "is a scene store"
+# A run's folder holding its store as DIR/store, as export takes it; a
+# sequence folder holding one is still the sequence.
+mkdir "$T/run" && cp -r "$T/S" "$T/run/store"
+expect 0 "$B" info "$T/run" --json
+json_get "$T/out" "d['kind']" | grep -qx bitfuse-store || fail "info DIR does not read DIR/store: $(head -c 300 "$T/out")"
+cp -r "$SEQ" "$T/seqstore" && cp -r "$T/S" "$T/seqstore/store"
+expect 0 "$B" info "$T/seqstore" --json
+json_get "$T/out" "d['kind']" | grep -qx tum || fail "info of a sequence holding a store/ is not the sequence's"
+rm -rf "$T/run" "$T/seqstore"
 
 # export: a mesh and the points, without the loop.
 expect 0 "$B" export "$T/S" --out "$T/m.ply"
