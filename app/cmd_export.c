@@ -89,6 +89,7 @@ int cmd_export(int argc, char **argv)
                                                 "holding one as store/", dir));
     /* Not into the store it reads (an --out of STORE/store.json replaced its index). */
     if ((rc = app_check_not_inside(cmd, "--out", out, dir, true)) != 0) return rc;
+    if ((rc = app_check_out_folder(cmd, "--out", out)) != 0) return rc;
     double t0 = bf_time_s();
     hostmap m = {0};
     store_meta meta;

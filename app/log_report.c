@@ -139,6 +139,21 @@ int app_check_json_out(const char *cmd, const char *opt, const char *path)
                                 "named by mistake?)", opt, path);
 }
 
+int app_check_out_folder(const char *cmd, const char *opt, const char *path)
+{
+    char dir[4096];
+    const char *slash = path ? strrchr(path, '/') : NULL;
+    if (!slash) return 0; /* the working folder */
+    size_t n = slash == path ? 1 : (size_t)(slash - path);
+    if (n >= sizeof dir) return 0; /* the writer names what is wrong */
+    memcpy(dir, path, n);
+    dir[n] = 0;
+    struct stat st;
+    if (stat(dir, &st) == 0 && S_ISDIR(st.st_mode)) return 0;
+    return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: the folder %s %s", opt, path, dir,
+                                 stat(dir, &st) == 0 ? "is not a folder" : "does not exist"));
+}
+
 int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite)
 {
     struct stat st;

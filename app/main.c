@@ -38,7 +38,9 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: bitfuse COMMAND [options]   (bitfuse COMMAND --help for details)\n"
                "       bitfuse --version\n\ncommands:\n");
-    for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
+    int w = 0;
+    for (size_t i = 0; i < N_COMMANDS; i++) w = (int)strlen(commands[i].name) > w ? (int)strlen(commands[i].name) : w;
+    for (size_t i = 0; i < N_COMMANDS; i++) fprintf(f, "  %-*s %s\n", w + 1, commands[i].name, commands[i].summary);
     fprintf(f, "\nexit codes: 0 ok, 1 failure, 2 usage, 3 bad input, 4 device error (or no display),\n"
                "            5 an output could not be written (disk full, I/O error)\n"
                "environment: BITFUSE_DEVICE (device name), BITFUSE_LOG (debug|info|warn|error|silent),\n"

@@ -169,6 +169,8 @@ bf_status bf_out_open(bf_out *o, const char *path_given)
         return bf_fail(BF_WRITE, "%s: exists and is not a regular file (%s)", path,
                        S_ISDIR(st.st_mode) ? "a folder" : "a device, pipe or socket");
     o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (o->fd < 0 && errno == ENOENT) /* the name of the folder, not of the temporary file */
+        return bf_fail(BF_WRITE, "%s: cannot create: its folder does not exist", path);
     if (o->fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(errno));
     o->pending = bf_pending_add(o->tmp);
     /* The file replaced keeps its permission bits (best effort: the new

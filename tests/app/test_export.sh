@@ -102,6 +102,8 @@ grep -q "^f " "$T/p.obj" && fail "a point cloud OBJ has faces"
     fail "p.obj: its p elements do not name every vertex"
 
 # Refusals: nothing written, the message says why.
+expect 5 "$B" export "$T/S" --out "$T/nofolder/m.ply"
+mentions "the folder $T/nofolder does not exist"
 expect 2 "$B" export "$T/S" --out "$T/x.stl"
 mentions ".ply, .obj, .glb"
 [ -e "$T/x.stl" ] && fail "x.stl written"

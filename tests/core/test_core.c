@@ -312,7 +312,7 @@ BF_TEST(output_file_is_whole_or_absent)
     CHECK(!bf_file_exists(path));
     CHECK_EQ_INT(count_tmp_files(dir), 0);
     CHECK_STATUS(bf_out_open(&o, "/nonexistent/dir/h.bin"), BF_WRITE);
-    CHECK_ERROR_MENTIONS("/nonexistent/dir/h.bin");
+    CHECK_ERROR_MENTIONS("/nonexistent/dir/h.bin: cannot create: its folder does not exist");
     CHECK_STATUS(bf_write_file_atomic("/nonexistent/dir/h.bin", "x", 1), BF_WRITE);
     free(ref);
 }
