@@ -1,6 +1,7 @@
 /* calib: calib.json (docs/formats.md, "Calibration files"), read and
- * written with cJSON. Numbers are printed with 17 significant digits so a
- * calibration read back is the one written, bit for bit. */
+ * written with cJSON. Numbers are printed with the fewest digits (15 to 17)
+ * that read back bit for bit (bf_fmt_double): a calibration read back is the
+ * one written. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -17,9 +18,8 @@
 
 static cJSON *json_exact(double v)
 {
-    char text[40];
-    snprintf(text, sizeof text, "%.17g", v);
-    return cJSON_CreateRaw(text);
+    char text[BF_FMT_DOUBLE_CAP];
+    return cJSON_CreateRaw(bf_fmt_double(text, v));
 }
 
 static cJSON *json_numbers(const double *v, int n)
@@ -170,7 +170,7 @@ static bf_status parse_camera(const char *path, const char *obj, const cJSON *o,
     return BF_OK;
 }
 
-/* R must be a rotation: orthonormal within 1e-6 (17-digit numbers keep
+/* R must be a rotation: orthonormal within 1e-6 (exact numbers keep
  * 1e-15; six printed decimals keep 1e-6) and right-handed. */
 static bool is_rotation(const double R[3][3])
 {

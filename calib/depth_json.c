@@ -36,10 +36,11 @@ bf_status calib_depth_write(const char *path, const calib_depth_correction *c)
     cJSON_AddItemToObject(root, "rms_before", json_float(c->rms_before, "%.6g"));
     cJSON_AddItemToObject(root, "rms_after", json_float(c->rms_after, "%.6g"));
     /* The pixels the pattern lies in: the lens taken out of the frames
-     * (null: none), %.17g so a double reads back as written. */
+     * (null: none), each number as it reads back bit for bit. */
     if (c->is_lens_known && calib_has_distortion(c->lens)) {
         cJSON *l = cJSON_AddArrayToObject(root, "undistorted");
-        for (int i = 0; l && i < CALIB_DIST_N; i++) cJSON_AddItemToArray(l, json_float(c->lens[i], "%.17g"));
+        char text[BF_FMT_DOUBLE_CAP];
+        for (int i = 0; l && i < CALIB_DIST_N; i++) cJSON_AddItemToArray(l, cJSON_CreateRaw(bf_fmt_double(text, c->lens[i])));
     } else if (c->is_lens_known) {
         cJSON_AddNullToObject(root, "undistorted");
     }

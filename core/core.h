@@ -340,6 +340,10 @@ bf_status bf_path_join(char *out, size_t cap, const char *dir, const char *name)
 
 /* Strict number parsing: the whole string must be a finite number. */
 bool bf_parse_double(const char *s, double *out);
+/* v as the fewest significant digits (15 to 17) that read back bit for bit:
+ * 517.3, not 517.29999999999995 (%.17g) or a rounded 15. Returns buf. */
+#define BF_FMT_DOUBLE_CAP 32
+const char *bf_fmt_double(char buf[BF_FMT_DOUBLE_CAP], double v);
 bool bf_parse_u32(const char *s, uint32_t *out);
 
 /* ---------------------------------------------------------------- fault injection */

@@ -421,3 +421,11 @@ bool bf_parse_u32(const char *s, uint32_t *out)
     return true;
 }
 
+const char *bf_fmt_double(char buf[BF_FMT_DOUBLE_CAP], double v)
+{
+    for (int digits = 15; digits <= 17; digits++) {
+        snprintf(buf, BF_FMT_DOUBLE_CAP, "%.*g", digits, v);
+        if (strtod(buf, NULL) == v || v != v) break; /* NaN never compares equal */
+    }
+    return buf;
+}

@@ -162,9 +162,10 @@ bf_status replay_tum_writer_finish(replay_tum_writer *w)
 {
     if (w->is_finished) return BF_OK;
     if (w->n_frames == 0) return bf_fail(BF_INVALID_ARG, "%s: no frames were added", w->dir);
-    char cam[256];
-    int n = snprintf(cam, sizeof cam, "%.17g %.17g %.17g %.17g %.17g\n", w->K.fx_px, w->K.fy_px, w->K.cx_px,
-                     w->K.cy_px, w->K.depth_scale);
+    char cam[256], v[5][BF_FMT_DOUBLE_CAP];
+    int n = snprintf(cam, sizeof cam, "%s %s %s %s %s\n", bf_fmt_double(v[0], w->K.fx_px), bf_fmt_double(v[1], w->K.fy_px),
+                     bf_fmt_double(v[2], w->K.cx_px), bf_fmt_double(v[3], w->K.cy_px),
+                     bf_fmt_double(v[4], w->K.depth_scale));
     text_buf cam_buf = {cam, (size_t)n, sizeof cam};
     bf_status s;
     /* depth.txt last: a reader detects the folder by it. */

@@ -111,13 +111,12 @@ static bf_status write_traj(store_writer *w, const bf_traj *traj)
     return s;
 }
 
-/* A number written with 17 significant digits: it reads back bit for bit
- * (cJSON's own printing settles for 15 when they compare within an epsilon). */
+/* A number that reads back bit for bit (cJSON's own printing settles for 15
+ * digits when they compare within an epsilon). */
 static cJSON *json_exact(double v)
 {
-    char text[40];
-    snprintf(text, sizeof text, "%.17g", v);
-    return cJSON_CreateRaw(text);
+    char text[BF_FMT_DOUBLE_CAP];
+    return cJSON_CreateRaw(bf_fmt_double(text, v));
 }
 
 static cJSON *json_numbers(const double *v, int n)

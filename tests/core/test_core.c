@@ -317,6 +317,30 @@ BF_TEST(output_file_is_whole_or_absent)
     free(ref);
 }
 
+/* bf_fmt_double: what a person wrote comes back as written (517.3, not
+ * 517.29999999999995), and every double reads back bit for bit. */
+BF_TEST(doubles_are_written_short_and_read_back_exactly)
+{
+    char b[BF_FMT_DOUBLE_CAP];
+    CHECK(!strcmp(bf_fmt_double(b, 517.3), "517.3"));
+    CHECK(!strcmp(bf_fmt_double(b, 0.1), "0.1"));
+    CHECK(!strcmp(bf_fmt_double(b, 5000), "5000"));
+    CHECK(!strcmp(bf_fmt_double(b, -0.0), "-0"));
+    CHECK(!strcmp(bf_fmt_double(b, 1.0 / 3.0), "0.3333333333333333"));   /* 16 */
+    CHECK(!strcmp(bf_fmt_double(b, 0.1 + 0.2), "0.30000000000000004")); /* all 17 */
+    uint64_t x = 0x9E3779B97F4A7C15ull;
+    for (int i = 0; i < 100000; i++) {
+        x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+        double v;
+        memcpy(&v, &x, sizeof v);
+        if (!isfinite(v)) continue;
+        bf_fmt_double(b, v);
+        double back = strtod(b, NULL);
+        CHECK(memcmp(&back, &v, sizeof v) == 0);
+        if (bf__test_failed_now) return;
+    }
+}
+
 /* The files a fatal signal's handler removes (bf_pending_*): an open
  * bf_out's temporary file is one until commit or abort, the committed file
  * never is; with every slot taken a file is simply not registered; the
