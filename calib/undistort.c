@@ -82,6 +82,17 @@ bf_status calib_undistort_map_make(const calib_camera *c, calib_undistort_map *o
                 n_outside++;
             }
         }
+    /* A real lens loses the corners at most (a few per cent); one that sends
+     * most of the image outside it (k1 1e300, p1 1e10: a typo) would leave
+     * every frame without depth, blamed on the depth. */
+    if (n_outside > n / 2) {
+        free(src);
+        return bf_fail(BF_INVALID_ARG,
+                       "undistortion: the distortion k1 %g k2 %g p1 %g p2 %g k3 %g sends %.0f%% of the %ux%u image's "
+                       "pixels outside it (not a lens)",
+                       c->dist[0], c->dist[1], c->dist[2], c->dist[3], c->dist[4], 100.0 * n_outside / n, c->width,
+                       c->height);
+    }
     *out = (calib_undistort_map){.width = c->width, .height = c->height, .src = src, .n_outside = n_outside,
                                  .max_shift_px = max_shift};
     return BF_OK;

@@ -27,7 +27,8 @@ const char *bf_status_message(bf_status s)
     return (unsigned)s < BF_STATUS_COUNT ? status_messages[s] : "unknown status";
 }
 
-static _Thread_local char last_error[1024];
+/* Room for two paths of PATH_MAX and the reason after them. */
+static _Thread_local char last_error[10240];
 
 bf_status bf_fail(bf_status s, const char *fmt, ...)
 {

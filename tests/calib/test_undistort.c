@@ -175,7 +175,7 @@ BF_TEST(undistortion_moves_colour_with_depth_and_keeps_holes)
     free(rgb_out);
 }
 
-BF_TEST(undistortion_refuses_a_lens_that_folds_the_image)
+BF_TEST(undistortion_refuses_what_no_lens_does)
 {
     calib_camera c = fr1_small();
     /* r (1 - 0.9 r^2) stops growing at r = 0.61, inside fr1's corners (0.79). */
@@ -185,6 +185,17 @@ BF_TEST(undistortion_refuses_a_lens_that_folds_the_image)
     CHECK_STATUS(calib_undistort_map_make(&c, &m), BF_INVALID_ARG);
     CHECK_ERROR_MENTIONS("folds");
     CHECK_ERROR_MENTIONS("k1 -0.9");
+    CHECK_EQ_INT(m.width, 99u); /* untouched */
+    /* Monotonic, but every pixel sent outside the image (a typo's k1 1e300,
+     * p1 1e10): no frame would keep any depth. */
+    c = fr1_small();
+    c.dist[0] = 1e300;
+    CHECK_STATUS(calib_undistort_map_make(&c, &m), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("outside it (not a lens)");
+    c = fr1_small();
+    c.dist[2] = 1e10;
+    CHECK_STATUS(calib_undistort_map_make(&c, &m), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("outside it (not a lens)");
     CHECK_EQ_INT(m.width, 99u); /* untouched */
     c = fr1_small();
     c.dist[2] = NAN;
