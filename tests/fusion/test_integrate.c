@@ -532,29 +532,20 @@ BF_TEST(gpu_equals_cpu_step_edge) { run_surface_case(surf_step, 4, 0.05); }
 BF_TEST(gpu_equals_cpu_invalid_pixels) { run_surface_case(surf_holes, 4, 0.05); }
 
 /* The kernel's workgroup size (voxels per invocation, 512 / it threads) is
- * a tuning choice: every size gives the same bits. */
-BF_TEST(gpu_equals_cpu_at_every_workgroup_size)
+ * a tuning choice, and its indirect grid goes out in rows of at most
+ * max_groups_x groups (a list past 65535 groups runs so on Mesa): every
+ * shape gives the same bits. */
+BF_TEST(gpu_equals_cpu_at_every_kernel_shape)
 {
-    static const uint32_t vpt[] = {1, 8, 16, 32};
-    for (size_t k = 0; k < sizeof vpt / sizeof vpt[0]; k++) {
-        s_integrate_vpt = vpt[k];
-        fprintf(stderr, "  %u voxels per invocation\n", vpt[k]);
+    static const struct {
+        uint32_t vpt, rows_of;
+    } shapes[] = {{1, 0}, {8, 0}, {16, 0}, {32, 0}, {0, 1}, {0, 3}};
+    for (size_t k = 0; k < sizeof shapes / sizeof shapes[0]; k++) {
+        s_integrate_vpt = shapes[k].vpt, s_max_groups_x = shapes[k].rows_of;
+        fprintf(stderr, "  %u voxels per invocation, rows of %u groups (0: by device)\n", shapes[k].vpt,
+                shapes[k].rows_of);
         run_surface_case(surf_sphere, 4, 0.05);
-        s_integrate_vpt = 0;
-        if (bf__test_failed_now) return;
-    }
-}
-
-/* The kernel's indirect grid in rows of one and of three groups (a list
- * past 65535 groups runs so on Mesa): the same bits. */
-BF_TEST(gpu_equals_cpu_with_the_grid_in_rows)
-{
-    static const uint32_t rows_of[] = {1, 3};
-    for (size_t k = 0; k < sizeof rows_of / sizeof rows_of[0]; k++) {
-        s_max_groups_x = rows_of[k];
-        fprintf(stderr, "  rows of %u groups\n", rows_of[k]);
-        run_surface_case(surf_sphere, 4, 0.05);
-        s_max_groups_x = 0;
+        s_integrate_vpt = 0, s_max_groups_x = 0;
         if (bf__test_failed_now) return;
     }
 }
