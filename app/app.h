@@ -113,6 +113,11 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
 /* What the map rows cannot check alone (the sub-cache within the window):
  * 0 or the usage exit code, the message printed. */
 int app_check_map_options(const char *cmd, const fusion_config *fc);
+/* After a run failed with s: when the map's pools were refused for this
+ * device's storage binding (fusion names its brick_cap / node_cap), a
+ * warning names the option that sized them (opt: "--gpu-budget" or
+ * "--bricks"; NULL: the device chose, nothing to say). */
+void app_pool_hint(const char *cmd, bf_status s, const char *opt);
 
 /* output.c: how a command writes a mesh (export, fuse, replay, live): the
  * file's format and the mesh's detail (docs/export.md). */

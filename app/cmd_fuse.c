@@ -193,6 +193,7 @@ int cmd_fuse(int argc, char **argv)
         rcfg.keep_on_source_error = true;
         rcfg.stop = stop;
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, NULL, NULL, &r.run), src, a.seq);
+        app_pool_hint(cmd, s, "--bricks");
         /* Stopped before any frame was fused (during start-up, or while the
          * first frames were being read): nothing to write, and no failure. */
         if ((s == BF_OK || s == BF_FORMAT) && r.run.is_interrupted && r.run.n_fused == 0)

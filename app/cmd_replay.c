@@ -1017,6 +1017,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         replay_sink sink = {.a = &a, .csv = &csv, .log = log, .r = &r, .win = win,
                             .stop = (volatile sig_atomic_t *)stop};
         s = app_input_status(recon_run_sequence(ctx, src, &rcfg, on_frame, &sink, &r.run), src, a.seq);
+        app_pool_hint(cmd, s, a.auto_budget ? NULL : a.bricks_given ? "--bricks" : "--gpu-budget");
         /* Ctrl-C before any frame with depth came (a live camera still
          * warming up): no trajectory or map to write, and no failure (an
          * output that failed is one). BF_END skips the outputs below and

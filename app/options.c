@@ -386,6 +386,13 @@ void app_sequence_options(app_option rows[APP_SEQUENCE_ROWS], replay_options *o)
     memcpy(rows, r, sizeof r);
 }
 
+void app_pool_hint(const char *cmd, bf_status s, const char *opt)
+{
+    if (s == BF_INVALID_ARG && opt && strstr(bf_last_error(), "storage binding"))
+        bf_warn("%s: %s sizes those pools: give a smaller one (bitfuse devices shows this device's binding limit)",
+                cmd, opt);
+}
+
 /* fusion_create's own bounds (fusion/map.c), checked before a device opens. */
 static const char *check_even(const char *name, const char *v)
 {

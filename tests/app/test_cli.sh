@@ -446,10 +446,29 @@ fi
 expect 3 "$B" replay "$T/tiny" --out "$T/rtiny"
 mentions "tiny: images of 15x15 are too small to track"
 [ -e "$T/rtiny" ] && fail "replay of images too small to track left $T/rtiny"
-# A lens that takes every pixel off the image: fuse writes its outputs and
-# says the map has no surface, exit 3 (a replay finds no frame with depth).
+# A lens that takes every pixel off the image is no lens: refused before
+# any frame (a usage error from --camera; bad input from camera.txt).
+expect 2 "$B" fuse "$T/seq" --poses groundtruth --camera "$fx,$fy,$cx,$cy,1e6,0,0,0,0" --out "$T/fnear" $small
+mentions "pixels outside it (not a lens)"
+[ -e "$T/fnear" ] && fail "fuse with a lens refused left $T/fnear"
+# Frames with one depth sample each (a different pixel in each, so none
+# repeats): fused, but too sparse for any surface. fuse writes its outputs
+# and says the map has no surface, exit 3.
 if [ $SANITIZED = 0 ]; then
-    expect 3 "$B" fuse "$T/seq" --poses groundtruth --camera "$fx,$fy,$cx,$cy,1e6,0,0,0,0" --out "$T/fnear" $small
+    cp -r "$T/seq" "$T/sparse"
+    py - "$T/sparse/depth" <<'PY'
+import os, struct, sys, zlib
+chunk = lambda t, x: struct.pack(">I", len(x)) + t + x + struct.pack(">I", zlib.crc32(t + x) & 0xffffffff)
+for k, name in enumerate(sorted(os.listdir(sys.argv[1]))):
+    p = os.path.join(sys.argv[1], name)
+    w, h = struct.unpack(">II", open(p, "rb").read()[16:24])
+    rows = [bytearray(2 * w) for _ in range(h)]
+    rows[h // 2][2 * (w // 2 + k):2 * (w // 2 + k) + 2] = struct.pack(">H", 10000)  # 2 m at scale 5000
+    raw = b"".join(b"\0" + bytes(r) for r in rows)
+    open(p, "wb").write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0))
+                        + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+PY
+    expect 3 "$B" fuse "$T/sparse" --poses groundtruth --out "$T/fnear" $small
     mentions "the 3 frames fused gave the map no surface voxel"
     py -c "import json,sys; assert json.load(open(sys.argv[1]))['no_surface'] is True" "$T/fnear/stats.json" \
         || fail "fuse with no surface: stats.json does not say no_surface"
@@ -990,5 +1009,16 @@ for c in demo synth replay fuse info record convert live eval-traj eval-surface 
 done
 grep -q -- "--ratio R .*default 2" <("$B" replay --help) || fail "replay --help: no --ratio default 2"
 grep -q -- "--ratio R .*default 1" <("$B" fuse --help) || fail "fuse --help: no --ratio default 1"
+
+# Pools larger than the device binds (lavapipe: 128 MiB a binding) are
+# refused naming the option that sized them, not only fusion's fields.
+"$B" replay "$T/seq" --out "$T/bigpool" --no-mesh --gpu-budget 4096 >"$T/out" 2>"$T/err"
+rc=$?
+if [ $rc = 2 ]; then
+    mentions "--gpu-budget sizes those pools"
+    [ -e "$T/bigpool" ] && fail "a refused pool size left its output folder"
+elif [ $rc != 0 ]; then
+    fail "replay --gpu-budget 4096: exit $rc, expected 2 (the pools refused) or 0 (a device that binds them)"
+fi
 
 finish test_cli.sh
