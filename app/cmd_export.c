@@ -102,9 +102,12 @@ int cmd_export(int argc, char **argv)
     /* Every chunk left out (bad files, or whole ones at odds with a damaged
      * store.json): an empty file and exit 0 would pass for an export; say
      * so, as render does ("holds no brick"), and write nothing. */
-    if (s == BF_OK && m.n_bricks == 0 && (rep.n_bad || rep.n_missing))
+    if (s == BF_OK && m.n_bricks == 0 && rep.n_bad)
         s = bf_fail(BF_FORMAT, "%s: no chunk could be loaded (%u file%s left out, the first: %s): nothing to export",
-                    dir, rep.n_bad, rep.n_bad == 1 ? "" : "s", rep.first_bad[0] ? rep.first_bad : "none");
+                    dir, rep.n_bad, rep.n_bad == 1 ? "" : "s", rep.first_bad);
+    else if (s == BF_OK && m.n_bricks == 0 && rep.n_missing)
+        s = bf_fail(BF_FORMAT, "%s: no chunk could be loaded (the %u chunk file%s the index lists %s gone): nothing to "
+                    "export", dir, rep.n_missing, rep.n_missing == 1 ? "" : "s", rep.n_missing == 1 ? "is" : "are");
     if (s == BF_OK && points) {
         s = export_points(&m, &data, &st);
     } else if (s == BF_OK) {

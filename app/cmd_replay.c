@@ -975,6 +975,9 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     bool made_store = a.store && !bf_file_exists(a.store);
     bool had_out = bf_file_exists(a.out); /* before a store inside it (--store DIR/store) makes it */
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
+    /* Only a store this run made or opened is this run's to tidy (a refused
+     * "already holds a scene store" must not lose that store's chunks/). */
+    bool owns_store = made_store || r.store.writer != NULL;
     /* A map without colour written over one with: its colour gone for good. */
     if (s == BF_OK && r.store.is_resumed && r.store.map.rgb565 && !a.rcfg.fusion.keep_colour)
         s = bf_fail(BF_INVALID_ARG, "%s: the store holds colour, which --colour off would drop for good: resume it "
@@ -1117,7 +1120,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
      * corrupt first frame, a failure at start-up) leaves no empty store
      * behind: a bare chunks/ reads as a store, and the next run would be
      * refused ("already holds a scene store: resume it"). */
-    if ((s != BF_OK || stopped_empty) && a.store && !a.resume) remove_unwritten_store(a.store, made_store, had_out, a.out);
+    if ((s != BF_OK || stopped_empty) && a.store && !a.resume && owns_store) remove_unwritten_store(a.store, made_store, had_out, a.out);
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (stopped_empty) {

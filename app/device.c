@@ -51,6 +51,10 @@ bool app_undistortion(const rgbd_source *src, double dist[CALIB_DIST_N], double 
 
 static rgbd_source *volatile g_stop_src;
 static volatile sig_atomic_t g_stopped;
+/* Stop signals taken since app_stop_begin: g_stopped is also set by
+ * app_stop_request (a closed window, --exit-after, a failed output), which
+ * is no Ctrl-C of the user's. */
+static volatile sig_atomic_t g_signals;
 static struct sigaction g_old_int, g_old_term;
 
 /* Only async-signal-safe calls: unlink, signal, raise. The signal is
@@ -69,7 +73,7 @@ void app_signals_init(void)
     struct sigaction sa = {.sa_handler = on_fatal_signal}, old;
     sigemptyset(&sa.sa_mask);
     /* A signal ignored from the start (nohup, a script's background job)
-     * stays ignored. */
+     * stays ignored (app_stop_begin takes SIGINT and SIGTERM during a scan). */
     static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
     for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++)
         if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler != SIG_IGN) sigaction(sigs[i], &sa, NULL);
@@ -77,10 +81,11 @@ void app_signals_init(void)
 
 static void on_stop_signal(int sig)
 {
-    if (g_stopped) { /* the second: the user means it */
+    if (g_signals) { /* the second: the user means it */
         on_fatal_signal(sig);
         return;
     }
+    g_signals = 1;
     g_stopped = 1;
     capture_threaded_stop(g_stop_src); /* sets an atomic flag: async-signal-safe */
 }
@@ -94,6 +99,10 @@ const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)
     sigemptyset(&sa.sa_mask);
     g_stop_src = src;
     g_stopped = 0;
+    g_signals = 0;
+    /* Also over a SIGINT ignored from the start (a script's background job,
+     * as the tests run it): during a scan Ctrl-C and SIGTERM always stop it,
+     * as they did before app_signals_init. */
     sigaction(SIGINT, &sa, &g_old_int);
     sigaction(SIGTERM, &sa, &g_old_term);
     return &g_stopped;

@@ -21,7 +21,14 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
          * the resumed map lacks: a chunk file that did not load (damaged,
          * or whole but at odds with a damaged store.json) would be lost for
          * good. Refuse, naming it, and let the user decide. */
-        if (s == BF_OK && (st->report.n_bad || st->report.n_missing))
+        /* A listed chunk whose file is gone cannot be lost any more: moving a
+         * bad file aside (what the refusal below advises) must let the scan
+         * resume. Only a store where nothing listed loaded (chunks/ emptied or
+         * not mounted) is refused for missing files alone. */
+        if (s == BF_OK && st->report.n_missing && !st->report.n_bad && st->report.n_chunks)
+            bf_warn("store: %s: %u listed chunk%s gone: the scan resumes without them", dir, st->report.n_missing,
+                    st->report.n_missing == 1 ? " is" : "s are");
+        else if (s == BF_OK && (st->report.n_bad || st->report.n_missing))
             s = bf_fail(BF_FORMAT,
                         "%s: %u chunk file%s could not be loaded and %u listed chunk%s missing (the first: %s): "
                         "resuming would replace or remove them; export what reads (bitfuse export) or move the "

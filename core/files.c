@@ -114,10 +114,12 @@ bf_status bf_link_target(const char *path, char *out, size_t cap)
 }
 
 /* A slot is claimed (FREE -> FILLING) by one thread, filled, then published
- * (READY); the signal handler unlinks READY slots only, so it never reads a
- * path being written. Forgetting marks the slot FREE before the file is
- * renamed or removed: a signal between the two leaves that one file. */
-enum { PENDING_FREE, PENDING_FILLING, PENDING_READY };
+ * (READY); the signal handler takes READY slots (-> REMOVING, never reused,
+ * the program is ending) before it reads their paths, so it never reads a
+ * path being written or refilled. Forgetting moves READY back to FREE
+ * before the file is renamed or removed: a signal between the two leaves
+ * that one file. Writers register a path before creating the file. */
+enum { PENDING_FREE, PENDING_FILLING, PENDING_READY, PENDING_REMOVING };
 static struct {
     atomic_int state;
     char path[4128];
@@ -139,13 +141,25 @@ int bf_pending_add(const char *path)
 
 void bf_pending_forget(int slot)
 {
-    if (slot >= 0 && slot < BF_PENDING_MAX) atomic_store(&g_pending[slot].state, PENDING_FREE);
+    int want = PENDING_READY;
+    if (slot >= 0 && slot < BF_PENDING_MAX)
+        atomic_compare_exchange_strong(&g_pending[slot].state, &want, PENDING_FREE);
 }
 
 void bf_pending_remove_all(void)
 {
-    for (int i = 0; i < BF_PENDING_MAX; i++)
-        if (atomic_load(&g_pending[i].state) == PENDING_READY) unlink(g_pending[i].path);
+    for (int i = 0; i < BF_PENDING_MAX; i++) {
+        int want = PENDING_READY;
+        if (atomic_compare_exchange_strong(&g_pending[i].state, &want, PENDING_REMOVING)) unlink(g_pending[i].path);
+    }
+}
+
+/* The temporary file is about to be renamed or removed: no longer the
+ * signal handler's to remove. */
+static void out_forget(bf_out *o)
+{
+    bf_pending_forget(o->pending);
+    o->pending = -1;
 }
 
 bf_status bf_out_open(bf_out *o, const char *path_given)
@@ -168,11 +182,15 @@ bf_status bf_out_open(bf_out *o, const char *path_given)
     if (exists && !S_ISREG(st.st_mode))
         return bf_fail(BF_WRITE, "%s: exists and is not a regular file (%s)", path,
                        S_ISDIR(st.st_mode) ? "a folder" : "a device, pipe or socket");
+    o->pending = bf_pending_add(o->tmp); /* before the file exists: a signal in between removes nothing */
     o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (o->fd < 0 && errno == ENOENT) /* the name of the folder, not of the temporary file */
-        return bf_fail(BF_WRITE, "%s: cannot create: its folder does not exist", path);
-    if (o->fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(errno));
-    o->pending = bf_pending_add(o->tmp);
+    if (o->fd < 0) {
+        int e = errno;
+        out_forget(o);
+        if (e == ENOENT) /* the name of the folder, not of the temporary file */
+            return bf_fail(BF_WRITE, "%s: cannot create: its folder does not exist", path);
+        return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(e));
+    }
     /* The file replaced keeps its permission bits (best effort: the new
      * file is the writer's, as any file it makes). */
     if (exists) (void)fchmod(o->fd, st.st_mode & 07777);
@@ -240,14 +258,6 @@ void bf_out_printf(bf_out *o, const char *fmt, ...)
     va_end(ap);
     bf_out_write(o, big, (size_t)n);
     free(big);
-}
-
-/* The temporary file is about to be renamed or removed: no longer the
- * signal handler's to remove. */
-static void out_forget(bf_out *o)
-{
-    bf_pending_forget(o->pending);
-    o->pending = -1;
 }
 
 void bf_out_abort(bf_out *o)

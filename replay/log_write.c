@@ -133,13 +133,17 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
         s = bf_fail(BF_INVALID_ARG, "%s: zstd refuses level %d", path, w->cfg.zstd_level);
         goto fail;
     }
+    /* Registered before it exists: a signal in between removes nothing. */
+    if (cfg->replace_when_finished) w->pending = bf_pending_add(w->disk_path);
     w->fd = open(w->disk_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (w->fd < 0) {
-        s = bf_fail(BF_WRITE, "%s: cannot create: %s", w->disk_path, strerror(errno));
+        int e = errno;
+        bf_pending_forget(w->pending);
+        w->pending = -1;
+        s = bf_fail(BF_WRITE, "%s: cannot create: %s", w->disk_path, strerror(e));
         goto fail;
     }
     w->is_opened = true;
-    if (cfg->replace_when_finished) w->pending = bf_pending_add(w->disk_path);
     uint8_t hdr[LOG_HEADER_FIXED + LOG_DEVICE_MAX + 4];
     memset(hdr, 0, sizeof hdr);
     memcpy(hdr, LOG_MAGIC, LOG_MAGIC_LEN);

@@ -151,9 +151,13 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
     if ((size_t)snprintf(tmp, sizeof tmp, "%s.tmp", path) >= sizeof tmp)
         return bf_fail(BF_INVALID_ARG, "%s: path too long", path);
     /* Messages name the file being written, not its temporary name. */
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, tmp, strerror(errno));
     int pending = bf_pending_add(tmp); /* a program killed by a signal removes it */
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) {
+        int e = errno;
+        bf_pending_forget(pending);
+        return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, tmp, strerror(e));
+    }
     bf_status s = write_all(fd, path, a, na);
     if (s == BF_OK && nb) s = write_all(fd, path, b, nb);
     if (s == BF_OK && (bf_fault_now() ? (errno = ENOSPC, 1) : fsync(fd) != 0))

@@ -119,6 +119,11 @@ expect 3 "$B" replay "$SEQ" --out "$T/cres" --no-mesh --store "$T/C" --resume
 mentions "resuming would replace or remove them"
 mentions "$f"
 [ "$(cd "$T/C/chunks" && md5sum * | md5sum)" = "$before" ] || fail "a refused resume changed the chunk files"
+# What the refusal advises: with the bad file moved aside (the index still
+# lists it, and the one removed above), the scan resumes without them.
+cp -r "$T/C" "$T/C2" && mv "$T/C2/chunks/$f" "$T/bad-$f"
+expect 0 "$B" replay "$SEQ" --out "$T/c2res" --no-mesh --store "$T/C2" --resume
+mentions "2 listed chunks are gone: the scan resumes without them"
 # store.json has no checksum: one wrong level makes every chunk file
 # inconsistent with it. Resume is refused with every file kept; export
 # says there is nothing to export instead of writing an empty mesh.
