@@ -3,6 +3,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <errno.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -150,8 +151,11 @@ int app_check_out_folder(const char *cmd, const char *opt, const char *path)
     dir[n] = 0;
     struct stat st;
     if (stat(dir, &st) == 0 && S_ISDIR(st.st_mode)) return 0;
+    int e = errno;
     return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: the folder %s %s", opt, path, dir,
-                                 stat(dir, &st) == 0 ? "is not a folder" : "does not exist"));
+                                 stat(dir, &st) == 0 ? "is not a folder"
+                                 : e == ENOENT       ? "does not exist"
+                                                     : strerror(e)));
 }
 
 int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite)
