@@ -178,11 +178,11 @@ int cmd_convert(int argc, char **argv)
     printf("bitfuse convert: %u frames (%u skipped) from %s to %s (%s)%s\n", n, skipped, a.in, a.out,
            a.to_log ? "bitfuse log" : "TUM folder", interrupted ? " (stopped by a signal; complete up to there)" : "");
     if (a.to_log) {
-        printf("  depth     %.2f MB raw -> %.2f MB (%.2fx)\n", L.depth_raw_bytes / 1e6, L.depth_bytes / 1e6,
+        printf("  depth     %.2f MB raw -> %.2f MB (%.2fx, zstd)\n", L.depth_raw_bytes / 1e6, L.depth_bytes / 1e6,
                app_ratio(L.depth_raw_bytes, L.depth_bytes));
-        if (L.rgb_raw_bytes)
-            printf("  colour    %.2f MB raw -> %.2f MB (%.2fx)\n", L.rgb_raw_bytes / 1e6, L.rgb_bytes / 1e6,
-                   app_ratio(L.rgb_raw_bytes, L.rgb_bytes));
+        if (L.rgb_raw_bytes) /* the codec named, as record names it */
+            printf("  colour    %.2f MB raw -> %.2f MB (%.2fx, %s)\n", L.rgb_raw_bytes / 1e6, L.rgb_bytes / 1e6,
+                   app_ratio(L.rgb_raw_bytes, L.rgb_bytes), app_colour_name(a.lcfg.colour));
         printf("  file      %.2f MB, %.1f MB/s\n", L.file_bytes / 1e6, seconds > 0 ? L.file_bytes / 1e6 / seconds : 0);
     }
     printf("  time      %.2f s, %.1f frames/s; stats in %s\n", seconds, seconds > 0 ? n / seconds : 0.0, json_path);
