@@ -321,12 +321,12 @@ void bf_out_abort(bf_out *o);
  * handler (bf_pending_remove_all), so a second Ctrl-C leaves no half-written
  * file beside the outputs. bf_pending_add copies the path into one of
  * BF_PENDING_MAX slots and returns it, or -1 when all are taken (the file is
- * then not removed on a signal); bf_pending_forget(slot) before the file is
- * renamed or removed (-1: nothing). bf_pending_remove_all unlinks every
+ * then not removed on a signal); bf_pending_forget(&slot) before the file is
+ * renamed or removed sets slot to -1 (-1: nothing). bf_pending_remove_all unlinks every
  * registered path and is async-signal-safe; any thread may add and forget. */
 #define BF_PENDING_MAX 16
 int bf_pending_add(const char *path);
-void bf_pending_forget(int slot);
+void bf_pending_forget(int *slot);
 void bf_pending_remove_all(void);
 /* fsyncs the folder path is in, so a new name in it survives a power loss
  * (the file's own fsync does not make its name durable). A file system

@@ -139,11 +139,12 @@ int bf_pending_add(const char *path)
     return -1;
 }
 
-void bf_pending_forget(int slot)
+void bf_pending_forget(int *slot)
 {
     int want = PENDING_READY;
-    if (slot >= 0 && slot < BF_PENDING_MAX)
-        atomic_compare_exchange_strong(&g_pending[slot].state, &want, PENDING_FREE);
+    if (*slot >= 0 && *slot < BF_PENDING_MAX)
+        atomic_compare_exchange_strong(&g_pending[*slot].state, &want, PENDING_FREE);
+    *slot = -1;
 }
 
 void bf_pending_remove_all(void)
@@ -152,14 +153,6 @@ void bf_pending_remove_all(void)
         int want = PENDING_READY;
         if (atomic_compare_exchange_strong(&g_pending[i].state, &want, PENDING_REMOVING)) unlink(g_pending[i].path);
     }
-}
-
-/* The temporary file is about to be renamed or removed: no longer the
- * signal handler's to remove. */
-static void out_forget(bf_out *o)
-{
-    bf_pending_forget(o->pending);
-    o->pending = -1;
 }
 
 bf_status bf_out_open(bf_out *o, const char *path_given)
@@ -186,7 +179,7 @@ bf_status bf_out_open(bf_out *o, const char *path_given)
     o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (o->fd < 0) {
         int e = errno;
-        out_forget(o);
+        bf_pending_forget(&o->pending);
         if (e == ENOENT) /* the name of the folder, not of the temporary file */
             return bf_fail(BF_WRITE, "%s: cannot create: its folder does not exist", path);
         return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, o->tmp, strerror(e));
@@ -264,7 +257,7 @@ void bf_out_abort(bf_out *o)
 {
     if (o->fd >= 0) {
         close(o->fd);
-        out_forget(o);
+        bf_pending_forget(&o->pending);
         unlink(o->tmp);
     }
     o->fd = -1;
@@ -292,7 +285,7 @@ static bf_status out_failed(bf_out *o)
 
 static bf_status out_rename(bf_out *o)
 {
-    out_forget(o);
+    bf_pending_forget(&o->pending);
     if (rename(o->tmp, o->path) != 0) {
         int e = errno;
         unlink(o->tmp);
@@ -312,15 +305,15 @@ bf_status bf_out_commit_both(bf_out *first, bf_out *second)
     out_finish(first);
     out_finish(second);
     if (first->err || second->err) {
-        out_forget(first);
-        out_forget(second);
+        bf_pending_forget(&first->pending);
+        bf_pending_forget(&second->pending);
         unlink(first->tmp);
         unlink(second->tmp);
         return out_failed(first->err ? first : second);
     }
     bf_status s = out_rename(first);
     if (s != BF_OK) {
-        out_forget(second);
+        bf_pending_forget(&second->pending);
         unlink(second->tmp);
         return s;
     }
@@ -332,7 +325,7 @@ bf_status bf_out_commit(bf_out *o)
     if (o->fd < 0) return bf_fail(BF_WRITE, "%s: the output was not opened", o->path);
     out_finish(o);
     if (o->err) {
-        out_forget(o);
+        bf_pending_forget(&o->pending);
         unlink(o->tmp);
         return out_failed(o);
     }

@@ -39,8 +39,7 @@ struct replay_log_writer {
  * .partial): no longer for a signal's handler to remove. */
 static void remove_disk_file(replay_log_writer *w)
 {
-    bf_pending_forget(w->pending);
-    w->pending = -1;
+    bf_pending_forget(&w->pending);
     remove(w->disk_path);
 }
 
@@ -138,8 +137,7 @@ bf_status replay_log_writer_create(const char *path, const bf_intrinsics *K, con
     w->fd = open(w->disk_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (w->fd < 0) {
         int e = errno;
-        bf_pending_forget(w->pending);
-        w->pending = -1;
+        bf_pending_forget(&w->pending);
         s = bf_fail(BF_WRITE, "%s: cannot create: %s", w->disk_path, strerror(e));
         goto fail;
     }
@@ -289,8 +287,7 @@ bf_status replay_log_writer_finish(replay_log_writer *w)
         return s;
     }
     if (w->cfg.replace_when_finished) {
-        bf_pending_forget(w->pending);
-        w->pending = -1;
+        bf_pending_forget(&w->pending);
         if (rename(w->disk_path, w->path) != 0) {
             bf_status s = bf_fail(BF_WRITE, "%s: cannot put the finished log in place (from %s): %s", w->path,
                                   w->disk_path, strerror(errno));

@@ -155,7 +155,7 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (fd < 0) {
         int e = errno;
-        bf_pending_forget(pending);
+        bf_pending_forget(&pending);
         return bf_fail(BF_WRITE, "%s: cannot create %s: %s", path, tmp, strerror(e));
     }
     bf_status s = write_all(fd, path, a, na);
@@ -163,7 +163,7 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
     if (s == BF_OK && (bf_fault_now() ? (errno = ENOSPC, 1) : fsync(fd) != 0))
         s = bf_fail(BF_WRITE, "%s: fsync failed: %s", path, strerror(errno));
     if (close(fd) != 0 && s == BF_OK) s = bf_fail(BF_WRITE, "%s: close failed: %s", path, strerror(errno));
-    bf_pending_forget(pending);
+    bf_pending_forget(&pending);
     if (s == BF_OK && rename(tmp, path) != 0) s = bf_fail(BF_WRITE, "%s: rename failed: %s", path, strerror(errno));
     if (s != BF_OK) unlink(tmp); /* the earlier version of path, if any, stays whole */
     return s;

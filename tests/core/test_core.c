@@ -365,15 +365,16 @@ BF_TEST(pending_files_are_the_open_temporaries)
     CHECK_EQ_INT(ob.pending, -1);
     bf_out_printf(&ob, "kept");
     CHECK_OK(bf_out_commit(&ob));
-    for (int i = 0; i < BF_PENDING_MAX; i++) bf_pending_forget(slots[i]);
-    bf_pending_forget(-1);
+    for (int i = 0; i < BF_PENDING_MAX; i++) bf_pending_forget(&slots[i]);
+    int none = -1;
+    bf_pending_forget(&none); /* nothing */
     /* A failed open releases the slot it took first. */
     CHECK_STATUS(bf_out_open(&oa, "/nonexistent/dir/p.bin"), BF_WRITE);
     for (int i = 0; i < BF_PENDING_MAX; i++) {
         slots[i] = bf_pending_add(extra);
         CHECK(slots[i] >= 0);
     }
-    for (int i = 0; i < BF_PENDING_MAX; i++) bf_pending_forget(slots[i]);
+    for (int i = 0; i < BF_PENDING_MAX; i++) bf_pending_forget(&slots[i]);
     /* What the signal handler removes. */
     CHECK_OK(bf_out_open(&oa, a));
     bf_out_printf(&oa, "committed\n");
