@@ -254,6 +254,8 @@ bf_status app_store_frame(app_store *st, struct recon_run *run, const bf_frame *
 /* The end of the scan (also after Ctrl-C): the final map, then waits for the writer. */
 bf_status app_store_finish(app_store *st, struct recon_run *run);
 void app_store_json(cJSON *parent, const app_store *st);
+/* The summary's line: where the store is and what it holds after the last write. */
+void app_store_print(const app_store *st);
 void app_store_close(app_store *st);
 
 /* json.c: JSON through cJSON. Objects are built with cJSON's own calls;

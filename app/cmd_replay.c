@@ -886,6 +886,7 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                1e3 * r->surf.accuracy.median, 1e3 * r->surf.accuracy.p90, a->ref_path, 100 * r->surf.completeness,
                r->surf.used_visible ? "seen" : "whole");
     app_print_map(&r->out, a->rcfg.fusion.max_level);
+    app_store_print(&r->store);
     /* After a failed output the list would claim it: the failure instead. */
     if (output_error)
         printf("  not written      %s (the other outputs are written) in %.1f s\n", output_error, r->seconds);

@@ -176,6 +176,7 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
     cJSON_AddNumberToObject(c, "bits_per_allocated_voxel", voxels ? 8.0 * (double)m->bytes_colour / (double)voxels : NAN);
     cJSON_AddNumberToObject(c, "pool_full_events", m->fail_colour);
     cJSON_AddNumberToObject(o, "chunks", m->n_chunks);
+    cJSON_AddNumberToObject(o, "chunks_with_bricks", m->n_chunks_with_bricks);
     cJSON_AddNumberToObject(o, "nodes", m->n_nodes);
     cJSON_AddNumberToObject(o, "bricks", m->n_bricks);
     cJSON *per_level = cJSON_AddArrayToObject(o, "bricks_per_level");
@@ -213,8 +214,15 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
 void app_print_map(const app_map_report *r, uint32_t max_level)
 {
     const fusion_stats *m = &r->map;
-    printf("  map              %u chunks, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
-           m->n_chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
+    /* A chunk emptied of its bricks keeps its hash entry (and its memory); a
+     * store and `info` count only the chunks holding bricks, so say both. */
+    char chunks[64];
+    if (m->n_chunks_with_bricks != m->n_chunks)
+        snprintf(chunks, sizeof chunks, "%u chunks (%u holding bricks)", m->n_chunks, m->n_chunks_with_bricks);
+    else
+        snprintf(chunks, sizeof chunks, "%u chunks", m->n_chunks);
+    printf("  map              %s, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
+           chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
            m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0);
     if (m->bytes_colour)
         printf("  colour           %llu voxels, %u units, %.2f MiB (%.2f bits per allocated voxel)\n",

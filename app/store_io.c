@@ -195,6 +195,15 @@ void app_store_json(cJSON *parent, const app_store *st)
     }
 }
 
+void app_store_print(const app_store *st)
+{
+    if (!st->writer) return;
+    printf("  store            %s: %u chunks, %llu bricks, %.2f MiB on disk, %u writes", st->dir, st->stats.chunks,
+           (unsigned long long)st->stats.bricks, st->stats.bytes_on_disk / 1048576.0, st->stats.writes);
+    if (st->is_resumed) printf(" (resumed after %u frames)", st->meta.frames);
+    printf("\n");
+}
+
 void app_store_close(app_store *st)
 {
     store_writer_close(st->writer);

@@ -26,6 +26,7 @@ SEQ="$T/seq"
 
 # One uninterrupted scan into a store.
 expect 0 "$B" replay "$SEQ" --out "$T/full" --no-mesh --store "$T/S"
+cp "$T/out" "$T/full.out"
 [ -f "$T/S/store.json" ] && [ -f "$T/S/trajectory.bin" ] || fail "the store has no index or trajectory"
 writes=$(json_get "$T/full/stats.json" "d['store']['writes']")
 [ "${writes:-0}" -ge 1 ] || fail "stats.json store.writes is '$writes'"
@@ -36,6 +37,8 @@ bricks=$(json_get "$T/out" "d['bricks']")
 mapb=$(json_get "$T/full/stats.json" "d['bricks']")
 # (each compare also needs its lookups to have found a number: "" = "" is no match)
 [ -n "$bricks" ] && [ "$bricks" = "$mapb" ] || fail "the store holds '$bricks' bricks, the scan's map '$mapb'"
+# The summary names the store and what it holds, as info counts it.
+grep -q "^  store  *$T/S: $chunks chunks, $bricks bricks" "$T/full.out" || fail "replay's summary does not name the store: $(cat "$T/full.out")"
 expect 0 "$B" info "$T/S"
 grep -q "last pose" "$T/out" || fail "info does not print the last pose"
 expect 2 "$B" info "$T/S" --frames 3

@@ -358,6 +358,51 @@ BF_TEST(repeated_frames_allocate_nothing_new_and_stay_consistent)
     gpu_context_destroy(ctx);
 }
 
+/* A wall seen in one frame only, then hidden behind a nearer one (a person
+ * stepping in front of the camera): no window sees it often enough to make a
+ * voxel of it confident, so its bricks go when the window closes. Their chunk
+ * keeps its hash entry (its memory is counted), and the stats say it holds no
+ * brick, as a store would. */
+BF_TEST(a_chunk_emptied_of_bricks_is_counted_apart)
+{
+    gpu_context *ctx;
+    GPU_FIXTURE_OPEN(ctx);
+    fusion_config c = small_config();
+    fusion_map *map;
+    CHECK_OK(fusion_create(ctx, &c, &K_TEST, bf_v3(0, 0, 0), &map));
+    /* Chunks are 2 m: the wall at 3 m is in chunk z 1, the one at 1.2 m in chunk z 0. */
+    uint16_t *far = plane_depth(&K_TEST, 3.0), *near = plane_depth(&K_TEST, 1.2);
+    bf_frame f = make_frame(&K_TEST, far, 0);
+    bf_se3 T = bf_se3_identity();
+    CHECK_OK(fusion_add_frame(map, &f, &T));
+    fusion_stats st0, st1;
+    CHECK_OK(fusion_get_stats(map, &st0));
+    CHECK(st0.n_bricks > 0);
+    CHECK_EQ_INT(st0.n_chunks_with_bricks, st0.n_chunks);
+    f.depth = near;
+    for (uint32_t i = 1; i < 12; i++) {
+        f.index = i;
+        CHECK_OK(fusion_add_frame(map, &f, &T));
+    }
+    CHECK_OK(fusion_flush(map));
+    CHECK_OK(fusion_check(map));
+    CHECK_OK(fusion_get_stats(map, &st1));
+    hostmap snap;
+    CHECK_OK(fusion_snapshot_take(map, &snap));
+    uint32_t in_chunk_1 = 0;
+    for (uint32_t b = 0; b < snap.n_bricks; b++) in_chunk_1 += snap.bricks[b].key[2] == 1;
+    CHECK_EQ_INT(in_chunk_1, 0);
+    CHECK(st1.n_bricks > 0);
+    CHECK(st1.n_chunks_with_bricks < st1.n_chunks);
+    CHECK_EQ_INT(st1.n_chunks - st1.n_chunks_with_bricks, st0.n_chunks);
+    hostmap_free(&snap);
+    free(near);
+    free(far);
+    fusion_destroy(map);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
+}
+
 /* A host copy loaded into a new map (a reopened scene store) is the same
  * map: the same bricks bit for bit at the same world places, reachable by
  * the GPU's lookups (the same frame allocates nothing new there), and a
