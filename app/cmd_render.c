@@ -196,6 +196,10 @@ int cmd_render(int argc, char **argv)
     if (a.depth && !strcmp(a.depth, a.out))
         return app_usage_error(cmd, "--depth %s is --out's file: give each its own", a.depth);
     if ((rc = app_scene_check(cmd, "render", &a.scene)) != 0) return rc;
+    /* Both outputs' folders before the work: a missing --depth folder found
+     * after the image was written would leave half of what was asked. */
+    if ((rc = app_check_out_folder(cmd, "--out", a.out)) != 0) return rc;
+    if (a.depth && (rc = app_check_out_folder(cmd, "--depth", a.depth)) != 0) return rc;
     uint32_t W = 0, H = 0;
     app_parse_size(a.size, &W, &H);
     bf_se3 T_wc;

@@ -272,6 +272,13 @@ expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 1x1 --out "$T/x.png"
 mentions "each 2..8192"
 expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/x.png" --depth "$T/x.png"
 mentions "give each its own"
+# A missing folder for either output is named before anything is drawn:
+# no image is left without the depth asked beside it.
+expect 5 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/y.png" --depth "$T/nofolder/y.png"
+mentions "--depth $T/nofolder/y.png: the folder $T/nofolder does not exist"
+[ -e "$T/y.png" ] && fail "render wrote --out although --depth's folder is missing"
+expect 5 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/nofolder/y.png"
+mentions "the folder $T/nofolder does not exist"
 expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --camera 100,100 --out "$T/x.png"
 mentions "--camera"
 expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/x.jpg"
