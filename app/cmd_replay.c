@@ -932,7 +932,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     app_write_failure wf = {0};  /* outputs that failed: the others are still written */
     bf_status s_loop = BF_OK;    /* the loop failed mid-scan: the work done is still written */
     bool stopped_empty = false;  /* stopped before any frame with depth: no trajectory or map to write */
-    char loop_error[1024] = "";
+    char loop_error[BF_ERROR_CAP] = "";
     bool has_map = true;
     /* The input first: a missing one leaves no empty output folder. */
     bf_status s;

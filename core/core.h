@@ -52,7 +52,10 @@ const char *bf_status_message(bf_status s); /* "input/output error" */
  * reports and fails in one line. The message is also logged at debug level. */
 bf_status bf_fail(bf_status s, const char *fmt, ...)
     __attribute__((format(printf, 2, 3)));
-/* The last message recorded by bf_fail() on this thread ("" if none). */
+/* The last message recorded by bf_fail() on this thread ("" if none), at
+ * most BF_ERROR_CAP - 1 bytes: room for two paths of PATH_MAX and the
+ * reason after them. A copy kept for later wants a buffer this size. */
+#define BF_ERROR_CAP 10240
 const char *bf_last_error(void);
 void bf_clear_error(void);
 

@@ -27,8 +27,7 @@ const char *bf_status_message(bf_status s)
     return (unsigned)s < BF_STATUS_COUNT ? status_messages[s] : "unknown status";
 }
 
-/* Room for two paths of PATH_MAX and the reason after them. */
-static _Thread_local char last_error[10240];
+static _Thread_local char last_error[BF_ERROR_CAP];
 
 bf_status bf_fail(bf_status s, const char *fmt, ...)
 {
@@ -77,15 +76,32 @@ void bf_log(bf_log_level level, const char *fmt, ...)
 {
     static const char *const prefix[] = {"debug: ", "", "warning: ", "error: "};
     if (level < bf_log_get_level() || level >= BF_LOG_SILENT) return;
-    char line[2048];
-    va_list ap;
+    /* One fputs per message so lines from threads do not interleave; a
+     * message longer than the stack's line (a long path, a quoted error)
+     * is formatted again on the heap rather than cut. */
+    char line[2048], *heap = NULL;
+    const char *head = "bitfuse: ";
+    int n_head = snprintf(line, sizeof line, "%s%s", head, prefix[level]);
+    va_list ap, again;
     va_start(ap, fmt);
-    vsnprintf(line, sizeof line, fmt, ap);
+    va_copy(again, ap);
+    int n = vsnprintf(line + n_head, sizeof line - (size_t)n_head - 1, fmt, ap);
     va_end(ap);
-    /* One fputs per message so lines from threads do not interleave. */
-    char out[2100];
-    snprintf(out, sizeof out, "bitfuse: %s%s\n", prefix[level], line);
+    char *out = line;
+    if (n >= 0 && (size_t)(n_head + n) + 2 > sizeof line && (heap = malloc((size_t)(n_head + n) + 2)) != NULL) {
+        memcpy(heap, line, (size_t)n_head);
+        vsnprintf(heap + n_head, (size_t)n + 1, fmt, again);
+        out = heap;
+    } else if (n < 0) {
+        n = 0;
+    } else if ((size_t)(n_head + n) + 2 > sizeof line) {
+        n = (int)(sizeof line - (size_t)n_head - 2); /* no memory: cut */
+    }
+    va_end(again);
+    out[n_head + n] = '\n';
+    out[n_head + n + 1] = '\0';
     fputs(out, stderr);
+    free(heap);
 }
 
 void bf__assert_fail(const char *expr, const char *file, int line)

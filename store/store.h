@@ -54,7 +54,7 @@ typedef struct store_report {
     uint64_t bytes_files;   /* bytes of the chunk files loaded */
     uint64_t bytes_raw;     /* their payloads uncompressed */
     uint32_t flush;         /* the index's write count (0 without one) */
-    char first_bad[512];    /* the first skipped file's message, "" if none */
+    char first_bad[BF_ERROR_CAP]; /* the first skipped file's message, "" if none */
 } store_report;
 
 /* The relocalisation keyframes of a scan (keyframes.bin, recon/reloc.c):

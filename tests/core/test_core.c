@@ -1,5 +1,6 @@
 /* core: SE(3), quaternions, eigen-decomposition, parsing, statistics. */
 #include <dirent.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -458,6 +459,43 @@ BF_TEST(status_table_names_every_code)
     CHECK(!strcmp(bf_status_message(BF_FORMAT), "malformed input"));
     CHECK_STATUS(bf_fail(BF_FORMAT, "%s: line %d: bad", "x.txt", 3), BF_FORMAT);
     CHECK_ERROR_MENTIONS("x.txt: line 3");
+}
+
+/* A message with a long path is kept whole: bf_fail up to BF_ERROR_CAP, and
+ * a log line of any length is written whole, once, ending in a newline. */
+BF_TEST(long_messages_are_kept_whole)
+{
+    static char path[6001];
+    for (size_t i = 0; i < sizeof path - 1; i++) path[i] = (char)('a' + i % 26);
+    path[5999] = 'Z';
+    CHECK_STATUS(bf_fail(BF_IO, "%s: the reason", path), BF_IO);
+    CHECK(strlen(bf_last_error()) == 6000 + strlen(": the reason"));
+    CHECK_ERROR_MENTIONS("Z: the reason");
+    char file[4200];
+    snprintf(file, sizeof file, "%s/log.txt", bf_test_tmpdir());
+    fflush(stderr);
+    int saved = dup(2), fd = open(file, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    CHECK(saved >= 0 && fd >= 0);
+    dup2(fd, 2);
+    close(fd);
+    bf_log_level level = bf_log_get_level();
+    bf_log_set_level(BF_LOG_INFO);
+    bf_warn("%s: the reason", path);
+    bf_warn("short");
+    bf_log_set_level(level);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    FILE *f = fopen(file, "rb");
+    CHECK(f != NULL);
+    static char got[8192];
+    size_t n = f ? fread(got, 1, sizeof got - 1, f) : 0;
+    if (f) fclose(f);
+    got[n] = 0;
+    const char *want_end = "Z: the reason\nbitfuse: warning: short\n";
+    CHECK(n == strlen("bitfuse: warning: ") + 6000 + strlen(want_end) - strlen("Z"));
+    CHECK(!strncmp(got, "bitfuse: warning: abc", 21));
+    CHECK(n >= strlen(want_end) && !strcmp(got + n - strlen(want_end), want_end));
 }
 
 /* A driver's repeats (core.h): depth against the last frame with depth,
