@@ -247,8 +247,10 @@ bf_status capture__openni2_open(const char *uri, const char *target, const captu
 {
     (void)opt;
     bool is_file = is_oni_file(target);
-    /* OpenNI2's file device would report a missing file as "no device". */
-    if (is_file && !bf_file_exists(target)) return bf_fail(BF_NO_DEVICE, "%s: no such .oni file", uri);
+    /* OpenNI2's file device would report a missing file as "no device"; a
+     * recording that is not there is input that is not there (exit 3, as
+     * replay's missing sequence), not a camera that is not plugged in. */
+    if (is_file && !bf_file_exists(target)) return bf_fail(BF_IO, "%s: no such .oni file", uri);
     oni_source *s = calloc(1, sizeof *s);
     if (!s) return bf_fail(BF_NO_MEMORY, "%s: source", uri);
     snprintf(s->uri, sizeof s->uri, "%s", uri);

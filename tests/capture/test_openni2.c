@@ -47,10 +47,10 @@ BF_TEST(oni_colour_conversions)
     CHECK_ERROR_MENTIONS("JPEG");
 }
 
-BF_TEST(openni2_missing_device_or_file_is_no_device)
+BF_TEST(openni2_missing_file_is_bad_input_and_missing_device_no_device)
 {
     rgbd_source *src = NULL;
-    CHECK_STATUS(capture_open("openni2:/nonexistent/bitfuse.oni", &src), BF_NO_DEVICE);
+    CHECK_STATUS(capture_open("openni2:/nonexistent/bitfuse.oni", &src), BF_IO);
     CHECK_ERROR_MENTIONS("openni2:/nonexistent/bitfuse.oni");
     CHECK_STATUS(capture_open("openni2:no-such-device-uri", &src), BF_NO_DEVICE);
     CHECK_ERROR_MENTIONS("openni2:no-such-device-uri");
