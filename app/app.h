@@ -263,8 +263,15 @@ void app_store_close(app_store *st);
 /* The root of a command's stats.json: {"command": command, "version": the
  * program's version}. */
 cJSON *app_json_stats(const char *command);
-/* A new object, added to parent under name when parent is not NULL. */
-cJSON *app_json_object(cJSON *parent, const char *name);
+/* A new object, added to parent under name when parent is not NULL. Here,
+ * not in json.c, so that expect.c compiles alone (tests/fuzz/fuzz_expect.c
+ * links it without json.c's recon and calibration code). */
+static inline cJSON *app_json_object(cJSON *parent, const char *name)
+{
+    cJSON *o = cJSON_CreateObject();
+    if (parent && o) cJSON_AddItemToObject(parent, name, o);
+    return o;
+}
 /* {"median", "p95", "mean"} of s under name. */
 void app_json_series(cJSON *parent, const char *name, const bf_stats *s);
 /* An array of n numbers under name. */

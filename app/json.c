@@ -18,13 +18,6 @@ cJSON *app_json_stats(const char *command)
     return o;
 }
 
-cJSON *app_json_object(cJSON *parent, const char *name)
-{
-    cJSON *o = cJSON_CreateObject();
-    if (parent && o) cJSON_AddItemToObject(parent, name, o);
-    return o;
-}
-
 void app_json_series(cJSON *parent, const char *name, const bf_stats *s)
 {
     cJSON *o = app_json_object(parent, name);
