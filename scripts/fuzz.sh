@@ -19,7 +19,8 @@ cd "$(dirname "$0")/.."
 SECONDS_EACH=60
 JOBS=1
 WRITE_DOC=1
-TARGETS="image text folder bflog mesh store calib depthcorr v4l2"
+ALL_TARGETS="image text folder bflog mesh store calib depthcorr v4l2 expect"
+TARGETS=$ALL_TARGETS
 SEED=0
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -81,6 +82,7 @@ declare -A what=(
   [calib]="calib.json"
   [depthcorr]="depth_correction.json"
   [v4l2]="a V4L2 camera's formats, sizes, buffers, frames"
+  [expect]="--expect's baseline stats.json, the gate"
 )
 found=0
 for t in $TARGETS; do
@@ -106,7 +108,7 @@ echo "fuzz.sh: build ${t_build} s, fuzzing ${t_run} s ($JOBS at a time), $(nproc
 
 if [ "$WRITE_DOC" = 1 ]; then
   cmd="scripts/fuzz.sh $SECONDS_EACH --jobs $JOBS"
-  [ "$TARGETS" = "image text folder bflog mesh store calib v4l2" ] || cmd+=" --targets \"$TARGETS\""
+  [ "$TARGETS" = "$ALL_TARGETS" ] || cmd+=" --targets \"$TARGETS\""
   stamp="$(date -u +%Y-%m-%d), commit $(git rev-parse --short HEAD), clang $(clang -dumpversion), $(nproc) cores"
   python3 - "$table" "$cmd" "$stamp" <<'EOF'
 import re, sys

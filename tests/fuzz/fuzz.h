@@ -71,5 +71,6 @@ bf_status fuzz_store(const uint8_t *data, size_t size);
 bf_status fuzz_calib(const uint8_t *data, size_t size);
 bf_status fuzz_depthcorr(const uint8_t *data, size_t size);
 bf_status fuzz_v4l2(const uint8_t *data, size_t size);
+bf_status fuzz_expect(const uint8_t *data, size_t size);
 
 #endif

@@ -456,6 +456,36 @@ static void seeds_depthcorr(void)
     free(c2.p);
 }
 
+/* ------------------------------------------------------------ --expect's baseline */
+
+/* The whole stats.json files of replay runs (replay*.json and their
+ * combinations) need a device, so they are copied from runs into the corpus
+ * (docs/fuzz.md); here the measures --expect looks up, alone: a small input
+ * whose every byte the fuzzer's mutations reach. */
+static const char measures_json[] = "{\n\t\"command\":\t\"replay\",\n"
+                                    "\t\"tracking\":\t{\"tracked\": 20, \"lost\": 0, \"relocalised\": 0},\n"
+                                    "\t\"ate_m\":\t{\"rmse\": 0.00042925569921996326},\n"
+                                    "\t\"surface_m\":\t{\"median\": 0.003359377384185791},\n"
+                                    "\t\"frame_ms\":\t{\"median\": 85.28168500197353},\n"
+                                    "\t\"map_digest\":\t\"xxh3:77e3c6a1640b7d66\"\n}\n";
+/* A run where every measure moved or changed type, gated with tolerances. */
+static const char moved_json[] = "{\"tracking\": {\"tracked\": 19, \"lost\": 1, \"relocalised\": \"1\"}, "
+                                 "\"ate_m\": {\"rmse\": 0.0125}, \"surface_m\": null, "
+                                 "\"frame_ms\": {\"median\": 1e300}, \"map_digest\": 7}\n";
+
+static void seeds_expect(void)
+{
+    seed("expect", "measures.json", measures_json, sizeof measures_json - 1, true);
+    buf b = {0};
+    buf_str(&b, measures_json);
+    buf_sep(&b);
+    buf_str(&b, "ate=0.002,surface=0.0005,time=0.2");
+    buf_sep(&b);
+    buf_str(&b, moved_json);
+    seed("expect", "measures_moved", b.p, b.n, false);
+    free(b.p);
+}
+
 /* ------------------------------------------------------------ a V4L2 camera */
 
 static void put(buf *b, uint32_t v, int bytes)
@@ -545,6 +575,7 @@ int main(int argc, char **argv)
     seeds_store();
     seeds_calib();
     seeds_depthcorr();
+    seeds_expect();
     seeds_v4l2();
     return 0;
 }

@@ -92,3 +92,4 @@ BF_TEST(store_inputs) { run_target("store", fuzz_store, true); }
 BF_TEST(calib_inputs) { run_target("calib", fuzz_calib, false); }
 BF_TEST(depthcorr_inputs) { run_target("depthcorr", fuzz_depthcorr, false); }
 BF_TEST(v4l2_inputs) { run_target("v4l2", fuzz_v4l2, true); }
+BF_TEST(expect_inputs) { run_target("expect", fuzz_expect, false); }
