@@ -200,7 +200,9 @@ uint32_t app_expect_check(const app_expect *e, cJSON *stats, char *why, size_t c
         if (m->kind == MEASURE_ABS)
             snprintf(tol, sizeof tol, ", tolerance %g%s%s", e->tol[i], *m->unit ? " " : "", m->unit);
         if (m->kind == MEASURE_SLOWER) snprintf(tol, sizeof tol, ", tolerance %g%% slower", 100 * e->tol[i]);
-        printf("  expect %-11s %s -> %s%s%s%s: %s\n", m->name, b, x, *m->unit ? " " : "", m->unit, tol,
+        /* The unit after a number only ("-> absent", not "-> absent m"). */
+        bool unit = *m->unit && cJSON_IsNumber(now);
+        printf("  expect %-11s %s -> %s%s%s%s: %s\n", m->name, b, x, unit ? " " : "", unit ? m->unit : "", tol,
                ok ? "ok" : "MOVED");
         if (ok) continue;
         n_moved++;
