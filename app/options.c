@@ -428,7 +428,8 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
         APP_OPT("--colour", APP_OPT_CHOICE, &fc->keep_colour, "on|off",
                 "keep the frames' colour in the map (RGB565 near the surface; coloured mesh, points and views)"),
         APP_OPT("--colour-frames", APP_OPT_U32, &fc->colour_frames, "N",
-                "frames of each window whose colour is fused", .min = 1, .max = FUSION_COLOUR_MAX_FRAMES),
+                "frames of each window whose colour is fused (overlapping windows read different ones)", .min = 1,
+                .max = FUSION_COLOUR_MAX_FRAMES),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);

@@ -41,20 +41,44 @@ void fusion__colour_destroy(fusion_map *m)
     m->p_colour = NULL;
 }
 
+fusion__colour_plan fusion__colour_frames(uint32_t window, uint32_t colour_frames, uint32_t window_first,
+                                          uint32_t window_end)
+{
+    fusion__colour_plan p = {0};
+    uint32_t n_window = window_end - window_first;
+    /* A full window shares each half with a neighbour that reads other
+     * frames there (below); a short one (a scan's first, or the last of a
+     * scan shorter than a window) has no such neighbour on one side, so it
+     * reads twice as many. */
+    uint32_t n = colour_frames * (n_window < window ? 2u : 1u);
+    if (n > FUSION_COLOUR_MAX_FRAMES) n = FUSION_COLOUR_MAX_FRAMES;
+    if (n > n_window) n = n_window;
+    if (n == 0) return p;
+    /* Frames spread evenly over the window, the first half a stride in.
+     * Windows overlap by half: where the slide is a whole number of strides
+     * the same offset would read half of each window's frames again, so
+     * full windows alternate between a quarter and three quarters of a
+     * stride in and every colour frame is a new one. */
+    uint32_t stride = n_window / n, slide = window / 2, offset = stride / 2;
+    if (stride >= 2 && slide && slide % stride == 0 && n_window == window)
+        offset = (window_end / slide) % 2 ? (3 * stride) / 4 : stride / 4;
+    p.first = window_first + offset;
+    p.n = n;
+    p.stride = stride ? stride : 1;
+    return p;
+}
+
 void fusion__cmd_colour(fusion_map *m, uint32_t first, uint32_t max_count)
 {
     if (!m->p_colour || max_count == 0) return;
-    uint32_t n_window = m->window_end - m->window_first;
-    uint32_t n = m->cfg.colour_frames < n_window ? m->cfg.colour_frames : n_window;
-    if (n == 0) return;
-    /* Frames spread evenly over the window, the first half a stride in. */
-    uint32_t stride = n_window / n;
+    fusion__colour_plan plan = fusion__colour_frames(m->cfg.window, m->cfg.colour_frames, m->window_first, m->window_end);
+    if (plan.n == 0) return;
     fusion_colour_push pc = {
         .first = first,
         .max_count = max_count,
-        .frame_first = m->window_first + stride / 2,
-        .n_frames = n,
-        .frame_stride = stride ? stride : 1,
+        .frame_first = plan.first,
+        .n_frames = plan.n,
+        .frame_stride = plan.stride,
         .ring_slots = m->ring_slots,
         .depth_words = (uint32_t)(((uint64_t)m->K.width * m->K.height + 1) / 2),
         .registered = m->colour_registered ? 1u : 0u,

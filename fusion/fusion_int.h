@@ -141,6 +141,14 @@ void fusion__colour_destroy(fusion_map *map);
 /* Records the colour pass over entries [first, first + max_count) of the
  * window list, reading up to cfg.colour_frames frames of the window. */
 void fusion__cmd_colour(fusion_map *map, uint32_t first, uint32_t max_count);
+/* The frames a window's colour pass reads: n frames from first, stride
+ * apart (n 0: none), for the window [window_first, window_end) of a map
+ * whose windows are `window` frames long. */
+typedef struct fusion__colour_plan {
+    uint32_t first, n, stride;
+} fusion__colour_plan;
+fusion__colour_plan fusion__colour_frames(uint32_t window, uint32_t colour_frames, uint32_t window_first,
+                                          uint32_t window_end);
 /* Converts an RGB8 image to RGB565 pairs (words of 2 pixels, low first). */
 void fusion__rgb_to_565(const uint8_t *rgb, uint64_t n_pixels, uint32_t *words);
 
