@@ -167,6 +167,8 @@ typedef struct app_map_report {
     bf_status mesh_refused;       /* BF_INVALID_ARG: simplified to nothing (the cap), the rest written */
     bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
     uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */
+    uint32_t n_chunks;            /* chunks holding bricks in the map exported (a streamed map's every
+                                     one; map.n_chunks: the device's hash entries) */
 } app_map_report;
 /* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
 uint32_t app_mesh_level(const hostmap *snap);
@@ -244,6 +246,7 @@ typedef struct app_store {
     uint32_t flushes, skipped;  /* flushes handed to the writer; periods skipped while it was busy */
     double ms_flush_max, ms_submit_max; /* the loop's cost of a flush (snapshot and hand-over) */
     store_write_stats stats;    /* the writer's, at the end */
+    bool end_failed;            /* the final write (or the writer's last) failed: stats are the last whole write's */
 } app_store;
 /* Opens dir for the scan; resume: reads it first (BF_FORMAT when it keeps no pose). */
 bf_status app_store_open(app_store *st, const char *dir, bool resume, double every_s);

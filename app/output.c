@@ -97,6 +97,7 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
      * gives the same files and digest (docs/determinism.md). */
     if (s == BF_OK) s = hostmap_sort(&snap);
     if (s == BF_OK) s = store_map_digest(&snap, &r->digest);
+    if (s == BF_OK) r->n_chunks = hostmap_count_chunks(&snap);
     if (s != BF_OK) {
         hostmap_free(&snap);
         return s;
@@ -176,7 +177,7 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
     cJSON_AddNumberToObject(c, "bits_per_allocated_voxel", voxels ? 8.0 * (double)m->bytes_colour / (double)voxels : NAN);
     cJSON_AddNumberToObject(c, "pool_full_events", m->fail_colour);
     cJSON_AddNumberToObject(o, "chunks", m->n_chunks);
-    cJSON_AddNumberToObject(o, "chunks_with_bricks", m->n_chunks_with_bricks);
+    cJSON_AddNumberToObject(o, "chunks_with_bricks", r->n_chunks);
     cJSON_AddNumberToObject(o, "nodes", m->n_nodes);
     cJSON_AddNumberToObject(o, "bricks", m->n_bricks);
     cJSON *per_level = cJSON_AddArrayToObject(o, "bricks_per_level");
@@ -214,11 +215,13 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
 void app_print_map(const app_map_report *r, uint32_t max_level)
 {
     const fusion_stats *m = &r->map;
-    /* A chunk emptied of its bricks keeps its hash entry (and its memory); a
-     * store and `info` count only the chunks holding bricks, so say both. */
-    char chunks[64];
-    if (m->n_chunks_with_bricks != m->n_chunks)
-        snprintf(chunks, sizeof chunks, "%u chunks (%u holding bricks)", m->n_chunks, m->n_chunks_with_bricks);
+    /* A chunk emptied of its bricks keeps its hash entry (and its memory),
+     * and a streamed chunk has left the device: a store and `info` count
+     * the map's chunks holding bricks, so say both where they differ. */
+    char chunks[96];
+    if (r->n_chunks != m->n_chunks)
+        snprintf(chunks, sizeof chunks, "%u chunks on the device, %u holding bricks in the map", m->n_chunks,
+                 r->n_chunks);
     else
         snprintf(chunks, sizeof chunks, "%u chunks", m->n_chunks);
     printf("  map              %s, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",

@@ -160,6 +160,7 @@ bf_status app_store_finish(app_store *st, recon_run *run)
     bf_status f = store_writer_finish(st->writer);
     st->stats = store_writer_stats(st->writer);
     if (s == BF_OK) s = f;
+    st->end_failed = s != BF_OK;
     return s;
 }
 
@@ -198,7 +199,14 @@ void app_store_json(cJSON *parent, const app_store *st)
 void app_store_print(const app_store *st)
 {
     if (!st->writer) return;
-    printf("  store            %s: %u chunks, %llu bricks, %.2f MiB on disk, %u writes", st->dir, st->stats.chunks,
+    /* After a failed last write the writer's figures are its last whole
+     * write's (none: the store holds what it held before the run). */
+    if (st->end_failed && st->stats.writes == 0) {
+        printf("  store            %s: not written (the error above); it holds what it held before\n", st->dir);
+        return;
+    }
+    printf("  store            %s: %s%u chunks, %llu bricks, %.2f MiB on disk, %u writes", st->dir,
+           st->end_failed ? "the last write failed (the error above); the one before holds " : "", st->stats.chunks,
            (unsigned long long)st->stats.bricks, st->stats.bytes_on_disk / 1048576.0, st->stats.writes);
     if (st->is_resumed) printf(" (resumed after %u frames)", st->meta.frames);
     printf("\n");

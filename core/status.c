@@ -80,26 +80,26 @@ void bf_log(bf_log_level level, const char *fmt, ...)
      * message longer than the stack's line (a long path, a quoted error)
      * is formatted again on the heap rather than cut. */
     char line[2048], *heap = NULL;
-    const char *head = "bitfuse: ";
-    int n_head = snprintf(line, sizeof line, "%s%s", head, prefix[level]);
+    size_t head = (size_t)snprintf(line, sizeof line, "bitfuse: %s", prefix[level]);
     va_list ap, again;
     va_start(ap, fmt);
     va_copy(again, ap);
-    int n = vsnprintf(line + n_head, sizeof line - (size_t)n_head - 1, fmt, ap);
+    int k = vsnprintf(line + head, sizeof line - head - 1, fmt, ap);
     va_end(ap);
     char *out = line;
-    if (n >= 0 && (size_t)(n_head + n) + 2 > sizeof line && (heap = malloc((size_t)(n_head + n) + 2)) != NULL) {
-        memcpy(heap, line, (size_t)n_head);
-        vsnprintf(heap + n_head, (size_t)n + 1, fmt, again);
+    size_t n = k > 0 ? (size_t)k : 0;
+    if (k < 0) n = (size_t)snprintf(line + head, sizeof line - head - 1, "%s", fmt); /* a bad format: the format */
+    if (k >= 0 && head + n + 2 > sizeof line && (heap = malloc(head + n + 2)) != NULL) {
+        memcpy(heap, line, head);
+        vsnprintf(heap + head, n + 1, fmt, again);
         out = heap;
-    } else if (n < 0) {
-        n = 0;
-    } else if ((size_t)(n_head + n) + 2 > sizeof line) {
-        n = (int)(sizeof line - (size_t)n_head - 2); /* no memory: cut */
+    } else if (head + n + 2 > sizeof line) {
+        n = sizeof line - head - 2; /* no memory: cut, and say so */
+        memcpy(line + n + head - 3, "...", 3);
     }
     va_end(again);
-    out[n_head + n] = '\n';
-    out[n_head + n + 1] = '\0';
+    out[head + n] = '\n';
+    out[head + n + 1] = '\0';
     fputs(out, stderr);
     free(heap);
 }

@@ -424,29 +424,6 @@ uint64_t fusion_reserved_bytes(const fusion_map *m)
            gpu_buffer_size(m->cpool) + gpu_buffer_size(m->cfree);
 }
 
-static int key_cmp(const void *a, const void *b)
-{
-    const int32_t *p = a, *q = b;
-    for (int i = 0; i < 3; i++)
-        if (p[i] != q[i]) return p[i] < q[i] ? -1 : 1;
-    return 0;
-}
-
-/* Distinct chunks among the snapshot's bricks: a chunk whose bricks were all
- * removed keeps its hash entry, so the entries overcount what a store saves. */
-static bf_status count_brick_chunks(const hostmap *snap, uint32_t *out)
-{
-    int32_t(*keys)[3] = malloc((size_t)snap->n_bricks * sizeof *keys + 1);
-    if (!keys) return bf_fail(BF_NO_MEMORY, "fusion: stats");
-    for (uint32_t i = 0; i < snap->n_bricks; i++) memcpy(keys[i], snap->bricks[i].key, sizeof keys[i]);
-    qsort(keys, snap->n_bricks, sizeof *keys, key_cmp);
-    uint32_t n = 0;
-    for (uint32_t i = 0; i < snap->n_bricks; i++) n += i == 0 || key_cmp(keys[i], keys[i - 1]) != 0;
-    free(keys);
-    *out = n;
-    return BF_OK;
-}
-
 bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
 {
     uint32_t cnt[FUSION_CNT_WORDS];
@@ -475,9 +452,7 @@ bf_status fusion_get_stats(fusion_map *m, fusion_stats *out)
         for (uint32_t v = 0; snap.rgb565 && v < BRICK_VOXELS; v++)
             st.n_coloured_voxels += snap.rgb565[(size_t)i * BRICK_VOXELS + v] != 0;
     }
-    s = count_brick_chunks(&snap, &st.n_chunks_with_bricks);
     hostmap_free(&snap);
-    if (s != BF_OK) return s;
     /* Chunks: live hash entries. */
     uint32_t *hash = malloc((size_t)m->n_entries * FUSION_ENTRY_WORDS * 4);
     if (!hash) return bf_fail(BF_NO_MEMORY, "fusion: stats");

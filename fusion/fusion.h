@@ -146,8 +146,8 @@ bf_status fusion_flush(fusion_map *map);
 
 typedef struct fusion_stats {
     uint32_t n_frames;
-    uint32_t n_chunks;               /* live hash entries (each takes hash memory) */
-    uint32_t n_chunks_with_bricks;   /* of those, chunks holding a brick (what a store saves) */
+    uint32_t n_chunks;               /* live hash entries (each takes hash memory; a chunk emptied of
+                                        its bricks keeps its entry) */
     uint32_t n_nodes;
     uint32_t n_bricks;
     uint32_t bricks_per_level[16];

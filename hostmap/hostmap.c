@@ -8,6 +8,14 @@
 
 _Static_assert(sizeof(((hostmap_brick *)0)->sign) == BRICK_WORDS * 4, "a brick's bit plane is BRICK_WORDS words");
 
+uint32_t hostmap_count_chunks(const hostmap *m)
+{
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m->n_bricks; i++)
+        n += i == 0 || memcmp(m->bricks[i].key, m->bricks[i - 1].key, sizeof m->bricks[i].key) != 0;
+    return n;
+}
+
 void hostmap_free(hostmap *m)
 {
     if (!m) return;

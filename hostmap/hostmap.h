@@ -40,6 +40,9 @@ int hostmap_brick_cmp(const hostmap_brick *a, const hostmap_brick *b);
 /* Sorts m's bricks, their colours with them, into the canonical order.
  * BF_NO_MEMORY (for the colours' copy) leaves m as it was. */
 bf_status hostmap_sort(hostmap *m);
+/* Chunks holding at least one brick, of a map in the canonical order
+ * (hostmap_sort: a chunk's bricks are together). */
+uint32_t hostmap_count_chunks(const hostmap *m);
 /* Frees the bricks and leaves an empty map. NULL is a no-op. */
 void hostmap_free(hostmap *m);
 /* Voxel edge of a level [m]. */

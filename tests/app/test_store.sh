@@ -37,6 +37,8 @@ bricks=$(json_get "$T/out" "d['bricks']")
 mapb=$(json_get "$T/full/stats.json" "d['bricks']")
 # (each compare also needs its lookups to have found a number: "" = "" is no match)
 [ -n "$bricks" ] && [ "$bricks" = "$mapb" ] || fail "the store holds '$bricks' bricks, the scan's map '$mapb'"
+mapc=$(json_get "$T/full/stats.json" "d['chunks_with_bricks']")
+[ -n "$chunks" ] && [ "$chunks" = "$mapc" ] || fail "the store holds '$chunks' chunks, the scan's map '$mapc' holding bricks"
 # The summary names the store and what it holds, as info counts it.
 grep -q "^  store  *$T/S: $chunks chunks, $bricks bricks" "$T/full.out" || fail "replay's summary does not name the store: $(cat "$T/full.out")"
 expect 0 "$B" info "$T/S"
@@ -287,6 +289,9 @@ if mount -t tmpfs -o size=48k tmpfs "$T/tiny" 2>/dev/null; then
     expect 5 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S"
     mentions "No space left on device"
     mentions "$T/tiny/S"
+    # The summary does not claim the failed write's figures.
+    grep -Eq "^  store  *$T/tiny/S: (the last write failed|not written)" "$T/out" ||
+        fail "the summary's store line after a full disk: $(grep '^  store' "$T/out")"
     expect 0 "$B" info "$T/tiny/S"
     umount "$T/tiny"
 else
