@@ -148,7 +148,7 @@ void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mes
  * written wherever it still can be (docs/faults.md). */
 typedef struct app_write_failure {
     bf_status s; /* BF_OK, or BF_WRITE once an output failed (BF_INVALID_ARG: app_note_mesh_refused) */
-    char message[1024];
+    char message[BF_ERROR_CAP];
 } app_write_failure;
 /* s, or BF_OK when s is BF_WRITE (then noted in w and warned about). */
 bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s);
@@ -163,7 +163,7 @@ typedef struct app_map_report {
     mesh_simplify_stats simplify; /* of the mesh written */
     char mesh_file[16];           /* "mesh.ply", "mesh.obj" or "mesh.glb"; "" without a mesh */
     bool mesh_skipped;            /* --no-mesh: none was made */
-    char mesh_error[1024];        /* why the mesh could not be written ("" if it was, or none was asked) */
+    char mesh_error[BF_ERROR_CAP]; /* why the mesh could not be written ("" if it was, or none was asked) */
     bf_status mesh_refused;       /* BF_INVALID_ARG: simplified to nothing (the cap), the rest written */
     bf_vec3 mesh_origin;          /* the mesh's local origin (zero: world coordinates) */
     uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */

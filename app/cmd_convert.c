@@ -101,7 +101,7 @@ static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_
     /* A bad input frame ends a folder with the frames before it indexed, so
      * they read (a log keeps an earlier log at DEST as it was instead). */
     if (tw && n > 0 && (s == BF_FORMAT || s == BF_IO)) {
-        char msg[1024];
+        char msg[BF_ERROR_CAP];
         snprintf(msg, sizeof msg, "%s", bf_last_error());
         if (replay_tum_writer_finish(tw) == BF_OK)
             return bf_fail(s, "%s (the %u frames before it are in the folder)", msg, n);

@@ -202,7 +202,7 @@ int cmd_fuse(int argc, char **argv)
         /* No frame within the file's time span: give the span. */
         if (s == BF_FORMAT && use_traj && traj.n && r.run.n_fused == 0 && r.run.n_skipped > 0 &&
             r.run.n_skipped == r.run.counts.frames) {
-            char msg[1024];
+            char msg[BF_ERROR_CAP];
             snprintf(msg, sizeof msg, "%s", bf_last_error());
             s = bf_fail(BF_FORMAT, "%s: %s's poses span t = %.6f to %.6f s, which no frame's time falls in", msg,
                         a.poses, traj.t_s[0], traj.t_s[traj.n - 1]);

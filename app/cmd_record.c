@@ -167,7 +167,7 @@ int cmd_record(int argc, char **argv)
     }
     bf_status rs = record_frames(&a, src, &w, &r);
     bf_status s_dev = rs == BF_END ? BF_OK : rs;
-    char dev_err[1024] = "";
+    char dev_err[BF_ERROR_CAP] = "";
     if (s_dev) snprintf(dev_err, sizeof dev_err, "%s", bf_last_error());
     rgbd_source_close(src);
     /* Finish even after a device error: every frame before it is kept. A
@@ -183,12 +183,12 @@ int cmd_record(int argc, char **argv)
     s = s_dev ? s_dev : s_fin;
     if (s_dev && dev_err[0]) bf_fail(s_dev, "%s", dev_err);
     /* The recording's own failure is the one named, not a later stats.json's. */
-    char err[1024] = "";
+    char err[BF_ERROR_CAP] = "";
     if (s) snprintf(err, sizeof err, "%s", bf_last_error());
 
     bf_status s_json = BF_OK;
     if (!keep_stats) s_json = app_json_write(json_path, stats_json(&a, log_path, &r, s));
-    char json_err[1024] = "";
+    char json_err[BF_ERROR_CAP] = "";
     if (s_json) snprintf(json_err, sizeof json_err, "%s", bf_last_error());
     const replay_log_stats *L = &r.log;
     printf("bitfuse %s: %u frames from %s to %s%s\n", cmd, L->n_frames, a.device, log_path,

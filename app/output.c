@@ -103,7 +103,7 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
         return s;
     }
     mesh_data mesh = {0}, pts = {0};
-    char mesh_error[1024] = ""; /* a mesh that cannot be written: the points still are */
+    char mesh_error[BF_ERROR_CAP] = ""; /* a mesh that cannot be written: the points still are */
     if (mo) {
         r->mesh_out = *mo;
         snprintf(r->mesh_file, sizeof r->mesh_file, "mesh.%s", mesh_format_name((mesh_format)mo->format));
