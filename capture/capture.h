@@ -132,8 +132,9 @@ bf_status capture_paced(rgbd_source *inner, rgbd_source **out);
  * n_frames is 0 for live devices. Failures: an unknown scheme is
  * BF_INVALID_ARG; a backend left out of this build is BF_UNSUPPORTED naming
  * the Debian package to install; an absent or unreachable device is
- * BF_NO_DEVICE with the URI in the message. Never crashes on a missing
- * device. */
+ * BF_NO_DEVICE with the URI in the message (a recording that is not
+ * there, openni2:FILE.oni, is BF_IO: missing input). Never crashes on a
+ * missing device. */
 bf_status capture_open(const char *uri, rgbd_source **out);
 
 /* True when uri starts with a scheme capture_open knows ("freenect:",
