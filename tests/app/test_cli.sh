@@ -882,6 +882,13 @@ expect 2 "$B" live --out "$T/live2"
 mentions "--device is required"
 expect 4 "$B" live --device "v4l2:$T/no-such-video" --out "$T/live3"
 mentions "$T/no-such-video"
+# A recording that is not there is missing input (exit 3), not a missing
+# camera (where OpenNI2 is in the build; else the URI names the package).
+"$B" live --device "openni2:$T/no-such.oni" --out "$T/live4" >"$T/out" 2>"$T/err"
+rc=$?
+if grep -q "libopenni2" "$T/err"; then echo "openni2: not in this build, skipped"
+else [ "$rc" = 3 ] || fail "live openni2:missing.oni: exit $rc, expected 3"; mentions "$T/no-such.oni: no such .oni file"; fi
+[ -e "$T/live4" ] && fail "a refused live run made its output folder"
 # Bad command lines and devices.
 expect 2 "$B" record --device "$T/seq" --out "$T/x.ply"
 mentions "--out must name a .bflog file"
