@@ -46,21 +46,18 @@ fusion__colour_plan fusion__colour_frames(uint32_t window, uint32_t colour_frame
 {
     fusion__colour_plan p = {0};
     uint32_t n_window = window_end - window_first;
-    /* A full window shares each half with a neighbour that reads other
-     * frames there (below); a short one (a scan's first, or the last of a
-     * scan shorter than a window) has no such neighbour on one side, so it
-     * reads twice as many. */
-    uint32_t n = colour_frames * (n_window < window ? 2u : 1u);
-    if (n > FUSION_COLOUR_MAX_FRAMES) n = FUSION_COLOUR_MAX_FRAMES;
-    if (n > n_window) n = n_window;
+    uint32_t n = colour_frames < n_window ? colour_frames : n_window;
     if (n == 0) return p;
     /* Frames spread evenly over the window, the first half a stride in.
      * Windows overlap by half: where the slide is a whole number of strides
      * the same offset would read half of each window's frames again, so
-     * full windows alternate between a quarter and three quarters of a
-     * stride in and every colour frame is a new one. */
+     * full windows on the schedule alternate between a quarter and three
+     * quarters of a stride in and every colour frame is a new one (twice
+     * the frames for the same reads; a voxel a later window made confident
+     * finds its colour in that window's own frames). A scan's last window,
+     * off the schedule, keeps half a stride. */
     uint32_t stride = n_window / n, slide = window / 2, offset = stride / 2;
-    if (stride >= 2 && slide && slide % stride == 0 && n_window == window)
+    if (stride >= 2 && slide && slide % stride == 0 && n_window == window && window_end % slide == 0)
         offset = (window_end / slide) % 2 ? (3 * stride) / 4 : stride / 4;
     p.first = window_first + offset;
     p.n = n;

@@ -55,7 +55,7 @@ typedef struct fusion_config {
        surface, addressed by popcount: a mask word per sub-brick, and per brick a
        chain of colour units of 14 colours each (docs/colour.md, "Layout"). */
     bool keep_colour;       /* default true */
-    uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 2 (windows
+    uint32_t colour_frames; /* frames of each window the colour pass reads, 1..32, default 4 (windows
                                alternate their offsets, so overlapping windows read new frames) */
     uint32_t colour_unit_cap; /* colour units (32 bytes, 14 colours each) allocated at create, default
                                  8 * brick_cap (as many as one storage binding holds) */

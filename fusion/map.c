@@ -24,7 +24,7 @@ fusion_config fusion_config_default(void)
         .conf_weight = 4.0f,
         .band_sigmas = 3.0f,
         .keep_colour = true,
-        .colour_frames = 2,
+        .colour_frames = 4,
     };
     return c;
 }
