@@ -152,10 +152,10 @@ int app_check_out_folder(const char *cmd, const char *opt, const char *path)
     struct stat st;
     if (stat(dir, &st) == 0 && S_ISDIR(st.st_mode)) return 0;
     int e = errno;
-    return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: the folder %s %s", opt, path, dir,
-                                 stat(dir, &st) == 0 ? "is not a folder"
-                                 : e == ENOENT       ? "does not exist"
-                                                     : strerror(e)));
+    if (stat(dir, &st) == 0)
+        return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: %s is not a folder", opt, path, dir));
+    return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: the folder %s %s%s", opt, path, dir,
+                                 e == ENOENT ? "does not exist" : "cannot be used: ", e == ENOENT ? "" : strerror(e)));
 }
 
 int app_check_new_recording(const char *cmd, const char *opt, const char *path, bool overwrite)
