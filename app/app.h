@@ -110,9 +110,10 @@ struct replay_options;
 void app_sequence_options(app_option rows[APP_SEQUENCE_ROWS], struct replay_options *o);
 /* bricks_given (NULL: not asked): set true when --bricks is given. */
 void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bricks_given);
-/* What the map rows cannot check alone (the sub-cache within the window):
- * 0 or the usage exit code, the message printed. */
-int app_check_map_options(const char *cmd, const fusion_config *fc);
+/* What the map rows cannot check alone (the sub-cache within the window;
+ * the default sub-cache is cut to a shorter window): 0 or the usage exit
+ * code, the message printed. */
+int app_check_map_options(const char *cmd, fusion_config *fc);
 /* After a run failed with s: when the map's pools were refused for this
  * device's storage binding (fusion names its brick_cap / node_cap), a
  * warning names the option that sized them (opt: "--gpu-budget" or

@@ -403,8 +403,12 @@ static const char *check_even(const char *name, const char *v)
     return msg;
 }
 
+/* Whether --subcache was given (one command line a process). */
+static bool s_subcache_given;
+
 void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bricks_given)
 {
+    s_subcache_given = false;
     const app_option r[APP_MAP_ROWS] = {
         APP_OPT("--ratio", APP_OPT_FLOAT, &fc->voxel_ratio, "R", "voxel-to-pixel ratio of the level rule", .min = 0.05,
                 .max = 64, .min_open = true),
@@ -414,8 +418,9 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
                 .min = 0, .max = 64),
         APP_OPT("--window", APP_OPT_U32, &fc->window, "N", "frames per fusion window (even)", .min = 2, .max = 256,
                 .check = check_even),
-        APP_OPT("--subcache", APP_OPT_U32, &fc->subcache, "N", "frames of the new-brick pass (at most the window)",
-                .min = 1, .max = 256),
+        APP_OPT("--subcache", APP_OPT_U32, &fc->subcache, "N",
+                "frames of the new-brick pass (at most the window; by default 10, or the window if shorter)", .min = 1,
+                .max = 256, .given = &s_subcache_given),
         APP_OPT("--bricks", APP_OPT_U32, &fc->brick_cap, "N",
                 "brick pool size (replay and live: instead of --gpu-budget, which with the device sizes it by "
                 "default, docs/cli.md \"Streaming\"; fuse: 1048576 by default)",
@@ -435,8 +440,10 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
     memcpy(rows, r, sizeof r);
 }
 
-int app_check_map_options(const char *cmd, const fusion_config *fc)
+int app_check_map_options(const char *cmd, fusion_config *fc)
 {
+    /* The default follows a short window (--window 8 alone is a whole command line). */
+    if (!s_subcache_given && fc->subcache > fc->window) fc->subcache = fc->window;
     if (fc->subcache > fc->window)
         return usage(cmd, "--subcache %u is more than the window of %u frames", fc->subcache, fc->window);
     return 0;

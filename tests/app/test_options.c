@@ -115,6 +115,14 @@ BF_TEST(options_want_required_options_and_positionals)
     CHECK_EQ_INT(parse(8, sub, &a), 0);
     CHECK_EQ_INT(app_check_map_options("cmd", &a.fc), APP_EXIT_USAGE);
     CHECK_ERROR_MENTIONS("--subcache 50");
+    /* A window shorter than the default sub-cache alone: the sub-cache follows it. */
+    char *window[] = {"cmd", "a", "--out", "o", "--window", "8"};
+    CHECK_EQ_INT(parse(6, window, &a), 0);
+    CHECK_EQ_INT(app_check_map_options("cmd", &a.fc), 0);
+    CHECK_EQ_INT(a.fc.subcache, 8);
+    char *both[] = {"cmd", "a", "--out", "o", "--window", "8", "--subcache", "10"};
+    CHECK_EQ_INT(parse(8, both, &a), 0);
+    CHECK_EQ_INT(app_check_map_options("cmd", &a.fc), APP_EXIT_USAGE);
 }
 
 /* An option that means nothing without another is refused alone, in
