@@ -276,6 +276,8 @@ static inline cJSON *app_json_object(cJSON *parent, const char *name)
     if (parent && o) cJSON_AddItemToObject(parent, name, o);
     return o;
 }
+/* "s" after a count other than one: "%u frame%s", n, app_s(n). */
+static inline const char *app_s(uint64_t n) { return n == 1 ? "" : "s"; }
 /* {"median", "p95", "mean"} of s under name. */
 void app_json_series(cJSON *parent, const char *name, const bf_stats *s);
 /* An array of n numbers under name. */

@@ -149,8 +149,8 @@ static bf_status read_frames(rgbd_source *src, const bf_traj *traj, const calib_
     bf_progress_end(&prog, seen);
     if (s == BF_END) s = BF_OK;
     if (s == BF_OK && *n_held)
-        bf_warn("calibrate-depth: %u frames left out: their pose repeats the one before to the bit (a replay's lost "
-                "frames keep the last good pose)", *n_held);
+        bf_warn("calibrate-depth: %u frame%s left out: %s pose repeats the one before to the bit (a replay's lost "
+                "frames keep the last good pose)", *n_held, app_s(*n_held), *n_held == 1 ? "its" : "their");
     if (s == BF_OK && d->n < 2) s = bf_fail(BF_FORMAT, "%s: %u frames with a pose: too few for pairs", seq, d->n);
     return s;
 }

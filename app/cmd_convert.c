@@ -175,7 +175,7 @@ int cmd_convert(int argc, char **argv)
     cJSON_AddNumberToObject(o, "fps", seconds > 0 ? n / seconds : NAN);
     if ((s = app_json_write(json_path, o)) != BF_OK) return app_fail(cmd, s);
 
-    printf("bitfuse convert: %u frames (%u skipped) from %s to %s (%s)%s\n", n, skipped, a.in, a.out,
+    printf("bitfuse convert: %u frame%s (%u skipped) from %s to %s (%s)%s\n", n, app_s(n), skipped, a.in, a.out,
            a.to_log ? "bitfuse log" : "TUM folder", interrupted ? " (stopped by a signal; complete up to there)" : "");
     if (a.to_log) {
         printf("  depth     %.2f MB raw -> %.2f MB (%.2fx, zstd)\n", L.depth_raw_bytes / 1e6, L.depth_bytes / 1e6,

@@ -134,9 +134,9 @@ static bf_status depth_points(const depth_points_args *a, mesh_data *pts, uint32
         free(xyz);
         return s;
     }
-    if (no_pose) bf_warn("eval-surface: %u frames without a pose left out", no_pose);
+    if (no_pose) bf_warn("eval-surface: %u frame%s without a pose left out", no_pose, app_s(no_pose));
     if (in_gap)
-        bf_warn("eval-surface: %u frames in gaps of %s wider than --max-gap %g s left out", in_gap, a->poses,
+        bf_warn("eval-surface: %u frame%s in gaps of %s wider than --max-gap %g s left out", in_gap, app_s(in_gap), a->poses,
                 a->max_gap_s);
     *in_gap_out = in_gap;
     bf_info("eval-surface: %zu depth samples from %u frames of %s", n, used, a->seq);

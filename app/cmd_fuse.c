@@ -222,18 +222,20 @@ int cmd_fuse(int argc, char **argv)
     /* The summary also when an output could not be written (the failure
      * named instead of the files written); the exit code says so after it. */
     if (s == BF_OK) {
-        printf("bitfuse fuse: %u frames fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
-               r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
+        printf("bitfuse fuse: %u frame%s fused (%u skipped: %u unreadable, %u without a pose) on %s\n", r.run.n_fused,
+               app_s(r.run.n_fused), r.run.n_skipped + r.n_unreadable, r.n_unreadable, r.run.n_skipped, r.device);
         if (r.run.is_interrupted)
             printf("  stopped          by a signal: the frames before it are fused and written\n");
         if (r.run.counts.repeated)
-            printf("  input            %u frames repeated the depth before them byte for byte: not fused\n",
-                   r.run.counts.repeated);
+            printf("  input            %u frame%s repeated the depth before %s byte for byte: not fused\n",
+                   r.run.counts.repeated, app_s(r.run.counts.repeated), r.run.counts.repeated == 1 ? "it" : "them");
         if (r.run.counts.no_depth)
-            printf("  input            %u frames without a depth sample in the sensor's range: not fused\n", r.run.counts.no_depth);
+            printf("  input            %u frame%s without a depth sample in the sensor's range: not fused\n",
+                   r.run.counts.no_depth, app_s(r.run.counts.no_depth));
         if (r.run.counts.colour_repeated)
-            printf("  input            %u frames repeated only the colour before them: fused without it\n",
-                   r.run.counts.colour_repeated);
+            printf("  input            %u frame%s repeated only the colour before %s: fused without it\n",
+                   r.run.counts.colour_repeated, app_s(r.run.counts.colour_repeated),
+                   r.run.counts.colour_repeated == 1 ? "it" : "them");
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);

@@ -191,7 +191,7 @@ int cmd_record(int argc, char **argv)
     char json_err[BF_ERROR_CAP] = "";
     if (s_json) snprintf(json_err, sizeof json_err, "%s", bf_last_error());
     const replay_log_stats *L = &r.log;
-    printf("bitfuse %s: %u frames from %s to %s%s\n", cmd, L->n_frames, a.device, log_path,
+    printf("bitfuse %s: %u frame%s from %s to %s%s\n", cmd, L->n_frames, app_s(L->n_frames), a.device, log_path,
            r.is_interrupted ? " (stopped by a signal; the log is complete up to there)" : "");
     printf("  capture   %llu captured, %llu dropped by the queue of %u\n", (unsigned long long)r.cap.captured,
            (unsigned long long)r.cap.dropped, a.queue);

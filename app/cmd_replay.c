@@ -824,29 +824,31 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
 {
     const recon_counts *c = &r->run.counts;
     const recon_run_series *t = &r->run.series;
-    printf("bitfuse %s: %u frames on %s: %u tracked (%u relocalised), %u lost, %u without depth (%u degenerate)\n",
-           a->is_live_cmd ? "live" : "replay", c->frames, r->device, c->tracked, c->relocalised, c->lost, c->no_depth,
+    printf("bitfuse %s: %u frame%s on %s: %u tracked (%u relocalised), %u lost, %u without depth (%u degenerate)\n",
+           a->is_live_cmd ? "live" : "replay", c->frames, app_s(c->frames), r->device, c->tracked, c->relocalised, c->lost, c->no_depth,
            c->degenerate);
     if (c->last_frame)
-        printf("  tracking         %u frames fitted the map weakly or not at all and were tracked against the "
-               "frame before them\n", c->last_frame);
+        printf("  tracking         %u frame%s fitted the map weakly or not at all and %s tracked against the "
+               "frame before %s\n", c->last_frame, app_s(c->last_frame), c->last_frame == 1 ? "was" : "were",
+               c->last_frame == 1 ? "it" : "them");
     if (c->unfused)
-        printf("  tracking         %u frames tracked only, not fused (--fuse-every, --fuse-every-behind; %u "
-               "frames came while the loop was behind the camera)\n", c->unfused, c->behind);
+        printf("  tracking         %u frame%s tracked only, not fused (--fuse-every, --fuse-every-behind; %u "
+               "came while the loop was behind the camera)\n", c->unfused, app_s(c->unfused), c->behind);
     if (replay_skipped_frames(src))
-        printf("  input            %u unreadable frames skipped\n", replay_skipped_frames(src));
+        printf("  input            %u unreadable frame%s skipped\n", replay_skipped_frames(src),
+               app_s(replay_skipped_frames(src)));
     if (r->run.n_skipped)
-        printf("  input            %u frames without a ground-truth pose skipped (--fuse-at-groundtruth)\n",
-               r->run.n_skipped);
+        printf("  input            %u frame%s without a ground-truth pose skipped (--fuse-at-groundtruth)\n",
+               r->run.n_skipped, app_s(r->run.n_skipped));
     if (c->repeated)
-        printf("  input            %u frames repeated the depth before them byte for byte: skipped, pose kept\n",
-               c->repeated);
+        printf("  input            %u frame%s repeated the depth before %s byte for byte: skipped, pose kept\n",
+               c->repeated, app_s(c->repeated), c->repeated == 1 ? "it" : "them");
     if (c->colour_repeated)
-        printf("  input            %u frames repeated only the colour before them: tracked and fused without it\n",
-               c->colour_repeated);
+        printf("  input            %u frame%s repeated only the colour before %s: tracked and fused without it\n",
+               c->colour_repeated, app_s(c->colour_repeated), c->colour_repeated == 1 ? "it" : "them");
     if (c->photo_weak)
-        printf("  photometric      %u frames whose depth left a direction weak were held by their colour\n",
-               c->photo_weak);
+        printf("  photometric      %u frame%s whose depth left a direction weak %s held by %s colour\n", c->photo_weak,
+               app_s(c->photo_weak), c->photo_weak == 1 ? "was" : "were", c->photo_weak == 1 ? "its" : "their");
     if (r->run.source_status != BF_OK)
         printf("  stopped early    %s: what came before it is kept\n", r->run.source_error);
     if (!r->has_capture && r->run.is_interrupted)

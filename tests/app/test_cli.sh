@@ -197,7 +197,7 @@ expect 0 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" -
     --max-gap 0.05 --json
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['depth']['frames'] == 2, d" "$T/out" ||
     fail "eval-surface --max-gap: the frame in the gap was placed: $(head -c 300 "$T/out")"
-mentions "1 frames in gaps of $T/holed.txt wider than --max-gap 0.05 s left out"
+mentions "1 frame in gaps of $T/holed.txt wider than --max-gap 0.05 s left out"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1]))['depth']; assert d['frames_in_gaps'] == 1 and d['max_gap_s'] == 0.05, d" \
     "$T/out" || fail "eval-surface --max-gap: frames_in_gaps not in the JSON"
 expect 2 "$B" eval-surface --reference "$T/clean/scene.ply" --depth "$T/clean" --poses groundtruth --max-gap 0.05
@@ -347,7 +347,7 @@ PY
     # A repeated depth frame (info's case above): skipped with its pose kept by default,
     # tracked with --repeated track; stats.json echoes the choice and counts it.
     expect 0 "$B" replay "$T/rep" --out "$T/rprep" $small
-    grep -q "1 frames repeated the depth before them" "$T/out" || fail "replay does not report the repeat: $(head -c 400 "$T/out")"
+    grep -q "1 frame repeated the depth before it" "$T/out" || fail "replay does not report the repeat: $(head -c 400 "$T/out")"
     python3 - "$T/rprep" skip <<'PY' || fail "replay of a repeated frame (default)"
 import csv, json, sys
 d = json.load(open(sys.argv[1] + "/stats.json"))
@@ -368,7 +368,7 @@ PY
     # Every frame tracked, every second one fused (--fuse-every): frames.csv says which,
     # stats.json counts the others and echoes the cadence; 0 is refused by name.
     expect 0 "$B" replay "$T/seq" --out "$T/rpfe" $small --fuse-every 2
-    grep -q "1 frames tracked only, not fused" "$T/out" || fail "replay --fuse-every: no summary line: $(head -c 400 "$T/out")"
+    grep -q "1 frame tracked only, not fused" "$T/out" || fail "replay --fuse-every: no summary line: $(head -c 400 "$T/out")"
     python3 - "$T/rpfe" <<'PY' || fail "replay --fuse-every 2"
 import csv, json, sys
 d = json.load(open(sys.argv[1] + "/stats.json"))
@@ -397,7 +397,7 @@ PY
     # term on, frames.csv's photo_sharpness is 0 where the term did not run: on that frame
     # (and the next, whose reference it made, if there were one); --repeated track uses it.
     expect 0 "$B" replay "$T/reprgb" --out "$T/rprgb" $small --photometric 0.3 --photometric-weak 0
-    grep -q "1 frames repeated only the colour before them" "$T/out" || fail "replay does not report the colour repeat: $(head -c 400 "$T/out")"
+    grep -q "1 frame repeated only the colour before it" "$T/out" || fail "replay does not report the colour repeat: $(head -c 400 "$T/out")"
     expect 0 "$B" replay "$T/reprgb" --out "$T/rprgbt" $small --photometric 0.3 --photometric-weak 0 --repeated track
     py - "$T/rprgb" "$T/rprgbt" <<'PY' || fail "replay of a repeated colour"
 import csv, json, sys
@@ -422,7 +422,7 @@ PY
         py -c "import json,sys; d=json.load(open(sys.argv[1]+'/stats.json')); assert (d['frames'], d['repeated'], d['colour_repeated']) == tuple(map(int, sys.argv[2:5])), d" "$@"
     }
     expect 0 "$B" fuse "$T/rep" --poses groundtruth --out "$T/furep" $small
-    grep -q "1 frames repeated the depth before them byte for byte: not fused" "$T/out" || fail "fuse does not report the repeat: $(head -c 400 "$T/out")"
+    grep -q "1 frame repeated the depth before it byte for byte: not fused" "$T/out" || fail "fuse does not report the repeat: $(head -c 400 "$T/out")"
     fused_are "$T/furep" 2 1 0 || fail "fuse fused a repeated depth"
     expect 0 "$B" fuse "$T/rep" --poses groundtruth --out "$T/furepf" $small --repeated fuse
     fused_are "$T/furepf" 3 0 0 || fail "fuse --repeated fuse did not fuse the repeat"
