@@ -170,6 +170,8 @@ typedef struct app_map_report {
     uint64_t digest;              /* store_map_digest of the map exported (stats.json's map_digest) */
     uint32_t n_chunks;            /* chunks holding bricks in the map exported (a streamed map's every
                                      one; map.n_chunks: the device's hash entries) */
+    uint32_t n_bricks_whole;      /* bricks of the map exported (map.n_bricks: the device's; more when
+                                     chunks were streamed out) */
 } app_map_report;
 /* The mesh lattice's level for a map: the finest level holding a tenth of its bricks. */
 uint32_t app_mesh_level(const hostmap *snap);

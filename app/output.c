@@ -98,6 +98,7 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
     if (s == BF_OK) s = hostmap_sort(&snap);
     if (s == BF_OK) s = store_map_digest(&snap, &r->digest);
     if (s == BF_OK) r->n_chunks = hostmap_count_chunks(&snap);
+    r->n_bricks_whole = snap.n_bricks;
     if (s != BF_OK) {
         hostmap_free(&snap);
         return s;
@@ -178,6 +179,7 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
     cJSON_AddNumberToObject(c, "pool_full_events", m->fail_colour);
     cJSON_AddNumberToObject(o, "chunks", m->n_chunks);
     cJSON_AddNumberToObject(o, "chunks_with_bricks", r->n_chunks);
+    cJSON_AddNumberToObject(o, "bricks_in_map", r->n_bricks_whole);
     cJSON_AddNumberToObject(o, "nodes", m->n_nodes);
     cJSON_AddNumberToObject(o, "bricks", m->n_bricks);
     cJSON *per_level = cJSON_AddArrayToObject(o, "bricks_per_level");
@@ -212,12 +214,13 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
     cJSON_AddNumberToObject(mesh, "seconds", r->mesh.seconds);
 }
 
-void app_print_map(const app_map_report *r, uint32_t max_level)
+/* The map's line when the device holds the whole map. */
+static void app_print_map_line(const app_map_report *r)
 {
     const fusion_stats *m = &r->map;
-    /* A chunk emptied of its bricks keeps its hash entry (and its memory),
-     * and a streamed chunk has left the device: a store and `info` count
-     * the map's chunks holding bricks, so say both where they differ. */
+    /* A chunk emptied of its bricks keeps its hash entry (and its memory):
+     * a store and `info` count the map's chunks holding bricks, so say both
+     * where they differ. */
     char chunks[96];
     if (r->n_chunks != m->n_chunks)
         snprintf(chunks, sizeof chunks, "%u chunks on the device, %u holding bricks in the map", m->n_chunks,
@@ -227,6 +230,21 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
     printf("  map              %s, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
            chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
            m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0);
+}
+
+void app_print_map(const app_map_report *r, uint32_t max_level)
+{
+    const fusion_stats *m = &r->map;
+    double bits = m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0;
+    if (r->n_bricks_whole != m->n_bricks) {
+        /* Streamed: the map (the store's, the export's) and what the device holds of it. */
+        printf("  map              %u chunks, %u bricks (the whole map, the chunks streamed out included)\n",
+               r->n_chunks, r->n_bricks_whole);
+        printf("  on the device    %u chunks, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
+               m->n_chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0, bits);
+    } else {
+        app_print_map_line(r);
+    }
     if (m->bytes_colour)
         printf("  colour           %llu voxels, %u units, %.2f MiB (%.2f bits per allocated voxel)\n",
                (unsigned long long)m->n_coloured_voxels, m->n_colour_units, m->bytes_colour / 1048576.0,

@@ -47,6 +47,17 @@ if abs(vb - va) > 0.005 * va:
     print("the streamed map lost surface"); ok = False
 if small["tracking"]["tracked"] != big["tracking"]["tracked"]:
     print("tracked frames differ"); ok = False
+# The whole map against the device's part: the summary says both (below).
+if big["bricks_in_map"] != big["bricks"]:
+    print("unstreamed: the map's bricks %d are not the device's %d" % (big["bricks_in_map"], big["bricks"])); ok = False
+if not small["bricks_in_map"] > small["bricks"]:
+    print("streamed: the map's bricks %d are not more than the device's %d" % (small["bricks_in_map"], small["bricks"]))
+    ok = False
 sys.exit(0 if ok else 1)
 PY
+# The streamed run's summary: the whole map (as the store and the export count it), then the device's part.
+whole=$(py -c 'import json,sys; d=json.load(open(sys.argv[1])); print("%d chunks, %d bricks (the whole map" % (d["chunks_with_bricks"], d["bricks_in_map"]))' "$T/small/stats.json")
+device=$(py -c 'import json,sys; d=json.load(open(sys.argv[1])); print("on the device    %d chunks, %d nodes, %d bricks," % (d["chunks"], d["nodes"], d["bricks"]))' "$T/small/stats.json")
+grep -qF "map              $whole" "$T/out" || fail "no whole-map line '$whole': $(grep -m2 -A1 '  map ' "$T/out")"
+grep -qF "$device" "$T/out" || fail "no device line '$device': $(grep -m2 -A1 '  map ' "$T/out")"
 finish test_stream.sh
