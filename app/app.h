@@ -332,7 +332,8 @@ int app_check_out_not_store(const char *cmd, const char *out, const char *store)
  * mistake (--out written before a glob) is not written over. */
 int app_check_json_out(const char *cmd, const char *opt, const char *path);
 /* The folder a file output goes into exists (checked before the work, not
- * after it): 0, or the failure printed and exit 5 naming the folder. */
+ * after it): 0, or the failure printed and exit 5 naming the folder; a
+ * path too long for the system is a usage error (2). */
 int app_check_out_folder(const char *cmd, const char *opt, const char *path);
 /* The log's codec options record and convert share (--colour, --jpeg-quality,
  * --zstd-level), applied to a replay_log_config after parsing. */

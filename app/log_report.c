@@ -143,10 +143,13 @@ int app_check_json_out(const char *cmd, const char *opt, const char *path)
 int app_check_out_folder(const char *cmd, const char *opt, const char *path)
 {
     char dir[4096];
+    /* Checked first, so that no output is written before a later one fails on it. */
+    if (path && strlen(path) >= sizeof dir)
+        return app_usage_error(cmd, "%s: a path of %zu characters is too long (at most %zu): %.60s...", opt,
+                               strlen(path), sizeof dir - 1, path);
     const char *slash = path ? strrchr(path, '/') : NULL;
     if (!slash) return 0; /* the working folder */
     size_t n = slash == path ? 1 : (size_t)(slash - path);
-    if (n >= sizeof dir) return 0; /* the writer names what is wrong */
     memcpy(dir, path, n);
     dir[n] = 0;
     struct stat st;

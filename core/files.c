@@ -51,7 +51,10 @@ bf_status bf_mkdir_p(const char *path)
 {
     char tmp[4096];
     size_t len = strlen(path);
-    if (len == 0 || len >= sizeof tmp) return bf_fail(BF_INVALID_ARG, "bad directory path '%s'", path);
+    if (len == 0) return bf_fail(BF_INVALID_ARG, "an empty folder path");
+    if (len >= sizeof tmp)
+        return bf_fail(BF_INVALID_ARG, "%.60s...: a folder path of %zu characters is too long (at most %zu)", path, len,
+                       sizeof tmp - 1);
     memcpy(tmp, path, len + 1);
     for (char *p = tmp + 1; *p; p++) {
         if (*p != '/') continue;

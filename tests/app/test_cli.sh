@@ -785,6 +785,10 @@ expect 3 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/away.txt"
 mentions "is seen in none of the"
 expect 2 "$B" replay "$T/seq"
 mentions "--out is required"
+# An --out longer than the system takes: the reason, not just "bad path".
+LONG="$T/$(printf 'a%.0s' $(seq 1 4200))"
+expect 2 "$B" replay "$T/seq" --out "$LONG"
+mentions "a folder path of ${#LONG} characters is too long (at most 4095)"
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --icp-iters 10,x
 expect 2 "$B" replay "$T/seq" --out "$T/rp2" --gpu-budget 8 --bricks 5000
 mentions "give one"
