@@ -76,6 +76,8 @@ static int parse_args(int argc, char **argv, convert_args *a)
     /* A failed or cut conversion leaves a log already at DEST as it was. */
     a->lcfg.replace_when_finished = true;
     rc = app_check_not_input("convert", "--out", a->out, a->in);
+    /* A log's folder is not made for it (a folder's own parents are): named before the work. */
+    if (!rc && a->to_log) rc = app_check_out_folder("convert", "--out", a->out);
     return rc || a->to_log ? rc : check_new_folder(a->out);
 }
 

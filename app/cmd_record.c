@@ -56,7 +56,9 @@ static int parse_args(const char *cmd, int argc, char **argv, record_args *a)
     };
     int rc = app_parse_log_command(&spec, own, &a->codec, &a->ropt, &a->lcfg, argc, argv);
     if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->device);
-    return rc ? rc : app_check_new_recording(cmd, "--out", a->out, a->overwrite);
+    if (!rc) rc = app_check_new_recording(cmd, "--out", a->out, a->overwrite);
+    /* Before the camera opens: the log's folder is not made for it. */
+    return rc ? rc : app_check_out_folder(cmd, "--out", a->out);
 }
 
 /* What a recording did, for the summary and stats.json. */

@@ -589,6 +589,11 @@ python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] 
 mkdir "$T/adir.bflog"
 expect 2 "$B" convert "$T/seq" --out "$T/adir.bflog"
 mentions "is a folder"
+# A log into a missing folder: the folder named before the work (not the log's .partial).
+expect 5 "$B" convert "$T/seq" --out "$T/nofolder/x.bflog"
+mentions "--out $T/nofolder/x.bflog: the folder $T/nofolder does not exist"
+expect 5 "$B" record --device "$T/seq" --out "$T/nofolder/x.bflog"
+mentions "--out $T/nofolder/x.bflog: the folder $T/nofolder does not exist"
 # Codec options that would be ignored are refused.
 expect 2 "$B" convert "$T/seq" --out "$T/codecdir" --colour jpeg
 mentions "a TUM folder keeps PNG images"
