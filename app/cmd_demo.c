@@ -336,6 +336,15 @@ int cmd_demo(int argc, char **argv)
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (data_dir && !bf_file_exists(data_dir)) return app_usage_error(cmd, "--data: folder '%s' does not exist", data_dir);
+    /* Not over an earlier demo: its frames past this run's count and its
+     * reconstruction would stay beside the new files (synth refuses the same). */
+    static const char *const held[] = {"seq/depth.txt", "seq/depth", "stats.json"};
+    for (size_t i = 0; i < sizeof held / sizeof *held; i++) {
+        char p[4200];
+        if (snprintf(p, sizeof p, "%s/%s", out_dir, held[i]) < (int)sizeof p && bf_file_exists(p))
+            return app_usage_error(cmd, "--out %s holds an earlier run (%s): give a new folder, or remove it first",
+                                   out_dir, held[i]);
+    }
     bool use_gpu = !no_gpu;
     if (!data_dir) data_dir = app_default_data_dir();
 
