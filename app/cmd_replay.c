@@ -507,6 +507,7 @@ typedef struct replay_result {
     app_map_report out;
     bool has_ate;
     eval_ate_result ate;
+    char ate_error[512];       /* why no ATE where the frames carry ground truth ("" otherwise) */
     bool has_surface;          /* --reference */
     eval_surface_result surf;
     uint32_t n_views;
@@ -629,6 +630,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
         cJSON_AddNumberToObject(ate, "pairs", (double)r->ate.n_matched);
     } else {
         cJSON_AddNullToObject(o, "ate_m");
+        if (r->ate_error[0]) cJSON_AddStringToObject(o, "ate_error", r->ate_error);
     }
     if (r->has_surface) {
         cJSON *sf = app_json_object(o, "surface_m");
@@ -878,6 +880,8 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (r->has_ate)
         printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu poses\n", r->ate.trans.rmse,
                r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
+    else if (r->ate_error[0])
+        printf("  trajectory       ATE not computed: %s\n", r->ate_error);
     else
         printf("  trajectory       no ground truth: ATE not computed\n");
     if (r->has_surface && r->surf.accuracy.n == 0)
@@ -1069,6 +1073,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* Then the store: the whole map at the end (or at Ctrl-C). */
     if (s == BF_OK && a.store) s = app_note_write(&wf, cmd, app_store_finish(&r.store, &r.run));
     if (s == BF_OK && r.run.gt.n >= 2 && eval_ate(&r.run.gt, &r.run.est, 0, &r.ate) == BF_OK) r.has_ate = true;
+    else if (s == BF_OK && r.run.gt.n == 1)
+        snprintf(r.ate_error, sizeof r.ate_error, "one frame with a ground-truth pose: an ATE needs two");
+    else if (s == BF_OK && r.run.gt.n >= 2)
+        snprintf(r.ate_error, sizeof r.ate_error, "%s", bf_last_error());
     hostmap whole = {0};
     if (s == BF_OK && r.run.loop) s = recon_snapshot(r.run.loop, &whole);
     if (s == BF_OK)

@@ -790,6 +790,12 @@ expect 3 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/away.txt"
 mentions "is seen in none of the"
 expect 2 "$B" replay "$T/seq"
 mentions "--out is required"
+# One frame with ground truth: no ATE, and the summary says why (not "no ground truth").
+expect 0 "$B" replay "$T/seq" --out "$T/rp1f" --frames 1 --no-mesh
+grep -qF "ATE not computed: one frame with a ground-truth pose: an ATE needs two" "$T/out" ||
+    fail "replay --frames 1 does not say why there is no ATE: $(grep trajectory "$T/out")"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['ate_m'] is None and 'two' in d['ate_error'], d.get('ate_error')" \
+    "$T/rp1f/stats.json" || fail "replay --frames 1: stats.json has no ate_error"
 # An --out longer than the system takes: the reason, not just "bad path".
 LONG="$T/$(printf 'a%.0s' $(seq 1 4200))"
 expect 2 "$B" replay "$T/seq" --out "$LONG"
