@@ -33,6 +33,7 @@ static bf_status read_store(const char *cmd, const char *dir, hostmap *m, store_
 {
     bf_status s = store_read(dir, m, meta, traj, rep);
     if (s == BF_IO && !store_exists(dir)) s = BF_FORMAT; /* not a store: bad input, not an I/O failure */
+    if (s == BF_UNSUPPORTED) s = BF_FORMAT;              /* a newer store: unreadable here (exit 3) */
     /* No readable store.json, no trajectory, no chunk file: a folder that only
      * looks like a store (one killed before its first write finished). */
     if (s == BF_OK && refuse_empty && !rep->index_ok && !rep->trajectory_ok && rep->n_chunks == 0 && rep->n_bad == 0)

@@ -235,13 +235,14 @@ bf_status app_scene_read_map(const char *path, hostmap *m, store_meta *meta_out,
     store_meta meta;
     store_report rep;
     bf_status s = store_read(dir, m, &meta, NULL, &rep);
+    if (s == BF_UNSUPPORTED) s = BF_FORMAT; /* a newer store: unreadable here (exit 3) */
     if (s == BF_OK && meta_out) *meta_out = meta;
     if (s == BF_OK && rep_out) *rep_out = rep;
     if (s == BF_OK && rep.n_bad)
-        bf_warn("%s: %u chunk file(s) left out, the first: %s", dir, rep.n_bad, rep.first_bad);
+        bf_warn("%s: %u chunk file%s left out, the first: %s", dir, rep.n_bad, app_s(rep.n_bad), rep.first_bad);
     if (s == BF_OK && rep.n_missing)
-        bf_warn("%s: %u chunk(s) the index lists were not loaded (a file missing or bad): left out", dir,
-                rep.n_missing);
+        bf_warn("%s: %u chunk%s the index lists %s not loaded (a file missing or bad): left out", dir,
+                rep.n_missing, app_s(rep.n_missing), rep.n_missing == 1 ? "was" : "were");
     if (s == BF_OK && m->n_bricks == 0) s = bf_fail(BF_FORMAT, "%s: the store holds no brick", dir);
     if (s != BF_OK) hostmap_free(m);
     return s;

@@ -17,6 +17,7 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
     bf_status s = BF_OK;
     if (resume) {
         s = store_read(dir, &st->map, &st->meta, &st->traj, &st->report);
+        if (s == BF_UNSUPPORTED) s = BF_FORMAT; /* a newer store: unreadable here (exit 3) */
         /* The writer rewrites and removes every chunk the index lists that
          * the resumed map lacks: a chunk file that did not load (damaged,
          * or whole but at odds with a damaged store.json) would be lost for

@@ -55,6 +55,23 @@ expect 0 "$B" info "$T/seqstore" --json
 json_get "$T/out" "d['kind']" | grep -qx tum || fail "info of a sequence holding a store/ is not the sequence's"
 rm -rf "$T/run" "$T/seqstore"
 
+# A store of a newer version: unreadable input for this build (exit 3), by every reader.
+cp -r "$T/S" "$T/newer"
+py - "$T/newer/store.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1])); d["version"] = 9; json.dump(d, open(sys.argv[1], "w"))
+PY
+expect 3 "$B" info "$T/newer"
+mentions "store version 9; this bitfuse reads version"
+expect 3 "$B" export "$T/newer" --out "$T/newer.ply"
+mentions "store version 9; this bitfuse reads version"
+expect 3 "$B" render --map "$T/newer" --pose "0 0 0 0 0 0 1" --size 64x48 --out "$T/newer.png"
+mentions "store version 9; this bitfuse reads version"
+expect 3 "$B" replay "$SEQ" --out "$T/newer-run" --no-mesh --store "$T/newer" --resume
+mentions "store version 9; this bitfuse reads version"
+{ [ -e "$T/newer.ply" ] || [ -e "$T/newer.png" ]; } && fail "a newer store was exported or rendered"
+rm -rf "$T/newer" "$T/newer-run"
+
 # export: a mesh and the points, without the loop.
 expect 0 "$B" export "$T/S" --out "$T/m.ply"
 head -c 400 "$T/m.ply" | grep -aq "element face [1-9]" || fail "export wrote no mesh"
