@@ -40,10 +40,11 @@ static bf_status read_store(const char *cmd, const char *dir, hostmap *m, store_
         s = bf_fail(BF_FORMAT, "%s: holds no chunk file, no readable store.json and no trajectory: not a scene store "
                     "(or one stopped before its first write)", dir);
     if (s == BF_OK && rep->n_bad)
-        bf_warn("%s: %s: %u chunk file(s) left out, the first: %s", cmd, dir, rep->n_bad, rep->first_bad);
+        bf_warn("%s: %s: %u chunk file%s left out, the first: %s", cmd, dir, rep->n_bad, app_s(rep->n_bad),
+                rep->first_bad);
     if (s == BF_OK && rep->n_missing)
-        bf_warn("%s: %s: %u chunk(s) the index lists were not loaded (a file missing or bad): left out", cmd, dir,
-                rep->n_missing);
+        bf_warn("%s: %s: %u chunk%s the index lists %s not loaded (a file missing or bad): left out", cmd, dir,
+                rep->n_missing, app_s(rep->n_missing), rep->n_missing == 1 ? "was" : "were");
     return s;
 }
 
@@ -243,8 +244,9 @@ int app_info_store(const char *dir, bool json)
                    kf_points);
         if (!kf_ok) printf("  damage           keyframes.bin unreadable (a resumed scan starts from its poses)\n");
         if (!rep.index_ok || !rep.trajectory_ok || rep.n_bad || rep.n_missing)
-            printf("  damage           index %s, trajectory %s, %u bad chunk files, %u chunks missing\n",
-                   rep.index_ok ? "ok" : "unreadable", rep.trajectory_ok ? "ok" : "unreadable", rep.n_bad, rep.n_missing);
+            printf("  damage           index %s, trajectory %s, %u bad chunk file%s, %u chunk%s missing\n",
+                   rep.index_ok ? "ok" : "unreadable", rep.trajectory_ok ? "ok" : "unreadable", rep.n_bad,
+                   app_s(rep.n_bad), rep.n_missing, app_s(rep.n_missing));
     }
     store_keyframes_free(&kf);
     hostmap_free(&m);

@@ -264,10 +264,10 @@ int cmd_render(int argc, char **argv)
         if (a.scene.map) printf("  map              %s: %u bricks\n", a.scene.map, n_map_bricks);
         bool one_level = !a.scene.mesh_lod || vst.level_coarse == vst.level_fine;
         if (a.scene.mesh && one_level)
-            printf("  mesh             %s: %u triangles at level %u (%.2f mm voxels): "
+            printf("  mesh             %s: %u triangle%s at level %u (%.2f mm voxels): "
                    "%u bricks, voxelised in %.3f s (%.2f M triangles/s; binning %.3f s, GPU pass %.3f s over the %u bricks "
                    "with crossings to test)\n",
-                   a.scene.mesh, f.mesh.n_tris, vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
+                   a.scene.mesh, f.mesh.n_tris, app_s(f.mesh.n_tris), vst.level_fine, 1e3 * vst.voxel_m, vst.n_bricks, vst.seconds,
                    vst.seconds > 0 ? 1e-6 * f.mesh.n_tris / vst.seconds : 0.0, vst.seconds_bin, vst.seconds_gpu,
                    vst.n_gpu_bricks);
         if (a.scene.mesh && !one_level) {

@@ -33,7 +33,8 @@ static const char *check_camera(const char *name, const char *v)
 {
     static char msg[512];
     bf_intrinsics K = {0};
-    if (replay_parse_camera(v, &K) != BF_OK) snprintf(msg, sizeof msg, "%s: %s", name, bf_last_error());
+    /* (replay's messages name --camera and its value already) */
+    if (replay_parse_camera(v, &K) != BF_OK) snprintf(msg, sizeof msg, "%s", bf_last_error());
     else if (!(K.fx_px > 0) || K.fy_px == 0) snprintf(msg, sizeof msg, "%s: fx must be positive and fy not zero", name);
     else return NULL;
     return msg;
@@ -253,7 +254,7 @@ int cmd_synth(int argc, char **argv)
     synth_result res;
     bf_status s = synth_run(&cfg, &res);
     if (s) return app_fail(cmd, s);
-    printf("synth: %u frames -> %s\n", res.n_frames, cfg.out_dir);
+    printf("synth: %u frame%s -> %s\n", res.n_frames, app_s(res.n_frames), cfg.out_dir);
     printf("  scene        %u triangles\n", res.n_scene_tris);
     printf("  render       %.3f s per frame (median %.3f), %.2f frames/s on %d threads\n", res.mean_frame_s,
            res.median_frame_s, res.mean_frame_s > 0 ? 1 / res.mean_frame_s : 0, bf_thread_count());

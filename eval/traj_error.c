@@ -154,9 +154,9 @@ bf_status eval_ate(const bf_traj *gt, const bf_traj *est, double max_dt_s, eval_
     if (s != BF_OK) return s;
     if (n < 2) {
         free(m);
-        return bf_fail(BF_FORMAT, "ATE: only %zu pose pair(s) have timestamps within %g s; "
+        return bf_fail(BF_FORMAT, "ATE: only %zu pose pair%s timestamps within %g s; "
                                   "are these the same sequence?",
-                       n, max_dt_s > 0 ? max_dt_s : EVAL_TUM_MAX_DT_S);
+                       n, n == 1 ? " has" : "s have", max_dt_s > 0 ? max_dt_s : EVAL_TUM_MAX_DT_S);
     }
     bf_vec3 *p_est = bf_malloc(n * sizeof *p_est), *p_gt = bf_malloc(n * sizeof *p_gt);
     double *err = bf_malloc(n * sizeof *err);
@@ -260,9 +260,16 @@ bf_status eval_rpe(const bf_traj *gt, const bf_traj *est, double max_dt_s, bool 
         e_r[n_pairs] = bf_se3_angle(&err) * 180.0 / M_PI;
         n_pairs++;
     }
+    double span = est->t_s[n - 1] - est->t_s[0];
+    if (n_pairs < 2 && !per_frame && span < 2 * delta) {
+        /* TUM drops the pair that ends at the last pose: two pairs need a span of more than delta. */
+        s = bf_fail(BF_FORMAT, "RPE: the trajectory spans %.3f s: too short for pairs %g s apart (%zu found)", span,
+                    delta, n_pairs);
+        goto done;
+    }
     if (n_pairs < 2) {
-        s = bf_fail(BF_FORMAT, "RPE: only %zu pose pair(s) %s apart with ground truth within %g s",
-                    n_pairs, per_frame ? "one frame" : "delta", max_dt);
+        s = bf_fail(BF_FORMAT, "RPE: only %zu pose pair%s %s apart with ground truth within %g s", n_pairs,
+                    n_pairs == 1 ? "" : "s", per_frame ? "one frame" : "delta", max_dt);
         goto done;
     }
     eval_rpe_result r = {.n_pairs = n_pairs, .max_dt_s = max_dt};

@@ -114,9 +114,9 @@ bf_status mesh_simplify(mesh_data *m, const mesh_simplify_config *cfg, mesh_simp
         size_t fewest = smallest_clustering(tmp, m, target);
         free(tmp), free(idx);
         return bf_fail(BF_INVALID_ARG,
-                       "simplify: a cap of %llu triangles leaves none of the mesh's %u (the coarsest vertex clustering "
+                       "simplify: a cap of %llu triangle%s leaves none of the mesh's %u (the coarsest vertex clustering "
                        "that keeps any has %zu): choose a larger cap",
-                       (unsigned long long)cfg->max_triangles, m->n_tris, fewest);
+                       (unsigned long long)cfg->max_triangles, cfg->max_triangles == 1 ? "" : "s", m->n_tris, fewest);
     }
     free(tmp);
     bf_status s = compact(m, idx, n);

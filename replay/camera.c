@@ -68,9 +68,8 @@ bf_status replay_parse_camera(const char *spec, bf_intrinsics *K)
     if (s != BF_OK) return s;
     /* A preset's lens is dropped; a lens typed in numbers is not a pinhole. */
     if (strchr(spec, ',') && calib_has_distortion(dist))
-        return bf_fail(BF_INVALID_ARG, "--camera '%s': a lens is not applied here (a bitfuse log keeps its "
-                                       "frames as recorded; synth renders a pinhole): give fr1, fr2, fr3, icl or "
-                                       "fx,fy,cx,cy", spec);
+        return bf_fail(BF_INVALID_ARG, "--camera '%s': a lens (distortion coefficients) is not applied here: give "
+                                       "fr1, fr2, fr3, icl or fx,fy,cx,cy (a pinhole)", spec);
     *K = k;
     return BF_OK;
 }

@@ -332,6 +332,26 @@ BF_TEST(rpe_skips_pairs_without_nearby_ground_truth)
     bf_traj_free(&est);
 }
 
+BF_TEST(rpe_of_a_trajectory_shorter_than_delta_says_so)
+{
+    /* 0.63 s of poses, pairs 1 s apart: none exist, and the message names
+     * the span (not a timing mismatch with the ground truth). */
+    bf_traj gt = {0}, est = {0};
+    bf_se3 I = bf_se3_identity();
+    for (int i = 0; i < 20; i++) {
+        CHECK_OK(bf_traj_push(&gt, i / 30.0, &I));
+        CHECK_OK(bf_traj_push(&est, i / 30.0, &I));
+    }
+    eval_rpe_result r;
+    CHECK_STATUS(eval_rpe(&gt, &est, 0, false, 1.0, &r), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("the trajectory spans 0.633 s: too short for pairs 1 s apart");
+    /* Per frame, the same poses give pairs. */
+    CHECK_OK(eval_rpe(&gt, &est, 0, true, 0, &r));
+    CHECK(r.n_pairs == 18);
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
+}
+
 BF_TEST(error_stats_follow_numpy)
 {
     const double v[] = {4, 1, 3, 2};

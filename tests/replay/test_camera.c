@@ -53,5 +53,5 @@ BF_TEST(camera_presets_carry_their_lens)
     CHECK(K.fx_px == 517.3);
     CHECK_OK(replay_parse_camera("500,501,300,200,0,0,0,0,0", &K));
     CHECK_STATUS(replay_parse_camera("500,501,300,200,0.1,0,0,0,0", &K), BF_INVALID_ARG);
-    CHECK_ERROR_MENTIONS("lens is not applied");
+    CHECK_ERROR_MENTIONS("a lens (distortion coefficients) is not applied here");
 }
