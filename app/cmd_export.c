@@ -213,7 +213,9 @@ int app_info_store(const char *dir, bool json)
             double p[8] = {meta.last_t_s, meta.last_pose.t.x, meta.last_pose.t.y, meta.last_pose.t.z, q.x, q.y, q.z, q.w};
             app_json_numbers(o, "last_pose_tum", p, 8);
         }
-        cJSON_AddNumberToObject(o, "flush", rep.flush);
+        /* The write count lives in store.json: unknown without it. */
+        if (rep.index_ok) cJSON_AddNumberToObject(o, "flush", rep.flush);
+        else cJSON_AddNullToObject(o, "flush");
         cJSON_AddBoolToObject(o, "index_ok", rep.index_ok);
         cJSON_AddBoolToObject(o, "trajectory_ok", rep.trajectory_ok);
         cJSON_AddNumberToObject(o, "bad_chunk_files", rep.n_bad);
@@ -224,7 +226,10 @@ int app_info_store(const char *dir, bool json)
         cJSON_AddBoolToObject(o, "keyframes_ok", kf_ok);
         s = app_json_print(o);
     } else {
-        printf("%s: bitfuse scene store, version %u, %u writes\n", dir, STORE_VERSION, rep.flush);
+        if (rep.index_ok)
+            printf("%s: bitfuse scene store, version %u, %u write%s\n", dir, STORE_VERSION, rep.flush, app_s(rep.flush));
+        else
+            printf("%s: bitfuse scene store, version %u, writes unknown (store.json unreadable)\n", dir, STORE_VERSION);
         printf("  chunks           %u (%g m), %u bricks:", rep.n_chunks, meta.chunk_m, rep.n_bricks);
         for (uint32_t l = 0; l < 9; l++)
             if (per_level[l]) printf("  L%u:%u", l, per_level[l]);

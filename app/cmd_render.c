@@ -123,6 +123,7 @@ static cJSON *render_json(const render_report *r)
     cJSON_AddNumberToObject(o, "height", r->H);
     cJSON_AddStringToObject(o, "out", a->out);
     if (a->depth) cJSON_AddStringToObject(o, "depth", a->depth);
+    else cJSON_AddNullToObject(o, "depth");
     cJSON_AddNumberToObject(o, "hit_fraction", r->hit_frac);
     if (a->scene.map) {
         cJSON *m = app_json_object(o, "map");

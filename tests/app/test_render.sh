@@ -143,6 +143,7 @@ expect 0 "$B" render --mesh "$T/slab.off" --mesh-lod off --pose "0 0 -0.3 0 0 0 
 py - "$T/out" "$T/err" <<'PYEOF' || fail "the 20 m slab from 0.3 m: $(head -c 300 "$T/out") $(head -c 300 "$T/err")"
 import json, sys
 d = json.load(open(sys.argv[1]))
+assert "depth" in d and d["depth"] is None, "no depth: null without --depth"
 warned = "too large for this device at level 7" in open(sys.argv[2]).read()
 assert d["hit_fraction"] == 1, d
 assert d["mesh"]["level_fine"] <= 6 if warned else d["mesh"]["level_fine"] == 7, (warned, d)
@@ -235,7 +236,7 @@ fi
 cp -r "$T/S" "$T/Sdmg"
 rm "$(ls "$T"/Sdmg/chunks/*.bfc | head -n 1)"
 expect 0 "$B" render --map "$T/Sdmg" --pose "$POSE" --size 40x30 --out "$T/dmg.png" --json
-mentions "were not loaded"
+mentions "1 chunk the index lists was not loaded"
 py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['map']['chunks_missing'] == 1 and d['map']['chunk_files_left_out'] == 0, d['map']" \
     "$T/out" || fail "render of a damaged store: $(head -c 300 "$T/out")"
 # Options for what is not drawn are refused, not ignored.

@@ -172,6 +172,11 @@ before=$(cd "$T/D" && find . -type f | sort | xargs md5sum | md5sum)
 expect 3 "$B" replay "$SEQ" --out "$T/dres" --no-mesh --store "$T/D" --resume
 mentions "no last pose to resume from"
 [ "$(cd "$T/D" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a store with a damaged index and trajectory was changed"
+# info of it: the write count lived in the index, so it is unknown, not 0.
+expect 0 "$B" info "$T/D"
+grep -q "writes unknown (store.json unreadable)" "$T/out" || fail "info of an unreadable index: $(head -1 "$T/out")"
+expect 0 "$B" info "$T/D" --json
+json_get "$T/out" "d['flush']" | grep -qx None || fail "info --json: flush is not null without an index"
 # A new store whose scan fails before its first write (a corrupt first
 # frame) is not left behind as an empty store the next run would refuse.
 cp -r "$SEQ" "$T/badfirst"
