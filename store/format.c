@@ -145,7 +145,8 @@ static bf_status write_all(int fd, const char *path, const void *p, size_t n)
     return BF_OK;
 }
 
-bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb)
+/* path.tmp written whole and synced; *pending its slot (kept on success). */
+static bf_status write_tmp(const char *path, const void *a, size_t na, const void *b, size_t nb, int *pending_out)
 {
     char tmp[4200];
     if ((size_t)snprintf(tmp, sizeof tmp, "%s.tmp", path) >= sizeof tmp)
@@ -163,8 +164,92 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
     if (s == BF_OK && (bf_fault_now() ? (errno = ENOSPC, 1) : fsync(fd) != 0))
         s = bf_fail(BF_WRITE, "%s: fsync failed: %s", path, strerror(errno));
     if (close(fd) != 0 && s == BF_OK) s = bf_fail(BF_WRITE, "%s: close failed: %s", path, strerror(errno));
-    bf_pending_forget(&pending);
-    if (s == BF_OK && rename(tmp, path) != 0) s = bf_fail(BF_WRITE, "%s: rename failed: %s", path, strerror(errno));
-    if (s != BF_OK) unlink(tmp); /* the earlier version of path, if any, stays whole */
+    if (s != BF_OK) {
+        bf_pending_forget(&pending);
+        unlink(tmp); /* the earlier version of path, if any, stays whole */
+        return s;
+    }
+    *pending_out = pending;
+    return BF_OK;
+}
+
+/* Renames path.tmp over path; path.tmp is gone either way. */
+static bf_status rename_tmp(const char *path, int *pending)
+{
+    char tmp[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path); /* fits: write_tmp made it */
+    bf_pending_forget(pending);
+    if (rename(tmp, path) == 0) return BF_OK;
+    bf_status s = bf_fail(BF_WRITE, "%s: rename failed: %s", path, strerror(errno));
+    unlink(tmp);
     return s;
+}
+
+bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb)
+{
+    int pending = -1;
+    bf_status s = write_tmp(path, a, na, b, nb, &pending);
+    return s == BF_OK ? rename_tmp(path, &pending) : s;
+}
+
+bf_status store__write_staged(store_stage *stage, const char *path, const void *a, size_t na, const void *b,
+                              size_t nb)
+{
+    if (stage->n == stage->cap) {
+        uint32_t cap = stage->cap ? 2 * stage->cap : 16;
+        char **p = bf_realloc(stage->paths, cap * sizeof *p);
+        if (p) stage->paths = p;
+        int *q = p ? bf_realloc(stage->pending, cap * sizeof *q) : NULL;
+        if (q) stage->pending = q;
+        if (!p || !q) return bf_fail(BF_NO_MEMORY, "%s: the store write's list of %u files", path, cap);
+        stage->cap = cap;
+    }
+    char *name = bf_malloc(strlen(path) + 1);
+    if (!name) return bf_fail(BF_NO_MEMORY, "%s: name", path);
+    strcpy(name, path);
+    int pending = -1;
+    bf_status s = write_tmp(path, a, na, b, nb, &pending);
+    if (s != BF_OK) {
+        free(name);
+        return s;
+    }
+    stage->paths[stage->n] = name;
+    stage->pending[stage->n++] = pending;
+    return BF_OK;
+}
+
+static void stage_free(store_stage *stage)
+{
+    for (uint32_t i = 0; i < stage->n; i++) free(stage->paths[i]);
+    free(stage->paths);
+    free(stage->pending);
+    memset(stage, 0, sizeof *stage);
+}
+
+bf_status store__stage_commit(store_stage *stage)
+{
+    bf_status s = BF_OK;
+    for (uint32_t i = 0; i < stage->n; i++) {
+        if (s == BF_OK) {
+            s = rename_tmp(stage->paths[i], &stage->pending[i]);
+            continue;
+        }
+        char tmp[4200];
+        snprintf(tmp, sizeof tmp, "%s.tmp", stage->paths[i]);
+        bf_pending_forget(&stage->pending[i]);
+        unlink(tmp);
+    }
+    stage_free(stage);
+    return s;
+}
+
+void store__stage_abort(store_stage *stage)
+{
+    for (uint32_t i = 0; i < stage->n; i++) {
+        char tmp[4200];
+        snprintf(tmp, sizeof tmp, "%s.tmp", stage->paths[i]);
+        bf_pending_forget(&stage->pending[i]);
+        unlink(tmp);
+    }
+    stage_free(stage);
 }

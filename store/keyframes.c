@@ -25,11 +25,12 @@ void store_keyframes_free(store_keyframes *k)
 
 static size_t keyframe_bytes(uint32_t n) { return STORE_KEYFRAME_HEADER + (size_t)n * (32 + 12); }
 
-bf_status store_keyframes_write(const char *dir, const store_keyframes *k)
+/* keyframes.bin's bytes into *out (malloc'd), its path into path. */
+static bf_status keyframes_encode(const char *dir, const store_keyframes *k, char path[4200], uint8_t **out,
+                                  size_t *out_bytes)
 {
     if (!dir || !k) return bf_fail(BF_INVALID_ARG, "store_keyframes_write: no folder or keyframes");
-    char path[4200];
-    snprintf(path, sizeof path, "%s/%s", dir, STORE_KEYFRAMES_NAME);
+    snprintf(path, 4200, "%s/%s", dir, STORE_KEYFRAMES_NAME);
     if (k->n > STORE_MAX_KEYFRAMES || (k->n && !k->kf))
         return bf_fail(BF_INVALID_ARG, "%s: %u keyframes, at most %u", path, k->n, STORE_MAX_KEYFRAMES);
     size_t bytes = STORE_KEYFRAMES_HEADER + 8;
@@ -60,9 +61,31 @@ bf_status store_keyframes_write(const char *dir, const store_keyframes *k)
     }
     uint64_t h = store__hash(buf, bytes - 8);
     memcpy(p, &h, 8);
-    bf_status s = store__write_atomic(path, buf, bytes, NULL, 0);
+    *out = buf;
+    *out_bytes = bytes;
+    return BF_OK;
+}
+
+bf_status store_keyframes_write(const char *dir, const store_keyframes *k)
+{
+    char path[4200];
+    uint8_t *buf = NULL;
+    size_t bytes = 0;
+    bf_status s = keyframes_encode(dir, k, path, &buf, &bytes);
+    if (s == BF_OK) s = store__write_atomic(path, buf, bytes, NULL, 0);
     free(buf);
     return s == BF_OK ? bf_sync_dir(dir) : s;
+}
+
+bf_status store__keyframes_stage(store_stage *stage, const char *dir, const store_keyframes *k)
+{
+    char path[4200];
+    uint8_t *buf = NULL;
+    size_t bytes = 0;
+    bf_status s = keyframes_encode(dir, k, path, &buf, &bytes);
+    if (s == BF_OK) s = store__write_staged(stage, path, buf, bytes, NULL, 0);
+    free(buf);
+    return s;
 }
 
 /* Keyframe i of the file at *at (len bytes left): its arrays copied. */

@@ -78,6 +78,25 @@ uint64_t store__hash(const void *p, size_t n);
 /* Writes path atomically: path.tmp, fsync, rename (the folder's fsync is
  * the caller's). An injected fault (bf_fault_now) fails as ENOSPC. */
 bf_status store__write_atomic(const char *path, const void *a, size_t na, const void *b, size_t nb);
+/* Files written whole as path.tmp and not yet renamed: a store write puts
+ * every new file down first and renames them only when all are whole, so
+ * a write that fails (a full disk) leaves the store as the write before. */
+typedef struct store_stage {
+    char **paths; /* the final names (malloc'd) */
+    int *pending; /* their temporary files' bf_pending_add slots */
+    uint32_t n, cap;
+} store_stage;
+/* As store__write_atomic, but path.tmp is added to stage, not renamed. */
+bf_status store__write_staged(store_stage *stage, const char *path, const void *a, size_t na, const void *b,
+                              size_t nb);
+/* Renames every staged file over its final name, in the order staged; the
+ * stage is emptied. A failed rename leaves the files before it renamed and
+ * removes the rest. */
+bf_status store__stage_commit(store_stage *stage);
+/* Removes every staged file; the stage is emptied. */
+void store__stage_abort(store_stage *stage);
+/* keyframes.bin staged (store_keyframes_write writes it at once). */
+bf_status store__keyframes_stage(store_stage *stage, const char *dir, const store_keyframes *k);
 /* The whole regular file at path into *out (malloc'd, NUL-terminated, *n
  * bytes without the NUL): BF_IO when it cannot be opened or read,
  * BF_FORMAT when it is larger than max. */

@@ -47,8 +47,8 @@ struct store_writer {
 
 /* ------------------------------------------------------------ one write */
 
-static bf_status write_chunk(const char *chunk_dir, const hostmap *m, const store_group *g, const store_meta *meta,
-                             uint64_t *file_bytes)
+static bf_status write_chunk(store_stage *stage, const char *chunk_dir, const hostmap *m, const store_group *g,
+                             const store_meta *meta, uint64_t *file_bytes)
 {
     size_t raw = (size_t)g->n * store__record_bytes(g->has_colour), cap = ZSTD_compressBound(raw);
     uint8_t *rec = bf_malloc(raw), *z = bf_malloc(cap);
@@ -77,7 +77,8 @@ static bf_status write_chunk(const char *chunk_dir, const hostmap *m, const stor
         h.payload_bytes = nz;
         h.payload_hash = store__hash(z, nz);
         h.header_hash = store__hash(&h, offsetof(store_chunk_header, header_hash));
-        s = store__write_atomic(path, &h, sizeof h, z, nz);
+        s = stage ? store__write_staged(stage, path, &h, sizeof h, z, nz) /* renamed with the write's other files */
+                  : store__write_atomic(path, &h, sizeof h, z, nz);
         *file_bytes = sizeof h + nz;
     }
     free(rec);
@@ -85,7 +86,7 @@ static bf_status write_chunk(const char *chunk_dir, const hostmap *m, const stor
     return s;
 }
 
-static bf_status write_traj(store_writer *w, const bf_traj *traj)
+static bf_status write_traj(store_writer *w, store_stage *stage, const bf_traj *traj)
 {
     size_t n = traj ? traj->n : 0, bytes = STORE_TRAJ_HEADER + n * STORE_TRAJ_POSE_DOUBLES * 8 + 8;
     uint8_t *buf = bf_malloc(bytes);
@@ -105,7 +106,7 @@ static bf_status write_traj(store_writer *w, const bf_traj *traj)
     memcpy(buf + bytes - 8, &h, 8);
     char path[4200];
     snprintf(path, sizeof path, "%s/%s", w->dir, STORE_TRAJ_NAME);
-    bf_status s = store__write_atomic(path, buf, bytes, NULL, 0);
+    bf_status s = store__write_staged(stage, path, buf, bytes, NULL, 0);
     if (s == BF_OK) w->work.bytes_written += bytes;
     free(buf);
     return s;
@@ -126,7 +127,8 @@ static cJSON *json_numbers(const double *v, int n)
     return a;
 }
 
-static bf_status write_index(store_writer *w, const store_meta *meta, const store_entry *e, uint32_t n)
+static bf_status write_index(store_writer *w, store_stage *stage, const store_meta *meta, const store_entry *e,
+                             uint32_t n)
 {
     cJSON *root = cJSON_CreateObject();
     if (!root) return bf_fail(BF_NO_MEMORY, "store: index");
@@ -174,15 +176,16 @@ static bf_status write_index(store_writer *w, const store_meta *meta, const stor
     char path[4200];
     snprintf(path, sizeof path, "%s/%s", w->dir, STORE_INDEX_NAME);
     size_t len = strlen(text);
-    bf_status s = store__write_atomic(path, text, len, "\n", 1);
+    bf_status s = store__write_staged(stage, path, text, len, "\n", 1);
     if (s == BF_OK) w->work.bytes_written += len + 1;
     cJSON_free(text);
     return s;
 }
 
 /* Writes one map: its changed chunks, the trajectory, the index, then
- * removes the files of chunks it no longer has. A failure leaves every
- * file whole (the earlier version where the new one failed). */
+ * removes the files of chunks it no longer has. Every new file is put down
+ * whole first and renamed only when all are: a write that fails (a full
+ * disk) leaves the store as the write before it, file for file. */
 static bf_status write_map(store_writer *w, store_job *job)
 {
     double t0 = bf_time_s();
@@ -193,6 +196,7 @@ static bf_status write_map(store_writer *w, store_job *job)
     store_entry *e = s == BF_OK && n ? bf_calloc(n, sizeof *e) : NULL;
     if (s == BF_OK && n && !e) s = bf_fail(BF_NO_MEMORY, "store: index of %u chunks", n);
     uint64_t written = 0;
+    store_stage chunks = {0}, rest = {0};
     for (uint32_t i = 0; s == BF_OK && i < n; i++) {
         memcpy(e[i].key, g[i].key, sizeof e[i].key);
         e[i].n_bricks = g[i].n;
@@ -203,14 +207,21 @@ static bf_status write_map(store_writer *w, store_job *job)
             e[i].file_bytes = old->file_bytes;
             continue;
         }
-        s = write_chunk(w->chunk_dir, &job->map, &g[i], &job->meta, &e[i].file_bytes);
+        s = write_chunk(&chunks, w->chunk_dir, &job->map, &g[i], &job->meta, &e[i].file_bytes);
         if (s == BF_OK) written++, w->work.bytes_written += e[i].file_bytes;
     }
+    if (s == BF_OK) s = write_traj(w, &rest, &job->traj);
+    if (s == BF_OK && job->has_kf) s = store__keyframes_stage(&rest, w->dir, &job->kf);
+    if (s == BF_OK) s = write_index(w, &rest, &job->meta, e, n);
+    if (s != BF_OK) store__stage_abort(&chunks);
+    /* The chunk files before the index that lists them (a kill in between
+     * leaves chunks the old index does not list: loaded, as a reader takes them). */
+    if (s == BF_OK) s = store__stage_commit(&chunks);
     if (s == BF_OK && written) s = bf_sync_dir(w->chunk_dir);
-    if (s == BF_OK) s = write_traj(w, &job->traj);
-    if (s == BF_OK && job->has_kf) s = store_keyframes_write(w->dir, &job->kf);
-    if (s == BF_OK) s = write_index(w, &job->meta, e, n);
+    if (s == BF_OK) s = store__stage_commit(&rest);
+    else store__stage_abort(&rest);
     if (s == BF_OK) s = bf_sync_dir(w->dir);
+
     uint64_t removed = 0;
     for (uint32_t i = 0; s == BF_OK && i < w->n_entries; i++) {
         if (n && bsearch(&w->entries[i], e, n, sizeof *e, store__entry_cmp)) continue;
@@ -264,7 +275,7 @@ bf_status store_put_chunks(const char *dir, hostmap *m, const store_meta *meta, 
     if (s == BF_OK) s = store__groups(m, &g, &n);
     for (uint32_t i = 0; s == BF_OK && i < n; i++) {
         uint64_t b = 0;
-        s = write_chunk(chunk_dir, m, &g[i], meta, &b);
+        s = write_chunk(NULL, chunk_dir, m, &g[i], meta, &b);
         total += b;
     }
     free(g);

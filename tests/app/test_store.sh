@@ -307,14 +307,24 @@ echo "kill -9: $kills kills, the store reopened and exported after each"
 # A full disk: a tiny tmpfs (root only) ends the scan with an error naming
 # the store's file, and what the store holds still reads.
 mkdir "$T/tiny"
-if mount -t tmpfs -o size=48k tmpfs "$T/tiny" 2>/dev/null; then
+if mount -t tmpfs -o size=64k tmpfs "$T/tiny" 2>/dev/null; then
     expect 5 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S"
     mentions "No space left on device"
     mentions "$T/tiny/S"
     # The summary does not claim the failed write's figures.
     grep -Eq "^  store  *$T/tiny/S: (the last write failed|not written)" "$T/out" ||
         fail "the summary's store line after a full disk: $(grep '^  store' "$T/out")"
-    expect 0 "$B" info "$T/tiny/S"
+    # (64 KiB: the first write fits, a later one does not)
+    line=$(grep '^  store' "$T/out")
+    expect 0 "$B" info "$T/tiny/S" --json
+    # What it says the store holds is what the store holds (a failed write renames none of its files).
+    held=$(printf '%s' "$line" | grep -o 'the one before holds [0-9]* chunks\?, [0-9]* bricks') ||
+        fail "64 KiB: no write before the failed one: $line"
+    if [ -n "$held" ]; then
+        got="the one before holds $(json_get "$T/out" "d['chunks']") chunk"
+        [ "${held%% chunk*} chunk" = "$got" ] && printf '%s' "$held" | grep -q ", $(json_get "$T/out" "d['bricks']") bricks" ||
+            fail "after a full disk the summary says '$held', info finds $(json_get "$T/out" "(d['chunks'], d['bricks'])")"
+    fi
     umount "$T/tiny"
 else
     echo "full disk: skipped (no tmpfs mount here; the injected ENOSPC of test_store covers it)"
