@@ -229,7 +229,8 @@ int app_info_store(const char *dir, bool json)
         if (rep.index_ok)
             printf("%s: bitfuse scene store, version %u, %u write%s\n", dir, STORE_VERSION, rep.flush, app_s(rep.flush));
         else
-            printf("%s: bitfuse scene store, version %u, writes unknown (store.json unreadable)\n", dir, STORE_VERSION);
+            printf("%s: bitfuse scene store, version %u, writes unknown (store.json %s)\n", dir, STORE_VERSION,
+                   rep.index_found ? "unreadable" : "absent");
         printf("  chunks           %u (%g m), %u bricks:", rep.n_chunks, meta.chunk_m, rep.n_bricks);
         for (uint32_t l = 0; l < 9; l++)
             if (per_level[l]) printf("  L%u:%u", l, per_level[l]);

@@ -221,7 +221,7 @@ int cmd_info(int argc, char **argv)
         else
             printf("depth         none\n");
         printf("ground truth  %s (%u of %u frame%s %s a pose)\n", src->has_groundtruth ? "yes" : "no",
-               st.n_with_pose, st.n_frames, app_s(st.n_frames), st.n_frames == 1 ? "has" : "have");
+               st.n_with_pose, st.n_frames, app_s(st.n_frames), st.n_with_pose == 1 ? "has" : "have");
         print_repeats("depth", st.n_depth_repeats, st.depth_repeats);
         if (st.n_with_rgb) print_repeats("colour", st.n_rgb_repeats, st.rgb_repeats);
     }

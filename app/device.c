@@ -77,6 +77,10 @@ void app_signals_init(void)
     static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
     for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++)
         if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler != SIG_IGN) sigaction(sigs[i], &sa, NULL);
+    /* A write past the file-size limit (ulimit -f) then fails with EFBIG and
+     * is named as any failed write (exit 5, its temporary file removed),
+     * rather than killing the program with the file half written. */
+    signal(SIGXFSZ, SIG_IGN);
 }
 
 static void on_stop_signal(int sig)

@@ -238,10 +238,10 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
     double bits = m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0;
     if (r->n_bricks_whole != m->n_bricks) {
         /* Streamed: the map (the store's, the export's) and what the device holds of it. */
-        printf("  map              %u chunks, %u bricks (the whole map, the chunks streamed out included)\n",
-               r->n_chunks, r->n_bricks_whole);
-        printf("  on the device    %u chunks, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
-               m->n_chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0, bits);
+        printf("  map              %u chunk%s, %u brick%s (the whole map, the chunks streamed out included)\n",
+               r->n_chunks, app_s(r->n_chunks), r->n_bricks_whole, app_s(r->n_bricks_whole));
+        printf("  on the device    %u chunk%s, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
+               m->n_chunks, app_s(m->n_chunks), m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0, bits);
     } else {
         app_print_map_line(r);
     }

@@ -206,10 +206,10 @@ void app_store_print(const app_store *st)
         printf("  store            %s: not written (the error above); it holds what it held before\n", st->dir);
         return;
     }
-    printf("  store            %s: %s%u chunk%s, %llu bricks, %.2f MiB on disk, %u write%s this run", st->dir,
+    printf("  store            %s: %s%u chunk%s, %llu brick%s, %.2f MiB on disk, %u write%s this run", st->dir,
            st->end_failed ? "the last write failed (the error above); the one before holds " : "", st->stats.chunks,
-           app_s(st->stats.chunks), (unsigned long long)st->stats.bricks, st->stats.bytes_on_disk / 1048576.0,
-           st->stats.writes, app_s(st->stats.writes));
+           app_s(st->stats.chunks), (unsigned long long)st->stats.bricks, app_s(st->stats.bricks),
+           st->stats.bytes_on_disk / 1048576.0, st->stats.writes, app_s(st->stats.writes));
     if (st->is_resumed) printf(" (resumed after %u frame%s)", st->meta.frames, app_s(st->meta.frames));
     printf("\n");
 }

@@ -322,12 +322,13 @@ void bf_out_abort(bf_out *o);
 /* Files that exist only until the program finishes them (bf_out's temporary
  * files, a log's .partial): a program killed by a signal removes them in its
  * handler (bf_pending_remove_all), so a second Ctrl-C leaves no half-written
- * file beside the outputs. bf_pending_add copies the path into one of
- * BF_PENDING_MAX slots and returns it, or -1 when all are taken (the file is
- * then not removed on a signal); bf_pending_forget(&slot) before the file is
+ * file beside the outputs. bf_pending_add copies the path (to the heap)
+ * into one of BF_PENDING_MAX slots and returns it, or -1 when all are taken
+ * (the file is then not removed on a signal; a store write holds a slot for
+ * each file it has put down and not yet renamed); bf_pending_forget(&slot) before the file is
  * renamed or removed sets slot to -1 (-1: nothing). bf_pending_remove_all unlinks every
  * registered path and is async-signal-safe; any thread may add and forget. */
-#define BF_PENDING_MAX 16
+#define BF_PENDING_MAX 4096
 int bf_pending_add(const char *path);
 void bf_pending_forget(int *slot);
 void bf_pending_remove_all(void);

@@ -123,30 +123,41 @@ bf_status bf_link_target(const char *path, char *out, size_t cap)
  * before the file is renamed or removed: a signal between the two leaves
  * that one file. Writers register a path before creating the file. */
 enum { PENDING_FREE, PENDING_FILLING, PENDING_READY, PENDING_REMOVING };
+/* The path is a copy on the heap, made before the slot is claimed and freed
+ * after it is given back (never by the handler): a store write holds one
+ * slot per file it has staged. */
 static struct {
     atomic_int state;
-    char path[4128];
+    char *path;
 } g_pending[BF_PENDING_MAX];
 
 int bf_pending_add(const char *path)
 {
     size_t n = strlen(path);
-    if (n >= sizeof g_pending[0].path) return -1;
+    char *copy = malloc(n + 1); /* not bf_malloc: no fault point of its own */
+    if (!copy) return -1;
+    memcpy(copy, path, n + 1);
     for (int i = 0; i < BF_PENDING_MAX; i++) {
         int want = PENDING_FREE;
         if (!atomic_compare_exchange_strong(&g_pending[i].state, &want, PENDING_FILLING)) continue;
-        memcpy(g_pending[i].path, path, n + 1);
+        g_pending[i].path = copy;
         atomic_store(&g_pending[i].state, PENDING_READY);
         return i;
     }
+    free(copy);
     return -1;
 }
 
 void bf_pending_forget(int *slot)
 {
     int want = PENDING_READY;
-    if (*slot >= 0 && *slot < BF_PENDING_MAX)
-        atomic_compare_exchange_strong(&g_pending[*slot].state, &want, PENDING_FREE);
+    if (*slot >= 0 && *slot < BF_PENDING_MAX) {
+        /* Read while READY (only its owner forgets a slot): once FREE another
+         * thread may claim it and set its own path. Taken by the handler
+         * (REMOVING), the copy stays: the program is ending. */
+        char *p = g_pending[*slot].path;
+        if (atomic_compare_exchange_strong(&g_pending[*slot].state, &want, PENDING_FREE)) free(p);
+    }
     *slot = -1;
 }
 

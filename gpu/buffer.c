@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/resource.h>
 
 /* The first memory type allowed by type_bits that has all of required and
  * as many of the preferred flag sets (tried in order) as possible. */
@@ -160,6 +161,19 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
         return BF_OK;
     }
 
+    /* lavapipe (Mesa 25) keeps device memory in a memfd it sizes with
+     * ftruncate: past the file-size limit (ulimit -f) that kills the program
+     * (SIGXFSZ) or, the signal ignored, faults on first touch (SIGBUS).
+     * Refused here instead, by name. */
+    struct rlimit fsize;
+    if (ctx->info.type == VK_PHYSICAL_DEVICE_TYPE_CPU && getrlimit(RLIMIT_FSIZE, &fsize) == 0 &&
+        fsize.rlim_cur != RLIM_INFINITY && req.size > (VkDeviceSize)fsize.rlim_cur) {
+        status = bf_fail(BF_NO_MEMORY,
+                         "gpu buffer %s: %llu bytes exceed the file-size limit (ulimit -f, %llu bytes): %s keeps "
+                         "device memory in files",
+                         buf->name, (unsigned long long)req.size, (unsigned long long)fsize.rlim_cur, ctx->info.name);
+        goto fail;
+    }
     uint32_t type = choose_type(ctx, desc->memory, req.memoryTypeBits);
     bool want_map = desc->memory != GPU_MEMORY_DEVICE || !ctx->force_staging;
     if (type == UINT32_MAX) {

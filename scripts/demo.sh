@@ -6,5 +6,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 bash scripts/build.sh
-rm -rf out/demo
+# (only the default folder: an --out given on the command line is the user's)
+case " $* " in *" --out "* | *" --out="*) ;; *) rm -rf out/demo ;; esac
 ./build/app/bitfuse demo --out out/demo "$@"

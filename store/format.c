@@ -198,8 +198,10 @@ bf_status store__write_staged(store_stage *stage, const char *path, const void *
     if (stage->n == stage->cap) {
         uint32_t cap = stage->cap ? 2 * stage->cap : 16;
         char **p = bf_realloc(stage->paths, cap * sizeof *p);
-        if (!p) return bf_fail(BF_NO_MEMORY, "%s: the store write's list of %u files", path, cap);
-        stage->paths = p;
+        if (p) stage->paths = p;
+        int *q = p ? bf_realloc(stage->pending, cap * sizeof *q) : NULL;
+        if (q) stage->pending = q;
+        if (!p || !q) return bf_fail(BF_NO_MEMORY, "%s: the store write's list of %u files", path, cap);
         stage->cap = cap;
     }
     char *name = bf_malloc(strlen(path) + 1);
@@ -211,12 +213,10 @@ bf_status store__write_staged(store_stage *stage, const char *path, const void *
         free(name);
         return s;
     }
-    /* A whole file awaiting its rename gives its slot back: a write may stage
-     * more files than there are slots, and the loop's own outputs need them.
-     * A program killed now leaves it (whole, and ignored: readers take only
-     * NAME; the next writer deletes NAME.tmp). */
-    bf_pending_forget(&pending);
-    stage->paths[stage->n++] = name;
+    /* Its slot is kept until the rename: a second Ctrl-C during the write
+     * removes every file it has put down. */
+    stage->paths[stage->n] = name;
+    stage->pending[stage->n++] = pending;
     return BF_OK;
 }
 
@@ -224,6 +224,7 @@ static void stage_free(store_stage *stage)
 {
     for (uint32_t i = 0; i < stage->n; i++) free(stage->paths[i]);
     free(stage->paths);
+    free(stage->pending);
     memset(stage, 0, sizeof *stage);
 }
 
@@ -231,13 +232,13 @@ bf_status store__stage_commit(store_stage *stage)
 {
     bf_status s = BF_OK;
     for (uint32_t i = 0; i < stage->n; i++) {
-        int none = -1;
         if (s == BF_OK) {
-            s = rename_tmp(stage->paths[i], &none);
+            s = rename_tmp(stage->paths[i], &stage->pending[i]);
             continue;
         }
         char tmp[4200];
         snprintf(tmp, sizeof tmp, "%s.tmp", stage->paths[i]);
+        bf_pending_forget(&stage->pending[i]);
         unlink(tmp);
     }
     stage_free(stage);
@@ -249,6 +250,7 @@ void store__stage_abort(store_stage *stage)
     for (uint32_t i = 0; i < stage->n; i++) {
         char tmp[4200];
         snprintf(tmp, sizeof tmp, "%s.tmp", stage->paths[i]);
+        bf_pending_forget(&stage->pending[i]);
         unlink(tmp);
     }
     stage_free(stage);

@@ -83,6 +83,7 @@ bf_status store__write_atomic(const char *path, const void *a, size_t na, const 
  * a write that fails (a full disk) leaves the store as the write before. */
 typedef struct store_stage {
     char **paths; /* the final names (malloc'd); NAME.tmp is whole on disk */
+    int *pending; /* NAME.tmp's bf_pending_add slots, held until the rename */
     uint32_t n, cap;
 } store_stage;
 /* As store__write_atomic, but path.tmp is added to stage, not renamed. */

@@ -195,7 +195,7 @@ static bf_status write_map(store_writer *w, store_job *job)
     bf_status s = store__groups(&job->map, &g, &n);
     store_entry *e = s == BF_OK && n ? bf_calloc(n, sizeof *e) : NULL;
     if (s == BF_OK && n && !e) s = bf_fail(BF_NO_MEMORY, "store: index of %u chunks", n);
-    uint64_t written = 0;
+    uint64_t written = 0, bytes_before = w->work.bytes_written;
     store_stage chunks = {0}, rest = {0};
     for (uint32_t i = 0; s == BF_OK && i < n; i++) {
         memcpy(e[i].key, g[i].key, sizeof e[i].key);
@@ -234,6 +234,7 @@ static bf_status write_map(store_writer *w, store_job *job)
     free(g);
     if (s != BF_OK) {
         free(e);
+        w->work.bytes_written = bytes_before; /* a failed write's files are removed */
         return s;
     }
     free(w->entries);

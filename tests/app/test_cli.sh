@@ -1004,9 +1004,11 @@ mentions "does not fit"
 [ -e "$T/bigboard" ] && fail "synth --board that does not fit left its folder"
 # Not over an earlier demo (its frames past the new count would stay, unlisted).
 expect 0 "$B" demo --frames 3 --no-gpu --out "$T/demo-twice"
+before=$(cd "$T/demo-twice" && find . -type f | sort | xargs md5sum | md5sum)
 expect 2 "$B" demo --frames 2 --no-gpu --out "$T/demo-twice"
 mentions "--out $T/demo-twice holds an earlier run (seq/depth.txt)"
-[ "$(ls "$T/demo-twice/seq/depth" | wc -l)" = 3 ] || fail "a refused demo changed the earlier run's frames"
+[ "$(cd "$T/demo-twice" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] ||
+    fail "a refused demo changed the earlier run's files"
 expect 2 "$B" demo --data "$T/no-such-data" --no-gpu --out "$T/demo-nodata"
 mentions "$T/no-such-data"
 [ -e "$T/demo-nodata" ] && fail "demo with a missing --data made its folder"
@@ -1047,5 +1049,22 @@ if [ $rc = 2 ]; then
 elif [ $rc != 0 ]; then
     fail "replay --gpu-budget 4096: exit $rc, expected 2 (the pools refused) or 0 (a device that binds them)"
 fi
+
+# Under a file-size limit (ulimit -f): lavapipe keeps device memory in files,
+# so pools past the limit are refused by name (they killed the program with
+# SIGXFSZ, or SIGBUS with the signal ignored); a file output past it fails as
+# a write (exit 5, EFBIG), its temporary file removed.
+if "$B" devices 2>/dev/null | grep -qi "llvmpipe\|lavapipe"; then
+    (ulimit -f 2048; exec "$B" replay "$T/seq" --out "$T/fsize" --no-mesh) >"$T/out" 2>"$T/err"
+    rc=$?
+    [ $rc = 1 ] || fail "replay under ulimit -f 2048: exit $rc, expected 1 ($(head -c 300 "$T/err"))"
+    mentions "exceed the file-size limit (ulimit -f"
+fi
+expect 0 "$B" replay "$T/seq" --out "$T/fsrun" --no-mesh --store "$T/fsS"
+(ulimit -f 1; exec "$B" export "$T/fsS" --out "$T/fsize.ply") >"$T/out" 2>"$T/err"
+rc=$?
+[ $rc = 5 ] || fail "export under ulimit -f 1: exit $rc, expected 5 ($(head -c 300 "$T/err"))"
+mentions "File too large"
+ls "$T" | grep -q "fsize.ply" && fail "export under ulimit -f 1 left $(ls "$T" | grep fsize.ply)"
 
 finish test_cli.sh

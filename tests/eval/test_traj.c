@@ -344,10 +344,19 @@ BF_TEST(rpe_of_a_trajectory_shorter_than_delta_says_so)
     }
     eval_rpe_result r;
     CHECK_STATUS(eval_rpe(&gt, &est, 0, false, 1.0, &r), BF_FORMAT);
-    CHECK_ERROR_MENTIONS("the trajectory spans 0.633 s: too short for pairs 1 s apart");
+    CHECK_ERROR_MENTIONS("the trajectory spans 0.633 s: too short for two pairs 1 s apart");
     /* Per frame, the same poses give pairs. */
     CHECK_OK(eval_rpe(&gt, &est, 0, true, 0, &r));
     CHECK(r.n_pairs == 18);
+    /* 1.5 s long enough, but the ground truth 10 s away: its timing is named. */
+    bf_traj_free(&gt);
+    bf_traj_free(&est);
+    for (int i = 0; i < 45; i++) {
+        CHECK_OK(bf_traj_push(&gt, 10 + i / 30.0, &I));
+        CHECK_OK(bf_traj_push(&est, i / 30.0, &I));
+    }
+    CHECK_STATUS(eval_rpe(&gt, &est, 0, false, 1.0, &r), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("only 0 pose pairs delta apart with ground truth within");
     bf_traj_free(&gt);
     bf_traj_free(&est);
 }

@@ -91,13 +91,15 @@ static const char *fresh_dir(const char *name)
 }
 
 /* Writes m (a copy) with meta and traj into dir through a new writer. */
-static bf_status write_store(const char *dir, bool resume, const hostmap *m, const store_meta *meta, const bf_traj *t,
-                             store_write_stats *st)
+/* kf (may be NULL) is handed over with the map (taken). */
+static bf_status write_store_kf(const char *dir, bool resume, const hostmap *m, const store_meta *meta,
+                                const bf_traj *t, store_keyframes *kf, store_write_stats *st)
 {
     store_writer *w = NULL;
     hostmap c;
     bf_status s = store_writer_open(dir, resume, &w);
     if (s != BF_OK) return s;
+    if (kf) store_writer_keyframes(w, kf);
     if ((s = copy_map(m, &c)) == BF_OK) s = store_writer_submit(w, &c, meta, t);
     hostmap_free(&c);
     bf_status f = store_writer_finish(w);
@@ -105,6 +107,12 @@ static bf_status write_store(const char *dir, bool resume, const hostmap *m, con
     if (st) *st = store_writer_stats(w);
     store_writer_close(w);
     return s;
+}
+
+static bf_status write_store(const char *dir, bool resume, const hostmap *m, const store_meta *meta, const bf_traj *t,
+                             store_write_stats *st)
+{
+    return write_store_kf(dir, resume, m, meta, t, NULL, st);
 }
 
 /* Same bricks in the same order, every field. */
@@ -439,6 +447,8 @@ BF_TEST(store_opens_without_its_index)
  * temp file, and the store reads as the write before it, chunk for chunk
  * and pose for pose: every new file is renamed only when all are whole (a
  * full disk part-way through replaced some chunk files before). */
+static bf_status make_keyframes(store_keyframes *k, uint32_t n);
+
 BF_TEST(store_survives_a_failed_write_at_every_point)
 {
     hostmap a, b, back = {0};
@@ -457,9 +467,12 @@ BF_TEST(store_survives_a_failed_write_at_every_point)
         const char *dir = fresh_dir(name);
         snprintf(cd, sizeof cd, "%s/chunks", dir);
         CHECK_OK(write_store(dir, false, &a, &ma, &ta, NULL));
+        store_keyframes kf;
+        CHECK_OK(make_keyframes(&kf, 3)); /* keyframes.bin staged with the rest */
         bf_fault_arm(k);
-        bf_status s = write_store(dir, true, &b, &mb, &tb, NULL);
+        bf_status s = write_store_kf(dir, true, &b, &mb, &tb, &kf, NULL);
         bool fired = bf_fault_arm(0) == 0;
+        store_keyframes_free(&kf);
         if (!fired) {
             CHECK_OK(s);
             points = k - 1;
@@ -471,8 +484,14 @@ BF_TEST(store_survives_a_failed_write_at_every_point)
             CHECK(false);
         }
         CHECK_EQ_INT(count_files(cd, ".tmp"), 0);
+        CHECK_EQ_INT(count_files(dir, ".tmp"), 0);
         store_report rep;
         CHECK_OK(store_read(dir, &back, &m2, &t2, &rep));
+        store_keyframes kb = {0};
+        bf_status sk = store_keyframes_read(dir, &kb);
+        CHECK_OK(sk); /* written with the map, or not at all (the first write had none) */
+        CHECK_EQ_INT(kb.n, s == BF_OK ? 3 : 0);
+        store_keyframes_free(&kb);
         CHECK_EQ_INT(rep.n_bad, 0);
         CHECK_EQ_INT(back.n_bricks, a.n_bricks);
         /* Failed: the old map and trajectory; recovered: the new ones. */
