@@ -270,10 +270,24 @@ int app_options_parse(const app_command_spec *spec, int argc, char **argv)
         for (const app_option *row = *t; row->name; row++, k++) {
             if (!row->needs || !(k < APP_OPT_ROWS_MAX && seen[k])) continue;
             const app_option *need = NULL;
-            if (!given(spec, seen, row->needs, &need))
-                return usage(spec->name, "%s needs %s%s%s", row->name, row->needs,
-                             need && need->meta && need->kind != APP_OPT_FLAG ? " " : "",
-                             need && need->meta && need->kind != APP_OPT_FLAG ? need->meta : "");
+            if (given(spec, seen, row->needs, &need)) continue;
+            /* Every option missing along the chain at once (--screenshot needs
+             * --exit-after, which needs --view): one refusal, not one a try. */
+            char list[512];
+            size_t len = 0;
+            for (int depth = 0; depth < 8; depth++) {
+                bool meta = need && need->meta && need->kind != APP_OPT_FLAG;
+                const char *name = need ? need->name : row->needs;
+                int w = snprintf(list + len, sizeof list - len, "%s%s%s%s", depth ? " and " : "", name,
+                                 meta ? " " : "", meta ? need->meta : "");
+                if (w < 0 || (size_t)w >= sizeof list - len) break;
+                len += (size_t)w;
+                const app_option *next = NULL;
+                if (!need || !need->needs || given(spec, seen, need->needs, &next)) break;
+                need = next;
+                if (!need) break;
+            }
+            return usage(spec->name, "%s needs %s", row->name, list);
         }
     if (n_pos < spec->min_positional) return usage(spec->name, "%s", spec->positional_missing);
     return 0;

@@ -11,7 +11,7 @@
 
 typedef struct demo_args {
     const char *seq, *out;
-    bool json;
+    bool json, sort_keys;
     replay_options ropt;
     fusion_config fc;
     uint32_t iters[4], levels, indent;
@@ -31,6 +31,7 @@ static int parse(int argc, char **argv, demo_args *a)
         APP_OPT("--out", APP_OPT_STRING, &a->out, "DIR", "output folder", .required = true),
         APP_OPT("--json", APP_OPT_FLAG, &a->json, NULL, "JSON on stdout"),
         APP_OPT("--indent", APP_OPT_U32, &a->indent, "N", "with --json: spaces per level", .needs = "--json"),
+        APP_OPT("--sort-keys", APP_OPT_FLAG, &a->sort_keys, NULL, "with --indent: keys sorted", .needs = "--indent"),
         APP_OPT("--icp-iters", APP_OPT_LIST, a->iters, "A,B", "iterations per level", .max = 1000, .count = &a->levels,
                 .max_n = 3),
         APP_OPT("--noise-weights", APP_OPT_CHOICE, &a->noise, "on|off", "weight by the noise"),
@@ -139,6 +140,13 @@ BF_TEST(options_that_need_another_are_refused_without_it)
     char *before[] = {"cmd", "seq", "--json", "--indent=3", "--out", "o"};
     CHECK_EQ_INT(parse(6, before, &a), 0);
     CHECK_EQ_INT(a.indent, 3);
+    /* A chain missing whole is named whole: not one option a try. */
+    char *chain[] = {"cmd", "seq", "--out", "o", "--sort-keys"};
+    CHECK_EQ_INT(parse(5, chain, &a), APP_EXIT_USAGE);
+    CHECK_ERROR_MENTIONS("--sort-keys needs --indent N and --json");
+    char *half[] = {"cmd", "seq", "--out", "o", "--sort-keys", "--indent", "2"};
+    CHECK_EQ_INT(parse(7, half, &a), APP_EXIT_USAGE);
+    CHECK_ERROR_MENTIONS("--indent needs --json");
 }
 
 BF_TEST(help_is_generated_from_the_rows_with_their_defaults)
