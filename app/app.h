@@ -10,6 +10,7 @@
 
 #include "calib/calib.h"
 #include "capture/capture.h"
+#include "replay/replay.h"
 #include "core/core.h"
 #include "fusion/fusion.h"
 #include "gpu/gpu.h"
@@ -278,6 +279,9 @@ static inline cJSON *app_json_object(cJSON *parent, const char *name)
     if (parent && o) cJSON_AddItemToObject(parent, name, o);
     return o;
 }
+/* The unreadable frames a reader skipped (--skip-bad-frames), through a
+ * capture thread or pacing (live, record): read once the thread has ended. */
+static inline uint32_t app_skipped_frames(const rgbd_source *src) { return replay_skipped_frames(capture_inner(src)); }
 /* "s" after a count other than one: "%u frame%s", n, app_s(n). */
 static inline const char *app_s(uint64_t n) { return n == 1 ? "" : "s"; }
 /* {"median", "p95", "mean"} of s under name. */

@@ -141,7 +141,7 @@ int cmd_convert(int argc, char **argv)
     uint32_t n = 0;
     if (s == BF_OK) s = convert_frames(src, lw, tw, stop, &n);
     bool interrupted = app_stop_end();
-    uint32_t skipped = replay_skipped_frames(dev);
+    uint32_t skipped = app_skipped_frames(dev);
     replay_log_stats L = {0};
     if (lw) L = replay_log_writer_stats(lw);
     double seconds = bf_time_s() - t0;

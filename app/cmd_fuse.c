@@ -198,7 +198,7 @@ int cmd_fuse(int argc, char **argv)
          * first frames were being read): nothing to write, and no failure. */
         if ((s == BF_OK || s == BF_FORMAT) && r.run.is_interrupted && r.run.n_fused == 0)
             stopped_empty = true, s = BF_END;
-        r.n_unreadable = replay_skipped_frames(src);
+        r.n_unreadable = app_skipped_frames(src);
         /* No frame within the file's time span: give the span. */
         if (s == BF_FORMAT && use_traj && traj.n && r.run.n_fused == 0 && r.run.n_skipped > 0 &&
             r.run.n_skipped == r.run.counts.frames) {

@@ -68,6 +68,7 @@ typedef struct record_result {
     double seconds;
     bool is_interrupted;
     bool is_live;
+    uint32_t n_unreadable; /* frames a recorded sequence's reader skipped (--skip-bad-frames) */
 } record_result;
 
 static cJSON *stats_json(const record_args *a, const char *log_path, const record_result *r, bf_status s)
@@ -79,6 +80,7 @@ static cJSON *stats_json(const record_args *a, const char *log_path, const recor
     cJSON_AddStringToObject(o, "out", log_path);
     cJSON_AddNumberToObject(o, "frames", L->n_frames);
     cJSON_AddNumberToObject(o, "captured", (double)r->cap.captured);
+    cJSON_AddNumberToObject(o, "frames_unreadable", r->n_unreadable);
     cJSON_AddNumberToObject(o, "dropped", (double)r->cap.dropped);
     cJSON_AddBoolToObject(o, "interrupted", r->is_interrupted);
     /* What ended the recording, in the exit code's words, and the message. */
@@ -171,6 +173,7 @@ int cmd_record(int argc, char **argv)
     bf_status s_dev = rs == BF_END ? BF_OK : rs;
     char dev_err[BF_ERROR_CAP] = "";
     if (s_dev) snprintf(dev_err, sizeof dev_err, "%s", bf_last_error());
+    r.n_unreadable = app_skipped_frames(src); /* the capture thread has ended */
     rgbd_source_close(src);
     /* Finish even after a device error: every frame before it is kept. A
      * failure before the first frame leaves no log (an earlier one stays). */
@@ -197,6 +200,8 @@ int cmd_record(int argc, char **argv)
            r.is_interrupted ? " (stopped by a signal; the log is complete up to there)" : "");
     printf("  capture   %llu captured, %llu dropped by the queue of %u\n", (unsigned long long)r.cap.captured,
            (unsigned long long)r.cap.dropped, a.queue);
+    if (r.n_unreadable)
+        printf("  input     %u unreadable frame%s skipped (--skip-bad-frames)\n", r.n_unreadable, app_s(r.n_unreadable));
     if (L->depth_raw_bytes) /* no frame: no ratio to give */
         printf("  depth     %.2f MB raw -> %.2f MB (%.2fx, zstd)\n", L->depth_raw_bytes / 1e6, L->depth_bytes / 1e6,
                app_ratio(L->depth_raw_bytes, L->depth_bytes));

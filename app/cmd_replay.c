@@ -836,9 +836,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (c->unfused)
         printf("  tracking         %u frame%s tracked only, not fused (--fuse-every, --fuse-every-behind; %u "
                "came while the loop was behind the camera)\n", c->unfused, app_s(c->unfused), c->behind);
-    if (replay_skipped_frames(src))
-        printf("  input            %u unreadable frame%s skipped\n", replay_skipped_frames(src),
-               app_s(replay_skipped_frames(src)));
+    if (app_skipped_frames(src))
+        printf("  input            %u unreadable frame%s skipped\n", app_skipped_frames(src),
+               app_s(app_skipped_frames(src)));
     if (r->run.n_skipped)
         printf("  input            %u frame%s without a ground-truth pose skipped (--fuse-at-groundtruth)\n",
                r->run.n_skipped, app_s(r->run.n_skipped));

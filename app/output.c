@@ -343,14 +343,14 @@ void app_json_input(cJSON *o, const recon_run *run, const rgbd_source *src)
         cJSON_AddNullToObject(cam, "undistorted");
         cJSON_AddNullToObject(cam, "undistort_max_shift_px");
     }
-    cJSON_AddNumberToObject(o, "frames_unreadable", replay_skipped_frames(src));
+    cJSON_AddNumberToObject(o, "frames_unreadable", app_skipped_frames(src));
     if (run->source_status != BF_OK) cJSON_AddStringToObject(o, "input_error", run->source_error);
     else cJSON_AddNullToObject(o, "input_error");
 }
 
 bf_status app_input_status(bf_status s, const rgbd_source *src, const char *name)
 {
-    uint32_t skipped = src ? replay_skipped_frames(src) : 0;
+    uint32_t skipped = src ? app_skipped_frames(src) : 0;
     if (s != BF_FORMAT || skipped == 0 || skipped < src->n_frames) return s;
     return bf_fail(BF_FORMAT, "%s: no frame could be read (%u skipped)", name, skipped);
 }

@@ -110,6 +110,11 @@ capture_thread_stats capture_threaded_stats(const rgbd_source *src);
  * and NULL. */
 void capture_threaded_stop(rgbd_source *src);
 
+/* The source a capture thread or pacing wraps (through every layer), or
+ * src itself: what a reader's own counts come from (replay_skipped_frames).
+ * Read them once the thread has ended. */
+const rgbd_source *capture_inner(const rgbd_source *src);
+
 /* Delivers inner's frames at their own pace: each next() waits until the
  * frame's timestamp, counted from the first frame's, has passed. A recorded
  * sequence behind the capture thread then behaves like a camera. On success

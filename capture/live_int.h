@@ -28,6 +28,8 @@ bf_status capture__uri_split(const char *uri, const char *after_scheme, char *ta
                              capture__uri_options *opt);
 /* Applies camera/depth_scale overrides to a source's intrinsics. */
 void capture__apply_options(const capture__uri_options *opt, bf_intrinsics *K);
+/* The source capture_paced wraps, NULL for any other (capture_inner). */
+const rgbd_source *capture__paced_inner(const rgbd_source *src);
 
 /* ------------------------------------------------------------ backends
  * Each takes the full URI (for messages), the target after the scheme and

@@ -1,5 +1,6 @@
 /* capture: a recorded sequence delivered at its own pace (capture.h). */
 #include "capture.h"
+#include "live_int.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -48,6 +49,11 @@ static void paced_close(rgbd_source *base)
 }
 
 static const rgbd_source_ops paced_ops = {.next = paced_next, .close = paced_close};
+
+const rgbd_source *capture__paced_inner(const rgbd_source *src)
+{
+    return src && src->ops == &paced_ops ? ((const paced_source *)src)->inner : NULL;
+}
 
 bf_status capture_paced(rgbd_source *inner, rgbd_source **out)
 {

@@ -21,6 +21,7 @@
  * with a timeout so it notices the flag even though a signal handler cannot
  * signal a condition variable. */
 #include "capture/capture.h"
+#include "live_int.h"
 
 #include <errno.h>
 #include <pthread.h>
@@ -319,6 +320,16 @@ bf_status capture_threaded(rgbd_source *src, uint32_t capacity, rgbd_source **ou
 bf_status capture_threaded_lossless(rgbd_source *src, uint32_t capacity, rgbd_source **out)
 {
     return capture_create(src, capacity, false, out);
+}
+
+const rgbd_source *capture_inner(const rgbd_source *src)
+{
+    for (;;) {
+        const rgbd_source *in = src && src->ops == &capture_thread_ops ? ((const capture_thread *)src)->src
+                                                                         : capture__paced_inner(src);
+        if (!in) return src;
+        src = in;
+    }
 }
 
 capture_thread_stats capture_threaded_stats(const rgbd_source *src)

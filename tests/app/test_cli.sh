@@ -287,6 +287,11 @@ expect 3 "$B" info "$T/cut"
 mentions "$f"
 mentions "frame 1"
 expect 0 "$B" info "$T/cut" --skip-bad-frames
+# record reads a sequence through its capture thread: the skipped frame is still counted.
+expect 0 "$B" record --device "$T/cut" --out "$T/cutrec.bflog" --skip-bad-frames
+grep -q "1 unreadable frame skipped" "$T/out" || fail "record --skip-bad-frames: no count in the summary: $(cat "$T/out")"
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames_unreadable'] == 1 and d['frames'] == 2, d" \
+    "$T/cutrec.stats.json" || fail "record --skip-bad-frames: stats.json does not count the skipped frame"
 # A corrupt frame mid-fuse keeps the work done: the frames before it are written, exit 3
 # names the file and frame; with --skip-bad-frames the frame is skipped and counted.
 # (Small pools: the default pool's allocation is most of a 3-frame run's time.)
