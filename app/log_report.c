@@ -140,13 +140,17 @@ int app_check_json_out(const char *cmd, const char *opt, const char *path)
                                 "named by mistake?)", opt, path);
 }
 
-int app_check_out_folder(const char *cmd, const char *opt, const char *path)
+int app_check_out_folder(const char *cmd, const char *opt, const char *given)
 {
-    char dir[4096];
+    char dir[4096], target[4096];
     /* Checked first, so that no output is written before a later one fails on it. */
-    if (path && strlen(path) >= sizeof dir)
+    if (given && strlen(given) >= sizeof dir)
         return app_usage_error(cmd, "%s: a path of %zu characters is too long (at most %zu): %.60s...", opt,
-                               strlen(path), sizeof dir - 1, path);
+                               strlen(given), sizeof dir - 1, given);
+    /* A symbolic link is written through (bf_out): its target's folder is the one that must exist. */
+    if (given && bf_link_target(given, target, sizeof target) != BF_OK)
+        return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: %s", opt, given, bf_last_error()));
+    const char *path = given ? target : NULL;
     const char *slash = path ? strrchr(path, '/') : NULL;
     if (!slash) return 0; /* the working folder */
     size_t n = slash == path ? 1 : (size_t)(slash - path);
@@ -155,9 +159,12 @@ int app_check_out_folder(const char *cmd, const char *opt, const char *path)
     struct stat st;
     if (stat(dir, &st) == 0 && S_ISDIR(st.st_mode)) return 0;
     int e = errno;
+    char shown[8300];
+    if (strcmp(given, path)) snprintf(shown, sizeof shown, "%s (a link to %s)", given, path);
+    else snprintf(shown, sizeof shown, "%s", given);
     if (stat(dir, &st) == 0)
-        return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: %s is not a folder", opt, path, dir));
-    return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: the folder %s %s%s", opt, path, dir,
+        return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: %s is not a folder", opt, shown, dir));
+    return app_fail(cmd, bf_fail(BF_WRITE, "%s %s: the folder %s %s%s", opt, shown, dir,
                                  e == ENOENT ? "does not exist" : "cannot be used: ", e == ENOENT ? "" : strerror(e)));
 }
 

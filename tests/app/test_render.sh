@@ -280,6 +280,10 @@ mentions "--depth $T/nofolder/y.png: the folder $T/nofolder does not exist"
 [ -e "$T/y.png" ] && fail "render wrote --out although --depth's folder is missing"
 expect 5 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/nofolder/y.png"
 mentions "the folder $T/nofolder does not exist"
+# A link is written through: its target's folder is the one checked, before anything is drawn.
+ln -s "$T/nofolder/z.png" "$T/zlink.png"
+expect 5 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/zlink.png"
+mentions "--out $T/zlink.png (a link to $T/nofolder/z.png): the folder $T/nofolder does not exist"
 # A path longer than the system takes (4095 characters): refused before anything is written.
 LONG="$T/$(printf 'a%.0s' $(seq 1 4200))/y.png"
 expect 2 "$B" render --map "$T/S" --pose "$POSE" --size 160x120 --out "$T/y.png" --depth "$LONG"
