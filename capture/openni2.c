@@ -110,10 +110,22 @@ static bool oni_init(void)
     return oni_init_status == ONI_STATUS_OK;
 }
 
+/* OpenNI2's last error on one line: it indents with tabs and ends with
+ * blank lines, which would break the message bitfuse prints. */
 static const char *oni_error(void)
 {
+    static _Thread_local char line[512];
     const char *e = oniGetExtendedError();
-    return e && *e ? e : "no details";
+    size_t n = 0;
+    for (bool space = true; e && *e && n + 1 < sizeof line; e++) {
+        bool blank = *e == ' ' || *e == '\t' || *e == '\n' || *e == '\r';
+        if (blank && !space) line[n++] = ' ';
+        else if (!blank) line[n++] = *e;
+        space = blank;
+    }
+    while (n && line[n - 1] == ' ') n--;
+    line[n] = '\0';
+    return n ? line : "no details";
 }
 
 static void oni_close(rgbd_source *base)
@@ -262,7 +274,13 @@ bf_status capture__openni2_open(const char *uri, const char *target, const captu
     }
     if (oniDeviceOpen(*target ? target : NULL, &s->dev) != ONI_STATUS_OK) {
         s->dev = NULL;
-        st = bf_fail(BF_NO_DEVICE, "%s: no OpenNI2 device%s%s: %s", uri, *target ? " at " : "", target, oni_error());
+        /* A recording that is there but does not open is bad input (exit 3), not a missing camera. */
+        if (is_file)
+            st = bf_fail(BF_FORMAT, "%s: OpenNI2 cannot play %s (not an OpenNI recording, or a damaged one): %s", uri,
+                         target, oni_error());
+        else
+            st = bf_fail(BF_NO_DEVICE, "%s: no OpenNI2 device%s%s: %s", uri, *target ? " at " : "", target,
+                         oni_error());
         goto fail;
     }
     if (s->is_file) {

@@ -909,6 +909,15 @@ rc=$?
 if grep -q "libopenni2" "$T/err"; then echo "openni2: not in this build, skipped"
 else [ "$rc" = 3 ] || fail "live openni2:missing.oni: exit $rc, expected 3"; mentions "$T/no-such.oni: no such .oni file"; fi
 [ -e "$T/live4" ] && fail "a refused live run made its output folder"
+# One that is there but no recording: bad input too (3), OpenNI2's reason on one line.
+printf 'not a recording' >"$T/junk.oni"
+"$B" live --device "openni2:$T/junk.oni" --out "$T/live5" >"$T/out" 2>"$T/err"
+rc=$?
+if ! grep -q "libopenni2" "$T/err"; then
+    [ "$rc" = 3 ] || fail "live openni2:junk.oni: exit $rc, expected 3"
+    mentions "OpenNI2 cannot play $T/junk.oni (not an OpenNI recording, or a damaged one): "
+    [ "$(wc -l <"$T/err")" = 1 ] && ! grep -q "$(printf '\t')" "$T/err" || fail "live openni2:junk.oni: not one line: $(cat -A "$T/err")"
+fi
 # Bad command lines and devices.
 expect 2 "$B" record --device "$T/seq" --out "$T/x.ply"
 mentions "--out must name a .bflog file"
