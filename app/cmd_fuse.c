@@ -169,6 +169,7 @@ int cmd_fuse(int argc, char **argv)
     bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK && !made_out) app_warn_earlier_run(cmd, a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
+    if (s == BF_OK && made_out) app_signals_made_folder(a.out);
     gpu_config gcfg = {0};
     if (s == BF_OK) s = gpu_context_create(&gcfg, &ctx);
     if (s == BF_OK) {

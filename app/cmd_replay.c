@@ -992,6 +992,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     bool made_out = !bf_file_exists(a.out);
     if (s == BF_OK && !made_out) app_warn_earlier_run(cmd, a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
+    if (s == BF_OK && made_out) app_signals_made_folder(a.out);
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
                                 .has_groundtruth = src->has_groundtruth};
@@ -1131,7 +1132,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
      * corrupt first frame, a failure at start-up) leaves no empty store
      * behind: a bare chunks/ reads as a store, and the next run would be
      * refused ("already holds a scene store: resume it"). */
-    if ((s != BF_OK || stopped_empty) && a.store && !a.resume && owns_store) remove_unwritten_store(a.store, made_store, had_out, a.out);
+    /* (A first write that failed, a full disk, renamed none of its files: the same.) */
+    bool store_unwritten = r.store.end_failed && r.store.stats.writes == 0;
+    if ((s != BF_OK || stopped_empty || store_unwritten) && a.store && !a.resume && owns_store)
+        remove_unwritten_store(a.store, made_store, had_out, a.out);
     /* The first failure decides the exit code: a GPU or output failure
      * mid-scan, else a later one, else the source's. */
     if (stopped_empty) {

@@ -2,7 +2,9 @@
  * that; app adds the recordings replay reads) and the one Ctrl-C handler,
  * which ends the capture instead of the program. */
 #include <signal.h>
+#include <stdatomic.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "app.h"
 #include "replay/replay.h"
@@ -61,9 +63,26 @@ static struct sigaction g_old_int, g_old_term;
  * blocked while its handler runs, so the raised one is taken, with the
  * default action, as the handler returns: the shell sees the program
  * killed by it, as before. */
+/* An output folder this run made, removed on a fatal signal if it is
+ * still empty (rmdir takes only an empty one): "" when none. */
+static char g_made_folder[4096];
+
+void app_signals_made_folder(const char *dir)
+{
+    size_t n = dir ? strlen(dir) : 0;
+    if (n == 0 || n >= sizeof g_made_folder) n = 0, dir = "";
+    /* The first byte last: the handler never sees a half-copied name. */
+    g_made_folder[0] = '\0';
+    atomic_signal_fence(memory_order_seq_cst);
+    memcpy(g_made_folder + 1, dir + (n ? 1 : 0), n); /* the rest and its NUL */
+    atomic_signal_fence(memory_order_seq_cst);
+    g_made_folder[0] = dir[0];
+}
+
 static void on_fatal_signal(int sig)
 {
     bf_pending_remove_all();
+    if (g_made_folder[0]) (void)rmdir(g_made_folder);
     signal(sig, SIG_DFL);
     raise(sig);
 }
@@ -92,6 +111,10 @@ static void on_stop_signal(int sig)
     g_signals = 1;
     g_stopped = 1;
     capture_threaded_stop(g_stop_src); /* sets an atomic flag: async-signal-safe */
+    /* Writing the outputs can take seconds: say so, or a second press looks needed. */
+    static const char msg[] = "bitfuse: stopping: the frames so far are being written (a second Ctrl-C abandons "
+                              "them)\n";
+    (void)!write(STDERR_FILENO, msg, sizeof msg - 1);
 }
 
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)

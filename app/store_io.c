@@ -177,12 +177,17 @@ void app_store_json(cJSON *parent, const app_store *st)
     cJSON_AddNumberToObject(o, "flush_every_s", st->every_s);
     cJSON_AddNumberToObject(o, "writes", st->stats.writes);
     cJSON_AddNumberToObject(o, "writes_skipped_busy", st->skipped);
-    cJSON_AddNumberToObject(o, "chunks", st->stats.chunks);
-    cJSON_AddNumberToObject(o, "bricks", (double)st->stats.bricks);
+    /* What the store holds at the end, as the summary says: after a failed
+     * last write the write before it, and with none this run, what it held
+     * when it was reopened (a failed write renames none of its files). */
+    cJSON_AddBoolToObject(o, "last_write_failed", st->end_failed);
+    bool held_before = st->end_failed && st->stats.writes == 0;
+    cJSON_AddNumberToObject(o, "chunks", held_before ? st->report.n_chunks : st->stats.chunks);
+    cJSON_AddNumberToObject(o, "bricks", (double)(held_before ? st->report.n_bricks : st->stats.bricks));
     cJSON_AddNumberToObject(o, "chunk_files_written", (double)st->stats.chunks_written);
     cJSON_AddNumberToObject(o, "chunk_files_removed", (double)st->stats.chunks_removed);
     cJSON_AddNumberToObject(o, "bytes_written", (double)st->stats.bytes_written);
-    cJSON_AddNumberToObject(o, "bytes_on_disk", (double)st->stats.bytes_on_disk);
+    cJSON_AddNumberToObject(o, "bytes_on_disk", (double)(held_before ? st->report.bytes_files : st->stats.bytes_on_disk));
     cJSON_AddNumberToObject(o, "write_ms_max", st->stats.ms_max);
     cJSON_AddNumberToObject(o, "write_ms_mean", st->stats.writes ? st->stats.ms_total / st->stats.writes : NAN);
     cJSON_AddNumberToObject(o, "loop_flush_ms_max", st->ms_flush_max);

@@ -325,6 +325,16 @@ if mount -t tmpfs -o size=64k tmpfs "$T/tiny" 2>/dev/null; then
         [ "${held%% chunk*} chunk" = "$got" ] && printf '%s' "$held" | grep -q ", $(json_get "$T/out" "d['bricks']") bricks" ||
             fail "after a full disk the summary says '$held', info finds $(json_get "$T/out" "(d['chunks'], d['bricks'])")"
     fi
+    json_get "$T/o-tiny/stats.json" "d['store']['last_write_failed']" | grep -qx True ||
+        fail "stats.json store.last_write_failed is not true after a full disk"
+    umount "$T/tiny"
+    # 48 KiB: the new store's first write fails: no empty store is left to refuse the next run.
+    mount -t tmpfs -o size=48k tmpfs "$T/tiny"
+    expect 5 "$B" replay "$SEQ" --out "$T/o-tiny2" --no-mesh --store "$T/tiny/S"
+    grep -q "^  store  *$T/tiny/S: not written" "$T/out" || fail "48 KiB: $(grep '^  store' "$T/out")"
+    [ ! -e "$T/tiny/S" ] || fail "a new store whose first write failed was left: $(find "$T/tiny/S")"
+    json_get "$T/o-tiny2/stats.json" "(d['store']['last_write_failed'], d['store']['chunks'])" | grep -qx "(True, 0)" ||
+        fail "48 KiB: stats.json store: $(json_get "$T/o-tiny2/stats.json" "d['store']")"
     umount "$T/tiny"
 else
     echo "full disk: skipped (no tmpfs mount here; the injected ENOSPC of test_store covers it)"
