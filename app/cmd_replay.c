@@ -518,6 +518,7 @@ typedef struct replay_result {
     char device_driver[256]; /* the driver's own words, e.g. Mesa's version */
     app_store store;           /* --store */
     bool has_capture;          /* live: the capture thread's counts */
+    bool is_camera;            /* live from a camera (not a recording): every frame is new to a resumed store */
     capture_thread_stats cap;
     uint32_t n_recorded;
 } replay_result;
@@ -596,6 +597,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
     }
     app_json_depth_correction(o, a->depth_correction, a->depth_correction ? &replay_depth_fix : NULL);
     cJSON_AddNumberToObject(o, "frames", c->frames);
+    cJSON_AddNumberToObject(o, "frames_already_stored", r->run.n_resume_skipped);
     cJSON_AddBoolToObject(o, "interrupted", r->run.is_interrupted); /* Ctrl-C, SIGTERM, the window closed */
     app_json_input(o, &r->run, src);
     cJSON *tr = app_json_object(o, "tracking");
@@ -839,6 +841,9 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (app_skipped_frames(src))
         printf("  input            %u unreadable frame%s skipped\n", app_skipped_frames(src),
                app_s(app_skipped_frames(src)));
+    if (r->run.n_resume_skipped)
+        printf("  input            %u frame%s at or before the stored scan's last time passed over as already in "
+               "the store (--resume)\n", r->run.n_resume_skipped, app_s(r->run.n_resume_skipped));
     if (r->run.n_skipped)
         printf("  input            %u frame%s without a ground-truth pose skipped (--fuse-at-groundtruth)\n",
                r->run.n_skipped, app_s(r->run.n_skipped));
@@ -943,9 +948,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     /* The input first: a missing one leaves no empty output folder. */
     bf_status s;
     if (is_live_cmd) {
-        bool is_live;
+        bool is_live = false;
         s = app_open_device(a.seq, &a.ropt, a.realtime, a.queue, &is_live, &src);
         r.has_capture = s == BF_OK;
+        r.is_camera = s == BF_OK && is_live;
         /* Ctrl-C ends the scan, not the program: what was seen is kept. */
         if (s == BF_OK) stop = app_stop_begin(src);
     } else {
@@ -1015,6 +1021,10 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     recon_resume_state rs;
     /* The stored map's geometry, in the config stats.json echoes too. */
     if (s == BF_OK && r.store.is_resumed) app_store_resume_config(&r.store, &rs, &a.rcfg);
+    /* A camera's clock is its own (freenect's from power-on, V4L2's monotonic
+     * one): its frames are all new, whatever their times; only a recording
+     * resumed goes on after the frames the store has. */
+    if (s == BF_OK && r.store.is_resumed && r.is_camera) rs.t_last_s = -INFINITY;
     if (s == BF_OK) {
         recon_run_config rcfg = {
             .loop = a.rcfg, .poses = a.fuse_at_gt ? RECON_POSES_TRACK_FUSE_GT : RECON_POSES_TRACK,

@@ -214,6 +214,10 @@ expect 2 "$B" replay "$T/seqh" --out "$T/h2off" --no-mesh --store "$T/H" --resum
 mentions "the store holds colour"
 [ -e "$T/h2off" ] && fail "a refused resume made its output folder"
 expect 0 "$B" replay "$T/seqh" --out "$T/h2" --no-mesh --store "$T/H" --resume
+# The frames passed over are counted (a recording whose clock starts over would lose them: said).
+grep -q "30 frames at or before the stored scan's last time passed over as already in the store" "$T/out" ||
+    fail "the resumed scan's summary does not count the frames passed over: $(grep input "$T/out")"
+[ "$(json_get "$T/h2/stats.json" "d['frames_already_stored']")" = 30 ] || fail "stats.json frames_already_stored is not 30"
 # Resumed again: every frame is the store's already, and that is said.
 cp -r "$T/H" "$T/H3"
 expect 0 "$B" replay "$T/seqh" --out "$T/h3" --no-mesh --store "$T/H3" --resume
