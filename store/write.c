@@ -3,6 +3,8 @@
  * new ones came, and the index. */
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
+#include <sys/file.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
@@ -33,6 +35,7 @@ struct store_writer {
 
     pthread_t thread;
     bool has_thread;
+    int lock_fd;          /* the store folder, flock'ed while this writer lives (-1: none) */
     pthread_mutex_t mu;
     pthread_cond_t cv;
     bool has_job, running, stop;
@@ -345,12 +348,34 @@ static bf_status unlink_suffix(const char *dir, const char *suffix)
     return s;
 }
 
+/* One writer a store: a second scan into it (another terminal, --resume of
+ * a store being written) would mix two maps and delete the other's
+ * temporary files. The folder is flock'ed (*fd, closed to release; the
+ * lock goes with the process, so a kill frees it). */
+static bf_status lock_store(const char *dir, int *fd)
+{
+    *fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (*fd < 0) return bf_fail(BF_WRITE, "%s: cannot open the folder: %s", dir, strerror(errno));
+    if (flock(*fd, LOCK_EX | LOCK_NB) == 0) return BF_OK;
+    int e = errno;
+    close(*fd);
+    *fd = -1;
+    if (e == EWOULDBLOCK)
+        return bf_fail(BF_INVALID_ARG, "%s: another bitfuse is writing this store (a scan still running?): wait for it "
+                                       "to end, or choose another folder",
+                       dir);
+    return bf_fail(BF_WRITE, "%s: cannot lock the folder: %s", dir, strerror(e));
+}
+
 bf_status store_clear(const char *dir)
 {
     if (!dir) return bf_fail(BF_INVALID_ARG, "store_clear: NULL folder");
     char chunk_dir[4200], path[4600];
     snprintf(chunk_dir, sizeof chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
-    bf_status s = unlink_suffix(chunk_dir, ".bfc");
+    int lock_fd = -1;
+    bf_status s = lock_store(dir, &lock_fd); /* not under a writer's feet */
+    if (s != BF_OK) return s;
+    s = unlink_suffix(chunk_dir, ".bfc");
     if (s == BF_OK) s = unlink_suffix(chunk_dir, ".tmp");
     /* keyframes.bin too: its poses are in the cleared scan's frame. */
     const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME, STORE_KEYFRAMES_NAME};
@@ -358,6 +383,7 @@ bf_status store_clear(const char *dir)
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
         if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
     }
+    close(lock_fd);
     return s == BF_OK ? bf_sync_dir(dir) : s;
 }
 
@@ -376,8 +402,10 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
         return bf_fail(BF_INVALID_ARG, "%s: path too long", dir);
     }
     snprintf(w->chunk_dir, sizeof w->chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
+    w->lock_fd = -1;
     bf_status s = bf_mkdir_p(w->chunk_dir);
     if (s == BF_OK) s = bf_sync_dir(dir);
+    if (s == BF_OK) s = lock_store(dir, &w->lock_fd);
     /* A new scan: a keyframes.bin left in the folder (not a store without
      * its index or chunks) holds poses of another scan's frame. */
     if (s == BF_OK && !resume) {
@@ -404,6 +432,7 @@ bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
     if (s != BF_OK) {
         pthread_mutex_destroy(&w->mu);
         pthread_cond_destroy(&w->cv);
+        if (w->lock_fd >= 0) close(w->lock_fd);
         free(w->entries);
         free(w);
         return s;
@@ -500,6 +529,7 @@ void store_writer_close(store_writer *w)
     store_keyframes_free(&w->pending_kf);
     pthread_mutex_destroy(&w->mu);
     pthread_cond_destroy(&w->cv);
+    if (w->lock_fd >= 0) close(w->lock_fd); /* the lock with it */
     free(w->entries);
     free(w);
 }

@@ -55,6 +55,17 @@ expect 0 "$B" info "$T/seqstore" --json
 json_get "$T/out" "d['kind']" | grep -qx tum || fail "info of a sequence holding a store/ is not the sequence's"
 rm -rf "$T/run" "$T/seqstore"
 
+# One writer a store: a scan into a store another process holds (flock(1) here, as a running scan
+# holds it) is refused before it touches it, and the store is left as it was.
+if command -v flock >/dev/null; then
+    cp -r "$T/S" "$T/locked"
+    before=$(cd "$T/locked" && find . -type f | sort | xargs md5sum | md5sum)
+    expect 2 flock "$T/locked" "$B" replay "$SEQ" --out "$T/locked-run" --no-mesh --store "$T/locked" --resume
+    mentions "$T/locked: another bitfuse is writing this store"
+    [ "$(cd "$T/locked" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a refused scan changed the locked store"
+    [ -e "$T/locked-run" ] && fail "a refused scan made its output folder"
+    rm -rf "$T/locked"
+fi
 # A store of a newer version: unreadable input for this build (exit 3), by every reader.
 cp -r "$T/S" "$T/newer"
 py - "$T/newer/store.json" <<'PY'
