@@ -90,6 +90,8 @@ typedef struct oni_source {
     bool is_depth_started, is_colour_started;
     uint32_t w, h, cw, ch;
     int colour_fmt;
+    double native_scale; /* the depth format's own units per metre (a URI's depth_scale= may override the
+                            intrinsics' scale: a change of format is judged on this one) */
     uint16_t *depth_px;
     uint8_t *rgb_px, *rgb_native;
     bool has_rgb_frame;
@@ -193,7 +195,7 @@ static bf_status oni_next(rgbd_source *base, bf_frame *out)
         return bf_fail(BF_NO_DEVICE, "%s: frame %u: the device stopped delivering depth (unplugged?): %s", s->uri,
                        s->index, oni_error());
     if ((uint32_t)f->width != s->w || (uint32_t)f->height != s->h ||
-        capture__oni_depth_scale(f->videoMode.pixelFormat) != s->base.intrinsics.depth_scale) {
+        capture__oni_depth_scale(f->videoMode.pixelFormat) != s->native_scale) {
         bf_status st = bf_fail(BF_FORMAT, "%s: frame %u: depth changed to %dx%d %s mid-stream (started as %ux%u)",
                                s->uri, s->index, f->width, f->height,
                                capture__oni_format_name(f->videoMode.pixelFormat), s->w, s->h);
@@ -309,6 +311,7 @@ bf_status capture__openni2_open(const char *uri, const char *target, const captu
                      dm.resolutionX, dm.resolutionY, capture__oni_format_name(dm.pixelFormat));
         goto fail;
     }
+    s->native_scale = scale;
     s->w = (uint32_t)dm.resolutionX;
     s->h = (uint32_t)dm.resolutionY;
 

@@ -54,6 +54,17 @@ BF_TEST(openni2_missing_file_is_bad_input_and_missing_device_no_device)
     CHECK_ERROR_MENTIONS("openni2:/nonexistent/bitfuse.oni");
     CHECK_STATUS(capture_open("openni2:no-such-device-uri", &src), BF_NO_DEVICE);
     CHECK_ERROR_MENTIONS("openni2:no-such-device-uri");
+    /* A file that is there but no recording: bad input, OpenNI2's reason on one line. */
+    char junk[600], uri[700];
+    snprintf(junk, sizeof junk, "%s/junk.oni", bf_test_tmpdir());
+    FILE *f = fopen(junk, "wb");
+    CHECK(f != NULL);
+    fputs("not a recording", f);
+    fclose(f);
+    snprintf(uri, sizeof uri, "openni2:%s", junk);
+    CHECK_STATUS(capture_open(uri, &src), BF_FORMAT);
+    CHECK_ERROR_MENTIONS("not an OpenNI recording");
+    CHECK(!strchr(bf_last_error(), '\n') && !strchr(bf_last_error(), '\t'));
     CHECK(src == NULL);
     bf_status s = capture_open("openni2:", &src);
     if (s == BF_OK) {
@@ -109,14 +120,17 @@ static void report(int fd, const char *fmt, ...)
  * otherwise the report says what did not. */
 static void dummy_live_child(int fd, const char *arg)
 {
-    (void)arg;
+    /* arg: a URI with ?depth_scale=5000, whose frames must still stream (the
+     * format's own scale, not the one given, tells a change of format). */
+    const char *uri = arg ? arg : "openni2:Dummy";
+    double want_scale = arg ? 5000.0 : 1000.0;
     rgbd_source *src = NULL;
-    if (capture_open("openni2:Dummy", &src)) {
+    if (capture_open(uri, &src)) {
         report(fd, "open: %s", bf_last_error());
         _exit(1);
     }
     const bf_intrinsics *K = rgbd_source_intrinsics(src);
-    if (K->width != 320 || K->height != 240 || K->depth_scale != 1000.0) {
+    if (K->width != 320 || K->height != 240 || K->depth_scale != want_scale) {
         report(fd, "intrinsics %ux%u scale %g", K->width, K->height, K->depth_scale);
         _exit(1);
     }
@@ -155,6 +169,8 @@ BF_TEST(openni2_dummy_device_streams_depth_colour_and_time)
     char rep[512];
     int rc = run_child(dummy_live_child, NULL, rep, sizeof rep);
     if (rc != 0) bf__test_fail(__FILE__, __LINE__, "Dummy device child: exit %d: %s", rc, rep);
+    rc = run_child(dummy_live_child, "openni2:Dummy?depth_scale=5000", rep, sizeof rep);
+    if (rc != 0) bf__test_fail(__FILE__, __LINE__, "Dummy device with ?depth_scale=5000: exit %d: %s", rc, rep);
 }
 
 /* Child: records the Dummy device's depth stream to arg with OpenNI2's
