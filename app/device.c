@@ -56,7 +56,9 @@ static volatile sig_atomic_t g_stopped;
 /* Stop signals taken since app_stop_begin: g_stopped is also set by
  * app_stop_request (a closed window, --exit-after, a failed output), which
  * is no Ctrl-C of the user's. */
-static volatile sig_atomic_t g_signals;
+/* Taken with one atomic exchange: two signals handled at once by two threads
+ * (a capture thread takes one too) must still count as two. */
+static atomic_int g_signals;
 static struct sigaction g_old_int, g_old_term;
 
 /* Only async-signal-safe calls: unlink, signal, raise. The signal is
@@ -104,11 +106,10 @@ void app_signals_init(void)
 
 static void on_stop_signal(int sig)
 {
-    if (g_signals) { /* the second: the user means it */
+    if (atomic_exchange(&g_signals, 1)) { /* the second: the user means it */
         on_fatal_signal(sig);
         return;
     }
-    g_signals = 1;
     g_stopped = 1;
     capture_threaded_stop(g_stop_src); /* sets an atomic flag: async-signal-safe */
     /* Writing the outputs can take seconds: say so, or a second press looks needed. */
@@ -126,7 +127,7 @@ const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)
     sigemptyset(&sa.sa_mask);
     g_stop_src = src;
     g_stopped = 0;
-    g_signals = 0;
+    atomic_store(&g_signals, 0);
     /* Also over a SIGINT ignored from the start (a script's background job,
      * as the tests run it): during a scan Ctrl-C and SIGTERM always stop it,
      * as they did before app_signals_init. */
