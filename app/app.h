@@ -75,6 +75,10 @@ typedef struct app_option {
     /* An option that means nothing without another ("--view"): given
      * alone, it is a usage error rather than silently ignored. */
     const char *needs;
+    /* An option it means nothing beside, refused together (exit 2) rather
+     * than ignored: "--no-mesh" (given), or "--colour=off" (an on|off
+     * option given as off). */
+    const char *not_with;
     /* NULL, or set true when the option is given (a default's value given
      * on purpose is then told from the default). */
     bool *given;

@@ -168,11 +168,12 @@ static void stream_options(app_option rows[STREAM_ROWS], replay_args *a)
                 "GPU's memory up to 2048)", .min = 0.1, .no_default = true),
         APP_OPT("--cache-budget", APP_OPT_DOUBLE, &a->cache_budget_mib, "MIB",
                 "bytes of the CPU cache of chunks streamed out of the GPU, in MiB; beyond it they go to disk (0: "
-                "every one)", .min = 0),
+                "every one)", .min = 0, .not_with = "--stream=off"),
         APP_OPT("--stream", APP_OPT_CHOICE, &sc->enabled, "on|off",
                 "stream chunks out of the GPU pools beyond --stream-radius (or when the pools fill) and back"),
         APP_OPT("--stream-radius", APP_OPT_FLOAT, &sc->radius_m, "M",
-                "chunks within M metres of the camera stay in the pools or come back", .min_open = true),
+                "chunks within M metres of the camera stay in the pools or come back", .min_open = true,
+                .not_with = "--stream=off"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);
@@ -286,7 +287,7 @@ static void loop_options(app_option rows[LOOP_ROWS], replay_args *a)
         APP_OPT("--reloc-features", APP_OPT_U32, &a->rcfg.reloc.features, "N",
                 "ORB keypoints per keyframe and per searching frame for the candidates from colour (0: none; "
                 "with --calibration found in the colour camera's own image)",
-                .max = 100000),
+                .max = 100000, .not_with = "--reloc=off"),
         APP_OPT("--last-frame", APP_OPT_CHOICE, &a->rcfg.reloc.last_frame, "on|off",
                 "with --reloc: a frame right after a good one whose fit to the map is weak (under 45% of its "
                 "samples inliers) or that no candidate finds is tracked against that frame's depth, and takes "

@@ -289,6 +289,23 @@ int app_options_parse(const app_command_spec *spec, int argc, char **argv)
             }
             return usage(spec->name, "%s needs %s", row->name, list);
         }
+    k = 0;
+    for (const app_option *const *t = spec->tables; *t; t++)
+        for (const app_option *row = *t; row->name; row++, k++) {
+            if (!row->not_with || !(k < APP_OPT_ROWS_MAX && seen[k])) continue;
+            char name[64];
+            const char *eq = strchr(row->not_with, '=');
+            size_t n = eq ? (size_t)(eq - row->not_with) : strlen(row->not_with);
+            if (n >= sizeof name) continue;
+            memcpy(name, row->not_with, n);
+            name[n] = '\0';
+            const app_option *other = NULL;
+            if (!given(spec, seen, name, &other)) continue;
+            bool off = other->kind == APP_OPT_CHOICE && !*(const bool *)other->dest;
+            if (!eq || (!strcmp(eq + 1, "off") && off))
+                return usage(spec->name, "%s means nothing with %s%s%s: give one of them", row->name, name,
+                             eq ? " " : "", eq ? eq + 1 : "");
+        }
     if (n_pos < spec->min_positional) return usage(spec->name, "%s", spec->positional_missing);
     return 0;
 }
@@ -448,7 +465,7 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
                 "keep the frames' colour in the map (RGB565 near the surface; coloured mesh, points and views)"),
         APP_OPT("--colour-frames", APP_OPT_U32, &fc->colour_frames, "N",
                 "frames of each window whose colour is fused (overlapping windows read different ones)", .min = 1,
-                .max = FUSION_COLOUR_MAX_FRAMES),
+                .max = FUSION_COLOUR_MAX_FRAMES, .not_with = "--colour=off"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);

@@ -35,7 +35,7 @@ void app_mesh_options(app_option rows[APP_MESH_ROWS], app_mesh_out *o, bool is_e
     o->max_error_m = 0;
     const app_option format[2] = {
         APP_OPT("--mesh-format", APP_OPT_ENUM, &o->format, "ply|obj|glb",
-                "the mesh file's format: DIR/mesh.ply, mesh.obj (+ mesh.mtl) or mesh.glb"),
+                "the mesh file's format: DIR/mesh.ply, mesh.obj (+ mesh.mtl) or mesh.glb", .not_with = "--no-mesh"),
         APP_OPT("--format", APP_OPT_ENUM, &o->format, "ply|obj|glb",
                 "the file's format: binary PLY, Wavefront OBJ (+ .mtl beside it) or glTF binary (default: from "
                 "--out's extension)",
@@ -45,11 +45,11 @@ void app_mesh_options(app_option rows[APP_MESH_ROWS], app_mesh_out *o, bool is_e
         format[is_export],
         APP_OPT("--max-triangles", APP_OPT_U32, &o->max_triangles, "N",
                 "simplify the mesh to at most N triangles (meshoptimizer; default: the full mesh)", .min = 1,
-                .no_default = true),
+                .no_default = true, .not_with = "--no-mesh"),
         APP_OPT("--max-error", APP_OPT_DOUBLE, &o->max_error_m, "M",
                 "simplify the mesh as far as the surface moves at most M metres (with --max-triangles the cap "
                 "still holds)",
-                .min_open = true, .no_default = true),
+                .min_open = true, .no_default = true, .not_with = "--no-mesh"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);

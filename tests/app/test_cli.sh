@@ -801,6 +801,12 @@ expect 3 "$B" eval-colour "$T/rp/mesh.ply" "$T/seq" --trajectory "$T/away.txt"
 mentions "is seen in none of the"
 expect 2 "$B" replay "$T/seq"
 mentions "--out is required"
+# An option that means nothing beside another is refused, not ignored.
+expect 2 "$B" replay "$T/seq" --out "$T/nm" --no-mesh --max-triangles 100
+mentions "--max-triangles means nothing with --no-mesh"
+expect 2 "$B" fuse "$T/seq" --poses groundtruth --out "$T/nm" --colour off --colour-frames 3
+mentions "--colour-frames means nothing with --colour off"
+[ -e "$T/nm" ] && fail "a refused combination made its output folder"
 # One frame with ground truth: no ATE, and the summary says why (not "no ground truth").
 expect 0 "$B" replay "$T/seq" --out "$T/rp1f" --frames 1 --no-mesh
 grep -qF "ATE not computed: one frame with a ground-truth pose: an ATE needs two" "$T/out" ||

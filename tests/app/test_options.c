@@ -15,7 +15,8 @@ typedef struct demo_args {
     replay_options ropt;
     fusion_config fc;
     uint32_t iters[4], levels, indent;
-    bool noise;
+    bool noise, quiet;
+    float noise_exp;
     int init;
 } demo_args;
 
@@ -35,6 +36,9 @@ static int parse(int argc, char **argv, demo_args *a)
         APP_OPT("--icp-iters", APP_OPT_LIST, a->iters, "A,B", "iterations per level", .max = 1000, .count = &a->levels,
                 .max_n = 3),
         APP_OPT("--noise-weights", APP_OPT_CHOICE, &a->noise, "on|off", "weight by the noise"),
+        APP_OPT("--noise-exp", APP_OPT_FLOAT, &a->noise_exp, "E", "the weights' exponent",
+                .not_with = "--noise-weights=off"),
+        APP_OPT("--quiet", APP_OPT_FLAG, &a->quiet, NULL, "no human lines", .not_with = "--json"),
         APP_OPT("--init", APP_OPT_ENUM, &a->init, "groundtruth|identity", "first pose"),
         APP_OPT_END,
     };
@@ -147,6 +151,25 @@ BF_TEST(options_that_need_another_are_refused_without_it)
     char *half[] = {"cmd", "seq", "--out", "o", "--sort-keys", "--indent", "2"};
     CHECK_EQ_INT(parse(7, half, &a), APP_EXIT_USAGE);
     CHECK_ERROR_MENTIONS("--indent needs --json");
+}
+
+/* An option that means nothing beside another is refused with it, in either
+ * order, and taken beside that option's other value. */
+BF_TEST(options_that_mean_nothing_beside_another_are_refused_with_it)
+{
+    demo_args a;
+    char *flag[] = {"cmd", "seq", "--out", "o", "--quiet", "--json"};
+    CHECK_EQ_INT(parse(6, flag, &a), APP_EXIT_USAGE);
+    CHECK_ERROR_MENTIONS("--quiet means nothing with --json");
+    char *off[] = {"cmd", "seq", "--out", "o", "--noise-weights", "off", "--noise-exp", "2"};
+    CHECK_EQ_INT(parse(8, off, &a), APP_EXIT_USAGE);
+    CHECK_ERROR_MENTIONS("--noise-exp means nothing with --noise-weights off");
+    char *on[] = {"cmd", "seq", "--noise-exp", "2", "--out", "o", "--noise-weights", "on"};
+    CHECK_EQ_INT(parse(8, on, &a), 0);
+    CHECK(a.noise && a.noise_exp == 2.0f);
+    char *dflt[] = {"cmd", "seq", "--out", "o", "--noise-exp", "2.5", "--quiet"};
+    CHECK_EQ_INT(parse(7, dflt, &a), 0);
+    CHECK(a.quiet && a.noise_exp == 2.5f);
 }
 
 BF_TEST(help_is_generated_from_the_rows_with_their_defaults)
