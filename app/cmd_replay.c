@@ -774,6 +774,31 @@ static bf_status show_frame(replay_sink *k, recon_run *run, const recon_frame_re
     return s;
 }
 
+/* The scan ended before --exit-after frames were shown (a short sequence, a
+ * stop): --screenshot is the map cast once more from the window's camera,
+ * so a script that asked for one still gets it. */
+static bf_status final_screenshot(replay_sink *k, recon_run *run)
+{
+    view_window *w = k->win;
+    bf_se3 T = view_pose(w);
+    bf_status s = recon_render_view(run->loop, &T);
+    render_caster *caster = s == BF_OK ? recon_caster(run->loop) : NULL;
+    if (s == BF_OK && !caster) s = bf_fail(BF_NO_MEMORY, "view: the loop has no caster");
+    uint32_t vw = 0, vh = 0;
+    view_size(w, &vw, &vh);
+    uint8_t *rgb = s == BF_OK ? malloc(3ull * vw * vh) : NULL;
+    if (s == BF_OK && !rgb) s = bf_fail(BF_NO_MEMORY, "view: screenshot");
+    bool is_shown = false;
+    if (s == BF_OK) s = view_show(w, render_get_targets(caster), rgb, &is_shown);
+    if (s == BF_OK && !is_shown) s = bf_fail(BF_WRITE, "%s: the window showed no frame to read back", k->a->screenshot);
+    if (s == BF_OK) s = replay_png_write_rgb8(k->a->screenshot, rgb, vw, vh);
+    if (s == BF_OK)
+        bf_warn("--exit-after %u: the scan ended after %u frame%s shown; %s is the map at its end", k->a->exit_after,
+                k->n_shown, app_s(k->n_shown), k->a->screenshot);
+    free(rgb);
+    return s;
+}
+
 /* An output that cannot be written mid-scan (a view, the store, the log,
  * frames.csv) stops the scan as Ctrl-C does, so that what was reconstructed
  * so far is still written (docs/faults.md); the exit code reports it. */
@@ -1049,6 +1074,8 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             stopped_empty = true;
             s = BF_END;
         }
+        if (s == BF_OK && win && a.screenshot && sink.n_shown < a.exit_after && r.run.loop && view_poll(win))
+            s = app_note_write(&sink.wf, cmd, final_screenshot(&sink, &r.run));
         if (sink.wf.s != BF_OK) {
             wf = sink.wf;
             r.run.is_interrupted = false; /* the stop was ours, not a signal's */

@@ -50,6 +50,14 @@ frames=$(py -c "import json,sys; print(json.load(open(sys.argv[1]))['frames'])" 
 # pose, the window's size is the sequence's): tolerance 0. A wrong byte
 # order, row pitch, scaling or a stale image all break it.
 py "$CMP" "$T/shot_replay.png" "$T/rep/views/000004.png" 0 0 || fail "the window's screenshot differs from views/000004.png"
+# A scan that ends before --exit-after frames were shown still leaves its screenshot (the map at
+# its end, from the window's camera), and says so.
+"$B" replay "$T/seq" --out "$T/rep2" --no-mesh --view --exit-after 50 --overlay off \
+    --screenshot "$T/shot_end.png" >"$T/out" 2>"$T/err" || fail "replay --view --exit-after 50: exit $?: $(head -c 400 "$T/err")"
+grep -q "the scan ended after 12 frames shown; $T/shot_end.png is the map at its end" "$T/err" ||
+    fail "no word of the early end: $(grep -v '^  ' "$T/err" | head -c 400)"
+py -c "import sys; d=open(sys.argv[1],'rb').read(24); assert d[:8]==b'\x89PNG\r\n\x1a\n' and int.from_bytes(d[16:20],'big')==160, d" \
+    "$T/shot_end.png" || fail "the early end's screenshot is not a 160-wide PNG"
 
 # 2. bitfuse view of what bitfuse render draws (the stored map, a sphere
 # mesh voxelised into it and a sheet of particles, in front of the scan's
