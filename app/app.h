@@ -155,7 +155,16 @@ void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mes
 typedef struct app_write_failure {
     bf_status s; /* BF_OK, or BF_WRITE once an output failed (BF_INVALID_ARG: app_note_mesh_refused) */
     char message[BF_ERROR_CAP];
+    uint32_t n;  /* outputs that failed (each warned about); message is the first's */
 } app_write_failure;
+/* The summary's words after the first failure: " (the other outputs are
+ * written)", or how many more failed. */
+static inline const char *app_write_failure_tail(const app_write_failure *w, char *buf, size_t cap)
+{
+    if (w->n <= 1) return " (the other outputs are written)";
+    snprintf(buf, cap, ", and %u other output%s (the warnings above)", w->n - 1, w->n == 2 ? "" : "s");
+    return buf;
+}
 /* s, or BF_OK when s is BF_WRITE (then noted in w and warned about). */
 bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s);
 /* The first failure noted as the status (its message restored), or BF_OK. */

@@ -240,8 +240,10 @@ int cmd_fuse(int argc, char **argv)
         printf("  time per frame   median %.1f ms, p95 %.1f ms\n", bf_stats_percentile(&r.run.series.frame_ms, 50),
                bf_stats_percentile(&r.run.series.frame_ms, 95));
         app_print_map(&r.out, a.fcfg.max_level);
+        char tail[96];
         if (wf.s != BF_OK)
-            printf("  not written      %s (the other outputs are written) in %.1f s\n", wf.message, r.seconds);
+            printf("  not written      %s%s in %.1f s\n", wf.message, app_write_failure_tail(&wf, tail, sizeof tail),
+                   r.seconds);
         else {
             char files[128];
             app_mesh_file_list(&r.out, files, sizeof files);

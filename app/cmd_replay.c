@@ -850,7 +850,7 @@ static bf_status eval_fused_surface(const replay_args *a, replay_result *r)
 }
 
 static void print_summary(const replay_args *a, const replay_result *r, const rgbd_source *src,
-                          const char *output_error)
+                          const app_write_failure *wf)
 {
     const recon_counts *c = &r->run.counts;
     const recon_run_series *t = &r->run.series;
@@ -925,8 +925,10 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     app_print_map(&r->out, a->rcfg.fusion.max_level);
     app_store_print(&r->store);
     /* After a failed output the list would claim it: the failure instead. */
-    if (output_error)
-        printf("  not written      %s (the other outputs are written) in %.1f s\n", output_error, r->seconds);
+    char tail[96];
+    if (wf->s != BF_OK)
+        printf("  not written      %s%s in %.1f s\n", wf->message, app_write_failure_tail(wf, tail, sizeof tail),
+               r->seconds);
     else {
         char files[128];
         app_mesh_file_list(&r->out, files, sizeof files);
@@ -1153,7 +1155,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s != BF_OK && made_out) (void)rmdir(a.out);
     /* An output that could not be written leaves the run's results to say
      * (the summary names the failure instead of the files written). */
-    if (s == BF_OK && has_map && s_loop == BF_OK) print_summary(&a, &r, src, wf.s != BF_OK ? wf.message : NULL);
+    if (s == BF_OK && has_map && s_loop == BF_OK) print_summary(&a, &r, src, &wf);
     bf_status s_dev = r.run.source_status;
     if (s == BF_OK && s_dev != BF_OK) bf_fail(s_dev, "%s", r.run.source_error);
     replay_log_writer_destroy(log);

@@ -277,6 +277,7 @@ bf_status app_note_write(app_write_failure *w, const char *cmd, bf_status s)
     if (s != BF_WRITE) return s;
     if (w->s != BF_OK && !strcmp(w->message, bf_last_error())) return BF_OK; /* the same one again (a sticky writer) */
     bf_warn("%s: %s; the other outputs are still written", cmd, bf_last_error());
+    w->n++;
     if (w->s == BF_OK) {
         w->s = s;
         snprintf(w->message, sizeof w->message, "%s", bf_last_error());

@@ -998,6 +998,12 @@ mkdir -p "$T/meshfail/mesh.ply/x"
 expect 5 "$B" replay "$T/seq" --out "$T/meshfail" --frames 5
 grep -q "not written      .*mesh.ply" "$T/out" || fail "replay with an unwritable mesh: no summary naming it: $(head -c 400 "$T/out")"
 grep -q "^  wrote" "$T/out" && fail "replay with an unwritable mesh claims it wrote its files"
+grep -q "not written      .*mesh.ply.*(the other outputs are written)" "$T/out" || fail "one failure: $(grep 'not written' "$T/out")"
+# Two outputs that cannot be written: the summary does not claim the others were.
+mkdir -p "$T/twofail/mesh.ply/x" "$T/twofail/trajectory.txt/x"
+expect 5 "$B" replay "$T/seq" --out "$T/twofail" --frames 5
+grep -q "not written      .*trajectory.txt.*, and 1 other output (the warnings above)" "$T/out" ||
+    fail "two failures: $(grep 'not written' "$T/out")"
 py -c "import json,sys; m = json.load(open(sys.argv[1]))['mesh']; assert m['file'] is None and 'mesh.ply' in m['error'], m" \
     "$T/meshfail/stats.json" || fail "replay with an unwritable mesh: stats.json's mesh does not say so"
 # synth at another size keeps 640x480's field of view by default, as render does.
