@@ -472,10 +472,10 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         if (track_config_check(&tc) != BF_OK) return app_usage_error(cmd, "%s", bf_last_error());
     }
     if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->seq);
-    if (!rc) rc = app_check_out_not_store(cmd, a->out, a->store);
     if (!rc && a->store && !a->store[0]) rc = app_usage_error(cmd, "--store needs a folder, not ''");
     /* The store's files among the sequence's: the folder would read as a store. */
     if (!rc) rc = app_check_not_input(cmd, "--store", a->store, a->seq);
+    if (!rc) rc = app_check_out_not_store(cmd, a->out, a->store);
     if (!rc) rc = app_check_not_input(cmd, "--record", a->record_path, a->seq);
     if (!rc) rc = app_check_new_recording(cmd, "--record", a->record_path, a->overwrite);
     if (!rc && a->ref_path) {

@@ -3,6 +3,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <dirent.h>
 #include <errno.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -110,8 +111,44 @@ static bool canonical(const char *path, char out[PATH_MAX])
     return true;
 }
 
+/* The nearest folder above path (lexically, from the working folder) that
+ * holds a scene store, into inside (PATH_MAX); false when none does. */
+static bool store_above(const char *path, char *inside)
+{
+    char p[PATH_MAX];
+    if (!canonical(path, p)) return false;
+    for (char *slash = strrchr(p, '/'); slash && slash != p; slash = strrchr(p, '/')) {
+        *slash = '\0';
+        if (store_exists(p)) {
+            snprintf(inside, PATH_MAX, "%s", p);
+            return true;
+        }
+    }
+    return false;
+}
+
 int app_check_out_not_store(const char *cmd, const char *out, const char *store)
 {
+    char above[PATH_MAX];
+    /* Not inside a store's files either way: its chunks/ would hold a folder
+     * that is no chunk, and a reader of the outer store meets the inner's. */
+    if (out && store_above(out, above))
+        return app_usage_error(cmd, "--out %s is inside the scene store %s: give a folder outside it", out, above);
+    if (store && store_above(store, above))
+        return app_usage_error(cmd, "--store %s is inside the scene store %s: give a folder outside it", store, above);
+    /* A folder holding other files is no store's (a run's results: info and
+     * export would then read the store instead of DIR/store; a sequence):
+     * the store's files would lie among them. */
+    DIR *d = store && !store_exists(store) ? opendir(store) : NULL;
+    for (struct dirent *e; d && (e = readdir(d));) {
+        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
+        char first[256];
+        snprintf(first, sizeof first, "%s", e->d_name);
+        closedir(d);
+        return app_usage_error(cmd, "--store %s holds other files (%s): give the store a folder of its own (an "
+                               "empty or new one, e.g. --store %s/store)", store, first, store);
+    }
+    if (d) closedir(d);
     if (!out) return 0;
     if (store_exists(out))
         return app_usage_error(cmd, "--out %s is a scene store: the outputs would go in among its files; give another "

@@ -97,6 +97,14 @@ pts=$(json_get "$T/out" "d['vertices']")
 [ -n "$pts" ] && [ "$pts" = "$ref" ] || fail "export of DIR holding DIR/store wrote '$pts' points, not '$ref'"
 [ "$(json_get "$T/out" "d['store']")" = "$T/run/store" ] || fail "export of DIR: the store is not named DIR/store"
 
+# Not a store among a run's results, nor anything inside a store (its chunks/ would hold a folder).
+expect 2 "$B" replay "$SEQ" --out "$T/u1" --no-mesh --store "$T/full"
+mentions "--store $T/full holds other files ("
+expect 2 "$B" replay "$SEQ" --out "$T/u1" --no-mesh --store "$T/S/chunks/inner"
+mentions "is inside the scene store $T/S"
+expect 2 "$B" replay "$SEQ" --out "$T/S/results" --no-mesh
+mentions "--out $T/S/results is inside the scene store $T/S"
+[ -e "$T/u1" ] || [ -e "$T/S/results" ] || [ -e "$T/S/chunks/inner" ] && fail "a refused scan made a folder"
 # Usage: a second scan into a used store, --resume without --store, no store at all.
 expect 2 "$B" replay "$SEQ" --out "$T/x" --store "$T/S"
 mentions "--resume"

@@ -144,10 +144,13 @@ check_file_fault() {
         fi
     done
     # The loop above skips folders: a fault inside replay's store S/ (a
-    # chunk, the trajectory, the index) leaves a store that still opens,
-    # at worst as one killed during its first write (docs/formats.md).
-    if [[ "$final" == "$out/S/"* ]]; then
+    # chunk, the trajectory, the index) fails its write, which renames none
+    # of its files (docs/formats.md): a store written before opens as that
+    # write; a new store whose only write failed is removed, and said so.
+    if [[ "$final" == "$out/S/"* ]] && [ -e "$out/S" ]; then
         "$B" info "$out/S" --json >"$T/info" 2>&1 || fail "$name: the store does not open after a fault in $(basename "$final"): $(head -c 300 "$T/info")"
+    elif [[ "$final" == "$out/S/"* ]]; then
+        grep -q "^  store  *$out/S: not written" "$T/out" || fail "$name: the store is gone and the summary says: $(grep '^  store' "$T/out")"
     fi
 }
 
@@ -244,7 +247,8 @@ no_temp "mid-scan"
 
 # The scene store cannot be written mid-scan (its first chunk file, at the
 # first flush): the scan stops, the rest is written, exit 5 naming the
-# chunk file, and the store still opens (what its flushes kept).
+# chunk file; the new store, with no write whole, is removed (a rerun into
+# the same folder is not refused), and the summary says it was not written.
 rm -rf "$O/run"
 shim 1 enospc 0 "" "$B" replay "$T/seq" --out "$O/run" --store "$O/run/S" --store-every 0.001
 [ "$rc" = 5 ] || fail "mid-scan store failure: exit $rc ($(head -c 300 "$T/err"))"
@@ -254,7 +258,8 @@ for f in trajectory.txt mesh.ply points.ply frames.csv stats.json; do
     [ -f "$O/run/$f" ] && whole "$O/run/$f" || fail "mid-scan store failure: $f not written whole"
 done
 no_temp "mid-scan store failure"
-expect 0 "$B" info "$O/run/S" --json
+[ ! -e "$O/run/S" ] || fail "mid-scan store failure: the new store without a whole write was left: $(find "$O/run/S")"
+grep -q "^  store  *$O/run/S: not written" "$T/out" || fail "mid-scan store failure: $(grep '^  store' "$T/out")"
 
 # ---------------------------------------------------------------- export
 MKRUN=1 # export writes a file into a folder that exists
