@@ -264,6 +264,7 @@ typedef struct app_store {
     double ms_flush_max, ms_submit_max; /* the loop's cost of a flush (snapshot and hand-over) */
     store_write_stats stats;    /* the writer's, at the end */
     bool end_failed;            /* the final write (or the writer's last) failed: stats are the last whole write's */
+    bool lock_refused;          /* another process was writing the store: nothing of it is this run's */
 } app_store;
 /* Opens dir for the scan; resume: reads it first (BF_FORMAT when it keeps no pose). */
 bf_status app_store_open(app_store *st, const char *dir, bool resume, double every_s);

@@ -1018,7 +1018,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && a.store) s = app_store_open(&r.store, a.store, a.resume, a.store_every_s);
     /* Only a store this run made or opened is this run's to tidy (a refused
      * "already holds a scene store" must not lose that store's chunks/). */
-    bool owns_store = made_store || r.store.writer != NULL;
+    bool owns_store = (made_store && !r.store.lock_refused) || r.store.writer != NULL;
     /* A map without colour written over one with: its colour gone for good. */
     if (s == BF_OK && r.store.is_resumed && r.store.map.rgb565 && !a.rcfg.fusion.keep_colour)
         s = bf_fail(BF_INVALID_ARG, "%s: the store holds colour, which --colour off would drop for good: resume it "

@@ -15,7 +15,13 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
     st->every_s = every_s;
     st->last_s = bf_time_s();
     bf_status s = BF_OK;
-    if (resume) {
+    /* The lock first, where the folder is there: reading a store another
+     * scan is writing, or clearing it, would be reading or deleting its
+     * files in flight; that scan is named instead. */
+    int lock_fd = -1;
+    if (bf_file_exists(dir)) s = store_lock(dir, &lock_fd);
+    st->lock_refused = s == BF_INVALID_ARG;
+    if (s == BF_OK && resume) {
         s = store_read(dir, &st->map, &st->meta, &st->traj, &st->report);
         if (s == BF_UNSUPPORTED) s = BF_FORMAT; /* a newer store: unreadable here (exit 3) */
         /* The writer rewrites and removes every chunk the index lists that
@@ -64,7 +70,8 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
             s = store_clear(dir);
         }
     }
-    if (s == BF_OK) s = store_writer_open(dir, resume, &st->writer);
+    if (s == BF_OK) s = store_writer_open_locked(dir, resume, lock_fd, &st->writer); /* owns the lock */
+    else store_unlock(lock_fd);
     if (s != BF_OK) app_store_close(st);
     return s;
 }

@@ -134,14 +134,25 @@ typedef struct store_write_stats {
     double ms_last, ms_max, ms_total; /* wall time of the writes (the writer's thread) */
 } store_write_stats;
 
-/* Opens dir for writing (created if missing). resume false: dir must not
+/* One writer a store: an exclusive flock on the folder dir (which must
+ * exist), *fd its descriptor (store_unlock releases; the lock goes with the
+ * process, so a kill frees it). BF_INVALID_ARG when another process holds
+ * it ("another bitfuse is writing this store"); where the file system has
+ * no such locks (NFS without lock support), a warning and *fd = -1. */
+bf_status store_lock(const char *dir, int *fd);
+void store_unlock(int fd); /* -1: nothing */
+/* Opens dir for writing (created if missing), under its lock: lock_fd, one
+ * the caller took with store_lock (owned from here, released with the
+ * writer or on failure), or -1 to take it here. resume false: dir must not
  * hold a store yet (BF_INVALID_ARG: the message says to resume or choose
  * another folder). resume true: it must (BF_IO otherwise); the writer then
  * knows the stored chunks' digests and rewrites only what changes. */
-bf_status store_writer_open(const char *dir, bool resume, store_writer **out);
+bf_status store_writer_open_locked(const char *dir, bool resume, int lock_fd, store_writer **out);
+bf_status store_writer_open(const char *dir, bool resume, store_writer **out); /* lock_fd -1 */
 /* Removes a store's files (chunk files, temp files, trajectory, index, keyframes) and
  * keeps the folder: for a store whose first write never finished (chunk
- * files but no pose), which a resumed scan starts anew. */
+ * files but no pose), which a resumed scan starts anew. The caller holds
+ * the store's lock (store_lock). */
 bf_status store_clear(const char *dir);
 /* Hands the writer a map to write (taken: *map is emptied) with its meta
  * and trajectory (copied). Waits first while an earlier write is running.

@@ -348,11 +348,10 @@ static bf_status unlink_suffix(const char *dir, const char *suffix)
     return s;
 }
 
-/* One writer a store: a second scan into it (another terminal, --resume of
- * a store being written) would mix two maps and delete the other's
- * temporary files. The folder is flock'ed (*fd, closed to release; the
- * lock goes with the process, so a kill frees it). */
-static bf_status lock_store(const char *dir, int *fd)
+/* One writer a store (store.h): a second scan into it (another terminal,
+ * --resume of a store being written) would mix two maps and delete the
+ * other's temporary files. */
+bf_status store_lock(const char *dir, int *fd)
 {
     *fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (*fd < 0) return bf_fail(BF_WRITE, "%s: cannot open the folder: %s", dir, strerror(errno));
@@ -364,7 +363,15 @@ static bf_status lock_store(const char *dir, int *fd)
         return bf_fail(BF_INVALID_ARG, "%s: another bitfuse is writing this store (a scan still running?): wait for it "
                                        "to end, or choose another folder",
                        dir);
-    return bf_fail(BF_WRITE, "%s: cannot lock the folder: %s", dir, strerror(e));
+    /* NFS emulates flock with fcntl locks, which a folder opened read-only
+     * cannot take: no lock there, as before locks came. */
+    bf_warn("store: %s: no lock on this file system (%s): a second scan into it is not refused", dir, strerror(e));
+    return BF_OK;
+}
+
+void store_unlock(int fd)
+{
+    if (fd >= 0) close(fd);
 }
 
 bf_status store_clear(const char *dir)
@@ -372,10 +379,7 @@ bf_status store_clear(const char *dir)
     if (!dir) return bf_fail(BF_INVALID_ARG, "store_clear: NULL folder");
     char chunk_dir[4200], path[4600];
     snprintf(chunk_dir, sizeof chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
-    int lock_fd = -1;
-    bf_status s = lock_store(dir, &lock_fd); /* not under a writer's feet */
-    if (s != BF_OK) return s;
-    s = unlink_suffix(chunk_dir, ".bfc");
+    bf_status s = unlink_suffix(chunk_dir, ".bfc");
     if (s == BF_OK) s = unlink_suffix(chunk_dir, ".tmp");
     /* keyframes.bin too: its poses are in the cleared scan's frame. */
     const char *files[] = {STORE_INDEX_NAME, STORE_TRAJ_NAME, STORE_KEYFRAMES_NAME};
@@ -383,29 +387,44 @@ bf_status store_clear(const char *dir)
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
         if (unlink(path) != 0 && errno != ENOENT) s = bf_fail(BF_WRITE, "%s: cannot remove: %s", path, strerror(errno));
     }
-    close(lock_fd);
     return s == BF_OK ? bf_sync_dir(dir) : s;
 }
 
 bf_status store_writer_open(const char *dir, bool resume, store_writer **out)
 {
-    if (!dir || !out) return bf_fail(BF_INVALID_ARG, "store_writer_open: NULL argument");
+    return store_writer_open_locked(dir, resume, -1, out);
+}
+
+bf_status store_writer_open_locked(const char *dir, bool resume, int lock_fd, store_writer **out)
+{
+    if (!dir || !out) {
+        store_unlock(lock_fd);
+        return bf_fail(BF_INVALID_ARG, "store_writer_open: NULL argument");
+    }
     bool exists = store_exists(dir);
-    if (!resume && exists)
-        return bf_fail(BF_INVALID_ARG, "%s: already holds a scene store: resume it (--resume) or choose another folder",
-                       dir);
-    if (resume && !exists) return bf_fail(BF_IO, "%s: no scene store to resume", dir);
-    store_writer *w = calloc(1, sizeof *w);
-    if (!w) return bf_fail(BF_NO_MEMORY, "store: writer");
-    if (snprintf(w->dir, sizeof w->dir, "%s", dir) >= (int)sizeof w->dir) {
+    /* The lock before the checks: a store being written is said so first. */
+    bf_status s = BF_OK;
+    if (lock_fd < 0 && (exists || !resume)) {
+        s = bf_mkdir_p(dir);
+        if (s == BF_OK) s = store_lock(dir, &lock_fd);
+        if (s != BF_OK) return s;
+    }
+    if (!resume && exists) s = bf_fail(BF_INVALID_ARG, "%s: already holds a scene store: resume it (--resume) or "
+                                                       "choose another folder", dir);
+    if (resume && !exists) s = bf_fail(BF_IO, "%s: no scene store to resume", dir);
+    store_writer *w = s == BF_OK ? calloc(1, sizeof *w) : NULL;
+    if (s == BF_OK && !w) s = bf_fail(BF_NO_MEMORY, "store: writer");
+    if (s == BF_OK && snprintf(w->dir, sizeof w->dir, "%s", dir) >= (int)sizeof w->dir)
+        s = bf_fail(BF_INVALID_ARG, "%s: path too long", dir);
+    if (s != BF_OK) {
         free(w);
-        return bf_fail(BF_INVALID_ARG, "%s: path too long", dir);
+        store_unlock(lock_fd);
+        return s;
     }
     snprintf(w->chunk_dir, sizeof w->chunk_dir, "%s/%s", dir, STORE_CHUNK_DIR);
-    w->lock_fd = -1;
-    bf_status s = bf_mkdir_p(w->chunk_dir);
+    w->lock_fd = lock_fd;
+    s = bf_mkdir_p(w->chunk_dir);
     if (s == BF_OK) s = bf_sync_dir(dir);
-    if (s == BF_OK) s = lock_store(dir, &w->lock_fd);
     /* A new scan: a keyframes.bin left in the folder (not a store without
      * its index or chunks) holds poses of another scan's frame. */
     if (s == BF_OK && !resume) {

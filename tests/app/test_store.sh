@@ -64,6 +64,10 @@ if command -v flock >/dev/null; then
     mentions "$T/locked: another bitfuse is writing this store"
     [ "$(cd "$T/locked" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a refused scan changed the locked store"
     [ -e "$T/locked-run" ] && fail "a refused scan made its output folder"
+    # Without --resume too: the store being written is what is said, not "resume it".
+    expect 2 flock "$T/locked" "$B" replay "$SEQ" --out "$T/locked-run" --no-mesh --store "$T/locked"
+    mentions "$T/locked: another bitfuse is writing this store"
+    [ "$(cd "$T/locked" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a refused scan changed the locked store"
     rm -rf "$T/locked"
 fi
 # A store of a newer version: unreadable input for this build (exit 3), by every reader.
@@ -105,6 +109,11 @@ mentions "is inside the scene store $T/S"
 expect 2 "$B" replay "$SEQ" --out "$T/S/results" --no-mesh
 mentions "--out $T/S/results is inside the scene store $T/S"
 [ -e "$T/u1" ] || [ -e "$T/S/results" ] || [ -e "$T/S/chunks/inner" ] && fail "a refused scan made a folder"
+expect 2 "$B" replay "$SEQ" --out "$T/NS/results" --no-mesh --store "$T/NS"
+mentions "--out $T/NS/results is inside --store $T/NS"
+# A folder above that only looks like a store (a chunks/ of something else, any store.json) is no store.
+mkdir -p "$T/proj/chunks" && echo '{}' >"$T/proj/store.json"
+expect 0 "$B" replay "$SEQ" --out "$T/proj/run1" --no-mesh --frames 3
 # Usage: a second scan into a used store, --resume without --store, no store at all.
 expect 2 "$B" replay "$SEQ" --out "$T/x" --store "$T/S"
 mentions "--resume"

@@ -515,6 +515,34 @@ BF_TEST(store_survives_a_failed_write_at_every_point)
     bf_traj_free(&tb);
 }
 
+/* One writer a store: a second one is refused while the first lives (also
+ * in this process: the lock is the open folder's), taken once it is closed. */
+BF_TEST(store_has_one_writer_at_a_time)
+{
+    hostmap a;
+    CHECK_OK(make_map(&a, 2, 4));
+    bf_traj t;
+    CHECK_OK(make_traj(&t, 3));
+    store_meta m = meta_of(&a, 3);
+    const char *dir = fresh_dir("locked");
+    CHECK_OK(write_store(dir, false, &a, &m, &t, NULL));
+    store_writer *w1 = NULL, *w2 = NULL;
+    CHECK_OK(store_writer_open(dir, true, &w1));
+    CHECK_STATUS(store_writer_open(dir, true, &w2), BF_INVALID_ARG);
+    CHECK_ERROR_MENTIONS("another bitfuse is writing this store");
+    CHECK(w2 == NULL);
+    int fd = -1;
+    CHECK_STATUS(store_lock(dir, &fd), BF_INVALID_ARG);
+    CHECK_OK(store_writer_finish(w1));
+    store_writer_close(w1);
+    CHECK_OK(store_lock(dir, &fd)); /* released with the writer */
+    CHECK_OK(store_writer_open_locked(dir, true, fd, &w2)); /* takes the caller's lock */
+    CHECK_OK(store_writer_finish(w2));
+    store_writer_close(w2);
+    hostmap_free(&a);
+    bf_traj_free(&t);
+}
+
 /* keyframes.bin: k keyframes of random poses and keypoints (keyframe 1 with
  * none: a keyframe without colour). */
 static bf_status make_keyframes(store_keyframes *k, uint32_t n)
