@@ -520,8 +520,9 @@ const volatile sig_atomic_t *app_stop_begin(rgbd_source *src);
  * closed): sets flag (the run's stop flag) and stops the capture thread
  * of app_stop_begin's source, if any. */
 void app_stop_request(volatile sig_atomic_t *flag);
-/* The output folder this run made (NULL: none): a fatal signal (a second
- * Ctrl-C) removes it when nothing was written into it yet. */
+/* A folder this run made (up to three: the output folder, a store and its
+ * chunks/): a fatal signal (a second Ctrl-C) removes them, the last made
+ * first, while nothing was written into them yet. */
 void app_signals_made_folder(const char *dir);
 /* Restores the handlers; true if a signal came. */
 bool app_stop_end(void);

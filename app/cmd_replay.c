@@ -979,7 +979,7 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
         bool is_live = false;
         s = app_open_device(a.seq, &a.ropt, a.realtime, a.queue, &is_live, &src);
         r.has_capture = s == BF_OK;
-        r.is_camera = s == BF_OK && is_live;
+        r.is_camera = s == BF_OK && is_live && !capture_is_recording_uri(a.seq);
         /* Ctrl-C ends the scan, not the program: what was seen is kept. */
         if (s == BF_OK) stop = app_stop_begin(src);
     } else {
@@ -1023,10 +1023,16 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
     if (s == BF_OK && r.store.is_resumed && r.store.map.rgb565 && !a.rcfg.fusion.keep_colour)
         s = bf_fail(BF_INVALID_ARG, "%s: the store holds colour, which --colour off would drop for good: resume it "
                     "with colour", a.store);
-    bool made_out = !bf_file_exists(a.out);
+    /* (from before the store: --store DIR/store makes DIR) */
+    bool made_out = !had_out;
     if (s == BF_OK && !made_out) app_warn_earlier_run(cmd, a.out);
     if (s == BF_OK) s = bf_mkdir_p(a.out);
     if (s == BF_OK && made_out) app_signals_made_folder(a.out);
+    if (s == BF_OK && made_store && r.store.writer) {
+        char chunks[4200];
+        app_signals_made_folder(a.store);
+        if (snprintf(chunks, sizeof chunks, "%s/chunks", a.store) < (int)sizeof chunks) app_signals_made_folder(chunks);
+    }
     if (s == BF_OK && a.record_path) {
         replay_log_config lc = {.colour = REPLAY_LOG_COLOUR_JPEG, .device = a.seq,
                                 .has_groundtruth = src->has_groundtruth};

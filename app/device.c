@@ -1,6 +1,7 @@
 /* The device part of record and live: what opens a device (capture owns
  * that; app adds the recordings replay reads) and the one Ctrl-C handler,
  * which ends the capture instead of the program. */
+#include <errno.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <string.h>
@@ -65,26 +66,28 @@ static struct sigaction g_old_int, g_old_term;
  * blocked while its handler runs, so the raised one is taken, with the
  * default action, as the handler returns: the shell sees the program
  * killed by it, as before. */
-/* An output folder this run made, removed on a fatal signal if it is
- * still empty (rmdir takes only an empty one): "" when none. */
-static char g_made_folder[4096];
+/* Folders this run made, removed on a fatal signal while still empty
+ * (rmdir takes only an empty one), the last made first. A slot is filled,
+ * then published by the count (release; the handler, on any thread,
+ * acquires it). */
+enum { MADE_FOLDERS = 3 };
+static char g_made[MADE_FOLDERS][4096];
+static atomic_int g_n_made;
 
 void app_signals_made_folder(const char *dir)
 {
-    size_t n = dir ? strlen(dir) : 0;
-    if (n == 0 || n >= sizeof g_made_folder) n = 0, dir = "";
-    /* The first byte last: the handler never sees a half-copied name. */
-    g_made_folder[0] = '\0';
-    atomic_signal_fence(memory_order_seq_cst);
-    memcpy(g_made_folder + 1, dir + (n ? 1 : 0), n); /* the rest and its NUL */
-    atomic_signal_fence(memory_order_seq_cst);
-    g_made_folder[0] = dir[0];
+    int n = atomic_load(&g_n_made);
+    if (!dir || !dir[0] || n >= MADE_FOLDERS || strlen(dir) >= sizeof g_made[0]) return;
+    memcpy(g_made[n], dir, strlen(dir) + 1);
+    atomic_store_explicit(&g_n_made, n + 1, memory_order_release);
 }
 
 static void on_fatal_signal(int sig)
 {
+    int saved = errno;
     bf_pending_remove_all();
-    if (g_made_folder[0]) (void)rmdir(g_made_folder);
+    for (int i = atomic_load_explicit(&g_n_made, memory_order_acquire) - 1; i >= 0; i--) (void)rmdir(g_made[i]);
+    errno = saved;
     signal(sig, SIG_DFL);
     raise(sig);
 }
@@ -112,10 +115,18 @@ static void on_stop_signal(int sig)
     }
     g_stopped = 1;
     capture_threaded_stop(g_stop_src); /* sets an atomic flag: async-signal-safe */
-    /* Writing the outputs can take seconds: say so, or a second press looks needed. */
+    /* Writing the outputs can take seconds: say so, or a second press looks
+     * needed. stderr may be a pipe whose reader the same Ctrl-C ended
+     * (2>&1 | tee): its SIGPIPE must not end the program here. */
     static const char msg[] = "bitfuse: stopping: the frames so far are being written (a second Ctrl-C abandons "
                               "them)\n";
+    int saved = errno;
+    struct sigaction ign = {.sa_handler = SIG_IGN}, old;
+    sigemptyset(&ign.sa_mask);
+    sigaction(SIGPIPE, &ign, &old);
     (void)!write(STDERR_FILENO, msg, sizeof msg - 1);
+    sigaction(SIGPIPE, &old, NULL);
+    errno = saved;
 }
 
 const volatile sig_atomic_t *app_stop_begin(rgbd_source *src)

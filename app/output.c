@@ -295,7 +295,9 @@ void app_warn_earlier_run(const char *cmd, const char *out)
 
 void app_note_mesh_refused(app_write_failure *w, const app_map_report *r)
 {
-    if (r->mesh_refused == BF_OK || w->s != BF_OK) return;
+    if (r->mesh_refused == BF_OK) return;
+    w->n++; /* an output not written, as a failed one */
+    if (w->s != BF_OK) return;
     w->s = r->mesh_refused;
     snprintf(w->message, sizeof w->message, "%s", r->mesh_error);
 }

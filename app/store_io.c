@@ -215,7 +215,8 @@ void app_store_print(const app_store *st)
     /* After a failed last write the writer's figures are its last whole
      * write's (none: the store holds what it held before the run). */
     if (st->end_failed && st->stats.writes == 0) {
-        printf("  store            %s: not written (the error above); it holds what it held before\n", st->dir);
+        printf("  store            %s: not written (the error above); %s\n", st->dir,
+               st->is_resumed ? "it holds what it held before" : "nothing of this scan is in it");
         return;
     }
     printf("  store            %s: %s%u chunk%s, %llu brick%s, %.2f MiB on disk, %u write%s this run", st->dir,

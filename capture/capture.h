@@ -146,6 +146,9 @@ bf_status capture_open(const char *uri, rgbd_source **out);
  * "openni2:", "v4l2:"), compiled in or not. Anything else (a folder, a
  * .bflog, a path with a colon) is a recording. */
 bool capture_is_device_uri(const char *uri);
+/* A device URI that names a recording, not a camera (openni2:FILE.oni): its
+ * frames carry the recording's own times. */
+bool capture_is_recording_uri(const char *uri);
 
 /* Opens what a user names as a device: a live URI (capture_open), or
  * anything else through open_recording (a recorded sequence standing in for

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 typedef struct capture_backend {
     const char *scheme;
@@ -89,6 +90,12 @@ bool capture_is_device_uri(const char *uri)
         if (!strncmp(uri, capture_backends[i].scheme, n) && uri[n] == ':') return true;
     }
     return false;
+}
+
+bool capture_is_recording_uri(const char *uri)
+{
+    size_t n = uri ? strlen(uri) : 0;
+    return n > 4 && capture_is_device_uri(uri) && !strcasecmp(uri + n - 4, ".oni");
 }
 
 bf_status capture_open_device(const char *uri, capture_open_fn open_recording, void *user, bool realtime,

@@ -723,6 +723,10 @@ TWICE=1 interrupt_at_gate "$B" replay "$T/gated" --no-mesh --out "$T/rint2"
 [ $rc = 130 ] || fail "replay after two SIGINTs: exit $rc, expected 130 (killed by SIGINT) ($(tail -c 300 "$T/err"))"
 # (the folder it made, with nothing written into it yet, goes too)
 [ ! -e "$T/rint2" ] || fail "replay after two SIGINTs left: $(ls -A "$T/rint2")"
+# With a store inside it (--store DIR/store) whose first write had not come (--store-every 0:
+# only at the end): all of it goes.
+TWICE=1 interrupt_at_gate "$B" replay "$T/gated" --no-mesh --out "$T/rint4" --store "$T/rint4/store" --store-every 0
+[ $rc = 130 ] && [ ! -e "$T/rint4" ] || fail "replay --store DIR/store after two SIGINTs: exit $rc, left $(find "$T/rint4" 2>&1 | tr '\n' ' ')"
 # A folder that was there before stays (empty).
 mkdir "$T/rint3"
 TWICE=1 interrupt_at_gate "$B" replay "$T/gated" --no-mesh --out "$T/rint3"

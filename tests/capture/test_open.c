@@ -156,6 +156,14 @@ BF_TEST(device_uris_are_told_from_recordings_by_scheme)
     CHECK(!capture_is_device_uri("seq_fr2"));
     CHECK(!capture_is_device_uri("/data/run:2/desk.bflog"));
     CHECK(!capture_is_device_uri("v4l2"));
+    /* A device URI naming a recording keeps the recording's times (a resumed store passes over
+     * what it has); a camera's are its own. */
+    CHECK(capture_is_recording_uri("openni2:/data/desk.oni"));
+    CHECK(capture_is_recording_uri("openni2:desk.ONI"));
+    CHECK(!capture_is_recording_uri("openni2:"));
+    CHECK(!capture_is_recording_uri("openni2:Dummy"));
+    CHECK(!capture_is_recording_uri("/data/desk.oni"));
+    CHECK(!capture_is_recording_uri("freenect:0"));
     /* Without an opener for recordings, a path is refused, not read. */
     rgbd_source *src = NULL;
     bool is_live = true;
