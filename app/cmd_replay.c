@@ -864,9 +864,8 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     if (c->unfused)
         printf("  tracking         %u frame%s tracked only, not fused (--fuse-every, --fuse-every-behind; %u "
                "came while the loop was behind the camera)\n", c->unfused, app_s(c->unfused), c->behind);
-    if (app_skipped_frames(src))
-        printf("  input            %u unreadable frame%s skipped\n", app_skipped_frames(src),
-               app_s(app_skipped_frames(src)));
+    uint32_t unreadable = app_skipped_frames(src);
+    if (unreadable) printf("  input            %u unreadable frame%s skipped\n", unreadable, app_s(unreadable));
     if (r->run.n_resume_skipped)
         printf("  input            %u frame%s at or before the stored scan's last time passed over as already in "
                "the store (--resume)\n", r->run.n_resume_skipped, app_s(r->run.n_resume_skipped));

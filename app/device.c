@@ -56,16 +56,12 @@ static rgbd_source *volatile g_stop_src;
 static volatile sig_atomic_t g_stopped;
 /* Stop signals taken since app_stop_begin: g_stopped is also set by
  * app_stop_request (a closed window, --exit-after, a failed output), which
- * is no Ctrl-C of the user's. */
-/* Taken with one atomic exchange: two signals handled at once by two threads
- * (a capture thread takes one too) must still count as two. */
+ * is no Ctrl-C of the user's. Taken with one atomic exchange: two signals
+ * handled at once by two threads (a capture thread takes one too) still
+ * count as two. */
 static atomic_int g_signals;
 static struct sigaction g_old_int, g_old_term;
 
-/* Only async-signal-safe calls: unlink, signal, raise. The signal is
- * blocked while its handler runs, so the raised one is taken, with the
- * default action, as the handler returns: the shell sees the program
- * killed by it, as before. */
 /* Folders this run made, removed on a fatal signal while still empty
  * (rmdir takes only an empty one), the last made first. A slot is filled,
  * then published by the count (release; the handler, on any thread,
@@ -82,6 +78,10 @@ void app_signals_made_folder(const char *dir)
     atomic_store_explicit(&g_n_made, n + 1, memory_order_release);
 }
 
+/* Only async-signal-safe calls: unlink, rmdir, signal, raise. The signal
+ * is blocked while its handler runs, so the raised one is taken, with the
+ * default action, as the handler returns: the shell sees the program
+ * killed by it, as before. */
 static void on_fatal_signal(int sig)
 {
     int saved = errno;

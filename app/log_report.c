@@ -1,9 +1,9 @@
 /* What record and convert report about a bitfuse log they wrote. */
+#include <dirent.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <dirent.h>
 #include <errno.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -111,33 +111,6 @@ static bool canonical(const char *path, char out[PATH_MAX])
     return true;
 }
 
-/* A folder that is a scene store beyond doubt: a store.json naming the
- * format, or a chunk file in chunks/ (store_exists takes any chunks/ folder
- * or store.json, which is right for the folder given, too loose for every
- * folder above it). */
-static bool is_written_store(const char *dir)
-{
-    char p[PATH_MAX + 32];
-    snprintf(p, sizeof p, "%s/store.json", dir);
-    FILE *f = fopen(p, "rb");
-    if (f) {
-        char head[512];
-        size_t n = fread(head, 1, sizeof head - 1, f);
-        fclose(f);
-        head[n] = '\0';
-        if (strstr(head, "\"bitfuse-store\"")) return true;
-    }
-    snprintf(p, sizeof p, "%s/chunks", dir);
-    DIR *d = opendir(p);
-    bool found = false;
-    for (struct dirent *e; d && !found && (e = readdir(d));) {
-        size_t n = strlen(e->d_name);
-        found = n > 6 && !strncmp(e->d_name, "c_", 2) && !strcmp(e->d_name + n - 4, ".bfc");
-    }
-    if (d) closedir(d);
-    return found;
-}
-
 /* The nearest folder above path (lexically, from the working folder) that
  * is a scene store, into inside (PATH_MAX); false when none is. */
 static bool store_above(const char *path, char *inside)
@@ -146,7 +119,7 @@ static bool store_above(const char *path, char *inside)
     if (!canonical(path, p)) return false;
     for (char *slash = strrchr(p, '/'); slash && slash != p; slash = strrchr(p, '/')) {
         *slash = '\0';
-        if (is_written_store(p)) {
+        if (store_is_written(p)) {
             snprintf(inside, PATH_MAX, "%s", p);
             return true;
         }
@@ -178,17 +151,15 @@ int app_check_out_not_store(const char *cmd, const char *out, const char *store)
     }
     if (d) closedir(d);
     if (!out) return 0;
-    /* Nor the outputs inside this run's own store (a new one, not yet on disk). */
-    char ro_in[PATH_MAX], rs_in[PATH_MAX];
-    size_t ns = store && canonical(store, rs_in) ? strlen(rs_in) : 0;
-    if (ns && canonical(out, ro_in) && !strncmp(ro_in, rs_in, ns) && ro_in[ns] == '/')
-        return app_usage_error(cmd, "--out %s is inside --store %s: give a folder outside it", out, store);
     if (store_exists(out))
         return app_usage_error(cmd, "--out %s is a scene store: the outputs would go in among its files; give another "
                                "folder (a store may live inside it, as --store DIR/store)", out);
     char ro[PATH_MAX], rs[PATH_MAX];
-    bool same = store && canonical(out, ro) && canonical(store, rs) && !strcmp(ro, rs);
-    if (same)
+    size_t ns = store && canonical(out, ro) && canonical(store, rs) ? strlen(rs) : 0;
+    /* Nor inside this run's own store (a new one, not yet on disk). */
+    if (ns && !strncmp(ro, rs, ns) && ro[ns] == '/')
+        return app_usage_error(cmd, "--out %s is inside --store %s: give a folder outside it", out, store);
+    if (ns && !strcmp(ro, rs))
         return app_usage_error(cmd, "--out %s is --store's folder: the outputs would go in among the store's files; "
                                "give the store its own folder (--store %s/store)", out, out);
     return 0;

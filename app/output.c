@@ -215,7 +215,7 @@ void app_json_map(cJSON *o, const app_map_report *r, uint32_t max_level)
 }
 
 /* The map's line when the device holds the whole map. */
-static void app_print_map_line(const app_map_report *r)
+static void app_print_map_line(const app_map_report *r, double bits)
 {
     const fusion_stats *m = &r->map;
     /* A chunk emptied of its bricks keeps its hash entry (and its memory):
@@ -228,8 +228,7 @@ static void app_print_map_line(const app_map_report *r)
     else
         snprintf(chunks, sizeof chunks, "%u chunks", m->n_chunks);
     printf("  map              %s, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
-           chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0,
-           m->n_bricks ? 8.0 * m->bytes_total / (512.0 * m->n_bricks) : 0.0);
+           chunks, m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0, bits);
 }
 
 void app_print_map(const app_map_report *r, uint32_t max_level)
@@ -243,7 +242,7 @@ void app_print_map(const app_map_report *r, uint32_t max_level)
         printf("  on the device    %u chunk%s, %u nodes, %u bricks, %.2f MiB (%.2f bits per allocated voxel)\n",
                m->n_chunks, app_s(m->n_chunks), m->n_nodes, m->n_bricks, m->bytes_total / 1048576.0, bits);
     } else {
-        app_print_map_line(r);
+        app_print_map_line(r, bits);
     }
     if (m->bytes_colour)
         printf("  colour           %llu voxels, %u units, %.2f MiB (%.2f bits per allocated voxel)\n",

@@ -228,30 +228,28 @@ static void stage_free(store_stage *stage)
     memset(stage, 0, sizeof *stage);
 }
 
-bf_status store__stage_commit(store_stage *stage)
+/* Removes the staged files from the first-th on. */
+static void unlink_staged(store_stage *stage, uint32_t first)
 {
-    bf_status s = BF_OK;
-    for (uint32_t i = 0; i < stage->n; i++) {
-        if (s == BF_OK) {
-            s = rename_tmp(stage->paths[i], &stage->pending[i]);
-            continue;
-        }
+    for (uint32_t i = first; i < stage->n; i++) {
         char tmp[4200];
         snprintf(tmp, sizeof tmp, "%s.tmp", stage->paths[i]);
         bf_pending_forget(&stage->pending[i]);
         unlink(tmp);
     }
+}
+
+bf_status store__stage_commit(store_stage *stage)
+{
+    bf_status s = BF_OK;
+    for (uint32_t i = 0; s == BF_OK && i < stage->n; i++)
+        if ((s = rename_tmp(stage->paths[i], &stage->pending[i])) != BF_OK) unlink_staged(stage, i + 1);
     stage_free(stage);
     return s;
 }
 
 void store__stage_abort(store_stage *stage)
 {
-    for (uint32_t i = 0; i < stage->n; i++) {
-        char tmp[4200];
-        snprintf(tmp, sizeof tmp, "%s.tmp", stage->paths[i]);
-        bf_pending_forget(&stage->pending[i]);
-        unlink(tmp);
-    }
+    unlink_staged(stage, 0);
     stage_free(stage);
 }

@@ -52,6 +52,30 @@ bool store_exists(const char *dir)
     return is_dir(p);
 }
 
+static bool parse_chunk_name(const char *name, int32_t key[3]);
+
+bool store_is_written(const char *dir)
+{
+    char p[4200];
+    if (!dir) return false;
+    snprintf(p, sizeof p, "%s/%s", dir, STORE_INDEX_NAME);
+    FILE *f = fopen(p, "rb");
+    if (f) {
+        char head[512];
+        size_t n = fread(head, 1, sizeof head - 1, f);
+        fclose(f);
+        head[n] = '\0';
+        if (strstr(head, "\"" STORE_FORMAT_NAME "\"")) return true;
+    }
+    snprintf(p, sizeof p, "%s/%s", dir, STORE_CHUNK_DIR);
+    DIR *d = opendir(p);
+    bool found = false;
+    int32_t key[3];
+    for (struct dirent *e; d && !found && (e = readdir(d));) found = parse_chunk_name(e->d_name, key);
+    if (d) closedir(d);
+    return found;
+}
+
 /* store_int.h. */
 bf_status store__read_file(const char *path, size_t max, uint8_t **out, size_t *n)
 {

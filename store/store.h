@@ -89,6 +89,11 @@ bf_status store_keyframes_read(const char *dir, store_keyframes *out);
 
 /* True when dir holds a store (its index or its chunks folder). */
 bool store_exists(const char *dir);
+/* True when dir holds a store beyond doubt: a store.json naming the format,
+ * or a chunk file in chunks/ (store_exists takes any chunks/ folder or
+ * store.json: right for a folder named as a store, too loose for telling
+ * whether a folder met on the way is one). */
+bool store_is_written(const char *dir);
 
 /* Reads the store in dir: every valid chunk into *map (bricks in the
  * store's canonical order: chunk key, then level, then cell z, y, x), the

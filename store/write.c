@@ -451,7 +451,7 @@ bf_status store_writer_open_locked(const char *dir, bool resume, int lock_fd, st
     if (s != BF_OK) {
         pthread_mutex_destroy(&w->mu);
         pthread_cond_destroy(&w->cv);
-        if (w->lock_fd >= 0) close(w->lock_fd);
+        store_unlock(w->lock_fd);
         free(w->entries);
         free(w);
         return s;
@@ -548,7 +548,7 @@ void store_writer_close(store_writer *w)
     store_keyframes_free(&w->pending_kf);
     pthread_mutex_destroy(&w->mu);
     pthread_cond_destroy(&w->cv);
-    if (w->lock_fd >= 0) close(w->lock_fd); /* the lock with it */
+    store_unlock(w->lock_fd); /* the lock with it */
     free(w->entries);
     free(w);
 }
