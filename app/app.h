@@ -257,7 +257,6 @@ typedef struct app_store {
     bf_traj traj;
     store_report report;
     store_keyframes keyframes;  /* resumed: the relocalisation keyframes read (none when the file is absent or bad) */
-    uint32_t keyframes_written; /* keyframes in the last set handed to the writer for keyframes.bin */
     uint64_t kf_generation;     /* the loop's keyframe generation then */
     bool has_kf_generation;
     uint32_t flushes, skipped;  /* flushes handed to the writer; periods skipped while it was busy */

@@ -111,10 +111,7 @@ static void hand_keyframes(app_store *st, const recon *loop)
     bf_status s = recon_keyframes(loop, &k);
     bool has_colour = false;
     for (uint32_t i = 0; s == BF_OK && i < k.n; i++) has_colour |= k.kf[i].n > 0;
-    if (s == BF_OK && has_colour) {
-        st->keyframes_written = k.n;
-        store_writer_keyframes(st->writer, &k);
-    }
+    if (s == BF_OK && has_colour) store_writer_keyframes(st->writer, &k);
     if (s != BF_OK) bf_warn("store: the keyframes were not kept (a resumed scan starts from its poses): %s", bf_last_error());
     st->kf_generation = gen, st->has_kf_generation = true;
     store_keyframes_free(&k);
@@ -198,7 +195,7 @@ void app_store_json(cJSON *parent, const app_store *st)
     cJSON_AddNumberToObject(o, "write_ms_max", st->stats.ms_max);
     cJSON_AddNumberToObject(o, "write_ms_mean", st->stats.writes ? st->stats.ms_total / st->stats.writes : NAN);
     cJSON_AddNumberToObject(o, "loop_flush_ms_max", st->ms_flush_max);
-    cJSON_AddNumberToObject(o, "keyframes_written", st->keyframes_written);
+    cJSON_AddNumberToObject(o, "keyframes_written", st->stats.keyframes);
     if (st->is_resumed) {
         cJSON *r = app_json_object(o, "reopened");
         cJSON_AddNumberToObject(r, "frames", st->meta.frames);

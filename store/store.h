@@ -136,6 +136,7 @@ typedef struct store_write_stats {
     uint64_t chunks_removed;  /* chunk files removed (chunks that became empty) */
     uint64_t bytes_written;   /* bytes of every file written */
     uint64_t bytes_on_disk;   /* chunk file bytes after the last write */
+    uint32_t keyframes;       /* keyframes this writer put in keyframes.bin (by a write that finished) */
     double ms_last, ms_max, ms_total; /* wall time of the writes (the writer's thread) */
 } store_write_stats;
 

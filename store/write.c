@@ -250,6 +250,7 @@ static bf_status write_map(store_writer *w, store_job *job)
     st->bricks = job->map.n_bricks;
     st->chunks_written += written;
     st->chunks_removed += removed;
+    if (job->has_kf) st->keyframes = job->kf.n;
     st->bytes_on_disk = 0;
     for (uint32_t i = 0; i < n; i++) st->bytes_on_disk += e[i].file_bytes;
     st->ms_last = 1e3 * (bf_time_s() - t0);

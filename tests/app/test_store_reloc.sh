@@ -48,6 +48,14 @@ expect 0 "$B" replay "$SEQ" --out "$T/a" --no-mesh --frames 30 --store "$T/S"
 [ -f "$T/S/keyframes.bin" ] || fail "the store keeps no keyframes.bin"
 kf=$(json_get "$T/a/stats.json" "d['store']['keyframes_written']")
 [ "${kf:-0}" -ge 1 ] || fail "stats.json store.keyframes_written is '$kf'"
+# On a disk too small for the first write no keyframes were written.
+mkdir "$T/tiny"
+if mount -t tmpfs -o size=16k tmpfs "$T/tiny" 2>/dev/null; then
+    expect 5 "$B" replay "$SEQ" --out "$T/a-full" --no-mesh --frames 30 --store "$T/tiny/S"
+    [ "$(json_get "$T/a-full/stats.json" "d['store']['keyframes_written']")" = 0 ] ||
+        fail "a failed write counts $(json_get "$T/a-full/stats.json" "d['store']['keyframes_written']") keyframes written"
+    umount "$T/tiny"
+fi
 expect 0 "$B" info "$T/S" --json
 n=$(json_get "$T/out" "d['keyframes']")
 [ "$n" = "$kf" ] || fail "info: $n keyframes where $kf were written"
