@@ -316,6 +316,9 @@ bf_status bf_out_commit_both(bf_out *first, bf_out *second)
         bf_out_abort(second);
         return bf_fail(BF_WRITE, "%s: the output was not opened", closed->path);
     }
+    /* The file that failed first is the cause: an output that filled the
+     * disk while it was written leaves the other none to finish in. */
+    bool second_failed_first = second->err && !first->err;
     out_finish(first);
     out_finish(second);
     if (first->err || second->err) {
@@ -323,7 +326,7 @@ bf_status bf_out_commit_both(bf_out *first, bf_out *second)
         bf_pending_forget(&second->pending);
         unlink(first->tmp);
         unlink(second->tmp);
-        return out_failed(first->err ? first : second);
+        return out_failed(first->err && !second_failed_first ? first : second);
     }
     bf_status s = out_rename(first);
     if (s != BF_OK) {

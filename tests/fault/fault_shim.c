@@ -11,6 +11,9 @@
  *           fills in the middle of a write; an fsync or close at N: EIO)
  *   partial a write writes half its bytes and returns the count, nothing
  *           else fails (a signal or a pipe: the caller must go on writing)
+ *   full    the call fails with ENOSPC, and so does every later write,
+ *           fsync and close of every watched descriptor (a disk one output
+ *           filled, which the next output then finds full)
  * Opening a file for writing with stdio (fopen "w"/"a"/"+") under FAULT_DIR
  * is reported on stderr ("fault_shim: stdio stream ..."), because glibc's
  * stdio writes without calling write(2) through the PLT and would escape
@@ -55,7 +58,8 @@
 static char dir[PATH_MAX];
 static size_t dir_len;
 static long fault_n, vk_n, delay_us;
-static int kind; /* 0 enospc, 1 eio, 2 short, 3 partial */
+static int kind; /* 0 enospc, 1 eio, 2 short, 3 partial, 4 full */
+static _Atomic bool disk_full;
 static bool vk_lost;
 static _Atomic long points, vk_allocs, vk_submits;
 static _Atomic bool lost_now;
@@ -110,7 +114,7 @@ __attribute__((constructor)) static void init(void)
     const char *n = getenv("FAULT_N");
     fault_n = n ? atol(n) : 0;
     const char *k = getenv("FAULT_KIND");
-    kind = !k || !strcmp(k, "enospc") ? 0 : !strcmp(k, "eio") ? 1 : !strcmp(k, "short") ? 2 : 3;
+    kind = !k || !strcmp(k, "enospc") ? 0 : !strcmp(k, "eio") ? 1 : !strcmp(k, "short") ? 2 : !strcmp(k, "full") ? 4 : 3;
     const char *dl = getenv("FAULT_DELAY_US");
     delay_us = dl ? atol(dl) : 0;
     const char *v = getenv("FAULT_VK_N");
@@ -165,13 +169,14 @@ static int at_point(int fd, bool is_write)
 {
     if (fd < 0 || fd >= MAX_FD || !watched[fd]) return 0;
     if (delay_us > 0) usleep((useconds_t)delay_us);
-    if (broken[fd]) return 1;
+    if (broken[fd] || disk_full) return 1;
     long k = atomic_fetch_add(&points, 1) + 1;
     if (k != fault_n || (kind == 3 && !is_write)) return 0;
     pthread_mutex_lock(&mu);
     snprintf(fired, sizeof fired, "fired %s", watched[fd]);
     pthread_mutex_unlock(&mu);
-    if (kind >= 2 && is_write) {
+    if (kind == 4) disk_full = true;
+    if ((kind == 2 || kind == 3) && is_write) {
         if (kind == 2) broken[fd] = true;
         return 2;
     }
@@ -194,7 +199,7 @@ int fsync(int fd)
 {
     load();
     if (at_point(fd, false) == 1) {
-        errno = kind == 0 ? ENOSPC : EIO;
+        errno = kind == 0 || kind == 4 ? ENOSPC : EIO;
         return -1;
     }
     return real_fsync(fd);
@@ -204,7 +209,7 @@ int fdatasync(int fd)
 {
     load();
     if (at_point(fd, false) == 1) {
-        errno = kind == 0 ? ENOSPC : EIO;
+        errno = kind == 0 || kind == 4 ? ENOSPC : EIO;
         return -1;
     }
     return real_fdatasync(fd);
@@ -223,7 +228,7 @@ int close(int fd)
     }
     int c = real_close(fd);
     if (r == 1) { /* closed all the same, as Linux does (NFS reports late) */
-        errno = kind == 0 ? ENOSPC : EIO;
+        errno = kind == 0 || kind == 4 ? ENOSPC : EIO;
         return -1;
     }
     return c;

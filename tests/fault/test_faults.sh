@@ -269,6 +269,20 @@ for fmt in ply obj glb; do
     walk "export_$fmt" "$T/export_$fmt" "m.$fmt m.mtl" "$B" export "$T/replay/S" --out "$O/run/m.$fmt"
 done
 
+# A disk the OBJ fills while it is written (an OBJ over the output
+# buffer, 1 MiB, written as it grows) leaves its .mtl none either: the
+# error names the OBJ, the file that failed first (it named the .mtl).
+expect 0 "$B" synth --trajectory "$T/traj.txt" --frames 3 --size 320x240 --camera 262.5,262.5,159.5,119.5 \
+    --data "$T/nodata" --noise none --out "$T/seq320"
+expect 0 "$B" replay "$T/seq320" --out "$T/r320" --no-mesh --store "$T/r320/S"
+fresh
+shim 2 full 0 "" "$B" export "$T/r320/S" --out "$O/run/m.obj"
+[[ "$(report fired)" == "$O/run/m.obj.tmp"* ]] || fail "full disk, export m.obj: the fault hit '$(report fired)', not the OBJ's second write"
+[ "$rc" = 5 ] || fail "full disk, export m.obj: exit $rc, expected 5 ($(head -c 300 "$T/err"))"
+mentions "$O/run/m.obj: "
+grep -q "m\.mtl" "$T/err" && fail "full disk, export m.obj: the error names the .mtl: $(head -c 300 "$T/err")"
+[ -z "$(ls "$O/run")" ] || fail "full disk, export m.obj: left $(ls "$O/run")"
+
 MKRUN=0
 ONE_OUTPUT=0
 
