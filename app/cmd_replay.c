@@ -631,6 +631,7 @@ static cJSON *stats_json(const replay_args *a, const replay_result *r, const rgb
         cJSON_AddNumberToObject(ate, "median", r->ate.trans.median);
         cJSON_AddNumberToObject(ate, "max", r->ate.trans.max);
         cJSON_AddNumberToObject(ate, "pairs", (double)r->ate.n_matched);
+        cJSON_AddNumberToObject(ate, "trajectory_poses", (double)r->run.est.n);
     } else {
         cJSON_AddNullToObject(o, "ate_m");
         if (r->ate_error[0]) cJSON_AddStringToObject(o, "ate_error", r->ate_error);
@@ -907,9 +908,16 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
                bf_stats_percentile(&t->frame_ms, 50), bf_stats_percentile(&t->frame_ms, 95), m[0], m[1], m[2], m[3],
                m[4], m[5], m[6]);
     }
-    if (r->has_ate)
-        printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu poses\n", r->ate.trans.rmse,
-               r->ate.trans.median, r->ate.trans.max, r->ate.n_matched);
+    /* A resume passes over stored frames, --frames may stop before them,
+     * a ground truth may miss some: the ATE then covers part of what
+     * trajectory.txt holds, and says which part. */
+    if (r->has_ate && r->ate.n_matched < r->run.est.n)
+        printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu of the %zu poses in trajectory.txt "
+               "(those with a ground truth among the frames read)\n",
+               r->ate.trans.rmse, r->ate.trans.median, r->ate.trans.max, r->ate.n_matched, r->run.est.n);
+    else if (r->has_ate)
+        printf("  trajectory       ATE RMSE %.4f m (median %.4f, max %.4f) over %zu pose%s\n", r->ate.trans.rmse,
+               r->ate.trans.median, r->ate.trans.max, r->ate.n_matched, app_s(r->ate.n_matched));
     else if (r->ate_error[0])
         printf("  trajectory       ATE not computed: %s\n", r->ate_error);
     else

@@ -250,6 +250,13 @@ grep -q "30 frames at or before the stored scan's last time passed over as alrea
 cp -r "$T/H" "$T/H3"
 expect 0 "$B" replay "$T/seqh" --out "$T/h3" --no-mesh --store "$T/H3" --resume
 mentions "are at or before the stored scan's last time"
+# ... and with --frames 10 the ATE covers the 10 frames read, of the 60
+# poses the trajectory holds: the summary says which.
+cp -r "$T/H" "$T/H4"
+expect 0 "$B" replay "$T/seqh" --out "$T/h4" --no-mesh --store "$T/H4" --resume --frames 10
+grep -q "over 10 of the 60 poses in trajectory.txt" "$T/out" || fail "the summary after a resume with --frames 10: $(grep ATE "$T/out")"
+[ "$(json_get "$T/h4/stats.json" "(d['ate_m']['pairs'], d['ate_m']['trajectory_poses'])")" = "(10, 60)" ] ||
+    fail "stats.json ate_m after a resume with --frames 10: $(json_get "$T/h4/stats.json" "d['ate_m']")"
 # The same from a log: the stored records' headers are read, not their
 # payloads (one spoilt here, a quarter of the way in, past its header).
 expect 0 "$B" convert "$SEQ" --out "$T/seq.bflog"
