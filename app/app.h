@@ -111,7 +111,7 @@ void app_options_help(FILE *f, const app_command_spec *spec);
  * --window, --subcache, --bricks, --chunk, --max-level). */
 struct replay_options;
 #define APP_SEQUENCE_ROWS 5
-#define APP_MAP_ROWS 10
+#define APP_MAP_ROWS 11
 void app_sequence_options(app_option rows[APP_SEQUENCE_ROWS], struct replay_options *o);
 /* bricks_given (NULL: not asked): set true when --bricks is given. */
 void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bricks_given);

@@ -117,6 +117,7 @@ void app_json_fusion_config(cJSON *parent, const char *name, const fusion_config
     cJSON_AddNumberToObject(o, "max_groups_x", c->max_groups_x);
     cJSON_AddBoolToObject(o, "keep_colour", c->keep_colour);
     cJSON_AddNumberToObject(o, "colour_frames", c->colour_frames);
+    cJSON_AddNumberToObject(o, "colour_reach", c->colour_reach);
     cJSON_AddNumberToObject(o, "colour_unit_cap", c->colour_unit_cap);
     cJSON_AddBoolToObject(o, "load_only", c->load_only);
 }

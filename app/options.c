@@ -466,6 +466,11 @@ void app_map_options(app_option rows[APP_MAP_ROWS], fusion_config *fc, bool *bri
         APP_OPT("--colour-frames", APP_OPT_U32, &fc->colour_frames, "N",
                 "frames of each window whose colour is fused (overlapping windows read different ones)", .min = 1,
                 .max = FUSION_COLOUR_MAX_FRAMES, .not_with = "--colour=off"),
+        APP_OPT("--colour-reach", APP_OPT_U32, &fc->colour_reach, "K",
+                "bricks no window integrates again, and the whole map at the end, keep colour only within K "
+                "voxels (L1) of the surface, giving the rest of their colour memory back; 0: keep every shell "
+                "the frames coloured (docs/colour.md)",
+                .max = 2, .not_with = "--colour=off"),
         APP_OPT_END,
     };
     memcpy(rows, r, sizeof r);

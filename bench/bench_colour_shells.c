@@ -5,9 +5,13 @@
  * far the colour pass's union of shells (docs/colour.md) reaches past the
  * surface the export and the views read.
  *
- *   build/bench/bench_colour_shells STORE
+ *   build/bench/bench_colour_shells STORE [--keep-within K --write NEW]
  *
- * (a folder written by `bitfuse replay SEQ --store STORE`). */
+ * (a folder written by `bitfuse replay SEQ --store STORE`). With
+ * --keep-within K it also writes the store NEW with the colour taken off
+ * every voxel farther than K from the other sign (what a colour rule by
+ * the map's own signs would keep), for `bitfuse export NEW` and
+ * `bitfuse eval-colour` to score. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -74,15 +78,19 @@ static int distance_to_surface(const hostmap *m, long i, const int v[3], int s)
 
 int main(int argc, char **argv)
 {
-    if (argc != 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
-        fprintf(argc == 2 ? stdout : stderr, "usage: bench_colour_shells STORE\n"
-                                             "Coloured voxels of a scene store by their distance to the surface.\n");
-        return argc == 2 ? 0 : 2;
+    bool usage = argc != 2 && !(argc == 6 && !strcmp(argv[2], "--keep-within") && !strcmp(argv[4], "--write"));
+    if (usage || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        fprintf(usage ? stderr : stdout, "usage: bench_colour_shells STORE [--keep-within K --write NEW]\n"
+                                         "Coloured voxels of a scene store by their distance to the surface; with\n"
+                                         "--keep-within, NEW is STORE with the colour farther than K voxels taken off.\n");
+        return usage ? 2 : 0;
     }
+    int keep = argc == 6 ? atoi(argv[3]) : 0;
     hostmap m = {0};
     store_meta meta;
     store_report rep;
-    if (store_read(argv[1], &m, &meta, NULL, &rep) != BF_OK) {
+    bf_traj traj = {0};
+    if (store_read(argv[1], &m, &meta, &traj, &rep) != BF_OK) {
         fprintf(stderr, "bench_colour_shells: %s\n", bf_last_error());
         return 3;
     }
@@ -91,7 +99,7 @@ int main(int argc, char **argv)
         hostmap_free(&m);
         return 3;
     }
-    long by_distance[FAR + 1] = {0}, confident = 0, surface = 0, surface_coloured = 0;
+    long by_distance[FAR + 1] = {0}, confident = 0, surface = 0, surface_coloured = 0, kept_off = 0;
     for (long i = 0; i < (long)m.n_bricks; i++)
         for (int z = 0; z < 8; z++)
             for (int y = 0; y < 8; y++)
@@ -104,6 +112,7 @@ int main(int argc, char **argv)
                     int d = distance_to_surface(&m, i, v, s);
                     if (d == 1) surface++, surface_coloured += coloured;
                     if (coloured) by_distance[d]++;
+                    if (coloured && keep > 0 && d > keep) m.rgb565[i * 512 + x + 8 * y + 64 * z] = 0, kept_off++;
                 }
     long coloured = 0;
     for (int d = 1; d <= FAR; d++) coloured += by_distance[d];
@@ -112,6 +121,17 @@ int main(int argc, char **argv)
     for (int d = 1; d <= FAR; d++) printf(" %ld (%.1f%%) |", by_distance[d], coloured ? 100.0 * by_distance[d] / coloured : 0.0);
     printf("\nsurface voxels (a face neighbour of the other sign): %ld, coloured %ld (%.1f%%)\n", surface,
            surface_coloured, surface ? 100.0 * surface_coloured / surface : 0.0);
+    bf_status st = BF_OK;
+    if (keep > 0) {
+        store_writer *w = NULL;
+        st = store_writer_open(argv[5], false, &w);
+        if (st == BF_OK) st = store_writer_submit(w, &m, &meta, &traj);
+        if (st == BF_OK) st = store_writer_finish(w);
+        store_writer_close(w);
+        if (st == BF_OK) printf("%s: %ld colours taken off (farther than %d), %ld kept\n", argv[5], kept_off, keep, coloured - kept_off);
+        else fprintf(stderr, "bench_colour_shells: %s\n", bf_last_error());
+    }
     hostmap_free(&m);
-    return 0;
+    bf_traj_free(&traj);
+    return st == BF_OK ? 0 : 5;
 }

@@ -9,7 +9,7 @@
 #include "bf_shaders_spv.h"
 #include "fusion_int.h"
 
-enum { COLOUR_BUFFERS = 12 };
+enum { COLOUR_BUFFERS = 14 };
 
 bf_status fusion__colour_create(fusion_map *m)
 {
@@ -25,8 +25,12 @@ bf_status fusion__colour_create(fusion_map *m)
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_colour);
     gpu_buffer *bufs[COLOUR_BUFFERS] = {m->hash,       m->info,        m->conf,        m->frames,
                                         m->depth_ring, m->colour_ring, m->window_list, m->cmask,
-                                        m->cpool,      m->counters,    m->cfree,       m->chead};
+                                        m->cpool,      m->counters,    m->cfree,       m->chead,
+                                        m->sign,       m->nodes};
     if (s == BF_OK) s = fusion__bindings_create(m, "fusion.colour", bufs, COLOUR_BUFFERS, &m->b_colour);
+    bufs[6] = m->trim_list;
+    if (s == BF_OK && m->cfg.colour_reach)
+        s = fusion__bindings_create(m, "fusion.colour_trim", bufs, COLOUR_BUFFERS, &m->b_colour_trim);
     /* As the integration: a CPU device pays per workgroup, a GPU wants one brick each. */
     m->colour_bpg = gpu_device(m->ctx)->type == VK_PHYSICAL_DEVICE_TYPE_CPU ? 16 : 1;
     if (s == BF_OK) s = gpu_pipeline_warm_up(m->ctx, (gpu_pipeline *[]){m->p_colour}, 1);
@@ -35,9 +39,10 @@ bf_status fusion__colour_create(fusion_map *m)
 
 void fusion__colour_destroy(fusion_map *m)
 {
+    gpu_bindings_destroy(m->b_colour_trim);
     gpu_bindings_destroy(m->b_colour);
     gpu_pipeline_destroy(m->p_colour);
-    m->b_colour = NULL;
+    m->b_colour = m->b_colour_trim = NULL;
     m->p_colour = NULL;
 }
 
@@ -88,6 +93,9 @@ void fusion__cmd_colour(fusion_map *m, uint32_t first, uint32_t max_count)
         .ccx = (float)m->Kc.cx_px,
         .ccy = (float)m->Kc.cy_px,
         .bricks_per_group = m->colour_bpg,
+        .n_buckets = m->cfg.hash_buckets,
+        .n_overflow = m->cfg.hash_overflow,
+        .mode = FUSION_COLOUR_MODE_FRAMES,
     };
     bf_quat q = bf_quat_from_mat(m->T_colour_depth.R);
     pc.q[0] = (float)q.x, pc.q[1] = (float)q.y, pc.q[2] = (float)q.z, pc.q[3] = (float)q.w;
@@ -99,6 +107,31 @@ void fusion__cmd_colour(fusion_map *m, uint32_t first, uint32_t max_count)
     if (max_x > 65535u) max_x = 65535u;
     uint32_t gx = groups < max_x ? groups : max_x, gy = gpu_groups(groups, gx);
     gpu_cmd_dispatch(m->ctx, m->p_colour, m->b_colour, &pc, gx, gy, 1);
+}
+
+void fusion__cmd_colour_trim(fusion_map *m)
+{
+    if (!m->p_colour || !m->b_colour_trim) return;
+    /* The group counts from the trim list's count, written into its header. */
+    fusion_integrate_push args = {.first = 0,
+                                  .max_count = m->cfg.brick_cap,
+                                  .max_groups_x = fusion__max_groups_x(m),
+                                  .bricks_per_group = m->colour_bpg};
+    gpu_cmd_dispatch(m->ctx, m->p_integrate_args, m->b_integrate_trim, &args, 1, 1, 1);
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_INDIRECT);
+    fusion_colour_push pc = {
+        .first = 0,
+        .max_count = m->cfg.brick_cap,
+        .chunk_m = m->cfg.chunk_m,
+        .bricks_per_group = m->colour_bpg,
+        .n_buckets = m->cfg.hash_buckets,
+        .n_overflow = m->cfg.hash_overflow,
+        .mode = FUSION_COLOUR_MODE_TRIM | m->cfg.colour_reach << 8,
+    };
+    gpu_cmd_dispatch_indirect(m->ctx, m->p_colour, m->b_colour_trim, &pc, m->trim_list, FUSION_LIST_ARGS * 4);
+    /* The trimmed masks and chains, the units given back -> readers and the
+     * next colour pass's pops. */
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
 }
 
 void fusion__rgb_to_565(const uint8_t *rgb, uint64_t n_pixels, uint32_t *words)

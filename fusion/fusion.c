@@ -22,13 +22,13 @@ static bf_status window_list_create(fusion_map *m)
         .name = "fusion.window_list",
         .spirv = bf_spv_fusion_window_list,
         .spirv_bytes = bf_spv_fusion_window_list_size,
-        .n_buffers = 5,
+        .n_buffers = 6,
         .push_bytes = sizeof(fusion_window_list_push),
         .local_size = {64, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_window_list);
-    gpu_buffer *bufs[5] = {m->info, m->stamp, m->window_list, m->hash, m->window_slices};
-    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.window_list", bufs, 5, &m->b_window_list);
+    gpu_buffer *bufs[6] = {m->info, m->stamp, m->window_list, m->hash, m->window_slices, m->trim_list};
+    if (s == BF_OK) s = fusion__bindings_create(m, "fusion.window_list", bufs, 6, &m->b_window_list);
     return s;
 }
 
@@ -67,17 +67,23 @@ void fusion__schedule_destroy(fusion_map *m)
     m->p_remove = m->p_window_list = NULL;
 }
 
+static bool trims(const fusion_map *m) { return m->b_colour_trim != NULL; }
+
 /* Records the gathering of the bricks stamped by frames [first, last],
- * slice by slice (shaders/fusion_window_list.comp). */
-static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last)
+ * slice by slice (shaders/fusion_window_list.comp), and of those stamped
+ * last by frames [trim_first, trim_last] into the trim list (none when
+ * trim_first > trim_last). */
+static void cmd_window_list(fusion_map *m, uint32_t first, uint32_t last, uint32_t trim_first, uint32_t trim_last)
 {
     fusion_window_list_push pc = {.brick_cap = m->cfg.brick_cap, .n_entries = m->n_entries, .first = first,
-                                  .last = last, .n_buckets = half_window(m) * FUSION_SLICE_BUCKETS, .pass = FUSION_GATHER_COUNT};
+                                  .last = last, .n_buckets = half_window(m) * FUSION_SLICE_BUCKETS, .pass = FUSION_GATHER_COUNT,
+                                  .trim_first = trims(m) ? trim_first : 1, .trim_last = trims(m) ? trim_last : 0};
     uint32_t groups = gpu_groups(m->cfg.brick_cap, 64);
     /* The previous window's slices read the list -> the fills that reset it. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_fill(m->ctx, m->window_list, 0, FUSION_LIST_HEADER * 4, 0);
     gpu_cmd_fill(m->ctx, m->window_slices, 0, GPU_WHOLE_SIZE, 0);
+    gpu_cmd_fill(m->ctx, m->trim_list, 0, FUSION_LIST_HEADER * 4, 0);
     /* The cleared counts -> the counting pass. */
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
     gpu_cmd_dispatch_linear(m->ctx, m->p_window_list, m->b_window_list, &pc, groups);
@@ -251,7 +257,35 @@ static void start_window(fusion_map *m, uint32_t last)
     m->window_count = 0;
     memset(m->slice_start, 0, sizeof m->slice_start);
     gpu_cmd_stage_begin(m->ctx, "fusion.window_list");
-    cmd_window_list(m, m->window_first, last);
+    /* The bricks stamped last in the half window before this one: no
+     * window integrates them again (until a frame stamps them anew), and
+     * the one before, whose colour pass read them last, is done. */
+    uint32_t slide = half_window(m), trim_first = m->window_first >= slide ? m->window_first - slide : 0;
+    bool trim = trims(m) && m->window_first > 0;
+    cmd_window_list(m, m->window_first, last, trim ? trim_first : 1, trim ? m->window_first - 1 : 0);
+    gpu_cmd_stage_end(m->ctx);
+    if (trim) {
+        gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+        gpu_cmd_stage_begin(m->ctx, "fusion.colour_trim");
+        fusion__cmd_colour_trim(m);
+        gpu_cmd_stage_end(m->ctx);
+    }
+}
+
+/* Records the trim of every brick (the end of a scan: no window follows). */
+static void trim_all(fusion_map *m)
+{
+    if (!trims(m) || m->n_frames == 0) return;
+    fusion_window_list_push pc = {.brick_cap = m->cfg.brick_cap, .n_entries = m->n_entries, .first = 1, .last = 0,
+                                  .n_buckets = 1, .pass = FUSION_GATHER_COUNT, .trim_first = 0,
+                                  .trim_last = m->n_frames - 1, .trim_only = 1};
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
+    gpu_cmd_fill(m->ctx, m->trim_list, 0, FUSION_LIST_HEADER * 4, 0);
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
+    gpu_cmd_stage_begin(m->ctx, "fusion.colour_trim");
+    gpu_cmd_dispatch_linear(m->ctx, m->p_window_list, m->b_window_list, &pc, gpu_groups(m->cfg.brick_cap, 64));
+    gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
+    fusion__cmd_colour_trim(m);
     gpu_cmd_stage_end(m->ctx);
 }
 
@@ -388,6 +422,7 @@ bf_status fusion_flush(fusion_map *m)
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         start_window(m, m->n_frames - 1);
     }
+    if (!tail) trim_all(m);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
     if ((s = gpu_submit_wait(m->ctx)) != BF_OK) return s;
     if (!tail) return BF_OK;
@@ -396,6 +431,7 @@ bf_status fusion_flush(fusion_map *m)
     gpu_cmd_stage_begin(m->ctx, "fusion.window");
     while (m->window_pending) cmd_window_slice(m, true);
     gpu_cmd_stage_end(m->ctx);
+    trim_all(m);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);
     return gpu_submit_wait(m->ctx);
 }

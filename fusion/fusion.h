@@ -59,6 +59,12 @@ typedef struct fusion_config {
                                alternate their offsets, so overlapping windows read new frames) */
     uint32_t colour_unit_cap; /* colour units (32 bytes, 14 colours each) allocated at create, default
                                  8 * brick_cap (as many as one storage binding holds) */
+    /* The colour trim: bricks no window integrates again (and the whole map
+       at fusion_flush) keep colour only on confident voxels within this L1
+       distance of a confident voxel of the other sign, and give the units
+       they no longer need back (docs/colour.md, "Colour off the surface").
+       0: no trim (every shell the frames coloured stays), 1 or 2; default 2. */
+    uint32_t colour_reach;
     /* A map that only holds what is loaded or inserted (a store to render, a
        particle set, a voxelised mesh): the frame passes' pipelines are not
        made (0.37 s of lavapipe's create) and frames are refused. Default false. */

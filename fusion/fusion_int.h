@@ -36,17 +36,18 @@ struct fusion_map {
     gpu_buffer *new_list;     /* bricks created by the current frame */
     gpu_buffer *window_list;  /* bricks of the window being integrated, slice by slice */
     gpu_buffer *window_slices; /* its slices' counts and starts (FUSION_SLICE_WORDS) */
+    gpu_buffer *trim_list;    /* bricks no window integrates again, for the colour trim */
 
     /* Pipelines and binding sets, created by each stage's file. */
     gpu_pipeline *p_alloc, *p_alloc_args;
     gpu_bindings *b_alloc, *b_alloc_args;
     gpu_pipeline *p_integrate, *p_integrate_args, *p_window_list;
-    gpu_bindings *b_integrate_new, *b_integrate_window, *b_window_list;
+    gpu_bindings *b_integrate_new, *b_integrate_window, *b_integrate_trim, *b_window_list;
     uint32_t integrate_bpg;   /* list entries per workgroup of the integration kernel */
     gpu_pipeline *p_remove;
     gpu_bindings *b_remove;
     gpu_pipeline *p_colour;
-    gpu_bindings *b_colour;
+    gpu_bindings *b_colour, *b_colour_trim;
     uint32_t colour_bpg;      /* list entries per workgroup of the colour pass */
     bool colour_registered;   /* colour pixel i shows depth pixel i */
     bf_intrinsics Kc;         /* colour camera (when not registered) */
@@ -141,6 +142,9 @@ void fusion__colour_destroy(fusion_map *map);
 /* Records the colour pass over entries [first, first + max_count) of the
  * window list, reading up to cfg.colour_frames frames of the window. */
 void fusion__cmd_colour(fusion_map *map, uint32_t first, uint32_t max_count);
+/* Records the trim of the bricks in the trim list (gathered before, in the
+ * same submission): their colour off the voxels past cfg.colour_reach. */
+void fusion__cmd_colour_trim(fusion_map *map);
 /* The frames a window's colour pass reads: n frames from first, stride
  * apart (n 0: none), for the window [window_first, window_end) of a map
  * whose windows are `window` frames long. */

@@ -85,17 +85,22 @@ bf_status fusion__integrate_create(fusion_map *m)
         BF_OK)
         return s;
     if ((s = bind_all(m, m->b_integrate_window, m->window_list)) != BF_OK) return s;
+    /* The trim list's group counts (fusion__cmd_colour_trim) come from the same args pass. */
+    if ((s = gpu_bindings_create(m->ctx, INTEGRATE_BUFFERS, "fusion.integrate_trim", &m->b_integrate_trim)) != BF_OK)
+        return s;
+    if ((s = bind_all(m, m->b_integrate_trim, m->trim_list)) != BF_OK) return s;
     /* Zero push constants and buffers: both kernels see an empty list. */
     return gpu_pipeline_warm_up(m->ctx, (gpu_pipeline *[]){m->p_integrate, m->p_integrate_args}, 2);
 }
 
 void fusion__integrate_destroy(fusion_map *m)
 {
+    gpu_bindings_destroy(m->b_integrate_trim);
     gpu_bindings_destroy(m->b_integrate_window);
     gpu_bindings_destroy(m->b_integrate_new);
     gpu_pipeline_destroy(m->p_integrate_args);
     gpu_pipeline_destroy(m->p_integrate);
-    m->b_integrate_window = m->b_integrate_new = NULL;
+    m->b_integrate_window = m->b_integrate_new = m->b_integrate_trim = NULL;
     m->p_integrate_args = m->p_integrate = NULL;
 }
 

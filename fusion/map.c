@@ -25,6 +25,7 @@ fusion_config fusion_config_default(void)
         .band_sigmas = 3.0f,
         .keep_colour = true,
         .colour_frames = 4,
+        .colour_reach = 2,
     };
     return c;
 }
@@ -55,6 +56,7 @@ static bf_status config_check(const fusion_config *c, const bf_intrinsics *K)
     if (c->keep_colour && (c->colour_frames < 1 || c->colour_frames > FUSION_COLOUR_MAX_FRAMES))
         return bf_fail(BF_INVALID_ARG, "fusion: colour_frames %u outside 1..%u", c->colour_frames,
                        FUSION_COLOUR_MAX_FRAMES);
+    if (c->colour_reach > 2) return bf_fail(BF_INVALID_ARG, "fusion: colour_reach %u outside 0..2", c->colour_reach);
     if (K->width < 2 || K->height < 2 || K->width > 8192 || K->height > 8192 || !(K->depth_scale > 0) ||
         !isfinite(K->fx_px) || !isfinite(K->fy_px) || K->fx_px == 0 || K->fy_px == 0)
         return bf_fail(BF_INVALID_ARG, "fusion: bad intrinsics (%ux%u, fx %g, fy %g, depth scale %g)", K->width,
@@ -102,6 +104,10 @@ static bf_status create_buffers(fusion_map *m)
         {&m->window_list, "fusion.window_list", ((uint64_t)FUSION_LIST_HEADER + c->brick_cap) * 4,
          GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
         {&m->window_slices, "fusion.window_slices", FUSION_SLICE_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        /* The bricks whose colour the trim looks at (one word without colour). */
+        {&m->trim_list, "fusion.trim_list",
+         c->keep_colour && c->colour_reach ? ((uint64_t)FUSION_LIST_HEADER + c->brick_cap) * 4 : (uint64_t)FUSION_LIST_HEADER * 4,
+         GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
     };
     uint64_t max_binding = gpu_device_limits(m->ctx)->max_storage_buffer_range;
     for (size_t i = 0; i < sizeof plan / sizeof plan[0]; i++) {
@@ -207,6 +213,7 @@ bf_status fusion__reset(fusion_map *m, bool is_fresh)
     if (s == BF_OK) s = zero(m->new_list, is_fresh);
     if (s == BF_OK) s = zero(m->window_list, is_fresh);
     if (s == BF_OK) s = zero(m->window_slices, is_fresh);
+    if (s == BF_OK) s = zero(m->trim_list, is_fresh);
     if (s == BF_OK) s = zero(m->readback, is_fresh);
     if (s == BF_OK) s = counters_empty(m);
     m->only_loaded = s == BF_OK;
@@ -240,7 +247,7 @@ static bool reset_is_host_only(const fusion_map *m)
                              m->conf,     m->free_stack, m->stamp,      m->counters,    m->frames,
                              m->depth_ring, m->readback, m->samples,    m->new_list,    m->window_list,
                              m->window_slices, m->colour_ring, m->cmask, m->chead,      m->cpool,
-                             m->cfree};
+                             m->cfree,    m->trim_list};
     for (size_t i = 0; i < sizeof b / sizeof b[0]; i++) {
         if (!gpu_buffer_map(b[i])) return false;
     }
@@ -316,7 +323,8 @@ void fusion_destroy(fusion_map *m)
     gpu_buffer *bufs[] = {m->readback, m->window_slices, m->window_list, m->new_list,
                           m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
-                          m->locks, m->hash, m->colour_ring, m->cmask, m->chead, m->cpool, m->cfree};
+                          m->locks, m->hash, m->colour_ring, m->cmask, m->chead, m->cpool, m->cfree,
+                          m->trim_list};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     free(m);
 }
@@ -551,12 +559,56 @@ static bf_status check_map(const fusion_map *m, const fusion_host_map *h)
     return s;
 }
 
+/* The colour units: every live brick's chain holds distinct units, enough
+ * for its masks' colours; the free stack holds the others, once each (no
+ * unit lost or shared: the colour pass's pops, the removal's and the
+ * trim's pushes). */
+static bf_status check_colour(fusion_map *m, const fusion_host_map *h)
+{
+    uint32_t *mask = NULL, *head = NULL, *pool = NULL, *cfree = NULL;
+    uint32_t cap = m->cfg.colour_unit_cap;
+    uint8_t *seen = calloc(cap ? cap : 1, 1);
+    bf_status s = seen ? BF_OK : bf_fail(BF_NO_MEMORY, "fusion check: %u colour units", cap);
+    if (s == BF_OK) s = download_whole(m->cmask, &mask);
+    if (s == BF_OK) s = download_whole(m->chead, &head);
+    if (s == BF_OK) s = download_whole(m->cpool, &pool);
+    if (s == BF_OK) s = download_whole(m->cfree, &cfree);
+    uint64_t in_chains = 0;
+    for (uint32_t b = 0; s == BF_OK && b < m->cfg.brick_cap; b++) {
+        if (h->info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] == FUSION_NONE) continue;
+        uint32_t colours = 0, n = 0;
+        for (uint32_t w = 0; w < BRICK_WORDS; w++) colours += (uint32_t)__builtin_popcount(mask[(size_t)b * BRICK_WORDS + w]);
+        for (uint32_t u = head[b]; s == BF_OK && u != FUSION_NONE; u = pool[(size_t)u * FUSION_COLOUR_UNIT_WORDS], n++) {
+            if (u >= cap || seen[u]++ || n >= FUSION_COLOUR_MAX_UNITS)
+                s = bf_fail(BF_NUMERIC, "fusion check: brick %u's colour chain reaches unit %u again or out of range", b, u);
+        }
+        in_chains += n;
+        if (s == BF_OK && n * FUSION_COLOUR_UNIT_COLOURS < colours)
+            s = bf_fail(BF_NUMERIC, "fusion check: brick %u has %u colours in a chain of %u units", b, colours, n);
+    }
+    uint32_t top = h->counters[FUSION_CNT_COLOUR_TOP];
+    for (uint32_t i = 0; s == BF_OK && i < top; i++)
+        if (cfree[i] >= cap || seen[cfree[i]]++)
+            s = bf_fail(BF_NUMERIC, "fusion check: colour free stack entry %u (unit %u) is in a chain or repeated", i,
+                        cfree[i]);
+    if (s == BF_OK && in_chains + top != cap)
+        s = bf_fail(BF_NUMERIC, "fusion check: %llu colour units in chains and %u free of %u", (unsigned long long)in_chains,
+                    top, cap);
+    free(seen);
+    free(mask);
+    free(head);
+    free(pool);
+    free(cfree);
+    return s;
+}
+
 bf_status fusion_check(fusion_map *m)
 {
     fusion_host_map h;
     bf_status s = fusion__host_map_load(m, &h);
     if (s != BF_OK) return s;
     s = check_map(m, &h);
+    if (s == BF_OK && m->cfg.keep_colour) s = check_colour(m, &h);
     fusion__host_map_free(&h);
     return s;
 }

@@ -186,11 +186,18 @@ struct fusion_window_list_push {
     bf_u32 first, last; /* frame indices of the window, inclusive */
     bf_u32 n_buckets;  /* the window's slices times FUSION_SLICE_BUCKETS, <= FUSION_MAX_BUCKETS */
     bf_u32 pass;       /* FUSION_GATHER_COUNT, _PREFIX or _SCATTER */
-    bf_u32 pad[2];
+    /* The COUNT pass also lists in the trim list the bricks stamped last
+     * by frames [trim_first, trim_last] (none when trim_first > trim_last):
+     * those no window integrates again, whose colour the trim pass takes
+     * off where it lies past the surface (docs/colour.md). With trim_only
+     * the pass does that alone. */
+    bf_u32 trim_first, trim_last;
+    bf_u32 trim_only;
+    bf_u32 pad[3];
 };
 #ifndef BF_GLSL
 typedef struct fusion_window_list_push fusion_window_list_push;
-_Static_assert(sizeof(fusion_window_list_push) == 32, "fusion_window_list_push must match std430");
+_Static_assert(sizeof(fusion_window_list_push) == 48, "fusion_window_list_push must match std430");
 #endif
 
 /* A window's bricks are integrated in n/2 slices, one per frame, and the
@@ -689,6 +696,10 @@ BF_FN bf_u32 fusion_box_culled(fusion_frame f, bf_f32 lo_x, bf_f32 lo_y, bf_f32 
  * the mean of D over the colour samples (weighted as they are) must be
  * below it. 0.5 keeps about one voxel across a surface (docs/colour.md). */
 #define FUSION_COLOUR_SHELL 0.5f
+/* The colour pass's modes (fusion_colour_push.mode): a window slice's
+ * colours, or the trim of bricks no window integrates again. */
+#define FUSION_COLOUR_MODE_FRAMES 0u
+#define FUSION_COLOUR_MODE_TRIM 1u
 /* Workgroup of the colour pass: 64 invocations, 8 voxels each. */
 #define FUSION_COLOUR_LOCAL 64u
 
@@ -723,7 +734,10 @@ struct fusion_colour_push {
     bf_f32 t[3];
     bf_f32 dist[5];           /* k1 k2 p1 p2 k3, OpenCV's order */
     bf_u32 bricks_per_group;  /* consecutive list entries one workgroup colours */
-    bf_u32 pad[3];
+    bf_u32 n_buckets;         /* the hash's modulus and overflow (the trim's neighbouring bricks) */
+    bf_u32 n_overflow;
+    bf_u32 mode;              /* FUSION_COLOUR_MODE_* | reach << 8: the trim keeps colour within L1
+                               * distance `reach` (1 or 2) of a confident voxel of the other sign */
 };
 #ifndef BF_GLSL
 typedef struct fusion_colour_push fusion_colour_push;

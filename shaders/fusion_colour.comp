@@ -29,10 +29,15 @@ layout(std430, binding = 6) readonly buffer List { uint w[]; } list;
 layout(std430, binding = 7) buffer ColourMask { uint w[]; } cmask;
 layout(std430, binding = 8) buffer ColourPool { uint w[]; } cpool;
 layout(std430, binding = 9) buffer Counters { uint w[]; } cnt;
-layout(std430, binding = 10) readonly buffer ColourFree { uint w[]; } cfree;
+layout(std430, binding = 10) buffer ColourFree { uint w[]; } cfree;
 layout(std430, binding = 11) buffer ColourHead { uint w[]; } chead;
+layout(std430, binding = 12) readonly buffer Sign { uint w[]; } sign_pool;
+layout(std430, binding = 13) readonly buffer Nodes { uint w[]; } nodes;
 
 layout(push_constant) uniform Push { fusion_colour_push pc; };
+
+uint fusion_hash_word(uint i) { return hash.w[i]; }
+#include "fusion_hash.glsl.h"
 
 #define VPT 8u
 #define COL_WORDS (BRICK_VOXELS / 2u)
@@ -46,6 +51,12 @@ shared uint s_n_units, s_n_old_units, s_keep_old, s_changed;
 shared uint s_visible, s_n_visible;
 shared uint s_order[FUSION_COLOUR_MAX_FRAMES];
 shared vec4 s_step[FUSION_COLOUR_MAX_FRAMES * 4u];
+shared uint s_sign[BRICK_WORDS], s_s1[BRICK_WORDS], s_surf[BRICK_WORDS];
+shared uint s_nb_slot[6];
+/* The neighbour across face f, its two layers next to the face: voxel
+ * (u, v) of layer l at bit i = u + 8 v of words 4 f + 2 l + i / 32. */
+shared uint s_nb_sign[24], s_nb_conf[24];
+shared uint s_nb_s1[12]; /* its layer 0's surface voxels: words 2 f + i / 32 */
 
 /* Takes a colour unit off the free stack; FUSION_NONE when it is empty. */
 uint pop_unit()
@@ -68,54 +79,151 @@ uint ring_colour(uint base, uint pixel)
 /* Camera point of pixel (u, v) (centres at integers) at depth z. */
 vec3 unproject(fusion_frame f, float u, float v, float z) { return vec3((u - f.cx) / f.fx * z, (v - f.cy) / f.fy * z, z); }
 
-void colour_brick(uint slot, uint tid)
+/* Slot of the brick at `level` with brick coordinate b (brick units on
+ * that level's grid), FUSION_NONE when it does not exist (as the
+ * ray-cast's render_brick_at). */
+uint brick_at(ivec3 b, uint level)
 {
-    uint chunk = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
-    if (chunk == FUSION_NONE) return; /* uniform */
-    uint pos = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS];
-    int key_x = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_X]);
-    int key_y = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Y]);
-    int key_z = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Z]);
-    uint cell_x = fusion_pos_x(pos), cell_y = fusion_pos_y(pos), cell_z = fusion_pos_z(pos);
-    float voxel_m = fusion_voxel_m(pc.chunk_m, fusion_pos_level(pos));
-    if (tid < BRICK_WORDS) {
-        s_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
-        s_mask[tid] = cmask.w[slot * BRICK_WORDS + tid];
-        s_new[tid] = 0u;
+    ivec3 key = b >> int(level);
+    uint e = fusion_find_chunk(key.x, key.y, key.z, pc.n_buckets, pc.n_overflow);
+    if (e == FUSION_NONE) return FUSION_NONE;
+    uvec3 cell = uvec3(b - (key << int(level)));
+    uint node = hash.w[e * FUSION_ENTRY_WORDS + FUSION_ENTRY_ROOT];
+    for (uint l = 1u; l <= level; l++) {
+        uint child = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_CHILD];
+        if (child >= FUSION_LOCKED) return FUSION_NONE;
+        uvec3 c = cell >> (level - l);
+        node = child + fusion_octant(c.x, c.y, c.z);
     }
-    if (tid == 0u) s_visible = 0u, s_changed = 0u;
-    barrier();
-    uint any_conf = 0u;
-    [[unroll]] for (uint w = 0u; w < BRICK_WORDS; w++) any_conf |= s_conf[w];
-    if (any_conf == 0u) return; /* uniform: nothing to colour */
-    /* The brick's chain and where each sub-brick's colours start on it. */
-    if (tid == 0u) {
-        uint n = 0u, u = chead.w[slot];
-        while (u != FUSION_NONE && n < FUSION_COLOUR_MAX_UNITS) {
-            s_unit[n++] = u;
-            u = cpool.w[u * FUSION_COLOUR_UNIT_WORDS];
-        }
-        s_n_units = n, s_n_old_units = n;
-        uint acc = 0u;
-        for (uint w = 0u; w < BRICK_WORDS; w++) s_pre[w] = acc, acc += uint(bitCount(s_mask[w]));
-        s_pre[BRICK_WORDS] = acc;
-    }
-    barrier();
-    /* The old colours, dense (0 where a voxel has none). */
-    for (uint i = tid; i < COL_WORDS; i += FUSION_COLOUR_LOCAL) {
-        uint w = i / 16u, word = 0u;
-        for (uint h = 0u; h < 2u; h++) {
-            uint bit = (i % 16u) * 2u + h;
-            if (((s_mask[w] >> bit) & 1u) == 0u) continue;
-            uint r = s_pre[w] + uint(bitCount(s_mask[w] & ((1u << bit) - 1u)));
-            uint k = r / FUSION_COLOUR_UNIT_COLOURS, j = r % FUSION_COLOUR_UNIT_COLOURS;
-            if (k >= s_n_units) continue;
-            uint c = cpool.w[s_unit[k] * FUSION_COLOUR_UNIT_WORDS + 1u + j / 2u];
-            word |= ((j & 1u) != 0u ? c >> 16 : c & 0xFFFFu) << (16u * h);
-        }
-        s_col[i] = word;
-    }
+    uint slot = nodes.w[node * FUSION_NODE_WORDS + FUSION_NODE_BRICK];
+    return slot < FUSION_LOCKED ? slot : FUSION_NONE;
+}
 
+/* Voxel (x, y, z) of the neighbour across face f = 2 * axis + (0: -1,
+ * 1: +1) at layer l from the face, for face voxel (u, v). */
+uvec3 face_voxel(uint f, uint l, uint u, uint v)
+{
+    uint a = f >> 1, at = (f & 1u) != 0u ? l : 7u - l;
+    return a == 0u ? uvec3(at, u, v) : (a == 1u ? uvec3(u, at, v) : uvec3(u, v, at));
+}
+
+/* Where p (brick coordinates, at most one axis outside 0..7, by at most
+ * two voxels) is: its face (6: inside the brick, 7: unknown), layer and
+ * bit within the face's 64. */
+uvec3 locate(ivec3 p)
+{
+    uint f = 6u, l = 0u;
+    [[unroll]] for (uint a = 0u; a < 3u; a++) {
+        if (p[a] >= 0 && p[a] < 8) continue;
+        if (f != 6u) return uvec3(7u, 0u, 0u);
+        f = 2u * a + (p[a] >= 8 ? 1u : 0u);
+        l = uint(p[a] >= 8 ? p[a] - 8 : -1 - p[a]);
+    }
+    if (f == 6u) return uvec3(6u, 0u, 0u);
+    uint a = f >> 1;
+    uint u = uint(a == 0u ? p.y : p.x), v = uint(a == 2u ? p.y : p.z);
+    return uvec3(f, l, u + 8u * v);
+}
+
+/* Confidence and sign of the voxel at p: bit 1 confident, bit 0 the sign;
+ * 0 where unknown (outside the known layers, no brick there at this level). */
+uint conf_sign(ivec3 p)
+{
+    uvec3 at = locate(p);
+    if (at.x == 6u) {
+        uint w = brick_word(uint(p.x), uint(p.y), uint(p.z)), b = brick_bit(uint(p.x), uint(p.y), uint(p.z));
+        return (((s_conf[w] >> b) & 1u) << 1) | ((s_sign[w] >> b) & 1u);
+    }
+    if (at.x == 7u || at.y > 1u || s_nb_slot[at.x] == FUSION_NONE) return 0u;
+    uint w = 4u * at.x + 2u * at.y + (at.z >> 5), b = at.z & 31u;
+    return (((s_nb_conf[w] >> b) & 1u) << 1) | ((s_nb_sign[w] >> b) & 1u);
+}
+
+/* Whether the voxel at p is confident with a confident face neighbour of
+ * the other sign. */
+bool is_s1(ivec3 p)
+{
+    uint c = conf_sign(p);
+    if (c < 2u) return false;
+    bool s1 = false;
+    [[unroll]] for (uint f = 0u; f < 6u; f++) {
+        ivec3 q = p;
+        q[f >> 1] += (f & 1u) != 0u ? 1 : -1;
+        uint d = conf_sign(q);
+        s1 = s1 || (d >= 2u && d != c);
+    }
+    return s1;
+}
+
+/* The voxels that keep colour (s_surf): confident and within L1 distance
+ * the reach in pc.mode (1 or 2) of a confident voxel of the other sign, from the
+ * brick's signs and those of the six neighbouring bricks at its level (two
+ * layers each; a neighbour at another level counts as unknown). */
+void surface_mask(uint slot, ivec3 bc, uint level, uint tid)
+{
+    if (tid < BRICK_WORDS) s_sign[tid] = sign_pool.w[slot * BRICK_WORDS + tid], s_surf[tid] = 0u, s_s1[tid] = 0u;
+    if (tid < 24u) s_nb_sign[tid] = 0u, s_nb_conf[tid] = 0u;
+    if (tid < 12u) s_nb_s1[tid] = 0u;
+    if (tid < 6u) {
+        ivec3 nb = bc;
+        nb[tid >> 1] += (tid & 1u) != 0u ? 1 : -1;
+        s_nb_slot[tid] = brick_at(nb, level);
+    }
+    barrier();
+    uint u = tid & 7u, v = tid >> 3;
+    for (uint f = 0u; f < 6u; f++) {
+        uint ns = s_nb_slot[f];
+        if (ns == FUSION_NONE) continue; /* uniform */
+        for (uint l = 0u; l < 2u; l++) {
+            uvec3 p = face_voxel(f, l, u, v);
+            uint w = brick_word(p.x, p.y, p.z), b = brick_bit(p.x, p.y, p.z);
+            uint cb = (conf_pool.w[ns * BRICK_WORDS + w] >> b) & 1u;
+            uint sb = (sign_pool.w[ns * BRICK_WORDS + w] >> b) & 1u;
+            if (cb != 0u) atomicOr(s_nb_conf[4u * f + 2u * l + (tid >> 5)], 1u << (tid & 31u));
+            if (sb != 0u) atomicOr(s_nb_sign[4u * f + 2u * l + (tid >> 5)], 1u << (tid & 31u));
+        }
+    }
+    barrier();
+    uint k_rule = (pc.mode >> 8) >= 2u ? 2u : 1u;
+    for (uint k = 0u; k < VPT; k++) {
+        uint i = tid + k * FUSION_COLOUR_LOCAL;
+        uint x = i & 7u, y = (i >> 3) & 7u, z = i >> 6;
+        if (is_s1(ivec3(x, y, z))) atomicOr(s_s1[brick_word(x, y, z)], 1u << brick_bit(x, y, z));
+    }
+    if (k_rule == 2u)
+        for (uint f = 0u; f < 6u; f++) {
+            if (s_nb_slot[f] == FUSION_NONE) continue; /* uniform */
+            uint a = f >> 1;
+            int at = (f & 1u) != 0u ? 8 : -1;
+            ivec3 p = a == 0u ? ivec3(at, u, v) : (a == 1u ? ivec3(u, at, v) : ivec3(u, v, at));
+            if (is_s1(p)) atomicOr(s_nb_s1[2u * f + (tid >> 5)], 1u << (tid & 31u));
+        }
+    barrier();
+    for (uint k = 0u; k < VPT; k++) {
+        uint i = tid + k * FUSION_COLOUR_LOCAL;
+        uint x = i & 7u, y = (i >> 3) & 7u, z = i >> 6;
+        uint w = brick_word(x, y, z), b = brick_bit(x, y, z);
+        bool keep = ((s_s1[w] >> b) & 1u) != 0u;
+        if (k_rule == 2u && ((s_conf[w] >> b) & 1u) != 0u)
+            [[unroll]] for (uint f = 0u; f < 6u; f++) {
+                ivec3 q = ivec3(x, y, z);
+                q[f >> 1] += (f & 1u) != 0u ? 1 : -1;
+                uvec3 at = locate(q);
+                if (at.x == 6u)
+                    keep = keep || ((s_s1[brick_word(uint(q.x), uint(q.y), uint(q.z))] >> brick_bit(uint(q.x), uint(q.y), uint(q.z))) & 1u) != 0u;
+                else if (at.x < 6u && s_nb_slot[at.x] != FUSION_NONE)
+                    keep = keep || ((s_nb_s1[2u * at.x + (at.z >> 5)] >> (at.z & 31u)) & 1u) != 0u;
+            }
+        if (keep) atomicOr(s_surf[w], 1u << b);
+    }
+    barrier();
+}
+
+/* The window's frames' colours of the brick's voxels, blended into s_col;
+ * s_new the new masks, s_changed whether they or a colour changed. */
+void colour_from_frames(uint slot, uint tid, int key_x, int key_y, int key_z, uint cell_x, uint cell_y, uint cell_z,
+                        float voxel_m)
+{
     float lo_x = fusion_voxel_centre(key_x, cell_x, 0u, pc.chunk_m, voxel_m);
     float lo_y = fusion_voxel_centre(key_y, cell_y, 0u, pc.chunk_m, voxel_m);
     float lo_z = fusion_voxel_centre(key_z, cell_z, 0u, pc.chunk_m, voxel_m);
@@ -138,7 +246,7 @@ void colour_brick(uint slot, uint tid)
     barrier();
     uint vis = s_visible;
     uint n_visible = uint(bitCount(vis));
-    if (n_visible == 0u) return; /* uniform */
+    if (n_visible == 0u) return; /* uniform: s_changed stays 0 */
     if (tid < n_frames && ((vis >> tid) & 1u) != 0u) s_order[uint(bitCount(vis & ((1u << tid) - 1u)))] = tid;
     barrier();
 
@@ -232,7 +340,30 @@ void colour_brick(uint slot, uint tid)
         s_new[tid] = m;
     }
     barrier();
-    if (s_changed == 0u) return; /* uniform: no colour moved */
+}
+
+/* The trim (docs/colour.md, "Colour off the surface"): the brick's
+ * colours farther than the reach from the surface taken off; s_new the
+ * masks that stay, s_changed whether any went. */
+void trim_masks(uint slot, uint pos, ivec3 key, uint tid)
+{
+    uint level = fusion_pos_level(pos);
+    ivec3 bc = (key << int(level)) + ivec3(fusion_pos_x(pos), fusion_pos_y(pos), fusion_pos_z(pos));
+    surface_mask(slot, bc, level, tid);
+    if (tid < BRICK_WORDS) {
+        uint m = s_mask[tid] & s_surf[tid];
+        if (m != s_mask[tid]) atomicOr(s_changed, 1u);
+        s_new[tid] = m;
+    }
+    barrier();
+}
+
+/* The brick's colours (s_col) packed again along its chain for the masks
+ * s_new: a longer chain takes units off the free stack (a window slice),
+ * a trimmed one gives its surplus back (the trim), never both in one
+ * dispatch. */
+void commit(uint slot, uint tid, bool trim)
+{
     /* Units for the new count: the chain grows off the free stack; when
      * the stack runs dry the brick keeps its old masks (counted). */
     if (tid == 0u) {
@@ -282,8 +413,69 @@ void colour_brick(uint slot, uint tid)
             else cpool.w[s_unit[k - 1u] * FUSION_COLOUR_UNIT_WORDS] = s_unit[k];
             cpool.w[s_unit[k] * FUSION_COLOUR_UNIT_WORDS] = FUSION_NONE;
         }
+        /* The trim: the chain ends after the units in use, the rest go back. */
+        if (trim && used < n) {
+            if (used == 0u) chead.w[slot] = FUSION_NONE;
+            else cpool.w[s_unit[used - 1u] * FUSION_COLOUR_UNIT_WORDS] = FUSION_NONE;
+            for (uint k = used; k < n; k++) cfree.w[atomicAdd(cnt.w[FUSION_CNT_COLOUR_TOP], 1u)] = s_unit[k];
+        }
     }
     if (tid < BRICK_WORDS) cmask.w[slot * BRICK_WORDS + tid] = s_new[tid];
+}
+
+void colour_brick(uint slot, uint tid)
+{
+    uint chunk = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
+    if (chunk == FUSION_NONE) return; /* uniform */
+    uint pos = info.w[slot * FUSION_BRICK_INFO_WORDS + FUSION_INFO_POS];
+    int key_x = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_X]);
+    int key_y = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Y]);
+    int key_z = int(hash.w[chunk * FUSION_ENTRY_WORDS + FUSION_ENTRY_Z]);
+    uint cell_x = fusion_pos_x(pos), cell_y = fusion_pos_y(pos), cell_z = fusion_pos_z(pos);
+    float voxel_m = fusion_voxel_m(pc.chunk_m, fusion_pos_level(pos));
+    if (tid < BRICK_WORDS) {
+        s_conf[tid] = conf_pool.w[slot * BRICK_WORDS + tid];
+        s_mask[tid] = cmask.w[slot * BRICK_WORDS + tid];
+        s_new[tid] = 0u;
+    }
+    if (tid == 0u) s_visible = 0u, s_changed = 0u;
+    barrier();
+    uint any_conf = 0u;
+    [[unroll]] for (uint w = 0u; w < BRICK_WORDS; w++) any_conf |= s_conf[w];
+    if (any_conf == 0u) return; /* uniform: nothing to colour */
+    /* The brick's chain and where each sub-brick's colours start on it. */
+    if (tid == 0u) {
+        uint n = 0u, u = chead.w[slot];
+        while (u != FUSION_NONE && n < FUSION_COLOUR_MAX_UNITS) {
+            s_unit[n++] = u;
+            u = cpool.w[u * FUSION_COLOUR_UNIT_WORDS];
+        }
+        s_n_units = n, s_n_old_units = n;
+        uint acc = 0u;
+        for (uint w = 0u; w < BRICK_WORDS; w++) s_pre[w] = acc, acc += uint(bitCount(s_mask[w]));
+        s_pre[BRICK_WORDS] = acc;
+    }
+    barrier();
+    /* The old colours, dense (0 where a voxel has none). */
+    for (uint i = tid; i < COL_WORDS; i += FUSION_COLOUR_LOCAL) {
+        uint w = i / 16u, word = 0u;
+        for (uint h = 0u; h < 2u; h++) {
+            uint bit = (i % 16u) * 2u + h;
+            if (((s_mask[w] >> bit) & 1u) == 0u) continue;
+            uint r = s_pre[w] + uint(bitCount(s_mask[w] & ((1u << bit) - 1u)));
+            uint k = r / FUSION_COLOUR_UNIT_COLOURS, j = r % FUSION_COLOUR_UNIT_COLOURS;
+            if (k >= s_n_units) continue;
+            uint c = cpool.w[s_unit[k] * FUSION_COLOUR_UNIT_WORDS + 1u + j / 2u];
+            word |= ((j & 1u) != 0u ? c >> 16 : c & 0xFFFFu) << (16u * h);
+        }
+        s_col[i] = word;
+    }
+
+    bool trim = (pc.mode & 0xFFu) == FUSION_COLOUR_MODE_TRIM;
+    if (trim) trim_masks(slot, pos, ivec3(key_x, key_y, key_z), tid);
+    else colour_from_frames(slot, tid, key_x, key_y, key_z, cell_x, cell_y, cell_z, voxel_m);
+    if (s_changed == 0u) return; /* uniform: no colour moved */
+    commit(slot, tid, trim);
 }
 
 void main()

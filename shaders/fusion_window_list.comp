@@ -6,7 +6,7 @@
  * is, not from the order of the atomics, docs/determinism.md; fusion/ cuts
  * the list into slices at bucket boundaries). Three passes: COUNT and
  * SCATTER have one invocation per brick slot, PREFIX one invocation in
- * all. Within a bucket the order still follows the atomics; the slice's
+ * all; COUNT also lists the bricks to trim (fusion_window_list_push). Within a bucket the order still follows the atomics; the slice's
  * bricks are integrated by one dispatch and each independently of the
  * others, so their order changes nothing. */
 #extension GL_GOOGLE_include_directive : require
@@ -19,6 +19,7 @@ layout(std430, binding = 1) readonly buffer Stamp { uint w[]; } stamp;
 layout(std430, binding = 2) buffer List { uint w[]; } list;
 layout(std430, binding = 3) readonly buffer Hash { uint w[]; } hash;
 layout(std430, binding = 4) buffer Slices { uint w[]; } slices;
+layout(std430, binding = 5) buffer Trim { uint w[]; } trim;
 
 layout(push_constant) uniform Push { fusion_window_list_push pc; };
 
@@ -42,6 +43,9 @@ void main()
     uint chunk = info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
     if (chunk >= pc.n_entries) return; /* free slot */
     uint st = stamp.w[b];
+    if (pc.pass == FUSION_GATHER_COUNT && st != FUSION_NONE && st >= pc.trim_first && st <= pc.trim_last)
+        trim.w[FUSION_LIST_HEADER + atomicAdd(trim.w[FUSION_LIST_COUNT], 1u)] = b;
+    if (pc.trim_only != 0u) return;
     if (st == FUSION_NONE || st < pc.first || st > pc.last) return;
     uint base = chunk * FUSION_ENTRY_WORDS;
     uint s = fusion_bucket_of(int(hash.w[base + FUSION_ENTRY_X]), int(hash.w[base + FUSION_ENTRY_Y]),

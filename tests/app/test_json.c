@@ -57,7 +57,7 @@ BF_TEST(json_config_echoes_every_field_as_it_was_set)
     char *text = cJSON_PrintUnformatted(f);
     CHECK(strstr(text, "\"voxel_ratio\":0.1,") != NULL);
     cJSON_free(text);
-    CHECK_EQ_INT(cJSON_GetArraySize(f), 20);  /* every field of fusion_config */
+    CHECK_EQ_INT(cJSON_GetArraySize(f), 21);  /* every field of fusion_config */
     CHECK_EQ_INT(cJSON_GetArraySize(t), 35);  /* every field of track_config */
     CHECK_EQ_INT(cJSON_GetArraySize(cJSON_GetObjectItem(cfg, "sensor")), 4); /* bf_sensor */
     cJSON *l = cJSON_GetObjectItem(cfg, "loop");

@@ -38,6 +38,11 @@ static fusion_config small_config(void)
     c.hash_overflow = 64;
     c.window = 4;
     c.subcache = 2;
+    /* The planes here are confident on one side only, so the colour trim
+     * would take every colour off (no mesh passes there either): these
+     * tests follow colours through loads and evictions. The trim's own test
+     * is in test_fusion_room. */
+    c.colour_reach = 0;
     return c;
 }
 

@@ -55,6 +55,115 @@ static bool scene_colour_near(const synth_scene *scene, const mesh_bvh *bvh, bf_
     return true;
 }
 
+/* ---- the colour trim's oracle (shaders/fusion_colour.comp, trim_masks) */
+
+/* The voxel at global voxel coordinates g of level `level` in sorted map m:
+ * its brick's index (-1: none at this level) and, through *cs, bit 1
+ * confident and bit 0 its sign. */
+static long trim_voxel(const hostmap *m, uint32_t level, const int64_t g[3], uint32_t *cs)
+{
+    hostmap_brick want = {.level = level};
+    int64_t n = (int64_t)1 << level;
+    uint32_t x[3];
+    for (int a = 0; a < 3; a++) {
+        int64_t b = g[a] >= 0 ? g[a] / 8 : -((-g[a] + 7) / 8);
+        int64_t key = b >= 0 ? b / n : -((-b + n - 1) / n);
+        want.key[a] = (int32_t)key, want.cell[a] = (uint32_t)(b - key * n), x[a] = (uint32_t)(g[a] - b * 8);
+    }
+    *cs = 0;
+    const hostmap_brick *hit = bsearch(&want, m->bricks, m->n_bricks, sizeof *m->bricks,
+                                       (int (*)(const void *, const void *))hostmap_brick_cmp);
+    if (!hit) return -1;
+    uint32_t w = brick_word(x[0], x[1], x[2]), bit = brick_bit(x[0], x[1], x[2]);
+    *cs = (((hit->conf[w] >> bit) & 1u) << 1) | ((hit->sign[w] >> bit) & 1u);
+    return hit - m->bricks;
+}
+
+/* Confident with a confident face neighbour of the other sign; only the
+ * neighbours in bricks a or b count when only_ab (a voxel of a neighbouring
+ * brick, which the pass sees through its face layers alone). */
+static bool trim_s1(const hostmap *m, uint32_t level, const int64_t g[3], bool only_ab, long a, long b)
+{
+    uint32_t c, d;
+    trim_voxel(m, level, g, &c);
+    if (c < 2) return false;
+    for (int f = 0; f < 6; f++) {
+        int64_t q[3] = {g[0], g[1], g[2]};
+        q[f / 2] += f % 2 ? 1 : -1;
+        long at = trim_voxel(m, level, q, &d);
+        if (only_ab && at != a && at != b) continue;
+        if (d >= 2 && d != c) return true;
+    }
+    return false;
+}
+
+/* Whether the trim with reach k keeps voxel (x, y, z) of brick i. */
+static bool trim_keeps(const hostmap *m, long i, uint32_t x, uint32_t y, uint32_t z, uint32_t k)
+{
+    const hostmap_brick *br = &m->bricks[i];
+    int64_t n = (int64_t)1 << br->level, g[3];
+    uint32_t v[3] = {x, y, z};
+    for (int a = 0; a < 3; a++) g[a] = ((int64_t)br->key[a] * n + br->cell[a]) * 8 + v[a];
+    if (trim_s1(m, br->level, g, false, i, i)) return true;
+    uint32_t c;
+    trim_voxel(m, br->level, g, &c);
+    if (k < 2 || c < 2) return false;
+    for (int f = 0; f < 6; f++) {
+        int64_t q[3] = {g[0], g[1], g[2]};
+        q[f / 2] += f % 2 ? 1 : -1;
+        uint32_t d;
+        long at = trim_voxel(m, br->level, q, &d);
+        if (at < 0) continue;
+        if (trim_s1(m, br->level, q, at != i, i, at)) return true;
+    }
+    return false;
+}
+
+/* The colours of `trimmed` are those of `whole` where the trim with reach k
+ * keeps a voxel, none elsewhere, bit for bit (the same frames fused into
+ * both, the trim at the end alone). */
+static void check_trim(hostmap *whole, hostmap *trimmed, uint32_t k)
+{
+    CHECK_OK(hostmap_sort(whole));
+    CHECK_OK(hostmap_sort(trimmed));
+    CHECK_EQ_INT(whole->n_bricks, trimmed->n_bricks);
+    uint64_t n_whole = 0, n_kept = 0, n_wrong = 0;
+    for (long i = 0; i < (long)whole->n_bricks; i++) {
+        CHECK(hostmap_brick_cmp(&whole->bricks[i], &trimmed->bricks[i]) == 0);
+        for (uint32_t v = 0; v < 512; v++) {
+            uint16_t c = whole->rgb565[(size_t)i * 512 + v], t = trimmed->rgb565[(size_t)i * 512 + v];
+            n_whole += c != 0;
+            uint16_t want = c && trim_keeps(whole, i, v % 8, (v / 8) % 8, v / 64, k) ? c : 0;
+            n_kept += want != 0, n_wrong += t != want;
+        }
+    }
+    fprintf(stderr, "  colour trim, reach %u: %llu of %llu colours kept, %llu differ from the oracle's\n", k,
+            (unsigned long long)n_kept, (unsigned long long)n_whole, (unsigned long long)n_wrong);
+    CHECK_EQ_INT(n_wrong, 0);
+    CHECK(n_kept > 0 && n_kept < n_whole);
+}
+
+/* The room's frames fused into a map of config fc; its snapshot and stats. */
+static void fuse_room(gpu_context *ctx, const char *seq, const fusion_config *fc, hostmap *snap, fusion_stats *st)
+{
+    rgbd_source *src;
+    CHECK_OK(replay_open(seq, NULL, &src));
+    fusion_map *map = NULL;
+    bf_frame f;
+    bf_status s;
+    while ((s = rgbd_source_next(src, &f)) == BF_OK) {
+        if (!map) CHECK_OK(fusion_create(ctx, fc, rgbd_source_intrinsics(src), f.T_wc.t, &map));
+        CHECK_OK(fusion_add_frame(map, &f, &f.T_wc));
+    }
+    CHECK_STATUS(s, BF_END);
+    CHECK_OK(fusion_flush(map));
+    CHECK_OK(fusion_check(map)); /* the colour chains and free stack too */
+    CHECK_OK(fusion_get_stats(map, st));
+    CHECK_OK(fusion_snapshot_take(map, snap));
+    fusion_destroy(map);
+    rgbd_source_close(src);
+}
+
 BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
 {
     gpu_context *ctx;
@@ -157,6 +266,39 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
     CHECK_LE(med, 6.0);
     CHECK_LE(n_grey, n_err / 50);
     CHECK_LE(8.0 * (double)st.bytes_colour / (512.0 * st.n_bricks), 6.0);
+
+    /* The colour trim (36 frames, one window: at the end alone) against its
+     * oracle, for the default reach (this map) and reach 1, from the same
+     * frames fused without it; the units it gives back. Then windows of 8
+     * frames (trims mid-scan too, and colour taken again after them): the
+     * chains stay whole (fusion_check). */
+    {
+        CHECK_EQ_INT(fc.colour_reach, 2);
+        fusion_config f0 = fc, f1 = fc, f8 = fc;
+        f0.colour_reach = 0, f1.colour_reach = 1, f8.window = 8, f8.subcache = 8;
+        hostmap whole = {0}, one = {0}, eight = {0};
+        fusion_stats s0, s1, s8;
+        fuse_room(ctx, seq, &f0, &whole, &s0);
+        fuse_room(ctx, seq, &f1, &one, &s1);
+        fuse_room(ctx, seq, &f8, &eight, &s8);
+        check_trim(&whole, &snap, 2);
+        check_trim(&whole, &one, 1);
+        /* Every colour left after the mid-scan trims passes the rule. */
+        CHECK_OK(hostmap_sort(&eight));
+        uint64_t n8 = 0, bad8 = 0;
+        for (long i = 0; i < (long)eight.n_bricks; i++)
+            for (uint32_t v = 0; v < 512; v++)
+                if (eight.rgb565[(size_t)i * 512 + v])
+                    n8++, bad8 += !trim_keeps(&eight, i, v % 8, (v / 8) % 8, v / 64, 2);
+        CHECK(n8 > 0);
+        CHECK_EQ_INT(bad8, 0);
+        fprintf(stderr, "  colour units: %u without the trim, %u reach 2, %u reach 1; windows of 8: %u\n",
+                s0.n_colour_units, st.n_colour_units, s1.n_colour_units, s8.n_colour_units);
+        CHECK(st.n_colour_units < s0.n_colour_units && s1.n_colour_units < st.n_colour_units);
+        hostmap_free(&whole);
+        hostmap_free(&one);
+        hostmap_free(&eight);
+    }
 
     /* The ray-cast's colour lookup (popcount rank along the brick's chain
      * of units, on the GPU) against the same scene colours, at the last
