@@ -272,13 +272,14 @@ static void start_window(fusion_map *m, uint32_t last)
     }
 }
 
-/* Records the trim of every brick (the end of a scan: no window follows). */
+/* Records the trim of every brick (the end of a scan: no window follows),
+ * loaded ones too (a store written before the trim). */
 static void trim_all(fusion_map *m)
 {
     if (!trims(m) || m->n_frames == 0) return;
     fusion_window_list_push pc = {.brick_cap = m->cfg.brick_cap, .n_entries = m->n_entries, .first = 1, .last = 0,
                                   .n_buckets = 1, .pass = FUSION_GATHER_COUNT, .trim_first = 0,
-                                  .trim_last = m->n_frames - 1, .trim_only = 1};
+                                  .trim_last = UINT32_MAX, .trim_only = 1};
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE_TO_TRANSFER);
     gpu_cmd_fill(m->ctx, m->trim_list, 0, FUSION_LIST_HEADER * 4, 0);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);

@@ -43,7 +43,9 @@ void main()
     uint chunk = info.w[b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK];
     if (chunk >= pc.n_entries) return; /* free slot */
     uint st = stamp.w[b];
-    if (pc.pass == FUSION_GATHER_COUNT && st != FUSION_NONE && st >= pc.trim_first && st <= pc.trim_last)
+    /* (trim_only: every brick, also one loaded and never stamped since) */
+    if (pc.pass == FUSION_GATHER_COUNT && (st != FUSION_NONE || pc.trim_only != 0u) && st >= pc.trim_first &&
+        st <= pc.trim_last)
         trim.w[FUSION_LIST_HEADER + atomicAdd(trim.w[FUSION_LIST_COUNT], 1u)] = b;
     if (pc.trim_only != 0u) return;
     if (st == FUSION_NONE || st < pc.first || st > pc.last) return;

@@ -292,6 +292,35 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
                     n8++, bad8 += !trim_keeps(&eight, i, v % 8, (v / 8) % 8, v / 64, 2);
         CHECK(n8 > 0);
         CHECK_EQ_INT(bad8, 0);
+        /* A map loaded untrimmed (a store written before the trim), then
+         * one frame and the end of the scan: the loaded bricks are trimmed
+         * too. */
+        {
+            fusion_map *lm = NULL;
+            rgbd_source *ls;
+            bf_frame lf;
+            CHECK_OK(replay_open(seq, NULL, &ls));
+            CHECK_OK(rgbd_source_next(ls, &lf));
+            CHECK_OK(fusion_create(ctx, &fc, rgbd_source_intrinsics(ls), whole.origin_w, &lm));
+            CHECK_OK(fusion_load(lm, &whole));
+            CHECK_OK(fusion_add_frame(lm, &lf, &lf.T_wc));
+            CHECK_OK(fusion_flush(lm));
+            CHECK_OK(fusion_check(lm));
+            hostmap lt = {0};
+            CHECK_OK(fusion_snapshot_take(lm, &lt));
+            CHECK_OK(hostmap_sort(&lt));
+            uint64_t nl = 0, badl = 0;
+            for (long i = 0; i < (long)lt.n_bricks; i++)
+                for (uint32_t v = 0; v < 512; v++)
+                    if (lt.rgb565[(size_t)i * 512 + v]) nl++, badl += !trim_keeps(&lt, i, v % 8, (v / 8) % 8, v / 64, 2);
+            fprintf(stderr, "  loaded untrimmed, one frame, flushed: %llu colours, %llu past the reach\n",
+                    (unsigned long long)nl, (unsigned long long)badl);
+            CHECK(nl > 0);
+            CHECK_EQ_INT(badl, 0);
+            hostmap_free(&lt);
+            fusion_destroy(lm);
+            rgbd_source_close(ls);
+        }
         fprintf(stderr, "  colour units: %u without the trim, %u reach 2, %u reach 1; windows of 8: %u\n",
                 s0.n_colour_units, st.n_colour_units, s1.n_colour_units, s8.n_colour_units);
         CHECK(st.n_colour_units < s0.n_colour_units && s1.n_colour_units < st.n_colour_units);
