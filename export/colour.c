@@ -1,7 +1,10 @@
 /* Colour of exported vertices and points: the map's colour (hostmap.rgb565)
  * of the finest confident voxel holding the point, or, where that voxel has
  * none (colour is kept only near the surface, where frames saw it), the
- * mean of the coloured voxels of the same level around it. */
+ * mean of the coloured voxels of the same level around it: its 3x3x3
+ * neighbourhood, else its 5x5x5 one (a surface voxel no frame coloured
+ * whose nearest colour lies two voxels along the surface: the colour trim,
+ * docs/colour.md, keeps none off the surface to borrow from). */
 #include <math.h>
 #include <stdlib.h>
 
@@ -38,11 +41,12 @@ static void colour_one(void *ctx, size_t i)
     uint32_t c = 0;
     if (export__grid_sample(g, q, &vx)) {
         c = g->s->rgb565[(size_t)vx.brick * BRICK_VOXELS + vx.x + 8 * vx.y + 64 * vx.z];
-        if (c == 0) {
+        for (int r = 1; c == 0 && r <= 2; r++) {
             uint32_t sum[3] = {0, 0, 0}, n = 0;
-            for (int dz = -1; dz <= 1; dz++)
-                for (int dy = -1; dy <= 1; dy++)
-                    for (int dx = -1; dx <= 1; dx++) {
+            for (int dz = -r; dz <= r; dz++)
+                for (int dy = -r; dy <= r; dy++)
+                    for (int dx = -r; dx <= r; dx++) {
+                        if (r == 2 && abs(dx) < 2 && abs(dy) < 2 && abs(dz) < 2) continue; /* none there */
                         int64_t v[3] = {vx.g[0] + dx, vx.g[1] + dy, vx.g[2] + dz};
                         uint32_t cn = voxel_colour(g, vx.level, v);
                         if (!cn) continue;

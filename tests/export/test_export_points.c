@@ -99,3 +99,49 @@ BF_TEST(surface_points_across_a_level_transition)
     fx_free(&s);
     (void)pick_x_below;
 }
+
+/* A point whose voxel has no colour takes the mean of the coloured voxels
+ * around it at its level, within two voxels (3x3x3, else 5x5x5), and is
+ * grey (160) past that: a plane whose voxels are red up to x index c. */
+BF_TEST(uncoloured_points_borrow_colour_from_two_voxels_away_and_no_further)
+{
+    hostmap s;
+    memset(&s, 0, sizeof s);
+    s.chunk_m = 2;
+    s.origin_w = ORIGIN;
+    fx_plane pl = {bf_v3(0, 0, 1), ORIGIN.z + 0.3013};
+    double v = fx_voxel_m(&s, 6);
+    fx_voxelize(&s, fx_plane_sdf, &pl, 6, bf_v3(ORIGIN.x, ORIGIN.y, ORIGIN.z + 0.25),
+                bf_v3(ORIGIN.x + 0.2, ORIGIN.y + 0.1, ORIGIN.z + 0.35), 2, NULL, NULL, true);
+    s.rgb565 = calloc((size_t)s.n_bricks * 512, 2);
+    CHECK(s.rgb565 != NULL);
+    const int64_t c = 20; /* voxels with global x index <= c are red */
+    int64_t per_chunk = 1 << 6;
+    for (uint32_t i = 0; i < s.n_bricks; i++)
+        for (uint32_t x = 0; x < 8; x++) {
+            int64_t gx = ((int64_t)s.bricks[i].key[0] * per_chunk + s.bricks[i].cell[0]) * 8 + x;
+            if (gx > c) continue;
+            for (uint32_t z = 0; z < 8; z++)
+                for (uint32_t y = 0; y < 8; y++) s.rgb565[(size_t)i * 512 + x + 8 * y + 64 * z] = 0xF800;
+        }
+    mesh_data p;
+    CHECK_OK(export_points(&s, &p, NULL));
+    CHECK(p.rgb != NULL);
+    uint32_t n_at[5] = {0, 0, 0, 0, 0}, wrong = 0;
+    for (uint32_t i = 0; i < p.n_verts; i++) {
+        int64_t gx = (int64_t)floor(((double)p.xyz[3 * i] + p.origin.x - ORIGIN.x) / v);
+        int64_t d = gx - c; /* voxels past the last red one */
+        const uint8_t *rgb = p.rgb + 3 * i;
+        bool red = rgb[0] == 255 && rgb[1] == 0 && rgb[2] == 0, grey = rgb[0] == 160 && rgb[1] == 160 && rgb[2] == 160;
+        if (d >= 1 && d <= 4) n_at[d]++;
+        if (d <= 2 ? !red : !grey) wrong++;
+    }
+    fprintf(stderr, "  %u points; 1, 2, 3, 4 voxels past the red: %u, %u, %u, %u; %u wrong\n", p.n_verts, n_at[1],
+            n_at[2], n_at[3], n_at[4], wrong);
+    CHECK(n_at[1] > 0 && n_at[2] > 0 && n_at[3] > 0);
+    CHECK_EQ_INT(wrong, 0);
+    mesh_free(&p);
+    free(s.rgb565);
+    s.rgb565 = NULL;
+    fx_free(&s);
+}
