@@ -86,6 +86,10 @@ int main(int argc, char **argv)
         return usage ? 2 : 0;
     }
     int keep = argc == 6 ? atoi(argv[3]) : 0;
+    if (argc == 6 && keep < 1) {
+        fprintf(stderr, "bench_colour_shells: --keep-within %s: a distance of 1 voxel or more\n", argv[3]);
+        return 2;
+    }
     hostmap m = {0};
     store_meta meta;
     store_report rep;

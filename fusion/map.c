@@ -578,15 +578,18 @@ static bf_status check_colour(fusion_map *m, const fusion_host_map *h)
         if (h->info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] == FUSION_NONE) continue;
         uint32_t colours = 0, n = 0;
         for (uint32_t w = 0; w < BRICK_WORDS; w++) colours += (uint32_t)__builtin_popcount(mask[(size_t)b * BRICK_WORDS + w]);
-        for (uint32_t u = head[b]; s == BF_OK && u != FUSION_NONE; u = pool[(size_t)u * FUSION_COLOUR_UNIT_WORDS], n++) {
-            if (u >= cap || seen[u]++ || n >= FUSION_COLOUR_MAX_UNITS)
+        for (uint32_t u = head[b]; u != FUSION_NONE; u = pool[(size_t)u * FUSION_COLOUR_UNIT_WORDS], n++) {
+            if (u >= cap || seen[u]++ || n >= FUSION_COLOUR_MAX_UNITS) {
                 s = bf_fail(BF_NUMERIC, "fusion check: brick %u's colour chain reaches unit %u again or out of range", b, u);
+                break;
+            }
         }
         in_chains += n;
         if (s == BF_OK && n * FUSION_COLOUR_UNIT_COLOURS < colours)
             s = bf_fail(BF_NUMERIC, "fusion check: brick %u has %u colours in a chain of %u units", b, colours, n);
     }
     uint32_t top = h->counters[FUSION_CNT_COLOUR_TOP];
+    if (s == BF_OK && top > cap) s = bf_fail(BF_NUMERIC, "fusion check: colour free stack top %u above its %u units", top, cap);
     for (uint32_t i = 0; s == BF_OK && i < top; i++)
         if (cfree[i] >= cap || seen[cfree[i]]++)
             s = bf_fail(BF_NUMERIC, "fusion check: colour free stack entry %u (unit %u) is in a chain or repeated", i,

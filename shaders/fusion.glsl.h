@@ -700,8 +700,12 @@ BF_FN bf_u32 fusion_box_culled(fusion_frame f, bf_f32 lo_x, bf_f32 lo_y, bf_f32 
  * colours, or the trim of bricks no window integrates again. */
 #define FUSION_COLOUR_MODE_FRAMES 0u
 #define FUSION_COLOUR_MODE_TRIM 1u
-/* Workgroup of the colour pass: 64 invocations, 8 voxels each. */
+/* Workgroup of the colour pass: 64 invocations, 8 voxels each (the trim's
+ * surface_mask maps them onto a face's 8 x 8 voxels). */
 #define FUSION_COLOUR_LOCAL 64u
+#ifndef BF_GLSL
+_Static_assert(FUSION_COLOUR_LOCAL == 64u, "fusion_colour.comp's trim reads a brick face with one invocation a voxel");
+#endif
 
 /* RGB565 of a colour in [0, 255] per channel (rounded; black -> 0x0001). */
 BF_FN bf_u32 fusion_rgb565(bf_f32 r, bf_f32 g, bf_f32 b)

@@ -126,7 +126,9 @@ uvec3 locate(ivec3 p)
 }
 
 /* Confidence and sign of the voxel at p: bit 1 confident, bit 0 the sign;
- * 0 where unknown (outside the known layers, no brick there at this level). */
+ * 0 where unknown (outside the known layers), CS_NO_BRICK across a face
+ * whose neighbour has no brick at this level. */
+#define CS_NO_BRICK 4u
 uint conf_sign(ivec3 p)
 {
     uvec3 at = locate(p);
@@ -134,23 +136,26 @@ uint conf_sign(ivec3 p)
         uint w = brick_word(uint(p.x), uint(p.y), uint(p.z)), b = brick_bit(uint(p.x), uint(p.y), uint(p.z));
         return (((s_conf[w] >> b) & 1u) << 1) | ((s_sign[w] >> b) & 1u);
     }
-    if (at.x == 7u || at.y > 1u || s_nb_slot[at.x] == FUSION_NONE) return 0u;
+    if (at.x == 7u || at.y > 1u) return 0u;
+    if (s_nb_slot[at.x] == FUSION_NONE) return CS_NO_BRICK;
     uint w = 4u * at.x + 2u * at.y + (at.z >> 5), b = at.z & 31u;
     return (((s_nb_conf[w] >> b) & 1u) << 1) | ((s_nb_sign[w] >> b) & 1u);
 }
 
 /* Whether the voxel at p is confident with a confident face neighbour of
- * the other sign. */
+ * the other sign, or one in a brick this level does not have (a coarser or
+ * finer brick, or a chunk streamed out, may hold the other sign there: the
+ * mesh and the points, which look across levels, may need the colour). */
 bool is_s1(ivec3 p)
 {
     uint c = conf_sign(p);
-    if (c < 2u) return false;
+    if (c < 2u || c == CS_NO_BRICK) return false;
     bool s1 = false;
     [[unroll]] for (uint f = 0u; f < 6u; f++) {
         ivec3 q = p;
         q[f >> 1] += (f & 1u) != 0u ? 1 : -1;
         uint d = conf_sign(q);
-        s1 = s1 || (d >= 2u && d != c);
+        s1 = s1 || d == CS_NO_BRICK || (d >= 2u && d != c);
     }
     return s1;
 }
@@ -356,6 +361,15 @@ void trim_masks(uint slot, uint pos, ivec3 key, uint tid)
         s_new[tid] = m;
     }
     barrier();
+    /* A chain longer than its colours need (grown while colours were
+     * taken, then fewer kept: confidence lost) gives its spare units back
+     * even when the trim takes no colour. */
+    if (tid == 0u) {
+        uint total = 0u;
+        for (uint w = 0u; w < BRICK_WORDS; w++) total += uint(bitCount(s_new[w]));
+        if (s_n_units > (total + FUSION_COLOUR_UNIT_COLOURS - 1u) / FUSION_COLOUR_UNIT_COLOURS) s_changed = 1u;
+    }
+    barrier();
 }
 
 /* The brick's colours (s_col) packed again along its chain for the masks
@@ -371,7 +385,7 @@ void commit(uint slot, uint tid, bool trim)
         for (uint w = 0u; w < BRICK_WORDS; w++) total += uint(bitCount(s_new[w]));
         uint need = (total + FUSION_COLOUR_UNIT_COLOURS - 1u) / FUSION_COLOUR_UNIT_COLOURS;
         uint n = s_n_units;
-        while (n < need) {
+        while (n < need && !trim) { /* the trim only pushes (it never needs more: its masks only lose bits) */
             uint u = pop_unit();
             if (u == FUSION_NONE) break;
             s_unit[n++] = u;

@@ -12,6 +12,7 @@
 #include "mesh/mesh.h"
 #include "synth/synth.h"
 #include "fusion/fusion.h"
+#include "fusion/fusion_int.h"
 #include "gpu_fixture.h"
 #include "replay/replay.h"
 #include "export/export.h"
@@ -79,9 +80,10 @@ static long trim_voxel(const hostmap *m, uint32_t level, const int64_t g[3], uin
     return hit - m->bricks;
 }
 
-/* Confident with a confident face neighbour of the other sign; only the
- * neighbours in bricks a or b count when only_ab (a voxel of a neighbouring
- * brick, which the pass sees through its face layers alone). */
+/* Confident with a confident face neighbour of the other sign, or one in a
+ * brick this level does not have; only the neighbours in bricks a or b
+ * count when only_ab (a voxel of a neighbouring brick, which the pass sees
+ * through its face layers alone). */
 static bool trim_s1(const hostmap *m, uint32_t level, const int64_t g[3], bool only_ab, long a, long b)
 {
     uint32_t c, d;
@@ -92,7 +94,7 @@ static bool trim_s1(const hostmap *m, uint32_t level, const int64_t g[3], bool o
         q[f / 2] += f % 2 ? 1 : -1;
         long at = trim_voxel(m, level, q, &d);
         if (only_ab && at != a && at != b) continue;
-        if (d >= 2 && d != c) return true;
+        if (at < 0 || (d >= 2 && d != c)) return true;
     }
     return false;
 }
@@ -141,6 +143,39 @@ static void check_trim(hostmap *whole, hostmap *trimmed, uint32_t k)
             (unsigned long long)n_kept, (unsigned long long)n_whole, (unsigned long long)n_wrong);
     CHECK_EQ_INT(n_wrong, 0);
     CHECK(n_kept > 0 && n_kept < n_whole);
+}
+
+/* A brick's place (key, level, cell) and its stamp, sorted as hostmap_sort
+ * sorts the bricks. */
+typedef struct trim_stamp {
+    hostmap_brick id;
+    uint32_t stamp;
+} trim_stamp;
+static int trim_stamp_cmp(const void *a, const void *b)
+{
+    return hostmap_brick_cmp(&((const trim_stamp *)a)->id, &((const trim_stamp *)b)->id);
+}
+
+/* The first n frames of the room into a new map *out of config fc (no
+ * flush: the state right after frame n - 1's fusion_add_frame); *st its
+ * stats. */
+static void fuse_room_frames(gpu_context *ctx, const char *seq, const fusion_config *fc, uint32_t n, fusion_stats *st,
+                             fusion_map **out)
+{
+    rgbd_source *src;
+    CHECK_OK(replay_open(seq, NULL, &src));
+    fusion_map *map = NULL;
+    *out = NULL;
+    bf_frame f;
+    for (uint32_t i = 0; i < n; i++) {
+        CHECK_OK(rgbd_source_next(src, &f));
+        if (!map) CHECK_OK(fusion_create(ctx, fc, rgbd_source_intrinsics(src), f.T_wc.t, &map));
+        CHECK_OK(fusion_add_frame(map, &f, &f.T_wc));
+    }
+    rgbd_source_close(src);
+    *out = map;
+    CHECK_OK(fusion_check(map));
+    CHECK_OK(fusion_get_stats(map, st));
 }
 
 /* The room's frames fused into a map of config fc; its snapshot and stats. */
@@ -292,6 +327,62 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
                     n8++, bad8 += !trim_keeps(&eight, i, v % 8, (v / 8) % 8, v / 64, 2);
         CHECK(n8 > 0);
         CHECK_EQ_INT(bad8, 0);
+        /* Mid-scan: windows of 8 frames (slide 4) stopped right after frame
+         * 23 closed one: its gathering trimmed the bricks stamped last by
+         * frames 12-15, and no slice of the new window [16, 23] has run.
+         * Those bricks pass the rule; the new window's still hold colour
+         * past it (they are integrated again, and trimmed when left); the
+         * units are fewer than without the trim at the same frame. */
+        {
+            fusion_config fw = fc, fw0 = fc;
+            fw.window = fw0.window = 8, fw.subcache = fw0.subcache = 8, fw0.colour_reach = 0;
+            fusion_stats sw, sw0;
+            fusion_map *mw, *mw0;
+            fuse_room_frames(ctx, seq, &fw, 24, &sw, &mw);
+            fuse_room_frames(ctx, seq, &fw0, 24, &sw0, &mw0);
+            CHECK_EQ_INT(mw->window_first, 16);
+            hostmap ms = {0};
+            CHECK_OK(fusion_snapshot_take(mw, &ms));
+            /* The stamps in the snapshot's order (live slots ascending). */
+            uint32_t cap = fw.brick_cap;
+            uint32_t *info = malloc((size_t)cap * FUSION_BRICK_INFO_WORDS * 4), *stamp = malloc((size_t)cap * 4);
+            trim_stamp *ts = calloc(ms.n_bricks + 1, sizeof *ts);
+            CHECK(info && stamp && ts);
+            CHECK_OK(gpu_buffer_download(mw->info, 0, info, (uint64_t)cap * FUSION_BRICK_INFO_WORDS * 4));
+            CHECK_OK(gpu_buffer_download(mw->stamp, 0, stamp, (uint64_t)cap * 4));
+            uint32_t k = 0;
+            for (uint32_t b = 0; b < cap && k < ms.n_bricks; b++)
+                if (info[(size_t)b * FUSION_BRICK_INFO_WORDS + FUSION_INFO_CHUNK] < mw->n_entries)
+                    ts[k].id = ms.bricks[k], ts[k].stamp = stamp[b], k++;
+            CHECK_EQ_INT(k, ms.n_bricks);
+            CHECK_OK(hostmap_sort(&ms));
+            qsort(ts, ms.n_bricks, sizeof *ts, trim_stamp_cmp);
+            uint64_t n_left = 0, bad_left = 0, n_window = 0, past_window = 0;
+            for (long i = 0; i < (long)ms.n_bricks; i++) {
+                CHECK(hostmap_brick_cmp(&ts[i].id, &ms.bricks[i]) == 0);
+                bool left = ts[i].stamp >= 12 && ts[i].stamp <= 15, in_window = ts[i].stamp >= 16 && ts[i].stamp != FUSION_NONE;
+                for (uint32_t v = 0; v < 512; v++) {
+                    if (!ms.rgb565[(size_t)i * 512 + v] || !(left || in_window)) continue;
+                    bool keeps = trim_keeps(&ms, i, v % 8, (v / 8) % 8, v / 64, 2);
+                    if (left) n_left++, bad_left += !keeps;
+                    else n_window++, past_window += !keeps;
+                }
+            }
+            fprintf(stderr, "  mid-scan (windows of 8, after frame 23): bricks left at frames 12-15: %llu colours, %llu "
+                            "past the reach; the new window's: %llu, %llu past it; units %u (%u without the trim)\n",
+                    (unsigned long long)n_left, (unsigned long long)bad_left, (unsigned long long)n_window,
+                    (unsigned long long)past_window, sw.n_colour_units, sw0.n_colour_units);
+            CHECK(n_left > 0 && n_window > 0);
+            CHECK_EQ_INT(bad_left, 0);
+            CHECK(past_window > 0);
+            CHECK(sw.n_colour_units < sw0.n_colour_units);
+            free(info);
+            free(stamp);
+            free(ts);
+            hostmap_free(&ms);
+            fusion_destroy(mw);
+            fusion_destroy(mw0);
+        }
         /* A map loaded untrimmed (a store written before the trim), then
          * one frame and the end of the scan: the loaded bricks are trimmed
          * too. */
