@@ -63,7 +63,7 @@ typedef struct fusion_config {
        at fusion_flush) keep colour only on confident voxels within this L1
        distance of a confident voxel of the other sign, and give the units
        they no longer need back (docs/colour.md, "Colour off the surface").
-       0: no trim (every shell the frames coloured stays), 1 or 2; default 2. */
+       0: no trim (every shell the frames coloured stays), 1 or 2; default 1. */
     uint32_t colour_reach;
     /* A map that only holds what is loaded or inserted (a store to render, a
        particle set, a voxelised mesh): the frame passes' pipelines are not

@@ -25,7 +25,7 @@ fusion_config fusion_config_default(void)
         .band_sigmas = 3.0f,
         .keep_colour = true,
         .colour_frames = 4,
-        .colour_reach = 2,
+        .colour_reach = 1,
     };
     return c;
 }

@@ -128,7 +128,10 @@ uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
 /* The colour at a hit: the voxel holding it, else the nearest along the
  * ray within 1.2 voxels either way, else one of its six face neighbours
  * (colour lives in a shell about a voxel thick around the surface, which a
- * grazing ray can cross beside the voxel it hits). */
+ * grazing ray can cross beside the voxel it hits), else one of the voxels
+ * at L1 distance 2 (a surface voxel no frame coloured takes its colour
+ * along the surface, as the export does: the colour trim keeps none off
+ * the surface, docs/colour.md). */
 uint hit_colour(render_ray ray, render_trace tr)
 {
     float v = fusion_voxel_m(pc.view.chunk_m, tr.hit_level);
@@ -142,6 +145,18 @@ uint hit_colour(render_ray ray, render_trace tr)
     for (uint k = 0u; k < 6u && c == 0u; k++) {
         vec3 o = vec3(0.0);
         o[k / 2u] = (k & 1u) != 0u ? -v : v;
+        c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p + o);
+    }
+    /* Distance 2: two along an axis (k < 6), or one along each of two (the 12 edges). */
+    for (uint k = 0u; k < 18u && c == 0u; k++) {
+        vec3 o = vec3(0.0);
+        if (k < 6u) {
+            o[k / 2u] = (k & 1u) != 0u ? -2.0 * v : 2.0 * v;
+        } else {
+            uint e = k - 6u, a = e / 4u, b = (a + 1u) % 3u;
+            o[a] = (e & 1u) != 0u ? -v : v;
+            o[b] = (e & 2u) != 0u ? -v : v;
+        }
         c = voxel_colour(tr.hit_slot, tr.hit_brick, tr.hit_level, p + o);
     }
     return c;

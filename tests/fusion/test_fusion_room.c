@@ -303,28 +303,30 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
     CHECK_LE(8.0 * (double)st.bytes_colour / (512.0 * st.n_bricks), 6.0);
 
     /* The colour trim (36 frames, one window: at the end alone) against its
-     * oracle, for the default reach (this map) and reach 1, from the same
-     * frames fused without it; the units it gives back. Then windows of 8
-     * frames (trims mid-scan too, and colour taken again after them): the
-     * chains stay whole (fusion_check). */
+     * oracle, for the default reach (this map) and the other one, from the
+     * same frames fused without it; the units it gives back. Then windows
+     * of 8 frames (trims mid-scan too, and colour taken again after them):
+     * the chains stay whole (fusion_check). */
     {
-        CHECK_EQ_INT(fc.colour_reach, 2);
-        fusion_config f0 = fc, f1 = fc, f8 = fc;
-        f0.colour_reach = 0, f1.colour_reach = 1, f8.window = 8, f8.subcache = 8;
-        hostmap whole = {0}, one = {0}, eight = {0};
-        fusion_stats s0, s1, s8;
+        CHECK(fc.colour_reach == 1 || fc.colour_reach == 2);
+        fusion_config f0 = fc, fo = fc, f8 = fc;
+        f0.colour_reach = 0, fo.colour_reach = 3 - fc.colour_reach, f8.window = 8, f8.subcache = 8;
+        hostmap whole = {0}, other = {0}, eight = {0};
+        fusion_stats s0, so, s8;
         fuse_room(ctx, seq, &f0, &whole, &s0);
-        fuse_room(ctx, seq, &f1, &one, &s1);
+        fuse_room(ctx, seq, &fo, &other, &so);
         fuse_room(ctx, seq, &f8, &eight, &s8);
-        check_trim(&whole, &snap, 2);
-        check_trim(&whole, &one, 1);
+        check_trim(&whole, &snap, fc.colour_reach);
+        check_trim(&whole, &other, fo.colour_reach);
+        uint32_t units1 = fc.colour_reach == 1 ? st.n_colour_units : so.n_colour_units;
+        uint32_t units2 = fc.colour_reach == 2 ? st.n_colour_units : so.n_colour_units;
         /* Every colour left after the mid-scan trims passes the rule. */
         CHECK_OK(hostmap_sort(&eight));
         uint64_t n8 = 0, bad8 = 0;
         for (long i = 0; i < (long)eight.n_bricks; i++)
             for (uint32_t v = 0; v < 512; v++)
                 if (eight.rgb565[(size_t)i * 512 + v])
-                    n8++, bad8 += !trim_keeps(&eight, i, v % 8, (v / 8) % 8, v / 64, 2);
+                    n8++, bad8 += !trim_keeps(&eight, i, v % 8, (v / 8) % 8, v / 64, f8.colour_reach);
         CHECK(n8 > 0);
         CHECK_EQ_INT(bad8, 0);
         /* Mid-scan: windows of 8 frames (slide 4) stopped right after frame
@@ -363,7 +365,7 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
                 bool left = ts[i].stamp >= 12 && ts[i].stamp <= 15, in_window = ts[i].stamp >= 16 && ts[i].stamp != FUSION_NONE;
                 for (uint32_t v = 0; v < 512; v++) {
                     if (!ms.rgb565[(size_t)i * 512 + v] || !(left || in_window)) continue;
-                    bool keeps = trim_keeps(&ms, i, v % 8, (v / 8) % 8, v / 64, 2);
+                    bool keeps = trim_keeps(&ms, i, v % 8, (v / 8) % 8, v / 64, fw.colour_reach);
                     if (left) n_left++, bad_left += !keeps;
                     else n_window++, past_window += !keeps;
                 }
@@ -403,7 +405,7 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
             uint64_t nl = 0, badl = 0;
             for (long i = 0; i < (long)lt.n_bricks; i++)
                 for (uint32_t v = 0; v < 512; v++)
-                    if (lt.rgb565[(size_t)i * 512 + v]) nl++, badl += !trim_keeps(&lt, i, v % 8, (v / 8) % 8, v / 64, 2);
+                    if (lt.rgb565[(size_t)i * 512 + v]) nl++, badl += !trim_keeps(&lt, i, v % 8, (v / 8) % 8, v / 64, fc.colour_reach);
             fprintf(stderr, "  loaded untrimmed, one frame, flushed: %llu colours, %llu past the reach\n",
                     (unsigned long long)nl, (unsigned long long)badl);
             CHECK(nl > 0);
@@ -413,10 +415,10 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
             rgbd_source_close(ls);
         }
         fprintf(stderr, "  colour units: %u without the trim, %u reach 2, %u reach 1; windows of 8: %u\n",
-                s0.n_colour_units, st.n_colour_units, s1.n_colour_units, s8.n_colour_units);
-        CHECK(st.n_colour_units < s0.n_colour_units && s1.n_colour_units < st.n_colour_units);
+                s0.n_colour_units, units2, units1, s8.n_colour_units);
+        CHECK(units2 < s0.n_colour_units && units1 < units2);
         hostmap_free(&whole);
-        hostmap_free(&one);
+        hostmap_free(&other);
         hostmap_free(&eight);
     }
 
