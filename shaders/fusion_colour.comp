@@ -226,7 +226,7 @@ void surface_mask(uint slot, ivec3 bc, uint level, uint tid)
 
 /* The window's frames' colours of the brick's voxels, blended into s_col;
  * s_new the new masks, s_changed whether they or a colour changed. */
-void colour_from_frames(uint slot, uint tid, int key_x, int key_y, int key_z, uint cell_x, uint cell_y, uint cell_z,
+void colour_from_frames(uint tid, int key_x, int key_y, int key_z, uint cell_x, uint cell_y, uint cell_z,
                         float voxel_m)
 {
     float lo_x = fusion_voxel_centre(key_x, cell_x, 0u, pc.chunk_m, voxel_m);
@@ -487,7 +487,7 @@ void colour_brick(uint slot, uint tid)
 
     bool trim = (pc.mode & 0xFFu) == FUSION_COLOUR_MODE_TRIM;
     if (trim) trim_masks(slot, pos, ivec3(key_x, key_y, key_z), tid);
-    else colour_from_frames(slot, tid, key_x, key_y, key_z, cell_x, cell_y, cell_z, voxel_m);
+    else colour_from_frames(tid, key_x, key_y, key_z, cell_x, cell_y, cell_z, voxel_m);
     if (s_changed == 0u) return; /* uniform: no colour moved */
     commit(slot, tid, trim);
 }
