@@ -173,7 +173,7 @@ int cmd_record(int argc, char **argv)
     bf_status s_dev = rs == BF_END ? BF_OK : rs;
     char dev_err[BF_ERROR_CAP] = "";
     if (s_dev) snprintf(dev_err, sizeof dev_err, "%s", bf_last_error());
-    r.n_unreadable = app_skipped_frames(src); /* the capture thread has ended */
+    r.n_unreadable = app_skipped_frames(src); /* atomic: the thread may still be reading after a stop */
     rgbd_source_close(src);
     /* Finish even after a device error: every frame before it is kept. A
      * failure before the first frame leaves no log (an earlier one stays). */

@@ -112,7 +112,8 @@ void capture_threaded_stop(rgbd_source *src);
 
 /* The source a capture thread or pacing wraps (through every layer), or
  * src itself: what a reader's own counts come from (replay_skipped_frames).
- * Read them once the thread has ended. */
+ * Those counts are atomic: after a stop whose grace ran out the thread may
+ * still be reading, and a count read then misses at most that frame. */
 const rgbd_source *capture_inner(const rgbd_source *src);
 
 /* Delivers inner's frames at their own pace: each next() waits until the

@@ -18,6 +18,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <zstd.h>
@@ -36,7 +37,7 @@ typedef struct log__source {
     char tail_msg[768];
     uint32_t pos;         /* next frame to deliver */
     bool skip_bad;
-    uint32_t n_skipped;
+    atomic_uint n_skipped; /* read while a capture thread may still run: replay_skipped_frames */
     double last_t_s;      /* the depth time of the last frame delivered (-inf before the first) */
     size_t n_px;
     ZSTD_DCtx *zd;

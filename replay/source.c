@@ -7,6 +7,7 @@
 #include "log_int.h"
 
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -61,7 +62,10 @@ typedef struct replay__source {
     rgbd_source base;
     replay__list list;
     uint32_t next_idx;   /* next list entry to deliver */
-    uint32_t n_skipped;  /* frames skipped with --skip-bad-frames */
+    /* Frames skipped with --skip-bad-frames. Atomic: behind a capture thread
+     * that a stop left reading (capture_next's grace ran out), the count is
+     * read while this source may still skip one. */
+    atomic_uint n_skipped;
     bool skip_bad;
     bool has_rgb;        /* some frame lists a colour image */
     uint16_t *depth;     /* width*height, reused for every frame */
