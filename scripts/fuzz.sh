@@ -9,9 +9,9 @@
 #
 #   scripts/fuzz.sh [SECONDS] [--jobs N] [--no-doc] [--targets "a b"] [--seed S]
 #
-# CI (scripts/test.sh) runs scripts/fuzz.sh 30 --jobs 2 --no-doc --seed 1: a
+# CI (scripts/test.sh) runs scripts/fuzz.sh 20 --jobs 2 --no-doc --seed 1: a
 # fixed seed makes a run repeat the inputs of the last one (as far as its
-# 30 s reach), so a new finding there comes from a change of code, not from
+# 20 s reach), so a new finding there comes from a change of code, not from
 # chance; without --seed every run explores afresh.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -8,7 +8,7 @@
 #     only that layer's own leaks: see docs/gpu.md); tests labelled
 #     gpu_bound (their time is lavapipe's, their host code is covered by
 #     other sanitized tests) run in the normal build only, for CI's 20 minutes;
-#  4. every fuzz target (tests/fuzz/, docs/fuzz.md) for 30 s under ASan +
+#  4. every fuzz target (tests/fuzz/, docs/fuzz.md) for 20 s under ASan +
 #     UBSan, two at a time: no crash, leak or hang may come up.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,4 +19,4 @@ bash scripts/build.sh
 BUILD_DIR=build-asan bash scripts/build.sh -DBITFUSE_SANITIZE=ON
 (cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
    ctest --output-on-failure -j 2 -LE gpu_bound)
-bash scripts/fuzz.sh 30 --jobs 2 --no-doc --seed 1
+bash scripts/fuzz.sh 20 --jobs 2 --no-doc --seed 1
