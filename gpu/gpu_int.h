@@ -178,7 +178,15 @@ struct gpu_context {
     bool is_stage_timed;             /* the open stage got a begin timestamp */
     gpu_stage_time *stages;          /* stage_cap entries */
     uint32_t label_depth;
+
+    /* Set by gpu_pipeline_warm_up around its wait: a wait past
+     * GPU__COMPILE_NOTE_NS is the driver compiling at first dispatch
+     * (lavapipe: tens of seconds a shader with a cold Mesa cache), said
+     * once a context so a first start is not silent. */
+    const char *warming;             /* the pipelines' names, or NULL */
+    bool said_compiling;
 };
+#define GPU__COMPILE_NOTE_NS 2000000000ull
 
 struct gpu_buffer {
     gpu_context *ctx;

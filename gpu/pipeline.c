@@ -406,8 +406,17 @@ bf_status gpu_pipeline_warm_up(gpu_context *ctx, gpu_pipeline *const *pipes, uin
         gpu_cmd_dispatch(ctx, p, binds[p->n_buffers], p->push_bytes ? zeros : NULL, 1, 1, 1);
     }
     gpu_cmd_label_end(ctx);
+    char names[256] = "";
+    for (uint32_t i = 0, k = 0; i < n && k < sizeof names; i++)
+        k += (size_t)snprintf(names + k, sizeof names - k, "%s%s", i ? ", " : "", pipes[i]->name);
+    double t_wait = bf_time_s();
+    ctx->warming = names;
     status = gpu_submit_wait(ctx);
+    ctx->warming = NULL;
     if (status != BF_OK) goto fail;
+    double wait_s = bf_time_s() - t_wait;
+    if (wait_s * 1e9 > (double)GPU__COMPILE_NOTE_NS)
+        bf_info("gpu: compiled %s in %.1f s", names, wait_s);
     bf_debug("gpu: warmed up %u pipelines in %.1f ms", n, 1e3 * (bf_time_s() - t0));
 
 fail:
