@@ -145,7 +145,9 @@ bf_status fusion_cmd_fuse(fusion_map *map, const bf_se3 *T_wc);
  * counts the frame. BF_POOL_FULL as fusion_add_frame. */
 bf_status fusion_finish_frame(fusion_map *map);
 /* Integrates whatever the schedule still owes (the last, partial windows),
- * as at the end of a sequence. */
+ * as at the end of a sequence, then trims every brick's colour
+ * (fusion_config.colour_reach). Frames fused after it still fuse, but the
+ * bricks they revisit start from trimmed colour: flush once, at the end. */
 bf_status fusion_flush(fusion_map *map);
 
 /* ------------------------------------------------------------ statistics */
