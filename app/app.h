@@ -199,6 +199,12 @@ bf_status app_export_map(fusion_map *map, hostmap *whole, const char *out_dir, c
  * its files this run does not write (another mesh format, views past this
  * run's) stay beside the new ones. */
 void app_warn_earlier_run(const char *cmd, const char *out);
+/* Usage error (exit 2) when the output folder out holds a sequence (its
+ * index, ground truth or image folders), whose files, stats.json among them,
+ * a run would overwrite or mix with its own; with results_too, also when it
+ * holds an earlier run's stats.json (for commands that write a sequence:
+ * synth, convert). 0 when out is new or holds neither. */
+int app_check_out_not_sequence(const char *cmd, const char *out, bool results_too);
 /* A mesh that app_export_map refused to simplify to nothing (r->mesh_refused)
  * is noted in w as a failure of its own status (exit 2 after the outputs). */
 void app_note_mesh_refused(app_write_failure *w, const app_map_report *r);

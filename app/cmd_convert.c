@@ -30,23 +30,6 @@ typedef struct convert_args {
     bool to_log;
 } convert_args;
 
-/* A folder that holds a sequence already is not converted into: its images
- * would be overwritten one by one, and a conversion failing part-way would
- * leave two sequences mixed under the old index (a log is replaced whole
- * instead). */
-static int check_new_folder(const char *dir)
-{
-    static const char *const held[] = {"depth.txt", "rgb.txt", "groundtruth.txt", "depth", "rgb"};
-    for (size_t i = 0; i < sizeof held / sizeof *held; i++) {
-        char p[4200];
-        snprintf(p, sizeof p, "%s/%s", dir, held[i]);
-        if (bf_file_exists(p))
-            return app_usage_error("convert", "--out %s holds a sequence already (%s): give a new folder, or "
-                                              "remove it first (a conversion that failed left it too)", dir, held[i]);
-    }
-    return 0;
-}
-
 static int parse_args(int argc, char **argv, convert_args *a)
 {
     memset(a, 0, sizeof *a);
@@ -78,7 +61,11 @@ static int parse_args(int argc, char **argv, convert_args *a)
     rc = app_check_not_input("convert", "--out", a->out, a->in);
     /* A log's folder is not made for it (a folder's own parents are): named before the work. */
     if (!rc && a->to_log) rc = app_check_out_folder("convert", "--out", a->out);
-    return rc || a->to_log ? rc : check_new_folder(a->out);
+    /* Not into a sequence (its images would be overwritten one by one, and a
+     * conversion failing part-way would leave two sequences mixed under the
+     * old index; a log is replaced whole instead), nor over a run's
+     * stats.json. */
+    return rc || a->to_log ? rc : app_check_out_not_sequence("convert", a->out, true);
 }
 
 /* The frames of src into the log or TUM writer (exactly one is set), until

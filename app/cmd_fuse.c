@@ -85,6 +85,7 @@ static int parse_args(int argc, char **argv, fuse_args *a)
     if (!rc && a->calibration) rc = app_calibration_read("fuse", a->calibration, a->seq, false, &a->ropt, &a->cal);
     if (!rc) rc = app_check_map_options("fuse", &a->fcfg);
     if (!rc) rc = app_check_not_input("fuse", "--out", a->out, a->seq);
+    if (!rc) rc = app_check_out_not_sequence("fuse", a->out, false);
     return rc ? rc : app_check_out_not_store("fuse", a->out, NULL);
 }
 

@@ -472,6 +472,7 @@ static int parse_args(const char *cmd, bool is_live_cmd, int argc, char **argv, 
         if (track_config_check(&tc) != BF_OK) return app_usage_error(cmd, "%s", bf_last_error());
     }
     if (!rc) rc = app_check_not_input(cmd, "--out", a->out, a->seq);
+    if (!rc) rc = app_check_out_not_sequence(cmd, a->out, false); /* another sequence's stats.json, its files */
     if (!rc && a->store && !a->store[0]) rc = app_usage_error(cmd, "--store needs a folder, not ''");
     /* The store's files among the sequence's: the folder would read as a store. */
     if (!rc) rc = app_check_not_input(cmd, "--store", a->store, a->seq);

@@ -224,15 +224,9 @@ int cmd_synth(int argc, char **argv)
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     cfg.noise = (synth_noise)noise;
-    /* Not over a sequence: frames past the new count would stay beside it,
-     * unlisted (convert refuses the same). */
-    static const char *const held[] = {"depth.txt", "rgb.txt", "depth", "rgb"};
-    for (size_t i = 0; i < sizeof held / sizeof *held; i++) {
-        char p[4200];
-        if (snprintf(p, sizeof p, "%s/%s", cfg.out_dir, held[i]) < (int)sizeof p && bf_file_exists(p))
-            return app_usage_error(cmd, "--out %s holds a sequence already (%s): give a new folder, or remove it "
-                                   "first", cfg.out_dir, held[i]);
-    }
+    /* Not over a sequence (frames past the new count would stay beside it,
+     * unlisted), nor over a run's stats.json (convert refuses the same). */
+    if ((rc = app_check_out_not_sequence(cmd, cfg.out_dir, true)) != 0) return rc;
     /* Options that would change nothing are refused, not ignored. */
     bool procedural = !strcmp(cfg.scene, "room") || !strncmp(cfg.scene, "rooms:", 6);
     if (scale_given && procedural)

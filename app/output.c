@@ -292,6 +292,20 @@ void app_warn_earlier_run(const char *cmd, const char *out)
                 "format, more views) stay beside its own", cmd, out);
 }
 
+int app_check_out_not_sequence(const char *cmd, const char *out, bool results_too)
+{
+    static const char *const held[] = {"depth.txt", "rgb.txt", "groundtruth.txt", "depth", "rgb"};
+    char p[4200];
+    for (size_t i = 0; i < sizeof held / sizeof *held; i++)
+        if (bf_path_join(p, sizeof p, out, held[i]) == BF_OK && bf_file_exists(p))
+            return app_usage_error(cmd, "--out %s holds a sequence already (%s): give a new folder, or remove it first",
+                                   out, held[i]);
+    if (results_too && bf_path_join(p, sizeof p, out, "stats.json") == BF_OK && bf_file_exists(p))
+        return app_usage_error(cmd, "--out %s holds an earlier run's outputs (stats.json), which a sequence written "
+                               "there would replace: give a new folder, or remove it first", out);
+    return 0;
+}
+
 void app_note_mesh_refused(app_write_failure *w, const app_map_report *r)
 {
     if (r->mesh_refused == BF_OK) return;

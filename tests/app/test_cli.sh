@@ -1031,6 +1031,27 @@ mentions "--seed seeds the noise"
 # and rooms:N takes a count.
 expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --out "$T/seq"
 mentions "holds a sequence already"
+# Nor over a run's outputs: its stats.json (an --expect baseline) would be
+# replaced by the sequence's (synth and convert went on, exit 0).
+st_rp=$(md5sum <"$T/rp/stats.json")
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 2 --size 32x24 --out "$T/rp"
+mentions "--out $T/rp holds an earlier run's outputs (stats.json)"
+expect 2 "$B" convert "$T/seq" --out "$T/rp"
+mentions "--out $T/rp holds an earlier run's outputs (stats.json)"
+[ "$(md5sum <"$T/rp/stats.json")" = "$st_rp" ] || fail "a refused synth or convert changed a run's stats.json"
+[ -e "$T/rp/depth.txt" ] && fail "a refused synth or convert wrote a sequence among a run's outputs"
+# A run's outputs not into another sequence's folder: its stats.json (synth's)
+# was replaced and the run's files mixed with its frames.
+cp -r "$T/seq" "$T/otherseq"
+st_os=$(md5sum <"$T/otherseq/stats.json")
+expect 2 "$B" replay "$T/seq" --out "$T/otherseq" --frames 2 --no-mesh
+mentions "--out $T/otherseq holds a sequence already (depth.txt)"
+expect 2 "$B" fuse "$T/seq" --poses groundtruth --out "$T/otherseq" --no-mesh
+mentions "--out $T/otherseq holds a sequence already (depth.txt)"
+[ "$(md5sum <"$T/otherseq/stats.json")" = "$st_os" ] || fail "a refused replay or fuse changed another sequence's stats.json"
+[ -e "$T/otherseq/trajectory.txt" ] && fail "a refused replay or fuse wrote into another sequence's folder"
+expect 2 "$B" synth --trajectory "$T/traj.txt" --frames 1 --size 32x24 --seed -1 --out "$T/negseed"
+mentions "--seed: '-1' is below 0"
 expect 2 "$B" synth --scene rooms:-1 --trajectory "$T/traj.txt" --frames 1 --size 32x24 --out "$T/rooms_neg"
 mentions "rooms:N takes a count"
 [ -e "$T/rooms_neg/depth.txt" ] && fail "synth rooms:-1 wrote a sequence"
@@ -1045,7 +1066,7 @@ expect 2 "$B" demo --frames 2 --no-gpu --out "$T/demo-twice"
 mentions "--out $T/demo-twice holds an earlier run (seq/depth.txt)"
 [ "$(cd "$T/demo-twice" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] ||
     fail "a refused demo changed the earlier run's files"
-expect 2 "$B" demo --data "$T/no-such-data" --no-gpu --out "$T/demo-nodata"
+expect 3 "$B" demo --data "$T/no-such-data" --no-gpu --out "$T/demo-nodata"
 mentions "$T/no-such-data"
 [ -e "$T/demo-nodata" ] && fail "demo with a missing --data made its folder"
 # A mesh there that does not read: exit 3 naming it, and nothing left behind.
