@@ -331,11 +331,13 @@ int cmd_demo(int argc, char **argv)
     const app_option *tables[] = {own, NULL};
     app_command_spec spec = {.name = cmd, .usage = demo_usage, .tables = tables,
                              .epilog = "exit codes: 0 ok (with no Vulkan device the reconstruction is skipped and said "
-                                       "so), 1 failure,\n2 usage, 3 a mesh in --data unreadable, 5 an output could not "
+                                       "so), 1 failure,\n2 usage, 3 --data missing or a mesh in it unreadable, 5 an output could not "
                                        "be written\n"};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
-    if (data_dir && !bf_file_exists(data_dir)) return app_usage_error(cmd, "--data: folder '%s' does not exist", data_dir);
+    /* A missing input is bad input (exit 3), as in every command. */
+    if (data_dir && !bf_file_exists(data_dir))
+        return app_fail(cmd, bf_fail(BF_IO, "--data: folder '%s' does not exist", data_dir));
     /* Not over an earlier demo: its frames past this run's count and its
      * reconstruction would stay beside the new files (synth refuses the same). */
     static const char *const held[] = {"seq/depth.txt", "seq/depth", "stats.json"};

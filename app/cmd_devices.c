@@ -160,7 +160,8 @@ int cmd_devices(int argc, char **argv)
     };
     const app_option *tables[] = {own, NULL};
     app_command_spec spec = {.name = "devices", .usage = devices_usage, .tables = tables,
-                             .epilog = "exit codes: 0 ok, 2 usage, 4 no (matching) Vulkan device\n"};
+                             .epilog = "exit codes: 0 ok, 2 usage, 4 no (matching) Vulkan device, 5 standard output "
+                                       "could not be written\n"};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     static gpu_device_info devs[GPU_MAX_DEVICES];

@@ -423,7 +423,7 @@ int cmd_eval_motion(int argc, char **argv)
         .epilog = "exit codes: 0 ok, 1 failure, 2 usage (--camera with a --calibration that has a depth camera),\n"
                   "3 bad input (an unreadable frame, trajectory or --calibration file, a frame without colour,\n"
                   "'groundtruth' for a sequence without it, a calibration's depth camera of another size, no\n"
-                  "pair the colour gives a motion for), 5 the CSV could not be written\n"
+                  "pair the colour gives a motion for), 5 the CSV or standard output could not be written\n"
                   "\nSee docs/eval.md.\n",
     };
     int rc = app_options_parse(&spec, argc, argv);

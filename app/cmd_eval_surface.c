@@ -227,7 +227,7 @@ int cmd_eval_surface(int argc, char **argv)
     const app_option *tables[] = {own, seq, NULL};
     app_command_spec spec = {.name = cmd, .usage = usage_text, .tables = tables,
                              .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 a mesh, sequence or trajectory "
-                                       "unreadable or malformed\n"};
+                                       "unreadable or malformed,\n5 standard output could not be written\n"};
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
     if (!rec_path == !dp.seq) return app_usage_error(cmd, "give exactly one of --reconstruction and --depth");

@@ -62,8 +62,8 @@ int cmd_eval_traj(int argc, char **argv)
     app_command_spec spec = {
         .name = cmd, .usage = usage_text, .tables = tables, .positional = paths, .min_positional = 2,
         .max_positional = 2, .positional_missing = "needs GT and EST trajectory files",
-        .epilog = "exit codes: 0 ok, 2 usage, 3 a trajectory unreadable or malformed, or too few poses matched in "
-                  "time\n",
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 a trajectory unreadable or malformed, or too few poses "
+                  "matched in time,\n5 standard output could not be written\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;

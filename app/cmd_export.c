@@ -145,9 +145,10 @@ int cmd_export(int argc, char **argv)
         cJSON_AddNumberToObject(o, "seconds", secs);
         s = app_json_print(o);
     } else if (s == BF_OK) {
-        printf("bitfuse export: %s (%u chunks, %u bricks%s) -> %s (%s): %llu %s in %.1f s\n", dir, rep.n_chunks,
+        printf("bitfuse export: %s (%u chunks, %u bricks%s) -> %s (%s): %llu %s%s in %.1f s\n", dir, rep.n_chunks,
                rep.n_bricks, rep.n_bad || rep.n_missing ? ", some chunk files left out" : "", out, mesh_format_name(fmt),
-               (unsigned long long)(points ? data.n_verts : data.n_tris), points ? "points" : "triangles", secs);
+               (unsigned long long)(points ? data.n_verts : data.n_tris), points ? "point" : "triangle",
+               app_s(points ? data.n_verts : data.n_tris), secs);
         if (ss.tris_after != ss.tris_before)
             printf("  simplified from %llu triangles in %.1f s (meshoptimizer's error estimate %.2f mm%s)\n",
                    (unsigned long long)ss.tris_before, ss.seconds, 1e3 * ss.error_m,

@@ -109,7 +109,8 @@ int cmd_info(int argc, char **argv)
     app_command_spec spec = {
         .name = "info", .usage = info_usage, .tables = tables, .positional = &path, .min_positional = 1,
         .max_positional = 1, .positional_missing = "no sequence given",
-        .epilog = "exit codes: 0 ok, 2 usage, 3 unreadable or malformed input (also a store of a newer version)\n",
+        .epilog = "exit codes: 0 ok, 1 failure, 2 usage, 3 unreadable or malformed input (also a store of a newer "
+                  "version),\n5 standard output could not be written\n",
     };
     int rc = app_options_parse(&spec, argc, argv);
     if (rc) return rc < 0 ? APP_EXIT_OK : rc;
