@@ -254,6 +254,7 @@ static void start_window(fusion_map *m, uint32_t last)
     m->window_first = last + 1 >= m->cfg.window ? last + 1 - m->cfg.window : 0;
     m->window_slices_done = 0;
     m->window_pending = true;
+    m->window_whole = false;
     m->window_count = 0;
     memset(m->slice_start, 0, sizeof m->slice_start);
     gpu_cmd_stage_begin(m->ctx, "fusion.window_list");
@@ -422,6 +423,7 @@ bf_status fusion_flush(fusion_map *m)
     if (tail) {
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         start_window(m, m->n_frames - 1);
+        m->window_whole = m->window_first == 0;
     }
     if (!tail) trim_all(m);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);

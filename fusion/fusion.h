@@ -41,7 +41,9 @@ typedef struct fusion_config {
     uint32_t hash_buckets;  /* chunk hash buckets, default 4096 */
     uint32_t hash_overflow; /* overflow entries, default 4096 */
     bf_sensor sensor;       /* noise model and range, default Kinect v1 (recon/ sets its own) */
-    float conf_weight;      /* accumulated weight that makes a voxel confident, default 4 */
+    float conf_weight;      /* accumulated weight that makes a voxel confident, default 4; a
+                               window of fewer frames asks as many, the one window of a whole
+                               sequence that short half as many (at least 1) */
     float band_sigmas;      /* allocation band around a sample: +-k sigma(z), default 3 */
     /* Shape of the integration kernel (docs/fusion_integrate.md): tuning for benchmarks and
        tests; every choice gives the same bits. 0: chosen by device type (the default). */

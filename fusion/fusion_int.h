@@ -63,6 +63,10 @@ struct fusion_map {
     uint32_t slice_start[FUSION_MAX_SLICES + 1]; /* slice k's first list place (read back with the count) */
     uint32_t window_slices_done;
     bool window_pending;
+    /* The window fusion_flush started holds every frame of the sequence (a
+     * sequence shorter than a window): its confidence threshold is
+     * fusion__window_conf_weight's. */
+    bool window_whole;
     uint32_t n_windows_done;  /* windows whose last slice has been recorded */
     uint32_t fails_seen;      /* pool-full drops already reported */
     bool has_incoming;        /* the incoming slot holds a frame's depth (fusion_upload_frame) */

@@ -111,6 +111,24 @@ uint32_t fusion__max_groups_x(const fusion_map *m)
     return m->cfg.max_groups_x && m->cfg.max_groups_x < max_x ? m->cfg.max_groups_x : max_x;
 }
 
+/* The weight that makes a voxel confident in a window of n frames: the
+ * configured one, or n for a window of fewer frames (the first windows of a
+ * scan), so a voxel seen in every one of its frames still is. The window
+ * that holds a whole sequence shorter than twice the threshold (whole:
+ * fusion_flush's one window of a few frames) asks for half its frames'
+ * weight instead, at least 1: asked to be seen with full weight in every
+ * frame, the voxels just behind a noisy surface rarely were, and 2-7
+ * frames made less surface than 1 (docs/fusion.md, "Short sequences"). */
+static float window_conf_weight(float conf_weight, uint32_t n_frames, bool whole)
+{
+    float cap = (float)n_frames;
+    if (whole) {
+        cap = 0.5f * (float)n_frames;
+        if (cap < 1.0f) cap = 1.0f;
+    }
+    return conf_weight < cap ? conf_weight : cap;
+}
+
 fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t first, uint32_t max_count,
                                                uint32_t frame_first, uint32_t n_frames, bool set_confidence)
 {
@@ -124,9 +142,7 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         .set_confidence = set_confidence ? 1u : 0u,
         .max_groups_x = fusion__max_groups_x(m),
         .chunk_m = m->cfg.chunk_m,
-        /* A window shorter than the threshold (a sequence of fewer frames)
-         * can still make a voxel confident: seen in every one of its frames. */
-        .conf_weight = m->cfg.conf_weight < (float)n_frames ? m->cfg.conf_weight : (float)n_frames,
+        .conf_weight = window_conf_weight(m->cfg.conf_weight, n_frames, set_confidence && m->window_whole),
         .sigma_a = m->cfg.sensor.sigma_a,
         .sigma_b = m->cfg.sensor.sigma_b,
         .sigma_c = m->cfg.sensor.sigma_c,
