@@ -71,8 +71,9 @@ static int parse_args(int argc, char **argv, convert_args *a)
 /* The frames of src into the log or TUM writer (exactly one is set), until
  * the source ends or *stop is set (Ctrl-C: what was converted is kept). */
 static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_tum_writer *tw,
-                                const volatile sig_atomic_t *stop, uint32_t *n_out)
+                                const volatile sig_atomic_t *stop, uint32_t *n_out, bool *kept)
 {
+    *kept = false;
     bf_progress prog;
     bf_progress_begin(&prog, "convert", src->n_frames);
     bf_frame f;
@@ -92,8 +93,10 @@ static bf_status convert_frames(rgbd_source *src, replay_log_writer *lw, replay_
     if (tw && n > 0 && (s == BF_FORMAT || s == BF_IO)) {
         char msg[BF_ERROR_CAP];
         snprintf(msg, sizeof msg, "%s", bf_last_error());
-        if (replay_tum_writer_finish(tw) == BF_OK)
+        if (replay_tum_writer_finish(tw) == BF_OK) {
+            *kept = true;
             return bf_fail(s, "%s (the %u frames before it are in the folder)", msg, n);
+        }
         return bf_fail(s, "%s", msg);
     }
     if (s != BF_END) return s;
@@ -126,7 +129,8 @@ int cmd_convert(int argc, char **argv)
     s = a.to_log ? replay_log_writer_create(a.out, rgbd_source_intrinsics(src), &a.lcfg, &lw)
                  : replay_tum_writer_create(a.out, rgbd_source_intrinsics(src), &tw);
     uint32_t n = 0;
-    if (s == BF_OK) s = convert_frames(src, lw, tw, stop, &n);
+    bool kept = false; /* a bad input frame ended the folder with the frames before it */
+    if (s == BF_OK) s = convert_frames(src, lw, tw, stop, &n, &kept);
     bool interrupted = app_stop_end();
     uint32_t skipped = app_skipped_frames(dev);
     replay_log_stats L = {0};
@@ -143,7 +147,12 @@ int cmd_convert(int argc, char **argv)
         printf("bitfuse convert: stopped by a signal before any frame: nothing written\n");
         return APP_EXIT_OK;
     }
-    if (s) return app_fail(cmd, s);
+    /* The folder's frames before a bad one are kept: its stats.json says
+     * so (input_error), as replay's and fuse's do, and the exit is 3. */
+    char input_error[BF_ERROR_CAP] = "";
+    bf_status s_input = s;
+    if (s && kept) snprintf(input_error, sizeof input_error, "%s", bf_last_error());
+    else if (s) return app_fail(cmd, s);
 
     char json_path[4200];
     size_t len = strlen(a.out);
@@ -159,10 +168,13 @@ int cmd_convert(int argc, char **argv)
     cJSON_AddNumberToObject(o, "skipped", skipped);
     cJSON_AddNumberToObject(o, "dropped", 0);
     cJSON_AddBoolToObject(o, "interrupted", interrupted);
+    if (input_error[0]) cJSON_AddStringToObject(o, "input_error", input_error);
+    else cJSON_AddNullToObject(o, "input_error");
     if (a.to_log) app_json_log_stats(o, &a.lcfg, &L, seconds);
     cJSON_AddNumberToObject(o, "seconds", seconds);
     cJSON_AddNumberToObject(o, "fps", seconds > 0 ? n / seconds : NAN);
     if ((s = app_json_write(json_path, o)) != BF_OK) return app_fail(cmd, s);
+    if (input_error[0]) return app_fail(cmd, bf_fail(s_input, "%s", input_error));
 
     printf("bitfuse convert: %u frame%s (%u skipped) from %s to %s (%s)%s\n", n, app_s(n), skipped, a.in, a.out,
            a.to_log ? "bitfuse log" : "TUM folder", interrupted ? " (stopped by a signal; complete up to there)" : "");

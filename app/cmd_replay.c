@@ -940,8 +940,10 @@ static void print_summary(const replay_args *a, const replay_result *r, const rg
     else {
         char files[128];
         app_mesh_file_list(&r->out, files, sizeof files);
-        printf("  wrote            %s/{trajectory.txt,frames.csv,%spoints.ply,stats.json} in %.1f s\n", a->out, files,
-               r->seconds);
+        char views[64] = "";
+        if (r->n_views) snprintf(views, sizeof views, ",views/ (%u image%s)", r->n_views, app_s(r->n_views));
+        printf("  wrote            %s/{trajectory.txt,frames.csv,%spoints.ply,stats.json%s} in %.1f s\n", a->out, files,
+               views, r->seconds);
     }
 }
 

@@ -587,6 +587,9 @@ mentions "checksum"
 # Converted to a folder, the frames before the bad one are indexed and read.
 expect 3 "$B" convert "$T/flip.bflog" --out "$T/flipdir"
 mentions "the 2 frames before it are in the folder"
+# Its stats.json says so, as replay's and fuse's do (there was none).
+py -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] == 2 and 'frame 2' in d['input_error'], d" \
+    "$T/flipdir/stats.json" || fail "convert stopped by a bad frame: stats.json without its frames and input_error"
 expect 0 "$B" info "$T/flipdir" --json
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['frames'] == 2, d" "$T/out" ||
     fail "the frames before a bad one are not a readable folder"
@@ -782,6 +785,7 @@ expect 0 "$B" replay "$T/seq" --out "$T/rp" --view-every 2
 is_json "$T/rp/stats.json"
 [ "$(grep -vc '^#' "$T/rp/trajectory.txt")" = 3 ] || fail "replay: trajectory.txt has not 3 poses"
 [ -s "$T/rp/views/000000.png" ] || fail "replay --view-every 2: no view of frame 0"
+grep -q "stats.json,views/ (2 images)}" "$T/out" || fail "replay --view-every 2: the summary does not name views/: $(grep wrote "$T/out")"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); t=d['tracking']; assert d['frames'] == 3 and t['tracked'] + t['lost'] + t['no_depth'] == 3 and d['ate_m'] is not None, d" \
     "$T/rp/stats.json" || fail "replay stats.json: frames/tracking/ate"
 expect 0 "$B" eval-traj "$T/seq/groundtruth.txt" "$T/rp/trajectory.txt" --json
