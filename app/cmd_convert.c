@@ -173,7 +173,10 @@ int cmd_convert(int argc, char **argv)
     if (a.to_log) app_json_log_stats(o, &a.lcfg, &L, seconds);
     cJSON_AddNumberToObject(o, "seconds", seconds);
     cJSON_AddNumberToObject(o, "fps", seconds > 0 ? n / seconds : NAN);
-    if ((s = app_json_write(json_path, o)) != BF_OK) return app_fail(cmd, s);
+    if ((s = app_json_write(json_path, o)) != BF_OK) {
+        if (input_error[0]) bf_warn("%s: %s", cmd, input_error); /* the folder is cut short: said either way */
+        return app_fail(cmd, s);
+    }
     if (input_error[0]) return app_fail(cmd, bf_fail(s_input, "%s", input_error));
 
     printf("bitfuse convert: %u frame%s (%u skipped) from %s to %s (%s)%s\n", n, app_s(n), skipped, a.in, a.out,

@@ -340,6 +340,7 @@ int cmd_demo(int argc, char **argv)
         return app_fail(cmd, bf_fail(BF_IO, "--data: folder '%s' does not exist", data_dir));
     /* Not over an earlier demo: its frames past this run's count and its
      * reconstruction would stay beside the new files (synth refuses the same). */
+    if ((rc = app_check_out_not_sequence(cmd, out_dir, false)) != 0) return rc;
     static const char *const held[] = {"seq/depth.txt", "seq/depth", "stats.json"};
     for (size_t i = 0; i < sizeof held / sizeof *held; i++) {
         char p[4200];

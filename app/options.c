@@ -167,8 +167,12 @@ static int set_value(const char *cmd, const app_option *row, const char *v)
     case APP_OPT_U64: {
         char *end;
         if (!v[0] || v[0] == '+') return usage(cmd, "%s: '%s' is not a whole number", row->name, v);
-        if (v[0] == '-' && v[1] >= '0' && v[1] <= '9') return usage(cmd, "%s: '%s' is below 0", row->name, v);
-        if (v[0] == '-') return usage(cmd, "%s: '%s' is not a whole number", row->name, v);
+        if (v[0] == '-') {
+            char *e;
+            long long neg = strtoll(v, &e, 10);
+            if (!*e && e != v + 1 && neg < 0) return usage(cmd, "%s: '%s' is below 0", row->name, v);
+            return usage(cmd, "%s: '%s' is not a whole number", row->name, v);
+        }
         unsigned long long u = strtoull(v, &end, 10);
         if (*end) return usage(cmd, "%s: '%s' is not a whole number", row->name, v);
         if ((rc = check_bounds(cmd, row, v, (double)u))) return rc;

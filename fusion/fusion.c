@@ -423,7 +423,8 @@ bf_status fusion_flush(fusion_map *m)
     if (tail) {
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
         start_window(m, m->n_frames - 1);
-        m->window_whole = m->window_first == 0;
+        /* Not over a loaded map: its frames are not this window's. */
+        m->window_whole = m->window_first == 0 && m->n_loaded == 0;
     }
     if (!tail) trim_all(m);
     gpu_cmd_barrier(m->ctx, GPU_BARRIER_HOST);

@@ -64,8 +64,9 @@ struct fusion_map {
     uint32_t window_slices_done;
     bool window_pending;
     /* The window fusion_flush started holds every frame of the sequence (a
-     * sequence shorter than a window): its confidence threshold is
-     * fusion__window_conf_weight's. */
+     * sequence shorter than a window, on a map not loaded): its confidence
+     * threshold is half its frames' weight (integrate.c,
+     * window_conf_weight). */
     bool window_whole;
     uint32_t n_windows_done;  /* windows whose last slice has been recorded */
     uint32_t fails_seen;      /* pool-full drops already reported */

@@ -1070,6 +1070,10 @@ expect 2 "$B" demo --frames 2 --no-gpu --out "$T/demo-twice"
 mentions "--out $T/demo-twice holds an earlier run (seq/depth.txt)"
 [ "$(cd "$T/demo-twice" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] ||
     fail "a refused demo changed the earlier run's files"
+st_seq=$(md5sum <"$T/seq/stats.json")
+expect 2 "$B" demo --frames 2 --no-gpu --out "$T/seq"
+mentions "--out $T/seq holds a sequence already (depth.txt)"
+[ "$(md5sum <"$T/seq/stats.json")" = "$st_seq" ] || fail "a refused demo changed a sequence's stats.json"
 expect 3 "$B" demo --data "$T/no-such-data" --no-gpu --out "$T/demo-nodata"
 mentions "$T/no-such-data"
 [ -e "$T/demo-nodata" ] && fail "demo with a missing --data made its folder"

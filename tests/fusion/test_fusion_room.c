@@ -529,4 +529,6 @@ BF_TEST(a_few_frames_keep_the_surface_one_frame_keeps)
     CHECK(n1 > 1000);
     CHECK(n2 >= 0.8 * n1);
     CHECK(n4 >= 0.8 * n1);
+    GPU_FIXTURE_CHECK_CLEAN(ctx);
+    gpu_context_destroy(ctx);
 }
