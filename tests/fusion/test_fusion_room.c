@@ -34,6 +34,20 @@ static void write_sweep(const char *path)
     bf_traj_free(&t);
 }
 
+/* The room without the shared meshes (walls, table and boxes: no test
+ * depends on ../shared/data), n frames of the sweep at 320x240 with Kinect
+ * v1 noise of the given seed, written to seq (the test folder's name). */
+static void synth_room(const char *name, uint32_t n, uint64_t seed, char seq[512])
+{
+    char traj[600];
+    snprintf(traj, sizeof traj, "%s/%s_sweep.txt", bf_test_tmpdir(), name);
+    snprintf(seq, 512, "%s/%s", bf_test_tmpdir(), name);
+    write_sweep(traj);
+    synth_config sc = {.scene = "room", .traj_path = traj, .n_frames = n, .noise = SYNTH_NOISE_KINECT1,
+                       .seed = seed, .K = {320, 240, 262.5, 262.5, 159.5, 119.5, 5000}, .out_dir = seq};
+    CHECK_OK(synth_run(&sc, NULL));
+}
+
 /* The scene's colour (0..255 per channel) at its point closest to p
  * within 2 cm, seen along view; false when none is that close. */
 static bool scene_colour_near(const synth_scene *scene, const mesh_bvh *bvh, bf_vec3 p, bf_vec3 view, double rgb[3])
@@ -203,15 +217,8 @@ BF_TEST(fused_room_surface_is_within_a_voxel_and_covers_what_was_seen)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    char traj[512], seq[512], path[600];
-    snprintf(traj, sizeof traj, "%s/sweep.txt", bf_test_tmpdir());
-    snprintf(seq, sizeof seq, "%s/room", bf_test_tmpdir());
-    write_sweep(traj);
-    /* Without the shared meshes the room is walls, table and boxes: the
-     * test does not depend on ../shared/data. */
-    synth_config sc = {.scene = "room", .traj_path = traj, .n_frames = 36, .noise = SYNTH_NOISE_KINECT1,
-                            .seed = 3, .K = {320, 240, 262.5, 262.5, 159.5, 119.5, 5000}, .out_dir = seq};
-    CHECK_OK(synth_run(&sc, NULL));
+    char seq[512], path[600];
+    synth_room("room", 36, 3, seq);
 
     rgbd_source *src;
     CHECK_OK(replay_open(seq, NULL, &src));
@@ -514,13 +521,8 @@ BF_TEST(a_few_frames_keep_the_surface_one_frame_keeps)
 {
     gpu_context *ctx;
     GPU_FIXTURE_OPEN(ctx);
-    char traj[512], seq[512];
-    snprintf(traj, sizeof traj, "%s/sweep_short.txt", bf_test_tmpdir());
-    snprintf(seq, sizeof seq, "%s/room_short", bf_test_tmpdir());
-    write_sweep(traj);
-    synth_config sc = {.scene = "room", .traj_path = traj, .n_frames = 4, .noise = SYNTH_NOISE_KINECT1,
-                       .seed = 5, .K = {320, 240, 262.5, 262.5, 159.5, 119.5, 5000}, .out_dir = seq};
-    CHECK_OK(synth_run(&sc, NULL));
+    char seq[512];
+    synth_room("room_short", 4, 5, seq);
     uint32_t n1, n2, n4;
     short_sequence_surface(ctx, seq, 1, &n1);
     short_sequence_surface(ctx, seq, 2, &n2);
