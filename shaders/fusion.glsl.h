@@ -377,7 +377,7 @@ BF_FN bf_u32 fusion_project_pixel(fusion_frame f, fusion_point c)
     BF_PRECISE bf_f32 u = f.fx * c.x / c.z + f.cx + 0.5f;
     BF_PRECISE bf_f32 v = f.fy * c.y / c.z + f.cy + 0.5f;
     if (!(u >= 0.0f && v >= 0.0f && u < BF_F32(f.width) && v < BF_F32(f.height))) return FUSION_NONE;
-    return BF_U32(v) * f.width + BF_U32(u); /* truncation is floor for u, v >= 0 */
+    return BF_TRUNC_U32(v) * f.width + BF_TRUNC_U32(u); /* truncation is floor for u, v >= 0 */
 }
 
 /* Incremental voxel stepping (the integration kernel and its oracle). For a
@@ -453,7 +453,7 @@ BF_FN bf_u32 fusion_project_step(fusion_point h, bf_u32 width, bf_u32 height)
     BF_PRECISE bf_f32 u = h.x / h.z;
     BF_PRECISE bf_f32 v = h.y / h.z;
     if (!(u >= 0.0f && v >= 0.0f && u < BF_F32(width) && v < BF_F32(height))) return FUSION_NONE;
-    return BF_U32(v) * width + BF_U32(u);
+    return BF_TRUNC_U32(v) * width + BF_TRUNC_U32(u);
 }
 
 /* Raw 16-bit depth of pixel i of a ring image, from its word (two pixels
@@ -522,7 +522,7 @@ BF_FN fusion_acc fusion_acc_zero(void)
 BF_FN bf_u32 fusion_sigma_um(bf_f32 sigma)
 {
     BF_PRECISE bf_f32 um = sigma * 1.0e6f + 0.5f;
-    return um < BF_F32(FUSION_SIGMA_UM_MAX) ? BF_U32(um) : FUSION_SIGMA_UM_MAX;
+    return um < BF_F32(FUSION_SIGMA_UM_MAX) ? BF_TRUNC_U32(um) : FUSION_SIGMA_UM_MAX;
 }
 
 BF_FN fusion_acc fusion_acc_add(fusion_acc a, fusion_obs o)
@@ -713,9 +713,9 @@ BF_FN bf_u32 fusion_rgb565(bf_f32 r, bf_f32 g, bf_f32 b)
     BF_PRECISE bf_f32 rr = r * (31.0f / 255.0f) + 0.5f;
     BF_PRECISE bf_f32 gg = g * (63.0f / 255.0f) + 0.5f;
     BF_PRECISE bf_f32 bb = b * (31.0f / 255.0f) + 0.5f;
-    bf_u32 ri = rr < 31.0f ? (rr > 0.0f ? BF_U32(rr) : 0u) : 31u;
-    bf_u32 gi = gg < 63.0f ? (gg > 0.0f ? BF_U32(gg) : 0u) : 63u;
-    bf_u32 bi = bb < 31.0f ? (bb > 0.0f ? BF_U32(bb) : 0u) : 31u;
+    bf_u32 ri = rr < 31.0f ? (rr > 0.0f ? BF_TRUNC_U32(rr) : 0u) : 31u;
+    bf_u32 gi = gg < 63.0f ? (gg > 0.0f ? BF_TRUNC_U32(gg) : 0u) : 63u;
+    bf_u32 bi = bb < 31.0f ? (bb > 0.0f ? BF_TRUNC_U32(bb) : 0u) : 31u;
     bf_u32 c = (ri << 11) | (gi << 5) | bi;
     return c != 0u ? c : 1u;
 }

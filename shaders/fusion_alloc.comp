@@ -133,10 +133,10 @@ void touch_brick(uint node, uint entry, uvec3 cell, uint level)
 /* The chunk of map point p and its cell at level inside the chunk. */
 void locate(vec3 p, uint level, out ivec3 key, out uvec3 cell)
 {
-    key = ivec3(floor(p * (1.0 / pc.chunk_m)));
+    key = BF_TRUNC_I32(floor(p * (1.0 / pc.chunk_m)));
     vec3 q = p - vec3(key) * pc.chunk_m; /* chunk-local, in [0, chunk_m) up to rounding */
     float cells_per_m = float(1u << level) / pc.chunk_m; /* level-`level` cells per metre */
-    cell = uvec3(clamp(ivec3(floor(q * cells_per_m)), ivec3(0), ivec3((1 << level) - 1)));
+    cell = uvec3(clamp(BF_TRUNC_I32(floor(q * cells_per_m)), ivec3(0), ivec3((1 << level) - 1)));
 }
 
 /* Inserts the brick of cell at level in chunk key; false if it must be

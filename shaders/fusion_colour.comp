@@ -308,7 +308,7 @@ void colour_from_frames(uint tid, int key_x, int key_y, int key_z, uint cell_x, 
                 float cu = pc.cfx * xd + pc.ccx + 0.5, cv = pc.cfy * yd + pc.ccy + 0.5;
                 bool inside = pcol.z > 0.0 && cu >= 0.0 && cv >= 0.0 && cu < float(width) && cv < float(height);
                 near = near && inside;
-                cpix = inside ? uint(cv) * width + uint(cu) : 0u;
+                cpix = inside ? BF_TRUNC_U32(cv) * width + BF_TRUNC_U32(cu) : 0u;
             }
             uint c = ring_colour(base, cpix);
             float wgt = near ? fusion_colour_weight(cos_view, d0) : 0.0;

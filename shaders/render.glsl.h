@@ -141,9 +141,9 @@ BF_FN bf_u32 render_shade_colour(bf_f32 cos_theta, bf_u32 rgb565)
 {
     bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
     bf_f32 i = 0.55f + 0.45f * c;
-    bf_u32 r = BF_U32(BF_F32(bf_565_r(rgb565)) * i + 0.5f);
-    bf_u32 g = BF_U32(BF_F32(bf_565_g(rgb565)) * i + 0.5f);
-    bf_u32 b = BF_U32(BF_F32(bf_565_b(rgb565)) * i + 0.5f);
+    bf_u32 r = BF_TRUNC_U32(BF_F32(bf_565_r(rgb565)) * i + 0.5f);
+    bf_u32 g = BF_TRUNC_U32(BF_F32(bf_565_g(rgb565)) * i + 0.5f);
+    bf_u32 b = BF_TRUNC_U32(BF_F32(bf_565_b(rgb565)) * i + 0.5f);
     return r | (g << 8) | (b << 16) | (255u << 24);
 }
 
@@ -158,9 +158,9 @@ BF_FN bf_u32 render_shade(bf_f32 cos_theta, bf_u32 level)
     if (k == 3u) { tr = 1.0f; tg = 0.85f; tb = 1.0f; }
     bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
     bf_f32 i = 0.12f + 0.88f * c;
-    bf_u32 r = BF_U32(255.0f * i * tr + 0.5f);
-    bf_u32 g = BF_U32(255.0f * i * tg + 0.5f);
-    bf_u32 b = BF_U32(255.0f * i * tb + 0.5f);
+    bf_u32 r = BF_TRUNC_U32(255.0f * i * tr + 0.5f);
+    bf_u32 g = BF_TRUNC_U32(255.0f * i * tg + 0.5f);
+    bf_u32 b = BF_TRUNC_U32(255.0f * i * tb + 0.5f);
     return r | (g << 8) | (b << 16) | (255u << 24);
 }
 
@@ -250,9 +250,9 @@ BF_FN bf_u32 render_shade_particle(bf_f32 cos_theta, bf_u32 rgb)
 {
     bf_f32 c = cos_theta < 0.0f ? 0.0f : (cos_theta > 1.0f ? 1.0f : cos_theta);
     bf_f32 i = 0.2f + 0.8f * c;
-    bf_u32 r = BF_U32(BF_F32(rgb & 255u) * i + 0.5f);
-    bf_u32 g = BF_U32(BF_F32((rgb >> 8) & 255u) * i + 0.5f);
-    bf_u32 b = BF_U32(BF_F32((rgb >> 16) & 255u) * i + 0.5f);
+    bf_u32 r = BF_TRUNC_U32(BF_F32(rgb & 255u) * i + 0.5f);
+    bf_u32 g = BF_TRUNC_U32(BF_F32((rgb >> 8) & 255u) * i + 0.5f);
+    bf_u32 b = BF_TRUNC_U32(BF_F32((rgb >> 16) & 255u) * i + 0.5f);
     return r | (g << 8) | (b << 16) | (255u << 24);
 }
 

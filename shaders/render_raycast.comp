@@ -107,7 +107,7 @@ void gather_block(ivec3 B, uint level, uint hit_slot, ivec3 hit_brick, bool conf
 uint voxel_colour(uint slot, ivec3 brick, uint level, vec3 p)
 {
     float v = fusion_voxel_m(pc.view.chunk_m, level);
-    ivec3 G = ivec3(floor(p / v)), nb = G >> 3;
+    ivec3 G = BF_TRUNC_I32(floor(p / v)), nb = G >> 3;
     if (nb != brick) slot = render_brick_at(walk_map(), nb, level);
     if (slot == FUSION_NONE) return 0u;
     ivec3 g = G - nb * 8;
@@ -180,7 +180,7 @@ float subvoxel_depth(render_ray ray, uint level, uint slot, ivec3 brick, float s
     for (uint it = 0u; it < n_eval; it++) {
         /* Voxel-centre coordinates: centre of voxel i at q = i. */
         vec3 q = (ray.o + s * ray.dir) * inv_v - 0.5;
-        ivec3 Gn = ivec3(floor(q));
+        ivec3 Gn = BF_TRUNC_I32(floor(q));
         if (Gn != G) {
             /* The 3x3x3 means at the 8 centres around the point: boxes of
              * the 4x4x4 block around them. */

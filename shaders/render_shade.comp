@@ -80,7 +80,7 @@ void main()
     vec3 p = back_project(u, v, z);
     vec3 view = normalize(p);
     float voxel = fusion_voxel_m(pc.view.chunk_m, min(level, FUSION_MAX_LEVEL));
-    int k = clamp(int(RENDER_NORMAL_VOXELS * voxel * pc.view.fx / z + 0.5), 1, RENDER_NORMAL_MAX_PX);
+    int k = clamp(BF_TRUNC_I32(RENDER_NORMAL_VOXELS * voxel * pc.view.fx / z + 0.5), 1, RENDER_NORMAL_MAX_PX);
     float thr_k = thr * float(k);
     vec3 tx, ty, n;
     if (tangent(u, v, k, 0, z, thr_k, tx) && tangent(u, v, 0, k, z, thr_k, ty)) {

@@ -50,7 +50,7 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
                      float s_in, float s_out, uint flags, inout render_trace tr)
 {
     vec3 p = ray.o + render_nudged(s_in) * ray.dir;
-    ivec3 idx = clamp(ivec3(floor((p - brick_lo) * (1.0 / voxel_m))), ivec3(0), ivec3(7));
+    ivec3 idx = clamp(BF_TRUNC_I32(floor((p - brick_lo) * (1.0 / voxel_m))), ivec3(0), ivec3(7));
     ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
     vec3 face = brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m;
     vec3 s_max = (face - ray.o) * ray.inv_dir;
@@ -78,7 +78,7 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
                                                                  : s_enter;
                 tr.hit_level = level;
                 tr.hit_slot = slot;
-                tr.hit_brick = ivec3(floor(brick_lo * (0.125 / voxel_m) + 0.5));
+                tr.hit_brick = BF_TRUNC_I32(floor(brick_lo * (0.125 / voxel_m) + 0.5));
                 tr.hit_s_exit = min(s_max.x, min(s_max.y, s_max.z));
                 return true;
             }
@@ -370,11 +370,11 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
      * [0, 8]. */
     int lo_off = int(ceil(-rc - 0.5)), hi_off = int(floor(8.0 + rc - 0.5));
     vec3 p0 = ray.o + render_nudged(s_in) * ray.dir;
-    ivec3 idx = clamp(ivec3(floor((p0 - brick_lo) * inv_v)), ivec3(0), ivec3(7));
+    ivec3 idx = clamp(BF_TRUNC_I32(floor((p0 - brick_lo) * inv_v)), ivec3(0), ivec3(7));
     ivec3 stp = ivec3(ray.dir.x > 0.0 ? 1 : -1, ray.dir.y > 0.0 ? 1 : -1, ray.dir.z > 0.0 ? 1 : -1);
     vec3 s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
     vec3 s_delta = voxel_m * abs(ray.inv_dir);
-    ivec3 B = ivec3(floor(brick_lo * inv_v * 0.125 + 0.5));
+    ivec3 B = BF_TRUNC_I32(floor(brick_lo * inv_v * 0.125 + 0.5));
     if (node != FUSION_NONE) {
         /* The walk's node of this brick: its parent's children are its
          * siblings, which most of the searches' neighbours are. */
@@ -408,7 +408,7 @@ bool render_traverse(uint slot, uint node, uint parent, uint level, vec3 brick_l
             if (s_q >= s_out) break;
             s_enter = s_q;
             vec3 pq = ray.o + render_nudged(s_q) * ray.dir;
-            idx = ivec3(floor((pq - brick_lo) * inv_v));
+            idx = BF_TRUNC_I32(floor((pq - brick_lo) * inv_v));
             if (any(lessThan(idx, ivec3(0))) || any(greaterThan(idx, ivec3(7)))) break;
             s_max = (brick_lo + (vec3(idx) + vec3(greaterThan(ray.dir, vec3(0.0)))) * voxel_m - ray.o) * ray.inv_dir;
             continue;

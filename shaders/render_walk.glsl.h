@@ -166,7 +166,7 @@ bool render_walk_from(render_walk_map m, render_ray ray, inout float s, float s_
     for (uint iter = 0u; iter < m.max_cells && s < s_far; iter++) {
         float sp = render_nudged(s);
         vec3 p = ray.o + sp * ray.dir;
-        ivec3 key = ivec3(floor(p * inv_chunk));
+        ivec3 key = BF_TRUNC_I32(floor(p * inv_chunk));
         if (!have_key || key != cur_key) {
             have_key = true;
             cur_key = key;
@@ -179,7 +179,7 @@ bool render_walk_from(render_walk_map m, render_ray ray, inout float s, float s_
             s = max(render_cell_exit(ray, chunk_lo, m.chunk_m), sp);
             continue;
         }
-        uvec3 g = uvec3(clamp(ivec3(floor((p - chunk_lo) * grid_per_m)), ivec3(0), ivec3(int(RENDER_GRID) - 1)));
+        uvec3 g = uvec3(clamp(BF_TRUNC_I32(floor((p - chunk_lo) * grid_per_m)), ivec3(0), ivec3(int(RENDER_GRID) - 1)));
         if (deep >= 0) {
             /* Pop to the deepest ancestor that also holds the new point. */
             uint diff = (g.x ^ g_prev.x) | (g.y ^ g_prev.y) | (g.z ^ g_prev.z);

@@ -98,7 +98,7 @@ void add_photometric(uint i, vec3 p, inout icp_acc A)
     float ic = frame_i.v[i];
     float u = pc.fx * p.x / p.z + pc.cx, v = pc.fy * p.y / p.z + pc.cy;
     if (!(ic >= 0.0) || !(u >= 0.0 && v >= 0.0 && u < float(W - 1u) && v < float(H - 1u))) return;
-    uint x0 = uint(u), y0 = uint(v);
+    uint x0 = BF_TRUNC_U32(u), y0 = BF_TRUNC_U32(v);
     float a = u - float(x0), b = v - float(y0);
     uint j = pc.off + y0 * W + x0;
     float i00 = ref_i.v[j], i10 = ref_i.v[j + 1u], i01 = ref_i.v[j + W], i11 = ref_i.v[j + W + 1u];
@@ -140,7 +140,7 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     /* Nearest reference pixel; the float comparison also rejects NaN. */
     uint RW = pc.ref_size & 0xFFFFu, RH = pc.ref_size >> 16;
     if (!(u > -0.5 && w > -0.5 && u < float(RW) - 0.5 && w < float(RH) - 0.5)) return;
-    uint ux = uint(u + 0.5), wy = uint(w + 0.5);
+    uint ux = BF_TRUNC_U32(u + 0.5), wy = BF_TRUNC_U32(w + 0.5);
     uint j = pc.ref_off + wy * RW + ux;
     float zq = ref_d.d[j];
     uint nw = ref_n.n[j];

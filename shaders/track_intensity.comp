@@ -25,7 +25,7 @@ float colour_luma(uint i)
 float colour_at(float u, float v)
 {
     if (!(u >= 0.0 && v >= 0.0 && u <= float(pc.width - 1u) && v <= float(pc.height - 1u))) return TRACK_NO_INTENSITY;
-    uint x0 = min(uint(u), pc.width - 2u), y0 = min(uint(v), pc.height - 2u);
+    uint x0 = min(BF_TRUNC_U32(u), pc.width - 2u), y0 = min(BF_TRUNC_U32(v), pc.height - 2u);
     float a = u - float(x0), b = v - float(y0);
     uint i = y0 * pc.width + x0;
     float top = mix(colour_luma(i), colour_luma(i + 1u), a);
