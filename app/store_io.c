@@ -35,14 +35,18 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
         if (s == BF_OK && st->report.n_missing && !st->report.n_bad && st->report.n_chunks)
             bf_warn("store: %s: %u listed chunk%s gone: the scan resumes without them", dir, st->report.n_missing,
                     st->report.n_missing == 1 ? " is" : "s are");
+        else if (s == BF_OK && !st->report.n_bad && st->report.n_missing)
+            s = bf_fail(BF_FORMAT,
+                        "%s: none of the %u chunk files its index lists is there (chunks/ emptied, or not "
+                        "mounted?): resuming would start its map anew; put them back, or scan into another folder",
+                        dir, st->report.n_missing);
         else if (s == BF_OK && (st->report.n_bad || st->report.n_missing))
             s = bf_fail(BF_FORMAT,
                         "%s: %u chunk file%s could not be loaded and %u listed chunk%s missing (the first: %s): "
                         "resuming would replace or remove them; export what reads (bitfuse export) or move the "
                         "bad files aside first",
                         dir, st->report.n_bad, st->report.n_bad == 1 ? "" : "s", st->report.n_missing,
-                        st->report.n_missing == 1 ? " is" : "s are",
-                        st->report.first_bad[0] ? st->report.first_bad : "none bad");
+                        st->report.n_missing == 1 ? " is" : "s are", st->report.first_bad);
         /* A store killed before its first write finished holds no pose to
          * go on from (at most some chunk files of that write): the scan
          * starts anew into it, as if it had never been saved. */
@@ -52,15 +56,17 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
          * resumes from the trajectory's poses as before. */
         if (s == BF_OK && st->is_resumed && store_keyframes_read(dir, &st->keyframes) != BF_OK)
             bf_warn("store: %s; the scan resumes with the trajectory's poses as keyframes", bf_last_error());
-        /* A map without a pose but with store.json or trajectory.bin on
-         * disk (written whole, atomically, after the chunks) is a store
-         * whose index and trajectory are both damaged, not one whose first
-         * write never finished: clearing it would delete every chunk file. */
-        bool was_written = st->report.index_found || st->report.trajectory_found;
+        /* A map without a pose but with store.json, trajectory.bin or
+         * keyframes.bin on disk (each written whole, atomically, after the
+         * chunks) is a store whose index and trajectory are damaged or were
+         * removed, not one whose first write never finished: clearing it
+         * would delete every chunk file. */
+        bool was_written = st->report.index_found || st->report.trajectory_found || st->report.keyframes_found;
         if (s == BF_OK && !st->is_resumed && st->map.n_bricks && was_written)
             s = bf_fail(BF_FORMAT,
                         "%s: holds a map (%u chunk files) but no last pose to resume from (store.json and "
-                        "trajectory.bin are unreadable): export it (bitfuse export) or scan into another folder",
+                        "trajectory.bin are unreadable or gone): export it (bitfuse export) or scan into another "
+                        "folder",
                         dir, st->report.n_chunks);
         if (s == BF_OK && !st->is_resumed) {
             bf_warn("store: %s keeps no last pose (its first write never finished): the scan starts anew into it",

@@ -519,6 +519,8 @@ bf_status store_read(const char *dir, hostmap *map, store_meta *meta, bf_traj *t
                       bf_file_exists(found);
     rep.trajectory_found = snprintf(found, sizeof found, "%s/%s", dir, STORE_TRAJ_NAME) < (int)sizeof found &&
                            bf_file_exists(found);
+    rep.keyframes_found = snprintf(found, sizeof found, "%s/%s", dir, STORE_KEYFRAMES_NAME) < (int)sizeof found &&
+                          bf_file_exists(found);
     bf_status s = store__index_read(dir, &m, &idx, &n_idx, &rep.flush);
     if (s == BF_UNSUPPORTED) return s;
     if (s == BF_OK) {

@@ -51,6 +51,7 @@ typedef struct store_report {
     bool trajectory_ok;     /* trajectory.bin read and its checksum right */
     bool index_found;       /* store.json is there, read or not (written whole, after the chunks) */
     bool trajectory_found;  /* trajectory.bin is there, read or not */
+    bool keyframes_found;   /* keyframes.bin is there, read or not (written after trajectory.bin) */
     uint64_t bytes_files;   /* bytes of the chunk files loaded */
     uint64_t bytes_raw;     /* their payloads uncompressed */
     uint32_t flush;         /* the index's write count (0 without one) */
