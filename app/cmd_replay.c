@@ -1099,9 +1099,11 @@ int app_reconstruct(const char *cmd, int argc, char **argv, bool is_live_cmd)
             r.run.is_interrupted = false; /* the stop was ours, not a signal's */
         }
         /* Every frame at or before the stored scan's end: nothing new (another
-         * sequence than the store's, or one it has scanned to its end). */
+         * sequence than the store's, or one it has scanned to its end). Not
+         * when the source failed after them: the frames it could not read are
+         * the news, reported as the input's error. */
         if (s == BF_OK && r.store.is_resumed && r.run.counts.frames == 0 && r.run.n_resume_skipped > 0 &&
-            r.run.n_skipped == 0)
+            r.run.n_skipped == 0 && r.run.source_status == BF_OK)
             bf_warn("%s: all %u frames of %s are at or before the stored scan's last time (t = %.6f s): nothing new "
                     "to scan (the sequence the store was made from, scanned to its end?)", cmd,
                     r.run.n_resume_skipped, a.seq, rs.t_last_s);

@@ -174,6 +174,14 @@ mentions "$f"
 cp -r "$T/C" "$T/C2" && mv "$T/C2/chunks/$f" "$T/bad-$f"
 expect 0 "$B" replay "$SEQ" --out "$T/c2res" --no-mesh --store "$T/C2" --resume
 mentions "2 listed chunks are gone: the scan resumes without them"
+# Every listed chunk gone (chunks/ emptied or not mounted): refused,
+# saying so, with nothing bad to move aside.
+cp -r "$T/S" "$T/E" && rm "$T/E/chunks/"*
+before=$(cd "$T/E" && find . -type f | sort | xargs md5sum | md5sum)
+expect 3 "$B" replay "$SEQ" --out "$T/eres" --no-mesh --store "$T/E" --resume
+mentions "none of the"
+grep -q "none bad" "$T/err" && fail "the all-gone refusal speaks of bad files: $(cat "$T/err")"
+[ "$(cd "$T/E" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a refused resume of an emptied store changed it"
 # store.json has no checksum: one wrong level makes every chunk file
 # inconsistent with it. Resume is refused with every file kept; export
 # says there is nothing to export instead of writing an empty mesh.
@@ -205,6 +213,14 @@ expect 0 "$B" info "$T/D"
 grep -q "writes unknown (store.json unreadable)" "$T/out" || fail "info of an unreadable index: $(head -1 "$T/out")"
 expect 0 "$B" info "$T/D" --json
 json_get "$T/out" "d['flush']" | grep -qx None || fail "info --json: flush is not null without an index"
+# Index and trajectory both removed, keyframes.bin (written after the
+# trajectory) still there: a store that was written, so not cleared either.
+[ -e "$T/S/keyframes.bin" ] || fail "the test store has no keyframes.bin"
+cp -r "$T/S" "$T/D2" && rm "$T/D2/store.json" "$T/D2/trajectory.bin"
+before=$(cd "$T/D2" && find . -type f | sort | xargs md5sum | md5sum)
+expect 3 "$B" replay "$SEQ" --out "$T/d2res" --no-mesh --store "$T/D2" --resume
+mentions "unreadable or gone"
+[ "$(cd "$T/D2" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a store without its index and trajectory was cleared"
 # A new store whose scan fails before its first write (a corrupt first
 # frame) is not left behind as an empty store the next run would refuse.
 cp -r "$SEQ" "$T/badfirst"
@@ -264,7 +280,17 @@ expect 0 "$B" replay "$T/seq.bflog" --out "$T/l1" --no-mesh --frames 30 --store 
 size=$(wc -c <"$T/seq.bflog")
 printf '\377\377\377\377' | dd of="$T/seq.bflog" bs=1 seek=$((size / 4)) conv=notrunc 2>/dev/null
 expect 3 "$B" info "$T/seq.bflog" --frames 30
+cp -r "$T/L" "$T/L3"
 expect 0 "$B" replay "$T/seq.bflog" --out "$T/l2" --no-mesh --store "$T/L" --resume
+# The first frame after the stored ones spoilt: the resume fails on it
+# (exit 3, the store kept) and does not say the log held nothing new.
+expect 0 "$B" convert "$SEQ" --out "$T/seq3.bflog"
+size=$(wc -c <"$T/seq3.bflog")
+printf '\377\377\377\377' | dd of="$T/seq3.bflog" bs=1 seek=$((size * 305 / 600)) conv=notrunc 2>/dev/null
+expect 3 "$B" replay "$T/seq3.bflog" --out "$T/l3" --no-mesh --store "$T/L3" --resume
+grep -q "nothing new" "$T/err" && fail "a resume that failed on a spoilt frame said the log held nothing new: $(cat "$T/err")"
+expect 0 "$B" info "$T/L3" --json
+[ "$(json_get "$T/out" "d['frames']")" = 30 ] || fail "the failed resume changed the store: $(head -c 300 "$T/out")"
 [ "$(json_get "$T/l2/stats.json" "d['frames']")" = 30 ] || fail "the resumed scan of a log did not pass over the 30 stored frames"
 [ "$(grep -vc '^#' "$T/h2/trajectory.txt")" = 60 ] || fail "the resumed scan's trajectory has not 60 poses"
 [ "$(json_get "$T/h2/stats.json" "d['frames']")" = 30 ] || fail "the resumed scan did not skip the 30 stored frames"
@@ -347,7 +373,9 @@ echo "kill -9: $kills kills, the store reopened and exported after each"
 # the store's file, and what the store holds still reads.
 mkdir "$T/tiny"
 if mount -t tmpfs -o size=64k tmpfs "$T/tiny" 2>/dev/null; then
-    expect 5 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S"
+    # A write after every frame or so: the first (one frame's map) fits
+    # whatever the machine's speed; the whole map never does.
+    expect 5 "$B" replay "$SEQ" --out "$T/o-tiny" --no-mesh --store "$T/tiny/S" --store-every 0.01
     mentions "No space left on device"
     mentions "$T/tiny/S"
     # The summary does not claim the failed write's figures.
