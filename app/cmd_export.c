@@ -125,6 +125,17 @@ int cmd_export(int argc, char **argv)
         }
         mesh_level = mc.max_level;
         s = export_mesh(&m, &mc, &data, &st);
+        /* A lattice too coarse for the scene's surfaces (a wall thinner
+         * than a few of its voxels, a surface seen from one side whose band
+         * falls between its corners) meshes nothing: say so rather than hand
+         * over an empty file as the export. */
+        if (s == BF_OK && st.n_triangles == 0 && m.n_bricks)
+            bf_warn("export: the mesh at level %u has no triangle: no surface of the store spans a few of that level's "
+                    "%g m voxels%s; --points writes its surface voxels",
+                    mc.max_level, m.chunk_m / 8.0 / (double)(1u << (mc.max_level > 20 ? 20 : mc.max_level)),
+                    mc.max_level < finest ? " (a finer --mesh-level, up to its finest bricks' level, keeps thinner "
+                                            "ones)"
+                                          : "");
     }
     double t_write = bf_time_s();
     if (s == BF_OK) s = app_mesh_write(out, fmt, &mo, &data, &ss);

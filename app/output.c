@@ -77,8 +77,11 @@ void app_json_mesh_file(cJSON *o, const char *file, mesh_format f, const app_mes
     }
     if (mo->max_triangles || mo->max_error_m > 0) {
         cJSON *s = app_json_object(o, "simplify");
-        cJSON_AddNumberToObject(s, "max_triangles", mo->max_triangles);
-        cJSON_AddNumberToObject(s, "max_error_m", mo->max_error_m);
+        /* The limit not given is null, as elsewhere in bitfuse's JSON. */
+        if (mo->max_triangles) cJSON_AddNumberToObject(s, "max_triangles", mo->max_triangles);
+        else cJSON_AddNullToObject(s, "max_triangles");
+        if (mo->max_error_m > 0) cJSON_AddNumberToObject(s, "max_error_m", mo->max_error_m);
+        else cJSON_AddNullToObject(s, "max_error_m");
         cJSON_AddNumberToObject(s, "error_estimate_m", st->error_m);
         cJSON_AddBoolToObject(s, "used_sloppy", st->used_sloppy);
         cJSON_AddNumberToObject(s, "seconds", st->seconds);

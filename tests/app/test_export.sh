@@ -77,6 +77,28 @@ lv=$(json_get "$T/out" "d['mesh_level']")
 [ "$lv" -lt 8 ] && [ "$(json_get "$T/out" "d['triangles']")" = "$nfull" ] ||
     fail "--mesh-level 8 over coarser bricks: level $lv, $(json_get "$T/out" "d['triangles']") triangles, not $nfull"
 
+# A store whose only surface is a plate seen from one side: its band is
+# thinner than a voxel, so no cell has all its corners known. The empty
+# mesh is written and said to be empty; the room's export says nothing.
+py - "$T/plate.ply" <<'PY'
+import struct, sys
+with open(sys.argv[1], "wb") as o:
+    o.write(b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+            b"property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n")
+    for p in [(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)]:
+        o.write(struct.pack("<3f", *p))
+    for t in [(0, 1, 2), (0, 2, 3)]:
+        o.write(struct.pack("<B3i", 3, *t))
+PY
+expect 0 "$B" synth --scene "$T/plate.ply" --trajectory "$T/traj.txt" --frames 8 --size 160x120 \
+    --camera 131.25,131.25,79.5,59.5 --noise none --out "$T/plateseq"
+expect 0 "$B" replay "$T/plateseq" --out "$T/platerun" --no-mesh --store "$T/PS"
+expect 0 "$B" export "$T/PS" --out "$T/plate0.ply" --json
+[ "$(json_get "$T/out" "d['triangles']")" = 0 ] || fail "the one-sided plate meshed triangles: the test needs an empty mesh"
+mentions "has no triangle"
+expect 0 "$B" export "$T/S" --out "$T/m2.ply"
+grep -q "has no triangle" "$T/err" && fail "a room's export warned of an empty mesh"
+
 # Detail: a cap, an error bound.
 expect 0 "$B" export "$T/S" --out "$T/c.glb" --max-triangles 2000 --json
 n=$(json_get "$T/out" "d['triangles']")
@@ -87,6 +109,7 @@ expect 0 "$B" export "$T/S" --out "$T/e.ply" --max-error 0.002 --json
 n=$(json_get "$T/out" "d['triangles']")
 est=$(json_get "$T/out" "d['simplify']['error_estimate_m']")
 [ "$n" -lt "$nfull" ] || fail "--max-error 0.002 kept all $n triangles"
+[ "$(json_get "$T/out" "d['simplify']['max_triangles']")" = None ] || fail "simplify.max_triangles is not null without --max-triangles"
 py -c "import sys; sys.exit(0 if float(sys.argv[1]) <= 0.002 else 1)" "$est" || fail "error estimate $est above 0.002"
 # Measured: the simplified mesh against the full one.
 expect 0 "$B" eval-surface --reference "$T/full.ply" --reconstruction "$T/e.ply" --json
