@@ -263,7 +263,8 @@ bf_status eval_rpe(const bf_traj *gt, const bf_traj *est, double max_dt_s, bool 
     }
     if (n_candidates < 2 && !per_frame) {
         /* Too short whatever the ground truth (TUM drops a pair that ends at the last pose). */
-        s = bf_fail(BF_FORMAT, "RPE: the trajectory spans %.3f s: too short for two pairs %g s apart",
+        s = bf_fail(BF_FORMAT, "RPE: the trajectory spans %.3f s: too short for two pairs %g s apart that do "
+                    "not end at its last pose (TUM's rule drops a pair ending there)",
                     est->t_s[n - 1] - est->t_s[0], delta);
         goto done;
     }

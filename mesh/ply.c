@@ -373,8 +373,10 @@ static bf_status ply_read_faces(ply_reader *rd, const ply_element *el, ply_tris 
                 s = ply_read_value(rd, pr->type, "face", i, &v);
                 if (s != BF_OK) return s;
                 if (v < 0 || v > (double)UINT32_MAX)
-                    return bf_fail(BF_FORMAT, "%s: face %llu: vertex index %.0f out of range", rd->path,
-                                   (unsigned long long)i, v);
+                    return bf_fail(BF_FORMAT, "%s: face %llu: corner %llu of %llu: vertex index %.0f out of range%s",
+                                   rd->path, (unsigned long long)i, (unsigned long long)j + 1,
+                                   (unsigned long long)n, v,
+                                   n > 4 ? " (is the face's corner count right?)" : "");
                 uint32_t cur = (uint32_t)v;
                 if (j == 0)
                     first = cur;
