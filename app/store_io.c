@@ -32,14 +32,20 @@ bf_status app_store_open(app_store *st, const char *dir, bool resume, double eve
          * bad file aside (what the refusal below advises) must let the scan
          * resume. Only a store where nothing listed loaded (chunks/ emptied or
          * not mounted) is refused for missing files alone. */
-        if (s == BF_OK && st->report.n_missing && !st->report.n_bad && st->report.n_chunks)
+        if (s == BF_OK && st->report.n_missing && !st->report.n_bad && st->report.n_chunks > st->report.n_unindexed)
             bf_warn("store: %s: %u listed chunk%s gone: the scan resumes without them", dir, st->report.n_missing,
                     st->report.n_missing == 1 ? " is" : "s are");
         else if (s == BF_OK && !st->report.n_bad && st->report.n_missing)
-            s = bf_fail(BF_FORMAT,
-                        "%s: none of the %u chunk files its index lists is there (chunks/ emptied, or not "
-                        "mounted?): resuming would start its map anew; put them back, or scan into another folder",
-                        dir, st->report.n_missing);
+            s = st->report.n_missing == 1
+                    ? bf_fail(BF_FORMAT,
+                              "%s: the one chunk file its index lists is not there (chunks/ emptied, or not "
+                              "mounted?): resuming would start its map anew; put it back, or scan into another folder",
+                              dir)
+                    : bf_fail(BF_FORMAT,
+                              "%s: none of the %u chunk files its index lists is there (chunks/ emptied, or not "
+                              "mounted?): resuming would start its map anew; put them back, or scan into another "
+                              "folder",
+                              dir, st->report.n_missing);
         else if (s == BF_OK && (st->report.n_bad || st->report.n_missing))
             s = bf_fail(BF_FORMAT,
                         "%s: %u chunk file%s could not be loaded and %u listed chunk%s missing (the first: %s): "

@@ -104,6 +104,7 @@ expect 0 "$B" export "$T/S" --out "$T/c.glb" --max-triangles 2000 --json
 n=$(json_get "$T/out" "d['triangles']")
 [ "$n" -le 2000 ] && [ "$n" -ge 1500 ] || fail "--max-triangles 2000 wrote $n triangles"
 [ "$(json_get "$T/out" "d['triangles_full']")" = "$nfull" ] || fail "triangles_full is not the full mesh's"
+[ "$(json_get "$T/out" "d['simplify']['max_error_m']")" = None ] || fail "simplify.max_error_m is not null without --max-error"
 validate "$T/c.glb"
 expect 0 "$B" export "$T/S" --out "$T/e.ply" --max-error 0.002 --json
 n=$(json_get "$T/out" "d['triangles']")

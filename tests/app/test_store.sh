@@ -182,6 +182,17 @@ expect 3 "$B" replay "$SEQ" --out "$T/eres" --no-mesh --store "$T/E" --resume
 mentions "none of the"
 grep -q "none bad" "$T/err" && fail "the all-gone refusal speaks of bad files: $(cat "$T/err")"
 [ "$(cd "$T/E" && find . -type f | sort | xargs md5sum | md5sum)" = "$before" ] || fail "a refused resume of an emptied store changed it"
+# The same when files remain that the index does not list (loaded as
+# written after it): still nothing the index lists is there.
+cp -r "$T/S" "$T/U"
+py - "$T/U/store.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["chunks"] = [{"key": [99, 99, 99], "bricks": 1, "bytes": 100, "xxh3": "0" * 16}]
+json.dump(d, open(sys.argv[1], "w"))
+PY
+expect 3 "$B" replay "$SEQ" --out "$T/ures" --no-mesh --store "$T/U" --resume
+mentions "the one chunk file its index lists is not there"
 # store.json has no checksum: one wrong level makes every chunk file
 # inconsistent with it. Resume is refused with every file kept; export
 # says there is nothing to export instead of writing an empty mesh.
@@ -285,8 +296,17 @@ expect 0 "$B" replay "$T/seq.bflog" --out "$T/l2" --no-mesh --store "$T/L" --res
 # The first frame after the stored ones spoilt: the resume fails on it
 # (exit 3, the store kept) and does not say the log held nothing new.
 expect 0 "$B" convert "$SEQ" --out "$T/seq3.bflog"
-size=$(wc -c <"$T/seq3.bflog")
-printf '\377\377\377\377' | dd of="$T/seq3.bflog" bs=1 seek=$((size * 305 / 600)) conv=notrunc 2>/dev/null
+# Frame 30's record from the log's index (footer: u64 index offset; the
+# index: "BFIX", n, then n x (u64 offset, f64 time)); 16 bytes into its
+# depth payload, past the 152-byte record header.
+at=$(py - "$T/seq3.bflog" <<'PY'
+import struct, sys
+d = open(sys.argv[1], "rb").read()
+ix = struct.unpack_from("<Q", d, len(d) - 24)[0]
+print(struct.unpack_from("<Q", d, ix + 8 + 16 * 30)[0] + 152 + 16)
+PY
+)
+printf '\377\377\377\377' | dd of="$T/seq3.bflog" bs=1 seek="$at" conv=notrunc 2>/dev/null
 expect 3 "$B" replay "$T/seq3.bflog" --out "$T/l3" --no-mesh --store "$T/L3" --resume
 grep -q "nothing new" "$T/err" && fail "a resume that failed on a spoilt frame said the log held nothing new: $(cat "$T/err")"
 expect 0 "$B" info "$T/L3" --json
