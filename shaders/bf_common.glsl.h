@@ -24,8 +24,8 @@
  * two selects per lane; this uses vector operations only (the fusion
  * window pass 22% faster, docs/gpu.md). Adding 1.5 * 2^23 puts an
  * integer-valued float of that range into the mantissa exactly, and the
- * bits give it back: the same integer as int(x) wherever int(x) is
- * defined, so the C side stays a plain cast. */
+ * bits give it back: for |x| < 2^22 the same integer as int(x), so the C
+ * side stays a plain cast. */
 int bf_trunc_i32(float x) { return floatBitsToInt(clamp(trunc(x), -4194304.0, 4194303.0) + 12582912.0) - 0x4B400000; }
 ivec2 bf_trunc_i32(vec2 x) { return floatBitsToInt(clamp(trunc(x), -4194304.0, 4194303.0) + 12582912.0) - 0x4B400000; }
 ivec3 bf_trunc_i32(vec3 x) { return floatBitsToInt(clamp(trunc(x), -4194304.0, 4194303.0) + 12582912.0) - 0x4B400000; }

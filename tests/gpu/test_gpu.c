@@ -4,6 +4,7 @@
  * tests skip. */
 #include "test.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -686,6 +687,72 @@ static struct gpu_test_params changed(struct gpu_test_params q)
     q.seed ^= 0xffffffffu;
     for (uint32_t k = 0; k < 4; k++) q.words[k] += k;
     return q;
+}
+
+/* The float-to-integer helpers that stand in for int()/uint() in the
+ * shaders (lavapipe runs those lane by lane): the integer C's cast gives for
+ * every |x| < 2^22, the range clamped beyond. */
+BF_TEST(trunc_helpers_gpu_equal_the_c_cast)
+{
+    uint32_t v0 = gpu_validation_message_total();
+    gpu_config cfg = test_config();
+    gpu_context *ctx = NULL;
+    OPEN_CTX(ctx, &cfg);
+    enum { N_EDGE = 24, N = 4096 };
+    static const float edge[N_EDGE] = {0.0f, -0.0f, 0.5f, -0.5f, 0.99999994f, -0.99999994f, 1.0f, -1.0f,
+                                       1.5f, -1.5f, 2.5f, -2.5f, 639.99994f, 640.0f, 4194303.0f, 4194303.5f,
+                                       -4194304.0f, -4194303.5f, 4194304.0f, -4194305.0f, 8388607.0f, 1e9f,
+                                       -1e9f, 33000.4f};
+    float x[N];
+    uint32_t bits[N], out[2 * N];
+    uint32_t seed = 0x2545f491u;
+    for (int i = 0; i < N; i++) {
+        if (i < N_EDGE) {
+            x[i] = edge[i];
+        } else { /* spread over the range: 2^(0..22) times [-1, 1) */
+            float m = (float)(int32_t)xorshift(&seed) / 2147483648.0f;
+            x[i] = ldexpf(m, (int)(xorshift(&seed) % 23u));
+        }
+        memcpy(&bits[i], &x[i], 4);
+    }
+    gpu_pipeline *p = NULL;
+    gpu_buffer *in = NULL, *res = NULL;
+    gpu_bindings *b = NULL;
+    gpu_pipeline_desc d = desc_of("test.trunc", SPV(gpu_test_trunc), 2, sizeof(struct gpu_test_count), 64);
+    CHECK_OK(gpu_pipeline_create(ctx, &d, &p));
+    gpu_buffer_desc id = {.name = "test.trunc_in", .size_bytes = sizeof bits};
+    gpu_buffer_desc od = {.name = "test.trunc_out", .size_bytes = sizeof out};
+    CHECK_OK(gpu_buffer_create(ctx, &id, &in));
+    CHECK_OK(gpu_buffer_create(ctx, &od, &res));
+    CHECK_OK(gpu_buffer_upload(in, 0, bits, sizeof bits));
+    CHECK_OK(gpu_bindings_create(ctx, 2, "test.trunc_bindings", &b));
+    CHECK_OK(gpu_bindings_set(b, 0, in, 0, GPU_WHOLE_SIZE));
+    CHECK_OK(gpu_bindings_set(b, 1, res, 0, GPU_WHOLE_SIZE));
+    struct gpu_test_count pc = {.n = N};
+    CHECK_OK(gpu_begin(ctx));
+    gpu_cmd_dispatch(ctx, p, b, &pc, gpu_groups(N, 64), 1, 1);
+    CHECK_OK(gpu_submit_wait(ctx));
+    CHECK_OK(gpu_buffer_download(res, 0, out, sizeof out));
+    for (int i = 0; i < N; i++) {
+        int32_t got_i = (int32_t)out[2 * i];
+        uint32_t got_u = out[2 * i + 1];
+        if (fabsf(x[i]) < 4194304.0f) {
+            int32_t want = BF_TRUNC_I32(x[i]); /* C: the plain cast */
+            if (got_i != want) CHECK_EQ_INT(got_i, want);
+            if (x[i] >= 0.0f && got_u != BF_TRUNC_U32(x[i])) CHECK_EQ_INT(got_u, BF_TRUNC_U32(x[i]));
+        } else { /* beyond: clamped to the range */
+            int32_t want = x[i] > 0.0f ? 4194303 : -4194304;
+            if (got_i != want) CHECK_EQ_INT(got_i, want);
+        }
+    }
+    CHECK_EQ_INT((int32_t)out[2 * 3], 0);   /* -0.5 truncates to 0, as int() */
+    CHECK_EQ_INT((int32_t)out[2 * 9], -1);  /* -1.5 to -1 */
+    CHECK_EQ_INT((int32_t)out[2 * 15], 4194303);
+    gpu_bindings_destroy(b);
+    gpu_buffer_destroy(res);
+    gpu_buffer_destroy(in);
+    gpu_pipeline_destroy(p);
+    CLOSE_CTX_CLEAN(ctx, v0);
 }
 
 BF_TEST(shared_struct_layout_round_trip)
