@@ -118,7 +118,7 @@ static void print_text(const gpu_device_info *d, uint32_t n, uint32_t chosen)
         printf("%c %u  %s  [%s, Vulkan %u.%u.%u%s%s]%s\n", i == chosen ? '*' : ' ', i, d[i].name,
                gpu_device_type_name(d[i].type), VK_API_VERSION_MAJOR(d[i].api_version),
                VK_API_VERSION_MINOR(d[i].api_version), VK_API_VERSION_PATCH(d[i].api_version),
-               d[i].driver_info[0] ? ", " : "", d[i].driver_info, d[i].is_usable ? "" : "  (not usable: needs Vulkan 1.2 and a compute queue)");
+               d[i].driver_info[0] ? ", " : "", d[i].driver_info, d[i].is_usable ? "" : "  (not usable: needs Vulkan 1.2 with buffer device addresses and a compute queue)");
         printf("     storage binding   %llu MiB max (maxStorageBufferRange), offsets aligned to %llu bytes\n",
                (unsigned long long)(l->max_storage_buffer_range >> 20),
                (unsigned long long)l->min_storage_buffer_offset_alignment);

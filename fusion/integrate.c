@@ -148,6 +148,8 @@ fusion_integrate_push fusion__integrate_params(const fusion_map *m, uint32_t fir
         .sigma_c = m->cfg.sensor.sigma_c,
         .prior_weight = FUSION_PRIOR_WEIGHT,
         .bricks_per_group = m->integrate_bpg ? m->integrate_bpg : 1,
+        .depth_addr_lo = (uint32_t)gpu_buffer_address(m->depth_ring),
+        .depth_addr_hi = (uint32_t)(gpu_buffer_address(m->depth_ring) >> 32),
     };
     return pc;
 }

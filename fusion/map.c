@@ -92,7 +92,9 @@ static bf_status create_buffers(fusion_map *m)
         {&m->stamp, "fusion.stamp", (uint64_t)c->brick_cap * 4, GPU_MEMORY_DEVICE, st},
         {&m->counters, "fusion.counters", FUSION_CNT_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
         {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
-        {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE, st},
+        /* The window pass reads it through its address (gpu_buffer_address). */
+        {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE,
+         st | GPU_USAGE_ADDRESS},
         /* Room for the colour whether or not the map keeps it: tracking reads it here. */
         {&m->upload, "fusion.upload", FUSION_FRAME_WORDS * 4 + depth_words * 4 * 2, GPU_MEMORY_UPLOAD, st},
         {&m->readback, "fusion.readback", (FUSION_CNT_WORDS + FUSION_MAX_BUCKETS + 1) * 4, GPU_MEMORY_READBACK, st},

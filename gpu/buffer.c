@@ -21,12 +21,21 @@ static uint32_t find_memory_type(const gpu_context *ctx, uint32_t type_bits, VkM
     return UINT32_MAX;
 }
 
+/* The device address of a buffer made with GPU_USAGE_ADDRESS, once bound. */
+static void set_address(gpu_buffer *buf)
+{
+    if (!(buf->usage & GPU_USAGE_ADDRESS)) return;
+    VkBufferDeviceAddressInfo i = {.sType = VK_STRUCTURE_TYPE_BUFFER_DEVICE_ADDRESS_INFO, .buffer = buf->buffer};
+    buf->address = buf->ctx->inst.vk.GetBufferDeviceAddress(buf->ctx->device, &i);
+}
+
 static VkBufferUsageFlags vk_usage(uint32_t usage)
 {
     VkBufferUsageFlags u = 0;
     if (usage & GPU_USAGE_STORAGE) u |= VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     if (usage & GPU_USAGE_INDIRECT) u |= VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
     if (usage & GPU_USAGE_TRANSFER) u |= VK_BUFFER_USAGE_TRANSFER_SRC_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    if (usage & GPU_USAGE_ADDRESS) u |= VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT;
     return u;
 }
 
@@ -94,8 +103,11 @@ static bool import_host(gpu_buffer *buf, const VkMemoryRequirements *req)
         type = choose_type(ctx, buf->kind, req->memoryTypeBits & hp.memoryTypeBits);
     VkMemoryPropertyFlags flags = type == UINT32_MAX ? 0 : ctx->mem_props.memoryTypes[type].propertyFlags;
     if (!(flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT)) goto no;
+    VkMemoryAllocateFlagsInfo fl = {.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO,
+                                     .flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT};
     VkImportMemoryHostPointerInfoEXT imp = {
         .sType = VK_STRUCTURE_TYPE_IMPORT_MEMORY_HOST_POINTER_INFO_EXT,
+        .pNext = (buf->usage & GPU_USAGE_ADDRESS) ? &fl : NULL,
         .handleType = VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT,
         .pHostPointer = p,
     };
@@ -111,6 +123,7 @@ static bool import_host(gpu_buffer *buf, const VkMemoryRequirements *req)
     buf->host_alloc = p;
     buf->host_alloc_bytes = n;
     buf->mapped = p; /* the memory is our mapping: no vkMapMemory */
+    set_address(buf);
     buf->is_coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     buf->is_cached = flags & VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
     return true;
@@ -181,8 +194,11 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
         goto fail;
     }
     VkMemoryPropertyFlags flags = ctx->mem_props.memoryTypes[type].propertyFlags;
+    VkMemoryAllocateFlagsInfo fl = {.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO,
+                                     .flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT};
     VkMemoryAllocateInfo ai = {
         .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO,
+        .pNext = (buf->usage & GPU_USAGE_ADDRESS) ? &fl : NULL,
         .allocationSize = req.size,
         .memoryTypeIndex = type,
     };
@@ -198,6 +214,7 @@ bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_b
     }
     gpu__name(ctx, VK_OBJECT_TYPE_DEVICE_MEMORY, (uint64_t)buf->memory, "%s.memory", buf->name);
     GPU__CHECK(vk->BindBufferMemory(ctx->device, buf->buffer, buf->memory, 0), buf->name);
+    set_address(buf);
     buf->is_coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     buf->is_cached = flags & VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
     if (want_map && (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT))
@@ -231,6 +248,7 @@ void gpu_buffer_destroy(gpu_buffer *buf)
 }
 
 uint64_t gpu_buffer_size(const gpu_buffer *buf) { return buf->size; }
+uint64_t gpu_buffer_address(const gpu_buffer *buf) { return buf->address; }
 const char *gpu_buffer_name(const gpu_buffer *buf) { return buf->name; }
 VkBuffer gpu_buffer_handle(const gpu_buffer *buf) { return buf->buffer; }
 void *gpu_buffer_map(const gpu_buffer *buf) { return buf->mapped; }

@@ -401,7 +401,16 @@ void gpu__query_device(const gpu__instance *inst, VkPhysicalDevice phys, gpu_dev
         if (best == UINT32_MAX || !(fams[i].queueFlags & VK_QUEUE_GRAPHICS_BIT)) best = i;
         if (!(fams[i].queueFlags & VK_QUEUE_GRAPHICS_BIT)) break;
     }
-    info->is_usable = is_12 && best != UINT32_MAX;
+    /* Buffer device addresses: the fusion window reads the depth ring
+     * through one (gpu_buffer_address). Optional in Vulkan 1.2, which every
+     * desktop driver and lavapipe offer. */
+    if (is_12 && vk->GetPhysicalDeviceFeatures2) {
+        VkPhysicalDeviceVulkan12Features f12 = {.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+        VkPhysicalDeviceFeatures2 f2 = {.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, .pNext = &f12};
+        vk->GetPhysicalDeviceFeatures2(phys, &f2);
+        info->has_buffer_address = f12.bufferDeviceAddress;
+    }
+    info->is_usable = is_12 && best != UINT32_MAX && info->has_buffer_address;
     if (best != UINT32_MAX) {
         info->queue_family = best;
         lim->timestamp_valid_bits = fams[best].timestampValidBits;
@@ -537,8 +546,11 @@ static bf_status create_device(gpu_context *ctx)
     uint32_t n_exts = 0;
     if (ctx->surface) exts[n_exts++] = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
     if (ctx->host_import_align) exts[n_exts++] = VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME;
+    VkPhysicalDeviceVulkan12Features f12 = {.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES,
+                                             .bufferDeviceAddress = VK_TRUE};
     VkDeviceCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO,
+        .pNext = &f12,
         .queueCreateInfoCount = 1,
         .pQueueCreateInfos = &queue,
         .enabledExtensionCount = n_exts,

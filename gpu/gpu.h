@@ -132,7 +132,8 @@ typedef struct gpu_device_info {
     char driver_info[VK_MAX_DRIVER_INFO_SIZE];
     uint8_t device_uuid[VK_UUID_SIZE];
     uint8_t pipeline_cache_uuid[VK_UUID_SIZE];
-    bool is_usable;                         /* Vulkan >= 1.2 and a compute queue */
+    bool is_usable;                         /* Vulkan >= 1.2, a compute queue, buffer device addresses */
+    bool has_buffer_address;                /* bufferDeviceAddress (Vulkan 1.2's, optional there) */
     uint32_t queue_family;                  /* the compute queue family, if usable */
     gpu_limits limits;
 } gpu_device_info;
@@ -202,6 +203,7 @@ enum gpu_usage {
     GPU_USAGE_STORAGE = 1u << 0,  /* bound to a shader */
     GPU_USAGE_INDIRECT = 1u << 1, /* dispatch arguments */
     GPU_USAGE_TRANSFER = 1u << 2, /* copy / fill source or destination */
+    GPU_USAGE_ADDRESS = 1u << 3,  /* read by shaders through its device address (gpu_buffer_address) */
 };
 
 typedef struct gpu_buffer_desc {
@@ -218,6 +220,14 @@ typedef struct gpu_buffer_desc {
 bf_status gpu_buffer_create(gpu_context *ctx, const gpu_buffer_desc *desc, gpu_buffer **out);
 void gpu_buffer_destroy(gpu_buffer *buf); /* NULL is a no-op; the GPU must be done with it */
 uint64_t gpu_buffer_size(const gpu_buffer *buf);
+/* The buffer's device address, for a shader that reads it through a
+ * buffer_reference (GL_EXT_buffer_reference) handed over in its push
+ * constants; 0 without GPU_USAGE_ADDRESS. On lavapipe a storage-buffer load
+ * at a per-lane address is a scalar loop over the lanes, each lane reading
+ * the descriptor again and checking its bounds; a load through an address is
+ * one gather (docs/gpu.md, lavapipe notes). No bounds check: the shader's
+ * indices must stay inside the buffer. */
+uint64_t gpu_buffer_address(const gpu_buffer *buf);
 const char *gpu_buffer_name(const gpu_buffer *buf);
 VkBuffer gpu_buffer_handle(const gpu_buffer *buf);
 /* Persistent mapping of a host-visible buffer (always for UPLOAD and

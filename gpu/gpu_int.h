@@ -23,6 +23,7 @@
     X(EnumeratePhysicalDevices)              \
     X(GetPhysicalDeviceProperties)           \
     X(GetPhysicalDeviceProperties2)          \
+    X(GetPhysicalDeviceFeatures2)            \
     X(GetPhysicalDeviceQueueFamilyProperties) \
     X(GetPhysicalDeviceMemoryProperties)     \
     X(CreateDevice)                          \
@@ -85,6 +86,7 @@
     X(AllocateDescriptorSets)                \
     X(FreeDescriptorSets)                    \
     X(UpdateDescriptorSets)                  \
+    X(GetBufferDeviceAddress)                \
     X(CreateCommandPool)                     \
     X(DestroyCommandPool)                    \
     X(AllocateCommandBuffers)                \
@@ -193,6 +195,7 @@ struct gpu_buffer {
     VkBuffer buffer;
     VkDeviceMemory memory;
     uint64_t size;
+    uint64_t address;                /* device address (GPU_USAGE_ADDRESS), else 0 */
     uint32_t usage;                  /* gpu_usage bits */
     gpu_memory kind;
     bool is_coherent;

@@ -329,10 +329,15 @@ struct fusion_integrate_push {
     bf_f32 prior_weight;   /* Psi of a confident voxel when window and brick errors agree */
     bf_u32 bricks_per_group; /* consecutive list entries one workgroup integrates */
     bf_u32 pad;
+    /* The depth ring's device address, low and high words: read through it,
+     * not its binding (gpu_buffer_address; on lavapipe a load at a per-lane
+     * address through a binding is a scalar loop over the lanes). */
+    bf_u32 depth_addr_lo, depth_addr_hi;
+    bf_u32 pad2, pad3;
 };
 #ifndef BF_GLSL
 typedef struct fusion_integrate_push fusion_integrate_push;
-_Static_assert(sizeof(fusion_integrate_push) == 64, "fusion_integrate_push must match std430");
+_Static_assert(sizeof(fusion_integrate_push) == 80, "fusion_integrate_push must match std430");
 #endif
 
 /* One axis of a voxel centre relative to the map origin: chunk corner

@@ -20,6 +20,8 @@
  *  5. 16 invocations write the sign and confidence words, one the error. */
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
 #include "fusion.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
@@ -30,9 +32,10 @@ layout(std430, binding = 1) buffer Info { uint w[]; } info;
 layout(std430, binding = 2) buffer Sign { uint w[]; } sign_pool;
 layout(std430, binding = 3) buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 4) readonly buffer Frames { fusion_frame f[]; } frames;
-layout(std430, binding = 5) readonly buffer Depth { uint w[]; } depth;
+/* Binding 5 is the depth ring, read through its address (pc.depth_addr_*). */
 layout(std430, binding = 6) readonly buffer List { uint w[]; } list;
 
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer DepthRing { uint w[]; };
 layout(push_constant) uniform Push { fusion_integrate_push pc; };
 
 shared uint s_old_sign[BRICK_WORDS], s_old_conf[BRICK_WORDS];
@@ -128,6 +131,7 @@ void integrate_brick(uint slot, uint tid, uint n_threads)
 
         /* 3. Accumulate, in frame order. */
         uint r = 0u;
+        DepthRing depth = DepthRing(uvec2(pc.depth_addr_lo, pc.depth_addr_hi));
         if (n_visible != 0u) do {
             uint j = s_order[r];
             vec4 a = s_step[4u * j + 0u], b = s_step[4u * j + 1u], c = s_step[4u * j + 2u], d = s_step[4u * j + 3u];

@@ -71,7 +71,7 @@ BF_TEST(context_creates_and_reports_device)
     const gpu_device_info *info = gpu_device(ctx);
     CHECK(gpu_device_name(ctx)[0] != '\0');
     CHECK(!strcmp(gpu_device_name(ctx), info->name));
-    CHECK(info->is_usable);
+    CHECK(info->is_usable && info->has_buffer_address);
     CHECK(gpu_validation_enabled(ctx));
     CHECK(strcmp(gpu_device_type_name(info->type), "other") != 0);
 
@@ -341,6 +341,33 @@ BF_TEST(buffer_round_trip_shader_adds_one) { round_trip(false, false, false); }
 BF_TEST(buffer_round_trip_through_staging_as_on_a_discrete_gpu) { round_trip(true, true, false); }
 BF_TEST(large_buffer_round_trip_imported_host_memory) { round_trip(false, true, false); }
 BF_TEST(large_buffer_round_trip_driver_memory) { round_trip(false, true, true); }
+
+/* GPU_USAGE_ADDRESS: a device address for buffers in driver memory and in
+ * imported host memory (the large one), none without the flag. The fusion
+ * tests read through one (the window's depth ring) bit for bit. */
+BF_TEST(device_addresses_for_address_buffers_only)
+{
+    uint32_t v0 = gpu_validation_message_total();
+    gpu_config cfg = test_config();
+    gpu_context *ctx = NULL;
+    OPEN_CTX(ctx, &cfg);
+    gpu_buffer *small = NULL, *large = NULL, *plain = NULL;
+    const uint32_t addr = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER | GPU_USAGE_ADDRESS;
+    gpu_buffer_desc sd = {.name = "test.address_small", .size_bytes = 4096, .usage = addr};
+    gpu_buffer_desc ld = {.name = "test.address_large", .size_bytes = 64u << 20, .usage = addr};
+    gpu_buffer_desc pd = {.name = "test.plain", .size_bytes = 4096};
+    CHECK_OK(gpu_buffer_create(ctx, &sd, &small));
+    CHECK_OK(gpu_buffer_create(ctx, &ld, &large));
+    CHECK_OK(gpu_buffer_create(ctx, &pd, &plain));
+    CHECK(gpu_buffer_address(small) != 0 && gpu_buffer_address(small) % 4 == 0);
+    CHECK(gpu_buffer_address(large) != 0 && gpu_buffer_address(large) % 4 == 0);
+    CHECK(gpu_buffer_address(small) != gpu_buffer_address(large));
+    CHECK(gpu_buffer_address(plain) == 0);
+    gpu_buffer_destroy(plain);
+    gpu_buffer_destroy(large);
+    gpu_buffer_destroy(small);
+    CLOSE_CTX_CLEAN(ctx, v0);
+}
 
 BF_TEST(recorded_fill_and_copy)
 {
