@@ -80,6 +80,7 @@ static cJSON *devices_json(const gpu_device_info *d, uint32_t n, uint32_t chosen
         cJSON_AddStringToObject(dev, "type", gpu_device_type_name(d[i].type));
         cJSON_AddBoolToObject(dev, "is_chosen", i == chosen);
         cJSON_AddBoolToObject(dev, "is_usable", d[i].is_usable);
+        cJSON_AddBoolToObject(dev, "buffer_device_address", d[i].has_buffer_address);
         cJSON_AddStringToObject(dev, "api_version", version);
         cJSON_AddStringToObject(dev, "driver", d[i].driver_info[0] ? d[i].driver_info : d[i].driver_name);
         cJSON_AddStringToObject(dev, "device_uuid", uuid);

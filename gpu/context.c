@@ -445,7 +445,8 @@ uint32_t gpu__choose_device(const gpu_device_info *infos, uint32_t n, const char
     bool is_index = want && bf_parse_u32(want, &index);
     if (is_index && index < n) {
         if (infos[index].is_usable) return index;
-        bf_fail(BF_NO_DEVICE, "device %u (%s) is not usable: bitfuse needs Vulkan 1.2 and a compute queue", index,
+        bf_fail(BF_NO_DEVICE, "device %u (%s) is not usable: bitfuse needs Vulkan 1.2 with buffer device addresses and a "
+                "compute queue", index,
                 infos[index].name);
         return UINT32_MAX;
     }
@@ -469,8 +470,8 @@ uint32_t gpu__choose_device(const gpu_device_info *infos, uint32_t n, const char
             bf_fail(BF_NO_DEVICE, "no usable Vulkan device matches '%s' (BITFUSE_DEVICE or --device%s); "
                     "devices: %s", want, is_index ? "; no such index either" : "", n ? names : "none");
         } else {
-            bf_fail(BF_NO_DEVICE, "no usable Vulkan device (%u found; bitfuse needs Vulkan 1.2 and "
-                    "a compute queue)", n);
+            bf_fail(BF_NO_DEVICE, "no usable Vulkan device (%u found; bitfuse needs Vulkan 1.2 with "
+                    "buffer device addresses and a compute queue)", n);
         }
     }
     return best;
