@@ -646,6 +646,36 @@ BF_TEST(timestamps_are_monotonic_and_nonzero)
 
 /* ------------------------------------------------------------ shared definitions */
 
+/* Runs a test kernel of two bindings (input words, output words) whose push
+ * constants are gpu_test_count {n}, over n_invocations invocations in groups
+ * of 64, and reads its output back. */
+static void run_in_out(gpu_context *ctx, const char *name, const uint32_t *spv, size_t spv_bytes, const void *in_data,
+                       size_t in_bytes, void *out_data, size_t out_bytes, uint32_t n, uint32_t n_invocations)
+{
+    gpu_pipeline *p = NULL;
+    gpu_buffer *in = NULL, *res = NULL;
+    gpu_bindings *b = NULL;
+    gpu_pipeline_desc d = desc_of(name, spv, spv_bytes, 2, sizeof(struct gpu_test_count), 64);
+    CHECK_OK(gpu_pipeline_create(ctx, &d, &p));
+    gpu_buffer_desc id = {.name = "test.in", .size_bytes = in_bytes};
+    gpu_buffer_desc od = {.name = "test.out", .size_bytes = out_bytes};
+    CHECK_OK(gpu_buffer_create(ctx, &id, &in));
+    CHECK_OK(gpu_buffer_create(ctx, &od, &res));
+    CHECK_OK(gpu_buffer_upload(in, 0, in_data, in_bytes));
+    CHECK_OK(gpu_bindings_create(ctx, 2, name, &b));
+    CHECK_OK(gpu_bindings_set(b, 0, in, 0, GPU_WHOLE_SIZE));
+    CHECK_OK(gpu_bindings_set(b, 1, res, 0, GPU_WHOLE_SIZE));
+    struct gpu_test_count pc = {.n = n};
+    CHECK_OK(gpu_begin(ctx));
+    gpu_cmd_dispatch(ctx, p, b, &pc, gpu_groups(n_invocations, 64), 1, 1);
+    CHECK_OK(gpu_submit_wait(ctx));
+    CHECK_OK(gpu_buffer_download(res, 0, out_data, out_bytes));
+    gpu_bindings_destroy(b);
+    gpu_buffer_destroy(res);
+    gpu_buffer_destroy(in);
+    gpu_pipeline_destroy(p);
+}
+
 BF_TEST(brick_helpers_gpu_equal_cpu)
 {
     uint32_t v0 = gpu_validation_message_total();
@@ -661,24 +691,7 @@ BF_TEST(brick_helpers_gpu_equal_cpu)
     words[2] = 0x80000000u;
     words[3] = 1;
 
-    gpu_pipeline *p = NULL;
-    gpu_buffer *in = NULL, *res = NULL;
-    gpu_bindings *b = NULL;
-    gpu_pipeline_desc d = desc_of("test.bits", SPV(gpu_test_bits), 2, sizeof(struct gpu_test_count), 64);
-    CHECK_OK(gpu_pipeline_create(ctx, &d, &p));
-    gpu_buffer_desc id = {.name = "test.words", .size_bytes = sizeof words};
-    gpu_buffer_desc od = {.name = "test.bits_out", .size_bytes = sizeof out};
-    CHECK_OK(gpu_buffer_create(ctx, &id, &in));
-    CHECK_OK(gpu_buffer_create(ctx, &od, &res));
-    CHECK_OK(gpu_buffer_upload(in, 0, words, sizeof words));
-    CHECK_OK(gpu_bindings_create(ctx, 2, "test.bits_bindings", &b));
-    CHECK_OK(gpu_bindings_set(b, 0, in, 0, GPU_WHOLE_SIZE));
-    CHECK_OK(gpu_bindings_set(b, 1, res, 0, GPU_WHOLE_SIZE));
-    struct gpu_test_count pc = {.n = N_WORDS};
-    CHECK_OK(gpu_begin(ctx));
-    gpu_cmd_dispatch(ctx, p, b, &pc, gpu_groups(32 * N_WORDS, 64), 1, 1);
-    CHECK_OK(gpu_submit_wait(ctx));
-    CHECK_OK(gpu_buffer_download(res, 0, out, sizeof out));
+    run_in_out(ctx, "test.bits", SPV(gpu_test_bits), words, sizeof words, out, sizeof out, N_WORDS, 32 * N_WORDS);
 
     /* Every voxel lands on a distinct (word, bit): the mapping is a bijection. */
     uint32_t seen[BRICK_WORDS] = {0};
@@ -699,10 +712,6 @@ BF_TEST(brick_helpers_gpu_equal_cpu)
     CHECK_EQ_INT(brick_rank(UINT32_MAX, 31), 31);
     CHECK_EQ_INT(brick_rank(0x80000000u, 31), 0);
 
-    gpu_bindings_destroy(b);
-    gpu_buffer_destroy(res);
-    gpu_buffer_destroy(in);
-    gpu_pipeline_destroy(p);
     CLOSE_CTX_CLEAN(ctx, v0);
 }
 
@@ -742,24 +751,7 @@ BF_TEST(trunc_helpers_gpu_equal_the_c_cast)
         }
         memcpy(&bits[i], &x[i], 4);
     }
-    gpu_pipeline *p = NULL;
-    gpu_buffer *in = NULL, *res = NULL;
-    gpu_bindings *b = NULL;
-    gpu_pipeline_desc d = desc_of("test.trunc", SPV(gpu_test_trunc), 2, sizeof(struct gpu_test_count), 64);
-    CHECK_OK(gpu_pipeline_create(ctx, &d, &p));
-    gpu_buffer_desc id = {.name = "test.trunc_in", .size_bytes = sizeof bits};
-    gpu_buffer_desc od = {.name = "test.trunc_out", .size_bytes = sizeof out};
-    CHECK_OK(gpu_buffer_create(ctx, &id, &in));
-    CHECK_OK(gpu_buffer_create(ctx, &od, &res));
-    CHECK_OK(gpu_buffer_upload(in, 0, bits, sizeof bits));
-    CHECK_OK(gpu_bindings_create(ctx, 2, "test.trunc_bindings", &b));
-    CHECK_OK(gpu_bindings_set(b, 0, in, 0, GPU_WHOLE_SIZE));
-    CHECK_OK(gpu_bindings_set(b, 1, res, 0, GPU_WHOLE_SIZE));
-    struct gpu_test_count pc = {.n = N};
-    CHECK_OK(gpu_begin(ctx));
-    gpu_cmd_dispatch(ctx, p, b, &pc, gpu_groups(N, 64), 1, 1);
-    CHECK_OK(gpu_submit_wait(ctx));
-    CHECK_OK(gpu_buffer_download(res, 0, out, sizeof out));
+    run_in_out(ctx, "test.trunc", SPV(gpu_test_trunc), bits, sizeof bits, out, sizeof out, N, N);
     for (int i = 0; i < N; i++) {
         int32_t got_i = (int32_t)out[2 * i];
         uint32_t got_u = out[2 * i + 1];
@@ -775,10 +767,6 @@ BF_TEST(trunc_helpers_gpu_equal_the_c_cast)
     CHECK_EQ_INT((int32_t)out[2 * 3], 0);   /* -0.5 truncates to 0, as int() */
     CHECK_EQ_INT((int32_t)out[2 * 9], -1);  /* -1.5 to -1 */
     CHECK_EQ_INT((int32_t)out[2 * 15], 4194303);
-    gpu_bindings_destroy(b);
-    gpu_buffer_destroy(res);
-    gpu_buffer_destroy(in);
-    gpu_pipeline_destroy(p);
     CLOSE_CTX_CLEAN(ctx, v0);
 }
 
