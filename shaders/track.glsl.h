@@ -14,19 +14,17 @@
  * bounds-checked load per lane, so ICP reads 4 words per pixel instead of
  * 16. The ROF dual field is vec2 per pixel.
  *
- * Buffers of the image kernels (track_depth, track_pyrdown, track_smooth,
- * track_vn, track_rof, track_rof_primal), one binding layout for all:
+ * The image kernels (track_depth, track_pyrdown, track_smooth, track_vn,
+ * track_rof, track_rof_primal) read and write the pyramids through their
+ * device addresses in the push constants (track_image_push; on lavapipe a
+ * storage-buffer access at a per-lane index is a scalar loop over the lanes,
+ * one through an address a gather: gpu_buffer_address), and bind
  *   0 raw      input: u16 depth two per word (low half first), or float bits,
  *              from word raw_off (a frame in fusion's incoming slot)
- *   1 depth    depth pyramid (float)
- *   2 normal   normal pyramid (uint, octahedral)
- *   3 counters TRACK_CNT_* (uint)
- *   4 p_in     ROF dual field read (vec2); after the ROF: smoothing scratch (float)
- *   5 p_out    ROF dual field written (vec2); after the ROF: the depth pyramid
- *              that normals are computed from (float, track_smooth.comp)
- * The ICP kernel: 0 frame depth, 1 frame normal, 2 reference depth,
- * 3 reference normal (pyramids), 4 partial sums (TRACK_PARTIAL_WORDS floats
- * per workgroup), 5 frame intensity, 6 reference intensity (pyramids).
+ *   1 counters TRACK_CNT_* (uint)
+ * The ICP kernel (push constants full) reads the same addresses from
+ * binding 0, TRACK_ADDR_* (uvec2 each); binding 1 is the partial sums
+ * (TRACK_PARTIAL_WORDS floats per workgroup).
  *
  * Intensity pyramids (the photometric term) are float luma in [0, 1] per
  * pixel of the depth pyramid's geometry, TRACK_NO_INTENSITY where the pixel
@@ -38,17 +36,35 @@
 #ifndef BF_TRACK_GLSL_H
 #define BF_TRACK_GLSL_H
 
+#ifdef BF_GLSL
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+#endif
 #include "bf_common.glsl.h"
 
 #define TRACK_LEVELS 3u
-#define TRACK_IMAGE_BUFFERS 6u
-/* The image kernels' workgroups: TRACK_IMAGE_TILE^2 invocations; those that
- * loop take TRACK_IMAGE_PX pixels each, TRACK_IMAGE_TILE apart in x. */
+#define TRACK_IMAGE_BUFFERS 2u
+/* The image kernels' workgroups: TRACK_IMAGE_TILE^2 invocations, each taking
+ * TRACK_IMAGE_PX pixels TRACK_IMAGE_TILE apart in x (neighbouring lanes stay
+ * neighbouring pixels). On lavapipe every 8 invocations cost about 16
+ * integer divisions (their local indices from the workgroup's size), more
+ * than these kernels' own work on a pixel: 8 pixels share them (the
+ * finest level's depth pass 1.7 -> 0.7 ms on the 2-core machine). */
 #define TRACK_IMAGE_TILE 8u
-#define TRACK_IMAGE_PX 4u
-#define TRACK_ICP_BUFFERS 7u
+#define TRACK_IMAGE_PX 8u
+#define TRACK_ICP_BUFFERS 2u
 #define TRACK_INTENSITY_BUFFERS 3u
 #define TRACK_NO_INTENSITY (-1.0f)
+
+/* The ICP's address table (binding 0): the device address of each buffer it
+ * reads per pixel. */
+#define TRACK_ADDR_FRAME_DEPTH 0u
+#define TRACK_ADDR_FRAME_NORMAL 1u
+#define TRACK_ADDR_REF_DEPTH 2u
+#define TRACK_ADDR_REF_NORMAL 3u
+#define TRACK_ADDR_FRAME_INT 4u
+#define TRACK_ADDR_REF_INT 5u
+#define TRACK_ADDRS 6u
 
 /* Counters (uint words of the counters buffer). */
 #define TRACK_CNT_FRAME_VALID 0u /* valid depth pixels of the frame, finest level */
@@ -97,10 +113,16 @@ struct track_image_push {
     bf_u32 raw_off;         /* word offset of the raw image in binding 0 (depth, TRACK_RAW_U16 / F32) */
     bf_f32 sigma_a, sigma_b, sigma_c; /* the sensor's noise (bf_sensor_sigma; pyrdown, smooth) */
     bf_u32 pad;
+    /* Device addresses (low, high word) of the pyramids read and written: */
+    bf_u32 depth_lo, depth_hi;   /* depth (float) */
+    bf_u32 normal_lo, normal_hi; /* normals (uint, octahedral) */
+    bf_u32 p_in_lo, p_in_hi;     /* ROF dual field read (vec2); after the ROF: smoothing scratch (float) */
+    bf_u32 p_out_lo, p_out_hi;   /* ROF dual field written (vec2); after the ROF: the depth pyramid
+                                    that normals are computed from (float, track_smooth.comp) */
 };
 #ifndef BF_GLSL
 typedef struct track_image_push track_image_push;
-_Static_assert(sizeof(track_image_push) == 80, "track_image_push must match std430");
+_Static_assert(sizeof(track_image_push) == 112, "track_image_push must match std430");
 #endif
 
 /* Push constants of the ICP kernel: the frame's pose relative to the
@@ -162,6 +184,13 @@ _Static_assert(sizeof(track_intensity_push) == 128, "track_intensity_push must m
 /* ------------------------------------------------------------ shared math */
 
 #ifdef BF_GLSL
+/* Pyramids read and written through a device address (the push constants'
+ * *_lo, *_hi; the ICP's address table). No bounds check: every index stays
+ * inside its level. */
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer TrackF32 { float v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer TrackU32 { uint v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) buffer TrackVec2 { vec2 v[]; };
+
 /* Unit vectors in octahedral coordinates, two snorm16 in a uint (Cigolle
  * et al. 2014, "A survey of efficient representations for independent unit
  * vectors", JCGT 3(2)): about 0.003 degrees of error. */

@@ -24,13 +24,12 @@
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 0) readonly buffer FrameD { float d[]; } frame_d;
-layout(std430, binding = 1) readonly buffer FrameN { uint n[]; } frame_n;
-layout(std430, binding = 2) readonly buffer RefD { float d[]; } ref_d;
-layout(std430, binding = 3) readonly buffer RefN { uint n[]; } ref_n;
-layout(std430, binding = 4) writeonly buffer Partial { float w[]; } partial;
-layout(std430, binding = 5) readonly buffer FrameI { float v[]; } frame_i;
-layout(std430, binding = 6) readonly buffer RefI { float v[]; } ref_i;
+layout(std430, binding = 0) readonly buffer Addr { uvec2 a[TRACK_ADDRS]; } addr;
+layout(std430, binding = 1) writeonly buffer Partial { float w[]; } partial;
+
+/* The pyramids, through their addresses (main sets them from addr). */
+TrackF32 frame_d, ref_d, frame_i, ref_i;
+TrackU32 frame_n, ref_n;
 
 layout(push_constant) uniform Push { track_icp_push pc; };
 
@@ -125,8 +124,8 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
 {
     uint W = pc.size & 0xFFFFu;
     uint i = pc.off + y * W + x;
-    float z = frame_d.d[i];
-    uint mw = frame_n.n[i];
+    float z = frame_d.v[i];
+    uint mw = frame_n.v[i];
     if (!(z > 0.0) || mw == 0u) return;
     A.s7.y += 1.0; /* TRACK_SUM_VALID */
     vec3 r0 = vec3(pc.R[0], pc.R[1], pc.R[2]);
@@ -142,8 +141,8 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     if (!(u > -0.5 && w > -0.5 && u < float(RW) - 0.5 && w < float(RH) - 0.5)) return;
     uint ux = BF_TRUNC_U32(u + 0.5), wy = BF_TRUNC_U32(w + 0.5);
     uint j = pc.ref_off + wy * RW + ux;
-    float zq = ref_d.d[j];
-    uint nw = ref_n.n[j];
+    float zq = ref_d.v[j];
+    uint nw = ref_n.v[j];
     if (!(zq > 0.0) || nw == 0u) return;
     vec3 q = vec3((float(ux) - G.cx) * zq / G.fx, (float(wy) - G.cy) * zq / G.fy, zq);
     vec3 n = track_oct_decode(nw);
@@ -194,6 +193,9 @@ void main()
     uint x = k0 % W, y = k0 / W;
     uint sx = stride % W, sy = stride / W;
     ref_geom G = ref_geometry();
+    frame_d = TrackF32(addr.a[TRACK_ADDR_FRAME_DEPTH]), frame_n = TrackU32(addr.a[TRACK_ADDR_FRAME_NORMAL]);
+    ref_d = TrackF32(addr.a[TRACK_ADDR_REF_DEPTH]), ref_n = TrackU32(addr.a[TRACK_ADDR_REF_NORMAL]);
+    frame_i = TrackF32(addr.a[TRACK_ADDR_FRAME_INT]), ref_i = TrackF32(addr.a[TRACK_ADDR_REF_INT]);
     while (y < H) {
         uint xx = x + (y & 1u) * (pc.sub >> 1);
         if (xx < W) add_pixel(xx, y, G, A);

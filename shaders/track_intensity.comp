@@ -60,9 +60,15 @@ float down(uint x, uint y)
     return n > 0.0 ? sum / n : TRACK_NO_INTENSITY;
 }
 
-void main()
+void intensity_pixel(uint x, uint y)
 {
-    uint x = gl_GlobalInvocationID.x, y = gl_GlobalInvocationID.y;
     if (x >= pc.width || y >= pc.height) return;
     inten.v[pc.dst_off + y * pc.width + x] = pc.mode == TRACK_INT_DOWN ? down(x, y) : finest(x, y);
+}
+
+void main()
+{
+    /* TRACK_IMAGE_PX pixels per invocation (track.glsl.h says why). */
+    uint x0 = gl_WorkGroupID.x * (TRACK_IMAGE_TILE * TRACK_IMAGE_PX) + gl_LocalInvocationID.x;
+    for (uint j = 0u; j < TRACK_IMAGE_PX; j++) intensity_pixel(x0 + j * TRACK_IMAGE_TILE, gl_GlobalInvocationID.y);
 }

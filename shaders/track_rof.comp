@@ -22,9 +22,9 @@
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 1) readonly buffer Depth { float d[]; } depth;
-layout(std430, binding = 4) readonly buffer PIn { vec2 p[]; } p_in;
-layout(std430, binding = 5) writeonly buffer POut { vec2 p[]; } p_out;
+/* The depth, the dual field read and the one written (main sets them). */
+TrackF32 depth;
+TrackVec2 p_in, p_out;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 
@@ -32,9 +32,9 @@ layout(push_constant) uniform Push { track_image_push pc; };
  * outside the mask and in components whose forward neighbour is outside. */
 float div_p(uint i, uint x, uint y)
 {
-    vec2 p = p_in.p[i];
-    float pl = x > 0u ? p_in.p[i - 1u].x : 0.0;
-    float pu = y > 0u ? p_in.p[i - pc.width].y : 0.0;
+    vec2 p = p_in.v[i];
+    float pl = x > 0u ? p_in.v[i - 1u].x : 0.0;
+    float pu = y > 0u ? p_in.v[i - pc.width].y : 0.0;
     BF_PRECISE float d = (p.x - pl) + (p.y - pu);
     return d;
 }
@@ -52,13 +52,13 @@ void rof_pixel(uint x, uint y)
     uint i = y * pc.width + x;
     /* The level's depth at pixel offset pc.dst_off; p is level-local. */
     uint o = pc.dst_off;
-    float f = depth.d[o + i];
+    float f = depth.v[o + i];
     if (!(f > 0.0)) {
-        p_out.p[i] = vec2(0.0);
+        p_out.v[i] = vec2(0.0);
         return;
     }
-    float fr = x + 1u < pc.width ? depth.d[o + i + 1u] : 0.0;
-    float fd = y + 1u < pc.height ? depth.d[o + i + pc.width] : 0.0;
+    float fr = x + 1u < pc.width ? depth.v[o + i + 1u] : 0.0;
+    float fd = y + 1u < pc.height ? depth.v[o + i + pc.width] : 0.0;
     bool mx = fr > 0.0, my = fd > 0.0;
     float lambda = track_rof_lambda(f, pc.lambda0);
     float w = w_at(i, x, y, f, lambda);
@@ -76,17 +76,16 @@ void rof_pixel(uint x, uint y)
     }
     BF_PRECISE float s = pc.tau * lmin;
     BF_PRECISE float gn = sqrt(gx * gx + gy * gy);
-    vec2 p = p_in.p[i];
-    p_out.p[i] = vec2(mx ? track_rof_step(p.x, gx, s, gn) : 0.0, my ? track_rof_step(p.y, gy, s, gn) : 0.0);
+    vec2 p = p_in.v[i];
+    p_out.v[i] = vec2(mx ? track_rof_step(p.x, gx, s, gn) : 0.0, my ? track_rof_step(p.y, gy, s, gn) : 0.0);
 }
 
 void main()
 {
-    /* 2D dispatch, TRACK_IMAGE_PX pixels per invocation TRACK_IMAGE_TILE
-     * apart in x (neighbouring lanes stay neighbouring pixels): x and y
-     * without an integer division (lavapipe divides lane by lane), and
-     * lavapipe's cost per invocation, which dominates a kernel this small,
-     * is shared by several pixels. */
+    /* TRACK_IMAGE_PX pixels per invocation (track.glsl.h says why). */
+    depth = TrackF32(uvec2(pc.depth_lo, pc.depth_hi));
+    p_in = TrackVec2(uvec2(pc.p_in_lo, pc.p_in_hi));
+    p_out = TrackVec2(uvec2(pc.p_out_lo, pc.p_out_hi));
     uint x0 = gl_WorkGroupID.x * (TRACK_IMAGE_TILE * TRACK_IMAGE_PX) + gl_LocalInvocationID.x;
     for (uint j = 0u; j < TRACK_IMAGE_PX; j++) rof_pixel(x0 + j * TRACK_IMAGE_TILE, gl_GlobalInvocationID.y);
 }

@@ -8,26 +8,25 @@
  * TV keeps a monotone staircase) depth are off by tens of degrees. The
  * range weight lets a staircase's step through and stops at real depth
  * edges. Vertices keep the unfiltered depth.
- * mode 0: horizontal, depth (binding 1) -> scratch (binding 4);
- * mode 1: vertical, scratch (binding 4) -> smoothed (binding 5); all at the
- * level's pixel offset. */
+ * mode 0: horizontal, depth -> scratch (pc.p_in_*);
+ * mode 1: vertical, scratch -> smoothed (pc.p_out_*); all at the level's
+ * pixel offset. */
 #extension GL_GOOGLE_include_directive : require
 #include "track.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 1) readonly buffer Depth { float d[]; } depth;
-layout(std430, binding = 4) buffer Scratch { float d[]; } scratch;
-layout(std430, binding = 5) writeonly buffer Smooth { float d[]; } smoothed;
-
 layout(push_constant) uniform Push { track_image_push pc; };
 
-float src(uint i) { return pc.mode == 0u ? depth.d[i] : scratch.d[i]; }
+/* The pass's input, the depth (mode 0) or the horizontal pass's output,
+ * and its output (main sets them). */
+TrackF32 g_src, g_dst;
+float src(uint i) { return g_src.v[i]; }
 
-void main()
+void smooth_pixel(uint ux, uint uy)
 {
-    if (gl_GlobalInvocationID.x >= pc.width || gl_GlobalInvocationID.y >= pc.height) return;
-    int x = int(gl_GlobalInvocationID.x), y = int(gl_GlobalInvocationID.y);
+    if (ux >= pc.width || uy >= pc.height) return;
+    int x = int(ux), y = int(uy);
     uint i = uint(y) * pc.width + uint(x);
     uint o = pc.dst_off;
     float z = src(o + i);
@@ -48,6 +47,14 @@ void main()
         }
         out_z = sum / wsum;
     }
-    if (pc.mode == 0u) scratch.d[o + i] = out_z;
-    else smoothed.d[o + i] = out_z;
+    g_dst.v[o + i] = out_z;
+}
+
+void main()
+{
+    /* TRACK_IMAGE_PX pixels per invocation (track.glsl.h says why). */
+    g_src = pc.mode == 0u ? TrackF32(uvec2(pc.depth_lo, pc.depth_hi)) : TrackF32(uvec2(pc.p_in_lo, pc.p_in_hi));
+    g_dst = pc.mode == 0u ? TrackF32(uvec2(pc.p_in_lo, pc.p_in_hi)) : TrackF32(uvec2(pc.p_out_lo, pc.p_out_hi));
+    uint x0 = gl_WorkGroupID.x * (TRACK_IMAGE_TILE * TRACK_IMAGE_PX) + gl_LocalInvocationID.x;
+    for (uint j = 0u; j < TRACK_IMAGE_PX; j++) smooth_pixel(x0 + j * TRACK_IMAGE_TILE, gl_GlobalInvocationID.y);
 }

@@ -14,9 +14,6 @@
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 1) readonly buffer Depth { float d[]; } depth;
-layout(std430, binding = 5) readonly buffer Smooth { float d[]; } smoothed;
-layout(std430, binding = 2) buffer Normal { uint n[]; } normal;
 
 layout(push_constant) uniform Push { track_image_push pc; };
 
@@ -25,13 +22,15 @@ vec3 unproject(uint x, uint y, float z)
     return vec3((float(x) - pc.cx) * z / pc.fx, (float(y) - pc.cy) * z / pc.fy, z);
 }
 
-void main()
+void vn_pixel(uint x, uint y)
 {
-    uint x = gl_GlobalInvocationID.x, y = gl_GlobalInvocationID.y;
     if (x >= pc.width || y >= pc.height) return;
     uint i = y * pc.width + x;
     uint o = pc.dst_off;
-    float z = depth.d[o + i];
+    TrackF32 depth = TrackF32(uvec2(pc.depth_lo, pc.depth_hi));
+    TrackF32 smoothed = TrackF32(uvec2(pc.p_out_lo, pc.p_out_hi)); /* track_smooth.comp's output */
+    TrackU32 normal = TrackU32(uvec2(pc.normal_lo, pc.normal_hi));
+    float z = depth.v[o + i];
     uint n = 0u;
     if (pc.mode == 1u) {
         /* The finest level's normal from its parent pixel on the level
@@ -39,17 +38,17 @@ void main()
          * full-resolution smoothing, and the parent's normal spans twice
          * the baseline, which averages more of the disparity staircase. */
         uint j = pc.src_off + (y >> 1) * pc.src_width + (x >> 1);
-        float zp = depth.d[j];
-        if (z > 0.0 && zp > 0.0 && abs(z - zp) <= 2.0 * TRACK_NORMAL_JUMP_REL * z) n = normal.n[j];
-        normal.n[o + i] = n;
+        float zp = depth.v[j];
+        if (z > 0.0 && zp > 0.0 && abs(z - zp) <= 2.0 * TRACK_NORMAL_JUMP_REL * z) n = normal.v[j];
+        normal.v[o + i] = n;
         return;
     }
     /* Differences over +-TRACK_NORMAL_STEP pixels: a wider baseline
      * averages what is left of the quantisation staircase. */
     uint r = TRACK_NORMAL_STEP;
     if (z > 0.0 && x >= r && y >= r && x + r < pc.width && y + r < pc.height) {
-        float zl = smoothed.d[o + i - r], zr = smoothed.d[o + i + r];
-        float zu = smoothed.d[o + i - r * pc.width], zd = smoothed.d[o + i + r * pc.width];
+        float zl = smoothed.v[o + i - r], zr = smoothed.v[o + i + r];
+        float zu = smoothed.v[o + i - r * pc.width], zd = smoothed.v[o + i + r * pc.width];
         float jump = 2.0 * float(r) * TRACK_NORMAL_JUMP_REL * z;
         bool ok = zl > 0.0 && zr > 0.0 && zu > 0.0 && zd > 0.0 && abs(zr - zl) <= jump && abs(zd - zu) <= jump;
         if (ok) {
@@ -64,5 +63,12 @@ void main()
             }
         }
     }
-    normal.n[o + i] = n;
+    normal.v[o + i] = n;
+}
+
+void main()
+{
+    /* TRACK_IMAGE_PX pixels per invocation (track.glsl.h says why). */
+    uint x0 = gl_WorkGroupID.x * (TRACK_IMAGE_TILE * TRACK_IMAGE_PX) + gl_LocalInvocationID.x;
+    for (uint j = 0u; j < TRACK_IMAGE_PX; j++) vn_pixel(x0 + j * TRACK_IMAGE_TILE, gl_GlobalInvocationID.y);
 }

@@ -47,8 +47,7 @@ bf_status track__icp_create(track_tracker *t)
     t->partial_host = malloc(bytes);
     if (!t->partial_host) return bf_fail(BF_NO_MEMORY, "tracking: partial sums");
     if ((s = gpu_bindings_create(t->ctx, TRACK_ICP_BUFFERS, "track.icp", &t->b_icp)) != BF_OK) return s;
-    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
-                                           t->partials,    t->frame_int,    t->ref_int};
+    gpu_buffer *bufs[TRACK_ICP_BUFFERS] = {t->addresses, t->partials};
     for (uint32_t i = 0; i < TRACK_ICP_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(t->b_icp, i, bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
     /* Zero push constants: an empty level, the workgroup writes zeros. */

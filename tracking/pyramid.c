@@ -24,20 +24,23 @@ static bf_status image_pipeline(track_tracker *t, const char *name, const uint32
     return gpu_pipeline_create(t->ctx, &d, out);
 }
 
-static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *raw, bool is_ref, uint32_t p_in,
-                                gpu_bindings **out)
+static bf_status image_bindings(track_tracker *t, const char *name, gpu_buffer *raw, gpu_bindings **out)
 {
     bf_status s = gpu_bindings_create(t->ctx, TRACK_IMAGE_BUFFERS, name, out);
-    gpu_buffer *bufs[TRACK_IMAGE_BUFFERS] = {
-        raw,
-        is_ref ? t->ref_depth : t->frame_depth,
-        is_ref ? t->ref_normal : t->frame_normal,
-        t->counters,
-        t->rof_p[p_in],
-        t->rof_p[1 - p_in],
-    };
+    gpu_buffer *bufs[TRACK_IMAGE_BUFFERS] = {raw, t->counters};
     for (uint32_t i = 0; i < TRACK_IMAGE_BUFFERS && s == BF_OK; i++) s = gpu_bindings_set(*out, i, bufs[i], 0, GPU_WHOLE_SIZE);
     return s;
+}
+
+static track_image_set image_set(track_tracker *t, gpu_bindings *b, bool is_ref, uint32_t p_in)
+{
+    return (track_image_set){
+        .b = b,
+        .depth = gpu_buffer_address(is_ref ? t->ref_depth : t->frame_depth),
+        .normal = gpu_buffer_address(is_ref ? t->ref_normal : t->frame_normal),
+        .p_in = gpu_buffer_address(t->rof_p[p_in]),
+        .p_out = gpu_buffer_address(t->rof_p[1 - p_in]),
+    };
 }
 
 bf_status track__pyramid_create(track_tracker *t)
@@ -80,11 +83,11 @@ bf_status track__pyramid_create(track_tracker *t)
     for (uint32_t i = 0; i < TRACK_INTENSITY_BUFFERS && s == BF_OK; i++)
         s = gpu_bindings_set(t->b_int, i, ib[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
-    if ((s = image_bindings(t, "track.frame", t->upload, false, 0, &t->b_frame)) != BF_OK) return s;
+    if ((s = image_bindings(t, "track.frame", t->upload, &t->b_frame)) != BF_OK) return s;
+    if ((s = image_bindings(t, "track.ref", t->upload, &t->b_ref)) != BF_OK) return s;
     t->frame_raw_off = 0;
-    for (uint32_t k = 0; k < 2; k++)
-        if ((s = image_bindings(t, k ? "track.ref[1]" : "track.ref[0]", t->upload, true, k, &t->b_ref_up[k])) != BF_OK)
-            return s;
+    t->frame_set = image_set(t, t->b_frame, false, 0);
+    for (uint32_t k = 0; k < 2; k++) t->ref_set[k] = image_set(t, t->b_ref, true, k);
     /* Zero push constants: every kernel sees a 0 x 0 image and returns. */
     gpu_pipeline *all[] = {t->p_depth, t->p_pyrdown, t->p_smooth, t->p_vn, t->p_rof, t->p_primal, t->p_int};
     return gpu_pipeline_warm_up(t->ctx, all, 7);
@@ -92,10 +95,8 @@ bf_status track__pyramid_create(track_tracker *t)
 
 void track__pyramid_destroy(track_tracker *t)
 {
-    for (int k = 1; k >= 0; k--) {
-        gpu_bindings_destroy(t->b_ref_up[k]);
-        t->b_ref_up[k] = NULL;
-    }
+    gpu_bindings_destroy(t->b_ref);
+    t->b_ref = NULL;
     gpu_bindings_destroy(t->b_frame);
     gpu_bindings_destroy(t->b_int);
     gpu_pipeline_destroy(t->p_int);
@@ -170,27 +171,31 @@ static void pstage_begin(track_tracker *t, const gpu_pipeline *p, const track_im
     gpu_cmd_stage_begin(t->ctx, name);
 }
 
-/* The image kernels run on 2D tiles (no integer division for x, y). */
-static void dispatch(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const track_image_push *pc)
+/* The image set's addresses into the push constants. */
+static track_image_push with_set(const track_image_push *pc, const track_image_set *set)
 {
-    pstage_begin(t, p, pc);
-    gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE),
-                     gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
-    if (t->cfg.profile) gpu_cmd_stage_end(t->ctx);
+    track_image_push q = *pc;
+    q.depth_lo = (uint32_t)set->depth, q.depth_hi = (uint32_t)(set->depth >> 32);
+    q.normal_lo = (uint32_t)set->normal, q.normal_hi = (uint32_t)(set->normal >> 32);
+    q.p_in_lo = (uint32_t)set->p_in, q.p_in_hi = (uint32_t)(set->p_in >> 32);
+    q.p_out_lo = (uint32_t)set->p_out, q.p_out_hi = (uint32_t)(set->p_out >> 32);
+    return q;
 }
 
-/* The same for kernels taking TRACK_IMAGE_PX pixels per invocation. */
-static void dispatch_px(track_tracker *t, gpu_pipeline *p, gpu_bindings *b, const track_image_push *pc)
+/* The image kernels run on 2D tiles (no integer division for x, y) and take
+ * TRACK_IMAGE_PX pixels per invocation. */
+static void dispatch(track_tracker *t, gpu_pipeline *p, const track_image_set *set, const track_image_push *pc)
 {
+    track_image_push q = with_set(pc, set);
     pstage_begin(t, p, pc);
-    gpu_cmd_dispatch(t->ctx, p, b, pc, gpu_groups(pc->width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
+    gpu_cmd_dispatch(t->ctx, p, set->b, &q, gpu_groups(pc->width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
                      gpu_groups(pc->height, TRACK_IMAGE_TILE), 1);
     if (t->cfg.profile) gpu_cmd_stage_end(t->ctx);
 }
 
 /* Depth of level 0 from the raw input, levels above, then the normal maps
- * of every level, through binding set b. */
-static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t level, uint32_t mode, uint32_t counter,
+ * of every level, in image set b. */
+static void cmd_depth(track_tracker *t, const track_image_set *b, uint32_t level, uint32_t mode, uint32_t counter,
                       uint32_t raw_off)
 {
     track_image_push pc = base_push(t, level);
@@ -202,7 +207,7 @@ static void cmd_depth(track_tracker *t, gpu_bindings *b, uint32_t level, uint32_
 
 /* Depth levels first_down.. from the ones below, then the normals of every
  * level from `first` (the image's finest) up. */
-static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first, uint32_t first_down)
+static void cmd_pyramid(track_tracker *t, const track_image_set *b, uint32_t first, uint32_t first_down)
 {
     for (uint32_t l = first_down; l < TRACK_LEVELS; l++) {
         /* Level l - 1's depth writes -> level l's block reads. */
@@ -246,8 +251,8 @@ static void cmd_pyramid(track_tracker *t, gpu_bindings *b, uint32_t first, uint3
 void track__cmd_frame_pyramid(track_tracker *t)
 {
     track__stage_begin(t, "track.frame");
-    cmd_depth(t, t->b_frame, 0, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID, t->frame_raw_off);
-    cmd_pyramid(t, t->b_frame, 0, 1);
+    cmd_depth(t, &t->frame_set, 0, TRACK_RAW_U16, TRACK_CNT_FRAME_VALID, t->frame_raw_off);
+    cmd_pyramid(t, &t->frame_set, 0, 1);
     t->frame_has_int = t->colour && t->cfg.photo_weight > 0;
     if (t->frame_has_int) track__cmd_frame_intensity(t);
     track__stage_end(t);
@@ -281,7 +286,7 @@ void track__cmd_frame_intensity(track_tracker *t)
     pc.dist[3] = (float)t->colour_dist[3], pc.dist[4] = (float)t->colour_dist[4];
     pc.t[0] = (float)t->T_colour_depth.t.x, pc.t[1] = (float)t->T_colour_depth.t.y, pc.t[2] = (float)t->T_colour_depth.t.z;
     /* The depth pyramid's last barrier made level 0's depth readable. */
-    gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE),
+    gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
                      gpu_groups(pc.height, TRACK_IMAGE_TILE), 1);
     for (uint32_t l = 1; l < track__int_levels(t); l++) {
         /* Level l - 1's writes -> level l's block reads. */
@@ -289,7 +294,7 @@ void track__cmd_frame_intensity(track_tracker *t)
         pc.mode = TRACK_INT_DOWN;
         pc.width = t->geom.w[l], pc.height = t->geom.h[l];
         pc.src_off = t->geom.off[l - 1], pc.dst_off = t->geom.off[l], pc.src_width = t->geom.w[l - 1];
-        gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE),
+        gpu_cmd_dispatch(t->ctx, t->p_int, t->b_int, &pc, gpu_groups(pc.width, TRACK_IMAGE_TILE * TRACK_IMAGE_PX),
                          gpu_groups(pc.height, TRACK_IMAGE_TILE), 1);
     }
     /* The intensity -> ICP's reads. */
@@ -298,7 +303,7 @@ void track__cmd_frame_intensity(track_tracker *t)
 
 void track__cmd_reference(track_tracker *t, bool in_place)
 {
-    gpu_bindings **b = t->b_ref_up;
+    const track_image_set *b = t->ref_set;
     uint32_t n_it = t->cfg.rof_iterations;
     /* The image comes in at level l0 (a GPU reference at ref_level, a raw
      * frame at full resolution). The ROF runs on level rl >= l0; levels
@@ -314,14 +319,14 @@ void track__cmd_reference(track_tracker *t, bool in_place)
     /* The zero dual field and count -> the depth pass and the first ROF
      * iteration. */
     gpu_cmd_barrier(t->ctx, GPU_BARRIER_TRANSFER_TO_COMPUTE);
-    cmd_depth(t, b[0], l0, in_place ? TRACK_RAW_IN_PLACE : TRACK_RAW_U16, TRACK_CNT_REF_VALID, 0);
+    cmd_depth(t, &b[0], l0, in_place ? TRACK_RAW_IN_PLACE : TRACK_RAW_U16, TRACK_CNT_REF_VALID, 0);
     for (uint32_t l = l0 + 1; l <= rl; l++) {
         /* Level l - 1's depth writes -> level l's block reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
         track_image_push pc = base_push(t, l);
         pc.src_off = t->geom.off[l - 1];
         pc.src_width = t->geom.w[l - 1];
-        dispatch(t, t->p_pyrdown, b[0], &pc);
+        dispatch(t, t->p_pyrdown, &b[0], &pc);
     }
     track__stage_end(t);
 
@@ -335,16 +340,16 @@ void track__cmd_reference(track_tracker *t, bool in_place)
         /* The depth (first) or the previous iteration's dual writes -> this
          * iteration's reads. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        dispatch_px(t, t->p_rof, b[it & 1u], &pc);
+        dispatch(t, t->p_rof, &b[it & 1u], &pc);
     }
     if (n_it > 0) {
         /* The last dual field -> the primal solution reading it. */
         gpu_cmd_barrier(t->ctx, GPU_BARRIER_COMPUTE);
-        dispatch(t, t->p_primal, b[n_it & 1u], &pc);
+        dispatch(t, t->p_primal, &b[n_it & 1u], &pc);
     }
     track__stage_end(t);
 
     track__stage_begin(t, "track.ref");
-    cmd_pyramid(t, b[0], l0, rl + 1);
+    cmd_pyramid(t, &b[0], l0, rl + 1);
     track__stage_end(t);
 }

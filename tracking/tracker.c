@@ -232,6 +232,30 @@ static bf_status buffer(track_tracker *t, const char *name, uint64_t bytes, gpu_
     return gpu_buffer_create(t->ctx, &d, out);
 }
 
+/* A pyramid: bound to some kernels, read and written by others through its
+ * address (shaders/track.glsl.h). */
+static bf_status pyramid(track_tracker *t, const char *name, uint64_t bytes, gpu_buffer **out)
+{
+    gpu_buffer_desc d = {.name = name, .size_bytes = bytes, .memory = GPU_MEMORY_DEVICE,
+                         .usage = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER | GPU_USAGE_ADDRESS};
+    return gpu_buffer_create(t->ctx, &d, out);
+}
+
+/* The ICP's address table (TRACK_ADDR_*). */
+static bf_status address_table(track_tracker *t)
+{
+    bf_status s = buffer(t, "track.addresses", TRACK_ADDRS * 8, GPU_MEMORY_DEVICE, &t->addresses);
+    if (s != BF_OK) return s;
+    uint64_t a[TRACK_ADDRS];
+    a[TRACK_ADDR_FRAME_DEPTH] = gpu_buffer_address(t->frame_depth);
+    a[TRACK_ADDR_FRAME_NORMAL] = gpu_buffer_address(t->frame_normal);
+    a[TRACK_ADDR_REF_DEPTH] = gpu_buffer_address(t->ref_depth);
+    a[TRACK_ADDR_REF_NORMAL] = gpu_buffer_address(t->ref_normal);
+    a[TRACK_ADDR_FRAME_INT] = gpu_buffer_address(t->frame_int);
+    a[TRACK_ADDR_REF_INT] = gpu_buffer_address(t->ref_int);
+    return gpu_buffer_upload(t->addresses, 0, a, sizeof a);
+}
+
 bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out)
 {
     if (!ctx || !cfg || !K || !out) return bf_fail(BF_INVALID_ARG, "tracking: NULL argument");
@@ -255,22 +279,23 @@ bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intri
     t->geom.n_pix = off;
     uint64_t n0 = (uint64_t)K->width * K->height, np = t->geom.n_pix;
     if ((s = buffer(t, "track.upload", (n0 + 1) / 2 * 4, GPU_MEMORY_UPLOAD, &t->upload)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.frame_depth", np * 4, GPU_MEMORY_DEVICE, &t->frame_depth)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.frame_normal", np * 4, GPU_MEMORY_DEVICE, &t->frame_normal)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_depth", np * 4, GPU_MEMORY_DEVICE, &t->ref_depth)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_normal", np * 4, GPU_MEMORY_DEVICE, &t->ref_normal)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.rof_p[0]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[0])) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.rof_p[1]", n0 * 8, GPU_MEMORY_DEVICE, &t->rof_p[1])) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.frame_depth", np * 4, &t->frame_depth)) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.frame_normal", np * 4, &t->frame_normal)) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.ref_depth", np * 4, &t->ref_depth)) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.ref_normal", np * 4, &t->ref_normal)) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.rof_p[0]", n0 * 8, &t->rof_p[0])) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.rof_p[1]", n0 * 8, &t->rof_p[1])) != BF_OK) goto fail;
     if ((s = buffer(t, "track.counters", TRACK_CNT_WORDS * 4, GPU_MEMORY_READBACK, &t->counters)) != BF_OK) goto fail;
     /* The intensity pyramids: a word each while the photometric term is off. */
     uint64_t ni = cfg->photo_weight > 0 ? np * 4 : 4;
-    if ((s = buffer(t, "track.frame_intensity", ni, GPU_MEMORY_DEVICE, &t->frame_int)) != BF_OK) goto fail;
-    if ((s = buffer(t, "track.ref_intensity", ni, GPU_MEMORY_DEVICE, &t->ref_int)) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.frame_intensity", ni, &t->frame_int)) != BF_OK) goto fail;
+    if ((s = pyramid(t, "track.ref_intensity", ni, &t->ref_int)) != BF_OK) goto fail;
     /* Defined contents before any kernel reads them (validation, and a
      * reference pyramid level a smaller config never writes). */
     gpu_buffer *zero[] = {t->upload, t->frame_depth, t->frame_normal, t->ref_depth, t->ref_normal,
                           t->rof_p[0], t->rof_p[1], t->counters, t->frame_int, t->ref_int};
     for (size_t i = 0; i < sizeof zero / sizeof zero[0] && s == BF_OK; i++) s = gpu_buffer_zero(zero[i]);
+    if (s == BF_OK) s = address_table(t);
     if (s != BF_OK) goto fail;
     if ((s = track__pyramid_create(t)) != BF_OK) goto fail;
     if ((s = track__icp_create(t)) != BF_OK) goto fail;
@@ -286,7 +311,7 @@ void track_destroy(track_tracker *t)
     if (!t) return;
     track__icp_destroy(t);
     track__pyramid_destroy(t);
-    gpu_buffer *bufs[] = {t->ref_int, t->frame_int, t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal,
+    gpu_buffer *bufs[] = {t->addresses, t->ref_int, t->frame_int, t->counters, t->rof_p[1], t->rof_p[0], t->ref_normal,
                           t->ref_depth, t->frame_normal, t->frame_depth, t->upload};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     memset(t, 0xff, sizeof *t); /* poison: a use after destroy crashes early */

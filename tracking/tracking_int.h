@@ -17,6 +17,14 @@ typedef struct track_pyramid_geom {
     uint32_t n_pix;
 } track_pyramid_geom;
 
+/* One image kernel pass's buffers: a binding set (raw input, counters) and
+ * the device addresses of the pyramids it reads and writes
+ * (track_image_push). */
+typedef struct track_image_set {
+    gpu_bindings *b;
+    uint64_t depth, normal, p_in, p_out;
+} track_image_set;
+
 struct track_tracker {
     gpu_context *ctx;
     track_config cfg;
@@ -56,8 +64,12 @@ struct track_tracker {
     gpu_pipeline *p_depth, *p_pyrdown, *p_smooth, *p_vn, *p_rof, *p_primal, *p_icp, *p_int;
     gpu_bindings *b_int;       /* the intensity kernel: colour (bound per frame), frame depth, frame_int */
     /* Image binding sets: frame from its raw depth, reference from the upload
-     * (a raw frame; unused in place) with the dual fields 0 -> 1 and 1 -> 0. */
-    gpu_bindings *b_frame, *b_ref_up[2], *b_icp;
+     * (a raw frame; unused in place). */
+    gpu_bindings *b_frame, *b_ref, *b_icp;
+    /* What the image kernels work on: the frame's pyramids, or the
+     * reference's with the dual fields 0 -> 1 and 1 -> 0. */
+    track_image_set frame_set, ref_set[2];
+    gpu_buffer *addresses;     /* the ICP's address table, TRACK_ADDR_* */
 
     uint32_t icp_local;        /* ICP invocations per workgroup */
     uint32_t icp_px_per_thread;
