@@ -74,7 +74,6 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
         .voxel_sigmas = m->cfg.voxel_sigmas,
         .max_groups_x = fusion__max_groups_x(m),
     };
-    uint32_t lock_groups = gpu_groups(m->cfg.hash_buckets, 64);
     /* Empty retry queues and the frame's new-brick list; clear the locks. */
     gpu_cmd_fill(m->ctx, m->samples, 0, FUSION_QUEUE_ENTRIES * 4, 0);
     gpu_cmd_fill(m->ctx, m->new_list, 0, FUSION_LIST_HEADER * 4, 0);
@@ -87,7 +86,7 @@ void fusion__cmd_alloc(fusion_map *m, uint32_t slot, uint32_t frame_index)
         pc.pass = p;
         /* The previous pass's queue writes -> the args pass reading the count. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_COMPUTE);
-        gpu_cmd_dispatch_linear(m->ctx, m->p_alloc_args, m->b_alloc_args, &pc, lock_groups);
+        gpu_cmd_dispatch(m->ctx, m->p_alloc_args, m->b_alloc_args, &pc, 1, 1, 1);
         /* Group counts and cleared locks -> the indirect retry pass. */
         gpu_cmd_barrier(m->ctx, GPU_BARRIER_INDIRECT);
         uint32_t q_in = (p - 1) % 2;
