@@ -277,9 +277,17 @@ void colour_from_frames(uint tid, int key_x, int key_y, int key_z, uint cell_x, 
             fusion_point h = fusion_step_point(st, x, y, z);
             uint pixel = fusion_project_step(h, width, height);
             uint p0 = pixel != FUSION_NONE ? pixel : 0u;
-            uint pu = p0 % width, pv = p0 / width;
+            /* Its column and row as fusion_project_step found them: no
+             * division by the width (lavapipe divides lane by lane). */
+            uint pu = 0u, pv = 0u;
+            if (pixel != FUSION_NONE) {
+                BF_PRECISE float u = h.x / h.z;
+                BF_PRECISE float v = h.y / h.z;
+                pu = BF_TRUNC_U32(u), pv = BF_TRUNC_U32(v);
+            }
             /* The pixel and its right and lower neighbours (clamped), for the normal. */
-            uint p1 = pu + 1u < width ? p0 + 1u : p0 - 1u, p2 = pv + 1u < height ? p0 + width : p0 - width;
+            uint u1 = pu + 1u < width ? pu + 1u : pu - 1u, v2 = pv + 1u < height ? pv + 1u : pv - 1u;
+            uint p1 = pv * width + u1, p2 = v2 * width + pu;
             float d0 = float(fusion_depth_raw(depth.w[base + (p0 >> 1)], p0)) * a.w;
             float d1 = float(fusion_depth_raw(depth.w[base + (p1 >> 1)], p1)) * a.w;
             float d2 = float(fusion_depth_raw(depth.w[base + (p2 >> 1)], p2)) * a.w;
@@ -289,8 +297,8 @@ void colour_from_frames(uint tid, int key_x, int key_y, int key_z, uint cell_x, 
             /* Normal from the depth image; a neighbour across an edge or
              * without depth leaves the sample at a fixed, low weight. */
             vec3 q0 = unproject(f, float(pu), float(pv), d0);
-            vec3 q1 = unproject(f, float(p1 % width), float(p1 / width), d1);
-            vec3 q2 = unproject(f, float(p2 % width), float(p2 / width), d2);
+            vec3 q1 = unproject(f, float(u1), float(pv), d1);
+            vec3 q2 = unproject(f, float(pu), float(v2), d2);
             vec3 n = cross(q1 - q0, q2 - q0);
             bool smooth_nb = d1 > 0.0 && d2 > 0.0 && abs(d1 - d0) < 4.0 * band && abs(d2 - d0) < 4.0 * band && dot(n, n) > 0.0;
             float cos_view = smooth_nb ? abs(dot(normalize(n), normalize(q0))) : 0.25;

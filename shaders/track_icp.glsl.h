@@ -88,10 +88,10 @@ void add_row(vec3 n, vec3 c, float r, float wgt, inout icp_acc A)
  * camera, projects with the frame level's intrinsics to (u, v) of the
  * reference's intensity at this level (the frame the reference was made
  * with, at the reference's pose). The residual is r = I_ref(u, v) -
- * I_frame(pixel i); moving p by the twist (t, w) changes it by g . (t + w x
+ * I_frame(pixel i, column fx, row fy); moving p by the twist (t, w) changes it by g . (t + w x
  * p), g = J_pi(p)^T grad I_ref, so its row is (g, p x g) like a normal's.
  * The gradient is the bilinear interpolant's own derivative. */
-void add_photometric(uint i, vec3 p, inout icp_acc A)
+void add_photometric(uint i, uint fx, uint fy, vec3 p, inout icp_acc A)
 {
     uint W = pc.size & 0xFFFFu, H = pc.size >> 16;
     float ic = frame_i.v[i];
@@ -112,7 +112,6 @@ void add_photometric(uint i, vec3 p, inout icp_acc A)
     /* The frame's own gradient at the pixel (forward differences, as the
      * reference's above): a frame blurred by its motion has less of it than
      * the sharp reference (track_config.photo_sharpness_min). */
-    uint fx = (i - pc.off) % W, fy = (i - pc.off) / W;
     float ir = fx + 1u < W ? frame_i.v[i + 1u] : -1.0, id = fy + 1u < H ? frame_i.v[i + W] : -1.0;
     float gf = ir >= 0.0 && id >= 0.0 ? (ir - ic) * (ir - ic) + (id - ic) * (id - ic) : 0.0;
     float gr = ir >= 0.0 && id >= 0.0 ? gu * gu + gv * gv : 0.0;
@@ -176,7 +175,7 @@ void add_pixel(uint x, uint y, ref_geom G, inout icp_acc A)
     add_row(n, cross(p, n), r, wgt, A);
     A.s6.w += r * r;
     A.s7 += vec4(1.0, 0.0, p.z, e * e);
-    if (pc.photo_w > 0.0) add_photometric(i, p, A);
+    if (pc.photo_w > 0.0) add_photometric(i, x, y, p, A);
 }
 
 void main()
