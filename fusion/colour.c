@@ -9,7 +9,7 @@
 #include "bf_shaders_spv.h"
 #include "fusion_int.h"
 
-enum { COLOUR_BUFFERS = 14 };
+enum { COLOUR_BUFFERS = 13 };
 
 bf_status fusion__colour_create(fusion_map *m)
 {
@@ -23,12 +23,12 @@ bf_status fusion__colour_create(fusion_map *m)
         .local_size = {FUSION_COLOUR_LOCAL, 1, 1},
     };
     bf_status s = gpu_pipeline_create(m->ctx, &d, &m->p_colour);
-    gpu_buffer *bufs[COLOUR_BUFFERS] = {m->hash,       m->info,        m->conf,        m->frames,
-                                        m->depth_ring, m->colour_ring, m->window_list, m->cmask,
-                                        m->cpool,      m->counters,    m->cfree,       m->chead,
-                                        m->sign,       m->nodes};
+    /* The rings are read through the map's address table (binding 4). */
+    gpu_buffer *bufs[COLOUR_BUFFERS] = {m->hash,     m->info,  m->conf,     m->frames, m->addresses,
+                                        m->window_list, m->cmask, m->cpool,   m->counters, m->cfree,
+                                        m->chead,    m->sign,  m->nodes};
     if (s == BF_OK) s = fusion__bindings_create(m, "fusion.colour", bufs, COLOUR_BUFFERS, &m->b_colour);
-    bufs[6] = m->trim_list;
+    bufs[5] = m->trim_list;
     if (s == BF_OK && m->cfg.colour_reach)
         s = fusion__bindings_create(m, "fusion.colour_trim", bufs, COLOUR_BUFFERS, &m->b_colour_trim);
     /* As the integration: a CPU device pays per workgroup, a GPU wants one brick each. */

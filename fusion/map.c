@@ -82,17 +82,18 @@ static bf_status create_buffers(fusion_map *m)
     uint64_t depth_words = (pixels + 1) / 2;
     uint32_t st = GPU_USAGE_STORAGE | GPU_USAGE_TRANSFER;
     buf_plan plan[] = {
-        {&m->hash, "fusion.hash", (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        /* The ray-cast reads these four through their addresses (FUSION_ADDR_*). */
+        {&m->hash, "fusion.hash", (uint64_t)m->n_entries * FUSION_ENTRY_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_ADDRESS},
         {&m->locks, "fusion.locks", (uint64_t)c->hash_buckets * 4, GPU_MEMORY_DEVICE, st},
-        {&m->nodes, "fusion.nodes", (uint64_t)c->node_cap * FUSION_NODE_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->nodes, "fusion.nodes", (uint64_t)c->node_cap * FUSION_NODE_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_ADDRESS},
         {&m->info, "fusion.brick_info", (uint64_t)c->brick_cap * FUSION_BRICK_INFO_WORDS * 4, GPU_MEMORY_DEVICE, st},
-        {&m->sign, "fusion.sign_pool", (uint64_t)c->brick_cap * BRICK_WORDS * 4, GPU_MEMORY_DEVICE, st},
-        {&m->conf, "fusion.conf_pool", (uint64_t)c->brick_cap * BRICK_WORDS * 4, GPU_MEMORY_DEVICE, st},
+        {&m->sign, "fusion.sign_pool", (uint64_t)c->brick_cap * BRICK_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_ADDRESS},
+        {&m->conf, "fusion.conf_pool", (uint64_t)c->brick_cap * BRICK_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_ADDRESS},
         {&m->free_stack, "fusion.free_stack", (uint64_t)c->brick_cap * 4, GPU_MEMORY_DEVICE, st},
         {&m->stamp, "fusion.stamp", (uint64_t)c->brick_cap * 4, GPU_MEMORY_DEVICE, st},
         {&m->counters, "fusion.counters", FUSION_CNT_WORDS * 4, GPU_MEMORY_DEVICE, st | GPU_USAGE_INDIRECT},
         {&m->frames, "fusion.frames", (uint64_t)m->ring_slots * FUSION_FRAME_WORDS * 4, GPU_MEMORY_DEVICE, st},
-        /* The window pass reads it through its address (gpu_buffer_address). */
+        /* The window and colour passes read it through its address (gpu_buffer_address). */
         {&m->depth_ring, "fusion.depth_ring", (uint64_t)m->ring_slots * depth_words * 4, GPU_MEMORY_DEVICE,
          st | GPU_USAGE_ADDRESS},
         /* Room for the colour whether or not the map keeps it: tracking reads it here. */
@@ -128,7 +129,7 @@ static bf_status create_buffers(fusion_map *m)
     uint64_t on = c->keep_colour ? 1 : 0;
     buf_plan colour[] = {
         {&m->colour_ring, "fusion.colour_ring", on ? (uint64_t)m->ring_slots * depth_words * 4 : 4, GPU_MEMORY_DEVICE,
-         st},
+         st | GPU_USAGE_ADDRESS},
         {&m->cmask, "fusion.colour_mask", on ? (uint64_t)c->brick_cap * BRICK_WORDS * 4 : 4, GPU_MEMORY_DEVICE, st},
         {&m->chead, "fusion.colour_head", on ? (uint64_t)c->brick_cap * 4 : 4, GPU_MEMORY_DEVICE, st},
         {&m->cpool, "fusion.colour_pool", on ? (uint64_t)c->colour_unit_cap * FUSION_COLOUR_UNIT_WORDS * 4 : 4,
@@ -144,7 +145,16 @@ static bf_status create_buffers(fusion_map *m)
         bf_status s = gpu_buffer_create(m->ctx, &d, colour[i].dst);
         if (s != BF_OK) return s;
     }
-    return BF_OK;
+    gpu_buffer_desc ad = {.name = "fusion.addresses", .size_bytes = FUSION_ADDRS * 8, .memory = GPU_MEMORY_DEVICE};
+    bf_status s = gpu_buffer_create(m->ctx, &ad, &m->addresses);
+    uint64_t a[FUSION_ADDRS];
+    a[FUSION_ADDR_HASH] = gpu_buffer_address(m->hash);
+    a[FUSION_ADDR_NODES] = gpu_buffer_address(m->nodes);
+    a[FUSION_ADDR_SIGN] = gpu_buffer_address(m->sign);
+    a[FUSION_ADDR_CONF] = gpu_buffer_address(m->conf);
+    a[FUSION_ADDR_DEPTH_RING] = gpu_buffer_address(m->depth_ring);
+    a[FUSION_ADDR_COLOUR_RING] = gpu_buffer_address(m->colour_ring);
+    return s == BF_OK ? gpu_buffer_upload(m->addresses, 0, a, sizeof a) : s;
 }
 
 /* Fills the pools with their empty state: no chunk, no node, every brick slot
@@ -326,7 +336,7 @@ void fusion_destroy(fusion_map *m)
                           m->samples, m->upload, m->depth_ring, m->frames,
                           m->counters, m->stamp, m->free_stack, m->conf, m->sign, m->info, m->nodes,
                           m->locks, m->hash, m->colour_ring, m->cmask, m->chead, m->cpool, m->cfree,
-                          m->trim_list};
+                          m->trim_list, m->addresses};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) gpu_buffer_destroy(bufs[i]);
     free(m);
 }
@@ -626,6 +636,7 @@ fusion_gpu_view fusion_gpu_view_get(const fusion_map *m)
         .info = m->info,
         .sign = m->sign,
         .conf = m->conf,
+        .addresses = m->addresses,
         .cmask = m->cmask,
         .cpool = m->cpool,
         .chead = m->chead,

@@ -16,9 +16,9 @@ struct render_caster {
     gpu_pipeline *p_raycast, *p_shade;
     gpu_bindings *b_raycast, *b_shade;
     /* The map buffers bound to b_raycast (rebound when another map comes). */
-    gpu_buffer *bound_hash, *bound_nodes, *bound_sign, *bound_conf, *bound_cmask, *bound_cpool, *bound_chead;
-    gpu_buffer *bound_start; /* binding 6: the start depths, or the dummy */
-    gpu_buffer *bound_depth; /* binding 4: the depth destination, targets.depth or render_options.depth_out */
+    gpu_buffer *bound_addresses, *bound_cmask, *bound_cpool, *bound_chead;
+    gpu_buffer *bound_start; /* RENDER_RC_START: the start depths, or the dummy */
+    gpu_buffer *bound_depth; /* RENDER_RC_DEPTH: the depth destination, targets.depth or render_options.depth_out */
     gpu_buffer *dummy;       /* 16 bytes bound when there are no start depths */
     double last_ms;
     uint32_t local_x, local_y; /* workgroup shape of both passes */
@@ -80,7 +80,7 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
         .name = "render.raycast",
         .spirv = bf_spv_render_raycast,
         .spirv_bytes = bf_spv_render_raycast_size,
-        .n_buffers = 11,
+        .n_buffers = RENDER_RC_BUFFERS,
         .push_bytes = sizeof(render_push),
         .local_size = {rc->local_x, rc->local_y, 1},
     };
@@ -96,14 +96,14 @@ bf_status render_create(gpu_context *ctx, const render_config *cfg, uint32_t wid
     if (s == BF_OK) s = gpu_pipeline_create(ctx, &ps, &rc->p_shade);
     if (s == BF_OK) s = target_create(ctx, "render.no_start", 16, &rc->dummy);
     if (s == BF_OK) s = gpu_buffer_zero(rc->dummy);
-    if (s == BF_OK) s = gpu_bindings_create(ctx, 11, "render.raycast", &rc->b_raycast);
-    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 9, rc->targets.surface_rgb, 0, GPU_WHOLE_SIZE);
-    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 6, rc->dummy, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_create(ctx, RENDER_RC_BUFFERS, "render.raycast", &rc->b_raycast);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, RENDER_RC_RGB, rc->targets.surface_rgb, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, RENDER_RC_START, rc->dummy, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) rc->bound_start = rc->dummy;
     if (s == BF_OK) s = gpu_bindings_create(ctx, 5, "render.shade", &rc->b_shade);
-    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 4, rc->targets.depth, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, RENDER_RC_DEPTH, rc->targets.depth, 0, GPU_WHOLE_SIZE);
     if (s == BF_OK) rc->bound_depth = rc->targets.depth;
-    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, 5, rc->targets.level, 0, GPU_WHOLE_SIZE);
+    if (s == BF_OK) s = gpu_bindings_set(rc->b_raycast, RENDER_RC_LEVEL, rc->targets.level, 0, GPU_WHOLE_SIZE);
     gpu_buffer *shade[5] = {rc->targets.depth, rc->targets.level, rc->targets.normal, rc->targets.colour,
                             rc->targets.surface_rgb};
     for (uint32_t i = 0; i < 5 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_shade, i, shade[i], 0, GPU_WHOLE_SIZE);
@@ -137,18 +137,16 @@ void render_destroy(render_caster *rc)
 /* Binds the map's buffers when they are not those bound already. */
 static bf_status bind_map(render_caster *rc, const fusion_gpu_view *v)
 {
-    if (rc->bound_hash == v->hash && rc->bound_nodes == v->nodes && rc->bound_sign == v->sign &&
-        rc->bound_conf == v->conf && rc->bound_cmask == v->cmask && rc->bound_cpool == v->cpool &&
+    if (rc->bound_addresses == v->addresses && rc->bound_cmask == v->cmask && rc->bound_cpool == v->cpool &&
         rc->bound_chead == v->chead)
         return BF_OK;
-    gpu_buffer *bufs[7] = {v->hash, v->nodes, v->sign, v->conf, v->cmask, v->cpool, v->chead};
-    uint32_t at[7] = {0, 1, 2, 3, 7, 8, 10};
-    rc->bound_hash = rc->bound_nodes = rc->bound_sign = rc->bound_conf = NULL;
-    rc->bound_cmask = rc->bound_cpool = rc->bound_chead = NULL;
+    gpu_buffer *bufs[4] = {v->addresses, v->cmask, v->cpool, v->chead};
+    uint32_t at[4] = {RENDER_RC_ADDR, RENDER_RC_CMASK, RENDER_RC_CPOOL, RENDER_RC_CHEAD};
+    rc->bound_addresses = rc->bound_cmask = rc->bound_cpool = rc->bound_chead = NULL;
     bf_status s = BF_OK;
-    for (uint32_t i = 0; i < 7 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, at[i], bufs[i], 0, GPU_WHOLE_SIZE);
+    for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, at[i], bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
-    rc->bound_hash = v->hash, rc->bound_nodes = v->nodes, rc->bound_sign = v->sign, rc->bound_conf = v->conf;
+    rc->bound_addresses = v->addresses;
     rc->bound_cmask = v->cmask, rc->bound_cpool = v->cpool, rc->bound_chead = v->chead;
     return BF_OK;
 }
@@ -186,12 +184,12 @@ bf_status render_cmd_raycast(render_caster *rc, fusion_map *map, const bf_intrin
     if (s != BF_OK) return s;
     gpu_buffer *start = opt->start_depth ? opt->start_depth : rc->dummy;
     if (start != rc->bound_start) {
-        if ((s = gpu_bindings_set(rc->b_raycast, 6, start, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
+        if ((s = gpu_bindings_set(rc->b_raycast, RENDER_RC_START, start, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
         rc->bound_start = start;
     }
     gpu_buffer *depth = opt->depth_out ? opt->depth_out : rc->targets.depth;
     if (depth != rc->bound_depth) {
-        if ((s = gpu_bindings_set(rc->b_raycast, 4, depth, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
+        if ((s = gpu_bindings_set(rc->b_raycast, RENDER_RC_DEPTH, depth, 0, GPU_WHOLE_SIZE)) != BF_OK) return s;
         rc->bound_depth = depth;
     }
 

@@ -22,6 +22,12 @@
  *   sign      BRICK_WORDS per brick slot: bit = voxel centre in front.
  *   conf      BRICK_WORDS per brick slot: bit = voxel is confident.
  *   counters  fusion_counters (allocation cursors, free stack, statistics).
+ *   addresses the device addresses (uvec2 each) of hash, nodes, sign, conf
+ *             and the frame rings, FUSION_ADDR_*: a reader that binds this one
+ *             buffer reads them through it (render_raycast.comp,
+ *             fusion_colour.comp; on lavapipe a storage-buffer load at a
+ *             per-lane index is a scalar loop over the lanes, one through an
+ *             address a gather: gpu_buffer_address).
  */
 #ifndef BF_FUSION_GLSL_H
 #define BF_FUSION_GLSL_H
@@ -29,6 +35,13 @@
 #include "bf_common.glsl.h"
 
 #define FUSION_MAX_LEVEL 8u
+#define FUSION_ADDR_HASH 0u
+#define FUSION_ADDR_NODES 1u
+#define FUSION_ADDR_SIGN 2u
+#define FUSION_ADDR_CONF 3u
+#define FUSION_ADDR_DEPTH_RING 4u
+#define FUSION_ADDR_COLOUR_RING 5u
+#define FUSION_ADDRS 6u
 #define FUSION_NONE 0xFFFFFFFFu   /* no child / no brick / end of list */
 #define FUSION_LOCKED 0xFFFFFFFEu /* being created in this pass */
 

@@ -14,6 +14,8 @@
  * x). The frames' stepping is that of the integration (fusion_step), so a
  * voxel lands on the pixel the integration read. */
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
 #extension GL_EXT_control_flow_attributes : require
 #include "fusion.glsl.h"
 
@@ -23,16 +25,21 @@ layout(std430, binding = 0) readonly buffer Hash { uint w[]; } hash;
 layout(std430, binding = 1) readonly buffer Info { uint w[]; } info;
 layout(std430, binding = 2) readonly buffer Conf { uint w[]; } conf_pool;
 layout(std430, binding = 3) readonly buffer Frames { fusion_frame f[]; } frames;
-layout(std430, binding = 4) readonly buffer Depth { uint w[]; } depth;
-layout(std430, binding = 5) readonly buffer ColourRing { uint w[]; } colour_ring;
-layout(std430, binding = 6) readonly buffer List { uint w[]; } list;
-layout(std430, binding = 7) buffer ColourMask { uint w[]; } cmask;
-layout(std430, binding = 8) buffer ColourPool { uint w[]; } cpool;
-layout(std430, binding = 9) buffer Counters { uint w[]; } cnt;
-layout(std430, binding = 10) buffer ColourFree { uint w[]; } cfree;
-layout(std430, binding = 11) buffer ColourHead { uint w[]; } chead;
-layout(std430, binding = 12) readonly buffer Sign { uint w[]; } sign_pool;
-layout(std430, binding = 13) readonly buffer Nodes { uint w[]; } nodes;
+layout(std430, binding = 4) readonly buffer Addr { uvec2 a[FUSION_ADDRS]; } addr;
+layout(std430, binding = 5) readonly buffer List { uint w[]; } list;
+layout(std430, binding = 6) buffer ColourMask { uint w[]; } cmask;
+layout(std430, binding = 7) buffer ColourPool { uint w[]; } cpool;
+layout(std430, binding = 8) buffer Counters { uint w[]; } cnt;
+layout(std430, binding = 9) buffer ColourFree { uint w[]; } cfree;
+layout(std430, binding = 10) buffer ColourHead { uint w[]; } chead;
+layout(std430, binding = 11) readonly buffer Sign { uint w[]; } sign_pool;
+layout(std430, binding = 12) readonly buffer Nodes { uint w[]; } nodes;
+
+/* The depth and colour rings, read through their addresses (the map's
+ * table, FUSION_ADDR_*): a gather on lavapipe, where a load through a
+ * binding at a per-lane index is a loop over the lanes. */
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer RingWords { uint w[]; };
+RingWords depth, colour_ring; /* main sets them */
 
 layout(push_constant) uniform Push { fusion_colour_push pc; };
 
@@ -505,6 +512,8 @@ void main()
     uint n_list = list.w[FUSION_LIST_COUNT];
     uint count = n_list > pc.first ? min(n_list - pc.first, pc.max_count) : 0u;
     uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    depth = RingWords(addr.a[FUSION_ADDR_DEPTH_RING]);
+    colour_ring = RingWords(addr.a[FUSION_ADDR_COLOUR_RING]);
     /* bricks_per_group consecutive entries: llvmpipe pays about 10 us to
      * start a workgroup (as for the integration). */
     for (uint b = 0u; b < pc.bricks_per_group; b++) {

@@ -25,7 +25,7 @@
 #define RENDER_FLAG_CONFIDENT_ONLY 1u /* non-confident voxels are unknown */
 #define RENDER_FLAG_REFINE 2u         /* hit between the two voxel centres */
 #define RENDER_FLAG_START 4u          /* rays start at the start image's depth minus a margin */
-#define RENDER_FLAG_COLOUR 8u         /* look up the map's colour at the hit (bindings 7-9) */
+#define RENDER_FLAG_COLOUR 8u         /* look up the map's colour at the hit (RENDER_RC_CMASK .. _CHEAD) */
 #define RENDER_FLAG_NO_GRAZE 16u      /* with REFINE: a hit whose refined field stays in front is passed by */
 
 /* Octree cells are addressed by integer coordinates on the finest grid
@@ -98,16 +98,29 @@ typedef struct render_view_push render_view_push;
 _Static_assert(sizeof(render_view_push) == RENDER_VIEW_PUSH_WORDS * 4, "render_view_push must match std430");
 #endif
 
+/* Bindings of render_raycast.comp. The map's hash, nodes, sign and conf
+ * are read through their device addresses (the map's address table,
+ * FUSION_ADDR_*; docs/gpu.md, lavapipe notes). */
+#define RENDER_RC_ADDR 0u  /* the map's address table */
+#define RENDER_RC_DEPTH 1u /* depth written (float), from pixel depth_off */
+#define RENDER_RC_LEVEL 2u /* level of the hit (uint) */
+#define RENDER_RC_START 3u /* the start image (float, RENDER_FLAG_START) */
+#define RENDER_RC_CMASK 4u /* the map's colour masks, units and heads (RENDER_FLAG_COLOUR) */
+#define RENDER_RC_CPOOL 5u
+#define RENDER_RC_RGB 6u   /* the hit's colour written (RGB565) */
+#define RENDER_RC_CHEAD 7u
+#define RENDER_RC_BUFFERS 8u
+
 /* Push constants of render_raycast.comp and render_shade.comp. */
 struct render_push {
     render_view_push view;
     bf_u32 flags;            /* RENDER_FLAG_* */
     /* RENDER_FLAG_START: a ray whose pixel has depth z > 0 in the start
-     * image (binding 6, floats from start_off) begins at max(near_m, z -
+     * image (RENDER_RC_START, floats from start_off) begins at max(near_m, z -
      * start_margin_m - start_margin_z2 z^2). */
     bf_f32 start_margin_m, start_margin_z2;
     bf_u32 start_off;
-    /* The depth image (binding 4) starts at pixel depth_off: 0 for the
+    /* The depth image (RENDER_RC_DEPTH) starts at pixel depth_off: 0 for the
      * caster's own, another buffer's level (the tracking reference) else. */
     bf_u32 depth_off;
 };

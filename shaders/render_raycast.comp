@@ -7,30 +7,34 @@
  * (FUSION_NONE: none); render_shade.comp derives normals and colour.
  */
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
 #include "fusion.glsl.h"
 #include "render.glsl.h"
 
 BF_LOCAL_SIZE_FROM_SPEC
 
-layout(std430, binding = 0) readonly buffer Hash { uint w[]; } hash;
-layout(std430, binding = 1) readonly buffer Nodes { uint w[]; } nodes;
-layout(std430, binding = 2) readonly buffer Sign { uint w[]; } sign_pool;
-layout(std430, binding = 3) readonly buffer Conf { uint w[]; } conf_pool;
-layout(std430, binding = 4) writeonly buffer Depth { float v[]; } depth_out;
-layout(std430, binding = 5) writeonly buffer Level { uint v[]; } level_out;
-layout(std430, binding = 6) readonly buffer Start { float v[]; } start_in;
-layout(std430, binding = 7) readonly buffer ColourMask { uint w[]; } cmask;
-layout(std430, binding = 8) readonly buffer ColourPool { uint w[]; } cpool;
-layout(std430, binding = 9) writeonly buffer SurfaceColour { uint v[]; } rgb_out;
-layout(std430, binding = 10) readonly buffer ColourHead { uint w[]; } chead;
+layout(std430, binding = RENDER_RC_ADDR) readonly buffer Addr { uvec2 a[FUSION_ADDRS]; } addr;
+layout(std430, binding = RENDER_RC_DEPTH) writeonly buffer Depth { float v[]; } depth_out;
+layout(std430, binding = RENDER_RC_LEVEL) writeonly buffer Level { uint v[]; } level_out;
+layout(std430, binding = RENDER_RC_START) readonly buffer Start { float v[]; } start_in;
+layout(std430, binding = RENDER_RC_CMASK) readonly buffer ColourMask { uint w[]; } cmask;
+layout(std430, binding = RENDER_RC_CPOOL) readonly buffer ColourPool { uint w[]; } cpool;
+layout(std430, binding = RENDER_RC_RGB) writeonly buffer SurfaceColour { uint v[]; } rgb_out;
+layout(std430, binding = RENDER_RC_CHEAD) readonly buffer ColourHead { uint w[]; } chead;
+
+/* The map's words through their addresses (a gather on lavapipe, where a
+ * load through a binding at a per-lane index is a loop over the lanes). No
+ * bounds check: the walk's indices come from the map's own links. */
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer MapWords { uint w[]; };
 
 layout(push_constant) uniform Push { render_push pc; };
 
-uint render_sign_word(uint slot, uint w) { return sign_pool.w[slot * BRICK_WORDS + w]; }
-uint render_conf_word(uint slot, uint w) { return conf_pool.w[slot * BRICK_WORDS + w]; }
+uint render_sign_word(uint slot, uint w) { return MapWords(addr.a[FUSION_ADDR_SIGN]).w[slot * BRICK_WORDS + w]; }
+uint render_conf_word(uint slot, uint w) { return MapWords(addr.a[FUSION_ADDR_CONF]).w[slot * BRICK_WORDS + w]; }
 
-uint fusion_hash_word(uint i) { return hash.w[i]; }
-uint render_node_word(uint i) { return nodes.w[i]; }
+uint fusion_hash_word(uint i) { return MapWords(addr.a[FUSION_ADDR_HASH]).w[i]; }
+uint render_node_word(uint i) { return MapWords(addr.a[FUSION_ADDR_NODES]).w[i]; }
 
 #include "render_traverse.glsl.h"
 
