@@ -201,7 +201,9 @@ typedef struct fusion_gpu_view {
     gpu_buffer *nodes;      /* FUSION_NODE_WORDS per node */
     gpu_buffer *info;       /* FUSION_BRICK_INFO_WORDS per brick slot */
     gpu_buffer *sign, *conf; /* BRICK_WORDS per brick slot */
-    gpu_buffer *addresses;  /* FUSION_ADDRS device addresses (uvec2): hash, nodes, sign, conf (FUSION_ADDR_*) */
+    gpu_buffer *addresses;  /* FUSION_ADDRS device addresses (uvec2, FUSION_ADDR_*): hash, nodes, sign, conf,
+                               the depth and colour rings */
+    uint64_t id;            /* this map's, unique in the process: a reader's bindings follow it */
     gpu_buffer *cmask, *cpool, *chead; /* colour masks, units and heads (one word each when the map keeps no colour) */
     bool has_colour;
     uint32_t n_buckets;     /* hash buckets (fusion_hash's modulus) */

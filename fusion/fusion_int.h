@@ -18,7 +18,8 @@ struct fusion_map {
 
     /* The map (shaders/fusion.glsl.h has the layouts). */
     gpu_buffer *hash, *locks, *nodes, *info, *sign, *conf, *counters;
-    gpu_buffer *addresses;    /* FUSION_ADDR_*: hash, nodes, sign and conf's device addresses */
+    gpu_buffer *addresses;    /* FUSION_ADDR_*: hash, nodes, sign, conf and the rings' device addresses */
+    uint64_t id;              /* unique in the process (fusion_gpu_view.id) */
     gpu_buffer *free_stack;   /* brick slots not in use, FUSION_CNT_FREE_TOP of them */
     gpu_buffer *stamp;        /* per brick: index of the last frame that touched it */
     /* Colour (shaders/fusion.glsl.h "colour"; NULL without colour). */

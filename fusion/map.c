@@ -297,6 +297,10 @@ bf_status fusion_create(gpu_context *ctx, const fusion_config *cfg, const bf_int
     fusion_map *m = calloc(1, sizeof *m);
     if (!m) return bf_fail(BF_NO_MEMORY, "fusion: map struct");
     m->ctx = ctx;
+    /* A reader that keeps a map's buffers bound (render/) tells maps apart by
+     * this, not by buffer pointers a later map may reuse. */
+    static uint64_t next_id;
+    m->id = __atomic_add_fetch(&next_id, 1, __ATOMIC_RELAXED);
     m->cfg = c;
     m->K = *K;
     m->origin_w = origin_w;
@@ -637,6 +641,7 @@ fusion_gpu_view fusion_gpu_view_get(const fusion_map *m)
         .sign = m->sign,
         .conf = m->conf,
         .addresses = m->addresses,
+        .id = m->id,
         .cmask = m->cmask,
         .cpool = m->cpool,
         .chead = m->chead,

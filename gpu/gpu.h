@@ -222,7 +222,8 @@ void gpu_buffer_destroy(gpu_buffer *buf); /* NULL is a no-op; the GPU must be do
 uint64_t gpu_buffer_size(const gpu_buffer *buf);
 /* The buffer's device address, for a shader that reads it through a
  * buffer_reference (GL_EXT_buffer_reference) handed over in its push
- * constants; 0 without GPU_USAGE_ADDRESS. On lavapipe a storage-buffer load
+ * constants or in a small table buffer it binds; 0 without
+ * GPU_USAGE_ADDRESS. On lavapipe a storage-buffer load
  * at a per-lane address is a scalar loop over the lanes, each lane reading
  * the descriptor again and checking its bounds; a load through an address is
  * one gather (docs/gpu.md, lavapipe notes). No bounds check: the shader's

@@ -15,8 +15,9 @@ struct render_caster {
     render_targets targets;
     gpu_pipeline *p_raycast, *p_shade;
     gpu_bindings *b_raycast, *b_shade;
-    /* The map buffers bound to b_raycast (rebound when another map comes). */
-    gpu_buffer *bound_addresses, *bound_cmask, *bound_cpool, *bound_chead;
+    /* The map whose buffers are bound to b_raycast (fusion_gpu_view.id, 0:
+     * none; rebound when another map comes). */
+    uint64_t bound_map;
     gpu_buffer *bound_start; /* RENDER_RC_START: the start depths, or the dummy */
     gpu_buffer *bound_depth; /* RENDER_RC_DEPTH: the depth destination, targets.depth or render_options.depth_out */
     gpu_buffer *dummy;       /* 16 bytes bound when there are no start depths */
@@ -134,20 +135,17 @@ void render_destroy(render_caster *rc)
     free(rc);
 }
 
-/* Binds the map's buffers when they are not those bound already. */
+/* Binds the map's buffers when another map's (or none) are bound. */
 static bf_status bind_map(render_caster *rc, const fusion_gpu_view *v)
 {
-    if (rc->bound_addresses == v->addresses && rc->bound_cmask == v->cmask && rc->bound_cpool == v->cpool &&
-        rc->bound_chead == v->chead)
-        return BF_OK;
+    if (rc->bound_map == v->id) return BF_OK;
     gpu_buffer *bufs[4] = {v->addresses, v->cmask, v->cpool, v->chead};
     uint32_t at[4] = {RENDER_RC_ADDR, RENDER_RC_CMASK, RENDER_RC_CPOOL, RENDER_RC_CHEAD};
-    rc->bound_addresses = rc->bound_cmask = rc->bound_cpool = rc->bound_chead = NULL;
+    rc->bound_map = 0;
     bf_status s = BF_OK;
     for (uint32_t i = 0; i < 4 && s == BF_OK; i++) s = gpu_bindings_set(rc->b_raycast, at[i], bufs[i], 0, GPU_WHOLE_SIZE);
     if (s != BF_OK) return s;
-    rc->bound_addresses = v->addresses;
-    rc->bound_cmask = v->cmask, rc->bound_cpool = v->cpool, rc->bound_chead = v->chead;
+    rc->bound_map = v->id;
     return BF_OK;
 }
 

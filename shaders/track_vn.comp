@@ -36,10 +36,15 @@ void vn_pixel(uint x, uint y)
         /* The finest level's normal from its parent pixel on the level
          * above (pc.src_off, pc.src_width) where the depths agree: no
          * full-resolution smoothing, and the parent's normal spans twice
-         * the baseline, which averages more of the disparity staircase. */
-        uint j = pc.src_off + (y >> 1) * pc.src_width + (x >> 1);
-        float zp = depth.v[j];
-        if (z > 0.0 && zp > 0.0 && abs(z - zp) <= 2.0 * TRACK_NORMAL_JUMP_REL * z) n = normal.v[j];
+         * the baseline, which averages more of the disparity staircase.
+         * An odd width or height leaves the last column or row without a
+         * parent (level 1 is (w >> 1) x (h >> 1)): no normal there. */
+        uint px = x >> 1, py = y >> 1;
+        if (px < pc.src_width && py < (pc.height >> 1)) {
+            uint j = pc.src_off + py * pc.src_width + px;
+            float zp = depth.v[j];
+            if (z > 0.0 && zp > 0.0 && abs(z - zp) <= 2.0 * TRACK_NORMAL_JUMP_REL * z) n = normal.v[j];
+        }
         normal.v[o + i] = n;
         return;
     }

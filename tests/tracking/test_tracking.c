@@ -411,6 +411,28 @@ BF_TEST(icp_recovers_2cm_2deg_noisy_room)
     check_room(SYNTH_NOISE_KINECT1, 0.004, 0.25);
 }
 
+BF_TEST(odd_sized_images_track_the_noiseless_room)
+{
+    /* 321x241: every level has an odd side, so the finest level's last row
+     * and column have no parent pixel to take their normals from (and an
+     * image kernel's last tile is partly outside the image). Tracked like
+     * the even size: within the noiseless bounds. */
+    const bf_intrinsics K = {321, 241, 262.5, 262.5, 160, 120, 5000};
+    bf_se3 I = bf_se3_identity(), est;
+    track_result r;
+    bool ok;
+    track_room_pair(SYNTH_NOISE_NONE, &K, &I, track_config_default().noise_weight_exp, &est, &r, &ok);
+    CHECK(ok);
+    double dt, da;
+    bf_se3 truth = small_motion();
+    pose_error(&truth, &est, &dt, &da);
+    fprintf(stderr, "  321x241: %s, error %.3f mm %.4f deg, %u/%u inliers\n", track_outcome_name(r.outcome), 1e3 * dt,
+            da, r.n_inliers, r.n_valid);
+    CHECK_EQ_INT(r.outcome, TRACK_OK);
+    CHECK_LE(dt, 0.001);
+    CHECK_LE(da, 0.1);
+}
+
 BF_TEST(sparser_finest_samples_track_the_noisy_room)
 {
     /* The finest level on every pixel, on a checkerboard (the default) and
