@@ -145,16 +145,14 @@ static bf_status create_buffers(fusion_map *m)
         bf_status s = gpu_buffer_create(m->ctx, &d, colour[i].dst);
         if (s != BF_OK) return s;
     }
-    gpu_buffer_desc ad = {.name = "fusion.addresses", .size_bytes = FUSION_ADDRS * 8, .memory = GPU_MEMORY_DEVICE};
-    bf_status s = gpu_buffer_create(m->ctx, &ad, &m->addresses);
-    uint64_t a[FUSION_ADDRS];
-    a[FUSION_ADDR_HASH] = gpu_buffer_address(m->hash);
-    a[FUSION_ADDR_NODES] = gpu_buffer_address(m->nodes);
-    a[FUSION_ADDR_SIGN] = gpu_buffer_address(m->sign);
-    a[FUSION_ADDR_CONF] = gpu_buffer_address(m->conf);
-    a[FUSION_ADDR_DEPTH_RING] = gpu_buffer_address(m->depth_ring);
-    a[FUSION_ADDR_COLOUR_RING] = gpu_buffer_address(m->colour_ring);
-    return s == BF_OK ? gpu_buffer_upload(m->addresses, 0, a, sizeof a) : s;
+    gpu_buffer *a[FUSION_ADDRS];
+    a[FUSION_ADDR_HASH] = m->hash;
+    a[FUSION_ADDR_NODES] = m->nodes;
+    a[FUSION_ADDR_SIGN] = m->sign;
+    a[FUSION_ADDR_CONF] = m->conf;
+    a[FUSION_ADDR_DEPTH_RING] = m->depth_ring;
+    a[FUSION_ADDR_COLOUR_RING] = m->colour_ring;
+    return gpu_address_table_create(m->ctx, "fusion.addresses", a, FUSION_ADDRS, &m->addresses);
 }
 
 /* Fills the pools with their empty state: no chunk, no node, every brick slot

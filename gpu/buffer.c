@@ -249,6 +249,32 @@ void gpu_buffer_destroy(gpu_buffer *buf)
 
 uint64_t gpu_buffer_size(const gpu_buffer *buf) { return buf->size; }
 uint64_t gpu_buffer_address(const gpu_buffer *buf) { return buf->address; }
+
+bf_status gpu_address_table_create(gpu_context *ctx, const char *name, gpu_buffer *const *bufs, uint32_t n,
+                                   gpu_buffer **out)
+{
+    if (!ctx || !name || !bufs || !out || n == 0) return bf_fail(BF_INVALID_ARG, "gpu: address table: no buffers");
+    uint64_t *a = malloc((size_t)n * sizeof *a);
+    if (!a) return bf_fail(BF_NO_MEMORY, "gpu: address table %s", name);
+    bf_status s = BF_OK;
+    for (uint32_t i = 0; i < n && s == BF_OK; i++) {
+        a[i] = bufs[i] ? bufs[i]->address : 0;
+        if (a[i] == 0)
+            s = bf_fail(BF_INVALID_ARG, "gpu: address table %s: entry %u (%s) has no device address", name, i,
+                        bufs[i] ? bufs[i]->name : "NULL");
+    }
+    gpu_buffer_desc d = {.name = name, .size_bytes = (uint64_t)n * sizeof *a, .memory = GPU_MEMORY_DEVICE};
+    gpu_buffer *t = NULL;
+    if (s == BF_OK) s = gpu_buffer_create(ctx, &d, &t);
+    if (s == BF_OK) s = gpu_buffer_upload(t, 0, a, d.size_bytes);
+    free(a);
+    if (s != BF_OK) {
+        gpu_buffer_destroy(t);
+        return s;
+    }
+    *out = t;
+    return BF_OK;
+}
 const char *gpu_buffer_name(const gpu_buffer *buf) { return buf->name; }
 VkBuffer gpu_buffer_handle(const gpu_buffer *buf) { return buf->buffer; }
 void *gpu_buffer_map(const gpu_buffer *buf) { return buf->mapped; }

@@ -229,6 +229,14 @@ uint64_t gpu_buffer_size(const gpu_buffer *buf);
  * one gather (docs/gpu.md, lavapipe notes). No bounds check: the shader's
  * indices must stay inside the buffer. */
 uint64_t gpu_buffer_address(const gpu_buffer *buf);
+/* A table of device addresses for a shader whose push constants have no
+ * room for them: a new device buffer holding gpu_buffer_address(bufs[i]) as
+ * n 64-bit words (a `uvec2 a[n]` in std430), which the shader binds and
+ * reads at uniform indices. BF_INVALID_ARG when a buffer has no address
+ * (made without GPU_USAGE_ADDRESS) or n is 0. The table is not updated:
+ * the buffers must outlive it. */
+bf_status gpu_address_table_create(gpu_context *ctx, const char *name, gpu_buffer *const *bufs, uint32_t n,
+                                   gpu_buffer **out);
 const char *gpu_buffer_name(const gpu_buffer *buf);
 VkBuffer gpu_buffer_handle(const gpu_buffer *buf);
 /* Persistent mapping of a host-visible buffer (always for UPLOAD and

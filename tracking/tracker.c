@@ -244,16 +244,14 @@ static bf_status pyramid(track_tracker *t, const char *name, uint64_t bytes, gpu
 /* The ICP's address table (TRACK_ADDR_*). */
 static bf_status address_table(track_tracker *t)
 {
-    bf_status s = buffer(t, "track.addresses", TRACK_ADDRS * 8, GPU_MEMORY_DEVICE, &t->addresses);
-    if (s != BF_OK) return s;
-    uint64_t a[TRACK_ADDRS];
-    a[TRACK_ADDR_FRAME_DEPTH] = gpu_buffer_address(t->frame_depth);
-    a[TRACK_ADDR_FRAME_NORMAL] = gpu_buffer_address(t->frame_normal);
-    a[TRACK_ADDR_REF_DEPTH] = gpu_buffer_address(t->ref_depth);
-    a[TRACK_ADDR_REF_NORMAL] = gpu_buffer_address(t->ref_normal);
-    a[TRACK_ADDR_FRAME_INT] = gpu_buffer_address(t->frame_int);
-    a[TRACK_ADDR_REF_INT] = gpu_buffer_address(t->ref_int);
-    return gpu_buffer_upload(t->addresses, 0, a, sizeof a);
+    gpu_buffer *a[TRACK_ADDRS];
+    a[TRACK_ADDR_FRAME_DEPTH] = t->frame_depth;
+    a[TRACK_ADDR_FRAME_NORMAL] = t->frame_normal;
+    a[TRACK_ADDR_REF_DEPTH] = t->ref_depth;
+    a[TRACK_ADDR_REF_NORMAL] = t->ref_normal;
+    a[TRACK_ADDR_FRAME_INT] = t->frame_int;
+    a[TRACK_ADDR_REF_INT] = t->ref_int;
+    return gpu_address_table_create(t->ctx, "track.addresses", a, TRACK_ADDRS, &t->addresses);
 }
 
 bf_status track_create(gpu_context *ctx, const track_config *cfg, const bf_intrinsics *K, track_tracker **out)

@@ -363,6 +363,18 @@ BF_TEST(device_addresses_for_address_buffers_only)
     CHECK(gpu_buffer_address(large) != 0 && gpu_buffer_address(large) % 4 == 0);
     CHECK(gpu_buffer_address(small) != gpu_buffer_address(large));
     CHECK(gpu_buffer_address(plain) == 0);
+    /* A table of them holds each address as a 64-bit word; a buffer
+     * without one is refused, naming it. */
+    gpu_buffer *table = NULL, *both[2] = {large, small}, *with_plain[2] = {small, plain};
+    CHECK_OK(gpu_address_table_create(ctx, "test.table", both, 2, &table));
+    uint64_t words[2] = {0, 0};
+    CHECK(table && gpu_buffer_size(table) == 16);
+    if (table) CHECK_OK(gpu_buffer_download(table, 0, words, sizeof words));
+    CHECK(words[0] == gpu_buffer_address(large) && words[1] == gpu_buffer_address(small));
+    gpu_buffer *refused = NULL;
+    CHECK_EQ_INT(gpu_address_table_create(ctx, "test.table2", with_plain, 2, &refused), BF_INVALID_ARG);
+    CHECK(refused == NULL && strstr(bf_last_error(), "entry 1 (test.plain)") != NULL);
+    gpu_buffer_destroy(table);
     gpu_buffer_destroy(plain);
     gpu_buffer_destroy(large);
     gpu_buffer_destroy(small);
